@@ -1,0 +1,42 @@
+"""The ``bendsense`` command line: a thin shell over the library.
+
+Commands live in one module per area (``pipeline``, ``device``, ``sim``,
+``identify``); each exposes ``COMMANDS``, a list of click commands added here.
+Heavy imports happen inside the commands, so ``bendsense --help`` is fast.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import click
+
+from bendsense import __version__
+from bendsense.cli import device, identify, pipeline, sim
+
+
+@click.group(
+    cls=pipeline.PipelineGroup,
+    chain=True,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+@click.option("-v", "--verbose", count=True, help="More log output (repeat for debug).")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors.")
+@click.version_option(__version__, prog_name="bendsense")
+@click.pass_context
+def main(ctx: click.Context, verbose: int, quiet: bool) -> None:
+    """Shape and tip force of soft bending actuators from an inductive curvature sensor.
+
+    Processing steps chain on one command line, for example:
+
+        bendsense load run.csv --calibration cal.yaml reconstruct estimate save out/
+    """
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
+    ctx.ensure_object(dict)
+    ctx.obj["quiet"] = quiet
+
+
+for _module in (pipeline, identify, sim, device):
+    for _command in _module.COMMANDS:
+        main.add_command(_command)

@@ -1,0 +1,3 @@
+"""Commands of the device area (see bendsense.cli)."""
+
+COMMANDS = []

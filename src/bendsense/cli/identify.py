@@ -1,0 +1,3 @@
+"""Commands of the identify area (see bendsense.cli)."""
+
+COMMANDS = []

@@ -1,0 +1,3 @@
+"""Commands of the sim area (see bendsense.cli)."""
+
+COMMANDS = []

@@ -1,0 +1,430 @@
+"""Configuration: the sensor, the actuator, its material and stiffness, gravity and estimation options.
+
+Every section is a frozen, keyword-only dataclass with SI units in its field names
+and its checks in ``__post_init__``. ``Config.from_dict`` / ``Config.to_dict``
+map to and from the YAML layout of ``configs/paper.yaml``; an invalid value raises
+:class:`~bendsense.errors.ConfigError` naming the field path and the value, e.g.
+``sensor.segment_lengths_m[3]: must be > 0, got -0.008``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+import yaml
+
+from bendsense.errors import ConfigError
+
+__all__ = [
+    "SensorConfig",
+    "ActuatorConfig",
+    "MaterialConfig",
+    "StiffnessConfig",
+    "GravityConfig",
+    "EstimationConfig",
+    "Config",
+    "load_config",
+    "save_config",
+    "PAPER_CONFIG",
+]
+
+PAPER_CONFIG = "paper.yaml"
+CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
+METHODS = ("fast", "paper")
+ANGLE_SOURCES = ("model", "shape")
+
+
+def _fail(path: str, message: str) -> ConfigError:
+    return ConfigError(f"{path}: {message}")
+
+
+def _number(path: str, value: Any, *, positive: bool = False, nonnegative: bool = False) -> float:
+    # bool is an int subclass; a YAML "true" where a number belongs is a mistake
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _fail(path, f"expected a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise _fail(path, f"must be finite, got {value!r}")
+    if positive and not value > 0:
+        raise _fail(path, f"must be > 0, got {value!r}")
+    if nonnegative and not value >= 0:
+        raise _fail(path, f"must be >= 0, got {value!r}")
+    return value
+
+
+def _integer(path: str, value: Any, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _fail(path, f"expected an integer, got {value!r}")
+    if minimum is not None and value < minimum:
+        raise _fail(path, f"must be >= {minimum}, got {value!r}")
+    if maximum is not None and value > maximum:
+        raise _fail(path, f"must be <= {maximum}, got {value!r}")
+    return value
+
+
+def _numbers(path: str, value: Any, length: int | None = None, *, positive: bool = False) -> tuple:
+    if not isinstance(value, (list, tuple)):
+        raise _fail(path, f"expected a list of numbers, got {value!r}")
+    if length is not None and len(value) != length:
+        raise _fail(path, f"expected {length} values, got {len(value)}")
+    return tuple(_number(f"{path}[{i}]", v, positive=positive) for i, v in enumerate(value))
+
+
+def _choice(path: str, value: Any, choices: tuple[str, ...]) -> str:
+    if value not in choices:
+        raise _fail(path, f"must be one of {', '.join(choices)}, got {value!r}")
+    return value
+
+
+def _boolean(path: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise _fail(path, f"expected true or false, got {value!r}")
+    return value
+
+
+class _Section:
+    """Mixin: dict conversion with unknown/missing-key checks for a config section."""
+
+    section: ClassVar[str]
+
+    @classmethod
+    def from_dict(cls, data: Any):
+        path = cls.section
+        if not isinstance(data, dict):
+            raise _fail(path, f"expected a mapping, got {data!r}")
+        names = [f.name for f in dataclasses.fields(cls)]
+        required = [
+            f.name
+            for f in dataclasses.fields(cls)
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        ]
+        unknown = sorted(set(data) - set(names), key=str)
+        if unknown:
+            raise _fail(path, f"unknown keys {', '.join(map(str, unknown))}; allowed: {', '.join(names)}")
+        missing = [n for n in required if n not in data]
+        if missing:
+            raise _fail(path, f"missing keys {', '.join(missing)}")
+        return cls(**data)
+
+    def to_dict(self) -> dict:
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = list(v) if isinstance(v, tuple) else v
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorConfig(_Section):
+    """The distributed inductive curvature sensor (paper section II, V-A).
+
+    Parameters
+    ----------
+    n_segments : int
+        Number of receiver coils and PCC segments N.
+    segment_lengths_m : tuple of float
+        Segment lengths l_i [m], base to tip.
+    strip_gap_m : float
+        Distance d between receiver and transmitter strips [m].
+    sleeve_thickness_m : float
+        Silicone sleeve thickness c [m].
+    calibration_adds_sleeve : bool
+        If true, a calibration strip of radius R gives κ_cal = 1/(R + c);
+        the paper's default is κ_cal = 1/R.
+    coil_diameter_m, coil_turns, coil_pitch_m : float, int, float
+        Coil geometry, used by the simulator.
+    """
+
+    section: ClassVar[str] = "sensor"
+    n_segments: int
+    segment_lengths_m: tuple
+    strip_gap_m: float
+    sleeve_thickness_m: float
+    calibration_adds_sleeve: bool = False
+    coil_diameter_m: float = 0.006
+    coil_turns: int = 20
+    coil_pitch_m: float = 0.008
+
+    def __post_init__(self):
+        p = self.section
+        n = _integer(f"{p}.n_segments", self.n_segments, minimum=1, maximum=64)
+        set_ = object.__setattr__
+        set_(self, "segment_lengths_m", _numbers(f"{p}.segment_lengths_m", self.segment_lengths_m, n, positive=True))
+        set_(self, "strip_gap_m", _number(f"{p}.strip_gap_m", self.strip_gap_m, positive=True))
+        set_(self, "sleeve_thickness_m", _number(f"{p}.sleeve_thickness_m", self.sleeve_thickness_m, nonnegative=True))
+        _boolean(f"{p}.calibration_adds_sleeve", self.calibration_adds_sleeve)
+        set_(self, "coil_diameter_m", _number(f"{p}.coil_diameter_m", self.coil_diameter_m, positive=True))
+        _integer(f"{p}.coil_turns", self.coil_turns, minimum=1)
+        set_(self, "coil_pitch_m", _number(f"{p}.coil_pitch_m", self.coil_pitch_m, positive=True))
+
+    @property
+    def lengths_m(self) -> np.ndarray:
+        """Segment lengths l_i as an array [m]."""
+        return np.asarray(self.segment_lengths_m, dtype=float)
+
+    @property
+    def length_m(self) -> float:
+        """Total sensor length L_N [m]."""
+        return float(sum(self.segment_lengths_m))
+
+
+@dataclass(frozen=True, kw_only=True)
+class ActuatorConfig(_Section):
+    """Geometry and mass of the soft bending actuator (paper Fig. 3(b), V-A).
+
+    Parameters
+    ----------
+    chamber_radius_m : float
+        Inner chamber radius a [m].
+    bottom_thickness_m : float
+        Bottom (strain-limiting) layer thickness b [m].
+    wall_thickness_m : float
+        Wall thickness t [m].
+    length_m : float
+        Actuator length L [m].
+    mass_kg : float
+        Total mass of actuator and sensor [kg].
+    """
+
+    section: ClassVar[str] = "actuator"
+    chamber_radius_m: float
+    bottom_thickness_m: float
+    wall_thickness_m: float
+    length_m: float
+    mass_kg: float
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            object.__setattr__(self, f.name, _number(f"{self.section}.{f.name}", getattr(self, f.name), positive=True))
+
+
+@dataclass(frozen=True, kw_only=True)
+class MaterialConfig(_Section):
+    """Material parameters of the free-bending model (paper eq. 10–12).
+
+    Parameters
+    ----------
+    shear_modulus_pa : float
+        Effective shear modulus μ̄ [Pa].
+    sensor_stiffness_nm_per_rad : float
+        Sensor bending stiffness μ_s [N·m/rad].
+    prebend_angle_rad : float
+        Bending angle at zero pressure, added to θ0 [rad].
+    """
+
+    section: ClassVar[str] = "material"
+    shear_modulus_pa: float
+    sensor_stiffness_nm_per_rad: float
+    prebend_angle_rad: float = 0.0
+
+    def __post_init__(self):
+        p = self.section
+        object.__setattr__(self, "shear_modulus_pa", _number(f"{p}.shear_modulus_pa", self.shear_modulus_pa, positive=True))
+        object.__setattr__(
+            self,
+            "sensor_stiffness_nm_per_rad",
+            _number(f"{p}.sensor_stiffness_nm_per_rad", self.sensor_stiffness_nm_per_rad, nonnegative=True),
+        )
+        object.__setattr__(self, "prebend_angle_rad", _number(f"{p}.prebend_angle_rad", self.prebend_angle_rad))
+
+
+@dataclass(frozen=True, kw_only=True)
+class StiffnessConfig(_Section):
+    """Pressure-dependent flexural rigidity EI(P) = ei0 + ei1·P (paper eq. 15)."""
+
+    section: ClassVar[str] = "stiffness"
+    ei0_nm2: float
+    ei1_nm2_per_pa: float = 0.0
+
+    def __post_init__(self):
+        p = self.section
+        object.__setattr__(self, "ei0_nm2", _number(f"{p}.ei0_nm2", self.ei0_nm2, positive=True))
+        object.__setattr__(self, "ei1_nm2_per_pa", _number(f"{p}.ei1_nm2_per_pa", self.ei1_nm2_per_pa))
+
+    def ei_nm2(self, pressure_pa):
+        """Flexural rigidity EI [N·m²] at gauge pressure ``pressure_pa`` [Pa]."""
+        return self.ei0_nm2 + self.ei1_nm2_per_pa * np.asarray(pressure_pa, dtype=float)
+
+
+@dataclass(frozen=True, kw_only=True)
+class GravityConfig(_Section):
+    """Gravity: acceleration g and its unit direction in the base frame (DESIGN section 2)."""
+
+    section: ClassVar[str] = "gravity"
+    g_m_per_s2: float = 9.81
+    direction: tuple = (0.0, -1.0)
+
+    def __post_init__(self):
+        p = self.section
+        object.__setattr__(self, "g_m_per_s2", _number(f"{p}.g_m_per_s2", self.g_m_per_s2, nonnegative=True))
+        d = _numbers(f"{p}.direction", self.direction, 2)
+        norm = math.hypot(*d)
+        if abs(norm - 1.0) > 1e-6:
+            raise _fail(f"{p}.direction", f"must be a unit vector, got {list(d)} (norm {norm:.6g})")
+        object.__setattr__(self, "direction", d)
+
+
+@dataclass(frozen=True, kw_only=True)
+class EstimationConfig(_Section):
+    """Options of the force estimate (paper eq. 18, 21; DESIGN section 2).
+
+    Parameters
+    ----------
+    constraint : str
+        ``none``, ``vertical``, ``horizontal``, ``direction`` (along ``direction``),
+        ``normal`` (normal to the tip tangent) or ``follower`` (at
+        ``follower_angle_rad`` to the tip tangent).
+    method : str
+        ``fast`` (default) or ``paper`` (shooting + Nelder–Mead / SLSQP).
+    n_points : int
+        Sample points along the actuator for the shape-distance quadrature.
+    tip_angle_source : str
+        Where ``normal``/``follower`` take the tip angle: ``model`` (free-bending
+        model, as in the paper) or ``shape`` (the reconstructed shape).
+    direction : tuple of float
+        Unit direction of the force for ``constraint: direction``.
+    follower_angle_rad : float
+        Angle of a follower force from the tip tangent [rad].
+    push_only : bool
+        Bound the force magnitude along its constrained direction to >= 0.
+    signal_noise_std : float
+        Standard deviation of the signal noise ΔA used for the force uncertainty
+        when the calibration does not provide one [signal units].
+    pressure_max_pa : float
+        Upper end of the precomputed free-bending interpolant [Pa].
+    """
+
+    section: ClassVar[str] = "estimation"
+    constraint: str = "none"
+    method: str = "fast"
+    n_points: int = 41
+    tip_angle_source: str = "model"
+    direction: tuple = (0.0, -1.0)
+    follower_angle_rad: float = math.pi / 2
+    push_only: bool = False
+    signal_noise_std: float = 0.0
+    pressure_max_pa: float = 200e3
+
+    def __post_init__(self):
+        p = self.section
+        _choice(f"{p}.constraint", self.constraint, CONSTRAINTS)
+        _choice(f"{p}.method", self.method, METHODS)
+        _integer(f"{p}.n_points", self.n_points, minimum=3, maximum=1000)
+        _choice(f"{p}.tip_angle_source", self.tip_angle_source, ANGLE_SOURCES)
+        d = _numbers(f"{p}.direction", self.direction, 2)
+        norm = math.hypot(*d)
+        if abs(norm - 1.0) > 1e-6:
+            raise _fail(f"{p}.direction", f"must be a unit vector, got {list(d)} (norm {norm:.6g})")
+        object.__setattr__(self, "direction", d)
+        object.__setattr__(self, "follower_angle_rad", _number(f"{p}.follower_angle_rad", self.follower_angle_rad))
+        _boolean(f"{p}.push_only", self.push_only)
+        object.__setattr__(
+            self, "signal_noise_std", _number(f"{p}.signal_noise_std", self.signal_noise_std, nonnegative=True)
+        )
+        object.__setattr__(
+            self, "pressure_max_pa", _number(f"{p}.pressure_max_pa", self.pressure_max_pa, positive=True)
+        )
+
+
+_SECTIONS = {
+    "sensor": SensorConfig,
+    "actuator": ActuatorConfig,
+    "material": MaterialConfig,
+    "stiffness": StiffnessConfig,
+    "gravity": GravityConfig,
+    "estimation": EstimationConfig,
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Config:
+    """A whole bendsense configuration: one field per section."""
+
+    sensor: SensorConfig
+    actuator: ActuatorConfig
+    material: MaterialConfig
+    stiffness: StiffnessConfig
+    gravity: GravityConfig = field(default_factory=GravityConfig)
+    estimation: EstimationConfig = field(default_factory=EstimationConfig)
+    name: str = ""
+
+    def __post_init__(self):
+        for key, cls in _SECTIONS.items():
+            if not isinstance(getattr(self, key), cls):
+                raise _fail(key, f"expected a {cls.__name__}, got {type(getattr(self, key)).__name__}")
+        if not isinstance(self.name, str):
+            raise _fail("name", f"expected a string, got {self.name!r}")
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Config:
+        """Build a config from the YAML layout; raises `ConfigError` naming the bad field."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"config: expected a mapping of sections, got {data!r}")
+        allowed = ["name", *_SECTIONS]
+        unknown = sorted(set(data) - set(allowed), key=str)
+        if unknown:
+            raise ConfigError(f"config: unknown keys {', '.join(map(str, unknown))}; allowed: {', '.join(allowed)}")
+        missing = [k for k in ("sensor", "actuator", "material", "stiffness") if k not in data]
+        if missing:
+            raise ConfigError(f"config: missing keys {', '.join(missing)}")
+        kwargs = {k: c.from_dict(data[k]) for k, c in _SECTIONS.items() if k in data}
+        if "name" in data:
+            kwargs["name"] = data["name"]
+        return cls(**kwargs)
+
+    def to_dict(self) -> dict:
+        """The YAML layout of this config (plain lists, floats and strings)."""
+        out = {"name": self.name} if self.name else {}
+        out.update({k: getattr(self, k).to_dict() for k in _SECTIONS})
+        return out
+
+    def replace(self, **sections) -> Config:
+        """A copy with whole sections replaced, e.g. ``config.replace(stiffness=...)``."""
+        return dataclasses.replace(self, **sections)
+
+    @property
+    def weight_per_length_n_per_m(self) -> np.ndarray:
+        """Gravity as a distributed load w = (m g / L) ĝ in the base frame [N/m]."""
+        q = self.actuator.mass_kg * self.gravity.g_m_per_s2 / self.actuator.length_m
+        return q * np.asarray(self.gravity.direction)
+
+
+def load_config(path: str | os.PathLike | None = None) -> Config:
+    """Load a config YAML; ``None`` loads the paper's prototype shipped with the package.
+
+    Raises
+    ------
+    ConfigError
+        If the file cannot be read or parsed, or a value is invalid.
+    """
+    if path is None:
+        text = resources.files("bendsense.data").joinpath(PAPER_CONFIG).read_text(encoding="utf-8")
+        source = "paper.yaml (built in)"
+    else:
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as err:
+            raise ConfigError(f"{path}: cannot read config: {err.strerror or err}") from None
+        source = str(path)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{source}: not valid YAML: {err}") from None
+    try:
+        return Config.from_dict(data)
+    except ConfigError as err:
+        raise ConfigError(f"{source}: {err}") from None
+
+
+def save_config(config: Config, path: str | os.PathLike) -> None:
+    """Write ``config`` as YAML atomically (temporary file, then rename)."""
+    from bendsense._io import atomic_write_text
+
+    atomic_write_text(path, yaml.safe_dump(config.to_dict(), sort_keys=False))

@@ -1,0 +1,39 @@
+"""Exceptions raised by bendsense.
+
+Every error derives from :class:`BendsenseError` and from the matching built-in
+exception, so ``except ValueError`` keeps working for callers that do not know
+bendsense. All of them pickle, so batch workers can send them back.
+"""
+
+__all__ = [
+    "BendsenseError",
+    "ConfigError",
+    "FrameError",
+    "DeviceError",
+    "ConvergenceError",
+    "SessionError",
+]
+
+
+class BendsenseError(Exception):
+    """Base class of all bendsense errors."""
+
+
+class ConfigError(BendsenseError, ValueError):
+    """A configuration value or file is invalid; the message names the field."""
+
+
+class SessionError(BendsenseError, ValueError):
+    """A session file (CSV or native directory) is malformed; the message names where."""
+
+
+class FrameError(BendsenseError, ValueError):
+    """A wire frame cannot be encoded or decoded."""
+
+
+class DeviceError(BendsenseError, OSError):
+    """The sensor device cannot be opened, was disconnected or misbehaves."""
+
+
+class ConvergenceError(BendsenseError, RuntimeError):
+    """A solver did not converge and ``strict=True`` was requested."""
