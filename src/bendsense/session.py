@@ -1,0 +1,274 @@
+"""Sessions: a recording of sensor signals and pressure, frame by frame.
+
+The interchange format is the session CSV of DESIGN.md section 3: a header row with
+``t_s``, an optional pressure column (``pressure_pa`` or ``pressure_kpa``) and the
+signal columns ``ch1..chN``; ``#`` lines before the header are metadata; any other
+column is kept and passed through. Native session directories written by the
+recorder are read by :func:`read_session` as well.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bendsense._io import atomic_path
+from bendsense.errors import SessionError
+
+__all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
+
+_CHANNEL = re.compile(r"ch([1-9][0-9]*)$")
+
+
+@dataclass(frozen=True, eq=False)
+class Session:
+    """Recorded frames of one session.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (frames,)
+        Time of each frame [s].
+    signals : ndarray, shape (frames, N)
+        Signal value of each receiver channel (ADC counts or volts, as recorded).
+    pressure_pa : ndarray, shape (frames,)
+        Actuation (gauge) pressure [Pa]; NaN where there is no reading.
+    seq : ndarray of int, shape (frames,), optional
+        Device sequence number, unwrapped, where known.
+    meta : dict
+        Metadata: the ``# key: value`` lines of a CSV, or ``meta.yaml`` of a native session.
+    extra : dict of str to ndarray
+        Further per-frame columns, kept in file order and passed through (e.g. the
+        ground truth ``fx_n``, ``fy_n`` of a simulated session).
+    source : str
+        Where the session was read from.
+    """
+
+    t_s: np.ndarray
+    signals: np.ndarray
+    pressure_pa: np.ndarray
+    seq: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)
+    source: str = ""
+
+    def __post_init__(self):
+        t = np.asarray(self.t_s, dtype=float)
+        sig = np.asarray(self.signals, dtype=float)
+        if t.ndim != 1:
+            raise SessionError(f"t_s: expected shape (frames,), got {t.shape}")
+        if sig.ndim != 2 or sig.shape[0] != t.size:
+            raise SessionError(f"signals: expected shape ({t.size}, N), got {sig.shape}")
+        p = np.broadcast_to(np.asarray(self.pressure_pa, dtype=float), t.shape).copy()
+        object.__setattr__(self, "t_s", t)
+        object.__setattr__(self, "signals", sig)
+        object.__setattr__(self, "pressure_pa", p)
+        if self.seq is not None:
+            seq = np.asarray(self.seq, dtype=np.int64)
+            if seq.shape != t.shape:
+                raise SessionError(f"seq: expected shape {t.shape}, got {seq.shape}")
+            object.__setattr__(self, "seq", seq)
+        extra = {}
+        for name, values in self.extra.items():
+            values = np.asarray(values)
+            if values.shape != t.shape:
+                raise SessionError(f"extra column {name!r}: expected shape {t.shape}, got {values.shape}")
+            extra[name] = values
+        object.__setattr__(self, "extra", extra)
+
+    def __len__(self) -> int:
+        return self.t_s.size
+
+    @property
+    def n_channels(self) -> int:
+        """Number of signal channels N."""
+        return self.signals.shape[1]
+
+    @property
+    def has_pressure(self) -> bool:
+        """True when every frame has a pressure reading."""
+        return bool(np.all(np.isfinite(self.pressure_pa)))
+
+    def with_pressure(self, pressure_pa: float) -> Session:
+        """A copy whose frames without a pressure reading get ``pressure_pa`` [Pa]."""
+        p = np.where(np.isfinite(self.pressure_pa), self.pressure_pa, float(pressure_pa))
+        return Session(self.t_s, self.signals, p, self.seq, dict(self.meta), dict(self.extra), self.source)
+
+    def select(self, index) -> Session:
+        """A new session with the frames picked by ``index`` (slice, mask or indices)."""
+        seq = None if self.seq is None else self.seq[index]
+        extra = {k: v[index] for k, v in self.extra.items()}
+        return Session(
+            self.t_s[index], self.signals[index], self.pressure_pa[index], seq, dict(self.meta), extra, self.source
+        )
+
+
+def _parse_float(text: str, line: int, column: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise SessionError(f"line {line}, column {column}: expected a number, got {text!r}") from None
+    return value
+
+
+def read_session_csv(path: str | os.PathLike) -> Session:
+    """Read a session CSV (DESIGN.md section 3).
+
+    Raises
+    ------
+    SessionError
+        If the file is malformed; the message gives the line number and the column.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise SessionError(f"{path}: not UTF-8 text (byte offset {err.start})") from None
+    except OSError as err:
+        raise SessionError(f"{path}: cannot read: {err.strerror or err}") from None
+    try:
+        return _parse_session_csv(text, str(path))
+    except SessionError as err:
+        raise SessionError(f"{path}: {err}") from None
+
+
+def _parse_session_csv(text: str, source: str) -> Session:
+    lines = text.splitlines()
+    meta: dict[str, str] = {}
+    start = 0
+    while start < len(lines) and (lines[start].startswith("#") or not lines[start].strip()):
+        body = lines[start][1:].strip()
+        if ":" in body:
+            key, value = body.split(":", 1)
+            meta[key.strip()] = value.strip()
+        start += 1
+    if start == len(lines):
+        raise SessionError("no header row (expected t_s, ch1..chN)")
+    rows = csv.reader(io.StringIO("\n".join(lines[start:])))
+    header = [h.strip() for h in next(rows)]
+    header_line = start + 1
+    seen = set()
+    for h in header:
+        if not h:
+            raise SessionError(f"line {header_line}: empty column name in header")
+        if h in seen:
+            raise SessionError(f"line {header_line}, column {h}: duplicate column")
+        seen.add(h)
+    if "t_s" not in seen:
+        raise SessionError(f"line {header_line}: missing required column t_s")
+    if "pressure_pa" in seen and "pressure_kpa" in seen:
+        raise SessionError(f"line {header_line}: give pressure_pa or pressure_kpa, not both")
+    channels = sorted((int(m.group(1)), h) for h in header if (m := _CHANNEL.match(h)))
+    if not channels:
+        raise SessionError(f"line {header_line}: no signal columns (expected ch1..chN)")
+    numbers = [n for n, _ in channels]
+    if numbers != list(range(1, len(numbers) + 1)):
+        missing = sorted(set(range(1, max(numbers) + 1)) - set(numbers))
+        raise SessionError(f"line {header_line}: signal columns must be ch1..chN; missing ch{missing[0]}")
+
+    columns: dict[str, list] = {h: [] for h in header}
+    row_lines = []
+    for offset, row in enumerate(rows):
+        line = header_line + 1 + offset
+        if not row or (len(row) == 1 and not row[0].strip()):
+            continue
+        if row[0].startswith("#"):
+            raise SessionError(f"line {line}: comment lines are only allowed before the header")
+        if len(row) != len(header):
+            raise SessionError(f"line {line}: expected {len(header)} columns, got {len(row)}")
+        row_lines.append(line)
+        for h, cell in zip(header, row):
+            columns[h].append(cell.strip())
+    if not columns["t_s"]:
+        raise SessionError("no data rows")
+
+    numeric = {"t_s", "pressure_pa", "pressure_kpa", *(h for _, h in channels)}
+    values = {}
+    for h in numeric & seen:
+        arr = np.array([_parse_float(c, row_lines[i], h) for i, c in enumerate(columns[h])])
+        # a missing pressure reading may be NaN; time and signals must be finite
+        if not h.startswith("pressure") and not np.all(np.isfinite(arr)):
+            bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+            raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {columns[h][bad]!r}")
+        values[h] = arr
+    t = values["t_s"]
+    if "pressure_pa" in values:
+        pressure = values["pressure_pa"]
+    elif "pressure_kpa" in values:
+        pressure = values["pressure_kpa"] * 1e3
+    else:
+        pressure = np.full(t.shape, np.nan)
+    signals = np.column_stack([values[h] for _, h in channels])
+    extra = {h: _column_array(columns[h]) for h in header if h not in numeric}
+    seq = extra.pop("seq").astype(np.int64) if "seq" in extra and extra["seq"].dtype.kind in "iu" else None
+    return Session(t, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
+
+
+def _column_array(cells: list[str]) -> np.ndarray:
+    """Numbers where every cell is numeric (ints kept as ints), else strings."""
+    try:
+        ints = [int(c) for c in cells]
+        return np.array(ints, dtype=np.int64)
+    except ValueError:
+        pass
+    try:
+        return np.array([float(c) for c in cells])
+    except ValueError:
+        return np.array(cells, dtype=object)
+
+
+def _format(value) -> str:
+    if isinstance(value, (float, np.floating)):
+        return "nan" if math.isnan(value) else repr(float(value))
+    return str(value)
+
+
+def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: bool = True) -> None:
+    """Write ``session`` as a session CSV, atomically (temporary file, then rename).
+
+    Floats are written with ``repr`` so that reading the file back gives the same
+    numbers bit for bit. Pressure is written as ``pressure_pa`` when any frame has
+    a reading.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise SessionError(f"{path}: exists (use overwrite=True)")
+    header = ["t_s"]
+    cols = [session.t_s]
+    if np.any(np.isfinite(session.pressure_pa)):
+        header.append("pressure_pa")
+        cols.append(session.pressure_pa)
+    header += [f"ch{i + 1}" for i in range(session.n_channels)]
+    cols += list(session.signals.T)
+    if session.seq is not None:
+        header.append("seq")
+        cols.append(session.seq)
+    for name, values in session.extra.items():
+        header.append(name)
+        cols.append(values)
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as fh:
+        for key, value in session.meta.items():
+            if isinstance(value, (str, int, float)):
+                fh.write(f"# {key}: {value}\n")
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(header)
+        for row in zip(*cols):
+            writer.writerow([_format(v) for v in row])
+
+
+def read_session(path: str | os.PathLike) -> Session:
+    """Read a session: a native session directory or a session CSV."""
+    path = Path(path)
+    if path.is_dir():
+        from bendsense.sessiondir import read_session_dir
+
+        return read_session_dir(path)
+    if not path.exists():
+        raise SessionError(f"{path}: no such file or session directory")
+    return read_session_csv(path)
