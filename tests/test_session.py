@@ -1,0 +1,106 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from bendsense.errors import SessionError
+from bendsense.session import Session, read_session, read_session_csv, write_session_csv
+
+INVALID = sorted((Path(__file__).parent / "data" / "invalid" / "sessions").glob("*.csv"))
+
+
+def _expected(path):
+    first = path.read_bytes().splitlines()[0].decode()
+    return first[len("# expect: ") :]
+
+
+@pytest.mark.parametrize("path", INVALID, ids=[p.stem for p in INVALID])
+def test_invalid_session_corpus(path):
+    with pytest.raises(SessionError, match=_expected(path)):
+        read_session_csv(path)
+
+
+def test_reads_kpa_metadata_and_extra_columns(tmp_path):
+    p = tmp_path / "s.csv"
+    p.write_text("# rig: upright\n# operator: ada\nt_s,pressure_kpa,ch1,ch2,fx_n,note\n0,20,1,2,0.1,a\n0.5,40,3,4,0.2,b\n")
+    s = read_session(p)
+    assert s.meta == {"rig": "upright", "operator": "ada"}
+    np.testing.assert_array_equal(s.pressure_pa, [20e3, 40e3])
+    np.testing.assert_array_equal(s.signals, [[1, 2], [3, 4]])
+    assert list(s.extra) == ["fx_n", "note"]
+    np.testing.assert_array_equal(s.extra["fx_n"], [0.1, 0.2])
+    assert list(s.extra["note"]) == ["a", "b"]
+
+
+def test_channels_in_any_column_order(tmp_path):
+    p = tmp_path / "s.csv"
+    p.write_text("ch2,t_s,ch1\n5,0,7\n")
+    s = read_session_csv(p)
+    np.testing.assert_array_equal(s.signals, [[7, 5]])
+    assert np.isnan(s.pressure_pa).all() and not s.has_pressure
+    assert s.with_pressure(3e4).has_pressure
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    signals=hnp.arrays(np.float64, st.tuples(st.integers(1, 8), st.integers(1, 5)), elements=finite),
+    pressure=finite,
+)
+def test_write_read_round_trip_is_bit_exact(tmp_path_factory, signals, pressure):
+    n = signals.shape[0]
+    s = Session(np.arange(n) / 7.0, signals, np.full(n, pressure), seq=np.arange(n) + 65530,
+                extra={"fx_n": np.linspace(-1, 1, n)}, meta={"scenario": "test"})
+    path = tmp_path_factory.mktemp("rt") / "s.csv"
+    write_session_csv(s, path)
+    r = read_session_csv(path)
+    np.testing.assert_array_equal(r.signals, s.signals)
+    np.testing.assert_array_equal(r.t_s, s.t_s)
+    np.testing.assert_array_equal(r.pressure_pa, s.pressure_pa)
+    np.testing.assert_array_equal(r.seq, s.seq)
+    np.testing.assert_array_equal(r.extra["fx_n"], s.extra["fx_n"])
+    assert r.meta == {"scenario": "test"}
+
+
+def test_failed_write_leaves_no_file(tmp_path, monkeypatch):
+    import bendsense.session as session_module
+
+    calls = []
+
+    def failing_format(value):
+        calls.append(value)
+        if len(calls) > 5:
+            raise OSError("disk full")
+        return str(value)
+
+    monkeypatch.setattr(session_module, "_format", failing_format)
+    target = tmp_path / "out.csv"
+    target.write_text("previous content")
+    s = Session([0.0, 1.0, 2.0], [[1.0], [2.0], [3.0]], 0.0)
+    with pytest.raises(OSError, match="disk full"):
+        write_session_csv(s, target)
+    assert target.read_text() == "previous content"
+    assert list(tmp_path.iterdir()) == [target]
+
+
+def test_refuses_to_overwrite_when_asked(tmp_path):
+    s = Session([0.0], [[1.0]], [0.0])
+    target = tmp_path / "out.csv"
+    write_session_csv(s, target)
+    with pytest.raises(SessionError, match="exists"):
+        write_session_csv(s, target, overwrite=False)
+
+
+def test_shape_errors_name_the_field():
+    with pytest.raises(SessionError, match=r"signals: expected shape \(2, N\)"):
+        Session([0.0, 1.0], [[1.0, 2.0, 3.0]], 0.0)
+
+
+def test_missing_path(tmp_path):
+    with pytest.raises(SessionError, match="no such file"):
+        read_session(tmp_path / "none.csv")
