@@ -37,6 +37,11 @@ def main(ctx: click.Context, verbose: int, quiet: bool) -> None:
     ctx.obj["quiet"] = quiet
 
 
+@main.result_callback()
+def _run_pipeline(steps, **_options) -> None:
+    pipeline.run_steps(steps)
+
+
 for _module in (pipeline, identify, sim, device):
     for _command in _module.COMMANDS:
         main.add_command(_command)

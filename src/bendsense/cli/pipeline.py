@@ -1,9 +1,187 @@
-"""Chained processing steps: load, reconstruct, estimate, save, plot, export."""
+"""Chained processing steps: ``load``, ``reconstruct``, ``estimate``, ``save``, ``plot``, ``export``.
+
+Each step returns a function of the pipeline state; the group runs them in the
+order given on the command line::
+
+    bendsense load run.csv --calibration cal.yaml reconstruct estimate --constraint normal save out/
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
 
 import click
 
-COMMANDS = []
+from bendsense.errors import BendsenseError
 
+log = logging.getLogger("bendsense")
 
 class PipelineGroup(click.Group):
-    """A chained group (filled in with the pipeline)."""
+    """A chained group that runs pipeline steps in order and turns user errors into one line."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except BendsenseError as err:
+            raise click.ClickException(str(err)) from None
+        except FileNotFoundError as err:
+            raise click.ClickException(f"{err.filename}: no such file or directory") from None
+        except PermissionError as err:
+            raise click.ClickException(f"{err.filename}: permission denied") from None
+
+
+def _require(state: dict, key: str, step: str, hint: str) -> object:
+    if state.get(key) is None:
+        raise click.UsageError(f"'{step}' needs {hint} earlier in the chain")
+    return state[key]
+
+
+def run_steps(steps) -> dict:
+    """Run the chained steps (functions of the state dict) in order."""
+    state: dict = {}
+    for step in steps:
+        if step is not None:
+            state = step(state) or state
+    return state
+
+
+config_option = click.option(
+    "--config",
+    "config_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Config YAML (default: the paper's prototype, built in).",
+)
+overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output.")
+
+
+@click.command("load")
+@click.argument("session_path", metavar="SESSION", type=click.Path(exists=True, path_type=Path))
+@config_option
+@click.option(
+    "--calibration",
+    "calibration_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Calibration YAML written by 'bendsense calibrate'.",
+)
+@click.option("--pressure-kpa", type=float, help="Constant pressure for frames without a reading [kPa].")
+def load(session_path, config_path, calibration_path, pressure_kpa):
+    """Load a session (session CSV or native session directory)."""
+
+    def step(state):
+        from bendsense.calibration import Calibration
+        from bendsense.config import load_config
+        from bendsense.session import read_session
+
+        session = read_session(session_path)
+        if pressure_kpa is not None:
+            session = session.with_pressure(pressure_kpa * 1e3)
+        state.update(
+            session=session,
+            config=load_config(config_path),
+            calibration=Calibration.load(calibration_path) if calibration_path else None,
+            name=session_path.stem,
+        )
+        log.info("loaded %s: %d frames, %d channels", session_path, len(session), session.n_channels)
+        return state
+
+    return step
+
+
+@click.command("reconstruct")
+@click.option("--points", type=click.IntRange(2, 10000), default=101, show_default=True,
+              help="Arc-length samples of the shape along the sensor.")
+def reconstruct(points):
+    """Reconstruct curvatures and the continuous shape (PCC) of every frame."""
+
+    def step(state):
+        import numpy as np
+
+        from bendsense.pcc import reconstruct as reconstruct_shape
+
+        session = _require(state, "session", "reconstruct", "'load SESSION'")
+        calibration = _require(state, "calibration", "reconstruct", "'load ... --calibration CAL.yaml'")
+        sensor = state["config"].sensor
+        s_m = np.linspace(0.0, sensor.length_m, points)
+        shape = reconstruct_shape(session.signals, calibration, sensor, s_m=s_m)
+        n_extra = int(np.count_nonzero(shape.extrapolated))
+        if n_extra:
+            log.warning("%d of %d frames outside the calibrated signal range (status 'extrapolated')",
+                        n_extra, len(session))
+        state["shape"] = shape
+        return state
+
+    return step
+
+
+@click.command("estimate")
+@click.option("--constraint", type=click.Choice(["none", "vertical", "horizontal", "normal", "follower"]),
+              help="Force constraint (default: from the config).")
+@click.option("--method", type=click.Choice(["fast", "paper"]), help="Estimator (default: from the config).")
+@click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
+def estimate(constraint, method, push_only):
+    """Estimate the tip force of every frame from its shape and pressure."""
+
+    def step(state):
+        import numpy as np
+
+        from bendsense.estimation import estimate_force
+
+        shape = _require(state, "shape", "estimate", "'reconstruct'")
+        session = state["session"]
+        if not session.has_pressure:
+            raise click.UsageError("the session has frames without pressure: give 'load ... --pressure-kpa P'")
+        config = state["config"]
+        est = estimate_force(
+            shape,
+            session.pressure_pa,
+            config,
+            constraint=constraint or config.estimation.constraint,
+            method=method or config.estimation.method,
+            push_only=push_only,
+        )
+        failed = int(np.count_nonzero(~np.asarray(est.success)))
+        if failed:
+            log.warning("%d of %d frames did not converge (status 'not converged')", failed, len(session))
+        state["estimate"] = est
+        return state
+
+    return step
+
+
+@click.command("save")
+@click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
+@overwrite_option
+def save(out_dir, overwrite):
+    """Write results.csv and shape.npz into OUT_DIR."""
+
+    def step(state):
+        from bendsense.results import write_results
+
+        shape = _require(state, "shape", "save", "'reconstruct'")
+        write_results(out_dir, state["session"], shape, state.get("estimate"), overwrite=overwrite)
+        state["out_dir"] = out_dir
+        click.echo(f"wrote {out_dir}/results.csv and shape.npz ({len(state['session'])} frames)")
+        return state
+
+    return step
+
+
+@click.command("export")
+@click.argument("csv_path", metavar="FILE.csv", type=click.Path(dir_okay=False, path_type=Path))
+@overwrite_option
+def export(csv_path, overwrite):
+    """Export the loaded session as a session CSV."""
+
+    def step(state):
+        from bendsense.session import write_session_csv
+
+        session = _require(state, "session", "export", "'load SESSION'")
+        write_session_csv(session, csv_path, overwrite=overwrite)
+        click.echo(f"wrote {csv_path} ({len(session)} frames)")
+        return state
+
+    return step
+
+
+COMMANDS = [load, reconstruct, estimate, save, export]

@@ -1,0 +1,151 @@
+"""Results of the pipeline on disk: ``results.csv`` and ``shape.npz`` (DESIGN.md section 3).
+
+``results.csv`` has a row per frame: ``t_s``, ``pressure_pa``, ``kappa1..kappaN``
+[1/m], ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, after estimation ``fx_n``,
+``fy_n``, ``fx_std_n``, ``fy_std_n``, ``residual_m``, ``status``; then the input's
+extra columns unchanged. ``shape.npz`` holds ``s_m`` (M,) and ``positions_m``
+(frames, M, 2).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bendsense.errors import SessionError
+from bendsense.session import _column_array, _format
+
+__all__ = ["Results", "write_results", "read_results", "frame_status"]
+
+FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
+
+
+@dataclass(frozen=True, eq=False)
+class Results:
+    """Per-frame results as read back from an output directory."""
+
+    columns: dict
+    s_m: np.ndarray
+    positions_m: np.ndarray
+    extra_names: tuple = field(default_factory=tuple)
+
+    def __getitem__(self, name):
+        return self.columns[name]
+
+    @property
+    def curvature_per_m(self) -> np.ndarray:
+        """Segment curvatures, shape (frames, N) [1/m]."""
+        n = sum(1 for k in self.columns if k.startswith("kappa"))
+        return np.column_stack([self.columns[f"kappa{i + 1}"] for i in range(n)])
+
+    @property
+    def has_forces(self) -> bool:
+        """True when the results include a force estimate."""
+        return "fx_n" in self.columns
+
+
+def frame_status(shape, estimate=None) -> np.ndarray:
+    """Per-frame status strings: ``ok`` or a short reason."""
+    n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
+    status = np.full(n, "ok", dtype=object)
+    extrapolated = np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))
+    status[extrapolated] = "extrapolated"
+    if estimate is not None:
+        failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
+        status[failed] = "not converged"
+    return status
+
+
+def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = False) -> Path:
+    """Write ``results.csv`` and ``shape.npz`` of a processed session into ``out_dir``.
+
+    The directory is written complete or not at all: files go to a temporary
+    directory beside it that is renamed into place at the end.
+
+    Parameters
+    ----------
+    out_dir : path
+        Output directory; must not exist unless ``overwrite``.
+    session : Session
+        The input session (time, pressure and extra columns).
+    shape : Shape
+        Reconstructed shapes, batch axis over the session's frames.
+    estimate : ForceEstimate, optional
+        Force estimates for the same frames.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not overwrite:
+        raise SessionError(f"{out_dir}: exists (use --overwrite to replace it)")
+    frames = len(session)
+    kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
+    tip = np.asarray(shape.tip_position_m).reshape(frames, 2)
+    columns: dict[str, np.ndarray] = {
+        "t_s": session.t_s,
+        "pressure_pa": session.pressure_pa,
+        **{f"kappa{i + 1}": kappa[:, i] for i in range(kappa.shape[1])},
+        "tip_x_m": tip[:, 0],
+        "tip_y_m": tip[:, 1],
+        "tip_angle_rad": np.asarray(shape.tip_angle_rad).reshape(frames),
+    }
+    if estimate is not None:
+        force = np.asarray(estimate.force_n).reshape(frames, 2)
+        std = np.asarray(estimate.std_n).reshape(frames, 2)
+        columns.update(
+            fx_n=force[:, 0],
+            fy_n=force[:, 1],
+            fx_std_n=std[:, 0],
+            fy_std_n=std[:, 1],
+            residual_m=np.asarray(estimate.residual_m).reshape(frames),
+        )
+    columns["status"] = frame_status(shape, estimate)
+    for name, values in session.extra.items():
+        if name not in columns:
+            columns[name] = values
+
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        with open(tmp / "results.csv", "w", encoding="utf-8", newline="") as fh:
+            writer = csv.writer(fh, lineterminator="\n")
+            writer.writerow(columns)
+            for row in zip(*columns.values()):
+                writer.writerow([_format(v) for v in row])
+        np.savez_compressed(
+            tmp / "shape.npz",
+            s_m=np.asarray(shape.s_m),
+            positions_m=np.asarray(shape.positions_m).reshape(frames, -1, 2),
+        )
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out_dir
+
+
+def read_results(out_dir) -> Results:
+    """Read an output directory written by :func:`write_results`."""
+    out_dir = Path(out_dir)
+    path = out_dir / "results.csv"
+    if not path.is_file():
+        raise SessionError(f"{out_dir}: no results.csv (not a results directory)")
+    with open(path, encoding="utf-8", newline="") as fh:
+        rows = list(csv.reader(fh))
+    header, body = rows[0], rows[1:]
+    cells = list(zip(*body)) if body else [[] for _ in header]
+    columns = {h: _column_array(list(c)) for h, c in zip(header, cells)}
+    for h in ("t_s", "pressure_pa", "fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m"):
+        if h in columns:
+            columns[h] = columns[h].astype(float)
+    with np.load(out_dir / "shape.npz") as npz:
+        s_m, positions = npz["s_m"], npz["positions_m"]
+    known = {"t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS}
+    extra = tuple(h for h in header if h not in known and not h.startswith("kappa"))
+    return Results(columns=columns, s_m=s_m, positions_m=positions, extra_names=extra)
