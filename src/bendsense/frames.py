@@ -1,0 +1,723 @@
+"""Wire protocol of the sensor board: framing, CRC, payloads and incremental decoders.
+
+Pure functions and classes, no IO. The binary protocol is DESIGN.md section 3: each
+frame on the wire is ``0x00, COBS(body), 0x00`` with ``body = payload + CRC16`` (CRC-16/
+CCITT-FALSE of the payload, little-endian). Payload, little-endian::
+
+    0  u8   version = 1
+    1  u8   type: 1 SAMPLE, 2 HELLO, 3 TEXT; host->device 16 START, 17 STOP, 18 HELLO_REQUEST
+    2  u16  seq: +1 per device frame of any type, wraps at 65536
+    4  u32  t_us: device clock [us], wraps
+    SAMPLE 8: u8 n_channels (1..64), u8 status, u16 tx_drops, i32 pressure_pa
+              (0x7FFFFFFF = no reading), u16[n] adc
+    HELLO  8: u8 n_channels, u8 adc_bits, u16 rate_hz, u16 vref_mv, <= 32 B firmware (ASCII)
+    TEXT   8: UTF-8 log line
+
+:class:`Decoder` turns a byte stream, cut into chunks anywhere, into frame objects; it
+resynchronises at the next ``0x00`` after any bad frame, counts what it rejects and never
+raises on bad bytes. :class:`LineDecoder` does the same for the text dialect (one frame
+per line) of simple firmware.
+"""
+
+from __future__ import annotations
+
+import binascii
+import enum
+import struct
+from collections import deque
+from dataclasses import dataclass
+
+from bendsense.errors import FrameError
+
+__all__ = [
+    "VERSION",
+    "NO_PRESSURE",
+    "FrameType",
+    "StatusBits",
+    "Sample",
+    "Hello",
+    "Text",
+    "Command",
+    "crc16_ccitt_false",
+    "cobs_encode",
+    "cobs_decode",
+    "frame_bytes",
+    "encode_sample",
+    "encode_hello",
+    "encode_text",
+    "encode_command",
+    "encode_frame",
+    "decode_body",
+    "decode_frame",
+    "Decoder",
+    "LineDecoder",
+]
+
+VERSION = 1
+NO_PRESSURE = 0x7FFFFFFF
+"""``pressure_pa`` on the wire when the board has no pressure reading."""
+MAX_CHANNELS = 64
+MAX_FIRMWARE_BYTES = 32
+
+
+class FrameType(enum.IntEnum):
+    """Frame type byte (payload offset 1)."""
+
+    SAMPLE = 1
+    HELLO = 2
+    TEXT = 3
+    START = 16
+    STOP = 17
+    HELLO_REQUEST = 18
+
+
+class StatusBits(enum.IntFlag):
+    """Bits of the SAMPLE status byte."""
+
+    ADC_OVERRUN = 1
+    LOCKIN_SATURATED = 2
+    MUX_SETTLE = 4
+    TX_OVERFLOW = 8
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One SAMPLE frame.
+
+    Attributes
+    ----------
+    seq : int
+        Sequence number (0..65535, wraps).
+    t_us : int or None
+        Device clock [us] (0..2**32-1, wraps); None from a line dialect without a ``t_us`` column.
+    n_channels : int
+        Number of ADC values.
+    status : int
+        Status bits (:class:`StatusBits`).
+    tx_drops : int
+        Cumulative frames the firmware could not send.
+    pressure_pa : int, float or None
+        Actuation pressure [Pa]; None for "no reading".
+    adc : tuple of int
+        Raw ADC counts, one per channel (floats only from a line dialect that sends them).
+    """
+
+    seq: int
+    t_us: int | None
+    n_channels: int
+    status: int
+    tx_drops: int
+    pressure_pa: int | float | None
+    adc: tuple
+
+
+@dataclass(frozen=True, slots=True)
+class Hello:
+    """HELLO frame: what the board is (its answer to HELLO_REQUEST)."""
+
+    seq: int
+    t_us: int
+    n_channels: int
+    adc_bits: int
+    rate_hz: int
+    vref_mv: int
+    firmware: str
+
+    def to_dict(self) -> dict:
+        """Plain dict of the fields (for ``meta.yaml``)."""
+        return {
+            "n_channels": self.n_channels,
+            "adc_bits": self.adc_bits,
+            "rate_hz": self.rate_hz,
+            "vref_mv": self.vref_mv,
+            "firmware": self.firmware,
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class Text:
+    """TEXT frame: a log line from the firmware."""
+
+    seq: int
+    t_us: int
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """Host-to-device frame (START, STOP, HELLO_REQUEST); carries no sequence gap accounting."""
+
+    kind: FrameType
+    seq: int = 0
+    t_us: int = 0
+
+
+# --------------------------------------------------------------------------- primitives
+
+
+def crc16_ccitt_false(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor).
+
+    The check value, ``crc16_ccitt_false(b"123456789")``, is 0x29B1.
+    """
+    return binascii.crc_hqx(data, 0xFFFF)
+
+
+def cobs_encode(data: bytes) -> bytes:
+    """Consistent Overhead Byte Stuffing: ``data`` without any zero byte, overhead 1 + len/254."""
+    out = bytearray()
+    for part in bytes(data).split(b"\x00"):
+        while len(part) >= 254:
+            out.append(0xFF)
+            out += part[:254]
+            part = part[254:]
+        out.append(len(part) + 1)
+        out += part
+    return bytes(out)
+
+
+def cobs_decode(data: bytes) -> bytes:
+    """Inverse of :func:`cobs_encode`.
+
+    Raises
+    ------
+    FrameError
+        If ``data`` contains a zero byte or a block runs past its end.
+    """
+    out = _cobs_decode(bytes(data))
+    if out is None:
+        raise FrameError(f"COBS: invalid encoding of {len(data)} bytes (zero byte or block past the end)")
+    return out
+
+
+def _cobs_decode(data: bytes) -> bytes | None:
+    # Hot path: no exceptions, None for invalid input.
+    n = len(data)
+    if n == 0 or 0 in data:
+        return None
+    code = data[0]
+    if code == n:  # the common case: a body without zero bytes
+        return data[1:]
+    out = bytearray()
+    i = 0
+    while i < n:
+        code = data[i]
+        end = i + code
+        if end > n:
+            return None
+        out += data[i + 1 : end]
+        i = end
+        if code != 0xFF and i < n:
+            out.append(0)
+    return bytes(out)
+
+
+def frame_bytes(payload: bytes) -> bytes:
+    """Wire frame of ``payload``: ``0x00, COBS(payload + CRC16 LE), 0x00``."""
+    body = payload + crc16_ccitt_false(payload).to_bytes(2, "little")
+    return b"\x00" + cobs_encode(body) + b"\x00"
+
+
+# --------------------------------------------------------------------------- encoding
+
+_HEADER = struct.Struct("<BBHI")
+_SAMPLE_HEAD = struct.Struct("<BBHIBBHi")
+_HELLO_HEAD = struct.Struct("<BBHIBBHH")
+_ADC = {}
+
+
+def _adc_struct(n: int) -> struct.Struct:
+    s = _ADC.get(n)
+    if s is None:
+        s = _ADC[n] = struct.Struct(f"<{n}H")
+    return s
+
+
+def _check_int(name: str, value, lo: int, hi: int) -> int:
+    v = int(value)
+    if v != value or not lo <= v <= hi:
+        raise FrameError(f"{name}: expected an integer in {lo}..{hi}, got {value!r}")
+    return v
+
+
+def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0) -> bytes:
+    """Encode a SAMPLE as a whole wire frame.
+
+    Parameters
+    ----------
+    seq : int
+        Sequence number; taken modulo 65536 (the protocol wraps).
+    t_us : int
+        Device clock [us]; taken modulo 2**32.
+    adc : sequence of int, length 1..64
+        Raw counts, 0..65535.
+    pressure_pa : float or None
+        Pressure [Pa], rounded to an integer; None (or NaN) sends "no reading".
+    status, tx_drops : int
+        Status bits (0..255) and cumulative transmit drops (taken modulo 65536).
+
+    Returns
+    -------
+    bytes
+        ``0x00, COBS(body), 0x00``.
+    """
+    counts = [int(v) for v in adc]
+    n = len(counts)
+    if not 1 <= n <= MAX_CHANNELS:
+        raise FrameError(f"adc: expected 1..{MAX_CHANNELS} channels, got {n}")
+    if min(counts) < 0 or max(counts) > 0xFFFF:
+        raise FrameError(f"adc: counts must be in 0..65535, got {min(counts)}..{max(counts)}")
+    if pressure_pa is None or pressure_pa != pressure_pa:
+        p = NO_PRESSURE
+    else:
+        p = round(pressure_pa)
+        if not -(2**31) <= p < NO_PRESSURE:
+            raise FrameError(f"pressure_pa: expected -2**31 <= p < 2**31-1 [Pa], got {pressure_pa!r}")
+    status = _check_int("status", status, 0, 255)
+    payload = _SAMPLE_HEAD.pack(
+        VERSION, FrameType.SAMPLE, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF, n, status, int(tx_drops) & 0xFFFF, p
+    ) + _adc_struct(n).pack(*counts)
+    return frame_bytes(payload)
+
+
+def encode_hello(seq, t_us, n_channels, adc_bits, rate_hz, vref_mv, firmware="") -> bytes:
+    """Encode a HELLO as a whole wire frame (``firmware``: ASCII, at most 32 bytes)."""
+    fw = str(firmware).encode("ascii", errors="strict") if firmware else b""
+    if len(fw) > MAX_FIRMWARE_BYTES:
+        raise FrameError(f"firmware: at most {MAX_FIRMWARE_BYTES} ASCII bytes, got {len(fw)}")
+    payload = _HELLO_HEAD.pack(
+        VERSION,
+        FrameType.HELLO,
+        int(seq) & 0xFFFF,
+        int(t_us) & 0xFFFFFFFF,
+        _check_int("n_channels", n_channels, 1, MAX_CHANNELS),
+        _check_int("adc_bits", adc_bits, 1, 16),
+        _check_int("rate_hz", rate_hz, 0, 0xFFFF),
+        _check_int("vref_mv", vref_mv, 0, 0xFFFF),
+    )
+    return frame_bytes(payload + fw)
+
+
+def encode_text(seq, t_us, text: str) -> bytes:
+    """Encode a TEXT (UTF-8 log line) as a whole wire frame."""
+    payload = _HEADER.pack(VERSION, FrameType.TEXT, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF)
+    return frame_bytes(payload + str(text).encode("utf-8"))
+
+
+_COMMAND_NAMES = {"start": FrameType.START, "stop": FrameType.STOP, "hello_request": FrameType.HELLO_REQUEST}
+
+
+def _command_kind(kind) -> FrameType:
+    if isinstance(kind, str):
+        k = _COMMAND_NAMES.get(kind.lower().replace("-", "_"))
+        if k is not None:
+            return k
+    elif kind in (FrameType.START, FrameType.STOP, FrameType.HELLO_REQUEST):
+        return FrameType(kind)
+    raise FrameError(f"command kind: expected one of 'start', 'stop', 'hello_request' (or 16, 17, 18), got {kind!r}")
+
+
+def encode_command(kind, seq: int = 0, t_us: int = 0) -> bytes:
+    """Encode a host-to-device command (START, STOP, HELLO_REQUEST) as a whole wire frame.
+
+    The host has no sequence of its own that the device checks; the driver sends
+    ``seq`` = a per-connection counter of commands and ``t_us`` = 0, both of which the
+    firmware may ignore.
+    """
+    k = _command_kind(kind)
+    return frame_bytes(_HEADER.pack(VERSION, k, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF))
+
+
+def encode_frame(frame) -> bytes:
+    """Encode any frame object (:class:`Sample`, :class:`Hello`, :class:`Text`, :class:`Command`)."""
+    if isinstance(frame, Sample):
+        return encode_sample(frame.seq, frame.t_us or 0, frame.adc, frame.pressure_pa, frame.status, frame.tx_drops)
+    if isinstance(frame, Hello):
+        return encode_hello(
+            frame.seq, frame.t_us, frame.n_channels, frame.adc_bits, frame.rate_hz, frame.vref_mv, frame.firmware
+        )
+    if isinstance(frame, Text):
+        return encode_text(frame.seq, frame.t_us, frame.text)
+    if isinstance(frame, Command):
+        return encode_command(frame.kind, frame.seq, frame.t_us)
+    raise FrameError(f"frame: expected Sample, Hello, Text or Command, got {type(frame).__name__}")
+
+
+# --------------------------------------------------------------------------- decoding
+
+_CRC_ERROR = 1
+_MALFORMED = 2
+
+
+def _parse_body(body: bytes, adc_bits: int | None):
+    """Frame object, or ``_CRC_ERROR`` / ``_MALFORMED``. Never raises."""
+    n = len(body)
+    if n < 10:  # 8-byte header + CRC
+        return _MALFORMED
+    if binascii.crc_hqx(body[:-2], 0xFFFF) != body[-2] | (body[-1] << 8):
+        return _CRC_ERROR
+    if body[0] != VERSION:
+        return _MALFORMED
+    ftype = body[1]
+    plen = n - 2
+    if ftype == 1:
+        if plen < 18:
+            return _MALFORMED
+        _, _, seq, t_us, nch, status, tx_drops, p = _SAMPLE_HEAD.unpack_from(body)
+        if not 1 <= nch <= MAX_CHANNELS or plen != 16 + 2 * nch:
+            return _MALFORMED
+        adc = _adc_struct(nch).unpack_from(body, 16)
+        if adc_bits is not None and max(adc) >> adc_bits:
+            return _MALFORMED
+        return Sample(seq, t_us, nch, status, tx_drops, None if p == NO_PRESSURE else p, adc)
+    if ftype == 2:
+        if not 14 <= plen <= 14 + MAX_FIRMWARE_BYTES:
+            return _MALFORMED
+        _, _, seq, t_us, nch, bits, rate, vref = _HELLO_HEAD.unpack_from(body)
+        if not 1 <= nch <= MAX_CHANNELS or not 1 <= bits <= 16:
+            return _MALFORMED
+        fw = body[14:plen].decode("ascii", errors="replace")
+        return Hello(seq, t_us, nch, bits, rate, vref, fw)
+    if ftype == 3:
+        _, _, seq, t_us = _HEADER.unpack_from(body)
+        return Text(seq, t_us, body[8:plen].decode("utf-8", errors="replace"))
+    if ftype in (16, 17, 18):
+        if plen != 8:
+            return _MALFORMED
+        _, _, seq, t_us = _HEADER.unpack_from(body)
+        return Command(FrameType(ftype), seq, t_us)
+    return _MALFORMED
+
+
+def decode_body(body: bytes, adc_bits: int | None = None):
+    """Decode one un-stuffed body (payload + CRC) into a frame object.
+
+    Raises
+    ------
+    FrameError
+        On a CRC mismatch or a malformed payload.
+    """
+    frame = _parse_body(bytes(body), adc_bits)
+    if frame is _CRC_ERROR:
+        raise FrameError(f"CRC mismatch in a {len(body)}-byte body")
+    if frame is _MALFORMED:
+        raise FrameError(f"malformed {len(body)}-byte body (version, type, length or channel count)")
+    return frame
+
+
+def decode_frame(data: bytes, adc_bits: int | None = None):
+    """Decode exactly one wire frame (delimiters optional); raises :class:`FrameError` if bad."""
+    return decode_body(cobs_decode(bytes(data).strip(b"\x00")), adc_bits)
+
+
+class Decoder:
+    """Incremental decoder of the binary protocol.
+
+    Feed it bytes as they arrive, in chunks of any size; :meth:`feed` returns the
+    complete frames found so far. It never raises on bad input: a segment between two
+    ``0x00`` that fails COBS, the CRC or the payload checks is counted and skipped, and
+    decoding resumes at the next delimiter. Empty segments (``0x00 0x00``) are normal.
+
+    Parameters
+    ----------
+    adc_bits : int, optional
+        ADC resolution; SAMPLE values at or above ``2**adc_bits`` are malformed. Taken
+        from the first HELLO when not given.
+    max_frame_bytes : int
+        Longest run without a delimiter that is kept; a longer run is dropped (and
+        counted in ``overruns`` and ``malformed``), so memory stays bounded.
+
+    Attributes
+    ----------
+    frames : int
+        Valid frames returned.
+    crc_errors : int
+        Segments whose CRC did not match.
+    malformed : int
+        Segments with bad COBS, bad length, unknown version or type, channel count
+        outside 1..64, or an ADC value out of range; includes over-long runs.
+    overruns : int
+        Over-long runs without a delimiter that were dropped.
+    lost : int
+        Frames missing from the device sequence: ``sum((seq - last - 1) mod 65536)``
+        over consecutive valid device frames (SAMPLE, HELLO, TEXT).
+    bytes : int
+        Bytes fed.
+    hello : Hello or None
+        The last HELLO seen.
+    gaps : deque of (seq, n_lost)
+        The most recent sequence gaps (bounded).
+    """
+
+    def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 1024):
+        self.adc_bits = adc_bits
+        self._adc_bits_from_hello = adc_bits is None
+        self.max_frame_bytes = int(max_frame_bytes)
+        self._buf = b""
+        self._discarding = False
+        self._last_seq = None
+        self.frames = 0
+        self.crc_errors = 0
+        self.malformed = 0
+        self.overruns = 0
+        self.lost = 0
+        self.bytes = 0
+        self.hello = None
+        self.gaps = deque(maxlen=1000)
+
+    def reset(self) -> None:
+        """Forget a partial frame (e.g. after a reconnect); counters and sequence are kept."""
+        self._buf = b""
+        self._discarding = False
+
+    def reset_sequence(self) -> None:
+        """Forget the last sequence number (the next frame starts a new sequence)."""
+        self._last_seq = None
+
+    @property
+    def errors(self) -> int:
+        """``crc_errors + malformed``."""
+        return self.crc_errors + self.malformed
+
+    def feed(self, data: bytes) -> list:
+        """Decode ``data`` appended to what came before; return the complete frames in it."""
+        if not data:
+            return []
+        data = bytes(data)
+        self.bytes += len(data)
+        if b"\x00" not in data:
+            if not self._discarding:
+                self._buf += data
+                if len(self._buf) > self.max_frame_bytes:
+                    self._overrun()
+            return []
+        parts = data.split(b"\x00")
+        tail = parts.pop()
+        if self._discarding:
+            parts[0] = b""  # the end of an over-long run
+            self._discarding = False
+        elif self._buf:
+            parts[0] = self._buf + parts[0]
+        self._buf = tail
+        if len(tail) > self.max_frame_bytes:
+            self._overrun()
+        out = []
+        append = out.append
+        max_len = self.max_frame_bytes
+        for seg in parts:
+            if not seg:
+                continue
+            if len(seg) > max_len:
+                self.overruns += 1
+                self.malformed += 1
+                continue
+            body = _cobs_decode(seg)
+            if body is None:
+                self.malformed += 1
+                continue
+            frame = _parse_body(body, self.adc_bits)
+            if frame is _CRC_ERROR:
+                self.crc_errors += 1
+                continue
+            if frame is _MALFORMED:
+                self.malformed += 1
+                continue
+            self.frames += 1
+            if type(frame) is not Command:
+                seq = frame.seq
+                last = self._last_seq
+                if last is not None:
+                    gap = (seq - last - 1) & 0xFFFF
+                    if gap:
+                        self.lost += gap
+                        self.gaps.append((seq, gap))
+                self._last_seq = seq
+                if type(frame) is Hello:
+                    self.hello = frame
+                    if self._adc_bits_from_hello:
+                        self.adc_bits = frame.adc_bits
+            append(frame)
+        return out
+
+    def _overrun(self) -> None:
+        self._buf = b""
+        self._discarding = True
+        self.overruns += 1
+        self.malformed += 1
+
+
+class LineDecoder:
+    """Incremental decoder of the line dialect: one frame per line, for simple firmware.
+
+    Numbers are separated by commas or whitespace; a line starting with ``#`` is a
+    comment; a line equal to the column names is a header and skipped. Any other line
+    that does not parse is counted in ``malformed`` and skipped.
+
+    Parameters
+    ----------
+    columns : sequence of str, optional
+        Column layout. Channel columns are ``ch1..chN`` (in any order); optional
+        ``seq``, ``t_us`` and ``pressure_pa`` (``nan`` = no reading); any other name is
+        read and ignored. Default: ``ch1..ch{n_channels}``.
+    n_channels : int, optional
+        Number of channels for the default layout.
+    max_line_bytes : int
+        Longest line kept; a longer one is dropped and counted (bounded memory).
+
+    Attributes
+    ----------
+    frames, malformed, lost, overruns : int
+        As in :class:`Decoder`; without a ``seq`` column the decoder numbers the lines
+        itself and ``lost`` stays 0.
+    """
+
+    def __init__(self, columns=None, n_channels: int | None = None, max_line_bytes: int = 4096):
+        if columns is None:
+            if n_channels is None:
+                raise FrameError("LineDecoder: give columns or n_channels")
+            columns = [f"ch{i + 1}" for i in range(_check_int("n_channels", n_channels, 1, MAX_CHANNELS))]
+        columns = [str(c).strip() for c in columns]
+        chans = {}
+        for i, c in enumerate(columns):
+            if c.startswith("ch") and c[2:].isdigit() and int(c[2:]) >= 1:
+                chans[int(c[2:])] = i
+        if not chans or sorted(chans) != list(range(1, len(chans) + 1)):
+            raise FrameError(f"columns: expected ch1..chN among the columns, got {columns}")
+        if len(set(columns)) != len(columns):
+            raise FrameError(f"columns: duplicate names in {columns}")
+        self.columns = tuple(columns)
+        self.n_channels = len(chans)
+        self._chan_idx = [chans[k] for k in range(1, len(chans) + 1)]
+        self._seq_idx = columns.index("seq") if "seq" in columns else None
+        self._t_idx = columns.index("t_us") if "t_us" in columns else None
+        self._p_idx = columns.index("pressure_pa") if "pressure_pa" in columns else None
+        self.max_line_bytes = int(max_line_bytes)
+        self._buf = b""
+        self._discarding = False
+        self._last_seq = None
+        self._count = 0
+        self.frames = 0
+        self.crc_errors = 0  # no CRC in this dialect; kept for a uniform stats interface
+        self.malformed = 0
+        self.overruns = 0
+        self.lost = 0
+        self.bytes = 0
+        self.hello = None
+        self.adc_bits = None
+        self.gaps = deque(maxlen=1000)
+
+    @property
+    def errors(self) -> int:
+        """``crc_errors + malformed``."""
+        return self.crc_errors + self.malformed
+
+    def reset(self) -> None:
+        """Forget a partial line."""
+        self._buf = b""
+        self._discarding = False
+
+    def reset_sequence(self) -> None:
+        """Forget the last sequence number."""
+        self._last_seq = None
+
+    def feed(self, data) -> list:
+        """Decode ``data`` (bytes or str) appended to what came before; return complete frames."""
+        if not data:
+            return []
+        if isinstance(data, str):
+            data = data.encode("utf-8")
+        data = bytes(data).replace(b"\r", b"\n")
+        self.bytes += len(data)
+        if b"\n" not in data:
+            if not self._discarding:
+                self._buf += data
+                if len(self._buf) > self.max_line_bytes:
+                    self._overrun()
+            return []
+        lines = data.split(b"\n")
+        tail = lines.pop()
+        if self._discarding:
+            lines[0] = b""
+            self._discarding = False
+        elif self._buf:
+            lines[0] = self._buf + lines[0]
+        self._buf = tail
+        if len(tail) > self.max_line_bytes:
+            self._overrun()
+        out = []
+        for raw in lines:
+            frame = self._parse_line(raw)
+            if frame is not None:
+                out.append(frame)
+        return out
+
+    def _overrun(self) -> None:
+        self._buf = b""
+        self._discarding = True
+        self.overruns += 1
+        self.malformed += 1
+
+    def _parse_line(self, raw: bytes):
+        if len(raw) > self.max_line_bytes:
+            self.overruns += 1
+            self.malformed += 1
+            return None
+        try:
+            line = raw.decode("utf-8").strip()
+        except UnicodeDecodeError:
+            self.malformed += 1
+            return None
+        if not line or line.startswith("#"):
+            return None
+        tokens = line.replace(",", " ").split()
+        if tuple(tokens) == self.columns:
+            return None
+        if len(tokens) != len(self.columns):
+            self.malformed += 1
+            return None
+        try:
+            values = [float(t) for t in tokens]
+        except ValueError:
+            self.malformed += 1
+            return None
+        adc = tuple(_int_if_integral(values[i]) for i in self._chan_idx)
+        if any(v != v or v in (float("inf"), float("-inf")) for v in adc):
+            self.malformed += 1
+            return None
+        seq = None
+        if self._seq_idx is not None:
+            s = values[self._seq_idx]
+            if s != s or s in (float("inf"), float("-inf")) or s != int(s) or s < 0:
+                self.malformed += 1
+                return None
+            seq = int(s) & 0xFFFF
+        t_us = None
+        if self._t_idx is not None:
+            t = values[self._t_idx]
+            if t != t or t < 0 or t == float("inf"):
+                self.malformed += 1
+                return None
+            t_us = int(round(t)) & 0xFFFFFFFF
+        p = None
+        if self._p_idx is not None:
+            pv = values[self._p_idx]
+            p = None if pv != pv else _int_if_integral(pv)
+        if seq is None:
+            seq = self._count & 0xFFFF
+        else:
+            last = self._last_seq
+            if last is not None:
+                gap = (seq - last - 1) & 0xFFFF
+                if gap:
+                    self.lost += gap
+                    self.gaps.append((seq, gap))
+            self._last_seq = seq
+        self._count += 1
+        self.frames += 1
+        return Sample(seq, t_us, self.n_channels, 0, 0, p, adc)
+
+
+def _int_if_integral(v: float):
+    if v == v and abs(v) < 2**53 and v == int(v):
+        return int(v)
+    return v
