@@ -1,0 +1,897 @@
+"""Sensor calibration: signals → total relative shifts (paper eq. 1–2, section V-B).
+
+A calibration holds the offset A0 (the flat sensor's mean signal, paper eq. 1) and two
+polynomials in ascending powers, ``f_odd`` for the odd channels i = 1, 3, … (1-based)
+and ``f_even`` for the even ones (paper eq. 2): ``S_i = Σ_k c_k ΔA_i^k``.
+
+It is fitted from a manifest of recordings (DESIGN.md section 3): the flat sensor and
+one recording per calibration strip of radius R. For a strip the ground truth is
+``S_i = κ_cal · d · L_i`` with L_i the cumulative segment length and κ_cal = 1/R, or
+1/(R + c) when ``sensor.calibration_adds_sleeve`` (or ``sleeve=True``) says the strip
+radius does not include the sleeve thickness c.
+
+Choices made here where the paper is silent:
+
+- Each recording enters the fit as the mean of its frames, one point per channel; the
+  per-frame spread is kept as a noise estimate (``noise_std`` from the flat,
+  ``StripResidual.signal_std`` per strip).
+- The flat recording is a data point too: S = 0 at ΔA = 0 on every channel (a strip of
+  zero curvature), which pins the polynomials through the origin's neighbourhood.
+- ``weighting="none"`` (default) is the paper's ordinary least squares over all points.
+  ``weighting="shift"`` weights the points of each parity by their spacing along the
+  sorted shifts (a trapezoid rule in S), so the fit approximates ``∫ r(S)² dS`` over the
+  calibrated shift range and the many small shifts (every strip starts at S = 0) stop
+  dominating the few large ones — the imbalance the paper names as a likely cause of its
+  larger errors at high curvature.
+- ``degree="auto"`` picks the degree 1..5 by leave-one-strip-out cross-validation of
+  the shift error: the smallest degree whose CV error is within 5 % of the best.
+- ΔA is scaled to [−1, 1] for the least squares; the stored coefficients are plain
+  ascending powers of ΔA.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import math
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from bendsense.errors import ConfigError, SessionError
+
+__all__ = [
+    "Calibration",
+    "StripResidual",
+    "Manifest",
+    "read_manifest",
+    "strip_shifts",
+    "polyfit_shift",
+    "polyval_shift",
+    "parity_masks",
+    "cross_validate_degree",
+    "WEIGHTINGS",
+    "DEGREES",
+]
+
+FORMAT = "bendsense-calibration"
+VERSION = 1
+WEIGHTINGS = ("none", "shift")
+DEGREES = (1, 2, 3, 4, 5)
+AUTO_TOLERANCE = 0.05
+RANGE_MARGIN_STD = 3.0
+
+
+# --- pure functions ---------------------------------------------------------------------
+
+
+def strip_shifts(curvature_per_m, lengths_m, strip_gap_m):
+    """Total shifts of a sensor bent on an arc: ``S_i = κ · d · L_i`` (paper section V-B).
+
+    Parameters
+    ----------
+    curvature_per_m : float or array_like, shape (...)
+        Arc curvature κ_cal [1/m].
+    lengths_m : array_like, shape (N,)
+        Segment lengths l_i [m].
+    strip_gap_m : float
+        Strip distance d [m].
+
+    Returns
+    -------
+    ndarray, shape (..., N)
+        S_i [m], with L_i = l_1 + … + l_i.
+    """
+    cumulative = np.cumsum(np.asarray(lengths_m, dtype=float))
+    return np.asarray(curvature_per_m, dtype=float)[..., None] * strip_gap_m * cumulative
+
+
+def parity_masks(n_channels: int):
+    """Boolean masks of the odd (1-based i = 1, 3, …) and even channels."""
+    odd = (np.arange(n_channels) % 2) == 0
+    return odd, ~odd
+
+
+def polyval_shift(coefficients, delta_a):
+    """Evaluate ``Σ_k c_k ΔA^k`` (ascending powers, Horner's rule; paper eq. 2)."""
+    c = np.asarray(coefficients, dtype=float)
+    x = np.asarray(delta_a, dtype=float)
+    out = np.full(x.shape, c[-1])
+    for ck in c[-2::-1]:
+        out = out * x + ck
+    return out
+
+
+def polyfit_shift(delta_a, shifts_m, degree: int, weights=None):
+    """Weighted least-squares polynomial ``S = Σ_k c_k ΔA^k``, k = 0..degree (paper eq. 2).
+
+    ΔA is scaled by its largest magnitude for conditioning; the result is in plain
+    ascending powers of ΔA.
+
+    Parameters
+    ----------
+    delta_a : array_like, shape (P,)
+        Offset-free signals ΔA [signal units].
+    shifts_m : array_like, shape (P,)
+        Ground-truth shifts S [m].
+    degree : int
+        Polynomial degree n >= 0.
+    weights : array_like, shape (P,), optional
+        Non-negative weights of the squared residuals.
+
+    Returns
+    -------
+    ndarray, shape (degree + 1,)
+        Coefficients c_0..c_n.
+
+    Raises
+    ------
+    ConfigError
+        If the data cannot determine a polynomial of this degree.
+    """
+    x = np.asarray(delta_a, dtype=float).ravel()
+    y = np.asarray(shifts_m, dtype=float).ravel()
+    w = np.ones_like(x) if weights is None else np.asarray(weights, dtype=float).ravel()
+    keep = w > 0
+    x, y, w = x[keep], y[keep], w[keep]
+    distinct = np.unique(x).size
+    if distinct < degree + 1:
+        raise ConfigError(
+            f"degree: {degree} needs at least {degree + 1} distinct signal levels per parity, got {distinct}"
+        )
+    scale = float(np.max(np.abs(x))) or 1.0
+    vander = np.vander(x / scale, degree + 1, increasing=True)
+    sw = np.sqrt(w)
+    coef, *_ = np.linalg.lstsq(vander * sw[:, None], y * sw, rcond=None)
+    return coef / scale ** np.arange(degree + 1)
+
+
+def _shift_weights(shifts):
+    """Trapezoid weights along the sorted shifts (the ``"shift"`` weighting), mean 1."""
+    s = np.asarray(shifts, dtype=float).ravel()
+    order = np.argsort(s, kind="stable")
+    ss = s[order]
+    w_sorted = np.zeros_like(ss)
+    if ss.size > 1:
+        gaps = np.diff(ss)
+        w_sorted[:-1] += 0.5 * gaps
+        w_sorted[1:] += 0.5 * gaps
+    total = w_sorted.sum()
+    if total <= 0:
+        return np.ones_like(s)
+    w = np.empty_like(s)
+    w[order] = w_sorted
+    return w * (s.size / total)
+
+
+def _fit_parities(delta_a, shifts, degree, weighting, odd, even):
+    """Fit f_odd and f_even on rows of (R, N) data."""
+    out = []
+    for mask in (odd, even):
+        if not np.any(mask):  # a one-channel sensor has no even channels
+            out.append(out[0].copy())
+            continue
+        x, y = delta_a[:, mask], shifts[:, mask]
+        w = _shift_weights(y) if weighting == "shift" else None
+        out.append(polyfit_shift(x, y, degree, w))
+    return out[0], out[1]
+
+
+def cross_validate_degree(delta_a, shifts_m, groups, degrees=DEGREES, weighting="none"):
+    """Leave-one-strip-out cross-validation of the polynomial degree.
+
+    Parameters
+    ----------
+    delta_a, shifts_m : array_like, shape (R, N)
+        Per-recording mean ΔA and ground-truth shifts S [m].
+    groups : array_like of int, shape (R,)
+        Strip index of every row; rows with a negative group (the flat) are always
+        kept in the training set.
+    degrees : iterable of int
+        Candidate degrees.
+    weighting : str
+        ``"none"`` or ``"shift"``.
+
+    Returns
+    -------
+    dict of int to float
+        RMS held-out shift error per degree [m] (``inf`` if a fold cannot be fitted).
+    """
+    delta_a = np.asarray(delta_a, dtype=float)
+    shifts = np.asarray(shifts_m, dtype=float)
+    groups = np.asarray(groups)
+    odd, even = parity_masks(delta_a.shape[1])
+    folds = sorted(set(groups[groups >= 0].tolist()))
+    result = {}
+    for degree in degrees:
+        sq, count = 0.0, 0
+        try:
+            for g in folds:
+                train = groups != g
+                c_odd, c_even = _fit_parities(delta_a[train], shifts[train], degree, weighting, odd, even)
+                test = ~train
+                pred = np.where(odd, polyval_shift(c_odd, delta_a[test]), polyval_shift(c_even, delta_a[test]))
+                sq += float(np.sum((pred - shifts[test]) ** 2))
+                count += pred.size
+            result[int(degree)] = math.sqrt(sq / count) if count else math.inf
+        except ConfigError:
+            result[int(degree)] = math.inf
+    return result
+
+
+# --- manifest ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A parsed calibration manifest: absolute recording paths and strip radii [m]."""
+
+    flat: Path
+    strips: tuple  # of (radius_m, Path)
+    source: str = ""
+
+
+_STRIP_KEYS = ("radius_m", "radius_mm", "recording")
+
+
+def _positive(where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{where}: expected a number, got {value!r}")
+    if value <= 0:
+        raise ConfigError(f"{where}: must be > 0, got {value!r}")
+    return float(value)
+
+
+def read_manifest(path: str | os.PathLike) -> Manifest:
+    """Read and check a calibration manifest (DESIGN.md section 3).
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and the field, e.g. ``strips[2].radius_cm: unknown key``.
+    """
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read manifest: {err.strerror or err}") from None
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{path}: not valid YAML: {err}") from None
+    try:
+        return _parse_manifest(data, path.parent, str(path))
+    except ConfigError as err:
+        raise ConfigError(f"{path}: {err}") from None
+
+
+def _recording(where: str, value: Any, base: Path) -> Path:
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"{where}: expected a file name, got {value!r}")
+    full = base / value
+    if not full.is_file():
+        raise ConfigError(f"{where}: no such recording {value!r} ({full})")
+    return full
+
+
+def _parse_manifest(data: Any, base: Path, source: str) -> Manifest:
+    if not isinstance(data, dict):
+        raise ConfigError(f"manifest: expected a mapping with keys flat, strips, got {data!r}")
+    for key in data:
+        if key not in ("flat", "strips"):
+            raise ConfigError(f"{key}: unknown key; allowed: flat, strips")
+    for key in ("flat", "strips"):
+        if key not in data:
+            raise ConfigError(f"{key}: missing key")
+    flat = _recording("flat", data["flat"], base)
+    strips = data["strips"]
+    if not isinstance(strips, list) or not strips:
+        raise ConfigError(f"strips: expected a non-empty list of {{radius_m: ..., recording: ...}}, got {strips!r}")
+    out = []
+    for i, item in enumerate(strips):
+        where = f"strips[{i}]"
+        if not isinstance(item, dict):
+            raise ConfigError(f"{where}: expected a mapping with radius_m or radius_mm and recording, got {item!r}")
+        for key in item:
+            if key not in _STRIP_KEYS:
+                raise ConfigError(f"{where}.{key}: unknown key; allowed: {', '.join(_STRIP_KEYS)}")
+        if "radius_m" in item and "radius_mm" in item:
+            raise ConfigError(f"{where}: give exactly one of radius_m, radius_mm, got both")
+        if "radius_m" in item:
+            radius = _positive(f"{where}.radius_m", item["radius_m"])
+        elif "radius_mm" in item:
+            radius = _positive(f"{where}.radius_mm", item["radius_mm"]) * 1e-3
+        else:
+            raise ConfigError(f"{where}: missing key radius_m or radius_mm")
+        if "recording" not in item:
+            raise ConfigError(f"{where}: missing key recording")
+        out.append((radius, _recording(f"{where}.recording", item["recording"], base)))
+    return Manifest(flat=flat, strips=tuple(out), source=source)
+
+
+# --- result object -----------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class StripResidual:
+    """Fit quality on one calibration strip.
+
+    Attributes
+    ----------
+    radius_m : float
+        Strip radius R as given [m].
+    curvature_per_m : float
+        κ_cal used as ground truth [1/m].
+    rms_shift_m : float
+        RMS of f(ΔA_i) − S_i over the channels [m].
+    max_abs_shift_m : float
+        Largest |f(ΔA_i) − S_i| over the channels [m].
+    signal_std : float
+        Mean over channels of the per-frame standard deviation of the recording
+        [signal units] (a noise estimate).
+    n_frames : int
+        Frames averaged.
+    recording : str
+        File name of the recording.
+    """
+
+    radius_m: float
+    curvature_per_m: float
+    rms_shift_m: float
+    max_abs_shift_m: float
+    signal_std: float = 0.0
+    n_frames: int = 0
+    recording: str = ""
+
+    def to_dict(self) -> dict:
+        """Plain values, for YAML."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+def _array(where: str, value: Any, length: int | None = None) -> np.ndarray:
+    if not isinstance(value, (list, tuple, np.ndarray)):
+        raise ConfigError(f"{where}: expected a list of numbers, got {value!r}")
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: expected a list of numbers, got {value!r}") from None
+    if arr.ndim != 1 or (length is not None and arr.size != length):
+        want = f"{length} numbers" if length is not None else "a flat list of numbers"
+        raise ConfigError(f"{where}: expected {want}, got {arr.size if arr.ndim == 1 else arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{where}: values must be finite, got {value!r}")
+    return arr
+
+
+def _range(where: str, value: Any) -> tuple:
+    arr = _array(where, value, 2)
+    if arr[0] > arr[1]:
+        raise ConfigError(f"{where}: expected [min, max] with min <= max, got {arr.tolist()}")
+    return (float(arr[0]), float(arr[1]))
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Calibration:
+    """Signal → shift calibration of the sensor (paper eq. 1–2).
+
+    Attributes
+    ----------
+    offset : ndarray, shape (N,)
+        A0, the mean signal of the flat sensor [signal units] (paper eq. 1).
+    coefficients_odd, coefficients_even : ndarray, shape (n + 1,)
+        Coefficients a_k, b_k of f_odd and f_even in ascending powers [m / unit^k].
+    degree : int
+        Polynomial degree n.
+    delta_a_range_odd, delta_a_range_even : tuple of float
+        (min, max) of the fitted ΔA per parity [signal units].
+    noise_std : ndarray, shape (N,)
+        Per-channel signal noise, the flat recording's frame standard deviation.
+    strip_residuals : tuple of StripResidual
+        Fit quality on every calibration strip.
+    cv_errors_m : dict of int to float or None
+        Leave-one-strip-out RMS shift error per degree [m], when computed.
+    weighting : str
+        ``"none"`` or ``"shift"`` (see the module docstring).
+    sleeve : bool
+        Whether κ_cal = 1/(R + c) was used.
+    sensor : SensorConfig or None
+        Snapshot of the sensor the calibration was fitted for.
+    fit_delta_a, fit_shifts_m : ndarray, shape (R, N), optional
+        The fitted data (flat first, then one row per strip), for plots.
+    meta : dict
+        Free-form metadata (creation time, manifest).
+    """
+
+    offset: np.ndarray
+    coefficients_odd: np.ndarray
+    coefficients_even: np.ndarray
+    degree: int
+    delta_a_range_odd: tuple
+    delta_a_range_even: tuple
+    noise_std: np.ndarray | None = None
+    strip_residuals: tuple = ()
+    cv_errors_m: dict | None = None
+    weighting: str = "none"
+    sleeve: bool = False
+    sensor: Any = None
+    fit_delta_a: np.ndarray | None = None
+    fit_shifts_m: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        offset = _array("offset", self.offset)
+        n = offset.size
+        if n == 0:
+            raise ConfigError("offset: expected at least one channel, got 0")
+        set_(self, "offset", offset)
+        c_odd = _array("coefficients_odd", self.coefficients_odd)
+        c_even = _array("coefficients_even", self.coefficients_even)
+        if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or self.degree < 0:
+            raise ConfigError(f"degree: expected an integer >= 0, got {self.degree!r}")
+        for name, c in (("coefficients_odd", c_odd), ("coefficients_even", c_even)):
+            if c.size != self.degree + 1:
+                raise ConfigError(
+                    f"{name}: expected {self.degree + 1} coefficients (degree {self.degree}), got {c.size}"
+                )
+        set_(self, "degree", int(self.degree))
+        set_(self, "coefficients_odd", c_odd)
+        set_(self, "coefficients_even", c_even)
+        set_(self, "delta_a_range_odd", _range("delta_a_range_odd", self.delta_a_range_odd))
+        set_(self, "delta_a_range_even", _range("delta_a_range_even", self.delta_a_range_even))
+        noise = np.zeros(n) if self.noise_std is None else _array("noise_std", self.noise_std, n)
+        if np.any(noise < 0):
+            raise ConfigError(f"noise_std: values must be >= 0, got {noise.tolist()}")
+        set_(self, "noise_std", noise)
+        if self.weighting not in WEIGHTINGS:
+            raise ConfigError(f"weighting: must be one of {', '.join(WEIGHTINGS)}, got {self.weighting!r}")
+        if not isinstance(self.sleeve, bool):
+            raise ConfigError(f"sleeve: expected true or false, got {self.sleeve!r}")
+        if self.sensor is not None and getattr(self.sensor, "n_segments", n) != n:
+            raise ConfigError(
+                f"sensor.n_segments: expected {n} (the calibration's channels), got {self.sensor.n_segments}"
+            )
+        set_(self, "strip_residuals", tuple(self.strip_residuals))
+        for name in ("fit_delta_a", "fit_shifts_m"):
+            value = getattr(self, name)
+            if value is not None:
+                arr = np.asarray(value, dtype=float)
+                if arr.ndim != 2 or arr.shape[1] != n:
+                    raise ConfigError(f"{name}: expected shape (recordings, {n}), got {arr.shape}")
+                set_(self, name, arr)
+
+    # -- the hot path: per-channel arrays precomputed once ---------------------------
+
+    @property
+    def n_channels(self) -> int:
+        """Number of channels N."""
+        return self.offset.size
+
+    @cached_property
+    def _channel_coefficients(self) -> np.ndarray:
+        odd, _ = parity_masks(self.n_channels)
+        return np.where(odd[:, None], self.coefficients_odd, self.coefficients_even)  # (N, n+1)
+
+    @cached_property
+    def _channel_range(self):
+        odd, _ = parity_masks(self.n_channels)
+        lo = np.where(odd, self.delta_a_range_odd[0], self.delta_a_range_even[0])
+        hi = np.where(odd, self.delta_a_range_odd[1], self.delta_a_range_even[1])
+        margin = RANGE_MARGIN_STD * self.noise_std
+        return lo - margin, hi + margin
+
+    def shifts_from_delta(self, delta_a):
+        """Shifts S (..., N) [m] from offset-free signals ΔA (..., N) (paper eq. 2)."""
+        c = self._channel_coefficients
+        out = c[:, -1] + 0.0 * delta_a
+        for k in range(self.degree - 1, -1, -1):
+            out = out * delta_a + c[:, k]
+        return out
+
+    def shifts_m(self, signals):
+        """Total relative shifts S (..., N) [m] from raw signals A (..., N) (paper eq. 1–2)."""
+        a = np.asarray(signals, dtype=float)
+        self._check_channels(a)
+        return self.shifts_from_delta(a - self.offset)
+
+    def extrapolated_delta(self, delta_a):
+        """Per frame: True if any channel's ΔA lies outside the calibrated range."""
+        lo, hi = self._channel_range
+        return np.any((delta_a < lo) | (delta_a > hi), axis=-1)
+
+    def in_range(self, signals):
+        """Per frame (...,): True if every channel's ΔA lies in the fitted range.
+
+        The range is the (min, max) of the fitted ΔA of the channel's parity, widened
+        by 3 × the channel's flat-recording noise so that a flat, noisy sensor is not
+        flagged. Outside it the polynomials extrapolate and the shape is not to be
+        trusted; :func:`bendsense.pcc.reconstruct` reports this as ``Shape.extrapolated``.
+        """
+        a = np.asarray(signals, dtype=float)
+        self._check_channels(a)
+        return ~self.extrapolated_delta(a - self.offset)
+
+    def _check_channels(self, a):
+        if a.shape[-1:] != (self.n_channels,):
+            raise ValueError(f"signals: expected {self.n_channels} channels on the last axis, got shape {a.shape}")
+
+    # -- fitting ------------------------------------------------------------------------
+
+    @classmethod
+    def fit(
+        cls,
+        manifest_path: str | os.PathLike,
+        sensor=None,
+        degree: int | str = 3,
+        weighting: str = "none",
+        sleeve: bool | None = None,
+    ) -> Calibration:
+        """Fit a calibration from a manifest of session CSV recordings (DESIGN.md section 3).
+
+        Parameters
+        ----------
+        manifest_path : path
+            Calibration manifest YAML; recording paths are relative to it.
+        sensor : SensorConfig or Config, optional
+            ``None``: the paper's sensor (``bendsense.load_config().sensor``).
+        degree : int or "auto"
+            Polynomial degree 1..5, or ``"auto"`` for leave-one-strip-out CV.
+        weighting : str
+            ``"none"`` (the paper's) or ``"shift"``.
+        sleeve : bool, optional
+            Override ``sensor.calibration_adds_sleeve`` (κ_cal = 1/(R + c)).
+
+        Raises
+        ------
+        ConfigError
+            For a bad manifest, a missing recording or a channel count that does not
+            match the sensor; the message names the field and file.
+        SessionError
+            For a malformed recording (line and column in the message).
+        """
+        from bendsense.session import read_session_csv
+
+        sensor = _resolve_sensor(sensor)
+        manifest = read_manifest(manifest_path)
+        n = sensor.n_segments
+
+        def load(where, path):
+            session = read_session_csv(path)
+            if session.n_channels != n:
+                raise ConfigError(
+                    f"{manifest.source}: {where} ({path.name}): expected {n} channels "
+                    f"(sensor.n_segments), got {session.n_channels}"
+                )
+            if len(session) == 0:
+                raise SessionError(f"{path}: no frames")
+            return session.signals
+
+        flat = load("flat", manifest.flat)
+        strips = [load(f"strips[{i}].recording", p) for i, (_, p) in enumerate(manifest.strips)]
+        return cls.from_data(
+            flat,
+            strips,
+            [r for r, _ in manifest.strips],
+            sensor,
+            degree=degree,
+            weighting=weighting,
+            sleeve=sleeve,
+            recordings=[p.name for _, p in manifest.strips],
+            meta={"manifest": Path(manifest_path).name, "flat": manifest.flat.name},
+        )
+
+    @classmethod
+    def from_data(
+        cls,
+        flat_signals,
+        strip_signals_list,
+        radii_m,
+        sensor=None,
+        *,
+        degree: int | str = 3,
+        weighting: str = "none",
+        sleeve: bool | None = None,
+        recordings=None,
+        meta: dict | None = None,
+    ) -> Calibration:
+        """Fit a calibration from in-memory recordings.
+
+        Parameters
+        ----------
+        flat_signals : array_like, shape (frames, N)
+            Recording of the flat sensor.
+        strip_signals_list : sequence of array_like, each (frames_k, N)
+            One recording per calibration strip.
+        radii_m : sequence of float
+            Strip radii R [m].
+        sensor : SensorConfig or Config, optional
+            ``None``: the paper's sensor.
+        degree, weighting, sleeve
+            As in :meth:`fit`.
+        recordings : sequence of str, optional
+            Names of the strip recordings, for the report.
+        meta : dict, optional
+            Extra metadata to store.
+        """
+        sensor = _resolve_sensor(sensor)
+        n = sensor.n_segments
+        if weighting not in WEIGHTINGS:
+            raise ConfigError(f"weighting: must be one of {', '.join(WEIGHTINGS)}, got {weighting!r}")
+        auto = isinstance(degree, str) and degree == "auto"
+        integer = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
+        if not auto and not (integer and degree in DEGREES):
+            raise ConfigError(f"degree: must be 1..5 or 'auto', got {degree!r}")
+        sleeve = sensor.calibration_adds_sleeve if sleeve is None else bool(sleeve)
+        flat = _signals("flat", flat_signals, n)
+        radii = [_positive(f"radii_m[{i}]", float(r)) for i, r in enumerate(radii_m)]
+        if len(radii) != len(strip_signals_list):
+            raise ConfigError(f"radii_m: expected {len(strip_signals_list)} radii (one per strip), got {len(radii)}")
+        if not radii:
+            raise ConfigError("strips: at least one calibration strip is needed")
+        strips = [_signals(f"strips[{i}]", s, n) for i, s in enumerate(strip_signals_list)]
+        recordings = list(recordings) if recordings is not None else [f"strip {i}" for i in range(len(strips))]
+
+        offset = flat.mean(axis=0)
+        noise = flat.std(axis=0, ddof=1) if flat.shape[0] > 1 else np.zeros(n)
+        extra = sensor.sleeve_thickness_m if sleeve else 0.0
+        kappa = np.array([1.0 / (r + extra) for r in radii])
+        delta = np.vstack([np.zeros(n)] + [s.mean(axis=0) - offset for s in strips])  # flat first
+        shifts = strip_shifts(np.concatenate(([0.0], kappa)), sensor.lengths_m, sensor.strip_gap_m)
+        groups = np.arange(-1, len(strips))
+        odd, even = parity_masks(n)
+
+        cv = None
+        if auto:
+            if len(strips) < 2:
+                raise ConfigError("degree: 'auto' needs at least 2 calibration strips for cross-validation")
+            cv = cross_validate_degree(delta, shifts, groups, DEGREES, weighting)
+            best = min(cv.values())
+            if not math.isfinite(best):
+                raise ConfigError("degree: no degree 1..5 can be fitted to these recordings")
+            degree = min(d for d, e in cv.items() if e <= best * (1.0 + AUTO_TOLERANCE))
+        degree = int(degree)
+        c_odd, c_even = _fit_parities(delta, shifts, degree, weighting, odd, even)
+
+        pred = np.where(odd, polyval_shift(c_odd, delta), polyval_shift(c_even, delta))
+        resid = pred - shifts
+        residuals = tuple(
+            StripResidual(
+                radius_m=radii[k],
+                curvature_per_m=float(kappa[k]),
+                rms_shift_m=float(np.sqrt(np.mean(resid[k + 1] ** 2))),
+                max_abs_shift_m=float(np.max(np.abs(resid[k + 1]))),
+                signal_std=float(np.mean(strips[k].std(axis=0))),
+                n_frames=int(strips[k].shape[0]),
+                recording=str(recordings[k]),
+            )
+            for k in range(len(strips))
+        )
+        even_delta = delta[:, even] if np.any(even) else delta[:, odd]
+        info = {"created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+        info["flat_frames"] = int(flat.shape[0])
+        info.update(meta or {})
+        return cls(
+            offset=offset,
+            coefficients_odd=c_odd,
+            coefficients_even=c_even,
+            degree=degree,
+            delta_a_range_odd=(float(delta[:, odd].min()), float(delta[:, odd].max())),
+            delta_a_range_even=(float(even_delta.min()), float(even_delta.max())),
+            noise_std=noise,
+            strip_residuals=residuals,
+            cv_errors_m=cv,
+            weighting=weighting,
+            sleeve=sleeve,
+            sensor=sensor,
+            fit_delta_a=delta,
+            fit_shifts_m=shifts,
+            meta=info,
+        )
+
+    # -- files --------------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        """Return the calibration YAML layout (plain lists, floats and strings)."""
+        cv = self.cv_errors_m
+        out = {
+            "format": FORMAT,
+            "version": VERSION,
+            "n_channels": self.n_channels,
+            "degree": self.degree,
+            "offset": self.offset.tolist(),
+            "coefficients_odd": self.coefficients_odd.tolist(),
+            "coefficients_even": self.coefficients_even.tolist(),
+            "delta_a_range_odd": list(self.delta_a_range_odd),
+            "delta_a_range_even": list(self.delta_a_range_even),
+            "noise_std": self.noise_std.tolist(),
+            "weighting": self.weighting,
+            "sleeve": self.sleeve,
+            "strip_residuals": [r.to_dict() for r in self.strip_residuals],
+            "cv_errors_m": None if cv is None else {int(k): float(v) for k, v in cv.items()},
+            "sensor": None if self.sensor is None else self.sensor.to_dict(),
+            "fit_delta_a": None if self.fit_delta_a is None else self.fit_delta_a.tolist(),
+            "fit_shifts_m": None if self.fit_shifts_m is None else self.fit_shifts_m.tolist(),
+            "meta": dict(self.meta),
+        }
+        return out
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the calibration YAML atomically (``format: bendsense-calibration``, ``version: 1``)."""
+        from bendsense._io import atomic_write_text
+
+        header = "# bendsense sensor calibration: S_i = sum_k c_k (A_i - offset_i)^k (ascending powers, paper eq. 2)\n"
+        atomic_write_text(path, header + yaml.safe_dump(self.to_dict(), sort_keys=False))
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Calibration:
+        """Build a calibration from its YAML layout; raises `ConfigError` naming the field."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"calibration: expected a mapping, got {type(data).__name__}")
+        if data.get("format") != FORMAT:
+            raise ConfigError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
+        version = data.get("version")
+        if version != VERSION:
+            raise ConfigError(f"version: this bendsense reads version {VERSION}, got {version!r}")
+        allowed = [
+            "format", "version", "n_channels", "degree", "offset", "coefficients_odd", "coefficients_even",
+            "delta_a_range_odd", "delta_a_range_even", "noise_std", "weighting", "sleeve", "strip_residuals",
+            "cv_errors_m", "sensor", "fit_delta_a", "fit_shifts_m", "meta",
+        ]  # fmt: skip
+        unknown = [str(k) for k in data if k not in allowed]
+        if unknown:
+            raise ConfigError(f"calibration: unknown keys {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+        required = ["offset", "coefficients_odd", "coefficients_even", "delta_a_range_odd", "delta_a_range_even"]
+        missing = [k for k in required if k not in data]
+        if missing:
+            raise ConfigError(f"calibration: missing keys {', '.join(missing)}")
+        coef = _array("coefficients_odd", data["coefficients_odd"])
+        degree = data.get("degree", coef.size - 1)
+        offset = _array("offset", data["offset"])
+        if "n_channels" in data and data["n_channels"] != offset.size:
+            raise ConfigError(f"n_channels: {data['n_channels']!r} does not match the {offset.size} offset values")
+        sensor = None
+        if data.get("sensor") is not None:
+            from bendsense.config import SensorConfig
+
+            sensor = SensorConfig.from_dict(data["sensor"])
+        residuals = []
+        for i, item in enumerate(data.get("strip_residuals") or []):
+            try:
+                residuals.append(StripResidual(**item))
+            except TypeError as err:
+                raise ConfigError(f"strip_residuals[{i}]: {err}") from None
+        cv = data.get("cv_errors_m")
+        if cv is not None:
+            if not isinstance(cv, dict):
+                raise ConfigError(f"cv_errors_m: expected a mapping of degree to error, got {cv!r}")
+            cv = {int(k): float(v) for k, v in cv.items()}
+        meta = data.get("meta") or {}
+        if not isinstance(meta, dict):
+            raise ConfigError(f"meta: expected a mapping, got {meta!r}")
+        return cls(
+            offset=offset,
+            coefficients_odd=coef,
+            coefficients_even=data["coefficients_even"],
+            degree=degree,
+            delta_a_range_odd=data["delta_a_range_odd"],
+            delta_a_range_even=data["delta_a_range_even"],
+            noise_std=data.get("noise_std"),
+            strip_residuals=residuals,
+            cv_errors_m=cv,
+            weighting=data.get("weighting", "none"),
+            sleeve=data.get("sleeve", False),
+            sensor=sensor,
+            fit_delta_a=data.get("fit_delta_a"),
+            fit_shifts_m=data.get("fit_shifts_m"),
+            meta=meta,
+        )
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Calibration:
+        """Read a calibration YAML written by :meth:`save`.
+
+        Raises
+        ------
+        ConfigError
+            If the file cannot be read, is not a bendsense calibration, or a field is
+            invalid; the message names the file and the field.
+        """
+        path = Path(path)
+        try:
+            data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except OSError as err:
+            raise ConfigError(f"{path}: cannot read calibration: {err.strerror or err}") from None
+        except yaml.YAMLError as err:
+            raise ConfigError(f"{path}: not valid YAML: {err}") from None
+        try:
+            return cls.from_dict(data)
+        except ConfigError as err:
+            raise ConfigError(f"{path}: {err}") from None
+
+    # -- reporting ----------------------------------------------------------------------
+
+    def report(self) -> str:
+        """Summarise as text: degree, coefficients, ranges, per-strip residuals, CV table."""
+        lines = [
+            f"calibration: {self.n_channels} channels, degree {self.degree}, weighting {self.weighting}, "
+            f"kappa_cal = 1/{'(R + c)' if self.sleeve else 'R'}",
+            "  f_odd  coefficients (ascending): " + ", ".join(f"{c:.6g}" for c in self.coefficients_odd),
+            "  f_even coefficients (ascending): " + ", ".join(f"{c:.6g}" for c in self.coefficients_even),
+            f"  fitted dA range: odd [{self.delta_a_range_odd[0]:.6g}, {self.delta_a_range_odd[1]:.6g}], "
+            f"even [{self.delta_a_range_even[0]:.6g}, {self.delta_a_range_even[1]:.6g}]",
+            f"  flat noise std (mean over channels): {float(np.mean(self.noise_std)):.4g}",
+        ]
+        if self.strip_residuals:
+            lines.append("  strip   R [mm]  kappa [1/m]  rms dS [um]  max dS [um]  frames  recording")
+            for i, r in enumerate(self.strip_residuals):
+                lines.append(
+                    f"  {i:5d} {r.radius_m * 1e3:8.2f} {r.curvature_per_m:12.3f} {r.rms_shift_m * 1e6:12.3f} "
+                    f"{r.max_abs_shift_m * 1e6:12.3f} {r.n_frames:7d}  {r.recording}"
+                )
+        if self.cv_errors_m:
+            lines.append("  degree  CV rms dS [um] (leave one strip out)")
+            for d, e in sorted(self.cv_errors_m.items()):
+                mark = "  <- chosen" if d == self.degree else ""
+                lines.append(f"  {d:6d} {e * 1e6:15.3f}{mark}")
+        return "\n".join(lines)
+
+    def plot(self, ax=None):
+        """Plot the fitted polynomials over the data (S [mm] vs ΔA) and the residuals.
+
+        With ``ax=None`` a figure with two panels (fit, residuals) is created and both
+        axes are returned; with an ``ax`` only the fit is drawn on it.
+        """
+        import matplotlib.pyplot as plt
+
+        axes = None
+        if ax is None:
+            _, axes = plt.subplots(2, 1, sharex=True, figsize=(6, 6))
+            ax = axes[0]
+        odd, even = parity_masks(self.n_channels)
+        for mask, coef, rng, name, color in (
+            (odd, self.coefficients_odd, self.delta_a_range_odd, "odd", "C0"),
+            (even, self.coefficients_even, self.delta_a_range_even, "even", "C1"),
+        ):
+            if not np.any(mask):
+                continue
+            x = np.linspace(rng[0], rng[1], 200)
+            ax.plot(x, polyval_shift(coef, x) * 1e3, color=color, label=f"f_{name}")
+            if self.fit_delta_a is not None:
+                dx, sy = self.fit_delta_a[:, mask], self.fit_shifts_m[:, mask]
+                ax.plot(dx.ravel(), sy.ravel() * 1e3, ".", color=color, alpha=0.6)
+                if axes is not None:
+                    r = (polyval_shift(coef, dx) - sy) * 1e6
+                    axes[1].plot(dx.ravel(), r.ravel(), ".", color=color)
+        ax.set_ylabel("S [mm]")
+        ax.legend()
+        if axes is not None:
+            axes[1].axhline(0.0, color="k", linewidth=0.5)
+            axes[1].set_ylabel("residual [um]")
+            axes[1].set_xlabel("dA [signal units]")
+            return axes
+        ax.set_xlabel("dA [signal units]")
+        return ax
+
+
+def _signals(where: str, value, n: int) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != n:
+        raise ConfigError(f"{where}: expected {n} channels (sensor.n_segments), got shape {a.shape}")
+    if a.shape[0] == 0:
+        raise ConfigError(f"{where}: no frames")
+    if not np.all(np.isfinite(a)):
+        raise ConfigError(f"{where}: signals must be finite")
+    return a
+
+
+def _resolve_sensor(sensor):
+    if sensor is None:
+        from bendsense.config import load_config
+
+        return load_config().sensor
+    return getattr(sensor, "sensor", sensor)
