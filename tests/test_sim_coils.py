@@ -126,8 +126,8 @@ def test_coil_mutual_inductance_sums_the_turn_pairs():
     b = CoilGeometry(radii_m=(1.5e-3, 3e-3, 2.5e-3), z_m=(0.0, 0.0, -1e-4))
     rho = np.array([[0.0, 2e-3], [5e-3, 11e-3]])
     expected = np.zeros_like(rho)
-    for ra, za in zip(a.radii_m, a.z_m):
-        for rb, zb in zip(b.radii_m, b.z_m):
+    for ra, za in zip(a.radii_m, a.z_m, strict=True):
+        for rb, zb in zip(b.radii_m, b.z_m, strict=True):
             expected += loop_mutual_inductance(ra, rb, 1e-3 + zb - za, rho)
     np.testing.assert_allclose(coil_mutual_inductance(a, b, 1e-3, rho), expected, rtol=1e-13)
 
@@ -156,7 +156,8 @@ def test_direct_sum_is_the_physics(paper_model):
     signal = 0.0
     for j in range(5, 11):
         signal += (-1) ** j * coil_mutual_inductance(coil, coil, 1e-3, 7 * p + s - (j - 0.5) * p)
-    far = sum((-1) ** j * paper_model.coil_mutual_inductance(7 * p + s - (j - 0.5) * p) for j in range(17) if not 5 <= j < 11)
+    others = [j for j in range(17) if not 5 <= j < 11]
+    far = sum((-1) ** j * paper_model.coil_mutual_inductance(7 * p + s - (j - 0.5) * p) for j in others)
     expected = (signal + far) / paper_model.mutual_ref_h
     shifts = np.zeros(16)
     shifts[7] = s

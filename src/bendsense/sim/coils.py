@@ -157,9 +157,7 @@ def loop_mutual_inductance(radius1_m, radius2_m, z_m, rho_m=0.0, *, n_quad: int 
     ndarray
         Mutual inductance [H], broadcast over the inputs.
     """
-    a, b, z, rho = np.broadcast_arrays(
-        *(np.asarray(v, dtype=float) for v in (radius1_m, radius2_m, z_m, rho_m))
-    )
+    a, b, z, rho = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (radius1_m, radius2_m, z_m, rho_m)))
     if n_quad is None:
         n_quad = _default_n_quad(max(a.max(initial=0.0), b.max(initial=0.0)), np.abs(z).min(initial=np.inf))
     if int(n_quad) < 2:
@@ -215,7 +213,7 @@ class CoilGeometry:
         layers: int = 2,
         layer_spacing_m: float = 1e-4,
     ) -> CoilGeometry:
-        """A PCB spiral: ``turns`` loops over ``layers`` layers, radii evenly spaced.
+        """Build a PCB spiral: ``turns`` loops over ``layers`` layers, radii evenly spaced.
 
         Parameters
         ----------
@@ -247,7 +245,7 @@ class CoilGeometry:
 
     @classmethod
     def from_sensor_config(cls, sensor, **kwargs) -> CoilGeometry:
-        """The paper's spiral model for a :class:`~bendsense.config.SensorConfig`'s coils."""
+        """Build the paper's spiral model of a :class:`~bendsense.config.SensorConfig`'s coils."""
         turns = sensor.coil_turns
         kwargs.setdefault("layers", 2 if turns % 2 == 0 else 1)
         return cls.flat_spiral(outer_radius_m=0.5 * sensor.coil_diameter_m, turns=turns, **kwargs)
@@ -427,7 +425,7 @@ class CoilArrayModel:
 
     @classmethod
     def from_config(cls, sensor, **kwargs) -> CoilArrayModel:
-        """The model of a :class:`~bendsense.config.SensorConfig` (or a whole ``Config``)."""
+        """Build the model of a :class:`~bendsense.config.SensorConfig` (or a whole ``Config``)."""
         sensor = getattr(sensor, "sensor", sensor)
         coil = kwargs.pop("receiver_coil", None) or CoilGeometry.from_sensor_config(sensor)
         return cls.build(
@@ -459,13 +457,13 @@ class CoilArrayModel:
         return out
 
     def direct(self, shifts_m) -> np.ndarray:
-        """Normalized signals by the full transmitter sum (slower; no table) [-]."""
+        """Compute the normalized signals by the full transmitter sum (slower; no table) [-]."""
         s = self._check(shifts_m)
         rho = self._offsets_m + s[..., None]
         return (self.coil_mutual_inductance(rho) * self._polarity).sum(axis=-1) / self.mutual_ref_h
 
     def signal(self, shifts_m) -> np.ndarray:
-        """Normalized in-phase receiver signals u_i(S_i) (paper Fig. 2(c)).
+        """Evaluate the normalized in-phase receiver signals u_i(S_i) (paper Fig. 2(c)).
 
         Parameters
         ----------
@@ -494,7 +492,7 @@ class CoilArrayModel:
         return out
 
     def derivative(self, shifts_m) -> np.ndarray:
-        """d u_i / d S_i from the spline of M_coil [1/m], shape (..., N)."""
+        """Evaluate the slopes d u_i / d S_i from the spline of M_coil [1/m], shape (..., N)."""
         s = self._check(shifts_m)
         rho = self._offsets_m + s[..., None]
         dm = self._spline(np.abs(rho), 1) * np.sign(rho)
