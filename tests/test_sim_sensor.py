@@ -202,3 +202,25 @@ def test_from_config_rejects_bad_options(sensor_config, model):
         VirtualSensor.from_config(short, model=model)
     with pytest.raises(ConfigError, match=r"shifts_m: expected shape \(\.\.\., 16\)"):
         VirtualSensor.from_config(sensor_config, model=model).measure(np.zeros(3))
+
+
+def test_shifts_from_an_unloaded_beam_solution_are_an_arc(virtual, sensor_config):
+    beam = pytest.importorskip("bendsense.beam")
+    # no load: the beam keeps its free-bending curvature, a calibration-strip arc
+    solution = beam.solve_beam(0.134, 3e-3, 12.5, force_n=(0.0, 0.0), distributed_load_n_per_m=(0.0, 0.0))
+    shifts = virtual.shifts_from_shape(solution.s_m, solution.angle_rad)
+    np.testing.assert_allclose(shifts, calibration_shifts(sensor_config, 0.080), rtol=1e-6, atol=1e-12)
+
+
+def test_direct_construction_gets_the_seeded_noise_stream(virtual):
+    twin = VirtualSensor(
+        model=virtual.model,
+        lengths_m=virtual.lengths_m,
+        strip_gap_m=virtual.strip_gap_m,
+        gain_counts=virtual.gain_counts,
+        offset_counts=virtual.offset_counts,
+        noise_counts=virtual.noise_counts,
+        seed=virtual.seed,
+    )
+    shifts = np.full((5, 16), 1e-3)
+    np.testing.assert_array_equal(twin.measure(shifts).counts, virtual.measure(shifts).counts)

@@ -223,6 +223,15 @@ class VirtualSensor:
     seed: int | None = None
     rng: np.random.Generator = field(default=None, repr=False)
 
+    def __post_init__(self):
+        n = self.model.n_receivers
+        object.__setattr__(self, "gain_counts", _per_channel("gain_counts", self.gain_counts, n))
+        object.__setattr__(self, "offset_counts", _per_channel("offset_counts", self.offset_counts, n))
+        if self.rng is None:
+            # the same noise stream as from_config draws for this seed
+            stream = np.random.SeedSequence(self.seed).spawn(2)[1]
+            object.__setattr__(self, "rng", np.random.default_rng(stream))
+
     @classmethod
     def from_config(
         cls,
