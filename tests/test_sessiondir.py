@@ -1,0 +1,190 @@
+"""Native session directory: layout (DESIGN.md section 3), torn records, CSV export/import."""
+
+import datetime as dt
+import logging
+import struct
+
+import numpy as np
+import pytest
+import yaml
+
+from bendsense import read_session, read_session_csv, write_session_csv
+from bendsense.errors import SessionError
+from bendsense.session import Session
+from bendsense.sessiondir import (
+    SessionWriter,
+    dtype_from_list,
+    dtype_to_list,
+    export_session_csv,
+    import_session_csv,
+    read_records,
+    read_session_dir,
+    record_dtype,
+)
+
+NO_P = 0x7FFFFFFF
+
+
+def hand_made_v1(path, rows, n=3):
+    """A version-1 session written byte by byte from the format description, not by the writer."""
+    path.mkdir()
+    meta = {
+        "format": "bendsense-session",
+        "version": 1,
+        "start_time_utc": "2024-05-01T12:00:00.000000Z",
+        "n_channels": n,
+        "adc_bits": 12,
+        "record_dtype": [
+            ["host_ns", "<i8"],
+            ["t_us", "<u8"],
+            ["seq", "<u2"],
+            ["status", "|u1"],
+            ["pressure_pa", "<i4"],
+            ["adc", f"({n},)<u2"],
+        ],
+        "device": {"firmware": "hand", "n_channels": n, "adc_bits": 12, "rate_hz": 500, "vref_mv": 3300},
+    }
+    (path / "meta.yaml").write_text(yaml.safe_dump(meta))
+    data = b"".join(struct.pack(f"<qQHBi{n}H", *r[:5], *r[5]) for r in rows)
+    (path / "frames.bin").write_bytes(data)
+    (path / "events.log").write_text("")
+    return data
+
+
+ROWS = [
+    # host_ns, t_us (unwrapped, past 2**32), seq (wrapping), status, pressure, adc
+    (1_000_000_000, 2**32 - 2000, 65534, 0, 20000, (1, 2, 3)),
+    (1_002_000_000, 2**32, 65535, 1, NO_P, (4, 5, 6)),
+    (1_004_000_000, 2**32 + 2000, 0, 0, -5, (7, 8, 4095)),
+    (1_010_000_000, 2**32 + 8000, 3, 8, 20001, (10, 11, 12)),  # two frames lost in between
+]
+
+
+def test_reads_hand_made_v1_session(tmp_path):
+    hand_made_v1(tmp_path / "s", ROWS)
+    s = read_session(tmp_path / "s")
+    assert isinstance(s, Session) and len(s) == 4 and s.n_channels == 3
+    np.testing.assert_allclose(s.t_s, [0.0, 0.002, 0.004, 0.010], atol=1e-12)
+    np.testing.assert_array_equal(s.seq, [65534, 65535, 65536, 65539])
+    np.testing.assert_array_equal(s.pressure_pa, [20000.0, np.nan, -5.0, 20001.0])
+    np.testing.assert_array_equal(s.signals, [[1, 2, 3], [4, 5, 6], [7, 8, 4095], [10, 11, 12]])
+    np.testing.assert_allclose(s.extra["host_s"], [0.0, 0.002, 0.004, 0.010], atol=1e-12)
+    np.testing.assert_array_equal(s.extra["status"], [0, 1, 0, 8])
+    assert s.meta["torn_bytes"] == 0 and s.meta["device"]["firmware"] == "hand"
+    assert s.source.endswith("s")
+
+
+def test_torn_last_record_is_ignored_and_reported(tmp_path, caplog):
+    data = hand_made_v1(tmp_path / "s", ROWS)
+    with open(tmp_path / "s" / "frames.bin", "ab") as fh:
+        fh.write(data[:23])  # a record cut short by a crash
+    with caplog.at_level(logging.WARNING, logger="bendsense.sessiondir"):
+        s = read_session_dir(tmp_path / "s")
+    assert len(s) == 4 and s.meta["torn_bytes"] == 23
+    assert "torn last record (23 of 29 bytes)" in caplog.text
+
+
+def test_writer_layout_matches_the_format(tmp_path):
+    dtype = record_dtype(3)
+    assert dtype.itemsize == 8 + 8 + 2 + 1 + 4 + 2 * 3
+    assert [dtype.fields[k][1] for k in dtype.names] == [0, 8, 16, 18, 19, 23]
+    assert dtype_to_list(dtype) == [
+        ["host_ns", "<i8"],
+        ["t_us", "<u8"],
+        ["seq", "<u2"],
+        ["status", "|u1"],
+        ["pressure_pa", "<i4"],
+        ["adc", "(3,)<u2"],
+    ]
+    assert dtype_from_list(dtype_to_list(dtype)) == dtype
+    with SessionWriter(tmp_path / "w", 3, adc_bits=12, device={"firmware": "x"}, config={"a": 1}) as w:
+        rec = w.empty(len(ROWS))
+        for i, r in enumerate(ROWS):
+            rec[i] = (*r[:5], r[5])
+        w.write(rec[:2])
+        w.write(rec[2:])
+        w.event("gap: 2 frame(s) lost\nbefore seq 3")
+    expected = b"".join(struct.pack("<qQHBi3H", *r[:5], *r[5]) for r in ROWS)
+    assert (tmp_path / "w" / "frames.bin").read_bytes() == expected
+    meta = yaml.safe_load((tmp_path / "w" / "meta.yaml").read_text())
+    assert meta["format"] == "bendsense-session" and meta["version"] == 1
+    assert meta["n_channels"] == 3 and meta["adc_bits"] == 12 and meta["n_records"] == 4
+    assert meta["config"] == {"a": 1} and meta["device"] == {"firmware": "x"}
+    dt.datetime.strptime(meta["start_time_utc"], "%Y-%m-%dT%H:%M:%S.%fZ")
+    (line,) = (tmp_path / "w" / "events.log").read_text().splitlines()
+    stamp, text = line.split(" ", 1)
+    dt.datetime.strptime(stamp, "%Y-%m-%dT%H:%M:%S.%fZ")
+    assert text == "gap: 2 frame(s) lost before seq 3"
+
+
+def test_existing_session_is_not_overwritten(tmp_path):
+    SessionWriter(tmp_path / "s", 2).close()
+    with pytest.raises(SessionError, match="a session exists there"):
+        SessionWriter(tmp_path / "s", 2)
+    with SessionWriter(tmp_path / "s", 2, overwrite=True) as w:
+        w.write(w.empty(3))
+    assert len(read_session_dir(tmp_path / "s")) == 3
+    with SessionWriter(tmp_path / "t", 2) as w, pytest.raises(SessionError, match="records: expected dtype"):
+        w.write(np.zeros(2, dtype=record_dtype(3)))
+
+
+def test_bad_meta_is_reported(tmp_path):
+    hand_made_v1(tmp_path / "s", ROWS)
+    meta = yaml.safe_load((tmp_path / "s" / "meta.yaml").read_text())
+    (tmp_path / "s" / "meta.yaml").write_text(yaml.safe_dump({**meta, "version": 2}))
+    with pytest.raises(SessionError, match="version: expected 1, got 2"):
+        read_session_dir(tmp_path / "s")
+    (tmp_path / "s" / "meta.yaml").write_text(yaml.safe_dump({**meta, "format": "other"}))
+    with pytest.raises(SessionError, match="format: expected 'bendsense-session', got 'other'"):
+        read_session_dir(tmp_path / "s")
+    (tmp_path / "s" / "meta.yaml").write_text(yaml.safe_dump({**meta, "record_dtype": [["adc", "<u2"]]}))
+    with pytest.raises(SessionError, match="missing fields"):
+        read_session_dir(tmp_path / "s")
+    (tmp_path / "s" / "meta.yaml").unlink()
+    with pytest.raises(SessionError, match="no meta.yaml"):
+        read_records(tmp_path / "s")
+
+
+def test_empty_session_reads(tmp_path):
+    SessionWriter(tmp_path / "s", 4).close()
+    s = read_session_dir(tmp_path / "s")
+    assert len(s) == 0 and s.signals.shape == (0, 4)
+
+
+def test_export_to_csv_and_back(tmp_path):
+    hand_made_v1(tmp_path / "s", ROWS)
+    export_session_csv(tmp_path / "s", tmp_path / "s.csv")
+    with pytest.raises(SessionError, match="exists"):
+        export_session_csv(tmp_path / "s", tmp_path / "s.csv")
+    native, csv = read_session(tmp_path / "s"), read_session_csv(tmp_path / "s.csv")
+    np.testing.assert_array_equal(csv.t_s, native.t_s)
+    np.testing.assert_array_equal(csv.signals, native.signals)
+    np.testing.assert_array_equal(csv.pressure_pa, native.pressure_pa)
+    np.testing.assert_array_equal(csv.seq, native.seq)
+    np.testing.assert_array_equal(csv.extra["status"], native.extra["status"])
+    # and import the CSV into a second native session
+    import_session_csv(tmp_path / "s.csv", tmp_path / "s2")
+    again = read_session_dir(tmp_path / "s2")
+    np.testing.assert_allclose(again.t_s, native.t_s, atol=1e-12)
+    np.testing.assert_array_equal(again.signals, native.signals)
+    np.testing.assert_array_equal(again.pressure_pa, native.pressure_pa)
+    np.testing.assert_array_equal(again.seq, native.seq)
+    np.testing.assert_array_equal(again.extra["status"], native.extra["status"])
+    assert read_records(tmp_path / "s2")[0].dtype == record_dtype(3)
+
+
+def test_import_float_signals_and_extra_columns(tmp_path):
+    t = 5.0 + np.arange(6) * 0.01
+    rng = np.random.default_rng(1)
+    sig = rng.normal(size=(6, 2))
+    fx = rng.normal(size=6)
+    s = Session(t, sig, np.full(6, 12_500.0), extra={"fx_n": fx, "label": np.array(list("abcdef"), dtype=object)})
+    write_session_csv(s, tmp_path / "in.csv")
+    import_session_csv(tmp_path / "in.csv", tmp_path / "s")
+    back = read_session_dir(tmp_path / "s")
+    np.testing.assert_allclose(back.t_s, t, atol=1e-6)  # whole microseconds, offset kept
+    np.testing.assert_array_equal(back.signals, sig)  # stored as <f8, exact
+    np.testing.assert_array_equal(back.pressure_pa, 12_500.0)
+    np.testing.assert_array_equal(back.extra["fx_n"], fx)
+    assert "label" not in back.extra
+    np.testing.assert_array_equal(back.seq, np.arange(6))
