@@ -24,7 +24,10 @@ Choices made here where the paper is silent:
   dominating the few large ones — the imbalance the paper names as a likely cause of its
   larger errors at high curvature.
 - ``degree="auto"`` picks the degree 1..5 by leave-one-strip-out cross-validation of
-  the shift error: the smallest degree whose CV error is within 5 % of the best.
+  the shift error: the smallest degree within one standard error of the best (the
+  one-standard-error rule). The folds leave out every strip but the tightest one,
+  whose prediction would be an extrapolation (flagged by ``in_range``) and whose
+  noisy error would otherwise decide the degree; so ``auto`` needs >= 2 strips.
 - ΔA is scaled to [−1, 1] for the least squares; the stored coefficients are plain
   ascending powers of ΔA.
 """
@@ -55,6 +58,7 @@ __all__ = [
     "polyval_shift",
     "parity_masks",
     "cross_validate_degree",
+    "select_degree",
     "WEIGHTINGS",
     "DEGREES",
 ]
@@ -63,7 +67,6 @@ FORMAT = "bendsense-calibration"
 VERSION = 1
 WEIGHTINGS = ("none", "shift")
 DEGREES = (1, 2, 3, 4, 5)
-AUTO_TOLERANCE = 0.05
 RANGE_MARGIN_STD = 3.0
 
 
@@ -182,6 +185,26 @@ def _fit_parities(delta_a, shifts, degree, weighting, odd, even):
     return out[0], out[1]
 
 
+def _cv_fold_errors(delta_a, shifts, groups, degrees, weighting):
+    """Mean squared held-out shift error of every fold, per degree ({degree: (K,)})."""
+    odd, even = parity_masks(delta_a.shape[1])
+    folds = sorted(set(groups[groups >= 0].tolist()))
+    result = {}
+    for degree in degrees:
+        errors = []
+        try:
+            for g in folds:
+                train = groups != g
+                c_odd, c_even = _fit_parities(delta_a[train], shifts[train], degree, weighting, odd, even)
+                test = ~train
+                pred = np.where(odd, polyval_shift(c_odd, delta_a[test]), polyval_shift(c_even, delta_a[test]))
+                errors.append(float(np.mean((pred - shifts[test]) ** 2)))
+        except ConfigError:
+            errors = [math.inf] * len(folds)
+        result[int(degree)] = np.array(errors)
+    return result
+
+
 def cross_validate_degree(delta_a, shifts_m, groups, degrees=DEGREES, weighting="none"):
     """Leave-one-strip-out cross-validation of the polynomial degree.
 
@@ -202,26 +225,24 @@ def cross_validate_degree(delta_a, shifts_m, groups, degrees=DEGREES, weighting=
     dict of int to float
         RMS held-out shift error per degree [m] (``inf`` if a fold cannot be fitted).
     """
-    delta_a = np.asarray(delta_a, dtype=float)
-    shifts = np.asarray(shifts_m, dtype=float)
-    groups = np.asarray(groups)
-    odd, even = parity_masks(delta_a.shape[1])
-    folds = sorted(set(groups[groups >= 0].tolist()))
-    result = {}
-    for degree in degrees:
-        sq, count = 0.0, 0
-        try:
-            for g in folds:
-                train = groups != g
-                c_odd, c_even = _fit_parities(delta_a[train], shifts[train], degree, weighting, odd, even)
-                test = ~train
-                pred = np.where(odd, polyval_shift(c_odd, delta_a[test]), polyval_shift(c_even, delta_a[test]))
-                sq += float(np.sum((pred - shifts[test]) ** 2))
-                count += pred.size
-            result[int(degree)] = math.sqrt(sq / count) if count else math.inf
-        except ConfigError:
-            result[int(degree)] = math.inf
-    return result
+    errors = _cv_fold_errors(
+        np.asarray(delta_a, dtype=float), np.asarray(shifts_m, dtype=float), np.asarray(groups), degrees, weighting
+    )
+    return {d: math.sqrt(float(np.mean(e))) if e.size else math.inf for d, e in errors.items()}
+
+
+def select_degree(fold_errors: dict) -> int:
+    """Smallest degree within one standard error of the best CV error (the one-SE rule).
+
+    Extra degrees fit the noise of the training strips as readily as the sensor's
+    curve; the rule keeps the simplest polynomial that CV cannot tell apart from the
+    best one.
+    """
+    mean = {d: float(np.mean(e)) for d, e in fold_errors.items()}
+    best = min(mean, key=mean.get)
+    e = fold_errors[best]
+    se = float(np.std(e, ddof=1) / math.sqrt(e.size)) if e.size > 1 else 0.0
+    return min(d for d, m in mean.items() if m <= mean[best] + se)
 
 
 # --- manifest ----------------------------------------------------------------------------
@@ -641,17 +662,20 @@ class Calibration:
         delta = np.vstack([np.zeros(n)] + [s.mean(axis=0) - offset for s in strips])  # flat first
         shifts = strip_shifts(np.concatenate(([0.0], kappa)), sensor.lengths_m, sensor.strip_gap_m)
         groups = np.arange(-1, len(strips))
+        # the tightest strip stays in training: predicting it would test extrapolation,
+        # which `in_range` flags anyway, and its noisy fold would drive the degree choice
+        groups[1 + int(np.argmax(kappa))] = -1
         odd, even = parity_masks(n)
 
         cv = None
         if auto:
             if len(strips) < 2:
                 raise ConfigError("degree: 'auto' needs at least 2 calibration strips for cross-validation")
-            cv = cross_validate_degree(delta, shifts, groups, DEGREES, weighting)
-            best = min(cv.values())
-            if not math.isfinite(best):
+            fold_errors = _cv_fold_errors(delta, shifts, groups, DEGREES, weighting)
+            cv = {d: math.sqrt(float(np.mean(e))) for d, e in fold_errors.items()}
+            if not math.isfinite(min(cv.values())):
                 raise ConfigError("degree: no degree 1..5 can be fitted to these recordings")
-            degree = min(d for d, e in cv.items() if e <= best * (1.0 + AUTO_TOLERANCE))
+            degree = select_degree(fold_errors)
         degree = int(degree)
         c_odd, c_even = _fit_parities(delta, shifts, degree, weighting, odd, even)
 

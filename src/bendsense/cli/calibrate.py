@@ -1,0 +1,133 @@
+"""The ``calibrate`` command: fit the sensor calibration from a manifest of recordings."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from bendsense.errors import BendsenseError
+
+
+class InterspersedCommand(click.Command):
+    """A command whose options may follow its arguments, also inside a chained group.
+
+    click parses the subcommands of a chained group with
+    ``allow_interspersed_args=False``, so ``calibrate MANIFEST.yaml -o cal.yaml`` would
+    stop at ``MANIFEST.yaml``. Here the arguments are cut at the first sibling command
+    name (the next step of the chain) and everything before it is parsed with options
+    allowed anywhere.
+    """
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        """Make the context with interspersed options allowed."""
+        extra["allow_interspersed_args"] = True
+        return super().make_context(info_name, args, parent=parent, **extra)
+
+    def parse_args(self, ctx, args):
+        """Parse up to the next chained command; leave the rest for the group."""
+        group = ctx.parent.command if ctx.parent is not None else None
+        siblings = set(group.commands) if isinstance(group, click.Group) else set()
+        takes_value = {name for p in self.params if isinstance(p, click.Option) and not p.is_flag for name in p.opts}
+        cut = len(args)
+        for i, token in enumerate(args):
+            if token in siblings and (i == 0 or args[i - 1] not in takes_value):
+                cut = i
+                break
+        super().parse_args(ctx, args[:cut])
+        ctx.args = [*ctx.args, *args[cut:]]
+        return ctx.args
+
+
+def _degree(ctx, param, value):
+    if value is None:
+        return 3
+    text = str(value).strip().lower()
+    if text == "auto":
+        return "auto"
+    if text.isdigit() and 1 <= int(text) <= 5:
+        return int(text)
+    raise click.BadParameter(f"expected 1..5 or 'auto', got {value!r}", ctx=ctx, param=param)
+
+
+@click.command("calibrate", cls=InterspersedCommand)
+@click.argument("manifest", metavar="MANIFEST.yaml", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Calibration YAML to write.",
+)
+@click.option(
+    "--config",
+    "config_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Config YAML with the sensor (default: the paper's prototype, built in).",
+)
+@click.option(
+    "--degree",
+    default="3",
+    show_default=True,
+    callback=_degree,
+    metavar="1..5|auto",
+    help="Polynomial degree n of f_odd/f_even; 'auto' picks it by leave-one-strip-out cross-validation.",
+)
+@click.option(
+    "--weighting",
+    type=click.Choice(["none", "shift"]),
+    default="none",
+    show_default=True,
+    help="'none': the paper's least squares; 'shift': balance small and large shifts.",
+)
+@click.option(
+    "--sleeve/--no-sleeve",
+    default=None,
+    help="kappa_cal = 1/(R + c) (strip radius without the sleeve) or 1/R; default: from the config.",
+)
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path), help="Save a fit plot.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_path, overwrite):
+    r"""Fit the signal-to-shift calibration (paper eq. 1-2) from MANIFEST.yaml.
+
+    The manifest names the flat recording and one session CSV per calibration strip
+    (paths relative to the manifest):
+
+    \b
+        flat: flat.csv
+        strips:
+          - {radius_m: 0.040, recording: r040.csv}
+          - {radius_mm: 50, recording: r050.csv}
+    """
+
+    def step(state):
+        if output.exists() and not overwrite:
+            raise click.ClickException(f"{output}: exists (use --overwrite to replace it)")
+        try:
+            from bendsense.calibration import Calibration
+            from bendsense.config import load_config
+
+            sensor = load_config(config_path).sensor
+            cal = Calibration.fit(manifest, sensor, degree=degree, weighting=weighting, sleeve=sleeve)
+            cal.save(output)
+        except BendsenseError as err:
+            raise click.ClickException(str(err)) from None
+        click.echo(cal.report())
+        click.echo(f"wrote {output}")
+        if plot_path is not None:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+
+            axes = cal.plot()
+            axes[0].figure.savefig(plot_path, dpi=120)
+            plt.close(axes[0].figure)
+            click.echo(f"wrote {plot_path}")
+        state["calibration"] = cal
+        return state
+
+    return step
+
+
+COMMANDS = [calibrate]
