@@ -1,7 +1,7 @@
 """The ``bendsense`` command line: a thin shell over the library.
 
-Commands live in one module per area (``pipeline``, ``device``, ``sim``,
-``identify``); each exposes ``COMMANDS``, a list of click commands added here.
+Commands live in one module per area (``pipeline``, ``calibrate``, ``identify``,
+``sim``, ``device``); each exposes ``COMMANDS``, a list of click commands added here.
 Heavy imports happen inside the commands, so ``bendsense --help`` is fast.
 """
 
@@ -12,7 +12,7 @@ import logging
 import click
 
 from bendsense import __version__
-from bendsense.cli import device, identify, pipeline, sim
+from bendsense.cli import calibrate, device, identify, pipeline, sim
 
 
 @click.group(
@@ -42,6 +42,6 @@ def _run_pipeline(steps, **_options) -> None:
     pipeline.run_steps(steps)
 
 
-for _module in (pipeline, identify, sim, device):
+for _module in (pipeline, calibrate, identify, sim, device):
     for _command in _module.COMMANDS:
         main.add_command(_command)
