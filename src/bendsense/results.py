@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ from bendsense.session import _column_array, _format
 
 __all__ = ["Results", "write_results", "read_results", "frame_status"]
 
+_KAPPA = re.compile(r"kappa[0-9]+$")
 FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
 
 
@@ -41,7 +43,7 @@ class Results:
     @property
     def curvature_per_m(self) -> np.ndarray:
         """Segment curvatures, shape (frames, N) [1/m]."""
-        n = sum(1 for k in self.columns if k.startswith("kappa"))
+        n = sum(1 for k in self.columns if _KAPPA.match(k))
         return np.column_stack([self.columns[f"kappa{i + 1}"] for i in range(n)])
 
     @property
@@ -147,5 +149,5 @@ def read_results(out_dir) -> Results:
     with np.load(out_dir / "shape.npz") as npz:
         s_m, positions = npz["s_m"], npz["positions_m"]
     known = {"t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS}
-    extra = tuple(h for h in header if h not in known and not h.startswith("kappa"))
+    extra = tuple(h for h in header if h not in known and not _KAPPA.match(h))
     return Results(columns=columns, s_m=s_m, positions_m=positions, extra_names=extra)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import click
 
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
 from bendsense.errors import BendsenseError
 
 log = logging.getLogger("bendsense")
@@ -46,16 +47,7 @@ def run_steps(steps) -> dict:
     return state
 
 
-config_option = click.option(
-    "--config",
-    "config_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Config YAML (default: the paper's prototype, built in).",
-)
-overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output.")
-
-
-@click.command("load")
+@click.command("load", cls=InterspersedCommand)
 @click.argument("session_path", metavar="SESSION", type=click.Path(exists=True, path_type=Path))
 @config_option
 @click.option(
@@ -88,7 +80,7 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
     return step
 
 
-@click.command("reconstruct")
+@click.command("reconstruct", cls=InterspersedCommand)
 @click.option("--points", type=click.IntRange(2, 10000), default=101, show_default=True,
               help="Arc-length samples of the shape along the sensor.")
 def reconstruct(points):
@@ -114,7 +106,7 @@ def reconstruct(points):
     return step
 
 
-@click.command("estimate")
+@click.command("estimate", cls=InterspersedCommand)
 @click.option("--constraint", type=click.Choice(["none", "vertical", "horizontal", "normal", "follower"]),
               help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(["fast", "paper"]), help="Estimator (default: from the config).")
@@ -149,7 +141,7 @@ def estimate(constraint, method, push_only):
     return step
 
 
-@click.command("save")
+@click.command("save", cls=InterspersedCommand)
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
 @overwrite_option
 def save(out_dir, overwrite):
@@ -167,7 +159,7 @@ def save(out_dir, overwrite):
     return step
 
 
-@click.command("export")
+@click.command("export", cls=InterspersedCommand)
 @click.argument("csv_path", metavar="FILE.csv", type=click.Path(dir_okay=False, path_type=Path))
 @overwrite_option
 def export(csv_path, overwrite):

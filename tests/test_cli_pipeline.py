@@ -1,0 +1,102 @@
+"""The chained command line: calibrate, then load → reconstruct → save, against a virtual sensor."""
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+import bendsense
+from bendsense.cli import main
+from bendsense.pcc import fit_arc_curvature
+from bendsense.results import read_results
+from bendsense.session import Session, write_session_csv
+from bendsense.sim.sensor import VirtualSensor, calibration_shifts
+
+RADII_M = [0.04, 0.05, 0.06, 0.07, 0.08, 0.09, 0.1, 0.2, 0.3, 0.4]
+
+
+def _recording(path, counts, pressure_pa=np.nan, extra=None):
+    counts = np.atleast_2d(counts)
+    n = counts.shape[0]
+    write_session_csv(Session(np.arange(n) * 0.01, counts, np.full(n, pressure_pa), extra=extra or {}), path)
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    """A calibration manifest and a validation session made with the virtual sensor."""
+    root = tmp_path_factory.mktemp("cli")
+    config = bendsense.load_config()
+    sensor = VirtualSensor.from_config(config, noise_counts=0.5, seed=3)
+    frames = 20
+    _recording(root / "flat.csv", sensor.measure(np.zeros((frames, 16))).counts)
+    strips = []
+    for r in RADII_M:
+        shifts = np.broadcast_to(calibration_shifts(config.sensor, r), (frames, 16))
+        _recording(root / f"r{r * 1e3:03.0f}.csv", sensor.measure(shifts).counts)
+        strips.append({"radius_mm": r * 1e3, "recording": f"r{r * 1e3:03.0f}.csv"})
+    (root / "manifest.yaml").write_text(yaml.safe_dump({"flat": "flat.csv", "strips": strips}))
+    # validation: three arcs the calibration has not seen
+    kappa = np.array([1 / 0.04575, 1 / 0.07575, 1 / 0.15075])
+    shifts = np.stack([calibration_shifts(config.sensor, 1 / k) for k in kappa])
+    _recording(root / "validation.csv", sensor.measure(shifts).counts, 0.0, {"kappa_true_per_m": kappa})
+    return root
+
+
+def test_calibrate_then_reconstruct_and_save(workdir):
+    runner = CliRunner()
+    res = runner.invoke(main, ["calibrate", str(workdir / "manifest.yaml"), "-o", str(workdir / "cal.yaml"),
+                               "--degree", "3"])
+    assert res.exit_code == 0, res.output
+    out = workdir / "out"
+    res = runner.invoke(main, ["load", str(workdir / "validation.csv"), "--calibration", str(workdir / "cal.yaml"),
+                               "reconstruct", "--points", "67", "save", str(out)])
+    assert res.exit_code == 0, res.output
+    results = read_results(out)
+    kappa_true = results["kappa_true_per_m"]
+    assert results.positions_m.shape == (3, 67, 2) and results.s_m.shape == (67,)
+    # every segment of an arc has the arc's curvature, up to the calibration's model error
+    # (a cubic for a coil response that is not a polynomial), which differencing the
+    # shifts (eq. 3) amplifies per segment; the fitted arc (eq. 19) averages it out
+    np.testing.assert_allclose(results.curvature_per_m, kappa_true[:, None] * np.ones(16), rtol=0.15)
+    kappa_fit = fit_arc_curvature(results.positions_m, results.s_m)
+    np.testing.assert_allclose(kappa_fit, kappa_true, rtol=0.02)  # paper Table I: all below 2.3 %
+    assert list(results["status"]) == ["ok"] * 3
+    tip = np.column_stack([results["tip_x_m"], results["tip_y_m"]])
+    np.testing.assert_allclose(tip, results.positions_m[:, -1], atol=1e-12)
+
+
+def test_save_refuses_to_overwrite(workdir):
+    runner = CliRunner()
+    runner.invoke(main, ["calibrate", str(workdir / "manifest.yaml"), "-o", str(workdir / "cal2.yaml")])
+    out = workdir / "exists"
+    out.mkdir()
+    res = runner.invoke(main, ["load", str(workdir / "validation.csv"), "--calibration", str(workdir / "cal2.yaml"),
+                               "reconstruct", "save", str(out)])
+    assert res.exit_code == 1
+    assert "exists (use --overwrite" in res.output
+    assert list(out.iterdir()) == []
+
+
+def test_reconstruct_without_calibration_is_a_usage_error(workdir):
+    res = CliRunner().invoke(main, ["load", str(workdir / "validation.csv"), "reconstruct"])
+    assert res.exit_code == 2
+    assert "--calibration" in res.output
+    assert "Traceback" not in res.output
+
+
+def test_malformed_session_is_one_line(workdir):
+    bad = workdir / "bad.csv"
+    bad.write_text("t_s,ch1\n0,abc\n")
+    res = CliRunner().invoke(main, ["load", str(bad), "export", str(workdir / "never.csv")])
+    assert res.exit_code == 1
+    assert res.output.strip().splitlines() == [f"Error: {bad}: line 2, column ch1: expected a number, got 'abc'"]
+    assert not (workdir / "never.csv").exists()
+
+
+def test_export_round_trip(workdir):
+    out = workdir / "copy.csv"
+    res = CliRunner().invoke(main, ["load", str(workdir / "validation.csv"), "export", str(out)])
+    assert res.exit_code == 0, res.output
+    a, b = bendsense.read_session(workdir / "validation.csv"), bendsense.read_session(out)
+    np.testing.assert_array_equal(a.signals, b.signals)
+    np.testing.assert_array_equal(a.extra["kappa_true_per_m"], b.extra["kappa_true_per_m"])
