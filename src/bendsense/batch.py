@@ -1,0 +1,545 @@
+"""Batch processing of many recorded sessions on any ``concurrent.futures.Executor``.
+
+:func:`process_sessions` finds the sessions under the given paths, runs the
+pipeline (read → reconstruct → estimate → write results) on each of them in
+parallel and returns a :class:`BatchReport`. One session per task: a task gets
+only paths and small picklable objects (``Config``, ``Calibration``), so the same
+code runs on a local process pool and on a Dask cluster::
+
+    from dask.distributed import Client
+    report = process_sessions(["runs/"], "out/", calibration=cal,
+                              executor=Client("tcp://host:8786").get_executor())
+
+A failing session (a malformed file, a channel count that does not match the
+calibration, frames without pressure) is reported with its reason; the others
+finish. Outputs that exist are skipped unless ``overwrite``.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import os
+import time
+import warnings
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bendsense.errors import BendsenseError, SessionError
+
+__all__ = ["SessionOutcome", "BatchReport", "discover_sessions", "process_session", "process_sessions"]
+
+STATUSES = ("ok", "skipped", "failed")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SessionOutcome:
+    """What happened to one session of a batch.
+
+    Attributes
+    ----------
+    name : str
+        Session name; its results are in ``out_dir / name``.
+    source : str
+        Path of the session CSV or native session directory.
+    status : str
+        ``ok``, ``skipped`` (output exists, no ``overwrite``) or ``failed``.
+    frames : int
+        Frames processed (0 unless ``ok``).
+    seconds : float
+        Time spent on the session in its worker, reading to writing [s].
+    reason : str
+        Why the session failed or was skipped; for ``ok`` sessions a note on frames
+        flagged ``extrapolated`` or ``not converged`` (empty if none).
+    extrapolated : int
+        Frames whose signals lay outside the calibrated range.
+    not_converged : int
+        Frames whose force estimate did not converge.
+    out_dir : str
+        Results directory of the session.
+    """
+
+    name: str
+    source: str
+    status: str
+    frames: int = 0
+    seconds: float = 0.0
+    reason: str = ""
+    extrapolated: int = 0
+    not_converged: int = 0
+    out_dir: str = ""
+
+    def __post_init__(self):
+        if self.status not in STATUSES:
+            raise ValueError(f"status: must be one of {', '.join(STATUSES)}, got {self.status!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class BatchReport:
+    """Outcome of :func:`process_sessions`.
+
+    Attributes
+    ----------
+    sessions : tuple of SessionOutcome
+        One row per session, in discovery order.
+    out_dir : str
+        Root output directory.
+    wall_s : float
+        Wall-clock time of the whole batch [s].
+    workers : str
+        Description of the executor that ran it.
+    """
+
+    sessions: tuple = field(default_factory=tuple)
+    out_dir: str = ""
+    wall_s: float = 0.0
+    workers: str = ""
+
+    def _count(self, status: str) -> int:
+        return sum(1 for s in self.sessions if s.status == status)
+
+    @property
+    def n_ok(self) -> int:
+        """Sessions processed."""
+        return self._count("ok")
+
+    @property
+    def n_skipped(self) -> int:
+        """Sessions skipped because their output exists."""
+        return self._count("skipped")
+
+    @property
+    def n_failed(self) -> int:
+        """Sessions that failed."""
+        return self._count("failed")
+
+    @property
+    def failed(self) -> tuple:
+        """The failed sessions' rows."""
+        return tuple(s for s in self.sessions if s.status == "failed")
+
+    @property
+    def ok(self) -> bool:
+        """True when no session failed."""
+        return self.n_failed == 0
+
+    @property
+    def frames(self) -> int:
+        """Frames processed over all sessions."""
+        return sum(s.frames for s in self.sessions)
+
+    @property
+    def frames_per_s(self) -> float:
+        """Throughput: frames processed per second of wall-clock time [1/s]."""
+        return self.frames / self.wall_s if self.wall_s > 0 else float("nan")
+
+    def to_dict(self) -> dict:
+        """Plain dict (for JSON/YAML), with the totals."""
+        return {
+            "out_dir": self.out_dir,
+            "workers": self.workers,
+            "wall_s": self.wall_s,
+            "frames": self.frames,
+            "frames_per_s": self.frames_per_s,
+            "ok": self.n_ok,
+            "skipped": self.n_skipped,
+            "failed": self.n_failed,
+            "sessions": [asdict(s) for s in self.sessions],
+        }
+
+    def table(self, *, max_reason: int = 100) -> str:
+        """Text summary: one line per session, then the totals."""
+        width = max([len("session")] + [len(s.name) for s in self.sessions])
+        lines = [f"{'session':<{width}}  {'status':<7} {'frames':>8} {'time [s]':>9}  note"]
+        for s in self.sessions:
+            reason = " ".join(s.reason.split())
+            if len(reason) > max_reason:
+                reason = reason[: max_reason - 3] + "..."
+            frames = f"{s.frames:8d}" if s.status == "ok" else f"{'-':>8}"
+            seconds = f"{s.seconds:9.2f}" if s.status != "skipped" else f"{'-':>9}"
+            lines.append(f"{s.name:<{width}}  {s.status:<7} {frames} {seconds}  {reason}".rstrip())
+        lines.append(
+            f"{len(self.sessions)} sessions: {self.n_ok} ok, {self.n_skipped} skipped, {self.n_failed} failed; "
+            f"{self.frames} frames in {self.wall_s:.2f} s ({self.frames_per_s:,.0f} frames/s"
+            f"{', ' + self.workers if self.workers else ''})"
+        )
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.table()
+
+
+# --- discovery ----------------------------------------------------------------------------
+
+
+def _is_session_dir(path: Path) -> bool:
+    from bendsense.sessiondir import is_session_dir
+
+    return is_session_dir(path)
+
+
+def _inside(path: Path, root: Path | None) -> bool:
+    if root is None:
+        return False
+    try:
+        path.resolve().relative_to(root)
+    except ValueError:
+        return False
+    return True
+
+
+def _search(directory: Path, recursive: bool, exclude: Path | None) -> list[Path]:
+    found = []
+    for child in sorted(directory.iterdir()):
+        if child.name.startswith(".") or _inside(child, exclude):
+            continue
+        if child.is_dir():
+            if _is_session_dir(child):
+                found.append(child)
+            elif recursive:
+                found.extend(_search(child, recursive, exclude))
+        elif child.suffix.lower() == ".csv":
+            found.append(child)
+    return found
+
+
+def discover_sessions(paths, *, recursive: bool = False, exclude=None) -> list[Path]:
+    """Find the sessions under ``paths``.
+
+    Each path is one of
+
+    - a session CSV (any file given explicitly is read as one);
+    - a native session directory (holds ``meta.yaml`` or ``frames.bin``);
+    - a directory holding sessions: its ``*.csv`` files and session directories,
+      one level deep, or at any depth with ``recursive`` (the search does not
+      descend into session directories, and skips hidden entries).
+
+    Parameters
+    ----------
+    paths : path or sequence of paths
+        Where to look.
+    recursive : bool
+        Search directories at any depth.
+    exclude : path, optional
+        A directory whose contents are never sessions (the output directory, so that
+        results written there are not taken for input on the next run).
+
+    Returns
+    -------
+    list of Path
+        In the order given, each directory's entries sorted by name; duplicates removed.
+
+    Raises
+    ------
+    SessionError
+        If a path does not exist.
+    """
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    root = Path(exclude).resolve() if exclude is not None else None
+    found: list[Path] = []
+    for p in map(Path, paths):
+        if not p.exists():
+            raise SessionError(f"{p}: no such session file or directory")
+        if p.is_dir() and not _is_session_dir(p):
+            found.extend(_search(p, recursive, root))
+        else:
+            found.append(p)
+    seen, unique = set(), []
+    for p in found:
+        key = p.resolve()
+        if key not in seen:
+            seen.add(key)
+            unique.append(p)
+    return unique
+
+
+def session_names(paths) -> list[str]:
+    """Output names for sessions: the file stem or directory name, made unique.
+
+    Sessions with the same name (``a/run.csv``, ``b/run.csv``) get their parent
+    directories' names prepended (``a_run``, ``b_run``), then a counter if needed.
+    """
+    paths = [Path(p) for p in paths]
+    names = [p.stem if p.is_file() else p.name for p in paths]
+    depth = 0
+    while len(set(names)) < len(names) and depth < 8:
+        depth += 1
+        counts = Counter(names)
+        for i, p in enumerate(paths):
+            if counts[names[i]] > 1:
+                parents = [q.name for q in p.resolve().parents[:depth][::-1] if q.name]
+                names[i] = "_".join([*parents, p.stem if p.is_file() else p.name])
+    counts = Counter(names)
+    seen: Counter = Counter()
+    for i, n in enumerate(names):
+        if counts[n] > 1:
+            seen[n] += 1
+            names[i] = f"{n}_{seen[n]}"
+    return names
+
+
+# --- one session (runs in a worker) -------------------------------------------------------
+
+
+def process_session(
+    path,
+    out_dir,
+    *,
+    config,
+    calibration,
+    constraint=None,
+    method=None,
+    pressure_pa=None,
+    estimate: bool = True,
+    overwrite: bool = False,
+    name: str | None = None,
+) -> SessionOutcome:
+    """Process one session and write its results; never raises for a bad session.
+
+    Reads ``path`` (:func:`bendsense.session.read_session`), reconstructs the shapes
+    (:func:`bendsense.pcc.reconstruct`, paper eq. 1–7), estimates the tip forces
+    (:func:`bendsense.estimation.estimate_force`, paper eq. 18) unless ``estimate``
+    is False, and writes ``results.csv`` and ``shape.npz`` into ``out_dir``
+    (:func:`bendsense.results.write_results`). This is the task that
+    :func:`process_sessions` sends to its executor; its arguments pickle.
+
+    Returns
+    -------
+    SessionOutcome
+        ``failed`` with the error message as reason for a user-level error
+        (:class:`~bendsense.errors.BendsenseError`, ``OSError``, ``ValueError``); an
+        unexpected exception is reported with its type. Warnings raised on the way
+        (e.g. solver non-convergence) are not propagated: the frames they concern are
+        counted in ``extrapolated`` and ``not_converged``.
+    """
+    path, out_dir = Path(path), Path(out_dir)
+    name = name or (path.stem if path.is_file() else path.name)
+    row = {"name": name, "source": str(path), "out_dir": str(out_dir)}
+    start = time.perf_counter()
+    try:
+        # per-frame problems become the frame's status column; a warning per session
+        # from a worker process would only clutter the console
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            frames, extrapolated, not_converged = _run(
+                path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite
+            )
+    except (BendsenseError, OSError, ValueError) as err:
+        return SessionOutcome(status="failed", reason=str(err), seconds=time.perf_counter() - start, **row)
+    except Exception as err:  # noqa: BLE001 - isolate any failure to its session
+        reason = f"{type(err).__name__}: {err}"
+        return SessionOutcome(status="failed", reason=reason, seconds=time.perf_counter() - start, **row)
+    notes = []
+    if extrapolated:
+        notes.append(f"{extrapolated} of {frames} frames extrapolated")
+    if not_converged:
+        notes.append(f"{not_converged} of {frames} frames not converged")
+    return SessionOutcome(
+        status="ok",
+        frames=frames,
+        seconds=time.perf_counter() - start,
+        reason=", ".join(notes),
+        extrapolated=extrapolated,
+        not_converged=not_converged,
+        **row,
+    )
+
+
+def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite):
+    from bendsense.pcc import reconstruct
+    from bendsense.results import write_results
+    from bendsense.session import read_session
+
+    if out_dir.exists() and not overwrite:
+        raise SessionError(f"{out_dir}: exists (use overwrite=True or --overwrite to replace it)")
+    session = read_session(path)
+    if len(session) == 0:
+        raise SessionError(f"{path}: no frames")
+    if pressure_pa is not None:
+        session = session.with_pressure(pressure_pa)
+    shape = reconstruct(session.signals, calibration, config.sensor)
+    result = None
+    if estimate:
+        if not session.has_pressure:
+            missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
+            raise SessionError(
+                f"{path}: {missing} of {len(session)} frames have no pressure reading "
+                "(give pressure_pa, or --pressure-kpa on the command line)"
+            )
+        from bendsense.estimation import estimate_force
+
+        result = estimate_force(
+            shape,
+            session.pressure_pa,
+            config,
+            constraint=constraint or config.estimation.constraint,
+            method=method or config.estimation.method,
+        )
+    write_results(out_dir, session, shape, result, overwrite=overwrite)
+    extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(shape.extrapolated), (len(session),))))
+    not_converged = 0 if result is None else int(np.count_nonzero(~np.asarray(result.success, dtype=bool)))
+    return len(session), extrapolated, not_converged
+
+
+# --- many sessions ------------------------------------------------------------------------
+
+
+def _executor_name(executor) -> str:
+    workers = getattr(executor, "_max_workers", None)
+    kind = type(executor).__name__
+    return f"{kind}({workers} workers)" if workers else kind
+
+
+def process_sessions(
+    paths,
+    out_dir,
+    *,
+    config=None,
+    calibration,
+    executor: cf.Executor | None = None,
+    workers: int | None = None,
+    constraint: str | None = None,
+    method: str | None = None,
+    overwrite: bool = False,
+    pressure_pa: float | None = None,
+    estimate: bool = True,
+    recursive: bool = False,
+    progress: bool = True,
+) -> BatchReport:
+    """Process many sessions in parallel and write one results directory per session.
+
+    Parameters
+    ----------
+    paths : path or sequence of paths
+        Session CSV files, native session directories, or directories holding them
+        (searched one level deep, or at any depth with ``recursive``; see
+        :func:`discover_sessions`).
+    out_dir : path
+        Root output directory; session ``name`` goes to ``out_dir / name``
+        (``results.csv``, ``shape.npz``; DESIGN.md section 3). Names are the file stem or
+        directory name, made unique (:func:`session_names`).
+    config : Config or path, optional
+        Sensor, actuator and estimation settings; default the paper's prototype.
+    calibration : Calibration or path
+        Sensor calibration (a ``Calibration`` or its YAML file).
+    executor : concurrent.futures.Executor, optional
+        Where the sessions run, one task each: e.g. a ``ProcessPoolExecutor``, or a Dask
+        cluster's ``Client(...).get_executor()``. It is not shut down. Default: a local
+        ``ProcessPoolExecutor`` with ``workers`` processes, shut down at the end.
+    workers : int, optional
+        Processes of the default pool (default: ``os.cpu_count()``); ``0`` runs the
+        sessions one after the other in this process (no executor).
+    constraint, method : str, optional
+        Force constraint and estimator (default: from ``config.estimation``).
+    overwrite : bool
+        Reprocess sessions whose output directory exists (default: skip them).
+    pressure_pa : float, optional
+        Pressure for frames without a reading [Pa].
+    estimate : bool
+        Estimate the tip forces (False: shapes only).
+    recursive : bool
+        Search directories at any depth.
+    progress : bool
+        Show a tqdm progress bar (on stderr).
+
+    Returns
+    -------
+    BatchReport
+        One row per session (``ok``, ``skipped`` or ``failed`` with the reason) and the
+        totals; ``report.table()`` formats it.
+
+    Raises
+    ------
+    SessionError
+        If a path does not exist or no session is found.
+    ConfigError
+        If the config or the calibration file is invalid.
+    """
+    from tqdm.auto import tqdm
+
+    from bendsense.calibration import Calibration
+    from bendsense.config import Config, load_config
+
+    start = time.perf_counter()
+    out_dir = Path(out_dir)
+    if not isinstance(config, Config):
+        config = load_config(config)
+    if not isinstance(calibration, Calibration):
+        if calibration is None:
+            raise SessionError("calibration: a Calibration or a calibration YAML is required")
+        calibration = Calibration.load(calibration)
+    sessions = discover_sessions(paths, recursive=recursive, exclude=out_dir)
+    if not sessions:
+        shown = paths if isinstance(paths, (str, os.PathLike)) else ", ".join(map(str, paths))
+        raise SessionError(f"no sessions (*.csv files or session directories) found in {shown}")
+    names = session_names(sessions)
+
+    rows: list[SessionOutcome | None] = [None] * len(sessions)
+    todo = []
+    for i, (path, name) in enumerate(zip(sessions, names, strict=True)):
+        target = out_dir / name
+        if target.exists() and not overwrite:
+            rows[i] = SessionOutcome(
+                name=name,
+                source=str(path),
+                status="skipped",
+                reason="output exists (use overwrite / --overwrite to reprocess)",
+                out_dir=str(target),
+            )
+        else:
+            todo.append(i)
+    options = dict(
+        config=config,
+        calibration=calibration,
+        constraint=constraint,
+        method=method,
+        pressure_pa=pressure_pa,
+        estimate=estimate,
+        overwrite=overwrite,
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bar = tqdm(total=len(todo), unit="session", desc="process", disable=not progress or not todo, leave=False)
+
+    def finish(i, row):
+        rows[i] = row
+        bar.update(1)
+        if row.status == "failed":
+            bar.write(f"{row.name}: failed: {row.reason}")
+
+    own = None
+    try:
+        if executor is None and workers == 0:
+            description = "in-process"
+            for i in todo:
+                finish(i, process_session(sessions[i], out_dir / names[i], name=names[i], **options))
+        else:
+            if executor is None and todo:
+                own = executor = cf.ProcessPoolExecutor(max_workers=min(workers or os.cpu_count() or 1, len(todo)))
+            description = _executor_name(executor) if executor is not None else ""
+            futures = {
+                executor.submit(process_session, sessions[i], out_dir / names[i], name=names[i], **options): i
+                for i in todo
+            }
+            for future in cf.as_completed(futures):
+                i = futures[future]
+                try:
+                    row = future.result()
+                except Exception as err:  # noqa: BLE001 - a worker died or the task could not be sent
+                    row = SessionOutcome(
+                        name=names[i],
+                        source=str(sessions[i]),
+                        status="failed",
+                        reason=f"worker error: {type(err).__name__}: {err}",
+                        out_dir=str(out_dir / names[i]),
+                    )
+                finish(i, row)
+    finally:
+        bar.close()
+        if own is not None:
+            own.shutdown(cancel_futures=True)
+    return BatchReport(
+        sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start, workers=description
+    )

@@ -1,0 +1,165 @@
+"""Commands of the batch area: ``process`` (many sessions) and ``plot`` (figures).
+
+``plot`` is also the last step of a processing chain
+(``bendsense load run.csv ... reconstruct estimate save out/ plot fig.png``).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import click
+
+from bendsense.cli.calibrate import InterspersedCommand
+from bendsense.cli.pipeline import config_option, overwrite_option
+
+log = logging.getLogger("bendsense")
+
+CONSTRAINTS = ["none", "vertical", "horizontal", "direction", "normal", "follower"]
+
+
+def _dask_executor(address: str):
+    """Connect to a Dask scheduler; returns (client, executor)."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise click.ClickException(
+            "--scheduler needs Dask distributed, which is not installed: pip install bendsense[distributed]"
+        ) from None
+    try:
+        client = Client(address, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as err:
+        raise click.ClickException(f"--scheduler {address}: cannot connect: {err}") from None
+    return client, client.get_executor()
+
+
+@click.command("process", cls=InterspersedCommand)
+@click.argument("paths", metavar="SESSION_OR_DIR...", nargs=-1, required=True,
+                type=click.Path(exists=True, path_type=Path))
+@click.option("--calibration", "calibration_path", required=True,
+              type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="Calibration YAML written by 'bendsense calibrate'.")
+@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Root output directory; each session's results go to OUT/<session name>/.")
+@config_option
+@click.option("--workers", type=click.IntRange(0), help="Local worker processes (default: one per CPU; 0: no pool).")
+@click.option("--scheduler", metavar="tcp://HOST:PORT",
+              help="Run on a Dask distributed scheduler instead (needs bendsense[distributed]).")
+@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@click.option("--method", type=click.Choice(["fast", "paper"]), help="Estimator (default: from the config).")
+@click.option("--pressure-kpa", type=float, help="Constant pressure for frames without a reading [kPa].")
+@click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
+@click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
+@overwrite_option
+@click.option("--no-progress", is_flag=True, help="No progress bar.")
+def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, pressure_kpa,
+            no_estimate, recursive, overwrite, no_progress):
+    """Process many sessions in parallel: reconstruct, estimate and save each one.
+
+    Every SESSION_OR_DIR is a session CSV, a native session directory, or a
+    directory holding several (its *.csv files and session directories, one level
+    deep; with --recursive at any depth). Session NAME goes to OUT/NAME/results.csv
+    and shape.npz; existing outputs are skipped unless --overwrite. A session that
+    fails is reported with its reason while the others finish; the exit code is 1
+    if any failed. Prints a summary table at the end.
+
+    \b
+    Example:
+        bendsense process runs/ --calibration cal.yaml -o out/ --workers 2
+        bendsense process runs/ --calibration cal.yaml -o out/ --scheduler tcp://10.0.0.5:8786
+    """  # noqa: D301
+
+    def step(state):
+        from bendsense.batch import process_sessions
+
+        if scheduler and workers is not None:
+            raise click.UsageError("give --workers or --scheduler, not both")
+        client = executor = None
+        if scheduler:
+            client, executor = _dask_executor(scheduler)
+        try:
+            report = process_sessions(
+                paths,
+                out_dir,
+                config=config_path,
+                calibration=calibration_path,
+                executor=executor,
+                workers=workers,
+                constraint=constraint,
+                method=method,
+                overwrite=overwrite,
+                pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
+                estimate=not no_estimate,
+                recursive=recursive,
+                progress=not no_progress and not (click.get_current_context().obj or {}).get("quiet"),
+            )
+        finally:
+            if client is not None:
+                client.close()
+        click.echo(report.table())
+        state["batch_report"] = report
+        if not report.ok:
+            click.echo(f"error: {report.n_failed} of {len(report.sessions)} sessions failed", err=True)
+            click.get_current_context().exit(1)
+        return state
+
+    return step
+
+
+@click.command("plot", cls=InterspersedCommand)
+@click.argument("target", metavar="FIG | RESULTS_DIR", type=click.Path(path_type=Path))
+@click.option("-o", "--output", "figure_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Figure file to write when TARGET is a results directory.")
+@click.option("--shapes", type=click.IntRange(1, 100), default=8, show_default=True,
+              help="Number of frames whose shape is drawn.")
+@click.option("--dpi", type=click.IntRange(20, 1200), default=150, show_default=True,
+              help="Resolution of raster formats.")
+@overwrite_option
+def plot(target, figure_path, shapes, dpi, overwrite):
+    """Plot a summary figure: shapes and tip path, tip forces, curvatures over time.
+
+    Works in two ways:
+
+    \b
+      bendsense plot RESULTS_DIR -o FIG.png
+          standalone: plot a results directory written by 'save' or 'process';
+      bendsense load run.csv --calibration cal.yaml reconstruct estimate save out/ plot FIG.png
+          in a chain: plot the shapes (and forces) computed earlier in the chain.
+
+    With -o, TARGET is always a results directory; without it, TARGET is the
+    figure file and a 'reconstruct' step must come earlier in the chain. The
+    format follows the file suffix (.png, .pdf, .svg, ...). Existing figures are
+    replaced only with --overwrite.
+    """  # noqa: D301
+
+    def step(state):
+        import matplotlib
+
+        matplotlib.use("Agg")  # files only: never open a window, work without a display
+        from bendsense.plots import plot_results, results_from_state
+
+        if figure_path is not None:
+            if not target.is_dir():
+                raise click.BadParameter(f"{target}: not a results directory", param_hint="RESULTS_DIR")
+            source, out = target, figure_path
+        elif state.get("shape") is not None:
+            source = results_from_state(state["session"], state["shape"], state.get("estimate"))
+            out = target
+        elif target.is_dir():
+            raise click.UsageError(f"give the figure file: 'plot {target} -o FIG.png'")
+        else:
+            raise click.UsageError(
+                "'plot FIG' needs 'reconstruct' earlier in the chain; "
+                "to plot a results directory use 'plot RESULTS_DIR -o FIG.png'"
+            )
+        if out.exists() and not overwrite:
+            raise click.UsageError(f"{out}: exists (use --overwrite to replace it)")
+        plot_results(source, out, max_shapes=shapes, dpi=dpi)
+        click.echo(f"wrote {out}")
+        return state
+
+    return step
+
+
+COMMANDS = [process, plot]

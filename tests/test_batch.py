@@ -1,0 +1,367 @@
+"""Batch processing of many sessions (bendsense.batch) and the ``process`` command."""
+
+import concurrent.futures as cf
+import importlib.util
+import pickle
+import sys
+
+import click
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bendsense import load_config
+from bendsense.batch import (
+    BatchReport,
+    SessionOutcome,
+    discover_sessions,
+    process_session,
+    process_sessions,
+    session_names,
+)
+from bendsense.calibration import Calibration
+from bendsense.cli import batch as batch_cli
+from bendsense.cli import pipeline
+from bendsense.errors import SessionError
+from bendsense.results import read_results
+from bendsense.session import Session, write_session_csv
+from bendsense.sessiondir import SessionWriter
+
+CONFIG = load_config()
+SENSOR = CONFIG.sensor
+N = SENSOR.n_segments
+ODD = np.arange(N) % 2 == 0  # channels 1, 3, ... (1-based)
+GAIN = 2e-6  # shift per signal unit of the linear test calibration [m]
+# the force estimator is written in parallel; until it lands the batch runs shapes only
+ESTIMATE = importlib.util.find_spec("bendsense.estimation") is not None
+FRAMES = 40
+
+
+def linear_calibration():
+    """S_i = ±GAIN · ΔA_i (odd +, even −), offset 2000 + 10 i: an exactly invertible calibration."""
+    return Calibration(
+        offset=2000.0 + 10.0 * np.arange(N),
+        coefficients_odd=[0.0, GAIN],
+        coefficients_even=[0.0, -GAIN],
+        degree=1,
+        delta_a_range_odd=(-3000.0, 3000.0),
+        delta_a_range_even=(-3000.0, 3000.0),
+        noise_std=np.full(N, 1.0),
+        sensor=SENSOR,
+    )
+
+
+def true_curvatures(frames, seed):
+    """Smooth, time-varying segment curvatures (frames, N) [1/m], within 2..18 1/m."""
+    t = np.linspace(0.0, 1.0, frames)[:, None]
+    phase = np.random.default_rng(seed).uniform(0, 2 * np.pi)
+    return 10.0 + 6.0 * np.sin(2 * np.pi * t + phase + np.linspace(0, 1, N)) + 2.0 * np.linspace(-1, 1, N)
+
+
+def signals_for(kappa, calibration):
+    # independent of bendsense.pcc: S_i = d Σ_{j≤i} κ_j l_j (paper eq. 3-4), then invert S = ±GAIN ΔA
+    shifts = SENSOR.strip_gap_m * np.cumsum(kappa * SENSOR.lengths_m, axis=-1)
+    return calibration.offset + np.where(ODD, shifts / GAIN, -shifts / GAIN)
+
+
+def make_session(seed, frames=FRAMES):
+    kappa = true_curvatures(frames, seed)
+    t = 0.01 * np.arange(frames)
+    pressure = 40e3 + 20e3 * np.linspace(0, 1, frames)
+    session = Session(t, signals_for(kappa, linear_calibration()), pressure, extra={"truth_id": np.full(frames, seed)})
+    return session, kappa
+
+
+def write_csv_session(path, seed, frames=FRAMES):
+    session, kappa = make_session(seed, frames)
+    write_session_csv(session, path)
+    return kappa
+
+
+def write_native_session(path, seed, frames=FRAMES):
+    session, kappa = make_session(seed, frames)
+    with SessionWriter(path, N, adc_dtype="<f8") as writer:
+        rec = writer.empty(frames)
+        rec["t_us"] = np.round(session.t_s * 1e6).astype(np.uint64)
+        rec["seq"] = np.arange(frames)
+        rec["pressure_pa"] = np.round(session.pressure_pa).astype(np.int32)
+        rec["adc"] = session.signals
+        writer.write(rec)
+    return kappa
+
+
+def write_bad_csv(path):
+    header = "t_s,pressure_pa," + ",".join(f"ch{i + 1}" for i in range(N))
+    good = ",".join(["0.0", "40000"] + ["2000"] * N)
+    bad = ",".join(["0.01", "40000", "2000", "oops"] + ["2000"] * (N - 2))
+    path.write_text("\n".join([header, good, bad]) + "\n")
+
+
+@pytest.fixture
+def sessions(tmp_path):
+    """runs/: two CSV sessions, one native session directory, one malformed CSV."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    truth = {
+        "a": write_csv_session(runs / "a.csv", 1),
+        "b": write_csv_session(runs / "b.csv", 2),
+        "native": write_native_session(runs / "native", 3),
+    }
+    write_bad_csv(runs / "broken.csv")
+    return runs, truth
+
+
+def check_outputs(out, truth):
+    """Curvatures against the generating ones; forces against a direct estimate of the same frames."""
+    for name, kappa in truth.items():
+        res = read_results(out / name)
+        np.testing.assert_allclose(res.curvature_per_m, kappa, rtol=1e-9, atol=1e-9)
+        assert res.positions_m.shape == (len(kappa), 101, 2)
+        assert list(res["status"]) == ["ok"] * len(kappa)
+        if ESTIMATE:
+            from bendsense.estimation import estimate_force
+            from bendsense.pcc import Shape
+
+            shape = Shape.from_curvatures(kappa, SENSOR.lengths_m)
+            direct = estimate_force(shape, res["pressure_pa"], CONFIG, constraint="none", method="fast")
+            np.testing.assert_allclose(res["fx_n"], np.asarray(direct.force_n)[:, 0], atol=1e-6)
+            np.testing.assert_allclose(res["fy_n"], np.asarray(direct.force_n)[:, 1], atol=1e-6)
+
+
+def by_name(report):
+    return {s.name: s for s in report.sessions}
+
+
+# --- discovery ------------------------------------------------------------------------------
+
+
+def test_discovery_one_level_recursive_and_excluding_the_output(tmp_path):
+    root = tmp_path / "data"
+    (root / "day1" / "deep").mkdir(parents=True)
+    write_csv_session(root / "top.csv", 0, frames=3)
+    write_native_session(root / "rec", 0, frames=3)
+    write_csv_session(root / "day1" / "x.csv", 0, frames=3)
+    write_csv_session(root / "day1" / "deep" / "y.csv", 0, frames=3)
+    (root / "notes.txt").write_text("not a session")
+    (root / ".hidden.csv").write_text("t_s,ch1\n0,1\n")
+    (root / "out" / "top").mkdir(parents=True)
+    (root / "out" / "top" / "results.csv").write_text("t_s\n0\n")
+
+    assert discover_sessions(root) == [root / "rec", root / "top.csv"]
+    found = discover_sessions([root], recursive=True, exclude=root / "out")
+    assert found == [root / "day1" / "deep" / "y.csv", root / "day1" / "x.csv", root / "rec", root / "top.csv"]
+    # without the exclusion the earlier output would be taken for a session
+    assert root / "out" / "top" / "results.csv" in discover_sessions(root, recursive=True)
+    # explicit files and session directories are taken as given; duplicates dropped
+    assert discover_sessions([root / "rec", root / "top.csv", root / "top.csv"]) == [root / "rec", root / "top.csv"]
+    with pytest.raises(SessionError, match="nothing.csv: no such session file or directory"):
+        discover_sessions([root / "nothing.csv"])
+
+
+def test_session_names_are_unique(tmp_path):
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        (tmp_path / d / "run.csv").write_text("")
+    (tmp_path / "a" / "sess").mkdir()
+    names = session_names([tmp_path / "a" / "run.csv", tmp_path / "b" / "run.csv", tmp_path / "a" / "sess"])
+    assert names == ["a_run", "b_run", "sess"]
+
+
+# --- processing ----------------------------------------------------------------------------
+
+
+def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_path):
+    runs, truth = sessions
+    out = tmp_path / "out"
+    with cf.ProcessPoolExecutor(2) as pool:
+        report = process_sessions(
+            runs, out, calibration=linear_calibration(), executor=pool, estimate=ESTIMATE, progress=False
+        )
+    rows = by_name(report)
+    assert [s.name for s in report.sessions] == ["a", "b", "broken", "native"]  # discovery order
+    assert {n: s.status for n, s in rows.items()} == {"a": "ok", "b": "ok", "broken": "failed", "native": "ok"}
+    assert "line 3, column ch2: expected a number, got 'oops'" in rows["broken"].reason
+    assert not (out / "broken").exists()
+    assert report.frames == 3 * FRAMES and report.n_ok == 3 and report.n_failed == 1 and not report.ok
+    assert report.frames_per_s == pytest.approx(report.frames / report.wall_s)
+    assert all(rows[n].seconds > 0 and rows[n].frames == FRAMES for n in truth)
+    check_outputs(out, truth)
+    # extra columns pass through, the native session's pressure round-trips in whole pascals
+    assert list(read_results(out / "a")["truth_id"]) == [1] * FRAMES
+
+    # a second run skips what exists and retries the failure
+    stamp = (out / "a" / "results.csv").stat().st_mtime_ns
+    again = process_sessions(runs, out, calibration=linear_calibration(), workers=0, estimate=ESTIMATE, progress=False)
+    assert {s.name: s.status for s in again.sessions} == {
+        "a": "skipped", "b": "skipped", "broken": "failed", "native": "skipped"
+    }  # fmt: skip
+    assert "output exists" in by_name(again)["a"].reason
+    assert (out / "a" / "results.csv").stat().st_mtime_ns == stamp
+    # overwrite reprocesses
+    (out / "a" / "marker").write_text("old output")
+    redo = process_sessions(
+        runs / "a.csv", out, calibration=linear_calibration(), workers=0, overwrite=True, estimate=ESTIMATE,
+        progress=False,
+    )  # fmt: skip
+    assert [s.status for s in redo.sessions] == ["ok"]
+    assert not (out / "a" / "marker").exists()
+    check_outputs(out, {"a": truth["a"]})
+
+
+def test_table_lists_every_session_and_the_totals():
+    report = BatchReport(
+        sessions=(
+            SessionOutcome(name="run_1", source="r1.csv", status="ok", frames=100, seconds=0.5),
+            SessionOutcome(name="r2", source="r2.csv", status="failed", seconds=0.1, reason="r2.csv: line 3: bad"),
+            SessionOutcome(name="r3", source="r3", status="skipped", reason="output exists"),
+        ),
+        wall_s=2.0,
+        workers="ProcessPoolExecutor(2 workers)",
+    )
+    lines = report.table().splitlines()
+    assert lines[0].split() == ["session", "status", "frames", "time", "[s]", "note"]
+    assert lines[1].split() == ["run_1", "ok", "100", "0.50"]
+    assert lines[2].split()[:4] == ["r2", "failed", "-", "0.10"] and lines[2].endswith("r2.csv: line 3: bad")
+    assert lines[3].split()[:4] == ["r3", "skipped", "-", "-"]
+    assert lines[4] == (
+        "3 sessions: 1 ok, 1 skipped, 1 failed; 100 frames in 2.00 s (50 frames/s, ProcessPoolExecutor(2 workers))"
+    )
+    assert report.to_dict()["sessions"][1]["reason"] == "r2.csv: line 3: bad"
+    assert pickle.loads(pickle.dumps(report)) == report
+
+
+def test_process_session_reports_failures_instead_of_raising(tmp_path):
+    session, _ = make_session(0, frames=5)
+    no_pressure = Session(session.t_s, session.signals, np.full(5, np.nan))
+    write_session_csv(no_pressure, tmp_path / "nop.csv")
+    cal = linear_calibration()
+    row = process_session(tmp_path / "nop.csv", tmp_path / "o1", config=CONFIG, calibration=cal, estimate=True)
+    assert row.status == "failed" and "5 of 5 frames have no pressure reading" in row.reason
+    row = process_session(
+        tmp_path / "nop.csv", tmp_path / "o2", config=CONFIG, calibration=cal, pressure_pa=50e3, estimate=ESTIMATE
+    )
+    assert row.status == "ok" and row.frames == 5
+    assert np.all(read_results(tmp_path / "o2")["pressure_pa"] == 50e3)
+    # a session with the wrong channel count
+    write_session_csv(Session(session.t_s, session.signals[:, :8], session.pressure_pa), tmp_path / "ch8.csv")
+    row = process_session(tmp_path / "ch8.csv", tmp_path / "o3", config=CONFIG, calibration=cal, estimate=ESTIMATE)
+    assert row.status == "failed" and "expected 16 channels" in row.reason
+    row = process_session(tmp_path / "missing.csv", tmp_path / "o4", config=CONFIG, calibration=cal)
+    assert row.status == "failed" and "missing.csv: no such file" in row.reason
+
+
+def test_extrapolated_frames_are_counted(tmp_path):
+    session, _ = make_session(0, frames=5)
+    signals = session.signals.copy()
+    signals[2, 0] += 4000.0  # beyond the calibrated ΔA range of ±3000
+    write_session_csv(Session(session.t_s, signals, session.pressure_pa), tmp_path / "x.csv")
+    cal = linear_calibration()
+    row = process_session(tmp_path / "x.csv", tmp_path / "o", config=CONFIG, calibration=cal, estimate=ESTIMATE)
+    assert row.status == "ok" and row.extrapolated == 1 and "1 of 5 frames extrapolated" in row.reason
+    assert list(read_results(tmp_path / "o")["status"])[2] in ("extrapolated", "not converged")
+
+
+def test_no_sessions_is_an_error(tmp_path):
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SessionError, match="no sessions"):
+        process_sessions(tmp_path / "empty", tmp_path / "out", calibration=linear_calibration(), progress=False)
+
+
+# --- Dask ----------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def dask_cluster():
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(
+        n_workers=2, processes=True, threads_per_worker=1, dashboard_address=None, silence_logs=50
+    ) as cluster:
+        yield cluster
+
+
+def test_dask_local_cluster(sessions, tmp_path, dask_cluster):
+    from dask.distributed import Client
+
+    runs, truth = sessions
+    out = tmp_path / "out"
+    with Client(dask_cluster) as client:
+        report = process_sessions(
+            runs, out, calibration=linear_calibration(), executor=client.get_executor(), estimate=ESTIMATE,
+            progress=False,
+        )  # fmt: skip
+    rows = by_name(report)
+    assert {n: s.status for n, s in rows.items()} == {"a": "ok", "b": "ok", "broken": "failed", "native": "ok"}
+    assert "expected a number" in rows["broken"].reason
+    assert report.workers == "ClientExecutor"
+    check_outputs(out, truth)
+
+
+# --- command line --------------------------------------------------------------------------
+
+
+def cli():
+    @click.group(cls=pipeline.PipelineGroup, chain=True)
+    def group():
+        pass
+
+    @group.result_callback()
+    def run(steps):
+        pipeline.run_steps(steps)
+
+    for command in pipeline.COMMANDS + batch_cli.COMMANDS:
+        group.add_command(command)
+    return group
+
+
+def process_args(runs, cal_path, out):
+    return ["process", str(runs), "--calibration", str(cal_path), "-o", str(out), "--no-progress"] + (
+        [] if ESTIMATE else ["--no-estimate"]
+    )
+
+
+def test_cli_process_exit_code_and_table(sessions, tmp_path):
+    runs, truth = sessions
+    cal_path = tmp_path / "cal.yaml"
+    linear_calibration().save(cal_path)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli(), process_args(runs, cal_path, out) + ["--workers", "2"])
+    assert result.exit_code == 1, result.output
+    assert "1 of 4 sessions failed" in result.output
+    table = result.output.splitlines()
+    assert any(line.split()[:2] == ["broken", "failed"] for line in table)
+    assert "4 sessions: 3 ok, 0 skipped, 1 failed" in result.output
+    check_outputs(out, truth)
+    # all good now: skipped ones count as success
+    (runs / "broken.csv").unlink()
+    result = CliRunner().invoke(cli(), process_args(runs, cal_path, out) + ["--workers", "0"])
+    assert result.exit_code == 0, result.output
+    assert "3 sessions: 0 ok, 3 skipped, 0 failed" in result.output
+
+
+def test_cli_process_on_a_dask_scheduler(sessions, tmp_path, dask_cluster):
+    runs, truth = sessions
+    (runs / "broken.csv").unlink()
+    cal_path = tmp_path / "cal.yaml"
+    linear_calibration().save(cal_path)
+    out = tmp_path / "out"
+    args = process_args(runs, cal_path, out) + ["--scheduler", dask_cluster.scheduler_address]
+    result = CliRunner().invoke(cli(), args)
+    assert result.exit_code == 0, result.output
+    assert "3 sessions: 3 ok" in result.output
+    check_outputs(out, truth)
+
+
+def test_cli_process_option_errors(sessions, tmp_path, monkeypatch):
+    runs, _ = sessions
+    cal_path = tmp_path / "cal.yaml"
+    linear_calibration().save(cal_path)
+    args = process_args(runs, cal_path, tmp_path / "out")
+    result = CliRunner().invoke(cli(), args + ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"])
+    assert result.exit_code == 2 and "give --workers or --scheduler, not both" in result.output
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # as if the extra were not installed
+    result = CliRunner().invoke(cli(), args + ["--scheduler", "tcp://127.0.0.1:1"])
+    assert result.exit_code == 1
+    assert result.output.strip().splitlines()[-1] == (
+        "Error: --scheduler needs Dask distributed, which is not installed: pip install bendsense[distributed]"
+    )
+    assert not (tmp_path / "out").exists()
