@@ -279,6 +279,38 @@ def test_fast_follows_the_branch_from_the_unloaded_shape():
     np.testing.assert_allclose(end.tip_position_m, path.tip_position_m[-1], atol=1e-12)
 
 
+def test_soft_region_is_not_mistaken_for_buckling():
+    # near-snap: along this load path the stiffness drops to a few % of the unloaded
+    # value (λ ≈ 0.87) and two more equilibria exist at full load, one of them
+    # unstable and close to the continuation predictor
+    p = 18556.34
+    f = np.array([-0.12050784, -0.29500324])
+    args = (L, ei_of(p), 0.46390841953999307 / L)
+    fast = solve_beam(*args, f, GRAVITY)
+    ref = solve_beam(*args, f, GRAVITY, method="shooting")
+    assert fast.success and ref.success
+    np.testing.assert_allclose(fast.tip_position_m, ref.tip_position_m, atol=1e-8 * L)
+    # a warm start across the soft region must not slide onto the other stable branch
+    before = solve_beam(*args, 0.9 * f, 0.9 * np.array(GRAVITY))
+    warm = solve_beam(*args, 0.95 * f, 0.95 * np.array(GRAVITY), initial=before)
+    cold = solve_beam(*args, 0.95 * f, 0.95 * np.array(GRAVITY))
+    np.testing.assert_allclose(warm.tip_position_m, cold.tip_position_m, atol=1e-12)
+    assert cold.tip_position_m[0] > 0.5 * L
+
+
+def test_fast_matches_shooting_on_random_workspace_frames():
+    rng = np.random.default_rng(11)
+    n = 40
+    p = rng.uniform(0, 120e3, n)
+    forces = rng.uniform(-0.4, 0.4, (n, 2))
+    args = (L, ei_of(p), k0_of(p), forces, GRAVITY)
+    fast = solve_beam(*args, warn=False)
+    ref = solve_beam(*args, method="shooting", warn=False)
+    np.testing.assert_array_equal(fast.success, ref.success)
+    ok = fast.success
+    np.testing.assert_allclose(fast.positions_m[ok], ref.positions_m[ok], rtol=0, atol=1e-8 * L)
+
+
 # --------------------------------------------------------------------------- sensitivities
 
 

@@ -62,11 +62,34 @@ DEFAULT_NODES = 20
 DEFAULT_POINTS = 101
 
 _STABLE_BOUND = math.pi**2 / 4  # first eigenvalue of -d²/dσ² with η(0)=0, η'(1)=0
+_WEIGHT_BOUND = 7.83  # Greenhill: first eigenvalue b of -η'' = b (1 - σ) η, 7.8373 (rounded down)
+
+
+def _load_ratio(f, wn):
+    """Return a load measure ρ ≥ 0 such that ρ < 1 proves the energy strictly convex.
+
+    The second variation ∫ η'² + (g·t) η² dσ is bounded below by using
+    g·t ≥ -|g(σ)|. Two sufficient conditions for positivity: max |g| < π²/4 (|g| is
+    linear in σ, so its maximum sits at an end), and, since the lowest eigenvalue is
+    concave in the loads, Dunkerley's |f|/(π²/4) + |w|/7.837 < 1 (tip load and
+    uniform load toward the base at their separate buckling values). Below 1 the
+    equilibrium is unique and stable.
+    """
+    fn = np.hypot(f[..., 0], f[..., 1])
+    gmax = np.maximum(fn, np.hypot(f[..., 0] + wn[..., 0], f[..., 1] + wn[..., 1]))
+    return np.minimum(gmax / _STABLE_BOUND, fn / _STABLE_BOUND + np.hypot(wn[..., 0], wn[..., 1]) / _WEIGHT_BOUND)
+
+
 _OK = "converged"
 # Newton stops early once in its quadratic regime (step below _QUAD and shrinking fast):
 # the error left is ~ step³/previous step². Sensitivities come from the Jacobian at the
 # last iterate, so they ask for a smaller last step.
 _QUAD = 1e-4
+_LOCATE = 1e-3  # load-factor step within which a loss of stability is accepted as real
+# a warm start on a non-convex problem that moves farther than this [rad] is re-solved
+# from the unloaded shape, in case it slid onto another branch
+_WARM_MOVE = 0.1
+_FIRST_STEP = 1.0  # first continuation step, in units of the convexity bound
 _QUAD_SENS = 1e-8
 
 
@@ -162,6 +185,7 @@ class _Operators:
     Q: np.ndarray  # (Q f)_j = ∫_0^{σ_j} f dσ
     D0: np.ndarray  # first row of d/dσ without its first column: ψ'(0) when ψ(0) = 0
     J0: np.ndarray  # Jacobian at zero load, (n-1, n-1); unknowns are φ_1..φ_{n-1}
+    J0inv: np.ndarray
     diag: np.ndarray  # flat indices of the diagonal entries that carry the load term
     tail: np.ndarray  # 1 − σ at the interior nodes
 
@@ -189,7 +213,9 @@ def _operators(n: int) -> _Operators:
     J0 = np.vstack([D2[1:-1, 1:], D[-1:, 1:]])
     m = n - 1
     diag = np.arange(m - 1) * (m + 1)
-    return _Operators(n, sigma, D, D2[1:-1].copy(), D[-1].copy(), Q, D[0, 1:].copy(), J0, diag, 1.0 - sigma[1:-1])
+    return _Operators(
+        n, sigma, D, D2[1:-1].copy(), D[-1].copy(), Q, D[0, 1:].copy(), J0, np.linalg.inv(J0), diag, 1.0 - sigma[1:-1]
+    )
 
 
 @functools.lru_cache(maxsize=64)
@@ -389,6 +415,12 @@ def _newton(phi, lam, k0, gi, ops, tol, max_iter, *, sens=False, tangent=False):
     return phi, conv, iters, extra
 
 
+def _arc_tangent(phi, gi, ops):
+    """dφ/dλ at λ = 0, where the Jacobian is the constant J0: a product, not a solve."""
+    rhs = np.sin(phi[:, 1:-1]) * gi[..., 1] - np.cos(phi[:, 1:-1]) * gi[..., 0]
+    return rhs @ ops.J0inv[:, :-1].T
+
+
 def _stable(psi, ops):
     """Jacobi condition on the discrete Jacobi field ψ (ψ(0) = 0, ψ'(1) = 1).
 
@@ -399,7 +431,7 @@ def _stable(psi, ops):
     return (psi @ ops.D0 > 0.0) & (psi > 0.0).all(axis=1)
 
 
-def _continuation(phi, k0, gi, gmax, ops, tol, max_iter, sens):
+def _continuation(phi, k0, gi, ratio, ops, tol, max_iter, sens):
     """Follow the branch from the unloaded arc (λ = 0) to the full load (λ = 1).
 
     Euler–Newton continuation in the load factor λ with the tangent dφ/dλ as
@@ -409,14 +441,13 @@ def _continuation(phi, k0, gi, gmax, ops, tol, max_iter, sens):
     """
     b = phi.shape[0]
     lam = np.zeros(b)
-    dlam = np.minimum(1.0, _STABLE_BOUND / np.maximum(gmax, 1e-300))
+    dlam = np.minimum(1.0, _FIRST_STEP / np.maximum(ratio, 1e-300))
     status = np.zeros(b, dtype=int)  # 0 running, 1 done, 2 unstable, 3 lost the branch
     running = np.ones(b, dtype=bool)
     where = np.zeros(b)
     iters = np.zeros(b, dtype=int)
     extra = np.full((b, ops.n - 1, 1 + 2 * sens), np.nan)
-    _, _, _, x = _newton(phi, lam, k0, gi, ops, np.inf, 1, tangent=True)
-    tan = x[..., -1]
+    tan = _arc_tangent(phi, gi, ops)
     phi = phi.copy()
     for _ in range(1000):
         act = np.flatnonzero(running)
@@ -432,10 +463,17 @@ def _continuation(phi, k0, gi, gmax, ops, tol, max_iter, sens):
         move = np.abs(newp - pred).max(axis=1)
         pstep = np.abs(pred - phi[act]).max(axis=1)
         ok = conv & (move <= np.maximum(0.5 * pstep, 0.05))
-        acc = act[ok]
-        lost = acc[~_stable(x[ok, :, 0], ops) & (status[acc] == 0)]
+        unstable = np.zeros(act.size, dtype=bool)
+        unstable[ok] = ~_stable(x[ok, :, 0], ops)
+        fresh_loss = ok & unstable & (status[act] == 0)
+        # an unstable landing after a long step may be a jump onto another branch, so
+        # refine the step; only within a short step is it this branch losing stability
+        refine = fresh_loss & (lt - lam[act] > _LOCATE)
+        ok &= ~refine
+        lost = act[fresh_loss & ~refine]
         status[lost] = 2
         where[lost] = lam[lost]
+        acc = act[ok]
         phi[acc] = newp[ok]
         lam[acc] = lt[ok]
         tan[acc] = x[ok, :, -1]
@@ -465,17 +503,19 @@ def _solve_scalar(L, ei, k0, base, F, w, s_m, ops, state, sens, tol, max_iter):
     scale = L * L / ei
     fx, fy = F[0] * scale, F[1] * scale
     wx, wy = w[0] * scale * L, w[1] * scale * L
-    convex = max(math.hypot(fx, fy), math.hypot(fx + wx, fy + wy)) < _STABLE_BOUND
+    convex = float(_load_ratio(np.array([fx, fy]), np.array([wx, wy]))) < 1.0
     k0n = k0 * L
+    gx = fx + wx * ops.tail
+    gy = fy + wy * ops.tail
     if state is not None:
         p = np.array(state, dtype=float).reshape(n)
         p[0] = base
+        start = p.copy()
     elif convex:
         p = base + k0n * ops.sigma
+        p[1:] += ops.J0inv[:, :-1] @ (np.sin(p[1:-1]) * gy - np.cos(p[1:-1]) * gx)
     else:
         return None
-    gx = fx + wx * ops.tail
-    gy = fy + wy * ops.tail
     ncol = 4 if sens else 2
     quad = _QUAD_SENS if sens else _QUAD
     prev = math.inf
@@ -509,7 +549,7 @@ def _solve_scalar(L, ei, k0, base, F, w, s_m, ops, state, sens, tol, max_iter):
     else:
         return None
     psi = x[:, 1]
-    if not convex and not (psi @ ops.D0 > 0.0 and (psi > 0.0).all()):
+    if not convex and not (psi @ ops.D0 > 0.0 and (psi > 0.0).all() and np.abs(p - start).max() <= _WARM_MOVE):
         return None
     sigma_m = s_m / L
     M = sigma_m.size
@@ -624,10 +664,8 @@ def solve(
     f = np.broadcast_to(F, (*shape, 2)).reshape(B, 2) * scale[:, None]
     wn = np.broadcast_to(w, (*shape, 2)).reshape(B, 2) * (scale * L)[:, None]
     gi = f[:, None, :] + wn[:, None, :] * ops.tail[None, :, None]  # (B, n-2, 2)
-    # |G| is linear along s, so its largest value sits at an end
-    fw = f + wn
-    gmax = np.sqrt(np.maximum(f[:, 0] ** 2 + f[:, 1] ** 2, fw[:, 0] ** 2 + fw[:, 1] ** 2))
-    convex = gmax < _STABLE_BOUND
+    ratio = _load_ratio(f, wn)
+    convex = ratio < 1.0
 
     if state is not None:
         phi = np.broadcast_to(state, (*shape, n)).reshape(B, n).copy()
@@ -636,6 +674,8 @@ def solve(
     else:
         phi = base[:, None] + k0n[:, None] * ops.sigma[None, :]
         first = np.flatnonzero(convex)
+        # start convex frames from the linearised solution about the free arc
+        phi[first, 1:] += _arc_tangent(phi[first], gi[first], ops)
         if first.size == B:
             first = None
 
@@ -643,8 +683,10 @@ def solve(
     where = np.ones(B)
     extra = np.full((B, n - 1, 1 + 2 * sensitivities), np.nan)
     if first is None:
+        start = phi
         phi, conv, iters, x = _newton(phi, np.ones(B), k0n, gi, ops, tol, max_iter, sens=sensitivities)
-        ok = conv & (convex | _stable(x[..., 0], ops))
+        near = np.abs(phi - start).max(axis=1) <= _WARM_MOVE
+        ok = conv & (convex | (_stable(x[..., 0], ops) & near))
         status[ok] = 1
         extra = x
     else:
@@ -660,7 +702,7 @@ def solve(
     rest = np.flatnonzero(status == 0)
     if rest.size:
         start = base[rest, None] + k0n[rest, None] * ops.sigma[None, :]
-        p, st_, wl, it, x = _continuation(start, k0n[rest], gi[rest], gmax[rest], ops, tol, max_iter, sensitivities)
+        p, st_, wl, it, x = _continuation(start, k0n[rest], gi[rest], ratio[rest], ops, tol, max_iter, sensitivities)
         phi[rest] = p
         status[rest] = st_
         where[rest] = wl
@@ -741,7 +783,7 @@ def _shoot_one(L, ei, k0, base, F, w, s_m, rtol, atol, max_newton):
     f = np.asarray(F) * L * L / ei
     wn = np.asarray(w) * L**3 / ei
     k0n = k0 * L
-    gmax = max(math.hypot(*f), math.hypot(*(f + wn)))
+    ratio = float(_load_ratio(f, wn))
 
     # state: φ, φ', ψ = ∂φ/∂φ'(0), ψ', χ = ∂φ/∂λ, χ', x/L, y/L
     def rhs(sig, y, lam):
@@ -792,7 +834,7 @@ def _shoot_one(L, ei, k0, base, F, w, s_m, rtol, atol, max_newton):
         # dφ'(0)/dλ along the branch: R(c, λ) = φ'(1) − K0 L = 0
         return -sol.y[5, -1] / sol.y[3, -1]
 
-    steps = max(1, math.ceil(2.0 * gmax / _STABLE_BOUND))
+    steps = max(1, math.ceil(2.0 * ratio))
     lam, dlam = 0.0, 1.0 / steps
     c = k0n
     dc = slope(shoot(c, 0.0))
