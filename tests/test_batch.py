@@ -1,6 +1,7 @@
 """Batch processing of many sessions (bendsense.batch) and the ``process`` command."""
 
 import concurrent.futures as cf
+import functools
 import importlib.util
 import pickle
 import sys
@@ -51,11 +52,25 @@ def linear_calibration():
     )
 
 
-def true_curvatures(frames, seed):
-    """Smooth, time-varying segment curvatures (frames, N) [1/m], within 2..18 1/m."""
-    t = np.linspace(0.0, 1.0, frames)[:, None]
+@functools.cache
+def actuator():
+    from bendsense.sim.actuator import SimulatedActuator
+
+    return SimulatedActuator.from_config(CONFIG, noise_counts=0.0)
+
+
+def loading(frames, seed):
+    """Pressure [Pa] and tip force [N] of a time-varying session: a pressure ramp, a growing load."""
+    t = np.linspace(0.0, 1.0, frames)
     phase = np.random.default_rng(seed).uniform(0, 2 * np.pi)
-    return 10.0 + 6.0 * np.sin(2 * np.pi * t + phase + np.linspace(0, 1, N)) + 2.0 * np.linspace(-1, 1, N)
+    pressure = 40e3 + 40e3 * t
+    force = np.column_stack([0.05 * np.sin(2 * np.pi * t + phase), -0.1 - 0.1 * t])
+    return pressure, force
+
+
+def true_curvatures(frames, seed):
+    """Segment curvatures (frames, N) [1/m] of the simulated actuator (beam model) under ``loading``."""
+    return actuator().frames(*loading(frames, seed), noise=False).curvature_per_m
 
 
 def signals_for(kappa, calibration):
@@ -67,7 +82,7 @@ def signals_for(kappa, calibration):
 def make_session(seed, frames=FRAMES):
     kappa = true_curvatures(frames, seed)
     t = 0.01 * np.arange(frames)
-    pressure = 40e3 + 20e3 * np.linspace(0, 1, frames)
+    pressure, _ = loading(frames, seed)
     session = Session(t, signals_for(kappa, linear_calibration()), pressure, extra={"truth_id": np.full(frames, seed)})
     return session, kappa
 
@@ -102,10 +117,10 @@ def sessions(tmp_path):
     """runs/: two CSV sessions, one native session directory, one malformed CSV."""
     runs = tmp_path / "runs"
     runs.mkdir()
-    truth = {
-        "a": write_csv_session(runs / "a.csv", 1),
-        "b": write_csv_session(runs / "b.csv", 2),
-        "native": write_native_session(runs / "native", 3),
+    truth = {  # name: (curvatures, seed)
+        "a": (write_csv_session(runs / "a.csv", 1), 1),
+        "b": (write_csv_session(runs / "b.csv", 2), 2),
+        "native": (write_native_session(runs / "native", 3), 3),
     }
     write_bad_csv(runs / "broken.csv")
     return runs, truth
@@ -113,7 +128,7 @@ def sessions(tmp_path):
 
 def check_outputs(out, truth):
     """Curvatures against the generating ones; forces against a direct estimate of the same frames."""
-    for name, kappa in truth.items():
+    for name, (kappa, seed) in truth.items():
         res = read_results(out / name)
         np.testing.assert_allclose(res.curvature_per_m, kappa, rtol=1e-9, atol=1e-9)
         assert res.positions_m.shape == (len(kappa), 101, 2)
@@ -126,6 +141,8 @@ def check_outputs(out, truth):
             direct = estimate_force(shape, res["pressure_pa"], CONFIG, constraint="none", method="fast")
             np.testing.assert_allclose(res["fx_n"], np.asarray(direct.force_n)[:, 0], atol=1e-6)
             np.testing.assert_allclose(res["fy_n"], np.asarray(direct.force_n)[:, 1], atol=1e-6)
+            _, force = loading(len(kappa), seed)
+            np.testing.assert_allclose(np.column_stack([res["fx_n"], res["fy_n"]]), force, atol=0.01)
 
 
 def by_name(report):

@@ -377,6 +377,7 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
             config,
             constraint=constraint or config.estimation.constraint,
             method=method or config.estimation.method,
+            calibration=calibration,  # its noise_std gives the force uncertainty std_n
         )
     write_results(out_dir, session, shape, result, overwrite=overwrite)
     extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(shape.extrapolated), (len(session),))))

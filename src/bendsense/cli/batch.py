@@ -11,8 +11,7 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli.calibrate import InterspersedCommand
-from bendsense.cli.pipeline import config_option, overwrite_option
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
 
 log = logging.getLogger("bendsense")
 

@@ -1,0 +1,538 @@
+"""Figures: shapes, shapes against ground truth, force errors, time series, calibration, summaries.
+
+Every function draws on ``ax`` when given (a new figure otherwise) and returns
+the axes, or the figure for multi-panel plots. Lengths are shown in mm, forces
+in N, curvatures in 1/m, pressures in kPa, times in s; data go in SI units
+(DESIGN.md section 2). The styles follow the paper's figures: reconstructed
+shapes over several frames (Fig. 8), solid reconstruction against dotted ground
+truth (Fig. 8, 9(b)), force error over pressure × load (Fig. 10).
+
+Inputs are duck-typed: anything with ``positions_m`` (``Shape``, ``BeamSolution``,
+``Results``) or a positions array (..., M, 2) [m] is a shape.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "plot_shapes",
+    "plot_shape_comparison",
+    "plot_force_error_map",
+    "plot_time_series",
+    "plot_calibration",
+    "plot_results",
+    "results_from_state",
+]
+
+MM = 1e3
+KPA = 1e-3
+
+
+def _new_axes(ax, **kwargs):
+    if ax is not None:
+        return ax
+    import matplotlib.pyplot as plt
+
+    _, ax = plt.subplots(**kwargs)
+    return ax
+
+
+def _positions(obj) -> np.ndarray:
+    """Positions as (frames, M, 2) [m] from a shape-like object or an array."""
+    pos = np.asarray(getattr(obj, "positions_m", obj), dtype=float)
+    if pos.ndim < 2 or pos.shape[-1] != 2:
+        raise ValueError(f"positions_m: expected shape (..., M, 2), got {pos.shape}")
+    return pos.reshape(-1, pos.shape[-2], 2)
+
+
+def _flags(obj, frames: int) -> np.ndarray:
+    flags = getattr(obj, "extrapolated", None)
+    if flags is None and hasattr(obj, "columns") and "status" in obj.columns:
+        flags = np.asarray(obj.columns["status"]) == "extrapolated"
+    if flags is None:
+        return np.zeros(frames, dtype=bool)
+    return np.broadcast_to(np.asarray(flags, dtype=bool).reshape(-1) if np.ndim(flags) else flags, (frames,))
+
+
+def _pick(n: int, frames, max_frames: int) -> np.ndarray:
+    if frames is not None:
+        idx = np.arange(n)[frames] if not isinstance(frames, (int, np.integer)) else np.array([frames])
+        return np.atleast_1d(idx)
+    if n <= max_frames:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, max_frames).round().astype(int))
+
+
+def _colors(n: int, cmap: str = "viridis"):
+    import matplotlib
+
+    cm = matplotlib.colormaps[cmap]
+    return [cm(x) for x in (np.linspace(0.0, 0.9, n) if n > 1 else [0.0])]
+
+
+def plot_shapes(
+    shape_or_positions,
+    ax=None,
+    *,
+    frames=None,
+    max_frames: int = 8,
+    labels=None,
+    cmap: str = "viridis",
+    legend: bool = True,
+    **line_kwargs,
+):
+    """Plot reconstructed shapes of several frames in the base frame (paper Fig. 8 style).
+
+    Parameters
+    ----------
+    shape_or_positions : Shape, BeamSolution, Results or array_like, shape (..., M, 2)
+        Shapes; positions in [m] (drawn in mm).
+    ax : matplotlib.axes.Axes, optional
+        Where to draw; default a new figure.
+    frames : int, slice or sequence of int, optional
+        Frames to draw; default up to ``max_frames`` evenly spaced frames.
+    max_frames : int
+        Most frames drawn by default.
+    labels : sequence of str, optional
+        One legend label per drawn frame; default ``t = … s`` for ``Results``, else
+        ``frame i``.
+    cmap : str
+        Colour map; the frames go from its dark to its light end in order.
+    legend : bool
+        Draw a legend when there is more than one line.
+    **line_kwargs
+        Passed to ``Axes.plot``.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+
+    Notes
+    -----
+    Frames flagged ``extrapolated`` (signals outside the calibrated range) are dashed.
+    ``x`` points toward the centre of curvature, ``y`` along the base tangent
+    (DESIGN.md section 2); the base is the black square, the tips are dots.
+    """
+    ax = _new_axes(ax, figsize=(5, 5))
+    pos = _positions(shape_or_positions)
+    idx = _pick(len(pos), frames, max_frames)
+    flags = _flags(shape_or_positions, len(pos))
+    if labels is None:
+        columns = getattr(shape_or_positions, "columns", None)
+        if columns is not None and "t_s" in columns:
+            labels = [f"t = {columns['t_s'][i]:.2f} s" for i in idx]
+        else:
+            labels = [f"frame {i}" for i in idx]
+    labels = list(labels)
+    if len(labels) != len(idx):
+        raise ValueError(f"labels: expected {len(idx)} labels (one per drawn frame), got {len(labels)}")
+    for i, color, label in zip(idx, _colors(len(idx), cmap), labels, strict=True):
+        p = pos[i] * MM
+        style = dict(color=color, linewidth=1.8, linestyle="--" if flags[i] else "-", label=label)
+        style.update(line_kwargs)
+        ax.plot(p[:, 0], p[:, 1], **style)
+        ax.plot(p[-1, 0], p[-1, 1], "o", color=style["color"], markersize=4)
+    ax.plot([0.0], [0.0], "ks", markersize=6)
+    _shape_axes(ax)
+    if legend and len(idx) > 1:
+        title = "dashed: extrapolated" if np.any(flags[idx]) else None
+        ax.legend(fontsize="small", title=title, title_fontsize="small", loc="best")
+    return ax
+
+
+def _shape_axes(ax):
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+
+
+def plot_shape_comparison(
+    shapes,
+    truth,
+    ax=None,
+    *,
+    model=None,
+    labels=None,
+    names=("sensor", "model", "ground truth"),
+    cmap: str = "viridis",
+):
+    """Plot shapes against the ground truth (paper Fig. 8 and 9(b) style).
+
+    Solid lines are the reconstructed shapes, dashed lines the model's prediction
+    (optional), dotted lines with dots the ground truth; one colour per case.
+
+    Parameters
+    ----------
+    shapes : Shape or array_like, shape (K, M, 2)
+        Reconstructed shapes of K cases [m].
+    truth : Shape, BeamSolution or array_like, shape (K, M', 2)
+        Ground-truth shapes of the same cases (e.g. camera markers) [m].
+    ax : matplotlib.axes.Axes, optional
+    model : Shape, BeamSolution or array_like, shape (K, M'', 2), optional
+        Shapes predicted by a model (e.g. the beam model with the known load) [m].
+    labels : sequence of str, optional
+        One label per case (e.g. ``"0.1 N"``); default ``case k``.
+    names : tuple of str
+        Legend names of the reconstructed, model and ground-truth line styles.
+    cmap : str
+        Colour map of the cases.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    from matplotlib.lines import Line2D
+
+    ax = _new_axes(ax, figsize=(5, 5))
+    est = _positions(shapes)
+    tru = _positions(truth)
+    mod = None if model is None else _positions(model)
+    k = len(est)
+    for name, other in (("truth", tru), ("model", mod)):
+        if other is not None and len(other) != k:
+            raise ValueError(f"{name}: expected {k} shapes (one per reconstructed shape), got {len(other)}")
+    labels = [f"case {i}" for i in range(k)] if labels is None else list(labels)
+    if len(labels) != k:
+        raise ValueError(f"labels: expected {k} labels, got {len(labels)}")
+    colors = _colors(k, cmap)
+    for i in range(k):
+        c = colors[i]
+        ax.plot(est[i, :, 0] * MM, est[i, :, 1] * MM, "-", color=c, linewidth=1.8)
+        if mod is not None:
+            ax.plot(mod[i, :, 0] * MM, mod[i, :, 1] * MM, "--", color=c, linewidth=1.4)
+        ax.plot(tru[i, :, 0] * MM, tru[i, :, 1] * MM, ":", color=c, linewidth=1.6, marker="o", markersize=3)
+    ax.plot([0.0], [0.0], "ks", markersize=6)
+    _shape_axes(ax)
+    handles = [Line2D([], [], color=c, linewidth=6, label=lab) for c, lab in zip(colors, labels, strict=True)]
+    handles.append(Line2D([], [], color="k", linestyle="-", label=names[0]))
+    if mod is not None:
+        handles.append(Line2D([], [], color="k", linestyle="--", label=names[1]))
+    handles.append(Line2D([], [], color="k", linestyle=":", marker="o", markersize=3, label=names[2]))
+    ax.legend(handles=handles, fontsize="small", loc="best")
+    return ax
+
+
+def _grid(pressure_pa, load_n, error):
+    """Error on a pressure × load grid: (pressures (P,), loads (L,), mean (P, L), std (P, L))."""
+    p = np.asarray(pressure_pa, dtype=float).ravel()
+    f = np.asarray(load_n, dtype=float).ravel()
+    e = np.asarray(error, dtype=float)
+    if e.shape == (p.size, f.size) and not (e.ndim == 1 and p.size == f.size == e.size):
+        return p, f, e, np.full(e.shape, np.nan)
+    e = e.ravel()
+    if not p.size == f.size == e.size:
+        raise ValueError(
+            "error: expected shape (len(pressure_pa), len(load_n)) for a grid, or three arrays of equal "
+            f"length for samples; got pressure {p.shape}, load {f.shape}, error {np.shape(error)}"
+        )
+    pu, pi = np.unique(p, return_inverse=True)
+    fu, fi = np.unique(f, return_inverse=True)
+    mean = np.full((pu.size, fu.size), np.nan)
+    std = np.full((pu.size, fu.size), np.nan)
+    for a in range(pu.size):
+        for b in range(fu.size):
+            cell = e[(pi == a) & (fi == b)]
+            cell = cell[np.isfinite(cell)]
+            if cell.size:
+                mean[a, b] = cell.mean()
+                std[a, b] = cell.std(ddof=1) if cell.size > 1 else np.nan
+    return pu, fu, mean, std
+
+
+def plot_force_error_map(
+    pressure_pa,
+    load_n,
+    error,
+    ax=None,
+    *,
+    kind: str = "bars",
+    error_label: str = "force error [N]",
+    cmap: str | None = None,
+):
+    """Plot the force error over actuation pressure × tip load (paper Fig. 10 style).
+
+    Parameters
+    ----------
+    pressure_pa : array_like
+        Pressures [Pa]: the grid's P values, or one per sample.
+    load_n : array_like
+        Tip loads [N]: the grid's L values, or one per sample.
+    error : array_like, shape (P, L) or like ``pressure_pa``
+        Error of each pressure-load cell, or of each sample (then averaged per cell,
+        with the standard deviation as error bars); in the unit of ``error_label``
+        (e.g. N, or % of the largest load). NaN cells are left empty.
+    ax : matplotlib.axes.Axes, optional
+    kind : {"bars", "heatmap"}
+        Grouped bars per pressure with one bar per load (legend), or a heat map with a
+        colour bar and the value written in each cell.
+    error_label : str
+        Label of the error axis / colour bar, with its unit.
+    cmap : str, optional
+        Colour map; default ``viridis`` for the bars' loads and the heat map of
+        one-signed errors, ``RdBu_r`` centred on 0 for signed errors.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if kind not in ("bars", "heatmap"):
+        raise ValueError(f"kind: must be 'bars' or 'heatmap', got {kind!r}")
+    pu, fu, mean, std = _grid(pressure_pa, load_n, error)
+    ax = _new_axes(ax, figsize=(7, 4))
+    if kind == "bars":
+        n = fu.size
+        width = 0.8 / n
+        x = np.arange(pu.size)
+        for b, color in zip(range(n), _colors(n, cmap or "viridis"), strict=True):
+            yerr = std[:, b] if np.any(np.isfinite(std[:, b])) else None
+            ax.bar(x - 0.4 + (b + 0.5) * width, mean[:, b], width, yerr=yerr, capsize=2,
+                   color=color, label=f"{fu[b]:g} N", error_kw={"elinewidth": 0.8})
+        ax.set_xticks(x, [f"{v * KPA:g}" for v in pu])
+        ax.set_xlabel("pressure [kPa]")
+        ax.set_ylabel(error_label)
+        ax.axhline(0.0, color="k", linewidth=0.6)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.legend(title="tip load", fontsize="small", title_fontsize="small", ncols=min(n, 4))
+        return ax
+    finite = mean[np.isfinite(mean)]
+    signed = finite.size and finite.min() < 0 < finite.max()
+    if signed:
+        bound = float(np.abs(finite).max())
+        vmin, vmax, cmap = -bound, bound, cmap or "RdBu_r"
+    else:
+        vmin = vmax = None
+        cmap = cmap or "viridis"
+    image = ax.imshow(np.ma.masked_invalid(mean.T), origin="lower", aspect="auto", cmap=cmap,
+                      vmin=vmin, vmax=vmax, interpolation="nearest")
+    ax.set_xticks(np.arange(pu.size), [f"{v * KPA:g}" for v in pu])
+    ax.set_yticks(np.arange(fu.size), [f"{v:g}" for v in fu])
+    ax.set_xlabel("pressure [kPa]")
+    ax.set_ylabel("tip load [N]")
+    ax.figure.colorbar(image, ax=ax, label=error_label)
+    if mean.size <= 300:
+        norm = image.norm
+        for a in range(pu.size):
+            for b in range(fu.size):
+                v = mean[a, b]
+                if np.isfinite(v):
+                    dark = image.cmap(norm(v))[:3]
+                    light = 0.299 * dark[0] + 0.587 * dark[1] + 0.114 * dark[2] > 0.5
+                    ax.text(a, b, f"{v:.3g}", ha="center", va="center", fontsize="x-small",
+                            color="k" if light else "w")
+    return ax
+
+
+def _as_results(results):
+    if isinstance(results, (str, os.PathLike)):
+        from bendsense.results import read_results
+
+        return read_results(results)
+    return results
+
+
+def plot_time_series(results, ax=None, *, cmap: str = "viridis"):
+    """Plot tip force (with ±2σ band) and segment curvatures over time (two panels).
+
+    Parameters
+    ----------
+    results : Results or path
+        Results as read by :func:`bendsense.results.read_results`, or their directory.
+    ax : sequence of two matplotlib.axes.Axes, optional
+        Force and curvature axes; default a new figure with two panels sharing time.
+    cmap : str
+        Colour map of the segments (base: dark, tip: light).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Notes
+    -----
+    Frames whose status is not ``ok`` (``extrapolated``, ``not converged``) are marked
+    with grey ticks at the bottom of the force panel.
+    """
+    import matplotlib as mpl
+
+    results = _as_results(results)
+    if ax is None:
+        import matplotlib.pyplot as plt
+
+        fig, (ax_f, ax_k) = plt.subplots(2, 1, sharex=True, figsize=(8, 6), layout="constrained")
+    else:
+        ax_f, ax_k = ax
+        fig = ax_f.figure
+    t = np.asarray(results["t_s"], dtype=float)
+    _force_panel(ax_f, results, t)
+    kappa = results.curvature_per_m
+    n = kappa.shape[1]
+    colors = _colors(n, cmap)
+    for i in range(n):
+        ax_k.plot(t, kappa[:, i], color=colors[i], linewidth=1.0)
+    # one discrete colour per segment, so that the colour bar reads as a legend of 16 lines
+    norm = mpl.colors.BoundaryNorm(np.arange(0.5, n + 1.5), n)
+    mappable = mpl.cm.ScalarMappable(norm=norm, cmap=mpl.colors.ListedColormap(colors))
+    bar = fig.colorbar(mappable, ax=ax_k, label="segment i", pad=0.01)
+    step = max(1, n // 4)
+    bar.set_ticks(sorted({1, n, *range(step, n + 1, step)}))
+    ax_k.set_ylabel("curvature κ_i [1/m]")
+    ax_k.set_xlabel("time [s]")
+    ax_k.grid(True, alpha=0.3)
+    return fig
+
+
+def _force_panel(ax, results, t):
+    if not results.has_forces:
+        ax.text(0.5, 0.5, "no force estimate", transform=ax.transAxes, ha="center", va="center", color="0.4")
+        ax.set_ylabel("tip force [N]")
+        return
+    for comp, color, label in (("x", "C0", "F_x"), ("y", "C3", "F_y")):
+        f = np.asarray(results[f"f{comp}_n"], dtype=float)
+        s = np.asarray(results[f"f{comp}_std_n"], dtype=float)
+        ax.plot(t, f, color=color, linewidth=1.4, label=label)
+        ax.fill_between(t, f - 2 * s, f + 2 * s, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
+    status = np.asarray(results["status"]) if "status" in results.columns else None
+    if status is not None and np.any(status != "ok"):
+        bad = status != "ok"
+        ax.plot(t[bad], np.zeros(bad.sum()), "|", color="0.5", transform=ax.get_xaxis_transform(),
+                markersize=8, label="status not ok")
+    ax.axhline(0.0, color="k", linewidth=0.5)
+    ax.set_ylabel("tip force [N]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small", ncols=2, loc="best")
+
+
+def plot_calibration(calibration, data=None, ax=None):
+    """Plot the calibration fit S(ΔA) with its data and residuals (delegates to ``Calibration.plot``).
+
+    Parameters
+    ----------
+    calibration : Calibration
+        A fitted calibration (paper eq. 2); its own fit data are drawn when stored.
+    data : tuple (delta_a, shifts_m), optional
+        Further points to check the fit against, e.g. validation strips: signal
+        changes ΔA (K, N) [signal units] and true shifts S (K, N) [m]; drawn as black
+        crosses, with their residuals.
+    ax : matplotlib.axes.Axes, optional
+        Draw only the fit panel on this axes; default a new figure with the fit and
+        residual panels.
+
+    Returns
+    -------
+    matplotlib.figure.Figure or matplotlib.axes.Axes
+        The figure for the two-panel plot, the axes when ``ax`` was given.
+    """
+    axes = calibration.plot(ax=ax)
+    fit_ax = axes if ax is not None else axes[0]
+    if data is not None:
+        delta, shifts = (np.asarray(a, dtype=float) for a in data)
+        if delta.shape != shifts.shape:
+            raise ValueError(f"data: delta_a {delta.shape} and shifts_m {shifts.shape} must have the same shape")
+        fit_ax.plot(delta.ravel(), shifts.ravel() * MM, "kx", markersize=5, label="check data")
+        fit_ax.legend()
+        if ax is None:
+            resid = (calibration.shifts_from_delta(delta) - shifts) * 1e6
+            axes[1].plot(delta.ravel(), resid.ravel(), "kx", markersize=5)
+    if ax is not None:
+        return fit_ax
+    fig = fit_ax.figure
+    fig.set_layout_engine("constrained")
+    return fig
+
+
+def results_from_state(session, shape, estimate=None):
+    """In-memory :class:`~bendsense.results.Results` of a pipeline state (for plots).
+
+    The same columns as ``results.csv`` (DESIGN.md section 3), without writing files.
+    """
+    from bendsense.results import Results, frame_status
+
+    frames = len(session)
+    kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
+    tip = np.asarray(shape.tip_position_m).reshape(frames, 2)
+    columns = {
+        "t_s": session.t_s,
+        "pressure_pa": session.pressure_pa,
+        **{f"kappa{i + 1}": kappa[:, i] for i in range(kappa.shape[1])},
+        "tip_x_m": tip[:, 0],
+        "tip_y_m": tip[:, 1],
+        "tip_angle_rad": np.asarray(shape.tip_angle_rad).reshape(frames),
+    }
+    if estimate is not None:
+        force = np.asarray(estimate.force_n).reshape(frames, 2)
+        std = np.asarray(estimate.std_n).reshape(frames, 2)
+        columns.update(fx_n=force[:, 0], fy_n=force[:, 1], fx_std_n=std[:, 0], fy_std_n=std[:, 1],
+                       residual_m=np.asarray(estimate.residual_m).reshape(frames))
+    columns["status"] = frame_status(shape, estimate)
+    positions = np.asarray(shape.positions_m).reshape(frames, -1, 2)
+    return Results(columns=columns, s_m=np.asarray(shape.s_m), positions_m=positions,
+                   extra_names=tuple(session.extra))
+
+
+def plot_results(results, path=None, *, max_shapes: int = 8, dpi: int = 150, title: str | None = None):
+    """Summary figure of processed frames: shapes and tip path, tip forces, curvatures over time.
+
+    Parameters
+    ----------
+    results : Results or path
+        A results directory (``results.csv``, ``shape.npz``) or its :class:`Results`.
+    path : path, optional
+        Write the figure there (format from the suffix: .png, .pdf, .svg, ...),
+        atomically; the figure is then not registered with pyplot (no window, no
+        leak in loops).
+    max_shapes : int
+        Frames whose shape is drawn, evenly spaced in time.
+    dpi : int
+        Resolution of raster formats.
+    title : str, optional
+        Figure title; default the results directory's name and the frame count.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Left: shapes of ``max_shapes`` frames and the tip path (grey); right: tip force
+        with ±2σ band (top) and segment curvatures (bottom) over time.
+    """
+    source = results if isinstance(results, (str, os.PathLike)) else None
+    results = _as_results(results)
+    if path is not None:
+        from matplotlib.figure import Figure
+
+        path = Path(path)
+        fig = Figure(figsize=(12, 6.5), layout="constrained")
+        fmt = path.suffix[1:].lower() or "png"
+        supported = fig.canvas.get_supported_filetypes()
+        if fmt not in supported:
+            raise ValueError(f"{path}: unknown figure format {fmt!r}; use one of {', '.join(sorted(supported))}")
+    else:
+        import matplotlib.pyplot as plt
+
+        fig = plt.figure(figsize=(12, 6.5), layout="constrained")
+    grid = fig.add_gridspec(2, 2, width_ratios=(1, 1.6))
+    ax_s = fig.add_subplot(grid[:, 0])
+    ax_f = fig.add_subplot(grid[0, 1])
+    ax_k = fig.add_subplot(grid[1, 1], sharex=ax_f)
+    tip = np.column_stack([results["tip_x_m"], results["tip_y_m"]]).astype(float) * MM
+    ax_s.plot(tip[:, 0], tip[:, 1], color="0.6", linewidth=0.8, zorder=0, label="tip path")
+    plot_shapes(results, ax_s, max_frames=max_shapes, legend=False)
+    ax_s.legend(fontsize="small", loc="best")
+    ax_s.set_title("shapes", fontsize="medium")
+    plot_time_series(results, (ax_f, ax_k))
+    ax_f.set_title("tip force (base frame)", fontsize="medium")
+    ax_f.tick_params(labelbottom=False)
+    frames = len(results["t_s"])
+    if title is None:
+        name = Path(source).name if source is not None else "results"
+        title = f"{name}: {frames} frames"
+    fig.suptitle(title)
+    if path is not None:
+        from bendsense._io import atomic_path
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format=fmt, dpi=dpi)
+    return fig
