@@ -328,3 +328,21 @@ def test_shape_indexing_and_plot(tmp_path):
     ax.figure.savefig(tmp_path / "shape.png")
     plt.close("all")
     assert (tmp_path / "shape.png").stat().st_size > 0
+
+
+def test_reconstruct_blocks_and_base_angles_agree_with_single_frames():
+    cal = linear_calibration()
+    rng = np.random.default_rng(12)
+    kappa = rng.uniform(-20, 20, (4100, 16))  # more than one block of the fused kernel
+    signals = signals_for(kappa, cal)
+    s = np.linspace(0, L, 7)
+    batch = reconstruct(signals, cal, SENSOR, s_m=s, base_angle_rad=0.3)
+    for i in (0, 4095, 4096, 4099):
+        one = reconstruct(signals[i], cal, SENSOR, s_m=s, base_angle_rad=0.3)
+        np.testing.assert_allclose(batch.positions_m[i], one.positions_m, rtol=0, atol=1e-16)
+        np.testing.assert_allclose(batch.angle_rad[i], one.angle_rad, rtol=0, atol=1e-15)
+    per_frame_base = reconstruct(signals, cal, SENSOR, s_m=s, base_angle_rad=np.full(4100, 0.3))
+    np.testing.assert_allclose(per_frame_base.positions_m, batch.positions_m, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(per_frame_base.tip_angle_rad, batch.tip_angle_rad, rtol=0, atol=1e-13)
+    pos, _ = forward_kinematics(batch.curvature_per_m, LENGTHS, s, base_angle_rad=0.3)
+    np.testing.assert_allclose(batch.positions_m, pos, rtol=0, atol=1e-16)

@@ -75,7 +75,7 @@ def _dsinc(v):
 class _Grid:
     """Per-(lengths, s) precomputation: segment index and local arc length of every point."""
 
-    __slots__ = ("lengths", "s", "seg", "sigma", "total")
+    __slots__ = ("lengths", "s", "seg", "sigma", "half_sigma", "total")
 
     def __init__(self, lengths_m, s_m):
         lengths = np.asarray(lengths_m, dtype=float)
@@ -97,6 +97,7 @@ class _Grid:
         self.s = s
         self.seg = seg
         self.sigma = s - bounds[seg]
+        self.half_sigma = 0.5 * self.sigma
         self.total = total
 
 
@@ -142,42 +143,123 @@ def shifts_to_curvatures(shifts_m, lengths_m, strip_gap_m):
         κ_i = ΔS_i / (d l_i) with ΔS_1 = S_1, ΔS_i = S_i − S_(i−1) [1/m].
     """
     shifts = np.asarray(shifts_m, dtype=float)
-    local = np.diff(shifts, axis=-1, prepend=0.0)
-    return local / (strip_gap_m * np.asarray(lengths_m, dtype=float))
+    local = shifts.copy()
+    np.subtract(shifts[..., 1:], shifts[..., :-1], out=local[..., 1:])
+    local /= strip_gap_m * np.asarray(lengths_m, dtype=float)
+    return local
 
 
-def _nodes(kappa, lengths, base):
-    """Start angle, start position and chord of every segment, plus the tip pose."""
-    theta = kappa * lengths
-    phi_end = np.cumsum(theta, axis=-1) + base
-    phi_start = phi_end - theta
+def _cumsum_segments(x):
+    """Cumulative sum along the last (segment) axis of a (frames, N) block."""
+    if x.shape[0] < 64:
+        return np.add.accumulate(x, axis=-1)
+    # numpy's accumulate over a short last axis is slow; N column additions are not
+    out = x.copy()
+    for i in range(1, x.shape[1]):
+        out[:, i] += out[:, i - 1]
+    return out
+
+
+def _sinc_from(sin_x, x):
+    """sin(x)/x from precomputed sin(x); exactly 1 where x == 0, no division by zero."""
+    zero = x == 0.0
+    out = sin_x / (x + zero)
+    out += zero
+    return out
+
+
+_BLOCK = 4096  # frames per block: keeps the temporaries of the kernel in cache
+
+
+def _kernel(kappa, theta, base, grid: _Grid, pos, ang, tip, tip_ang):
+    """PCC kernel for a block of frames (paper eq. 5–7), writing into the output slices.
+
+    ``kappa``, ``theta`` = κ l: (F, N); ``base``: float or (F,). Points are complex
+    numbers ``w = y + i x``, so the unit tangent is ``e^{iφ}`` and an arc of length σ
+    and curvature κ starting at angle φ0 adds ``σ sinc(κσ/2) e^{i(φ0 + κσ/2)}`` (the
+    chord form of paper eq. 5 and 7). Rotations are a running product of the
+    segments' ``e^{iθ}``; the only transcendental function is one complex exponential
+    of a half angle per segment and per sample point.
+    """
     half = 0.5 * theta
-    chord_len = lengths * _sinc(half)
-    mid = phi_start + half
-    chord = np.stack((chord_len * np.sin(mid), chord_len * np.cos(mid)), axis=-1)
-    ends = np.cumsum(chord, axis=-2)
-    starts = ends - chord
-    return phi_start, starts, ends[..., -1, :], phi_end[..., -1]
+    h = np.exp(1j * half)  # e^{iθ/2}
+    sinc = _sinc_from(h.imag, half)
+    rot = h * h
+    np.multiply.accumulate(rot, axis=-1, out=rot)  # e^{i(φ_end − φ_base)}
+    e_start = np.empty_like(rot)  # e^{iφ_start}
+    e_start[:, 0] = 1.0
+    e_start[:, 1:] = rot[:, :-1]
+    if not isinstance(base, float):
+        e_start *= np.exp(1j * base)[:, None]
+    elif base != 0.0:
+        e_start *= np.exp(1j * base)
+    chord = e_start * h  # e^{i(φ_start + θ/2)}
+    chord *= grid.lengths * sinc
+    w = _cumsum_segments(chord)
+    phi = _cumsum_segments(theta)
+    phi += base[:, None] if not isinstance(base, float) else base
+    tip[:, 0] = w.imag[:, -1]
+    tip[:, 1] = w.real[:, -1]
+    tip_ang[:] = phi[:, -1]
+    if pos is None:
+        return
+    seg = grid.seg
+    w -= chord  # from here on: start point and start angle of every segment
+    phi -= theta
+    a = kappa[:, seg] * grid.half_sigma
+    g = np.exp(1j * a)
+    c = _sinc_from(g.imag, a)
+    c *= grid.sigma
+    g *= e_start[:, seg]
+    g *= c
+    g += w[:, seg]
+    pos[..., 0] = g.imag
+    pos[..., 1] = g.real
+    a += a
+    a += phi[:, seg]
+    ang[:] = a
 
 
-def _points(kappa, phi_start, starts, grid: _Grid):
-    """Positions and angles at the grid's arc lengths (paper eq. 6–7, chord form)."""
-    seg, sigma = grid.seg, grid.sigma
-    k = kappa[..., seg]
-    phi0 = phi_start[..., seg]
-    bend = k * sigma
-    half = 0.5 * bend
-    c = sigma * _sinc(half)
-    mid = phi0 + half
-    positions = starts[..., seg, :]
-    positions[..., 0] += c * np.sin(mid)
-    positions[..., 1] += c * np.cos(mid)
-    return positions, phi0 + bend
-
-
-def _base(base_angle_rad):
-    base = np.asarray(base_angle_rad, dtype=float)
-    return base if base.ndim == 0 else base[..., None]
+def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
+    """Run :func:`_kernel` over any batch shape, block by block."""
+    n = grid.lengths.size
+    if kappa.shape[-1:] != (n,):
+        raise ValueError(f"curvature_per_m: expected {n} values on the last axis, got {kappa.shape}")
+    if isinstance(base_angle_rad, (float, int)):  # the common case, without broadcasting overhead
+        batch = kappa.shape[:-1]
+        k2 = kappa.reshape(-1, n)
+        th2 = k2 * grid.lengths if theta is None else theta.reshape(-1, n)
+        b2 = float(base_angle_rad)
+        vector_base = False
+    else:
+        base = np.asarray(base_angle_rad, dtype=float)
+        batch = np.broadcast_shapes(kappa.shape[:-1], base.shape)
+        k2 = np.broadcast_to(kappa, (*batch, n)).reshape(-1, n)
+        th2 = k2 * grid.lengths if theta is None else np.broadcast_to(theta, (*batch, n)).reshape(-1, n)
+        b2 = np.broadcast_to(base, batch).reshape(-1)
+        vector_base = True
+    frames, m = k2.shape[0], grid.s.size
+    tip = np.empty((frames, 2))
+    tip_ang = np.empty(frames)
+    pos = np.empty((frames, m, 2)) if points else None
+    ang = np.empty((frames, m)) if points else None
+    for i in range(0, frames, _BLOCK):
+        sl = slice(i, i + _BLOCK)
+        _kernel(
+            k2[sl],
+            th2[sl],
+            b2[sl] if vector_base else b2,
+            grid,
+            None if pos is None else pos[sl],
+            None if ang is None else ang[sl],
+            tip[sl],
+            tip_ang[sl],
+        )
+    tip = tip.reshape(*batch, 2)
+    tip_ang = tip_ang.reshape(batch)
+    if not points:
+        return None, None, tip, tip_ang
+    return pos.reshape(*batch, m, 2), ang.reshape(*batch, m), tip, tip_ang
 
 
 def forward_kinematics(curvature_per_m, lengths_m, s_m, base_angle_rad=0.0):
@@ -207,11 +289,8 @@ def forward_kinematics(curvature_per_m, lengths_m, s_m, base_angle_rad=0.0):
         If an arc length lies outside [0, L_N] (no silent extrapolation).
     """
     grid = _grid(lengths_m, s_m)
-    kappa = np.asarray(curvature_per_m, dtype=float)
-    if kappa.shape[-1:] != grid.lengths.shape:
-        raise ValueError(f"curvature_per_m: expected {grid.lengths.size} values on the last axis, got {kappa.shape}")
-    phi_start, starts, _, _ = _nodes(kappa, grid.lengths, _base(base_angle_rad))
-    return _points(kappa, phi_start, starts, grid)
+    pos, ang, _, _ = _kinematics(np.asarray(curvature_per_m, dtype=float), grid, base_angle_rad)
+    return pos, ang
 
 
 def tip_pose(curvature_per_m, lengths_m, base_angle_rad=0.0):
@@ -233,9 +312,8 @@ def tip_pose(curvature_per_m, lengths_m, base_angle_rad=0.0):
     tip_angle_rad : ndarray, shape (...)
         Tip tangent angle φ(L_N) = φ_base + Σ κ_i l_i [rad].
     """
-    kappa = np.asarray(curvature_per_m, dtype=float)
-    lengths = np.asarray(lengths_m, dtype=float)
-    _, _, tip, tip_angle = _nodes(kappa, lengths, _base(base_angle_rad))
+    grid = _grid(lengths_m, ())
+    _, _, tip, tip_angle = _kinematics(np.asarray(curvature_per_m, dtype=float), grid, base_angle_rad, points=False)
     return tip, tip_angle
 
 
@@ -489,9 +567,8 @@ class Shape:
         return ax
 
 
-def _shape(kappa, grid: _Grid, base_angle_rad, extrapolated) -> Shape:
-    phi_start, starts, tip, tip_angle = _nodes(kappa, grid.lengths, _base(base_angle_rad))
-    positions, angles = _points(kappa, phi_start, starts, grid)
+def _shape(kappa, grid: _Grid, base_angle_rad, extrapolated, theta=None) -> Shape:
+    positions, angles, tip, tip_angle = _kinematics(kappa, grid, base_angle_rad, theta=theta)
     if extrapolated is None:
         extrapolated = np.zeros(kappa.shape[:-1], dtype=bool)
     return Shape(
@@ -558,8 +635,38 @@ def reconstruct(
     if a.shape[-1:] != (n,):
         raise ValueError(f"signals: expected {n} channels on the last axis, got shape {a.shape}")
     lengths = sensor.lengths_m
-    s = default_s_m(lengths) if s_m is None else s_m
-    grid = _grid(lengths, s)
-    delta = a - calibration.offset
-    kappa = shifts_to_curvatures(calibration.shifts_from_delta(delta), lengths, sensor.strip_gap_m)
-    return _shape(kappa, grid, base_angle_rad, calibration.extrapolated_delta(delta))
+    grid = _grid(lengths, default_s_m(lengths) if s_m is None else s_m)
+    if not isinstance(base_angle_rad, (float, int)):
+        delta = a - calibration.offset
+        kappa = shifts_to_curvatures(calibration.shifts_from_delta(delta), lengths, sensor.strip_gap_m)
+        return _shape(kappa, grid, base_angle_rad, calibration.extrapolated_delta(delta))
+    # fused, block by block: signals → ΔA → S → θ = ΔS/d, κ = θ/l → shape (paper eq. 1–7)
+    batch = a.shape[:-1]
+    a2 = a.reshape(-1, n)
+    frames, m = a2.shape[0], grid.s.size
+    kappa = np.empty((frames, n))
+    pos, ang = np.empty((frames, m, 2)), np.empty((frames, m))
+    tip, tip_ang = np.empty((frames, 2)), np.empty(frames)
+    extrapolated = np.empty(frames, dtype=bool)
+    inv_gap, inv_lengths, base = 1.0 / sensor.strip_gap_m, 1.0 / lengths, float(base_angle_rad)
+    for i in range(0, frames, _BLOCK):
+        sl = slice(i, i + _BLOCK)
+        delta = a2[sl] - calibration.offset
+        extrapolated[sl] = calibration.extrapolated_delta(delta)
+        shifts = calibration.shifts_from_delta(delta)
+        theta = delta  # reuse the buffer
+        theta[:, 0] = shifts[:, 0]
+        np.subtract(shifts[:, 1:], shifts[:, :-1], out=theta[:, 1:])
+        theta *= inv_gap
+        np.multiply(theta, inv_lengths, out=kappa[sl])
+        _kernel(kappa[sl], theta, base, grid, pos[sl], ang[sl], tip[sl], tip_ang[sl])
+    return Shape(
+        curvature_per_m=kappa.reshape(a.shape),
+        s_m=grid.s,
+        positions_m=pos.reshape(*batch, m, 2),
+        angle_rad=ang.reshape(*batch, m),
+        tip_position_m=tip.reshape(*batch, 2),
+        tip_angle_rad=tip_ang.reshape(batch),
+        lengths_m=grid.lengths,
+        extrapolated=extrapolated.reshape(batch),
+    )
