@@ -1,3 +1,203 @@
-"""Commands of the device area (see bendsense.cli)."""
+"""Commands of the device area: ``devices``, ``record``, ``sim-device`` (see bendsense.cli)."""
 
-COMMANDS = []
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import click
+
+
+class _Command(click.Command):
+    """A command whose options may follow its arguments inside the chained group.
+
+    click's chain mode makes sub-contexts with ``allow_interspersed_args=False``, which
+    would reject ``record PORT -o SESSION``; these commands end a chain anyway.
+    """
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        extra["allow_interspersed_args"] = True
+        return super().make_context(info_name, args, parent=parent, **extra)
+
+
+def _fail(err) -> click.ClickException:
+    return click.ClickException(str(err))
+
+
+@click.command("devices")
+def devices():
+    """List the serial ports of this machine (device, VID:PID, serial number, description)."""
+    from bendsense.device.ports import format_ports, list_ports
+
+    click.echo(format_ports(list_ports()))
+
+
+def _status_line(stats) -> str:
+    return (
+        f"{stats.records} frames  lost {stats.lost}  crc {stats.crc_errors}  malformed {stats.malformed}  "
+        f"queue drops {stats.queue_drops}  reconnects {stats.reconnects}  {stats.elapsed_s:.1f} s"
+    )
+
+
+@click.command("record", cls=_Command)
+@click.argument("port")
+@click.option(
+    "-o", "--output", required=True, type=click.Path(file_okay=False, path_type=Path), help="Session directory."
+)
+@click.option("--seconds", type=float, help="Recording time [s] (default: until Ctrl-C).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing session.")
+@click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
+@click.option("--dialect", type=click.Choice(["binary", "line"]), default="binary", show_default=True)
+@click.option("--channels", type=int, help="Line dialect: number of channels (columns ch1..chN).")
+@click.option("--columns", help="Line dialect: comma-separated column layout, e.g. seq,t_us,pressure_pa,ch1,...")
+@click.option("--no-handshake", is_flag=True, help="Do not wait for the board's HELLO.")
+@click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
+@click.option("--hello-timeout", type=float, default=2.0, show_default=True, help="HELLO wait [s].")
+@click.option(
+    "--config",
+    "config_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Config YAML to snapshot into meta.yaml.",
+)
+@click.option("--quiet-status", is_flag=True, help="No live status line.")
+def record(
+    port,
+    output,
+    seconds,
+    overwrite,
+    baud,
+    dialect,
+    channels,
+    columns,
+    no_handshake,
+    no_start,
+    hello_timeout,
+    config_path,
+    quiet_status,
+):
+    """Record the board on PORT to a native session directory.
+
+    PORT is a serial port (``/dev/ttyACM0``, ``COM3``), a pseudo-terminal path or a
+    pyserial URL. A live status line on stderr counts frames, gaps and errors; Ctrl-C
+    stops the recording and leaves a complete session.
+    """
+    from bendsense.config import load_config
+    from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
+    from bendsense.device.recorder import Recorder
+    from bendsense.errors import BendsenseError
+    from bendsense.sessiondir import is_session_dir
+
+    if is_session_dir(output) and not overwrite:
+        raise click.BadParameter(f"{output}: a session exists there (use --overwrite)", param_hint="-o/--output")
+    if seconds is not None and seconds <= 0:
+        raise click.BadParameter(f"expected > 0, got {seconds:g}", param_hint="--seconds")
+    if dialect == "line" and channels is None and columns is None:
+        raise click.BadParameter("the line dialect needs --channels or --columns", param_hint="--channels")
+    cols = [c.strip() for c in columns.split(",")] if columns else None
+    show = not quiet_status and not (click.get_current_context().find_root().obj or {}).get("quiet")
+
+    def progress(stats):
+        if show:
+            sys.stderr.write("\r" + _status_line(stats) + "   ")
+            sys.stderr.flush()
+
+    try:
+        config = load_config(config_path) if config_path else None
+        driver = Driver(
+            port,
+            baudrate=baud or DEFAULT_BAUDRATE,
+            dialect=dialect,
+            columns=cols,
+            n_channels=channels,
+            handshake=not no_handshake,
+            hello_timeout_s=hello_timeout,
+        )
+        with driver:
+            recorder = Recorder(
+                driver, output, overwrite=overwrite, config=config, meta={"command": "bendsense record"}
+            )
+            if not no_start:
+                driver.start()
+            try:
+                stats = recorder.run(seconds, on_progress=progress)
+                outcome = "done"
+            except KeyboardInterrupt:
+                stats, outcome = recorder.stats, "interrupted"
+    except BendsenseError as err:
+        if show:
+            sys.stderr.write("\n")
+        raise _fail(err) from None
+    if show:
+        sys.stderr.write("\r" + _status_line(stats) + "   \n")
+    click.echo(f"{outcome}: {stats.records} frames written to {output}", err=True)
+
+
+@click.command("sim-device", cls=_Command)
+@click.option("--rate", "rate_hz", type=float, default=500.0, show_default=True, help="Frame rate [Hz].")
+@click.option("--seconds", type=float, help="Run time [s] (default: until Ctrl-C).")
+@click.option("--drop", type=float, default=0.0, show_default=True, help="Probability of a dropped frame.")
+@click.option("--corrupt", type=float, default=0.0, show_default=True, help="Probability of a corrupted frame.")
+@click.option("--truncate", type=float, default=0.0, show_default=True, help="Probability of a truncated frame.")
+@click.option("--seed", type=int, help="Seed of the fault injection.")
+@click.option("--channels", type=int, default=16, show_default=True, help="Number of channels.")
+@click.option("--adc-bits", type=int, default=12, show_default=True, help="ADC resolution [bit].")
+@click.option(
+    "--source",
+    type=click.Choice(["sensor", "ramp"]),
+    default="sensor",
+    show_default=True,
+    help="sensor: the virtual sensor (bendsense.sim); ramp: counts that encode the frame index.",
+)
+@click.option("--autostart", is_flag=True, help="Stream without waiting for START.")
+def sim_device(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart):
+    """Run a simulated sensor board on a pseudo-terminal and print its port path.
+
+    Open the printed path with ``bendsense record PATH -o SESSION`` or ``live``. Runs
+    until Ctrl-C or for --seconds.
+    """
+    from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
+    from bendsense.errors import BendsenseError
+
+    if not 1 <= channels <= 64:
+        raise click.BadParameter(f"expected 1..64, got {channels}", param_hint="--channels")
+    if not 1 <= adc_bits <= 16:
+        raise click.BadParameter(f"expected 1..16, got {adc_bits}", param_hint="--adc-bits")
+    try:
+        if source == "ramp":
+            src = ramp_source(channels, adc_bits)
+        else:
+            src = default_source(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
+        dev = SimulatedDevice(
+            src,
+            rate_hz=rate_hz,
+            n_channels=channels,
+            adc_bits=adc_bits,
+            drop=drop,
+            corrupt=corrupt,
+            truncate=truncate,
+            seed=seed,
+            autostart=autostart,
+        )
+    except NotImplementedError as err:
+        raise click.ClickException(f"{err}; use --source ramp for now") from None
+    except BendsenseError as err:
+        raise _fail(err) from None
+    click.echo(dev.port)
+    sys.stdout.flush()
+    end = None if seconds is None else time.monotonic() + seconds
+    try:
+        with dev:
+            while not dev.finished.is_set() and (end is None or time.monotonic() < end):
+                time.sleep(0.05)
+    except KeyboardInterrupt:
+        pass
+    s = dev.stats
+    click.echo(
+        f"generated {s.generated}  sent {s.sent}  dropped {s.dropped}  corrupted {s.corrupted}  "
+        f"truncated {s.truncated}  tx overflow {s.tx_overflow}",
+        err=True,
+    )
+
+
+COMMANDS = [devices, record, sim_device]

@@ -1,0 +1,38 @@
+"""The sensor board: serial driver, simulated board, recorder and port listing.
+
+Layers, from the wire up: :mod:`bendsense.frames` (protocol, pure) ←
+:mod:`~bendsense.device.driver` (serial port, reader thread) ←
+:mod:`~bendsense.device.recorder` (session directory on disk). The simulated board
+(:mod:`~bendsense.device.simdevice`) needs a POSIX pseudo-terminal.
+"""
+
+from importlib import import_module
+
+_LAZY = {
+    "Driver": "bendsense.device.driver",
+    "Reading": "bendsense.device.driver",
+    "Event": "bendsense.device.driver",
+    "DeviceStats": "bendsense.device.driver",
+    "Recorder": "bendsense.device.recorder",
+    "RecorderStats": "bendsense.device.recorder",
+    "SimulatedDevice": "bendsense.device.simdevice",
+    "SimStats": "bendsense.device.simdevice",
+    "default_source": "bendsense.device.simdevice",
+    "ramp_source": "bendsense.device.simdevice",
+    "PortInfo": "bendsense.device.ports",
+    "list_ports": "bendsense.device.ports",
+}
+
+__all__ = list(_LAZY)
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'bendsense.device' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(__all__)

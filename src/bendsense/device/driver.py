@@ -1,0 +1,526 @@
+"""Serial driver of the sensor board: reader thread, frame queue, live value, reconnects.
+
+The driver opens any pyserial port or URL (``/dev/ttyACM0``, ``COM3``, a pseudo-terminal
+path such as ``/dev/pts/5``, ``loop://``), reads in bulk on a background thread, decodes
+with :class:`bendsense.frames.Decoder` (or :class:`~bendsense.frames.LineDecoder`) and
+hands every SAMPLE on to two consumers:
+
+- a bounded queue for the recorder, which never drops silently: when it is full the
+  reader blocks briefly, then counts ``queue_drops`` and logs an event;
+- a lossy latest-value slot for the live view (:meth:`Driver.latest`).
+
+Read errors (port vanished, pseudo-terminal closed) trigger bounded reconnect attempts
+with exponential backoff; if they fail, or the driver is closed, consumers blocked in
+:meth:`Driver.get` or iterating get a :class:`~bendsense.errors.DeviceError` instead of
+hanging.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+
+from bendsense.errors import DeviceError
+from bendsense.frames import Command, Decoder, Hello, LineDecoder, Sample, Text, encode_command
+
+__all__ = ["Reading", "Event", "DeviceStats", "Driver", "DEFAULT_BAUDRATE"]
+
+log = logging.getLogger("bendsense.device")
+
+DEFAULT_BAUDRATE = 921_600
+"""Default baud rate; 16 channels at 1 kHz need ~0.5 Mbit/s (USB CDC ignores it)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Reading:
+    """A SAMPLE as received.
+
+    Attributes
+    ----------
+    host_ns : int
+        Host clock, ``time.monotonic_ns()`` when its bytes were read [ns].
+    device_us : int
+        Device clock with the u32 wraps removed [us] (the host clock in us since the
+        first frame when the line dialect carries no ``t_us``).
+    sample : Sample
+        The decoded frame (raw ``seq`` and ``t_us``).
+    """
+
+    host_ns: int
+    device_us: int
+    sample: Sample
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """Something worth a line in ``events.log``.
+
+    ``kind`` is one of ``hello``, ``text``, ``gap``, ``crc``, ``malformed``, ``overrun``,
+    ``queue_drop``, ``clock``, ``disconnect``, ``reconnect``, ``error``, ``info``.
+    """
+
+    time_s: float
+    kind: str
+    text: str
+
+
+@dataclass(frozen=True)
+class DeviceStats:
+    """Counters of a driver (a snapshot)."""
+
+    frames: int
+    samples: int
+    crc_errors: int
+    malformed: int
+    lost: int
+    queue_drops: int
+    reconnects: int
+    overruns: int
+    bytes: int
+
+
+class Driver:
+    """Sensor board on a serial port.
+
+    Parameters
+    ----------
+    port : str
+        Port name, pseudo-terminal path or pyserial URL (``loop://``, ``socket://``...).
+    baudrate : int
+        Baud rate (ignored by USB CDC and pseudo-terminals).
+    dialect : {"binary", "line"}
+        Wire protocol (DESIGN.md section 3).
+    columns : sequence of str, optional
+        Line-dialect column layout (default ``ch1..chN`` with ``n_channels``).
+    n_channels : int, optional
+        Line-dialect channel count for the default layout.
+    handshake : bool
+        Binary dialect: on :meth:`open`, send HELLO_REQUEST and wait for HELLO.
+    hello_timeout_s : float
+        How long to wait for the HELLO [s].
+    queue_size : int or None
+        Capacity of the recorder queue [readings]; None: no queue (live value only).
+    queue_block_s : float
+        How long the reader blocks on a full queue before it counts a drop [s].
+    read_timeout_s : float
+        Serial read timeout; bounds how fast the reader notices :meth:`close` [s].
+    reconnect_attempts : int
+        Reconnect attempts after a read error before giving up (0: none).
+    reconnect_backoff_s : float
+        Delay before the first attempt; doubles each attempt, at most 2 s [s].
+    serial_kwargs : dict, optional
+        Further arguments of ``serial.serial_for_url``.
+
+    Examples
+    --------
+    >>> with Driver("/dev/ttyACM0") as dev:          # doctest: +SKIP
+    ...     dev.start()
+    ...     for reading in dev:
+    ...         print(reading.sample.adc)
+    """
+
+    def __init__(
+        self,
+        port: str,
+        *,
+        baudrate: int = DEFAULT_BAUDRATE,
+        dialect: str = "binary",
+        columns=None,
+        n_channels: int | None = None,
+        handshake: bool = True,
+        hello_timeout_s: float = 2.0,
+        queue_size: int | None = 10_000,
+        queue_block_s: float = 0.05,
+        read_timeout_s: float = 0.02,
+        reconnect_attempts: int = 5,
+        reconnect_backoff_s: float = 0.1,
+        serial_kwargs: dict | None = None,
+    ):
+        if dialect not in ("binary", "line"):
+            raise DeviceError(f"dialect: expected 'binary' or 'line', got {dialect!r}")
+        if queue_size is not None and queue_size < 1:
+            raise DeviceError(f"queue_size: expected a positive integer or None, got {queue_size!r}")
+        self.port = str(port)
+        self.baudrate = int(baudrate)
+        self.dialect = dialect
+        self.handshake = bool(handshake) and dialect == "binary"
+        self.hello_timeout_s = float(hello_timeout_s)
+        self.queue_block_s = float(queue_block_s)
+        self.read_timeout_s = float(read_timeout_s)
+        self.reconnect_attempts = int(reconnect_attempts)
+        self.reconnect_backoff_s = float(reconnect_backoff_s)
+        self.serial_kwargs = dict(serial_kwargs or {})
+        if dialect == "binary":
+            self.decoder = Decoder()
+        else:
+            self.decoder = LineDecoder(columns=columns, n_channels=n_channels)
+        self._queue = None if queue_size is None else queue.Queue(maxsize=int(queue_size))
+        self._ser = None
+        self._thread = None
+        self._write_lock = threading.Lock()
+        self._closing = threading.Event()
+        self._hello_event = threading.Event()
+        self._listeners = []
+        self.events = deque(maxlen=1000)
+        self._error: str | None = None
+        self._closed = False
+        self._streaming = False
+        self._cmd_seq = 0
+        self._latest = None
+        self._samples = 0
+        self._queue_drops = 0
+        self._reconnects = 0
+        self._last_t = None
+        self._device_us = 0
+        self._first_host_ns = None
+        self._seen = (0, 0, 0)
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def _open_serial(self):
+        import serial
+
+        try:
+            return serial.serial_for_url(
+                self.port,
+                baudrate=self.baudrate,
+                timeout=self.read_timeout_s,
+                write_timeout=1.0,
+                **self.serial_kwargs,
+            )
+        except (serial.SerialException, OSError, ValueError) as err:
+            raise DeviceError(f"{self.port}: cannot open serial port ({err})") from None
+
+    def open(self) -> Driver:
+        """Open the port, start the reader and (binary dialect) do the HELLO handshake.
+
+        Raises
+        ------
+        DeviceError
+            If the port cannot be opened or no HELLO arrives within ``hello_timeout_s``.
+        """
+        if self._thread is not None:
+            return self
+        self._ser = self._open_serial()
+        self._thread = threading.Thread(target=self._run, name=f"bendsense-reader {self.port}", daemon=True)
+        self._thread.start()
+        if self.handshake:
+            try:
+                self.request_hello(timeout_s=self.hello_timeout_s)
+            except DeviceError:
+                self.close()
+                raise
+        return self
+
+    def request_hello(self, timeout_s: float = 2.0) -> Hello:
+        """Send HELLO_REQUEST (re-sent every 0.5 s) and wait for the HELLO."""
+        self._hello_event.clear()
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self.send("hello_request")
+            left = deadline - time.monotonic()
+            if self._hello_event.wait(min(0.5, max(left, 0.0))):
+                return self.hello
+            if self._error is not None:
+                raise DeviceError(self._error)
+            if time.monotonic() >= deadline:
+                raise DeviceError(
+                    f"{self.port}: no HELLO within {timeout_s:g} s after HELLO_REQUEST "
+                    f"(is it a bendsense board speaking the binary protocol at {self.baudrate} baud?)"
+                )
+
+    def close(self) -> None:
+        """Send STOP if streaming, stop the reader and close the port (idempotent)."""
+        if self._closed:
+            return
+        if self._streaming and self._error is None:
+            try:
+                self.stop()
+            except DeviceError:
+                pass
+        self._closed = True
+        self._closing.set()
+        ser = self._ser
+        if ser is not None and hasattr(ser, "cancel_read"):
+            try:
+                ser.cancel_read()
+            except Exception:  # noqa: BLE001 - the port may already be gone
+                pass
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        if ser is not None:
+            try:
+                ser.close()
+            except Exception:  # noqa: BLE001
+                pass
+
+    def __enter__(self) -> Driver:
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ commands
+
+    def write(self, data: bytes) -> None:
+        """Write raw bytes to the port."""
+        if self._closed or self._ser is None:
+            raise DeviceError(f"{self.port}: not open")
+        try:
+            with self._write_lock:
+                self._ser.write(data)
+                self._ser.flush()
+        except Exception as err:  # noqa: BLE001 - pyserial raises several types here
+            raise DeviceError(f"{self.port}: write failed ({err})") from None
+
+    def send(self, kind: str) -> None:
+        """Send a command: ``"start"``, ``"stop"`` or ``"hello_request"`` (binary dialect only)."""
+        if self.dialect != "binary":
+            return
+        self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
+        self.write(encode_command(kind, seq=self._cmd_seq))
+
+    def start(self) -> None:
+        """Ask the board to stream SAMPLE frames."""
+        self.send("start")
+        self._streaming = True
+
+    def stop(self) -> None:
+        """Ask the board to stop streaming."""
+        self._streaming = False
+        self.send("stop")
+
+    # ------------------------------------------------------------------ consumers
+
+    @property
+    def hello(self) -> Hello | None:
+        """The last HELLO received."""
+        return self.decoder.hello
+
+    @property
+    def n_channels(self) -> int | None:
+        """Channel count from the HELLO or the line layout (None if not known yet)."""
+        if self.dialect == "line":
+            return self.decoder.n_channels
+        return None if self.hello is None else self.hello.n_channels
+
+    @property
+    def error(self) -> str | None:
+        """Why the reader stopped, if it failed."""
+        return self._error
+
+    @property
+    def stats(self) -> DeviceStats:
+        """Snapshot of the counters."""
+        d = self.decoder
+        return DeviceStats(
+            frames=d.frames,
+            samples=self._samples,
+            crc_errors=d.crc_errors,
+            malformed=d.malformed,
+            lost=d.lost,
+            queue_drops=self._queue_drops,
+            reconnects=self._reconnects,
+            overruns=d.overruns,
+            bytes=d.bytes,
+        )
+
+    def latest(self) -> Reading | None:
+        """Return the most recent reading (lossy; for live views), or None before the first."""
+        return self._latest
+
+    def add_listener(self, callback) -> None:
+        """Call ``callback(event)`` for every :class:`Event` (from the reader thread)."""
+        self._listeners.append(callback)
+
+    def _check_alive(self) -> None:
+        if self._error is not None:
+            raise DeviceError(self._error)
+        if self._closed or self._thread is None or not self._thread.is_alive():
+            raise DeviceError(f"{self.port}: device closed")
+
+    def get(self, timeout: float | None = None) -> Reading | None:
+        """Next reading from the queue, in order.
+
+        Parameters
+        ----------
+        timeout : float, optional
+            Longest wait [s]; None waits until a reading arrives or the device fails.
+
+        Returns
+        -------
+        Reading or None
+            None when ``timeout`` expired.
+
+        Raises
+        ------
+        DeviceError
+            Once the queue is drained, if the reader failed (disconnect without
+            successful reconnect) or the driver is closed.
+        """
+        batch = self.get_batch(timeout=timeout, max_items=1)
+        return batch[0] if batch else None
+
+    def get_batch(self, timeout: float | None = None, max_items: int = 4096) -> list:
+        """Up to ``max_items`` readings: waits up to ``timeout`` for the first, then takes what is queued."""
+        if self._queue is None:
+            raise DeviceError(f"{self.port}: opened with queue_size=None; use latest()")
+        q = self._queue
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            wait = 0.05 if deadline is None else max(0.0, min(0.05, deadline - time.monotonic()))
+            try:
+                first = q.get(timeout=wait) if wait > 0 else q.get_nowait()
+                break
+            except queue.Empty:
+                self._check_alive()
+                if deadline is not None and time.monotonic() >= deadline:
+                    return []
+        out = [first]
+        while len(out) < max_items:
+            try:
+                out.append(q.get_nowait())
+            except queue.Empty:
+                break
+        return out
+
+    def __iter__(self):
+        """Yield readings in order until the driver is closed; raise DeviceError if the device fails."""
+        while True:
+            try:
+                batch = self.get_batch(timeout=0.1)
+            except DeviceError:
+                if self._closed and self._error is None:
+                    return
+                raise
+            yield from batch
+
+    # ------------------------------------------------------------------ reader thread
+
+    def _emit(self, kind: str, text: str) -> None:
+        ev = Event(time.time(), kind, text)
+        self.events.append(ev)
+        level = logging.WARNING if kind in ("disconnect", "error", "queue_drop") else logging.INFO
+        log.log(level, "%s: %s", self.port, text)
+        for cb in list(self._listeners):
+            try:
+                cb(ev)
+            except Exception:  # a listener must not kill the reader
+                log.exception("event listener failed")
+
+    def _run(self) -> None:
+        while not self._closing.is_set():
+            ser = self._ser
+            try:
+                data = ser.read(max(1, ser.in_waiting))
+            except Exception as err:  # noqa: BLE001 - SerialException, OSError, TypeError on a closed port
+                if self._closing.is_set():
+                    break
+                if not self._reconnect(err):
+                    break
+                continue
+            if data:
+                self._handle(data, time.monotonic_ns())
+
+    def _reconnect(self, err) -> bool:
+        self._emit("disconnect", f"read failed: {err}")
+        try:
+            self._ser.close()
+        except Exception:  # noqa: BLE001
+            pass
+        n = self.reconnect_attempts
+        for attempt in range(1, n + 1):
+            delay = min(self.reconnect_backoff_s * 2 ** (attempt - 1), 2.0)
+            if self._closing.wait(delay):
+                return False
+            try:
+                ser = self._open_serial()
+            except DeviceError as exc:
+                self._emit("reconnect", f"reconnect attempt {attempt}/{n} failed: {exc}")
+                continue
+            self._ser = ser
+            self.decoder.reset()
+            self._reconnects += 1
+            self._emit("reconnect", f"reconnected after {attempt} attempt(s)")
+            try:
+                if self.handshake:
+                    self.send("hello_request")
+                if self._streaming:
+                    self.send("start")
+            except DeviceError as exc:
+                self._emit("reconnect", f"could not resend commands: {exc}")
+            return True
+        self._error = f"{self.port}: device disconnected ({err}); {n} reconnect attempt(s) failed"
+        self._emit("error", self._error)
+        return False
+
+    def _unwrap(self, t_us: int | None, host_ns: int) -> int:
+        if t_us is None:
+            if self._first_host_ns is None:
+                self._first_host_ns = host_ns
+            return (host_ns - self._first_host_ns) // 1000
+        last = self._last_t
+        if last is None:
+            self._device_us = t_us
+        else:
+            step = (t_us - last) & 0xFFFFFFFF
+            if step >= 1 << 31:  # a jump back (device reset), not ~36 min of silence
+                step -= 1 << 32
+                self._emit("clock", f"device clock jumped back by {-step} us")
+            self._device_us += step
+        self._last_t = t_us
+        return self._device_us
+
+    def _handle(self, data: bytes, host_ns: int) -> None:
+        dec = self.decoder
+        frames = dec.feed(data)
+        q = self._queue
+        may_block = True
+        drops = 0
+        for f in frames:
+            if type(f) is Sample:
+                r = Reading(host_ns, self._unwrap(f.t_us, host_ns), f)
+                self._latest = r
+                self._samples += 1
+                if q is None:
+                    continue
+                try:
+                    if may_block:
+                        q.put(r, timeout=self.queue_block_s)
+                    else:
+                        q.put_nowait(r)
+                except queue.Full:
+                    drops += 1
+                    may_block = False  # block once per chunk, not once per frame
+            elif type(f) is Hello:
+                self._unwrap(f.t_us, host_ns)
+                self._emit(
+                    "hello",
+                    f"HELLO firmware={f.firmware!r} n_channels={f.n_channels} adc_bits={f.adc_bits} "
+                    f"rate_hz={f.rate_hz} vref_mv={f.vref_mv}",
+                )
+                self._hello_event.set()
+            elif type(f) is Text:
+                self._unwrap(f.t_us, host_ns)
+                self._emit("text", f"firmware: {f.text}")
+            elif type(f) is Command:
+                pass  # our own commands echoed back (loop://)
+        if drops:
+            self._queue_drops += drops
+            self._emit("queue_drop", f"recorder queue full: {drops} reading(s) dropped (total {self._queue_drops})")
+        while dec.gaps:
+            seq, n = dec.gaps.popleft()
+            self._emit("gap", f"{n} frame(s) lost before seq {seq}")
+        crc, bad, over = dec.crc_errors, dec.malformed, dec.overruns
+        c0, b0, o0 = self._seen
+        if crc != c0:
+            self._emit("crc", f"{crc - c0} CRC error(s) (total {crc})")
+        if over != o0:
+            self._emit("overrun", f"{over - o0} over-long run(s) without delimiter dropped (total {over})")
+        if bad - (over - o0) != b0:
+            self._emit("malformed", f"{bad - b0 - (over - o0)} malformed frame(s) (total {bad})")
+        self._seen = (crc, bad, over)

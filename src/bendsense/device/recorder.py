@@ -1,0 +1,265 @@
+"""Record a device to a native session directory (:mod:`bendsense.sessiondir`), crash-safely.
+
+The recorder drains the driver's queue in batches, appends the batches to
+``frames.bin`` (unbuffered, so a killed recorder loses nothing it had written;
+``fsync`` at least every ``fsync_interval_s``) and writes every driver event (gaps, CRC
+errors, reconnects, queue drops, firmware TEXT) to ``events.log``. When the device
+fails, the session is closed cleanly and the :class:`~bendsense.errors.DeviceError`
+propagates.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from bendsense.errors import DeviceError, SessionError
+from bendsense.sessiondir import NO_PRESSURE, SessionWriter, is_session_dir
+
+__all__ = ["Recorder", "RecorderStats"]
+
+log = logging.getLogger("bendsense.device.recorder")
+
+
+@dataclass(frozen=True)
+class RecorderStats:
+    """Counters of a recording (a snapshot).
+
+    Attributes
+    ----------
+    records : int
+        Frames written to ``frames.bin``.
+    skipped : int
+        Samples not written because their channel count differed from the session's.
+    lost, crc_errors, malformed, queue_drops, reconnects : int
+        The driver's counters (see :class:`bendsense.device.driver.DeviceStats`).
+    elapsed_s : float
+        Time since the recording started [s].
+    """
+
+    records: int
+    skipped: int
+    lost: int
+    crc_errors: int
+    malformed: int
+    queue_drops: int
+    reconnects: int
+    elapsed_s: float
+
+
+class Recorder:
+    """Write the readings of a :class:`~bendsense.device.driver.Driver` to a session directory.
+
+    Parameters
+    ----------
+    driver : Driver
+        An open driver (with a queue).
+    path : path
+        Session directory to create.
+    overwrite : bool
+        Replace an existing session there; otherwise :class:`SessionError`.
+    config : Config or dict, optional
+        Config snapshot for ``meta.yaml``.
+    meta : dict, optional
+        Further metadata for ``meta.yaml``.
+    fsync_interval_s : float
+        Longest time between ``fsync`` calls [s] (DESIGN.md: at most 1 s).
+
+    Notes
+    -----
+    The session is created as soon as the channel count is known (from the HELLO, the
+    line layout or the first sample). Use :meth:`run` in the current thread, or
+    :meth:`start` / :meth:`stop` for a background thread.
+    """
+
+    def __init__(self, driver, path, *, overwrite=False, config=None, meta=None, fsync_interval_s=0.5):
+        self.driver = driver
+        self.path = path
+        self.overwrite = bool(overwrite)
+        self.config = config
+        self.meta = dict(meta or {})
+        self.fsync_interval_s = float(fsync_interval_s)
+        if is_session_dir(path) and not overwrite:
+            raise SessionError(f"{path}: a session exists there (use overwrite=True or --overwrite)")
+        self._writer = None
+        self._early_events = list(driver.events)  # e.g. the HELLO of the handshake
+        self._lock = threading.Lock()
+        self._skipped = 0
+        self._t0 = time.monotonic()
+        self._stop = threading.Event()
+        self._thread = None
+        self.error: BaseException | None = None
+        driver.add_listener(self._on_event)
+        if driver.n_channels is not None:
+            self._ensure_writer(driver.n_channels)
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def stats(self) -> RecorderStats:
+        """Snapshot of the counters."""
+        d = self.driver.stats
+        return RecorderStats(
+            records=0 if self._writer is None else self._writer.n_records,
+            skipped=self._skipped,
+            lost=d.lost,
+            crc_errors=d.crc_errors,
+            malformed=d.malformed,
+            queue_drops=d.queue_drops,
+            reconnects=d.reconnects,
+            elapsed_s=time.monotonic() - self._t0,
+        )
+
+    def _ensure_writer(self, n_channels: int) -> SessionWriter:
+        with self._lock:
+            if self._writer is None:
+                drv = self.driver
+                device = {"port": drv.port, "dialect": drv.dialect}
+                if drv.hello is not None:
+                    device.update(drv.hello.to_dict())
+                if drv.dialect == "line":
+                    device["columns"] = list(drv.decoder.columns)
+                self._writer = SessionWriter(
+                    self.path,
+                    n_channels,
+                    adc_bits=None if drv.hello is None else drv.hello.adc_bits,
+                    device=device,
+                    config=self.config,
+                    meta=self.meta,
+                    adc_dtype="<u2" if drv.dialect == "binary" else "<f8",
+                    overwrite=self.overwrite,
+                    fsync_interval_s=self.fsync_interval_s,
+                )
+                for ev in self._early_events:
+                    self._writer.event(f"{ev.kind}: {ev.text}", ev.time_s)
+                self._early_events = []
+            return self._writer
+
+    def _on_event(self, ev) -> None:
+        # called from the reader thread
+        with self._lock:
+            writer = self._writer
+            if writer is None:
+                self._early_events.append(ev)
+                return
+        writer.event(f"{ev.kind}: {ev.text}", ev.time_s)
+
+    def _write(self, batch) -> None:
+        writer = self._writer or self._ensure_writer(batch[0].sample.n_channels)
+        n = writer.n_channels
+        keep = [r for r in batch if r.sample.n_channels == n]
+        if len(keep) != len(batch):
+            bad = len(batch) - len(keep)
+            self._skipped += bad
+            writer.event(f"skipped: {bad} sample(s) with a channel count other than {n}")
+        if not keep:
+            return
+        rec = writer.empty(len(keep))
+        rec["host_ns"] = [r.host_ns for r in keep]
+        rec["t_us"] = [max(r.device_us, 0) for r in keep]
+        rec["seq"] = [r.sample.seq for r in keep]
+        rec["status"] = [r.sample.status for r in keep]
+        rec["pressure_pa"] = [
+            NO_PRESSURE if r.sample.pressure_pa is None else round(r.sample.pressure_pa) for r in keep
+        ]
+        rec["adc"] = np.array([r.sample.adc for r in keep])
+        writer.write(rec)
+
+    # ------------------------------------------------------------------ running
+
+    def run(self, duration_s: float | None = None, *, on_progress=None, progress_interval_s: float = 0.5):
+        """Record until ``duration_s`` elapsed, :meth:`stop` is called or the device fails.
+
+        Parameters
+        ----------
+        duration_s : float, optional
+            Recording time [s]; None: until stopped.
+        on_progress : callable, optional
+            Called with a :class:`RecorderStats` every ``progress_interval_s``.
+
+        Returns
+        -------
+        RecorderStats
+
+        Raises
+        ------
+        DeviceError
+            If the device disconnects and does not come back; the session written so
+            far is closed and readable.
+        """
+        self._t0 = time.monotonic()
+        end = None if duration_s is None else self._t0 + duration_s
+        next_progress = self._t0 + progress_interval_s
+        outcome = "stopped"
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                if end is not None and now >= end:
+                    outcome = "duration reached"
+                    break
+                wait = 0.1 if end is None else min(0.1, end - now)
+                batch = self.driver.get_batch(timeout=max(wait, 0.0))
+                if batch:
+                    self._write(batch)
+                elif self._writer is not None:
+                    self._writer.maybe_sync()
+                if on_progress is not None and now >= next_progress:
+                    on_progress(self.stats)
+                    next_progress = now + progress_interval_s
+        except DeviceError as err:
+            outcome = f"device error: {err}"
+            raise
+        except KeyboardInterrupt:
+            outcome = "interrupted"
+            raise
+        finally:
+            self.close(outcome)
+        return self.stats
+
+    def close(self, outcome: str = "stopped") -> None:
+        """Write the final counters to ``meta.yaml`` and close the session (idempotent)."""
+        with self._lock:
+            writer = self._writer
+        if writer is None:
+            log.warning("%s: no frames received; no session written", self.path)
+            return
+        if writer.closed:
+            return
+        stats = self.stats
+        writer.event(f"end: {outcome}")
+        writer.close({"stats": asdict(stats), "outcome": outcome})
+
+    def start(self, duration_s: float | None = None) -> Recorder:
+        """Run :meth:`run` on a background thread."""
+
+        def target():
+            try:
+                self.run(duration_s)
+            except BaseException as err:  # kept for stop() to re-raise
+                self.error = err
+
+        self._thread = threading.Thread(target=target, name="bendsense-recorder", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout_s: float = 5.0) -> RecorderStats:
+        """Stop the background recording, wait for it and re-raise its error, if any."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        if self.error is not None:
+            raise self.error
+        return self.stats
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.close()

@@ -1,0 +1,454 @@
+"""A simulated sensor board on a pseudo-terminal, speaking the binary wire protocol.
+
+:class:`SimulatedDevice` opens a pseudo-terminal pair and plays the firmware on the
+master side: it answers HELLO_REQUEST with HELLO, streams SAMPLE frames at ``rate_hz``
+after START (or at once with ``autostart=True``), stops on STOP, and can misbehave on
+purpose: drop a frame (its ``seq`` is skipped), corrupt one (one bit flipped), truncate
+one (cut short, no trailing delimiter), or disconnect (close the master) after a given
+number of frames. Every injection is counted exactly in :attr:`SimulatedDevice.stats`,
+so tests can check a receiver's counters against it. Any program opens ``.port``
+(e.g. ``/dev/pts/7``) as if it were the real board.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import logging
+import os
+import random
+import select
+import struct
+import termios
+import threading
+import time
+import tty
+from dataclasses import dataclass
+
+import numpy as np
+
+from bendsense.errors import DeviceError
+from bendsense.frames import Command, Decoder, FrameType, encode_hello, encode_sample, encode_text
+
+__all__ = ["SimulatedDevice", "SimStats", "default_source", "ramp_source"]
+
+log = logging.getLogger("bendsense.device.sim")
+
+_MAX_PENDING = 64 * 1024  # bytes queued for the pseudo-terminal before frames count as TX overflow
+
+
+def default_source(n_channels: int = 16, adc_bits: int = 12, rate_hz: float = 500.0, seed=None):
+    """Return the default frame source: the virtual sensor of :mod:`bendsense.sim`.
+
+    Returns an iterator of ``(pressure_pa, adc_counts)``.
+    """
+    raise NotImplementedError(
+        "the default virtual sensor (bendsense.sim) is not wired into SimulatedDevice yet; "
+        "pass source=... (e.g. bendsense.device.simdevice.ramp_source(n_channels))"
+    )
+
+
+def ramp_source(n_channels: int = 16, adc_bits: int = 12, pressure_pa: float | None = 20_000.0):
+    """Return a synthetic source whose counts encode the frame index.
+
+    Channel ``c`` of frame ``k`` is ``(k + 100 c) mod 2**adc_bits``, so a receiver can
+    check exactly which frames arrived.
+
+    Returns
+    -------
+    callable
+        ``source(k) -> (pressure_pa, adc_counts)``.
+    """
+    offsets = np.arange(n_channels, dtype=np.int64) * 100
+    mask = (1 << adc_bits) - 1
+
+    def source(k: int):
+        return pressure_pa, (k + offsets) & mask
+
+    return source
+
+
+@dataclass(frozen=True)
+class SimStats:
+    """Exact counts of what a :class:`SimulatedDevice` did.
+
+    Attributes
+    ----------
+    generated : int
+        SAMPLE frames produced (each consumed one ``seq``).
+    sent : int
+        SAMPLE frames written intact.
+    dropped : int
+        Frames skipped on purpose (``seq`` consumed, nothing sent).
+    corrupted : int
+        Frames sent with one bit flipped (always a CRC error at the receiver).
+    truncated : int
+        Frames cut short (no trailing delimiter).
+    tx_overflow : int
+        Frames not sent because nobody read the pseudo-terminal (backpressure).
+    hellos, texts : int
+        HELLO and TEXT frames sent (they consume ``seq`` too).
+    commands : int
+        Commands received.
+    disconnected : bool
+        The master was closed on purpose.
+    """
+
+    generated: int
+    sent: int
+    dropped: int
+    corrupted: int
+    truncated: int
+    tx_overflow: int
+    hellos: int
+    texts: int
+    commands: int
+    disconnected: bool
+
+
+class SimulatedDevice:
+    """The sensor board, simulated on a pseudo-terminal.
+
+    Parameters
+    ----------
+    source : iterable, callable or None
+        Per frame ``(pressure_pa or None, adc_counts)``: an iterable (streaming ends when
+        it is exhausted) or a callable ``source(k)`` of the frame index ``k``. None:
+        :func:`default_source`, the virtual sensor.
+    rate_hz : float
+        Frame rate [Hz].
+    n_channels, adc_bits : int
+        Reported in HELLO; counts are masked to ``adc_bits``.
+    drop, corrupt, truncate : float
+        Probability per SAMPLE frame of each fault (at most one per frame).
+    disconnect_after : int, optional
+        Close the master after this many SAMPLE frames were generated (once the
+        receiver has read them, waiting at most 0.5 s).
+    seed : int, optional
+        Seed of the fault generator.
+    autostart : bool
+        Stream from the start without waiting for START (a free-running board).
+    max_frames : int, optional
+        Stop streaming after this many generated frames.
+    firmware, vref_mv : str, int
+        Reported in HELLO.
+    start_seq, start_t_us : int
+        First sequence number and device clock (to exercise wrapping).
+    burst : int
+        Most frames written in one go when the sender is behind.
+
+    Notes
+    -----
+    The device clock of frame ``k`` is exactly ``start_t_us + round(k * 1e6 / rate_hz)``
+    (mod 2**32), whatever the host's timing jitter; frames are paced against the host
+    clock and sent in bursts when the thread wakes up late.
+    """
+
+    def __init__(
+        self,
+        source=None,
+        *,
+        rate_hz: float = 500.0,
+        n_channels: int = 16,
+        adc_bits: int = 12,
+        drop: float = 0.0,
+        corrupt: float = 0.0,
+        truncate: float = 0.0,
+        disconnect_after: int | None = None,
+        seed=None,
+        autostart: bool = False,
+        max_frames: int | None = None,
+        firmware: str = "bendsense-sim 1",
+        vref_mv: int = 3300,
+        start_seq: int = 0,
+        start_t_us: int = 0,
+        burst: int = 64,
+    ):
+        if not rate_hz > 0:
+            raise DeviceError(f"rate_hz: expected > 0, got {rate_hz!r}")
+        for name, p in (("drop", drop), ("corrupt", corrupt), ("truncate", truncate)):
+            if not 0.0 <= p <= 1.0:
+                raise DeviceError(f"{name}: expected a probability in [0, 1], got {p!r}")
+        if drop + corrupt + truncate > 1.0:
+            raise DeviceError(f"drop + corrupt + truncate: expected <= 1, got {drop + corrupt + truncate:g}")
+        if source is None:
+            source = default_source(n_channels=n_channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
+        self._source_fn = source if callable(source) and not hasattr(source, "__next__") else None
+        self._source_it = None if self._source_fn is not None else iter(source)
+        self.rate_hz = float(rate_hz)
+        self.n_channels = int(n_channels)
+        self.adc_bits = int(adc_bits)
+        self.drop, self.corrupt, self.truncate = float(drop), float(corrupt), float(truncate)
+        self.disconnect_after = disconnect_after
+        self.autostart = bool(autostart)
+        self.max_frames = max_frames
+        self.firmware = firmware
+        self.vref_mv = int(vref_mv)
+        self.burst = int(burst)
+        self._rng = random.Random(seed)
+        self._seq = int(start_seq) & 0xFFFF
+        self._t0_us = int(start_t_us)
+        self._mask = (1 << self.adc_bits) - 1
+        self._lock = threading.Lock()
+        self._counts = dict.fromkeys(
+            ("generated", "sent", "dropped", "corrupted", "truncated", "tx_overflow", "hellos", "texts", "commands"), 0
+        )
+        self._disconnected = False
+        self._stop = threading.Event()
+        self.finished = threading.Event()
+        """Set when the source is exhausted, ``max_frames`` reached or the device disconnected."""
+        self._streaming = self.autostart
+        self._pending = bytearray()
+        self._texts = []
+        self._decoder = Decoder()
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self.port = os.ttyname(self._slave)
+        self._thread = None
+
+    # ------------------------------------------------------------------ public
+
+    @property
+    def stats(self) -> SimStats:
+        """Exact counts so far."""
+        with self._lock:
+            return SimStats(**self._counts, disconnected=self._disconnected)
+
+    @property
+    def streaming(self) -> bool:
+        """True while SAMPLE frames are being sent."""
+        return self._streaming
+
+    def start(self) -> SimulatedDevice:
+        """Start the device thread (done by ``with``)."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name=f"bendsense-sim {self.port}", daemon=True)
+            self._thread.start()
+        return self
+
+    def send_text(self, text: str) -> None:
+        """Have the firmware send a TEXT log line."""
+        with self._lock:
+            self._texts.append(str(text))
+
+    def disconnect(self) -> None:
+        """Close the master now, as if the USB cable were pulled."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        self._close_fds(disconnected=True)
+
+    def close(self) -> None:
+        """Stop the thread and close the pseudo-terminal."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
+        self._close_fds(disconnected=False)
+
+    def __enter__(self) -> SimulatedDevice:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ internals
+
+    def _close_fds(self, disconnected: bool) -> None:
+        with self._lock:
+            if self._master is None:
+                return
+            for fd in (self._master, self._slave):
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+            self._master = self._slave = None
+            if disconnected:
+                self._disconnected = True
+        self.finished.set()
+
+    def _t_us(self, k: int) -> int:
+        return self._t0_us + round(k * 1e6 / self.rate_hz)
+
+    def _next_seq(self) -> int:
+        s = self._seq
+        self._seq = (s + 1) & 0xFFFF
+        return s
+
+    def _frame_values(self, k: int):
+        if self._source_fn is not None:
+            return self._source_fn(k)
+        return next(self._source_it)
+
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception:  # the device must not die silently
+            log.exception("simulated device failed")
+            self._close_fds(disconnected=True)
+        finally:
+            self.finished.set()
+
+    def _loop(self) -> None:
+        k = 0  # next frame index
+        t_start = None
+        period = 1.0 / self.rate_hz
+        while not self._stop.is_set():
+            # read commands
+            try:
+                data = os.read(self._master, 4096)
+            except BlockingIOError:
+                data = b""
+            except OSError as err:
+                if err.errno == errno.EIO:  # no slave open at the moment: not an error for a board
+                    data = b""
+                else:
+                    raise
+            for f in self._decoder.feed(data):
+                if type(f) is Command:
+                    self._on_command(f.kind, k)
+            with self._lock:
+                texts, self._texts = self._texts, []
+            for text in texts:
+                self._queue_bytes(encode_text(self._next_seq(), self._t_us(k), text))
+                self._counts["texts"] += 1
+            # produce the frames that are due
+            now = time.monotonic()
+            if not self._streaming:
+                t_start = None
+            elif t_start is None:
+                t_start = now - k * period  # (re)start without a burst of stale frames
+            if self._streaming and not self.finished.is_set():
+                due = int((now - t_start) / period) + 1
+                n = min(due - k, self.burst)
+                for _ in range(max(n, 0)):
+                    if self.max_frames is not None and k >= self.max_frames:
+                        self.finished.set()
+                        break
+                    if self.disconnect_after is not None and k >= self.disconnect_after:
+                        self._flush(wait_s=0.5)
+                        self._wait_read(0.5)
+                        self._close_fds(disconnected=True)
+                        return
+                    try:
+                        pressure, adc = self._frame_values(k)
+                    except StopIteration:
+                        self.finished.set()
+                        break
+                    self._produce(k, pressure, adc)
+                    k += 1
+            self._flush()
+            # sleep until the next frame is due or a command arrives
+            if self._master is None:
+                return
+            wait = 0.02
+            if self._streaming and t_start is not None and not self.finished.is_set():
+                wait = max(0.0, min(wait, t_start + k * period - time.monotonic()))
+            w = [self._master] if self._pending else []
+            try:
+                select.select([self._master], w, [], wait)
+            except (OSError, ValueError):
+                return
+
+    def _on_command(self, kind, k: int) -> None:
+        with self._lock:
+            self._counts["commands"] += 1
+        if kind == FrameType.HELLO_REQUEST:
+            frame = encode_hello(
+                self._next_seq(),
+                self._t_us(k),
+                self.n_channels,
+                self.adc_bits,
+                round(self.rate_hz) & 0xFFFF,
+                self.vref_mv,
+                self.firmware,
+            )
+            with self._lock:
+                self._counts["hellos"] += 1
+            self._queue_bytes(frame, force=True)
+        elif kind == FrameType.START:
+            self._streaming = True
+        elif kind == FrameType.STOP:
+            self._streaming = False
+
+    def _produce(self, k: int, pressure, adc) -> None:
+        seq = self._next_seq()
+        counts = np.asarray(adc, dtype=np.int64) & self._mask
+        r = self._rng.random()
+        with self._lock:
+            self._counts["generated"] += 1
+        if r < self.drop:
+            with self._lock:
+                self._counts["dropped"] += 1
+            return
+        frame = encode_sample(seq, self._t_us(k), counts.tolist(), pressure_pa=pressure)
+        kind = "sent"
+        if r < self.drop + self.corrupt:
+            frame = self._flip_one_bit(frame)
+            kind = "corrupted"
+        elif r < self.drop + self.corrupt + self.truncate:
+            frame = frame[: self._rng.randrange(2, len(frame) - 1)]
+            kind = "truncated"
+        if self._queue_bytes(frame):
+            with self._lock:
+                self._counts[kind] += 1
+
+    def _flip_one_bit(self, frame: bytes) -> bytes:
+        """Flip one bit of a stuffed data byte, never making a 0x00.
+
+        That is one bit error in the body, which CRC-16 always detects, and no new
+        delimiter, so the receiver sees exactly one bad frame.
+        """
+        enc = bytearray(frame)
+        code_positions = set()
+        i = 1
+        while i < len(enc) - 1:  # walk the COBS code bytes
+            code_positions.add(i)
+            i += enc[i]
+        candidates = [j for j in range(1, len(enc) - 1) if j not in code_positions]
+        while True:
+            j = self._rng.choice(candidates)
+            bit = 1 << self._rng.randrange(8)
+            if enc[j] ^ bit:
+                enc[j] ^= bit
+                return bytes(enc)
+
+    def _wait_read(self, timeout_s: float) -> None:
+        """Wait until the receiver has read what was sent.
+
+        A disconnect after N frames then loses none of them (a cable pulled between frames).
+        """
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            try:
+                waiting = struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]
+            except OSError:
+                return
+            if waiting == 0:
+                return
+            time.sleep(0.005)
+
+    def _queue_bytes(self, frame: bytes, force: bool = False) -> bool:
+        if not force and len(self._pending) > _MAX_PENDING:
+            with self._lock:
+                self._counts["tx_overflow"] += 1
+            return False
+        self._pending += frame
+        return True
+
+    def _flush(self, wait_s: float = 0.0) -> None:
+        deadline = time.monotonic() + wait_s
+        while self._pending and self._master is not None:
+            try:
+                n = os.write(self._master, self._pending)
+                del self._pending[:n]
+            except BlockingIOError:
+                pass
+            except OSError as err:
+                if err.errno == errno.EIO:
+                    return
+                raise
+            if not self._pending or time.monotonic() >= deadline:
+                return
+            select.select([], [self._master], [], max(0.0, deadline - time.monotonic()))
