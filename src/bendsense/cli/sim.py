@@ -1,3 +1,91 @@
-"""Commands of the sim area (see bendsense.cli)."""
+"""Commands of the sim area: ``simulate`` writes the paper's experiments as simulated recordings."""
 
-COMMANDS = []
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
+from bendsense.errors import BendsenseError
+
+# kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
+_SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
+
+
+@click.command("simulate", cls=InterspersedCommand)
+@click.argument("scenario", metavar="SCENARIO", type=click.Choice(_SCENARIOS))
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Directory to write (created; with 'all', one subdirectory per scenario).",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sensor hardware and the noise.")
+@config_option
+@click.option("--noise-counts", type=click.FloatRange(min=0), help="Sensor noise std [counts] (default 1.5).")
+@click.option("--frames", type=click.IntRange(min=1), help="Frames per strip or configuration (default 50 / 5).")
+@click.option("--ei-error", type=float, help="Model mismatch: relative error of the true EI.")
+@click.option("--k0-error", type=float, help="Model mismatch: relative error of the true K0.")
+@click.option("--base-rotation", type=float, help="Model mismatch: base rotation per radian of bending [rad/rad].")
+@click.option("--hysteresis-kpa", type=click.FloatRange(min=0), help="Model mismatch: pressure play [kPa].")
+@overwrite_option
+def simulate(
+    scenario,
+    out_dir,
+    seed,
+    config_path,
+    noise_counts,
+    frames,
+    ei_error,
+    k0_error,
+    base_rotation,
+    hysteresis_kpa,
+    overwrite,
+):
+    """Write SCENARIO as simulated session CSVs with ground-truth columns.
+
+    SCENARIO is one of the paper's experiments: calibration (flat + strips, with a
+    manifest for 'bendsense calibrate'), validation (strips of known curvature),
+    tip-loads (20-120 kPa x 0-0.3 N), contact (12 random normal contact forces),
+    time-varying (10 s at 100 Hz), or all.
+    """
+
+    def step(state):
+        if out_dir.exists() and not overwrite:
+            raise click.ClickException(f"{out_dir}: exists (use --overwrite to replace it)")
+        options = {
+            "noise_counts": noise_counts,
+            "ei_error": ei_error,
+            "k0_error": k0_error,
+            "base_rotation_rad_per_rad": base_rotation,
+            "hysteresis_pa": None if hysteresis_kpa is None else hysteresis_kpa * 1e3,
+        }
+        if frames is not None:
+            if scenario in ("calibration", "validation", "all"):
+                options["frames_per_strip"] = frames
+            if scenario in ("tip-loads", "contact", "all"):
+                options["frames_per_config"] = frames
+        options = {k: v for k, v in options.items() if v is not None}
+        try:
+            from bendsense.sim.scenarios import _simulate
+
+            _, summaries = _simulate(scenario, out_dir, config_path, seed, overwrite=overwrite, **options)
+        except BendsenseError as err:
+            raise click.ClickException(str(err)) from None
+        except FileExistsError as err:
+            raise click.ClickException(str(err)) from None
+        for name, summary in summaries.items():
+            excluded = summary["excluded_frames"]
+            note = f", {excluded} excluded (beam solve failed)" if excluded else ""
+            click.echo(
+                f"{name}: wrote {len(summary['files'])} files, {summary['frames']} frames{note} to {summary['path']}"
+            )
+        return state
+
+    return step
+
+
+COMMANDS = [simulate]

@@ -282,7 +282,7 @@ class SimulatedActuator:
         """Return the pressure that bends the actuator, for a time series of readings (first axis = time) [Pa]."""
         return play_operator(pressure_pa, self.hysteresis_pa, initial_pa)
 
-    def solve(self, pressure_pa, force_n=(0.0, 0.0), *, initial=None):
+    def solve(self, pressure_pa, force_n=(0.0, 0.0), *, initial=None, sensitivities=False):
         """Solve the true beam (over the actuator length) for the pressures acting on it.
 
         Parameters
@@ -293,6 +293,8 @@ class SimulatedActuator:
             Tip force in the base frame [N].
         initial : BeamSolution, optional
             Warm start.
+        sensitivities : bool
+            Also compute ∂φ/∂F and ∂r/∂F.
 
         Returns
         -------
@@ -312,13 +314,111 @@ class SimulatedActuator:
             s_m=self._s_beam,
             warn=False,
             initial=initial,
+            sensitivities=sensitivities,
         )
+
+    def solve_contact(self, pressure_pa, contact_n, force_n=(0.0, 0.0), *, ramp_steps=4, tol_rad=1e-10, max_iter=20):
+        """Solve for a tip contact force normal to the true loaded tip tangent (paper eq. 21).
+
+        The contact force ``F_c = f_c (−cos φ_c, sin φ_c)`` is normal to the tip tangent
+        ``t = (sin φ_c, cos φ_c)`` and pushes against the bending (toward ``−x`` for a
+        straight tip, ``+y`` for a horizontal one: the paper's fingertip, Fig. 7(d)).
+        Since ``φ_c`` must equal the tip angle of the loaded beam, Newton's method solves
+        ``φ_L(F_fixed + F_c(φ_c)) = φ_c`` per frame, with ∂φ_L/∂F from the beam solver.
+        ``f_c`` is ramped up from 0 in ``ramp_steps`` steps (quasi-static loading), so the
+        answer is the equilibrium connected to the unloaded shape.
+
+        Parameters
+        ----------
+        pressure_pa : array_like, shape (...)
+            Pressure acting on the actuator [Pa].
+        contact_n : array_like, shape (...)
+            Contact force magnitude f_c >= 0 [N].
+        force_n : array_like, shape (..., 2)
+            Further, fixed tip force [N].
+        ramp_steps : int
+            Load steps of the ramp of f_c.
+        tol_rad : float
+            Newton stops when |φ_L − φ_c| < ``tol_rad`` [rad].
+        max_iter : int
+            Newton iterations per load step.
+
+        Returns
+        -------
+        force_n : ndarray, shape (..., 2)
+            Total tip force F_fixed + F_c [N].
+        solution : BeamSolution
+            The beam under that force; ``success`` is also false where Newton did not
+            converge.
+        """
+        from bendsense.beam import BeamSolution
+
+        p = np.asarray(pressure_pa, dtype=float)
+        fc = np.asarray(contact_n, dtype=float)
+        fixed = np.asarray(force_n, dtype=float)
+        if not np.all(fc >= 0):
+            raise ConfigError(f"contact_n: must be >= 0, got {contact_n!r}")
+        shape = np.broadcast_shapes(p.shape, fc.shape, fixed.shape[:-1])
+        B = math.prod(shape)
+        p = np.broadcast_to(p, shape).reshape(B)
+        fc = np.broadcast_to(fc, shape).reshape(B)
+        fixed = np.broadcast_to(fixed, (*shape, 2)).reshape(B, 2)
+
+        sol = self.solve(p, fixed)
+        angle = np.array(sol.angle_rad)
+        positions = np.array(sol.positions_m)
+        tip = np.array(sol.tip_position_m)
+        phi = np.array(sol.tip_angle_rad)
+        state = np.array(sol.state)
+        ok = np.array(sol.success)
+        force = fixed.copy()
+        # only frames with a contact force need the iteration
+        active = np.flatnonzero(ok & (fc > 0))
+        for step in range(1, ramp_steps + 1):
+            if active.size == 0:
+                break
+            fraction = step / ramp_steps
+            tol = tol_rad if step == ramp_steps else max(tol_rad, 1e-6)
+            todo = active
+            for _ in range(max_iter):
+                mag = fraction * fc[todo]
+                c, s_ = np.cos(phi[todo]), np.sin(phi[todo])
+                f = fixed[todo] + mag[:, None] * np.stack([-c, s_], axis=-1)
+                sub = self.solve(p[todo], f, initial=state[todo], sensitivities=True)
+                residual = sub.tip_angle_rad - phi[todo]
+                done = np.abs(residual) < tol
+                angle[todo], positions[todo], tip[todo] = sub.angle_rad, sub.positions_m, sub.tip_position_m
+                state[todo], force[todo] = sub.state, f
+                lost = ~np.asarray(sub.success)
+                ok[todo[lost]] = False
+                slope = np.sum(sub.dangle_dforce[:, -1, :] * (mag[:, None] * np.stack([s_, c], axis=-1)), axis=-1)
+                phi[todo] = np.where(done, sub.tip_angle_rad, phi[todo] - residual / (slope - 1.0))
+                todo = todo[~done & ~lost]
+                if todo.size == 0:
+                    break
+            ok[todo] = False
+            active = active[ok[active]]
+        message = np.where(ok, "converged", "contact: no stable equilibrium normal to the tip found").reshape(shape)
+        solution = BeamSolution(
+            s_m=sol.s_m,
+            angle_rad=angle.reshape(*shape, -1),
+            positions_m=positions.reshape(*shape, -1, 2),
+            tip_position_m=tip.reshape(*shape, 2),
+            tip_angle_rad=angle[:, -1].reshape(shape),
+            success=ok.reshape(shape),
+            message=message if shape else str(message),
+            iterations=np.zeros(shape, dtype=int),
+            method="fast",
+            state=state.reshape(*shape, -1),
+        )
+        return force.reshape(*shape, 2), solution
 
     def frames(
         self,
         pressure_pa,
         force_n=(0.0, 0.0),
         *,
+        contact_n=None,
         time_series: bool = False,
         initial_pa=None,
         noise: bool = True,
@@ -333,6 +433,9 @@ class SimulatedActuator:
             Pressure readings [Pa].
         force_n : array_like, shape (..., 2)
             Tip force in the base frame [N]; broadcasts against ``pressure_pa``.
+        contact_n : array_like, shape (...), optional
+            Magnitude of a contact force normal to the true loaded tip tangent, added
+            to ``force_n`` [N] (:meth:`solve_contact`); ``frames.force_n`` is the total.
         time_series : bool
             The first axis is time: apply the pressure hysteresis along it.
         initial_pa : float, optional
@@ -352,11 +455,17 @@ class SimulatedActuator:
         F = np.asarray(force_n, dtype=float)
         if F.ndim == 0 or F.shape[-1] != 2:
             raise ConfigError(f"force_n: expected shape (..., 2), got {F.shape}")
-        shape = np.broadcast_shapes(p.shape, F.shape[:-1])
+        fc = None if contact_n is None else np.asarray(contact_n, dtype=float)
+        shape = np.broadcast_shapes(p.shape, F.shape[:-1], () if fc is None else fc.shape)
         p = np.broadcast_to(p, shape)
         F = np.broadcast_to(F, (*shape, 2))
         p_eff = self.effective_pressure_pa(p, initial_pa) if time_series else p.copy()
-        sol = self.solve(p_eff, F) if solution is None else solution
+        if solution is not None:
+            sol = solution
+        elif fc is None:
+            sol = self.solve(p_eff, F)
+        else:
+            F, sol = self.solve_contact(p_eff, fc, F)
         M = self.n_points
         angle = sol.angle_rad[..., :M]
         lengths = np.asarray(self.sensor.lengths_m, dtype=float)

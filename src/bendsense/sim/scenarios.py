@@ -1,0 +1,657 @@
+"""The paper's experiments (section V) as simulated recordings with ground truth.
+
+:func:`simulate` writes one scenario (or ``"all"``) as session CSVs (DESIGN section 3)
+whose extra columns carry the ground truth, plus a ``scenario.yaml`` describing the
+run (seed, options, config, frame counts, files). Every scenario directory is written
+to a temporary directory first and renamed into place at the end.
+
+``calibration``
+    ``flat.csv`` and one recording per calibration strip, ``r040.csv`` … ``r400.csv``
+    (R = 40 … 400 mm, paper section V-B), and ``manifest.yaml`` (DESIGN section 3,
+    recording paths relative to it): the input of ``bendsense calibrate``. The sensor is
+    pressed onto an arc of radius R, so its shifts are ``S_i = κ_cal d L_i`` with
+    ``κ_cal = 1/R`` (or ``1/(R + c)`` with ``sensor.calibration_adds_sleeve``,
+    :func:`~bendsense.sim.sensor.calibration_shifts`). Truth column: ``kappa_true_per_m``.
+``validation``
+    One recording per validation strip, ``r045_75.csv`` … ``r150_75.csv``, and
+    ``validation.yaml`` listing ``radius_m``, ``kappa_true_per_m`` and ``recording``.
+    The paper quotes the validation radii as ``R_val = R + c`` (Table I: 45.75 … 150.75
+    mm), i.e. already at the sensor layer; the simulated sensor therefore bends with
+    ``κ_true = 1/R_val`` whatever ``calibration_adds_sleeve`` says. Truth columns:
+    ``radius_m``, ``kappa_true_per_m``.
+``tip-loads``
+    ``tip_loads.csv``: P = 20 … 120 kPa in 10 kPa steps × the paper's vertical downward
+    tip loads 0, 0.1, 0.2, 0.3 N (section V-C), i.e. ``F = (0, −load)`` in the base frame
+    of the upright rig (DESIGN section 2), a few frames each. Truth columns: ``load_n``,
+    ``fx_n``, ``fy_n``, ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, ``base_angle_rad``
+    and ``kappa_true1_per_m`` … (mean true curvature per segment). The true shape of
+    every row is in ``truth.npz``: ``s_m`` (M,) on ``[0, L_sensor]``, ``positions_m``
+    (frames, M, 2), ``angle_rad`` (frames, M), rows in CSV order.
+``contact``
+    ``contact.csv``: 12 seeded random configurations (paper section V-D2) of pressure
+    and a contact force ``f_c`` in [0, 0.4] N normal to the true loaded tip tangent,
+    pushing against the bending (the fingertip of Fig. 7(d)): ``F · t_tip = 0``
+    (paper eq. 21). Configurations in which the loaded tip bends less than
+    ``min_tip_angle_deg`` (the finger would not be touched) are redrawn. Truth columns
+    as for ``tip-loads`` plus ``config`` and ``fc_n``; ``truth.npz`` likewise.
+``time-varying``
+    ``session.csv``: a run at ``rate_hz`` (100 Hz) for ``duration_s`` (10 s): the pressure
+    ramps smoothly between 0 and 100 kPa and back with a period of 5 s while a contact
+    force normal to the tip switches on and off smoothly (:func:`time_varying_profile`).
+    Truth columns: ``fx_n``, ``fy_n``, ``fc_n``, ``tip_x_m``, ``tip_y_m``,
+    ``tip_angle_rad``, ``effective_pressure_pa``; ``truth.npz`` likewise. The same frames
+    stream from :func:`time_varying_frames`, which the simulated device uses.
+
+Frames whose beam solve fails (``success=False``) are left out of the recordings and
+counted in ``scenario.yaml`` and in the CSV's ``# excluded_frames:`` metadata line.
+
+Seeds: one ``seed`` fixes everything. The sensor hardware (offsets, gains) is drawn from
+it as :meth:`VirtualSensor.from_config` does, and is the same in every scenario of that
+seed (so a calibration from ``calibration`` applies to the others); each scenario draws
+its noise and random configurations from its own stream, spawned from the seed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from bendsense.config import Config
+from bendsense.errors import ConfigError
+from bendsense.session import Session, write_session_csv
+from bendsense.sim.actuator import SimulatedActuator
+from bendsense.sim.sensor import VirtualSensor, calibration_shifts
+
+__all__ = [
+    "SCENARIOS",
+    "CALIBRATION_RADII_M",
+    "VALIDATION_RADII_M",
+    "TIP_LOAD_PRESSURES_PA",
+    "TIP_LOADS_N",
+    "simulate",
+    "time_varying_profile",
+    "time_varying_frames",
+]
+
+SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying")
+#: Calibration strip radii R [m] (paper section V-B).
+CALIBRATION_RADII_M = (0.040, 0.050, 0.060, 0.070, 0.080, 0.090, 0.100, 0.200, 0.300, 0.400)
+#: Validation strip radii R_val = R + c [m], at the sensor layer (paper Table I).
+VALIDATION_RADII_M = (0.04575, 0.05575, 0.06575, 0.07575, 0.08575, 0.09575, 0.15075)
+#: Pressures of the tip-load experiment [Pa] (paper section V-C).
+TIP_LOAD_PRESSURES_PA = tuple(float(p) for p in np.arange(20e3, 120e3 + 1.0, 10e3))
+#: Vertical downward tip loads [N] (paper section V-C); ``F = (0, −load)`` here.
+TIP_LOADS_N = (0.0, 0.1, 0.2, 0.3)
+
+_FORMAT = "bendsense-sim-scenario"
+_FORMAT_VERSION = 1
+# a spawn key apart from the two that VirtualSensor.from_config uses for the same seed
+_STREAM_BASE = 1000
+
+# options each scenario accepts besides the actuator's (noise and mismatch)
+_ACTUATOR_OPTIONS = ("noise_counts", "ei_error", "k0_error", "base_rotation_rad_per_rad", "hysteresis_pa")
+_OPTIONS = {
+    "calibration": {"frames_per_strip": 50, "rate_hz": 35.0, "radii_m": CALIBRATION_RADII_M},
+    "validation": {"frames_per_strip": 50, "rate_hz": 35.0, "radii_m": VALIDATION_RADII_M},
+    "tip-loads": {
+        "frames_per_config": 5,
+        "rate_hz": 35.0,
+        "pressures_pa": TIP_LOAD_PRESSURES_PA,
+        "loads_n": TIP_LOADS_N,
+    },
+    "contact": {
+        "n_configs": 12,
+        "frames_per_config": 5,
+        "rate_hz": 35.0,
+        "pressure_range_pa": (40e3, 120e3),
+        "force_range_n": (0.0, 0.4),
+        "min_tip_angle_deg": 15.0,
+    },
+    "time-varying": {"rate_hz": 100.0, "duration_s": 10.0, "contact_n": 0.15},
+}
+
+
+# --------------------------------------------------------------------------- profiles
+
+
+def time_varying_profile(t_s, *, pressure_max_pa=100e3, period_s=5.0, contact_n=0.15):
+    """Pressure and contact force of the ``time-varying`` scenario at times ``t_s``.
+
+    The pressure ramps smoothly up and down, ``P = P_max (1 − cos(2π t / T)) / 2``; the
+    contact force magnitude switches on and off with raised-cosine edges of 0.3 s, on
+    over [1.5, 3.5] s and [6.5, 8.5] s of every 10 s (periodic, so the stream never ends).
+
+    Parameters
+    ----------
+    t_s : array_like
+        Times [s].
+    pressure_max_pa : float
+        Peak pressure [Pa].
+    period_s : float
+        Period of the pressure ramp [s].
+    contact_n : float
+        Contact force magnitude while on [N].
+
+    Returns
+    -------
+    pressure_pa, contact_n : ndarray
+        Same shape as ``t_s`` [Pa], [N].
+    """
+    t = np.asarray(t_s, dtype=float)
+    pressure = 0.5 * pressure_max_pa * (1.0 - np.cos(2.0 * np.pi * t / period_s))
+    cycle = np.mod(t, 10.0)
+    edge = 0.3
+    on = np.zeros_like(t)
+    for start, stop in ((1.5, 3.5), (6.5, 8.5)):
+        rise = np.clip((cycle - start) / edge, 0.0, 1.0)
+        fall = np.clip((stop - cycle) / edge, 0.0, 1.0)
+        on = np.maximum(on, np.minimum(rise, fall))
+    return pressure, contact_n * 0.5 * (1.0 - np.cos(np.pi * on))
+
+
+def time_varying_frames(
+    config: Config | None = None,
+    rate_hz: float = 100.0,
+    seed: int | None = 0,
+    *,
+    truth: bool = False,
+    duration_s: float | None = None,
+    block_s: float = 0.1,
+    contact_n: float = 0.15,
+    noise_counts: float = 1.5,
+    sensor: VirtualSensor | None = None,
+    **mismatch,
+) -> Iterator:
+    """Stream the frames of the ``time-varying`` scenario one at a time, at any rate.
+
+    This is the default source of the simulated device (``bendsense.device.simdevice``)
+    and of ``bendsense demo``. Frames are simulated in blocks of ``block_s`` seconds
+    (one batched beam solve per block) and yielded one by one; the stream is endless
+    unless ``duration_s`` is given. The hysteresis state carries over between blocks.
+    A frame whose beam solve fails repeats the last valid shape (with fresh noise) and
+    has ``valid=False`` in its truth.
+
+    Parameters
+    ----------
+    config : Config, optional
+        Default: the paper's prototype.
+    rate_hz : float
+        Frame rate [Hz]; frame ``k`` is at ``t = k / rate_hz``.
+    seed : int or None
+        Seed of the sensor hardware and the noise (as :func:`simulate`).
+    truth : bool
+        Also yield the ground truth of each frame.
+    duration_s : float, optional
+        Stop after this time [s].
+    block_s : float
+        Frames simulated per batch [s].
+    contact_n : float
+        Contact force magnitude while on [N].
+    noise_counts : float
+        Sensor noise [counts] (when ``sensor`` is not given).
+    sensor : VirtualSensor, optional
+        Sensor hardware; default from ``config`` and ``seed``.
+    **mismatch
+        ``ei_error``, ``k0_error``, ``base_rotation_rad_per_rad``, ``hysteresis_pa``
+        (:class:`~bendsense.sim.actuator.SimulatedActuator`).
+
+    Yields
+    ------
+    pressure_pa : float
+        Pressure reading [Pa].
+    counts : ndarray of uint16, shape (N,)
+        ADC counts.
+    truth : dict
+        Only with ``truth=True``: ``t_s``, ``effective_pressure_pa``, ``fx_n``, ``fy_n``,
+        ``fc_n``, ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, ``valid``, ``angle_rad``
+        (M,), ``positions_m`` (M, 2), ``s_m`` (M,).
+    """
+    rate = _positive_option("rate_hz", rate_hz)
+    block = max(1, round(rate * _positive_option("block_s", block_s)))
+    total = None if duration_s is None else round(rate * _positive_option("duration_s", duration_s))
+    sim = _actuator(config, seed, sensor=sensor, noise_counts=noise_counts, **mismatch)
+    rng = _stream(seed, "time-varying")
+    return _stream_frames(sim, rate, block, total, float(contact_n), rng, truth)
+
+
+def _stream_frames(sim, rate, block, total, contact_n, rng, truth):
+    k0 = 0
+    state = None
+    last_valid = None
+    while total is None or k0 < total:
+        n = block if total is None else min(block, total - k0)
+        t = (k0 + np.arange(n)) / rate
+        pressure, contact = time_varying_profile(t, contact_n=contact_n)
+        frames = sim.frames(pressure, contact_n=contact, time_series=True, initial_pa=state, noise=False)
+        state = frames.effective_pressure_pa[-1]
+        shifts = frames.shifts_m.copy()
+        valid = frames.valid
+        for i in range(n):
+            if valid[i]:
+                last_valid = i, frames
+            elif last_valid is not None:
+                shifts[i] = last_valid[1].shifts_m[last_valid[0]]
+        counts = sim.sensor.measure(shifts, rng=rng).counts
+        for i in range(n):
+            if not truth:
+                yield float(pressure[i]), counts[i]
+                continue
+            yield (
+                float(pressure[i]),
+                counts[i],
+                {
+                    "t_s": float(t[i]),
+                    "effective_pressure_pa": float(frames.effective_pressure_pa[i]),
+                    "fx_n": float(frames.force_n[i, 0]),
+                    "fy_n": float(frames.force_n[i, 1]),
+                    "fc_n": float(contact[i]),
+                    "tip_x_m": float(frames.tip_position_m[i, 0]),
+                    "tip_y_m": float(frames.tip_position_m[i, 1]),
+                    "tip_angle_rad": float(frames.tip_angle_rad[i]),
+                    "valid": bool(valid[i]),
+                    "s_m": frames.s_m,
+                    "angle_rad": frames.angle_rad[i],
+                    "positions_m": frames.positions_m[i],
+                },
+            )
+        k0 += n
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _positive_option(name, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{name}: must be a finite number > 0, got {value!r}")
+    return float(value)
+
+
+def _count_option(name, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ConfigError(f"{name}: must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def _stream(seed, scenario) -> np.random.Generator:
+    key = _STREAM_BASE + SCENARIOS.index(scenario)
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(key,)))
+
+
+def _config(config) -> Config:
+    if config is None or isinstance(config, (str, os.PathLike)):
+        from bendsense.config import load_config
+
+        return load_config(config)
+    if not isinstance(config, Config):
+        raise ConfigError(f"config: expected a Config, a path or None, got {type(config).__name__}")
+    return config
+
+
+def _actuator(config, seed, *, sensor=None, noise_counts=1.5, **mismatch) -> SimulatedActuator:
+    unknown = sorted(set(mismatch) - set(_ACTUATOR_OPTIONS))
+    if unknown:
+        raise ConfigError(f"options: unknown {', '.join(unknown)}; allowed: {', '.join(_ACTUATOR_OPTIONS[1:])}")
+    return SimulatedActuator.from_config(
+        _config(config), sensor=sensor, noise_counts=noise_counts, seed=seed, **mismatch
+    )
+
+
+def _session(counts, pressure_pa, rate_hz, meta, extra) -> Session:
+    n = len(counts)
+    return Session(np.arange(n) / rate_hz, np.asarray(counts, dtype=float), pressure_pa, meta=meta, extra=extra)
+
+
+def _meta(scenario, seed, **more) -> dict:
+    meta = {"format": f"{_FORMAT} {_FORMAT_VERSION}", "scenario": scenario, "seed": "none" if seed is None else seed}
+    meta.update(more)
+    return meta
+
+
+def _truth_columns(frames, fc=None) -> dict:
+    extra = {
+        "fx_n": frames.force_n[:, 0],
+        "fy_n": frames.force_n[:, 1],
+    }
+    if fc is not None:
+        extra["fc_n"] = fc
+    extra.update(
+        tip_x_m=frames.tip_position_m[:, 0],
+        tip_y_m=frames.tip_position_m[:, 1],
+        tip_angle_rad=frames.tip_angle_rad,
+        base_angle_rad=frames.base_angle_rad,
+    )
+    for i in range(frames.curvature_per_m.shape[-1]):
+        extra[f"kappa_true{i + 1}_per_m"] = frames.curvature_per_m[:, i]
+    return extra
+
+
+def _save_truth(path: Path, frames) -> None:
+    with open(path, "wb") as fh:
+        np.savez(fh, s_m=frames.s_m, positions_m=frames.positions_m, angle_rad=frames.angle_rad)
+
+
+def _repeat(frames, count):
+    """Each of the configurations in ``frames`` repeated ``count`` times (noise is drawn later)."""
+    return frames.select(np.repeat(np.arange(len(frames.valid)), count))
+
+
+# --------------------------------------------------------------------------- scenarios
+
+
+def _strip_recordings(sim, rng, out, names, shifts, kappa, radii, n, rate, scenario, seed):
+    """Record the sensor held on fixed shapes: ``n`` noisy frames per shift vector."""
+    for name, shift, k, radius in zip(names, shifts, kappa, radii, strict=True):
+        counts = sim.sensor.measure(np.broadcast_to(shift, (n, shift.size)), rng=rng).counts
+        meta = _meta(scenario, seed, rate_hz=rate)
+        extra = {"kappa_true_per_m": np.full(n, k)}
+        if radius is not None:
+            meta["radius_m"] = radius
+            extra = {"radius_m": np.full(n, radius), **extra}
+        write_session_csv(_session(counts, np.nan, rate, meta, extra), out / name)
+
+
+def _radii(radii_m) -> list:
+    radii = [float(r) for r in np.atleast_1d(np.asarray(radii_m, dtype=float))]
+    if not radii or not all(math.isfinite(r) and r > 0 for r in radii):
+        raise ConfigError(f"radii_m: expected positive radii, got {radii_m!r}")
+    return radii
+
+
+def _strip_names(radii) -> list:
+    names = [f"r{round(r * 1e3):03d}.csv" for r in radii]
+    if len(set(names)) != len(names) or any(abs(r * 1e3 - round(r * 1e3)) > 1e-9 for r in radii):
+        names = [f"r{r * 1e3:06.2f}".replace(".", "_") + ".csv" for r in radii]
+    return names
+
+
+def _calibration(sim, rng, out, seed, *, frames_per_strip, rate_hz, radii_m):
+    n = _count_option("frames_per_strip", frames_per_strip)
+    rate = _positive_option("rate_hz", rate_hz)
+    radii = _radii(radii_m)
+    names = _strip_names(radii)
+    sensor = sim.config.sensor
+    shifts = calibration_shifts(sensor, radii)
+    # κ_cal as calibration_shifts applies it (DESIGN section 2)
+    kappa = [1.0 / (r + sensor.sleeve_thickness_m if sensor.calibration_adds_sleeve else r) for r in radii]
+    n_channels = sensor.n_segments
+    _strip_recordings(
+        sim, rng, out, ["flat.csv"], np.zeros((1, n_channels)), [0.0], [None], n, rate, "calibration", seed
+    )
+    _strip_recordings(sim, rng, out, names, shifts, kappa, [None] * len(radii), n, rate, "calibration", seed)
+    manifest = {
+        "flat": "flat.csv",
+        "strips": [{"radius_m": r, "recording": name} for r, name in zip(radii, names, strict=True)],
+    }
+    (out / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False), encoding="utf-8")
+    return {"frames": n * (len(radii) + 1), "excluded_frames": 0, "files": ["flat.csv", *names, "manifest.yaml"]}
+
+
+def _validation(sim, rng, out, seed, *, frames_per_strip, rate_hz, radii_m):
+    n = _count_option("frames_per_strip", frames_per_strip)
+    rate = _positive_option("rate_hz", rate_hz)
+    radii = _radii(radii_m)
+    names = _strip_names(radii)
+    kappa = [1.0 / r for r in radii]
+    # R_val is at the sensor layer already: S_i = d L_i / R_val, whatever calibration_adds_sleeve says
+    shifts = sim.sensor.strip_gap_m * np.cumsum(sim.sensor.lengths_m) * np.asarray(kappa)[:, None]
+    _strip_recordings(sim, rng, out, names, shifts, kappa, radii, n, rate, "validation", seed)
+    index = {
+        "note": "radius_m is at the sensor layer (R_val = R + c, paper Table I); kappa_true_per_m = 1/radius_m",
+        "strips": [
+            {"radius_m": r, "kappa_true_per_m": k, "recording": name}
+            for r, k, name in zip(radii, kappa, names, strict=True)
+        ],
+    }
+    (out / "validation.yaml").write_text(yaml.safe_dump(index, sort_keys=False), encoding="utf-8")
+    return {"frames": n * len(radii), "excluded_frames": 0, "files": [*names, "validation.yaml"]}
+
+
+def _write_frames(sim, rng, out, name, frames, rate_hz, scenario, seed, extra_first, fc=None):
+    """Measure (with noise) and write the valid ones of ``frames`` with their truth."""
+    keep = np.asarray(frames.valid)
+    excluded = int(keep.size - keep.sum())
+    frames = frames.select(keep)
+    extra_first = {k: np.asarray(v)[keep] for k, v in extra_first.items()}
+    fc = None if fc is None else np.asarray(fc)[keep]
+    counts = sim.sensor.measure(frames.shifts_m, rng=rng).counts
+    meta = _meta(scenario, seed, rate_hz=rate_hz, excluded_frames=excluded)
+    extra = {**extra_first, **_truth_columns(frames, fc)}
+    write_session_csv(_session(counts, frames.pressure_pa, rate_hz, meta, extra), out / name)
+    _save_truth(out / "truth.npz", frames)
+    return {"frames": int(keep.sum()), "excluded_frames": excluded, "files": [name, "truth.npz"]}
+
+
+def _tip_loads(sim, rng, out, seed, *, frames_per_config, rate_hz, pressures_pa, loads_n):
+    n = _count_option("frames_per_config", frames_per_config)
+    rate = _positive_option("rate_hz", rate_hz)
+    p, load = np.meshgrid(np.asarray(pressures_pa, dtype=float), np.asarray(loads_n, dtype=float), indexing="ij")
+    p, load = p.ravel(), load.ravel()
+    # the paper's vertical downward load on the upright rig is -Fy (DESIGN section 2)
+    force = np.stack([np.zeros_like(load), -load], axis=-1)
+    frames = _repeat(sim.frames(p, force, noise=False), n)
+    return _write_frames(
+        sim, rng, out, "tip_loads.csv", frames, rate, "tip-loads", seed, {"load_n": np.repeat(load, n)}
+    )
+
+
+def _contact(
+    sim, rng, out, seed, *, n_configs, frames_per_config, rate_hz, pressure_range_pa, force_range_n, min_tip_angle_deg
+):
+    count = _count_option("n_configs", n_configs)
+    n = _count_option("frames_per_config", frames_per_config)
+    rate = _positive_option("rate_hz", rate_hz)
+    (p_lo, p_hi), (f_lo, f_hi) = pressure_range_pa, force_range_n
+    if not (0 <= p_lo <= p_hi and 0 <= f_lo <= f_hi):
+        raise ConfigError(
+            f"pressure_range_pa, force_range_n: expected 0 <= low <= high, got {pressure_range_pa!r}, {force_range_n!r}"
+        )
+    min_angle = math.radians(float(min_tip_angle_deg))
+    chosen = []
+    # rejection sampling in seeded batches: deterministic for a seed
+    for _ in range(20):
+        p = rng.uniform(p_lo, p_hi, 2 * count)
+        fc = rng.uniform(f_lo, f_hi, 2 * count)
+        frames = sim.frames(p, contact_n=fc, noise=False)
+        good = np.flatnonzero(frames.valid & (frames.tip_angle_rad >= min_angle))
+        chosen.extend((frames.select(slice(i, i + 1)), fc[i]) for i in good)
+        if len(chosen) >= count:
+            break
+    else:
+        raise ConfigError(
+            f"contact: found only {len(chosen)} of {count} configurations with a stable contact and a tip angle "
+            f">= {min_tip_angle_deg} deg; widen pressure_range_pa or lower force_range_n"
+        )
+    chosen = chosen[:count]
+    picked = chosen[0][0]
+    for f, _ in chosen[1:]:
+        picked = _concat(picked, f)
+    fc = np.repeat([c for _, c in chosen], n)
+    frames = _repeat(picked, n)
+    return _write_frames(
+        sim, rng, out, "contact.csv", frames, rate, "contact", seed, {"config": np.repeat(np.arange(count), n)}, fc
+    )
+
+
+def _concat(a, b):
+    from bendsense.sim.actuator import ActuatorFrames
+
+    fields = {k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in a.__dataclass_fields__ if k != "s_m"}
+    return ActuatorFrames(s_m=a.s_m, **fields)
+
+
+def _time_varying(sim, rng, out, seed, *, rate_hz, duration_s, contact_n):
+    rate = _positive_option("rate_hz", rate_hz)
+    total = round(rate * _positive_option("duration_s", duration_s))
+    rows = list(_stream_frames(sim, rate, max(1, round(rate * 0.1)), total, float(contact_n), rng, True))
+    keep = np.array([truth["valid"] for _, _, truth in rows])
+    excluded = int(keep.size - keep.sum())
+    rows = [r for r, k in zip(rows, keep, strict=True) if k]
+    truth_keys = ("effective_pressure_pa", "fx_n", "fy_n", "fc_n", "tip_x_m", "tip_y_m", "tip_angle_rad")
+    extra = {k: np.array([t[k] for _, _, t in rows]) for k in truth_keys}
+    session = Session(
+        np.array([t["t_s"] for _, _, t in rows]),
+        np.array([c for _, c, _ in rows], dtype=float),
+        np.array([p for p, _, _ in rows]),
+        meta=_meta("time-varying", seed, rate_hz=rate, excluded_frames=excluded),
+        extra=extra,
+    )
+    write_session_csv(session, out / "session.csv")
+    with open(out / "truth.npz", "wb") as fh:
+        np.savez(
+            fh,
+            s_m=rows[0][2]["s_m"] if rows else sim.s_m,
+            positions_m=np.array([t["positions_m"] for _, _, t in rows]).reshape(-1, sim.n_points, 2),
+            angle_rad=np.array([t["angle_rad"] for _, _, t in rows]).reshape(-1, sim.n_points),
+        )
+    return {"frames": len(rows), "excluded_frames": excluded, "files": ["session.csv", "truth.npz"]}
+
+
+_WRITERS = {
+    "calibration": _calibration,
+    "validation": _validation,
+    "tip-loads": _tip_loads,
+    "contact": _contact,
+    "time-varying": _time_varying,
+}
+
+
+# --------------------------------------------------------------------------- entry point
+
+
+def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overwrite: bool = False, **options) -> Path:
+    """Write a simulated scenario (or all of them) with ground truth.
+
+    Parameters
+    ----------
+    scenario : str
+        One of :data:`SCENARIOS` or ``"all"`` (each in a subdirectory of ``out_dir``
+        named after it).
+    out_dir : path
+        Directory to create; written atomically (a temporary directory renamed at the
+        end).
+    config : Config or path, optional
+        The true actuator and sensor; default the paper's prototype.
+    seed : int or None
+        Seed of the sensor hardware, the noise and the random configurations.
+    overwrite : bool
+        Replace an existing ``out_dir``.
+    **options
+        ``noise_counts`` [counts]; model mismatch ``ei_error``, ``k0_error``,
+        ``base_rotation_rad_per_rad``, ``hysteresis_pa`` (see
+        :mod:`bendsense.sim.actuator`); per scenario: ``frames_per_strip``,
+        ``radii_m`` (calibration, validation), ``frames_per_config`` (tip-loads,
+        contact), ``pressures_pa``, ``loads_n`` (tip-loads), ``n_configs``,
+        ``pressure_range_pa``, ``force_range_n``, ``min_tip_angle_deg`` (contact),
+        ``duration_s``, ``contact_n`` (time-varying), ``rate_hz`` (all). With ``"all"``
+        each scenario takes the options it knows.
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+
+    Raises
+    ------
+    ConfigError
+        An unknown scenario or option, or an invalid value.
+    FileExistsError
+        If ``out_dir`` exists and ``overwrite`` is false.
+    """
+    return _simulate(scenario, out_dir, config, seed, overwrite=overwrite, **options)[0]
+
+
+def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **options):
+    """Do :func:`simulate`; also return ``{scenario: summary}``."""
+    if scenario != "all" and scenario not in SCENARIOS:
+        raise ConfigError(f"scenario: must be one of {', '.join(SCENARIOS)}, all; got {scenario!r}")
+    names = list(SCENARIOS) if scenario == "all" else [scenario]
+    known = set(_ACTUATOR_OPTIONS).union(*(_OPTIONS[n] for n in names))
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ConfigError(f"options: unknown {', '.join(unknown)} for {scenario}; allowed: {', '.join(sorted(known))}")
+    out = Path(out_dir)
+    if out.exists() and not (overwrite and out.is_dir()):
+        raise FileExistsError(f"{out}: exists (use overwrite=True / --overwrite)")
+    config = _config(config)
+    actuator_options = {k: v for k, v in options.items() if k in _ACTUATOR_OPTIONS}
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+    summaries = {}
+    try:
+        for name in names:
+            target = tmp if scenario != "all" else tmp / name
+            target.mkdir(exist_ok=True)
+            sim = _actuator(config, seed, **actuator_options)
+            opts = {**_OPTIONS[name], **{k: v for k, v in options.items() if k in _OPTIONS[name]}}
+            summary = _WRITERS[name](sim, _stream(seed, name), target, seed, **opts)
+            _write_description(target, name, seed, config, actuator_options, opts, summary)
+            summary["files"].append("scenario.yaml")
+            summaries[name] = {**summary, "path": out if scenario != "all" else out / name}
+        _public(tmp)
+        _replace_dir(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out, summaries
+
+
+def _plain(value):
+    if isinstance(value, (tuple, list, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return float(value)
+    if isinstance(value, (np.integer, int)) and not isinstance(value, bool):
+        return int(value)
+    return value
+
+
+def _write_description(target, name, seed, config, actuator_options, options, summary):
+    from bendsense import __version__
+
+    doc = {
+        "format": _FORMAT,
+        "version": _FORMAT_VERSION,
+        "scenario": name,
+        "seed": seed,
+        "bendsense": __version__,
+        "options": {k: _plain(v) for k, v in {**actuator_options, **options}.items()},
+        "frames": summary["frames"],
+        "excluded_frames": summary["excluded_frames"],
+        "files": summary["files"],
+        "config": config.to_dict(),
+    }
+    (target / "scenario.yaml").write_text(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True), encoding="utf-8")
+
+
+def _public(root: Path) -> None:
+    """Give the tree the usual permissions: temporary files and directories are private."""
+    umask = os.umask(0)
+    os.umask(umask)
+    for path in (root, *root.rglob("*")):
+        path.chmod((0o777 if path.is_dir() else 0o666) & ~umask)
+
+
+def _replace_dir(tmp: Path, out: Path) -> None:
+    """Move ``tmp`` to ``out``, replacing an existing ``out`` only once the new one is complete."""
+    if not out.exists():
+        os.replace(tmp, out)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+    os.replace(out, old / out.name)
+    try:
+        os.replace(tmp, out)
+    except BaseException:
+        os.replace(old / out.name, out)
+        raise
+    finally:
+        with contextlib.suppress(OSError):
+            shutil.rmtree(old)
