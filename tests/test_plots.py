@@ -191,6 +191,10 @@ def test_time_series_force_band_and_curvatures(results_dir, tmp_path):
     assert ax_f.get_ylabel() == "tip force [N]"
     assert labels(ax_k) == ("time [s]", "curvature κ_i [1/m]")
     assert fig.axes[2].get_ylabel() == "segment i"  # the segments' colour bar
+    assert fig.axes[2].get_ylim() == (0.5, N + 0.5)
+    # both panels keep the same width: the colour bar has its own column
+    fig.canvas.draw()
+    np.testing.assert_allclose(ax_f.get_position().x1, ax_k.get_position().x1)
     assert len(ax_k.lines) == N
     res = read_results(results_dir)
     fy = [line for line in ax_f.lines if line.get_label() == "F_y"][0]
@@ -199,7 +203,7 @@ def test_time_series_force_band_and_curvatures(results_dir, tmp_path):
     ys = band.get_paths()[0].vertices[:, 1]
     np.testing.assert_allclose([ys.min(), ys.max()], [res["fy_n"].min() - 0.04, res["fy_n"].max() + 0.04])
     legend = [t.get_text() for t in ax_f.get_legend().get_texts()]
-    assert legend == ["F_x", "F_x ± 2σ", "F_y", "F_y ± 2σ", "status not ok"]
+    assert legend == ["F_x ± 2σ", "F_y ± 2σ", "status not ok"]
     saved(fig, tmp_path / "series.png")
 
 

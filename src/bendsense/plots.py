@@ -37,7 +37,7 @@ def _new_axes(ax, **kwargs):
         return ax
     import matplotlib.pyplot as plt
 
-    _, ax = plt.subplots(**kwargs)
+    _, ax = plt.subplots(layout="constrained", **kwargs)
     return ax
 
 
@@ -335,7 +335,7 @@ def _as_results(results):
     return results
 
 
-def plot_time_series(results, ax=None, *, cmap: str = "viridis"):
+def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis"):
     """Plot tip force (with ±2σ band) and segment curvatures over time (two panels).
 
     Parameters
@@ -344,6 +344,9 @@ def plot_time_series(results, ax=None, *, cmap: str = "viridis"):
         Results as read by :func:`bendsense.results.read_results`, or their directory.
     ax : sequence of two matplotlib.axes.Axes, optional
         Force and curvature axes; default a new figure with two panels sharing time.
+    cax : matplotlib.axes.Axes, optional
+        Axes for the segments' colour bar; default: a slot beside the curvature panel
+        (in a new figure), or space taken from the curvature axes (with ``ax``).
     cmap : str
         Colour map of the segments (base: dark, tip: light).
 
@@ -362,7 +365,13 @@ def plot_time_series(results, ax=None, *, cmap: str = "viridis"):
     if ax is None:
         import matplotlib.pyplot as plt
 
-        fig, (ax_f, ax_k) = plt.subplots(2, 1, sharex=True, figsize=(8, 6), layout="constrained")
+        fig = plt.figure(figsize=(8, 6), layout="constrained")
+        # the colour bar gets its own column so that both panels keep the same width
+        grid = fig.add_gridspec(2, 2, width_ratios=(1, 0.025))
+        ax_f = fig.add_subplot(grid[0, 0])
+        ax_k = fig.add_subplot(grid[1, 0], sharex=ax_f)
+        cax = fig.add_subplot(grid[1, 1]) if cax is None else cax
+        ax_f.tick_params(labelbottom=False)
     else:
         ax_f, ax_k = ax
         fig = ax_f.figure
@@ -373,10 +382,13 @@ def plot_time_series(results, ax=None, *, cmap: str = "viridis"):
     colors = _colors(n, cmap)
     for i in range(n):
         ax_k.plot(t, kappa[:, i], color=colors[i], linewidth=1.0)
-    # one discrete colour per segment, so that the colour bar reads as a legend of 16 lines
+    # one discrete colour per segment, so that the colour bar reads as a legend of the N lines
     norm = mpl.colors.BoundaryNorm(np.arange(0.5, n + 1.5), n)
     mappable = mpl.cm.ScalarMappable(norm=norm, cmap=mpl.colors.ListedColormap(colors))
-    bar = fig.colorbar(mappable, ax=ax_k, label="segment i", pad=0.01)
+    if cax is None:
+        bar = fig.colorbar(mappable, ax=ax_k, label="segment i", pad=0.01)
+    else:
+        bar = fig.colorbar(mappable, cax=cax, label="segment i")
     step = max(1, n // 4)
     bar.set_ticks(sorted({1, n, *range(step, n + 1, step)}))
     ax_k.set_ylabel("curvature κ_i [1/m]")
@@ -386,24 +398,28 @@ def plot_time_series(results, ax=None, *, cmap: str = "viridis"):
 
 
 def _force_panel(ax, results, t):
+    ax.set_ylabel("tip force [N]")
     if not results.has_forces:
         ax.text(0.5, 0.5, "no force estimate", transform=ax.transAxes, ha="center", va="center", color="0.4")
-        ax.set_ylabel("tip force [N]")
         return
+    handles = []
     for comp, color, label in (("x", "C0", "F_x"), ("y", "C3", "F_y")):
         f = np.asarray(results[f"f{comp}_n"], dtype=float)
         s = np.asarray(results[f"f{comp}_std_n"], dtype=float)
-        ax.plot(t, f, color=color, linewidth=1.4, label=label)
-        ax.fill_between(t, f - 2 * s, f + 2 * s, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
+        (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label)
+        band = ax.fill_between(t, f - 2 * s, f + 2 * s, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
+        handles.append((line, band))
+    labels = ["F_x ± 2σ", "F_y ± 2σ"]
     status = np.asarray(results["status"]) if "status" in results.columns else None
     if status is not None and np.any(status != "ok"):
         bad = status != "ok"
-        ax.plot(t[bad], np.zeros(bad.sum()), "|", color="0.5", transform=ax.get_xaxis_transform(),
-                markersize=8, label="status not ok")
+        (ticks,) = ax.plot(t[bad], np.zeros(bad.sum()), "|", color="0.5", transform=ax.get_xaxis_transform(),
+                           markersize=8, label="status not ok")
+        handles.append(ticks)
+        labels.append("status not ok")
     ax.axhline(0.0, color="k", linewidth=0.5)
-    ax.set_ylabel("tip force [N]")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize="small", ncols=2, loc="best")
+    ax.legend(handles, labels, fontsize="small", ncols=len(labels), loc="best", framealpha=0.8)
 
 
 def plot_calibration(calibration, data=None, ax=None):
@@ -512,16 +528,17 @@ def plot_results(results, path=None, *, max_shapes: int = 8, dpi: int = 150, tit
         import matplotlib.pyplot as plt
 
         fig = plt.figure(figsize=(12, 6.5), layout="constrained")
-    grid = fig.add_gridspec(2, 2, width_ratios=(1, 1.6))
+    grid = fig.add_gridspec(2, 3, width_ratios=(1, 1.6, 0.04))
     ax_s = fig.add_subplot(grid[:, 0])
     ax_f = fig.add_subplot(grid[0, 1])
     ax_k = fig.add_subplot(grid[1, 1], sharex=ax_f)
+    cax = fig.add_subplot(grid[1, 2])
     tip = np.column_stack([results["tip_x_m"], results["tip_y_m"]]).astype(float) * MM
     ax_s.plot(tip[:, 0], tip[:, 1], color="0.6", linewidth=0.8, zorder=0, label="tip path")
     plot_shapes(results, ax_s, max_frames=max_shapes, legend=False)
     ax_s.legend(fontsize="small", loc="best")
     ax_s.set_title("shapes", fontsize="medium")
-    plot_time_series(results, (ax_f, ax_k))
+    plot_time_series(results, (ax_f, ax_k), cax=cax)
     ax_f.set_title("tip force (base frame)", fontsize="medium")
     ax_f.tick_params(labelbottom=False)
     frames = len(results["t_s"])
