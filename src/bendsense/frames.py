@@ -80,9 +80,12 @@ class StatusBits(enum.IntFlag):
     TX_OVERFLOW = 8
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Sample:
     """One SAMPLE frame.
+
+    Frame classes are slotted dataclasses, not frozen ones, because building a frozen
+    instance costs ~5x more and the decoder makes one per frame; treat them as read-only.
 
     Attributes
     ----------
@@ -111,7 +114,7 @@ class Sample:
     adc: tuple
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Hello:
     """HELLO frame: what the board is (its answer to HELLO_REQUEST)."""
 
@@ -134,7 +137,7 @@ class Hello:
         }
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Text:
     """TEXT frame: a log line from the firmware."""
 
@@ -143,7 +146,7 @@ class Text:
     text: str
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Command:
     """Host-to-device frame (START, STOP, HELLO_REQUEST); carries no sequence gap accounting."""
 
@@ -184,20 +187,36 @@ def cobs_decode(data: bytes) -> bytes:
     FrameError
         If ``data`` contains a zero byte or a block runs past its end.
     """
-    out = _cobs_decode(bytes(data))
+    data = bytes(data)
+    out = None if 0 in data else _cobs_decode(data)
     if out is None:
         raise FrameError(f"COBS: invalid encoding of {len(data)} bytes (zero byte or block past the end)")
     return out
 
 
 def _cobs_decode(data: bytes) -> bytes | None:
-    # Hot path: no exceptions, None for invalid input.
+    # Hot path, called on segments already split at 0x00: no exceptions, None if invalid.
+    # Every block but the last is followed by a zero, so joining the blocks with b"\x00"
+    # decodes; 0xFF blocks (runs of 254 non-zero bytes, rare) take the general loop.
+    n = len(data)
+    parts = []
+    i = 0
+    while i < n:
+        code = data[i]
+        if code == 0xFF:
+            return _cobs_decode_general(data)
+        end = i + code
+        if end > n or code == 0:
+            return None
+        parts.append(data[i + 1 : end])
+        i = end
+    return b"\x00".join(parts) if parts else None
+
+
+def _cobs_decode_general(data: bytes) -> bytes | None:
     n = len(data)
     if n == 0 or 0 in data:
         return None
-    code = data[0]
-    if code == n:  # the common case: a body without zero bytes
-        return data[1:]
     out = bytearray()
     i = 0
     while i < n:
@@ -230,6 +249,16 @@ def _adc_struct(n: int) -> struct.Struct:
     s = _ADC.get(n)
     if s is None:
         s = _ADC[n] = struct.Struct(f"<{n}H")
+    return s
+
+
+_SAMPLE = {}
+
+
+def _sample_struct(n: int) -> struct.Struct:
+    s = _SAMPLE.get(n)
+    if s is None:
+        s = _SAMPLE[n] = struct.Struct(f"<BBHIBBHi{n}H")
     return s
 
 
@@ -363,13 +392,15 @@ def _parse_body(body: bytes, adc_bits: int | None):
     if ftype == 1:
         if plen < 18:
             return _MALFORMED
-        _, _, seq, t_us, nch, status, tx_drops, p = _SAMPLE_HEAD.unpack_from(body)
+        nch = body[8]
         if not 1 <= nch <= MAX_CHANNELS or plen != 16 + 2 * nch:
             return _MALFORMED
-        adc = _adc_struct(nch).unpack_from(body, 16)
+        v = _sample_struct(nch).unpack_from(body)
+        adc = v[8:]
         if adc_bits is not None and max(adc) >> adc_bits:
             return _MALFORMED
-        return Sample(seq, t_us, nch, status, tx_drops, None if p == NO_PRESSURE else p, adc)
+        p = v[7]
+        return Sample(v[2], v[3], nch, v[5], v[6], None if p == NO_PRESSURE else p, adc)
     if ftype == 2:
         if not 14 <= plen <= 14 + MAX_FIRMWARE_BYTES:
             return _MALFORMED
