@@ -298,6 +298,20 @@ def test_soft_region_is_not_mistaken_for_buckling():
     assert cold.tip_position_m[0] > 0.5 * L
 
 
+def test_snap_across_to_the_other_side_is_followed():
+    # bend toward +x, push toward −x and compress: the tracked branch crosses over to
+    # the −x side near λ ≈ 0.68 while an unstable, almost straight equilibrium stays
+    # close to the path (both methods must step past it rather than land on it)
+    p = 17688.04
+    f = np.array([-0.02581754, -0.43908921])
+    args = (L, ei_of(p), 0.07376836249353437 / L, f, GRAVITY)
+    fast = solve_beam(*args)
+    ref = solve_beam(*args, method="shooting")
+    assert fast.success and ref.success
+    np.testing.assert_allclose(fast.positions_m, ref.positions_m, atol=1e-8 * L)
+    assert fast.tip_position_m[0] < -0.5 * L
+
+
 def test_fast_matches_shooting_on_random_workspace_frames():
     rng = np.random.default_rng(11)
     n = 40

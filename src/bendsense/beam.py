@@ -844,14 +844,17 @@ def _shoot_one(L, ei, k0, base, F, w, s_m, rtol, atol, max_newton):
         guess = c + dc * (lt - lam)
         cn, sol = newton(guess, lt)
         # a corrector far from the predictor means Newton jumped to another branch
-        if cn is None or abs(cn - guess) > max(0.5 * abs(guess - c), 0.05):
+        # ... and an unstable landing after a long step may be one too: refine the step
+        jump = cn is None or abs(cn - guess) > max(0.5 * abs(guess - c), 0.05)
+        unstable = not jump and status == 1 and not stable(sol)
+        if jump or (unstable and lt - lam > _LOCATE):
             dlam *= 0.25
             if dlam < 1e-4:
                 status, where = 3, lam
                 break
             continue
-        if status == 1 and not stable(sol):
-            status, where = 2, lt
+        if unstable:
+            status, where = 2, lam
         c, lam, dc = cn, lt, slope(sol)
         dlam = min(dlam * 1.5, 1.0)
     sol = shoot(c, lam, t_eval=np.unique(np.concatenate([s_m / L, [1.0]])))
