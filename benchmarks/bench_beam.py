@@ -8,6 +8,7 @@ cantilever under a perpendicular tip load (Bisshopp & Drucker 1945).
 
 import argparse
 import math
+import os
 import time
 import warnings
 
@@ -126,7 +127,9 @@ def main():
             err = np.linalg.norm(sol.tip_position_m - tip)
             row(f"tip error vs exact elastica, α = {alpha:g}, {method}", err / L, "× L", "target ≤ 1e-6")
 
-    print(f"bendsense beam benchmark (fast: {DEFAULT_NODES} Chebyshev nodes)")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"bendsense beam benchmark (fast: {DEFAULT_NODES} Chebyshev nodes; load average {load:.1f}")
+    print(f"on {os.cpu_count()} CPUs: timings are wall clock, best of several runs)")
     width = max(len(r[0]) for r in rows)
     print(f"{'quantity':<{width}}  {'value':>12}  unit       note")
     print("-" * (width + 40))
