@@ -187,7 +187,7 @@ def test_session_names_are_unique(tmp_path):
 # --- processing ----------------------------------------------------------------------------
 
 
-def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_path):
+def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_path, caplog):
     runs, truth = sessions
     out = tmp_path / "out"
     with cf.ProcessPoolExecutor(2) as pool:
@@ -199,6 +199,7 @@ def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_
     assert {n: s.status for n, s in rows.items()} == {"a": "ok", "b": "ok", "broken": "failed", "native": "ok"}
     assert "line 3, column ch2: expected a number, got 'oops'" in rows["broken"].reason
     assert not (out / "broken").exists()
+    assert [r.getMessage().split(":")[:2] for r in caplog.records] == [["broken", " failed"]]  # live, as it happens
     assert report.frames == 3 * FRAMES and report.n_ok == 3 and report.n_failed == 1 and not report.ok
     assert report.frames_per_s == pytest.approx(report.frames / report.wall_s)
     assert all(rows[n].seconds > 0 and rows[n].frames == FRAMES for n in truth)
@@ -208,7 +209,7 @@ def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_
 
     # a second run skips what exists and retries the failure
     stamp = (out / "a" / "results.csv").stat().st_mtime_ns
-    again = process_sessions(runs, out, calibration=linear_calibration(), workers=0, estimate=ESTIMATE, progress=False)
+    again = process_sessions(runs, out, calibration=linear_calibration(), workers=0, estimate=ESTIMATE, progress=True)
     assert {s.name: s.status for s in again.sessions} == {
         "a": "skipped", "b": "skipped", "broken": "failed", "native": "skipped"
     }  # fmt: skip

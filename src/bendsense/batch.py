@@ -18,6 +18,7 @@ finish. Outputs that exist are skipped unless ``overwrite``.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import logging
 import os
 import time
 import warnings
@@ -32,6 +33,8 @@ from bendsense.errors import BendsenseError, SessionError
 __all__ = ["SessionOutcome", "BatchReport", "discover_sessions", "process_session", "process_sessions"]
 
 STATUSES = ("ok", "skipped", "failed")
+
+log = logging.getLogger("bendsense.batch")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -459,7 +462,7 @@ def process_sessions(
     ConfigError
         If the config or the calibration file is invalid.
     """
-    from tqdm.auto import tqdm
+    from tqdm import tqdm
 
     from bendsense.calibration import Calibration
     from bendsense.config import Config, load_config
@@ -508,7 +511,7 @@ def process_sessions(
         rows[i] = row
         bar.update(1)
         if row.status == "failed":
-            bar.write(f"{row.name}: failed: {row.reason}")
+            log.warning("%s: failed: %s", row.name, row.reason)
 
     own = None
     try:
