@@ -126,7 +126,7 @@ def plot(target, figure_path, shapes, dpi, overwrite):
       bendsense load run.csv --calibration cal.yaml reconstruct estimate save out/ plot FIG.png
           in a chain: plot the shapes (and forces) computed earlier in the chain.
 
-    With -o, TARGET is always a results directory; without it, TARGET is the
+    With -o the argument is always a results directory; without it, it is the
     figure file and a 'reconstruct' step must come earlier in the chain. The
     format follows the file suffix (.png, .pdf, .svg, ...). Existing figures are
     replaced only with --overwrite.
@@ -154,6 +154,12 @@ def plot(target, figure_path, shapes, dpi, overwrite):
             )
         if out.exists() and not overwrite:
             raise click.UsageError(f"{out}: exists (use --overwrite to replace it)")
+        from matplotlib.figure import Figure
+
+        formats = Figure().canvas.get_supported_filetypes()
+        if out.suffix[1:].lower() not in formats:
+            raise click.BadParameter(f"{out}: unknown figure format {out.suffix!r}; use one of "
+                                     f"{', '.join('.' + f for f in sorted(formats))}", param_hint="FIG")
         plot_results(source, out, max_shapes=shapes, dpi=dpi)
         click.echo(f"wrote {out}")
         return state
