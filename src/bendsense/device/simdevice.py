@@ -420,12 +420,18 @@ class SimulatedDevice:
         A disconnect after N frames then loses none of them (a cable pulled between frames).
         """
         end = time.monotonic() + timeout_s
+        empty_since = None
         while time.monotonic() < end:
             try:
                 waiting = struct.unpack("i", fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0"))[0]
             except OSError:
                 return
-            if waiting == 0:
+            now = time.monotonic()
+            if waiting:
+                empty_since = None
+            elif empty_since is None:
+                empty_since = now
+            elif now - empty_since > 0.05:  # bytes may still sit in the pty's flip buffer briefly
                 return
             time.sleep(0.005)
 
