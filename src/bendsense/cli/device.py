@@ -78,8 +78,8 @@ def record(
 ):
     """Record the board on PORT to a native session directory.
 
-    PORT is a serial port (``/dev/ttyACM0``, ``COM3``), a pseudo-terminal path or a
-    pyserial URL. A live status line on stderr counts frames, gaps and errors; Ctrl-C
+    PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path or a
+    pyserial URL (loop://, socket://HOST:PORT). A live status line on stderr counts frames, gaps and errors; Ctrl-C
     stops the recording and leaves a complete session.
     """
     from bendsense.config import load_config
@@ -153,7 +153,7 @@ def record(
 def sim_device(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart):
     """Run a simulated sensor board on a pseudo-terminal and print its port path.
 
-    Open the printed path with ``bendsense record PATH -o SESSION`` or ``live``. Runs
+    Open the printed path with 'bendsense record PATH -o SESSION' or 'live'. Runs
     until Ctrl-C or for --seconds.
     """
     from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
