@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dgesv as _dgesv
 
-from bendsense.errors import ConvergenceError
+from bendsense.errors import ConvergenceError, ConvergenceWarning
 
 __all__ = [
     "BeamSolution",
@@ -93,7 +93,7 @@ _FIRST_STEP = 1.0  # first continuation step, in units of the convexity bound
 _QUAD_SENS = 1e-8
 
 
-class BeamConvergenceWarning(RuntimeWarning):
+class BeamConvergenceWarning(ConvergenceWarning):
     """Some frames of a beam solve did not converge or are unstable (``success=False``)."""
 
 

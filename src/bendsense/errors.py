@@ -12,6 +12,8 @@ __all__ = [
     "DeviceError",
     "ConvergenceError",
     "SessionError",
+    "BendsenseWarning",
+    "ConvergenceWarning",
 ]
 
 
@@ -37,3 +39,11 @@ class DeviceError(BendsenseError, OSError):
 
 class ConvergenceError(BendsenseError, RuntimeError):
     """A solver did not converge and ``strict=True`` was requested."""
+
+
+class BendsenseWarning(UserWarning):
+    """Base class of all bendsense warnings."""
+
+
+class ConvergenceWarning(BendsenseWarning, RuntimeWarning):
+    """Some frames of a batch did not converge; they are flagged with ``success=False``."""

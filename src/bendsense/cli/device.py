@@ -8,17 +8,7 @@ from pathlib import Path
 
 import click
 
-
-class _Command(click.Command):
-    """A command whose options may follow its arguments inside the chained group.
-
-    click's chain mode makes sub-contexts with ``allow_interspersed_args=False``, which
-    would reject ``record PORT -o SESSION``; these commands end a chain anyway.
-    """
-
-    def make_context(self, info_name, args, parent=None, **extra):
-        extra["allow_interspersed_args"] = True
-        return super().make_context(info_name, args, parent=parent, **extra)
+from bendsense.cli._common import InterspersedCommand
 
 
 def _fail(err) -> click.ClickException:
@@ -40,7 +30,7 @@ def _status_line(stats) -> str:
     )
 
 
-@click.command("record", cls=_Command)
+@click.command("record", cls=InterspersedCommand)
 @click.argument("port")
 @click.option(
     "-o", "--output", required=True, type=click.Path(file_okay=False, path_type=Path), help="Session directory."
@@ -133,7 +123,7 @@ def record(
     click.echo(f"{outcome}: {stats.records} frames written to {output}", err=True)
 
 
-@click.command("sim-device", cls=_Command)
+@click.command("sim-device", cls=InterspersedCommand)
 @click.option("--rate", "rate_hz", type=float, default=500.0, show_default=True, help="Frame rate [Hz].")
 @click.option("--seconds", type=float, help="Run time [s] (default: until Ctrl-C).")
 @click.option("--drop", type=float, default=0.0, show_default=True, help="Probability of a dropped frame.")

@@ -22,6 +22,7 @@ class PipelineGroup(click.Group):
     """A chained group that runs pipeline steps in order and turns user errors into one line."""
 
     def invoke(self, ctx):
+        """Invoke the chain; a user mistake becomes one ``Error:`` line and exit code 1."""
         try:
             return super().invoke(ctx)
         except BendsenseError as err:
