@@ -226,7 +226,9 @@ class MaterialConfig(_Section):
 
     def __post_init__(self):
         p = self.section
-        object.__setattr__(self, "shear_modulus_pa", _number(f"{p}.shear_modulus_pa", self.shear_modulus_pa, positive=True))
+        object.__setattr__(
+            self, "shear_modulus_pa", _number(f"{p}.shear_modulus_pa", self.shear_modulus_pa, positive=True)
+        )
         object.__setattr__(
             self,
             "sensor_stiffness_nm_per_rad",
