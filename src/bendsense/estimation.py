@@ -1,0 +1,1114 @@
+"""Tip force estimation from a reconstructed shape (paper section IV-C, eq. 18 and 21).
+
+The estimate is the force whose beam shape (paper eq. 13–17) is closest to the
+reconstructed shape ``p⁰(s)`` at the frame's pressure::
+
+    F̂ = argmin_F ∫₀^Lc ‖p⁰(s) − p(s; F, P)‖² ds,   F = F_fixed + D u,   u ≥ lower   (eq. 18)
+
+compared at the same arc length ``s`` over the common length ``Lc = min(L_sensor,
+L_actuator)`` (paper: 0.132 m and 0.134 m). ``K0(P)`` comes from the free-bending model
+(eq. 8–12), ``EI(P)`` from the stiffness model (eq. 15), the distributed load from
+``config.weight_per_length_n_per_m``, the base angle is 0.
+
+Quadrature
+    For a PCC shape (a :class:`~bendsense.pcc.Shape` or segment curvatures) the
+    integral is a composite Gauss–Legendre rule over the sensor segments (clipped to
+    ``Lc``) with ``config.estimation.n_points`` nodes in total: every segment gets
+    ``n_points // segments`` nodes and the remainder goes to the longest segments. The
+    PCC shape is smooth inside a segment and its curvature jumps at the junctions, so a
+    rule per segment integrates it to ~1e-10 relative with 2–3 nodes per segment, where
+    one rule over the whole length would converge only algebraically. With fewer points
+    than segments one Gauss–Legendre rule over ``[0, Lc]`` is used. A shape given as
+    positions only (a :class:`~bendsense.beam.BeamSolution`, any object with ``s_m`` and
+    ``positions_m`` but no ``curvature_per_m``, or an array with ``s_m=``) is compared at
+    its own points in ``[0, Lc]`` with trapezoid weights, so that a shape made by the
+    beam model itself is matched exactly.
+
+Constraints (DESIGN section 2), ``F = D u`` with ``D`` (2, k) of orthonormal columns
+    ``none``: ``D = I``, ``u = (Fx, Fy)``.
+    ``vertical``: ``D = (0, 1)``, ``u = Fy`` (the paper's tip-load case ``Fx = 0``).
+    ``horizontal``: ``D = (1, 0)``, ``u = Fx``.
+    ``direction``: ``D`` = the unit vector ``direction`` (option or config).
+    ``normal``: contact force normal to the tip tangent (eq. 21,
+    ``Fx sin φ_L + Fy cos φ_L = 0``): ``D = n_tip = (−cos φ_L, sin φ_L)``, so a
+    positive ``u`` pushes against the pressure-driven bending (toward ``−x`` for a
+    straight tip). ``φ_L`` is the free-motion tip angle at the frame's pressure
+    (``tip_angle_source="model"``, the paper) or the reconstructed tip angle
+    (``"shape"``).
+    ``follower``: the unit tip tangent ``(sin φ_L, cos φ_L)`` rotated counter-clockwise
+    (from ``+x`` toward ``+y``) by ``follower_angle_rad``:
+    ``D = (sin(φ_L − α), cos(φ_L − α))``; the default ``α = π/2`` is the ``normal``
+    direction.
+    ``push_only=True`` bounds ``u ≥ 0`` (1-D constraints only).
+
+Solvers
+    ``"fast"`` (default): Gauss–Newton on ``u`` with a trust region and projection on
+    the bounds, using the analytic shape sensitivities ∂p/∂F of the spectral beam
+    solver, vectorised over all frames. Each frame starts from the force that best
+    balances the bending moments of the reference shape (``EI (κ − K0) = −M_z``, linear
+    in F), and each beam solve starts Newton from the reference shape's tangent angles
+    (where the load makes the equilibrium unique; elsewhere load continuation from the
+    unloaded arc) or, within the iteration, from the previous state plus its
+    first-order change. Along a batch the frames are processed in rounds: round ``r``
+    solves frame ``r`` of every block of consecutive frames at once, its start
+    corrected by the previous frame's offset from that frame's moment-balance start.
+    Converged when the step (or the error left by the observed linear contraction) is
+    below ``XTOL_N`` = 1e-10 N. A trial shape that jumps away from its linear
+    prediction (onto another branch of equilibria, e.g. past buckling) is rejected.
+    ``"paper"``: the paper's algorithm as the baseline: the shooting beam solver inside
+    ``scipy.optimize.minimize`` with Nelder–Mead (MATLAB's fminsearch) on (Fx, Fy) for
+    ``none``, SLSQP (fmincon) with the equality constraint ``D⊥ · F = 0`` (and
+    ``D · F ≥ 0`` for ``push_only``) otherwise; a Python loop over frames, started
+    from the same moment-balance force so that both search the same basin.
+
+Uncertainty
+    Linear propagation of the sensor noise. With the weighted residual
+    ``r(u) = W^½ (p(s; u) − p⁰(s))`` and ``J = ∂r/∂u``, the optimum moves by
+    ``δu = (JᵀJ)⁻¹ Jᵀ W^½ δp⁰`` when the reconstructed shape moves by ``δp⁰``;
+    ``δp⁰ = (∂p⁰/∂κ)(∂κ/∂S) δS`` through the PCC kinematics (analytic) and the
+    differencing of eq. 3–4; ``δS_i = f_i'(ΔA_i) δΔA_i`` through the calibration's
+    slope (eq. 2) with ``Cov(ΔA) = diag(noise_std²)``. So ``Cov(F) = T Σ_S Tᵀ`` with
+    ``T = ∂F/∂S`` (including the change of ``D`` with the tip angle for
+    ``tip_angle_source="shape"``). The residuals of neighbouring points are strongly
+    correlated (one noisy coil bends the whole rest of the shape), which this accounts
+    for and ``s² (JᵀJ)⁻¹`` would not. A direction in which the shape does not depend on
+    the force (an axial load on a straight actuator: ``JᵀJ`` singular) gets an infinite
+    standard deviation. Without a ``calibration`` the shifts are taken as the signals
+    (unit slope, ``noise_std`` in metres of shift). When the noise is unknown (no
+    ``noise_std``, a calibration without ``noise_std``, ``config.estimation.
+    signal_noise_std = 0``) or the shape has no PCC curvatures, the fallback treats the
+    residuals as independent per point with the variance of the fit
+    (``uncertainty="residual"``), which is optimistic for correlated errors.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bendsense import beam as _beam
+from bendsense.errors import ConvergenceError
+
+__all__ = [
+    "ForceEstimate",
+    "estimate_force",
+    "constraint_basis",
+    "quadrature",
+    "CONSTRAINTS",
+    "METHODS",
+    "XTOL_N",
+]
+
+CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
+METHODS = ("fast", "paper")
+#: Gauss–Newton stops when its step is below this [N].
+XTOL_N = 1e-10
+_OK = "converged"
+_MAX_ITER = 100
+_BLOCK_FRAMES = 64  # fewest frames per warm-start round worth a vectorised call
+_MAX_ROUNDS = 32
+_COV_CHUNK = 2048
+_N_NODES = _beam.DEFAULT_NODES
+_STABLE_BOUND = math.pi**2 / 4  # below it (max |G| L²/EI) the beam's equilibrium is unique
+
+
+# --------------------------------------------------------------------------- result
+
+
+@dataclass(frozen=True, eq=False)
+class ForceEstimate:
+    """Estimated tip force (paper eq. 18), batched over leading axes ``...``.
+
+    Attributes
+    ----------
+    force_n : ndarray, shape (..., 2)
+        Tip force (Fx, Fy) in the base frame [N].
+    std_n : ndarray, shape (..., 2)
+        Standard deviation of each component from the sensor noise [N]; ``inf`` for a
+        component the shape cannot determine.
+    covariance_n2 : ndarray, shape (..., 2, 2)
+        Covariance of ``force_n`` [N²].
+    residual_m : ndarray, shape (...)
+        RMS distance between the reconstructed and the model shape over ``[0, Lc]`` [m].
+    success : ndarray of bool, shape (...)
+        Converged, with a stable beam equilibrium.
+    message : str or ndarray of str, shape (...)
+        ``"converged"`` or the reason for ``success=False``.
+    iterations : ndarray of int, shape (...)
+        Beam solves spent on each frame (objective evaluations for ``paper``).
+    wall_time_s : float
+        Wall time of the whole call [s].
+    method : str
+        ``"fast"`` or ``"paper"``.
+    constraint : str
+        The constraint (see the module docstring).
+    uncertainty : str
+        ``"propagated"`` (sensor noise through calibration and PCC) or ``"residual"``
+        (fallback from the fit residual).
+    tip_position_m : ndarray, shape (..., 2)
+        Tip of the model shape at the estimate [m].
+    state : ndarray, shape (..., n_nodes) or None
+        Beam state at the estimate, for warm starts (``initial=`` of the next call).
+    """
+
+    force_n: np.ndarray
+    std_n: np.ndarray
+    covariance_n2: np.ndarray
+    residual_m: np.ndarray
+    success: np.ndarray
+    message: object
+    iterations: np.ndarray
+    wall_time_s: float
+    method: str
+    constraint: str
+    uncertainty: str = "propagated"
+    tip_position_m: np.ndarray | None = None
+    state: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def batch_shape(self) -> tuple:
+        """Shape of the leading frame axes (``()`` for one frame)."""
+        return np.shape(self.force_n)[:-1]
+
+    def to_dict(self) -> dict:
+        """Plain lists and scalars, for JSON/YAML."""
+        return {
+            "force_n": np.asarray(self.force_n).tolist(),
+            "std_n": np.asarray(self.std_n).tolist(),
+            "covariance_n2": np.asarray(self.covariance_n2).tolist(),
+            "residual_m": np.asarray(self.residual_m).tolist(),
+            "success": np.asarray(self.success).tolist(),
+            "message": np.asarray(self.message).tolist(),
+            "iterations": np.asarray(self.iterations).tolist(),
+            "wall_time_s": float(self.wall_time_s),
+            "method": self.method,
+            "constraint": self.constraint,
+            "uncertainty": self.uncertainty,
+        }
+
+    def plot(self, ax=None, *, shape=None, t_s=None, scale_m_per_n: float = 0.1):
+        """Draw the estimate; returns the matplotlib axes.
+
+        One frame: the force as an arrow at the model tip (``scale_m_per_n`` metres per
+        newton), over ``shape`` if given. A batch: Fx and Fy against ``t_s`` (default the
+        frame index) with ±2σ bands.
+        """
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots()
+        force = np.asarray(self.force_n)
+        if force.ndim == 1:
+            if shape is not None:
+                pos = np.asarray(shape.positions_m).reshape(-1, 2)
+                ax.plot(pos[:, 0], pos[:, 1], "-", color="0.4")
+            tip = np.zeros(2) if self.tip_position_m is None else np.asarray(self.tip_position_m)
+            ax.annotate("", xy=tip + scale_m_per_n * force, xytext=tip,
+                        arrowprops={"arrowstyle": "->", "color": "C3"})
+            ax.plot([0.0, tip[0], tip[0] + scale_m_per_n * force[0]], [0.0, tip[1], tip[1] + scale_m_per_n * force[1]],
+                    alpha=0.0)
+            ax.plot([0.0], [0.0], "ks", markersize=4)
+            ax.set_xlabel("x [m]")
+            ax.set_ylabel("y [m]")
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.set_title(f"F = ({force[0]:.3g}, {force[1]:.3g}) N")
+            return ax
+        force = force.reshape(-1, 2)
+        std = np.asarray(self.std_n).reshape(-1, 2)
+        t = np.arange(len(force)) if t_s is None else np.asarray(t_s).reshape(-1)
+        for i, name in enumerate(("Fx", "Fy")):
+            ax.plot(t, force[:, i], label=name, color=f"C{i}")
+            band = np.where(np.isfinite(std[:, i]), 2.0 * std[:, i], np.nan)
+            ax.fill_between(t, force[:, i] - band, force[:, i] + band, color=f"C{i}", alpha=0.2)
+        ax.set_xlabel("t [s]" if t_s is not None else "frame")
+        ax.set_ylabel("force [N]")
+        ax.legend()
+        return ax
+
+
+# --------------------------------------------------------------------------- pure helpers
+
+
+def quadrature(lengths_m, length_m: float, n_points: int):
+    """Composite Gauss–Legendre nodes and weights over the PCC segments on ``[0, Lc]``.
+
+    Parameters
+    ----------
+    lengths_m : array_like, shape (N,)
+        Segment lengths l_i [m].
+    length_m : float
+        Common length Lc <= Σ l_i over which to integrate [m].
+    n_points : int
+        Total number of nodes.
+
+    Returns
+    -------
+    s_m : ndarray, shape (n_points,)
+        Nodes, ascending [m].
+    weights_m : ndarray, shape (n_points,)
+        Weights, summing to Lc [m].
+    """
+    lengths = np.asarray(lengths_m, dtype=float)
+    bounds = np.minimum(np.concatenate(([0.0], np.cumsum(lengths))), length_m)
+    seg = np.diff(bounds)
+    keep = seg > 1e-12 * length_m
+    a, h = bounds[:-1][keep], seg[keep]
+    n = int(n_points)
+    if n < h.size:
+        x, w = np.polynomial.legendre.leggauss(n)
+        return 0.5 * length_m * (x + 1.0), 0.5 * length_m * w
+    count = np.full(h.size, n // h.size)
+    count[np.argsort(-h, kind="stable")[: n % h.size]] += 1
+    s, wt = [], []
+    for a_i, h_i, q in zip(a, h, count):
+        x, w = np.polynomial.legendre.leggauss(int(q))
+        s.append(a_i + 0.5 * h_i * (x + 1.0))
+        wt.append(0.5 * h_i * w)
+    return np.concatenate(s), np.concatenate(wt)
+
+
+def _trapezoid(s):
+    w = np.zeros_like(s)
+    if s.size > 1:
+        ds = np.diff(s)
+        w[:-1] += 0.5 * ds
+        w[1:] += 0.5 * ds
+    return w
+
+
+def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0), follower_angle_rad=math.pi / 2):
+    """The matrix D (..., 2, k) of the linear force parametrisation ``F = D u``.
+
+    Parameters
+    ----------
+    constraint : str
+        One of :data:`CONSTRAINTS` (sign conventions in the module docstring).
+    tip_angle_rad : array_like, shape (...)
+        Tip tangent angle φ_L for ``normal`` and ``follower`` [rad].
+    direction : array_like, shape (2,)
+        Unit force direction for ``direction``.
+    follower_angle_rad : float
+        Counter-clockwise angle α of a follower force from the tip tangent [rad].
+
+    Returns
+    -------
+    D : ndarray, shape (..., 2, k)
+        Orthonormal columns; k = 2 for ``none``, else 1.
+    dD : ndarray, shape (..., 2, k) or None
+        ∂D/∂φ_L for the tip-angle constraints, else None.
+    """
+    phi = np.asarray(tip_angle_rad, dtype=float)
+    if constraint == "none":
+        return np.broadcast_to(np.eye(2), (*phi.shape, 2, 2)), None
+    if constraint in ("vertical", "horizontal", "direction"):
+        d = {"vertical": (0.0, 1.0), "horizontal": (1.0, 0.0)}.get(constraint, direction)
+        d = np.asarray(d, dtype=float)
+        return np.broadcast_to(d[:, None], (*phi.shape, 2, 1)), None
+    if constraint == "normal":
+        c, s = np.cos(phi), np.sin(phi)
+        return np.stack([-c, s], axis=-1)[..., None], np.stack([s, c], axis=-1)[..., None]
+    if constraint == "follower":
+        a = phi - float(follower_angle_rad)
+        c, s = np.cos(a), np.sin(a)
+        return np.stack([s, c], axis=-1)[..., None], np.stack([c, -s], axis=-1)[..., None]
+    raise ValueError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+
+
+_MODELS: dict = {}
+
+
+def _free_model(config):
+    from bendsense.actuator import FreeBendingModel
+
+    entry = _MODELS.get(id(config))
+    if entry is None or entry[0] is not config:
+        if len(_MODELS) > 16:
+            _MODELS.clear()
+        entry = (config, FreeBendingModel.from_config(config))
+        _MODELS[id(config)] = entry
+    return entry[1]
+
+
+# --------------------------------------------------------------------------- the fast core
+
+
+def _solve_beam(L, ei, k0, F, wload, s_all, M, state, n_nodes):
+    """Beam shapes at ``s_all[:M]`` with ∂p/∂F, and ∂φ/∂F at the nodes ``s_all[M:]``.
+
+    ``state`` (b, n) is Newton's start; None starts from the unloaded arc (with load
+    continuation where needed). Returns positions (b, M, 2), ∂p/∂F (b, M, 2, 2),
+    success (b,), state (b, n), tip (b, 2) and ∂φ_nodes/∂F (b, n, 2).
+    """
+    if F.shape[0] == 1:
+        # the solver's scalar path: a third of the batched path's overhead
+        sol = _beam.solve(L, ei[0], k0[0], F[0], wload, 0.0, s_all, n_nodes=n_nodes,
+                          initial=None if state is None else state[0], sensitivities=True)
+        return (sol.positions_m[None, :M], sol.dpositions_dforce[None, :M], np.atleast_1d(sol.success),
+                np.asarray(sol.state).reshape(1, -1), np.asarray(sol.tip_position_m).reshape(1, 2),
+                sol.dangle_dforce[None, M:])
+    sol = _beam.solve(L, ei, k0, F, wload, np.zeros(1), s_all, n_nodes=n_nodes, initial=state, sensitivities=True)
+    return (sol.positions_m[:, :M], sol.dpositions_dforce[:, :M], sol.success, sol.state, sol.tip_position_m,
+            sol.dangle_dforce[:, M:])
+
+
+def _lm_step(H, g, mu):
+    """−(H + μ diag(H) + ε I)⁻¹ g for stacks of 1×1 or 2×2 systems (closed form)."""
+    k = g.shape[1]
+    tr = H[:, 0, 0] + (H[:, 1, 1] if k == 2 else 0.0)
+    eps = 1e-14 * tr + 1e-300
+    if k == 1:
+        return -g / (H[:, 0, :] * (1.0 + mu[:, None]) + eps[:, None])
+    a = H[:, 0, 0] * (1.0 + mu) + eps
+    d = H[:, 1, 1] * (1.0 + mu) + eps
+    b = H[:, 0, 1]
+    det = a * d - b * b
+    x0 = (d * g[:, 0] - b * g[:, 1]) / det
+    x1 = (a * g[:, 1] - b * g[:, 0]) / det
+    return -np.stack([x0, x1], axis=1)
+
+
+def _apply(D, u):
+    """D u for stacks (b, 2, k) and (b, k)."""
+    if D.shape[-1] == 1:
+        return D[..., 0] * u
+    return D[..., 0] * u[:, :1] + D[..., 1] * u[:, 1:]
+
+
+def _project(D, gF, GF):
+    """Reduced gradient Dᵀ g and Hessian Dᵀ G D from their force-space versions."""
+    if D.shape[-1] == 1:
+        d = D[..., 0]
+        g = (d * gF).sum(axis=1)[:, None]
+        Gd = np.einsum("bij,bj->bi", GF, d)
+        return g, (d * Gd).sum(axis=1)[:, None, None]
+    return np.einsum("bij,bi->bj", D, gF), np.einsum("bij,bik,bkl->bjl", D, GF, D)
+
+
+def _linearise(pos, dpos, p0, w):
+    """Cost Σ w ‖p − p⁰‖², force-space gradient Σ w (∂p/∂F)ᵀ (p − p⁰) and Gram matrix."""
+    res = pos - p0
+    wr = res * w[:, None]
+    a, c = dpos[..., 0], dpos[..., 1]  # ∂p/∂Fx, ∂p/∂Fy: (b, M, 2)
+    wa, wc = a * w[:, None], c * w[:, None]
+    cost = np.einsum("bmi,bmi->b", res, wr)
+    gF = np.stack([np.einsum("bmi,bmi->b", a, wr), np.einsum("bmi,bmi->b", c, wr)], axis=1)
+    gxx = np.einsum("bmi,bmi->b", a, wa)
+    gxy = np.einsum("bmi,bmi->b", a, wc)
+    gyy = np.einsum("bmi,bmi->b", c, wc)
+    GF = np.stack([np.stack([gxx, gxy], axis=1), np.stack([gxy, gyy], axis=1)], axis=1)
+    return cost, gF, GF
+
+
+def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
+    """Batched projected Gauss–Newton with a trust region on u for frames (B,).
+
+    ``s_all`` holds the M comparison points and then the beam's n nodes, ``w`` the
+    quadrature weights (M,), ``p0`` (B, M, 2) the reference shape, ``D`` (B, 2, k),
+    ``ffix`` (B, 2), ``lower`` (k,), ``u`` (B, k) the start, ``state`` (B, n) the
+    beam's Newton start.
+    Returns a dict of arrays; ``status`` 1 converged, 2 beam fails, 3 no convergence.
+    """
+    B, k = u.shape
+    u = np.maximum(u, lower)
+    status = np.zeros(B, dtype=int)
+    iters = np.ones(B, dtype=int)
+    M = w.size
+    F = ffix + _apply(D, u)
+    # Newton from the reference shape is safe only where the equilibrium is unique
+    # (convex energy: max |G| L²/EI < π²/4); elsewhere a compressive start could land
+    # on a buckled branch, and the solver's load continuation from the unloaded arc
+    # finds the branch connected to it
+    scale = L * L / ei
+    gmax = np.maximum(np.hypot(F[:, 0], F[:, 1]), np.hypot(F[:, 0] + wload[0] * L, F[:, 1] + wload[1] * L))
+    convex = gmax * scale < 0.9 * _STABLE_BOUND
+    if convex.all():
+        pos, dpos, ok, st, tip, dst = _solve_beam(L, ei, k0, F, wload, s_all, M, state, n_nodes)
+    else:
+        pos = np.empty((B, M, 2))
+        dpos = np.empty((B, M, 2, 2))
+        ok = np.empty(B, dtype=bool)
+        st = np.empty((B, state.shape[1]))
+        tip = np.empty((B, 2))
+        dst = np.empty((B, state.shape[1], 2))
+        for mask in (convex, ~convex):
+            i = np.flatnonzero(mask)
+            if i.size:
+                r = _solve_beam(L, ei[i], k0[i], F[i], wload, s_all, M, state[i] if mask is convex else None,
+                                n_nodes)
+                pos[i], dpos[i], ok[i], st[i], tip[i], dst[i] = r
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        # the start may buckle the beam or lead Newton astray: start over from the
+        # unloaded arc by load continuation at the constraint's zero force
+        u[bad] = np.maximum(0.0, lower)
+        F[bad] = ffix[bad] + _apply(D[bad], u[bad])
+        r = _solve_beam(L, ei[bad], k0[bad], F[bad], wload, s_all, M, None, n_nodes)
+        pos[bad], dpos[bad], ok[bad], st[bad], tip[bad], dst[bad] = r
+        iters[bad] += 1
+    status[~ok] = 2
+    cost, gF, GF = _linearise(pos, dpos, p0, w)
+    g, H = _project(D, gF, GF)
+    # trust region on the Gauss–Newton step, in units of the natural force scale EI/L²
+    # (far from the optimum the linearisation overshoots by newtons)
+    radius = 0.5 * ei / (L * L)
+    last = np.full(B, np.inf)
+    act = np.flatnonzero(status == 0)
+    for _ in range(max_iter):
+        if act.size == 0:
+            break
+        step = _lm_step(H[act], g[act], np.zeros(act.size))
+        unew = np.maximum(u[act] + step, lower)
+        dstep = unew - u[act]
+        size = np.abs(dstep).max(axis=1)
+        # converged: the step, or the error left by a contraction at the observed rate,
+        # is below xtol; or stalled at the round-off floor of the beam solutions
+        prev = last[act]
+        seen = np.isfinite(prev)
+        rate = size / np.where(seen, prev, 1.0)
+        left = np.where(seen & (rate < 0.5), size * rate / (1.0 - rate), size)
+        done = (left <= xtol) | (seen & (size <= 1e3 * xtol) & (rate > 0.5))
+        last[act] = size
+        if done.any():
+            di = act[done]
+            u[di] = unew[done]
+            status[di] = 1
+        go = ~done
+        idx = act[go]
+        if idx.size == 0:
+            break
+        dstep = dstep[go]
+        norm = np.sqrt(np.einsum("bk,bk->b", dstep, dstep))
+        shrink = np.minimum(1.0, radius[idx] / norm)
+        dstep *= shrink[:, None]
+        norm *= shrink
+        un = np.maximum(u[idx] + dstep, lower)
+        dstep = un - u[idx]
+        predicted = -(2.0 * np.einsum("bk,bk->b", g[idx], dstep) + np.einsum("bk,bkl,bl->b", dstep, H[idx], dstep))
+        dF = _apply(D[idx], dstep)
+        Fn = ffix[idx] + _apply(D[idx], un)
+        # first-order prediction of the new beam state: Newton then needs one iteration
+        # for small steps
+        guess = st[idx] + dst[idx, :, 0] * dF[:, :1] + dst[idx, :, 1] * dF[:, 1:]
+        pn, dpn, okn, stn, tipn, dstn = _solve_beam(L, ei[idx], k0[idx], Fn, wload, s_all, M, guess, n_nodes)
+        iters[idx] += 1
+        # a shape far from its linear prediction has jumped to another branch of
+        # equilibria (e.g. past buckling onto the buckled one): not a valid trial
+        lin = dpos[idx, :, :, 0] * dF[:, None, :1] + dpos[idx, :, :, 1] * dF[:, None, 1:]
+        jump = np.abs(pn - pos[idx] - lin).max(axis=(1, 2))
+        okn = okn & (jump <= 0.5 * np.abs(lin).max(axis=(1, 2)) + 1e-6 * L)
+        cn, gFn, GFn = _linearise(pn, dpn, p0[idx], w)
+        rho = (cost[idx] - cn) / np.where(predicted > 0, predicted, np.inf)
+        # below ~1e-6 N the cost change is lost in the beam solutions' round-off: the
+        # Gauss–Newton step is trusted as it is
+        acc = okn & ((rho > 1e-4) | (norm < 1e-6))
+        ai = idx[acc]
+        u[ai], pos[ai], dpos[ai], st[ai], tip[ai], dst[ai] = un[acc], pn[acc], dpn[acc], stn[acc], tipn[acc], dstn[acc]
+        cost[ai], gF[ai], GF[ai] = cn[acc], gFn[acc], GFn[acc]
+        g[ai], H[ai] = _project(D[ai], gF[ai], GF[ai])
+        grow = acc & (rho > 0.75) & (shrink < 1.0)
+        radius[idx[grow]] = 4.0 * radius[idx[grow]]
+        cut = ~acc | (rho < 0.25)
+        radius[idx[cut]] = 0.25 * norm[cut]
+        last[idx[~acc]] = np.inf
+        dead = idx[radius[idx] < 1e-12]
+        status[dead] = 3
+        act = np.flatnonzero(status == 0)
+    status[status == 0] = 3
+    F = ffix + _apply(D, u)
+    return {"u": u, "force": F, "status": status, "iterations": iters, "positions": pos, "dpos": dpos,
+            "state": st, "tip": tip, "cost": cost}
+
+
+def _fast(prob, u0, state0, *, chain, xtol, max_iter, n_nodes):
+    """Run the Gauss–Newton core over the batch in warm-started rounds (module docstring)."""
+    B = prob["B"]
+
+    def run(idx, u, st):
+        return _gauss_newton(prob["L"], prob["ei"][idx], prob["k0"][idx], prob["wload"], prob["s_all"], prob["w"],
+                             prob["p0"][idx], prob["D"][idx], prob["ffix"][idx], prob["lower"], u, st,
+                             xtol=xtol, max_iter=max_iter, n_nodes=n_nodes)
+
+    rounds = min(B, _MAX_ROUNDS) if chain else 1
+    if rounds <= 1:
+        return run(slice(None), u0.copy(), state0)
+    out = None
+    prev = None
+    for r in range(rounds):
+        idx = np.arange(r, B, rounds)  # frame r of every block of `rounds` consecutive frames
+        u = u0[idx].copy()
+        st = None if state0 is None else state0[idx].copy()
+        if prev is not None:
+            # frame idx − 1 was solved in the previous round, at the same position; its
+            # offset from its own moment-balance guess (the PCC and model error) changes
+            # slowly along a time series, so it corrects this frame's guess
+            p_idx, p_u, p_ok = (a[: idx.size] for a in prev)
+            u[p_ok] = np.maximum(u[p_ok] + p_u[p_ok] - u0[p_idx[p_ok]], prob["lower"])
+        res = run(idx, u, st)
+        if out is None:
+            out = {key: np.empty((B, *val.shape[1:]), dtype=val.dtype) for key, val in res.items()}
+        for key, val in res.items():
+            out[key][idx] = val
+        prev = (idx, res["u"], res["status"] == 1)
+    return out
+
+
+def chebyshev_nodes_m(length_m: float, n_nodes: int = _N_NODES) -> np.ndarray:
+    """Arc lengths of the fast beam solver's Chebyshev–Lobatto nodes, base first [m]."""
+    j = np.arange(n_nodes)
+    return 0.5 * length_m * (1.0 - np.cos(np.pi * j / (n_nodes - 1)))
+
+
+def _shape_state(ref, L, n_nodes):
+    """The reference shape's tangent angle at the beam's nodes: the beam's Newton start.
+
+    At the optimum the model shape is the reference shape up to the residual, so this
+    start is close for every force near the estimate, where the unloaded arc is not
+    (and would need load continuation).
+    """
+    from bendsense import pcc
+
+    sc = chebyshev_nodes_m(L, n_nodes)
+    if ref["kappa"] is not None:
+        lengths = ref["lengths"]
+        total = float(lengths.sum())
+        phi = pcc.forward_kinematics(ref["kappa"], lengths, np.minimum(sc, total))[1]
+        return phi + ref["kappa"][..., -1:] * np.maximum(sc - total, 0.0)
+    s, phi = ref["s"], ref["phi"]
+    # linear interpolation, and the end slope beyond the last point
+    j = np.clip(np.searchsorted(s, sc) - 1, 0, s.size - 2)
+    t = (sc - s[j]) / (s[j + 1] - s[j])
+    out = phi[..., j] * (1.0 - t) + phi[..., j + 1] * t
+    out[..., 0] = 0.0
+    return out
+
+
+def _moment_guess(prob, phi, kappa_s):
+    """Starting force from the moment balance ``EI (κ(s) − K0) = −M_z(s)`` (linear in F).
+
+    With the reference shape's curvature and points, the moment of the tip force about
+    ``r(s)``, ``(r_L − r(s)) × F``, and of the distributed load are known, so the force
+    that best balances the bending moments along the shape is a small weighted linear
+    least-squares problem. It is exact for a beam-model shape and close for a PCC one:
+    a start near the right basin of the (non-convex) shape distance.
+    """
+    p0, s, w, L = prob["p0"], prob["s"], prob["w"], prob["L"]
+    B = prob["B"]
+    phi_end = phi[:, -1]
+    tip = p0[:, -1] + (L - s[-1]) * np.stack([np.sin(phi_end), np.cos(phi_end)], axis=-1)
+    r_ext = np.concatenate([p0, tip[:, None]], axis=1)
+    s_ext = np.concatenate([s, [L]])
+    seg = 0.5 * (r_ext[:, 1:] + r_ext[:, :-1]) * np.diff(s_ext)[None, :, None]
+    tail = np.cumsum(seg[:, ::-1], axis=1)[:, ::-1]  # ∫_{s_j}^{L} r dσ
+    arm_w = tail - (L - s)[None, :, None] * p0
+    wl = prob["wload"]
+    m_w = arm_w[..., 0] * wl[1] - arm_w[..., 1] * wl[0]
+    delta = tip[:, None] - p0
+    a = np.stack([-delta[..., 1], delta[..., 0]], axis=-1)  # M_F = a · F
+    c = prob["ei"][:, None] * (kappa_s - prob["k0"][:, None]) + m_w + np.einsum("bmi,bi->bm", a, prob["ffix"])
+    aD = np.einsum("bmi,bik->bmk", a, prob["D"])
+    H = np.einsum("bmk,m,bml->bkl", aD, w, aD)
+    g = np.einsum("bmk,m,bm->bk", aD, w, c)
+    # a ridge keeps directions the moment balance hardly sees (an axial load on a nearly
+    # straight shape) near zero instead of at an arbitrary, possibly buckling, value
+    tr = np.trace(H, axis1=1, axis2=2)
+    H = H + (1e-6 * tr / H.shape[-1])[:, None, None] * np.eye(H.shape[-1])
+    u = _lm_step(H, g, np.zeros(B))
+    # the guess only has to land in the right basin; beyond ~3 EI/L² it is not trusted
+    cap = 3.0 * prob["ei"] / (L * L)
+    norm = np.sqrt(np.einsum("bk,bk->b", u, u))
+    u *= np.minimum(1.0, cap / np.maximum(norm, 1e-300))[:, None]
+    u = np.where(np.isfinite(u), u, 0.0)
+    return np.maximum(u, prob["lower"])
+
+
+# --------------------------------------------------------------------------- the paper's method
+
+
+def _paper(prob, u0):
+    """Shooting beam solver inside Nelder–Mead (free) or SLSQP (constrained), frame by frame."""
+    from scipy.optimize import minimize
+
+    B, k = prob["B"], prob["k"]
+    L, s, wq, wload = prob["L"], prob["s"], prob["w"], prob["wload"]
+    scale = 1.0 / (prob["Lc"] * 1e-6)  # objective in mm² (mean squared distance)
+    u_out = np.empty((B, k))
+    status = np.ones(B, dtype=int)
+    nfev = np.zeros(B, dtype=int)
+    for b in range(B):
+        p0, ffix, D = prob["p0"][b], prob["ffix"][b], prob["D"][b]
+        ei, k0 = float(prob["ei"][b]), float(prob["k0"][b])
+
+        def objective(F, p0=p0, ei=ei, k0=k0):
+            sol = _beam.solve_beam(L, ei, k0, F, wload, 0.0, s, method="shooting", warn=False)
+            if not sol.success:
+                return 1e12
+            d = sol.positions_m - p0
+            return float(scale * (wq @ np.einsum("mi,mi->m", d, d)))
+
+        x0 = ffix + D @ u0[b]
+        if k == 2:
+            res = minimize(objective, x0, method="Nelder-Mead",
+                           options={"xatol": 1e-8, "fatol": 1e-16, "maxiter": 4000, "maxfev": 4000,
+                                    "initial_simplex": x0 + np.array([[0.0, 0.0], [0.05, 0.0], [0.0, 0.05]])})
+            u_out[b] = D.T @ (res.x - ffix)
+        else:
+            d = D[:, 0]
+            perp = np.array([-d[1], d[0]])
+            cons = [{"type": "eq", "fun": lambda F, perp=perp, ffix=ffix: perp @ (F - ffix),
+                     "jac": lambda F, perp=perp: perp}]
+            if np.isfinite(prob["lower"][0]):
+                cons.append({"type": "ineq", "fun": lambda F, d=d, ffix=ffix: d @ (F - ffix),
+                             "jac": lambda F, d=d: d})
+            res = minimize(objective, x0, method="SLSQP", constraints=cons,
+                           options={"ftol": 1e-14, "maxiter": 500})
+            u_out[b] = [max(d @ (res.x - ffix), prob["lower"][0])]
+        nfev[b] = res.nfev
+        if not res.success and objective(ffix + D @ u_out[b]) >= 1e12:
+            status[b] = 3
+        elif not res.success and k == 2:
+            status[b] = 3
+    return u_out, status, nfev
+
+
+# --------------------------------------------------------------------------- uncertainty
+
+
+def _dsinc(v):
+    small = np.abs(v) < 1e-2
+    safe = np.where(small, 1.0, v)
+    direct = (np.cos(safe) - np.sin(safe) / safe) / safe
+    v2 = v * v
+    return np.where(small, v * (-1.0 / 3.0 + v2 * (1.0 / 30.0 - v2 / 840.0)), direct)
+
+
+def _sinc(v):
+    return np.sinc(v / np.pi)
+
+
+def _arc_dkappa(kappa, sigma, phi0):
+    """∂/∂κ of the chord σ sinc(κσ/2) (sin(φ0 + κσ/2), cos(φ0 + κσ/2)) (paper eq. 5–6)."""
+    half = 0.5 * kappa * sigma
+    c = sigma * _sinc(half)
+    dc = 0.5 * sigma * sigma * _dsinc(half)
+    m = phi0 + half
+    sm, cm = np.sin(m), np.cos(m)
+    return np.stack([dc * sm + 0.5 * sigma * c * cm, dc * cm - 0.5 * sigma * c * sm], axis=-1)
+
+
+def _shape_sensitivity(kappa, lengths, d, seg_onehot, sigma, seg, pos, e):
+    """Σ_j (w_j ∂p_j/∂F)ᵀ ∂p⁰_j/∂S without forming ∂p⁰/∂S: (b, 2, N).
+
+    ``e`` (b, M, 2, 2) holds w_j ∂p_j/∂F. Raising κ_i bends segment i further and rotates
+    everything beyond it about its end ``P_i`` (φ grows: a vector v turns by
+    R'v = (v_y, −v_x)), so ``∂p_j/∂κ_i = ∂c_i/∂κ_i + l_i R'(p_j − P_i)`` for points
+    beyond segment i (``c_i`` its chord) and the in-segment chord derivative for points
+    inside it (paper eq. 5–7); suffix sums over the segments contract this with ``e`` in
+    O(M + N). Then ``κ_i = (S_i − S_{i−1}) / (d l_i)`` (paper eq. 3–4).
+    """
+    theta = kappa * lengths
+    phi_end = np.cumsum(theta, axis=-1)
+    phi_start = phi_end - theta
+    half = 0.5 * theta
+    chord_len = lengths * _sinc(half)
+    mid = phi_start + half
+    ends_x = np.cumsum(chord_len * np.sin(mid), axis=-1)
+    ends_y = np.cumsum(chord_len * np.cos(mid), axis=-1)
+    dchord = _arc_dkappa(kappa, lengths, phi_start)  # (b, N, 2)
+    dq = _arc_dkappa(kappa[:, seg], sigma, phi_start[:, seg])  # (b, M, 2)
+    rp = np.stack([pos[..., 1], -pos[..., 0]], axis=-1)[..., None]  # R'(p_j): (b, M, 2, 1)
+    s_seg = np.tensordot(e, seg_onehot, axes=([1], [0]))  # Σ_{j in q} e_j: (b, 2, 2, N)
+    r_seg = np.tensordot((e * rp).sum(axis=2), seg_onehot, axes=([1], [0]))  # (b, 2, N)
+    own = np.tensordot((e * dq[..., None]).sum(axis=2), seg_onehot, axes=([1], [0]))  # (b, 2, N)
+
+    def after(x):  # Σ over segments q > i
+        c = np.cumsum(x[..., ::-1], axis=-1)[..., ::-1]
+        out = np.zeros_like(x)
+        out[..., :-1] = c[..., 1:]
+        return out
+
+    s_suf = after(s_seg)  # (b, i, k, N)
+    r_suf = after(r_seg)
+    hk = (dchord[:, None, :, 0] * s_suf[:, 0] + dchord[:, None, :, 1] * s_suf[:, 1]
+          + lengths * (r_suf - ends_y[:, None, :] * s_suf[:, 0] + ends_x[:, None, :] * s_suf[:, 1]) + own)
+    hk = hk / (d * lengths)
+    hs = hk.copy()
+    hs[..., :-1] -= hk[..., 1:]
+    return hs
+
+
+def _inverse_cov(H):
+    """Pseudo-inverse of JᵀJ (b, k, k) and the eigen-directions it cannot resolve."""
+    lam, V = np.linalg.eigh(H)
+    top = lam[:, -1:]
+    singular = lam <= 1e-12 * np.maximum(top, 0.0) + 1e-300
+    inv = np.where(singular, 0.0, 1.0 / np.where(singular, 1.0, lam))
+    return np.einsum("bik,bk,bjk->bij", V, inv, V), singular, V
+
+
+def _covariance(prob, res, noise_s):
+    """Cov(F) (B, 2, 2) by linear propagation of the shift noise (module docstring)."""
+    B, k = prob["B"], prob["k"]
+    w = prob["w"]
+    cov = np.empty((B, 2, 2))
+    pcc = prob["kappa"] is not None and noise_s is not None
+    if pcc:
+        onehot = np.zeros((prob["M"], prob["lengths"].size))
+        onehot[np.arange(prob["M"]), prob["seg"]] = 1.0
+    for lo in range(0, B, _COV_CHUNK):
+        sl = slice(lo, min(B, lo + _COV_CHUNK))
+        D = prob["D"][sl]
+        Dt = np.swapaxes(D, 1, 2)
+        dpos = res["dpos"][sl]
+        _, _, GF = _linearise(res["positions"][sl], dpos, prob["p0"][sl], w)
+        H = Dt @ GF @ D
+        Hinv, singular, V = _inverse_cov(H)
+        if pcc:
+            e = w[:, None, None] * dpos
+            hs = Dt @ _shape_sensitivity(prob["kappa"][sl], prob["lengths"], prob["d"], onehot, prob["sigma"],
+                                         prob["seg"], prob["p0"][sl], e)  # (b, k, N)
+            if prob["dD"] is not None:
+                # D follows the reconstructed tip angle φ_L = S_N / d
+                Fd = _apply(prob["dD"][sl], res["u"][sl])  # (∂D/∂φ_L) u
+                hs[:, :, -1] -= (Dt @ (GF @ Fd[..., None]))[..., 0] / prob["d"]
+            T = D @ (Hinv @ hs)  # ∂F/∂S (b, 2, N)
+            if prob["dD"] is not None:
+                T[:, :, -1] += Fd / prob["d"]
+            c = (T * (noise_s[sl] ** 2)[:, None, :]) @ np.swapaxes(T, 1, 2)
+        else:
+            r = res["positions"][sl] - prob["p0"][sl]
+            dof = max(2 * prob["M"] - k, 1)
+            var = np.einsum("bmi,bmi->b", r, r) / dof  # per coordinate
+            _, _, mid = _linearise(r, dpos, r, w * w)
+            cu = var[:, None, None] * (Hinv @ (Dt @ mid @ D) @ Hinv)
+            c = D @ cu @ Dt
+        if singular.any():
+            dirs = D @ V  # force directions of the eigenvectors
+            for q in range(k):
+                hit = singular[:, q]
+                if hit.any():
+                    v = dirs[hit, :, q]
+                    outer = v[:, :, None] * v[:, None, :]
+                    c[hit] = np.where(np.abs(outer) > 1e-12, np.inf, c[hit])
+        cov[sl] = c
+    return cov
+
+
+def _shift_noise(kappa, lengths, d, noise_std, calibration):
+    """σ_S (b, N) [m]: the signal noise through the calibration slope f'(ΔA) (paper eq. 2)."""
+    from bendsense.calibration import parity_masks
+
+    S = d * np.cumsum(kappa * lengths, axis=-1)  # S_i = d φ(L_i) (paper eq. 3–4)
+    if calibration is None:
+        return np.broadcast_to(noise_std, S.shape)
+    n = S.shape[-1]
+    odd, _ = parity_masks(n)
+    coef = np.where(odd[:, None], calibration.coefficients_odd, calibration.coefficients_even)  # (N, n+1)
+    dcoef = coef[:, 1:] * np.arange(1, coef.shape[1])
+    if dcoef.shape[1] == 0:
+        return np.zeros_like(S)
+
+    def poly(c, x):
+        out = np.broadcast_to(c[:, -1], x.shape).copy()
+        for j in range(c.shape[1] - 2, -1, -1):
+            out = out * x + c[:, j]
+        return out
+
+    slope0 = dcoef[:, 0]
+    x = np.where(slope0 != 0, (S - coef[:, 0]) / np.where(slope0 != 0, slope0, 1.0), 0.0)
+    for _ in range(50):
+        fp = poly(dcoef, x)
+        dx = (poly(coef, x) - S) / np.where(fp != 0, fp, 1.0)
+        x = x - dx
+        if np.all(np.abs(dx) <= 1e-12 * np.maximum(1.0, np.abs(x))):
+            break
+    return np.abs(poly(dcoef, x)) * noise_std
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def _reference(shape, config, s_opt, n_points, L_act):
+    """Reference shape p⁰ at the comparison nodes and what the uncertainty needs."""
+    from bendsense import pcc
+
+    kappa = None
+    if s_opt is not None:
+        pos = np.asarray(shape, dtype=float)
+        s_in = np.asarray(s_opt, dtype=float)
+        angle = None
+    elif hasattr(shape, "curvature_per_m") and hasattr(shape, "lengths_m"):
+        kappa = np.asarray(shape.curvature_per_m, dtype=float)
+        lengths = np.asarray(shape.lengths_m, dtype=float)
+    elif hasattr(shape, "positions_m") and hasattr(shape, "s_m"):
+        pos = np.asarray(shape.positions_m, dtype=float)
+        s_in = np.asarray(shape.s_m, dtype=float)
+        angle = getattr(shape, "angle_rad", None)
+    else:
+        kappa = np.asarray(shape, dtype=float)
+        lengths = config.sensor.lengths_m
+        if kappa.ndim == 0 or kappa.shape[-1] != lengths.size:
+            raise ValueError(
+                f"shape: expected a Shape, a BeamSolution or curvatures (..., {lengths.size}) [1/m], "
+                f"got shape {kappa.shape}"
+            )
+    if kappa is not None:
+        if not np.all(np.isfinite(kappa)):
+            raise ValueError("shape.curvature_per_m: must be finite")
+        Lc = min(float(lengths.sum()), L_act)
+        s, w = quadrature(lengths, Lc, n_points)
+        p0, phi = pcc.forward_kinematics(kappa, lengths, s)
+        bounds = np.concatenate(([0.0], np.cumsum(lengths)))
+        seg = np.clip(np.searchsorted(bounds[1:-1], s, side="left"), 0, lengths.size - 1)
+        return {"p0": p0, "s": s, "w": w, "Lc": Lc, "kappa": kappa, "lengths": lengths, "seg": seg,
+                "sigma": s - bounds[seg], "tip_shape": np.sum(kappa * lengths, axis=-1), "phi": phi,
+                "kappa_s": kappa[..., seg]}
+    if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
+        raise ValueError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
+    if pos.shape[-2:] != (s_in.size, 2):
+        raise ValueError(f"shape.positions_m: expected shape (..., {s_in.size}, 2) to match s_m, got {pos.shape}")
+    if not np.all(np.isfinite(pos)):
+        raise ValueError("shape.positions_m: must be finite")
+    Lc = min(float(s_in[-1]), L_act)
+    keep = s_in <= Lc * (1.0 + 1e-12)
+    s = s_in[keep]
+    p0 = pos[..., keep, :]
+    # tangent angle and curvature by differences, for the starting guess only
+    if angle is not None and np.shape(angle)[-1:] == (s_in.size,):
+        phi = np.asarray(angle, dtype=float)[..., keep]
+    else:
+        dp = np.gradient(p0, s, axis=-2, edge_order=2)
+        phi = np.unwrap(np.arctan2(dp[..., 0], dp[..., 1]), axis=-1)
+    # the tip angle of a shape given by points: at its last compared point
+    return {"p0": p0, "s": s, "w": _trapezoid(s), "Lc": float(s[-1]), "kappa": None,
+            "tip_shape": phi[..., -1], "phi": phi, "kappa_s": np.gradient(phi, s, axis=-1, edge_order=2)}
+
+
+def _option(options, name, default):
+    value = options.pop(name, None)
+    return default if value is None else value
+
+
+def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", method: str = "fast",
+                   **options) -> ForceEstimate:
+    """Tip force from a reconstructed shape and the pressure (paper eq. 18, 21).
+
+    Parameters
+    ----------
+    shape : Shape, BeamSolution or array_like
+        A :class:`~bendsense.pcc.Shape` (its curvatures and segment lengths are used),
+        segment curvatures (..., N) [1/m] on ``config.sensor``, a shape given by points
+        (any object with ``s_m`` (M,) and ``positions_m`` (..., M, 2), e.g. a
+        :class:`~bendsense.beam.BeamSolution`), or positions (..., M, 2) [m] with the
+        option ``s_m``. Leading axes are frames.
+    pressure_pa : array_like, shape (...)
+        Pressure of each frame [Pa]; broadcasts against the shape's batch axes.
+    config : Config, optional
+        ``None``: the paper's prototype (:func:`bendsense.load_config`).
+    constraint : str
+        One of :data:`CONSTRAINTS`; sign conventions in the module docstring.
+    method : {"fast", "paper"}
+        Gauss–Newton with analytic sensitivities, or the paper's shooting +
+        Nelder–Mead / SLSQP.
+    **options
+        ``push_only`` (bool, default ``config.estimation.push_only``): ``u ≥ 0`` for
+        1-D constraints. ``tip_angle_source`` (``"model"`` | ``"shape"``),
+        ``direction`` (unit (2,)), ``follower_angle_rad`` [rad]: defaults from
+        ``config.estimation``. ``initial_force_n`` (..., 2) [N]: start of every frame
+        (otherwise F = 0 for the first frame of each block and the previous frame's
+        estimate for the others). ``initial``: a previous :class:`ForceEstimate`
+        (its force and beam state start every frame; real-time use).
+        ``warm_start`` (bool, default True): chain frames along the first batch axis.
+        ``noise_std`` (N,) or float: signal noise per channel [signal units];
+        default ``calibration.noise_std`` if nonzero, else
+        ``config.estimation.signal_noise_std``. ``calibration``: the
+        :class:`~bendsense.calibration.Calibration` whose slopes map signal noise to
+        shifts. ``strict`` (bool): raise :class:`~bendsense.errors.ConvergenceError`
+        if a frame fails. ``s_m``: arc lengths of positions given as an array.
+        ``n_points``: quadrature nodes (default ``config.estimation.n_points``).
+        ``xtol_n``, ``max_iter``: fast-method stopping rule.
+
+    Returns
+    -------
+    ForceEstimate
+        Frames that fail (no convergence, or every trial force buckles the beam) have
+        ``success=False`` and a message; nothing is raised unless ``strict=True``.
+
+    Raises
+    ------
+    ValueError
+        For a bad argument or option (the message names it).
+    ConvergenceError
+        With ``strict=True`` when a frame fails.
+    """
+    t_start = time.perf_counter()
+    if config is None:
+        from bendsense.config import load_config
+
+        config = load_config()
+    est = config.estimation
+    if constraint is None:
+        constraint = est.constraint
+    if method is None:
+        method = est.method
+    if constraint not in CONSTRAINTS:
+        raise ValueError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+    if method not in METHODS:
+        raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+    options = dict(options)
+    push_only = bool(_option(options, "push_only", est.push_only))
+    source = _option(options, "tip_angle_source", est.tip_angle_source)
+    if source not in ("model", "shape"):
+        raise ValueError(f"tip_angle_source: must be one of model, shape, got {source!r}")
+    direction = np.asarray(_option(options, "direction", est.direction), dtype=float)
+    if direction.shape != (2,) or not np.all(np.isfinite(direction)) or abs(np.hypot(*direction) - 1.0) > 1e-6:
+        raise ValueError(f"direction: expected a unit vector (2,), got {direction.tolist()}")
+    follower = float(_option(options, "follower_angle_rad", est.follower_angle_rad))
+    initial_force = options.pop("initial_force_n", None)
+    initial = options.pop("initial", None)
+    warm_start = bool(_option(options, "warm_start", True))
+    noise_opt = options.pop("noise_std", None)
+    calibration = options.pop("calibration", None)
+    strict = bool(_option(options, "strict", False))
+    s_opt = options.pop("s_m", None)
+    n_points = int(_option(options, "n_points", est.n_points))
+    xtol = float(_option(options, "xtol_n", XTOL_N))
+    max_iter = int(_option(options, "max_iter", _MAX_ITER))
+    if options:
+        raise ValueError(
+            f"options: unknown {', '.join(sorted(options))}; allowed: push_only, tip_angle_source, direction, "
+            "follower_angle_rad, initial_force_n, initial, warm_start, noise_std, calibration, strict, s_m, "
+            "n_points, xtol_n, max_iter"
+        )
+    if n_points < 3:
+        raise ValueError(f"n_points: must be >= 3, got {n_points}")
+    if push_only and constraint == "none":
+        raise ValueError("push_only: only for the 1-D constraints (vertical, horizontal, direction, normal, "
+                         "follower), got constraint='none'")
+
+    L = float(config.actuator.length_m)
+    ref = _reference(shape, config, s_opt, n_points, L)
+    P = np.asarray(pressure_pa, dtype=float)
+    if not np.all(np.isfinite(P)):
+        raise ValueError(f"pressure_pa: must be finite, got {pressure_pa!r}")
+    p0 = ref["p0"]
+    try:
+        batch = np.broadcast_shapes(p0.shape[:-2], P.shape)
+    except ValueError:
+        raise ValueError(f"pressure_pa: shape {P.shape} does not broadcast against the shape's frames "
+                         f"{p0.shape[:-2]}") from None
+    B = math.prod(batch)
+    M = ref["s"].size
+    p0 = np.broadcast_to(p0, (*batch, M, 2)).reshape(B, M, 2)
+    Pf = np.broadcast_to(P, batch).reshape(B)
+    model = _free_model(config)
+    k0 = np.asarray(model.tip_curvature_per_m(Pf), dtype=float).reshape(B)
+    ei = np.asarray(config.stiffness.ei_nm2(Pf), dtype=float).reshape(B)
+    if not np.all(ei > 0):
+        raise ValueError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
+                         f"at {float(Pf[np.argmin(ei)])!r} Pa")
+    tip_shape = np.broadcast_to(ref["tip_shape"], batch).reshape(B)
+    phi_L = np.asarray(model.tip_angle_rad(Pf), dtype=float).reshape(B) if source == "model" else tip_shape
+    D, dD = constraint_basis(constraint, phi_L, direction=direction, follower_angle_rad=follower)
+    D = np.ascontiguousarray(np.broadcast_to(D, (B, *D.shape[-2:])))
+    k = D.shape[-1]
+    prob = {
+        "B": B, "k": k, "M": M, "L": L, "Lc": ref["Lc"], "s": ref["s"], "w": ref["w"],
+        "s_all": np.concatenate([ref["s"], chebyshev_nodes_m(L, _N_NODES)]),
+        "p0": p0, "ei": ei, "k0": k0, "wload": np.asarray(config.weight_per_length_n_per_m, dtype=float),
+        "D": D, "dD": None if (dD is None or source == "model") else np.broadcast_to(dD, (B, 2, k)),
+        "ffix": np.zeros((B, 2)), "lower": np.full(k, 0.0 if push_only else -np.inf),
+        "kappa": None, "d": float(config.sensor.strip_gap_m),
+    }
+    if ref["kappa"] is not None:
+        N = ref["lengths"].size
+        prob.update(kappa=np.broadcast_to(ref["kappa"], (*batch, N)).reshape(B, N), lengths=ref["lengths"],
+                    seg=ref["seg"], sigma=ref["sigma"])
+
+    # starting points
+    st = _shape_state(ref, L, _N_NODES)
+    state0 = np.ascontiguousarray(np.broadcast_to(st, (*batch, _N_NODES)).reshape(B, _N_NODES))
+    if initial is not None:
+        if not isinstance(initial, ForceEstimate):
+            raise ValueError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
+        if initial_force is None:
+            initial_force = initial.force_n
+    if initial_force is not None:
+        f0 = np.asarray(initial_force, dtype=float)
+        if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
+            raise ValueError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
+        f0 = np.broadcast_to(f0, (*batch, 2)).reshape(B, 2)
+        u0 = np.einsum("bij,bi->bj", D, f0 - prob["ffix"])
+        chain = False
+    else:
+        phi = np.broadcast_to(ref["phi"], (*batch, M)).reshape(B, M)
+        kap = np.broadcast_to(ref["kappa_s"], (*batch, M)).reshape(B, M)
+        u0 = _moment_guess(prob, phi, kap)
+        chain = warm_start
+    u0 = np.maximum(u0, prob["lower"])
+
+    if method == "fast":
+        res = _fast(prob, u0, state0, chain=chain, xtol=xtol, max_iter=max_iter, n_nodes=_N_NODES)
+    else:
+        u, status, nfev = _paper(prob, u0)
+        # the shape, its sensitivities and the uncertainty at the paper's optimum come
+        # from the fast solver (the paper gives no uncertainty)
+        F = prob["ffix"] + np.einsum("bij,bj->bi", D, u)
+        pos, dpos, ok, st, tip, _ = _solve_beam(L, ei, k0, F, prob["wload"], prob["s_all"], M, state0, _N_NODES)
+        status = np.where(ok, status, 2)
+        res = {"u": u, "force": F, "status": status, "iterations": nfev, "positions": pos, "dpos": dpos,
+               "state": st, "tip": tip}
+
+    # uncertainty
+    noise_s = None
+    uncertainty = "residual"
+    if prob["kappa"] is not None:
+        if noise_opt is not None:
+            sigma_a = np.asarray(noise_opt, dtype=float)
+        elif calibration is not None and np.any(np.asarray(calibration.noise_std) > 0):
+            sigma_a = np.asarray(calibration.noise_std, dtype=float)
+        else:
+            sigma_a = np.asarray(est.signal_noise_std, dtype=float)
+        if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
+            raise ValueError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
+        if np.any(sigma_a > 0):
+            noise_s = _shift_noise(prob["kappa"], prob["lengths"], prob["d"],
+                                   np.broadcast_to(sigma_a, (prob["lengths"].size,)), calibration)
+            uncertainty = "propagated"
+    cov = _covariance(prob, res, noise_s)
+
+    status = res["status"]
+    success = status == 1
+    diff = res["positions"] - p0
+    residual = np.sqrt(np.einsum("bmi,bmi,m->b", diff, diff, prob["w"]) / prob["w"].sum())
+    force = np.where(success[:, None], res["force"], np.nan)
+    messages = np.full(B, _OK, dtype=object)
+    messages[status == 2] = "beam model fails (buckling or no equilibrium) at every trial force"
+    messages[status == 3] = ("no convergence in the iteration limit" if method == "fast"
+                             else "optimizer did not converge")
+    if not success.all() and strict:
+        first = messages[~success][0]
+        raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {first}")
+    std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    std = np.where(success[:, None], std, np.nan)
+    cov = np.where(success[:, None, None], cov, np.nan)
+    message = messages.astype(str).reshape(batch) if batch else str(messages[0])
+    return ForceEstimate(
+        force_n=force.reshape(*batch, 2),
+        std_n=std.reshape(*batch, 2),
+        covariance_n2=cov.reshape(*batch, 2, 2),
+        residual_m=residual.reshape(batch),
+        success=success.reshape(batch),
+        message=message,
+        iterations=np.asarray(res["iterations"]).reshape(batch),
+        wall_time_s=time.perf_counter() - t_start,
+        method=method,
+        constraint=constraint,
+        uncertainty=uncertainty,
+        tip_position_m=res["tip"].reshape(*batch, 2),
+        state=res["state"].reshape(*batch, res["state"].shape[-1]),
+    )
+
+
