@@ -108,11 +108,14 @@ def reconstruct(points):
 
 
 @click.command("estimate", cls=InterspersedCommand)
-@click.option("--constraint", type=click.Choice(["none", "vertical", "horizontal", "normal", "follower"]),
+@click.option("--constraint",
+              type=click.Choice(["none", "vertical", "horizontal", "direction", "normal", "follower"]),
               help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(["fast", "paper"]), help="Estimator (default: from the config).")
 @click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
-def estimate(constraint, method, push_only):
+@click.option("--tip-angle-source", type=click.Choice(["model", "shape"]),
+              help="Tip angle of the normal/follower constraints (default: from the config).")
+def estimate(constraint, method, push_only, tip_angle_source):
     """Estimate the tip force of every frame from its shape and pressure."""
 
     def step(state):
@@ -125,14 +128,21 @@ def estimate(constraint, method, push_only):
         if not session.has_pressure:
             raise click.UsageError("the session has frames without pressure: give 'load ... --pressure-kpa P'")
         config = state["config"]
-        est = estimate_force(
-            shape,
-            session.pressure_pa,
-            config,
-            constraint=constraint or config.estimation.constraint,
-            method=method or config.estimation.method,
-            push_only=push_only,
-        )
+        try:
+            est = estimate_force(
+                shape,
+                session.pressure_pa,
+                config,
+                constraint=constraint or config.estimation.constraint,
+                method=method or config.estimation.method,
+                push_only=push_only,
+                tip_angle_source=tip_angle_source,
+                calibration=state.get("calibration"),
+            )
+        except BendsenseError:
+            raise
+        except ValueError as err:  # a bad option combination, e.g. --push-only with no constraint
+            raise click.UsageError(f"estimate: {err}") from None
         failed = int(np.count_nonzero(~np.asarray(est.success)))
         if failed:
             log.warning("%d of %d frames did not converge (status 'not converged')", failed, len(session))
