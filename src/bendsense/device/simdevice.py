@@ -37,15 +37,60 @@ log = logging.getLogger("bendsense.device.sim")
 _MAX_PENDING = 64 * 1024  # bytes queued for the pseudo-terminal before frames count as TX overflow
 
 
-def default_source(n_channels: int = 16, adc_bits: int = 12, rate_hz: float = 500.0, seed=None):
+def default_source(
+    n_channels: int = 16, adc_bits: int = 12, rate_hz: float = 500.0, seed=None, *, config=None, **options
+):
     """Return the default frame source: the virtual sensor of :mod:`bendsense.sim`.
 
-    Returns an iterator of ``(pressure_pa, adc_counts)``.
+    The frames of the ``time-varying`` scenario
+    (:func:`bendsense.sim.scenarios.time_varying_frames`): the pressure ramps between 0
+    and 100 kPa and back every 5 s while a contact force normal to the tip switches on
+    and off. Frame ``k`` is the scenario at ``t = k / rate_hz``, so the same seed and
+    rate give the same frames, and a receiver can recompute the ground truth of frame
+    ``k`` with ``time_varying_frames(config, rate_hz, seed, truth=True)``.
+
+    Parameters
+    ----------
+    n_channels : int
+        Channels N. The config's sensor when it has N segments (the paper's has 16);
+        otherwise N equal segments over the same sensor length.
+    adc_bits : int
+        ADC resolution [bit].
+    rate_hz : float
+        Frame rate [Hz] (the time step of the scenario).
+    seed : int, optional
+        Seed of the sensor hardware (offsets, gains) and of the noise; None: 0, the
+        default of ``bendsense simulate``, so that ``bendsense simulate calibration``
+        calibrates this sensor.
+    config : Config, optional
+        The true actuator and sensor; default the paper's prototype.
+    **options
+        Passed to :func:`~bendsense.sim.scenarios.time_varying_frames` (``contact_n``,
+        ``noise_counts``, ``duration_s``, model mismatch, ...).
+
+    Returns
+    -------
+    iterator
+        Of ``(pressure_pa, adc_counts)``; endless unless ``duration_s`` is given.
     """
-    raise NotImplementedError(
-        "the default virtual sensor (bendsense.sim) is not wired into SimulatedDevice yet; "
-        "pass source=... (e.g. bendsense.device.simdevice.ramp_source(n_channels))"
-    )
+    import dataclasses
+
+    from bendsense.config import load_config
+    from bendsense.sim.scenarios import time_varying_frames
+    from bendsense.sim.sensor import VirtualSensor
+
+    config = load_config() if config is None else config
+    seed = 0 if seed is None else seed
+    sensor = config.sensor
+    if n_channels != sensor.n_segments:
+        lengths = (sensor.length_m / n_channels,) * n_channels
+        sensor = dataclasses.replace(sensor, n_segments=n_channels, segment_lengths_m=lengths)
+        config = dataclasses.replace(config, sensor=sensor)
+    if adc_bits != 12 and "sensor" not in options:
+        options["sensor"] = VirtualSensor.from_config(
+            sensor, noise_counts=options.pop("noise_counts", 1.5), adc_bits=adc_bits, seed=seed
+        )
+    return time_varying_frames(config, rate_hz, seed, **options)
 
 
 def ramp_source(n_channels: int = 16, adc_bits: int = 12, pressure_pa: float | None = 20_000.0):
