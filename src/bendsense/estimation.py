@@ -83,6 +83,7 @@ Uncertainty
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -151,7 +152,10 @@ class ForceEstimate:
     tip_position_m : ndarray, shape (..., 2)
         Tip of the model shape at the estimate [m].
     state : ndarray, shape (..., n_nodes) or None
-        Beam state at the estimate, for warm starts (``initial=`` of the next call).
+        Beam state at the estimate.
+    guess_n : ndarray, shape (..., 2) or None
+        The moment-balance starting force; with ``force_n`` it corrects the start of
+        the next frame (``initial=`` of the next call).
     """
 
     force_n: np.ndarray
@@ -167,6 +171,7 @@ class ForceEstimate:
     uncertainty: str = "propagated"
     tip_position_m: np.ndarray | None = None
     state: np.ndarray | None = field(default=None, repr=False)
+    guess_n: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def batch_shape(self) -> tuple:
@@ -268,6 +273,23 @@ def quadrature(lengths_m, length_m: float, n_points: int):
         s.append(a_i + 0.5 * h_i * (x + 1.0))
         wt.append(0.5 * h_i * w)
     return np.concatenate(s), np.concatenate(wt)
+
+
+@functools.lru_cache(maxsize=32)
+def _pcc_grid(lengths: tuple, length_m: float, n_points: int, beam_length_m: float):
+    """Quadrature nodes, weights, segment and local arc length of each node (cached).
+
+    Also the nodes followed by the beam's nodes clipped to the sensor length.
+    """
+    lengths = np.asarray(lengths)
+    s, w = quadrature(lengths, length_m, n_points)
+    bounds = np.concatenate(([0.0], np.cumsum(lengths)))
+    seg = np.clip(np.searchsorted(bounds[1:-1], s, side="left"), 0, lengths.size - 1)
+    s_fk = np.concatenate([s, np.minimum(chebyshev_nodes_m(beam_length_m, _N_NODES), bounds[-1])])
+    out = (s, w, seg, s - bounds[seg], s_fk)
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 def _trapezoid(s):
@@ -389,16 +411,14 @@ def _project(D, gF, GF):
 
 def _linearise(pos, dpos, p0, w):
     """Cost Σ w ‖p − p⁰‖², force-space gradient Σ w (∂p/∂F)ᵀ (p − p⁰) and Gram matrix."""
-    res = pos - p0
-    wr = res * w[:, None]
-    a, c = dpos[..., 0], dpos[..., 1]  # ∂p/∂Fx, ∂p/∂Fy: (b, M, 2)
-    wa, wc = a * w[:, None], c * w[:, None]
-    cost = np.einsum("bmi,bmi->b", res, wr)
-    gF = np.stack([np.einsum("bmi,bmi->b", a, wr), np.einsum("bmi,bmi->b", c, wr)], axis=1)
-    gxx = np.einsum("bmi,bmi->b", a, wa)
-    gxy = np.einsum("bmi,bmi->b", a, wc)
-    gyy = np.einsum("bmi,bmi->b", c, wc)
-    GF = np.stack([np.stack([gxx, gxy], axis=1), np.stack([gxy, gyy], axis=1)], axis=1)
+    b = pos.shape[0]
+    res = (pos - p0).reshape(b, -1)  # (b, 2M)
+    wr = res * np.repeat(w, 2)
+    A = dpos.reshape(b, -1, 2)  # (b, 2M, 2): ∂p/∂F
+    At = np.swapaxes(A, 1, 2)
+    cost = np.einsum("bm,bm->b", res, wr)
+    gF = (At @ wr[..., None])[..., 0]
+    GF = At @ (A * np.repeat(w, 2)[:, None])
     return cost, gF, GF
 
 
@@ -522,12 +542,99 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
             "state": st, "tip": tip, "cost": cost}
 
 
+def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
+    """:func:`_gauss_newton` for one frame, with plain floats: the real-time path.
+
+    Same algorithm and stopping rules; a batch of one spends most of its time in numpy
+    call overhead, which this avoids.
+    """
+    M = w.size
+    k = u.size
+    D2 = D[0]
+    lo = lower
+    u = np.maximum(u[0], lo)
+    ei_ = float(ei[0])
+    w2 = np.repeat(w, 2)
+    ref = p0[0].reshape(-1)
+    F = ffix[0] + D2 @ u
+    scale = L * L / ei_
+    gmax = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wload[0] * L, F[1] + wload[1] * L))
+    start = state if gmax * scale < 0.9 * _STABLE_BOUND else None
+    iters = 1
+    pos, dpos, ok, st, tip, dst = _solve_beam(L, ei, k0, F[None], wload, s_all, M, start, n_nodes)
+    if not ok[0]:
+        u = np.maximum(np.zeros(k), lo)
+        F = ffix[0] + D2 @ u
+        pos, dpos, ok, st, tip, dst = _solve_beam(L, ei, k0, F[None], wload, s_all, M, None, n_nodes)
+        iters += 1
+
+    def lin(pos_, dpos_):
+        r = pos_[0].reshape(-1) - ref
+        A = dpos_[0].reshape(-1, 2) @ D2  # ∂p/∂u: (2M, k)
+        wA = A * w2[:, None]
+        return float(r @ (r * w2)), wA.T @ r, A.T @ wA, A
+
+    def out(status, u_):
+        return {"u": u_[None], "force": (ffix[0] + D2 @ u_)[None], "status": np.array([status]),
+                "iterations": np.array([iters]), "positions": pos, "dpos": dpos, "state": st, "tip": tip,
+                "cost": np.array([cost])}
+
+    cost = np.nan
+    if not ok[0]:
+        return out(2, u)
+    cost, g, H, A = lin(pos, dpos)
+    radius = 0.5 * ei_ / (L * L)
+    last = math.inf
+    for _ in range(max_iter):
+        step = _lm_step(H[None], g[None], np.zeros(1))[0]
+        unew = np.maximum(u + step, lo)
+        dstep = unew - u
+        size = float(np.abs(dstep).max())
+        rate = size / last if last < math.inf else math.nan
+        left = size * rate / (1.0 - rate) if rate < 0.5 else size
+        if left <= xtol or (rate > 0.5 and size <= 1e3 * xtol):
+            return out(1, unew)
+        last = size
+        norm = math.sqrt(float(dstep @ dstep))
+        shrink = min(1.0, radius / norm)
+        un = np.maximum(u + dstep * shrink, lo)
+        dstep = un - u
+        norm *= shrink
+        predicted = -(2.0 * float(g @ dstep) + float(dstep @ H @ dstep))
+        dF = D2 @ dstep
+        guess = st + dst[..., 0] * dF[0] + dst[..., 1] * dF[1]
+        pn, dpn, okn, stn, tipn, dstn = _solve_beam(L, ei, k0, (ffix[0] + D2 @ un)[None], wload, s_all, M, guess,
+                                                    n_nodes)
+        iters += 1
+        linear = (A @ dstep).reshape(-1, 2)
+        good = bool(okn[0]) and (float(np.abs(pn[0] - pos[0] - linear).max())
+                                 <= 0.5 * float(np.abs(linear).max()) + 1e-6 * L)
+        if good:
+            cn, gn, Hn, An = lin(pn, dpn)
+            rho = (cost - cn) / predicted if predicted > 0 else -math.inf
+            good = rho > 1e-4 or norm < 1e-6
+        if good:
+            u, pos, dpos, st, tip, dst = un, pn, dpn, stn, tipn, dstn
+            cost, g, H, A = cn, gn, Hn, An
+            if rho > 0.75 and shrink < 1.0:
+                radius *= 4.0
+            elif rho < 0.25:
+                radius = 0.25 * norm
+        else:
+            radius = 0.25 * norm
+            last = math.inf
+        if radius < 1e-12:
+            return out(3, u)
+    return out(3, u)
+
+
 def _fast(prob, u0, state0, *, chain, xtol, max_iter, n_nodes):
     """Run the Gauss–Newton core over the batch in warm-started rounds (module docstring)."""
     B = prob["B"]
 
     def run(idx, u, st):
-        return _gauss_newton(prob["L"], prob["ei"][idx], prob["k0"][idx], prob["wload"], prob["s_all"], prob["w"],
+        solver = _gauss_newton_one if B == 1 else _gauss_newton
+        return solver(prob["L"], prob["ei"][idx], prob["k0"][idx], prob["wload"], prob["s_all"], prob["w"],
                              prob["p0"][idx], prob["D"][idx], prob["ffix"][idx], prob["lower"], u, st,
                              xtol=xtol, max_iter=max_iter, n_nodes=n_nodes)
 
@@ -555,10 +662,20 @@ def _fast(prob, u0, state0, *, chain, xtol, max_iter, n_nodes):
     return out
 
 
+@functools.lru_cache(maxsize=16)
 def chebyshev_nodes_m(length_m: float, n_nodes: int = _N_NODES) -> np.ndarray:
     """Arc lengths of the fast beam solver's Chebyshev–Lobatto nodes, base first [m]."""
     j = np.arange(n_nodes)
-    return 0.5 * length_m * (1.0 - np.cos(np.pi * j / (n_nodes - 1)))
+    s = 0.5 * length_m * (1.0 - np.cos(np.pi * j / (n_nodes - 1)))
+    s.setflags(write=False)
+    return s
+
+
+@functools.lru_cache(maxsize=16)
+def _joined(s: bytes, length_m: float, n_nodes: int) -> np.ndarray:
+    out = np.concatenate([np.frombuffer(s), chebyshev_nodes_m(length_m, n_nodes)])
+    out.setflags(write=False)
+    return out
 
 
 def _shape_state(ref, L, n_nodes):
@@ -568,14 +685,10 @@ def _shape_state(ref, L, n_nodes):
     start is close for every force near the estimate, where the unloaded arc is not
     (and would need load continuation).
     """
-    from bendsense import pcc
-
     sc = chebyshev_nodes_m(L, n_nodes)
     if ref["kappa"] is not None:
-        lengths = ref["lengths"]
-        total = float(lengths.sum())
-        phi = pcc.forward_kinematics(ref["kappa"], lengths, np.minimum(sc, total))[1]
-        return phi + ref["kappa"][..., -1:] * np.maximum(sc - total, 0.0)
+        total = float(ref["lengths"].sum())
+        return ref["phi_nodes"] + ref["kappa"][..., -1:] * np.maximum(sc - total, 0.0)
     s, phi = ref["s"], ref["phi"]
     # linear interpolation, and the end slope beyond the last point
     j = np.clip(np.searchsorted(s, sc) - 1, 0, s.size - 2)
@@ -858,13 +971,13 @@ def _reference(shape, config, s_opt, n_points, L_act):
         if not np.all(np.isfinite(kappa)):
             raise ValueError("shape.curvature_per_m: must be finite")
         Lc = min(float(lengths.sum()), L_act)
-        s, w = quadrature(lengths, Lc, n_points)
-        p0, phi = pcc.forward_kinematics(kappa, lengths, s)
-        bounds = np.concatenate(([0.0], np.cumsum(lengths)))
-        seg = np.clip(np.searchsorted(bounds[1:-1], s, side="left"), 0, lengths.size - 1)
-        return {"p0": p0, "s": s, "w": w, "Lc": Lc, "kappa": kappa, "lengths": lengths, "seg": seg,
-                "sigma": s - bounds[seg], "tip_shape": np.sum(kappa * lengths, axis=-1), "phi": phi,
-                "kappa_s": kappa[..., seg]}
+        s, w, seg, sigma, s_fk = _pcc_grid(tuple(lengths.tolist()), Lc, n_points, L_act)
+        # the comparison points and the beam's nodes (for its Newton start) in one pass
+        pos, phi = pcc.forward_kinematics(kappa, lengths, s_fk)
+        M = s.size
+        return {"p0": pos[..., :M, :], "s": s, "w": w, "Lc": Lc, "kappa": kappa, "lengths": lengths, "seg": seg,
+                "sigma": sigma, "tip_shape": np.sum(kappa * lengths, axis=-1), "phi": phi[..., :M],
+                "phi_nodes": phi[..., M:], "kappa_s": kappa[..., seg]}
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
         raise ValueError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
     if pos.shape[-2:] != (s_in.size, 2):
@@ -1016,7 +1129,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     k = D.shape[-1]
     prob = {
         "B": B, "k": k, "M": M, "L": L, "Lc": ref["Lc"], "s": ref["s"], "w": ref["w"],
-        "s_all": np.concatenate([ref["s"], chebyshev_nodes_m(L, _N_NODES)]),
+        "s_all": _joined(ref["s"].tobytes(), L, _N_NODES),
         "p0": p0, "ei": ei, "k0": k0, "wload": np.asarray(config.weight_per_length_n_per_m, dtype=float),
         "D": D, "dD": None if (dD is None or source == "model") else np.broadcast_to(dD, (B, 2, k)),
         "ffix": np.zeros((B, 2)), "lower": np.full(k, 0.0 if push_only else -np.inf),
@@ -1033,9 +1146,24 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     if initial is not None:
         if not isinstance(initial, ForceEstimate):
             raise ValueError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
-        if initial_force is None:
-            initial_force = initial.force_n
-    if initial_force is not None:
+    phi = np.broadcast_to(ref["phi"], (*batch, M)).reshape(B, M)
+    kap = np.broadcast_to(ref["kappa_s"], (*batch, M)).reshape(B, M)
+    guess = _moment_guess(prob, phi, kap)
+    u0 = None
+    if initial is not None and initial_force is None and initial.guess_n is not None:
+        # the previous frame's offset from its own moment-balance start corrects this
+        # frame's start (the PCC and model error change slowly along a time series)
+        prev_f = np.broadcast_to(np.asarray(initial.force_n, dtype=float), (*batch, 2)).reshape(B, 2)
+        prev_g = np.broadcast_to(np.asarray(initial.guess_n, dtype=float), (*batch, 2)).reshape(B, 2)
+        ok_prev = np.isfinite(prev_f).all(axis=1) & np.isfinite(prev_g).all(axis=1)
+        u0 = guess.copy()
+        u0[ok_prev] += np.einsum("bij,bi->bj", D[ok_prev], prev_f[ok_prev] - prev_g[ok_prev])
+        chain = False
+    elif initial is not None and initial_force is None:
+        initial_force = initial.force_n
+    if u0 is not None:
+        pass
+    elif initial_force is not None:
         f0 = np.asarray(initial_force, dtype=float)
         if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
             raise ValueError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
@@ -1043,9 +1171,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
         u0 = np.einsum("bij,bi->bj", D, f0 - prob["ffix"])
         chain = False
     else:
-        phi = np.broadcast_to(ref["phi"], (*batch, M)).reshape(B, M)
-        kap = np.broadcast_to(ref["kappa_s"], (*batch, M)).reshape(B, M)
-        u0 = _moment_guess(prob, phi, kap)
+        u0 = guess
         chain = warm_start
     u0 = np.maximum(u0, prob["lower"])
 
@@ -1109,6 +1235,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
         uncertainty=uncertainty,
         tip_position_m=res["tip"].reshape(*batch, 2),
         state=res["state"].reshape(*batch, res["state"].shape[-1]),
+        guess_n=(prob["ffix"] + _apply(D, guess)).reshape(*batch, 2),
     )
 
 
