@@ -1,0 +1,822 @@
+"""Identification of the actuator model from measurements (paper section V-C).
+
+Two fits, each a nonlinear least-squares problem with standard errors from the
+Jacobian and the residual variance:
+
+**Free bending** (:func:`fit_free_bending`) fits the effective shear modulus μ̄, the
+sensor stiffness μ_s and the prebend angle of the free-bending model (paper eq. 8–12)
+to measured bending angles without external load. Data CSV (:func:`read_free_bending_csv`)::
+
+    # optional comment lines before the header
+    pressure_kpa,bending_angle_deg
+    20,24.1
+    40,52.7
+
+with one pressure column, ``pressure_pa`` or ``pressure_kpa``, and one angle column,
+``bending_angle_rad`` or ``bending_angle_deg``: the measured total bending angle θ at
+the tip (the tangent angle of the tip relative to the base, DESIGN section 2). Other
+columns are ignored. At small angles μ̄ and μ_s act almost alike (both only stiffen
+the linear response); the fit reports their correlation and any of the three
+parameters can be fixed.
+
+**Stiffness** (:func:`fit_stiffness`) fits the flexural rigidity EI at each pressure
+level from loaded shapes with known tip loads, then ``EI(P) = ei0 + ei1 · P``
+(paper eq. 15) by weighted linear regression, as in the paper. Data CSV
+(:func:`read_stiffness_csv`), one loaded shape per row::
+
+    pressure_kpa,fx_n,fy_n,tip_x_m,tip_y_m
+    40,0,-0.1,0.0712,0.0853
+
+Columns: ``pressure_pa`` or ``pressure_kpa``; ``fx_n``, ``fy_n`` (tip force in the
+base frame, DESIGN section 2: the paper's downward tip load of 0.1 N on the upright rig
+is ``fy_n = -0.1``); and measured points, either or both of
+
+- ``tip_x_m``, ``tip_y_m``: the tip position r(L) [m];
+- shape points ``s1_m, x1_m, y1_m``, ``s2_m, x2_m, y2_m``, …: arc length from the
+  base and position of marker i [m]. Empty cells mark markers not seen in a row.
+
+Rows whose pressures differ by at most ``pressure_tolerance_pa`` (default 1 kPa) form
+one pressure level. The model shapes come from :func:`bendsense.beam.solve_beam` with
+K0(P) from the free-bending model of the config (identify it first), gravity
+``config.weight_per_length_n_per_m`` and the row's own pressure for K0. Rows with no
+load still count: gravity bends them.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+import os
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
+from bendsense.errors import ConfigError, SessionError
+
+__all__ = [
+    "FREE_BENDING_PARAMS",
+    "STIFFNESS_PARAMS",
+    "FreeBendingFit",
+    "StiffnessData",
+    "StiffnessFit",
+    "fit_free_bending",
+    "fit_stiffness",
+    "read_free_bending_csv",
+    "read_stiffness_csv",
+]
+
+FREE_BENDING_PARAMS = ("shear_modulus_pa", "sensor_stiffness_nm_per_rad", "prebend_angle_rad")
+STIFFNESS_PARAMS = ("ei0_nm2", "ei1_nm2_per_pa")
+# typical magnitudes: parameter scales for the optimiser when a start value is 0
+_TYPICAL = {
+    "shear_modulus_pa": 1e5,
+    "sensor_stiffness_nm_per_rad": 1e-3,
+    "prebend_angle_rad": 0.1,
+    "ei0_nm2": 1e-3,
+    "ei1_nm2_per_pa": 1e-8,
+}
+
+
+# --------------------------------------------------------------------------- CSV input
+
+
+def _read_table(path) -> tuple[list[str], np.ndarray]:
+    """Header and float rows of a CSV; ``#`` lines before the header are skipped, empty cells are NaN."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            lines = fh.read().splitlines()
+    except FileNotFoundError:
+        raise SessionError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise SessionError(f"{path}: cannot read: {getattr(err, 'strerror', None) or err}") from None
+    start = 0
+    while start < len(lines) and (not lines[start].strip() or lines[start].lstrip().startswith("#")):
+        start += 1
+    if start == len(lines):
+        raise SessionError(f"{path}: no header row")
+    reader = csv.reader(lines[start:])
+    header = [h.strip() for h in next(reader)]
+    if len(set(header)) != len(header):
+        dup = sorted({h for h in header if header.count(h) > 1})
+        raise SessionError(f"{path}: duplicate columns {', '.join(dup)}")
+    rows = []
+    for lineno, cells in enumerate(reader, start=start + 2):
+        if not cells or all(not c.strip() for c in cells):
+            continue
+        if len(cells) != len(header):
+            raise SessionError(f"{path}: line {lineno}: expected {len(header)} values, got {len(cells)}")
+        row = []
+        for name, cell in zip(header, cells, strict=True):
+            text = cell.strip()
+            try:
+                row.append(float(text) if text else math.nan)
+            except ValueError:
+                raise SessionError(f"{path}: line {lineno}: column {name}: not a number: {text!r}") from None
+        rows.append(row)
+    if not rows:
+        raise SessionError(f"{path}: no data rows")
+    return header, np.asarray(rows, dtype=float)
+
+
+def _column(path, header, data, names: Mapping[str, float], what: str, required: bool = True):
+    """The one present column of ``names`` (name → factor to SI), converted; None if absent and optional."""
+    present = [n for n in names if n in header]
+    if len(present) > 1:
+        raise SessionError(f"{path}: give one {what} column, got {', '.join(present)}")
+    if not present:
+        if required:
+            raise SessionError(f"{path}: missing {what} column ({' or '.join(names)})")
+        return None
+    name = present[0]
+    values = data[:, header.index(name)] * names[name]
+    return values, name
+
+
+def _require_finite(path, name, values):
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise SessionError(f"{path}: column {name}: missing or non-finite value in data row {bad[0] + 1}")
+
+
+_PRESSURE = {"pressure_pa": 1.0, "pressure_kpa": 1e3}
+
+
+def read_free_bending_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read free-bending data (module docstring): pressures [Pa] and total bending angles [rad].
+
+    Raises
+    ------
+    SessionError
+        If the file is missing, malformed, or lacks a column; the message names it.
+    """
+    header, data = _read_table(path)
+    pressure, pname = _column(path, header, data, _PRESSURE, "pressure")
+    angle, aname = _column(
+        path, header, data, {"bending_angle_rad": 1.0, "bending_angle_deg": math.pi / 180}, "bending angle"
+    )
+    _require_finite(path, pname, pressure)
+    _require_finite(path, aname, angle)
+    return pressure, angle
+
+
+@dataclass(frozen=True, eq=False)
+class StiffnessData:
+    """Loaded shapes for the stiffness fit, one row per measurement.
+
+    Attributes
+    ----------
+    pressure_pa : ndarray, shape (n,)
+        Gauge pressure [Pa].
+    force_n : ndarray, shape (n, 2)
+        Known tip force in the base frame [N].
+    s_m : ndarray, shape (n, M)
+        Arc length of each measured point from the base [m]; NaN where absent.
+    positions_m : ndarray, shape (n, M, 2)
+        Measured points [m]; NaN where absent.
+    """
+
+    pressure_pa: np.ndarray
+    force_n: np.ndarray
+    s_m: np.ndarray
+    positions_m: np.ndarray
+
+    def __post_init__(self):
+        p = np.asarray(self.pressure_pa, dtype=float)
+        f = np.asarray(self.force_n, dtype=float)
+        s = np.asarray(self.s_m, dtype=float)
+        r = np.asarray(self.positions_m, dtype=float)
+        n = p.shape[0] if p.ndim == 1 else -1
+        if p.ndim != 1 or n == 0:
+            raise ValueError(f"pressure_pa: expected shape (n,) with n >= 1, got {p.shape}")
+        if f.shape != (n, 2):
+            raise ValueError(f"force_n: expected shape ({n}, 2), got {f.shape}")
+        if s.ndim != 2 or s.shape[0] != n:
+            raise ValueError(f"s_m: expected shape ({n}, M), got {s.shape}")
+        if r.shape != (*s.shape, 2):
+            raise ValueError(f"positions_m: expected shape {(*s.shape, 2)}, got {r.shape}")
+        for name, arr in (("pressure_pa", p), ("force_n", f)):
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name}: must be finite")
+        seen = np.isfinite(s) & np.all(np.isfinite(r), axis=-1)
+        if not np.all(seen.any(axis=1)):
+            raise ValueError(f"positions_m: row {int(np.argmin(seen.any(axis=1)))} has no measured point")
+        for name, arr in (("pressure_pa", p), ("force_n", f), ("s_m", s), ("positions_m", r)):
+            object.__setattr__(self, name, arr)
+
+    @property
+    def observed(self) -> np.ndarray:
+        """Mask (n, M) of the points measured in each row."""
+        return np.isfinite(self.s_m) & np.all(np.isfinite(self.positions_m), axis=-1)
+
+    @classmethod
+    def from_tip(cls, pressure_pa, force_n, tip_position_m, length_m: float) -> StiffnessData:
+        """Data with the tip position r(L) [m] only."""
+        tip = np.asarray(tip_position_m, dtype=float)
+        n = tip.shape[0]
+        return cls(np.asarray(pressure_pa, dtype=float), force_n, np.full((n, 1), float(length_m)), tip[:, None, :])
+
+
+def read_stiffness_csv(path: str | os.PathLike, length_m: float) -> StiffnessData:
+    """Read loaded shapes for the stiffness fit (module docstring); ``length_m`` places the tip columns.
+
+    Raises
+    ------
+    SessionError
+        If the file is missing, malformed, lacks a column or has no measured points.
+    """
+    header, data = _read_table(path)
+    pressure, pname = _column(path, header, data, _PRESSURE, "pressure")
+    _require_finite(path, pname, pressure)
+    forces = []
+    for name in ("fx_n", "fy_n"):
+        if name not in header:
+            raise SessionError(f"{path}: missing column {name}")
+        forces.append(data[:, header.index(name)])
+        _require_finite(path, name, forces[-1])
+    s_cols, pos_cols = [], []
+    if "tip_x_m" in header or "tip_y_m" in header:
+        for name in ("tip_x_m", "tip_y_m"):
+            if name not in header:
+                raise SessionError(f"{path}: missing column {name} (tip columns come in pairs)")
+        s_cols.append(np.full(len(data), float(length_m)))
+        pos_cols.append(np.stack([data[:, header.index("tip_x_m")], data[:, header.index("tip_y_m")]], axis=-1))
+    i = 1
+    while f"s{i}_m" in header or f"x{i}_m" in header or f"y{i}_m" in header:
+        names = (f"s{i}_m", f"x{i}_m", f"y{i}_m")
+        missing = [n for n in names if n not in header]
+        if missing:
+            raise SessionError(f"{path}: missing column {', '.join(missing)} (shape point {i} needs s, x and y)")
+        s = data[:, header.index(names[0])]
+        if np.any(np.isfinite(s) & ((s < 0) | (s > length_m * (1 + 1e-9)))):
+            raise SessionError(f"{path}: column {names[0]}: arc lengths must lie in [0, {length_m:g}] m")
+        s_cols.append(s)
+        pos_cols.append(np.stack([data[:, header.index(names[1])], data[:, header.index(names[2])]], axis=-1))
+        i += 1
+    if not s_cols:
+        raise SessionError(f"{path}: no measured points: give tip_x_m, tip_y_m or s1_m, x1_m, y1_m, ...")
+    try:
+        return StiffnessData(pressure, np.stack(forces, axis=-1), np.stack(s_cols, axis=1), np.stack(pos_cols, axis=1))
+    except ValueError as err:
+        raise SessionError(f"{path}: {err}") from None
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _split_fix(fix, names: tuple[str, ...], values: dict) -> tuple[list[str], dict]:
+    """Free names and fixed values from ``fix``: names, or a mapping name → value (None: the start value)."""
+    fixed = {}
+    if fix is None:
+        fix = ()
+    items = fix.items() if isinstance(fix, Mapping) else ((n, None) for n in ([fix] if isinstance(fix, str) else fix))
+    for name, value in items:
+        if name not in names:
+            raise ConfigError(f"fix: unknown parameter {name!r}; allowed: {', '.join(names)}")
+        fixed[name] = values[name] if value is None else float(value)
+    free = [n for n in names if n not in fixed]
+    return free, fixed
+
+
+def _covariance(jac: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, int]:
+    """s² (JᵀJ)⁻¹ with s² = RSS / (n − k); inf where the parameters are not identifiable."""
+    n, k = jac.shape
+    dof = n - k
+    if k == 0:
+        return np.zeros((0, 0)), dof
+    # SVD keeps the inverse honest when μ̄ and μ_s are nearly collinear
+    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+    s2 = float(resid @ resid) / dof if dof > 0 else math.nan
+    if sv[0] == 0 or sv[-1] <= sv[0] * np.finfo(float).eps * max(n, k):
+        return np.full((k, k), np.inf), dof
+    cov = (vt.T / sv**2) @ vt * s2
+    return cov, dof
+
+
+def _correlation(cov: np.ndarray) -> np.ndarray:
+    sd = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return cov / np.outer(sd, sd)
+
+
+def _format_value(value: float, err: float) -> str:
+    if err == 0:
+        return f"{value:.6g} (fixed)"
+    if not math.isfinite(err):
+        return f"{value:.6g} ± (not identifiable)"
+    return f"{value:.6g} ± {err:.2g}"
+
+
+# --------------------------------------------------------------------------- free bending
+
+
+@dataclass(frozen=True, eq=False)
+class FreeBendingFit:
+    """Result of :func:`fit_free_bending`.
+
+    Attributes
+    ----------
+    params : dict
+        ``shear_modulus_pa`` [Pa], ``sensor_stiffness_nm_per_rad`` [N·m/rad],
+        ``prebend_angle_rad`` [rad]; fixed ones at their fixed values.
+    stderr : dict
+        Standard errors of ``params`` (0 for fixed parameters, inf if not identifiable).
+    free : tuple of str
+        The fitted parameters, in the order of ``correlation``.
+    correlation : ndarray, shape (k, k)
+        Correlation matrix of the free parameters.
+    residuals : ndarray, shape (n,)
+        Model minus measured bending angle [rad].
+    pressure_pa, bending_angle_rad : ndarray, shape (n,)
+        The data [Pa], [rad].
+    dof : int
+        Degrees of freedom n − k.
+    success : bool
+        The optimiser converged and no parameter ended on a bound.
+    message : str
+        The optimiser's message plus any caveat.
+    """
+
+    params: dict
+    stderr: dict
+    free: tuple
+    correlation: np.ndarray
+    residuals: np.ndarray
+    pressure_pa: np.ndarray
+    bending_angle_rad: np.ndarray
+    dof: int
+    success: bool
+    message: str
+
+    @property
+    def rms_rad(self) -> float:
+        """Root-mean-square residual [rad]."""
+        return float(np.sqrt(np.mean(self.residuals**2)))
+
+    def to_config(self, config):
+        """A copy of ``config`` with the fitted ``material`` section."""
+        return config.replace(material=dataclasses.replace(config.material, **self.params))
+
+    def report(self) -> str:
+        """Short text report: parameters with standard errors, correlation, residuals."""
+        lines = [f"free-bending fit (paper eq. 8-12): {len(self.residuals)} points, {self.dof} degrees of freedom"]
+        for name in FREE_BENDING_PARAMS:
+            lines.append(f"  {name:28s} {_format_value(self.params[name], self.stderr[name])}")
+        if len(self.free) > 1:
+            for i in range(len(self.free)):
+                for j in range(i + 1, len(self.free)):
+                    lines.append(f"  corr({self.free[i]}, {self.free[j]}) = {self.correlation[i, j]:+.3f}")
+        worst = math.degrees(float(np.max(np.abs(self.residuals))))
+        lines.append(f"  residual rms {math.degrees(self.rms_rad):.3g} deg, max {worst:.3g} deg")
+        if not self.success:
+            lines.append(f"  WARNING: {self.message}")
+        return "\n".join(lines)
+
+    def plot(self, ax=None, config=None):
+        """Measured and fitted bending angle over pressure; returns the axes."""
+        import matplotlib.pyplot as plt
+
+        from bendsense.config import load_config
+
+        if ax is None:
+            _, ax = plt.subplots()
+        cfg = self.to_config(config if config is not None else load_config())
+        act = cfg.actuator
+        p = np.linspace(min(0.0, self.pressure_pa.min()), self.pressure_pa.max(), 200)
+        theta = solve_bending_angle(
+            p,
+            chamber_radius_m=act.chamber_radius_m,
+            bottom_thickness_m=act.bottom_thickness_m,
+            wall_thickness_m=act.wall_thickness_m,
+            length_m=act.length_m,
+            **self.params,
+        )
+        ax.plot(self.pressure_pa / 1e3, np.degrees(self.bending_angle_rad), "o", label="measured")
+        ax.plot(p / 1e3, np.degrees(theta), "-", label="model")
+        ax.set_xlabel("pressure [kPa]")
+        ax.set_ylabel("bending angle [deg]")
+        ax.legend()
+        return ax
+
+
+def fit_free_bending(
+    pressure_pa,
+    bending_angle_rad,
+    config=None,
+    *,
+    fix: Iterable[str] | Mapping[str, float] | None = None,
+    initial: Mapping[str, float] | None = None,
+) -> FreeBendingFit:
+    """Fit μ̄, μ_s and the prebend angle to free-bending data (paper eq. 8–12, section V-C).
+
+    Minimises Σ (θ_model(P_i) − θ_i)² with ``scipy.optimize.least_squares`` and the exact
+    Jacobian from the implicit function theorem on eq. 8 (μ̄ ≥ 0, μ_s ≥ 0). Standard
+    errors are ``sqrt(diag(s² (JᵀJ)⁻¹))`` with ``s² = RSS / (n − k)``.
+
+    Parameters
+    ----------
+    pressure_pa : array_like, shape (n,)
+        Gauge pressures [Pa].
+    bending_angle_rad : array_like, shape (n,)
+        Measured total bending angles θ at the tip [rad].
+    config : Config, optional
+        Geometry (``config.actuator``) and start values (``config.material``);
+        default: the paper's prototype.
+    fix : iterable of str or mapping, optional
+        Parameters to hold: names (held at their start values) or name → value
+        (``None``: the start value).
+        Names: ``shear_modulus_pa``, ``sensor_stiffness_nm_per_rad``, ``prebend_angle_rad``.
+    initial : mapping, optional
+        Start values overriding ``config.material``.
+
+    Returns
+    -------
+    FreeBendingFit
+
+    Raises
+    ------
+    ValueError
+        Bad data shapes or values, too few points for the free parameters.
+    ConfigError
+        An unknown parameter name.
+    """
+    from scipy.optimize import least_squares
+
+    from bendsense.config import load_config
+
+    if config is None:
+        config = load_config()
+    p = np.asarray(pressure_pa, dtype=float)
+    y = np.asarray(bending_angle_rad, dtype=float)
+    if p.ndim != 1 or y.shape != p.shape:
+        raise ValueError(f"pressure_pa, bending_angle_rad: expected equal shapes (n,), got {p.shape} and {y.shape}")
+    for name, arr in (("pressure_pa", p), ("bending_angle_rad", y)):
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name}: must be finite")
+    start = {n: getattr(config.material, n) for n in FREE_BENDING_PARAMS}
+    if initial:
+        for name, value in initial.items():
+            if name not in start:
+                raise ConfigError(f"initial: unknown parameter {name!r}; allowed: {', '.join(FREE_BENDING_PARAMS)}")
+            start[name] = float(value)
+    free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start)
+    if len(p) <= len(free):
+        raise ValueError(
+            f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
+        )
+    act = config.actuator
+    geom = {
+        "chamber_radius_m": act.chamber_radius_m,
+        "bottom_thickness_m": act.bottom_thickness_m,
+        "wall_thickness_m": act.wall_thickness_m,
+        "length_m": act.length_m,
+    }
+    scale = np.array([abs(start[n]) or _TYPICAL[n] for n in free])
+    lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf}
+    lb = np.array([lower[n] for n in free]) / scale
+    x0 = np.array([start[n] for n in free]) / scale
+    x0 = np.maximum(x0, np.where(np.isfinite(lb), lb + 1e-6, -np.inf))
+
+    def unpack(x):
+        values = dict(fixed)
+        values.update({n: float(v) for n, v in zip(free, x * scale, strict=True)})
+        return values
+
+    def model(values):
+        theta = solve_bending_angle(p, **geom, **values)
+        return theta, theta - values["prebend_angle_rad"]
+
+    def resid(x):
+        return model(unpack(x))[0] - y
+
+    def jac(x):
+        values = unpack(x)
+        theta0 = model(values)[1]
+        mu, mu_s = values["shear_modulus_pa"], values["sensor_stiffness_nm_per_rad"]
+        # eq. 8: μ̄ m(θ0) + μ_s θ0 = M_a(P) with m = M_θ0 / μ̄; differentiate implicitly
+        m = elastic_moment(theta0, **geom, shear_modulus_pa=1.0)
+        dm = elastic_moment_slope(theta0, **geom, shear_modulus_pa=1.0)
+        denom = mu * dm + mu_s
+        cols = {
+            "shear_modulus_pa": -m / denom,
+            "sensor_stiffness_nm_per_rad": -theta0 / denom,
+            "prebend_angle_rad": np.ones_like(theta0),
+        }
+        return np.stack([cols[n] for n in free], axis=-1) * scale if free else np.zeros((len(p), 0))
+
+    if free:
+        sol = least_squares(
+            resid,
+            x0,
+            jac=jac,
+            bounds=(lb, np.inf),
+            method="trf",
+            x_scale=1.0,
+            xtol=1e-14,
+            ftol=1e-14,
+            gtol=1e-14,
+            max_nfev=500,
+        )
+        x, ok, message = sol.x, bool(sol.success), str(sol.message)
+        at_bound = [n for n, v, b in zip(free, x, lb, strict=True) if np.isfinite(b) and v <= b * (1 + 1e-9) + 1e-12]
+    else:
+        x, ok, message, at_bound = np.zeros(0), True, "all parameters fixed", []
+    values = unpack(x)
+    r = resid(x)
+    cov, dof = _covariance(jac(x) / scale, r)
+    sd = np.sqrt(np.diag(cov))
+    stderr = {n: 0.0 for n in FREE_BENDING_PARAMS}
+    stderr.update({n: float(s) for n, s in zip(free, sd, strict=True)})
+    if at_bound:
+        ok = False
+        message += f"; {', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
+    if not np.all(np.isfinite(sd)):
+        ok = False
+        message += "; parameters not identifiable from these data (fix one)"
+    return FreeBendingFit(
+        params=values,
+        stderr=stderr,
+        free=tuple(free),
+        correlation=_correlation(cov),
+        residuals=r,
+        pressure_pa=p,
+        bending_angle_rad=y,
+        dof=dof,
+        success=ok,
+        message=message,
+    )
+
+
+# --------------------------------------------------------------------------- stiffness
+
+
+@dataclass(frozen=True, eq=False)
+class StiffnessFit:
+    """Result of :func:`fit_stiffness`.
+
+    Attributes
+    ----------
+    params : dict
+        ``ei0_nm2`` [N·m²] and ``ei1_nm2_per_pa`` [N·m²/Pa] of EI(P) = ei0 + ei1·P (eq. 15).
+    stderr : dict
+        Standard errors of ``params`` (0 for fixed parameters).
+    free : tuple of str
+        The fitted parameters, in the order of ``correlation``.
+    correlation : ndarray, shape (k, k)
+        Correlation matrix of the free parameters.
+    residuals : ndarray, shape (levels,)
+        Per-level EI minus the fitted line [N·m²].
+    level_pressure_pa : ndarray, shape (levels,)
+        Mean pressure of each level [Pa].
+    level_ei_nm2, level_ei_stderr_nm2 : ndarray, shape (levels,)
+        EI fitted at each level and its standard error [N·m²].
+    level_rms_m : ndarray, shape (levels,)
+        RMS position residual of each level's fit [m].
+    level : ndarray of int, shape (n,)
+        Level index of each data row.
+    position_residuals_m : ndarray, shape (n, M, 2)
+        Model minus measured points at the level's EI [m]; NaN where not measured.
+    success : bool
+        Every level fit converged with stable beam solutions.
+    message : str
+        Summary, with the levels that failed.
+    """
+
+    params: dict
+    stderr: dict
+    free: tuple
+    correlation: np.ndarray
+    residuals: np.ndarray
+    level_pressure_pa: np.ndarray
+    level_ei_nm2: np.ndarray
+    level_ei_stderr_nm2: np.ndarray
+    level_rms_m: np.ndarray
+    level: np.ndarray
+    position_residuals_m: np.ndarray
+    success: bool
+    message: str
+
+    def to_config(self, config):
+        """A copy of ``config`` with the fitted ``stiffness`` section."""
+        return config.replace(stiffness=dataclasses.replace(config.stiffness, **self.params))
+
+    def report(self) -> str:
+        """Short text report: EI per level, the fitted line with standard errors."""
+        lines = [f"stiffness fit (paper eq. 15): {len(self.level)} shapes at {len(self.level_ei_nm2)} pressure levels"]
+        lines.append("  pressure [kPa]   EI [N m^2]              rms [mm]")
+        for p, ei, se, rms in zip(
+            self.level_pressure_pa, self.level_ei_nm2, self.level_ei_stderr_nm2, self.level_rms_m, strict=True
+        ):
+            lines.append(f"  {p / 1e3:14.2f}   {ei:.5g} ± {se:<10.2g}  {rms * 1e3:8.3g}")
+        for name in STIFFNESS_PARAMS:
+            lines.append(f"  {name:16s} {_format_value(self.params[name], self.stderr[name])}")
+        if len(self.free) == 2:
+            lines.append(f"  corr(ei0_nm2, ei1_nm2_per_pa) = {self.correlation[0, 1]:+.3f}")
+        if not self.success:
+            lines.append(f"  WARNING: {self.message}")
+        return "\n".join(lines)
+
+    def plot(self, ax=None):
+        """EI per pressure level with error bars and the fitted line; returns the axes."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots()
+        p = self.level_pressure_pa
+        ax.errorbar(p / 1e3, self.level_ei_nm2, yerr=self.level_ei_stderr_nm2, fmt="o", label="per level")
+        grid = np.linspace(min(0.0, p.min()), p.max(), 50)
+        ax.plot(grid / 1e3, self.params["ei0_nm2"] + self.params["ei1_nm2_per_pa"] * grid, "-", label="EI(P)")
+        ax.set_xlabel("pressure [kPa]")
+        ax.set_ylabel("EI [N m²]")
+        ax.legend()
+        return ax
+
+
+def _pressure_levels(pressure_pa: np.ndarray, tolerance_pa: float) -> np.ndarray:
+    """Level index per row: sorted pressures split where consecutive ones differ by more than the tolerance."""
+    order = np.argsort(pressure_pa, kind="stable")
+    jumps = np.diff(pressure_pa[order]) > tolerance_pa
+    level_sorted = np.concatenate([[0], np.cumsum(jumps)])
+    level = np.empty(len(pressure_pa), dtype=int)
+    level[order] = level_sorted
+    return level
+
+
+_FAILED_RESIDUAL_M = 1.0  # stands in for a failed beam solve: far worse than any real misfit
+
+
+def _fit_level(data: StiffnessData, rows, k0, w, length_m, ei_start, method):
+    """EI at one pressure level: 1-parameter least squares in log EI on the measured points."""
+    from scipy.optimize import least_squares
+
+    from bendsense.beam import solve_beam
+
+    obs = data.observed[rows]
+    s_all = data.s_m[rows]
+    grid, inverse = np.unique(np.where(obs, s_all, 0.0), return_inverse=True)
+    inverse = inverse.reshape(s_all.shape)
+    force = data.force_n[rows]
+    measured = data.positions_m[rows]
+    local = np.arange(len(rows))[:, None]
+
+    def shapes(log_ei):
+        sol = solve_beam(length_m, math.exp(log_ei), k0[rows], force, w, s_m=grid, method=method, warn=False)
+        return sol.positions_m[local, inverse], np.asarray(sol.success)
+
+    def resid(x):
+        pos, ok = shapes(float(x[0]))
+        r = pos - measured
+        r[~ok] = _FAILED_RESIDUAL_M
+        return r[obs].ravel()
+
+    x0 = np.array([math.log(ei_start)])
+    sol = least_squares(resid, x0, method="trf", diff_step=1e-6, x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    pos, ok = shapes(float(sol.x[0]))
+    r = resid(sol.x)
+    jac = np.atleast_2d(sol.jac)
+    cov, dof = _covariance(jac, r)
+    ei = math.exp(float(sol.x[0]))
+    se = ei * math.sqrt(cov[0, 0]) if dof > 0 else math.inf  # delta method from log EI
+    full = np.full(measured.shape, np.nan)
+    full[obs] = (pos - measured)[obs]
+    success = bool(sol.success) and bool(np.all(ok)) and math.isfinite(se)
+    return ei, se, float(np.sqrt(np.mean(r**2))), full, success
+
+
+def fit_stiffness(
+    data: StiffnessData,
+    config=None,
+    *,
+    fix: Iterable[str] | Mapping[str, float] | None = None,
+    pressure_tolerance_pa: float = 1e3,
+    weighted: bool = True,
+    method: str = "fast",
+) -> StiffnessFit:
+    """Fit EI per pressure level from loaded shapes, then EI(P) = ei0 + ei1·P (paper eq. 15, V-C).
+
+    At each level, EI minimises the distance between the measured points and the beam
+    model (paper eq. 16–17 via :func:`bendsense.beam.solve_beam`) with K0(P) from the
+    free-bending model of ``config`` and gravity ``config.weight_per_length_n_per_m``.
+    The line through the levels is a linear regression weighted by 1/σ_EI² (or
+    unweighted); its standard errors propagate the per-level ones, scaled up by
+    sqrt(χ²/(levels − k)) when the levels scatter more than their errors say.
+
+    Parameters
+    ----------
+    data : StiffnessData
+        Loaded shapes (:func:`read_stiffness_csv`).
+    config : Config, optional
+        Actuator, free-bending material, gravity, and start values (``config.stiffness``);
+        default: the paper's prototype.
+    fix : iterable of str or mapping, optional
+        ``ei0_nm2`` and/or ``ei1_nm2_per_pa`` to hold: names or name → value
+        (``None``: the value in ``config.stiffness``).
+    pressure_tolerance_pa : float
+        Rows whose sorted pressures differ by at most this much form one level [Pa].
+    weighted : bool
+        Weight the regression by the per-level standard errors.
+    method : str
+        Beam solver, ``fast`` or ``shooting`` (the paper's method).
+
+    Returns
+    -------
+    StiffnessFit
+
+    Raises
+    ------
+    ValueError
+        Too few levels or points for the free parameters.
+    """
+    from bendsense.actuator import FreeBendingModel
+    from bendsense.config import load_config
+
+    if config is None:
+        config = load_config()
+    if not isinstance(data, StiffnessData):
+        raise TypeError(f"data: expected StiffnessData, got {type(data).__name__}")
+    if not (math.isfinite(pressure_tolerance_pa) and pressure_tolerance_pa >= 0):
+        raise ValueError(f"pressure_tolerance_pa: must be finite and >= 0, got {pressure_tolerance_pa!r}")
+    start = {n: getattr(config.stiffness, n) for n in STIFFNESS_PARAMS}
+    free, fixed = _split_fix(fix, STIFFNESS_PARAMS, start)
+    length = config.actuator.length_m
+    k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(data.pressure_pa)
+    w = config.weight_per_length_n_per_m
+    level = _pressure_levels(data.pressure_pa, pressure_tolerance_pa)
+    n_levels = int(level.max()) + 1
+    if n_levels < len(free):
+        raise ValueError(
+            f"stiffness data: {n_levels} pressure level(s) cannot determine {len(free)} parameters "
+            f"({', '.join(free)}); measure more pressures or fix one"
+        )
+    lp, lei, lse, lrms = (np.empty(n_levels) for _ in range(4))
+    pos_res = np.full(data.positions_m.shape, np.nan)
+    failed = []
+    for j in range(n_levels):
+        rows = np.flatnonzero(level == j)
+        lp[j] = float(np.mean(data.pressure_pa[rows]))
+        n_obs = int(data.observed[rows].sum()) * 2
+        if n_obs < 2:
+            raise ValueError(f"stiffness data: level {lp[j] / 1e3:.3g} kPa has one coordinate only; need two")
+        ei_start = float(config.stiffness.ei_nm2(lp[j]))
+        if not ei_start > 0:
+            ei_start = config.stiffness.ei0_nm2
+        lei[j], lse[j], lrms[j], pos_res[rows], ok = _fit_level(data, rows, k0, w, length, ei_start, method)
+        if not ok:
+            failed.append(f"{lp[j] / 1e3:.3g} kPa")
+
+    # linear regression EI_j = ei0 + ei1 P_j over the levels
+    design = {"ei0_nm2": np.ones(n_levels), "ei1_nm2_per_pa": lp}
+    target = lei - sum(fixed[n] * design[n] for n in fixed)
+    X = np.stack([design[n] for n in free], axis=-1) if free else np.zeros((n_levels, 0))
+    finite_se = np.isfinite(lse) & (lse > 0)
+    use_weights = weighted and bool(np.all(finite_se))
+    weights = 1.0 / lse**2 if use_weights else np.ones(n_levels)
+    sw = np.sqrt(weights)
+    if free:
+        beta, *_ = np.linalg.lstsq(X * sw[:, None], target * sw, rcond=None)
+    else:
+        beta = np.zeros(0)
+    values = dict(fixed)
+    values.update({n: float(b) for n, b in zip(free, beta, strict=True)})
+    line = values["ei0_nm2"] + values["ei1_nm2_per_pa"] * lp
+    residuals = lei - line
+    dof = n_levels - len(free)
+    message = "converged"
+    if free:
+        xtwx_inv = np.linalg.pinv((X * weights[:, None]).T @ X)
+        chi2 = float(np.sum(weights * residuals**2))
+        if use_weights:
+            factor = max(1.0, chi2 / dof) if dof > 0 else 1.0
+        else:
+            factor = chi2 / dof if dof > 0 else math.inf
+        cov = xtwx_inv * factor
+    else:
+        cov = np.zeros((0, 0))
+    sd = np.sqrt(np.diag(cov))
+    stderr = {n: 0.0 for n in STIFFNESS_PARAMS}
+    stderr.update({n: float(s) for n, s in zip(free, sd, strict=True)})
+    success = not failed
+    if failed:
+        message = f"level fit failed at {', '.join(failed)} (beam solve unstable or not converged)"
+    if weighted and not use_weights:
+        message += "; some level has no finite standard error: unweighted regression"
+    if not values["ei0_nm2"] > 0:
+        success = False
+        message += f"; fitted ei0_nm2 = {values['ei0_nm2']:.3g} is not positive"
+    return StiffnessFit(
+        params=values,
+        stderr=stderr,
+        free=tuple(free),
+        correlation=_correlation(cov),
+        residuals=residuals,
+        level_pressure_pa=lp,
+        level_ei_nm2=lei,
+        level_ei_stderr_nm2=lse,
+        level_rms_m=lrms,
+        level=level,
+        position_residuals_m=pos_res,
+        success=success,
+        message=message,
+    )
