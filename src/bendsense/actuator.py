@@ -340,6 +340,13 @@ class _Table:
     bucket_start: np.ndarray  # (n_buckets,) interval that holds the bucket's left end
     error_rad: float  # largest error found at the test points
     converged: bool
+    columns: tuple = ()  # coef[:, 0..3] as contiguous arrays: faster gathers for batches
+
+    def __post_init__(self):
+        cols = tuple(np.ascontiguousarray(self.coef[:, i]) for i in range(4))
+        for col in cols:
+            col.setflags(write=False)
+        object.__setattr__(self, "columns", cols)
 
 
 @functools.lru_cache(maxsize=32)
@@ -531,8 +538,8 @@ class FreeBendingModel:
         k = tab.bucket_start[np.minimum((q / tab.bucket_pa).astype(np.intp), len(tab.bucket_start) - 1)]
         k = np.minimum(k + (q >= tab.p_pa[k + 1]), len(tab.coef) - 1)
         u = (q - tab.p_pa[k]) * tab.inv_width[k]
-        c = tab.coef[k]
-        theta = c[..., 0] + u * (c[..., 1] + u * (c[..., 2] + u * c[..., 3]))
+        c0, c1, c2, c3 = tab.columns
+        theta = c0[k] + u * (c1[k] + u * (c2[k] + u * c3[k]))
         above = p > self.pressure_max_pa
         if np.any(above):
             theta = np.array(theta, dtype=float)
