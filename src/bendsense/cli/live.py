@@ -1,0 +1,210 @@
+"""Commands ``live`` (shape and force of a board, live) and ``demo`` (the whole chain, simulated)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
+
+_NO_CALIBRATION = (
+    "live needs a sensor calibration: --calibration CAL.yaml (make one with "
+    "'bendsense calibrate MANIFEST.yaml -o CAL.yaml', or run 'bendsense demo' and use "
+    "bendsense-demo/calibration/calibration.yaml for the simulated board)"
+)
+# kept in sync with bendsense.estimation.CONSTRAINTS (imported lazily for a fast --help)
+_CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
+
+
+def _positive(ctx, param, value):
+    if value is not None and not value > 0:
+        raise click.BadParameter(f"expected > 0, got {value:g}", ctx=ctx, param=param)
+    return value
+
+
+@click.command("live", cls=InterspersedCommand)
+@click.argument("port")
+@config_option
+@click.option(
+    "--calibration",
+    "calibration_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Calibration YAML written by 'bendsense calibrate' (required).",
+)
+@click.option("--constraint", type=click.Choice(_CONSTRAINTS), help="Force constraint (default: from the config).")
+@click.option(
+    "--save",
+    "save_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Run headless (no window) and write the last frame to this image, e.g. live.png.",
+)
+@click.option(
+    "--seconds",
+    type=float,
+    callback=_positive,
+    help="Run time [s] (default: until the window is closed; 3 s with --save).",
+)
+@click.option("--pressure-kpa", type=float, help="Pressure for frames without a pressure reading [kPa].")
+@click.option(
+    "--scale",
+    "scale_mm_per_n",
+    type=float,
+    default=200.0,
+    show_default=True,
+    callback=_positive,
+    help="Force arrow length [mm per N].",
+)
+@click.option(
+    "--max-fps",
+    type=float,
+    default=60.0,
+    show_default=True,
+    callback=_positive,
+    help="Upper bound of the display rate [1/s].",
+)
+@click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
+@click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
+def live(
+    port,
+    config_path,
+    calibration_path,
+    constraint,
+    save_path,
+    seconds,
+    pressure_kpa,
+    scale_mm_per_n,
+    max_fps,
+    baud,
+    no_start,
+):
+    """Show the shape, the tip force (arrow, value and ±σ) and the channel levels of the board on PORT, live.
+
+    PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path (from
+    'bendsense sim-device') or a pyserial URL. Every displayed frame is the newest
+    one received; its shape is reconstructed and its force estimated, warm-started
+    from the previous frame. At the end, the achieved frame rate and the end-to-end
+    latency per frame (bytes read to artists drawn) are printed.
+    """
+    if calibration_path is None:
+        raise click.ClickException(_NO_CALIBRATION)
+    if save_path is not None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        if seconds is None:
+            seconds = 3.0
+    from bendsense.calibration import Calibration
+    from bendsense.config import load_config
+    from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
+    from bendsense.device.live import LiveProcessor, LiveView, run_live
+    from bendsense.errors import BendsenseError
+
+    try:
+        config = load_config(config_path)
+        calibration = Calibration.load(calibration_path)
+        processor = LiveProcessor(
+            calibration,
+            config,
+            constraint=constraint,
+            pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
+        )
+        if save_path is not None:
+            view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
+        else:
+            view, is_open = _window(processor, scale_mm_per_n * 1e-3)
+        with Driver(port, baudrate=baud or DEFAULT_BAUDRATE) as driver:
+            if not no_start:
+                driver.start()
+            try:
+                stats = run_live(driver, processor, view, duration_s=seconds, max_fps=max_fps, is_open=is_open)
+            except KeyboardInterrupt:
+                stats = None
+        if save_path is not None:
+            if stats is None or stats.frames == 0:
+                raise click.ClickException(f"{port}: no frames received; nothing to save")
+            save_path.parent.mkdir(parents=True, exist_ok=True)
+            view.save(save_path)
+    except BendsenseError as err:
+        raise click.ClickException(str(err)) from None
+    except ValueError as err:  # a bad option value reaching the estimator
+        raise click.ClickException(str(err)) from None
+    if stats is not None:
+        click.echo(stats.summary())
+    if save_path is not None:
+        click.echo(f"wrote {save_path}")
+
+
+def _window(processor, scale_m_per_n):
+    """An interactive window, or a one-line error when there is no display."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    from bendsense.device.live import LiveView
+
+    backend = matplotlib.get_backend().lower()
+    if backend in ("agg", "pdf", "ps", "svg", "cairo", "template") or backend.startswith("module://matplotlib_inline"):
+        raise click.ClickException(
+            f"no interactive matplotlib backend (got {backend!r}, no display?): use --save FILE.png"
+        )
+    view = LiveView(processor, scale_m_per_n=scale_m_per_n)
+    plt.show(block=False)
+    plt.pause(0.05)
+    number = view.figure.number
+    return view, lambda: plt.fignum_exists(number)
+
+
+@click.command("demo", cls=InterspersedCommand)
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default="bendsense-demo",
+    show_default=True,
+    help="Output directory.",
+)
+@click.option("--seconds", type=float, default=5.0, show_default=True, callback=_positive, help="Recording time [s].")
+@click.option(
+    "--rate",
+    "rate_hz",
+    type=float,
+    default=100.0,
+    show_default=True,
+    callback=_positive,
+    help="Frame rate of the simulated board [Hz].",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the virtual sensor.")
+@overwrite_option
+def demo(out_dir, seconds, rate_hz, seed, overwrite):
+    """Run the whole chain on a simulated board, no hardware needed, and check it against the truth.
+
+    Starts a simulated board (the virtual sensor under pressure ramps and an
+    intermittent contact force) on a pseudo-terminal, records it with the real driver
+    and recorder, calibrates the virtual sensor, reconstructs the shape and estimates
+    the tip force of every frame, and writes DIR/session, DIR/results, DIR/demo.png
+    with a summary of the force error against the simulated truth.
+    """
+    if out_dir.exists() and not overwrite:
+        raise click.ClickException(f"{out_dir}: exists (use --overwrite to replace the demo's outputs in it)")
+    if rate_hz > 65535:
+        raise click.BadParameter(f"expected at most 65535, got {rate_hz:g}", param_hint="--rate")
+    from bendsense.device.demo import run_demo
+    from bendsense.errors import BendsenseError
+
+    quiet = (click.get_current_context().find_root().obj or {}).get("quiet", False)
+
+    def echo(line):
+        if not quiet:
+            click.echo(line, err=True)
+            sys.stderr.flush()
+
+    try:
+        result = run_demo(out_dir, seconds=seconds, rate_hz=rate_hz, seed=seed, overwrite=overwrite, echo=echo)
+    except (BendsenseError, FileExistsError) as err:
+        raise click.ClickException(str(err)) from None
+    click.echo(result.summary())
+
+
+COMMANDS = [live, demo]
