@@ -451,3 +451,13 @@ def test_plots_draw(tmp_path, tip_dataset):
     ax = fit_stiffness(StiffnessData.from_tip(p, f, tip, L), CFG).plot()
     assert len(ax.lines) >= 1
     plt.close("all")
+
+
+def test_stiffness_with_paper_shooting_solver_agrees():
+    # data from the spectral solver, fit with the paper's shooting method: an independent check
+    p = np.array([30e3, 30e3, 90e3, 90e3])
+    f = np.array([[0.0, -0.1], [0.0, -0.2], [0.0, -0.1], [0.05, -0.2]])
+    tip = loaded_shapes(p, f).tip_position_m
+    fit = fit_stiffness(StiffnessData.from_tip(p, f, tip, L), CFG, method="shooting")
+    assert fit.success, fit.message
+    np.testing.assert_allclose(fit.level_ei_nm2, CFG.stiffness.ei_nm2(np.array([30e3, 90e3])), rtol=1e-6)

@@ -82,15 +82,16 @@ def _parse_fix(kind: str, items) -> dict:
 def identify(
     kind, data, config_path, output, fix_items, pressure_tolerance_kpa, unweighted, method, plot_path, overwrite
 ):
-    r"""Fit the free-bending or stiffness model to DATA.csv (paper section V-C).
+    """Fit the free-bending or stiffness model to DATA.csv (paper section V-C).
 
-    \b
-    free-bending: columns pressure_pa|pressure_kpa, bending_angle_rad|bending_angle_deg;
-                  fits shear_modulus_pa, sensor_stiffness_nm_per_rad, prebend_angle_rad.
-    stiffness:    columns pressure_pa|pressure_kpa, fx_n, fy_n, and tip_x_m, tip_y_m
-                  and/or shape points s1_m, x1_m, y1_m, s2_m, ...; fits EI per pressure
-                  level, then ei0_nm2, ei1_nm2_per_pa. Identify free bending first: the
-                  stiffness fit uses K0(P) of the config's free-bending model.
+    free-bending: DATA.csv has the columns pressure_pa (or pressure_kpa) and
+    bending_angle_rad (or bending_angle_deg); fits shear_modulus_pa,
+    sensor_stiffness_nm_per_rad and prebend_angle_rad.
+
+    stiffness: DATA.csv has the columns pressure_pa (or pressure_kpa), fx_n, fy_n, and
+    tip_x_m, tip_y_m and/or shape points s1_m, x1_m, y1_m, s2_m, ...; fits EI per
+    pressure level, then ei0_nm2 and ei1_nm2_per_pa. Identify free bending first: the
+    stiffness fit uses K0(P) of the config's free-bending model.
 
     Writes the config (--config, or the paper's) with the fitted values to OUTPUT.
     """
