@@ -1178,7 +1178,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     if method == "fast":
         res = _fast(prob, u0, state0, chain=chain, xtol=xtol, max_iter=max_iter, n_nodes=_N_NODES)
     else:
-        u, status, nfev = _paper(prob, u0)
+        # the paper's baseline starts where fminsearch/fmincon would: at zero force
+        u, status, nfev = _paper(prob, np.maximum(np.zeros_like(u0), prob["lower"]))
         # the shape, its sensitivities and the uncertainty at the paper's optimum come
         # from the fast solver (the paper gives no uncertainty)
         F = prob["ffix"] + np.einsum("bij,bj->bi", D, u)
