@@ -27,9 +27,13 @@ import numpy as np
 
 from bendsense.errors import ConfigError
 
-__all__ = ["LiveFrame", "LiveProcessor", "LiveView", "LiveStats", "run_live"]
+__all__ = ["LiveFrame", "LiveProcessor", "LiveView", "LiveStats", "run_live", "LIVE_MAX_ITER"]
 
 MM = 1e3
+#: Iteration limit of a live force estimate. A warm-started frame converges in a few
+#: iterations; one that cannot (an unconstrained axial force on the straight actuator
+#: does not change its shape) must not stall the display for 100 beam solves.
+LIVE_MAX_ITER = 20
 
 
 # --------------------------------------------------------------------------- model
@@ -104,7 +108,7 @@ class LiveProcessor:
         Estimate the force (False: shapes only).
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``push_only``,
-        ``tip_angle_source``, ``max_iter``, ...).
+        ``tip_angle_source``, ...). ``max_iter`` defaults to :data:`LIVE_MAX_ITER`.
 
     Attributes
     ----------
@@ -131,7 +135,7 @@ class LiveProcessor:
         self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
         self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
         self.estimate = bool(estimate)
-        self.options = options
+        self.options = {"max_iter": LIVE_MAX_ITER, **options}
         self.frames = 0
         self.failures = 0
         self._previous = None
