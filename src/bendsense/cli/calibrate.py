@@ -59,7 +59,7 @@ def _degree(ctx, param, value):
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path), help="Save a fit plot.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
 def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_path, overwrite):
-    r"""Fit the signal-to-shift calibration (paper eq. 1-2) from MANIFEST.yaml.
+    """Fit the signal-to-shift calibration (paper eq. 1-2) from MANIFEST.yaml.
 
     The manifest names the flat recording and one session CSV per calibration strip
     (paths relative to the manifest):
