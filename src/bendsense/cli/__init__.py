@@ -8,6 +8,13 @@ Heavy imports happen inside the commands, so ``bendsense --help`` is fast.
 from __future__ import annotations
 
 import logging
+import os
+
+# bendsense's linear algebra is many small matrices, which a threaded BLAS slows down
+# by an order of magnitude; parallelism comes from processes instead. This must be set
+# before numpy is first imported (the commands import it lazily).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 import click
 
