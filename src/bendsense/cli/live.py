@@ -200,10 +200,27 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
             click.echo(line, err=True)
             sys.stderr.flush()
 
+    bar = None
+
+    def progress(done, total):
+        nonlocal bar
+        if quiet:
+            return
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, unit="frame", desc="recording", file=sys.stderr, leave=False)
+        bar.update(done - bar.n)
+
     try:
-        result = run_demo(out_dir, seconds=seconds, rate_hz=rate_hz, seed=seed, overwrite=overwrite, echo=echo)
+        result = run_demo(
+            out_dir, seconds=seconds, rate_hz=rate_hz, seed=seed, overwrite=overwrite, echo=echo, progress=progress
+        )
     except (BendsenseError, FileExistsError) as err:
         raise click.ClickException(str(err)) from None
+    finally:
+        if bar is not None:
+            bar.close()
     click.echo(result.summary())
 
 

@@ -125,7 +125,7 @@ class DemoResult:
             f"calibration ({cal}): degree {self.calibration_degree}, RMS shift residual "
             f"{self.calibration_rms_shift_m * 1e6:.1f} um over the strips",
             f"reconstruction: {self.reconstruction_rate_hz:,.0f} frames/s",
-            f"force vs simulated truth ({self.frames_compared} frames, contact force {self.contact_n:g} N):",
+            f"force vs simulated truth ({self.frames_compared} frames, peak contact force {self.contact_n:.3g} N):",
         ]
         for name in self.force_rms_error_n:
             lines.append(
@@ -134,6 +134,7 @@ class DemoResult:
                 f"converged {100 * self.converged[name]:.0f} %, "
                 f"{self.estimation_rate_hz[name]:,.0f} frames/s"
             )
+        lines.append("  (σ propagates the sensor noise only; calibration and model errors are not in it)")
         lines.append(f"wrote {self.session_dir}, {self.results_dir}, {self.figure_path} in {self.elapsed_s:.1f} s")
         return "\n".join(lines)
 
@@ -166,7 +167,7 @@ def _calibrate(cal_dir: Path, config, seed: int, echo):
     return cal, cal_path, False
 
 
-def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo):
+def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo, progress=None):
     """Stream the virtual sensor through a pseudo-terminal, the driver and the recorder."""
     from bendsense.device.driver import Driver
     from bendsense.device.recorder import Recorder
@@ -191,9 +192,13 @@ def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo):
         recorder = Recorder(driver, session_dir, overwrite=True, config=config, meta=meta)
         driver.start()
         recorder.start()
-        if not device.finished.wait(timeout=3.0 * seconds + 30.0):
-            recorder.stop()
-            raise DeviceError(f"{device.port}: the simulated board did not finish {n_frames} frames in time")
+        deadline = time.monotonic() + 3.0 * seconds + 30.0
+        while not device.finished.wait(timeout=0.1):
+            if progress is not None:
+                progress(recorder.stats.records, n_frames)
+            if time.monotonic() > deadline:
+                recorder.stop()
+                raise DeviceError(f"{device.port}: the simulated board did not finish {n_frames} frames in time")
         # the last frames may still be on their way through the pty, the driver and the queue
         deadline = time.monotonic() + 5.0
         while time.monotonic() < deadline:
@@ -203,6 +208,8 @@ def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo):
             time.sleep(0.02)
         recorder.stop()
         stats = driver.stats
+        if progress is not None:
+            progress(recorder.stats.records, n_frames)
     return device.stats, stats
 
 
@@ -249,6 +256,7 @@ def run_demo(
     overwrite: bool = False,
     config=None,
     echo=None,
+    progress=None,
 ) -> DemoResult:
     """Run the demo (module docstring) and write its outputs into ``out_dir``.
 
@@ -269,6 +277,8 @@ def run_demo(
         The actuator and sensor (simulated and assumed alike); default the paper's.
     echo : callable, optional
         Called with a line of progress text per step.
+    progress : callable, optional
+        Called as ``progress(frames_recorded, frames_total)`` while recording.
 
     Returns
     -------
@@ -310,7 +320,9 @@ def run_demo(
 
     if session_dir.exists():
         shutil.rmtree(session_dir)
-    sim_stats, drv_stats = _record(session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed, echo=echo)
+    sim_stats, drv_stats = _record(
+        session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed, echo=echo, progress=progress
+    )
 
     session = read_session_dir(session_dir)
     k = _frame_index(session_dir, rate_hz)
