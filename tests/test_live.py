@@ -98,7 +98,7 @@ def test_view_blits_the_frame(calibration_path, stream):
     # the artists carry the last frame, in mm
     x, y = view.shape_line.get_data()
     np.testing.assert_allclose(np.column_stack([x, y]), last.shape.positions_m * 1e3)
-    np.testing.assert_allclose([b.get_height() for b in view.bars], last.delta_a)
+    np.testing.assert_allclose(view.bar_heights, last.delta_a)
     tip = last.shape.positions_m[-1] * 1e3
     np.testing.assert_allclose(view.arrow._posA_posB, [tip, tip + last.force_n * 0.2 * 1e3])
     assert view.arrow.get_visible() and "±σ" in view.force_text.get_text()

@@ -30,6 +30,8 @@ from bendsense.errors import ConfigError
 __all__ = ["LiveFrame", "LiveProcessor", "LiveView", "LiveStats", "run_live", "LIVE_MAX_ITER"]
 
 MM = 1e3
+_BLUE = (0.122, 0.467, 0.706, 1.0)  # matplotlib's C0 and C3
+_RED = (0.839, 0.153, 0.157, 1.0)
 #: Iteration limit of a live force estimate. A warm-started frame converges in a few
 #: iterations; one that cannot (an unconstrained axial force on the straight actuator
 #: does not change its shape) must not stall the display for 100 beam solves.
@@ -209,7 +211,7 @@ class LiveView:
     """
 
     def __init__(
-        self, processor: LiveProcessor, figure=None, *, headless=False, scale_m_per_n=0.1, text_interval_s=0.1
+        self, processor: LiveProcessor, figure=None, *, headless=False, scale_m_per_n=0.2, text_interval_s=0.1
     ):
         self.processor = processor
         self.scale_m_per_n = float(scale_m_per_n)
@@ -238,6 +240,7 @@ class LiveView:
         return self.figure.canvas
 
     def _build(self) -> None:
+        from matplotlib.collections import PolyCollection
         from matplotlib.patches import FancyArrowPatch
 
         fig = self.figure
@@ -253,7 +256,9 @@ class LiveView:
         ax.grid(True, alpha=0.3)
         ax.plot([0.0], [0.0], "ks", markersize=7, label="base")
         ax.set_title("shape and tip force (base frame)", fontsize="medium")
-        (self.shape_line,) = ax.plot([], [], "-", color="C0", linewidth=2.5, label="reconstructed shape", animated=True)
+        (self.shape_line,) = ax.plot(
+            [], [], "-", color="C0", linewidth=2.5, label="reconstructed shape (dashed: extrapolated)", animated=True
+        )
         (self.tip_marker,) = ax.plot([], [], "o", color="C0", markersize=6, animated=True)
         self.arrow = FancyArrowPatch(
             (0, 0), (0, 0), arrowstyle="-|>", mutation_scale=18, color="C3", linewidth=2, animated=True
@@ -282,7 +287,11 @@ class LiveView:
         hi = np.where(odd, cal.delta_a_range_odd[1], cal.delta_a_range_even[1])
         self._range = (lo, hi)
         bx.bar(x, hi - lo, bottom=lo, width=0.85, color="0.88", edgecolor="0.7", label="calibrated range")
-        self.bars = bx.bar(x, np.zeros(n), width=0.5, color="C0", animated=True)
+        # one collection for all channels: one draw call per frame instead of N patches
+        self._bar_x = x.astype(float)
+        self.bars = PolyCollection(self._bar_verts(np.zeros(n)), facecolors="C0", linewidths=0, animated=True)
+        bx.add_collection(self.bars, autolim=False)
+        self._bar_outside = np.zeros(n, dtype=bool)
         bx.bar([np.nan], [np.nan], color="C0", label="ΔA in range")
         bx.bar([np.nan], [np.nan], color="C3", label="ΔA outside (extrapolated)")
         span = float(np.max(hi) - np.min(lo)) or 1.0
@@ -297,7 +306,19 @@ class LiveView:
         bx.grid(True, axis="y", alpha=0.3)
         self.status_text = fig.text(0.5, 0.97, "", ha="center", va="top", fontsize="medium", animated=True)
         self.texts = [self.force_text, self.status_text]
-        self.artists = [*self.texts, *self.bars, self.shape_line, self.tip_marker, self.arrow]
+        self.artists = [*self.texts, self.bars, self.shape_line, self.tip_marker, self.arrow]
+
+    def _bar_verts(self, values, half_width=0.25):
+        x = self._bar_x[:, None]
+        v = np.asarray(values, dtype=float)[:, None]
+        xs = np.hstack([x - half_width, x + half_width, x + half_width, x - half_width])
+        ys = np.hstack([np.zeros_like(v), np.zeros_like(v), v, v])
+        return np.stack([xs, ys], axis=-1)
+
+    @property
+    def bar_heights(self) -> np.ndarray:
+        """The displayed ΔA per channel [signal units]."""
+        return np.array([path.vertices[2, 1] for path in self.bars.get_paths()])
 
     def _on_draw(self, event) -> None:
         # a full draw (first show, resize) invalidates the saved pixels
@@ -353,9 +374,10 @@ class LiveView:
         lo, hi = self._range
         da = frame.delta_a
         outside = (da < lo) | (da > hi)
-        for bar, value, bad in zip(self.bars, da, outside, strict=True):
-            bar.set_height(value)
-            bar.set_color("C3" if bad else "C0")
+        self.bars.set_verts(self._bar_verts(da))
+        if not np.array_equal(outside, self._bar_outside):
+            self.bars.set_facecolors(np.where(outside[:, None], _RED, _BLUE))
+            self._bar_outside = outside
         self.status_text.set_text(status)
 
     def update(self, frame: LiveFrame, status: str = "") -> None:
