@@ -97,15 +97,15 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         cal = calibration(Path(tmp))
     print()
-    print(f"{'case':<52} {'median':>9} {'p95':>9}")
+    print(f"{'case':<66} {'median':>9} {'p95':>9}")
     for constraint in ("normal", "none"):
         process, draw, failures = model_and_view(cal, constraint)
         note = f" ({failures} not converged)" if failures else ""
         print(
-            f"{'model: reconstruct + estimate (' + constraint + ') [ms]' + note:<52} "
+            f"{'model: reconstruct + estimate (' + constraint + ') [ms]' + note:<66} "
             f"{np.median(process):9.2f} {np.percentile(process, 95):9.2f}"
         )
-    print(f"{'view: update artists + blit [ms]':<52} {np.median(draw):9.2f} {np.percentile(draw, 95):9.2f}")
+    print(f"{'view: update artists + blit [ms]':<66} {np.median(draw):9.2f} {np.percentile(draw, 95):9.2f}")
     print()
     header = (
         f"{'end to end (constraint normal)':<34} {'rate':>6} {'shown':>6} {'fps':>6} "
