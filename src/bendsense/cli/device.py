@@ -169,8 +169,6 @@ def sim_device(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bi
             seed=seed,
             autostart=autostart,
         )
-    except NotImplementedError as err:
-        raise click.ClickException(f"{err}; use --source ramp for now") from None
     except BendsenseError as err:
         raise _fail(err) from None
     click.echo(dev.port)
