@@ -100,3 +100,25 @@ def test_export_round_trip(workdir):
     a, b = bendsense.read_session(workdir / "validation.csv"), bendsense.read_session(out)
     np.testing.assert_array_equal(a.signals, b.signals)
     np.testing.assert_array_equal(a.extra["kappa_true_per_m"], b.extra["kappa_true_per_m"])
+
+
+def test_input_columns_named_like_results_are_kept(tmp_path):
+    from types import SimpleNamespace
+
+    from bendsense.pcc import Shape
+    from bendsense.results import write_results
+
+    truth = np.array([0.1, 0.2])
+    session = Session([0.0, 0.1], np.zeros((2, 16)), [1e4, 2e4], extra={"fx_n": truth, "trial": np.array([7, 8])})
+    shape = Shape.from_curvatures(np.zeros((2, 16)), bendsense.load_config().sensor.lengths_m)
+    write_results(tmp_path / "shape_only", session, shape)
+    np.testing.assert_array_equal(read_results(tmp_path / "shape_only")["fx_n"], truth)  # passed through
+
+    estimate = SimpleNamespace(force_n=np.array([[0.5, 0.0], [0.6, 0.0]]), std_n=np.full((2, 2), 0.01),
+                               residual_m=np.zeros(2), success=np.array([True, True]))
+    write_results(tmp_path / "forces", session, shape, estimate)
+    results = read_results(tmp_path / "forces")
+    np.testing.assert_array_equal(results["fx_n"], [0.5, 0.6])
+    np.testing.assert_array_equal(results["input_fx_n"], truth)
+    np.testing.assert_array_equal(results["trial"], [7, 8])
+    assert results.extra_names == ("input_fx_n", "trial")

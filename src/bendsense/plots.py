@@ -461,32 +461,10 @@ def plot_calibration(calibration, data=None, ax=None):
 
 
 def results_from_state(session, shape, estimate=None):
-    """In-memory :class:`~bendsense.results.Results` of a pipeline state (for plots).
+    """In-memory :class:`~bendsense.results.Results` of a pipeline state (for plots)."""
+    from bendsense.results import Results
 
-    The same columns as ``results.csv`` (DESIGN.md section 3), without writing files.
-    """
-    from bendsense.results import Results, frame_status
-
-    frames = len(session)
-    kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
-    tip = np.asarray(shape.tip_position_m).reshape(frames, 2)
-    columns = {
-        "t_s": session.t_s,
-        "pressure_pa": session.pressure_pa,
-        **{f"kappa{i + 1}": kappa[:, i] for i in range(kappa.shape[1])},
-        "tip_x_m": tip[:, 0],
-        "tip_y_m": tip[:, 1],
-        "tip_angle_rad": np.asarray(shape.tip_angle_rad).reshape(frames),
-    }
-    if estimate is not None:
-        force = np.asarray(estimate.force_n).reshape(frames, 2)
-        std = np.asarray(estimate.std_n).reshape(frames, 2)
-        columns.update(fx_n=force[:, 0], fy_n=force[:, 1], fx_std_n=std[:, 0], fy_std_n=std[:, 1],
-                       residual_m=np.asarray(estimate.residual_m).reshape(frames))
-    columns["status"] = frame_status(shape, estimate)
-    positions = np.asarray(shape.positions_m).reshape(frames, -1, 2)
-    return Results(columns=columns, s_m=np.asarray(shape.s_m), positions_m=positions,
-                   extra_names=tuple(session.extra))
+    return Results.from_state(session, shape, estimate)
 
 
 def plot_results(results, path=None, *, max_shapes: int = 8, dpi: int = 150, title: str | None = None):

@@ -3,8 +3,9 @@
 ``results.csv`` has a row per frame: ``t_s``, ``pressure_pa``, ``kappa1..kappaN``
 [1/m], ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, after estimation ``fx_n``,
 ``fy_n``, ``fx_std_n``, ``fy_std_n``, ``residual_m``, ``status``; then the input's
-extra columns unchanged. ``shape.npz`` holds ``s_m`` (M,) and ``positions_m``
-(frames, M, 2).
+extra columns unchanged (one whose name is taken by a result column, such as a
+ground-truth ``fx_n``, is written as ``input_fx_n``). ``shape.npz`` holds ``s_m``
+(M,) and ``positions_m`` (frames, M, 2).
 """
 
 from __future__ import annotations
@@ -36,6 +37,41 @@ class Results:
     s_m: np.ndarray
     positions_m: np.ndarray
     extra_names: tuple = field(default_factory=tuple)
+
+    @classmethod
+    def from_state(cls, session, shape, estimate=None) -> Results:
+        """The results of a processed session in memory: the columns of ``results.csv``."""
+        frames = len(session)
+        kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
+        tip = np.asarray(shape.tip_position_m).reshape(frames, 2)
+        columns: dict[str, np.ndarray] = {
+            "t_s": session.t_s,
+            "pressure_pa": session.pressure_pa,
+            **{f"kappa{i + 1}": kappa[:, i] for i in range(kappa.shape[1])},
+            "tip_x_m": tip[:, 0],
+            "tip_y_m": tip[:, 1],
+            "tip_angle_rad": np.asarray(shape.tip_angle_rad).reshape(frames),
+        }
+        if estimate is not None:
+            force = np.asarray(estimate.force_n).reshape(frames, 2)
+            std = np.asarray(estimate.std_n).reshape(frames, 2)
+            columns.update(
+                fx_n=force[:, 0],
+                fy_n=force[:, 1],
+                fx_std_n=std[:, 0],
+                fy_std_n=std[:, 1],
+                residual_m=np.asarray(estimate.residual_m).reshape(frames),
+            )
+        columns["status"] = frame_status(shape, estimate)
+        extra_names = []
+        for name, values in session.extra.items():
+            # an input column named like a result (e.g. ground truth fx_n) is kept as input_fx_n
+            name = name if name not in columns else f"input_{name}"
+            columns[name] = values
+            extra_names.append(name)
+        positions = np.asarray(shape.positions_m).reshape(frames, -1, 2)
+        return cls(columns=columns, s_m=np.asarray(shape.s_m), positions_m=positions,
+                   extra_names=tuple(extra_names))
 
     def __getitem__(self, name):
         return self.columns[name]
@@ -84,31 +120,8 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise SessionError(f"{out_dir}: exists (use --overwrite to replace it)")
-    frames = len(session)
-    kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
-    tip = np.asarray(shape.tip_position_m).reshape(frames, 2)
-    columns: dict[str, np.ndarray] = {
-        "t_s": session.t_s,
-        "pressure_pa": session.pressure_pa,
-        **{f"kappa{i + 1}": kappa[:, i] for i in range(kappa.shape[1])},
-        "tip_x_m": tip[:, 0],
-        "tip_y_m": tip[:, 1],
-        "tip_angle_rad": np.asarray(shape.tip_angle_rad).reshape(frames),
-    }
-    if estimate is not None:
-        force = np.asarray(estimate.force_n).reshape(frames, 2)
-        std = np.asarray(estimate.std_n).reshape(frames, 2)
-        columns.update(
-            fx_n=force[:, 0],
-            fy_n=force[:, 1],
-            fx_std_n=std[:, 0],
-            fy_std_n=std[:, 1],
-            residual_m=np.asarray(estimate.residual_m).reshape(frames),
-        )
-    columns["status"] = frame_status(shape, estimate)
-    for name, values in session.extra.items():
-        if name not in columns:
-            columns[name] = values
+    results = Results.from_state(session, shape, estimate)
+    columns = results.columns
 
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
@@ -118,11 +131,7 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
             writer.writerow(columns)
             for row in zip(*columns.values()):
                 writer.writerow([_format(v) for v in row])
-        np.savez_compressed(
-            tmp / "shape.npz",
-            s_m=np.asarray(shape.s_m),
-            positions_m=np.asarray(shape.positions_m).reshape(frames, -1, 2),
-        )
+        np.savez_compressed(tmp / "shape.npz", s_m=results.s_m, positions_m=results.positions_m)
         if out_dir.exists():
             shutil.rmtree(out_dir)
         os.replace(tmp, out_dir)
