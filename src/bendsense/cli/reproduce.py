@@ -1,0 +1,72 @@
+"""The ``reproduce`` command: the paper's evaluation on simulated data, as a report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from bendsense.cli._common import InterspersedCommand, overwrite_option
+from bendsense.errors import BendsenseError
+
+
+def _quiet() -> bool:
+    ctx = click.get_current_context(silent=True)
+    obj = ctx.find_root().obj if ctx is not None else None
+    return bool(isinstance(obj, dict) and obj.get("quiet"))
+
+
+@click.command("reproduce", cls=InterspersedCommand)
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Report directory: report.md and PNG figures (created).",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the simulated sensor, noise and loads.")
+@click.option("--quick", is_flag=True, help="Fewer frames and configurations (every table and figure; for tests).")
+@overwrite_option
+def reproduce(out_dir, seed, quick, overwrite):
+    """Run the paper's evaluation (section V) on simulated experiments.
+
+    Simulates calibration and validation strips, free bending, tip loads and contact
+    forces on an actuator whose parameters the estimator does not know (with unmodelled
+    base rotation and sensor noise), then calibrates (n = 1, 2, 3), reconstructs,
+    identifies the model, estimates forces, and writes REPORT_DIR/report.md with the
+    analogues of Table I, Fig. 8, Fig. 9, Fig. 10 and Table II beside the paper's numbers,
+    and the time of each stage.
+    """
+
+    def step(state):
+        if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not overwrite)):
+            raise click.ClickException(f"{out_dir}: exists (use --overwrite to replace it)")
+        from bendsense.sim.reproduce import reproduce as run
+
+        quiet = _quiet()
+        command = f"bendsense reproduce -o {out_dir.as_posix()} --seed {seed}" + (" --quick" if quick else "")
+        try:
+            result = run(
+                out_dir,
+                seed=seed,
+                quick=quick,
+                overwrite=overwrite,
+                progress=None if quiet else (lambda text: click.echo(text, err=True)),
+                command=command,
+            )
+        except (BendsenseError, FileExistsError) as err:
+            raise click.ClickException(str(err)) from None
+        t1 = result.table_i[3]
+        tip = result.tip_load
+        click.echo(
+            f"n = 3: dkappa {t1['dkappa_all_pct'][0]:.2f} %, (dp)max {t1['dp_max_all_pct'][0]:.2f} %; "
+            f"tip-load error {tip['all_pct'][0]:.1f} % +- {tip['all_pct'][1]:.1f} % of 0.3 N"
+        )
+        click.echo(f"wrote {result.report_path} and {len(result.figures)} figures in {result.wall_time_s:.1f} s")
+        return state
+
+    return step
+
+
+COMMANDS = [reproduce]
