@@ -1,0 +1,162 @@
+"""The documentation runs: every fenced ``bash`` and ``python`` block of README.md and docs/*.md.
+
+The blocks of one page run in order, in one fresh temporary working directory that
+holds copies of the repository's ``configs/`` and ``examples/`` (the docs are written
+to run from the repository root), so later blocks see the files earlier ones wrote.
+``bash`` blocks run under ``bash -euo pipefail``, ``python`` blocks with this
+interpreter; each must exit 0. Blocks in other languages (``text``, ``yaml``, …) are
+not run.
+
+What is not run as written:
+
+- a command on the line after a ``# needs hardware`` comment (with its ``\\``
+  continuation lines) needs a sensor board and is skipped;
+- ``pip install ... && CMD``: the package is already installed in the test
+  environment, so only ``CMD`` runs; ``python -m pytest`` is skipped (the suite would
+  run itself recursively);
+- ``bendsense reproduce`` runs with its documented ``--quick`` flag (the full run takes
+  minutes; the quick one makes every table and figure).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+COPIED = ("configs", "examples")
+HARDWARE = re.compile(r"^\s*#\s*needs hardware\b", re.IGNORECASE)
+FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[\w+-]*)[^\n]*\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
+TIMEOUT_S = 300
+
+
+def extract_blocks(text: str) -> list[tuple[str, str]]:
+    """The ``(language, code)`` of every fenced bash or python block, in page order."""
+    out = []
+    for m in FENCE.finditer(text):
+        lang = m["lang"].lower()
+        if lang in ("bash", "sh", "shell"):
+            code = runnable_shell(m["body"])
+            if code.strip():
+                out.append(("bash", code))
+        elif lang == "python":
+            out.append(("python", m["body"]))
+    return out
+
+
+def runnable_shell(code: str) -> str:
+    """``code`` without its hardware commands, with the ``pip install`` and reproduce rules applied."""
+    lines = code.splitlines()
+    kept = []
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if HARDWARE.match(line):
+            # skip the marked command and its continuation lines
+            i += 1
+            while i < len(lines) and lines[i].rstrip().endswith("\\"):
+                i += 1
+            i += 1
+            continue
+        kept.append(_test_equivalent(line))
+        i += 1
+    return "\n".join(kept) + "\n"
+
+
+def _test_equivalent(line: str) -> str:
+    stripped = line.strip()
+    if stripped.startswith("pip install"):
+        parts = [p.strip() for p in stripped.split("&&")]
+        rest = [p for p in parts if not p.startswith("pip install")]
+        rest = [p for p in rest if not re.match(r"python[0-9.]* -m pytest\b", p)]
+        return " && ".join(rest)
+    if re.match(r"bendsense\s+reproduce\b", stripped) and "--quick" not in stripped:
+        return line.replace("reproduce", "reproduce --quick", 1)
+    return line
+
+
+# ------------------------------------------------------------------ the extraction itself
+
+
+def test_hardware_commands_are_skipped_with_their_continuations():
+    text = (
+        "```bash\n"
+        "echo one\n"
+        "# needs hardware\n"
+        "bendsense record /dev/ttyACM0 \\\n"
+        "    -o s --seconds 3\n"
+        "echo two\n"
+        "```\n"
+    )
+    [(lang, code)] = extract_blocks(text)
+    assert lang == "bash"
+    assert code.split() == ["echo", "one", "echo", "two"]
+
+
+def test_block_of_hardware_commands_only_is_dropped():
+    text = "```bash\n# needs hardware\nbendsense live /dev/ttyACM0 --calibration cal.yaml\n```\n"
+    assert extract_blocks(text) == []
+
+
+def test_pip_install_lines_keep_only_the_command_after_them():
+    assert _test_equivalent("pip install . && bendsense demo") == "bendsense demo"
+    assert _test_equivalent('pip install ".[test,distributed]" && python -m pytest') == ""
+    assert _test_equivalent('pip install ".[distributed]"') == ""
+
+
+def test_reproduce_gets_its_quick_flag():
+    assert _test_equivalent("bendsense reproduce -o report") == "bendsense reproduce --quick -o report"
+    assert _test_equivalent("bendsense reproduce --quick -o r") == "bendsense reproduce --quick -o r"
+
+
+def test_other_languages_are_not_run_and_order_is_kept():
+    text = "```text\nnot run\n```\n```python\nprint(1)\n```\n```yaml\na: 1\n```\n```bash\necho 2\n```\n"
+    assert extract_blocks(text) == [("python", "print(1)\n"), ("bash", "echo 2\n")]
+
+
+def test_fences_name_their_language_without_a_space():
+    # a page whose fences were mistyped (e.g. ``` bash) would silently run nothing
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        assert "``` bash" not in text and "```Bash" not in text, page.name
+
+
+# ------------------------------------------------------------------ running the pages
+
+
+def _run(lang: str, code: str, cwd: Path, env: dict) -> subprocess.CompletedProcess:
+    if lang == "bash":
+        cmd = ["bash", "-euo", "pipefail", "-c", code]
+    else:
+        cmd = [sys.executable, "-c", code]
+    return subprocess.run(
+        cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT_S, stdin=subprocess.DEVNULL
+    )
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(ROOT).as_posix() for p in PAGES])
+def test_page_runs(page: Path, tmp_path: Path):
+    blocks = extract_blocks(page.read_text(encoding="utf-8"))
+    if not blocks:
+        pytest.skip(f"{page.name}: no runnable blocks")
+    if shutil.which("bendsense") is None:
+        pytest.skip("the bendsense command is not on PATH (package not installed)")
+    for name in COPIED:
+        if (ROOT / name).is_dir():
+            shutil.copytree(ROOT / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__"))
+    # single-threaded BLAS as the CLI sets it (troubleshooting.md): the python blocks'
+    # many small matrices crawl when threaded BLAS competes for the cores
+    env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    for k, (lang, code) in enumerate(blocks, start=1):
+        proc = _run(lang, code, tmp_path, env)
+        assert proc.returncode == 0, (
+            f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
+            f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
+        )
