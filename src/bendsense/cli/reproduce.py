@@ -21,6 +21,7 @@ def _quiet() -> bool:
     "-o",
     "--output",
     "out_dir",
+    metavar="REPORT_DIR",
     required=True,
     type=click.Path(file_okay=False, path_type=Path),
     help="Report directory: report.md and PNG figures (created).",
