@@ -46,11 +46,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 import scipy  # noqa: E402
-
 from bench_beam import exact_tip  # noqa: E402
 from bench_estimation import latency, series  # noqa: E402
 from bench_frames import N_FRAMES, stream  # noqa: E402
 from bench_reconstruct import synthetic_calibration  # noqa: E402
+
 from bendsense import load_config  # noqa: E402
 from bendsense.beam import BeamConvergenceWarning, solve_beam  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402

@@ -724,13 +724,22 @@ def solve(
 
     dpos = dang = dtip = None
     if sensitivities:
-        dphi = np.zeros((B, n, 2))
-        dphi[:, 1:, :] = extra[..., 1:3] * scale[:, None, None]
-        dsin = cs[..., None] * dphi
-        dcos = -sn[..., None] * dphi
-        dang = (P @ dphi).reshape(*shape, M, 2)
-        dpos = np.stack([PQ @ dsin, PQ @ dcos], axis=-2).reshape(*shape, M, 2, 2) * L
-        dtip = np.stack([ops.Q[-1] @ dsin, ops.Q[-1] @ dcos], axis=-2).reshape(*shape, 2, 2) * L
+        # node-major (n, B, ...) so that each product with P, PQ, Q is one matrix
+        # product instead of B small ones (~2× faster for the estimator's batches)
+        dphi = np.zeros((n, B, 2))
+        dphi[1:] = extra[..., 1:3].transpose(1, 0, 2) * scale[:, None]
+        dsc = np.empty((n, B, 2, 2))  # ∂(sin φ, cos φ)/∂F at the nodes
+        np.multiply(cs.T[..., None], dphi, out=dsc[:, :, 0])
+        np.multiply(sn.T[..., None], dphi, out=dsc[:, :, 1])
+        np.negative(dsc[:, :, 1], out=dsc[:, :, 1])
+        flat = dsc.reshape(n, -1)
+        dang = np.empty((B, M, 2))
+        dang[:] = (P @ dphi.reshape(n, -1)).reshape(M, B, 2).transpose(1, 0, 2)
+        dpos = np.empty((B, M, 2, 2))
+        np.multiply((PQ @ flat).reshape(M, B, 2, 2).transpose(1, 0, 2, 3), L, out=dpos)
+        dang = dang.reshape(*shape, M, 2)
+        dpos = dpos.reshape(*shape, M, 2, 2)
+        dtip = (ops.Q[-1] @ flat).reshape(*shape, 2, 2) * L
 
     success = status == 1
     if success.all():
