@@ -518,6 +518,111 @@ class Calibration:
         self._check_channels(a)
         return self.shifts_from_delta(a - self.offset)
 
+    def shift_error_m(self, shifts_m, *, covariance: bool = False):
+        """Model error of the calibration polynomials at shifts ``shifts_m`` [m].
+
+        The polynomials of eq. 2 do not fit the coil response exactly; the misfit
+        ``r(S) = f(ΔA) − S`` is a smooth function of the shift that grows with ``|S|``,
+        one per parity. It is treated as a random smooth function: zero mean, standard
+        deviation ``σ_p(|S|)`` the kernel-smoothed RMS of the fit residuals of the
+        channels of parity p (Gaussian kernel, bandwidth a tenth of the largest fitted
+        shift; constant beyond the largest fitted shift), and correlation
+        ``ρ_ij = c_ij exp(−(S_i − S_j)² / 2ℓ²)`` between channels i and j, with
+        ``c_ij = 1`` within a parity and ``c`` between the odd and even polynomials.
+        ``ℓ`` and ``c`` are least-squares fits of that form to the empirical
+        correlogram of the residuals scaled by ``σ`` at lags below a third of the
+        fitted range (pairs of calibration points binned by ``|S_a − S_b|``). So
+        channels whose shifts are close err together, which independent errors miss.
+        Without the fitted data (an old calibration file) ``σ`` is the RMS of the
+        per-strip residuals for both parities and the channels are independent.
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Shifts S of the N channels [m].
+        covariance : bool
+            Return the covariance between the channels instead of ``σ``.
+
+        Returns
+        -------
+        ndarray, shape (..., N) or (..., N, N)
+            ``σ(|S|)`` [m], or the covariance ``σ_i σ_j ρ_ij`` [m²].
+        """
+        s = np.asarray(shifts_m, dtype=float)
+        n = self.n_channels
+        if s.ndim == 0 or s.shape[-1] != n:
+            raise ValueError(f"shifts_m: expected shape (..., {n}), got {s.shape}")
+        model = self._shift_error_table
+        odd, _ = parity_masks(n)
+        grid = model["grid_m"]
+        sigma = np.where(odd, np.interp(np.abs(s), grid, model["sigma_odd_m"]),
+                         np.interp(np.abs(s), grid, model["sigma_even_m"]))
+        if not covariance:
+            return sigma
+        ell = model["length_m"]
+        if ell > 0:
+            rho = np.exp(-0.5 * ((s[..., :, None] - s[..., None, :]) / ell) ** 2)
+        else:
+            rho = np.broadcast_to(np.eye(n), (*s.shape[:-1], n, n))
+        same = odd[:, None] == odd[None, :]
+        rho = rho * np.where(same, 1.0, model["parity_correlation"])
+        return sigma[..., :, None] * sigma[..., None, :] * rho
+
+    @cached_property
+    def _shift_error_table(self) -> dict:
+        # grid_m, sigma_odd_m, sigma_even_m: the envelopes σ_p(|S|) [m]; length_m: ℓ [m]
+        # (0: independent channels); parity_correlation: c (see shift_error_m)
+        if self.fit_delta_a is None or self.fit_shifts_m is None:
+            rms = [r.rms_shift_m for r in self.strip_residuals]
+            level = float(np.sqrt(np.mean(np.square(rms)))) if rms else 0.0
+            flat = np.array([level, level])
+            return {"grid_m": np.array([0.0, 1.0]), "sigma_odd_m": flat, "sigma_even_m": flat, "length_m": 0.0,
+                    "parity_correlation": 0.0}
+        shifts = self.fit_shifts_m
+        resid = self.shifts_from_delta(self.fit_delta_a) - shifts
+        odd, even = parity_masks(self.n_channels)
+        top = float(np.abs(shifts).max())
+        grid = np.linspace(0.0, top, 65)
+        h = 0.1 * top if top > 0 else 1.0
+
+        def envelope(mask):
+            x = np.abs(shifts[:, mask]).ravel()
+            k = np.exp(-0.5 * ((grid[:, None] - x[None, :]) / h) ** 2)
+            return np.sqrt(k @ resid[:, mask].ravel() ** 2 / k.sum(axis=1))
+
+        sig_odd = envelope(odd)
+        sig_even = envelope(even) if np.any(even) else sig_odd
+        out = {"grid_m": grid, "sigma_odd_m": sig_odd, "sigma_even_m": sig_even, "length_m": 0.0,
+               "parity_correlation": 0.0}
+        level = np.where(odd, np.interp(np.abs(shifts), grid, sig_odd), np.interp(np.abs(shifts), grid, sig_even))
+        if top > 0 and np.all(level > 0):
+            x, z = shifts.ravel(), (resid / level).ravel()
+            par = np.broadcast_to(odd, shifts.shape).ravel()
+            lag = np.abs(x[:, None] - x[None, :])
+            prod = z[:, None] * z[None, :]
+            same = par[:, None] == par[None, :]
+            # the correlogram at short lags (the residual oscillates, which a positive
+            # correlation function cannot follow at long lags)
+            width = top / 30.0
+            near = (lag < top / 3.0) & ~np.eye(x.size, dtype=bool)
+            curves = []
+            for pick in (same & near, ~same & near):
+                b = (lag[pick] / width).astype(int)
+                count = np.bincount(b, minlength=10)[:10]
+                mean = np.bincount(b, prod[pick], minlength=10)[:10] / np.maximum(count, 1)
+                curves.append((count, mean))
+            centre = (np.arange(10) + 0.5) * width
+            ells = np.geomspace(top / 300.0, top, 200)
+            g = np.exp(-0.5 * (centre[None, :] / ells[:, None]) ** 2)  # (ells, bins)
+            count, mean = curves[0]
+            ell = float(ells[np.argmin((count * (mean - g) ** 2).sum(axis=1))])
+            gl = np.exp(-0.5 * (centre / ell) ** 2)
+            cnt_x, mean_x = curves[1]
+            denom = float((cnt_x * gl * gl).sum())
+            c = float(np.clip((cnt_x * gl * mean_x).sum() / denom, 0.0, 1.0)) if denom > 0 else 0.0
+            out.update(length_m=ell, parity_correlation=c)
+        return out
+
     def extrapolated_delta(self, delta_a):
         """Per frame: True if any channel's ΔA lies outside the calibrated range."""
         lo, hi = self._channel_range

@@ -55,6 +55,14 @@ Solvers
     Converged when the step (or the error left by the observed linear contraction) is
     below ``XTOL_N`` = 1e-10 N. A trial shape that jumps away from its linear
     prediction (onto another branch of equilibria, e.g. past buckling) is rejected.
+    Poorly identifiable loads (an axial load on a nearly straight actuator, at low
+    pressure): a moment-balance start beyond the convexity bound competes with the
+    same start scaled into the convex region (the lower shape distance wins), and a
+    frame whose trial steps leave the stable branch ``_MAX_JUMPS`` = 2 times stops
+    at its best stable point with ``success=True``, the message ``"not identifiable
+    along (x, y): ..."`` and an infinite standard deviation along that direction
+    (the fit's optimum lies at the buckling boundary, or the cost is flat there):
+    the estimate comes back quickly, flagged, not as a confident number.
     ``"paper"``: the paper's algorithm as the baseline: the shooting beam solver inside
     ``scipy.optimize.minimize`` with Nelder–Mead (MATLAB's fminsearch) on (Fx, Fy) for
     ``none``, SLSQP (fmincon) with the equality constraint ``D⊥ · F = 0`` (and
@@ -62,23 +70,47 @@ Solvers
     from the same moment-balance force so that both search the same basin.
 
 Uncertainty
-    Linear propagation of the sensor noise. With the weighted residual
-    ``r(u) = W^½ (p(s; u) − p⁰(s))`` and ``J = ∂r/∂u``, the optimum moves by
-    ``δu = (JᵀJ)⁻¹ Jᵀ W^½ δp⁰`` when the reconstructed shape moves by ``δp⁰``;
-    ``δp⁰ = (∂p⁰/∂κ)(∂κ/∂S) δS`` through the PCC kinematics (analytic) and the
-    differencing of eq. 3–4; ``δS_i = f_i'(ΔA_i) δΔA_i`` through the calibration's
-    slope (eq. 2) with ``Cov(ΔA) = diag(noise_std²)``. So ``Cov(F) = T Σ_S Tᵀ`` with
+    Linear propagation of the errors of the shifts S, then a goodness-of-fit check.
+    With the weighted residual ``r(u) = W^½ (p(s; u) − p⁰(s))`` and ``J = ∂r/∂u``,
+    the optimum moves by ``δu = (JᵀJ)⁻¹ Jᵀ W^½ δp⁰`` when the reconstructed shape
+    moves by ``δp⁰ = G δS``, ``G = (∂p⁰/∂κ)(∂κ/∂S)`` through the PCC kinematics
+    (analytic) and the differencing of eq. 3–4. So ``Cov(F) = T Σ_S Tᵀ`` with
     ``T = ∂F/∂S`` (including the change of ``D`` with the tip angle for
-    ``tip_angle_source="shape"``). The residuals of neighbouring points are strongly
-    correlated (one noisy coil bends the whole rest of the shape), which this accounts
-    for and ``s² (JᵀJ)⁻¹`` would not. A direction in which the shape does not depend on
-    the force (an axial load on a straight actuator: ``JᵀJ`` singular) gets an infinite
-    standard deviation. Without a ``calibration`` the shifts are taken as the signals
-    (unit slope, ``noise_std`` in metres of shift). When the noise is unknown (no
-    ``noise_std``, a calibration without ``noise_std``, ``config.estimation.
-    signal_noise_std = 0``) or the shape has no PCC curvatures, the fallback treats the
-    residuals as independent per point with the variance of the fit
-    (``uncertainty="residual"``), which is optimistic for correlated errors.
+    ``tip_angle_source="shape"``). ``Σ_S`` (N × N) holds two terms:
+
+    - the signal noise through the calibration's slope (eq. 2),
+      ``f_i'(ΔA_i)² noise_std_i²`` on the diagonal (independent channels);
+    - the calibration's own model error: the polynomials do not fit the coil
+      response exactly, and their misfit is a smooth function of S, so channels
+      with similar shifts err together. ``Calibration.shift_error_m(S,
+      covariance=True)`` models it from the calibration residuals: RMS envelope
+      ``σ_p(|S|)`` per parity, Gaussian correlation in ``S_i − S_j`` with a length
+      fitted to the residuals' correlogram, and an odd/even correlation. Absent
+      for a calibration without residuals (an exact one) and without a calibration.
+
+    Then the misfit: the residual is pulled back to the shift perturbation that
+    explains it best, ``δŜ = −(GᵀWG)⁻¹ GᵀW r`` (the part no PCC shape can show
+    drops out), and ``χ² = δŜᵀ C⁺ δŜ`` with ``C`` the covariance that ``Σ_S``
+    predicts for ``δŜ`` (rank N − k). ``Cov(F)`` is multiplied by ``χ²/(N − k)``
+    where that exceeds 1 (the Birge ratio; ``ForceEstimate.chi2_per_dof``): errors
+    beyond the model of ``Σ_S`` that show in the shape (beam or PCC model error,
+    a worse calibration) widen σ; an exact model leaves it alone up to the χ²
+    fluctuation. Not included, because the shape cannot reveal them: errors of the
+    assumed constraint (e.g. ``normal`` with the free-motion tip angle while the
+    contact is normal to the loaded tip: a bias ``u Δφ`` across ``D``), of
+    ``K0(P)``, ``EI(P)`` and the pressure reading. The residuals of neighbouring
+    points are strongly correlated (one noisy coil bends the whole rest of the
+    shape), which this accounts for and ``s² (JᵀJ)⁻¹`` would not. A direction in
+    which the shape does not depend on the force (an axial load on a straight
+    actuator: ``JᵀJ`` singular), or along which the fit stopped at the stability
+    boundary (Solvers), gets an infinite standard deviation. Without a
+    ``calibration`` the shifts are taken as the signals (unit slope, ``noise_std``
+    in metres of shift). When neither noise nor calibration error is known (no
+    ``noise_std``, no calibration or one without ``noise_std`` and residuals,
+    ``config.estimation.signal_noise_std = 0``) or the shape has no PCC
+    curvatures, the fallback treats the residuals as independent per point with
+    the variance of the fit (``uncertainty="residual"``), which is optimistic for
+    correlated errors.
 """
 
 from __future__ import annotations
@@ -109,6 +141,8 @@ METHODS = ("fast", "paper")
 XTOL_N = 1e-10
 _OK = "converged"
 _MAX_ITER = 100
+_MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the boundary
+_BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a boundary stop is a failure
 _BLOCK_FRAMES = 64  # fewest frames per warm-start round worth a vectorised call
 _MAX_ROUNDS = 32
 _COV_CHUNK = 2048
@@ -128,16 +162,20 @@ class ForceEstimate:
     force_n : ndarray, shape (..., 2)
         Tip force (Fx, Fy) in the base frame [N].
     std_n : ndarray, shape (..., 2)
-        Standard deviation of each component from the sensor noise [N]; ``inf`` for a
-        component the shape cannot determine.
+        Standard deviation of each component [N] from the propagated shift errors
+        (signal noise and calibration error, scaled by ``max(1, χ²/dof)``; module
+        docstring, Uncertainty); ``inf`` for a component the shape cannot determine.
     covariance_n2 : ndarray, shape (..., 2, 2)
         Covariance of ``force_n`` [N²].
     residual_m : ndarray, shape (...)
         RMS distance between the reconstructed and the model shape over ``[0, Lc]`` [m].
     success : ndarray of bool, shape (...)
-        Converged, with a stable beam equilibrium.
+        Converged, with a stable beam equilibrium; or stopped at the best stable point
+        where the load along one direction is not identifiable (message
+        ``"not identifiable along ..."``, ``std_n`` inf along it).
     message : str or ndarray of str, shape (...)
-        ``"converged"`` or the reason for ``success=False``.
+        ``"converged"``, ``"not identifiable along (x, y): ..."`` or the reason for
+        ``success=False``.
     iterations : ndarray of int, shape (...)
         Beam solves spent on each frame (objective evaluations for ``paper``).
     wall_time_s : float
@@ -156,6 +194,10 @@ class ForceEstimate:
     guess_n : ndarray, shape (..., 2) or None
         The moment-balance starting force; with ``force_n`` it corrects the start of
         the next frame (``initial=`` of the next call).
+    chi2_per_dof : ndarray, shape (...) or None
+        Misfit of the fit against the propagated shift errors, χ²/dof (about 1 when
+        the errors are as modelled); ``std_n`` includes the factor ``max(1, χ²/dof)``
+        on the variance. NaN for ``uncertainty="residual"`` and failed frames.
     """
 
     force_n: np.ndarray
@@ -172,6 +214,7 @@ class ForceEstimate:
     tip_position_m: np.ndarray | None = None
     state: np.ndarray | None = field(default=None, repr=False)
     guess_n: np.ndarray | None = field(default=None, repr=False)
+    chi2_per_dof: np.ndarray | None = None
 
     @property
     def batch_shape(self) -> tuple:
@@ -192,6 +235,7 @@ class ForceEstimate:
             "method": self.method,
             "constraint": self.constraint,
             "uncertainty": self.uncertainty,
+            "chi2_per_dof": None if self.chi2_per_dof is None else np.asarray(self.chi2_per_dof).tolist(),
         }
 
     def plot(self, ax=None, *, shape=None, t_s=None, scale_m_per_n: float = 0.1):
@@ -422,6 +466,23 @@ def _linearise(pos, dpos, p0, w):
     return cost, gF, GF
 
 
+def _convex_start(L, ei, wload, D, ffix, lower, u):
+    """``u`` (b, k) scaled toward the fixed force until the load is provably convex.
+
+    The largest of the factors 1, 0.8, …, 0 at which the beam's convexity measure
+    (:func:`bendsense.beam._load_ratio`, Dunkerley) stays below 0.9: a start whose
+    equilibrium is unique and stable.
+    """
+    scale = (L * L / ei)[:, None]
+    wn = wload[None, :] * L * scale
+    best = np.zeros(u.shape[0])
+    for t in (0.2, 0.4, 0.6, 0.8, 1.0):
+        ut = np.maximum(u * t, lower)
+        inside = _beam._load_ratio((ffix + _apply(D, ut)) * scale, wn) < 0.9
+        best = np.where(inside, t, best)
+    return np.maximum(u * best[:, None], lower)
+
+
 def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
     """Batched projected Gauss–Newton with a trust region on u for frames (B,).
 
@@ -429,7 +490,9 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
     quadrature weights (M,), ``p0`` (B, M, 2) the reference shape, ``D`` (B, 2, k),
     ``ffix`` (B, 2), ``lower`` (k,), ``u`` (B, k) the start, ``state`` (B, n) the
     beam's Newton start.
-    Returns a dict of arrays; ``status`` 1 converged, 2 beam fails, 3 no convergence.
+    Returns a dict of arrays; ``status`` 1 converged, 2 beam fails, 3 no convergence,
+    4 stopped at the stability boundary (``blocked`` (B, k): the last step that left
+    the stable branch).
     """
     B, k = u.shape
     u = np.maximum(u, lower)
@@ -468,6 +531,21 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
         r = _solve_beam(L, ei[bad], k0[bad], F[bad], wload, s_all, M, None, n_nodes)
         pos[bad], dpos[bad], ok[bad], st[bad], tip[bad], dst[bad] = r
         iters[bad] += 1
+    far = np.flatnonzero(~convex & ok)
+    if far.size:
+        # a start beyond the convexity bound can sit on a far, strongly bent part of the
+        # branch when the shape hardly shows the axial load (a nearly straight
+        # actuator); the start scaled back into the convex region competes with it
+        uc = _convex_start(L, ei[far], wload, D[far], ffix[far], lower, u[far])
+        moved = np.any(uc != u[far], axis=1)
+        far, uc = far[moved], uc[moved]
+    if far.size:
+        r = _solve_beam(L, ei[far], k0[far], ffix[far] + _apply(D[far], uc), wload, s_all, M, state[far], n_nodes)
+        iters[far] += 1
+        better = r[2] & (_linearise(r[0], r[1], p0[far], w)[0] < _linearise(pos[far], dpos[far], p0[far], w)[0])
+        bi = far[better]
+        u[bi] = uc[better]
+        pos[bi], dpos[bi], st[bi], tip[bi], dst[bi] = (a[better] for a in (r[0], r[1], r[3], r[4], r[5]))
     status[~ok] = 2
     cost, gF, GF = _linearise(pos, dpos, p0, w)
     g, H = _project(D, gF, GF)
@@ -475,6 +553,8 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
     # (far from the optimum the linearisation overshoots by newtons)
     radius = 0.5 * ei / (L * L)
     last = np.full(B, np.inf)
+    jumps = np.zeros(B, dtype=int)
+    blocked = np.zeros((B, k))
     act = np.flatnonzero(status == 0)
     for _ in range(max_iter):
         if act.size == 0:
@@ -535,11 +615,18 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
         last[idx[~acc]] = np.inf
         dead = idx[radius[idx] < 1e-12]
         status[dead] = 3
+        # trials that leave the stable branch again and again: the optimum lies at the
+        # stability boundary (buckling), where the shape no longer tells the load along
+        # the blocked step; stop at the best stable point (status 4)
+        ji = idx[~okn]
+        jumps[ji] += 1
+        blocked[ji] = dstep[~okn]
+        status[ji[(jumps[ji] >= _MAX_JUMPS) & (status[ji] == 0)]] = 4
         act = np.flatnonzero(status == 0)
     status[status == 0] = 3
     F = ffix + _apply(D, u)
     return {"u": u, "force": F, "status": status, "iterations": iters, "positions": pos, "dpos": dpos,
-            "state": st, "tip": tip, "cost": cost}
+            "state": st, "tip": tip, "cost": cost, "blocked": blocked}
 
 
 def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
@@ -577,14 +664,27 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
     def out(status, u_):
         return {"u": u_[None], "force": (ffix[0] + D2 @ u_)[None], "status": np.array([status]),
                 "iterations": np.array([iters]), "positions": pos, "dpos": dpos, "state": st, "tip": tip,
-                "cost": np.array([cost])}
+                "cost": np.array([cost]), "blocked": blocked[None]}
 
     cost = np.nan
+    blocked = np.zeros(k)
     if not ok[0]:
         return out(2, u)
     cost, g, H, A = lin(pos, dpos)
+    if start is None:
+        # the competing start inside the convex region (see _gauss_newton)
+        uc = _convex_start(L, ei, wload, D, ffix, lo, u[None])[0]
+        if np.any(uc != u):
+            r = _solve_beam(L, ei, k0, (ffix[0] + D2 @ uc)[None], wload, s_all, M, state, n_nodes)
+            iters += 1
+            if r[2][0]:
+                trial = lin(r[0], r[1])
+                if trial[0] < cost:
+                    u, (pos, dpos, _, st, tip, dst) = uc, r
+                    cost, g, H, A = trial
     radius = 0.5 * ei_ / (L * L)
     last = math.inf
+    jumps = 0
     for _ in range(max_iter):
         step = _lm_step(H[None], g[None], np.zeros(1))[0]
         unew = np.maximum(u + step, lo)
@@ -609,6 +709,11 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
         linear = (A @ dstep).reshape(-1, 2)
         good = bool(okn[0]) and (float(np.abs(pn[0] - pos[0] - linear).max())
                                  <= 0.5 * float(np.abs(linear).max()) + 1e-6 * L)
+        if not good:
+            jumps += 1
+            blocked = dstep
+            if jumps >= _MAX_JUMPS:
+                return out(4, u)
         if good:
             cn, gn, Hn, An = lin(pn, dpn)
             rho = (cost - cn) / predicted if predicted > 0 else -math.inf
@@ -861,12 +966,71 @@ def _inverse_cov(H):
     return np.einsum("bik,bk,bjk->bij", V, inv, V), singular, V
 
 
-def _covariance(prob, res, noise_s):
-    """Cov(F) (B, 2, 2) by linear propagation of the shift noise (module docstring)."""
+def _shape_jacobian(kappa, lengths, d, seg, sigma, pos):
+    """∂p⁰_j/∂S_i (b, M, 2, N) of the PCC shape at the comparison points (paper eq. 3–7).
+
+    The explicit matrix that :func:`_shape_sensitivity` contracts: raising κ_i moves a
+    point inside segment i along its chord derivative and turns every point beyond the
+    segment about the segment's end ``P_i``; then ``κ_i = (S_i − S_{i−1}) / (d l_i)``.
+    """
+    n = lengths.size
+    theta = kappa * lengths
+    phi_start = np.cumsum(theta, axis=-1) - theta
+    half = 0.5 * theta
+    chord = lengths * _sinc(half)
+    mid = phi_start + half
+    ends_x = np.cumsum(chord * np.sin(mid), axis=-1)
+    ends_y = np.cumsum(chord * np.cos(mid), axis=-1)
+    dchord = _arc_dkappa(kappa, lengths, phi_start)  # (b, N, 2)
+    dq = _arc_dkappa(kappa[:, seg], sigma, phi_start[:, seg])  # (b, M, 2)
+    after = (seg[:, None] > np.arange(n)).astype(float)  # (M, N)
+    own = (seg[:, None] == np.arange(n)).astype(float)
+    out = np.empty((kappa.shape[0], seg.size, 2, n))
+    # beyond segment i: dchord_i + l_i R'(p_j − P_i), R'v = (v_y, −v_x)
+    out[:, :, 0] = after * (dchord[:, None, :, 0] + lengths * (pos[:, :, 1:2] - ends_y[:, None]))
+    out[:, :, 1] = after * (dchord[:, None, :, 1] - lengths * (pos[:, :, 0:1] - ends_x[:, None]))
+    out += own[:, None] * dq[..., None]
+    out /= d * lengths
+    out[..., :-1] -= out[..., 1:].copy()
+    return out
+
+
+def _misfit(G, w, r, J, Tu, cov_s):
+    """χ² of the fit residual against the propagated shift covariance, and its dof (b,).
+
+    The residual ``r = p(F̂) − p⁰`` is pulled back to the shift perturbation that
+    best explains it, ``δŜ = −(GᵀWG)⁻¹ GᵀW r`` (G = ∂p⁰/∂S): the part of ``r`` that no
+    PCC shape can show (the beam shape is not piecewise-constant) drops out. If
+    the shifts err by ``δS ~ N(0, Σ_S)`` and the model is right, ``δŜ = (I − Z T) δS``
+    with ``Z = (GᵀWG)⁻¹ GᵀW J`` and ``T = ∂u/∂S``, so ``χ² = δŜᵀ C⁺ δŜ`` with
+    ``C = (I − ZT) Σ_S (I − ZT)ᵀ`` of rank N − k follows χ² with N − k degrees of
+    freedom.
+    """
+    b, M, _, n = G.shape
+    Gf = G.reshape(b, 2 * M, n)
+    GtW = np.swapaxes(Gf * np.repeat(w, 2)[:, None], 1, 2)  # (b, N, 2M)
+    rhs = GtW @ np.concatenate([r.reshape(b, 2 * M, 1), J.reshape(b, 2 * M, -1)], axis=-1)
+    sol = np.linalg.solve(GtW @ Gf, rhs)
+    proj = np.eye(n) - sol[..., 1:] @ Tu
+    C = proj @ cov_s @ np.swapaxes(proj, 1, 2)
+    lam, V = np.linalg.eigh(0.5 * (C + np.swapaxes(C, 1, 2)))
+    keep = (np.arange(n) >= Tu.shape[1]) & (lam > 1e-10 * lam[:, -1:])
+    z = (np.swapaxes(V, 1, 2) @ sol[..., :1])[..., 0]  # V^T δŜ up to the sign
+    chi2 = np.sum(np.where(keep, z * z / np.where(keep, lam, 1.0), 0.0), axis=1)
+    return chi2, keep.sum(axis=1)
+
+
+def _covariance(prob, res, cov_s):
+    """Cov(F) (B, 2, 2) and χ²/dof (B,) by linear propagation of the shift errors (module docstring).
+
+    ``cov_s`` (B, N, N) is the covariance of the shifts; None uses the fit residual. The
+    propagated covariance is scaled by χ²/dof of the fit where that exceeds 1.
+    """
     B, k = prob["B"], prob["k"]
     w = prob["w"]
     cov = np.empty((B, 2, 2))
-    pcc = prob["kappa"] is not None and noise_s is not None
+    ratio = np.full(B, np.nan)
+    pcc = prob["kappa"] is not None and cov_s is not None
     if pcc:
         onehot = np.zeros((prob["M"], prob["lengths"].size))
         onehot[np.arange(prob["M"]), prob["seg"]] = 1.0
@@ -886,10 +1050,19 @@ def _covariance(prob, res, noise_s):
                 # D follows the reconstructed tip angle φ_L = S_N / d
                 Fd = _apply(prob["dD"][sl], res["u"][sl])  # (∂D/∂φ_L) u
                 hs[:, :, -1] -= (Dt @ (GF @ Fd[..., None]))[..., 0] / prob["d"]
-            T = D @ (Hinv @ hs)  # ∂F/∂S (b, 2, N)
+            Tu = Hinv @ hs  # ∂u/∂S (b, k, N)
+            T = D @ Tu  # ∂F/∂S (b, 2, N)
             if prob["dD"] is not None:
                 T[:, :, -1] += Fd / prob["d"]
-            c = (T * (noise_s[sl] ** 2)[:, None, :]) @ np.swapaxes(T, 1, 2)
+            c = T @ cov_s[sl] @ np.swapaxes(T, 1, 2)
+            G = _shape_jacobian(prob["kappa"][sl], prob["lengths"], prob["d"], prob["seg"], prob["sigma"],
+                                prob["p0"][sl])
+            J = np.einsum("bmif,bfk->bmik", dpos, D)
+            chi2, dof = _misfit(G, w, res["positions"][sl] - prob["p0"][sl], J, Tu, cov_s[sl])
+            ratio[sl] = chi2 / np.maximum(dof, 1)
+            # a misfit beyond the propagated errors (model error the shifts' covariance
+            # does not know) scales the covariance, the Birge ratio; never shrinks it
+            c *= np.maximum(ratio[sl], 1.0)[:, None, None]
         else:
             r = res["positions"][sl] - prob["p0"][sl]
             dof = max(2 * prob["M"] - k, 1)
@@ -906,22 +1079,28 @@ def _covariance(prob, res, noise_s):
                     outer = v[:, :, None] * v[:, None, :]
                     c[hit] = np.where(np.abs(outer) > 1e-12, np.inf, c[hit])
         cov[sl] = c
-    return cov
+    return cov, ratio
 
 
-def _shift_noise(kappa, lengths, d, noise_std, calibration):
-    """σ_S (b, N) [m]: the signal noise through the calibration slope f'(ΔA) (paper eq. 2)."""
+def _shift_covariance(kappa, lengths, d, noise_std, calibration):
+    """Σ_S (b, N, N) [m²]: covariance of the shifts (module docstring, Uncertainty).
+
+    The signal noise through the calibration slope f'(ΔA) (paper eq. 2), independent
+    per channel, plus the calibration's own model error, correlated across channels
+    (:meth:`~bendsense.calibration.Calibration.shift_error_m`).
+    """
     from bendsense.calibration import parity_masks
 
     S = d * np.cumsum(kappa * lengths, axis=-1)  # S_i = d φ(L_i) (paper eq. 3–4)
     if calibration is None:
-        return np.broadcast_to(noise_std, S.shape)
+        sd = np.broadcast_to(noise_std, S.shape)
+        return sd[..., :, None] * np.eye(S.shape[-1]) * sd[..., None, :]
     n = S.shape[-1]
     odd, _ = parity_masks(n)
     coef = np.where(odd[:, None], calibration.coefficients_odd, calibration.coefficients_even)  # (N, n+1)
     dcoef = coef[:, 1:] * np.arange(1, coef.shape[1])
     if dcoef.shape[1] == 0:
-        return np.zeros_like(S)
+        return np.zeros((*S.shape, n))
 
     def poly(c, x):
         out = np.broadcast_to(c[:, -1], x.shape).copy()
@@ -937,7 +1116,8 @@ def _shift_noise(kappa, lengths, d, noise_std, calibration):
         x = x - dx
         if np.all(np.abs(dx) <= 1e-12 * np.maximum(1.0, np.abs(x))):
             break
-    return np.abs(poly(dcoef, x)) * noise_std
+    sd = np.abs(poly(dcoef, x)) * noise_std
+    return sd[..., :, None] * np.eye(n) * sd[..., None, :] + calibration.shift_error_m(S, covariance=True)
 
 
 # --------------------------------------------------------------------------- inputs
@@ -1189,7 +1369,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
                "state": st, "tip": tip}
 
     # uncertainty
-    noise_s = None
+    cov_s = None
     uncertainty = "residual"
     if prob["kappa"] is not None:
         if noise_opt is not None:
@@ -1200,21 +1380,45 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
             sigma_a = np.asarray(est.signal_noise_std, dtype=float)
         if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
             raise ValueError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
-        if np.any(sigma_a > 0):
-            noise_s = _shift_noise(prob["kappa"], prob["lengths"], prob["d"],
-                                   np.broadcast_to(sigma_a, (prob["lengths"].size,)), calibration)
-            uncertainty = "propagated"
-    cov = _covariance(prob, res, noise_s)
+        if np.any(sigma_a > 0) or calibration is not None:
+            cov_s = _shift_covariance(prob["kappa"], prob["lengths"], prob["d"],
+                                      np.broadcast_to(sigma_a, (prob["lengths"].size,)), calibration)
+            if np.any(np.trace(cov_s, axis1=-2, axis2=-1) > 0):
+                uncertainty = "propagated"
+            else:
+                cov_s = None
+    cov, chi2_dof = _covariance(prob, res, cov_s)
 
     status = res["status"]
-    success = status == 1
+    edge = np.flatnonzero(status == 4)
+    boundary = []
+    if edge.size:
+        # stopped at the stability boundary: the load along the blocked step is not
+        # identifiable, whatever the linearisation at the boundary says
+        v = _apply(D[edge], res["blocked"][edge])
+        v /= np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-300)[:, None]
+        outer = v[:, :, None] * v[:, None, :]
+        cov[edge] = np.where(np.abs(outer) > 1e-12, np.inf, cov[edge])
+        boundary = [f"not identifiable along ({x:.3f}, {y:.3f}): trial loads leave the stable branch "
+                    "(buckling) or the shape's linear range; best stable estimate, std inf" for x, y in v]
     diff = res["positions"] - p0
     residual = np.sqrt(np.einsum("bmi,bmi,m->b", diff, diff, prob["w"]) / prob["w"].sum())
+    # a best stable shape this far off means no stable equilibrium matches the shape
+    # (it needs a load beyond buckling), not a merely unidentifiable direction
+    misfit = edge[residual[edge] > _BOUNDARY_MISFIT * L]
+    for i in misfit:
+        boundary[int(np.searchsorted(edge, i))] = (
+            f"no stable equilibrium matches the shape: stopped at the stability boundary {residual[i] * 1e3:.3g} mm "
+            "from it (a load beyond buckling?)")
+    status[misfit] = 3
+    success = (status == 1) | (status == 4)
     force = np.where(success[:, None], res["force"], np.nan)
     messages = np.full(B, _OK, dtype=object)
     messages[status == 2] = "beam model fails (buckling or no equilibrium) at every trial force"
     messages[status == 3] = ("no convergence in the iteration limit" if method == "fast"
                              else "optimizer did not converge")
+    for i, text in zip(edge, boundary):
+        messages[i] = text
     if not success.all() and strict:
         first = messages[~success][0]
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {first}")
@@ -1237,6 +1441,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
         tip_position_m=res["tip"].reshape(*batch, 2),
         state=res["state"].reshape(*batch, res["state"].shape[-1]),
         guess_n=(prob["ffix"] + _apply(D, guess)).reshape(*batch, 2),
+        chi2_per_dof=np.where(success, chi2_dof, np.nan).reshape(batch),
     )
 
 
