@@ -166,9 +166,6 @@ def test_normal_constraint_with_the_shape_tip_angle_covers_fy(sim):
     assert _coverage(est, truth)[1] >= 0.9
 
 
-@pytest.mark.xfail(strict=True, reason="the 'shape' tip angle is taken at the sensor's end, 2 mm short of the "
-                                       "actuator tip where the contact acts: a bias u κ_N ΔL across D that σ "
-                                       "does not hold (see the report of this change)")
 def test_normal_constraint_with_the_shape_tip_angle_covers_fx(sim):
     est, truth = _run(sim["tv"].select(np.arange(0, 1000, 4)), sim["cal"], "normal", tip_angle_source="shape")
     assert _coverage(est, truth)[0] >= 0.85

@@ -845,6 +845,26 @@ def _moment_guess(prob, phi, kappa_s):
 # --------------------------------------------------------------------------- the paper's method
 
 
+def _tip_angle_weights(lengths, length_m):
+    """Weights c with φ(L) = c · κ: the tip angle of the actuator from the segment curvatures.
+
+    The sensor (length L_N) may end short of the actuator tip L, where the contact
+    acts; the last segment's curvature is carried on to the tip.
+    """
+    c = np.array(lengths, dtype=float)
+    c[-1] += max(length_m - c.sum(), 0.0)
+    return c
+
+
+def _tip_angle_shift_gradient(lengths, length_m, strip_gap_m):
+    """∂φ(L)/∂S (N,) through κ_i = (S_i − S_(i−1)) / (d l_i) (paper eq. 3–4)."""
+    c = _tip_angle_weights(lengths, length_m) / (np.asarray(lengths, dtype=float) * strip_gap_m)
+    return c - np.append(c[1:], 0.0)
+
+
+_PAPER_ODE_TOL = 1e-9
+
+
 def _paper(prob, u0):
     """Shooting beam solver inside Nelder–Mead (free) or SLSQP (constrained), frame by frame."""
     from scipy.optimize import minimize
@@ -860,7 +880,10 @@ def _paper(prob, u0):
         ei, k0 = float(prob["ei"][b]), float(prob["k0"][b])
 
         def objective(F, p0=p0, ei=ei, k0=k0):
-            sol = _beam.solve_beam(L, ei, k0, F, wload, 0.0, s, method="shooting", warn=False)
+            # the shooting solver at tolerances like MATLAB's ode45 would be used with,
+            # tight enough for 1e-9 m shapes; its 1e-12 default is for the beam tests
+            sol = _beam.solve_beam(L, ei, k0, F, wload, 0.0, s, method="shooting", warn=False,
+                                   rtol=_PAPER_ODE_TOL, atol=_PAPER_ODE_TOL)
             if not sol.success:
                 return 1e12
             d = sol.positions_m - p0
@@ -1047,13 +1070,14 @@ def _covariance(prob, res, cov_s):
             hs = Dt @ _shape_sensitivity(prob["kappa"][sl], prob["lengths"], prob["d"], onehot, prob["sigma"],
                                          prob["seg"], prob["p0"][sl], e)  # (b, k, N)
             if prob["dD"] is not None:
-                # D follows the reconstructed tip angle φ_L = S_N / d
+                # D follows the reconstructed tip angle φ_L (see _tip_angle_weights)
+                dphi_ds = _tip_angle_shift_gradient(prob["lengths"], prob["L"], prob["d"])  # (N,)
                 Fd = _apply(prob["dD"][sl], res["u"][sl])  # (∂D/∂φ_L) u
-                hs[:, :, -1] -= (Dt @ (GF @ Fd[..., None]))[..., 0] / prob["d"]
+                hs -= (Dt @ (GF @ Fd[..., None])) * dphi_ds
             Tu = Hinv @ hs  # ∂u/∂S (b, k, N)
             T = D @ Tu  # ∂F/∂S (b, 2, N)
             if prob["dD"] is not None:
-                T[:, :, -1] += Fd / prob["d"]
+                T += Fd[..., None] * dphi_ds
             c = T @ cov_s[sl] @ np.swapaxes(T, 1, 2)
             G = _shape_jacobian(prob["kappa"][sl], prob["lengths"], prob["d"], prob["seg"], prob["sigma"],
                                 prob["p0"][sl])
@@ -1156,7 +1180,7 @@ def _reference(shape, config, s_opt, n_points, L_act):
         pos, phi = pcc.forward_kinematics(kappa, lengths, s_fk)
         M = s.size
         return {"p0": pos[..., :M, :], "s": s, "w": w, "Lc": Lc, "kappa": kappa, "lengths": lengths, "seg": seg,
-                "sigma": sigma, "tip_shape": np.sum(kappa * lengths, axis=-1), "phi": phi[..., :M],
+                "sigma": sigma, "tip_shape": kappa @ _tip_angle_weights(lengths, L_act), "phi": phi[..., :M],
                 "phi_nodes": phi[..., M:], "kappa_s": kappa[..., seg]}
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
         raise ValueError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
