@@ -863,6 +863,7 @@ def _tip_angle_shift_gradient(lengths, length_m, strip_gap_m):
 
 
 _PAPER_ODE_TOL = 1e-9
+_PAPER_BOUND_N = 5.0  # far beyond what bends (or buckles) a soft actuator of this size
 
 
 def _paper(prob, u0):
@@ -903,8 +904,10 @@ def _paper(prob, u0):
             if np.isfinite(prob["lower"][0]):
                 cons.append({"type": "ineq", "fun": lambda F, d=d, ffix=ffix: d @ (F - ffix),
                              "jac": lambda F, d=d: d})
+            # box bounds as fmincon would be given them: without them SLSQP's first line
+            # search tries loads of hundreds of newtons, where every shooting solve fails slowly
             res = minimize(objective, x0, method="SLSQP", constraints=cons,
-                           options={"ftol": 1e-14, "maxiter": 500})
+                           bounds=[(-_PAPER_BOUND_N, _PAPER_BOUND_N)] * 2, options={"ftol": 1e-14, "maxiter": 500})
             u_out[b] = [max(d @ (res.x - ffix), prob["lower"][0])]
         nfev[b] = res.nfev
         if not res.success and objective(ffix + D @ u_out[b]) >= 1e12:
