@@ -15,7 +15,10 @@ What is not run as written:
   environment, so only ``CMD`` runs; ``python -m pytest`` is skipped (the suite would
   run itself recursively);
 - ``bendsense reproduce`` runs with its documented ``--quick`` flag (the full run takes
-  minutes; the quick one makes every table and figure).
+  minutes; the quick one makes every table and figure);
+- ``python benchmarks/...`` (docs/performance.md) measures for minutes even with
+  ``--quick`` and asserts nothing; it runs only when the environment variable
+  ``BENDSENSE_DOCS_BENCHMARKS=1`` is set, with ``--quick`` added.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-COPIED = ("configs", "examples")
+COPIED = ("configs", "examples", "benchmarks")
 HARDWARE = re.compile(r"^\s*#\s*needs hardware\b", re.IGNORECASE)
 FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[\w+-]*)[^\n]*\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
 TIMEOUT_S = 300
@@ -79,6 +82,11 @@ def _test_equivalent(line: str) -> str:
         return " && ".join(rest)
     if re.match(r"bendsense\s+reproduce\b", stripped) and "--quick" not in stripped:
         return line.replace("reproduce", "reproduce --quick", 1)
+    if re.match(r"python[0-9.]*\s+benchmarks/", stripped):
+        if os.environ.get("BENDSENSE_DOCS_BENCHMARKS") != "1":
+            return ""
+        if "--quick" not in stripped:
+            return re.sub(r"(benchmarks/\S+)", r"\1 --quick", line, count=1)
     return line
 
 
@@ -114,6 +122,14 @@ def test_pip_install_lines_keep_only_the_command_after_them():
 def test_reproduce_gets_its_quick_flag():
     assert _test_equivalent("bendsense reproduce -o report") == "bendsense reproduce --quick -o report"
     assert _test_equivalent("bendsense reproduce --quick -o r") == "bendsense reproduce --quick -o r"
+
+
+def test_benchmarks_run_only_on_request(monkeypatch):
+    line = "python benchmarks/run_all.py --markdown results.md   # ~2-3 min"
+    monkeypatch.delenv("BENDSENSE_DOCS_BENCHMARKS", raising=False)
+    assert _test_equivalent(line) == ""
+    monkeypatch.setenv("BENDSENSE_DOCS_BENCHMARKS", "1")
+    assert _test_equivalent(line).startswith("python benchmarks/run_all.py --quick --markdown results.md")
 
 
 def test_other_languages_are_not_run_and_order_is_kept():
@@ -160,3 +176,40 @@ def test_page_runs(page: Path, tmp_path: Path):
             f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
             f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
         )
+
+
+# ------------------------------------------------------------------ links between pages
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading."""
+    text = re.sub(r"[`*_]", "", heading.strip().lower())
+    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", text)
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def _anchors(path: Path) -> set[str]:
+    text = FENCE.sub("", path.read_text(encoding="utf-8"))
+    return {_slug(m[1]) for m in re.finditer(r"^#{1,6}\s+(.+?)\s*$", text, re.M)}
+
+
+def test_slug_follows_github():
+    assert _slug("Free bending (paper eq. 8–12)") == "free-bending-paper-eq-812"
+    assert _slug("1. Install and run the demo") == "1-install-and-run-the-demo"
+    assert _slug("ModemManager grabs /dev/ttyACM*") == "modemmanager-grabs-devttyacm"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(ROOT).as_posix() for p in PAGES])
+def test_relative_links_and_anchors_resolve(page: Path):
+    text = FENCE.sub("", page.read_text(encoding="utf-8"))
+    broken = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if re.match(r"[a-z]+:", target):
+            continue  # http(s), mailto: not checked offline
+        file_part, _, anchor = target.partition("#")
+        path = (page.parent / file_part).resolve() if file_part else page
+        if not path.exists():
+            broken.append(f"{target}: no such file")
+        elif anchor and path.suffix == ".md" and anchor not in _anchors(path):
+            broken.append(f"{target}: no heading with this anchor")
+    assert not broken, f"{page.name}: " + "; ".join(broken)
