@@ -122,3 +122,12 @@ def test_input_columns_named_like_results_are_kept(tmp_path):
     np.testing.assert_array_equal(results["input_fx_n"], truth)
     np.testing.assert_array_equal(results["trial"], [7, 8])
     assert results.extra_names == ("input_fx_n", "trial")
+
+
+def test_cli_choices_match_the_config():
+    # the CLI spells them out to keep `bendsense --help` free of numpy; they must not drift
+    from bendsense import config
+    from bendsense.cli import _common
+
+    assert _common.CONSTRAINTS == config.CONSTRAINTS
+    assert _common.METHODS == config.METHODS

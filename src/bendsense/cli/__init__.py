@@ -1,7 +1,8 @@
 """The ``bendsense`` command line: a thin shell over the library.
 
 Commands live in one module per area (``pipeline``, ``batch``, ``calibrate``,
-``identify``, ``sim``, ``reproduce``, ``device``, ``live``); each exposes ``COMMANDS``, a list of click commands added here.
+``identify``, ``sim``, ``reproduce``, ``device``, ``live``); each exposes ``COMMANDS``,
+a list of click commands added here.
 Heavy imports happen inside the commands, so ``bendsense --help`` is fast.
 """
 
@@ -16,10 +17,10 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import click
+import click  # noqa: E402 (after the BLAS settings above)
 
-from bendsense import __version__
-from bendsense.cli import batch, calibrate, device, identify, live, pipeline, reproduce, sim
+from bendsense import __version__  # noqa: E402
+from bendsense.cli import batch, calibrate, device, identify, live, pipeline, reproduce, sim  # noqa: E402
 
 
 @click.group(

@@ -1,4 +1,4 @@
-"""Pieces shared by the command modules: the command class and common options."""
+"""Pieces shared by the command modules: the command class, common options and checks."""
 
 from __future__ import annotations
 
@@ -6,7 +6,22 @@ from pathlib import Path
 
 import click
 
-__all__ = ["InterspersedCommand", "config_option", "overwrite_option"]
+__all__ = [
+    "CONSTRAINTS",
+    "METHODS",
+    "InterspersedCommand",
+    "config_option",
+    "make_config_option",
+    "make_overwrite_option",
+    "overwrite_option",
+    "quiet",
+    "refuse_existing",
+    "save_figure",
+]
+
+# kept in sync with bendsense.config (imported lazily for a fast --help; a test compares them)
+CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
+METHODS = ("fast", "paper")
 
 
 class InterspersedCommand(click.Command):
@@ -39,10 +54,42 @@ class InterspersedCommand(click.Command):
         return ctx.args
 
 
-config_option = click.option(
-    "--config",
-    "config_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Config YAML (default: the paper's prototype, built in).",
-)
-overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output.")
+def make_config_option(help_text: str):
+    """``--config`` (an existing YAML file, passed as ``config_path``) with the command's own help."""
+    return click.option(
+        "--config",
+        "config_path",
+        type=click.Path(exists=True, dir_okay=False, path_type=Path),
+        help=help_text,
+    )
+
+
+def make_overwrite_option(help_text: str):
+    """``--overwrite`` (a flag) with the command's own help."""
+    return click.option("--overwrite", is_flag=True, help=help_text)
+
+
+config_option = make_config_option("Config YAML (default: the paper's prototype, built in).")
+overwrite_option = make_overwrite_option("Replace existing output.")
+
+
+def refuse_existing(path: Path, overwrite: bool) -> None:
+    """Stop with one line when the output ``path`` exists and ``--overwrite`` was not given."""
+    if path.exists() and not overwrite:
+        raise click.ClickException(f"{path}: exists (use --overwrite to replace it)")
+
+
+def quiet() -> bool:
+    """Whether ``bendsense -q`` was given (False outside the ``bendsense`` group)."""
+    ctx = click.get_current_context(silent=True)
+    obj = ctx.find_root().obj if ctx is not None else None
+    return bool(isinstance(obj, dict) and obj.get("quiet"))
+
+
+def save_figure(figure, path: Path) -> None:
+    """Write a matplotlib figure to ``path`` at 120 dpi, close it and say so."""
+    import matplotlib.pyplot as plt
+
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+    click.echo(f"wrote {path}")

@@ -11,11 +11,9 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
+from bendsense.cli._common import CONSTRAINTS, METHODS, InterspersedCommand, config_option, overwrite_option, quiet
 
 log = logging.getLogger("bendsense")
-
-CONSTRAINTS = ["none", "vertical", "horizontal", "direction", "normal", "follower"]
 
 
 def _dask_executor(address: str):
@@ -46,7 +44,7 @@ def _dask_executor(address: str):
 @click.option("--scheduler", metavar="tcp://HOST:PORT",
               help="Run on a Dask distributed scheduler instead (needs bendsense[distributed]).")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
-@click.option("--method", type=click.Choice(["fast", "paper"]), help="Estimator (default: from the config).")
+@click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
 @click.option("--pressure-kpa", type=float, help="Constant pressure for frames without a reading [kPa].")
 @click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
@@ -91,7 +89,7 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
                 pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
                 estimate=not no_estimate,
                 recursive=recursive,
-                progress=not no_progress and not (click.get_current_context().obj or {}).get("quiet"),
+                progress=not no_progress and not quiet(),
             )
         finally:
             if client is not None:

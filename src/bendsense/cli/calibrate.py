@@ -6,8 +6,13 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand
-from bendsense.errors import BendsenseError
+from bendsense.cli._common import (
+    InterspersedCommand,
+    make_config_option,
+    make_overwrite_option,
+    refuse_existing,
+    save_figure,
+)
 
 
 def _degree(ctx, param, value):
@@ -30,12 +35,7 @@ def _degree(ctx, param, value):
     type=click.Path(dir_okay=False, path_type=Path),
     help="Calibration YAML to write.",
 )
-@click.option(
-    "--config",
-    "config_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Config YAML with the sensor (default: the paper's prototype, built in).",
-)
+@make_config_option("Config YAML with the sensor (default: the paper's prototype, built in).")
 @click.option(
     "--degree",
     default="3",
@@ -57,7 +57,7 @@ def _degree(ctx, param, value):
     help="kappa_cal = 1/(R + c) (strip radius without the sleeve) or 1/R; default: from the config.",
 )
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path), help="Save a fit plot.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing output file.")
+@make_overwrite_option("Replace an existing output file.")
 def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_path, overwrite):
     """Fit the signal-to-shift calibration (paper eq. 1-2) from MANIFEST.yaml.
 
@@ -69,32 +69,23 @@ def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_pat
         strips:
           - {radius_m: 0.040, recording: r040.csv}
           - {radius_mm: 50, recording: r050.csv}
-    """
+    """  # noqa: D301 (click's \b keeps the example's line breaks)
 
     def step(state):
-        if output.exists() and not overwrite:
-            raise click.ClickException(f"{output}: exists (use --overwrite to replace it)")
-        try:
-            from bendsense.calibration import Calibration
-            from bendsense.config import load_config
+        refuse_existing(output, overwrite)
+        from bendsense.calibration import Calibration
+        from bendsense.config import load_config
 
-            sensor = load_config(config_path).sensor
-            cal = Calibration.fit(manifest, sensor, degree=degree, weighting=weighting, sleeve=sleeve)
-            cal.save(output)
-        except BendsenseError as err:
-            raise click.ClickException(str(err)) from None
+        sensor = load_config(config_path).sensor
+        cal = Calibration.fit(manifest, sensor, degree=degree, weighting=weighting, sleeve=sleeve)
+        cal.save(output)
         click.echo(cal.report())
         click.echo(f"wrote {output}")
         if plot_path is not None:
             import matplotlib
 
             matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
-            axes = cal.plot()
-            axes[0].figure.savefig(plot_path, dpi=120)
-            plt.close(axes[0].figure)
-            click.echo(f"wrote {plot_path}")
+            save_figure(cal.plot()[0].figure, plot_path)
         state["calibration"] = cal
         return state
 

@@ -8,11 +8,7 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand
-
-
-def _fail(err) -> click.ClickException:
-    return click.ClickException(str(err))
+from bendsense.cli._common import InterspersedCommand, make_config_option, make_overwrite_option, quiet
 
 
 @click.command("devices")
@@ -36,7 +32,7 @@ def _status_line(stats) -> str:
     "-o", "--output", required=True, type=click.Path(file_okay=False, path_type=Path), help="Session directory."
 )
 @click.option("--seconds", type=float, help="Recording time [s] (default: until Ctrl-C).")
-@click.option("--overwrite", is_flag=True, help="Replace an existing session.")
+@make_overwrite_option("Replace an existing session.")
 @click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
 @click.option("--dialect", type=click.Choice(["binary", "line"]), default="binary", show_default=True)
 @click.option("--channels", type=int, help="Line dialect: number of channels (columns ch1..chN).")
@@ -44,12 +40,7 @@ def _status_line(stats) -> str:
 @click.option("--no-handshake", is_flag=True, help="Do not wait for the board's HELLO.")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
 @click.option("--hello-timeout", type=float, default=2.0, show_default=True, help="HELLO wait [s].")
-@click.option(
-    "--config",
-    "config_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Config YAML to snapshot into meta.yaml.",
-)
+@make_config_option("Config YAML to snapshot into meta.yaml.")
 @click.option("--quiet-status", is_flag=True, help="No live status line.")
 def record(
     port,
@@ -85,7 +76,7 @@ def record(
     if dialect == "line" and channels is None and columns is None:
         raise click.BadParameter("the line dialect needs --channels or --columns", param_hint="--channels")
     cols = [c.strip() for c in columns.split(",")] if columns else None
-    show = not quiet_status and not (click.get_current_context().find_root().obj or {}).get("quiet")
+    show = not quiet_status and not quiet()
 
     def progress(stats):
         if show:
@@ -114,10 +105,10 @@ def record(
                 outcome = "done"
             except KeyboardInterrupt:
                 stats, outcome = recorder.stats, "interrupted"
-    except BendsenseError as err:
-        if show:
+    except BendsenseError:
+        if show:  # end the status line before the error
             sys.stderr.write("\n")
-        raise _fail(err) from None
+        raise
     if show:
         sys.stderr.write("\r" + _status_line(stats) + "   \n")
     click.echo(f"{outcome}: {stats.records} frames written to {output}", err=True)
@@ -147,30 +138,26 @@ def sim_device(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bi
     until Ctrl-C or for --seconds.
     """
     from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
-    from bendsense.errors import BendsenseError
 
     if not 1 <= channels <= 64:
         raise click.BadParameter(f"expected 1..64, got {channels}", param_hint="--channels")
     if not 1 <= adc_bits <= 16:
         raise click.BadParameter(f"expected 1..16, got {adc_bits}", param_hint="--adc-bits")
-    try:
-        if source == "ramp":
-            src = ramp_source(channels, adc_bits)
-        else:
-            src = default_source(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
-        dev = SimulatedDevice(
-            src,
-            rate_hz=rate_hz,
-            n_channels=channels,
-            adc_bits=adc_bits,
-            drop=drop,
-            corrupt=corrupt,
-            truncate=truncate,
-            seed=seed,
-            autostart=autostart,
-        )
-    except BendsenseError as err:
-        raise _fail(err) from None
+    if source == "ramp":
+        src = ramp_source(channels, adc_bits)
+    else:
+        src = default_source(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
+    dev = SimulatedDevice(
+        src,
+        rate_hz=rate_hz,
+        n_channels=channels,
+        adc_bits=adc_bits,
+        drop=drop,
+        corrupt=corrupt,
+        truncate=truncate,
+        seed=seed,
+        autostart=autostart,
+    )
     click.echo(dev.port)
     sys.stdout.flush()
     end = None if seconds is None else time.monotonic() + seconds

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, refuse_existing, save_figure
 from bendsense.errors import BendsenseError
 
 KINDS = ("free-bending", "stiffness")
@@ -96,8 +96,7 @@ def identify(
     Writes the config (--config, or the paper's) with the fitted values to OUTPUT.
     """
     fix = _parse_fix(kind, fix_items)
-    if output.exists() and not overwrite:
-        raise click.ClickException(f"{output}: exists (use --overwrite to replace it)")
+    refuse_existing(output, overwrite)
 
     def step(state):
         try:
@@ -136,12 +135,8 @@ def identify(
             import matplotlib
 
             matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-
             ax = fit.plot(config=config) if kind == "free-bending" else fit.plot()
-            ax.figure.savefig(plot_path, dpi=120)
-            plt.close(ax.figure)
-            click.echo(f"wrote {plot_path}")
+            save_figure(ax.figure, plot_path)
         state["config"] = new_config
         return state
 

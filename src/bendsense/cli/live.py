@@ -7,15 +7,13 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
+from bendsense.cli._common import CONSTRAINTS, InterspersedCommand, config_option, overwrite_option, quiet
 
 _NO_CALIBRATION = (
     "live needs a sensor calibration: --calibration CAL.yaml (make one with "
     "'bendsense calibrate MANIFEST.yaml -o CAL.yaml', or run 'bendsense demo' and use "
     "bendsense-demo/calibration/calibration.yaml for the simulated board)"
 )
-# kept in sync with bendsense.estimation.CONSTRAINTS (imported lazily for a fast --help)
-_CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 
 
 def _positive(ctx, param, value):
@@ -33,7 +31,7 @@ def _positive(ctx, param, value):
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="Calibration YAML written by 'bendsense calibrate' (required).",
 )
-@click.option("--constraint", type=click.Choice(_CONSTRAINTS), help="Force constraint (default: from the config).")
+@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @click.option(
     "--save",
     "save_path",
@@ -99,7 +97,6 @@ def live(
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
     from bendsense.device.live import LiveProcessor, LiveView, run_live
-    from bendsense.errors import BendsenseError
 
     try:
         config = load_config(config_path)
@@ -126,8 +123,6 @@ def live(
                 raise click.ClickException(f"{port}: no frames received; nothing to save")
             save_path.parent.mkdir(parents=True, exist_ok=True)
             view.save(save_path)
-    except BendsenseError as err:
-        raise click.ClickException(str(err)) from None
     except ValueError as err:  # a bad option value reaching the estimator
         raise click.ClickException(str(err)) from None
     if stats is not None:
@@ -191,12 +186,11 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
     if rate_hz > 65535:
         raise click.BadParameter(f"expected at most 65535, got {rate_hz:g}", param_hint="--rate")
     from bendsense.device.demo import run_demo
-    from bendsense.errors import BendsenseError
 
-    quiet = (click.get_current_context().find_root().obj or {}).get("quiet", False)
+    silent = quiet()
 
     def echo(line):
-        if not quiet:
+        if not silent:
             click.echo(line, err=True)
             sys.stderr.flush()
 
@@ -204,7 +198,7 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
 
     def progress(done, total):
         nonlocal bar
-        if quiet:
+        if silent:
             return
         if bar is None:
             from tqdm import tqdm
@@ -216,8 +210,6 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
         result = run_demo(
             out_dir, seconds=seconds, rate_hz=rate_hz, seed=seed, overwrite=overwrite, echo=echo, progress=progress
         )
-    except (BendsenseError, FileExistsError) as err:
-        raise click.ClickException(str(err)) from None
     finally:
         if bar is not None:
             bar.close()

@@ -13,19 +13,26 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
+from bendsense.cli._common import CONSTRAINTS, METHODS, InterspersedCommand, config_option, overwrite_option
 from bendsense.errors import BendsenseError
 
 log = logging.getLogger("bendsense")
 
+
 class PipelineGroup(click.Group):
-    """A chained group that runs pipeline steps in order and turns user errors into one line."""
+    """A chained group that runs pipeline steps in order and turns user errors into one line.
+
+    Every command of ``bendsense`` runs inside :meth:`invoke`, so the commands leave
+    these errors to it and catch only what needs a message of their own.
+    """
 
     def invoke(self, ctx):
         """Invoke the chain; a user mistake becomes one ``Error:`` line and exit code 1."""
         try:
             return super().invoke(ctx)
         except BendsenseError as err:
+            raise click.ClickException(str(err)) from None
+        except FileExistsError as err:  # outputs that need --overwrite; the library's message says so
             raise click.ClickException(str(err)) from None
         except FileNotFoundError as err:
             raise click.ClickException(f"{err.filename}: no such file or directory") from None
@@ -108,10 +115,8 @@ def reconstruct(points):
 
 
 @click.command("estimate", cls=InterspersedCommand)
-@click.option("--constraint",
-              type=click.Choice(["none", "vertical", "horizontal", "direction", "normal", "follower"]),
-              help="Force constraint (default: from the config).")
-@click.option("--method", type=click.Choice(["fast", "paper"]), help="Estimator (default: from the config).")
+@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
 @click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
 @click.option("--tip-angle-source", type=click.Choice(["model", "shape"]),
               help="Tip angle of the normal/follower constraints (default: from the config).")

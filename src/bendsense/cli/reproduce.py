@@ -6,14 +6,7 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, overwrite_option
-from bendsense.errors import BendsenseError
-
-
-def _quiet() -> bool:
-    ctx = click.get_current_context(silent=True)
-    obj = ctx.find_root().obj if ctx is not None else None
-    return bool(isinstance(obj, dict) and obj.get("quiet"))
+from bendsense.cli._common import InterspersedCommand, overwrite_option, quiet
 
 
 @click.command("reproduce", cls=InterspersedCommand)
@@ -45,19 +38,15 @@ def reproduce(out_dir, seed, quick, overwrite):
             raise click.ClickException(f"{out_dir}: exists (use --overwrite to replace it)")
         from bendsense.sim.reproduce import reproduce as run
 
-        quiet = _quiet()
         command = f"bendsense reproduce -o {out_dir.as_posix()} --seed {seed}" + (" --quick" if quick else "")
-        try:
-            result = run(
-                out_dir,
-                seed=seed,
-                quick=quick,
-                overwrite=overwrite,
-                progress=None if quiet else (lambda text: click.echo(text, err=True)),
-                command=command,
-            )
-        except (BendsenseError, FileExistsError) as err:
-            raise click.ClickException(str(err)) from None
+        result = run(
+            out_dir,
+            seed=seed,
+            quick=quick,
+            overwrite=overwrite,
+            progress=None if quiet() else (lambda text: click.echo(text, err=True)),
+            command=command,
+        )
         t1 = result.table_i[3]
         tip = result.tip_load
         click.echo(

@@ -6,8 +6,7 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option
-from bendsense.errors import BendsenseError
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, refuse_existing
 
 # kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
 _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
@@ -54,8 +53,9 @@ def simulate(
     """
 
     def step(state):
-        if out_dir.exists() and not overwrite:
-            raise click.ClickException(f"{out_dir}: exists (use --overwrite to replace it)")
+        refuse_existing(out_dir, overwrite)
+        from bendsense.sim.scenarios import _simulate
+
         options = {
             "noise_counts": noise_counts,
             "ei_error": ei_error,
@@ -69,14 +69,7 @@ def simulate(
             if scenario in ("tip-loads", "contact", "all"):
                 options["frames_per_config"] = frames
         options = {k: v for k, v in options.items() if v is not None}
-        try:
-            from bendsense.sim.scenarios import _simulate
-
-            _, summaries = _simulate(scenario, out_dir, config_path, seed, overwrite=overwrite, **options)
-        except BendsenseError as err:
-            raise click.ClickException(str(err)) from None
-        except FileExistsError as err:
-            raise click.ClickException(str(err)) from None
+        _, summaries = _simulate(scenario, out_dir, config_path, seed, overwrite=overwrite, **options)
         for name, summary in summaries.items():
             excluded = summary["excluded_frames"]
             note = f", {excluded} excluded (beam solve failed)" if excluded else ""
