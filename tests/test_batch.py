@@ -6,7 +6,6 @@ import importlib.util
 import pickle
 import sys
 
-import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -21,8 +20,7 @@ from bendsense.batch import (
     session_names,
 )
 from bendsense.calibration import Calibration
-from bendsense.cli import batch as batch_cli
-from bendsense.cli import pipeline
+from bendsense.cli import main
 from bendsense.errors import SessionError
 from bendsense.results import read_results
 from bendsense.session import Session, write_session_csv
@@ -317,20 +315,6 @@ def test_dask_local_cluster(sessions, tmp_path, dask_cluster):
 # --- command line --------------------------------------------------------------------------
 
 
-def cli():
-    @click.group(cls=pipeline.PipelineGroup, chain=True)
-    def group():
-        pass
-
-    @group.result_callback()
-    def run(steps):
-        pipeline.run_steps(steps)
-
-    for command in pipeline.COMMANDS + batch_cli.COMMANDS:
-        group.add_command(command)
-    return group
-
-
 def process_args(runs, cal_path, out):
     return ["process", str(runs), "--calibration", str(cal_path), "-o", str(out), "--no-progress"] + (
         [] if ESTIMATE else ["--no-estimate"]
@@ -342,7 +326,7 @@ def test_cli_process_exit_code_and_table(sessions, tmp_path):
     cal_path = tmp_path / "cal.yaml"
     linear_calibration().save(cal_path)
     out = tmp_path / "out"
-    result = CliRunner().invoke(cli(), process_args(runs, cal_path, out) + ["--workers", "2"])
+    result = CliRunner().invoke(main, process_args(runs, cal_path, out) + ["--workers", "2"])
     assert result.exit_code == 1, result.output
     assert "1 of 4 sessions failed" in result.output
     table = result.output.splitlines()
@@ -351,7 +335,7 @@ def test_cli_process_exit_code_and_table(sessions, tmp_path):
     check_outputs(out, truth)
     # all good now: skipped ones count as success
     (runs / "broken.csv").unlink()
-    result = CliRunner().invoke(cli(), process_args(runs, cal_path, out) + ["--workers", "0"])
+    result = CliRunner().invoke(main, process_args(runs, cal_path, out) + ["--workers", "0"])
     assert result.exit_code == 0, result.output
     assert "3 sessions: 0 ok, 3 skipped, 0 failed" in result.output
 
@@ -363,7 +347,7 @@ def test_cli_process_on_a_dask_scheduler(sessions, tmp_path, dask_cluster):
     linear_calibration().save(cal_path)
     out = tmp_path / "out"
     args = process_args(runs, cal_path, out) + ["--scheduler", dask_cluster.scheduler_address]
-    result = CliRunner().invoke(cli(), args)
+    result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     assert "3 sessions: 3 ok" in result.output
     check_outputs(out, truth)
@@ -374,10 +358,10 @@ def test_cli_process_option_errors(sessions, tmp_path, monkeypatch):
     cal_path = tmp_path / "cal.yaml"
     linear_calibration().save(cal_path)
     args = process_args(runs, cal_path, tmp_path / "out")
-    result = CliRunner().invoke(cli(), args + ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"])
+    result = CliRunner().invoke(main, args + ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"])
     assert result.exit_code == 2 and "give --workers or --scheduler, not both" in result.output
     monkeypatch.setitem(sys.modules, "dask.distributed", None)  # as if the extra were not installed
-    result = CliRunner().invoke(cli(), args + ["--scheduler", "tcp://127.0.0.1:1"])
+    result = CliRunner().invoke(main, args + ["--scheduler", "tcp://127.0.0.1:1"])
     assert result.exit_code == 1
     assert result.output.strip().splitlines()[-1] == (
         "Error: --scheduler needs Dask distributed, which is not installed: pip install bendsense[distributed]"

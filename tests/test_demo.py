@@ -8,7 +8,6 @@ import pytest
 from click.testing import CliRunner
 
 from bendsense.cli import main
-from bendsense.cli.live import demo
 from bendsense.results import read_results
 from bendsense.sessiondir import read_records, read_session_dir
 from bendsense.sim.scenarios import time_varying_frames
@@ -22,10 +21,8 @@ TOLERANCE_N = 0.02
 
 
 def invoke(*args):
-    """Run ``bendsense demo ...`` (through the top-level group once it is registered there)."""
-    if "demo" in main.commands:
-        return CliRunner().invoke(main, ["demo", *args])
-    return CliRunner().invoke(demo, list(args))
+    """Run ``bendsense demo ...``."""
+    return CliRunner().invoke(main, ["demo", *args])
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,6 @@ from click.testing import CliRunner
 import bendsense
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from bendsense.cli.live import live
 from bendsense.device.live import LiveFrame, LiveProcessor, LiveView
 from bendsense.device.simdevice import SimulatedDevice, default_source
 from bendsense.errors import ConfigError
@@ -23,10 +22,8 @@ RATE_HZ = 100.0
 
 
 def invoke(*args):
-    """Run ``bendsense live ...`` (through the top-level group once it is registered there)."""
-    if "live" in main.commands:
-        return CliRunner().invoke(main, ["live", *args])
-    return CliRunner().invoke(live, list(args))
+    """Run ``bendsense live ...``."""
+    return CliRunner().invoke(main, ["live", *args])
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,6 @@ import matplotlib
 
 matplotlib.use("Agg")  # before pyplot: render to files only
 
-import click  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -12,8 +11,7 @@ from click.testing import CliRunner  # noqa: E402
 
 from bendsense import load_config  # noqa: E402
 from bendsense.calibration import Calibration  # noqa: E402
-from bendsense.cli import batch as batch_cli  # noqa: E402
-from bendsense.cli import pipeline  # noqa: E402
+from bendsense.cli import main  # noqa: E402
 from bendsense.pcc import Shape  # noqa: E402
 from bendsense.plots import (  # noqa: E402
     plot_calibration,
@@ -263,37 +261,23 @@ def test_plot_results_summary_to_file(results_dir, tmp_path):
 # --- the plot command ------------------------------------------------------------------------
 
 
-def cli():
-    @click.group(cls=pipeline.PipelineGroup, chain=True)
-    def group():
-        pass
-
-    @group.result_callback()
-    def run(steps):
-        pipeline.run_steps(steps)
-
-    for command in pipeline.COMMANDS + batch_cli.COMMANDS:
-        group.add_command(command)
-    return group
-
-
 def test_cli_plot_standalone(results_dir, tmp_path):
     fig = tmp_path / "fig.png"
-    result = CliRunner().invoke(cli(), ["plot", str(results_dir), "-o", str(fig)])
+    result = CliRunner().invoke(main, ["plot", str(results_dir), "-o", str(fig)])
     assert result.exit_code == 0, result.output
     assert f"wrote {fig}" in result.output and fig.read_bytes().startswith(PNG)
-    result = CliRunner().invoke(cli(), ["plot", str(results_dir), "-o", str(fig)])
+    result = CliRunner().invoke(main, ["plot", str(results_dir), "-o", str(fig)])
     assert result.exit_code == 2 and "exists (use --overwrite" in result.output
-    result = CliRunner().invoke(cli(), ["plot", "-o", str(fig), str(results_dir), "--overwrite", "--dpi", "50"])
+    result = CliRunner().invoke(main, ["plot", "-o", str(fig), str(results_dir), "--overwrite", "--dpi", "50"])
     assert result.exit_code == 0, result.output
     # a figure file without a chain, a directory without -o, a non-directory with -o
-    result = CliRunner().invoke(cli(), ["plot", str(tmp_path / "other.png")])
+    result = CliRunner().invoke(main, ["plot", str(tmp_path / "other.png")])
     assert result.exit_code == 2 and "needs 'reconstruct' earlier in the chain" in result.output
-    result = CliRunner().invoke(cli(), ["plot", str(results_dir)])
+    result = CliRunner().invoke(main, ["plot", str(results_dir)])
     assert result.exit_code == 2 and "-o FIG.png" in result.output
-    result = CliRunner().invoke(cli(), ["plot", str(tmp_path / "none"), "-o", str(tmp_path / "x.png")])
+    result = CliRunner().invoke(main, ["plot", str(tmp_path / "none"), "-o", str(tmp_path / "x.png")])
     assert result.exit_code == 2 and "not a results directory" in result.output
-    result = CliRunner().invoke(cli(), ["plot", str(results_dir), "-o", str(tmp_path / "fig.doc")])
+    result = CliRunner().invoke(main, ["plot", str(results_dir), "-o", str(tmp_path / "fig.doc")])
     assert result.exit_code == 2 and "unknown figure format '.doc'; use one of" in result.output
 
 
@@ -310,7 +294,7 @@ def test_cli_plot_in_a_chain_after_save(tmp_path):
     fig = tmp_path / "fig.png"
     args = ["load", str(tmp_path / "run.csv"), "--calibration", str(tmp_path / "cal.yaml"), "reconstruct",
             "save", str(tmp_path / "out"), "plot", str(fig)]
-    result = CliRunner().invoke(cli(), args)
+    result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     assert fig.read_bytes().startswith(PNG) and (tmp_path / "out" / "results.csv").exists()
     # the chained figure and the standalone figure of the saved results show the same data

@@ -3,14 +3,12 @@
 import math
 import re
 
-import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from bendsense.calibration import Calibration
-from bendsense.cli import reproduce as reproduce_cli
-from bendsense.cli.pipeline import PipelineGroup, run_steps
+from bendsense.cli import main
 from bendsense.config import load_config
 from bendsense.pcc import arc_positions
 from bendsense.sim.reproduce import PAPER, shape_accuracy
@@ -20,26 +18,12 @@ RADII_MM = (45.75, 55.75, 65.75, 75.75, 85.75, 95.75, 150.75)
 NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 
 
-def cli():
-    @click.group(cls=PipelineGroup, chain=True)
-    def group():
-        pass
-
-    @group.result_callback()
-    def run(steps):
-        run_steps(steps)
-
-    for command in reproduce_cli.COMMANDS:
-        group.add_command(command)
-    return group
-
-
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce") / "report"
     out.mkdir()
     (out / "stale.txt").write_text("from an earlier run")
-    result = CliRunner().invoke(cli(), ["reproduce", "-o", str(out), "--quick", "--seed", "3", "--overwrite"])
+    result = CliRunner().invoke(main, ["reproduce", "-o", str(out), "--quick", "--seed", "3", "--overwrite"])
     assert result.exit_code == 0, result.output
     return out, result.output, (out / "report.md").read_text(encoding="utf-8")
 
@@ -157,7 +141,7 @@ def test_timing(run):
 def test_refuses_to_overwrite(run):
     out = run[0]
     before = (out / "report.md").stat().st_mtime_ns
-    result = CliRunner().invoke(cli(), ["reproduce", "-o", str(out), "--quick"])
+    result = CliRunner().invoke(main, ["reproduce", "-o", str(out), "--quick"])
     assert result.exit_code != 0
     assert "exists" in result.output and "--overwrite" in result.output
     assert "Traceback" not in result.output
