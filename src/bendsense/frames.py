@@ -441,7 +441,90 @@ def decode_frame(data: bytes, adc_bits: int | None = None):
     return decode_body(cobs_decode(bytes(data).strip(b"\x00")), adc_bits)
 
 
-class Decoder:
+class _StreamDecoder:
+    """Counters, bounded segment buffer and sequence-gap accounting of both decoders.
+
+    Subclasses split their stream with :meth:`_segments` and parse each segment.
+    """
+
+    def __init__(self):
+        self._buf = b""
+        self._discarding = False
+        self._last_seq = None
+        self.frames = 0
+        self.crc_errors = 0
+        self.malformed = 0
+        self.overruns = 0
+        self.lost = 0
+        self.bytes = 0
+        self.hello = None
+        self.gaps = deque(maxlen=1000)
+
+    @property
+    def errors(self) -> int:
+        """``crc_errors + malformed``."""
+        return self.crc_errors + self.malformed
+
+    def reset(self) -> None:
+        """Forget a partial frame (e.g. after a reconnect); counters and sequence are kept."""
+        self._buf = b""
+        self._discarding = False
+
+    def reset_sequence(self) -> None:
+        """Forget the last sequence number (the next frame starts a new sequence)."""
+        self._last_seq = None
+
+    def _segments(self, data: bytes, delimiter: bytes, max_bytes: int) -> list:
+        """The complete, non-empty segments that ``data`` ends, after what came before.
+
+        The incomplete tail is kept for the next call. A segment (or a run without a
+        delimiter) longer than ``max_bytes`` is dropped and counted in ``overruns`` and
+        ``malformed``, so memory stays bounded.
+        """
+        self.bytes += len(data)
+        if delimiter not in data:
+            if not self._discarding:
+                self._buf += data
+                if len(self._buf) > max_bytes:
+                    self._overrun()
+            return []
+        parts = data.split(delimiter)
+        tail = parts.pop()
+        if self._discarding:
+            parts[0] = b""  # the end of an over-long run
+            self._discarding = False
+        elif self._buf:
+            parts[0] = self._buf + parts[0]
+        self._buf = tail
+        if len(tail) > max_bytes:
+            self._overrun()
+        segments = []
+        for seg in parts:
+            if len(seg) > max_bytes:
+                self.overruns += 1
+                self.malformed += 1
+            elif seg:
+                segments.append(seg)
+        return segments
+
+    def _overrun(self) -> None:
+        self._buf = b""
+        self._discarding = True
+        self.overruns += 1
+        self.malformed += 1
+
+    def _count_sequence(self, seq: int) -> None:
+        """Add the frames missing between the last sequence number and ``seq`` to ``lost``."""
+        last = self._last_seq
+        if last is not None:
+            gap = (seq - last - 1) & 0xFFFF
+            if gap:
+                self.lost += gap
+                self.gaps.append((seq, gap))
+        self._last_seq = seq
+
+
+class Decoder(_StreamDecoder):
     """Incremental decoder of the binary protocol.
 
     Feed it bytes as they arrive, in chunks of any size; :meth:`feed` returns the
@@ -481,67 +564,18 @@ class Decoder:
     """
 
     def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 1024):
+        super().__init__()
         self.adc_bits = adc_bits
         self._adc_bits_from_hello = adc_bits is None
         self.max_frame_bytes = int(max_frame_bytes)
-        self._buf = b""
-        self._discarding = False
-        self._last_seq = None
-        self.frames = 0
-        self.crc_errors = 0
-        self.malformed = 0
-        self.overruns = 0
-        self.lost = 0
-        self.bytes = 0
-        self.hello = None
-        self.gaps = deque(maxlen=1000)
-
-    def reset(self) -> None:
-        """Forget a partial frame (e.g. after a reconnect); counters and sequence are kept."""
-        self._buf = b""
-        self._discarding = False
-
-    def reset_sequence(self) -> None:
-        """Forget the last sequence number (the next frame starts a new sequence)."""
-        self._last_seq = None
-
-    @property
-    def errors(self) -> int:
-        """``crc_errors + malformed``."""
-        return self.crc_errors + self.malformed
 
     def feed(self, data: bytes) -> list:
         """Decode ``data`` appended to what came before; return the complete frames in it."""
         if not data:
             return []
-        data = bytes(data)
-        self.bytes += len(data)
-        if b"\x00" not in data:
-            if not self._discarding:
-                self._buf += data
-                if len(self._buf) > self.max_frame_bytes:
-                    self._overrun()
-            return []
-        parts = data.split(b"\x00")
-        tail = parts.pop()
-        if self._discarding:
-            parts[0] = b""  # the end of an over-long run
-            self._discarding = False
-        elif self._buf:
-            parts[0] = self._buf + parts[0]
-        self._buf = tail
-        if len(tail) > self.max_frame_bytes:
-            self._overrun()
         out = []
         append = out.append
-        max_len = self.max_frame_bytes
-        for seg in parts:
-            if not seg:
-                continue
-            if len(seg) > max_len:
-                self.overruns += 1
-                self.malformed += 1
-                continue
+        for seg in self._segments(bytes(data), b"\x00", self.max_frame_bytes):
             body = _cobs_decode(seg)
             if body is None:
                 self.malformed += 1
@@ -555,14 +589,7 @@ class Decoder:
                 continue
             self.frames += 1
             if type(frame) is not Command:
-                seq = frame.seq
-                last = self._last_seq
-                if last is not None:
-                    gap = (seq - last - 1) & 0xFFFF
-                    if gap:
-                        self.lost += gap
-                        self.gaps.append((seq, gap))
-                self._last_seq = seq
+                self._count_sequence(frame.seq)
                 if type(frame) is Hello:
                     self.hello = frame
                     if self._adc_bits_from_hello:
@@ -570,14 +597,8 @@ class Decoder:
             append(frame)
         return out
 
-    def _overrun(self) -> None:
-        self._buf = b""
-        self._discarding = True
-        self.overruns += 1
-        self.malformed += 1
 
-
-class LineDecoder:
+class LineDecoder(_StreamDecoder):
     """Incremental decoder of the line dialect: one frame per line, for simple firmware.
 
     Numbers are separated by commas or whitespace; a line starting with ``#`` is a
@@ -616,6 +637,7 @@ class LineDecoder:
             raise FrameError(f"columns: expected ch1..chN among the columns, got {columns}")
         if len(set(columns)) != len(columns):
             raise FrameError(f"columns: duplicate names in {columns}")
+        super().__init__()
         self.columns = tuple(columns)
         self.n_channels = len(chans)
         self._chan_idx = [chans[k] for k in range(1, len(chans) + 1)]
@@ -623,33 +645,8 @@ class LineDecoder:
         self._t_idx = columns.index("t_us") if "t_us" in columns else None
         self._p_idx = columns.index("pressure_pa") if "pressure_pa" in columns else None
         self.max_line_bytes = int(max_line_bytes)
-        self._buf = b""
-        self._discarding = False
-        self._last_seq = None
         self._count = 0
-        self.frames = 0
-        self.crc_errors = 0  # no CRC in this dialect; kept for a uniform stats interface
-        self.malformed = 0
-        self.overruns = 0
-        self.lost = 0
-        self.bytes = 0
-        self.hello = None
-        self.adc_bits = None
-        self.gaps = deque(maxlen=1000)
-
-    @property
-    def errors(self) -> int:
-        """``crc_errors + malformed``."""
-        return self.crc_errors + self.malformed
-
-    def reset(self) -> None:
-        """Forget a partial line."""
-        self._buf = b""
-        self._discarding = False
-
-    def reset_sequence(self) -> None:
-        """Forget the last sequence number."""
-        self._last_seq = None
+        self.adc_bits = None  # crc_errors stays 0: no CRC in this dialect (uniform stats)
 
     def feed(self, data) -> list:
         """Decode ``data`` (bytes or str) appended to what came before; return complete frames."""
@@ -657,42 +654,14 @@ class LineDecoder:
             return []
         if isinstance(data, str):
             data = data.encode("utf-8")
-        data = bytes(data).replace(b"\r", b"\n")
-        self.bytes += len(data)
-        if b"\n" not in data:
-            if not self._discarding:
-                self._buf += data
-                if len(self._buf) > self.max_line_bytes:
-                    self._overrun()
-            return []
-        lines = data.split(b"\n")
-        tail = lines.pop()
-        if self._discarding:
-            lines[0] = b""
-            self._discarding = False
-        elif self._buf:
-            lines[0] = self._buf + lines[0]
-        self._buf = tail
-        if len(tail) > self.max_line_bytes:
-            self._overrun()
         out = []
-        for raw in lines:
+        for raw in self._segments(bytes(data).replace(b"\r", b"\n"), b"\n", self.max_line_bytes):
             frame = self._parse_line(raw)
             if frame is not None:
                 out.append(frame)
         return out
 
-    def _overrun(self) -> None:
-        self._buf = b""
-        self._discarding = True
-        self.overruns += 1
-        self.malformed += 1
-
     def _parse_line(self, raw: bytes):
-        if len(raw) > self.max_line_bytes:
-            self.overruns += 1
-            self.malformed += 1
-            return None
         try:
             line = raw.decode("utf-8").strip()
         except UnicodeDecodeError:
@@ -736,13 +705,7 @@ class LineDecoder:
         if seq is None:
             seq = self._count & 0xFFFF
         else:
-            last = self._last_seq
-            if last is not None:
-                gap = (seq - last - 1) & 0xFFFF
-                if gap:
-                    self.lost += gap
-                    self.gaps.append((seq, gap))
-            self._last_seq = seq
+            self._count_sequence(seq)
         self._count += 1
         self.frames += 1
         return Sample(seq, t_us, self.n_channels, 0, 0, p, adc)
