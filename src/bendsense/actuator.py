@@ -61,28 +61,28 @@ def _finite(name: str, value) -> np.ndarray:
     return arr
 
 
-def _real(name: str, value) -> float:
+def _number(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise ConfigError(f"{name}: expected a number, got {value!r}")
-    value = float(value)
+    return float(value)
+
+
+def _real(name: str, value) -> float:
+    value = _number(name, value)
     if not math.isfinite(value):
         raise ConfigError(f"{name}: must be finite, got {value!r}")
     return value
 
 
 def _positive(name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ConfigError(f"{name}: expected a number, got {value!r}")
-    value = float(value)
+    value = _number(name, value)
     if not (math.isfinite(value) and value > 0):
         raise ConfigError(f"{name}: must be finite and > 0, got {value!r}")
     return value
 
 
 def _nonnegative(name: str, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ConfigError(f"{name}: expected a number, got {value!r}")
-    value = float(value)
+    value = _number(name, value)
     if not (math.isfinite(value) and value >= 0):
         raise ConfigError(f"{name}: must be finite and >= 0, got {value!r}")
     return value
@@ -168,6 +168,17 @@ def _check_stretch(theta0, h_max, length_m):
         )
 
 
+def _elastic(theta0_rad, chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m, shear_modulus_pa, slope):
+    """M_θ0 (``slope=False``) or dM_θ0/dθ0 (``slope=True``) after checking the arguments."""
+    theta0 = _finite("theta0_rad", theta0_rad)
+    a, b, t, length = _check_geometry(chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m)
+    mu = _positive("shear_modulus_pa", shear_modulus_pa)
+    h, c = _lever_nodes(a, b, t)
+    _check_stretch(theta0, a + b + t, length)
+    unit = _unit_moment(theta0, h, c, length, slope=slope)
+    return mu * (unit[1] if slope else unit)
+
+
 def elastic_moment(
     theta0_rad,
     *,
@@ -199,12 +210,9 @@ def elastic_moment(
     ndarray
         M_θ0 [N·m], same shape as ``theta0_rad``.
     """
-    theta0 = _finite("theta0_rad", theta0_rad)
-    a, b, t, length = _check_geometry(chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m)
-    mu = _positive("shear_modulus_pa", shear_modulus_pa)
-    h, c = _lever_nodes(a, b, t)
-    _check_stretch(theta0, a + b + t, length)
-    return mu * _unit_moment(theta0, h, c, length)
+    return _elastic(
+        theta0_rad, chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m, shear_modulus_pa, slope=False
+    )
 
 
 def elastic_moment_slope(
@@ -217,12 +225,9 @@ def elastic_moment_slope(
     shear_modulus_pa: float,
 ) -> np.ndarray:
     """Derivative dM_θ0/dθ0 of :func:`elastic_moment` [N·m/rad] (same quadrature, exact)."""
-    theta0 = _finite("theta0_rad", theta0_rad)
-    a, b, t, length = _check_geometry(chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m)
-    mu = _positive("shear_modulus_pa", shear_modulus_pa)
-    h, c = _lever_nodes(a, b, t)
-    _check_stretch(theta0, a + b + t, length)
-    return mu * _unit_moment(theta0, h, c, length, slope=True)[1]
+    return _elastic(
+        theta0_rad, chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m, shear_modulus_pa, slope=True
+    )
 
 
 def _solve_theta0(moment, h, c, length, mu, mu_s, *, max_iter=100):
@@ -307,8 +312,7 @@ def solve_bending_angle(
     mu_s = _nonnegative("sensor_stiffness_nm_per_rad", sensor_stiffness_nm_per_rad)
     pre = _real("prebend_angle_rad", prebend_angle_rad)
     h, c = _lever_nodes(a, b, t)
-    moment = (4.0 * a**3 + 3.0 * math.pi * a**2 * b) / 6.0 * p
-    return _solve_theta0(moment, h, c, length, mu, mu_s) + pre
+    return _solve_theta0(pressure_moment(p, a, b), h, c, length, mu, mu_s) + pre
 
 
 def ei_nm2(pressure_pa, ei0_nm2: float, ei1_nm2_per_pa: float) -> np.ndarray:
