@@ -301,6 +301,19 @@ def _correlation(cov: np.ndarray) -> np.ndarray:
         return cov / np.outer(sd, sd)
 
 
+def _stderr(cov: np.ndarray, free, names: tuple[str, ...]) -> dict:
+    """Standard errors by name: sqrt(diag(cov)) for the ``free`` parameters, 0 for the fixed ones."""
+    stderr = dict.fromkeys(names, 0.0)
+    stderr.update({n: float(s) for n, s in zip(free, np.sqrt(np.diag(cov)), strict=True)})
+    return stderr
+
+
+def _geometry(actuator) -> dict:
+    """The geometry keywords of :mod:`bendsense.actuator`'s functions, from ``config.actuator``."""
+    names = ("chamber_radius_m", "bottom_thickness_m", "wall_thickness_m", "length_m")
+    return {n: getattr(actuator, n) for n in names}
+
+
 def _format_value(value: float, err: float) -> str:
     if err == 0:
         return f"{value:.6g} (fixed)"
@@ -383,16 +396,8 @@ class FreeBendingFit:
         if ax is None:
             _, ax = plt.subplots()
         cfg = self.to_config(config if config is not None else load_config())
-        act = cfg.actuator
         p = np.linspace(min(0.0, self.pressure_pa.min()), self.pressure_pa.max(), 200)
-        theta = solve_bending_angle(
-            p,
-            chamber_radius_m=act.chamber_radius_m,
-            bottom_thickness_m=act.bottom_thickness_m,
-            wall_thickness_m=act.wall_thickness_m,
-            length_m=act.length_m,
-            **self.params,
-        )
+        theta = solve_bending_angle(p, **_geometry(cfg.actuator), **self.params)
         ax.plot(self.pressure_pa / 1e3, np.degrees(self.bending_angle_rad), "o", label="measured")
         ax.plot(p / 1e3, np.degrees(theta), "-", label="model")
         ax.set_xlabel("pressure [kPa]")
@@ -466,13 +471,7 @@ def fit_free_bending(
         raise ValueError(
             f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
         )
-    act = config.actuator
-    geom = {
-        "chamber_radius_m": act.chamber_radius_m,
-        "bottom_thickness_m": act.bottom_thickness_m,
-        "wall_thickness_m": act.wall_thickness_m,
-        "length_m": act.length_m,
-    }
+    geom = _geometry(config.actuator)
     scale = np.array([abs(start[n]) or _TYPICAL[n] for n in free])
     lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf}
     lb = np.array([lower[n] for n in free]) / scale
@@ -526,13 +525,11 @@ def fit_free_bending(
     values = unpack(x)
     r = resid(x)
     cov, dof = _covariance(jac(x) / scale, r)
-    sd = np.sqrt(np.diag(cov))
-    stderr = {n: 0.0 for n in FREE_BENDING_PARAMS}
-    stderr.update({n: float(s) for n, s in zip(free, sd, strict=True)})
+    stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
     if at_bound:
         ok = False
         message += f"; {', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
-    if not np.all(np.isfinite(sd)):
+    if not all(math.isfinite(stderr[n]) for n in free):
         ok = False
         message += "; parameters not identifiable from these data (fix one)"
     return FreeBendingFit(
@@ -794,9 +791,7 @@ def fit_stiffness(
         cov = xtwx_inv * factor
     else:
         cov = np.zeros((0, 0))
-    sd = np.sqrt(np.diag(cov))
-    stderr = {n: 0.0 for n in STIFFNESS_PARAMS}
-    stderr.update({n: float(s) for n, s in zip(free, sd, strict=True)})
+    stderr = _stderr(cov, free, STIFFNESS_PARAMS)
     success = not failed
     if failed:
         message = f"level fit failed at {', '.join(failed)} (beam solve unstable or not converged)"
