@@ -337,45 +337,25 @@ def _simulate(tmp: Path, config: Config, seed: int, plan: Plan) -> dict:
     """Write the simulated experiments into ``tmp``; return their paths."""
     from bendsense.sim.scenarios import simulate
 
-    opts = dict(MISMATCH)
-    paths = {}
-    paths["calibration"] = simulate(
-        "calibration", tmp / "calibration", config, seed, frames_per_strip=plan.strip_frames, **opts
-    )
-    paths["validation"] = simulate(
-        "validation", tmp / "validation", config, seed, frames_per_strip=plan.strip_frames, **opts
-    )
-    paths["tip-loads"] = simulate(
-        "tip-loads",
-        tmp / "tip-loads",
-        config,
-        seed,
-        pressures_pa=plan.tip_pressures_pa,
-        frames_per_config=plan.tip_frames,
-        **opts,
-    )
+    def run(name, scenario=None, cfg=config, **options):
+        return simulate(scenario or name, tmp / name, cfg, seed, **options, **MISMATCH)
+
     # actuator on its side: the bending plane is horizontal, gravity does not bend it
     flat = config.replace(gravity=GravityConfig(g_m_per_s2=0.0, direction=config.gravity.direction))
-    paths["free-bending"] = simulate(
-        "tip-loads",
-        tmp / "free-bending",
-        flat,
-        seed,
-        pressures_pa=plan.free_pressures_pa,
-        loads_n=(0.0,),
-        frames_per_config=plan.free_frames,
-        **opts,
-    )
-    paths["contact"] = simulate(
-        "contact",
-        tmp / "contact",
-        config,
-        seed,
-        n_configs=plan.contact_configs,
-        frames_per_config=plan.contact_frames,
-        **opts,
-    )
-    return paths
+    return {
+        "calibration": run("calibration", frames_per_strip=plan.strip_frames),
+        "validation": run("validation", frames_per_strip=plan.strip_frames),
+        "tip-loads": run("tip-loads", pressures_pa=plan.tip_pressures_pa, frames_per_config=plan.tip_frames),
+        "free-bending": run(
+            "free-bending",
+            "tip-loads",
+            flat,
+            pressures_pa=plan.free_pressures_pa,
+            loads_n=(0.0,),
+            frames_per_config=plan.free_frames,
+        ),
+        "contact": run("contact", n_configs=plan.contact_configs, frames_per_config=plan.contact_frames),
+    }
 
 
 def _calibrate(manifest: Path, sensor) -> tuple:
@@ -769,9 +749,10 @@ def _fig_identification(path, ident, nominal, true, identified) -> Path:
     fig = _figure(figsize=(11.0, 4.4))
     ax_a, ax_b = fig.subplots(1, 2)
     p = np.linspace(0.0, 125e3, 126)
+    models = (("identified", identified, "-"), ("true", true, "--"), ("nominal", nominal, ":"))
     ax_a.plot(ident["free_pressure_pa"] * 1e-3, np.degrees(ident["free_angle_rad"]), "k.", markersize=5,
               label="measured (camera)")
-    for name, config, style in (("identified", identified, "-"), ("true", true, "--"), ("nominal", nominal, ":")):
+    for name, config, style in models:
         ax_a.plot(p * 1e-3, np.degrees(FreeBendingModel.from_config(config).bending_angle_rad(p)), style,
                   label=f"{name} model")
     ax_a.set_xlabel("pressure [kPa]")
@@ -781,7 +762,7 @@ def _fig_identification(path, ident, nominal, true, identified) -> Path:
     ax_a.set_title("(a) free bending (paper eq. 8–12)", fontsize="medium")
     ax_b.errorbar(ident["ei_pressure_pa"] * 1e-3, ident["ei_nm2"] * 1e3, yerr=ident["ei_stderr_nm2"] * 1e3,
                   fmt="k.", capsize=2, label="EI per pressure level")
-    for name, config, style in (("identified", identified, "-"), ("true", true, "--"), ("nominal", nominal, ":")):
+    for name, config, style in models:
         ax_b.plot(p * 1e-3, config.stiffness.ei_nm2(p) * 1e3, style, label=f"{name} γ0 + γ1 P")
     ax_b.set_xlabel("pressure [kPa]")
     ax_b.set_ylabel("flexural rigidity EI [10⁻³ N·m²]")
