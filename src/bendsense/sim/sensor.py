@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from bendsense.calibration import strip_shifts
 from bendsense.errors import ConfigError
 from bendsense.sim.coils import CoilArrayModel
 
@@ -120,7 +121,8 @@ def shifts_from_shape(s_m, angle_rad, lengths_m, strip_gap_m):
 def calibration_shifts(sensor, radius_m):
     """Shifts on a calibration strip of radius R: S_i = κ_cal d L_i (DESIGN section 2).
 
-    ``κ_cal = 1/R``, or ``1/(R + c)`` if ``sensor.calibration_adds_sleeve``.
+    ``κ_cal = 1/R``, or ``1/(R + c)`` if ``sensor.calibration_adds_sleeve``; the shifts
+    are those the calibration fits to (:func:`bendsense.calibration.strip_shifts`).
 
     Parameters
     ----------
@@ -140,8 +142,7 @@ def calibration_shifts(sensor, radius_m):
         raise ConfigError(f"radius_m: must be > 0, got {radius_m!r}")
     if sensor.calibration_adds_sleeve:
         radius = radius + sensor.sleeve_thickness_m
-    cumulative = np.cumsum(sensor.lengths_m)
-    return sensor.strip_gap_m * cumulative / radius[..., None]
+    return strip_shifts(1.0 / radius, sensor.lengths_m, sensor.strip_gap_m)
 
 
 def _positive(name, value) -> float:
