@@ -246,16 +246,12 @@ def test_sim_device_stops_on_stop_and_counts_commands():
         SimulatedDevice(ramp_source(1), drop=1.5)
 
 
-def test_default_source_is_explicit_about_being_unwired():
+def test_default_source_gives_pressure_and_counts_per_frame():
     from bendsense.device.simdevice import default_source
 
-    try:
-        source = default_source(n_channels=2)
-    except NotImplementedError as err:
-        assert "pass source=" in str(err)
-    else:  # wired in by now: it must give (pressure, counts) per frame
-        pressure, counts = next(iter(source)) if not callable(source) else source(0)
-        assert len(counts) == 2
+    pressure, counts = next(iter(default_source(n_channels=2)))  # the virtual sensor
+    assert len(counts) == 2
+    assert np.isfinite(pressure) and all(0 <= c < 2**12 for c in counts)
 
 
 def test_recorder_refuses_existing_session(tmp_path):
