@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import binascii
 import enum
+import functools
 import struct
 from collections import deque
 from dataclasses import dataclass
@@ -242,24 +243,16 @@ def frame_bytes(payload: bytes) -> bytes:
 _HEADER = struct.Struct("<BBHI")
 _SAMPLE_HEAD = struct.Struct("<BBHIBBHi")
 _HELLO_HEAD = struct.Struct("<BBHIBBHH")
-_ADC = {}
 
 
+@functools.cache
 def _adc_struct(n: int) -> struct.Struct:
-    s = _ADC.get(n)
-    if s is None:
-        s = _ADC[n] = struct.Struct(f"<{n}H")
-    return s
+    return struct.Struct(f"<{n}H")
 
 
-_SAMPLE = {}
-
-
+@functools.cache
 def _sample_struct(n: int) -> struct.Struct:
-    s = _SAMPLE.get(n)
-    if s is None:
-        s = _SAMPLE[n] = struct.Struct(f"<BBHIBBHi{n}H")
-    return s
+    return struct.Struct(f"<BBHIBBHi{n}H")
 
 
 def _check_int(name: str, value, lo: int, hi: int) -> int:
