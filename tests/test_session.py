@@ -25,7 +25,9 @@ def test_invalid_session_corpus(path):
 
 def test_reads_kpa_metadata_and_extra_columns(tmp_path):
     p = tmp_path / "s.csv"
-    p.write_text("# rig: upright\n# operator: ada\nt_s,pressure_kpa,ch1,ch2,fx_n,note\n0,20,1,2,0.1,a\n0.5,40,3,4,0.2,b\n")
+    p.write_text(
+        "# rig: upright\n# operator: ada\nt_s,pressure_kpa,ch1,ch2,fx_n,note\n0,20,1,2,0.1,a\n0.5,40,3,4,0.2,b\n"
+    )
     s = read_session(p)
     assert s.meta == {"rig": "upright", "operator": "ada"}
     np.testing.assert_array_equal(s.pressure_pa, [20e3, 40e3])
