@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from bendsense.calibration import strip_shifts
 from bendsense.config import Config
 from bendsense.errors import ConfigError
 from bendsense.session import Session, write_session_csv
@@ -401,7 +402,7 @@ def _validation(sim, rng, out, seed, *, frames_per_strip, rate_hz, radii_m):
     names = _strip_names(radii)
     kappa = [1.0 / r for r in radii]
     # R_val is at the sensor layer already: S_i = d L_i / R_val, whatever calibration_adds_sleeve says
-    shifts = sim.sensor.strip_gap_m * np.cumsum(sim.sensor.lengths_m) * np.asarray(kappa)[:, None]
+    shifts = strip_shifts(kappa, sim.sensor.lengths_m, sim.sensor.strip_gap_m)
     _strip_recordings(sim, rng, out, names, shifts, kappa, radii, n, rate, "validation", seed)
     index = {
         "note": "radius_m is at the sensor layer (R_val = R + c, paper Table I); kappa_true_per_m = 1/radius_m",
