@@ -81,6 +81,8 @@ def _load_ratio(f, wn):
 
 
 _OK = "converged"
+NEWTON_TOL = 1e-11  # rad: default Newton tolerance of :func:`solve`
+NEWTON_MAX_ITER = 30
 # Newton stops early once in its quadratic regime (step below _QUAD and shrinking fast):
 # the error left is ~ step³/previous step². Sensitivities come from the Jacobian at the
 # last iterate, so they ask for a smaller last step.
@@ -186,6 +188,8 @@ class _Operators:
     D0: np.ndarray  # first row of d/dσ without its first column: ψ'(0) when ψ(0) = 0
     J0: np.ndarray  # Jacobian at zero load, (n-1, n-1); unknowns are φ_1..φ_{n-1}
     J0inv: np.ndarray
+    J0T: np.ndarray  # J0ᵀ, C-contiguous: its transpose is J0 in Fortran order, as LAPACK takes it
+    rhs_one: np.ndarray  # (4, n-1): the constant entries of one frame's Newton right-hand sides, transposed
     diag: np.ndarray  # flat indices of the diagonal entries that carry the load term
     tail: np.ndarray  # 1 − σ at the interior nodes
 
@@ -213,8 +217,11 @@ def _operators(n: int) -> _Operators:
     J0 = np.vstack([D2[1:-1, 1:], D[-1:, 1:]])
     m = n - 1
     diag = np.arange(m - 1) * (m + 1)
+    rhs_one = np.zeros((4, m))
+    rhs_one[1, -1] = 1.0  # e_tip: the Jacobi field's column
     return _Operators(
-        n, sigma, D, D2[1:-1].copy(), D[-1].copy(), Q, D[0, 1:].copy(), J0, np.linalg.inv(J0), diag, 1.0 - sigma[1:-1]
+        n, sigma, D, D2[1:-1].copy(), D[-1].copy(), Q, D[0, 1:].copy(), J0, np.linalg.inv(J0), J0.T.copy(), rhs_one, diag,
+        1.0 - sigma[1:-1],
     )
 
 
@@ -494,46 +501,63 @@ def _continuation(phi, k0, gi, ratio, ops, tol, max_iter, sens):
     return phi, status, where, iters, extra
 
 
-def _solve_scalar(L, ei, k0, base, F, w, s_m, ops, state, sens, tol, max_iter):
-    """One frame without batch bookkeeping (the warm-started inner loop of the estimator).
+def _load_ratio_one(fx, fy, wx, wy):
+    """:func:`_load_ratio` of one frame on plain floats."""
+    fn = math.hypot(fx, fy)
+    gmax = max(fn, math.hypot(fx + wx, fy + wy))
+    return min(gmax / _STABLE_BOUND, fn / _STABLE_BOUND + math.hypot(wx, wy) / _WEIGHT_BOUND)
 
-    Returns None when the frame needs load continuation; the batched path then takes it.
+
+def _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q):
+    """One frame on plain floats: the warm-started inner loop of the estimator.
+
+    ``PQ`` (M, n) and ``P`` (K, n) sample positions and angles, ``q`` (n,) is the tip
+    row of the integration matrix, ``PQ`` and ``q`` times L (:func:`_sampling_one`). Returns ``(φ at the nodes (n,),
+    Newton iterations, positions (M, 2), tip (2,), ∂r/∂F (M, 2, 2), ∂φ/∂F at the rows
+    of P (K, 2), ∂r(L)/∂F (2, 2))`` (the last three None without ``sens``), or None
+    when the frame needs load continuation (the batched path then takes it).
     """
     n, m = ops.n, ops.n - 1
     scale = L * L / ei
-    fx, fy = F[0] * scale, F[1] * scale
-    wx, wy = w[0] * scale * L, w[1] * scale * L
-    convex = float(_load_ratio(np.array([fx, fy]), np.array([wx, wy]))) < 1.0
+    fx, fy = float(F[0]) * scale, float(F[1]) * scale
+    wx, wy = float(w[0]) * scale * L, float(w[1]) * scale * L
+    convex = _load_ratio_one(fx, fy, wx, wy) < 1.0
     k0n = k0 * L
-    gx = fx + wx * ops.tail
-    gy = fy + wy * ops.tail
+    # the load terms as one complex product: with e = cos φ + i sin φ and
+    # Gn = −(G_x + i G_y), Re(e Gn) = sin φ G_y − cos φ G_x (the residual's load term)
+    # and Im(e Gn) = −(cos φ G_y + sin φ G_x) (the Jacobian's diagonal)
+    gn = complex(-wx, -wy) * ops.tail
+    gn += complex(-fx, -fy)
     if state is not None:
         p = np.array(state, dtype=float).reshape(n)
         p[0] = base
         start = p.copy()
     elif convex:
         p = base + k0n * ops.sigma
-        p[1:] += ops.J0inv[:, :-1] @ (np.sin(p[1:-1]) * gy - np.cos(p[1:-1]) * gx)
+        p[1:] += ops.J0inv[:, :-1] @ (np.exp(1j * p[1:-1]) * gn).real
     else:
         return None
     ncol = 4 if sens else 2
     quad = _QUAD_SENS if sens else _QUAD
+    rhs0 = ops.rhs_one[:ncol]  # (ncol, m): the constant entries, transposed
     prev = math.inf
     it = 0
     while it < max_iter:
         it += 1
-        s, c = np.sin(p), np.cos(p)
-        si, ci = s[1:-1], c[1:-1]
-        rhs = np.zeros((m, ncol))
-        rhs[:-1, 0] = si * gy - ci * gx - ops.D2i @ p
-        rhs[-1, 0] = k0n - ops.Dtip @ p
-        rhs[-1, 1] = 1.0
+        e = np.exp(1j * p[1:-1])
+        eg = e * gn
+        # Fortran-ordered right-hand sides and Jacobian (transposes of C copies): LAPACK
+        # takes them without a copy
+        rhs = rhs0.copy()
+        r0 = rhs[0]
+        np.subtract(eg.real, ops.D2i @ p, out=r0[:-1])
+        r0[-1] = k0n - ops.Dtip @ p
         if sens:
-            rhs[:-1, 2] = -ci
-            rhs[:-1, 3] = si
-        J = ops.J0.copy()
-        J.flat[ops.diag] -= ci * gy + si * gx
-        _, _, x, info = _dgesv(J, rhs, overwrite_a=True, overwrite_b=True)
+            np.negative(e.real, out=rhs[2, :-1])
+            rhs[3, :-1] = e.imag
+        Jt = ops.J0T.copy()
+        Jt.reshape(-1)[: (m - 1) * (m + 1) : m + 1] += eg.imag
+        _, _, x, info = _dgesv(Jt.T, rhs.T, overwrite_a=True, overwrite_b=True)
         if info != 0:
             return None
         step = x[:, 0]
@@ -548,38 +572,52 @@ def _solve_scalar(L, ei, k0, base, F, w, s_m, ops, state, sens, tol, max_iter):
         prev = size
     else:
         return None
-    psi = x[:, 1]
-    if not convex and not (psi @ ops.D0 > 0.0 and (psi > 0.0).all() and np.abs(p - start).max() <= _WARM_MOVE):
-        return None
-    sigma_m = s_m / L
-    M = sigma_m.size
-    P, PQ = _sampling(n, sigma_m.tobytes())
-    sn, cs = np.sin(p), np.cos(p)
-    pos = np.empty((M, 2))
-    pos[:, 0] = PQ @ sn
-    pos[:, 1] = PQ @ cs
-    pos *= L
-    q = ops.Q[-1]
-    dpos = dang = dtip = None
+    if not convex:
+        psi = x[:, 1]
+        if not (psi @ ops.D0 > 0.0 and (psi > 0.0).all() and np.abs(p - start).max() <= _WARM_MOVE):
+            return None
+    # sin φ, cos φ and, with sensitivities, their derivatives by F = (∂φ/∂F) (cos φ, −sin φ):
+    # one product per sampling matrix
+    ec = np.exp(1j * p).view(float).reshape(n, 2)  # (cos φ, sin φ)
+    cols = np.empty((n, 6 if sens else 2))
+    cols[:, :2] = ec[:, ::-1]
+    dang = None
     if sens:
-        dphi = np.zeros((n, 2))
-        dphi[1:] = x[:, 2:4] * scale
-        dsin = cs[:, None] * dphi
-        dcos = -sn[:, None] * dphi
+        dphi = np.empty((n, 2))
+        dphi[0] = 0.0
+        np.multiply(x[:, 2:4], scale, out=dphi[1:])
+        ec *= _COS_MINUS_SIN
+        np.multiply(ec[:, :, None], dphi[:, None, :], out=cols[:, 2:].reshape(n, 2, 2))
         dang = P @ dphi
-        dpos = np.empty((M, 2, 2))
-        dpos[:, 0] = PQ @ dsin
-        dpos[:, 1] = PQ @ dcos
-        dpos *= L
-        dtip = np.empty((2, 2))
-        dtip[0] = q @ dsin
-        dtip[1] = q @ dcos
-        dtip *= L
+    out = PQ @ cols
+    tip = q @ cols
+    if not sens:
+        return p, it, out, tip, None, None, None
+    return p, it, out[:, :2], tip[:2], out[:, 2:].reshape(-1, 2, 2), dang, tip[2:].reshape(2, 2)
+
+
+_COS_MINUS_SIN = np.array([1.0, -1.0])
+
+
+@functools.lru_cache(maxsize=64)
+def _sampling_one(n: int, s_m_bytes: bytes, length_m: float):
+    """:func:`_sampling` for :func:`_solve_one`: P, PQ·L and the tip row Q[-1]·L."""
+    P, PQ = _sampling(n, (np.frombuffer(s_m_bytes) / length_m).tobytes())
+    return P, PQ * length_m, _operators(n).Q[-1] * length_m
+
+
+def _solve_scalar(L, ei, k0, base, F, w, s_m, ops, state, sens, tol, max_iter):
+    """One frame as a :class:`BeamSolution` (:func:`_solve_one`); None needs continuation."""
+    P, PQ, q = _sampling_one(ops.n, s_m.tobytes(), L)
+    r = _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q)
+    if r is None:
+        return None
+    p, it, pos, tip, dpos, dang, dtip = r
     return BeamSolution(
         s_m=s_m,
         angle_rad=P @ p,
         positions_m=pos,
-        tip_position_m=np.array([q @ sn, q @ cs]) * L,
+        tip_position_m=tip,
         tip_angle_rad=np.float64(p[-1]),
         success=np.bool_(True),
         message=_OK,
@@ -604,8 +642,8 @@ def solve(
     n_nodes: int = DEFAULT_NODES,
     initial=None,
     sensitivities: bool = False,
-    tol: float = 1e-11,
-    max_iter: int = 30,
+    tol: float = NEWTON_TOL,
+    max_iter: int = NEWTON_MAX_ITER,
 ) -> BeamSolution:
     """Fast spectral solver on already validated arrays (the estimator's inner loop).
 

@@ -504,12 +504,28 @@ class Calibration:
         margin = RANGE_MARGIN_STD * self.noise_std
         return lo - margin, hi + margin
 
+    @cached_property
+    def _coefficient_columns(self) -> tuple:
+        # per-channel coefficients of each power, highest first, contiguous (Horner's rule)
+        c = self._channel_coefficients
+        return tuple(np.ascontiguousarray(c[:, k]) for k in range(self.degree, -1, -1))
+
     def shifts_from_delta(self, delta_a):
         """Shifts S (..., N) [m] from offset-free signals ΔA (..., N) (paper eq. 2)."""
-        c = self._channel_coefficients
-        out = c[:, -1] + 0.0 * delta_a
-        for k in range(self.degree - 1, -1, -1):
-            out = out * delta_a + c[:, k]
+        cols = self._coefficient_columns
+        out = cols[0] + 0.0 * delta_a
+        for ck in cols[1:]:
+            out = out * delta_a + ck
+        return out
+
+    def _shifts_one(self, delta_a):
+        """:meth:`shifts_from_delta` of one frame (N,), in place on one buffer."""
+        cols = self._coefficient_columns
+        out = delta_a * 0.0  # NaN where ΔA is not finite, as shifts_from_delta
+        out += cols[0]
+        for ck in cols[1:]:
+            out *= delta_a
+            out += ck
         return out
 
     def shifts_m(self, signals):
@@ -627,6 +643,13 @@ class Calibration:
         """Per frame: True if any channel's ΔA lies outside the calibrated range."""
         lo, hi = self._channel_range
         return np.any((delta_a < lo) | (delta_a > hi), axis=-1)
+
+    def _extrapolated_one(self, delta_a) -> bool:
+        """:meth:`extrapolated_delta` of one frame (N,)."""
+        lo, hi = self._channel_range
+        out = delta_a < lo
+        out |= delta_a > hi
+        return bool(out.any())
 
     def in_range(self, signals):
         """Per frame (...,): True if every channel's ΔA lies in the fitted range.

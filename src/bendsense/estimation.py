@@ -409,15 +409,37 @@ def _solve_beam(L, ei, k0, F, wload, s_all, M, state, n_nodes):
     success (b,), state (b, n), tip (b, 2) and ∂φ_nodes/∂F (b, n, 2).
     """
     if F.shape[0] == 1:
-        # the solver's scalar path: a third of the batched path's overhead
-        sol = _beam.solve(L, ei[0], k0[0], F[0], wload, 0.0, s_all, n_nodes=n_nodes,
-                          initial=None if state is None else state[0], sensitivities=True)
-        return (sol.positions_m[None, :M], sol.dpositions_dforce[None, :M], np.atleast_1d(sol.success),
-                np.asarray(sol.state).reshape(1, -1), np.asarray(sol.tip_position_m).reshape(1, 2),
-                sol.dangle_dforce[None, M:])
+        r = _solve_frame(L, float(ei[0]), float(k0[0]), F[0], wload, s_all, M, None if state is None else state[0],
+                         n_nodes, _frame_sampling(s_all.tobytes(), L, M, n_nodes))
+        return r[0][None], r[1][None], np.array([r[2]]), r[3][None], r[4][None], r[5][None]
     sol = _beam.solve(L, ei, k0, F, wload, np.zeros(1), s_all, n_nodes=n_nodes, initial=state, sensitivities=True)
     return (sol.positions_m[:, :M], sol.dpositions_dforce[:, :M], sol.success, sol.state, sol.tip_position_m,
             sol.dangle_dforce[:, M:])
+
+
+@functools.lru_cache(maxsize=16)
+def _frame_sampling(s_all: bytes, length_m: float, M: int, n_nodes: int):
+    """Sampling of one frame's beam solution: positions at the first M points, angles at the rest, the tip."""
+    P, PQ, q = _beam._sampling_one(n_nodes, s_all, length_m)
+    return _beam._operators(n_nodes), np.ascontiguousarray(PQ[:M]), np.ascontiguousarray(P[M:]), q
+
+
+def _solve_frame(L, ei, k0, F, wload, s_all, M, state, n_nodes, sampling):
+    """:func:`_solve_beam` of one frame, unbatched: positions (M, 2), ∂p/∂F (M, 2, 2),
+    success, state (n,), tip (2,), ∂φ_nodes/∂F (n, 2).
+
+    The solver's one-frame core on plain floats; the batched solver (load continuation)
+    where that needs it.
+    """
+    ops, PQ, Pn, q = sampling
+    r = _beam._solve_one(L, ei, k0, 0.0, F, wload, ops, state, True, _beam.NEWTON_TOL, _beam.NEWTON_MAX_ITER, PQ, Pn,
+                         q)
+    if r is not None:
+        return r[2], r[4], True, r[0], r[3], r[5]
+    sol = _beam.solve(L, np.array([ei]), np.array([k0]), F[None], wload, np.zeros(1), s_all, n_nodes=n_nodes,
+                      initial=None if state is None else state[None], sensitivities=True)
+    return (sol.positions_m[0, :M], sol.dpositions_dforce[0, :M], bool(sol.success[0]), sol.state[0],
+            sol.tip_position_m[0], sol.dangle_dforce[0, M:])
 
 
 def _lm_step(H, g, mu):
@@ -629,6 +651,31 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
             "state": st, "tip": tip, "cost": cost, "blocked": blocked}
 
 
+def _lm_step_one(H, g):
+    """:func:`_lm_step` (μ = 0) of one frame on plain floats: (k,)."""
+    if g.size == 1:
+        h = float(H[0, 0])
+        return np.array([-float(g[0]) / (h + (1e-14 * h + 1e-300))])
+    h00, h01, h11 = float(H[0, 0]), float(H[0, 1]), float(H[1, 1])
+    eps = 1e-14 * (h00 + h11) + 1e-300
+    a, d = h00 + eps, h11 + eps
+    g0, g1 = float(g[0]), float(g[1])
+    det = a * d - h01 * h01
+    return np.array([-((d * g0 - h01 * g1) / det), -((a * g1 - h01 * g0) / det)])
+
+
+def _convex_start_one(L, ei, wload, D2, ffix, lower, u):
+    """:func:`_convex_start` of one frame on plain floats."""
+    scale = L * L / ei
+    wx, wy = float(wload[0]) * L * scale, float(wload[1]) * L * scale
+    best = 0.0
+    for t in (0.2, 0.4, 0.6, 0.8, 1.0):
+        f = (ffix + D2 @ np.maximum(u * t, lower)) * scale
+        if _beam._load_ratio_one(float(f[0]), float(f[1]), wx, wy) < 0.9:
+            best = t
+    return np.maximum(u * best, lower)
+
+
 def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
     """:func:`_gauss_newton` for one frame, with plain floats: the real-time path.
 
@@ -636,48 +683,55 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
     call overhead, which this avoids.
     """
     M = w.size
-    k = u.size
+    k = u.shape[-1]
     D2 = D[0]
+    ff = ffix[0]
     lo = lower
     u = np.maximum(u[0], lo)
     ei_ = float(ei[0])
+    k0_ = float(k0[0])
     w2 = np.repeat(w, 2)
     ref = p0[0].reshape(-1)
-    F = ffix[0] + D2 @ u
+    sampling = _frame_sampling(s_all.tobytes(), L, M, n_nodes)
+    state1 = None if state is None else state[0]
+
+    def solve(u_, start_):
+        return _solve_frame(L, ei_, k0_, ff + D2 @ u_, wload, s_all, M, start_, n_nodes, sampling)
+
+    F = ff + D2 @ u
     scale = L * L / ei_
     gmax = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wload[0] * L, F[1] + wload[1] * L))
-    start = state if gmax * scale < 0.9 * _STABLE_BOUND else None
+    start = state1 if gmax * scale < 0.9 * _STABLE_BOUND else None
     iters = 1
-    pos, dpos, ok, st, tip, dst = _solve_beam(L, ei, k0, F[None], wload, s_all, M, start, n_nodes)
-    if not ok[0]:
+    pos, dpos, ok, st, tip, dst = solve(u, start)
+    if not ok:
         u = np.maximum(np.zeros(k), lo)
-        F = ffix[0] + D2 @ u
-        pos, dpos, ok, st, tip, dst = _solve_beam(L, ei, k0, F[None], wload, s_all, M, None, n_nodes)
+        pos, dpos, ok, st, tip, dst = solve(u, None)
         iters += 1
 
     def lin(pos_, dpos_):
-        r = pos_[0].reshape(-1) - ref
-        A = dpos_[0].reshape(-1, 2) @ D2  # ∂p/∂u: (2M, k)
+        r = pos_.reshape(-1) - ref
+        A = dpos_.reshape(-1, 2) @ D2  # ∂p/∂u: (2M, k)
         wA = A * w2[:, None]
         return float(r @ (r * w2)), wA.T @ r, A.T @ wA, A
 
     def out(status, u_):
-        return {"u": u_[None], "force": (ffix[0] + D2 @ u_)[None], "status": np.array([status]),
-                "iterations": np.array([iters]), "positions": pos, "dpos": dpos, "state": st, "tip": tip,
-                "cost": np.array([cost]), "blocked": blocked[None]}
+        return {"u": u_[None], "force": (ff + D2 @ u_)[None], "status": np.array([status]),
+                "iterations": np.array([iters]), "positions": pos[None], "dpos": dpos[None], "state": st[None],
+                "tip": tip[None], "cost": np.array([cost]), "blocked": blocked[None]}
 
     cost = np.nan
     blocked = np.zeros(k)
-    if not ok[0]:
+    if not ok:
         return out(2, u)
     cost, g, H, A = lin(pos, dpos)
     if start is None:
         # the competing start inside the convex region (see _gauss_newton)
-        uc = _convex_start(L, ei, wload, D, ffix, lo, u[None])[0]
+        uc = _convex_start_one(L, ei_, wload, D2, ff, lo, u)
         if np.any(uc != u):
-            r = _solve_beam(L, ei, k0, (ffix[0] + D2 @ uc)[None], wload, s_all, M, state, n_nodes)
+            r = solve(uc, state1)
             iters += 1
-            if r[2][0]:
+            if r[2]:
                 trial = lin(r[0], r[1])
                 if trial[0] < cost:
                     u, (pos, dpos, _, st, tip, dst) = uc, r
@@ -686,7 +740,7 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
     last = math.inf
     jumps = 0
     for _ in range(max_iter):
-        step = _lm_step(H[None], g[None], np.zeros(1))[0]
+        step = _lm_step_one(H, g)
         unew = np.maximum(u + step, lo)
         dstep = unew - u
         size = float(np.abs(dstep).max())
@@ -702,13 +756,11 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
         norm *= shrink
         predicted = -(2.0 * float(g @ dstep) + float(dstep @ H @ dstep))
         dF = D2 @ dstep
-        guess = st + dst[..., 0] * dF[0] + dst[..., 1] * dF[1]
-        pn, dpn, okn, stn, tipn, dstn = _solve_beam(L, ei, k0, (ffix[0] + D2 @ un)[None], wload, s_all, M, guess,
-                                                    n_nodes)
+        guess = st + dst[:, 0] * dF[0] + dst[:, 1] * dF[1]
+        pn, dpn, okn, stn, tipn, dstn = solve(un, guess)
         iters += 1
         linear = (A @ dstep).reshape(-1, 2)
-        good = bool(okn[0]) and (float(np.abs(pn[0] - pos[0] - linear).max())
-                                 <= 0.5 * float(np.abs(linear).max()) + 1e-6 * L)
+        good = okn and (float(np.abs(pn - pos - linear).max()) <= 0.5 * float(np.abs(linear).max()) + 1e-6 * L)
         if not good:
             jumps += 1
             blocked = dstep

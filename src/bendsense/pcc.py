@@ -75,7 +75,7 @@ def _dsinc(v):
 class _Grid:
     """Per-(lengths, s) precomputation: segment index and local arc length of every point."""
 
-    __slots__ = ("lengths", "s", "seg", "sigma", "half_sigma", "total", "scale")
+    __slots__ = ("lengths", "s", "seg", "sigma", "half_sigma", "total", "scale", "scale_one", "half_lengths")
 
     def __init__(self, lengths_m, s_m):
         lengths = np.asarray(lengths_m, dtype=float)
@@ -100,6 +100,11 @@ class _Grid:
         self.half_sigma = 0.5 * self.sigma
         self.total = total
         self.scale = np.concatenate([lengths, self.sigma])[:, None]  # chord lengths of unit sinc
+        self.scale_one = self.scale[:, 0].copy()
+        self.half_lengths = 0.5 * lengths
+        for a in (self.lengths, self.s, self.seg, self.sigma, self.half_sigma, self.scale, self.scale_one,
+                  self.half_lengths):
+            a.setflags(write=False)
 
 
 _GRID_CACHE: dict = {}
@@ -262,6 +267,46 @@ def _kernel(kappa, theta, base, grid: _Grid, pos, ang, tip, tip_ang):
     ang[:] = m.T
 
 
+def _kernel_one(kappa, theta, base, grid: _Grid):
+    """:func:`_kernel` for one frame: positions (M, 2), angles (M,), tip (2,), tip angle.
+
+    The same chord form on 1-D arrays, with plain ``sin``/``cos`` (through one complex
+    exponential) instead of the batched kernel's half-angle tangents: for one frame the
+    number of numpy calls, not the arithmetic, sets the time.
+    """
+    n = theta.size
+    seg = grid.seg
+    half = np.empty(n + seg.size)  # half angles of the segments, then of the points' arcs
+    np.multiply(kappa, grid.half_lengths, out=half[:n])
+    np.multiply(kappa[seg], grid.half_sigma, out=half[n:])
+    zero = half == 0.0
+    chord = np.sin(half)
+    chord /= half + zero
+    chord += zero  # sinc, exactly 1 at 0
+    chord *= grid.scale_one
+    start = np.cumsum(theta)  # φ_end − φ_base
+    tip_angle = float(start[-1]) + base
+    start -= theta
+    if base != 0.0:
+        start += base
+    mid = half.copy()  # direction of every chord
+    mid[:n] += start
+    mid[n:] += start[seg]
+    z = np.exp(1j * mid)  # (cos, sin) = (y, x) of the unit chord
+    z *= chord
+    ends = np.cumsum(z[:n])  # segment end points
+    tip = ends[-1]
+    ends -= z[:n]  # start point of every segment
+    p = z[n:]
+    p += ends[seg]
+    pos = np.empty((seg.size, 2))
+    pos[:, 0] = p.imag
+    pos[:, 1] = p.real
+    mid_p = mid[n:]
+    mid_p += half[n:]
+    return pos, mid_p, np.array([tip.imag, tip.real]), tip_angle
+
+
 def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
     """Run :func:`_kernel` over any batch shape, block by block."""
     n = grid.lengths.size
@@ -281,6 +326,9 @@ def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
         b2 = np.broadcast_to(base, batch).reshape(-1)
         vector_base = True
     frames, m = k2.shape[0], grid.s.size
+    if frames == 1 and points and not vector_base:
+        pos, ang, tip, tip_ang = _kernel_one(k2[0], th2[0], b2, grid)
+        return pos.reshape(*batch, m, 2), ang.reshape(*batch, m), tip.reshape(*batch, 2), np.reshape(tip_ang, batch)
     tip = np.empty((frames, 2))
     tip_ang = np.empty(frames)
     pos = np.empty((frames, m, 2)) if points else None
@@ -682,6 +730,20 @@ def reconstruct(
         delta = a - calibration.offset
         kappa = shifts_to_curvatures(calibration.shifts_from_delta(delta), lengths, sensor.strip_gap_m)
         return _shape(kappa, grid, base_angle_rad, calibration.extrapolated_delta(delta))
+    inv_gap, inv_lengths, base = 1.0 / sensor.strip_gap_m, 1.0 / lengths, float(base_angle_rad)
+    if a.ndim == 1:
+        # one frame (the live path): the same chain on 1-D arrays
+        delta = a - calibration.offset
+        extrapolated = calibration._extrapolated_one(delta)
+        shifts = calibration._shifts_one(delta)
+        theta = delta  # reuse the buffer
+        theta[0] = shifts[0]
+        np.subtract(shifts[1:], shifts[:-1], out=theta[1:])
+        theta *= inv_gap
+        kappa = theta * inv_lengths
+        pos, ang, tip, tip_ang = _kernel_one(kappa, theta, base, grid)
+        return Shape(curvature_per_m=kappa, s_m=grid.s, positions_m=pos, angle_rad=ang, tip_position_m=tip,
+                     tip_angle_rad=np.array(tip_ang), lengths_m=grid.lengths, extrapolated=np.array(extrapolated))
     # fused, block by block: signals → ΔA → S → θ = ΔS/d, κ = θ/l → shape (paper eq. 1–7)
     batch = a.shape[:-1]
     a2 = a.reshape(-1, n)
@@ -690,7 +752,6 @@ def reconstruct(
     pos, ang = np.empty((frames, m, 2)), np.empty((frames, m))
     tip, tip_ang = np.empty((frames, 2)), np.empty(frames)
     extrapolated = np.empty(frames, dtype=bool)
-    inv_gap, inv_lengths, base = 1.0 / sensor.strip_gap_m, 1.0 / lengths, float(base_angle_rad)
     for i in range(0, frames, _BLOCK):
         sl = slice(i, i + _BLOCK)
         delta = a2[sl] - calibration.offset
