@@ -279,16 +279,12 @@ class SimulatedDevice:
 
     def disconnect(self) -> None:
         """Close the master now, as if the USB cable were pulled."""
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
+        self._stop_thread()
         self._close_fds(disconnected=True)
 
     def close(self) -> None:
         """Stop the thread and close the pseudo-terminal."""
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
+        self._stop_thread()
         self._close_fds(disconnected=False)
 
     def __enter__(self) -> SimulatedDevice:
@@ -298,6 +294,11 @@ class SimulatedDevice:
         self.close()
 
     # ------------------------------------------------------------------ internals
+
+    def _stop_thread(self) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)
 
     def _close_fds(self, disconnected: bool) -> None:
         with self._lock:
