@@ -789,10 +789,6 @@ def _table(header, rows) -> str:
     return "\n".join(lines)
 
 
-def _si(value) -> str:
-    return f"{value:.4g}"
-
-
 def _report(res: ReproduceResult, names: dict, command: str) -> str:
     from bendsense import __version__
 
