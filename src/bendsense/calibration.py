@@ -510,6 +510,19 @@ class Calibration:
         c = self._channel_coefficients
         return tuple(np.ascontiguousarray(c[:, k]) for k in range(self.degree, -1, -1))
 
+    @cached_property
+    def _slope_columns(self) -> tuple:
+        # the same for the slopes f'(ΔA) (highest power first); () for degree 0
+        c = self._channel_coefficients
+        return tuple(np.ascontiguousarray(k * c[:, k]) for k in range(self.degree, 0, -1))
+
+    @cached_property
+    def _linear_slope(self):
+        # the linear coefficient per channel: where it is nonzero, and it with 1 elsewhere
+        slope = self._channel_coefficients[:, 1] if self.degree > 0 else np.zeros(self.n_channels)
+        nonzero = slope != 0
+        return nonzero, np.where(nonzero, slope, 1.0)
+
     def shifts_from_delta(self, delta_a):
         """Shifts S (..., N) [m] from offset-free signals ΔA (..., N) (paper eq. 2)."""
         cols = self._coefficient_columns

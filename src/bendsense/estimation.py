@@ -321,18 +321,26 @@ def quadrature(lengths_m, length_m: float, n_points: int):
 
 @functools.lru_cache(maxsize=32)
 def _pcc_grid(lengths: tuple, length_m: float, n_points: int, beam_length_m: float):
-    """Quadrature nodes, weights, segment and local arc length of each node (cached).
+    """Per-grid constants of a PCC reference (cached, read-only).
 
-    Also the nodes followed by the beam's nodes clipped to the sensor length.
+    The quadrature nodes, weights, segment and local arc length of each node; the nodes
+    followed by the beam's nodes clipped to the sensor length, with the PCC kinematics'
+    own grid of them; the tip-angle weights (:func:`_tip_angle_weights`) and the arc
+    length of each beam node beyond the sensor (where the last curvature is carried on).
     """
+    from bendsense import pcc
+
     lengths = np.asarray(lengths)
     s, w = quadrature(lengths, length_m, n_points)
     bounds = np.concatenate(([0.0], np.cumsum(lengths)))
     seg = np.clip(np.searchsorted(bounds[1:-1], s, side="left"), 0, lengths.size - 1)
-    s_fk = np.concatenate([s, np.minimum(chebyshev_nodes_m(beam_length_m, _N_NODES), bounds[-1])])
-    out = (s, w, seg, s - bounds[seg], s_fk)
-    for a in out:
+    sc = chebyshev_nodes_m(beam_length_m, _N_NODES)
+    s_fk = np.concatenate([s, np.minimum(sc, bounds[-1])])
+    out = {"s": s, "w": w, "seg": seg, "sigma": s - bounds[seg], "s_fk": s_fk,
+           "tip_weights": _tip_angle_weights(lengths, beam_length_m), "beyond": np.maximum(sc - float(lengths.sum()), 0.0)}
+    for a in out.values():
         a.setflags(write=False)
+    out["grid"] = pcc._grid(lengths, s_fk)
     return out
 
 
@@ -366,6 +374,8 @@ def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0
     dD : ndarray, shape (..., 2, k) or None
         ∂D/∂φ_L for the tip-angle constraints, else None.
     """
+    if type(tip_angle_rad) is float:  # one frame: plain floats
+        return _constraint_basis_one(constraint, tip_angle_rad, direction, follower_angle_rad)
     phi = np.asarray(tip_angle_rad, dtype=float)
     if constraint == "none":
         return np.broadcast_to(np.eye(2), (*phi.shape, 2, 2)), None
@@ -380,6 +390,31 @@ def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0
         a = phi - float(follower_angle_rad)
         c, s = np.cos(a), np.sin(a)
         return np.stack([s, c], axis=-1)[..., None], np.stack([c, -s], axis=-1)[..., None]
+    raise ValueError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+
+
+_EYE2 = np.broadcast_to(np.eye(2), (2, 2))
+_VERTICAL = np.broadcast_to(np.array([[0.0], [1.0]]), (2, 1))
+_HORIZONTAL = np.broadcast_to(np.array([[1.0], [0.0]]), (2, 1))
+
+
+def _constraint_basis_one(constraint, phi, direction, follower_angle_rad):
+    """:func:`constraint_basis` for one tip angle (a float)."""
+    if constraint == "none":
+        return _EYE2, None
+    if constraint == "vertical":
+        return _VERTICAL, None
+    if constraint == "horizontal":
+        return _HORIZONTAL, None
+    if constraint == "direction":
+        return np.broadcast_to(np.asarray(direction, dtype=float)[:, None], (2, 1)), None
+    if constraint == "normal":
+        c, s = math.cos(phi), math.sin(phi)
+        return np.array([[-c], [s]]), np.array([[s], [c]])
+    if constraint == "follower":
+        a = phi - float(follower_angle_rad)
+        c, s = math.cos(a), math.sin(a)
+        return np.array([[s], [c]]), np.array([[c], [-s]])
     raise ValueError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
 
 
@@ -463,6 +498,13 @@ def _apply(D, u):
     if D.shape[-1] == 1:
         return D[..., 0] * u
     return D[..., 0] * u[:, :1] + D[..., 1] * u[:, 1:]
+
+
+def _apply_one(D, u):
+    """D u for one frame, (2, k) and (k,), with :func:`_apply`'s arithmetic."""
+    if D.shape[-1] == 1:
+        return D[:, 0] * u[0]
+    return D[:, 0] * u[0] + D[:, 1] * u[1]
 
 
 def _project(D, gF, GF):
@@ -677,23 +719,25 @@ def _convex_start_one(L, ei, wload, D2, ffix, lower, u):
 
 
 def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
-    """:func:`_gauss_newton` for one frame, with plain floats: the real-time path.
+    """:func:`_gauss_newton` for one frame, unbatched and with plain floats: the real-time path.
 
-    Same algorithm and stopping rules; a batch of one spends most of its time in numpy
-    call overhead, which this avoids.
+    ``ei``, ``k0`` floats, ``p0`` (M, 2), ``D`` (2, k), ``ffix`` (2,), ``u`` (k,),
+    ``state`` (n,). Same algorithm and stopping rules; a batch of one spends most of its
+    time in numpy call overhead, which this avoids. Returns the dict of
+    :func:`_gauss_newton` for the one frame (no batch axis).
     """
     M = w.size
     k = u.shape[-1]
-    D2 = D[0]
-    ff = ffix[0]
+    D2 = D
+    ff = ffix
     lo = lower
-    u = np.maximum(u[0], lo)
-    ei_ = float(ei[0])
-    k0_ = float(k0[0])
+    u = np.maximum(u, lo)
+    ei_ = float(ei)
+    k0_ = float(k0)
     w2 = np.repeat(w, 2)
-    ref = p0[0].reshape(-1)
+    ref = p0.reshape(-1)
     sampling = _frame_sampling(s_all.tobytes(), L, M, n_nodes)
-    state1 = None if state is None else state[0]
+    state1 = state
 
     def solve(u_, start_):
         return _solve_frame(L, ei_, k0_, ff + D2 @ u_, wload, s_all, M, start_, n_nodes, sampling)
@@ -716,9 +760,8 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
         return float(r @ (r * w2)), wA.T @ r, A.T @ wA, A
 
     def out(status, u_):
-        return {"u": u_[None], "force": (ff + D2 @ u_)[None], "status": np.array([status]),
-                "iterations": np.array([iters]), "positions": pos[None], "dpos": dpos[None], "state": st[None],
-                "tip": tip[None], "cost": np.array([cost]), "blocked": blocked[None]}
+        return {"u": u_, "force": ff + D2 @ u_, "status": status, "iterations": iters, "positions": pos,
+                "dpos": dpos, "state": st, "tip": tip, "cost": cost, "blocked": blocked}
 
     cost = np.nan
     blocked = np.zeros(k)
@@ -790,8 +833,12 @@ def _fast(prob, u0, state0, *, chain, xtol, max_iter, n_nodes):
     B = prob["B"]
 
     def run(idx, u, st):
-        solver = _gauss_newton_one if B == 1 else _gauss_newton
-        return solver(prob["L"], prob["ei"][idx], prob["k0"][idx], prob["wload"], prob["s_all"], prob["w"],
+        if B == 1:
+            r = _gauss_newton_one(prob["L"], prob["ei"][0], prob["k0"][0], prob["wload"], prob["s_all"], prob["w"],
+                                  prob["p0"][0], prob["D"][0], prob["ffix"][0], prob["lower"], u[0], st[0],
+                                  xtol=xtol, max_iter=max_iter, n_nodes=n_nodes)
+            return {key: np.asarray(val)[None] for key, val in r.items()}
+        return _gauss_newton(prob["L"], prob["ei"][idx], prob["k0"][idx], prob["wload"], prob["s_all"], prob["w"],
                              prob["p0"][idx], prob["D"][idx], prob["ffix"][idx], prob["lower"], u, st,
                              xtol=xtol, max_iter=max_iter, n_nodes=n_nodes)
 
@@ -844,8 +891,7 @@ def _shape_state(ref, L, n_nodes):
     """
     sc = chebyshev_nodes_m(L, n_nodes)
     if ref["kappa"] is not None:
-        total = float(ref["lengths"].sum())
-        return ref["phi_nodes"] + ref["kappa"][..., -1:] * np.maximum(sc - total, 0.0)
+        return ref["phi_nodes"] + ref["kappa"][..., -1:] * ref["beyond"]
     s, phi = ref["s"], ref["phi"]
     # linear interpolation, and the end slope beyond the last point
     j = np.clip(np.searchsorted(s, sc) - 1, 0, s.size - 2)
@@ -892,6 +938,50 @@ def _moment_guess(prob, phi, kappa_s):
     u *= np.minimum(1.0, cap / np.maximum(norm, 1e-300))[:, None]
     u = np.where(np.isfinite(u), u, 0.0)
     return np.maximum(u, prob["lower"])
+
+
+@functools.lru_cache(maxsize=16)
+def _moment_geometry(s: bytes, length_m: float):
+    """Half the intervals of the points extended to L, and L − s (cached, read-only)."""
+    s = np.frombuffer(s)
+    half_ds = 0.5 * np.diff(np.concatenate([s, [length_m]]))
+    tail_len = (length_m - s)[:, None]
+    half_ds = half_ds[:, None]
+    for a in (half_ds, tail_len):
+        a.setflags(write=False)
+    return half_ds, tail_len
+
+
+_ROT = np.array([[0.0, 1.0], [-1.0, 0.0]])  # a = δ @ _ROT = (−δ_y, δ_x): the moment arm of a force
+
+
+def _moment_guess_one(p0, s, w, L, ei, k0, wload, D, lower, phi_end, kappa_s):
+    """:func:`_moment_guess` of one frame (zero fixed force): ``p0`` (M, 2), ``D`` (2, k); u (k,)."""
+    M = s.size
+    half_ds, tail_len = _moment_geometry(s.tobytes(), L)
+    tip = p0[-1] + (L - float(s[-1])) * np.array([math.sin(phi_end), math.cos(phi_end)])
+    r_ext = np.empty((M + 1, 2))
+    r_ext[:M] = p0
+    r_ext[M] = tip
+    seg = r_ext[1:] + r_ext[:-1]
+    seg *= half_ds
+    tail = np.cumsum(seg[::-1], axis=0)[::-1]  # ∫_{s_j}^{L} r dσ
+    tail -= tail_len * p0  # the lever arms of the distributed load
+    c = tail @ np.array([float(wload[1]), -float(wload[0])])  # its moment
+    c += ei * (kappa_s - k0)
+    aD = (tip - p0) @ (_ROT @ D)  # M_F = a · F = a · D u
+    waD = aD * w[:, None]
+    H = aD.T @ waD
+    g = waD.T @ c
+    # the ridge of _moment_guess
+    k = H.shape[0]
+    H.flat[:: k + 1] += 1e-6 * float(np.trace(H)) / k
+    u = _lm_step_one(H, g)
+    cap = 3.0 * ei / (L * L)
+    norm = math.sqrt(float(u @ u))
+    u *= min(1.0, cap / max(norm, 1e-300))
+    u[~np.isfinite(u)] = 0.0
+    return np.maximum(u, lower)
 
 
 # --------------------------------------------------------------------------- the paper's method
@@ -1161,6 +1251,107 @@ def _covariance(prob, res, cov_s):
     return cov, ratio
 
 
+def _misfit_one(Gf, w2, r, J, Tu, cov_s):
+    """:func:`_misfit` of one frame: ``Gf`` (2M, N), ``w2`` (2M,), ``r`` (2M,), ``J`` (2M, k)."""
+    n = Gf.shape[1]
+    GtW = (Gf * w2[:, None]).T  # (N, 2M)
+    rj = np.empty((r.size, 1 + J.shape[1]))
+    rj[:, 0] = r
+    rj[:, 1:] = J
+    sol = np.linalg.solve(GtW @ Gf, GtW @ rj)
+    proj = np.eye(n) - sol[:, 1:] @ Tu
+    C = proj @ cov_s @ proj.T
+    C = C + C.T
+    C *= 0.5
+    lam, V = np.linalg.eigh(C)
+    keep = lam > 1e-10 * lam[-1]
+    keep[: Tu.shape[0]] = False
+    z = V.T @ sol[:, 0]
+    return float(np.sum(z[keep] ** 2 / lam[keep])), int(keep.sum())
+
+
+def _covariance_one(ref, res, D, dD, w2, L, d, cov_s):
+    """:func:`_covariance` of one frame with small dense products: Cov(F) (2, 2) and χ²/dof.
+
+    The PCC shape's Jacobian ``G = ∂p⁰/∂S`` is formed once (2M × N) and serves both the
+    propagation (``Σ_j (w_j ∂p_j/∂F)ᵀ G_j``, which the batched path contracts without
+    forming G) and the misfit.
+    """
+    k = D.shape[1]
+    A = res["dpos"].reshape(-1, 2)  # ∂p/∂F (2M, 2)
+    wA = A * w2[:, None]
+    GF = A.T @ wA
+    Hinv, singular, V = (a[0] for a in _inverse_cov((D.T @ GF @ D)[None]))
+    r = (res["positions"] - ref["p0"]).reshape(-1)
+    ratio = math.nan
+    if cov_s is not None:
+        kappa, lengths = ref["kappa"], ref["lengths"]
+        G = _shape_jacobian(kappa[None], lengths, d, ref["seg"], ref["sigma"], ref["p0"][None])[0]
+        Gf = G.reshape(-1, lengths.size)
+        hs = D.T @ (wA.T @ Gf)  # (k, N)
+        if dD is not None:
+            # D follows the reconstructed tip angle φ_L (see _tip_angle_weights)
+            dphi_ds = _tip_angle_shift_gradient(lengths, L, d)
+            Fd = dD @ res["u"]
+            hs -= (D.T @ (GF @ Fd))[:, None] * dphi_ds
+        Tu = Hinv @ hs  # ∂u/∂S
+        T = D @ Tu  # ∂F/∂S
+        if dD is not None:
+            T += Fd[:, None] * dphi_ds
+        c = T @ cov_s @ T.T
+        chi2, dof = _misfit_one(Gf, w2, r, A @ D, Tu, cov_s)
+        ratio = chi2 / max(dof, 1)
+        c *= max(ratio, 1.0)
+    else:
+        dof = max(r.size - k, 1)
+        var = float(r @ r) / dof  # per coordinate
+        mid = A.T @ (A * (w2 * w2)[:, None])
+        c = D @ (var * (Hinv @ (D.T @ mid @ D) @ Hinv)) @ D.T
+    if singular.any():
+        dirs = D @ V  # force directions of the eigenvectors
+        for q in np.flatnonzero(singular):
+            v = dirs[:, q]
+            c = np.where(np.abs(v[:, None] * v[None, :]) > 1e-12, np.inf, c)
+    return c, ratio
+
+
+def _shift_covariance_one(kappa, lengths, d, noise_std, calibration):
+    """:func:`_shift_covariance` of one frame (N,) → (N, N)."""
+    S = np.cumsum(kappa * lengths)
+    S *= d
+    if calibration is None:
+        sd = np.broadcast_to(noise_std, S.shape)
+        return np.diag(sd * sd)
+    cols, dcols = calibration._coefficient_columns, calibration._slope_columns
+    if not dcols:
+        return np.zeros((S.size, S.size))
+
+    def poly(c, x):
+        out = c[0].copy()
+        for ck in c[1:]:
+            out *= x
+            out += ck
+        return out
+
+    nonzero, safe = calibration._linear_slope
+    x = (S - cols[-1]) / safe
+    x[~nonzero] = 0.0
+    for _ in range(50):
+        fp = poly(dcols, x)
+        fp[fp == 0] = 1.0
+        dx = poly(cols, x)
+        dx -= S
+        dx /= fp
+        x = x - dx
+        if np.all(np.abs(dx) <= 1e-12 * np.maximum(1.0, np.abs(x))):
+            break
+    sd = np.abs(poly(dcols, x))
+    sd *= noise_std
+    cov = calibration.shift_error_m(S, covariance=True)
+    cov.flat[:: S.size + 1] += sd * sd
+    return cov
+
+
 def _shift_covariance(kappa, lengths, d, noise_std, calibration):
     """Σ_S (b, N, N) [m²]: covariance of the shifts (module docstring, Uncertainty).
 
@@ -1230,13 +1421,14 @@ def _reference(shape, config, s_opt, n_points, L_act):
         if not np.all(np.isfinite(kappa)):
             raise ValueError("shape.curvature_per_m: must be finite")
         Lc = min(float(lengths.sum()), L_act)
-        s, w, seg, sigma, s_fk = _pcc_grid(tuple(lengths.tolist()), Lc, n_points, L_act)
+        grid = _pcc_grid(tuple(lengths.tolist()), Lc, n_points, L_act)
+        s, seg = grid["s"], grid["seg"]
         # the comparison points and the beam's nodes (for its Newton start) in one pass
-        pos, phi = pcc.forward_kinematics(kappa, lengths, s_fk)
+        pos, phi, _, _ = pcc._kinematics(kappa, grid["grid"], 0.0)
         M = s.size
-        return {"p0": pos[..., :M, :], "s": s, "w": w, "Lc": Lc, "kappa": kappa, "lengths": lengths, "seg": seg,
-                "sigma": sigma, "tip_shape": kappa @ _tip_angle_weights(lengths, L_act), "phi": phi[..., :M],
-                "phi_nodes": phi[..., M:], "kappa_s": kappa[..., seg]}
+        return {"p0": pos[..., :M, :], "s": s, "w": grid["w"], "Lc": Lc, "kappa": kappa, "lengths": lengths,
+                "seg": seg, "sigma": grid["sigma"], "tip_shape": kappa @ grid["tip_weights"], "phi": phi[..., :M],
+                "phi_nodes": phi[..., M:], "kappa_s": kappa[..., seg], "beyond": grid["beyond"]}
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
         raise ValueError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
     if pos.shape[-2:] != (s_in.size, 2):
@@ -1256,6 +1448,150 @@ def _reference(shape, config, s_opt, n_points, L_act):
     # the tip angle of a shape given by points: at its last compared point
     return {"p0": p0, "s": s, "w": _trapezoid(s), "Lc": float(s[-1]), "kappa": None,
             "tip_shape": phi[..., -1], "phi": phi, "kappa_s": np.gradient(phi, s, axis=-1, edge_order=2)}
+
+
+def _noise_std(noise_opt, calibration, est):
+    """Signal noise per channel (option, else the calibration's if nonzero, else the config's)."""
+    if noise_opt is not None:
+        sigma_a = np.asarray(noise_opt, dtype=float)
+    elif calibration is not None and np.any(np.asarray(calibration.noise_std) > 0):
+        sigma_a = np.asarray(calibration.noise_std, dtype=float)
+    else:
+        sigma_a = np.asarray(est.signal_noise_std, dtype=float)
+    if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
+        raise ValueError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
+    return sigma_a
+
+
+def _boundary_message(v):
+    return (f"not identifiable along ({v[0]:.3f}, {v[1]:.3f}): trial loads leave the stable branch "
+            "(buckling) or the shape's linear range; best stable estimate, std inf")
+
+
+def _misfit_message(residual_m):
+    return (f"no stable equilibrium matches the shape: stopped at the stability boundary {residual_m * 1e3:.3g} mm "
+            "from it (a load beyond buckling?)")
+
+
+_FAILURES = {2: "beam model fails (buckling or no equilibrium) at every trial force",
+             3: "no convergence in the iteration limit"}
+
+
+def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direction, follower, push_only, initial,
+                  initial_force, noise_opt, calibration, strict, xtol, max_iter, t_start):
+    """:func:`estimate_force` (fast) of one frame: the real-time path.
+
+    The same steps as the batched path on unbatched arrays, with the frame's scalars as
+    plain floats and what depends only on the grid, the calibration or the config
+    cached; the numbers agree with the batched path to round-off.
+    """
+    est = config.estimation
+    M = ref["s"].size
+    p0 = ref["p0"].reshape(M, 2)
+    model = _free_model(config)
+    k0 = float(model.tip_curvature_per_m(pressure))
+    ei = float(config.stiffness.ei_nm2(pressure))
+    if not ei > 0:
+        raise ValueError(f"pressure_pa: EI(P) must be > 0, got {ei!r} N·m² at {pressure!r} Pa")
+    phi_L = float(model.tip_angle_rad(pressure)) if source == "model" else float(np.reshape(ref["tip_shape"], -1)[0])
+    D, dD = constraint_basis(constraint, phi_L, direction=direction, follower_angle_rad=follower)
+    k = D.shape[-1]
+    if source == "model":
+        dD = None
+    lower = np.full(k, 0.0 if push_only else -np.inf)
+    wload = np.asarray(config.weight_per_length_n_per_m, dtype=float)
+    s, w = ref["s"], ref["w"]
+    kappa = None if ref["kappa"] is None else ref["kappa"].reshape(-1)
+    ffix = np.zeros(2)
+
+    # starting points
+    state0 = _shape_state(ref, L, _N_NODES).reshape(_N_NODES)
+    if initial is not None and not isinstance(initial, ForceEstimate):
+        raise ValueError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
+    phi = ref["phi"].reshape(M)
+    guess = _moment_guess_one(p0, s, w, L, ei, k0, wload, D, lower, float(phi[-1]), ref["kappa_s"].reshape(M))
+    u0 = None
+    if initial is not None and initial_force is None and initial.guess_n is not None:
+        # the previous frame's offset from its own moment-balance start (see estimate_force)
+        prev_f = np.broadcast_to(np.asarray(initial.force_n, dtype=float), (*batch, 2)).reshape(2)
+        prev_g = np.broadcast_to(np.asarray(initial.guess_n, dtype=float), (*batch, 2)).reshape(2)
+        u0 = guess.copy()
+        if all(math.isfinite(x) for x in (*prev_f.tolist(), *prev_g.tolist())):
+            u0 += (prev_f - prev_g) @ D
+    elif initial is not None and initial_force is None:
+        initial_force = initial.force_n
+    if u0 is not None:
+        pass
+    elif initial_force is not None:
+        f0 = np.asarray(initial_force, dtype=float)
+        if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
+            raise ValueError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
+        u0 = np.broadcast_to(f0, (*batch, 2)).reshape(2) @ D
+    else:
+        u0 = guess
+    u0 = np.maximum(u0, lower)
+    res = _gauss_newton_one(L, ei, k0, wload, _joined(s.tobytes(), L, _N_NODES), w, p0, D, ffix, lower, u0, state0,
+                            xtol=xtol, max_iter=max_iter, n_nodes=_N_NODES)
+
+    # uncertainty
+    cov_s = None
+    uncertainty = "residual"
+    if kappa is not None:
+        sigma_a = _noise_std(noise_opt, calibration, est)
+        if np.any(sigma_a > 0) or calibration is not None:
+            lengths = ref["lengths"]
+            cov_s = _shift_covariance_one(kappa, lengths, float(config.sensor.strip_gap_m),
+                                          np.broadcast_to(sigma_a, (lengths.size,)), calibration)
+            if np.trace(cov_s) > 0:
+                uncertainty = "propagated"
+            else:
+                cov_s = None
+    w2 = np.repeat(w, 2)
+    cov, chi2_dof = _covariance_one(ref, res, D, dD, w2, L, float(config.sensor.strip_gap_m), cov_s)
+
+    status = res["status"]
+    message = _OK
+    diff = (res["positions"] - p0).reshape(-1)
+    residual = math.sqrt(float(diff @ (diff * w2)) / float(w.sum()))
+    if status == 4:
+        # stopped at the stability boundary (see estimate_force)
+        v = _apply_one(D, res["blocked"])
+        v /= max(math.hypot(v[0], v[1]), 1e-300)
+        cov = np.where(np.abs(v[:, None] * v[None, :]) > 1e-12, np.inf, cov)
+        if residual > _BOUNDARY_MISFIT * L:
+            status = 3
+            message = _misfit_message(residual)
+        else:
+            message = _boundary_message(v)
+    elif status != 1:
+        message = _FAILURES[status]
+    success = status in (1, 4)
+    if not success and strict:
+        raise ConvergenceError(f"1 of 1 force estimate(s) failed; first: {message}")
+    if success:
+        force = res["force"]
+        std = np.sqrt(np.diagonal(cov))
+    else:
+        force = std = np.full(2, np.nan)
+        cov = np.full((2, 2), np.nan)
+        chi2_dof = math.nan
+    return ForceEstimate(
+        force_n=force.reshape(*batch, 2),
+        std_n=std.reshape(*batch, 2),
+        covariance_n2=cov.reshape(*batch, 2, 2),
+        residual_m=np.full(batch, residual),
+        success=np.full(batch, success),
+        message=np.full(batch, message) if batch else message,
+        iterations=np.full(batch, res["iterations"]),
+        wall_time_s=time.perf_counter() - t_start,
+        method="fast",
+        constraint=constraint,
+        uncertainty=uncertainty,
+        tip_position_m=res["tip"].reshape(*batch, 2),
+        state=res["state"].reshape(*batch, res["state"].size),
+        guess_n=_apply_one(D, guess).reshape(*batch, 2),
+        chi2_per_dof=np.full(batch, chi2_dof),
+    )
 
 
 def _option(options, name, default):
@@ -1372,6 +1708,11 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
         raise ValueError(f"pressure_pa: shape {P.shape} does not broadcast against the shape's frames "
                          f"{p0.shape[:-2]}") from None
     B = math.prod(batch)
+    if B == 1 and method == "fast":
+        return _estimate_one(ref, float(P.reshape(-1)[0]), batch, config, L, constraint, source=source,
+                             direction=direction, follower=follower, push_only=push_only, initial=initial,
+                             initial_force=initial_force, noise_opt=noise_opt, calibration=calibration,
+                             strict=strict, xtol=xtol, max_iter=max_iter, t_start=t_start)
     M = ref["s"].size
     p0 = np.broadcast_to(p0, (*batch, M, 2)).reshape(B, M, 2)
     Pf = np.broadcast_to(P, batch).reshape(B)
