@@ -122,6 +122,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scipy.linalg.lapack import dgesv as _dgesv
+from scipy.linalg.lapack import dsyevd as _dsyevd
+
 from bendsense import beam as _beam
 from bendsense.errors import ConvergenceError
 
@@ -471,7 +474,8 @@ def _solve_frame(L, ei, k0, F, wload, s_all, M, state, n_nodes, sampling):
                          q)
     if r is not None:
         return r[2], r[4], True, r[0], r[3], r[5]
-    sol = _beam.solve(L, np.array([ei]), np.array([k0]), F[None], wload, np.zeros(1), s_all, n_nodes=n_nodes,
+    sol = _beam.solve(L, np.array([ei]), np.array([k0]), np.array([F], dtype=float), wload, np.zeros(1), s_all,
+                      n_nodes=n_nodes,
                       initial=None if state is None else state[None], sensitivities=True)
     return (sol.positions_m[0, :M], sol.dpositions_dforce[0, :M], bool(sol.success[0]), sol.state[0],
             sol.tip_position_m[0], sol.dangle_dforce[0, M:])
@@ -694,16 +698,16 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
 
 
 def _lm_step_one(H, g):
-    """:func:`_lm_step` (μ = 0) of one frame on plain floats: (k,)."""
-    if g.size == 1:
-        h = float(H[0, 0])
-        return np.array([-float(g[0]) / (h + (1e-14 * h + 1e-300))])
-    h00, h01, h11 = float(H[0, 0]), float(H[0, 1]), float(H[1, 1])
+    """:func:`_lm_step` (μ = 0) of one frame on plain floats: H, g nested lists; a list (k,)."""
+    if len(g) == 1:
+        h = H[0][0]
+        return [-g[0] / (h + (1e-14 * h + 1e-300))]
+    h00, h01, h11 = H[0][0], H[0][1], H[1][1]
     eps = 1e-14 * (h00 + h11) + 1e-300
     a, d = h00 + eps, h11 + eps
-    g0, g1 = float(g[0]), float(g[1])
+    g0, g1 = g
     det = a * d - h01 * h01
-    return np.array([-((d * g0 - h01 * g1) / det), -((a * g1 - h01 * g0) / det)])
+    return [-((d * g0 - h01 * g1) / det), -((a * g1 - h01 * g0) / det)]
 
 
 def _convex_start_one(L, ei, wload, D2, ffix, lower, u):
@@ -718,92 +722,113 @@ def _convex_start_one(L, ei, wload, D2, ffix, lower, u):
     return np.maximum(u * best, lower)
 
 
+@functools.lru_cache(maxsize=16)
+def _repeat2(w: bytes) -> np.ndarray:
+    """The weights of the points repeated for their x and y coordinates (cached)."""
+    out = np.repeat(np.frombuffer(w), 2)
+    out.setflags(write=False)
+    return out
+
+
 def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
     """:func:`_gauss_newton` for one frame, unbatched and with plain floats: the real-time path.
 
     ``ei``, ``k0`` floats, ``p0`` (M, 2), ``D`` (2, k), ``ffix`` (2,), ``u`` (k,),
     ``state`` (n,). Same algorithm and stopping rules; a batch of one spends most of its
-    time in numpy call overhead, which this avoids. Returns the dict of
+    time in numpy call overhead, which this avoids: the k ≤ 2 force parameters, their
+    gradient and Gauss–Newton matrix are Python floats. Returns the dict of
     :func:`_gauss_newton` for the one frame (no batch axis).
     """
     M = w.size
-    k = u.shape[-1]
-    D2 = D
-    ff = ffix
-    lo = lower
-    u = np.maximum(u, lo)
-    ei_ = float(ei)
-    k0_ = float(k0)
-    w2 = np.repeat(w, 2)
+    k = D.shape[1]
+    (d00, *d01), (d10, *d11) = D.tolist()
+    d01, d11 = (d01 or [0.0])[0], (d11 or [0.0])[0]
+    ff0, ff1 = float(ffix[0]), float(ffix[1])
+    lo = lower.tolist()
+    u = [max(a, b) for a, b in zip(u.tolist(), lo)]
+    ei = float(ei)
+    k0 = float(k0)
+    w2 = _repeat2(w.tobytes())
     ref = p0.reshape(-1)
     sampling = _frame_sampling(s_all.tobytes(), L, M, n_nodes)
-    state1 = state
 
-    def solve(u_, start_):
-        return _solve_frame(L, ei_, k0_, ff + D2 @ u_, wload, s_all, M, start_, n_nodes, sampling)
+    def apply(v):  # D v
+        if k == 1:
+            return d00 * v[0], d10 * v[0]
+        return d00 * v[0] + d01 * v[1], d10 * v[0] + d11 * v[1]
 
-    F = ff + D2 @ u
-    scale = L * L / ei_
+    def force(v):
+        fx, fy = apply(v)
+        return ff0 + fx, ff1 + fy
+
+    def solve(v, start_):
+        return _solve_frame(L, ei, k0, force(v), wload, s_all, M, start_, n_nodes, sampling)
+
+    F = force(u)
     gmax = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wload[0] * L, F[1] + wload[1] * L))
-    start = state1 if gmax * scale < 0.9 * _STABLE_BOUND else None
+    start = state if gmax * (L * L / ei) < 0.9 * _STABLE_BOUND else None
     iters = 1
     pos, dpos, ok, st, tip, dst = solve(u, start)
     if not ok:
-        u = np.maximum(np.zeros(k), lo)
+        u = [max(0.0, b) for b in lo]
         pos, dpos, ok, st, tip, dst = solve(u, None)
         iters += 1
 
     def lin(pos_, dpos_):
-        r = pos_.reshape(-1) - ref
-        A = dpos_.reshape(-1, 2) @ D2  # ∂p/∂u: (2M, k)
-        wA = A * w2[:, None]
-        return float(r @ (r * w2)), wA.T @ r, A.T @ wA, A
+        # one Gram matrix of [∂p/∂u, p − p⁰] gives the cost, gradient and Gauss–Newton matrix
+        Ar = np.empty((2 * M, k + 1))
+        np.matmul(dpos_.reshape(-1, 2), D, out=Ar[:, :k])  # ∂p/∂u
+        np.subtract(pos_.reshape(-1), ref, out=Ar[:, k])
+        gram = (Ar.T @ (Ar * w2[:, None])).tolist()
+        return gram[k][k], gram[k][:k], [row[:k] for row in gram[:k]], Ar[:, :k]
 
     def out(status, u_):
-        return {"u": u_, "force": ff + D2 @ u_, "status": status, "iterations": iters, "positions": pos,
-                "dpos": dpos, "state": st, "tip": tip, "cost": cost, "blocked": blocked}
+        return {"u": np.array(u_), "force": np.array(force(u_)), "status": status, "iterations": iters,
+                "positions": pos, "dpos": dpos, "state": st, "tip": tip, "cost": cost, "blocked": np.array(blocked)}
 
     cost = np.nan
-    blocked = np.zeros(k)
+    blocked = [0.0] * k
     if not ok:
         return out(2, u)
     cost, g, H, A = lin(pos, dpos)
     if start is None:
         # the competing start inside the convex region (see _gauss_newton)
-        uc = _convex_start_one(L, ei_, wload, D2, ff, lo, u)
-        if np.any(uc != u):
-            r = solve(uc, state1)
+        uc = _convex_start_one(L, ei, wload, D, ffix, lower, np.array(u)).tolist()
+        if uc != u:
+            r = solve(uc, state)
             iters += 1
             if r[2]:
                 trial = lin(r[0], r[1])
                 if trial[0] < cost:
                     u, (pos, dpos, _, st, tip, dst) = uc, r
                     cost, g, H, A = trial
-    radius = 0.5 * ei_ / (L * L)
+    radius = 0.5 * ei / (L * L)
     last = math.inf
     jumps = 0
     for _ in range(max_iter):
         step = _lm_step_one(H, g)
-        unew = np.maximum(u + step, lo)
-        dstep = unew - u
-        size = float(np.abs(dstep).max())
+        unew = [max(a + b, c) for a, b, c in zip(u, step, lo)]
+        dstep = [a - b for a, b in zip(unew, u)]
+        size = max(abs(a) for a in dstep)
         rate = size / last if last < math.inf else math.nan
         left = size * rate / (1.0 - rate) if rate < 0.5 else size
         if left <= xtol or (rate > 0.5 and size <= 1e3 * xtol):
             return out(1, unew)
         last = size
-        norm = math.sqrt(float(dstep @ dstep))
+        norm = math.sqrt(sum(a * a for a in dstep))
         shrink = min(1.0, radius / norm)
-        un = np.maximum(u + dstep * shrink, lo)
-        dstep = un - u
+        un = [max(a + b * shrink, c) for a, b, c in zip(u, dstep, lo)]
+        dstep = [a - b for a, b in zip(un, u)]
         norm *= shrink
-        predicted = -(2.0 * float(g @ dstep) + float(dstep @ H @ dstep))
-        dF = D2 @ dstep
-        guess = st + dst[:, 0] * dF[0] + dst[:, 1] * dF[1]
+        Hd = [sum(a * b for a, b in zip(dstep, col)) for col in zip(*H)]  # dstepᵀ H
+        predicted = -(2.0 * sum(a * b for a, b in zip(g, dstep)) + sum(a * b for a, b in zip(Hd, dstep)))
+        dF = apply(dstep)
+        guess = st + dst @ dF
         pn, dpn, okn, stn, tipn, dstn = solve(un, guess)
         iters += 1
-        linear = (A @ dstep).reshape(-1, 2)
-        good = okn and (float(np.abs(pn - pos - linear).max()) <= 0.5 * float(np.abs(linear).max()) + 1e-6 * L)
+        linear = A @ dstep
+        good = okn and (float(np.abs(pn.reshape(-1) - pos.reshape(-1) - linear).max())
+                        <= 0.5 * float(np.abs(linear).max()) + 1e-6 * L)
         if not good:
             jumps += 1
             blocked = dstep
@@ -976,11 +1001,13 @@ def _moment_guess_one(p0, s, w, L, ei, k0, wload, D, lower, phi_end, kappa_s):
     # the ridge of _moment_guess
     k = H.shape[0]
     H.flat[:: k + 1] += 1e-6 * float(np.trace(H)) / k
-    u = _lm_step_one(H, g)
-    cap = 3.0 * ei / (L * L)
-    norm = math.sqrt(float(u @ u))
-    u *= min(1.0, cap / max(norm, 1e-300))
-    u[~np.isfinite(u)] = 0.0
+    u = _lm_step_one(H.tolist(), g.tolist())
+    norm = math.sqrt(sum(a * a for a in u))
+    if math.isfinite(norm):
+        f = min(1.0, 3.0 * ei / (L * L) / max(norm, 1e-300))
+        u = [a * f if math.isfinite(a * f) else 0.0 for a in u]
+    else:  # as _moment_guess: a NaN or infinite step is no guess
+        u = [0.0] * k
     return np.maximum(u, lower)
 
 
@@ -1251,6 +1278,81 @@ def _covariance(prob, res, cov_s):
     return cov, ratio
 
 
+@functools.lru_cache(maxsize=16)
+def _jacobian_grid(lengths: bytes, seg: bytes, sigma: bytes):
+    """Per-grid constants of :func:`_shape_jacobian_one` (cached, read-only).
+
+    Segment index of the segments and then of the points, half their arc lengths,
+    their arc lengths squared over 2, the mask of the segments before each point's
+    and the index pairs (point, own segment).
+    """
+    lengths, seg, sigma = np.frombuffer(lengths), np.frombuffer(seg, dtype=np.intp), np.frombuffer(sigma)
+    n = lengths.size
+    idx = np.concatenate([np.arange(n), seg])
+    arc = np.concatenate([lengths, sigma])
+    out = (idx, 0.5 * arc, 0.5 * arc * arc, (seg[:, None] > np.arange(n)).astype(float), np.arange(seg.size), seg,
+           1j * lengths)
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def _shape_jacobian_one(kappa, lengths, d, seg, sigma, pos):
+    """:func:`_shape_jacobian` of one frame, (M, 2, N), in complex arithmetic.
+
+    Planar vectors are complex numbers ``y + i x``: a chord of length σ at angle
+    ``m`` is ``σ sinc(h) e^{im}`` and its derivative by κ is
+    ``σ²/2 (sinc'(h) + i sinc(h)) e^{im}`` (``h = κσ/2``, :func:`_arc_dkappa`); the
+    turn ``R'v = (v_y, −v_x)`` of the points beyond a segment is ``i v``.
+    """
+    n = lengths.size
+    idx, half_arc, half_arc2, after, rows, own, il = _jacobian_grid(lengths.tobytes(), seg.tobytes(), sigma.tobytes())
+    theta = kappa * lengths
+    start = np.cumsum(theta)
+    start -= theta  # φ at the start of every segment
+    h = kappa[idx] * half_arc  # half angles of the segments, then of the points' arcs
+    eh = np.exp(1j * h)
+    small = np.abs(h) < 1e-2
+    safe = np.where(small, 1.0, h)
+    sinc = eh.imag / safe
+    dsinc = (eh.real - sinc) / safe
+    if small.any():
+        hs = h[small]
+        h2 = hs * hs
+        sinc[small] = np.sinc(hs / np.pi)
+        dsinc[small] = hs * (-1.0 / 3.0 + h2 * (1.0 / 30.0 - h2 / 840.0))
+    em = np.exp(1j * start[idx])
+    em *= eh  # e^{im}, m = φ0 + h
+    dchord = dsinc + 1j * sinc
+    dchord *= em
+    dchord *= half_arc2
+    ends = np.cumsum(lengths * sinc[:n] * em[:n])  # segment end points P_i
+    pc = np.empty(seg.size, dtype=complex)
+    pc.real = pos[:, 1]
+    pc.imag = pos[:, 0]
+    G = pc[:, None] - ends
+    G *= il
+    G += dchord[:n]
+    G *= after
+    G[rows, own] += dchord[n:]
+    G /= d * lengths
+    G[:, :-1] -= G[:, 1:].copy()
+    out = np.empty((seg.size, 2, n))
+    out[:, 0] = G.imag
+    out[:, 1] = G.real
+    return out
+
+
+def _inverse_cov_one(H):
+    """:func:`_inverse_cov` of one (k, k) matrix."""
+    if H.shape[0] == 1:
+        h = float(H[0, 0])
+        singular = h <= 1e-12 * max(h, 0.0) + 1e-300
+        return np.array([[0.0 if singular else 1.0 / h]]), np.array([singular]), np.ones((1, 1))
+    Hinv, singular, V = _inverse_cov(H[None])
+    return Hinv[0], singular[0], V[0]
+
+
 def _misfit_one(Gf, w2, r, J, Tu, cov_s):
     """:func:`_misfit` of one frame: ``Gf`` (2M, N), ``w2`` (2M,), ``r`` (2M,), ``J`` (2M, k)."""
     n = Gf.shape[1]
@@ -1258,12 +1360,17 @@ def _misfit_one(Gf, w2, r, J, Tu, cov_s):
     rj = np.empty((r.size, 1 + J.shape[1]))
     rj[:, 0] = r
     rj[:, 1:] = J
-    sol = np.linalg.solve(GtW @ Gf, GtW @ rj)
+    # LAPACK directly (np.linalg.solve and eigh call the same routines, with more overhead)
+    _, _, sol, info = _dgesv(GtW @ Gf, GtW @ rj, overwrite_a=True, overwrite_b=True)
+    if info > 0:
+        raise np.linalg.LinAlgError("Singular matrix")
     proj = np.eye(n) - sol[:, 1:] @ Tu
     C = proj @ cov_s @ proj.T
     C = C + C.T
     C *= 0.5
-    lam, V = np.linalg.eigh(C)
+    lam, V, info = _dsyevd(C, compute_v=1, lower=1, overwrite_a=1)
+    if info > 0:
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
     keep = lam > 1e-10 * lam[-1]
     keep[: Tu.shape[0]] = False
     z = V.T @ sol[:, 0]
@@ -1281,13 +1388,13 @@ def _covariance_one(ref, res, D, dD, w2, L, d, cov_s):
     A = res["dpos"].reshape(-1, 2)  # ∂p/∂F (2M, 2)
     wA = A * w2[:, None]
     GF = A.T @ wA
-    Hinv, singular, V = (a[0] for a in _inverse_cov((D.T @ GF @ D)[None]))
+    Hinv, singular, V = _inverse_cov_one(D.T @ GF @ D)
     r = (res["positions"] - ref["p0"]).reshape(-1)
     ratio = math.nan
     if cov_s is not None:
         kappa, lengths = ref["kappa"], ref["lengths"]
-        G = _shape_jacobian(kappa[None], lengths, d, ref["seg"], ref["sigma"], ref["p0"][None])[0]
-        Gf = G.reshape(-1, lengths.size)
+        Gf = _shape_jacobian_one(kappa, lengths, d, ref["seg"], ref["sigma"], ref["p0"].reshape(-1, 2)).reshape(
+            -1, lengths.size)
         hs = D.T @ (wA.T @ Gf)  # (k, N)
         if dD is not None:
             # D follows the reconstructed tip angle φ_L (see _tip_angle_weights)
