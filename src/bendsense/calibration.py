@@ -517,6 +517,20 @@ class Calibration:
         return tuple(np.ascontiguousarray(k * c[:, k]) for k in range(self.degree, 0, -1))
 
     @cached_property
+    def _value_slope_columns(self) -> tuple:
+        # (f, f') per channel as one (2, N) Horner column per power, highest first; f'
+        # padded with a leading zero column so that both share the steps
+        cols, dcols = self._coefficient_columns, self._slope_columns
+        if not dcols:
+            return ()
+        slope = (np.zeros(self.n_channels), *dcols)
+        return tuple(np.stack([c, d]) for c, d in zip(cols, slope, strict=True))
+
+    @cached_property
+    def _noise_positive(self) -> bool:
+        return bool(np.any(self.noise_std > 0))
+
+    @cached_property
     def _linear_slope(self):
         # the linear coefficient per channel: where it is nonzero, and it with 1 elsewhere
         slope = self._channel_coefficients[:, 1] if self.degree > 0 else np.zeros(self.n_channels)
@@ -582,20 +596,30 @@ class Calibration:
         if s.ndim == 0 or s.shape[-1] != n:
             raise ValueError(f"shifts_m: expected shape (..., {n}), got {s.shape}")
         model = self._shift_error_table
-        odd, _ = parity_masks(n)
+        odd, parity = self._parity_correlation
         grid = model["grid_m"]
-        sigma = np.where(odd, np.interp(np.abs(s), grid, model["sigma_odd_m"]),
-                         np.interp(np.abs(s), grid, model["sigma_even_m"]))
+        a = np.abs(s)
+        sigma = np.where(odd, np.interp(a, grid, model["sigma_odd_m"]), np.interp(a, grid, model["sigma_even_m"]))
         if not covariance:
             return sigma
         ell = model["length_m"]
         if ell > 0:
-            rho = np.exp(-0.5 * ((s[..., :, None] - s[..., None, :]) / ell) ** 2)
+            rho = np.subtract.outer(s, s) if s.ndim == 1 else s[..., :, None] - s[..., None, :]
+            rho /= ell
+            np.square(rho, out=rho)
+            rho *= -0.5
+            np.exp(rho, out=rho)
         else:
             rho = np.broadcast_to(np.eye(n), (*s.shape[:-1], n, n))
-        same = odd[:, None] == odd[None, :]
-        rho = rho * np.where(same, 1.0, model["parity_correlation"])
+        rho = rho * parity
         return sigma[..., :, None] * sigma[..., None, :] * rho
+
+    @cached_property
+    def _parity_correlation(self):
+        # the odd channels, and c_ij of shift_error_m: 1 within a parity, c between them
+        odd, _ = parity_masks(self.n_channels)
+        same = odd[:, None] == odd[None, :]
+        return odd, np.where(same, 1.0, self._shift_error_table["parity_correlation"])
 
     @cached_property
     def _shift_error_table(self) -> dict:

@@ -422,6 +422,25 @@ def _constraint_basis_one(constraint, phi, direction, follower_angle_rad):
 
 
 _MODELS: dict = {}
+_LOWER = {(push, k): np.full(k, 0.0 if push else -np.inf) for push in (False, True) for k in (1, 2)}
+for _a in _LOWER.values():
+    _a.setflags(write=False)
+
+
+def _config_constants(config):
+    """The free-bending model, the distributed load (2,) [N/m] and the strip gap [m] of a config (cached)."""
+    entry = _CONSTANTS.get(id(config))
+    if entry is None or entry[0] is not config:
+        if len(_CONSTANTS) > 16:
+            _CONSTANTS.clear()
+        wload = np.asarray(config.weight_per_length_n_per_m, dtype=float).copy()
+        wload.setflags(write=False)
+        entry = (config, (_free_model(config), wload, float(config.sensor.strip_gap_m)))
+        _CONSTANTS[id(config)] = entry
+    return entry[1]
+
+
+_CONSTANTS: dict = {}
 
 
 def _free_model(config):
@@ -827,8 +846,12 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
         pn, dpn, okn, stn, tipn, dstn = solve(un, guess)
         iters += 1
         linear = A @ dstep
-        good = okn and (float(np.abs(pn.reshape(-1) - pos.reshape(-1) - linear).max())
-                        <= 0.5 * float(np.abs(linear).max()) + 1e-6 * L)
+        if okn:
+            jump = pn.reshape(-1) - pos.reshape(-1)
+            jump -= linear
+            good = float(_amax(np.abs(jump, out=jump))) <= 0.5 * float(_amax(np.abs(linear))) + 1e-6 * L
+        else:
+            good = False
         if not good:
             jumps += 1
             blocked = dstep
@@ -977,6 +1000,8 @@ def _moment_geometry(s: bytes, length_m: float):
     return half_ds, tail_len
 
 
+_amax = np.maximum.reduce  # without ndarray.max's Python-level wrapper
+
 _ROT = np.array([[0.0, 1.0], [-1.0, 0.0]])  # a = δ @ _ROT = (−δ_y, δ_x): the moment arm of a force
 
 
@@ -990,18 +1015,19 @@ def _moment_guess_one(p0, s, w, L, ei, k0, wload, D, lower, phi_end, kappa_s):
     r_ext[M] = tip
     seg = r_ext[1:] + r_ext[:-1]
     seg *= half_ds
-    tail = np.cumsum(seg[::-1], axis=0)[::-1]  # ∫_{s_j}^{L} r dσ
+    tail = np.add.accumulate(seg[::-1], axis=0)[::-1]  # ∫_{s_j}^{L} r dσ
     tail -= tail_len * p0  # the lever arms of the distributed load
     c = tail @ np.array([float(wload[1]), -float(wload[0])])  # its moment
     c += ei * (kappa_s - k0)
     aD = (tip - p0) @ (_ROT @ D)  # M_F = a · F = a · D u
     waD = aD * w[:, None]
-    H = aD.T @ waD
-    g = waD.T @ c
+    H = (aD.T @ waD).tolist()
+    k = len(H)
     # the ridge of _moment_guess
-    k = H.shape[0]
-    H.flat[:: k + 1] += 1e-6 * float(np.trace(H)) / k
-    u = _lm_step_one(H.tolist(), g.tolist())
+    ridge = 1e-6 * sum(H[i][i] for i in range(k)) / k
+    for i in range(k):
+        H[i][i] += ridge
+    u = _lm_step_one(H, (waD.T @ c).tolist())
     norm = math.sqrt(sum(a * a for a in u))
     if math.isfinite(norm):
         f = min(1.0, 3.0 * ei / (L * L) / max(norm, 1e-300))
@@ -1349,8 +1375,14 @@ def _inverse_cov_one(H):
         h = float(H[0, 0])
         singular = h <= 1e-12 * max(h, 0.0) + 1e-300
         return np.array([[0.0 if singular else 1.0 / h]]), np.array([singular]), np.ones((1, 1))
-    Hinv, singular, V = _inverse_cov(H[None])
-    return Hinv[0], singular[0], V[0]
+    lam, V = np.linalg.eigh(H)
+    top = max(float(lam[1]), 0.0)
+    singular = [x <= 1e-12 * top + 1e-300 for x in lam.tolist()]
+    inv = [0.0 if s else 1.0 / x for s, x in zip(singular, lam.tolist())]
+    (v00, v01), (v10, v11) = V.tolist()
+    h01 = v00 * inv[0] * v10 + v01 * inv[1] * v11
+    Hinv = np.array([[v00 * inv[0] * v00 + v01 * inv[1] * v01, h01], [h01, v10 * inv[0] * v10 + v11 * inv[1] * v11]])
+    return Hinv, np.array(singular), V
 
 
 def _misfit_one(Gf, w2, r, J, Tu, cov_s):
@@ -1424,7 +1456,7 @@ def _covariance_one(ref, res, D, dD, w2, L, d, cov_s):
 
 def _shift_covariance_one(kappa, lengths, d, noise_std, calibration):
     """:func:`_shift_covariance` of one frame (N,) → (N, N)."""
-    S = np.cumsum(kappa * lengths)
+    S = np.add.accumulate(kappa * lengths)
     S *= d
     if calibration is None:
         sd = np.broadcast_to(noise_std, S.shape)
@@ -1433,24 +1465,28 @@ def _shift_covariance_one(kappa, lengths, d, noise_std, calibration):
     if not dcols:
         return np.zeros((S.size, S.size))
 
-    def poly(c, x):
+    def poly(c, x):  # Horner's rule; c highest power first, (N,) or stacked (2, N)
         out = c[0].copy()
         for ck in c[1:]:
             out *= x
             out += ck
         return out
 
+    both = calibration._value_slope_columns
     nonzero, safe = calibration._linear_slope
     x = (S - cols[-1]) / safe
     x[~nonzero] = 0.0
     for _ in range(50):
-        fp = poly(dcols, x)
-        fp[fp == 0] = 1.0
-        dx = poly(cols, x)
+        dx, fp = poly(both, x)  # f(x), f'(x)
+        if not fp.all():
+            fp[fp == 0] = 1.0
         dx -= S
         dx /= fp
         x = x - dx
-        if np.all(np.abs(dx) <= 1e-12 * np.maximum(1.0, np.abs(x))):
+        tol = np.abs(x)
+        np.maximum(tol, 1.0, out=tol)
+        tol *= 1e-12
+        if (np.abs(dx, out=dx) <= tol).all():
             break
     sd = np.abs(poly(dcols, x))
     sd *= noise_std
@@ -1525,13 +1561,16 @@ def _reference(shape, config, s_opt, n_points, L_act):
                 f"got shape {kappa.shape}"
             )
     if kappa is not None:
-        if not np.all(np.isfinite(kappa)):
+        if not np.isfinite(kappa).all():
             raise ValueError("shape.curvature_per_m: must be finite")
         Lc = min(float(lengths.sum()), L_act)
         grid = _pcc_grid(tuple(lengths.tolist()), Lc, n_points, L_act)
         s, seg = grid["s"], grid["seg"]
         # the comparison points and the beam's nodes (for its Newton start) in one pass
-        pos, phi, _, _ = pcc._kinematics(kappa, grid["grid"], 0.0)
+        if kappa.shape == lengths.shape:  # one frame
+            pos, phi, _, _ = pcc._kernel_one(kappa, kappa * grid["grid"].lengths, 0.0, grid["grid"])
+        else:
+            pos, phi, _, _ = pcc._kinematics(kappa, grid["grid"], 0.0)
         M = s.size
         return {"p0": pos[..., :M, :], "s": s, "w": grid["w"], "Lc": Lc, "kappa": kappa, "lengths": lengths,
                 "seg": seg, "sigma": grid["sigma"], "tip_shape": kappa @ grid["tip_weights"], "phi": phi[..., :M],
@@ -1559,6 +1598,9 @@ def _reference(shape, config, s_opt, n_points, L_act):
 
 def _noise_std(noise_opt, calibration, est):
     """Signal noise per channel (option, else the calibration's if nonzero, else the config's)."""
+    if noise_opt is None and calibration is None and type(est.signal_noise_std) is float:
+        sigma_a = est.signal_noise_std  # validated by the config (finite, >= 0)
+        return np.float64(sigma_a)
     if noise_opt is not None:
         sigma_a = np.asarray(noise_opt, dtype=float)
     elif calibration is not None and np.any(np.asarray(calibration.noise_std) > 0):
@@ -1595,18 +1637,18 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
     est = config.estimation
     M = ref["s"].size
     p0 = ref["p0"].reshape(M, 2)
-    model = _free_model(config)
-    k0 = float(model.tip_curvature_per_m(pressure))
+    model, wload, gap = _config_constants(config)
+    theta = float(model.bending_angle_rad(pressure))  # free-motion tip angle
+    k0 = theta / model.length_m  # as model.tip_curvature_per_m
     ei = float(config.stiffness.ei_nm2(pressure))
     if not ei > 0:
         raise ValueError(f"pressure_pa: EI(P) must be > 0, got {ei!r} N·m² at {pressure!r} Pa")
-    phi_L = float(model.tip_angle_rad(pressure)) if source == "model" else float(np.reshape(ref["tip_shape"], -1)[0])
+    phi_L = theta if source == "model" else float(np.reshape(ref["tip_shape"], -1)[0])
     D, dD = constraint_basis(constraint, phi_L, direction=direction, follower_angle_rad=follower)
     k = D.shape[-1]
     if source == "model":
         dD = None
-    lower = np.full(k, 0.0 if push_only else -np.inf)
-    wload = np.asarray(config.weight_per_length_n_per_m, dtype=float)
+    lower = _LOWER[push_only, k]
     s, w = ref["s"], ref["w"]
     kappa = None if ref["kappa"] is None else ref["kappa"].reshape(-1)
     ffix = np.zeros(2)
@@ -1620,8 +1662,11 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
     u0 = None
     if initial is not None and initial_force is None and initial.guess_n is not None:
         # the previous frame's offset from its own moment-balance start (see estimate_force)
-        prev_f = np.broadcast_to(np.asarray(initial.force_n, dtype=float), (*batch, 2)).reshape(2)
-        prev_g = np.broadcast_to(np.asarray(initial.guess_n, dtype=float), (*batch, 2)).reshape(2)
+        prev_f, prev_g = (np.asarray(a, dtype=float) for a in (initial.force_n, initial.guess_n))
+        if prev_f.shape != (*batch, 2) or prev_g.shape != (*batch, 2):
+            prev_f = np.broadcast_to(prev_f, (*batch, 2))
+            prev_g = np.broadcast_to(prev_g, (*batch, 2))
+        prev_f, prev_g = prev_f.reshape(2), prev_g.reshape(2)
         u0 = guess.copy()
         if all(math.isfinite(x) for x in (*prev_f.tolist(), *prev_g.tolist())):
             u0 += (prev_f - prev_g) @ D
@@ -1644,17 +1689,21 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
     cov_s = None
     uncertainty = "residual"
     if kappa is not None:
-        sigma_a = _noise_std(noise_opt, calibration, est)
-        if np.any(sigma_a > 0) or calibration is not None:
+        if noise_opt is None and calibration is not None and calibration._noise_positive:
+            # validated when the calibration was made
+            sigma_a, positive = calibration.noise_std, True
+        else:
+            sigma_a = _noise_std(noise_opt, calibration, est)
+            positive = bool((sigma_a > 0).any())
+        if positive or calibration is not None:
             lengths = ref["lengths"]
-            cov_s = _shift_covariance_one(kappa, lengths, float(config.sensor.strip_gap_m),
-                                          np.broadcast_to(sigma_a, (lengths.size,)), calibration)
+            cov_s = _shift_covariance_one(kappa, lengths, gap, np.broadcast_to(sigma_a, (lengths.size,)), calibration)
             if np.trace(cov_s) > 0:
                 uncertainty = "propagated"
             else:
                 cov_s = None
-    w2 = np.repeat(w, 2)
-    cov, chi2_dof = _covariance_one(ref, res, D, dD, w2, L, float(config.sensor.strip_gap_m), cov_s)
+    w2 = _repeat2(w.tobytes())
+    cov, chi2_dof = _covariance_one(ref, res, D, dD, w2, L, gap, cov_s)
 
     status = res["status"]
     message = _OK
@@ -1806,11 +1855,11 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     L = float(config.actuator.length_m)
     ref = _reference(shape, config, s_opt, n_points, L)
     P = np.asarray(pressure_pa, dtype=float)
-    if not np.all(np.isfinite(P)):
+    if not np.isfinite(P).all():
         raise ValueError(f"pressure_pa: must be finite, got {pressure_pa!r}")
     p0 = ref["p0"]
     try:
-        batch = np.broadcast_shapes(p0.shape[:-2], P.shape)
+        batch = () if p0.ndim == 2 and P.ndim == 0 else np.broadcast_shapes(p0.shape[:-2], P.shape)
     except ValueError:
         raise ValueError(f"pressure_pa: shape {P.shape} does not broadcast against the shape's frames "
                          f"{p0.shape[:-2]}") from None

@@ -284,7 +284,7 @@ def _kernel_one(kappa, theta, base, grid: _Grid):
     chord /= half + zero
     chord += zero  # sinc, exactly 1 at 0
     chord *= grid.scale_one
-    start = np.cumsum(theta)  # φ_end − φ_base
+    start = np.add.accumulate(theta)  # φ_end − φ_base
     tip_angle = float(start[-1]) + base
     start -= theta
     if base != 0.0:
@@ -294,7 +294,7 @@ def _kernel_one(kappa, theta, base, grid: _Grid):
     mid[n:] += start[seg]
     z = np.exp(1j * mid)  # (cos, sin) = (y, x) of the unit chord
     z *= chord
-    ends = np.cumsum(z[:n])  # segment end points
+    ends = np.add.accumulate(z[:n])  # segment end points
     tip = ends[-1]
     ends -= z[:n]  # start point of every segment
     p = z[n:]
