@@ -190,6 +190,7 @@ class _Operators:
     J0inv: np.ndarray
     J0T: np.ndarray  # J0ᵀ, C-contiguous: its transpose is J0 in Fortran order, as LAPACK takes it
     rhs_one: np.ndarray  # (4, n-1): the constant entries of one frame's Newton right-hand sides, transposed
+    Dall: np.ndarray  # D2i and then Dtip: the rows of the collocation equations
     diag: np.ndarray  # flat indices of the diagonal entries that carry the load term
     tail: np.ndarray  # 1 − σ at the interior nodes
 
@@ -220,7 +221,8 @@ def _operators(n: int) -> _Operators:
     rhs_one = np.zeros((4, m))
     rhs_one[1, -1] = 1.0  # e_tip: the Jacobi field's column
     return _Operators(
-        n, sigma, D, D2[1:-1].copy(), D[-1].copy(), Q, D[0, 1:].copy(), J0, np.linalg.inv(J0), J0.T.copy(), rhs_one, diag,
+        n, sigma, D, D2[1:-1].copy(), D[-1].copy(), Q, D[0, 1:].copy(), J0, np.linalg.inv(J0), J0.T.copy(), rhs_one,
+        np.vstack([D2[1:-1], D[-1:]]), diag,
         1.0 - sigma[1:-1],
     )
 
@@ -501,6 +503,9 @@ def _continuation(phi, k0, gi, ratio, ops, tol, max_iter, sens):
     return phi, status, where, iters, extra
 
 
+_amax = np.maximum.reduce  # without ndarray.max's Python-level wrapper
+
+
 def _load_ratio_one(fx, fy, wx, wy):
     """:func:`_load_ratio` of one frame on plain floats."""
     fn = math.hypot(fx, fy)
@@ -550,8 +555,9 @@ def _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q)
         # takes them without a copy
         rhs = rhs0.copy()
         r0 = rhs[0]
-        np.subtract(eg.real, ops.D2i @ p, out=r0[:-1])
-        r0[-1] = k0n - ops.Dtip @ p
+        dp = ops.Dall @ p  # (φ'' at the interior nodes, φ' at the tip)
+        np.subtract(eg.real, dp[:-1], out=r0[:-1])
+        r0[-1] = k0n - dp[-1]
         if sens:
             np.negative(e.real, out=rhs[2, :-1])
             rhs[3, :-1] = e.imag
@@ -561,7 +567,7 @@ def _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q)
         if info != 0:
             return None
         step = x[:, 0]
-        size = float(np.abs(step).max())
+        size = float(_amax(np.abs(step)))
         if not math.isfinite(size):
             return None
         if size > 1.0:

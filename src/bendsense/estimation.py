@@ -729,16 +729,16 @@ def _lm_step_one(H, g):
     return [-((d * g0 - h01 * g1) / det), -((a * g1 - h01 * g0) / det)]
 
 
-def _convex_start_one(L, ei, wload, D2, ffix, lower, u):
-    """:func:`_convex_start` of one frame on plain floats."""
+def _convex_start_one(L, ei, wload, apply, ffix, lower, u):
+    """:func:`_convex_start` of one frame on plain floats (``apply(v)`` = D v; u, lower lists)."""
     scale = L * L / ei
     wx, wy = float(wload[0]) * L * scale, float(wload[1]) * L * scale
     best = 0.0
     for t in (0.2, 0.4, 0.6, 0.8, 1.0):
-        f = (ffix + D2 @ np.maximum(u * t, lower)) * scale
-        if _beam._load_ratio_one(float(f[0]), float(f[1]), wx, wy) < 0.9:
+        fx, fy = apply([max(a * t, b) for a, b in zip(u, lower)])
+        if _beam._load_ratio_one((ffix[0] + fx) * scale, (ffix[1] + fy) * scale, wx, wy) < 0.9:
             best = t
-    return np.maximum(u * best, lower)
+    return [max(a * best, b) for a, b in zip(u, lower)]
 
 
 @functools.lru_cache(maxsize=16)
@@ -812,7 +812,7 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
     cost, g, H, A = lin(pos, dpos)
     if start is None:
         # the competing start inside the convex region (see _gauss_newton)
-        uc = _convex_start_one(L, ei, wload, D, ffix, lower, np.array(u)).tolist()
+        uc = _convex_start_one(L, ei, wload, apply, (ff0, ff1), lo, u)
         if uc != u:
             r = solve(uc, state)
             iters += 1
