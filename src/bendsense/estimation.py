@@ -1334,25 +1334,31 @@ def _shape_jacobian_one(kappa, lengths, d, seg, sigma, pos):
     n = lengths.size
     idx, half_arc, half_arc2, after, rows, own, il = _jacobian_grid(lengths.tobytes(), seg.tobytes(), sigma.tobytes())
     theta = kappa * lengths
-    start = np.cumsum(theta)
+    start = np.add.accumulate(theta)
     start -= theta  # φ at the start of every segment
     h = kappa[idx] * half_arc  # half angles of the segments, then of the points' arcs
     eh = np.exp(1j * h)
+    zero = h == 0.0
+    sinc = eh.imag / (h + zero)
+    sinc += zero  # sin h / h, exactly 1 at 0
+    # sinc'(h) = (cos h − sinc h) / h, by its series where that cancels (as _dsinc)
     small = np.abs(h) < 1e-2
-    safe = np.where(small, 1.0, h)
-    sinc = eh.imag / safe
+    safe = h + small
     dsinc = (eh.real - sinc) / safe
     if small.any():
-        hs = h[small]
-        h2 = hs * hs
-        sinc[small] = np.sinc(hs / np.pi)
-        dsinc[small] = hs * (-1.0 / 3.0 + h2 * (1.0 / 30.0 - h2 / 840.0))
+        h2 = h * h
+        series = h2 / -840.0
+        series += 1.0 / 30.0
+        series *= h2
+        series -= 1.0 / 3.0
+        series *= h
+        np.copyto(dsinc, series, where=small)
     em = np.exp(1j * start[idx])
     em *= eh  # e^{im}, m = φ0 + h
     dchord = dsinc + 1j * sinc
     dchord *= em
     dchord *= half_arc2
-    ends = np.cumsum(lengths * sinc[:n] * em[:n])  # segment end points P_i
+    ends = np.add.accumulate(lengths * sinc[:n] * em[:n])  # segment end points P_i
     pc = np.empty(seg.size, dtype=complex)
     pc.real = pos[:, 1]
     pc.imag = pos[:, 0]
@@ -1361,11 +1367,11 @@ def _shape_jacobian_one(kappa, lengths, d, seg, sigma, pos):
     G += dchord[:n]
     G *= after
     G[rows, own] += dchord[n:]
-    G /= d * lengths
-    G[:, :-1] -= G[:, 1:].copy()
     out = np.empty((seg.size, 2, n))
-    out[:, 0] = G.imag
-    out[:, 1] = G.real
+    dl = d * lengths
+    np.divide(G.imag, dl, out=out[:, 0])
+    np.divide(G.real, dl, out=out[:, 1])
+    out[..., :-1] -= out[..., 1:].copy()
     return out
 
 
@@ -1731,14 +1737,20 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
         force = std = np.full(2, np.nan)
         cov = np.full((2, 2), np.nan)
         chi2_dof = math.nan
+    if batch:
+        residual, success, chi2_dof = np.full(batch, residual), np.full(batch, success), np.full(batch, chi2_dof)
+        message, iters = np.full(batch, message), np.full(batch, res["iterations"])
+    else:
+        residual, success, chi2_dof = np.array(residual), np.array(success), np.array(chi2_dof)
+        iters = np.array(res["iterations"])
     return ForceEstimate(
         force_n=force.reshape(*batch, 2),
         std_n=std.reshape(*batch, 2),
         covariance_n2=cov.reshape(*batch, 2, 2),
-        residual_m=np.full(batch, residual),
-        success=np.full(batch, success),
-        message=np.full(batch, message) if batch else message,
-        iterations=np.full(batch, res["iterations"]),
+        residual_m=residual,
+        success=success,
+        message=message,
+        iterations=iters,
         wall_time_s=time.perf_counter() - t_start,
         method="fast",
         constraint=constraint,
@@ -1746,7 +1758,7 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
         tip_position_m=res["tip"].reshape(*batch, 2),
         state=res["state"].reshape(*batch, res["state"].size),
         guess_n=_apply_one(D, guess).reshape(*batch, 2),
-        chi2_per_dof=np.full(batch, chi2_dof),
+        chi2_per_dof=chi2_dof,
     )
 
 
