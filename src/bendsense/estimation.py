@@ -63,6 +63,9 @@ Solvers
     along (x, y): ..."`` and an infinite standard deviation along that direction
     (the fit's optimum lies at the buckling boundary, or the cost is flat there):
     the estimate comes back quickly, flagged, not as a confident number.
+    One frame (the real-time path, e.g. ``initial=`` the previous estimate) runs the
+    same steps on unbatched arrays with the force parameters as plain floats
+    (``_estimate_one``); it agrees with the batched path to round-off (~1e-13 N).
     ``"paper"``: the paper's algorithm as the baseline: the shooting beam solver inside
     ``scipy.optimize.minimize`` with Nelder–Mead (MATLAB's fminsearch) on (Fx, Fy) for
     ``none``, SLSQP (fmincon) with the equality constraint ``D⊥ · F = 0`` (and
