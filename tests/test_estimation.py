@@ -399,3 +399,25 @@ def test_result_object(tmp_path):
     batch.plot(t_s=np.arange(4) * 0.1)
     plt.close("all")
     assert ax is not None
+
+
+@pytest.mark.parametrize("constraint", ("none", "vertical", "normal"))
+def test_single_frame_path_equals_the_batched_path(frames, constraint):
+    """One frame takes a lean path of its own; it must give the batch's numbers, cold and warm."""
+    p, mag, ang = frames
+    idx = np.arange(0, 48, 3)
+    force = np.column_stack([mag[idx] * np.cos(ang[idx]), mag[idx] * np.sin(ang[idx])]) * 0.5
+    kappa = pcc_curvatures(beam_shape(p[idx], force))
+    cal = _cubic_calibration(0.2)
+    batch = estimate_force(kappa, p[idx], CFG, constraint=constraint, warm_start=False, calibration=cal)
+    previous = None
+    for i in range(idx.size):
+        one = estimate_force(kappa[i], p[idx][i], CFG, constraint=constraint, calibration=cal)
+        assert one.force_n.shape == (2,)
+        np.testing.assert_allclose(one.force_n, batch.force_n[i], atol=1e-12)
+        np.testing.assert_allclose(one.std_n, batch.std_n[i], rtol=1e-9)
+        assert str(one.message) == str(batch.message[i]) and int(one.iterations) == int(batch.iterations[i])
+        # warm-started from the previous frame, as the live view does: the same optimum
+        warm = estimate_force(kappa[i], p[idx][i], CFG, constraint=constraint, calibration=cal, initial=previous)
+        np.testing.assert_allclose(warm.force_n, batch.force_n[i], atol=1e-8)
+        previous = warm
