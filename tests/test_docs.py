@@ -26,8 +26,11 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -148,13 +151,30 @@ def test_fences_name_their_language_without_a_space():
 
 
 def _run(lang: str, code: str, cwd: Path, env: dict) -> subprocess.CompletedProcess:
-    if lang == "bash":
-        cmd = ["bash", "-euo", "pipefail", "-c", code]
-    else:
-        cmd = [sys.executable, "-c", code]
-    return subprocess.run(
-        cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT_S, stdin=subprocess.DEVNULL
-    )
+    """Run one block in its own process group; afterwards end whatever it left running.
+
+    Output goes to files, not pipes, so that a background job the block started (a
+    simulated board) cannot keep the call waiting after the block has finished or failed.
+    """
+    cmd = ["bash", "-euo", "pipefail", "-c", code] if lang == "bash" else [sys.executable, "-c", code]
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen(
+            cmd, cwd=cwd, env=env, stdout=out, stderr=err, stdin=subprocess.DEVNULL, text=True, start_new_session=True
+        )
+        try:
+            returncode = proc.wait(timeout=TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            returncode = None
+        finally:
+            try:
+                os.killpg(proc.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            proc.wait()
+        out.seek(0)
+        err.seek(0)
+        stderr = err.read() + (f"\n[timed out after {TIMEOUT_S} s]" if returncode is None else "")
+        return subprocess.CompletedProcess(cmd, -1 if returncode is None else returncode, out.read(), stderr)
 
 
 @pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(ROOT).as_posix() for p in PAGES])
@@ -176,6 +196,23 @@ def test_page_runs(page: Path, tmp_path: Path):
             f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
             f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
         )
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+def test_run_ends_background_jobs_of_a_failed_block(tmp_path: Path):
+    # a block that fails with a background job still running returns at once, job ended
+    code = "sleep 60 > /dev/null 2>&1 &\necho $! > job.pid\nfalse\n"
+    t0 = time.monotonic()
+    proc = _run("bash", code, tmp_path, dict(os.environ))
+    assert proc.returncode == 1 and time.monotonic() - t0 < 30
+    pid = int((tmp_path / "job.pid").read_text())
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and Path(f"/proc/{pid}").exists():
+        time.sleep(0.05)  # the killed job may linger a moment as a zombie of its reaper
+        if Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z":
+            break
+    alive = Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    assert not alive
 
 
 # ------------------------------------------------------------------ links between pages
