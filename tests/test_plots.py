@@ -229,7 +229,8 @@ def test_plot_calibration_delegates_and_adds_check_data(tmp_path):
     check_delta = np.where(odd, 1, -1) * check_shift / 2e-6
     fig = plot_calibration(cal, data=(check_delta[None], check_shift[None]))
     fit_ax, res_ax = fig.axes
-    assert labels(fit_ax) == ("", "S [mm]") and labels(res_ax) == ("dA [signal units]", "residual [um]")
+    assert labels(fit_ax) == ("", "shift S [mm]")
+    assert labels(res_ax) == ("ΔA = A − A0 [signal units]", "residual f(ΔA) − S [µm]")
     crosses = [line for line in fit_ax.lines if line.get_label() == "check data"][0]
     np.testing.assert_allclose(crosses.get_ydata(), check_shift * 1e3)
     np.testing.assert_allclose(res_ax.lines[-1].get_ydata(), 0.0, atol=1e-6)  # an exact fit: zero residual

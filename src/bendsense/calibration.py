@@ -1047,21 +1047,22 @@ class Calibration:
             if not np.any(mask):
                 continue
             x = np.linspace(rng[0], rng[1], 200)
-            ax.plot(x, polyval_shift(coef, x) * 1e3, color=color, label=f"f_{name}")
+            ax.plot(x, polyval_shift(coef, x) * 1e3, color=color, label=f"f_{name} ({name} channels)")
             if self.fit_delta_a is not None:
                 dx, sy = self.fit_delta_a[:, mask], self.fit_shifts_m[:, mask]
-                ax.plot(dx.ravel(), sy.ravel() * 1e3, ".", color=color, alpha=0.6)
+                ax.plot(dx.ravel(), sy.ravel() * 1e3, ".", color=color, alpha=0.6, label=f"strips, {name} channels")
                 if axes is not None:
                     r = (polyval_shift(coef, dx) - sy) * 1e6
                     axes[1].plot(dx.ravel(), r.ravel(), ".", color=color)
-        ax.set_ylabel("S [mm]")
-        ax.legend()
+        ax.set_ylabel("shift S [mm]")
+        ax.set_title(f"calibration fit, degree {self.degree} (paper eq. 2)", fontsize="medium")
+        ax.legend(fontsize="small")
         if axes is not None:
             axes[1].axhline(0.0, color="k", linewidth=0.5)
-            axes[1].set_ylabel("residual [um]")
-            axes[1].set_xlabel("dA [signal units]")
+            axes[1].set_ylabel("residual f(ΔA) − S [µm]")
+            axes[1].set_xlabel("ΔA = A − A0 [signal units]")
             return axes
-        ax.set_xlabel("dA [signal units]")
+        ax.set_xlabel("ΔA = A − A0 [signal units]")
         return ax
 
 
