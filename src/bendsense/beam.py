@@ -513,14 +513,16 @@ def _load_ratio_one(fx, fy, wx, wy):
     return min(gmax / _STABLE_BOUND, fn / _STABLE_BOUND + math.hypot(wx, wy) / _WEIGHT_BOUND)
 
 
-def _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q):
+def _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q, continuation=True):
     """One frame on plain floats: the warm-started inner loop of the estimator.
 
     ``PQ`` (M, n) and ``P`` (K, n) sample positions and angles, ``q`` (n,) is the tip
     row of the integration matrix, ``PQ`` and ``q`` times L (:func:`_sampling_one`). Returns ``(φ at the nodes (n,),
     Newton iterations, positions (M, 2), tip (2,), ∂r/∂F (M, 2, 2), ∂φ/∂F at the rows
     of P (K, 2), ∂r(L)/∂F (2, 2))`` (the last three None without ``sens``), or None
-    when the frame needs load continuation (the batched path then takes it).
+    when the frame needs load continuation (the batched path then takes it), or False
+    without ``continuation`` when the warm start converged to an unstable equilibrium
+    (:func:`solve`'s status 4).
     """
     n, m = ops.n, ops.n - 1
     scale = L * L / ei
@@ -580,7 +582,9 @@ def _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q)
         return None
     if not convex:
         psi = x[:, 1]
-        if not (psi @ ops.D0 > 0.0 and (psi > 0.0).all() and np.abs(p - start).max() <= _WARM_MOVE):
+        if not (psi @ ops.D0 > 0.0 and (psi > 0.0).all()):
+            return None if continuation else False
+        if np.abs(p - start).max() > _WARM_MOVE:
             return None
     # sin φ, cos φ and, with sensitivities, their derivatives by F = (∂φ/∂F) (cos φ, −sin φ):
     # one product per sampling matrix
@@ -613,7 +617,7 @@ def _sampling_one(n: int, s_m_bytes: bytes, length_m: float):
 
 
 def _solve_scalar(L, ei, k0, base, F, w, s_m, ops, state, sens, tol, max_iter):
-    """One frame as a :class:`BeamSolution` (:func:`_solve_one`); None needs continuation."""
+    """One frame as a :class:`BeamSolution` (:func:`_solve_one`); None needs the batched path."""
     P, PQ, q = _sampling_one(ops.n, s_m.tobytes(), L)
     r = _solve_one(L, ei, k0, base, F, w, ops, state, sens, tol, max_iter, PQ, P, q)
     if r is None:
@@ -650,6 +654,7 @@ def solve(
     sensitivities: bool = False,
     tol: float = NEWTON_TOL,
     max_iter: int = NEWTON_MAX_ITER,
+    continuation: bool = True,
 ) -> BeamSolution:
     """Fast spectral solver on already validated arrays (the estimator's inner loop).
 
@@ -674,6 +679,14 @@ def solve(
         Newton stops when the angle error left is below ``tol`` [rad].
     max_iter : int
         Newton iterations per solve (per continuation step).
+    continuation : bool
+        With ``initial``: False reports a frame beyond the convexity bound whose
+        warm-started Newton converged to an *unstable* equilibrium as failed
+        (``success=False``) instead of re-solving it by load continuation from the
+        unloaded arc. For trial solves whose caller rejects shapes that leave their
+        linear prediction anyway (the estimator): the continuation's answer there is a
+        distant branch point. Frames that converged to a stable equilibrium far from
+        the start, or did not converge, are still continued.
 
     Returns
     -------
@@ -723,15 +736,18 @@ def solve(
         if first.size == B:
             first = None
 
-    status = np.zeros(B, dtype=int)  # 1 ok, 2 unstable, 3 no convergence / lost the branch
+    status = np.zeros(B, dtype=int)  # 1 ok, 2 unstable, 3 no convergence / lost the branch, 4 warm start unstable
     where = np.ones(B)
     extra = np.full((B, n - 1, 1 + 2 * sensitivities), np.nan)
     if first is None:
         start = phi
         phi, conv, iters, x = _newton(phi, np.ones(B), k0n, gi, ops, tol, max_iter, sens=sensitivities)
         near = np.abs(phi - start).max(axis=1) <= _WARM_MOVE
-        ok = conv & (convex | (_stable(x[..., 0], ops) & near))
+        stable = _stable(x[..., 0], ops)
+        ok = conv & (convex | (stable & near))
         status[ok] = 1
+        if not continuation:
+            status[conv & ~convex & ~stable] = 4
         extra = x
     else:
         iters = np.zeros(B, dtype=int)
@@ -820,6 +836,8 @@ def _messages(status, where_lam, method):
             f"no convergence ({method}): the branch from the unloaded shape ends near load factor "
             f"{where_lam[i]:.3g} (limit point: buckling or snap-through)"
         )
+    out[status == 4] = ("unstable: the warm-started solution is an unstable equilibrium "
+                        "(load beyond the convexity bound; not continued from the unloaded shape)")
     return out.astype(str)
 
 

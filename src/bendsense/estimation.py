@@ -461,18 +461,22 @@ def _free_model(config):
 # --------------------------------------------------------------------------- the fast core
 
 
-def _solve_beam(L, ei, k0, F, wload, s_all, M, state, n_nodes):
+def _solve_beam(L, ei, k0, F, wload, s_all, M, state, n_nodes, continuation=True):
     """Beam shapes at ``s_all[:M]`` with ∂p/∂F, and ∂φ/∂F at the nodes ``s_all[M:]``.
 
     ``state`` (b, n) is Newton's start; None starts from the unloaded arc (with load
-    continuation where needed). Returns positions (b, M, 2), ∂p/∂F (b, M, 2, 2),
-    success (b,), state (b, n), tip (b, 2) and ∂φ_nodes/∂F (b, n, 2).
+    continuation where needed). ``continuation=False``: a warm start beyond the
+    convexity bound that lands on an unstable equilibrium fails instead of being
+    continued from the unloaded arc (trial steps, whose jump test would reject the
+    continued shape, a distant point of the branch). Returns positions (b, M, 2),
+    ∂p/∂F (b, M, 2, 2), success (b,), state (b, n), tip (b, 2) and ∂φ_nodes/∂F (b, n, 2).
     """
     if F.shape[0] == 1:
         r = _solve_frame(L, float(ei[0]), float(k0[0]), F[0], wload, s_all, M, None if state is None else state[0],
-                         n_nodes, _frame_sampling(s_all.tobytes(), L, M, n_nodes))
+                         n_nodes, _frame_sampling(s_all.tobytes(), L, M, n_nodes), continuation)
         return r[0][None], r[1][None], np.array([r[2]]), r[3][None], r[4][None], r[5][None]
-    sol = _beam.solve(L, ei, k0, F, wload, np.zeros(1), s_all, n_nodes=n_nodes, initial=state, sensitivities=True)
+    sol = _beam.solve(L, ei, k0, F, wload, np.zeros(1), s_all, n_nodes=n_nodes, initial=state, sensitivities=True,
+                      continuation=continuation)
     return (sol.positions_m[:, :M], sol.dpositions_dforce[:, :M], sol.success, sol.state, sol.tip_position_m,
             sol.dangle_dforce[:, M:])
 
@@ -484,7 +488,7 @@ def _frame_sampling(s_all: bytes, length_m: float, M: int, n_nodes: int):
     return _beam._operators(n_nodes), np.ascontiguousarray(PQ[:M]), np.ascontiguousarray(P[M:]), q
 
 
-def _solve_frame(L, ei, k0, F, wload, s_all, M, state, n_nodes, sampling):
+def _solve_frame(L, ei, k0, F, wload, s_all, M, state, n_nodes, sampling, continuation=True):
     """:func:`_solve_beam` of one frame, unbatched: positions (M, 2), ∂p/∂F (M, 2, 2),
     success, state (n,), tip (2,), ∂φ_nodes/∂F (n, 2).
 
@@ -493,12 +497,17 @@ def _solve_frame(L, ei, k0, F, wload, s_all, M, state, n_nodes, sampling):
     """
     ops, PQ, Pn, q = sampling
     r = _beam._solve_one(L, ei, k0, 0.0, F, wload, ops, state, True, _beam.NEWTON_TOL, _beam.NEWTON_MAX_ITER, PQ, Pn,
-                         q)
+                         q, continuation)
+    if r is False:
+        # an unstable warm-started equilibrium, not continued: a failed trial
+        n = ops.n
+        return np.full((M, 2), np.nan), np.full((M, 2, 2), np.nan), False, np.full(n, np.nan), np.full(2, np.nan), \
+            np.full((n, 2), np.nan)
     if r is not None:
         return r[2], r[4], True, r[0], r[3], r[5]
     sol = _beam.solve(L, np.array([ei]), np.array([k0]), np.array([F], dtype=float), wload, np.zeros(1), s_all,
                       n_nodes=n_nodes,
-                      initial=None if state is None else state[None], sensitivities=True)
+                      initial=None if state is None else state[None], sensitivities=True, continuation=continuation)
     return (sol.positions_m[0, :M], sol.dpositions_dforce[0, :M], bool(sol.success[0]), sol.state[0],
             sol.tip_position_m[0], sol.dangle_dforce[0, M:])
 
@@ -573,13 +582,28 @@ def _convex_start(L, ei, wload, D, ffix, lower, u):
     return np.maximum(u * best[:, None], lower)
 
 
-def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes):
+def _unique(L, ei, F, wload):
+    """Frames (b,) whose load provably has a unique, stable equilibrium.
+
+    The beam solver's convexity measure (:func:`bendsense.beam._load_ratio`: the
+    largest |G| or Dunkerley's combination of tip and distributed load) below 1: where
+    the solver accepts any converged Newton start as the equilibrium. Gravity alone on
+    the upright, nearly straight actuator at low pressure is inside it.
+    """
+    scale = (L * L / ei)[:, None]
+    return _beam._load_ratio(F * scale, wload[None, :] * L * scale) < 1.0
+
+
+def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, xtol, max_iter, n_nodes,
+                  cold=None):
     """Batched projected Gauss–Newton with a trust region on u for frames (B,).
 
     ``s_all`` holds the M comparison points and then the beam's n nodes, ``w`` the
     quadrature weights (M,), ``p0`` (B, M, 2) the reference shape, ``D`` (B, 2, k),
     ``ffix`` (B, 2), ``lower`` (k,), ``u`` (B, k) the start, ``state`` (B, n) the
-    beam's Newton start.
+    beam's Newton start. ``cold``: ``(have (B,), solution)`` with the beam solution
+    from the unloaded arc (:func:`_solve_beam` with ``state=None``) at this start for the
+    frames ``have``, solved beforehand (:func:`_fast`).
     Returns a dict of arrays; ``status`` 1 converged, 2 beam fails, 3 no convergence,
     4 stopped at the stability boundary (``blocked`` (B, k): the last step that left
     the stable branch).
@@ -590,14 +614,11 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
     iters = np.ones(B, dtype=int)
     M = w.size
     F = ffix + _apply(D, u)
-    # Newton from the reference shape is safe only where the equilibrium is unique
-    # (convex energy: max |G| L²/EI < π²/4); elsewhere a compressive start could land
-    # on a buckled branch, and the solver's load continuation from the unloaded arc
-    # finds the branch connected to it
-    scale = L * L / ei
-    gmax = np.maximum(np.hypot(F[:, 0], F[:, 1]), np.hypot(F[:, 0] + wload[0] * L, F[:, 1] + wload[1] * L))
-    convex = gmax * scale < 0.9 * _STABLE_BOUND
-    if convex.all():
+    # Newton from the reference shape is safe only where the equilibrium is unique;
+    # elsewhere a compressive start could land on a buckled branch, and the solver's
+    # load continuation from the unloaded arc finds the branch connected to it
+    unique = _unique(L, ei, F, wload)
+    if unique.all():
         pos, dpos, ok, st, tip, dst = _solve_beam(L, ei, k0, F, wload, s_all, M, state, n_nodes)
     else:
         pos = np.empty((B, M, 2))
@@ -606,12 +627,23 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
         st = np.empty((B, state.shape[1]))
         tip = np.empty((B, 2))
         dst = np.empty((B, state.shape[1], 2))
-        for mask in (convex, ~convex):
-            i = np.flatnonzero(mask)
-            if i.size:
-                r = _solve_beam(L, ei[i], k0[i], F[i], wload, s_all, M, state[i] if mask is convex else None,
-                                n_nodes)
-                pos[i], dpos[i], ok[i], st[i], tip[i], dst[i] = r
+        i = np.flatnonzero(unique)
+        if i.size:
+            pos[i], dpos[i], ok[i], st[i], tip[i], dst[i] = _solve_beam(L, ei[i], k0[i], F[i], wload, s_all, M,
+                                                                        state[i], n_nodes)
+        i = np.flatnonzero(~unique)
+        if cold is not None:
+            have, sol = cold
+            j = i[have[i]]
+            pos[j], dpos[j], ok[j], st[j], tip[j], dst[j] = (a[j] for a in sol)
+            i = i[~have[i]]
+        if i.size:
+            pos[i], dpos[i], ok[i], st[i], tip[i], dst[i] = _solve_beam(L, ei[i], k0[i], F[i], wload, s_all, M, None,
+                                                                        n_nodes)
+    # the competing convex start below (a start beyond 0.9 of the bound on max |G|)
+    scale = L * L / ei
+    gmax = np.maximum(np.hypot(F[:, 0], F[:, 1]), np.hypot(F[:, 0] + wload[0] * L, F[:, 1] + wload[1] * L))
+    convex = gmax * scale < 0.9 * _STABLE_BOUND
     bad = np.flatnonzero(~ok)
     if bad.size:
         # the start may buckle the beam or lead Newton astray: start over from the
@@ -682,7 +714,8 @@ def _gauss_newton(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, *, x
         # first-order prediction of the new beam state: Newton then needs one iteration
         # for small steps
         guess = st[idx] + dst[idx, :, 0] * dF[:, :1] + dst[idx, :, 1] * dF[:, 1:]
-        pn, dpn, okn, stn, tipn, dstn = _solve_beam(L, ei[idx], k0[idx], Fn, wload, s_all, M, guess, n_nodes)
+        pn, dpn, okn, stn, tipn, dstn = _solve_beam(L, ei[idx], k0[idx], Fn, wload, s_all, M, guess, n_nodes,
+                                                    continuation=False)
         iters[idx] += 1
         # a shape far from its linear prediction has jumped to another branch of
         # equilibria (e.g. past buckling onto the buckled one): not a valid trial
@@ -783,14 +816,16 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
         fx, fy = apply(v)
         return ff0 + fx, ff1 + fy
 
-    def solve(v, start_):
-        return _solve_frame(L, ei, k0, force(v), wload, s_all, M, start_, n_nodes, sampling)
+    def solve(v, start_, continuation=True):
+        return _solve_frame(L, ei, k0, force(v), wload, s_all, M, start_, n_nodes, sampling, continuation)
 
     F = force(u)
-    gmax = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wload[0] * L, F[1] + wload[1] * L))
-    start = state if gmax * (L * L / ei) < 0.9 * _STABLE_BOUND else None
+    scale = L * L / ei
+    wx, wy = float(wload[0]) * L, float(wload[1]) * L
+    unique = _beam._load_ratio_one(F[0] * scale, F[1] * scale, wx * scale, wy * scale) < 1.0  # see _unique
+    convex = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wx, F[1] + wy)) * scale < 0.9 * _STABLE_BOUND
     iters = 1
-    pos, dpos, ok, st, tip, dst = solve(u, start)
+    pos, dpos, ok, st, tip, dst = solve(u, state if unique else None)
     if not ok:
         u = [max(0.0, b) for b in lo]
         pos, dpos, ok, st, tip, dst = solve(u, None)
@@ -813,7 +848,7 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
     if not ok:
         return out(2, u)
     cost, g, H, A = lin(pos, dpos)
-    if start is None:
+    if not convex:
         # the competing start inside the convex region (see _gauss_newton)
         uc = _convex_start_one(L, ei, wload, apply, (ff0, ff1), lo, u)
         if uc != u:
@@ -846,7 +881,7 @@ def _gauss_newton_one(L, ei, k0, wload, s_all, w, p0, D, ffix, lower, u, state, 
         predicted = -(2.0 * sum(a * b for a, b in zip(g, dstep)) + sum(a * b for a, b in zip(Hd, dstep)))
         dF = apply(dstep)
         guess = st + dst @ dF
-        pn, dpn, okn, stn, tipn, dstn = solve(un, guess)
+        pn, dpn, okn, stn, tipn, dstn = solve(un, guess, False)
         iters += 1
         linear = A @ dstep
         if okn:
@@ -883,19 +918,35 @@ def _fast(prob, u0, state0, *, chain, xtol, max_iter, n_nodes):
     """Run the Gauss–Newton core over the batch in warm-started rounds (module docstring)."""
     B = prob["B"]
 
-    def run(idx, u, st):
+    L, wload = prob["L"], prob["wload"]
+
+    def run(idx, u, st, cold=None):
         if B == 1:
-            r = _gauss_newton_one(prob["L"], prob["ei"][0], prob["k0"][0], prob["wload"], prob["s_all"], prob["w"],
+            r = _gauss_newton_one(L, prob["ei"][0], prob["k0"][0], wload, prob["s_all"], prob["w"],
                                   prob["p0"][0], prob["D"][0], prob["ffix"][0], prob["lower"], u[0], st[0],
                                   xtol=xtol, max_iter=max_iter, n_nodes=n_nodes)
             return {key: np.asarray(val)[None] for key, val in r.items()}
-        return _gauss_newton(prob["L"], prob["ei"][idx], prob["k0"][idx], prob["wload"], prob["s_all"], prob["w"],
+        return _gauss_newton(L, prob["ei"][idx], prob["k0"][idx], wload, prob["s_all"], prob["w"],
                              prob["p0"][idx], prob["D"][idx], prob["ffix"][idx], prob["lower"], u, st,
-                             xtol=xtol, max_iter=max_iter, n_nodes=n_nodes)
+                             xtol=xtol, max_iter=max_iter, n_nodes=n_nodes, cold=cold)
 
     rounds = min(B, _MAX_ROUNDS) if chain else 1
     if rounds <= 1:
         return run(slice(None), u0.copy(), state0)
+    # Frames whose start is beyond the convexity bound begin with load continuation
+    # from the unloaded arc. Most of them (low pressure, no preceding converged frame)
+    # start at their moment-balance guess u0, known now: their continuations run here
+    # in one batch instead of a few frames per round; a frame whose start the rounds
+    # correct is solved in its round.
+    F0 = prob["ffix"] + _apply(prob["D"], u0)
+    far = np.flatnonzero(~_unique(L, prob["ei"], F0, wload))
+    cold = None
+    if far.size > 1:
+        sol = _solve_beam(L, prob["ei"][far], prob["k0"][far], F0[far], wload, prob["s_all"], prob["M"], None,
+                          n_nodes)
+        where = np.full(B, -1)
+        where[far] = np.arange(far.size)
+        cold = (where, sol)
     out = None
     prev = None
     for r in range(rounds):
@@ -908,7 +959,13 @@ def _fast(prob, u0, state0, *, chain, xtol, max_iter, n_nodes):
             # slowly along a time series, so it corrects this frame's guess
             p_idx, p_u, p_ok = (a[: idx.size] for a in prev)
             u[p_ok] = np.maximum(u[p_ok] + p_u[p_ok] - u0[p_idx[p_ok]], prob["lower"])
-        res = run(idx, u, st)
+        known = None
+        if cold is not None:
+            j = cold[0][idx]
+            have = (j >= 0) & np.all(u == u0[idx], axis=1)
+            if have.any():
+                known = (have, tuple(a[np.maximum(j, 0)] for a in cold[1]))
+        res = run(idx, u, st, known)
         if out is None:
             out = {key: np.empty((B, *val.shape[1:]), dtype=val.dtype) for key, val in res.items()}
         for key, val in res.items():
