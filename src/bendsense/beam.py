@@ -92,6 +92,7 @@ _LOCATE = 1e-3  # load-factor step within which a loss of stability is accepted 
 # from the unloaded shape, in case it slid onto another branch
 _WARM_MOVE = 0.1
 _FIRST_STEP = 1.0  # first continuation step, in units of the convexity bound
+_STEP_ITER = 10  # Newton iterations of an intermediate continuation step
 _QUAD_SENS = 1e-8
 
 
@@ -338,7 +339,7 @@ def _linsolve(J, rhs):
         return out
 
 
-def _newton(phi, lam, k0, gi, ops, tol, max_iter, *, sens=False, tangent=False):
+def _newton(phi, lam, k0, gi, ops, tol, max_iter, *, sens=False, tangent=False, limit=None):
     """Batched Newton on the collocation equations (the unknowns are φ at nodes 1..n-1).
 
     Parameters
@@ -355,6 +356,9 @@ def _newton(phi, lam, k0, gi, ops, tol, max_iter, *, sens=False, tangent=False):
         Tolerance on the largest angle update [rad].
     sens, tangent : bool
         Also solve for -∂R/∂g (2 columns) and -∂R/∂λ (1 column) with the last Jacobian.
+    limit : ndarray of int, shape (b,), optional
+        Iterations per frame, at most ``max_iter``; a frame not converged within its
+        limit stops (``converged`` False).
 
     Returns
     -------
@@ -375,6 +379,7 @@ def _newton(phi, lam, k0, gi, ops, tol, max_iter, *, sens=False, tangent=False):
     idx = np.arange(b)
     p, g, kk, lm, tl = phi, gi, k0, lam, tol
     prev = np.full(b, np.inf)
+    cap = None if limit is None else np.minimum(limit, max_iter)
     for _ in range(max_iter):
         a = idx.size
         s, c = np.sin(p), np.cos(p)
@@ -410,12 +415,15 @@ def _newton(phi, lam, k0, gi, ops, tol, max_iter, *, sens=False, tangent=False):
             conv[idx] = True
             extra[idx] = sol[..., 1:]
             break
-        if done.any() or not good.all():
+        over = None if cap is None else iters[idx] >= cap[idx]
+        if done.any() or not good.all() or (over is not None and over.any()):
             phi[idx[done]] = p[done]
             conv[idx[done]] = True
             extra[idx[done]] = sol[done, :, 1:]
             keep = ~done & good
-            phi[idx[~good]] = p[~good]
+            if over is not None:
+                keep &= ~over
+            phi[idx[~done & ~keep]] = p[~done & ~keep]
             idx, p, g, kk, lm, tl, prev = idx[keep], p[keep], g[keep], kk[keep], lm[keep], tl[keep], prev[keep]
             if idx.size == 0:
                 break
@@ -467,7 +475,10 @@ def _continuation(phi, k0, gi, ratio, ops, tol, max_iter, sens):
         pred[:, 1:] += (lt - lam[act])[:, None] * tan[act]
         # only the last step needs the full tolerance
         t = np.where(lt >= 1.0, tol, 1e-6)
-        newp, conv, it, x = _newton(pred, lt, k0[act], gi[act], ops, t, max_iter, sens=sens, tangent=True)
+        # an intermediate step that Newton has not settled in _STEP_ITER iterations is
+        # rejected (steps accepted along a branch take 2-6), not pursued to max_iter
+        newp, conv, it, x = _newton(pred, lt, k0[act], gi[act], ops, t, max_iter, sens=sens, tangent=True,
+                                    limit=np.where(lt >= 1.0, max_iter, _STEP_ITER))
         iters[act] += it
         move = np.abs(newp - pred).max(axis=1)
         pstep = np.abs(pred - phi[act]).max(axis=1)
