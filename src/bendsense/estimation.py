@@ -124,7 +124,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dsyevd as _dsyevd
 
@@ -343,7 +342,8 @@ def _pcc_grid(lengths: tuple, length_m: float, n_points: int, beam_length_m: flo
     sc = chebyshev_nodes_m(beam_length_m, _N_NODES)
     s_fk = np.concatenate([s, np.minimum(sc, bounds[-1])])
     out = {"s": s, "w": w, "seg": seg, "sigma": s - bounds[seg], "s_fk": s_fk,
-           "tip_weights": _tip_angle_weights(lengths, beam_length_m), "beyond": np.maximum(sc - float(lengths.sum()), 0.0)}
+           "tip_weights": _tip_angle_weights(lengths, beam_length_m),
+           "beyond": np.maximum(sc - float(lengths.sum()), 0.0)}
     for a in out.values():
         a.setflags(write=False)
     out["grid"] = pcc._grid(lengths, s_fk)
@@ -489,10 +489,10 @@ def _frame_sampling(s_all: bytes, length_m: float, M: int, n_nodes: int):
 
 
 def _solve_frame(L, ei, k0, F, wload, s_all, M, state, n_nodes, sampling, continuation=True):
-    """:func:`_solve_beam` of one frame, unbatched: positions (M, 2), ∂p/∂F (M, 2, 2),
-    success, state (n,), tip (2,), ∂φ_nodes/∂F (n, 2).
+    """:func:`_solve_beam` of one frame, unbatched.
 
-    The solver's one-frame core on plain floats; the batched solver (load continuation)
+    Returns positions (M, 2), ∂p/∂F (M, 2, 2), success, state (n,), tip (2,) and
+    ∂φ_nodes/∂F (n, 2). The solver's one-frame core on plain floats; the batched solver (load continuation)
     where that needs it.
     """
     ops, PQ, Pn, q = sampling
