@@ -397,6 +397,21 @@ def _executor_name(executor) -> str:
     return f"{kind}({workers} workers)" if workers else kind
 
 
+def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
+    """A process pool whose workers use one BLAS thread each.
+
+    The estimator's matrices are tiny, so a threaded BLAS only adds overhead, and the
+    parallelism comes from the processes. The workers are spawned (not forked) so that
+    they import numpy afresh with these variables, even if this process has numpy
+    loaded already.
+    """
+    import multiprocessing
+
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+
+
 def process_sessions(
     paths,
     out_dir,
@@ -521,7 +536,7 @@ def process_sessions(
                 finish(i, process_session(sessions[i], out_dir / names[i], name=names[i], **options))
         else:
             if executor is None and todo:
-                own = executor = cf.ProcessPoolExecutor(max_workers=min(workers or os.cpu_count() or 1, len(todo)))
+                own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(todo)))
             description = _executor_name(executor) if executor is not None else ""
             futures = {
                 executor.submit(process_session, sessions[i], out_dir / names[i], name=names[i], **options): i
