@@ -474,3 +474,26 @@ def test_fast_matches_shooting_property(p, fx, fy, beta):
     ref = solve_beam(*args, method="shooting")
     assert fast.success and ref.success
     np.testing.assert_allclose(fast.tip_position_m, ref.tip_position_m, rtol=0, atol=1e-8 * L)
+
+
+def test_warm_start_without_continuation():
+    """``continuation=False`` reports an unstable warm landing instead of re-solving it."""
+    from bendsense.beam import DEFAULT_NODES
+
+    ei = ei_of(0.0)
+    fcr = critical_tip_load(ei, W_GRAV)
+    s = np.linspace(0.0, L, 11)
+    straight = np.zeros(DEFAULT_NODES)
+    args = (L, np.asarray(ei), np.asarray(0.0), np.array([0.0, 1.03 * fcr]), GRAVITY, np.asarray(0.0), s)
+    # beyond buckling, Newton from the straight state stays on the (unstable) straight branch
+    sol = solve(*args, initial=straight, continuation=False)
+    assert not sol.success and "unstable" in str(sol.message)
+    np.testing.assert_allclose(sol.positions_m[..., 0], 0.0, atol=1e-12)
+    # a frame well inside the convexity bound is the same with or without continuation
+    mild = (L, np.asarray(ei_of(60e3)), np.asarray(k0_of(60e3)), np.array([0.05, -0.05]), GRAVITY,
+            np.asarray(0.0), s)
+    start = solve_beam(L, ei_of(60e3), k0_of(60e3), (0.04, -0.04), GRAVITY, s_m=s)
+    a = solve(*mild, initial=start, continuation=False)
+    b = solve(*mild, initial=start, continuation=True)
+    assert a.success and b.success
+    np.testing.assert_array_equal(a.positions_m, b.positions_m)
