@@ -189,12 +189,16 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
 
     silent = quiet()
 
+    bar = None
+
     def echo(line):
+        nonlocal bar
+        if bar is not None:  # the recording is over: clear its bar before the next step
+            bar.close()
+            bar = None
         if not silent:
             click.echo(line, err=True)
             sys.stderr.flush()
-
-    bar = None
 
     def progress(done, total):
         nonlocal bar
