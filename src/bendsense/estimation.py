@@ -350,15 +350,6 @@ def _pcc_grid(lengths: tuple, length_m: float, n_points: int, beam_length_m: flo
     return out
 
 
-def _trapezoid(s):
-    w = np.zeros_like(s)
-    if s.size > 1:
-        ds = np.diff(s)
-        w[:-1] += 0.5 * ds
-        w[1:] += 0.5 * ds
-    return w
-
-
 def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0), follower_angle_rad=math.pi / 2):
     """The matrix D (..., 2, k) of the linear force parametrisation ``F = D u``.
 
@@ -1658,7 +1649,7 @@ def _reference(shape, config, s_opt, n_points, L_act):
         dp = np.gradient(p0, s, axis=-2, edge_order=2)
         phi = np.unwrap(np.arctan2(dp[..., 0], dp[..., 1]), axis=-1)
     # the tip angle of a shape given by points: at its last compared point
-    return {"p0": p0, "s": s, "w": _trapezoid(s), "Lc": float(s[-1]), "kappa": None,
+    return {"p0": p0, "s": s, "w": pcc._trapezoid_weights(s), "Lc": float(s[-1]), "kappa": None,
             "tip_shape": phi[..., -1], "phi": phi, "kappa_s": np.gradient(phi, s, axis=-1, edge_order=2)}
 
 
@@ -2020,14 +2011,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     cov_s = None
     uncertainty = "residual"
     if prob["kappa"] is not None:
-        if noise_opt is not None:
-            sigma_a = np.asarray(noise_opt, dtype=float)
-        elif calibration is not None and np.any(np.asarray(calibration.noise_std) > 0):
-            sigma_a = np.asarray(calibration.noise_std, dtype=float)
-        else:
-            sigma_a = np.asarray(est.signal_noise_std, dtype=float)
-        if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
-            raise ValueError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
+        sigma_a = _noise_std(noise_opt, calibration, est)
         if np.any(sigma_a > 0) or calibration is not None:
             cov_s = _shift_covariance(prob["kappa"], prob["lengths"], prob["d"],
                                       np.broadcast_to(sigma_a, (prob["lengths"].size,)), calibration)
