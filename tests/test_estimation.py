@@ -417,6 +417,10 @@ def test_single_frame_path_equals_the_batched_path(frames, constraint):
         np.testing.assert_allclose(one.force_n, batch.force_n[i], atol=1e-12)
         np.testing.assert_allclose(one.std_n, batch.std_n[i], rtol=1e-9)
         assert str(one.message) == str(batch.message[i]) and int(one.iterations) == int(batch.iterations[i])
+        # a batch of one frame keeps its batch axis and the same numbers
+        one_of_batch = estimate_force(kappa[i : i + 1], p[idx][i : i + 1], CFG, constraint=constraint, calibration=cal)
+        assert one_of_batch.force_n.shape == (1, 2)
+        np.testing.assert_allclose(one_of_batch.std_n[0], one.std_n, rtol=1e-12)
         # warm-started from the previous frame, as the live view does: the same optimum
         warm = estimate_force(kappa[i], p[idx][i], CFG, constraint=constraint, calibration=cal, initial=previous)
         np.testing.assert_allclose(warm.force_n, batch.force_n[i], atol=1e-8)

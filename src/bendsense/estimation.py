@@ -1481,7 +1481,7 @@ def _covariance_one(ref, res, D, dD, w2, L, d, cov_s):
     r = (res["positions"] - ref["p0"]).reshape(-1)
     ratio = math.nan
     if cov_s is not None:
-        kappa, lengths = ref["kappa"], ref["lengths"]
+        kappa, lengths = ref["kappa"].reshape(-1), ref["lengths"]  # one frame, any batch shape
         Gf = _shape_jacobian_one(kappa, lengths, d, ref["seg"], ref["sigma"], ref["p0"].reshape(-1, 2)).reshape(
             -1, lengths.size)
         hs = D.T @ (wA.T @ Gf)  # (k, N)
