@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from bendsense._io import atomic_write_text, load_yaml
 from bendsense.errors import ConfigError, SessionError
 
 __all__ = [
@@ -277,16 +278,7 @@ def read_manifest(path: str | os.PathLike) -> Manifest:
         Naming the file and the field, e.g. ``strips[2].radius_cm: unknown key``.
     """
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read manifest: {err.strerror or err}") from None
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{path}: not valid YAML: {err}") from None
-    try:
-        return _parse_manifest(data, path.parent, str(path))
-    except ConfigError as err:
-        raise ConfigError(f"{path}: {err}") from None
+    return load_yaml(path, "manifest", lambda data: _parse_manifest(data, path.parent, str(path)))
 
 
 def _recording(where: str, value: Any, base: Path) -> Path:
@@ -909,8 +901,6 @@ class Calibration:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the calibration YAML atomically (``format: bendsense-calibration``, ``version: 1``)."""
-        from bendsense._io import atomic_write_text
-
         header = "# bendsense sensor calibration: S_i = sum_k c_k (A_i - offset_i)^k (ascending powers, paper eq. 2)\n"
         atomic_write_text(path, header + yaml.safe_dump(self.to_dict(), sort_keys=False))
 
@@ -988,17 +978,7 @@ class Calibration:
             If the file cannot be read, is not a bendsense calibration, or a field is
             invalid; the message names the file and the field.
         """
-        path = Path(path)
-        try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except OSError as err:
-            raise ConfigError(f"{path}: cannot read calibration: {err.strerror or err}") from None
-        except yaml.YAMLError as err:
-            raise ConfigError(f"{path}: not valid YAML: {err}") from None
-        try:
-            return cls.from_dict(data)
-        except ConfigError as err:
-            raise ConfigError(f"{path}: {err}") from None
+        return load_yaml(path, "calibration", cls.from_dict)
 
     # -- reporting ----------------------------------------------------------------------
 

@@ -14,7 +14,6 @@ import math
 import os
 from dataclasses import dataclass, field
 from importlib import resources
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -406,23 +405,12 @@ def load_config(path: str | os.PathLike | None = None) -> Config:
     ConfigError
         If the file cannot be read or parsed, or a value is invalid.
     """
+    from bendsense._io import load_yaml, parse_yaml
+
     if path is None:
         text = resources.files("bendsense.data").joinpath(PAPER_CONFIG).read_text(encoding="utf-8")
-        source = "paper.yaml (built in)"
-    else:
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except OSError as err:
-            raise ConfigError(f"{path}: cannot read config: {err.strerror or err}") from None
-        source = str(path)
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{source}: not valid YAML: {err}") from None
-    try:
-        return Config.from_dict(data)
-    except ConfigError as err:
-        raise ConfigError(f"{source}: {err}") from None
+        return parse_yaml(text, "paper.yaml (built in)", Config.from_dict)
+    return load_yaml(path, "config", Config.from_dict)
 
 
 def save_config(config: Config, path: str | os.PathLike) -> None:
