@@ -1,0 +1,44 @@
+"""The estimator reproduces its frozen outputs (tests/data/regression, make_fixtures.py).
+
+Forces to 1e-9 N, σ to 1e-9 relative, the same success flags and messages: a change of
+the implementation (e.g. the compiled core) must not change an answer unnoticed.
+"""
+
+import importlib.util
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+HERE = pathlib.Path(__file__).parent / "data" / "regression"
+_spec = importlib.util.spec_from_file_location("make_fixtures", HERE / "make_fixtures.py")
+fixtures = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(fixtures)
+
+CASES = sorted(p.stem for p in HERE.glob("*.npz"))
+
+
+@pytest.fixture(scope="module")
+def calibration():
+    from bendsense.calibration import Calibration
+
+    return Calibration.load(HERE / "calibration.yaml")
+
+
+def test_the_fixtures_are_small_and_many():
+    assert len(CASES) >= 20
+    assert sum((HERE / f"{c}.npz").stat().st_size for c in CASES) < 500_000
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_estimator_reproduces_the_frozen_outputs(case, calibration):
+    data = np.load(HERE / f"{case}.npz")
+    inputs = {k[3:]: data[k] for k in data.files if k.startswith("in_")}
+    out = fixtures.run_case(inputs, str(data["mode"]), json.loads(str(data["options"])), calibration)
+    want = {k[4:]: data[k] for k in data.files if k.startswith("out_")}
+    np.testing.assert_array_equal(out["success"], want["success"])
+    np.testing.assert_array_equal(out["message"], want["message"])
+    np.testing.assert_allclose(out["force_n"], want["force_n"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out["std_n"], want["std_n"], rtol=1e-9, atol=0)
+    np.testing.assert_allclose(out["residual_m"], want["residual_m"], rtol=1e-7, atol=1e-13)
