@@ -307,15 +307,21 @@ def with_manifest(directory, data):
     [
         ([{"radius_m": 0.04, "recording": "nothere.csv"}], r"strips\[0\].recording: no such recording 'nothere.csv'"),
         ([{"radius_m": 0.04, "radius_mm": 40, "recording": "r040.0.csv"}], r"strips\[0\]: give exactly one of"),
-        ([{"radius_m": -0.04, "recording": "r040.0.csv"}], r"strips\[0\].radius_m: must be > 0, got -0.04"),
-        ([{"radius_mm": 0, "recording": "r040.0.csv"}], r"strips\[0\].radius_mm: must be > 0, got 0"),
+        ([{"radius_m": -0.04, "recording": "r040.0.csv"}], r"strips\[0\].radius_m: expected > 0, got -0.04"),
+        ([{"radius_mm": 0, "recording": "r040.0.csv"}], r"strips\[0\].radius_mm: expected > 0, got 0"),
         (
-            [{"radius_m": 0.04, "recording": "r040.0.csv"}] * 2 + [{"radius_cm": 4, "recording": "r040.0.csv"}],
+            [{"radius_m": 0.04, "recording": "r040.0.csv"}, {"radius_m": 0.05, "recording": "r050.0.csv"},
+             {"radius_cm": 4, "recording": "r060.0.csv"}],
             r"strips\[2\].radius_cm: unknown key; allowed: radius_m, radius_mm, recording",
         ),
         ([{"recording": "r040.0.csv"}], r"strips\[0\]: missing key radius_m or radius_mm"),
         ([{"radius_m": 0.04}], r"strips\[0\]: missing key recording"),
         ([], r"strips: expected a non-empty list"),
+        ([{"radius_m": 40, "recording": "r040.0.csv"}], r"strips\[0\].radius_m: .* looks like millimetres"),
+        ([{"radius_mm": 0.05, "recording": "r050.0.csv"}], r"strips\[0\].radius_mm: .* looks like metres"),
+        ([{"radius_m": 0.04, "recording": "r040.0.csv"}, {"radius_m": 0.05, "recording": "r040.0.csv"}],
+         r"strips\[1\].recording: r040.0.csv is listed twice \(strips\[0\] too\)"),
+        ([{"radius_m": 0.04, "recording": "flat.csv"}], r"strips\[0\].recording: flat.csv is the flat recording too"),
     ],
 )
 def test_manifest_errors(manifest_dir, strips, message):
@@ -445,5 +451,5 @@ def test_cli_user_errors_are_one_line(tmp_path):
     result = CliRunner().invoke(cli(), ["calibrate", str(bad), "-o", str(tmp_path / "c.yaml")])
     assert result.exit_code == 1
     errors = [line for line in result.output.splitlines() if line.startswith("Error")]
-    assert len(errors) == 1 and "strips[0].radius_m: must be > 0, got 0" in errors[0]
+    assert len(errors) == 1 and "strips[0].radius_m: expected > 0, got 0" in errors[0]
     assert not (tmp_path / "c.yaml").exists()

@@ -7,7 +7,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text", "load_yaml", "parse_yaml"]
+__all__ = ["atomic_path", "atomic_write_text", "load_yaml", "parse_yaml", "read_text", "safe_load"]
 
 
 @contextlib.contextmanager
@@ -43,33 +43,162 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
-def load_yaml(path: str | os.PathLike, what: str, parse):
-    """Read the YAML file ``path`` and return ``parse(data)``.
+MAX_TEXT_BYTES = 64 * 2**20
+"""Largest text file (session CSV, results) a reader accepts [bytes]."""
+MAX_YAML_BYTES = 2 * 2**20
+"""Largest YAML file (config, calibration, manifest, meta.yaml) a reader accepts [bytes]."""
+MAX_YAML_NODES = 50_000
+"""Most YAML nodes a document may expand to, aliases counted at every use."""
 
-    Every problem is a :class:`~bendsense.errors.ConfigError` whose message starts with
-    the path: the file cannot be read (``cannot read <what>``), is not YAML, or
-    ``parse`` rejects a field.
+
+def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """The UTF-8 text of ``path`` (a leading byte-order mark dropped).
+
+    Every problem is one line that starts with the path: the file cannot be read,
+    is larger than ``max_bytes``, holds NUL bytes (binary, not text), or is not
+    UTF-8 (with the byte offset and line of the first bad byte).
     """
     from bendsense.errors import ConfigError
 
+    error = error or ConfigError
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        with open(path, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except FileNotFoundError:
+        raise error(f"{path}: cannot read {what}: no such file") from None
     except OSError as err:
-        raise ConfigError(f"{path}: cannot read {what}: {err.strerror or err}") from None
-    return parse_yaml(text, str(path), parse)
+        raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
+    if len(data) > max_bytes:
+        raise error(f"{path}: too large for a {what} (over {max_bytes / 2**20:g} MiB)")
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]  # a UTF-8 byte-order mark (spreadsheet exports) is harmless
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise error(f"{path}: binary data, not a {what} (NUL byte at byte offset {nul})")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = data.count(b"\n", 0, err.start) + 1
+        raise error(f"{path}: not UTF-8 text (byte offset {err.start}, line {line}); "
+                    "save the file as UTF-8") from None
 
 
-def parse_yaml(text: str, source: str, parse):
-    """``parse`` the YAML ``text``; errors are ConfigErrors prefixed with ``source``."""
+def load_yaml(path: str | os.PathLike, what: str, parse, error=None):
+    """Read the YAML file ``path`` and return ``parse(data)``.
+
+    Every problem is a :class:`~bendsense.errors.ConfigError` (or ``error``) whose
+    message starts with the path: the file cannot be read (``cannot read <what>``),
+    is too large, binary or not UTF-8 (:func:`read_text`), is not YAML (with line and
+    column), expands beyond :data:`MAX_YAML_NODES` through aliases, or ``parse``
+    rejects a field.
+    """
+    text = read_text(path, what, error, max_bytes=MAX_YAML_BYTES)
+    return parse_yaml(text, str(path), parse, error)
+
+
+def parse_yaml(text: str, source: str, parse, error=None):
+    """``parse`` the YAML ``text``; errors are ConfigErrors (or ``error``) prefixed with ``source``."""
+    from bendsense.errors import BendsenseError, ConfigError
+
+    error = error or ConfigError
+    data = safe_load(text, source, error)
+    try:
+        return parse(data)
+    except BendsenseError as err:
+        if str(err).startswith(source):
+            raise
+        raise type(err)(f"{source}: {err}") from None
+
+
+def safe_load(text: str, source: str, error=None):
+    """``yaml.safe_load`` with bounded alias expansion and one-line errors naming ``source``.
+
+    Aliases are counted at every use (a "billion laughs" document of a few hundred
+    bytes expands to 10^9 nodes); a document that expands beyond
+    :data:`MAX_YAML_NODES` is refused before anything is built from it.
+    """
     import yaml
 
     from bendsense.errors import ConfigError
 
+    error = error or ConfigError
+    loader_class = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+    loader = loader_class(text)
     try:
-        data = yaml.safe_load(text)
+        # count the events first: composing nodes costs ~7 us each, so a large flat
+        # document is refused before it is composed (an error within a second)
+        for count, _ in enumerate(yaml.parse(text, Loader=loader_class)):
+            if count > MAX_YAML_NODES + 4:  # + stream and document start and end
+                raise error(f"{source}: YAML has more than {MAX_YAML_NODES:,} nodes; refused")
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_expansion(node, source, error)
+        return loader.construct_document(node)
+    except yaml.MarkedYAMLError as err:
+        mark = err.problem_mark or err.context_mark
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        problem = " ".join(str(err.problem or err.context or "syntax error").split())
+        raise error(f"{source}: not valid YAML: {problem}{where}") from None
     except yaml.YAMLError as err:
-        raise ConfigError(f"{source}: not valid YAML: {err}") from None
-    try:
-        return parse(data)
-    except ConfigError as err:
-        raise ConfigError(f"{source}: {err}") from None
+        raise error(f"{source}: not valid YAML: {' '.join(str(err).split())[:200]}") from None
+    except RecursionError:
+        raise error(f"{source}: not valid YAML: nested too deeply") from None
+    finally:
+        loader.dispose()
+
+
+def _check_expansion(root, source: str, error) -> None:
+    """Refuse a node graph that expands beyond MAX_YAML_NODES or refers to itself."""
+    import yaml
+
+    size: dict[int, int] = {}
+    # iterative post-order walk: each distinct node is sized once, its size counts at every use
+    stack = [(root, False)]
+    active: set[int] = set()
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            active.discard(key)
+            if isinstance(node, yaml.SequenceNode):
+                children = node.value
+            else:
+                children = [n for pair in node.value for n in pair]
+            total = 1 + sum(size[id(c)] for c in children)
+            size[key] = total
+            if total > MAX_YAML_NODES:
+                raise error(f"{source}: YAML expands to more than {MAX_YAML_NODES:,} nodes through aliases "
+                            "(an alias bomb?); refused")
+            continue
+        if key in size:
+            continue
+        if not isinstance(node, (yaml.SequenceNode, yaml.MappingNode)):
+            size[key] = 1
+            continue
+        if key in active:
+            raise error(f"{source}: YAML alias refers to itself (a recursive structure); refused")
+        active.add(key)
+        stack.append((node, True))
+        children = node.value if isinstance(node, yaml.SequenceNode) else [n for pair in node.value for n in pair]
+        for child in children:
+            if id(child) in active:
+                raise error(f"{source}: YAML alias refers to itself (a recursive structure); refused")
+            if id(child) not in size:
+                stack.append((child, False))
+
+
+def check_csv_header(header: list[str], line: int, error=None) -> None:
+    """Refuse a CSV header that is really another separator's (``;`` or tab) in one cell.
+
+    Spreadsheets in many locales export ``;``-separated files (with ``,`` as the
+    decimal mark); reading one as CSV gives a single column, so say what happened.
+    """
+    from bendsense.errors import ConfigError
+
+    error = error or ConfigError
+    if len(header) == 1:
+        for sep, name in ((";", "';'"), ("\t", "tabs")):
+            if sep in header[0]:
+                raise error(f"line {line}: columns are separated by {name}, expected ',' "
+                            "(save the file as comma-separated CSV with '.' as the decimal mark)")

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bendsense.config import StiffnessConfig
-from bendsense.errors import ConfigError, ConvergenceError
+from bendsense.errors import ArgumentError, ConfigError, ConvergenceError
 
 __all__ = [
     "pressure_moment",
@@ -57,7 +57,7 @@ def _finite(name: str, value) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if not np.all(np.isfinite(arr)):
         bad = arr[~np.isfinite(arr)].flat[0]
-        raise ValueError(f"{name}: must be finite, got {bad!r}")
+        raise ArgumentError(f"{name}: must be finite, got {bad!r}")
     return arr
 
 
@@ -163,7 +163,7 @@ def _unit_moment(theta0, h, c, length_m, slope=False):
 def _check_stretch(theta0, h_max, length_m):
     # λ must stay positive: compression beyond the bottom surface has no meaning
     if theta0.size and float(np.min(theta0)) * h_max / length_m <= -1.0:
-        raise ValueError(
+        raise ArgumentError(
             f"theta0_rad: must be > {-length_m / h_max:.6g} rad (fibres would invert), got {float(np.min(theta0))!r}"
         )
 
@@ -514,7 +514,7 @@ class FreeBendingModel:
     def _theta0_scalar(self, p: float) -> float:
         # one frame: plain floats are ~10x faster than numpy for a single value
         if not math.isfinite(p):
-            raise ValueError(f"pressure_pa: must be finite, got {p!r}")
+            raise ArgumentError(f"pressure_pa: must be finite, got {p!r}")
         if p <= 0.0:
             return 0.0
         tab = self._table

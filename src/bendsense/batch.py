@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense.errors import BendsenseError, SessionError
+from bendsense.errors import ArgumentError, BendsenseError, SessionError
 
 __all__ = ["SessionOutcome", "BatchReport", "discover_sessions", "process_session", "process_sessions"]
 
@@ -76,7 +76,7 @@ class SessionOutcome:
 
     def __post_init__(self):
         if self.status not in STATUSES:
-            raise ValueError(f"status: must be one of {', '.join(STATUSES)}, got {self.status!r}")
+            raise ArgumentError(f"status: must be one of {', '.join(STATUSES)}, got {self.status!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -330,7 +330,7 @@ def process_session(
             frames, extrapolated, not_converged = _run(
                 path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite
             )
-    except (BendsenseError, OSError, ValueError) as err:
+    except (BendsenseError, OSError) as err:
         return SessionOutcome(status="failed", reason=str(err), seconds=time.perf_counter() - start, **row)
     except Exception as err:  # noqa: BLE001 - isolate any failure to its session
         reason = f"{type(err).__name__}: {err}"

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dgesv as _dgesv
 
-from bendsense.errors import ConvergenceError, ConvergenceWarning
+from bendsense.errors import ArgumentError, ConvergenceError, ConvergenceWarning
 
 __all__ = [
     "BeamSolution",
@@ -254,18 +254,18 @@ def _as_float(name: str, value, *, positive: bool = False) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected numbers, got {value!r}") from None
+        raise ArgumentError(f"{name}: expected numbers, got {value!r}") from None
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: must be finite, got {value!r}")
+        raise ArgumentError(f"{name}: must be finite, got {value!r}")
     if positive and not np.all(arr > 0):
-        raise ValueError(f"{name}: must be > 0, got {value!r}")
+        raise ArgumentError(f"{name}: must be > 0, got {value!r}")
     return arr
 
 
 def _as_vector(name: str, value) -> np.ndarray:
     arr = _as_float(name, value)
     if arr.ndim == 0 or arr.shape[-1] != 2:
-        raise ValueError(f"{name}: expected shape (..., 2), got shape {arr.shape}")
+        raise ArgumentError(f"{name}: expected shape (..., 2), got shape {arr.shape}")
     return arr
 
 
@@ -281,10 +281,10 @@ def _grid(length_m: float, s_m) -> np.ndarray:
         return _default_grid(length_m)
     s = _as_float("s_m", s_m)
     if s.ndim != 1 or s.size == 0:
-        raise ValueError(f"s_m: expected a non-empty 1-D array of arc lengths [m], got shape {s.shape}")
+        raise ArgumentError(f"s_m: expected a non-empty 1-D array of arc lengths [m], got shape {s.shape}")
     tol = 1e-12 * length_m
     if s.min() < -tol or s.max() > length_m + tol:
-        raise ValueError(f"s_m: must lie in [0, length_m] = [0, {length_m!r}], got [{s.min()!r}, {s.max()!r}]")
+        raise ArgumentError(f"s_m: must lie in [0, length_m] = [0, {length_m!r}], got [{s.min()!r}, {s.max()!r}]")
     return np.clip(s, 0.0, length_m)
 
 
@@ -715,10 +715,10 @@ def solve(
     state = initial.state if isinstance(initial, BeamSolution) else initial
     if initial is not None:
         if state is None:
-            raise ValueError("initial: the solution carries no state (solve it with method='fast')")
+            raise ArgumentError("initial: the solution carries no state (solve it with method='fast')")
         state = np.asarray(state, dtype=float)
         if state.ndim == 0 or state.shape[-1] != n:
-            raise ValueError(f"initial: expected a state of shape (..., {n}) for n_nodes={n}, got {state.shape}")
+            raise ArgumentError(f"initial: expected a state of shape (..., {n}) for n_nodes={n}, got {state.shape}")
     if ei.ndim == k0.ndim == base.ndim == 0 and F.shape == w.shape == (2,) and (state is None or np.ndim(state) == 1):
         sol = _solve_scalar(L, float(ei), float(k0), float(base), F, w, s_m, ops, state, sensitivities, tol, max_iter)
         if sol is not None:
@@ -1061,10 +1061,10 @@ def solve_beam(
         With ``strict=True``, if any frame fails.
     """
     if isinstance(length_m, bool):
-        raise ValueError(f"length_m: expected a number, got {length_m!r}")
+        raise ArgumentError(f"length_m: expected a number, got {length_m!r}")
     L = _as_float("length_m", length_m, positive=True)
     if L.ndim != 0:
-        raise ValueError(f"length_m: expected a scalar, got shape {L.shape}")
+        raise ArgumentError(f"length_m: expected a scalar, got shape {L.shape}")
     L = float(L)
     ei = _as_float("ei_nm2", ei_nm2, positive=True)
     k0 = _as_float("tip_curvature_per_m", tip_curvature_per_m)
@@ -1075,13 +1075,13 @@ def solve_beam(
     try:
         np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1])
     except ValueError:
-        raise ValueError(
+        raise ArgumentError(
             "ei_nm2, tip_curvature_per_m, base_angle_rad, force_n[..., :], distributed_load_n_per_m[..., :]: "
             f"batch shapes {ei.shape}, {k0.shape}, {base.shape}, {F.shape[:-1]}, {w.shape[:-1]} do not broadcast"
         ) from None
     if method == "fast":
         if isinstance(n_nodes, bool) or not isinstance(n_nodes, (int, np.integer)) or n_nodes < 4:
-            raise ValueError(f"n_nodes: expected an integer >= 4, got {n_nodes!r}")
+            raise ArgumentError(f"n_nodes: expected an integer >= 4, got {n_nodes!r}")
         sol = solve(
             L,
             ei,
@@ -1098,10 +1098,10 @@ def solve_beam(
         )
     elif method in ("shooting", "paper"):
         if sensitivities:
-            raise ValueError("sensitivities: only available with method='fast'")
+            raise ArgumentError("sensitivities: only available with method='fast'")
         sol = _shooting(L, ei, k0, base, F, w, s, rtol=rtol, atol=atol)
     else:
-        raise ValueError(f"method: must be one of fast, shooting, paper, got {method!r}")
+        raise ArgumentError(f"method: must be one of fast, shooting, paper, got {method!r}")
     failed = ~np.asarray(sol.success)
     if failed.any():
         msgs = np.atleast_1d(np.asarray(sol.message))[np.atleast_1d(failed)]

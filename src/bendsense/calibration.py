@@ -47,7 +47,8 @@ import numpy as np
 import yaml
 
 from bendsense._io import atomic_write_text, load_yaml
-from bendsense.errors import ConfigError, SessionError
+from bendsense import validation as check
+from bendsense.errors import ArgumentError, ConfigError, SessionError
 
 __all__ = [
     "Calibration",
@@ -261,12 +262,16 @@ class Manifest:
 _STRIP_KEYS = ("radius_m", "radius_mm", "recording")
 
 
-def _positive(where: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{where}: expected a number, got {value!r}")
-    if value <= 0:
-        raise ConfigError(f"{where}: must be > 0, got {value!r}")
-    return float(value)
+def _radius_m(where: str, item: dict) -> float:
+    """The strip radius of a manifest entry [m]: ``radius_m``, or ``radius_mm`` converted."""
+    if "radius_m" in item:
+        # a strip radius over 1 m is millimetres written as metres
+        return check.length_m(f"{where}.radius_m", item["radius_m"], error=ConfigError)
+    radius_mm = check.number(f"{where}.radius_mm", item["radius_mm"], error=ConfigError, positive=True)
+    if radius_mm < 1:
+        raise ConfigError(f"{where}.radius_mm: expected a radius in millimetres >= 1, got {radius_mm:g}; "
+                          f"looks like metres (did you mean radius_m: {radius_mm:g}?)")
+    return check.length_m(f"{where}.radius_mm", radius_mm * 1e-3, error=ConfigError)
 
 
 def read_manifest(path: str | os.PathLike) -> Manifest:
@@ -283,45 +288,49 @@ def read_manifest(path: str | os.PathLike) -> Manifest:
 
 def _recording(where: str, value: Any, base: Path) -> Path:
     if not isinstance(value, str) or not value:
-        raise ConfigError(f"{where}: expected a file name, got {value!r}")
+        raise check.fail(where, "a file name", value, ConfigError)
     full = base / value
     if not full.is_file():
-        raise ConfigError(f"{where}: no such recording {value!r} ({full})")
+        raise ConfigError(f"{where}: no such recording {check.short(value)} ({check.short(str(full), 200)})")
     return full
 
 
 def _parse_manifest(data: Any, base: Path, source: str) -> Manifest:
     if not isinstance(data, dict):
-        raise ConfigError(f"manifest: expected a mapping with keys flat, strips, got {data!r}")
+        raise check.fail("manifest", "a mapping with keys flat, strips", data, ConfigError)
     for key in data:
         if key not in ("flat", "strips"):
-            raise ConfigError(f"{key}: unknown key; allowed: flat, strips")
+            raise ConfigError(f"{check.key(key)}: unknown key; allowed: flat, strips")
     for key in ("flat", "strips"):
         if key not in data:
             raise ConfigError(f"{key}: missing key")
     flat = _recording("flat", data["flat"], base)
     strips = data["strips"]
     if not isinstance(strips, list) or not strips:
-        raise ConfigError(f"strips: expected a non-empty list of {{radius_m: ..., recording: ...}}, got {strips!r}")
+        raise check.fail("strips", "a non-empty list of {radius_m: ..., recording: ...}", strips, ConfigError)
     out = []
     for i, item in enumerate(strips):
         where = f"strips[{i}]"
         if not isinstance(item, dict):
-            raise ConfigError(f"{where}: expected a mapping with radius_m or radius_mm and recording, got {item!r}")
+            raise check.fail(where, "a mapping with radius_m or radius_mm and recording", item, ConfigError)
         for key in item:
             if key not in _STRIP_KEYS:
-                raise ConfigError(f"{where}.{key}: unknown key; allowed: {', '.join(_STRIP_KEYS)}")
+                raise ConfigError(f"{where}.{check.key(key)}: unknown key; allowed: {', '.join(_STRIP_KEYS)}")
         if "radius_m" in item and "radius_mm" in item:
             raise ConfigError(f"{where}: give exactly one of radius_m, radius_mm, got both")
-        if "radius_m" in item:
-            radius = _positive(f"{where}.radius_m", item["radius_m"])
-        elif "radius_mm" in item:
-            radius = _positive(f"{where}.radius_mm", item["radius_mm"]) * 1e-3
-        else:
+        if "radius_m" not in item and "radius_mm" not in item:
             raise ConfigError(f"{where}: missing key radius_m or radius_mm")
+        radius = _radius_m(where, item)
         if "recording" not in item:
             raise ConfigError(f"{where}: missing key recording")
-        out.append((radius, _recording(f"{where}.recording", item["recording"], base)))
+        recording = _recording(f"{where}.recording", item["recording"], base)
+        # one recording counted twice would weigh its strip double; the flat as a strip is a mix-up
+        if recording.resolve() == flat.resolve():
+            raise ConfigError(f"{where}.recording: {recording.name} is the flat recording too")
+        for j, (_, seen) in enumerate(out):
+            if recording.resolve() == seen.resolve():
+                raise ConfigError(f"{where}.recording: {recording.name} is listed twice (strips[{j}] too)")
+        out.append((radius, recording))
     return Manifest(flat=flat, strips=tuple(out), source=source)
 
 
@@ -586,7 +595,7 @@ class Calibration:
         s = np.asarray(shifts_m, dtype=float)
         n = self.n_channels
         if s.ndim == 0 or s.shape[-1] != n:
-            raise ValueError(f"shifts_m: expected shape (..., {n}), got {s.shape}")
+            raise ArgumentError(f"shifts_m: expected shape (..., {n}), got {s.shape}")
         model = self._shift_error_table
         odd, parity = self._parity_correlation
         grid = model["grid_m"]
@@ -694,7 +703,7 @@ class Calibration:
 
     def _check_channels(self, a):
         if a.shape[-1:] != (self.n_channels,):
-            raise ValueError(f"signals: expected {self.n_channels} channels on the last axis, got shape {a.shape}")
+            raise ArgumentError(f"signals: expected {self.n_channels} channels on the last axis, got shape {a.shape}")
 
     # -- fitting ------------------------------------------------------------------------
 
@@ -804,7 +813,7 @@ class Calibration:
             raise ConfigError(f"degree: must be 1..5 or 'auto', got {degree!r}")
         sleeve = sensor.calibration_adds_sleeve if sleeve is None else bool(sleeve)
         flat = _signals("flat", flat_signals, n)
-        radii = [_positive(f"radii_m[{i}]", float(r)) for i, r in enumerate(radii_m)]
+        radii = [check.length_m(f"radii_m[{i}]", r, error=ConfigError) for i, r in enumerate(radii_m)]
         if len(radii) != len(strip_signals_list):
             raise ConfigError(f"radii_m: expected {len(strip_signals_list)} radii (one per strip), got {len(radii)}")
         if not radii:

@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 import yaml
 
+from bendsense import validation as check
 from bendsense.errors import ConfigError
 
 __all__ = [
@@ -35,6 +36,10 @@ __all__ = [
 ]
 
 PAPER_CONFIG = "paper.yaml"
+SMALL_M = 0.1
+"""Largest plausible cross-section dimension (strip gap, sleeve, wall, chamber radius) [m]."""
+PRESSURE_RANGE_PA = (0.0, 200e3)
+"""Default working range of the actuator's gauge pressure (the paper's prototype) [Pa]."""
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 METHODS = ("fast", "paper")
 ANGLE_SOURCES = ("model", "shape")
@@ -44,48 +49,40 @@ def _fail(path: str, message: str) -> ConfigError:
     return ConfigError(f"{path}: {message}")
 
 
+# the checks of bendsense.validation, raising ConfigError
 def _number(path: str, value: Any, *, positive: bool = False, nonnegative: bool = False) -> float:
-    # bool is an int subclass; a YAML "true" where a number belongs is a mistake
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _fail(path, f"expected a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise _fail(path, f"must be finite, got {value!r}")
-    if positive and not value > 0:
-        raise _fail(path, f"must be > 0, got {value!r}")
-    if nonnegative and not value >= 0:
-        raise _fail(path, f"must be >= 0, got {value!r}")
-    return value
+    return check.number(path, value, error=ConfigError, positive=positive, nonnegative=nonnegative)
+
+
+def _length(path: str, value: Any, *, max_m: float = check.MAX_LENGTH_M, positive: bool = True) -> float:
+    return check.length_m(path, value, error=ConfigError, max_m=max_m, positive=positive)
 
 
 def _integer(path: str, value: Any, *, minimum: int | None = None, maximum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise _fail(path, f"expected an integer, got {value!r}")
-    if minimum is not None and value < minimum:
-        raise _fail(path, f"must be >= {minimum}, got {value!r}")
-    if maximum is not None and value > maximum:
-        raise _fail(path, f"must be <= {maximum}, got {value!r}")
-    return value
+    return check.integer(path, value, error=ConfigError, minimum=minimum, maximum=maximum)
 
 
-def _numbers(path: str, value: Any, length: int | None = None, *, positive: bool = False) -> tuple:
+def _numbers(path: str, value: Any, length: int | None = None, *, positive: bool = False, check_one=None) -> tuple:
     if not isinstance(value, (list, tuple)):
-        raise _fail(path, f"expected a list of numbers, got {value!r}")
+        raise check.fail(path, "a list of numbers", value, ConfigError)
     if length is not None and len(value) != length:
-        raise _fail(path, f"expected {length} values, got {len(value)}")
-    return tuple(_number(f"{path}[{i}]", v, positive=positive) for i, v in enumerate(value))
+        raise check.fail(path, f"{length} values", len(value), ConfigError)
+    one = check_one or (lambda where, v: _number(where, v, positive=positive))
+    return tuple(one(f"{path}[{i}]", v) for i, v in enumerate(value))
 
 
 def _choice(path: str, value: Any, choices: tuple[str, ...]) -> str:
-    if value not in choices:
-        raise _fail(path, f"must be one of {', '.join(choices)}, got {value!r}")
-    return value
+    return check.choice(path, value, choices, error=ConfigError)
 
 
 def _boolean(path: str, value: Any) -> bool:
-    if not isinstance(value, bool):
-        raise _fail(path, f"expected true or false, got {value!r}")
-    return value
+    return check.boolean(path, value, error=ConfigError)
+
+
+def _names(names) -> str:
+    """At most 8 names, comma-separated (a message never lists a file's worth of keys)."""
+    names = [check.key(n) for n in names]
+    return ", ".join(names) if len(names) <= 8 else ", ".join(names[:8]) + f", ... ({len(names)} in all)"
 
 
 class _Section:
@@ -97,7 +94,7 @@ class _Section:
     def from_dict(cls, data: Any):
         path = cls.section
         if not isinstance(data, dict):
-            raise _fail(path, f"expected a mapping, got {data!r}")
+            raise check.fail(path, "a mapping", data, ConfigError)
         names = [f.name for f in dataclasses.fields(cls)]
         required = [
             f.name
@@ -106,7 +103,7 @@ class _Section:
         ]
         unknown = sorted(set(data) - set(names), key=str)
         if unknown:
-            raise _fail(path, f"unknown keys {', '.join(map(str, unknown))}; allowed: {', '.join(names)}")
+            raise _fail(path, f"unknown keys {_names(unknown)}; allowed: {', '.join(names)}")
         missing = [n for n in required if n not in data]
         if missing:
             raise _fail(path, f"missing keys {', '.join(missing)}")
@@ -155,13 +152,16 @@ class SensorConfig(_Section):
         p = self.section
         n = _integer(f"{p}.n_segments", self.n_segments, minimum=1, maximum=64)
         set_ = object.__setattr__
-        set_(self, "segment_lengths_m", _numbers(f"{p}.segment_lengths_m", self.segment_lengths_m, n, positive=True))
-        set_(self, "strip_gap_m", _number(f"{p}.strip_gap_m", self.strip_gap_m, positive=True))
-        set_(self, "sleeve_thickness_m", _number(f"{p}.sleeve_thickness_m", self.sleeve_thickness_m, nonnegative=True))
+        lengths = _numbers(f"{p}.segment_lengths_m", self.segment_lengths_m, n, check_one=_length)
+        set_(self, "segment_lengths_m", lengths)
+        # small dimensions: over 0.1 m is a unit mistake ("looks like millimetres")
+        set_(self, "strip_gap_m", _length(f"{p}.strip_gap_m", self.strip_gap_m, max_m=SMALL_M))
+        set_(self, "sleeve_thickness_m",
+             _length(f"{p}.sleeve_thickness_m", self.sleeve_thickness_m, max_m=SMALL_M, positive=False))
         _boolean(f"{p}.calibration_adds_sleeve", self.calibration_adds_sleeve)
-        set_(self, "coil_diameter_m", _number(f"{p}.coil_diameter_m", self.coil_diameter_m, positive=True))
+        set_(self, "coil_diameter_m", _length(f"{p}.coil_diameter_m", self.coil_diameter_m, max_m=SMALL_M))
         _integer(f"{p}.coil_turns", self.coil_turns, minimum=1)
-        set_(self, "coil_pitch_m", _number(f"{p}.coil_pitch_m", self.coil_pitch_m, positive=True))
+        set_(self, "coil_pitch_m", _length(f"{p}.coil_pitch_m", self.coil_pitch_m, max_m=SMALL_M))
 
     @property
     def lengths_m(self) -> np.ndarray:
@@ -190,6 +190,10 @@ class ActuatorConfig(_Section):
         Actuator length L [m].
     mass_kg : float
         Total mass of actuator and sensor [kg].
+    pressure_range_pa : tuple of float
+        ``[min, max]`` gauge pressure the actuator works at [Pa] (default 0..200 kPa,
+        the paper's prototype). Frames outside it get the status
+        ``pressure_out_of_range`` and no force.
     """
 
     section: ClassVar[str] = "actuator"
@@ -198,10 +202,24 @@ class ActuatorConfig(_Section):
     wall_thickness_m: float
     length_m: float
     mass_kg: float
+    pressure_range_pa: tuple = PRESSURE_RANGE_PA
 
     def __post_init__(self):
-        for f in dataclasses.fields(self):
-            object.__setattr__(self, f.name, _number(f"{self.section}.{f.name}", getattr(self, f.name), positive=True))
+        p, set_ = self.section, object.__setattr__
+        for name in ("chamber_radius_m", "bottom_thickness_m", "wall_thickness_m"):
+            set_(self, name, _length(f"{p}.{name}", getattr(self, name), max_m=SMALL_M))
+        set_(self, "length_m", _length(f"{p}.length_m", self.length_m))
+        set_(self, "mass_kg", _number(f"{p}.mass_kg", self.mass_kg, positive=True))
+        lo, hi = _numbers(f"{p}.pressure_range_pa", self.pressure_range_pa, 2)
+        where = f"{p}.pressure_range_pa"
+        if lo < -101_325:
+            raise check.fail(where, "a minimum >= -101325 Pa (vacuum)", lo, ConfigError)
+        if not hi > lo:
+            raise check.fail(where, "[min, max] with min < max", [lo, hi], ConfigError)
+        if hi < 1000:
+            raise ConfigError(f"{where}: expected pascals, got a maximum of {hi:g} Pa; looks like kilopascals "
+                              f"(did you mean [{lo * 1e3:g}, {hi * 1e3:g}]?)")
+        set_(self, "pressure_range_pa", (lo, hi))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -361,17 +379,17 @@ class Config:
             if not isinstance(getattr(self, key), cls):
                 raise _fail(key, f"expected a {cls.__name__}, got {type(getattr(self, key)).__name__}")
         if not isinstance(self.name, str):
-            raise _fail("name", f"expected a string, got {self.name!r}")
+            raise check.fail("name", "a string", self.name, ConfigError)
 
     @classmethod
     def from_dict(cls, data: Any) -> Config:
         """Build a config from the YAML layout; raises `ConfigError` naming the bad field."""
         if not isinstance(data, dict):
-            raise ConfigError(f"config: expected a mapping of sections, got {data!r}")
+            raise check.fail("config", "a mapping of sections", data, ConfigError)
         allowed = ["name", *_SECTIONS]
         unknown = sorted(set(data) - set(allowed), key=str)
         if unknown:
-            raise ConfigError(f"config: unknown keys {', '.join(map(str, unknown))}; allowed: {', '.join(allowed)}")
+            raise ConfigError(f"config: unknown keys {_names(unknown)}; allowed: {', '.join(allowed)}")
         missing = [k for k in ("sensor", "actuator", "material", "stiffness") if k not in data]
         if missing:
             raise ConfigError(f"config: missing keys {', '.join(missing)}")

@@ -7,6 +7,7 @@ bendsense. All of them pickle, so batch workers can send them back.
 
 __all__ = [
     "BendsenseError",
+    "ArgumentError",
     "ConfigError",
     "FrameError",
     "DeviceError",
@@ -19,6 +20,14 @@ __all__ = [
 
 class BendsenseError(Exception):
     """Base class of all bendsense errors."""
+
+
+class ArgumentError(BendsenseError, ValueError):
+    """An argument of a function or a command is invalid; the message names it.
+
+    Raised for user input (options, array shapes, out-of-range values) by the checks
+    of :mod:`bendsense.validation`; a plain ``ValueError`` from bendsense is a bug.
+    """
 
 
 class ConfigError(BendsenseError, ValueError):

@@ -128,7 +128,7 @@ from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dsyevd as _dsyevd
 
 from bendsense import beam as _beam
-from bendsense.errors import ConvergenceError
+from bendsense.errors import ArgumentError, ConvergenceError
 
 __all__ = [
     "ForceEstimate",
@@ -387,7 +387,7 @@ def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0
         a = phi - float(follower_angle_rad)
         c, s = np.cos(a), np.sin(a)
         return np.stack([s, c], axis=-1)[..., None], np.stack([c, -s], axis=-1)[..., None]
-    raise ValueError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+    raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
 
 
 _EYE2 = np.broadcast_to(np.eye(2), (2, 2))
@@ -412,7 +412,7 @@ def _constraint_basis_one(constraint, phi, direction, follower_angle_rad):
         a = phi - float(follower_angle_rad)
         c, s = math.cos(a), math.sin(a)
         return np.array([[s], [c]]), np.array([[c], [-s]])
-    raise ValueError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+    raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
 
 
 _MODELS: dict = {}
@@ -1613,13 +1613,13 @@ def _reference(shape, config, s_opt, n_points, L_act):
         kappa = np.asarray(shape, dtype=float)
         lengths = config.sensor.lengths_m
         if kappa.ndim == 0 or kappa.shape[-1] != lengths.size:
-            raise ValueError(
+            raise ArgumentError(
                 f"shape: expected a Shape, a BeamSolution or curvatures (..., {lengths.size}) [1/m], "
                 f"got shape {kappa.shape}"
             )
     if kappa is not None:
         if not np.isfinite(kappa).all():
-            raise ValueError("shape.curvature_per_m: must be finite")
+            raise ArgumentError("shape.curvature_per_m: must be finite")
         Lc = min(float(lengths.sum()), L_act)
         grid = _pcc_grid(tuple(lengths.tolist()), Lc, n_points, L_act)
         s, seg = grid["s"], grid["seg"]
@@ -1633,11 +1633,11 @@ def _reference(shape, config, s_opt, n_points, L_act):
                 "seg": seg, "sigma": grid["sigma"], "tip_shape": kappa @ grid["tip_weights"], "phi": phi[..., :M],
                 "phi_nodes": phi[..., M:], "kappa_s": kappa[..., seg], "beyond": grid["beyond"]}
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
-        raise ValueError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
+        raise ArgumentError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
     if pos.shape[-2:] != (s_in.size, 2):
-        raise ValueError(f"shape.positions_m: expected shape (..., {s_in.size}, 2) to match s_m, got {pos.shape}")
+        raise ArgumentError(f"shape.positions_m: expected shape (..., {s_in.size}, 2) to match s_m, got {pos.shape}")
     if not np.all(np.isfinite(pos)):
-        raise ValueError("shape.positions_m: must be finite")
+        raise ArgumentError("shape.positions_m: must be finite")
     Lc = min(float(s_in[-1]), L_act)
     keep = s_in <= Lc * (1.0 + 1e-12)
     s = s_in[keep]
@@ -1665,7 +1665,7 @@ def _noise_std(noise_opt, calibration, est):
     else:
         sigma_a = np.asarray(est.signal_noise_std, dtype=float)
     if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
-        raise ValueError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
+        raise ArgumentError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
     return sigma_a
 
 
@@ -1699,7 +1699,7 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
     k0 = theta / model.length_m  # as model.tip_curvature_per_m
     ei = float(config.stiffness.ei_nm2(pressure))
     if not ei > 0:
-        raise ValueError(f"pressure_pa: EI(P) must be > 0, got {ei!r} N·m² at {pressure!r} Pa")
+        raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {ei!r} N·m² at {pressure!r} Pa")
     phi_L = theta if source == "model" else float(np.reshape(ref["tip_shape"], -1)[0])
     D, dD = constraint_basis(constraint, phi_L, direction=direction, follower_angle_rad=follower)
     k = D.shape[-1]
@@ -1713,7 +1713,7 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
     # starting points
     state0 = _shape_state(ref, L, _N_NODES).reshape(_N_NODES)
     if initial is not None and not isinstance(initial, ForceEstimate):
-        raise ValueError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
+        raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     phi = ref["phi"].reshape(M)
     guess = _moment_guess_one(p0, s, w, L, ei, k0, wload, D, lower, float(phi[-1]), ref["kappa_s"].reshape(M))
     u0 = None
@@ -1734,7 +1734,7 @@ def _estimate_one(ref, pressure, batch, config, L, constraint, *, source, direct
     elif initial_force is not None:
         f0 = np.asarray(initial_force, dtype=float)
         if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
-            raise ValueError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
+            raise ArgumentError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
         u0 = np.broadcast_to(f0, (*batch, 2)).reshape(2) @ D
     else:
         u0 = guess
@@ -1881,17 +1881,17 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     if method is None:
         method = est.method
     if constraint not in CONSTRAINTS:
-        raise ValueError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+        raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
     if method not in METHODS:
-        raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+        raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
     options = dict(options)
     push_only = bool(_option(options, "push_only", est.push_only))
     source = _option(options, "tip_angle_source", est.tip_angle_source)
     if source not in ("model", "shape"):
-        raise ValueError(f"tip_angle_source: must be one of model, shape, got {source!r}")
+        raise ArgumentError(f"tip_angle_source: must be one of model, shape, got {source!r}")
     direction = np.asarray(_option(options, "direction", est.direction), dtype=float)
     if direction.shape != (2,) or not np.all(np.isfinite(direction)) or abs(np.hypot(*direction) - 1.0) > 1e-6:
-        raise ValueError(f"direction: expected a unit vector (2,), got {direction.tolist()}")
+        raise ArgumentError(f"direction: expected a unit vector (2,), got {direction.tolist()}")
     follower = float(_option(options, "follower_angle_rad", est.follower_angle_rad))
     initial_force = options.pop("initial_force_n", None)
     initial = options.pop("initial", None)
@@ -1904,27 +1904,27 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     xtol = float(_option(options, "xtol_n", XTOL_N))
     max_iter = int(_option(options, "max_iter", _MAX_ITER))
     if options:
-        raise ValueError(
+        raise ArgumentError(
             f"options: unknown {', '.join(sorted(options))}; allowed: push_only, tip_angle_source, direction, "
             "follower_angle_rad, initial_force_n, initial, warm_start, noise_std, calibration, strict, s_m, "
             "n_points, xtol_n, max_iter"
         )
     if n_points < 3:
-        raise ValueError(f"n_points: must be >= 3, got {n_points}")
+        raise ArgumentError(f"n_points: must be >= 3, got {n_points}")
     if push_only and constraint == "none":
-        raise ValueError("push_only: only for the 1-D constraints (vertical, horizontal, direction, normal, "
+        raise ArgumentError("push_only: only for the 1-D constraints (vertical, horizontal, direction, normal, "
                          "follower), got constraint='none'")
 
     L = float(config.actuator.length_m)
     ref = _reference(shape, config, s_opt, n_points, L)
     P = np.asarray(pressure_pa, dtype=float)
     if not np.isfinite(P).all():
-        raise ValueError(f"pressure_pa: must be finite, got {pressure_pa!r}")
+        raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
     p0 = ref["p0"]
     try:
         batch = () if p0.ndim == 2 and P.ndim == 0 else np.broadcast_shapes(p0.shape[:-2], P.shape)
     except ValueError:
-        raise ValueError(f"pressure_pa: shape {P.shape} does not broadcast against the shape's frames "
+        raise ArgumentError(f"pressure_pa: shape {P.shape} does not broadcast against the shape's frames "
                          f"{p0.shape[:-2]}") from None
     B = math.prod(batch)
     if B == 1 and method == "fast":
@@ -1939,7 +1939,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     k0 = np.asarray(model.tip_curvature_per_m(Pf), dtype=float).reshape(B)
     ei = np.asarray(config.stiffness.ei_nm2(Pf), dtype=float).reshape(B)
     if not np.all(ei > 0):
-        raise ValueError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
+        raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
                          f"at {float(Pf[np.argmin(ei)])!r} Pa")
     tip_shape = np.broadcast_to(ref["tip_shape"], batch).reshape(B)
     phi_L = np.asarray(model.tip_angle_rad(Pf), dtype=float).reshape(B) if source == "model" else tip_shape
@@ -1964,7 +1964,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     state0 = np.ascontiguousarray(np.broadcast_to(st, (*batch, _N_NODES)).reshape(B, _N_NODES))
     if initial is not None:
         if not isinstance(initial, ForceEstimate):
-            raise ValueError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
+            raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     phi = np.broadcast_to(ref["phi"], (*batch, M)).reshape(B, M)
     kap = np.broadcast_to(ref["kappa_s"], (*batch, M)).reshape(B, M)
     guess = _moment_guess(prob, phi, kap)
@@ -1985,7 +1985,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str = "none", me
     elif initial_force is not None:
         f0 = np.asarray(initial_force, dtype=float)
         if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
-            raise ValueError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
+            raise ArgumentError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
         f0 = np.broadcast_to(f0, (*batch, 2)).reshape(B, 2)
         u0 = np.einsum("bij,bi->bj", D, f0 - prob["ffix"])
         chain = False

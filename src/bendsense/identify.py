@@ -54,7 +54,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
-from bendsense.errors import ConfigError, SessionError
+from bendsense._io import check_csv_header, read_text
+from bendsense.errors import ArgumentError, ConfigError, SessionError
+from bendsense.validation import short
 
 __all__ = [
     "FREE_BENDING_PARAMS",
@@ -85,13 +87,7 @@ _TYPICAL = {
 
 def _read_table(path) -> tuple[list[str], np.ndarray]:
     """Header and float rows of a CSV; ``#`` lines before the header are skipped, empty cells are NaN."""
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            lines = fh.read().splitlines()
-    except FileNotFoundError:
-        raise SessionError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise SessionError(f"{path}: cannot read: {getattr(err, 'strerror', None) or err}") from None
+    lines = read_text(path, "CSV table", SessionError).splitlines()
     start = 0
     while start < len(lines) and (not lines[start].strip() or lines[start].lstrip().startswith("#")):
         start += 1
@@ -99,6 +95,10 @@ def _read_table(path) -> tuple[list[str], np.ndarray]:
         raise SessionError(f"{path}: no header row")
     reader = csv.reader(lines[start:])
     header = [h.strip() for h in next(reader)]
+    try:
+        check_csv_header(header, start + 1, SessionError)
+    except SessionError as err:
+        raise SessionError(f"{path}: {err}") from None
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise SessionError(f"{path}: duplicate columns {', '.join(dup)}")
@@ -114,7 +114,7 @@ def _read_table(path) -> tuple[list[str], np.ndarray]:
             try:
                 row.append(float(text) if text else math.nan)
             except ValueError:
-                raise SessionError(f"{path}: line {lineno}: column {name}: not a number: {text!r}") from None
+                raise SessionError(f"{path}: line {lineno}: column {name}: not a number: {short(text)}") from None
         rows.append(row)
     if not rows:
         raise SessionError(f"{path}: no data rows")
@@ -190,19 +190,19 @@ class StiffnessData:
         r = np.asarray(self.positions_m, dtype=float)
         n = p.shape[0] if p.ndim == 1 else -1
         if p.ndim != 1 or n == 0:
-            raise ValueError(f"pressure_pa: expected shape (n,) with n >= 1, got {p.shape}")
+            raise ArgumentError(f"pressure_pa: expected shape (n,) with n >= 1, got {p.shape}")
         if f.shape != (n, 2):
-            raise ValueError(f"force_n: expected shape ({n}, 2), got {f.shape}")
+            raise ArgumentError(f"force_n: expected shape ({n}, 2), got {f.shape}")
         if s.ndim != 2 or s.shape[0] != n:
-            raise ValueError(f"s_m: expected shape ({n}, M), got {s.shape}")
+            raise ArgumentError(f"s_m: expected shape ({n}, M), got {s.shape}")
         if r.shape != (*s.shape, 2):
-            raise ValueError(f"positions_m: expected shape {(*s.shape, 2)}, got {r.shape}")
+            raise ArgumentError(f"positions_m: expected shape {(*s.shape, 2)}, got {r.shape}")
         for name, arr in (("pressure_pa", p), ("force_n", f)):
             if not np.all(np.isfinite(arr)):
-                raise ValueError(f"{name}: must be finite")
+                raise ArgumentError(f"{name}: must be finite")
         seen = np.isfinite(s) & np.all(np.isfinite(r), axis=-1)
         if not np.all(seen.any(axis=1)):
-            raise ValueError(f"positions_m: row {int(np.argmin(seen.any(axis=1)))} has no measured point")
+            raise ArgumentError(f"positions_m: row {int(np.argmin(seen.any(axis=1)))} has no measured point")
         for name, arr in (("pressure_pa", p), ("force_n", f), ("s_m", s), ("positions_m", r)):
             object.__setattr__(self, name, arr)
 
@@ -259,7 +259,7 @@ def read_stiffness_csv(path: str | os.PathLike, length_m: float) -> StiffnessDat
         raise SessionError(f"{path}: no measured points: give tip_x_m, tip_y_m or s1_m, x1_m, y1_m, ...")
     try:
         return StiffnessData(pressure, np.stack(forces, axis=-1), np.stack(s_cols, axis=1), np.stack(pos_cols, axis=1))
-    except ValueError as err:
+    except ArgumentError as err:
         raise SessionError(f"{path}: {err}") from None
 
 
@@ -456,10 +456,10 @@ def fit_free_bending(
     p = np.asarray(pressure_pa, dtype=float)
     y = np.asarray(bending_angle_rad, dtype=float)
     if p.ndim != 1 or y.shape != p.shape:
-        raise ValueError(f"pressure_pa, bending_angle_rad: expected equal shapes (n,), got {p.shape} and {y.shape}")
+        raise ArgumentError(f"pressure_pa, bending_angle_rad: expected equal shapes (n,), got {p.shape} and {y.shape}")
     for name, arr in (("pressure_pa", p), ("bending_angle_rad", y)):
         if not np.all(np.isfinite(arr)):
-            raise ValueError(f"{name}: must be finite")
+            raise ArgumentError(f"{name}: must be finite")
     start = {n: getattr(config.material, n) for n in FREE_BENDING_PARAMS}
     if initial:
         for name, value in initial.items():
@@ -468,7 +468,7 @@ def fit_free_bending(
             start[name] = float(value)
     free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start)
     if len(p) <= len(free):
-        raise ValueError(
+        raise ArgumentError(
             f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
         )
     geom = _geometry(config.actuator)
@@ -734,7 +734,7 @@ def fit_stiffness(
     if not isinstance(data, StiffnessData):
         raise TypeError(f"data: expected StiffnessData, got {type(data).__name__}")
     if not (math.isfinite(pressure_tolerance_pa) and pressure_tolerance_pa >= 0):
-        raise ValueError(f"pressure_tolerance_pa: must be finite and >= 0, got {pressure_tolerance_pa!r}")
+        raise ArgumentError(f"pressure_tolerance_pa: must be finite and >= 0, got {pressure_tolerance_pa!r}")
     start = {n: getattr(config.stiffness, n) for n in STIFFNESS_PARAMS}
     free, fixed = _split_fix(fix, STIFFNESS_PARAMS, start)
     length = config.actuator.length_m
@@ -743,7 +743,7 @@ def fit_stiffness(
     level = _pressure_levels(data.pressure_pa, pressure_tolerance_pa)
     n_levels = int(level.max()) + 1
     if n_levels < len(free):
-        raise ValueError(
+        raise ArgumentError(
             f"stiffness data: {n_levels} pressure level(s) cannot determine {len(free)} parameters "
             f"({', '.join(free)}); measure more pressures or fix one"
         )
@@ -755,7 +755,7 @@ def fit_stiffness(
         lp[j] = float(np.mean(data.pressure_pa[rows]))
         n_obs = int(data.observed[rows].sum()) * 2
         if n_obs < 2:
-            raise ValueError(f"stiffness data: level {lp[j] / 1e3:.3g} kPa has one coordinate only; need two")
+            raise ArgumentError(f"stiffness data: level {lp[j] / 1e3:.3g} kPa has one coordinate only; need two")
         ei_start = float(config.stiffness.ei_nm2(lp[j]))
         if not ei_start > 0:
             ei_start = config.stiffness.ei0_nm2

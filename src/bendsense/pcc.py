@@ -32,6 +32,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from bendsense.errors import ArgumentError
+
 if TYPE_CHECKING:  # pragma: no cover
     from bendsense.calibration import Calibration
     from bendsense.config import SensorConfig
@@ -80,16 +82,16 @@ class _Grid:
     def __init__(self, lengths_m, s_m):
         lengths = np.asarray(lengths_m, dtype=float)
         if lengths.ndim != 1 or lengths.size == 0 or not np.all(lengths > 0):
-            raise ValueError(f"lengths_m: expected a 1-D array of positive segment lengths, got {lengths_m!r}")
+            raise ArgumentError(f"lengths_m: expected a 1-D array of positive segment lengths, got {lengths_m!r}")
         s = np.asarray(s_m, dtype=float)
         if s.ndim != 1:
-            raise ValueError(f"s_m: expected a 1-D array of arc lengths, got shape {s.shape}")
+            raise ArgumentError(f"s_m: expected a 1-D array of arc lengths, got shape {s.shape}")
         bounds = np.concatenate(([0.0], np.cumsum(lengths)))
         total = float(bounds[-1])
         tol = 1e-12 * total
         if s.size and (not np.all(np.isfinite(s)) or s.min() < -tol or s.max() > total + tol):
             bad = s[~((s >= -tol) & (s <= total + tol))][0]
-            raise ValueError(f"s_m: arc lengths must lie in [0, {total:g}] m (the sensor length), got {bad:g}")
+            raise ArgumentError(f"s_m: arc lengths must lie in [0, {total:g}] m (the sensor length), got {bad:g}")
         s = np.clip(s, 0.0, total)
         # s in (L_{i-1}, L_i] belongs to segment i (paper eq. 7); s = 0 to the first one
         seg = np.searchsorted(bounds[1:-1], s, side="left")
@@ -311,7 +313,7 @@ def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
     """Run :func:`_kernel` over any batch shape, block by block."""
     n = grid.lengths.size
     if kappa.shape[-1:] != (n,):
-        raise ValueError(f"curvature_per_m: expected {n} values on the last axis, got {kappa.shape}")
+        raise ArgumentError(f"curvature_per_m: expected {n} values on the last axis, got {kappa.shape}")
     if isinstance(base_angle_rad, (float, int)):  # the common case, without broadcasting overhead
         batch = kappa.shape[:-1]
         k2 = kappa.reshape(-1, n)
@@ -479,9 +481,9 @@ def fit_arc_curvature(positions_m, s_m, *, kappa_max_per_m=None, n_grid=129, max
     p0 = np.asarray(positions_m, dtype=float)
     s = np.asarray(s_m, dtype=float)
     if p0.shape[-2:] != (s.size, 2):
-        raise ValueError(f"positions_m: expected shape (..., {s.size}, 2) to match s_m, got {p0.shape}")
+        raise ArgumentError(f"positions_m: expected shape (..., {s.size}, 2) to match s_m, got {p0.shape}")
     if s.size < 2 or np.any(np.diff(s) <= 0):
-        raise ValueError("s_m: expected at least 2 strictly ascending arc lengths")
+        raise ArgumentError("s_m: expected at least 2 strictly ascending arc lengths")
     w = _trapezoid_weights(s)
     kmax = 4.0 * np.pi / s[-1] if kappa_max_per_m is None else float(kappa_max_per_m)
     batch = p0.shape[:-2]
@@ -723,7 +725,7 @@ def reconstruct(
         raise ConfigError(f"calibration.n_channels: expected {n} (sensor.n_segments), got {calibration.n_channels}")
     a = np.asarray(signals, dtype=float)
     if a.shape[-1:] != (n,):
-        raise ValueError(f"signals: expected {n} channels on the last axis, got shape {a.shape}")
+        raise ArgumentError(f"signals: expected {n} channels on the last axis, got shape {a.shape}")
     lengths = sensor.lengths_m
     grid = _grid(lengths, default_s_m(lengths) if s_m is None else s_m)
     if not isinstance(base_angle_rad, (float, int)):

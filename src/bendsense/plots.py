@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bendsense.errors import ArgumentError
+
 __all__ = [
     "plot_shapes",
     "plot_shape_comparison",
@@ -45,7 +47,7 @@ def _positions(obj) -> np.ndarray:
     """Positions as (frames, M, 2) [m] from a shape-like object or an array."""
     pos = np.asarray(getattr(obj, "positions_m", obj), dtype=float)
     if pos.ndim < 2 or pos.shape[-1] != 2:
-        raise ValueError(f"positions_m: expected shape (..., M, 2), got {pos.shape}")
+        raise ArgumentError(f"positions_m: expected shape (..., M, 2), got {pos.shape}")
     return pos.reshape(-1, pos.shape[-2], 2)
 
 
@@ -129,7 +131,7 @@ def plot_shapes(
             labels = [f"frame {i}" for i in idx]
     labels = list(labels)
     if len(labels) != len(idx):
-        raise ValueError(f"labels: expected {len(idx)} labels (one per drawn frame), got {len(labels)}")
+        raise ArgumentError(f"labels: expected {len(idx)} labels (one per drawn frame), got {len(labels)}")
     for i, color, label in zip(idx, _colors(len(idx), cmap), labels, strict=True):
         p = pos[i] * MM
         style = dict(color=color, linewidth=1.8, linestyle="--" if flags[i] else "-", label=label)
@@ -195,10 +197,10 @@ def plot_shape_comparison(
     k = len(est)
     for name, other in (("truth", tru), ("model", mod)):
         if other is not None and len(other) != k:
-            raise ValueError(f"{name}: expected {k} shapes (one per reconstructed shape), got {len(other)}")
+            raise ArgumentError(f"{name}: expected {k} shapes (one per reconstructed shape), got {len(other)}")
     labels = [f"case {i}" for i in range(k)] if labels is None else list(labels)
     if len(labels) != k:
-        raise ValueError(f"labels: expected {k} labels, got {len(labels)}")
+        raise ArgumentError(f"labels: expected {k} labels, got {len(labels)}")
     colors = _colors(k, cmap)
     for i in range(k):
         c = colors[i]
@@ -226,7 +228,7 @@ def _grid(pressure_pa, load_n, error):
         return p, f, e, np.full(e.shape, np.nan)
     e = e.ravel()
     if not p.size == f.size == e.size:
-        raise ValueError(
+        raise ArgumentError(
             "error: expected shape (len(pressure_pa), len(load_n)) for a grid, or three arrays of equal "
             f"length for samples; got pressure {p.shape}, load {f.shape}, error {np.shape(error)}"
         )
@@ -281,7 +283,7 @@ def plot_force_error_map(
     matplotlib.axes.Axes
     """
     if kind not in ("bars", "heatmap"):
-        raise ValueError(f"kind: must be 'bars' or 'heatmap', got {kind!r}")
+        raise ArgumentError(f"kind: must be 'bars' or 'heatmap', got {kind!r}")
     pu, fu, mean, std = _grid(pressure_pa, load_n, error)
     ax = _new_axes(ax, figsize=(7, 4))
     if kind == "bars":
@@ -447,7 +449,7 @@ def plot_calibration(calibration, data=None, ax=None):
     if data is not None:
         delta, shifts = (np.asarray(a, dtype=float) for a in data)
         if delta.shape != shifts.shape:
-            raise ValueError(f"data: delta_a {delta.shape} and shifts_m {shifts.shape} must have the same shape")
+            raise ArgumentError(f"data: delta_a {delta.shape} and shifts_m {shifts.shape} must have the same shape")
         fit_ax.plot(delta.ravel(), shifts.ravel() * MM, "kx", markersize=5, label="check data")
         fit_ax.legend()
         if ax is None:
@@ -501,7 +503,7 @@ def plot_results(results, path=None, *, max_shapes: int = 8, dpi: int = 150, tit
         fmt = path.suffix[1:].lower() or "png"
         supported = fig.canvas.get_supported_filetypes()
         if fmt not in supported:
-            raise ValueError(f"{path}: unknown figure format {fmt!r}; use one of {', '.join(sorted(supported))}")
+            raise ArgumentError(f"{path}: unknown figure format {fmt!r}; use one of {', '.join(sorted(supported))}")
     else:
         import matplotlib.pyplot as plt
 

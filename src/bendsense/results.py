@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bendsense._io import read_text
 from bendsense.errors import SessionError
 from bendsense.session import _column_array, _format
 
@@ -174,8 +175,9 @@ def read_results(out_dir) -> Results:
     path = out_dir / "results.csv"
     if not path.is_file():
         raise SessionError(f"{out_dir}: no results.csv (not a results directory)")
-    with open(path, encoding="utf-8", newline="") as fh:
-        rows = list(csv.reader(fh))
+    rows = list(csv.reader(read_text(path, "results CSV", SessionError).splitlines()))
+    if not rows:
+        raise SessionError(f"{path}: empty (no header row)")
     header, body = rows[0], rows[1:]
     cells = list(zip(*body)) if body else [[] for _ in header]
     columns = {h: _column_array(list(c)) for h, c in zip(header, cells)}

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense._io import atomic_path
+from bendsense._io import atomic_path, check_csv_header, read_text
 from bendsense.errors import SessionError
 
 __all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
@@ -126,12 +126,7 @@ def read_session_csv(path: str | os.PathLike) -> Session:
         If the file is malformed; the message gives the line number and the column.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        raise SessionError(f"{path}: not UTF-8 text (byte offset {err.start})") from None
-    except OSError as err:
-        raise SessionError(f"{path}: cannot read: {err.strerror or err}") from None
+    text = read_text(path, "session CSV", SessionError)
     try:
         return _parse_session_csv(text, str(path))
     except SessionError as err:
@@ -153,6 +148,7 @@ def _parse_session_csv(text: str, source: str) -> Session:
     rows = csv.reader(io.StringIO("\n".join(lines[start:])))
     header = [h.strip() for h in next(rows)]
     header_line = start + 1
+    check_csv_header(header, header_line, SessionError)
     seen = set()
     for h in header:
         if not h:

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from bendsense._io import atomic_write_text
+from bendsense._io import atomic_write_text, load_yaml
 from bendsense.errors import SessionError
 
 __all__ = [
@@ -310,12 +310,9 @@ class SessionWriter:
 def read_session_meta(path) -> dict:
     """``meta.yaml`` of a session directory, checked for format name and version."""
     path = Path(path)
-    try:
-        meta = yaml.safe_load((path / META).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SessionError(f"{path}: not a session directory (no {META})") from None
-    except yaml.YAMLError as err:
-        raise SessionError(f"{path / META}: invalid YAML ({err})") from None
+    if not (path / META).exists():
+        raise SessionError(f"{path}: not a session directory (no {META})")
+    meta = load_yaml(path / META, "session meta.yaml", lambda data: data, SessionError)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
         raise SessionError(f"{path / META}: format: expected {FORMAT!r}, got {got!r}")

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 
 import click
@@ -24,10 +25,14 @@ def _dask_executor(address: str):
         raise click.ClickException(
             "--scheduler needs Dask distributed, which is not installed: pip install bendsense[distributed]"
         ) from None
+    from bendsense.validation import short
+
+    if not re.fullmatch(r"(?:[a-z][a-z0-9+]*://)?[^\s/:]+:[0-9]{1,5}", address):
+        raise click.BadParameter(f"expected tcp://HOST:PORT, got {short(address)}", param_hint="--scheduler")
     try:
         client = Client(address, timeout="10s")
-    except (OSError, TimeoutError, ValueError) as err:
-        raise click.ClickException(f"--scheduler {address}: cannot connect: {err}") from None
+    except (OSError, TimeoutError) as err:
+        raise click.ClickException(f"--scheduler {short(address)}: cannot connect: {err}") from None
     return client, client.get_executor()
 
 

@@ -31,10 +31,9 @@ def _parse_fix(kind: str, items) -> dict:
             allowed = ", ".join([*_NAMES[kind], *_ALIASES[kind]])
             raise click.BadParameter(f"unknown parameter {item!r} for {kind}; allowed: {allowed}", param_hint="--fix")
         if value.strip():
-            try:
-                out[name] = float(value)
-            except ValueError:
-                raise click.BadParameter(f"{item!r}: value is not a number", param_hint="--fix") from None
+            from bendsense.validation import parse_number
+
+            out[name] = parse_number(f"--fix {name}", value.strip())
         else:
             out[name] = None
     return out
@@ -123,7 +122,7 @@ def identify(
                     method=method,
                 )
             new_config = fit.to_config(config)
-        except (BendsenseError, ValueError) as err:
+        except BendsenseError as err:
             raise click.ClickException(f"{data}: {err}" if str(data) not in str(err) else str(err)) from None
         click.echo(fit.report())
         try:

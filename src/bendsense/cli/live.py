@@ -98,33 +98,31 @@ def live(
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
     from bendsense.device.live import LiveProcessor, LiveView, run_live
 
-    try:
-        config = load_config(config_path)
-        calibration = Calibration.load(calibration_path)
-        processor = LiveProcessor(
-            calibration,
-            config,
-            constraint=constraint,
-            pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
-        )
-        if save_path is not None:
-            view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
-        else:
-            view, is_open = _window(processor, scale_mm_per_n * 1e-3)
-        with Driver(port, baudrate=baud or DEFAULT_BAUDRATE) as driver:
-            if not no_start:
-                driver.start()
-            try:
-                stats = run_live(driver, processor, view, duration_s=seconds, max_fps=max_fps, is_open=is_open)
-            except KeyboardInterrupt:
-                stats = None
-        if save_path is not None:
-            if stats is None or stats.frames == 0:
-                raise click.ClickException(f"{port}: no frames received; nothing to save")
-            save_path.parent.mkdir(parents=True, exist_ok=True)
-            view.save(save_path)
-    except ValueError as err:  # a bad option value reaching the estimator
-        raise click.ClickException(str(err)) from None
+    # the library's errors (bad options included) become one line in PipelineGroup
+    config = load_config(config_path)
+    calibration = Calibration.load(calibration_path)
+    processor = LiveProcessor(
+        calibration,
+        config,
+        constraint=constraint,
+        pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
+    )
+    if save_path is not None:
+        view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
+    else:
+        view, is_open = _window(processor, scale_mm_per_n * 1e-3)
+    with Driver(port, baudrate=baud or DEFAULT_BAUDRATE) as driver:
+        if not no_start:
+            driver.start()
+        try:
+            stats = run_live(driver, processor, view, duration_s=seconds, max_fps=max_fps, is_open=is_open)
+        except KeyboardInterrupt:
+            stats = None
+    if save_path is not None:
+        if stats is None or stats.frames == 0:
+            raise click.ClickException(f"{port}: no frames received; nothing to save")
+        save_path.parent.mkdir(parents=True, exist_ok=True)
+        view.save(save_path)
     if stats is not None:
         click.echo(stats.summary())
     if save_path is not None:

@@ -133,21 +133,18 @@ def estimate(constraint, method, push_only, tip_angle_source):
         if not session.has_pressure:
             raise click.UsageError("the session has frames without pressure: give 'load ... --pressure-kpa P'")
         config = state["config"]
-        try:
-            est = estimate_force(
-                shape,
-                session.pressure_pa,
-                config,
-                constraint=constraint or config.estimation.constraint,
-                method=method or config.estimation.method,
-                push_only=push_only,
-                tip_angle_source=tip_angle_source,
-                calibration=state.get("calibration"),
-            )
-        except BendsenseError:
-            raise
-        except ValueError as err:  # a bad option combination, e.g. --push-only with no constraint
-            raise click.UsageError(f"estimate: {err}") from None
+        # a bad option combination (e.g. --push-only with no constraint) is an
+        # ArgumentError, one line through PipelineGroup
+        est = estimate_force(
+            shape,
+            session.pressure_pa,
+            config,
+            constraint=constraint or config.estimation.constraint,
+            method=method or config.estimation.method,
+            push_only=push_only,
+            tip_angle_source=tip_angle_source,
+            calibration=state.get("calibration"),
+        )
         failed = int(np.count_nonzero(~np.asarray(est.success)))
         if failed:
             log.warning("%d of %d frames did not converge (status 'not converged')", failed, len(session))
