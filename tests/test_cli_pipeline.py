@@ -70,11 +70,12 @@ def test_save_refuses_to_overwrite(workdir):
     runner.invoke(main, ["calibrate", str(workdir / "manifest.yaml"), "-o", str(workdir / "cal2.yaml")])
     out = workdir / "exists"
     out.mkdir()
+    (out / "notes.txt").write_text("mine")
     res = runner.invoke(main, ["load", str(workdir / "validation.csv"), "--calibration", str(workdir / "cal2.yaml"),
                                "reconstruct", "save", str(out)])
     assert res.exit_code == 1
-    assert "exists (use --overwrite" in res.output
-    assert list(out.iterdir()) == []
+    assert "exists and is not empty (use --overwrite" in res.output
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]
 
 
 def test_reconstruct_without_calibration_is_a_usage_error(workdir):

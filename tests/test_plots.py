@@ -268,7 +268,7 @@ def test_cli_plot_standalone(results_dir, tmp_path):
     assert result.exit_code == 0, result.output
     assert f"wrote {fig}" in result.output and fig.read_bytes().startswith(PNG)
     result = CliRunner().invoke(main, ["plot", str(results_dir), "-o", str(fig)])
-    assert result.exit_code == 2 and "exists (use --overwrite" in result.output
+    assert result.exit_code == 1 and "exists (use --overwrite" in result.output
     result = CliRunner().invoke(main, ["plot", "-o", str(fig), str(results_dir), "--overwrite", "--dpi", "50"])
     assert result.exit_code == 0, result.output
     # a figure file without a chain, a directory without -o, a non-directory with -o
@@ -279,7 +279,7 @@ def test_cli_plot_standalone(results_dir, tmp_path):
     result = CliRunner().invoke(main, ["plot", str(tmp_path / "none"), "-o", str(tmp_path / "x.png")])
     assert result.exit_code == 2 and "not a results directory" in result.output
     result = CliRunner().invoke(main, ["plot", str(results_dir), "-o", str(tmp_path / "fig.doc")])
-    assert result.exit_code == 2 and "unknown figure format '.doc'; use one of" in result.output
+    assert result.exit_code == 1 and "unknown figure format '.doc'; use one of" in result.output
 
 
 def test_cli_plot_in_a_chain_after_save(tmp_path):

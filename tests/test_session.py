@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from bendsense.errors import SessionError
+from bendsense.errors import OutputExistsError, SessionError
 from bendsense.session import Session, read_session, read_session_csv, write_session_csv
 
 INVALID = sorted((Path(__file__).parent / "data" / "invalid" / "sessions").glob("*.csv"))
@@ -94,7 +94,7 @@ def test_refuses_to_overwrite_when_asked(tmp_path):
     s = Session([0.0], [[1.0]], [0.0])
     target = tmp_path / "out.csv"
     write_session_csv(s, target)
-    with pytest.raises(SessionError, match="exists"):
+    with pytest.raises(OutputExistsError, match="exists"):
         write_session_csv(s, target, overwrite=False)
 
 

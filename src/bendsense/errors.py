@@ -13,6 +13,8 @@ __all__ = [
     "DeviceError",
     "ConvergenceError",
     "SessionError",
+    "OutputError",
+    "OutputExistsError",
     "BendsenseWarning",
     "ConvergenceWarning",
 ]
@@ -44,6 +46,14 @@ class FrameError(BendsenseError, ValueError):
 
 class DeviceError(BendsenseError, OSError):
     """The sensor device cannot be opened, was disconnected or misbehaves."""
+
+
+class OutputError(BendsenseError, OSError):
+    """An output cannot be written without destroying something; the message names the path."""
+
+
+class OutputExistsError(OutputError, FileExistsError):
+    """An output exists and ``overwrite`` was not given."""
 
 
 class ConvergenceError(BendsenseError, RuntimeError):

@@ -469,7 +469,9 @@ def results_from_state(session, shape, estimate=None):
     return Results.from_state(session, shape, estimate)
 
 
-def plot_results(results, path=None, *, max_shapes: int = 8, dpi: int = 150, title: str | None = None):
+def plot_results(
+    results, path=None, *, max_shapes: int = 8, dpi: int = 150, title: str | None = None, overwrite: bool = True
+):
     """Summary figure of processed frames: shapes and tip path, tip forces, curvatures over time.
 
     Parameters
@@ -486,6 +488,8 @@ def plot_results(results, path=None, *, max_shapes: int = 8, dpi: int = 150, tit
         Resolution of raster formats.
     title : str, optional
         Figure title; default the results directory's name and the frame count.
+    overwrite : bool
+        Replace an existing file at ``path`` (False: :class:`~bendsense.errors.OutputExistsError`).
 
     Returns
     -------
@@ -527,9 +531,8 @@ def plot_results(results, path=None, *, max_shapes: int = 8, dpi: int = 150, tit
         title = f"{name}: {frames} frames"
     fig.suptitle(title)
     if path is not None:
-        from bendsense._io import atomic_path
+        from bendsense import output
 
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
+        with output.write_file(path, overwrite=overwrite, inputs=[source], writer="bendsense plot") as tmp:
             fig.savefig(tmp, format=fmt, dpi=dpi)
     return fig

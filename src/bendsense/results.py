@@ -11,10 +11,7 @@ ground-truth ``fx_n``, is written as ``input_fx_n``). ``shape.npz`` holds ``s_m`
 from __future__ import annotations
 
 import csv
-import os
 import re
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -101,32 +98,41 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     return status
 
 
-def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = False) -> Path:
+def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = False, inputs=()) -> Path:
     """Write ``results.csv`` and ``shape.npz`` of a processed session into ``out_dir``.
 
-    The directory is written complete or not at all: files go to a temporary
-    directory beside it that is renamed into place at the end.
+    The directory is written complete or not at all (:func:`bendsense.output.write_dir`):
+    files go to a hidden directory beside it that is swapped in at the end, with a
+    manifest of what bendsense wrote.
 
     Parameters
     ----------
     out_dir : path
-        Output directory; must not exist unless ``overwrite``.
+        Output directory; must not exist (or be empty) unless ``overwrite``, which
+        replaces only a previous bendsense output there.
     session : Session
         The input session (time, pressure and extra columns).
     shape : Shape
         Reconstructed shapes, batch axis over the session's frames.
     estimate : ForceEstimate, optional
         Force estimates for the same frames.
+    inputs : iterable of paths
+        Inputs never to be written over (the session's source is always one).
+
+    Raises
+    ------
+    OutputExistsError, OutputError
+        See :func:`bendsense.output.check`.
     """
+    from bendsense import output
+
     out_dir = Path(out_dir)
-    if out_dir.exists() and not overwrite:
-        raise SessionError(f"{out_dir}: exists (use --overwrite to replace it)")
+    source = getattr(session, "source", None)
+    inputs = [*inputs, *([source] if source and Path(source).exists() else [])]
+    output.check([output.directory(out_dir, overwrite=overwrite)], inputs)
     results = Results.from_state(session, shape, estimate)
     columns = results.columns
-
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
         with open(tmp / "results.csv", "w", encoding="utf-8", newline="") as fh:
             writer = csv.writer(fh, lineterminator="\n")
             writer.writerow(columns)
@@ -140,12 +146,6 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
         # stored, not deflated: positions of noisy shapes deflate by ~10 % at ~35 ms per
         # 1,000 frames, the largest cost of writing; np.load reads either
         np.savez(tmp / "shape.npz", s_m=results.s_m, positions_m=results.positions_m)
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        os.replace(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out_dir
 
 

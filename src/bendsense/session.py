@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense._io import atomic_path, check_csv_header, read_text
+from bendsense._io import check_csv_header, read_text
 from bendsense.errors import SessionError
 
 __all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
@@ -246,9 +246,11 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
     numbers bit for bit. Pressure is written as ``pressure_pa`` when any frame has
     a reading.
     """
+    from bendsense import output
+
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise SessionError(f"{path}: exists (use overwrite=True)")
+    source = session.source if session.source and Path(session.source).exists() else None
+    output.check([output.file(path, overwrite=overwrite)], [source])
     header = ["t_s"]
     cols = [session.t_s]
     if np.any(np.isfinite(session.pressure_pa)):
@@ -262,7 +264,10 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
     for name, values in session.extra.items():
         header.append(name)
         cols.append(values)
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as fh:
+    with (
+        output.write_file(path, overwrite=overwrite, inputs=[source], writer="bendsense export") as tmp,
+        open(tmp, "w", encoding="utf-8", newline="") as fh,
+    ):
         for key, value in session.meta.items():
             if isinstance(value, (str, int, float)):
                 fh.write(f"# {key}: {value}\n")

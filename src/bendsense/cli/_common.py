@@ -17,6 +17,7 @@ __all__ = [
     "quiet",
     "refuse_existing",
     "save_figure",
+    "step_io",
 ]
 
 # kept in sync with bendsense.config (imported lazily for a fast --help; a test compares them)
@@ -79,6 +80,17 @@ def refuse_existing(path: Path, overwrite: bool) -> None:
         raise click.ClickException(f"{path}: exists (use --overwrite to replace it)")
 
 
+def step_io(step, outputs=(), inputs=()):
+    """Attach a chain step's outputs (``bendsense.output`` targets) and input paths to it.
+
+    The group checks and locks every output of the whole command line before the
+    first step runs (:func:`bendsense.cli.pipeline.run_steps`).
+    """
+    step.outputs = list(outputs)
+    step.inputs = [p for p in inputs if p is not None]
+    return step
+
+
 def quiet() -> bool:
     """Whether ``bendsense -q`` was given (False outside the ``bendsense`` group)."""
     ctx = click.get_current_context(silent=True)
@@ -86,10 +98,15 @@ def quiet() -> bool:
     return bool(isinstance(obj, dict) and obj.get("quiet"))
 
 
-def save_figure(figure, path: Path) -> None:
-    """Write a matplotlib figure to ``path`` at 120 dpi, close it and say so."""
+def save_figure(figure, path: Path, overwrite: bool = False) -> None:
+    """Write a matplotlib figure to ``path`` at 120 dpi (atomically), close it and say so."""
     import matplotlib.pyplot as plt
 
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
+    from bendsense import output
+
+    try:
+        with output.write_file(path, overwrite=overwrite, suffixes=output.FIGURE) as tmp:
+            figure.savefig(tmp, dpi=120, format=path.suffix[1:].lower())
+    finally:
+        plt.close(figure)
     click.echo(f"wrote {path}")

@@ -12,7 +12,16 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import CONSTRAINTS, METHODS, InterspersedCommand, config_option, overwrite_option, quiet
+from bendsense import output
+from bendsense.cli._common import (
+    CONSTRAINTS,
+    METHODS,
+    InterspersedCommand,
+    config_option,
+    overwrite_option,
+    quiet,
+    step_io,
+)
 
 log = logging.getLogger("bendsense")
 
@@ -155,19 +164,17 @@ def plot(target, figure_path, shapes, dpi, overwrite):
                 "'plot FIG' needs 'reconstruct' earlier in the chain; "
                 "to plot a results directory use 'plot RESULTS_DIR -o FIG.png'"
             )
-        if out.exists() and not overwrite:
-            raise click.UsageError(f"{out}: exists (use --overwrite to replace it)")
-        from matplotlib.figure import Figure
-
-        formats = Figure().canvas.get_supported_filetypes()
-        if out.suffix[1:].lower() not in formats:
-            raise click.BadParameter(f"{out}: unknown figure format {out.suffix!r}; use one of "
-                                     f"{', '.join('.' + f for f in sorted(formats))}", param_hint="FIG")
-        plot_results(source, out, max_shapes=shapes, dpi=dpi)
+        plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite)
         click.echo(f"wrote {out}")
         return state
 
-    return step
+    # the figure is checked (suffix, existing file, --overwrite) before any step runs
+    if figure_path is not None:
+        return step_io(step, outputs=[output.file(figure_path, overwrite=overwrite, suffixes=output.FIGURE)],
+                       inputs=[target])
+    if target.is_dir():  # not a figure: the step says how to plot a results directory
+        return step
+    return step_io(step, outputs=[output.file(target, overwrite=overwrite, suffixes=output.FIGURE)])
 
 
 COMMANDS = [process, plot]

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import CONSTRAINTS, METHODS, InterspersedCommand, config_option, overwrite_option
+from bendsense import output
+from bendsense.cli._common import CONSTRAINTS, METHODS, InterspersedCommand, config_option, overwrite_option, step_io
 from bendsense.errors import BendsenseError
 
 log = logging.getLogger("bendsense")
@@ -47,10 +48,18 @@ def _require(state: dict, key: str, step: str, hint: str) -> object:
 
 
 def run_steps(steps) -> dict:
-    """Run the chained steps (functions of the state dict) in order."""
+    """Run the chained steps (functions of the state dict) in order.
+
+    Every output of every step is checked and locked first (:func:`bendsense.output.reserve`),
+    against the inputs of all steps, so that a bad output path stops the command before
+    any work and nothing is half-done.
+    """
+    steps = [step for step in steps if step is not None]
+    targets = [t for step in steps for t in getattr(step, "outputs", ())]
+    inputs = [p for step in steps for p in getattr(step, "inputs", ())]
     state: dict = {}
-    for step in steps:
-        if step is not None:
+    with output.reserve(targets, inputs):
+        for step in steps:
             state = step(state) or state
     return state
 
@@ -85,7 +94,7 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
         log.info("loaded %s: %d frames, %d channels", session_path, len(session), session.n_channels)
         return state
 
-    return step
+    return step_io(step, inputs=[session_path, config_path, calibration_path])
 
 
 @click.command("reconstruct", cls=InterspersedCommand)
@@ -169,7 +178,7 @@ def save(out_dir, overwrite):
         click.echo(f"wrote {out_dir}/results.csv and shape.npz ({len(state['session'])} frames)")
         return state
 
-    return step
+    return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)])
 
 
 @click.command("export", cls=InterspersedCommand)
@@ -186,7 +195,7 @@ def export(csv_path, overwrite):
         click.echo(f"wrote {csv_path} ({len(session)} frames)")
         return state
 
-    return step
+    return step_io(step, outputs=[output.file(csv_path, overwrite=overwrite, suffixes=output.CSV)])
 
 
 COMMANDS = [load, reconstruct, estimate, save, export]

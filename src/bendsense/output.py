@@ -1,0 +1,735 @@
+"""Outputs that cannot destroy: every file and directory bendsense writes goes through here.
+
+The promises (docs/cli.md, "Outputs"):
+
+- A **directory output** (``save``, ``simulate``, ``reproduce``, ``demo``, each session
+  of ``process``) is written into a fresh hidden sibling and swapped in at the end, so
+  it is complete or absent. It holds a manifest, :data:`MANIFEST_NAME`, that lists what
+  bendsense wrote there. ``overwrite`` replaces only those files: anything else inside
+  makes the write refuse, naming it.
+- A **file output** (calibration and config YAML, figures, session CSV) is written to a
+  hidden temporary file in the same directory and renamed over the target.
+- A **recording** (``record``) must survive being killed, so it is written in place: the
+  manifest is written first, and an existing directory is accepted only when all its
+  content is bendsense's.
+- Never a target: the working directory or any of its ancestors, an input of the same
+  command, a directory that holds an input, or any path that resolves to one of those
+  through ``..`` or symlinks.
+- Every target is checked before any work starts (:func:`reserve`), and locked until the
+  command ends, so two runs writing to the same place refuse cleanly instead of
+  interleaving.
+- Directories and files get the permissions the umask gives; error messages name the
+  user's path, never the hidden temporary one.
+
+A command uses it in two steps::
+
+    targets = [output.directory(out_dir, overwrite=overwrite), output.file(fig, suffixes=output.FIGURE)]
+    with output.reserve(targets, inputs=[session_path]):  # check all, lock all, before any work
+        ...                                                 # the work
+        with output.write_dir(out_dir, overwrite=overwrite, writer="bendsense save") as tmp:
+            write files into tmp                           # swapped in when the block ends
+        with output.write_file(fig, suffixes=output.FIGURE) as tmp:
+            figure.savefig(tmp)                            # renamed over fig when the block ends
+
+The writers check and lock again by themselves (re-entrant within a process), so the
+library functions that call them are safe without the CLI's :func:`reserve`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import errno
+import json
+import logging
+import os
+import shutil
+import tempfile
+import threading
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from bendsense.errors import OutputError, OutputExistsError
+
+__all__ = [
+    "MANIFEST_NAME",
+    "MANIFEST_FORMAT",
+    "FIGURE",
+    "YAML",
+    "CSV",
+    "Target",
+    "directory",
+    "file",
+    "recording",
+    "collection",
+    "check",
+    "reserve",
+    "write_dir",
+    "write_file",
+    "write_text",
+    "begin_in_place",
+    "add_to_manifest",
+    "read_manifest",
+    "foreign_entries",
+]
+
+log = logging.getLogger("bendsense")
+
+MANIFEST_NAME = ".bendsense-output.json"
+MANIFEST_FORMAT = "bendsense-output"
+MANIFEST_VERSION = 1
+_LOCK_SUFFIX = ".bendsense-lock"
+_TMP_MARK = ".bendsense-tmp-"
+_OLD_MARK = ".bendsense-old-"
+_SHOWN = 8  # foreign entries named in a message
+
+YAML = (".yaml", ".yml")
+CSV = (".csv",)
+FIGURE = "figure"  # suffixes: the formats matplotlib can write (looked up when needed)
+
+_KINDS = ("dir", "file", "recording", "collection")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Target:
+    """One output of a command.
+
+    Attributes
+    ----------
+    path : Path
+        The path as the user gave it (messages name it).
+    kind : str
+        ``dir`` (written aside and swapped in), ``file`` (temporary file renamed over
+        it), ``recording`` (a directory written in place) or ``collection`` (a directory
+        that holds the outputs of several writers, e.g. the root of ``process``; never
+        replaced).
+    overwrite : bool
+        Whether what bendsense wrote there before may be replaced.
+    suffixes : tuple of str or str
+        File outputs: the allowed suffixes (lower case, with the dot), :data:`FIGURE`
+        for the formats matplotlib writes, or empty for any.
+    """
+
+    path: Path
+    kind: str
+    overwrite: bool = False
+    suffixes: tuple | str = ()
+
+    def __post_init__(self):
+        if self.kind not in _KINDS:
+            raise ValueError(f"kind: must be one of {', '.join(_KINDS)}, got {self.kind!r}")
+        object.__setattr__(self, "path", Path(self.path))
+
+
+def directory(path, *, overwrite: bool = False) -> Target:
+    """A directory output, written aside and swapped in."""
+    return Target(path=path, kind="dir", overwrite=overwrite)
+
+
+def file(path, *, overwrite: bool = False, suffixes=()) -> Target:
+    """A file output, written to a temporary file and renamed over ``path``."""
+    return Target(path=path, kind="file", overwrite=overwrite, suffixes=suffixes)
+
+
+def recording(path, *, overwrite: bool = False) -> Target:
+    """A directory written in place (a recording that must survive being killed)."""
+    return Target(path=path, kind="recording", overwrite=overwrite)
+
+
+def collection(path) -> Target:
+    """A directory that collects outputs (``process``'s root); existing content is kept."""
+    return Target(path=path, kind="collection")
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _resolve(path) -> Path:
+    return Path(os.path.abspath(path)).resolve()
+
+
+def _is_within(inner: Path, outer: Path) -> bool:
+    return inner == outer or inner.is_relative_to(outer)
+
+
+def _litter(name: str) -> bool:
+    """Names of bendsense's own working files: locks, temporary and old directories."""
+    return name.startswith(".") and (name.endswith(_LOCK_SUFFIX) or _TMP_MARK in name or _OLD_MARK in name)
+
+
+def _figure_suffixes() -> tuple:
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return tuple(sorted("." + s for s in FigureCanvasBase.get_supported_filetypes()))
+
+
+def _suffixes(target: Target) -> tuple:
+    return _figure_suffixes() if target.suffixes == FIGURE else tuple(target.suffixes)
+
+
+def check(targets: Iterable[Target], inputs: Iterable = ()) -> None:
+    """Check every output of a command before any work starts.
+
+    Parameters
+    ----------
+    targets : iterable of Target
+        The outputs (:func:`directory`, :func:`file`, :func:`recording`, :func:`collection`).
+    inputs : iterable of paths
+        The command's inputs (files or directories); None entries are ignored.
+
+    Raises
+    ------
+    OutputExistsError
+        An output exists and ``overwrite`` was not given (a file, or a non-empty
+        directory).
+    OutputError
+        An output is the working directory or one of its ancestors, an input, holds an
+        input, holds files that bendsense did not write (with ``overwrite``), is a file
+        where a directory is expected (or the reverse), has an unknown suffix, its parent
+        is not a writable directory, or it is given twice.
+    """
+    targets = list(targets)
+    inputs = [(Path(p), _resolve(p)) for p in inputs if p is not None]
+    cwd = _resolve(os.getcwd())
+    seen: dict[Path, Target] = {}
+    for t in targets:
+        p, r = t.path, _resolve(t.path)
+        if r in seen:
+            raise OutputError(f"{p}: given as output twice")
+        seen[r] = t
+        if t.kind != "file" or r.is_dir():
+            if r == cwd:
+                raise OutputError(f"{p}: is the working directory; refusing to write over it (give a new directory)")
+            if _is_within(cwd, r):
+                raise OutputError(f"{p}: holds the working directory ({cwd}); refusing to write over it")
+        for given, resolved in inputs:
+            if r == resolved:
+                raise OutputError(f"{p}: is an input of this command ({given}); choose another output")
+            if t.kind != "file" and _is_within(resolved, r):
+                raise OutputError(f"{p}: holds the input {given} of this command; choose another output")
+        _check_parent(p, r)
+        if t.kind == "file":
+            _check_file(t, r)
+        else:
+            _check_dir(t, r)
+
+
+def _check_parent(p: Path, r: Path) -> None:
+    anc = r.parent
+    while not anc.exists():
+        if anc == anc.parent:
+            break
+        anc = anc.parent
+    if not anc.is_dir():
+        raise OutputError(f"{p}: {anc} is not a directory")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise OutputError(f"{p}: cannot write in {anc} (permission denied)")
+
+
+def _check_file(t: Target, r: Path) -> None:
+    p = t.path
+    if r.is_dir():
+        raise OutputError(f"{p}: is a directory; give a file name")
+    allowed = _suffixes(t)
+    if allowed and r.suffix.lower() not in allowed:
+        what = "figure format" if t.suffixes == FIGURE else "suffix"
+        got = repr(r.suffix) if r.suffix else "none"
+        raise OutputError(f"{p}: unknown {what} {got}; use one of {', '.join(allowed)}")
+    if r.exists() or r.is_symlink():
+        if not t.overwrite:
+            raise OutputExistsError(f"{p}: exists (use --overwrite to replace it)")
+        if not r.is_file():
+            raise OutputError(f"{p}: exists and is not a regular file; refusing to replace it")
+
+
+def _check_dir(t: Target, r: Path) -> None:
+    p = t.path
+    if r.exists() and not r.is_dir():
+        raise OutputError(f"{p}: exists and is not a directory")
+    if t.kind == "collection" or not r.is_dir():
+        return
+    entries = [e for e in os.listdir(r) if not _litter(e)]
+    if not entries:
+        return
+    if not t.overwrite:
+        raise OutputExistsError(
+            f"{p}: exists and is not empty (use --overwrite to replace what bendsense wrote there)"
+        )
+    foreign = foreign_entries(r)
+    if foreign:
+        raise OutputError(_foreign_message(p, r, foreign))
+
+
+def _foreign_message(p: Path, r: Path, foreign: list) -> str:
+    shown = ", ".join(foreign[:_SHOWN]) + (f" and {len(foreign) - _SHOWN} more" if len(foreign) > _SHOWN else "")
+    if read_manifest(r) is None:
+        return (
+            f"{p}: not a bendsense output (no {MANIFEST_NAME}); it holds {shown}; "
+            "nothing was replaced (choose a new directory)"
+        )
+    return (
+        f"{p}: holds files bendsense did not write: {shown}; nothing was replaced "
+        "(move them away or choose a new directory)"
+    )
+
+
+# --------------------------------------------------------------------------- manifest
+
+
+def read_manifest(path) -> dict | None:
+    """The manifest of the output directory ``path``, or None if it has none (or a broken one)."""
+    try:
+        with open(Path(path) / MANIFEST_NAME, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    if not (isinstance(data, dict) and data.get("format") == MANIFEST_FORMAT and isinstance(data.get("files"), list)):
+        return None
+    return data
+
+
+def foreign_entries(path) -> list[str]:
+    """Entries of the directory ``path`` that its manifest does not list (all, if it has none).
+
+    Relative POSIX paths, sorted; a directory none of whose content is listed is one
+    entry ``name/``. An entry ``name/`` in the manifest is a nested output with its own
+    manifest, checked in turn. bendsense's lock files and temporary directories are
+    never foreign.
+    """
+    root = Path(path)
+    manifest = read_manifest(root)
+    listed = {str(f) for f in manifest["files"]} if manifest else set()
+    foreign: list[str] = []
+
+    def walk(d: Path, rel: str) -> None:
+        for entry in sorted(os.scandir(d), key=lambda e: e.name):
+            name, relname = entry.name, rel + entry.name
+            if (not rel and name == MANIFEST_NAME) or _litter(name):
+                continue
+            if entry.is_dir(follow_symlinks=False):
+                if relname + "/" in listed:
+                    foreign.extend(relname + "/" + f for f in foreign_entries(entry.path))
+                elif any(f.startswith(relname + "/") for f in listed):
+                    walk(Path(entry.path), relname + "/")
+                else:
+                    foreign.append(relname + "/")
+            elif relname not in listed:
+                foreign.append(relname)
+
+    walk(root, "")
+    return foreign
+
+
+def _listing(root: Path) -> list[str]:
+    """What a finished output directory holds, for its manifest (nested outputs as ``name/``)."""
+    files: list[str] = []
+
+    def walk(d: Path, rel: str) -> None:
+        for entry in sorted(os.scandir(d), key=lambda e: e.name):
+            name, relname = entry.name, rel + entry.name
+            if (not rel and name == MANIFEST_NAME) or _litter(name):
+                continue
+            if entry.is_dir(follow_symlinks=False):
+                if (Path(entry.path) / MANIFEST_NAME).exists():
+                    files.append(relname + "/")
+                else:
+                    walk(Path(entry.path), relname + "/")
+            else:
+                files.append(relname)
+
+    walk(root, "")
+    return files
+
+
+def _write_manifest(directory: Path, files: list[str], writer: str, previous: dict | None = None) -> None:
+    from bendsense import __version__
+
+    now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    doc = {
+        "format": MANIFEST_FORMAT,
+        "version": MANIFEST_VERSION,
+        "writer": (previous or {}).get("writer", writer),
+        "bendsense": __version__,
+        "created_utc": (previous or {}).get("created_utc", now),
+        "files": files,
+    }
+    if previous is not None:
+        doc["updated_utc"] = now
+    path = directory / MANIFEST_NAME
+    fd, tmp = tempfile.mkstemp(prefix=f".{MANIFEST_NAME}{_TMP_MARK}", dir=directory)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(doc, fh, indent=1)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def add_to_manifest(path, names: Iterable[str], *, writer: str = "bendsense") -> None:
+    """Add ``names`` (relative paths; ``name/`` for a nested output) to the manifest of ``path``.
+
+    Creates the manifest if there is none. The caller holds the lock of ``path``
+    (:func:`reserve` or a writer).
+    """
+    path = _resolve(path)
+    previous = read_manifest(path)
+    files = list(previous["files"]) if previous else []
+    files += [n for n in names if n not in files]
+    _write_manifest(path, files, writer, previous)
+
+
+# --------------------------------------------------------------------------- locks
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows: an exclusive lock file instead
+    fcntl = None
+
+_held: dict[Path, list] = {}  # lock file -> [fd, count]; re-entrant within this process
+_held_guard = threading.Lock()
+
+
+def _lock_path(r: Path) -> Path:
+    return r.parent / f".{r.name}{_LOCK_SUFFIX}"
+
+
+def _try_lock(lock: Path) -> int | None:
+    """Open and lock ``lock``; None if another process holds it."""
+    while True:
+        if fcntl is None:  # pragma: no cover
+            try:
+                return os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            except FileExistsError:
+                return None
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as err:
+            os.close(fd)
+            if err.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                return None
+            raise
+        # the holder before us may have removed the file after we opened it: lock the live one
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(lock))
+        except FileNotFoundError:
+            same = False
+        if same:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode())
+            return fd
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def _locked(targets: list[tuple[Path, Path]]) -> Iterator[None]:
+    """Hold the locks of the resolved targets ``(user path, resolved)``; re-entrant."""
+    taken: list[Path] = []
+    try:
+        for p, r in targets:
+            lock = _lock_path(r)
+            with _held_guard:
+                if lock in _held:
+                    _held[lock][1] += 1
+                    taken.append(lock)
+                    continue
+            lock.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                fd = _try_lock(lock)
+            except OSError as err:
+                raise OutputError(f"{p}: cannot lock the output: {err.strerror or err}") from None
+            if fd is None:
+                raise OutputError(f"{p}: another bendsense run is writing there; try again when it has finished")
+            with _held_guard:
+                _held[lock] = [fd, 1]
+            taken.append(lock)
+        yield
+    finally:
+        for lock in reversed(taken):
+            _release(lock)
+
+
+def _release(lock: Path) -> None:
+    with _held_guard:
+        entry = _held[lock]
+        entry[1] -= 1
+        if entry[1]:
+            return
+        del _held[lock]
+    with contextlib.suppress(OSError):
+        if os.path.samestat(os.fstat(entry[0]), os.stat(lock)):
+            os.unlink(lock)  # while still holding it: a waiting run then locks a new file
+    os.close(entry[0])
+
+
+@contextlib.contextmanager
+def reserve(targets: Iterable[Target], inputs: Iterable = ()) -> Iterator[None]:
+    """Check all outputs of a command (:func:`check`) and lock them until the block ends.
+
+    The CLI calls this before any work; the writers inside the block re-enter the locks.
+    """
+    targets, inputs = list(targets), list(inputs)
+    check(targets, inputs)  # before the locks create any missing parent directory
+    with _locked([(t.path, _resolve(t.path)) for t in targets]):
+        check(targets, inputs)
+        yield
+
+
+# --------------------------------------------------------------------------- writers
+
+
+def _umask() -> int:
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def _user_paths(tmp: Path, user: Path) -> Iterator[None]:
+    """Re-raise an OSError about the hidden ``tmp`` as an OutputError naming ``user``."""
+    try:
+        yield
+    except OutputError:
+        raise
+    except OSError as err:
+        names = [n for n in (err.filename, getattr(err, "filename2", None)) if n is not None]
+        hidden = str(tmp)
+        if not any(str(n).startswith(hidden) for n in names):
+            raise
+        where = str(names[0]).replace(hidden, str(user), 1)
+        raise OutputError(f"{where}: cannot write: {err.strerror or err}") from None
+
+
+@contextlib.contextmanager
+def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: str = "bendsense") -> Iterator[Path]:
+    """Write a directory output: yield a fresh hidden sibling, swap it in when the block ends.
+
+    The block writes the content into the yielded directory. On success the manifest
+    (listing everything there) is added and the directory replaces ``path``; a previous
+    output there is removed file by file, only what its manifest lists. On failure
+    nothing at ``path`` changes and the sibling is removed.
+
+    Parameters
+    ----------
+    path : path
+        The output directory.
+    overwrite : bool
+        Replace a previous bendsense output at ``path``.
+    inputs : iterable of paths
+        Inputs of the command, never to be written over.
+    writer : str
+        Who writes, for the manifest (e.g. ``"bendsense save"``).
+
+    Raises
+    ------
+    OutputExistsError, OutputError
+        See :func:`check`.
+    """
+    target = directory(path, overwrite=overwrite)
+    p, r = target.path, _resolve(path)
+    inputs = list(inputs)
+    check([target], inputs)
+    with _locked([(p, r)]):
+        check([target], inputs)
+        _clear_litter(r)
+        tmp = None
+        try:
+            try:
+                r.parent.mkdir(parents=True, exist_ok=True)
+                tmp = Path(tempfile.mkdtemp(prefix=f".{r.name}{_TMP_MARK}", dir=r.parent))
+                os.chmod(tmp, 0o777 & ~_umask())
+            except OSError as err:
+                raise OutputError(f"{p}: cannot write: {err.strerror or err}") from None
+            with _user_paths(tmp, p):
+                yield tmp
+                _write_manifest(tmp, _listing(tmp), writer)
+            _swap_in(tmp, target, r)
+        except BaseException:
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+            raise
+
+
+def _swap_in(tmp: Path, target: Target, r: Path) -> None:
+    p = target.path
+    if not r.exists():
+        os.replace(tmp, r)
+        return
+    check([target])  # again: the directory may have changed while we worked
+    old = Path(tempfile.mkdtemp(prefix=f".{r.name}{_OLD_MARK}", dir=r.parent))
+    os.replace(r, old)
+    foreign = foreign_entries(old)
+    if foreign:
+        os.replace(old, r)  # something appeared meanwhile: put it all back
+        raise OutputError(_foreign_message(p, r, foreign))
+    try:
+        os.replace(tmp, r)
+    except BaseException:
+        os.replace(old, r)
+        raise
+    _remove_ours(old, p)
+
+
+def _remove_ours(d: Path, user: Path, keep_root: bool = False) -> None:
+    """Remove what the manifest of ``d`` lists (and bendsense's litter); never anything else."""
+    manifest = read_manifest(d)
+    for name in manifest["files"] if manifest else ():
+        f = d / name
+        if name.endswith("/"):
+            if f.is_dir() and not f.is_symlink():
+                _remove_ours(f, user / name)
+        elif f.is_file() or f.is_symlink():
+            f.unlink()
+    for entry in os.listdir(d):
+        if _litter(entry):
+            q = d / entry
+            shutil.rmtree(q, ignore_errors=True) if q.is_dir() and not q.is_symlink() else q.unlink(missing_ok=True)
+    with contextlib.suppress(FileNotFoundError):
+        (d / MANIFEST_NAME).unlink()
+    for sub in sorted((q for q in d.rglob("*") if q.is_dir() and not q.is_symlink()), reverse=True):
+        with contextlib.suppress(OSError):
+            sub.rmdir()  # only the ones left empty
+    if not keep_root:
+        try:
+            d.rmdir()
+        except OSError:
+            log.warning("%s: kept %s: it holds files bendsense did not write", user, d)
+
+
+def _clear_litter(r: Path) -> None:
+    """Remove temporary and old siblings of ``r`` left by a killed run (we hold its lock)."""
+    if not r.parent.is_dir():
+        return
+    for q in r.parent.glob(f".{r.name}.bendsense-*"):
+        rest = q.name[len(r.name) + 1 :]
+        if q.is_dir() and not q.is_symlink() and rest.startswith(_TMP_MARK):
+            shutil.rmtree(q, ignore_errors=True)
+        elif q.is_dir() and not q.is_symlink() and rest.startswith(_OLD_MARK):
+            _remove_ours(q, q)
+
+
+@contextlib.contextmanager
+def write_file(
+    path, *, overwrite: bool = False, inputs: Iterable = (), suffixes=(), writer: str = "bendsense"
+) -> Iterator[Path]:
+    """Write a file output: yield a hidden temporary path beside it, rename it over ``path`` at the end.
+
+    If the directory holds a bendsense output (a manifest), the file is added to it.
+    On failure ``path`` is unchanged and the temporary file is removed.
+
+    Parameters
+    ----------
+    path : path
+        The output file; its parent directories are created.
+    overwrite : bool
+        Replace an existing file.
+    inputs : iterable of paths
+        Inputs of the command, never to be written over.
+    suffixes : tuple of str or FIGURE
+        Allowed suffixes (empty: any).
+    writer : str
+        Who writes, for a manifest.
+
+    Raises
+    ------
+    OutputExistsError, OutputError
+        See :func:`check`.
+    """
+    target = file(path, overwrite=overwrite, suffixes=suffixes)
+    p, r = target.path, _resolve(path)
+    inputs = list(inputs)
+    check([target], inputs)
+    with _locked([(p, r)]):
+        check([target], inputs)
+        tmp = None
+        try:
+            try:
+                r.parent.mkdir(parents=True, exist_ok=True)
+                fd, name = tempfile.mkstemp(prefix=f".{r.name}{_TMP_MARK}", suffix=r.suffix, dir=r.parent)
+                tmp = Path(name)
+                os.fchmod(fd, 0o666 & ~_umask())
+                os.close(fd)
+            except OSError as err:
+                raise OutputError(f"{p}: cannot write: {err.strerror or err}") from None
+            with _user_paths(tmp, p):
+                yield tmp
+            if r.exists() and not overwrite:  # appeared while we worked
+                raise OutputExistsError(f"{p}: exists (use --overwrite to replace it)")
+            os.replace(tmp, r)
+            tmp = None
+        finally:
+            if tmp is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
+        _register(r, writer)
+
+
+def _register(r: Path, writer: str) -> None:
+    """Add the file ``r`` to the manifest of its directory, when that is a bendsense output."""
+    parent = r.parent
+    if read_manifest(parent) is None:
+        return
+    with contextlib.suppress(OutputError), _locked([(parent, parent)]):
+        add_to_manifest(parent, [r.name], writer=writer)
+
+
+def write_text(path, text: str, **options) -> None:
+    """Write ``text`` (UTF-8) to the file ``path`` (options of :func:`write_file`)."""
+    with write_file(path, **options) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+class InPlace:
+    """A directory output written in place (a recording); holds its lock until :meth:`close`."""
+
+    def __init__(self, path, files, *, overwrite: bool = False, inputs: Iterable = (), writer: str = "bendsense"):
+        target = recording(path, overwrite=overwrite)
+        p, r = target.path, _resolve(path)
+        self.path = r
+        inputs = list(inputs)
+        check([target], inputs)
+        self._stack = contextlib.ExitStack()
+        self._stack.enter_context(_locked([(p, r)]))
+        try:
+            check([target], inputs)
+            with _user_paths(r, p):
+                if r.is_dir():
+                    _remove_ours(r, p, keep_root=True)
+                r.mkdir(parents=True, exist_ok=True)
+                _write_manifest(r, list(files), writer)
+        except BaseException:
+            self._stack.close()
+            raise
+
+    def close(self) -> None:
+        """Release the lock."""
+        self._stack.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def begin_in_place(path, files, *, overwrite: bool = False, inputs: Iterable = (), writer: str = "bendsense") -> InPlace:
+    """Start a directory output written in place (a recording).
+
+    Checks and locks ``path``, removes a previous output there (only what its manifest
+    lists; anything else makes it refuse) and writes the manifest listing ``files``
+    first, so that a recording killed at any moment is still recognised as bendsense's.
+    The returned :class:`InPlace` holds the lock until its ``close()``.
+    """
+    return InPlace(path, files, overwrite=overwrite, inputs=inputs, writer=writer)
