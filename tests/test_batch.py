@@ -213,14 +213,21 @@ def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_
     }  # fmt: skip
     assert "output exists" in by_name(again)["a"].reason
     assert (out / "a" / "results.csv").stat().st_mtime_ns == stamp
-    # overwrite reprocesses
-    (out / "a" / "marker").write_text("old output")
+    # overwrite reprocesses, but never over a file bendsense did not write
+    (out / "a" / "marker").write_text("a user's note")
+    redo = process_sessions(
+        runs / "a.csv", out, calibration=linear_calibration(), workers=0, overwrite=True, estimate=ESTIMATE,
+        progress=False,
+    )  # fmt: skip
+    assert [s.status for s in redo.sessions] == ["failed"]
+    assert "holds files bendsense did not write: marker" in redo.sessions[0].reason
+    assert (out / "a" / "marker").read_text() == "a user's note"
+    (out / "a" / "marker").unlink()
     redo = process_sessions(
         runs / "a.csv", out, calibration=linear_calibration(), workers=0, overwrite=True, estimate=ESTIMATE,
         progress=False,
     )  # fmt: skip
     assert [s.status for s in redo.sessions] == ["ok"]
-    assert not (out / "a" / "marker").exists()
     check_outputs(out, {"a": truth["a"]})
 
 

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from bendsense import read_session, read_session_csv, write_session_csv
-from bendsense.errors import SessionError
+from bendsense.errors import OutputExistsError, SessionError
 from bendsense.session import Session
 from bendsense.sessiondir import (
     SessionWriter,
@@ -154,7 +154,7 @@ def test_empty_session_reads(tmp_path):
 def test_export_to_csv_and_back(tmp_path):
     hand_made_v1(tmp_path / "s", ROWS)
     export_session_csv(tmp_path / "s", tmp_path / "s.csv")
-    with pytest.raises(SessionError, match="exists"):
+    with pytest.raises(OutputExistsError, match="exists"):
         export_session_csv(tmp_path / "s", tmp_path / "s.csv")
     native, csv = read_session(tmp_path / "s"), read_session_csv(tmp_path / "s.csv")
     np.testing.assert_array_equal(csv.t_s, native.t_s)
