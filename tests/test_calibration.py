@@ -374,6 +374,7 @@ def cli():
     def next_step(flag):
         return lambda state: click.echo(f"next step ran, calibration degree {state['calibration'].degree}, {flag}")
 
+    group.add_command(next_step, "next.yaml")  # a command name that is also an output file name
     for command in calibrate_cli.COMMANDS:
         group.add_command(command)
     return group
@@ -389,9 +390,9 @@ def test_cli_options_after_the_argument_and_chaining(tmp_path, monkeypatch):
     assert "next step ran, calibration degree 2, True" in result.output
     # an option value equal to a command name is still a value
     monkeypatch.chdir(tmp_path)
-    result = CliRunner().invoke(cli(), ["calibrate", "-o", "next-step", str(manifest)])
+    result = CliRunner().invoke(cli(), ["calibrate", "-o", "next.yaml", str(manifest)])
     assert result.exit_code == 0, result.output
-    assert Calibration.load(tmp_path / "next-step").degree == 3
+    assert Calibration.load(tmp_path / "next.yaml").degree == 3
 
 
 def test_cli_through_the_bendsense_command(tmp_path):

@@ -10,6 +10,7 @@ from click.testing import CliRunner
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.config import load_config
+from bendsense.output import write_dir
 from bendsense.pcc import arc_positions
 from bendsense.sim.reproduce import PAPER, shape_accuracy
 
@@ -21,8 +22,8 @@ NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce") / "report"
-    out.mkdir()
-    (out / "stale.txt").write_text("from an earlier run")
+    with write_dir(out) as earlier:  # an earlier run's output, with a file this run does not write
+        (earlier / "stale.txt").write_text("from an earlier run")
     result = CliRunner().invoke(main, ["reproduce", "-o", str(out), "--quick", "--seed", "3", "--overwrite"])
     assert result.exit_code == 0, result.output
     return out, result.output, (out / "report.md").read_text(encoding="utf-8")
@@ -52,7 +53,7 @@ def numbers(cell):
 
 def test_report_and_figures_written(run):
     out, output, report = run
-    assert not (out / "stale.txt").exists()  # --overwrite replaced the old directory
+    assert not (out / "stale.txt").exists()  # --overwrite replaced the earlier output
     assert "wrote" in output
     for name in FIGURES:
         data = (out / name).read_bytes()

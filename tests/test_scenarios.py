@@ -13,7 +13,7 @@ import bendsense
 from bendsense.calibration import read_manifest
 from bendsense.cli import main
 from bendsense.config import load_config
-from bendsense.errors import ConfigError
+from bendsense.errors import OutputError, ConfigError
 from bendsense.sim import VirtualSensor, calibration_shifts
 from bendsense.sim.scenarios import (
     CALIBRATION_RADII_M,
@@ -40,7 +40,7 @@ def all_dir(tmp_path_factory):
 
 
 def test_all_scenarios_written(all_dir):
-    assert sorted(p.name for p in all_dir.iterdir()) == sorted(SCENARIOS)
+    assert sorted(p.name for p in all_dir.iterdir()) == sorted([*SCENARIOS, ".bendsense-output.json"])
     for name in SCENARIOS:
         doc = yaml.safe_load((all_dir / name / "scenario.yaml").read_text())
         assert doc["scenario"] == name and doc["seed"] == 7
@@ -197,15 +197,21 @@ def test_library_errors(tmp_path):
     assert not (tmp_path / "x").exists()
     assert list(tmp_path.iterdir()) == []
     (tmp_path / "y").mkdir()
+    (tmp_path / "y" / "notes.txt").write_text("mine")
     with pytest.raises(FileExistsError):
         simulate("validation", tmp_path / "y", frames_per_strip=1)
 
 
-def test_overwrite_replaces(tmp_path):
+def test_overwrite_replaces_only_what_bendsense_wrote(tmp_path):
     out = simulate("validation", tmp_path / "v", frames_per_strip=1, radii_m=[0.05])
-    (out / "stale.txt").write_text("old")
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(OutputError, match="holds files bendsense did not write: notes.txt"):
+        simulate("validation", out, frames_per_strip=1, radii_m=[0.06], overwrite=True)
+    assert (out / "notes.txt").read_text() == "mine" and (out / "r050.csv").exists()
+    (out / "notes.txt").unlink()
     simulate("validation", out, frames_per_strip=1, radii_m=[0.06], overwrite=True)
-    assert sorted(p.name for p in out.iterdir()) == ["r060.csv", "scenario.yaml", "validation.yaml"]
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [".bendsense-output.json", "r060.csv", "scenario.yaml", "validation.yaml"]  # r050.csv went
     assert sorted(p.name for p in tmp_path.iterdir()) == ["v"]
 
 

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from bendsense._io import atomic_write_text, load_yaml
+from bendsense._io import load_yaml
 from bendsense import validation as check
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 
@@ -908,10 +908,16 @@ class Calibration:
         }
         return out
 
-    def save(self, path: str | os.PathLike) -> None:
-        """Write the calibration YAML atomically (``format: bendsense-calibration``, ``version: 1``)."""
+    def save(self, path: str | os.PathLike, *, overwrite: bool = True) -> None:
+        """Write the calibration YAML atomically (``format: bendsense-calibration``, ``version: 1``).
+
+        ``overwrite=False`` refuses an existing file (:class:`~bendsense.errors.OutputExistsError`).
+        """
+        from bendsense import output
+
         header = "# bendsense sensor calibration: S_i = sum_k c_k (A_i - offset_i)^k (ascending powers, paper eq. 2)\n"
-        atomic_write_text(path, header + yaml.safe_dump(self.to_dict(), sort_keys=False))
+        text = header + yaml.safe_dump(self.to_dict(), sort_keys=False)
+        output.write_text(path, text, overwrite=overwrite, writer="bendsense calibrate")
 
     @classmethod
     def from_dict(cls, data: Any) -> Calibration:

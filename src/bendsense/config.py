@@ -431,8 +431,12 @@ def load_config(path: str | os.PathLike | None = None) -> Config:
     return load_yaml(path, "config", Config.from_dict)
 
 
-def save_config(config: Config, path: str | os.PathLike) -> None:
-    """Write ``config`` as YAML atomically (temporary file, then rename)."""
-    from bendsense._io import atomic_write_text
+def save_config(config: Config, path: str | os.PathLike, *, overwrite: bool = True) -> None:
+    """Write ``config`` as YAML atomically (:func:`bendsense.output.write_text`).
 
-    atomic_write_text(path, yaml.safe_dump(config.to_dict(), sort_keys=False))
+    ``overwrite=False`` refuses an existing file (:class:`~bendsense.errors.OutputExistsError`).
+    """
+    from bendsense import output
+
+    output.write_text(path, yaml.safe_dump(config.to_dict(), sort_keys=False), overwrite=overwrite,
+                      writer="bendsense identify")

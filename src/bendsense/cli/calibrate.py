@@ -6,12 +6,13 @@ from pathlib import Path
 
 import click
 
+from bendsense import output as outputs
 from bendsense.cli._common import (
     InterspersedCommand,
     make_config_option,
     make_overwrite_option,
-    refuse_existing,
     save_figure,
+    step_io,
 )
 
 
@@ -72,24 +73,38 @@ def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_pat
     """  # noqa: D301 (click's \b keeps the example's line breaks)
 
     def step(state):
-        refuse_existing(output, overwrite)
         from bendsense.calibration import Calibration
         from bendsense.config import load_config
 
         sensor = load_config(config_path).sensor
         cal = Calibration.fit(manifest, sensor, degree=degree, weighting=weighting, sleeve=sleeve)
-        cal.save(output)
+        cal.save(output, overwrite=overwrite)
         click.echo(cal.report())
         click.echo(f"wrote {output}")
         if plot_path is not None:
             import matplotlib
 
             matplotlib.use("Agg")
-            save_figure(cal.plot()[0].figure, plot_path)
+            save_figure(cal.plot()[0].figure, plot_path, overwrite=overwrite)
         state["calibration"] = cal
         return state
 
-    return step
+    targets = [outputs.file(output, overwrite=overwrite, suffixes=outputs.YAML)]
+    if plot_path is not None:
+        targets.append(outputs.file(plot_path, overwrite=overwrite, suffixes=outputs.FIGURE))
+    return step_io(step, outputs=targets, inputs=[manifest, config_path, *_recordings(manifest)])
+
+
+def _recordings(manifest: Path) -> list:
+    """The recordings a calibration manifest names (inputs never to be written over); [] if unreadable."""
+    from bendsense.calibration import read_manifest
+    from bendsense.errors import BendsenseError
+
+    try:
+        found = read_manifest(manifest)
+    except BendsenseError:  # the fit reports it, with its message
+        return []
+    return [found.flat, *(path for _, path in found.strips)]
 
 
 COMMANDS = [calibrate]

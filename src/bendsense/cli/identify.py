@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, refuse_existing, save_figure
+from bendsense import output as outputs
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, save_figure, step_io
 from bendsense.errors import BendsenseError
 
 KINDS = ("free-bending", "stiffness")
@@ -95,7 +96,6 @@ def identify(
     Writes the config (--config, or the paper's) with the fitted values to OUTPUT.
     """
     fix = _parse_fix(kind, fix_items)
-    refuse_existing(output, overwrite)
 
     def step(state):
         try:
@@ -125,21 +125,21 @@ def identify(
         except BendsenseError as err:
             raise click.ClickException(f"{data}: {err}" if str(data) not in str(err) else str(err)) from None
         click.echo(fit.report())
-        try:
-            save_config(new_config, output)
-        except OSError as err:
-            raise click.ClickException(f"{output}: cannot write: {err.strerror or err}") from None
+        save_config(new_config, output, overwrite=overwrite)
         click.echo(f"wrote {output}")
         if plot_path is not None:
             import matplotlib
 
             matplotlib.use("Agg")
             ax = fit.plot(config=config) if kind == "free-bending" else fit.plot()
-            save_figure(ax.figure, plot_path)
+            save_figure(ax.figure, plot_path, overwrite=overwrite)
         state["config"] = new_config
         return state
 
-    return step
+    targets = [outputs.file(output, overwrite=overwrite, suffixes=outputs.YAML)]
+    if plot_path is not None:
+        targets.append(outputs.file(plot_path, overwrite=overwrite, suffixes=outputs.FIGURE))
+    return step_io(step, outputs=targets, inputs=[data, config_path])
 
 
 COMMANDS = [identify]

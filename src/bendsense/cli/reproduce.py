@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, overwrite_option, quiet
+from bendsense import output
+from bendsense.cli._common import InterspersedCommand, overwrite_option, quiet, step_io
 
 
 @click.command("reproduce", cls=InterspersedCommand)
@@ -34,8 +35,6 @@ def reproduce(out_dir, seed, quick, overwrite):
     """
 
     def step(state):
-        if out_dir.exists() and (not out_dir.is_dir() or (any(out_dir.iterdir()) and not overwrite)):
-            raise click.ClickException(f"{out_dir}: exists (use --overwrite to replace it)")
         from bendsense.sim.reproduce import reproduce as run
 
         command = f"bendsense reproduce -o {out_dir.as_posix()} --seed {seed}" + (" --quick" if quick else "")
@@ -56,7 +55,7 @@ def reproduce(out_dir, seed, quick, overwrite):
         click.echo(f"wrote {result.report_path} and {len(result.figures)} figures in {result.wall_time_s:.1f} s")
         return state
 
-    return step
+    return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)])
 
 
 COMMANDS = [reproduce]

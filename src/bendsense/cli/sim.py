@@ -6,7 +6,8 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, refuse_existing
+from bendsense import output
+from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, step_io
 
 # kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
 _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
@@ -53,7 +54,6 @@ def simulate(
     """
 
     def step(state):
-        refuse_existing(out_dir, overwrite)
         from bendsense.sim.scenarios import _simulate
 
         options = {
@@ -78,7 +78,7 @@ def simulate(
             )
         return state
 
-    return step
+    return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)], inputs=[config_path])
 
 
 COMMANDS = [simulate]

@@ -54,7 +54,6 @@ import dataclasses
 import math
 import os
 import shutil
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -62,6 +61,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bendsense import output
 from bendsense.config import Config, GravityConfig, MaterialConfig, StiffnessConfig
 
 __all__ = [
@@ -1014,28 +1014,6 @@ def _paper_row(tm, key, what, paper_s):
 # --------------------------------------------------------------------------- entry point
 
 
-def _check_target(out: Path, overwrite: bool) -> None:
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"{out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(f"{out}: exists (use overwrite=True / --overwrite)")
-
-
-def _replace_dir(tmp: Path, out: Path) -> None:
-    """Move the finished ``tmp`` to ``out``; an old ``out`` goes only once the new one is complete."""
-    if not out.exists():
-        os.replace(tmp, out)
-        return
-    old = out.parent / f".{out.name}.old-{os.getpid()}"
-    os.replace(out, old)
-    try:
-        os.replace(tmp, out)
-    except BaseException:
-        os.replace(old, out)
-        raise
-    shutil.rmtree(old, ignore_errors=True)
-
-
 def reproduce(
     out_dir,
     *,
@@ -1050,15 +1028,15 @@ def reproduce(
     Parameters
     ----------
     out_dir : path
-        Report directory: ``report.md`` and the PNG figures. Written to a temporary
-        directory first and moved into place at the end.
+        Report directory: ``report.md`` and the PNG figures. Written to a hidden sibling
+        first and swapped in at the end (:func:`bendsense.output.write_dir`).
     seed : int
         Seed of the simulated sensor, noise, random configurations and camera noise.
     quick : bool
         :meth:`Plan.quick` (for tests: fewer frames and configurations, every table and
         figure) instead of :meth:`Plan.full`.
     overwrite : bool
-        Replace an existing, non-empty ``out_dir``.
+        Replace a previous report in ``out_dir`` (never files bendsense did not write).
     progress : callable, optional
         Called with one line of text at the start of each stage.
     command : str, optional
@@ -1070,15 +1048,17 @@ def reproduce(
 
     Raises
     ------
-    FileExistsError
-        If ``out_dir`` exists, is not empty and ``overwrite`` is false.
+    OutputExistsError
+        If ``out_dir`` exists, is not empty and ``overwrite`` is false (a ``FileExistsError``).
+    OutputError
+        If ``out_dir`` holds files bendsense did not write, or may not be written over.
     """
     from bendsense.config import load_config
     from bendsense.pcc import reconstruct
 
     t_start = time.perf_counter()
     out = Path(out_dir)
-    _check_target(out, overwrite)
+    output.check([output.directory(out, overwrite=overwrite)])
     say = progress or (lambda text: None)
     plan = Plan.quick() if quick else Plan.full()
     nominal = load_config()
@@ -1086,9 +1066,7 @@ def reproduce(
     sensor = nominal.sensor
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(2000,)))
     timings = {}
-    out.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
-    try:
+    with output.write_dir(out, overwrite=overwrite, writer="bendsense reproduce") as work:
         data = work / "data"
         say("simulating the experiments (calibration, validation, free bending, tip loads, contact) ...")
         paths, timings["simulation_s"] = _timed(_simulate, data, true, seed, plan)
@@ -1174,13 +1152,4 @@ def reproduce(
         if command is None:
             command = f"bendsense reproduce -o {out.name} --seed {seed}" + (" --quick" if quick else "")
         (work / "report.md").write_text(_report(result, names, command) + "\n", encoding="utf-8")
-        umask = os.umask(0)
-        os.umask(umask)
-        for path in (work, *work.iterdir()):
-            path.chmod((0o777 if path.is_dir() else 0o666) & ~umask)
-        _check_target(out, overwrite)
-        _replace_dir(work, out)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
     return result

@@ -2,8 +2,8 @@
 
 :func:`simulate` writes one scenario (or ``"all"``) as session CSVs (DESIGN section 3)
 whose extra columns carry the ground truth, plus a ``scenario.yaml`` describing the
-run (seed, options, config, frame counts, files). Every scenario directory is written
-to a temporary directory first and renamed into place at the end.
+run (seed, options, config, frame counts, files). The output directory is written
+to a hidden sibling first and swapped in at the end (:func:`bendsense.output.write_dir`).
 
 ``calibration``
     ``flat.csv`` and one recording per calibration strip, ``r040.csv`` … ``r400.csv``
@@ -53,17 +53,15 @@ its noise and random configurations from its own stream, spawned from the seed.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-import shutil
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from bendsense import output
 from bendsense.calibration import strip_shifts
 from bendsense.config import Config
 from bendsense.errors import ConfigError
@@ -536,14 +534,13 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
         One of :data:`SCENARIOS` or ``"all"`` (each in a subdirectory of ``out_dir``
         named after it).
     out_dir : path
-        Directory to create; written atomically (a temporary directory renamed at the
-        end).
+        Directory to create; written atomically (:func:`bendsense.output.write_dir`).
     config : Config or path, optional
         The true actuator and sensor; default the paper's prototype.
     seed : int or None
         Seed of the sensor hardware, the noise and the random configurations.
     overwrite : bool
-        Replace an existing ``out_dir``.
+        Replace a previous bendsense output in ``out_dir`` (never files it did not write).
     **options
         ``noise_counts`` [counts]; model mismatch ``ei_error``, ``k0_error``,
         ``base_rotation_rad_per_rad``, ``hysteresis_pa`` (see
@@ -563,8 +560,11 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
     ------
     ConfigError
         An unknown scenario or option, or an invalid value.
-    FileExistsError
-        If ``out_dir`` exists and ``overwrite`` is false.
+    OutputExistsError
+        If ``out_dir`` exists and ``overwrite`` is false (a ``FileExistsError``).
+    OutputError
+        If ``out_dir`` holds files bendsense did not write, or may not be written over
+        (:func:`bendsense.output.check`).
     """
     return _simulate(scenario, out_dir, config, seed, overwrite=overwrite, **options)[0]
 
@@ -579,15 +579,13 @@ def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **opti
     if unknown:
         raise ConfigError(f"options: unknown {', '.join(unknown)} for {scenario}; allowed: {', '.join(sorted(known))}")
     out = Path(out_dir)
-    if out.exists() and not (overwrite and out.is_dir()):
-        raise FileExistsError(f"{out}: exists (use overwrite=True / --overwrite)")
+    config_path = config if isinstance(config, (str, os.PathLike)) else None
+    output.check([output.directory(out, overwrite=overwrite)], [config_path])
     config = _config(config)
     actuator_options = {k: v for k, v in options.items() if k in _ACTUATOR_OPTIONS}
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
     summaries = {}
-    try:
+    with output.write_dir(out, overwrite=overwrite, inputs=[config_path], writer="bendsense simulate") as tmp:
         for name in names:
             target = tmp if scenario != "all" else tmp / name
             target.mkdir(exist_ok=True)
@@ -597,11 +595,6 @@ def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **opti
             _write_description(target, name, seed, config, actuator_options, opts, summary)
             summary["files"].append("scenario.yaml")
             summaries[name] = {**summary, "path": out if scenario != "all" else out / name}
-        _public(tmp)
-        _replace_dir(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out, summaries
 
 
@@ -633,26 +626,3 @@ def _write_description(target, name, seed, config, actuator_options, options, su
     (target / "scenario.yaml").write_text(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True), encoding="utf-8")
 
 
-def _public(root: Path) -> None:
-    """Give the tree the usual permissions: temporary files and directories are private."""
-    umask = os.umask(0)
-    os.umask(umask)
-    for path in (root, *root.rglob("*")):
-        path.chmod((0o777 if path.is_dir() else 0o666) & ~umask)
-
-
-def _replace_dir(tmp: Path, out: Path) -> None:
-    """Move ``tmp`` to ``out``, replacing an existing ``out`` only once the new one is complete."""
-    if not out.exists():
-        os.replace(tmp, out)
-        return
-    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-    os.replace(out, old / out.name)
-    try:
-        os.replace(tmp, out)
-    except BaseException:
-        os.replace(old / out.name, out)
-        raise
-    finally:
-        with contextlib.suppress(OSError):
-            shutil.rmtree(old)
