@@ -317,9 +317,9 @@ def main(argv=None):
     ]
     print(render_text(table, header))
     if args.markdown:
-        from bendsense._io import atomic_write_text
+        from bendsense import output
 
-        atomic_write_text(args.markdown, render_markdown(table, header))
+        output.write_text(args.markdown, render_markdown(table, header), overwrite=True)
         print(f"Markdown table written to {args.markdown}")
 
 

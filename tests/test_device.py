@@ -15,7 +15,7 @@ from bendsense import read_session
 from bendsense.cli import main
 from bendsense.device import Driver, Recorder, SimulatedDevice, ramp_source
 from bendsense.device import ports as ports_mod
-from bendsense.errors import DeviceError, SessionError
+from bendsense.errors import OutputExistsError, DeviceError, SessionError
 from bendsense.frames import encode_hello, encode_sample, encode_text
 from bendsense.sessiondir import SessionWriter
 
@@ -256,7 +256,7 @@ def test_default_source_gives_pressure_and_counts_per_frame():
 
 def test_recorder_refuses_existing_session(tmp_path):
     SessionWriter(tmp_path / "s", 1).close()
-    with Driver("loop://", handshake=False) as drv, pytest.raises(SessionError, match="session exists"):
+    with Driver("loop://", handshake=False) as drv, pytest.raises(OutputExistsError, match="exists and is not empty"):
         Recorder(drv, tmp_path / "s")
 
 
@@ -283,7 +283,7 @@ def test_cli_record(tmp_path):
         n = len(read_session(tmp_path / "s"))
         assert 100 < n <= 260
         res = CliRunner().invoke(main, ["record", sim.port, "-o", str(tmp_path / "s"), "--seconds", "0.2"])
-        assert res.exit_code == 2 and "use --overwrite" in res.output
+        assert res.exit_code == 1 and "use --overwrite" in res.output
         res = CliRunner().invoke(
             main, ["record", sim.port, "-o", str(tmp_path / "s"), "--seconds", "0.2", "--overwrite"]
         )

@@ -119,7 +119,7 @@ def test_writer_layout_matches_the_format(tmp_path):
 
 def test_existing_session_is_not_overwritten(tmp_path):
     SessionWriter(tmp_path / "s", 2).close()
-    with pytest.raises(SessionError, match="a session exists there"):
+    with pytest.raises(OutputExistsError, match="exists and is not empty"):
         SessionWriter(tmp_path / "s", 2)
     with SessionWriter(tmp_path / "s", 2, overwrite=True) as w:
         w.write(w.empty(3))

@@ -1,46 +1,11 @@
-"""Atomic file output: write to a temporary file in the same directory, then rename."""
+"""Bounded, one-line-error readers of text and YAML files (outputs: :mod:`bendsense.output`)."""
 
 from __future__ import annotations
 
-import contextlib
 import os
-import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text", "load_yaml", "parse_yaml", "read_text", "safe_load"]
-
-
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike):
-    """Yield a temporary path beside ``path``; rename it over ``path`` if the block succeeds.
-
-    On any exception the temporary file is removed and ``path`` is left untouched,
-    so a failed write never leaves a half-written output file.
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    # mkstemp creates 0600; give the file the permissions an ordinary open() would
-    os.fchmod(fd, 0o666 & ~_umask())
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` atomically."""
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+__all__ = ["load_yaml", "parse_yaml", "read_text", "safe_load"]
 
 
 MAX_TEXT_BYTES = 64 * 2**20

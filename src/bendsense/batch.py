@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense.errors import ArgumentError, BendsenseError, SessionError
+from bendsense import output
+from bendsense.errors import ArgumentError, BendsenseError, OutputError, SessionError
 
 __all__ = ["SessionOutcome", "BatchReport", "discover_sessions", "process_session", "process_sessions"]
 
@@ -356,8 +357,7 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
     from bendsense.results import write_results
     from bendsense.session import read_session
 
-    if out_dir.exists() and not overwrite:
-        raise SessionError(f"{out_dir}: exists (use overwrite=True or --overwrite to replace it)")
+    output.check([output.directory(out_dir, overwrite=overwrite)], [path])
     session = read_session(path)
     if len(session) == 0:
         raise SessionError(f"{path}: no frames")
@@ -382,7 +382,7 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
             method=method or config.estimation.method,
             calibration=calibration,  # its noise_std gives the force uncertainty std_n
         )
-    write_results(out_dir, session, shape, result, overwrite=overwrite)
+    write_results(out_dir, session, shape, result, overwrite=overwrite, inputs=[path])
     extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(shape.extrapolated), (len(session),))))
     not_converged = 0 if result is None else int(np.count_nonzero(~np.asarray(result.success, dtype=bool)))
     return len(session), extrapolated, not_converged
@@ -454,7 +454,9 @@ def process_sessions(
     constraint, method : str, optional
         Force constraint and estimator (default: from ``config.estimation``).
     overwrite : bool
-        Reprocess sessions whose output directory exists (default: skip them).
+        Reprocess sessions whose output directory exists (default: skip them); a
+        session's directory that holds files bendsense did not write is never replaced
+        (that session fails, naming them).
     pressure_pa : float, optional
         Pressure for frames without a reading [Pa].
     estimate : bool
@@ -476,14 +478,28 @@ def process_sessions(
         If a path does not exist or no session is found.
     ConfigError
         If the config or the calibration file is invalid.
+    OutputError
+        If ``out_dir`` may not be written (the working directory or one of its
+        ancestors, an input, or another run is writing there; :mod:`bendsense.output`).
     """
+    start = time.perf_counter()
+    out_dir = Path(out_dir)
+    given = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
+    inputs = [*given, *(p for p in (config, calibration) if isinstance(p, (str, os.PathLike)))]
+    # the root collects one results directory per session; it is never replaced
+    with output.reserve([output.collection(out_dir)], inputs):
+        return _process(given, out_dir, start, config=config, calibration=calibration, executor=executor,
+                        workers=workers, constraint=constraint, method=method, overwrite=overwrite,
+                        pressure_pa=pressure_pa, estimate=estimate, recursive=recursive, progress=progress)
+
+
+def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, overwrite,
+             pressure_pa, estimate, recursive, progress) -> BatchReport:
     from tqdm import tqdm
 
     from bendsense.calibration import Calibration
     from bendsense.config import Config, load_config
 
-    start = time.perf_counter()
-    out_dir = Path(out_dir)
     if not isinstance(config, Config):
         config = load_config(config)
     if not isinstance(calibration, Calibration):
@@ -492,8 +508,7 @@ def process_sessions(
         calibration = Calibration.load(calibration)
     sessions = discover_sessions(paths, recursive=recursive, exclude=out_dir)
     if not sessions:
-        shown = paths if isinstance(paths, (str, os.PathLike)) else ", ".join(map(str, paths))
-        raise SessionError(f"no sessions (*.csv files or session directories) found in {shown}")
+        raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, paths))}")
     names = session_names(sessions)
 
     rows: list[SessionOutcome | None] = [None] * len(sessions)
@@ -508,6 +523,14 @@ def process_sessions(
                 reason="output exists (use overwrite / --overwrite to reprocess)",
                 out_dir=str(target),
             )
+        elif overwrite and target.exists():
+            try:  # before any work: never over files bendsense did not write
+                output.check([output.directory(target, overwrite=True)], [path])
+            except OutputError as err:
+                rows[i] = SessionOutcome(name=name, source=str(path), status="failed", reason=str(err),
+                                         out_dir=str(target))
+                continue
+            todo.append(i)
         else:
             todo.append(i)
     options = dict(
@@ -520,11 +543,14 @@ def process_sessions(
         overwrite=overwrite,
     )
     out_dir.mkdir(parents=True, exist_ok=True)
+    output.add_to_manifest(out_dir, [], writer="bendsense process")
     bar = tqdm(total=len(todo), unit="session", desc="process", disable=not progress or not todo, leave=False)
 
     def finish(i, row):
         rows[i] = row
         bar.update(1)
+        if row.status == "ok":
+            output.add_to_manifest(out_dir, [f"{row.name}/"])
         if row.status == "failed":
             log.warning("%s: failed: %s", row.name, row.reason)
 

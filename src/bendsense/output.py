@@ -498,11 +498,18 @@ def _umask() -> int:
 
 @contextlib.contextmanager
 def _user_paths(tmp: Path, user: Path) -> Iterator[None]:
-    """Re-raise an OSError about the hidden ``tmp`` as an OutputError naming ``user``."""
+    """Re-raise an error about the hidden ``tmp`` as one naming ``user``.
+
+    An OSError becomes an OutputError; a bendsense error keeps its class.
+    """
+    from bendsense.errors import BendsenseError
+
     try:
         yield
-    except OutputError:
-        raise
+    except BendsenseError as err:
+        if str(tmp) not in str(err) or len(err.args) != 1:
+            raise
+        raise type(err)(str(err).replace(str(tmp), str(user))) from None
     except OSError as err:
         names = [n for n in (err.filename, getattr(err, "filename2", None)) if n is not None]
         hidden = str(tmp)

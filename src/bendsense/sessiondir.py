@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from bendsense._io import atomic_write_text, load_yaml
+from bendsense._io import load_yaml
 from bendsense.errors import SessionError
 
 __all__ = [
@@ -172,9 +172,14 @@ class SessionWriter:
     extra_fields : sequence of (name, dtype str)
         Further per-frame columns.
     overwrite : bool
-        Replace an existing session (its ``meta.yaml``, ``frames.bin``, ``events.log``).
+        Replace an existing session (only what bendsense wrote there, see
+        :mod:`bendsense.output`; a directory with other files is refused).
     fsync_interval_s : float
         Longest time between ``os.fsync`` calls while writing [s].
+    inputs : iterable of paths
+        Inputs of the command, never to be written over.
+    writer : str
+        Who writes, for the output manifest.
 
     Notes
     -----
@@ -194,20 +199,28 @@ class SessionWriter:
         extra_fields=(),
         overwrite: bool = False,
         fsync_interval_s: float = 0.5,
+        inputs=(),
+        writer: str = "bendsense record",
     ):
+        from bendsense import output
+
         self.path = Path(path)
         self.dtype = record_dtype(n_channels, adc_dtype, extra_fields)
         self.n_channels = int(n_channels)
         self.fsync_interval_s = float(fsync_interval_s)
-        if self.path.exists():
-            if not self.path.is_dir():
-                raise SessionError(f"{self.path}: exists and is not a session directory")
-            ours = [self.path / name for name in (META, FRAMES, EVENTS) if (self.path / name).exists()]
-            if ours and not overwrite:
-                raise SessionError(f"{self.path}: a session exists there (use overwrite=True or --overwrite)")
-            for p in ours:
-                p.unlink()
-        self.path.mkdir(parents=True, exist_ok=True)
+        # written in place (a recording must survive being killed): the output layer checks
+        # and locks the directory, removes an earlier session there (only what bendsense
+        # wrote) and writes the manifest before any data
+        self._output = output.begin_in_place(
+            self.path, [META, FRAMES, EVENTS], overwrite=overwrite, inputs=inputs, writer=writer
+        )
+        try:
+            self._start(config, adc_bits, device, meta)
+        except BaseException:
+            self._output.close()
+            raise
+
+    def _start(self, config, adc_bits, device, meta) -> None:
         if config is not None and hasattr(config, "to_dict"):
             config = config.to_dict()
         now_ns = time.monotonic_ns()
@@ -231,14 +244,17 @@ class SessionWriter:
             self.meta["config"] = _plain(config)
         self._write_meta()
         self._lock = threading.Lock()
-        self._fd = os.open(self.path / FRAMES, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        self._fd = os.open(self.path / FRAMES, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o666)
         self._events = open(self.path / EVENTS, "a", encoding="utf-8", buffering=1)
         self._last_sync = time.monotonic()
         self.n_records = 0
         self.closed = False
 
     def _write_meta(self) -> None:
-        atomic_write_text(self.path / META, yaml.safe_dump(self.meta, sort_keys=False, allow_unicode=True))
+        from bendsense import output
+
+        text = yaml.safe_dump(self.meta, sort_keys=False, allow_unicode=True)
+        output.write_text(self.path / META, text, overwrite=True)
 
     def empty(self, n: int) -> np.ndarray:
         """``n`` zeroed records of this session's dtype (pressure set to "no reading")."""
@@ -295,7 +311,10 @@ class SessionWriter:
         self.meta["n_records"] = self.n_records
         if meta_update:
             self.meta.update(_plain(meta_update))
-        self._write_meta()
+        try:
+            self._write_meta()
+        finally:
+            self._output.close()
 
     def __enter__(self):
         return self
@@ -429,6 +448,8 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
         extra_fields=[(k, dt) for k, (_, dt) in extra_cols.items()],
         meta={"imported_from": str(csv_path), "t_offset_s": float(s.t_s[0]) if n else 0.0, "csv_meta": s.meta},
         overwrite=overwrite,
+        inputs=[csv_path],
+        writer="bendsense import",
     )
     try:
         rec = writer.empty(n)

@@ -115,7 +115,7 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
             click.get_current_context().exit(1)
         return state
 
-    return step
+    return step_io(step, outputs=[output.collection(out_dir)], inputs=[*paths, calibration_path, config_path])
 
 
 @click.command("plot", cls=InterspersedCommand)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from bendsense import output as outputs
 from bendsense.cli._common import InterspersedCommand, make_config_option, make_overwrite_option, quiet
 
 
@@ -67,16 +68,16 @@ def record(
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
     from bendsense.device.recorder import Recorder
     from bendsense.errors import BendsenseError
-    from bendsense.sessiondir import is_session_dir
 
-    if is_session_dir(output) and not overwrite:
-        raise click.BadParameter(f"{output}: a session exists there (use --overwrite)", param_hint="-o/--output")
     if seconds is not None and seconds <= 0:
         raise click.BadParameter(f"expected > 0, got {seconds:g}", param_hint="--seconds")
     if dialect == "line" and channels is None and columns is None:
         raise click.BadParameter("the line dialect needs --channels or --columns", param_hint="--channels")
     cols = [c.strip() for c in columns.split(",")] if columns else None
     show = not quiet_status and not quiet()
+    # the session directory is checked and locked before the port is opened, until the command ends
+    target = outputs.recording(output, overwrite=overwrite)
+    click.get_current_context().with_resource(outputs.reserve([target], [config_path]))
 
     def progress(stats):
         if show:

@@ -64,6 +64,7 @@ def _positive(ctx, param, value):
 )
 @click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing --save image.")
 def live(
     port,
     config_path,
@@ -76,6 +77,7 @@ def live(
     max_fps,
     baud,
     no_start,
+    overwrite,
 ):
     """Show the shape, the tip force (arrow, value and ±σ) and the channel levels of the board on PORT, live.
 
@@ -88,6 +90,11 @@ def live(
     if calibration_path is None:
         raise click.ClickException(_NO_CALIBRATION)
     if save_path is not None:
+        from bendsense import output
+
+        # the image is checked (suffix, existing file, --overwrite) and locked before the port is opened
+        target = output.file(save_path, overwrite=overwrite, suffixes=output.FIGURE)
+        click.get_current_context().with_resource(output.reserve([target], [calibration_path, config_path]))
         import matplotlib
 
         matplotlib.use("Agg")
@@ -121,8 +128,7 @@ def live(
     if save_path is not None:
         if stats is None or stats.frames == 0:
             raise click.ClickException(f"{port}: no frames received; nothing to save")
-        save_path.parent.mkdir(parents=True, exist_ok=True)
-        view.save(save_path)
+        view.save(save_path, overwrite=overwrite)
     if stats is not None:
         click.echo(stats.summary())
     if save_path is not None:
@@ -179,11 +185,12 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
     the tip force of every frame, and writes DIR/session, DIR/results, DIR/demo.png
     with a summary of the force error against the simulated truth.
     """
-    if out_dir.exists() and not overwrite:
-        raise click.ClickException(f"{out_dir}: exists (use --overwrite to replace the demo's outputs in it)")
     if rate_hz > 65535:
         raise click.BadParameter(f"expected at most 65535, got {rate_hz:g}", param_hint="--rate")
+    from bendsense import output
     from bendsense.device.demo import run_demo
+
+    target = output.directory(out_dir, overwrite=overwrite)
 
     silent = quiet()
 
@@ -209,9 +216,10 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
         bar.update(done - bar.n)
 
     try:
-        result = run_demo(
-            out_dir, seconds=seconds, rate_hz=rate_hz, seed=seed, overwrite=overwrite, echo=echo, progress=progress
-        )
+        with output.reserve([target]):  # checked and locked before the board starts
+            result = run_demo(
+                out_dir, seconds=seconds, rate_hz=rate_hz, seed=seed, overwrite=overwrite, echo=echo, progress=progress
+            )
     finally:
         if bar is not None:
             bar.close()

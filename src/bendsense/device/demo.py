@@ -31,6 +31,7 @@ Layout of the output directory::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -152,15 +153,17 @@ def _nothing(_message: str) -> None:
     pass
 
 
-def _calibrate(cal_dir: Path, config, seed: int, echo):
-    """Fit the calibration of the virtual sensor of ``seed``, or reuse the one in ``cal_dir``."""
+def _calibrate(cal_dir: Path, previous: Path, config, seed: int, echo):
+    """Fit the calibration of the virtual sensor of ``seed`` into ``cal_dir``, or reuse the one in ``previous``."""
+    import shutil
+
     import yaml
 
     from bendsense.calibration import Calibration
     from bendsense.sim.scenarios import simulate
 
-    cal_path = cal_dir / "calibration.yaml"
-    description = cal_dir / "scenario.yaml"
+    cal_path = previous / "calibration.yaml"
+    description = previous / "scenario.yaml"
     if cal_path.is_file() and description.is_file():
         try:
             same_seed = yaml.safe_load(description.read_text(encoding="utf-8")).get("seed") == seed
@@ -168,12 +171,13 @@ def _calibrate(cal_dir: Path, config, seed: int, echo):
             same_seed = False
         if same_seed:
             echo(f"calibration: reusing {cal_path}")
-            return Calibration.load(cal_path), cal_path, True
+            shutil.copytree(previous, cal_dir, symlinks=True)
+            return Calibration.load(cal_dir / "calibration.yaml"), True
     echo(f"calibration: simulating the calibration strips (seed {seed}) and fitting ...")
     simulate("calibration", cal_dir, config, seed, overwrite=True)
     cal = Calibration.fit(cal_dir / "manifest.yaml", config.sensor)
-    cal.save(cal_path)
-    return cal, cal_path, False
+    cal.save(cal_dir / "calibration.yaml")
+    return cal, False
 
 
 def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo, progress=None):
@@ -284,8 +288,8 @@ def run_demo(
     seed : int
         Seed of the virtual sensor's hardware and noise.
     overwrite : bool
-        Replace the outputs in an existing ``out_dir`` (a calibration of the same seed
-        there is reused; nothing else in the directory is touched).
+        Replace an earlier demo's outputs in ``out_dir`` (a calibration of the same seed
+        there is reused); a directory holding files bendsense did not write is refused.
     config : Config, optional
         The actuator and sensor (simulated and assumed alike); default the paper's.
     echo : callable, optional
@@ -299,19 +303,15 @@ def run_demo(
 
     Raises
     ------
-    FileExistsError
-        If ``out_dir`` exists and ``overwrite`` is false.
+    OutputExistsError
+        If ``out_dir`` exists and ``overwrite`` is false (a ``FileExistsError``).
+    OutputError
+        If ``out_dir`` holds files bendsense did not write, or may not be written over.
     ValueError
         For ``seconds`` or ``rate_hz`` not > 0.
     """
-    import shutil
-
+    from bendsense import output
     from bendsense.config import load_config
-    from bendsense.estimation import estimate_force
-    from bendsense.pcc import reconstruct
-    from bendsense.results import write_results
-    from bendsense.session import Session
-    from bendsense.sessiondir import read_session_dir
 
     t_start = time.monotonic()
     echo = _nothing if echo is None else echo
@@ -321,18 +321,24 @@ def run_demo(
     if rate_hz > 65535:
         raise ValueError(f"rate_hz: the HELLO carries at most 65535 Hz, got {rate_hz!r}")
     out = Path(out_dir)
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out}: exists (use --overwrite to replace the demo's outputs in it)")
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"{out}: exists and is not a directory")
+    output.check([output.directory(out, overwrite=overwrite)])
     config = load_config() if config is None else config
-    out.mkdir(parents=True, exist_ok=True)
-    session_dir, results_dir, figure_path = out / "session", out / "results", out / "demo.png"
+    with output.write_dir(out, overwrite=overwrite, writer="bendsense demo") as work:
+        result = _run(work, out, config, seconds=seconds, rate_hz=rate_hz, seed=seed, echo=echo, progress=progress)
+    return dataclasses.replace(result, elapsed_s=time.monotonic() - t_start)
 
-    cal, cal_path, reused = _calibrate(out / "calibration", config, seed, echo)
 
-    if session_dir.exists():
-        shutil.rmtree(session_dir)
+def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progress) -> DemoResult:
+    """The demo's steps, writing into ``work`` (swapped in as ``out`` at the end)."""
+    from bendsense.estimation import estimate_force
+    from bendsense.pcc import reconstruct
+    from bendsense.results import write_results
+    from bendsense.session import Session
+    from bendsense.sessiondir import read_session_dir
+
+    session_dir, results_dir, figure_path = work / "session", work / "results", work / "demo.png"
+    cal, reused = _calibrate(work / "calibration", out / "calibration", config, seed, echo)
+
     sim_stats, drv_stats = _record(
         session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed, echo=echo, progress=progress
     )
@@ -380,16 +386,16 @@ def run_demo(
         session.t_s, session.signals, session.pressure_pa, session.seq, dict(session.meta), extra, session.source
     )
     write_results(results_dir, annotated, shape, estimates["normal"], overwrite=True)
-    echo(f"figure: {figure_path} ...")
+    echo(f"figure: {out / figure_path.name} ...")
     write_figure(results_dir, figure_path, title=f"bendsense demo: simulated board, seed {seed}, {len(session)} frames")
 
     residuals = [r.rms_shift_m for r in cal.strip_residuals]
     return DemoResult(
         out_dir=out,
-        session_dir=session_dir,
-        results_dir=results_dir,
-        figure_path=figure_path,
-        calibration_path=cal_path,
+        session_dir=out / session_dir.name,
+        results_dir=out / results_dir.name,
+        figure_path=out / figure_path.name,
+        calibration_path=out / "calibration" / "calibration.yaml",
         calibration_reused=reused,
         calibration_degree=cal.degree,
         calibration_rms_shift_m=float(np.sqrt(np.mean(np.square(residuals)))) if residuals else math.nan,
@@ -408,7 +414,7 @@ def run_demo(
         estimation_rate_hz=rates,
         reconstruction_rate_hz=recon_rate,
         contact_n=float(np.max(true_fc)) if true_fc.size else math.nan,
-        elapsed_s=time.monotonic() - t_start,
+        elapsed_s=math.nan,
     )
 
 
@@ -423,7 +429,7 @@ def write_figure(results_dir, path, *, title=None, max_shapes: int = 8, dpi: int
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
 
-    from bendsense._io import atomic_path
+    from bendsense import output
     from bendsense.plots import plot_shapes, plot_time_series
     from bendsense.results import read_results
 
@@ -471,7 +477,7 @@ def write_figure(results_dir, path, *, title=None, max_shapes: int = 8, dpi: int
     if title:
         fig.suptitle(title)
     path = Path(path)
-    with atomic_path(path) as tmp:
+    with output.write_file(path, overwrite=True, writer="bendsense demo") as tmp:
         fig.savefig(tmp, format="png", dpi=dpi)
     return fig
 

@@ -392,11 +392,11 @@ class LiveView:
         canvas.blit(self.figure.bbox)
         canvas.flush_events()
 
-    def save(self, path, dpi: int = 120) -> None:
-        """Write the figure with the current frame (atomically)."""
+    def save(self, path, dpi: int = 120, overwrite: bool = True) -> None:
+        """Write the figure with the current frame (atomically; :func:`bendsense.output.write_file`)."""
         from pathlib import Path
 
-        from bendsense._io import atomic_path
+        from bendsense import output
 
         path = Path(path)
         fmt = path.suffix[1:].lower() or "png"
@@ -404,7 +404,7 @@ class LiveView:
         for artist in self.artists:
             artist.set_animated(False)
         try:
-            with atomic_path(path) as tmp:
+            with output.write_file(path, overwrite=overwrite, writer="bendsense live") as tmp:
                 self.figure.savefig(tmp, format=fmt, dpi=dpi)
         finally:
             for artist in self.artists:

@@ -17,8 +17,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from bendsense.errors import DeviceError, SessionError
-from bendsense.sessiondir import NO_PRESSURE, SessionWriter, is_session_dir
+from bendsense import output
+from bendsense.errors import DeviceError
+from bendsense.sessiondir import NO_PRESSURE, SessionWriter
 
 __all__ = ["Recorder", "RecorderStats"]
 
@@ -61,7 +62,8 @@ class Recorder:
     path : path
         Session directory to create.
     overwrite : bool
-        Replace an existing session there; otherwise :class:`SessionError`.
+        Replace an earlier session there (only what bendsense wrote; see
+        :mod:`bendsense.output`); otherwise :class:`~bendsense.errors.OutputExistsError`.
     config : Config or dict, optional
         Config snapshot for ``meta.yaml``.
     meta : dict, optional
@@ -83,8 +85,8 @@ class Recorder:
         self.config = config
         self.meta = dict(meta or {})
         self.fsync_interval_s = float(fsync_interval_s)
-        if is_session_dir(path) and not overwrite:
-            raise SessionError(f"{path}: a session exists there (use overwrite=True or --overwrite)")
+        # before the device is read: an output that may not be written stops us here
+        output.check([output.recording(path, overwrite=self.overwrite)])
         self._writer = None
         self._early_events = list(driver.events)  # e.g. the HELLO of the handshake
         self._lock = threading.Lock()
