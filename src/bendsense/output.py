@@ -619,8 +619,11 @@ def _clear_litter(r: Path) -> None:
     """Remove temporary and old siblings of ``r`` left by a killed run (we hold its lock)."""
     if not r.parent.is_dir():
         return
-    for q in r.parent.glob(f".{r.name}.bendsense-*"):
-        rest = q.name[len(r.name) + 1 :]
+    prefix = f".{r.name}"
+    for name in os.listdir(r.parent):
+        if not name.startswith(prefix):
+            continue
+        q, rest = r.parent / name, name[len(prefix) :]
         if q.is_dir() and not q.is_symlink() and rest.startswith(_TMP_MARK):
             shutil.rmtree(q, ignore_errors=True)
         elif q.is_dir() and not q.is_symlink() and rest.startswith(_OLD_MARK):

@@ -1,0 +1,373 @@
+"""Data safety: no command ever deletes or replaces a file that bendsense did not write.
+
+User files are planted next to and inside every output of every writing command, which
+then runs with and without ``--overwrite``; the files must survive byte for byte. The
+special cases of issue 10 (``save . --overwrite``, the session being read inside the
+output, ``process sess/sub/.. -o .``, symlinks, ancestors of the working directory, an
+existing plot, two concurrent writers, the umask, a failure half-way) each have a test.
+"""
+
+import json
+import multiprocessing
+import os
+import shutil
+import stat
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bendsense import load_config, output
+from bendsense.calibration import Calibration
+from bendsense.cli import main
+from bendsense.session import Session, write_session_csv
+from bendsense.sessiondir import SessionWriter, read_session_dir
+from bendsense.sim.scenarios import simulate
+
+SENSOR = load_config().sensor
+N = SENSOR.n_segments
+GAIN = 2e-6
+FRAMES = 6
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    """A small lab: a calibration, a session CSV, a native session, calibration recordings."""
+    root = tmp_path_factory.mktemp("lab")
+    cal = Calibration(offset=np.full(N, 2000.0), coefficients_odd=[0.0, GAIN], coefficients_even=[0.0, -GAIN],
+                      degree=1, delta_a_range_odd=(-5e3, 5e3), delta_a_range_even=(-5e3, 5e3))
+    cal.save(root / "cal.yaml")
+    kappa = np.linspace(2.0, 12.0, FRAMES)[:, None] * np.ones(N)
+    shifts = SENSOR.strip_gap_m * np.cumsum(kappa * SENSOR.lengths_m, axis=-1)
+    odd = np.arange(N) % 2 == 0
+    signals = 2000.0 + np.where(odd, shifts, -shifts) / GAIN
+    session = Session(np.arange(FRAMES) * 0.1, signals, np.full(FRAMES, 50e3))
+    write_session_csv(session, root / "run.csv")
+    with SessionWriter(root / "native", N) as w:
+        rec = w.empty(FRAMES)
+        rec["adc"] = np.round(signals)
+        rec["pressure_pa"] = 50_000
+        w.write(rec)
+    simulate("calibration", root / "calib", frames_per_strip=2, radii_m=[0.05, 0.1, 0.2])
+    (root / "bending.csv").write_text("pressure_kpa,bending_angle_deg\n20,25\n40,55\n60,80\n90,130\n120,176\n")
+    return root
+
+
+@pytest.fixture
+def work(lab, tmp_path, monkeypatch):
+    """A fresh copy of the lab as the working directory."""
+    root = tmp_path / "work"
+    shutil.copytree(lab, root, symlinks=True)
+    monkeypatch.chdir(root)
+    return root
+
+
+def run(*args):
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    assert "Traceback" not in result.output
+    return result
+
+
+def plant(*places):
+    """Put a user file into each directory (created if needed); return {path: content}."""
+    planted = {}
+    for d in places:
+        d.mkdir(parents=True, exist_ok=True)
+        f = d / "USER_NOTES.txt"
+        f.write_text(f"a user's notes in {d.name}")
+        planted[f] = f.read_bytes()
+    return planted
+
+
+def intact(planted):
+    return all(f.is_file() and f.read_bytes() == content for f, content in planted.items())
+
+
+def one_line_error(result):
+    return result.exit_code == 1 and result.output.startswith("Error: ") and result.output.strip().count("\n") == 0
+
+
+def litter(root):
+    """bendsense's temporary files and locks left anywhere under ``root``."""
+    return [p for p in root.rglob("*") if ".bendsense-tmp-" in p.name or p.name.endswith(".bendsense-lock")]
+
+
+# --- every directory-writing command ------------------------------------------------------
+
+DIRECTORY_COMMANDS = {
+    "save": lambda out: ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "save", out],
+    "save-native": lambda out: ["load", "native", "--calibration", "cal.yaml", "reconstruct", "save", out],
+    "simulate": lambda out: ["simulate", "validation", "-o", out, "--frames", "1"],
+    "reproduce": lambda out: ["reproduce", "-o", out, "--quick"],
+    "demo": lambda out: ["demo", "-o", out, "--seconds", "0.2"],
+    "record": lambda out: ["record", "/dev/bendsense-no-such-port", "-o", out, "--seconds", "0.1"],
+}
+CHEAP = ("save", "save-native", "simulate")  # run to completion; the others are refused before any work
+
+
+@pytest.mark.parametrize("name", list(DIRECTORY_COMMANDS))
+def test_user_files_inside_an_output_directory_survive(work, name):
+    args = DIRECTORY_COMMANDS[name]
+    planted = plant(work / "out", work / "out" / "sub")
+    for flag in ([], ["--overwrite"]):
+        result = run(*args("out"), *flag)
+        assert one_line_error(result), result.output
+        assert intact(planted)
+        if flag:
+            assert "USER_NOTES.txt" in result.output and "sub/" in result.output
+        else:
+            assert "exists and is not empty (use --overwrite" in result.output
+    assert sorted(p.name for p in (work / "out").iterdir()) == ["USER_NOTES.txt", "sub"]
+    assert not litter(work)
+
+
+@pytest.mark.parametrize("name", CHEAP)
+def test_user_files_next_to_an_output_directory_survive_and_overwrite_replaces_only_ours(work, name):
+    args = DIRECTORY_COMMANDS[name]
+    planted = plant(work, work / "elsewhere")
+    assert run(*args("out")).exit_code == 0
+    manifest = output.read_manifest(work / "out")
+    assert manifest["writer"].startswith("bendsense") and manifest["files"]
+    assert all((work / "out" / f).exists() for f in manifest["files"])
+    assert run(*args("out")).exit_code == 1  # no --overwrite
+    assert run(*args("out"), "--overwrite").exit_code == 0
+    assert intact(planted) and not litter(work)
+    # a user file put into the output since makes --overwrite refuse
+    planted.update(plant(work / "out"))
+    result = run(*args("out"), "--overwrite")
+    assert one_line_error(result) and "holds files bendsense did not write: USER_NOTES.txt" in result.output
+    assert intact(planted)
+
+
+def test_process_never_replaces_user_files(work):
+    args = ["process", "run.csv", "native", "--calibration", "cal.yaml", "-o", "out", "--workers", "0",
+            "--no-estimate", "--no-progress"]
+    planted = plant(work / "out")  # the root collects outputs: user files there are fine
+    result = run(*args)
+    assert result.exit_code == 0, result.output
+    assert output.read_manifest(work / "out")["files"] == ["run/", "native/"]
+    assert (work / "out/run/results.csv").is_file() and (work / "out/native/results.csv").is_file()
+    planted.update(plant(work / "out" / "run"))
+    result = run(*args, "--overwrite")
+    assert result.exit_code == 1 and "holds files bendsense did not write: USER_NOTES.txt" in result.output
+    assert intact(planted)
+    assert not litter(work)
+
+
+@pytest.mark.parametrize("command", ["calibrate", "calibrate --plot", "identify", "export", "plot"])
+def test_file_outputs_never_replace_a_file_without_overwrite(work, command):
+    (work / "target.yaml").write_text("user's yaml")
+    (work / "target.png").write_bytes(b"user's png")
+    (work / "target.csv").write_text("user's csv")
+    planted = plant(work)
+    args = {
+        "calibrate": ["calibrate", "calib/manifest.yaml", "-o", "target.yaml"],
+        "calibrate --plot": ["calibrate", "calib/manifest.yaml", "-o", "new.yaml", "--plot", "target.png"],
+        "identify": ["identify", "free-bending", "bending.csv", "-o", "target.yaml"],
+        "export": ["load", "run.csv", "export", "target.csv"],
+        "plot": ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "plot", "target.png"],
+    }[command]
+    result = run(*args)
+    assert one_line_error(result) and "exists (use --overwrite to replace it)" in result.output
+    assert (work / "target.yaml").read_text() == "user's yaml"
+    assert (work / "target.png").read_bytes() == b"user's png"
+    assert (work / "target.csv").read_text() == "user's csv"
+    assert not (work / "new.yaml").exists()  # checked before any work: the calibration was not written
+    assert intact(planted) and not litter(work)
+
+
+def test_calibrate_with_plot_writes_both_and_overwrite_replaces_them(work):
+    planted = plant(work)
+    result = run("calibrate", "calib/manifest.yaml", "-o", "c/cal.yaml", "--plot", "c/fit.svg", "--degree", "1")
+    assert result.exit_code == 0, result.output
+    assert Calibration.load(work / "c/cal.yaml").degree == 1 and (work / "c/fit.svg").read_bytes().startswith(b"<?xml")
+    result = run("calibrate", "calib/manifest.yaml", "-o", "c/cal.yaml", "--plot", "c/fit.svg", "--overwrite")
+    assert result.exit_code == 0, result.output
+    assert Calibration.load(work / "c/cal.yaml").degree == 3
+    assert intact(planted) and not litter(work)
+
+
+def test_unknown_plot_suffix_is_refused_before_the_calibration_is_written(work):
+    result = run("calibrate", "calib/manifest.yaml", "-o", "cal2.yaml", "--plot", "fit.xyz")
+    assert one_line_error(result) and "fit.xyz: unknown figure format '.xyz'" in result.output
+    assert not (work / "cal2.yaml").exists()
+    result = run("calibrate", "calib/manifest.yaml", "-o", "cal2.txt")
+    assert one_line_error(result) and "cal2.txt: unknown suffix '.txt'; use one of .yaml, .yml" in result.output
+
+
+# --- the targets issue 10 found destroying data ----------------------------------------------
+
+
+@pytest.mark.parametrize("target", [".", "./", "..", "sub/..", "sub/../.", "/"])
+def test_the_working_directory_and_its_ancestors_are_never_targets(work, target):
+    (work / "sub").mkdir()
+    before = sorted(p.name for p in work.iterdir())
+    for args in (
+        DIRECTORY_COMMANDS["save"](target),
+        DIRECTORY_COMMANDS["simulate"](target),
+        ["process", "run.csv", "--calibration", "cal.yaml", "-o", target, "--workers", "0", "--no-progress"],
+    ):
+        result = run(*args, "--overwrite")
+        assert one_line_error(result) and "working directory" in result.output, result.output
+        assert sorted(p.name for p in work.iterdir()) == before
+    assert (work / "run.csv").is_file() and (work / "cal.yaml").is_file()
+
+
+def test_process_of_a_subdirectory_dot_dot_into_the_working_directory(work):
+    (work / "sess" / "sub").mkdir(parents=True)
+    shutil.copy(work / "run.csv", work / "sess" / "a.csv")
+    before = sorted(str(p.relative_to(work)) for p in work.rglob("*"))
+    result = run("process", "sess/sub/..", "--calibration", "cal.yaml", "-o", ".", "--overwrite", "--workers", "0")
+    assert one_line_error(result) and "working directory" in result.output
+    assert sorted(str(p.relative_to(work)) for p in work.rglob("*")) == before
+
+
+@pytest.mark.parametrize("session", ["data/run.csv", "data/native"])
+def test_save_over_the_directory_that_holds_the_session_being_read(work, session):
+    (work / "data").mkdir()
+    shutil.move(work / session.split("/", 1)[1], work / session)  # the lab's run.csv or native
+    before = {p: p.read_bytes() for p in (work / "data").rglob("*") if p.is_file()}
+    for target in ("data", "data/.", "data/../data"):
+        args = ["load", session, "--calibration", "cal.yaml", "reconstruct", "save", target, "--overwrite"]
+        result = run(*args)
+        assert one_line_error(result) and f"holds the input {session} of this command" in result.output
+    if session == "data/native":  # the session directory itself
+        result = run("load", session, "--calibration", "cal.yaml", "reconstruct", "save", session, "--overwrite")
+        assert one_line_error(result) and "is an input of this command" in result.output
+    assert {p: p.read_bytes() for p in (work / "data").rglob("*") if p.is_file()} == before
+    # inside the session's directory is fine: the output is swapped, the input stays
+    result = run("load", session, "--calibration", "cal.yaml", "reconstruct", "save", "data/results")
+    assert result.exit_code == 0, result.output
+    assert all(p.read_bytes() == content for p, content in before.items())
+
+
+def test_inputs_are_never_targets(work):
+    result = run("load", "run.csv", "export", "run.csv", "--overwrite")
+    assert one_line_error(result) and "run.csv: is an input of this command" in result.output
+    result = run("calibrate", "calib/manifest.yaml", "-o", "calib/manifest.yaml", "--overwrite")
+    assert one_line_error(result) and "is an input of this command" in result.output
+    result = run("identify", "free-bending", "bending.csv", "--config", "cal.yaml", "-o", "cal.yaml", "--overwrite")
+    assert one_line_error(result) and "is an input of this command" in result.output
+    result = run("process", "native", "--calibration", "cal.yaml", "-o", "native/..", "--workers", "0")
+    assert one_line_error(result)
+    assert Calibration.load(work / "cal.yaml").degree == 1 and len(read_session_dir(work / "native")) == FRAMES
+
+
+def test_symlinked_targets_resolve_before_the_checks(work):
+    user = work / "userdir"
+    planted = plant(user)
+    (work / "link").symlink_to(user)
+    (work / "here").symlink_to(work)
+    (work / "cal-link.yaml").symlink_to(work / "cal.yaml")
+    result = run(*DIRECTORY_COMMANDS["save"]("link"), "--overwrite")
+    assert one_line_error(result) and "not a bendsense output" in result.output and "USER_NOTES.txt" in result.output
+    result = run(*DIRECTORY_COMMANDS["save"]("here"), "--overwrite")
+    assert one_line_error(result) and "working directory" in result.output
+    result = run("calibrate", "calib/manifest.yaml", "-o", "cal-link.yaml", "--overwrite",
+                 "load", "run.csv", "--calibration", "cal.yaml")
+    assert one_line_error(result) and "is an input of this command" in result.output
+    assert intact(planted) and Calibration.load(work / "cal.yaml").degree == 1
+    # a link to a directory bendsense wrote is followed: the output is replaced behind it
+    assert run(*DIRECTORY_COMMANDS["save"]("real")).exit_code == 0
+    (work / "out-link").symlink_to(work / "real")
+    assert run(*DIRECTORY_COMMANDS["save"]("out-link"), "--overwrite").exit_code == 0
+    assert (work / "out-link").is_symlink() and (work / "real" / "results.csv").is_file()
+
+
+def test_a_chain_checks_every_output_before_the_first_step(work):
+    (work / "fig.png").write_bytes(b"user's png")
+    args = ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "save", "out", "plot", "fig.png"]
+    result = run(*args)
+    assert one_line_error(result) and "fig.png: exists" in result.output
+    assert not (work / "out").exists()  # save did not run
+    result = run(*args[:-1], "fig.webp2")
+    assert one_line_error(result) and "unknown figure format" in result.output and not (work / "out").exists()
+    # into the results directory: the figure joins its manifest, so --overwrite may replace both
+    args = ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "save", "out", "plot", "out/fig.png"]
+    assert run(*args).exit_code == 0
+    assert output.read_manifest(work / "out")["files"] == ["results.csv", "shape.npz", "fig.png"]
+    assert run(*args[:7], "--overwrite", "plot", "out/fig.png", "--overwrite").exit_code == 0
+    assert (work / "fig.png").read_bytes() == b"user's png"
+
+
+def test_a_failure_half_way_leaves_nothing(work, monkeypatch):
+    import bendsense.results
+
+    def disk_full(path, **arrays):
+        with open(path, "wb") as fh:
+            fh.write(b"PK\x03\x04 half")
+        raise OSError(28, "No space left on device", str(path))
+
+    with monkeypatch.context() as m:
+        m.setattr(bendsense.results.np, "savez", disk_full)
+        result = run(*DIRECTORY_COMMANDS["save"]("out"))
+    assert one_line_error(result)
+    assert "out/shape.npz: cannot write: No space left on device" in result.output
+    assert ".bendsense-tmp" not in result.output  # the user's path, not the hidden one
+    assert not (work / "out").exists() and not litter(work)
+    assert run(*DIRECTORY_COMMANDS["save"]("out")).exit_code == 0
+    before = (work / "out" / "results.csv").read_bytes()
+    with monkeypatch.context() as m:
+        m.setattr(bendsense.results.np, "savez", disk_full)
+        assert run(*DIRECTORY_COMMANDS["save"]("out"), "--overwrite").exit_code == 1
+    assert (work / "out" / "results.csv").read_bytes() == before and (work / "out" / "shape.npz").is_file()
+    assert not litter(work)
+
+
+# --- concurrency, permissions, recordings ---------------------------------------------------
+
+
+def _hold(path, ready, release):
+    with output.reserve([output.directory(path)]):
+        ready.set()
+        release.wait(30)
+
+
+def test_two_runs_on_one_output_the_second_refuses(work):
+    ctx = multiprocessing.get_context("spawn")
+    ready, release = ctx.Event(), ctx.Event()
+    proc = ctx.Process(target=_hold, args=(str(work / "out"), ready, release))
+    proc.start()
+    try:
+        assert ready.wait(60)
+        for args in (DIRECTORY_COMMANDS["save"]("out"), DIRECTORY_COMMANDS["simulate"]("out"),
+                     DIRECTORY_COMMANDS["record"]("out")):
+            result = run(*args)
+            assert one_line_error(result) and "another bendsense run is writing there" in result.output
+        assert not (work / "out").exists()
+    finally:
+        release.set()
+        proc.join(60)
+    assert run(*DIRECTORY_COMMANDS["save"]("out")).exit_code == 0
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077])
+def test_permissions_follow_the_umask(work, umask):
+    old = os.umask(umask)
+    try:
+        assert run(*DIRECTORY_COMMANDS["save"]("out")).exit_code == 0
+        assert run("calibrate", "calib/manifest.yaml", "-o", "new.yaml", "--degree", "1").exit_code == 0
+        with SessionWriter(work / "rec", N) as w:
+            w.write(w.empty(1))
+    finally:
+        os.umask(old)
+    for p in [work / "out", *(work / "out").iterdir(), work / "new.yaml", work / "rec", *(work / "rec").iterdir()]:
+        full = 0o777 if p.is_dir() else 0o666
+        assert stat.S_IMODE(p.stat().st_mode) == full & ~umask, p
+
+
+def test_a_killed_recording_is_still_bendsenses_and_user_files_stop_record(work):
+    w = SessionWriter(work / "rec", N)  # never closed: killed
+    w.write(w.empty(2))
+    manifest = json.loads((work / "rec" / output.MANIFEST_NAME).read_text())
+    assert manifest["files"] == ["meta.yaml", "frames.bin", "events.log"] and manifest["writer"] == "bendsense record"
+    w.close()
+    assert output.foreign_entries(work / "rec") == []
+    planted = plant(work / "rec")
+    result = run(*DIRECTORY_COMMANDS["record"]("rec"), "--overwrite")  # refused before the port is opened
+    assert one_line_error(result) and "holds files bendsense did not write: USER_NOTES.txt" in result.output
+    assert intact(planted) and len(read_session_dir(work / "rec")) == 2
+    (work / "rec" / "USER_NOTES.txt").unlink()
+    with SessionWriter(work / "rec", N, overwrite=True) as w2:
+        w2.write(w2.empty(1))
+    assert len(read_session_dir(work / "rec")) == 1
