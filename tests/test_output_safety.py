@@ -263,8 +263,8 @@ def test_symlinked_targets_resolve_before_the_checks(work):
     assert one_line_error(result) and "not a bendsense output" in result.output and "USER_NOTES.txt" in result.output
     result = run(*DIRECTORY_COMMANDS["save"]("here"), "--overwrite")
     assert one_line_error(result) and "working directory" in result.output
-    result = run("calibrate", "calib/manifest.yaml", "-o", "cal-link.yaml", "--overwrite",
-                 "load", "run.csv", "--calibration", "cal.yaml")
+    result = run("load", "run.csv", "--calibration", "cal.yaml",
+                 "calibrate", "calib/manifest.yaml", "-o", "cal-link.yaml", "--overwrite")
     assert one_line_error(result) and "is an input of this command" in result.output
     assert intact(planted) and Calibration.load(work / "cal.yaml").degree == 1
     # a link to a directory bendsense wrote is followed: the output is replaced behind it
@@ -371,3 +371,25 @@ def test_a_killed_recording_is_still_bendsenses_and_user_files_stop_record(work)
     with SessionWriter(work / "rec", N, overwrite=True) as w2:
         w2.write(w2.empty(1))
     assert len(read_session_dir(work / "rec")) == 1
+
+
+def test_what_a_chain_wrote_earlier_is_not_an_input_of_its_later_steps(work):
+    args = ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "save", "out", "plot", "out", "-o", "fig.png"]
+    result = run(*args)
+    assert result.exit_code == 0, result.output
+    assert (work / "fig.png").is_file() and (work / "out" / "results.csv").is_file()
+    # the other way round, the results directory is read before it would be written over
+    result = run("plot", "out", "-o", "fig2.png", "load", "run.csv", "--calibration", "cal.yaml", "reconstruct",
+                 "save", "out", "--overwrite")
+    assert one_line_error(result) and "out: is an input of this command" in result.output
+    assert not (work / "fig2.png").exists()
+
+
+def test_a_plot_that_cannot_be_drawn_leaves_no_calibration(work, monkeypatch):
+    def broken(self, *args, **kwargs):
+        raise RuntimeError("drawing failed")
+
+    monkeypatch.setattr(Calibration, "plot", broken)
+    result = CliRunner().invoke(main, ["calibrate", "calib/manifest.yaml", "-o", "new.yaml", "--plot", "fit.png"])
+    assert result.exit_code != 0 and isinstance(result.exception, RuntimeError)
+    assert not (work / "new.yaml").exists() and not (work / "fit.png").exists() and not litter(work)

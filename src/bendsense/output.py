@@ -72,6 +72,7 @@ __all__ = [
     "add_to_manifest",
     "read_manifest",
     "foreign_entries",
+    "resolve",
 ]
 
 log = logging.getLogger("bendsense")
@@ -147,6 +148,11 @@ def collection(path) -> Target:
 
 def _resolve(path) -> Path:
     return Path(os.path.abspath(path)).resolve()
+
+
+def resolve(path) -> Path:
+    """The absolute path with every ``..`` and symlink resolved: what the checks compare."""
+    return _resolve(path)
 
 
 def _is_within(inner: Path, outer: Path) -> bool:

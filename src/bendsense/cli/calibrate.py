@@ -78,14 +78,17 @@ def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_pat
 
         sensor = load_config(config_path).sensor
         cal = Calibration.fit(manifest, sensor, degree=degree, weighting=weighting, sleeve=sleeve)
-        cal.save(output, overwrite=overwrite)
-        click.echo(cal.report())
-        click.echo(f"wrote {output}")
-        if plot_path is not None:
+        figure = None
+        if plot_path is not None:  # drawn before anything is written: a failure leaves no calibration
             import matplotlib
 
             matplotlib.use("Agg")
-            save_figure(cal.plot()[0].figure, plot_path, overwrite=overwrite)
+            figure = cal.plot()[0].figure
+        cal.save(output, overwrite=overwrite)
+        click.echo(cal.report())
+        click.echo(f"wrote {output}")
+        if figure is not None:
+            save_figure(figure, plot_path, overwrite=overwrite)
         state["calibration"] = cal
         return state
 

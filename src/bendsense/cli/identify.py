@@ -125,13 +125,15 @@ def identify(
         except BendsenseError as err:
             raise click.ClickException(f"{data}: {err}" if str(data) not in str(err) else str(err)) from None
         click.echo(fit.report())
-        save_config(new_config, output, overwrite=overwrite)
-        click.echo(f"wrote {output}")
-        if plot_path is not None:
+        ax = None
+        if plot_path is not None:  # drawn before anything is written: a failure leaves no config
             import matplotlib
 
             matplotlib.use("Agg")
             ax = fit.plot(config=config) if kind == "free-bending" else fit.plot()
+        save_config(new_config, output, overwrite=overwrite)
+        click.echo(f"wrote {output}")
+        if ax is not None:
             save_figure(ax.figure, plot_path, overwrite=overwrite)
         state["config"] = new_config
         return state

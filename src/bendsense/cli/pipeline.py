@@ -52,11 +52,15 @@ def run_steps(steps) -> dict:
 
     Every output of every step is checked and locked first (:func:`bendsense.output.reserve`),
     against the inputs of all steps, so that a bad output path stops the command before
-    any work and nothing is half-done.
+    any work and nothing is half-done. What a step reads after an earlier step wrote it
+    (``save out plot out -o fig.png``) is the chain's own product, not an input.
     """
     steps = [step for step in steps if step is not None]
-    targets = [t for step in steps for t in getattr(step, "outputs", ())]
-    inputs = [p for step in steps for p in getattr(step, "inputs", ())]
+    targets, inputs, written = [], [], set()
+    for step in steps:
+        inputs += [p for p in getattr(step, "inputs", ()) if output.resolve(p) not in written]
+        targets += getattr(step, "outputs", ())
+        written.update(output.resolve(t.path) for t in getattr(step, "outputs", ()))
     state: dict = {}
     with output.reserve(targets, inputs):
         for step in steps:
