@@ -52,6 +52,7 @@ from bendsense.errors import ArgumentError, ConfigError, SessionError
 
 __all__ = [
     "Calibration",
+    "AngleCovariance",
     "StripResidual",
     "Manifest",
     "read_manifest",
@@ -373,6 +374,33 @@ class StripResidual:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
+@dataclass(frozen=True, eq=False)
+class AngleCovariance:
+    """Covariance of the measured tangent angles ``φ(L_i) = S_i / d``, by source.
+
+    Attributes
+    ----------
+    noise : ndarray, shape (..., N, N)
+        The frame's signal noise through the calibration's slopes [rad²]; diagonal.
+    calibration : ndarray, shape (..., N, N)
+        The calibration's error: its coefficients and offsets (from the noise of
+        the recordings it was fitted to) and the polynomials' misfit [rad²].
+    """
+
+    noise: np.ndarray
+    calibration: np.ndarray
+
+    @property
+    def total(self) -> np.ndarray:
+        """``noise + calibration`` [rad²], shape (..., N, N)."""
+        return self.noise + self.calibration
+
+    @property
+    def std_rad(self) -> np.ndarray:
+        """Standard deviation of each angle from ``total`` [rad], shape (..., N)."""
+        return np.sqrt(np.diagonal(self.total, axis1=-2, axis2=-1))
+
+
 def _array(where: str, value: Any, length: int | None = None) -> np.ndarray:
     if not isinstance(value, (list, tuple, np.ndarray)):
         raise ConfigError(f"{where}: expected a list of numbers, got {value!r}")
@@ -464,6 +492,9 @@ class Calibration:
         set_(self, "coefficients_even", c_even)
         set_(self, "delta_a_range_odd", _range("delta_a_range_odd", self.delta_a_range_odd))
         set_(self, "delta_a_range_even", _range("delta_a_range_even", self.delta_a_range_even))
+        # noise_std stays an array (zeros when not measured) for the range margin;
+        # noise_known tells a measured zero from a missing value
+        set_(self, "_noise_known", self.noise_std is not None)
         noise = np.zeros(n) if self.noise_std is None else _array("noise_std", self.noise_std, n)
         if np.any(noise < 0):
             raise ConfigError(f"noise_std: values must be >= 0, got {noise.tolist()}")
@@ -705,6 +736,321 @@ class Calibration:
         if a.shape[-1:] != (self.n_channels,):
             raise ArgumentError(f"signals: expected {self.n_channels} channels on the last axis, got shape {a.shape}")
 
+    # -- the measurement model: public methods for the estimator ------------------------
+
+    @property
+    def noise_known(self) -> bool:
+        """Whether the per-channel noise was measured (False for an old file without ``noise_std``)."""
+        return self._noise_known
+
+    def noise_std_counts(self) -> np.ndarray:
+        """Per-channel signal noise σ_A [counts], the flat recording's frame standard deviation.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            ``noise_std`` as measured at fit time (a measured zero stays zero).
+
+        Raises
+        ------
+        ConfigError
+            If the calibration does not hold a measured noise (a file without
+            ``noise_std``, or a flat recording of a single frame).
+        """
+        if not self._noise_known:
+            raise ConfigError(
+                "calibration: noise_std is missing (not measured: an older file or a one-frame flat "
+                "recording); refit with `bendsense calibrate` from a flat recording of many frames"
+            )
+        return self.noise_std
+
+    def shift_slopes(self, signals) -> np.ndarray:
+        """Slopes dS/dA of the calibration at raw signals A, per channel (paper eq. 2).
+
+        Parameters
+        ----------
+        signals : array_like, shape (..., N)
+            Raw signals A [counts].
+
+        Returns
+        -------
+        ndarray, shape (..., N)
+            ``f_i'(A_i − A0_i)`` [m/count], with f_odd for odd and f_even for even channels.
+        """
+        a = np.asarray(signals, dtype=float)
+        self._check_channels(a)
+        return self._slopes_from_delta(a - self.offset)
+
+    def _slopes_from_delta(self, delta_a):
+        cols = self._slope_columns
+        if not cols:
+            return np.zeros(np.shape(delta_a))
+        out = cols[0] + 0.0 * delta_a
+        for ck in cols[1:]:
+            out = out * delta_a + ck
+        return out
+
+    def delta_from_shifts(self, shifts_m) -> np.ndarray:
+        """Offset-free signals ΔA with ``f_i(ΔA_i) = S_i``: the inverse of :meth:`shifts_from_delta`.
+
+        Per channel, a safeguarded Newton iteration inside the fitted ΔA range of its
+        parity widened by its width on both sides, where the root is bracketed (the
+        polynomials are monotone there for a sensible calibration); elsewhere plain
+        Newton from the linear inverse. Converges to ~1e-13 relative.
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Shifts S [m].
+
+        Returns
+        -------
+        ndarray, shape (..., N)
+            ΔA [counts]; NaN where no inverse was found (a shift the polynomial
+            never reaches, or a non-finite shift).
+        """
+        s = np.asarray(shifts_m, dtype=float)
+        if s.ndim == 0 or s.shape[-1] != self.n_channels:
+            raise ValueError(f"shifts_m: expected shape (..., {self.n_channels}), got {s.shape}")
+        s = np.broadcast_to(s, s.shape).copy()
+        lo_r, hi_r = self._channel_range
+        width = np.maximum(hi_r - lo_r, 1e-12)
+        lo = np.broadcast_to(lo_r - width, s.shape).copy()
+        hi = np.broadcast_to(hi_r + width, s.shape).copy()
+        g_lo = self.shifts_from_delta(lo) - s
+        g_hi = self.shifts_from_delta(hi) - s
+        sign = np.where(g_hi >= g_lo, 1.0, -1.0)
+        bracketed = (g_lo * sign <= 0) & (g_hi * sign >= 0)
+        nonzero, safe = self._linear_slope
+        c0 = self._channel_coefficients[:, 0]
+        x = np.where(bracketed, 0.5 * (lo + hi), np.where(nonzero, (s - c0) / safe, 0.0))
+        done = ~np.isfinite(s)
+        for _ in range(200):
+            g = self.shifts_from_delta(x) - s
+            fp = self._slopes_from_delta(x)
+            h = g * sign
+            lo = np.where(bracketed & (h < 0), x, lo)
+            hi = np.where(bracketed & (h > 0), x, hi)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                new = x - g / fp
+            bad = ~np.isfinite(new) | (bracketed & ~((new > lo) & (new < hi)))
+            new = np.where(bad, np.where(bracketed, 0.5 * (lo + hi), x), new)
+            step = np.abs(new - x)
+            x = np.where(done, x, new)
+            done |= (step <= 1e-13 * np.maximum(np.abs(x), width)) | (g == 0)
+            if done.all():
+                break
+        ok = np.abs(self.shifts_from_delta(x) - s) <= 1e-9 * np.maximum(np.abs(s), 1e-9)
+        return np.where(ok & np.isfinite(s), x, np.nan)
+
+    def signals_from_shifts(self, shifts_m) -> np.ndarray:
+        """Raw signals A = A0 + ΔA that the calibration maps to the shifts S (inverse of :meth:`shifts_m`).
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Shifts S [m].
+
+        Returns
+        -------
+        ndarray, shape (..., N)
+            Signals A [counts]; NaN where the polynomial has no inverse
+            (:meth:`delta_from_shifts`).
+        """
+        return self.delta_from_shifts(shifts_m) + self.offset
+
+    def strip_gap_m(self, sensor=None) -> float:
+        """The strip gap d the calibration's shifts were labelled with (``S = κ_cal d L_i``) [m].
+
+        The calibration's own sensor snapshot wins: its shifts are ``d_cal`` times an
+        angle, whatever gap another config states (docs/theory.md, "What the sensor
+        measures"). Without a snapshot (an old file) the ``sensor`` given is used.
+
+        Raises
+        ------
+        ConfigError
+            Without a snapshot and without ``sensor``; or if ``sensor`` has another
+            channel count or other segment lengths than the snapshot.
+        """
+        sensor = getattr(sensor, "sensor", sensor)
+        if sensor is not None:
+            if sensor.n_segments != self.n_channels:
+                raise ConfigError(
+                    f"sensor.n_segments: expected {self.n_channels} (the calibration's channels), "
+                    f"got {sensor.n_segments}"
+                )
+            if self.sensor is not None and not np.allclose(sensor.lengths_m, self.sensor.lengths_m, rtol=1e-9):
+                raise ConfigError(
+                    f"sensor.segment_lengths_m: {list(sensor.segment_lengths_m)} differ from the calibration's "
+                    f"{list(self.sensor.segment_lengths_m)}; the coil positions L_i would be ambiguous"
+                )
+        if self.sensor is not None:
+            return float(self.sensor.strip_gap_m)
+        if sensor is None:
+            raise ConfigError(
+                "calibration: sensor is missing (no snapshot of the sensor it was fitted for); "
+                "pass the sensor (config) the calibration was fitted with"
+            )
+        return float(sensor.strip_gap_m)
+
+    def angles_rad(self, signals, sensor=None) -> np.ndarray:
+        """Tangent angle at each receiver coil, ``φ(L_i) = S_i / d`` (DESIGN "What the sensor measures").
+
+        The shift of segment i is ``S_i = d φ(L_i)`` (paper eq. 3–4 read backwards);
+        the calibration labelled its strips ``S_i = κ_cal d L_i`` with its own ``d``
+        (:meth:`strip_gap_m`), so ``S_i / d`` is ``κ_cal L_i`` on a strip whatever
+        the physical gap, and ``κ_cal`` (1/R, or 1/(R + c) with ``sleeve``) is the
+        curvature of the receiver strip by the calibration's convention. Tangent
+        angles of parallel curves agree at corresponding points, so no sleeve term
+        enters here; docs/theory.md derives this and what a wrong convention costs.
+
+        Parameters
+        ----------
+        signals : array_like, shape (..., N)
+            Raw signals A [counts].
+        sensor : SensorConfig or Config, optional
+            Checked against the calibration's sensor snapshot; gives ``d`` for an
+            old calibration without a snapshot.
+
+        Returns
+        -------
+        ndarray, shape (..., N)
+            φ(L_i) relative to the base [rad], L_i the cumulative segment lengths.
+        """
+        return self.shifts_m(signals) / self.strip_gap_m(sensor)
+
+    def angle_covariance(self, signals, sensor=None) -> AngleCovariance:
+        """Covariance of the measured angles :meth:`angles_rad`, by source (docs/theory.md).
+
+        - ``noise``: the frame's signal noise through the slopes,
+          ``diag(f_i'(ΔA_i)² σ_i²) / d²``, σ from :meth:`noise_std_counts`;
+        - ``calibration``: the calibration's own error, the same for every frame
+          that sees the same signals: the uncertainty of the coefficients and offsets
+          (:attr:`coefficient_covariance`; the odd channels share f_odd's
+          coefficients and so err together) through ``∂S_i/∂(a, b, A0)``, plus the
+          polynomials' misfit from the fit residuals (:meth:`shift_error_m`).
+
+        Parameters
+        ----------
+        signals : array_like, shape (..., N)
+            Raw signals A [counts].
+        sensor : SensorConfig or Config, optional
+            As in :meth:`angles_rad`.
+
+        Returns
+        -------
+        AngleCovariance
+            ``noise`` and ``calibration``, each (..., N, N) [rad²]; ``total`` their sum.
+
+        Raises
+        ------
+        ConfigError
+            Naming what the calibration lacks (``noise_std``, the fitted data
+            ``fit_delta_a``/``fit_shifts_m``, frame counts) — never a silent zero.
+        """
+        a = np.asarray(signals, dtype=float)
+        self._check_channels(a)
+        d = self.strip_gap_m(sensor)
+        sigma = self.noise_std_counts()
+        q = self.coefficient_covariance
+        delta = a - self.offset
+        slope = self._slopes_from_delta(delta)
+        n, k = self.n_channels, self.degree + 1
+        sd = slope * sigma
+        noise = sd[..., :, None] * np.eye(n) * sd[..., None, :]
+        odd, _ = parity_masks(n)
+        powers = delta[..., None] ** np.arange(k)  # (..., N, k)
+        lin = np.zeros((*delta.shape, 2 * k + n))
+        lin[..., odd, :k] = powers[..., odd, :]
+        lin[..., ~odd, k : 2 * k] = powers[..., ~odd, :]
+        idx = np.arange(n)
+        lin[..., idx, 2 * k + idx] = -slope
+        coef = lin @ q @ np.swapaxes(lin, -1, -2)
+        misfit = self.shift_error_m(self.shifts_from_delta(delta), covariance=True)
+        return AngleCovariance(noise=noise / d**2, calibration=(coef + misfit) / d**2)
+
+    def _fit_operator(self, mask):
+        """The fit's least-squares operator of one parity: ``c = op @ y[keep]`` (as :func:`polyfit_shift`)."""
+        k = self.degree + 1
+        x = self.fit_delta_a[:, mask].ravel()
+        y = self.fit_shifts_m[:, mask]
+        w = (_shift_weights(y) if self.weighting == "shift" else np.ones(y.size)).ravel()
+        keep = w > 0
+        xs = x[keep]
+        scale = float(np.max(np.abs(xs))) or 1.0
+        sw = np.sqrt(w[keep])
+        op = np.linalg.pinv(np.vander(xs / scale, k, increasing=True) * sw[:, None]) * sw
+        return keep, op / scale ** np.arange(k)[:, None]
+
+    @cached_property
+    def coefficient_covariance(self) -> np.ndarray:
+        """Joint covariance of ``(a_0..a_n, b_0..b_n, A0_1..A0_N)`` from the fit's data noise.
+
+        The strip means and the offsets are averages of noisy frames: strip k's
+        ΔA has the error ``ε_k − δA0`` (``Var ε = σ²/frames_k``, ``Var δA0 =
+        σ²/flat_frames``, σ = :meth:`noise_std_counts`), while its shift label is
+        exact. Moving a point's ΔA by δx moves its residual like a shift error
+        ``−f'(x) δx``, so the coefficients, linear in the labels, move by
+        ``δc = −A diag(f') δx`` with ``A`` the fit's (weighted) least-squares
+        operator. The offsets enter every later frame as well, which makes them part
+        of the vector. The odd and even blocks are independent (no channel is in
+        both); within a block all channels of that parity share the error.
+
+        Returns
+        -------
+        ndarray, shape (2 (n + 1) + N, 2 (n + 1) + N)
+            [m²/count^(j+k)] for the coefficient entries, [counts²] for the offsets.
+
+        Raises
+        ------
+        ConfigError
+            If the fitted data, the noise or the frame counts are not stored.
+        """
+        n, k = self.n_channels, self.degree + 1
+        if self.fit_delta_a is None or self.fit_shifts_m is None:
+            raise ConfigError(
+                "calibration: fit_delta_a, fit_shifts_m are missing (an older file without the fitted data); "
+                "refit with `bendsense calibrate` to get the coefficients' covariance"
+            )
+        sigma = self.noise_std_counts()
+        rows = self.fit_delta_a.shape[0]
+        flat_frames = self.meta.get("flat_frames")
+        frames = [r.n_frames for r in self.strip_residuals]
+        if not isinstance(flat_frames, int) or flat_frames < 1:
+            raise ConfigError("calibration: meta.flat_frames is missing (frames of the flat recording)")
+        if len(frames) != rows - 1 or min(frames, default=1) < 1:
+            raise ConfigError(
+                f"calibration: strip_residuals[].n_frames: expected the frame count of each of the {rows - 1} "
+                f"strips, got {frames}"
+            )
+        var_strip = np.concatenate([[0.0], 1.0 / np.asarray(frames, dtype=float)])[:, None] * sigma**2  # (R, N)
+        var_offset = sigma**2 / flat_frames
+        odd, even = parity_masks(n)
+        q = np.zeros((2 * k + n, 2 * k + n))
+        q[2 * k :, 2 * k :] = np.diag(var_offset)
+        for block, (mask, coef) in enumerate(((odd, self.coefficients_odd), (even, self.coefficients_even))):
+            if not np.any(mask):
+                continue
+            x = self.fit_delta_a[:, mask]
+            keep, op = self._fit_operator(mask)
+            xs = x.ravel()[keep]
+            slope = np.zeros(x.size)
+            slope[keep] = polyval_shift(coef[1:] * np.arange(1, k), xs) if k > 1 else 0.0
+            gain = np.zeros((k, x.size))
+            gain[:, keep] = op * slope[keep]  # δc = −gain · δx, per point
+            cov_eps = (gain * var_strip[:, mask].ravel()) @ gain.T
+            # δx = ε − δA0(channel): δc gets +gain summed over the channel's points
+            channel = np.broadcast_to(np.flatnonzero(mask), x.shape).ravel()
+            strip_row = np.broadcast_to(np.arange(rows)[:, None] > 0, x.shape).ravel()
+            to_offset = np.zeros((k, n))
+            np.add.at(to_offset.T, channel[strip_row], gain[:, strip_row].T)
+            sl = slice(block * k, (block + 1) * k)
+            q[sl, sl] += cov_eps + (to_offset * var_offset) @ to_offset.T
+            q[sl, 2 * k :] = to_offset * var_offset
+            q[2 * k :, sl] = q[sl, 2 * k :].T
+        return q
+
+
     # -- fitting ------------------------------------------------------------------------
 
     @classmethod
@@ -822,7 +1168,7 @@ class Calibration:
         recordings = list(recordings) if recordings is not None else [f"strip {i}" for i in range(len(strips))]
 
         offset = flat.mean(axis=0)
-        noise = flat.std(axis=0, ddof=1) if flat.shape[0] > 1 else np.zeros(n)
+        noise = flat.std(axis=0, ddof=1) if flat.shape[0] > 1 else None  # one frame: not measured
         extra = sensor.sleeve_thickness_m if sleeve else 0.0
         kappa = np.array([1.0 / (r + extra) for r in radii])
         delta = np.vstack([np.zeros(n)] + [s.mean(axis=0) - offset for s in strips])  # flat first
@@ -896,7 +1242,7 @@ class Calibration:
             "coefficients_even": self.coefficients_even.tolist(),
             "delta_a_range_odd": list(self.delta_a_range_odd),
             "delta_a_range_even": list(self.delta_a_range_even),
-            "noise_std": self.noise_std.tolist(),
+            "noise_std": self.noise_std.tolist() if self.noise_known else None,
             "weighting": self.weighting,
             "sleeve": self.sleeve,
             "strip_residuals": [r.to_dict() for r in self.strip_residuals],
