@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bendsense.config import StiffnessConfig
+from bendsense.config import FREE_BENDING_PARAMETERS, MODEL_PARAMETERS, STIFFNESS_PARAMETERS, StiffnessConfig
 from bendsense.errors import ArgumentError, ConfigError, ConvergenceError
 
 __all__ = [
@@ -39,7 +39,12 @@ __all__ = [
     "elastic_moment_slope",
     "solve_bending_angle",
     "ei_nm2",
+    "ei_jacobian",
+    "model_jacobian",
     "FreeBendingModel",
+    "FREE_BENDING_PARAMETERS",
+    "STIFFNESS_PARAMETERS",
+    "MODEL_PARAMETERS",
 ]
 
 _log = logging.getLogger(__name__)
@@ -324,6 +329,69 @@ def ei_nm2(pressure_pa, ei0_nm2: float, ei1_nm2_per_pa: float) -> np.ndarray:
     return StiffnessConfig(ei0_nm2=ei0_nm2, ei1_nm2_per_pa=ei1_nm2_per_pa).ei_nm2(p)
 
 
+def ei_jacobian(pressure_pa) -> np.ndarray:
+    """Sensitivity of EI(P) = ei0 + ei1 · P (paper eq. 15) to its coefficients.
+
+    Parameters
+    ----------
+    pressure_pa : array_like, shape (...)
+        Gauge pressure P [Pa].
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        ∂EI/∂(``ei0_nm2``, ``ei1_nm2_per_pa``) = (1, P) [1, Pa], in the order of
+        :data:`STIFFNESS_PARAMETERS`.
+    """
+    p = _finite("pressure_pa", pressure_pa)
+    return np.stack([np.ones(p.shape), p], axis=-1)
+
+
+def model_jacobian(config, pressure_pa, parameters=None) -> np.ndarray:
+    """Sensitivity of the beam model's inputs (K0, EI) to the identified parameters θ.
+
+    The force estimate's model-parameter uncertainty is ``∂F/∂θ Σ_θ ∂F/∂θᵀ``
+    with ``∂r/∂θ = ∂r/∂K0 ∂K0/∂θ + ∂r/∂EI ∂EI/∂θ`` (docs/theory.md); this gives
+    the second factors, per frame, from :meth:`FreeBendingModel.tip_curvature_jacobian`
+    and :func:`ei_jacobian`.
+
+    Parameters
+    ----------
+    config : Config
+        Actuator, material, stiffness and ``estimation.pressure_max_pa``.
+    pressure_pa : array_like, shape (...)
+        Gauge pressure P [Pa].
+    parameters : sequence of str, optional
+        Names from :data:`MODEL_PARAMETERS`, in the order wanted; default: those of
+        ``config.parameter_covariance`` if present, else all five.
+
+    Returns
+    -------
+    ndarray, shape (..., 2, k)
+        Row 0: ∂K0/∂θ_j [1/m per unit of θ_j]; row 1: ∂EI/∂θ_j [N·m² per unit].
+    """
+    if parameters is None:
+        cov = getattr(config, "parameter_covariance", None)
+        parameters = cov.parameters if cov is not None else MODEL_PARAMETERS
+    unknown = [n for n in parameters if n not in MODEL_PARAMETERS]
+    if unknown:
+        allowed = ", ".join(MODEL_PARAMETERS)
+        raise ConfigError(f"parameters: unknown {', '.join(map(repr, unknown))}; allowed: {allowed}")
+    p = _finite("pressure_pa", pressure_pa)
+    out = np.zeros((*p.shape, 2, len(parameters)))
+    free = [(j, FREE_BENDING_PARAMETERS.index(n)) for j, n in enumerate(parameters) if n in FREE_BENDING_PARAMETERS]
+    stiff = [(j, STIFFNESS_PARAMETERS.index(n)) for j, n in enumerate(parameters) if n in STIFFNESS_PARAMETERS]
+    if free:
+        jk = FreeBendingModel.from_config(config).tip_curvature_jacobian(p)
+        for j, i in free:
+            out[..., 0, j] = jk[..., i]
+    if stiff:
+        je = ei_jacobian(p)
+        for j, i in stiff:
+            out[..., 1, j] = je[..., i]
+    return out
+
+
 # ---------------------------------------------------------------------------------------
 # Interpolant
 
@@ -561,6 +629,93 @@ class FreeBendingModel:
     def tip_curvature_per_m(self, pressure_pa) -> np.ndarray:
         """Curvature of the free arc K0 = θ / L [1/m] (paper section IV-A)."""
         return self.bending_angle_rad(pressure_pa) / self.length_m
+
+    # -- sensitivities (uncertainty of the model parameters) ----------------------------
+
+    def bending_angle_slope(self, pressure_pa) -> np.ndarray:
+        """dθ/dP, the slope of the free bending angle over pressure [rad/Pa].
+
+        By the implicit function theorem on eq. 8, ``dθ0/dP = c_a / (μ̄ m'(θ0) + μ_s)``
+        with ``M_a = c_a P`` (eq. 9) and ``m = M_θ0 / μ̄``. Inside the interpolated
+        range it is the derivative of the Hermite interpolant (which matches that
+        slope at every node; between nodes to ~1e-7 relative); above it, the formula
+        at the directly solved θ0. Zero for P < 0, where θ0 = 0.
+
+        Parameters
+        ----------
+        pressure_pa : array_like
+            Gauge pressure P [Pa].
+
+        Returns
+        -------
+        ndarray
+            dθ/dP [rad/Pa], same shape as ``pressure_pa``.
+        """
+        p = _finite("pressure_pa", pressure_pa)
+        tab = self._table
+        q = np.clip(p, 0.0, self.pressure_max_pa)
+        if tab.converged:
+            k = tab.bucket_start[np.minimum((q / tab.bucket_pa).astype(np.intp), len(tab.bucket_start) - 1)]
+            k = np.minimum(k + (q >= tab.p_pa[k + 1]), len(tab.coef) - 1)
+            u = (q - tab.p_pa[k]) * tab.inv_width[k]
+            _, c1, c2, c3 = tab.columns
+            slope = (c1[k] + u * (2.0 * c2[k] + 3.0 * u * c3[k])) * tab.inv_width[k]
+            exact = p > self.pressure_max_pa
+        else:
+            slope = np.zeros(p.shape)
+            exact = np.ones(p.shape, dtype=bool)
+        slope = np.array(slope, dtype=float)
+        if np.any(exact):
+            slope[exact] = self._exact_slope(p[exact])
+        slope[p < 0] = 0.0
+        return slope
+
+    def _exact_slope(self, p):
+        """dθ0/dP = c_a / (μ̄ m'(θ0) + μ_s) at the directly solved θ0 (eq. 8–9)."""
+        h, c = _lever_nodes(self.chamber_radius_m, self.bottom_thickness_m, self.wall_thickness_m)
+        theta0 = self.solve(p) - self.prebend_angle_rad
+        _, dm = _unit_moment(np.asarray(theta0, dtype=float), h, c, self.length_m, slope=True)
+        return self._moment_per_pa / (self.shear_modulus_pa * dm + self.sensor_stiffness_nm_per_rad)
+
+    @property
+    def _moment_per_pa(self) -> float:
+        a, b = self.chamber_radius_m, self.bottom_thickness_m
+        return (4.0 * a**3 + 3.0 * math.pi * a**2 * b) / 6.0  # c_a of eq. 9 [N·m/Pa]
+
+    def tip_curvature_slope(self, pressure_pa) -> np.ndarray:
+        """dK0/dP = (dθ/dP) / L [1/(m·Pa)] (see :meth:`bending_angle_slope`)."""
+        return self.bending_angle_slope(pressure_pa) / self.length_m
+
+    def tip_curvature_jacobian(self, pressure_pa) -> np.ndarray:
+        """Sensitivity of K0(P) to the material parameters (paper eq. 8–12).
+
+        Implicit differentiation of the balance ``μ̄ m(θ0) + μ_s θ0 = c_a P``
+        (eq. 8–9, 12) at fixed P gives, with ``D = μ̄ m'(θ0) + μ_s = c_a / (dθ0/dP)``,
+
+            ∂θ0/∂μ̄ = −m(θ0) / D,   ∂θ0/∂μ_s = −θ0 / D,   ∂θ/∂θ_pre = 1,
+
+        and ``m(θ0) = (c_a P − μ_s θ0) / μ̄`` from the balance itself, so one
+        interpolant lookup per frame gives all three; ``K0 = θ / L``.
+
+        Parameters
+        ----------
+        pressure_pa : array_like, shape (...)
+            Gauge pressure P [Pa].
+
+        Returns
+        -------
+        ndarray, shape (..., 3)
+            ∂K0/∂(``shear_modulus_pa``, ``sensor_stiffness_nm_per_rad``,
+            ``prebend_angle_rad``) [1/(m·Pa), rad/(m·N·m), 1/(m·rad)], in the
+            order of :data:`FREE_BENDING_PARAMETERS`.
+        """
+        p = _finite("pressure_pa", pressure_pa)
+        theta0 = np.asarray(self.theta0_rad(p), dtype=float)
+        per = self.bending_angle_slope(p) / self._moment_per_pa  # 1 / D
+        mu, mu_s = self.shear_modulus_pa, self.sensor_stiffness_nm_per_rad
+        unit_moment = (self._moment_per_pa * np.maximum(p, 0.0) - mu_s * theta0) / mu
+        out = np.stack([-unit_moment * per, -theta0 * per, np.ones(p.shape)], axis=-1)
+        return out / self.length_m
 
     def elastic_moment(self, theta0_rad) -> np.ndarray:
         """M_θ0(θ0) + μ_s θ0, the total restoring moment [N·m] (paper eq. 10–12)."""

@@ -29,10 +29,14 @@ __all__ = [
     "StiffnessConfig",
     "GravityConfig",
     "EstimationConfig",
+    "ParameterCovarianceConfig",
     "Config",
     "load_config",
     "save_config",
     "PAPER_CONFIG",
+    "MODEL_PARAMETERS",
+    "FREE_BENDING_PARAMETERS",
+    "STIFFNESS_PARAMETERS",
 ]
 
 PAPER_CONFIG = "paper.yaml"
@@ -43,6 +47,14 @@ PRESSURE_RANGE_PA = (0.0, 200e3)
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 METHODS = ("fast", "paper")
 ANGLE_SOURCES = ("model", "shape")
+# the identified model parameters θ (paper eq. 8–12, 15) and the config section of each
+FREE_BENDING_PARAMETERS = ("shear_modulus_pa", "sensor_stiffness_nm_per_rad", "prebend_angle_rad")
+STIFFNESS_PARAMETERS = ("ei0_nm2", "ei1_nm2_per_pa")
+MODEL_PARAMETERS = FREE_BENDING_PARAMETERS + STIFFNESS_PARAMETERS
+_PARAMETER_SECTION = {
+    **dict.fromkeys(FREE_BENDING_PARAMETERS, "material"),
+    **dict.fromkeys(STIFFNESS_PARAMETERS, "stiffness"),
+}
 
 
 def _fail(path: str, message: str) -> ConfigError:
@@ -352,6 +364,111 @@ class EstimationConfig(_Section):
         )
 
 
+@dataclass(frozen=True, kw_only=True)
+class ParameterCovarianceConfig(_Section):
+    """Covariance of the identified model parameters θ (written by ``bendsense identify``).
+
+    Parameters
+    ----------
+    parameters : tuple of str
+        Names from ``MODEL_PARAMETERS`` (``shear_modulus_pa``,
+        ``sensor_stiffness_nm_per_rad``, ``prebend_angle_rad``, ``ei0_nm2``,
+        ``ei1_nm2_per_pa``), each once, in the order of the matrix. Parameters not
+        listed are treated as exact.
+    covariance : tuple of tuple of float
+        Symmetric positive semi-definite k × k matrix in the parameters' SI units
+        (e.g. [Pa²] for ``shear_modulus_pa``).
+    source : str
+        How it was obtained (e.g. which fits, and that separate fits give a block
+        diagonal matrix).
+    """
+
+    section: ClassVar[str] = "parameter_covariance"
+    parameters: tuple
+    covariance: tuple
+    source: str = ""
+
+    def __post_init__(self):
+        p = self.section
+        names = self.parameters
+        if not isinstance(names, (list, tuple)) or not names:
+            raise _fail(f"{p}.parameters", f"expected a non-empty list of names, got {names!r}")
+        for i, name in enumerate(names):
+            if name not in MODEL_PARAMETERS:
+                raise _fail(f"{p}.parameters[{i}]", f"must be one of {', '.join(MODEL_PARAMETERS)}, got {name!r}")
+        if len(set(names)) != len(names):
+            raise _fail(f"{p}.parameters", f"each name once, got {list(names)}")
+        k = len(names)
+        rows = self.covariance
+        if not isinstance(rows, (list, tuple)) or len(rows) != k:
+            got = len(rows) if isinstance(rows, (list, tuple)) else rows
+            raise _fail(f"{p}.covariance", f"expected {k} rows (one per parameter), got {got!r}")
+        matrix = tuple(_numbers(f"{p}.covariance[{i}]", row, k) for i, row in enumerate(rows))
+        c = np.array(matrix, dtype=float).reshape(k, k)
+        diag = np.diag(c)
+        if np.any(diag < 0):
+            i = int(np.argmin(diag))
+            raise _fail(f"{p}.covariance[{i}][{i}]", f"a variance must be >= 0, got {diag[i]!r}")
+        scale = np.sqrt(np.outer(diag, diag))
+        tol = 1e-9 * scale + 1e-300
+        asym = np.abs(c - c.T)
+        if np.any(asym > tol):
+            i, j = np.unravel_index(int(np.argmax(asym - tol)), c.shape)
+            raise _fail(
+                f"{p}.covariance", f"must be symmetric, got [{i}][{j}] = {c[i, j]!r} and [{j}][{i}] = {c[j, i]!r}"
+            )
+        # positive semi-definite, judged on the correlation matrix (units differ by 1e20)
+        sd = np.sqrt(diag)
+        inv = np.where(sd > 0, 1.0 / np.where(sd > 0, sd, 1.0), 0.0)
+        low = float(np.linalg.eigvalsh(c * np.outer(inv, inv)).min())
+        if low < -1e-9:
+            raise _fail(f"{p}.covariance", f"must be positive semi-definite, got a correlation eigenvalue {low:.3g}")
+        if not isinstance(self.source, str):
+            raise _fail(f"{p}.source", f"expected a string, got {self.source!r}")
+        object.__setattr__(self, "parameters", tuple(names))
+        object.__setattr__(self, "covariance", matrix)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The covariance as a (k, k) array, in the order of ``parameters``."""
+        return np.array(self.covariance, dtype=float)
+
+    @property
+    def std(self) -> dict:
+        """Standard deviation of each parameter, by name [its SI unit]."""
+        return {n: math.sqrt(v) for n, v in zip(self.parameters, np.diag(self.matrix), strict=True)}
+
+    def to_dict(self) -> dict:
+        """The YAML layout (plain lists)."""
+        out = {"parameters": list(self.parameters), "covariance": [list(row) for row in self.covariance]}
+        if self.source:
+            out["source"] = self.source
+        return out
+
+    @classmethod
+    def from_blocks(cls, blocks, source: str = "") -> ParameterCovarianceConfig:
+        """Assemble a block-diagonal covariance from independent fits.
+
+        Parameters
+        ----------
+        blocks : iterable of (names, matrix)
+            Each fit's parameter names and covariance; a name in several blocks is
+            an error. Cross-covariances between blocks are zero.
+        source : str
+            Stored as ``source``.
+        """
+        names, mats = [], []
+        for block_names, block in blocks:
+            names.extend(block_names)
+            mats.append(np.asarray(block, dtype=float).reshape(len(block_names), len(block_names)))
+        c = np.zeros((len(names), len(names)))
+        i = 0
+        for m in mats:
+            c[i : i + len(m), i : i + len(m)] = m
+            i += len(m)
+        return cls(parameters=tuple(names), covariance=tuple(tuple(float(v) for v in row) for row in c), source=source)
+
+
 _SECTIONS = {
     "sensor": SensorConfig,
     "actuator": ActuatorConfig,
@@ -359,7 +476,9 @@ _SECTIONS = {
     "stiffness": StiffnessConfig,
     "gravity": GravityConfig,
     "estimation": EstimationConfig,
+    "parameter_covariance": ParameterCovarianceConfig,
 }
+_OPTIONAL = ("parameter_covariance",)  # sections that may be absent (None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -372,10 +491,13 @@ class Config:
     stiffness: StiffnessConfig
     gravity: GravityConfig = field(default_factory=GravityConfig)
     estimation: EstimationConfig = field(default_factory=EstimationConfig)
+    parameter_covariance: ParameterCovarianceConfig | None = None
     name: str = ""
 
     def __post_init__(self):
         for key, cls in _SECTIONS.items():
+            if key in _OPTIONAL and getattr(self, key) is None:
+                continue
             if not isinstance(getattr(self, key), cls):
                 raise _fail(key, f"expected a {cls.__name__}, got {type(getattr(self, key)).__name__}")
         if not isinstance(self.name, str):
@@ -401,12 +523,27 @@ class Config:
     def to_dict(self) -> dict:
         """The YAML layout of this config (plain lists, floats and strings)."""
         out = {"name": self.name} if self.name else {}
-        out.update({k: getattr(self, k).to_dict() for k in _SECTIONS})
+        out.update({k: getattr(self, k).to_dict() for k in _SECTIONS if getattr(self, k) is not None})
         return out
 
     def replace(self, **sections) -> Config:
         """A copy with whole sections replaced, e.g. ``config.replace(stiffness=...)``."""
         return dataclasses.replace(self, **sections)
+
+    def model_parameters(self) -> dict:
+        """The identified model parameters θ by name (``MODEL_PARAMETERS``) [SI units]."""
+        return {n: getattr(getattr(self, _PARAMETER_SECTION[n]), n) for n in MODEL_PARAMETERS}
+
+    def with_model_parameters(self, values) -> Config:
+        """A copy with some of the ``MODEL_PARAMETERS`` replaced: ``{name: value}``."""
+        unknown = [str(n) for n in values if n not in MODEL_PARAMETERS]
+        if unknown:
+            raise ConfigError(f"parameters: unknown {', '.join(unknown)}; allowed: {', '.join(MODEL_PARAMETERS)}")
+        sections = {}
+        for name, value in values.items():
+            key = _PARAMETER_SECTION[name]
+            sections.setdefault(key, {})[name] = float(value)
+        return self.replace(**{k: dataclasses.replace(getattr(self, k), **v) for k, v in sections.items()})
 
     @property
     def weight_per_length_n_per_m(self) -> np.ndarray:
