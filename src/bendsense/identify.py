@@ -55,6 +55,7 @@ import numpy as np
 
 from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
 from bendsense._io import check_csv_header, read_text
+from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.validation import short
 
@@ -70,8 +71,8 @@ __all__ = [
     "read_stiffness_csv",
 ]
 
-FREE_BENDING_PARAMS = ("shear_modulus_pa", "sensor_stiffness_nm_per_rad", "prebend_angle_rad")
-STIFFNESS_PARAMS = ("ei0_nm2", "ei1_nm2_per_pa")
+FREE_BENDING_PARAMS = FREE_BENDING_PARAMETERS
+STIFFNESS_PARAMS = STIFFNESS_PARAMETERS
 # typical magnitudes: parameter scales for the optimiser when a start value is 0
 _TYPICAL = {
     "shear_modulus_pa": 1e5,
@@ -308,6 +309,63 @@ def _stderr(cov: np.ndarray, free, names: tuple[str, ...]) -> dict:
     return stderr
 
 
+def _full_covariance(cov: np.ndarray, free, names: tuple[str, ...]) -> np.ndarray:
+    """The fit's covariance over all its ``names``: ``cov`` for the free ones, 0 for the fixed ones."""
+    out = np.zeros((len(names), len(names)))
+    idx = [names.index(n) for n in free]
+    out[np.ix_(idx, idx)] = cov
+    return out
+
+
+def _with_covariance(config, names: tuple[str, ...], block: np.ndarray, what: str):
+    """``config`` with this fit's block in ``parameter_covariance``, other fits' blocks kept.
+
+    The fits are separate least-squares problems, so the matrix is block diagonal:
+    the covariance between the parameters of different fits is taken as zero (the
+    stiffness fit uses K0(P) from the free-bending parameters, whose uncertainty it
+    does not carry over). A block that is not finite (parameters not identifiable)
+    is not written, and an older block of the same parameters is removed.
+    """
+    from bendsense.config import MODEL_PARAMETERS, ParameterCovarianceConfig
+
+    blocks = []
+    old = config.parameter_covariance
+    if old is not None:
+        keep = [i for i, n in enumerate(old.parameters) if n not in names]
+        if keep:
+            blocks.append(([old.parameters[i] for i in keep], old.matrix[np.ix_(keep, keep)]))
+    if np.all(np.isfinite(block)):
+        blocks.append((list(names), 0.5 * (block + block.T)))
+    if not blocks:
+        return config.replace(parameter_covariance=None)
+    fits = []
+    listed = [n for b, _ in blocks for n in b]
+    if any(n in listed for n in FREE_BENDING_PARAMETERS):
+        fits.append("identify free-bending")
+    if any(n in listed for n in STIFFNESS_PARAMETERS):
+        fits.append("identify stiffness")
+    source = " and ".join(fits)
+    if len(fits) > 1:
+        source += ", fitted separately: block diagonal (cross-covariances between the fits taken as zero)"
+    source += f"; last: {what}; fixed parameters have variance 0"
+    # list the parameters in the canonical order
+    order = sorted(range(len(listed)), key=lambda i: MODEL_PARAMETERS.index(listed[i]))
+    full = ParameterCovarianceConfig.from_blocks(blocks, source=source)
+    matrix = full.matrix[np.ix_(order, order)]
+    section = ParameterCovarianceConfig(
+        parameters=tuple(listed[i] for i in order),
+        covariance=tuple(tuple(float(v) for v in row) for row in matrix),
+        source=source,
+    )
+    return config.replace(parameter_covariance=section)
+
+
+def _covariance_note(cov) -> str:
+    if cov is not None and np.all(np.isfinite(cov)):
+        return "  covariance written to the config's parameter_covariance section"
+    return "  covariance NOT written (parameters not identifiable, or no degrees of freedom)"
+
+
 def _geometry(actuator) -> dict:
     """The geometry keywords of :mod:`bendsense.actuator`'s functions, from ``config.actuator``."""
     names = ("chamber_radius_m", "bottom_thickness_m", "wall_thickness_m", "length_m")
@@ -350,6 +408,10 @@ class FreeBendingFit:
         The optimiser converged and no parameter ended on a bound.
     message : str
         The optimiser's message plus any caveat.
+    covariance : ndarray, shape (3, 3)
+        Covariance of ``shear_modulus_pa``, ``sensor_stiffness_nm_per_rad``,
+        ``prebend_angle_rad`` in that order (``s² (JᵀJ)⁻¹`` for the free ones, 0 for
+        fixed ones; inf if not identifiable).
     """
 
     params: dict
@@ -362,6 +424,7 @@ class FreeBendingFit:
     dof: int
     success: bool
     message: str
+    covariance: np.ndarray | None = None
 
     @property
     def rms_rad(self) -> float:
@@ -369,8 +432,17 @@ class FreeBendingFit:
         return float(np.sqrt(np.mean(self.residuals**2)))
 
     def to_config(self, config):
-        """A copy of ``config`` with the fitted ``material`` section."""
-        return config.replace(material=dataclasses.replace(config.material, **self.params))
+        """A copy of ``config`` with the fitted ``material`` section and its covariance.
+
+        The covariance goes into ``parameter_covariance`` (the block of the three
+        free-bending parameters; another fit's block already there is kept, with zero
+        cross-covariance). Not written if the parameters are not identifiable.
+        """
+        new = config.replace(material=dataclasses.replace(config.material, **self.params))
+        if self.covariance is None:
+            return new
+        what = f"free-bending fit of {len(self.residuals)} points"
+        return _with_covariance(new, FREE_BENDING_PARAMS, self.covariance, what)
 
     def report(self) -> str:
         """Short text report: parameters with standard errors, correlation, residuals."""
@@ -383,6 +455,7 @@ class FreeBendingFit:
                     lines.append(f"  corr({self.free[i]}, {self.free[j]}) = {self.correlation[i, j]:+.3f}")
         worst = math.degrees(float(np.max(np.abs(self.residuals))))
         lines.append(f"  residual rms {math.degrees(self.rms_rad):.3g} deg, max {worst:.3g} deg")
+        lines.append(_covariance_note(self.covariance))
         if not self.success:
             lines.append(f"  WARNING: {self.message}")
         return "\n".join(lines)
@@ -543,6 +616,7 @@ def fit_free_bending(
         dof=dof,
         success=ok,
         message=message,
+        covariance=_full_covariance(cov, free, FREE_BENDING_PARAMS),
     )
 
 
@@ -579,6 +653,8 @@ class StiffnessFit:
         Every level fit converged with stable beam solutions.
     message : str
         Summary, with the levels that failed.
+    covariance : ndarray, shape (2, 2)
+        Covariance of ``ei0_nm2``, ``ei1_nm2_per_pa`` (0 for a fixed one).
     """
 
     params: dict
@@ -594,10 +670,20 @@ class StiffnessFit:
     position_residuals_m: np.ndarray
     success: bool
     message: str
+    covariance: np.ndarray | None = None
 
     def to_config(self, config):
-        """A copy of ``config`` with the fitted ``stiffness`` section."""
-        return config.replace(stiffness=dataclasses.replace(config.stiffness, **self.params))
+        """A copy of ``config`` with the fitted ``stiffness`` section and its covariance.
+
+        The covariance of ``ei0_nm2``, ``ei1_nm2_per_pa`` goes into
+        ``parameter_covariance`` beside the free-bending block (block diagonal:
+        the two fits are separate).
+        """
+        new = config.replace(stiffness=dataclasses.replace(config.stiffness, **self.params))
+        if self.covariance is None:
+            return new
+        what = f"stiffness fit of {len(self.level_ei_nm2)} pressure levels"
+        return _with_covariance(new, STIFFNESS_PARAMS, self.covariance, what)
 
     def report(self) -> str:
         """Short text report: EI per level, the fitted line with standard errors."""
@@ -611,6 +697,7 @@ class StiffnessFit:
             lines.append(f"  {name:16s} {_format_value(self.params[name], self.stderr[name])}")
         if len(self.free) == 2:
             lines.append(f"  corr(ei0_nm2, ei1_nm2_per_pa) = {self.correlation[0, 1]:+.3f}")
+        lines.append(_covariance_note(self.covariance))
         if not self.success:
             lines.append(f"  WARNING: {self.message}")
         return "\n".join(lines)
@@ -814,4 +901,5 @@ def fit_stiffness(
         position_residuals_m=pos_res,
         success=success,
         message=message,
+        covariance=_full_covariance(cov, free, STIFFNESS_PARAMS),
     )
