@@ -15,7 +15,7 @@ from bendsense.actuator import (
     solve_bending_angle,
 )
 from bendsense.config import Config, ParameterCovarianceConfig, save_config
-from bendsense.errors import ConfigError
+from bendsense.errors import ArgumentError, ConfigError
 
 CONFIG = load_config()
 PRESSURES = np.array([1e3, 2e4, 4e4, 6e4, 9e4, 1.2e5, 1.6e5, 1.99e5, 2.4e5])  # the last above pressure_max_pa
@@ -91,7 +91,7 @@ def test_ei_and_model_jacobian():
         np.testing.assert_allclose(full[:, 1, j], (up - down) / (2 * h), rtol=1e-9)
     picked = model_jacobian(CONFIG, p, parameters=("ei1_nm2_per_pa", "shear_modulus_pa"))
     np.testing.assert_array_equal(picked, full[..., [4, 0]])
-    with pytest.raises(ConfigError, match=r"parameters: unknown 'gamma0'"):
+    with pytest.raises(ArgumentError, match=r"parameters: unknown 'gamma0'"):
         model_jacobian(CONFIG, p, parameters=("gamma0",))
 
 
@@ -150,5 +150,5 @@ def test_blocks_and_parameter_replacement():
     changed = CONFIG.with_model_parameters({"shear_modulus_pa": 2e5, "ei1_nm2_per_pa": 2e-8})
     assert changed.material.shear_modulus_pa == 2e5 and changed.stiffness.ei1_nm2_per_pa == 2e-8
     assert changed.material.sensor_stiffness_nm_per_rad == CONFIG.material.sensor_stiffness_nm_per_rad
-    with pytest.raises(ConfigError, match=r"parameters: unknown mu"):
+    with pytest.raises(ArgumentError, match=r"parameters: expected names from shear_modulus_pa, .*, got 'mu'"):
         CONFIG.with_model_parameters({"mu": 1.0})

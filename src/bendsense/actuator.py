@@ -32,6 +32,7 @@ import numpy as np
 
 from bendsense.config import FREE_BENDING_PARAMETERS, MODEL_PARAMETERS, STIFFNESS_PARAMETERS, StiffnessConfig
 from bendsense.errors import ArgumentError, ConfigError, ConvergenceError
+from bendsense.validation import short
 
 __all__ = [
     "pressure_moment",
@@ -376,7 +377,7 @@ def model_jacobian(config, pressure_pa, parameters=None) -> np.ndarray:
     unknown = [n for n in parameters if n not in MODEL_PARAMETERS]
     if unknown:
         allowed = ", ".join(MODEL_PARAMETERS)
-        raise ConfigError(f"parameters: unknown {', '.join(map(repr, unknown))}; allowed: {allowed}")
+        raise ArgumentError(f"parameters: unknown {', '.join(short(n) for n in unknown)}; allowed: {allowed}")
     p = _finite("pressure_pa", pressure_pa)
     out = np.zeros((*p.shape, 2, len(parameters)))
     free = [(j, FREE_BENDING_PARAMETERS.index(n)) for j, n in enumerate(parameters) if n in FREE_BENDING_PARAMETERS]

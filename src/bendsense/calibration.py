@@ -811,7 +811,7 @@ class Calibration:
         """
         s = np.asarray(shifts_m, dtype=float)
         if s.ndim == 0 or s.shape[-1] != self.n_channels:
-            raise ValueError(f"shifts_m: expected shape (..., {self.n_channels}), got {s.shape}")
+            raise ArgumentError(f"shifts_m: expected shape (..., {self.n_channels}), got {s.shape}")
         s = np.broadcast_to(s, s.shape).copy()
         lo_r, hi_r = self._channel_range
         width = np.maximum(hi_r - lo_r, 1e-12)

@@ -392,17 +392,18 @@ class ParameterCovarianceConfig(_Section):
         p = self.section
         names = self.parameters
         if not isinstance(names, (list, tuple)) or not names:
-            raise _fail(f"{p}.parameters", f"expected a non-empty list of names, got {names!r}")
+            raise _fail(f"{p}.parameters", f"expected a non-empty list of names, got {check.short(names)}")
         for i, name in enumerate(names):
             if name not in MODEL_PARAMETERS:
-                raise _fail(f"{p}.parameters[{i}]", f"must be one of {', '.join(MODEL_PARAMETERS)}, got {name!r}")
+                allowed = ", ".join(MODEL_PARAMETERS)
+                raise _fail(f"{p}.parameters[{i}]", f"must be one of {allowed}, got {check.short(name)}")
         if len(set(names)) != len(names):
-            raise _fail(f"{p}.parameters", f"each name once, got {list(names)}")
+            raise _fail(f"{p}.parameters", f"each name once, got {check.short(list(names))}")
         k = len(names)
         rows = self.covariance
         if not isinstance(rows, (list, tuple)) or len(rows) != k:
-            got = len(rows) if isinstance(rows, (list, tuple)) else rows
-            raise _fail(f"{p}.covariance", f"expected {k} rows (one per parameter), got {got!r}")
+            got = len(rows) if isinstance(rows, (list, tuple)) else check.short(rows)
+            raise _fail(f"{p}.covariance", f"expected {k} rows (one per parameter), got {got}")
         matrix = tuple(_numbers(f"{p}.covariance[{i}]", row, k) for i, row in enumerate(rows))
         c = np.array(matrix, dtype=float).reshape(k, k)
         diag = np.diag(c)
@@ -424,7 +425,7 @@ class ParameterCovarianceConfig(_Section):
         if low < -1e-9:
             raise _fail(f"{p}.covariance", f"must be positive semi-definite, got a correlation eigenvalue {low:.3g}")
         if not isinstance(self.source, str):
-            raise _fail(f"{p}.source", f"expected a string, got {self.source!r}")
+            raise _fail(f"{p}.source", f"expected a string, got {check.short(self.source)}")
         object.__setattr__(self, "parameters", tuple(names))
         object.__setattr__(self, "covariance", matrix)
 
@@ -536,9 +537,9 @@ class Config:
 
     def with_model_parameters(self, values) -> Config:
         """A copy with some of the ``MODEL_PARAMETERS`` replaced: ``{name: value}``."""
-        unknown = [str(n) for n in values if n not in MODEL_PARAMETERS]
+        unknown = [check.short(str(n)) for n in values if n not in MODEL_PARAMETERS]
         if unknown:
-            raise ConfigError(f"parameters: unknown {', '.join(unknown)}; allowed: {', '.join(MODEL_PARAMETERS)}")
+            raise check.fail("parameters", f"names from {', '.join(MODEL_PARAMETERS)}", ", ".join(unknown), raw=True)
         sections = {}
         for name, value in values.items():
             key = _PARAMETER_SECTION[name]
