@@ -823,23 +823,26 @@ class Calibration:
         bracketed = (g_lo * sign <= 0) & (g_hi * sign >= 0)
         nonzero, safe = self._linear_slope
         c0 = self._channel_coefficients[:, 0]
-        x = np.where(bracketed, 0.5 * (lo + hi), np.where(nonzero, (s - c0) / safe, 0.0))
+        x = np.where(nonzero, (s - c0) / safe, 0.0)  # the linear inverse, kept inside the bracket
+        x = np.where(bracketed, np.clip(x, lo, hi), x)
         done = ~np.isfinite(s)
+        tol_s = 1e-14 * np.maximum(np.abs(s), 1e-6)  # round-off of the shift [m]
         for _ in range(200):
             g = self.shifts_from_delta(x) - s
+            done |= np.abs(g) <= tol_s
+            if done.all():
+                break
             fp = self._slopes_from_delta(x)
             h = g * sign
             lo = np.where(bracketed & (h < 0), x, lo)
             hi = np.where(bracketed & (h > 0), x, hi)
             with np.errstate(divide="ignore", invalid="ignore"):
                 new = x - g / fp
-            bad = ~np.isfinite(new) | (bracketed & ~((new > lo) & (new < hi)))
+            bad = ~np.isfinite(new) | (bracketed & ~((new >= lo) & (new <= hi)))
             new = np.where(bad, np.where(bracketed, 0.5 * (lo + hi), x), new)
             step = np.abs(new - x)
             x = np.where(done, x, new)
-            done |= (step <= 1e-13 * np.maximum(np.abs(x), width)) | (g == 0)
-            if done.all():
-                break
+            done |= step <= 1e-13 * np.maximum(np.abs(x), width)
         ok = np.abs(self.shifts_from_delta(x) - s) <= 1e-9 * np.maximum(np.abs(s), 1e-9)
         return np.where(ok & np.isfinite(s), x, np.nan)
 
@@ -956,14 +959,17 @@ class Calibration:
         delta = a - self.offset
         slope = self._slopes_from_delta(delta)
         n, k = self.n_channels, self.degree + 1
-        sd = slope * sigma
-        noise = sd[..., :, None] * np.eye(n) * sd[..., None, :]
-        odd, _ = parity_masks(n)
-        powers = delta[..., None] ** np.arange(k)  # (..., N, k)
-        lin = np.zeros((*delta.shape, 2 * k + n))
-        lin[..., odd, :k] = powers[..., odd, :]
-        lin[..., ~odd, k : 2 * k] = powers[..., ~odd, :]
         idx = np.arange(n)
+        noise = np.zeros((*delta.shape, n))
+        noise[..., idx, idx] = np.square(slope * sigma)
+        odd, _ = parity_masks(n)
+        # ∂S_i/∂(a, b, A0): (1, ΔA_i, ΔA_i², …) in the block of channel i's parity, −f_i' at A0_i
+        lin = np.zeros((*delta.shape, 2 * k + n))
+        lin[..., odd, 0] = 1.0
+        lin[..., ~odd, k] = 1.0
+        for j in range(1, k):
+            lin[..., odd, j] = lin[..., odd, j - 1] * delta[..., odd]
+            lin[..., ~odd, k + j] = lin[..., ~odd, k + j - 1] * delta[..., ~odd]
         lin[..., idx, 2 * k + idx] = -slope
         coef = lin @ q @ np.swapaxes(lin, -1, -2)
         misfit = self.shift_error_m(self.shifts_from_delta(delta), covariance=True)
