@@ -187,3 +187,4 @@ def test_old_files_load_and_say_what_is_missing(tmp_path):
     model = SyntheticSensor()
     one = Calibration.from_data(model.signals(0.0, 1), [model.signals(1 / r, 3) for r in RADII], RADII, SENSOR)
     assert not one.noise_known
+    assert "flat noise std (mean over channels): not measured" in one.report()

@@ -1358,7 +1358,8 @@ class Calibration:
             "  f_even coefficients (ascending): " + ", ".join(f"{c:.6g}" for c in self.coefficients_even),
             f"  fitted dA range: odd [{self.delta_a_range_odd[0]:.6g}, {self.delta_a_range_odd[1]:.6g}], "
             f"even [{self.delta_a_range_even[0]:.6g}, {self.delta_a_range_even[1]:.6g}]",
-            f"  flat noise std (mean over channels): {float(np.mean(self.noise_std)):.4g}",
+            "  flat noise std (mean over channels): "
+            + (f"{float(np.mean(self.noise_std)):.4g}" if self.noise_known else "not measured"),
         ]
         if self.strip_residuals:
             lines.append("  strip   R [mm]  kappa [1/m]  rms dS [um]  max dS [um]  frames  recording")
