@@ -82,9 +82,10 @@ def _test_equivalent(line: str) -> str:
         rest = [p for p in parts if not p.startswith("pip install")]
         rest = [p for p in rest if not re.match(r"python[0-9.]* -m pytest\b", p)]
         return " && ".join(rest)
-    if re.match(r"bendsense\s+reproduce\b", stripped) and "--quick" not in stripped:
+    command = stripped.split("#", 1)[0]  # a "--quick" in the comment is no flag
+    if re.match(r"bendsense\s+reproduce\b", stripped) and "--quick" not in command:
         return line.replace("reproduce", "reproduce --quick", 1)
-    if re.match(r"python[0-9.]*\s+benchmarks/", stripped) and "--quick" not in stripped:
+    if re.match(r"python[0-9.]*\s+benchmarks/", stripped) and "--quick" not in command:
         return re.sub(r"(benchmarks/\S+)", r"\1 --quick", line, count=1)
     return line
 
@@ -126,6 +127,9 @@ def test_reproduce_gets_its_quick_flag():
 def test_benchmarks_get_their_quick_flag():
     line = "python benchmarks/run_all.py --markdown results.md   # ~10 s"
     assert _test_equivalent(line).startswith("python benchmarks/run_all.py --quick --markdown results.md")
+    # a "--quick" mentioned in the comment does not count as the flag
+    commented = "python benchmarks/bench_batch.py   # ~2 min; --no-dask, --quick"
+    assert _test_equivalent(commented).startswith("python benchmarks/bench_batch.py --quick")
 
 
 def test_other_languages_are_not_run_and_order_is_kept():
