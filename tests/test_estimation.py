@@ -369,7 +369,7 @@ def test_bad_arguments_name_the_field():
         estimate_force(kappa, 0.0, CFG, constraint="sideways")
     with pytest.raises(ValueError, match="method: must be one of"):
         estimate_force(kappa, 0.0, CFG, method="magic")
-    with pytest.raises(ValueError, match="options: unknown colour"):
+    with pytest.raises(TypeError, match="colour"):
         estimate_force(kappa, 0.0, CFG, colour="red")
     with pytest.raises(ValueError, match="push_only: only for the 1-D constraints"):
         estimate_force(kappa, 0.0, CFG, push_only=True)

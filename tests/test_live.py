@@ -162,3 +162,24 @@ def test_default_source_is_the_time_varying_scenario():
     assert all(p == q and np.array_equal(a, b) for (p, a), (q, b) in zip(got, want, strict=True))
     # another channel count: equal segments over the same sensor
     assert next(default_source(n_channels=3, adc_bits=10))[1].shape == (3,)
+
+
+def test_every_received_frame_is_estimated(calibration_path, stream):
+    """``process_many`` (what ``run_live`` does with the queued readings) estimates each of them."""
+    from types import SimpleNamespace
+
+    cal = Calibration.load(calibration_path)
+    config = bendsense.load_config()
+    readings = [SimpleNamespace(sample=SimpleNamespace(adc=np.asarray(c), pressure_pa=p, seq=k), device_us=k * 10_000,
+                                host_ns=k) for k, (p, c, _) in enumerate(stream)]
+    proc = LiveProcessor(cal, config, constraint="normal")
+    shown = [proc.process_many(readings[i:i + 40]) for i in range(0, len(readings), 40)]
+    assert proc.estimated == proc.frames == len(stream) and proc.failures == 0
+    # the newest frame of each chunk equals a cold estimate of it, independently of its chunk
+    signals = np.array([c for _, c, _ in stream], dtype=float)
+    pressure = np.array([p for p, _, _ in stream])
+    shape = bendsense.reconstruct(signals, cal, config.sensor, s_m=proc.s_m)
+    cold = estimate_force(shape, pressure, config, constraint="normal", calibration=cal, warm_start=False)
+    last = [min(i + 40, len(stream)) - 1 for i in range(0, len(stream), 40)]
+    np.testing.assert_allclose([f.force_n for f in shown], cold.force_n[last], atol=1e-6)
+    assert [f.seq for f in shown] == last

@@ -397,11 +397,19 @@ def _executor_name(executor) -> str:
     return f"{kind}({workers} workers)" if workers else kind
 
 
-def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
-    """A process pool whose workers use one BLAS thread each.
+def _one_thread() -> None:
+    """Pool worker initializer: one numba thread (the processes are the parallelism)."""
+    import numba
 
-    The estimator's matrices are tiny, so a threaded BLAS only adds overhead, and the
-    parallelism comes from the processes. The workers are spawned (not forked) so that
+    numba.set_num_threads(1)
+
+
+def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
+    """A process pool whose workers use one BLAS thread and one numba thread each.
+
+    Parallelism comes either from the worker processes (here) or from the compiled
+    kernels' threads (``--workers 0``, in-process), never both: two levels of threads on
+    few cores only oversubscribe them. The workers are spawned (not forked) so that
     they import numpy afresh with these variables, even if this process has numpy
     loaded already.
     """
@@ -409,7 +417,8 @@ def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_one_thread)
 
 
 def process_sessions(
@@ -557,13 +566,17 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
     own = None
     try:
         if executor is None and workers == 0:
-            description = "in-process"
+            import numba
+
+            description = f"in-process, {numba.get_num_threads()} numba threads"
             for i in todo:
                 finish(i, process_session(sessions[i], out_dir / names[i], name=names[i], **options))
         else:
             if executor is None and todo:
                 own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(todo)))
             description = _executor_name(executor) if executor is not None else ""
+            if own is not None:
+                description = description.replace(" workers)", " workers, 1 numba thread each)")
             futures = {
                 executor.submit(process_session, sessions[i], out_dir / names[i], name=names[i], **options): i
                 for i in todo

@@ -140,6 +140,7 @@ class LiveProcessor:
         self.options = {"max_iter": LIVE_MAX_ITER, **options}
         self.frames = 0
         self.failures = 0
+        self.estimated = 0
         self._previous = None
 
     def reset(self) -> None:
@@ -165,6 +166,7 @@ class LiveProcessor:
                 shape, p, self.config, constraint=self.constraint, calibration=self.calibration, **warm, **self.options
             )
             self._previous = est
+            self.estimated += 1
             if not bool(est.success):
                 self.failures += 1
         self.frames += 1
@@ -179,12 +181,63 @@ class LiveProcessor:
             process_s=time.perf_counter() - t0,
         )
 
+    def process_many(self, readings) -> LiveFrame:
+        """Estimate every reading of a list in one batched call; the newest as a :class:`LiveFrame`.
+
+        Frames along the list are warm-started from each other and the first from the
+        previous estimate, so that the force is estimated at the sensor's rate however
+        often the view is drawn.
+        """
+        from bendsense.estimation import estimate_force
+        from bendsense.pcc import reconstruct
+
+        ps = [r.sample.pressure_pa for r in readings]
+        ps = [self.pressure_pa if p is None or not math.isfinite(p) else float(p) for p in ps]
+        if len(readings) == 1 or not self.estimate or any(p is None for p in ps):
+            for r in readings[:-1]:
+                self.process(r)
+            return self.process(readings[-1])
+        t0 = time.perf_counter()
+        a = np.array([r.sample.adc for r in readings], dtype=float)
+        shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
+        prev = self._previous
+        warm = {"initial": prev} if prev is not None and bool(prev.success) else {}
+        est = estimate_force(shape, np.array(ps), self.config, constraint=self.constraint,
+                             calibration=self.calibration, **warm, **self.options)
+        last = _frame_of(est, -1)
+        self._previous = last
+        self.estimated += len(readings)
+        self.failures += int(np.count_nonzero(~np.asarray(est.success)))
+        self.frames += len(readings)
+        reading = readings[-1]
+        sample = reading.sample
+        return LiveFrame(
+            seq=int(sample.seq),
+            t_s=reading.device_us * 1e-6,
+            host_ns=int(reading.host_ns),
+            pressure_pa=ps[-1],
+            delta_a=a[-1] - self.calibration.offset,
+            shape=reconstruct(a[-1], self.calibration, self.config.sensor, s_m=self.s_m),
+            estimate=last,
+            process_s=time.perf_counter() - t0,
+        )
+
     def process(self, reading) -> LiveFrame:
         """Process a :class:`~bendsense.device.driver.Reading`."""
         sample = reading.sample
         return self.process_signals(
             sample.adc, sample.pressure_pa, seq=sample.seq, t_s=reading.device_us * 1e-6, host_ns=reading.host_ns
         )
+
+
+def _frame_of(est, i):
+    """Frame ``i`` of a batched :class:`~bendsense.estimation.ForceEstimate`."""
+    import dataclasses
+
+    fields = ("force_n", "std_n", "covariance_n2", "residual_m", "success", "message", "iterations",
+              "tip_position_m", "state", "guess_n", "chi2_per_dof")
+    return dataclasses.replace(est, **{f: np.asarray(getattr(est, f))[i] for f in fields
+                                       if getattr(est, f) is not None})
 
 
 # --------------------------------------------------------------------------- view
@@ -439,6 +492,10 @@ class LiveStats:
         Median reconstruction + estimation time per frame [ms].
     draw_ms : float
         Median time to update and blit the artists per frame [ms].
+    estimated : int
+        Frames whose force was estimated (every received frame with a pressure).
+    estimate_hz : float
+        Achieved estimation rate [1/s].
     """
 
     frames: int
@@ -449,13 +506,16 @@ class LiveStats:
     latency_ms: tuple
     process_ms: float
     draw_ms: float
+    estimated: int = 0
+    estimate_hz: float = math.nan
 
     def summary(self) -> str:
         """One line for the terminal."""
         return (
             f"{self.frames} frames shown ({self.received} received) in {self.elapsed_s:.1f} s: "
             f"{self.fps:.1f} fps, latency median {self.latency_ms[0]:.1f} ms (p95 {self.latency_ms[1]:.1f} ms), "
-            f"process {self.process_ms:.2f} ms, draw {self.draw_ms:.2f} ms per frame"
+            f"process {self.process_ms:.2f} ms, draw {self.draw_ms:.2f} ms per frame; "
+            f"{self.estimated} frames estimated ({self.estimate_hz:.0f} estimates/s)"
             + (f", {self.failures} estimates not converged" if self.failures else "")
         )
 
@@ -501,6 +561,8 @@ def run_live(
 
     min_period = 1.0 / max_fps if max_fps else 0.0
     latencies, process, draw = [], [], []
+    queued = getattr(driver, "_queue", None) is not None
+    estimated0 = processor.estimated
     samples0 = driver.stats.samples
     last_key = None
     start = time.monotonic()
@@ -514,15 +576,22 @@ def run_live(
             break
         if driver.error is not None:
             raise DeviceError(driver.error)
-        reading = driver.latest()
+        if queued:
+            # every received frame is estimated; the view shows the newest
+            readings = driver.get_batch(timeout=0.002)
+            reading = readings[-1] if readings else None
+        else:
+            reading = driver.latest()
+            readings = [reading]
         key = None if reading is None else (reading.host_ns, reading.sample.seq)
         if reading is None or key == last_key:
-            time.sleep(0.002)
+            if not queued:
+                time.sleep(0.002)
             if view is not None:
                 view.canvas.flush_events()
             continue
         last_key = key
-        frame = processor.process(reading)
+        frame = processor.process_many(readings)
         t_draw = time.perf_counter()
         if view is not None:
             elapsed = time.monotonic() - start
@@ -554,4 +623,6 @@ def run_live(
         latency_ms=lat,
         process_ms=float(np.median(process)) * 1e3 if n else math.nan,
         draw_ms=float(np.median(draw)) * 1e3 if n else math.nan,
+        estimated=processor.estimated - estimated0,
+        estimate_hz=(processor.estimated - estimated0) / elapsed if elapsed > 0 else 0.0,
     )

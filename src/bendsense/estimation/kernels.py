@@ -1,0 +1,469 @@
+"""Compiled per-frame kernels of the force estimate (paper eq. 18 and 21).
+
+One frame: the moment-balance start (:func:`moment_guess`), the projected Gauss–Newton
+iteration with a trust region on the constraint parameters ``u`` (:func:`gauss_newton`,
+``F = F_fixed + D u``, ``u ≥ lower``) around the spectral beam solver of
+:mod:`bendsense.beam_kernels`, and the uncertainty propagation
+(:mod:`bendsense.estimation.uncertainty`). :func:`estimate_frames` is the batch: a
+``prange`` loop over blocks of consecutive frames, each block run in order so that a
+frame's start is corrected by its predecessor's offset from its own moment-balance start
+(warm start along a time series).
+
+The residual is pluggable: :func:`objective` evaluates the weighted residual vector of
+the model shape against the measured one and its Jacobian by F; the positions objective
+(paper eq. 18) compares points of the beam with the PCC shape at quadrature nodes.
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from bendsense import beam_kernels as bk
+from bendsense.estimation.uncertainty import covariance
+from bendsense.status import Status
+
+_RUNNING = int(Status.RUNNING)
+_OK = int(Status.OK)
+_BEAM_FAILED = int(Status.BEAM_FAILED)
+_NOT_CONVERGED = int(Status.NOT_CONVERGED)
+_NOT_IDENTIFIABLE = int(Status.NOT_IDENTIFIABLE)
+_NO_STABLE_MATCH = int(Status.NO_STABLE_MATCH)
+
+MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the boundary
+BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a boundary stop is a failure
+NEWTON_TOL = 1e-11
+NEWTON_MAX_ITER = 30
+
+
+@njit(cache=True)
+def lm_step(H, g, out):
+    """−(H + ε I)⁻¹ g for a 1×1 or 2×2 system (closed form)."""
+    k = g.size
+    if k == 1:
+        h = H[0, 0]
+        out[0] = -g[0] / (h + (1e-14 * h + 1e-300))
+        return
+    eps = 1e-14 * (H[0, 0] + H[1, 1]) + 1e-300
+    a = H[0, 0] + eps
+    d = H[1, 1] + eps
+    b = H[0, 1]
+    det = a * d - b * b
+    out[0] = -((d * g[0] - b * g[1]) / det)
+    out[1] = -((a * g[1] - b * g[0]) / det)
+
+
+@njit(cache=True)
+def force_of(D, ffix, u, out):
+    """F = F_fixed + D u."""
+    for a in range(2):
+        acc = ffix[a]
+        for c in range(u.size):
+            acc += D[a, c] * u[c]
+        out[a] = acc
+
+
+@njit(cache=True)
+def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, u):
+    """Starting force from the moment balance ``EI (κ(s) − K0) = −M_z(s)`` (linear in F).
+
+    With the reference shape's curvature and points, the moment of the tip force about
+    ``r(s)``, ``(r_L − r(s)) × F``, and of the distributed load are known: a small
+    weighted linear least-squares problem in ``u``, exact for a beam-model shape. A ridge
+    keeps directions it hardly sees near zero; beyond 3 EI/L² the guess is scaled down.
+    """
+    M = s.size
+    k = u.size
+    tx = p0[M - 1, 0] + (L - s[M - 1]) * math.sin(phi_end)
+    ty = p0[M - 1, 1] + (L - s[M - 1]) * math.cos(phi_end)
+    H = np.zeros((k, k))
+    g = np.zeros(k)
+    aD = np.empty(k)
+    tail_x = 0.0  # ∫_{s_j}^{L} r dσ, accumulated from the tip
+    tail_y = 0.0
+    nx, ny = tx, ty  # the next point out
+    ns = L
+    for j in range(M - 1, -1, -1):
+        tail_x += 0.5 * (nx + p0[j, 0]) * (ns - s[j])
+        tail_y += 0.5 * (ny + p0[j, 1]) * (ns - s[j])
+        nx, ny, ns = p0[j, 0], p0[j, 1], s[j]
+        arm_x = tail_x - (L - s[j]) * p0[j, 0]
+        arm_y = tail_y - (L - s[j]) * p0[j, 1]
+        ax = -(ty - p0[j, 1])  # M_F = a · F
+        ay = tx - p0[j, 0]
+        c = ei * (kappa_s[j] - k0) + arm_x * wload[1] - arm_y * wload[0] + ax * ffix[0] + ay * ffix[1]
+        for q in range(k):
+            aD[q] = ax * D[0, q] + ay * D[1, q]
+        for q in range(k):
+            g[q] += w[j] * aD[q] * c
+            for r in range(k):
+                H[q, r] += w[j] * aD[q] * aD[r]
+    tr = 0.0
+    for q in range(k):
+        tr += H[q, q]
+    for q in range(k):
+        H[q, q] += 1e-6 * tr / k
+    lm_step(H, g, u)
+    norm = 0.0
+    for q in range(k):
+        norm += u[q] * u[q]
+    norm = math.sqrt(norm)
+    f = min(1.0, 3.0 * ei / (L * L) / max(norm, 1e-300))
+    for q in range(k):
+        v = u[q] * f
+        u[q] = max(v if math.isfinite(v) else 0.0, lower[q])
+
+
+@njit(cache=True)
+def workspace(M, n):
+    """Buffers of one beam evaluation: positions, ∂p/∂F, state, tip (+ ∂tip/∂F), ∂φ_nodes/∂F."""
+    return np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 2))
+
+
+@njit(cache=True)
+def copy_workspace(src, dst):
+    dst[0][:, :] = src[0]
+    dst[1][:, :, :] = src[1]
+    dst[2][:] = src[2]
+    dst[3][:] = src[3]
+    dst[4][:, :] = src[4]
+
+
+@njit(cache=True)
+def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, PQ, q, ws):
+    """The beam shape at the comparison points with ∂p/∂F, into the workspace ``ws``; True if stable."""
+    pos, dpos, st, tip, dst = ws
+    n = st.size
+    extra = np.empty((n - 1, 3))
+    status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
+                                  NEWTON_TOL, NEWTON_MAX_ITER, True, allow_continuation, st, extra)
+    bk.node_sensitivity(extra, L, ei, dst)
+    bk.sample(st, dst, L, PQ, q, True, pos, dpos, tip)
+    return status == _OK
+
+
+@njit(cache=True)
+def objective(ws, p0, w, D, gF, GF):
+    """Positions objective (paper eq. 18): cost Σ w ‖p − p⁰‖², force gradient and Gram matrix.
+
+    Writes ``gF`` (2,) = Σ w (∂p/∂F)ᵀ (p − p⁰) and ``GF`` (2, 2) = Σ w (∂p/∂F)ᵀ ∂p/∂F;
+    returns the cost.
+    """
+    pos, dpos = ws[0], ws[1]
+    cost = 0.0
+    gF[:] = 0.0
+    GF[:, :] = 0.0
+    for j in range(p0.shape[0]):
+        for a in range(2):
+            r = pos[j, a] - p0[j, a]
+            cost += w[j] * r * r
+            for b in range(2):
+                gF[b] += w[j] * dpos[j, a, b] * r
+                for c in range(2):
+                    GF[b, c] += w[j] * dpos[j, a, b] * dpos[j, a, c]
+    return cost
+
+
+@njit(cache=True)
+def project(D, gF, GF, g, H):
+    """Reduced gradient Dᵀ g_F and Gauss–Newton matrix Dᵀ G_F D."""
+    k = g.size
+    for q in range(k):
+        g[q] = D[0, q] * gF[0] + D[1, q] * gF[1]
+        for r in range(k):
+            acc = 0.0
+            for a in range(2):
+                for b in range(2):
+                    acc += D[a, q] * GF[a, b] * D[b, r]
+            H[q, r] = acc
+
+
+@njit(cache=True)
+def convex_start(L, ei, wload, D, ffix, lower, u, out):
+    """``u`` scaled toward the fixed force (1, 0.8, …, 0) while the load stays provably convex (ρ < 0.9)."""
+    scale = L * L / ei
+    k = u.size
+    best = 0.0
+    F = np.empty(2)
+    ut = np.empty(k)
+    for t in (0.2, 0.4, 0.6, 0.8, 1.0):
+        for c in range(k):
+            ut[c] = max(u[c] * t, lower[c])
+        force_of(D, ffix, ut, F)
+        if bk.load_ratio(F[0] * scale, F[1] * scale, wload[0] * L * scale, wload[1] * L * scale) < 0.9:
+            best = t
+    for c in range(k):
+        out[c] = max(u[c] * best, lower[c])
+
+
+@njit(cache=True)
+def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_iter, ops, PQ, q, ws, blocked):
+    """Projected Gauss–Newton with a trust region on ``u`` (k,) for one frame; ``u`` updated in place.
+
+    The first beam solve starts Newton from the reference shape ``state0`` where the
+    load is provably convex, else by continuation from the unloaded arc; a start that
+    fails restarts at zero force; a start beyond the convexity bound competes with the
+    same start scaled into the convex region (the lower cost wins). Each trial solve
+    starts from the first-order prediction of the state and may not leave its linear
+    prediction (a jump to another branch). Converged when the step, or the error left
+    by the observed contraction, is below ``xtol`` [N]. Returns (status, beam solves,
+    cost); ``ws`` holds the beam at the last accepted ``u``; ``blocked`` the last step that
+    left the stable branch (status NOT_IDENTIFIABLE).
+    """
+    k = u.size
+    M = p0.shape[0]
+    n = state0.size
+    for c in range(k):
+        u[c] = max(u[c], lower[c])
+    F = np.empty(2)
+    force_of(D, ffix, u, F)
+    scale = L * L / ei
+    wx, wy = wload[0] * L, wload[1] * L
+    unique = bk.load_ratio(F[0] * scale, F[1] * scale, wx * scale, wy * scale) < 1.0
+    convex = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wx, F[1] + wy)) * scale < 0.9 * bk.STABLE_BOUND
+    iters = 1
+    ok = beam_eval(L, ei, k0, F, wload, state0, unique, True, ops, PQ, q, ws)
+    if not ok:
+        # the start may buckle the beam or lead Newton astray: start over from the unloaded
+        # arc by continuation at the constraint's zero force
+        for c in range(k):
+            u[c] = max(0.0, lower[c])
+        force_of(D, ffix, u, F)
+        ok = beam_eval(L, ei, k0, F, wload, state0, False, True, ops, PQ, q, ws)
+        iters += 1
+    gF = np.empty(2)
+    GF = np.empty((2, 2))
+    trial = workspace(M, n)
+    if not convex and ok:
+        uc = np.empty(k)
+        convex_start(L, ei, wload, D, ffix, lower, u, uc)
+        moved = False
+        for c in range(k):
+            moved |= uc[c] != u[c]
+        if moved:
+            force_of(D, ffix, uc, F)
+            okc = beam_eval(L, ei, k0, F, wload, state0, True, True, ops, PQ, q, trial)
+            iters += 1
+            if okc and objective(trial, p0, w, D, gF, GF) < objective(ws, p0, w, D, gF, GF):
+                u[:] = uc
+                copy_workspace(trial, ws)
+    if not ok:
+        return _BEAM_FAILED, iters, np.nan
+    cost = objective(ws, p0, w, D, gF, GF)
+    g = np.empty(k)
+    H = np.empty((k, k))
+    project(D, gF, GF, g, H)
+    radius = 0.5 * ei / (L * L)  # trust region in units of the natural force scale EI/L²
+    last = np.inf
+    jumps = 0
+    status = _RUNNING
+    step = np.empty(k)
+    dstep = np.empty(k)
+    un = np.empty(k)
+    dF = np.empty(2)
+    guess = np.empty(n)
+    gFn = np.empty(2)
+    GFn = np.empty((2, 2))
+    pos, dpos, st, _, dst = ws
+    for _ in range(max_iter):
+        lm_step(H, g, step)
+        size = 0.0
+        for c in range(k):
+            dstep[c] = max(u[c] + step[c], lower[c]) - u[c]
+            size = max(size, abs(dstep[c]))
+        seen = math.isfinite(last)
+        rate = size / last if seen else size
+        left = size * rate / (1.0 - rate) if seen and rate < 0.5 else size
+        # converged: the step, or the error left by a contraction at the observed rate,
+        # is below xtol; or stalled at the round-off floor of the beam solutions
+        if left <= xtol or (seen and size <= 1e3 * xtol and rate > 0.5):
+            for c in range(k):
+                u[c] += dstep[c]
+            status = _OK
+            break
+        last = size
+        norm = 0.0
+        for c in range(k):
+            norm += dstep[c] * dstep[c]
+        norm = math.sqrt(norm)
+        shrink = min(1.0, radius / norm)
+        norm *= shrink
+        predicted = 0.0
+        for c in range(k):
+            un[c] = max(u[c] + dstep[c] * shrink, lower[c])
+            dstep[c] = un[c] - u[c]
+        for c in range(k):
+            predicted -= 2.0 * g[c] * dstep[c]
+            for r in range(k):
+                predicted -= dstep[c] * H[c, r] * dstep[r]
+        force_of(D, np.zeros(2), dstep, dF)
+        force_of(D, ffix, un, F)
+        for i in range(n):  # first-order prediction of the new state
+            guess[i] = st[i] + dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
+        okn = beam_eval(L, ei, k0, F, wload, guess, True, False, ops, PQ, q, trial)
+        iters += 1
+        # a shape far from its linear prediction has jumped to another branch of equilibria
+        jump = 0.0
+        lin_max = 0.0
+        for j in range(M):
+            for a in range(2):
+                lin = dpos[j, a, 0] * dF[0] + dpos[j, a, 1] * dF[1]
+                lin_max = max(lin_max, abs(lin))
+                jump = max(jump, abs(trial[0][j, a] - pos[j, a] - lin))
+        okn = okn and jump <= 0.5 * lin_max + 1e-6 * L
+        cn = objective(trial, p0, w, D, gFn, GFn)
+        rho = (cost - cn) / (predicted if predicted > 0 else np.inf)
+        # below ~1e-6 N the cost change is lost in the beam's round-off: the step is trusted
+        acc = okn and (rho > 1e-4 or norm < 1e-6)
+        if acc:
+            u[:] = un
+            copy_workspace(trial, ws)
+            cost = cn
+            gF[:] = gFn
+            GF[:, :] = GFn
+            project(D, gF, GF, g, H)
+            if rho > 0.75 and shrink < 1.0:
+                radius *= 4.0
+        if not acc or rho < 0.25:
+            radius = 0.25 * norm
+        if not acc:
+            last = np.inf
+        if radius < 1e-12:
+            status = _NOT_CONVERGED
+        if not okn:
+            # trials leave the stable branch again and again: the optimum lies at the
+            # stability boundary; stop at the best stable point
+            jumps += 1
+            blocked[:] = dstep
+            if jumps >= MAX_JUMPS and status == _RUNNING:
+                status = _NOT_IDENTIFIABLE
+        if status != _RUNNING:
+            break
+    if status == _RUNNING:
+        status = _NOT_CONVERGED
+    return status, iters, cost
+
+
+@njit(cache=True)
+def finish(status, L, p0, w, D, dD, has_dD, u, ffix, ws, blocked, has_cov, cov_s, kappa, lengths, gap, seg, sigma,
+           dphi_ds, force, cov, direction):
+    """Status, force, covariance and χ²/dof of a frame after the iteration; returns (status, residual, χ²/dof)."""
+    pos = ws[0]
+    num = 0.0
+    den = 0.0
+    for j in range(p0.shape[0]):
+        dx = pos[j, 0] - p0[j, 0]
+        dy = pos[j, 1] - p0[j, 1]
+        num += w[j] * (dx * dx + dy * dy)
+        den += w[j]
+    residual = math.sqrt(num / den)
+    ratio = np.nan
+    if status == _OK or status == _NOT_IDENTIFIABLE:
+        ratio = covariance(L, p0, w, D, dD, has_dD, u, ws[0], ws[1], has_cov, cov_s, kappa, lengths, gap, seg,
+                           sigma, dphi_ds, cov)
+    if status == _NOT_IDENTIFIABLE:
+        v = np.empty(2)
+        force_of(D, np.zeros(2), blocked, v)
+        nv = max(math.hypot(v[0], v[1]), 1e-300)
+        direction[0] = v[0] / nv
+        direction[1] = v[1] / nv
+        for a in range(2):
+            for b in range(2):
+                if abs(direction[a] * direction[b]) > 1e-12:
+                    cov[a, b] = np.inf
+        if residual > BOUNDARY_MISFIT * L:
+            status = _NO_STABLE_MATCH
+    if status == _OK or status == _NOT_IDENTIFIABLE:
+        force_of(D, ffix, u, force)
+    else:
+        force[:] = np.nan
+        cov[:, :] = np.nan
+        ratio = np.nan
+    return status, residual, ratio
+
+
+@njit(cache=True)
+def estimate_block(lo, hi, use_guess, chained, p0, s, w, L, wload, ei, k0, D, dD, has_dD, ffix, lower, phi_end, kappa_s,
+                   state0, u_init, offset, xtol, max_iter, ops, PQ, q, noise, out):
+    """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
+    has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds = noise
+    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction = out
+    k = lower.size
+    ws = workspace(s.size, state0.shape[1])
+    u = np.empty(k)
+    u0 = np.empty(k)
+    prev_u = np.empty(k)
+    prev_u0 = np.empty(k)
+    blocked = np.zeros(k)
+    g = np.empty(k)
+    prev_ok = False
+    for i in range(lo, hi):
+        moment_guess(p0[i], s, w, L, ei[i], k0[i], wload, D[i], ffix[i], lower, phi_end[i], kappa_s[i], g)
+        force_of(D[i], ffix[i], g, guess_n[i])
+        for c in range(k):
+            u0[c] = max((g[c] + offset[i, c]) if use_guess else u_init[i, c], lower[c])
+            u[c] = u0[c]
+            if prev_ok:
+                u[c] = max(u0[c] + prev_u[c] - prev_u0[c], lower[c])
+        blocked[:] = 0.0
+        st, it, _ = gauss_newton(L, ei[i], k0[i], wload, p0[i], w, D[i], ffix[i], lower, u, state0[i], xtol,
+                                 max_iter, ops, PQ, q, ws, blocked)
+        prev_ok = chained and st == _OK
+        prev_u[:] = u
+        prev_u0[:] = u0
+        direction[i, :] = 0.0
+        st, residual[i], chi2[i] = finish(st, L, p0[i], w, D[i], dD[i], has_dD, u, ffix[i], ws, blocked, has_cov,
+                                          cov_s[i], kappa[i], lengths, gap, seg, sigma, dphi_ds, force[i], cov[i],
+                                          direction[i])
+        status[i] = st
+        iters[i] = it
+        state[i] = ws[2]
+        tip[i, 0] = ws[3][0]
+        tip[i, 1] = ws[3][1]
+
+
+@njit(cache=True, parallel=True)
+def estimate_frames(block, use_guess, p0, s, w, L, wload, ei, k0, D, dD, has_dD, ffix, lower, phi_end, kappa_s,
+                    state0, u_init, offset, xtol, max_iter, ops, PQ, q, noise, out):
+    """The whole estimate of every frame (B,), in parallel over blocks of ``block`` consecutive frames.
+
+    ``use_guess``: start at the moment-balance guess plus ``offset`` (B, k), else at
+    ``u_init`` (B, k). Within a block (``block`` > 1, a time series) a frame's start is
+    corrected by the previous frame's offset from its own guess when that converged.
+    ``noise``: (has_cov, Σ_S (B, N, N), κ (B, N), lengths, gap, seg, σ, ∂φ_L/∂S).
+    ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof, guess
+    (B, 2), state (B, n), tip (B, 2) and the unidentifiable direction of a boundary stop
+    (B, 2).
+    """
+    B = p0.shape[0]
+    nblocks = (B + block - 1) // block
+    for blk in prange(nblocks):
+        estimate_block(blk * block, min(B, (blk + 1) * block), use_guess, block > 1, p0, s, w, L, wload, ei, k0, D,
+                       dD, has_dD, ffix, lower, phi_end, kappa_s, state0, u_init, offset, xtol, max_iter, ops, PQ, q,
+                       noise, out)
+
+
+@njit(cache=True)
+def evaluate_frame(i, p0, w, L, wload, ei, k0, D, dD, has_dD, ffix, u, run_status, state0, ops, PQ, q, noise, out):
+    """Shape, covariance and status of frame ``i`` at given parameters ``u`` (the paper's optimum)."""
+    has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds = noise
+    force, cov, status, residual, chi2, state, tip = out
+    ws = workspace(p0.shape[1], state0.shape[1])
+    F = np.empty(2)
+    force_of(D[i], ffix[i], u[i], F)
+    ok = beam_eval(L, ei[i], k0[i], F, wload, state0[i], True, True, ops, PQ, q, ws)
+    st = run_status[i] if ok else _BEAM_FAILED
+    blocked = np.zeros(u.shape[1])
+    status[i], residual[i], chi2[i] = finish(st, L, p0[i], w, D[i], dD[i], has_dD, u[i], ffix[i], ws, blocked,
+                                             has_cov, cov_s[i], kappa[i], lengths, gap, seg, sigma, dphi_ds,
+                                             force[i], cov[i], np.zeros(2))
+    state[i] = ws[2]
+    tip[i, 0] = ws[3][0]
+    tip[i, 1] = ws[3][1]
+
+
+@njit(cache=True, parallel=True)
+def evaluate_frames(p0, w, L, wload, ei, k0, D, dD, has_dD, ffix, u, run_status, state0, ops, PQ, q, noise, out):
+    """:func:`evaluate_frame` over a batch, in parallel."""
+    for i in prange(p0.shape[0]):
+        evaluate_frame(i, p0, w, L, wload, ei, k0, D, dD, has_dD, ffix, u, run_status, state0, ops, PQ, q, noise, out)

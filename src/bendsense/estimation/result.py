@@ -1,0 +1,154 @@
+"""The result object of a force estimate and the messages of its per-frame status codes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bendsense.status import Status
+
+__all__ = ["ForceEstimate", "messages"]
+
+OK_MESSAGE = "converged"
+
+
+def messages(status, residual_m, direction, method):
+    """Per-frame messages (B,) of str from the status codes (:class:`~bendsense.status.Status`)."""
+    out = np.full(status.shape, OK_MESSAGE, dtype=object)
+    out[status == Status.BEAM_FAILED] = "beam model fails (buckling or no equilibrium) at every trial force"
+    out[status == Status.NOT_CONVERGED] = ("no convergence in the iteration limit" if method == "fast"
+                                           else "optimizer did not converge")
+    for i in np.flatnonzero(status == Status.NOT_IDENTIFIABLE):
+        x, y = direction[i]
+        out[i] = (f"not identifiable along ({x:.3f}, {y:.3f}): trial loads leave the stable branch "
+                  "(buckling) or the shape's linear range; best stable estimate, std inf")
+    for i in np.flatnonzero(status == Status.NO_STABLE_MATCH):
+        out[i] = (f"no stable equilibrium matches the shape: stopped at the stability boundary "
+                  f"{residual_m[i] * 1e3:.3g} mm from it (a load beyond buckling?)")
+    return out.astype(str)
+
+
+@dataclass(frozen=True, eq=False)
+class ForceEstimate:
+    """Estimated tip force (paper eq. 18), batched over leading axes ``...``.
+
+    Attributes
+    ----------
+    force_n : ndarray, shape (..., 2)
+        Tip force (Fx, Fy) in the base frame [N].
+    std_n : ndarray, shape (..., 2)
+        Standard deviation of each component [N] from the propagated shift errors
+        (signal noise and calibration error, scaled by ``max(1, χ²/dof)``; module
+        docstring, Uncertainty); ``inf`` for a component the shape cannot determine.
+    covariance_n2 : ndarray, shape (..., 2, 2)
+        Covariance of ``force_n`` [N²].
+    residual_m : ndarray, shape (...)
+        RMS distance between the reconstructed and the model shape over ``[0, Lc]`` [m].
+    success : ndarray of bool, shape (...)
+        Converged, with a stable beam equilibrium; or stopped at the best stable point
+        where the load along one direction is not identifiable (message
+        ``"not identifiable along ..."``, ``std_n`` inf along it).
+    message : str or ndarray of str, shape (...)
+        ``"converged"``, ``"not identifiable along (x, y): ..."`` or the reason for
+        ``success=False``.
+    iterations : ndarray of int, shape (...)
+        Beam solves spent on each frame (objective evaluations for ``paper``).
+    wall_time_s : float
+        Wall time of the whole call [s].
+    method : str
+        ``"fast"`` or ``"paper"``.
+    constraint : str
+        The constraint (see the module docstring).
+    uncertainty : str
+        ``"propagated"`` (sensor noise through calibration and PCC) or ``"residual"``
+        (fallback from the fit residual).
+    tip_position_m : ndarray, shape (..., 2)
+        Tip of the model shape at the estimate [m].
+    state : ndarray, shape (..., n_nodes) or None
+        Beam state at the estimate.
+    guess_n : ndarray, shape (..., 2) or None
+        The moment-balance starting force; with ``force_n`` it corrects the start of
+        the next frame (``initial=`` of the next call).
+    chi2_per_dof : ndarray, shape (...) or None
+        Misfit of the fit against the propagated shift errors, χ²/dof (about 1 when
+        the errors are as modelled); ``std_n`` includes the factor ``max(1, χ²/dof)``
+        on the variance. NaN for ``uncertainty="residual"`` and failed frames.
+    """
+
+    force_n: np.ndarray
+    std_n: np.ndarray
+    covariance_n2: np.ndarray
+    residual_m: np.ndarray
+    success: np.ndarray
+    message: object
+    iterations: np.ndarray
+    wall_time_s: float
+    method: str
+    constraint: str
+    uncertainty: str = "propagated"
+    tip_position_m: np.ndarray | None = None
+    state: np.ndarray | None = field(default=None, repr=False)
+    guess_n: np.ndarray | None = field(default=None, repr=False)
+    chi2_per_dof: np.ndarray | None = None
+
+    @property
+    def batch_shape(self) -> tuple:
+        """Shape of the leading frame axes (``()`` for one frame)."""
+        return np.shape(self.force_n)[:-1]
+
+    def to_dict(self) -> dict:
+        """Plain lists and scalars, for JSON/YAML."""
+        return {
+            "force_n": np.asarray(self.force_n).tolist(),
+            "std_n": np.asarray(self.std_n).tolist(),
+            "covariance_n2": np.asarray(self.covariance_n2).tolist(),
+            "residual_m": np.asarray(self.residual_m).tolist(),
+            "success": np.asarray(self.success).tolist(),
+            "message": np.asarray(self.message).tolist(),
+            "iterations": np.asarray(self.iterations).tolist(),
+            "wall_time_s": float(self.wall_time_s),
+            "method": self.method,
+            "constraint": self.constraint,
+            "uncertainty": self.uncertainty,
+            "chi2_per_dof": None if self.chi2_per_dof is None else np.asarray(self.chi2_per_dof).tolist(),
+        }
+
+    def plot(self, ax=None, *, shape=None, t_s=None, scale_m_per_n: float = 0.1):
+        """Draw the estimate; returns the matplotlib axes.
+
+        One frame: the force as an arrow at the model tip (``scale_m_per_n`` metres per
+        newton), over ``shape`` if given. A batch: Fx and Fy against ``t_s`` (default the
+        frame index) with ±2σ bands.
+        """
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots()
+        force = np.asarray(self.force_n)
+        if force.ndim == 1:
+            if shape is not None:
+                pos = np.asarray(shape.positions_m).reshape(-1, 2)
+                ax.plot(pos[:, 0], pos[:, 1], "-", color="0.4")
+            tip = np.zeros(2) if self.tip_position_m is None else np.asarray(self.tip_position_m)
+            ax.annotate("", xy=tip + scale_m_per_n * force, xytext=tip,
+                        arrowprops={"arrowstyle": "->", "color": "C3"})
+            ax.plot([0.0, tip[0], tip[0] + scale_m_per_n * force[0]], [0.0, tip[1], tip[1] + scale_m_per_n * force[1]],
+                    alpha=0.0)
+            ax.plot([0.0], [0.0], "ks", markersize=4)
+            ax.set_xlabel("x [m]")
+            ax.set_ylabel("y [m]")
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.set_title(f"F = ({force[0]:.3g}, {force[1]:.3g}) N")
+            return ax
+        force = force.reshape(-1, 2)
+        std = np.asarray(self.std_n).reshape(-1, 2)
+        t = np.arange(len(force)) if t_s is None else np.asarray(t_s).reshape(-1)
+        for i, name in enumerate(("Fx", "Fy")):
+            ax.plot(t, force[:, i], label=name, color=f"C{i}")
+            band = np.where(np.isfinite(std[:, i]), 2.0 * std[:, i], np.nan)
+            ax.fill_between(t, force[:, i] - band, force[:, i] + band, color=f"C{i}", alpha=0.2)
+        ax.set_xlabel("t [s]" if t_s is not None else "frame")
+        ax.set_ylabel("force [N]")
+        ax.legend()
+        return ax

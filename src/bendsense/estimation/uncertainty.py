@@ -1,0 +1,284 @@
+"""Uncertainty of the force estimate: linear propagation of the shift errors and the misfit χ².
+
+With the weighted residual ``r(u) = W^½ (p(s; u) − p⁰(s))`` and ``J = ∂r/∂u``, the
+optimum moves by ``δu = (JᵀJ)⁻¹ Jᵀ W^½ δp⁰`` when the reconstructed shape moves by
+``δp⁰ = G δS``, ``G = ∂p⁰/∂S`` through the PCC kinematics (paper eq. 3–7). So
+``Cov(F) = T Σ_S Tᵀ`` with ``T = ∂F/∂S`` (including the change of ``D`` with the tip
+angle for ``tip_angle_source="shape"``). ``Σ_S`` holds the signal noise through the
+calibration slope and the calibration's own model error (:func:`shift_covariance`).
+
+The misfit: the residual is pulled back to the shift perturbation that explains it
+best, ``δŜ = −(GᵀWG)⁻¹ GᵀW r``, and ``χ² = δŜᵀ C⁺ δŜ`` with ``C`` the covariance that
+``Σ_S`` predicts for ``δŜ`` (rank N − k); ``Cov(F)`` is scaled by ``max(1, χ²/dof)``
+(the Birge ratio). Without a noise model the residuals are taken as independent per
+point with the variance of the fit (``uncertainty="residual"``). A direction the shape
+does not determine (``JᵀJ`` singular) gets an infinite standard deviation.
+
+:func:`covariance` is the compiled per-frame kernel (~15 µs for N = 16, M = 41).
+"""
+
+import math
+
+import numpy as np
+
+from bendsense.errors import ArgumentError
+from numba import njit
+
+from bendsense.beam_kernels import lu_solve
+
+
+@njit(cache=True)
+def _sinc(v):
+    return 1.0 if v == 0.0 else math.sin(v) / v
+
+
+@njit(cache=True)
+def _dsinc(v):
+    """d/dv sin(v)/v, by its series near 0 where (cos v − sinc v)/v cancels."""
+    if abs(v) < 1e-2:
+        v2 = v * v
+        return v * (-1.0 / 3.0 + v2 * (1.0 / 30.0 - v2 / 840.0))
+    return (math.cos(v) - math.sin(v) / v) / v
+
+
+@njit(cache=True)
+def _arc_dkappa(kappa, sigma, phi0):
+    """∂/∂κ of the chord σ sinc(κσ/2) (sin(φ0 + κσ/2), cos(φ0 + κσ/2)) (paper eq. 5–6)."""
+    half = 0.5 * kappa * sigma
+    c = sigma * _sinc(half)
+    dc = 0.5 * sigma * sigma * _dsinc(half)
+    m = phi0 + half
+    sm, cm = math.sin(m), math.cos(m)
+    return dc * sm + 0.5 * sigma * c * cm, dc * cm - 0.5 * sigma * c * sm
+
+
+@njit(cache=True)
+def shape_jacobian(kappa, lengths, gap, seg, sigma, pos, out):
+    """∂p⁰_j/∂S_i (2M, N) of the PCC shape at its points ``pos`` (M, 2) (paper eq. 3–7).
+
+    Raising κ_i moves a point inside segment i along its chord derivative and turns every
+    point beyond the segment about the segment's end ``P_i`` (R'v = (v_y, −v_x)); then
+    ``κ_i = (S_i − S_{i−1}) / (d l_i)``.
+    """
+    N = lengths.size
+    M = seg.size
+    phi_start = np.empty(N)
+    ends_x = np.empty(N)
+    ends_y = np.empty(N)
+    dch = np.empty((N, 2))
+    acc = 0.0
+    ex = 0.0
+    ey = 0.0
+    for i in range(N):
+        theta = kappa[i] * lengths[i]
+        phi_start[i] = acc
+        half = 0.5 * theta
+        chord = lengths[i] * _sinc(half)
+        ex += chord * math.sin(acc + half)
+        ey += chord * math.cos(acc + half)
+        ends_x[i] = ex
+        ends_y[i] = ey
+        dch[i, 0], dch[i, 1] = _arc_dkappa(kappa[i], lengths[i], acc)
+        acc += theta
+    for j in range(M):
+        sj = seg[j]
+        for i in range(N):
+            if sj > i:
+                gx = dch[i, 0] + lengths[i] * (pos[j, 1] - ends_y[i])
+                gy = dch[i, 1] - lengths[i] * (pos[j, 0] - ends_x[i])
+            elif sj == i:
+                gx, gy = _arc_dkappa(kappa[i], sigma[j], phi_start[i])
+            else:
+                gx = gy = 0.0
+            out[2 * j, i] = gx / (gap * lengths[i])
+            out[2 * j + 1, i] = gy / (gap * lengths[i])
+        for i in range(N - 1):  # κ_i depends on S_i and S_{i−1}
+            out[2 * j, i] -= out[2 * j, i + 1]
+            out[2 * j + 1, i] -= out[2 * j + 1, i + 1]
+
+
+@njit(cache=True)
+def inverse_cov(H):
+    """Pseudo-inverse of JᵀJ (k, k), the eigen-directions it cannot resolve and its eigenvectors."""
+    k = H.shape[0]
+    if k == 1:
+        h = H[0, 0]
+        singular = np.array([h <= 1e-12 * max(h, 0.0) + 1e-300])
+        return np.array([[0.0 if singular[0] else 1.0 / h]]), singular, np.ones((1, 1))
+    lam, V = np.linalg.eigh(H)
+    top = max(lam[k - 1], 0.0)
+    singular = lam <= 1e-12 * top + 1e-300
+    inv = np.zeros((k, k))
+    for q in range(k):
+        if not singular[q]:
+            for a in range(k):
+                for b in range(k):
+                    inv[a, b] += V[a, q] * V[b, q] / lam[q]
+    return inv, singular, V
+
+
+@njit(cache=True)
+def misfit(Gf, w2, r, JD, Tu, cov_s):
+    """χ² of the residual ``r`` (2M,) against the propagated shift covariance, and its dof.
+
+    ``δŜ = −(GᵀWG)⁻¹ GᵀW r``; with ``Z = (GᵀWG)⁻¹ GᵀW J`` and ``T = ∂u/∂S``,
+    ``C = (I − ZT) Σ_S (I − ZT)ᵀ`` of rank N − k.
+    """
+    N = Gf.shape[1]
+    k = JD.shape[1]
+    A = np.zeros((N, N))
+    rhs = np.zeros((N, 1 + k))
+    for row in range(Gf.shape[0]):
+        wr = w2[row]
+        for i in range(N):
+            gi = wr * Gf[row, i]
+            if gi == 0.0:
+                continue
+            for j in range(N):
+                A[i, j] += gi * Gf[row, j]
+            rhs[i, 0] += gi * r[row]
+            for c in range(k):
+                rhs[i, 1 + c] += gi * JD[row, c]
+    if not lu_solve(A, rhs):
+        return np.nan, 0
+    proj = np.eye(N) - np.ascontiguousarray(rhs[:, 1:]) @ Tu
+    C = proj @ cov_s @ proj.T
+    C = 0.5 * (C + C.T)
+    lam, V = np.linalg.eigh(C)
+    z = V.T @ np.ascontiguousarray(rhs[:, 0])
+    chi2 = 0.0
+    dof = 0
+    for i in range(k, N):
+        if lam[i] > 1e-10 * lam[N - 1]:
+            chi2 += z[i] * z[i] / lam[i]
+            dof += 1
+    return chi2, dof
+
+
+@njit(cache=True)
+def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds, out):
+    """Cov(F) (2, 2) into ``out`` and χ²/dof (NaN for the residual fallback) of one frame (module docstring)."""
+    M = p0.shape[0]
+    k = D.shape[1]
+    A = np.empty((2 * M, 2))  # ∂p/∂F
+    w2 = np.empty(2 * M)
+    r = np.empty(2 * M)
+    for j in range(M):
+        for a in range(2):
+            A[2 * j + a, 0] = dpos[j, a, 0]
+            A[2 * j + a, 1] = dpos[j, a, 1]
+            w2[2 * j + a] = w[j]
+            r[2 * j + a] = pos[j, a] - p0[j, a]
+    wA = A * w2.reshape(-1, 1)
+    GF = A.T @ wA
+    Dc = np.ascontiguousarray(D)
+    Hinv, singular, V = inverse_cov(Dc.T @ GF @ Dc)
+    ratio = np.nan
+    if has_cov:
+        N = lengths.size
+        Gf = np.empty((2 * M, N))
+        shape_jacobian(kappa, lengths, gap, seg, sigma, p0, Gf)
+        hs = Dc.T @ (wA.T @ Gf)  # (k, N)
+        Fd = np.zeros(2)
+        if has_dD:
+            # D follows the reconstructed tip angle φ_L
+            for a in range(2):
+                for c in range(k):
+                    Fd[a] += dD[a, c] * u[c]
+            t = Dc.T @ (GF @ Fd)
+            for c in range(k):
+                for i in range(N):
+                    hs[c, i] -= t[c] * dphi_ds[i]
+        Tu = Hinv @ hs  # ∂u/∂S
+        T = Dc @ Tu  # ∂F/∂S
+        if has_dD:
+            for a in range(2):
+                for i in range(N):
+                    T[a, i] += Fd[a] * dphi_ds[i]
+        c = T @ cov_s @ T.T
+        chi2, dof = misfit(Gf, w2, r, A @ Dc, Tu, cov_s)
+        ratio = chi2 / max(dof, 1)
+        c *= max(ratio, 1.0)
+    else:
+        dof = max(2 * M - k, 1)
+        var = (r @ r) / dof  # per coordinate
+        mid = A.T @ (A * (w2 * w2).reshape(-1, 1))
+        c = Dc @ (var * (Hinv @ (Dc.T @ mid @ Dc) @ Hinv)) @ Dc.T
+    for q in range(k):
+        if singular[q]:
+            v = Dc @ np.ascontiguousarray(V[:, q])
+            for a in range(2):
+                for b in range(2):
+                    if abs(v[a] * v[b]) > 1e-12:
+                        c[a, b] = np.inf
+    out[:, :] = c
+    return ratio
+
+
+def tip_angle_weights(lengths, length_m):
+    """Weights c with φ(L) = c · κ: the tip angle of the actuator from the segment curvatures.
+
+    The sensor (length L_N) may end short of the actuator tip L, where the contact acts;
+    the last segment's curvature is carried on to the tip.
+    """
+    c = np.array(lengths, dtype=float)
+    c[-1] += max(length_m - c.sum(), 0.0)
+    return c
+
+
+def tip_angle_shift_gradient(lengths, length_m, strip_gap_m):
+    """∂φ(L)/∂S (N,) through κ_i = (S_i − S_(i−1)) / (d l_i) (paper eq. 3–4)."""
+    c = tip_angle_weights(lengths, length_m) / (np.asarray(lengths, dtype=float) * strip_gap_m)
+    return c - np.append(c[1:], 0.0)
+
+
+def noise_std(noise_opt, calibration, est):
+    """Signal noise per channel (option, else the calibration's if nonzero, else the config's)."""
+    if noise_opt is not None:
+        sigma_a = np.asarray(noise_opt, dtype=float)
+    elif calibration is not None and np.any(np.asarray(calibration.noise_std) > 0):
+        sigma_a = np.asarray(calibration.noise_std, dtype=float)
+    else:
+        sigma_a = np.asarray(est.signal_noise_std, dtype=float)
+    if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
+        raise ArgumentError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
+    return sigma_a
+
+
+def shift_covariance(kappa, lengths, d, noise_std, calibration):
+    """Σ_S (b, N, N) [m²]: covariance of the shifts.
+
+    The signal noise through the calibration slope f'(ΔA) (paper eq. 2), independent per
+    channel, plus the calibration's own model error, correlated across channels
+    (:meth:`~bendsense.calibration.Calibration.shift_error_m`). Without a calibration the
+    noise is in metres of shift.
+    """
+    from bendsense.calibration import parity_masks
+
+    S = d * np.cumsum(kappa * lengths, axis=-1)  # S_i = d φ(L_i) (paper eq. 3–4)
+    if calibration is None:
+        sd = np.broadcast_to(noise_std, S.shape)
+        return sd[..., :, None] * np.eye(S.shape[-1]) * sd[..., None, :]
+    n = S.shape[-1]
+    odd, _ = parity_masks(n)
+    coef = np.where(odd[:, None], calibration.coefficients_odd, calibration.coefficients_even)  # (N, n+1)
+    dcoef = coef[:, 1:] * np.arange(1, coef.shape[1])
+    if dcoef.shape[1] == 0:
+        return np.zeros((*S.shape, n))
+
+    def poly(c, x):
+        out = np.broadcast_to(c[:, -1], x.shape).copy()
+        for j in range(c.shape[1] - 2, -1, -1):
+            out = out * x + c[:, j]
+        return out
+
+    slope0 = dcoef[:, 0]
+    x = np.where(slope0 != 0, (S - coef[:, 0]) / np.where(slope0 != 0, slope0, 1.0), 0.0)
+    for _ in range(50):
+        fp = poly(dcoef, x)
+        dx = (poly(coef, x) - S) / np.where(fp != 0, fp, 1.0)
+        x = x - dx
+        if np.all(np.abs(dx) <= 1e-12 * np.maximum(1.0, np.abs(x))):
+            break
+    sd = np.abs(poly(dcoef, x)) * noise_std
+    return sd[..., :, None] * np.eye(n) * sd[..., None, :] + calibration.shift_error_m(S, covariance=True)
