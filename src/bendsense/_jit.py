@@ -25,6 +25,7 @@ if "NUMBA_THREADING_LAYER" not in os.environ:
 
 _announced = False
 _lock = threading.Lock()
+_ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)
 
 
 def _cached(dispatcher) -> bool:
@@ -42,8 +43,9 @@ def call(dispatcher, *args):
 
 
 def _call(dispatcher, args):
-    if dispatcher.signatures:
+    if dispatcher in _ready:
         return dispatcher(*args)
+    _ready.add(dispatcher)
     global _announced
     if not _announced and not _cached(dispatcher):
         _announced = True

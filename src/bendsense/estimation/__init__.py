@@ -65,7 +65,9 @@ _N_NODES = _beam.DEFAULT_NODES
 
 def _c(a, dtype=float):
     """A C-contiguous, writable array: the one array type the kernels are compiled for."""
-    return np.require(a, dtype=dtype, requirements=("C", "W", "A"))
+    if type(a) is np.ndarray and a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, dtype=dtype, order="C")
 
 
 def _models(config):
@@ -189,8 +191,10 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     M = ref.s.size
 
     def flat(a, tail=(), dtype=float):
-        if np.shape(a) != (B, *tail):
-            a = np.broadcast_to(a, (*batch, *tail)).reshape(B, *tail)
+        a = np.asarray(a)
+        if a.shape != (B, *tail):
+            a = a.reshape(B, *tail) if a.size == B * math.prod(tail) else np.broadcast_to(a, (*batch, *tail)).reshape(
+                B, *tail)
         return _c(a, dtype)
 
     Pf = flat(P)
@@ -259,6 +263,11 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                                          np.maximum(np.zeros((B, k)), lower))
         _jit.call(_kernels.evaluate_frames, p0, _c(ref.w), *common, _c(u), _c(run_status, np.int64), state0,
                   ops.kernel, PQ, q, noise, (force, cov, status, residual, chi2, state, tip))
+    # a NaN force is never a success
+    bad = ((status == Status.OK) | (status == Status.NOT_IDENTIFIABLE)) & ~np.isfinite(force).all(axis=1)
+    if bad.any():
+        status[bad] = Status.NOT_CONVERGED
+        force[bad], cov[bad], chi2[bad] = np.nan, np.nan, np.nan
     success = (status == Status.OK) | (status == Status.NOT_IDENTIFIABLE)
     text = messages(status, residual, blocked_dir, method)
     if strict and not success.all():

@@ -15,6 +15,8 @@ OK_MESSAGE = "converged"
 
 def messages(status, residual_m, direction, method):
     """Per-frame messages (B,) of str from the status codes (:class:`~bendsense.status.Status`)."""
+    if (status == Status.OK).all():
+        return np.full(status.shape, OK_MESSAGE)
     out = np.full(status.shape, OK_MESSAGE, dtype=object)
     out[status == Status.BEAM_FAILED] = "beam model fails (buckling or no equilibrium) at every trial force"
     out[status == Status.NOT_CONVERGED] = ("no convergence in the iteration limit" if method == "fast"

@@ -215,6 +215,37 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
     return ratio
 
 
+@njit(cache=True)
+def _slope_noise(coef, dcoef, S, noise):
+    """|f'(ΔA)| σ_A per channel at the signal ΔA = f⁻¹(S) (paper eq. 2 inverted by Newton's method).
+
+    ``coef`` (N, n+1) and ``dcoef`` (N, n) ascending powers of each channel's polynomial
+    and its derivative, ``S`` (B, N) shifts, ``noise`` (N,) signal noise.
+    """
+    B, N = S.shape
+    out = np.empty((B, N))
+    for b in range(B):
+        for i in range(N):
+            x = (S[b, i] - coef[i, 0]) / dcoef[i, 0] if dcoef[i, 0] != 0 else 0.0
+            fp = 0.0
+            for _ in range(50):
+                f = 0.0
+                for j in range(coef.shape[1] - 1, -1, -1):
+                    f = f * x + coef[i, j]
+                fp = 0.0
+                for j in range(dcoef.shape[1] - 1, -1, -1):
+                    fp = fp * x + dcoef[i, j]
+                dx = (f - S[b, i]) / (fp if fp != 0 else 1.0)
+                x -= dx
+                if abs(dx) <= 1e-12 * max(1.0, abs(x)):
+                    break
+            fp = 0.0
+            for j in range(dcoef.shape[1] - 1, -1, -1):
+                fp = fp * x + dcoef[i, j]
+            out[b, i] = abs(fp) * noise[i]
+    return out
+
+
 def tip_angle_weights(lengths, length_m):
     """Weights c with φ(L) = c · κ: the tip angle of the actuator from the segment curvatures.
 
@@ -266,19 +297,6 @@ def shift_covariance(kappa, lengths, d, noise_std, calibration):
     if dcoef.shape[1] == 0:
         return np.zeros((*S.shape, n))
 
-    def poly(c, x):
-        out = np.broadcast_to(c[:, -1], x.shape).copy()
-        for j in range(c.shape[1] - 2, -1, -1):
-            out = out * x + c[:, j]
-        return out
-
-    slope0 = dcoef[:, 0]
-    x = np.where(slope0 != 0, (S - coef[:, 0]) / np.where(slope0 != 0, slope0, 1.0), 0.0)
-    for _ in range(50):
-        fp = poly(dcoef, x)
-        dx = (poly(coef, x) - S) / np.where(fp != 0, fp, 1.0)
-        x = x - dx
-        if np.all(np.abs(dx) <= 1e-12 * np.maximum(1.0, np.abs(x))):
-            break
-    sd = np.abs(poly(dcoef, x)) * noise_std
+    sd = _slope_noise(np.ascontiguousarray(coef), np.ascontiguousarray(dcoef), S.reshape(-1, n),
+                      np.ascontiguousarray(np.broadcast_to(noise_std, (n,)), dtype=float)).reshape(S.shape)
     return sd[..., :, None] * np.eye(n) * sd[..., None, :] + calibration.shift_error_m(S, covariance=True)
