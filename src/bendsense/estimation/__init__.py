@@ -25,6 +25,7 @@ and an infinite standard deviation along that direction.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -199,12 +200,13 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
 
     Pf = flat(P)
     model = _models(config)
-    k0 = flat(model.tip_curvature_per_m(Pf))
+    theta = flat(model.bending_angle_rad(Pf))  # free-motion tip angle
+    k0 = theta / model.length_m  # as model.tip_curvature_per_m
     ei = flat(config.stiffness.ei_nm2(Pf))
     if not np.all(ei > 0):
         raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
                          f"at {float(Pf[np.argmin(ei)])!r} Pa")
-    phi_L = model.tip_angle_rad(Pf) if source == "model" else flat(ref.tip_shape)
+    phi_L = theta if source == "model" else flat(ref.tip_shape)
     D, dD = constraint_basis(constraint, phi_L, direction=direction, follower_angle_rad=follower)
     k = D.shape[-1]
     D = flat(D, (2, k))
@@ -291,6 +293,12 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     )
 
 
+@functools.lru_cache(maxsize=16)
+def _tip_gradient(lengths: bytes, length_m: float, gap: float) -> np.ndarray:
+    """∂φ_L/∂S (N,) of a sensor (cached)."""
+    return _c(tip_angle_shift_gradient(np.frombuffer(lengths), length_m, gap))
+
+
 def _noise_model(ref, B, config, noise_opt, calibration, L):
     """The kernels' noise arguments: (has_cov, Σ_S (B, N, N), κ (B, N), lengths, gap, seg, σ, ∂φ_L/∂S).
 
@@ -308,6 +316,6 @@ def _noise_model(ref, B, config, noise_opt, calibration, L):
             cov_s = shift_covariance(kappa, ref.lengths, gap, np.broadcast_to(sigma_a, (N,)), calibration)
             if np.any(np.trace(cov_s, axis1=-2, axis2=-1) > 0):
                 return (True, _c(cov_s), _c(kappa), _c(ref.lengths), gap, _c(ref.seg, np.int64), _c(ref.sigma),
-                        _c(tip_angle_shift_gradient(ref.lengths, L, gap)))
+                        _tip_gradient(ref.lengths.tobytes(), L, gap))
     return (False, np.zeros((B, 1, 1)), np.zeros((B, 1)), np.zeros(1), gap, np.zeros(1, dtype=np.int64), np.zeros(1),
             np.zeros(1))
