@@ -13,6 +13,7 @@ from click.testing import CliRunner
 from bendsense import load_config
 from bendsense.batch import (
     BatchReport,
+    _local_pool,
     SessionOutcome,
     discover_sessions,
     process_session,
@@ -374,3 +375,22 @@ def test_cli_process_option_errors(sessions, tmp_path, monkeypatch):
         "Error: --scheduler needs Dask distributed, which is not installed: pip install bendsense[distributed]"
     )
     assert not (tmp_path / "out").exists()
+
+
+def test_processes_or_numba_threads_never_both(sessions, tmp_path):
+    """The default pool's workers run one numba thread each; in-process runs use numba's threads; the report says which."""
+    import numba
+
+    runs, truth = sessions
+    pooled = process_sessions(runs / "a.csv", tmp_path / "pool", calibration=linear_calibration(), workers=2,
+                              estimate=ESTIMATE, progress=False)
+    assert [s.status for s in pooled.sessions] == ["ok"]
+    assert pooled.workers == "ProcessPoolExecutor(1 workers, 1 numba thread each)"
+    local = process_sessions(runs / "a.csv", tmp_path / "here", calibration=linear_calibration(), workers=0,
+                             estimate=ESTIMATE, progress=False)
+    assert local.workers == f"in-process, {numba.get_num_threads()} numba threads"
+    pool = _local_pool(1)
+    try:
+        assert pool.submit(numba.get_num_threads).result() == 1
+    finally:
+        pool.shutdown()
