@@ -132,14 +132,39 @@ def record(
     help="sensor: the virtual sensor (bendsense.sim); ramp: counts that encode the frame index.",
 )
 @click.option("--autostart", is_flag=True, help="Stream without waiting for START.")
-def sim_device(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart):
+@click.option(
+    "--replay",
+    "replay_path",
+    metavar="SESSION",
+    type=click.Path(exists=True, path_type=Path),
+    help="Play a recording back (native session directory or session CSV) with its original timing.",
+)
+@click.option("--speed", type=float, default=1.0, show_default=True, help="Replay speed (2: twice as fast).")
+@click.option("--loop", is_flag=True, help="Replay: start over after the last frame, until stopped.")
+def sim_device(
+    rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop
+):
     """Run a simulated sensor board on a pseudo-terminal and print its port path.
 
     Open the printed path with 'bendsense record PATH -o SESSION' or 'live'. Runs
-    until Ctrl-C or for --seconds.
+    until Ctrl-C or for --seconds (a replay also ends after its last frame unless
+    --loop). With --replay SESSION the board sends the recorded frames (counts,
+    pressure, status, sequence numbers and device clock) at their recorded times.
     """
     from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
 
+    if not speed > 0:
+        raise click.BadParameter(f"expected > 0, got {speed:g}", param_hint="--speed")
+    if replay_path is not None:
+        from bendsense.device.replay import ReplayDevice
+
+        dev = ReplayDevice(
+            replay_path, speed=speed, loop=loop, drop=drop, corrupt=corrupt, truncate=truncate, seed=seed,
+            autostart=autostart,
+        )
+        return _serve(dev, seconds)
+    if speed != 1.0 or loop:
+        raise click.BadParameter("--speed and --loop need --replay SESSION", param_hint="--speed/--loop")
     if not 1 <= channels <= 64:
         raise click.BadParameter(f"expected 1..64, got {channels}", param_hint="--channels")
     if not 1 <= adc_bits <= 16:
@@ -159,6 +184,11 @@ def sim_device(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bi
         seed=seed,
         autostart=autostart,
     )
+    _serve(dev, seconds)
+
+
+def _serve(dev, seconds) -> None:
+    """Print the board's port, run it until it finishes, --seconds pass or Ctrl-C, and print its counts."""
     click.echo(dev.port)
     sys.stdout.flush()
     end = None if seconds is None else time.monotonic() + seconds

@@ -241,7 +241,9 @@ class SimulatedDevice:
         self._disconnected = False
         self._stop = threading.Event()
         self.finished = threading.Event()
-        """Set when the source is exhausted, ``max_frames`` reached or the device disconnected."""
+        """Set when the source is exhausted or ``max_frames`` reached (and the receiver has read
+        the last frame, waiting at most 1 s), or the device disconnected."""
+        self._exhausted = False
         self._streaming = self.autostart
         self._pending = bytearray()
         self._texts = []
@@ -317,6 +319,14 @@ class SimulatedDevice:
     def _t_us(self, k: int) -> int:
         return self._t0_us + round(k * 1e6 / self.rate_hz)
 
+    def _offset_s(self, k: int) -> float:
+        """When frame ``k`` is due, after the first one [s] (host time)."""
+        return k / self.rate_hz
+
+    def _sample_header(self, k: int) -> tuple:
+        """``(seq, t_us, status)`` of SAMPLE ``k`` (consumes its sequence number)."""
+        return self._next_seq(), self._t_us(k), 0
+
     def _next_seq(self) -> int:
         s = self._seq
         self._seq = (s + 1) & 0xFFFF
@@ -339,7 +349,6 @@ class SimulatedDevice:
     def _loop(self) -> None:
         k = 0  # next frame index
         t_start = None
-        period = 1.0 / self.rate_hz
         while not self._stop.is_set():
             # read commands
             try:
@@ -364,13 +373,13 @@ class SimulatedDevice:
             if not self._streaming:
                 t_start = None
             elif t_start is None:
-                t_start = now - k * period  # (re)start without a burst of stale frames
-            if self._streaming and not self.finished.is_set():
-                due = int((now - t_start) / period) + 1
-                n = min(due - k, self.burst)
-                for _ in range(max(n, 0)):
+                t_start = now - self._offset_s(k)  # (re)start without a burst of stale frames
+            if self._streaming and not self._exhausted:
+                for _ in range(self.burst):
+                    if self._offset_s(k) > now - t_start:
+                        break
                     if self.max_frames is not None and k >= self.max_frames:
-                        self.finished.set()
+                        self._exhausted = True
                         break
                     if self.disconnect_after is not None and k >= self.disconnect_after:
                         self._flush(wait_s=0.5)
@@ -380,17 +389,21 @@ class SimulatedDevice:
                     try:
                         pressure, adc = self._frame_values(k)
                     except StopIteration:
-                        self.finished.set()
+                        self._exhausted = True
                         break
                     self._produce(k, pressure, adc)
                     k += 1
             self._flush()
+            if self._exhausted and not self.finished.is_set():
+                self._flush(wait_s=1.0)
+                self._wait_read(1.0)
+                self.finished.set()
             # sleep until the next frame is due or a command arrives
             if self._master is None:
                 return
             wait = 0.02
-            if self._streaming and t_start is not None and not self.finished.is_set():
-                wait = max(0.0, min(wait, t_start + k * period - time.monotonic()))
+            if self._streaming and t_start is not None and not self._exhausted:
+                wait = max(0.0, min(wait, t_start + self._offset_s(k) - time.monotonic()))
             w = [self._master] if self._pending else []
             try:
                 select.select([self._master], w, [], wait)
@@ -419,7 +432,7 @@ class SimulatedDevice:
             self._streaming = False
 
     def _produce(self, k: int, pressure, adc) -> None:
-        seq = self._next_seq()
+        seq, t_us, status = self._sample_header(k)
         counts = np.asarray(adc, dtype=np.int64) & self._mask
         r = self._rng.random()
         with self._lock:
@@ -428,7 +441,7 @@ class SimulatedDevice:
             with self._lock:
                 self._counts["dropped"] += 1
             return
-        frame = encode_sample(seq, self._t_us(k), counts.tolist(), pressure_pa=pressure)
+        frame = encode_sample(seq, t_us, counts.tolist(), pressure_pa=pressure, status=status)
         kind = "sent"
         if r < self.drop + self.corrupt:
             frame = self._flip_one_bit(frame)
