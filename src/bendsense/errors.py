@@ -15,6 +15,7 @@ __all__ = [
     "SessionError",
     "OutputError",
     "OutputExistsError",
+    "MissingExtraError",
     "BendsenseWarning",
     "ConvergenceWarning",
 ]
@@ -58,6 +59,37 @@ class OutputExistsError(OutputError, FileExistsError):
 
 class ConvergenceError(BendsenseError, RuntimeError):
     """A solver did not converge and ``strict=True`` was requested."""
+
+
+class MissingExtraError(BendsenseError, ImportError):
+    """A feature needs an optional extra that is not installed; the message names it."""
+
+
+def require_extra(module: str, extra: str, feature: str):
+    """Import ``module`` or raise :class:`MissingExtraError` naming the extra to install.
+
+    Parameters
+    ----------
+    module : str
+        Module to import, e.g. ``"pylsl"``.
+    extra : str
+        The optional extra of bendsense that installs it, e.g. ``"lsl"``.
+    feature : str
+        What needs it, for the message, e.g. ``"--lsl"``.
+
+    Returns
+    -------
+    module
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as err:
+        raise MissingExtraError(
+            f"{feature} needs the optional extra '{extra}' ({module} is not installed): "
+            f"pip install 'bendsense[{extra}]'"
+        ) from err
 
 
 class BendsenseWarning(UserWarning):

@@ -1,4 +1,4 @@
-"""Chained processing steps: ``load``, ``reconstruct``, ``estimate``, ``save``, ``plot``, ``export``.
+"""Chained processing steps: ``load``, ``reconstruct``, ``estimate``, ``save``, ``mcap``, ``plot``, ``export``.
 
 Each step returns a function of the pipeline state; the group runs them in the
 order given on the command line::
@@ -185,6 +185,28 @@ def save(out_dir, overwrite):
     return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)])
 
 
+@click.command("mcap", cls=InterspersedCommand)
+@click.argument("mcap_path", metavar="FILE.mcap", type=click.Path(dir_okay=False, path_type=Path))
+@overwrite_option
+def mcap(mcap_path, overwrite):
+    """Write the session and its results as ROS 2 messages to FILE.mcap (extra 'ros').
+
+    Topics /bendsense/wrench (geometry_msgs/msg/WrenchStamped, after 'estimate'),
+    /bendsense/force_std, /bendsense/status, /bendsense/shape (nav_msgs/msg/Path) and
+    /bendsense/pressure (sensor_msgs/msg/FluidPressure), stamped with the session's time.
+    """
+
+    def step(state):
+        from bendsense.interop.ros2 import write_mcap
+
+        shape = _require(state, "shape", "mcap", "'reconstruct'")
+        write_mcap(mcap_path, state["session"], shape, state.get("estimate"), overwrite=overwrite)
+        click.echo(f"wrote {mcap_path} ({len(state['session'])} frames)")
+        return state
+
+    return step
+
+
 @click.command("export", cls=InterspersedCommand)
 @click.argument("csv_path", metavar="FILE.csv", type=click.Path(dir_okay=False, path_type=Path))
 @overwrite_option
@@ -202,4 +224,4 @@ def export(csv_path, overwrite):
     return step_io(step, outputs=[output.file(csv_path, overwrite=overwrite, suffixes=output.CSV)])
 
 
-COMMANDS = [load, reconstruct, estimate, save, export]
+COMMANDS = [load, reconstruct, estimate, save, mcap, export]

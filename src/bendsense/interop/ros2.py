@@ -1,0 +1,226 @@
+"""Sessions and their results as ROS 2 messages in an MCAP file (optional extra ``ros``).
+
+One message per frame on each topic, all in the frame ``bendsense_base`` (DESIGN.md
+section 2: base at the origin, ``+y`` along the actuator at its base, ``+x`` toward the
+centre of curvature; SI units, metres and newtons):
+
+=============================== =================================== ===========================================
+topic                           type                                content
+=============================== =================================== ===========================================
+``/bendsense/wrench``           ``geometry_msgs/msg/WrenchStamped`` tip force ``(fx_n, fy_n, 0)`` [N], torque 0
+``/bendsense/force_std``        ``geometry_msgs/msg/Vector3Stamped`` its standard deviation ``(fx_std_n,
+                                                                    fy_std_n, 0)`` [N] (NaN: no noise model)
+``/bendsense/status``           ``diagnostic_msgs/msg/DiagnosticArray`` one ``DiagnosticStatus`` named
+                                                                    ``bendsense/force``: level OK (``ok``), WARN
+                                                                    (``extrapolated``, ``model_misfit``) or ERROR
+                                                                    (``not converged``); message = the status of
+                                                                    ``results.csv``; values ``fx_std_n``,
+                                                                    ``fy_std_n``, ``residual_m``, ``status``
+``/bendsense/shape``            ``nav_msgs/msg/Path``               the reconstructed shape: one pose per arc-length
+                                                                    sample, position ``(x, y, 0)`` [m], orientation
+                                                                    the tangent (a rotation about ``z``)
+``/bendsense/pressure``         ``sensor_msgs/msg/FluidPressure``   actuation pressure [Pa], variance 0 (unknown);
+                                                                    frames without a reading are not written
+=============================== =================================== ===========================================
+
+The force topics are written when the results hold a force estimate. Time stamps (the
+header stamp and the MCAP log time) are the session's: ``meta["start_time_utc"]`` of a
+recorded session plus the frame's time ``t_s`` from the first frame; a session CSV without
+that key is stamped with ``t_s`` itself (seconds after 1970-01-01, which viewers show as
+such). The message definitions are the standard ones of ROS 2 (Humble and later), so
+``mcap_ros2.reader.read_ros2_messages``, ``ros2 bag`` and Foxglove read the file
+without bendsense.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from pathlib import Path
+
+import numpy as np
+
+from bendsense._io import atomic_path
+from bendsense.errors import SessionError, require_extra
+
+__all__ = ["write_mcap", "FRAME_ID", "TOPICS"]
+
+FRAME_ID = "bendsense_base"
+TOPICS = {
+    "wrench": "/bendsense/wrench",
+    "force_std": "/bendsense/force_std",
+    "status": "/bendsense/status",
+    "shape": "/bendsense/shape",
+    "pressure": "/bendsense/pressure",
+}
+
+_SEP = "=" * 80 + "\n"
+_TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+_HEADER = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+_VECTOR3 = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+
+
+def _definition(fields: str, *dependencies: str) -> str:
+    """A ROS 2 message definition with its dependencies, as ``ros2 bag`` stores it."""
+    return fields + "".join(_SEP + dep for dep in dependencies)
+
+
+SCHEMAS = {
+    "geometry_msgs/msg/WrenchStamped": _definition(
+        "std_msgs/Header header\ngeometry_msgs/Wrench wrench\n",
+        _HEADER,
+        _TIME,
+        "MSG: geometry_msgs/Wrench\ngeometry_msgs/Vector3 force\ngeometry_msgs/Vector3 torque\n",
+        _VECTOR3,
+    ),
+    "geometry_msgs/msg/Vector3Stamped": _definition(
+        "std_msgs/Header header\ngeometry_msgs/Vector3 vector\n", _HEADER, _TIME, _VECTOR3
+    ),
+    "diagnostic_msgs/msg/DiagnosticArray": _definition(
+        "std_msgs/Header header\ndiagnostic_msgs/DiagnosticStatus[] status\n",
+        _HEADER,
+        _TIME,
+        "MSG: diagnostic_msgs/DiagnosticStatus\nbyte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\n"
+        "byte level\nstring name\nstring message\nstring hardware_id\ndiagnostic_msgs/KeyValue[] values\n",
+        "MSG: diagnostic_msgs/KeyValue\nstring key\nstring value\n",
+    ),
+    "nav_msgs/msg/Path": _definition(
+        "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n",
+        _HEADER,
+        _TIME,
+        "MSG: geometry_msgs/PoseStamped\nstd_msgs/Header header\ngeometry_msgs/Pose pose\n",
+        "MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",
+        "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n",
+        "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    ),
+    "sensor_msgs/msg/FluidPressure": _definition(
+        "std_msgs/Header header\nfloat64 fluid_pressure\nfloat64 variance\n", _HEADER, _TIME
+    ),
+}
+_LEVEL = {"ok": 0, "extrapolated": 1, "model_misfit": 1, "not converged": 2}
+
+
+def session_epoch_s(session) -> float:
+    """Wall-clock time of the session's first frame [s since 1970]; 0 when unknown."""
+    start = session.meta.get("start_time_utc")
+    if not start:
+        return 0.0
+    try:
+        t = _dt.datetime.strptime(str(start).rstrip("Z"), "%Y-%m-%dT%H:%M:%S.%f")
+    except ValueError:
+        return 0.0
+    return t.replace(tzinfo=_dt.timezone.utc).timestamp()
+
+
+def frame_stamps_ns(session) -> np.ndarray:
+    """Time stamp of every frame [ns since 1970] (see the module docstring)."""
+    t = np.asarray(session.t_s, dtype=float)
+    epoch = session_epoch_s(session)
+    rel = t - t[0] if epoch and t.size else t
+    stamps = np.round((epoch + rel) * 1e9).astype(np.int64)
+    if stamps.size and stamps.min() < 0:
+        raise SessionError(f"{session.source or 'session'}: t_s: negative times cannot be ROS time stamps")
+    return stamps
+
+
+def _header(stamp_ns: int) -> dict:
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": FRAME_ID}
+
+
+def _vec(x: float, y: float) -> dict:
+    return {"x": float(x), "y": float(y), "z": 0.0}
+
+
+def _tangent_quaternions(positions_m: np.ndarray) -> np.ndarray:
+    """Orientation of every point of a shape, ``(M, 4)`` quaternions ``(x, y, z, w)``.
+
+    The tangent angle φ is measured from ``+y`` toward ``+x`` (DESIGN.md), so in ROS's
+    convention (yaw from ``+x`` counter-clockwise) the yaw is ``π/2 − φ``.
+    """
+    d = np.gradient(positions_m, axis=0)
+    yaw = np.arctan2(d[:, 1], d[:, 0])
+    q = np.zeros((len(yaw), 4))
+    q[:, 2] = np.sin(yaw / 2)
+    q[:, 3] = np.cos(yaw / 2)
+    return q
+
+
+def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) -> Path:
+    """Write a processed session as ROS 2 messages to an MCAP file.
+
+    Parameters
+    ----------
+    path : path
+        Output ``.mcap`` file; written atomically (complete or not at all).
+    session : Session
+        The input session (time, pressure).
+    shape : Shape
+        Reconstructed shapes, batch axis over the session's frames.
+    estimate : ForceEstimate, optional
+        Force estimates of the same frames; without it no force topics are written.
+    overwrite : bool
+        Replace an existing file; otherwise :class:`FileExistsError`.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    MissingExtraError
+        If ``mcap`` or ``mcap-ros2-support`` is not installed (extra ``ros``).
+    """
+    require_extra("mcap", "ros", "the mcap step")
+    writer_mod = require_extra("mcap_ros2.writer", "ros", "the mcap step")
+    from bendsense.results import Results
+
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path}: exists (use --overwrite to replace it)")
+    results = Results.from_state(session, shape, estimate)
+    cols = results.columns
+    stamps = frame_stamps_ns(session)
+    positions = results.positions_m
+    device = session.meta.get("device")
+    hardware_id = str(device.get("firmware", "")) if isinstance(device, dict) else ""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        writer = writer_mod.Writer(fh)
+        schemas = {name: writer.register_msgdef(name, text) for name, text in SCHEMAS.items()}
+        for k, stamp in enumerate(stamps.tolist()):
+            header = _header(stamp)
+
+            def write(topic, schema, message, k=k, stamp=stamp):
+                writer.write_message(TOPICS[topic], schemas[schema], message, log_time=stamp, publish_time=stamp,
+                                     sequence=k)
+
+            if results.has_forces:
+                write("wrench", "geometry_msgs/msg/WrenchStamped",
+                      {"header": header, "wrench": {"force": _vec(cols["fx_n"][k], cols["fy_n"][k]),
+                                                    "torque": _vec(0.0, 0.0)}})
+                write("force_std", "geometry_msgs/msg/Vector3Stamped",
+                      {"header": header, "vector": _vec(cols["fx_std_n"][k], cols["fy_std_n"][k])})
+            status = str(cols["status"][k])
+            values = {"status": status}
+            if results.has_forces:
+                values.update({name: repr(float(cols[name][k])) for name in ("fx_std_n", "fy_std_n", "residual_m")})
+            write("status", "diagnostic_msgs/msg/DiagnosticArray", {"header": header, "status": [{
+                "level": _LEVEL.get(status, 1), "name": "bendsense/force", "message": status,
+                "hardware_id": hardware_id,
+                "values": [{"key": key, "value": value} for key, value in values.items()],
+            }]})
+            q = _tangent_quaternions(positions[k])
+            poses = [
+                {"header": header, "pose": {"position": _vec(x, y),
+                                            "orientation": {"x": 0.0, "y": 0.0, "z": qz, "w": qw}}}
+                for (x, y), qz, qw in zip(positions[k].tolist(), q[:, 2].tolist(), q[:, 3].tolist())
+            ]
+            write("shape", "nav_msgs/msg/Path", {"header": header, "poses": poses})
+            p = float(cols["pressure_pa"][k])
+            if math.isfinite(p):
+                write("pressure", "sensor_msgs/msg/FluidPressure",
+                      {"header": header, "fluid_pressure": p, "variance": 0.0})
+        writer.finish()
+    return path

@@ -1,0 +1,113 @@
+"""Third-party readers of what bendsense writes: ROS 2 messages in MCAP (``mcap_ros2``), LSL inlets (``pylsl``)."""
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import bendsense
+from bendsense.calibration import Calibration
+from bendsense.cli import main
+from bendsense.results import read_results
+from bendsense.session import Session, write_session_csv
+from bendsense.sim.scenarios import simulate, time_varying_frames
+
+SEED = 0
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    """The virtual sensor's calibration and 1.2 s of its time-varying session at 50 Hz, as a session CSV."""
+    root = tmp_path_factory.mktemp("interop")
+    simulate("calibration", root / "cal", seed=SEED, frames_per_strip=20)
+    Calibration.fit(root / "cal" / "manifest.yaml").save(root / "cal.yaml")
+    frames = list(time_varying_frames(None, 50.0, SEED, duration_s=1.2))
+    n = len(frames)
+    pressure = np.array([p for p, _ in frames], dtype=float)
+    pressure[3] = np.nan  # one frame without a reading: no FluidPressure for it
+    session = Session(1.5 + np.arange(n) / 50.0, np.array([c for _, c in frames]), pressure)
+    write_session_csv(session, root / "tv.csv")
+    return root
+
+
+def test_mcap_wrench_per_frame_equals_results_csv(workdir):
+    from mcap_ros2.reader import read_ros2_messages
+
+    res = CliRunner().invoke(main, [
+        "load", str(workdir / "tv.csv"), "--calibration", str(workdir / "cal.yaml"), "--pressure-kpa", "40",
+        "reconstruct", "--points", "21", "estimate", "--constraint", "normal",
+        "save", str(workdir / "out"), "mcap", str(workdir / "out.mcap"),
+    ])
+    assert res.exit_code == 0, res.output
+    results = read_results(workdir / "out")
+    by_topic = {}
+    for m in read_ros2_messages(str(workdir / "out.mcap")):
+        by_topic.setdefault(m.channel.topic, []).append(m)
+    wrench = by_topic["/bendsense/wrench"]
+    n = len(results["t_s"])
+    assert len(wrench) == n
+    assert {m.schema.name for m in wrench} == {"geometry_msgs/msg/WrenchStamped"}
+    force = np.array([[m.ros_msg.wrench.force.x, m.ros_msg.wrench.force.y, m.ros_msg.wrench.force.z]
+                      for m in wrench])
+    np.testing.assert_array_equal(force[:, 0], results["fx_n"])
+    np.testing.assert_array_equal(force[:, 1], results["fy_n"])
+    assert np.all(force[:, 2] == 0) and np.any(np.abs(force[:, :2]) > 1e-3)
+    # stamps from the session's time (a CSV: t_s itself), in header and log time alike
+    stamp = np.array([m.ros_msg.header.stamp.sec + 1e-9 * m.ros_msg.header.stamp.nanosec for m in wrench])
+    np.testing.assert_allclose(stamp, results["t_s"], atol=1e-9)
+    np.testing.assert_allclose([m.log_time_ns * 1e-9 for m in wrench], results["t_s"], atol=1e-9)
+    assert {m.ros_msg.header.frame_id for m in wrench} == {"bendsense_base"}
+
+    std = by_topic["/bendsense/force_std"]
+    np.testing.assert_array_equal([m.ros_msg.vector.x for m in std], results["fx_std_n"])
+    np.testing.assert_array_equal([m.ros_msg.vector.y for m in std], results["fy_std_n"])
+    status = by_topic["/bendsense/status"]
+    assert [m.ros_msg.status[0].message for m in status] == list(results["status"])
+    levels = {"ok": 0, "extrapolated": 1, "not converged": 2}
+    assert [m.ros_msg.status[0].level for m in status] == [levels[s] for s in results["status"]]
+
+    # the shape: one pose per arc-length sample, at the positions of shape.npz
+    shape = by_topic["/bendsense/shape"]
+    assert len(shape) == n and shape[0].schema.name == "nav_msgs/msg/Path"
+    for k in (0, n - 1):
+        pos = np.array([[p.pose.position.x, p.pose.position.y] for p in shape[k].ros_msg.poses])
+        np.testing.assert_array_equal(pos, results.positions_m[k])
+        # orientation: the tangent; its yaw from +x is pi/2 - tip angle at the tip
+        q = shape[k].ros_msg.poses[-1].pose.orientation
+        yaw = 2 * np.arctan2(q.z, q.w)
+        assert abs(np.angle(np.exp(1j * (yaw - (np.pi / 2 - results["tip_angle_rad"][k]))))) < 0.05
+    pressure = by_topic["/bendsense/pressure"]
+    assert len(pressure) == n  # --pressure-kpa filled the frame without a reading
+    np.testing.assert_array_equal([m.ros_msg.fluid_pressure for m in pressure], results["pressure_pa"])
+    assert pressure[3].ros_msg.fluid_pressure == 40e3
+
+
+def test_mcap_after_reconstruct_only_and_overwrite(workdir):
+    out = workdir / "shape.mcap"
+    args = ["load", str(workdir / "tv.csv"), "--calibration", str(workdir / "cal.yaml"), "reconstruct",
+            "--points", "5", "mcap", str(out)]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    from mcap_ros2.reader import read_ros2_messages
+
+    topics = [m.channel.topic for m in read_ros2_messages(str(out))]
+    assert "/bendsense/wrench" not in topics and topics.count("/bendsense/shape") == 60
+    assert topics.count("/bendsense/pressure") == 59  # the frame without a reading has none
+    before = out.read_bytes()
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 1 and "use --overwrite" in res.output and out.read_bytes() == before
+    res = CliRunner().invoke(main, ["load", str(workdir / "tv.csv"), "mcap", str(out)])
+    assert res.exit_code == 2 and "'mcap' needs 'reconstruct'" in res.output
+
+
+def test_mcap_without_the_extra_names_it(workdir, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "mcap_ros2.writer", None)  # as if not installed
+    out = workdir / "none.mcap"
+    res = CliRunner().invoke(main, ["load", str(workdir / "tv.csv"), "--calibration", str(workdir / "cal.yaml"),
+                                    "reconstruct", "mcap", str(out)])
+    assert res.exit_code == 1 and not out.exists()
+    assert res.output.strip().splitlines() == [
+        "Error: the mcap step needs the optional extra 'ros' (mcap_ros2.writer is not installed): "
+        "pip install 'bendsense[ros]'"
+    ]
