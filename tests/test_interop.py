@@ -95,7 +95,7 @@ def test_mcap_after_reconstruct_only_and_overwrite(workdir):
     before = out.read_bytes()
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 1 and "use --overwrite" in res.output and out.read_bytes() == before
-    res = CliRunner().invoke(main, ["load", str(workdir / "tv.csv"), "mcap", str(out)])
+    res = CliRunner().invoke(main, ["load", str(workdir / "tv.csv"), "mcap", str(workdir / "fresh.mcap")])
     assert res.exit_code == 2 and "'mcap' needs 'reconstruct'" in res.output
 
 

@@ -204,7 +204,7 @@ def mcap(mcap_path, overwrite):
         click.echo(f"wrote {mcap_path} ({len(state['session'])} frames)")
         return state
 
-    return step
+    return step_io(step, outputs=[output.file(mcap_path, overwrite=overwrite, suffixes=(".mcap",))])
 
 
 @click.command("export", cls=InterspersedCommand)

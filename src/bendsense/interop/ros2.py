@@ -40,12 +40,13 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense._io import atomic_path
+from bendsense import output
 from bendsense.errors import SessionError, require_extra
 
 __all__ = ["write_mcap", "FRAME_ID", "TOPICS"]
 
 FRAME_ID = "bendsense_base"
+MCAP = (".mcap",)
 TOPICS = {
     "wrench": "/bendsense/wrench",
     "force_std": "/bendsense/force_std",
@@ -160,7 +161,7 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
     estimate : ForceEstimate, optional
         Force estimates of the same frames; without it no force topics are written.
     overwrite : bool
-        Replace an existing file; otherwise :class:`FileExistsError`.
+        Replace an existing file; otherwise :class:`~bendsense.errors.OutputExistsError`.
 
     Returns
     -------
@@ -177,16 +178,14 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
     from bendsense.results import Results
 
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: exists (use --overwrite to replace it)")
     results = Results.from_state(session, shape, estimate)
     cols = results.columns
     stamps = frame_stamps_ns(session)
     positions = results.positions_m
     device = session.meta.get("device")
     hardware_id = str(device.get("firmware", "")) if isinstance(device, dict) else ""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+    with output.write_file(path, overwrite=overwrite, suffixes=MCAP, writer="bendsense mcap") as tmp, \
+            open(tmp, "wb") as fh:
         writer = writer_mod.Writer(fh)
         schemas = {name: writer.register_msgdef(name, text) for name, text in SCHEMAS.items()}
         for k, stamp in enumerate(stamps.tolist()):
