@@ -1,5 +1,10 @@
 """Third-party readers of what bendsense writes: ROS 2 messages in MCAP (``mcap_ros2``), LSL inlets (``pylsl``)."""
 
+import csv
+import subprocess
+import sys
+import time
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -111,3 +116,90 @@ def test_mcap_without_the_extra_names_it(workdir, monkeypatch):
         "Error: the mcap step needs the optional extra 'ros' (mcap_ros2.writer is not installed): "
         "pip install 'bendsense[ros]'"
     ]
+
+
+CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]
+
+
+def pull_all(inlets, proc, idle_s=2.0):
+    """Samples and time stamps of each inlet until ``proc`` ended and nothing came for ``idle_s``."""
+    data = [[] for _ in inlets]
+    stamps = [[] for _ in inlets]
+    last = time.monotonic()
+    while True:
+        got = False
+        for inlet, d, st in zip(inlets, data, stamps):
+            chunk, ts = inlet.pull_chunk(timeout=0.1, max_samples=4096)
+            if chunk:
+                d += chunk
+                st += ts
+                got = True
+        if got:
+            last = time.monotonic()
+        elif proc.poll() is not None and time.monotonic() - last > idle_s:
+            return [(np.array(d), np.array(st)) for d, st in zip(data, stamps)]
+        assert time.monotonic() - last < 60, "no samples for a minute"
+
+
+def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_path):
+    import pylsl
+
+    from bendsense.device.simdevice import SimulatedDevice, default_source
+
+    out = tmp_path / "s"
+    with SimulatedDevice(default_source(rate_hz=1000, seed=SEED), rate_hz=1000) as dev:
+        with open(tmp_path / "stderr.txt", "wb") as err, subprocess.Popen(
+            [*CLI, "-q", "record", dev.port, "-o", str(out), "--seconds", "3", "--calibration", str(workdir / "cal.yaml"),
+             "--estimate", "--lsl", "--lsl-wait", "30", "--quiet-status"], stdout=subprocess.DEVNULL, stderr=err
+        ) as proc:
+            try:
+                found = pylsl.resolve_byprop("name", "bendsense-force", minimum=1, timeout=30)
+                assert found, "no bendsense-force stream"
+                shapes = pylsl.resolve_byprop("name", "bendsense-shape", minimum=1, timeout=10)
+                force_in = pylsl.StreamInlet(found[0], max_buflen=60)
+                shape_in = pylsl.StreamInlet(shapes[0], max_buflen=60)
+                force_in.open_stream(timeout=10)
+                shape_in.open_stream(timeout=10)
+                info, sinfo = force_in.info(timeout=10), shape_in.info(timeout=10)
+                (force, stamps), (shape, _) = pull_all([force_in, shape_in], proc)
+                proc.wait(30)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
+            assert proc.returncode == 0, (tmp_path / "stderr.txt").read_text()
+    assert (info.type(), info.channel_count(), info.nominal_srate()) == ("Force", 4, 1000.0)
+    ch = info.desc().child("channels").child("channel")
+    labels, units = [], []
+    while not ch.empty():
+        labels.append(ch.child_value("label"))
+        units.append(ch.child_value("unit"))
+        ch = ch.next_sibling()
+    assert labels == ["fx_n", "fy_n", "fx_std_n", "fy_std_n"] and units == ["N"] * 4
+    assert sinfo.type() == "Shape" and sinfo.channel_count() == 16 + 3
+    header, rows = None, None
+    with open(out / "results.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    header, rows = rows[0], rows[1:]
+    results = {h: np.array([r[i] for r in rows]) for i, h in enumerate(header)}
+    n = len(rows)
+    assert n > 1000  # ~3 s of a 1 kHz board (the simulated one lags on a busy machine)
+    assert len(force) >= 0.99 * n
+    # the samples are the results, in order (the first ones sent are the first recorded)
+    m = min(len(force), n)
+    want = np.column_stack([results[c][:m].astype(float) for c in ("fx_n", "fy_n", "fx_std_n", "fy_std_n")])
+    np.testing.assert_allclose(force[:m], want, rtol=0, atol=1e-12, equal_nan=True)
+    np.testing.assert_allclose(shape[:m, -3], results["tip_x_m"][:m].astype(float), atol=1e-15)
+    # time stamps: arrival times on the LSL clock, in order, about 1 ms apart
+    assert np.all(np.diff(stamps) >= 0)
+    assert 0.5e-3 < np.median(np.diff(stamps)) < 2e-3 or np.percentile(np.diff(stamps), 90) < 0.05
+    assert abs(stamps[-1] - pylsl.local_clock()) < 60
+
+
+def test_lsl_without_the_extra_names_it(workdir, monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "pylsl", None)  # as if not installed
+    res = CliRunner().invoke(main, ["record", "/dev/null", "-o", str(tmp_path / "s"), "--calibration",
+                                    str(workdir / "cal.yaml"), "--lsl"])
+    assert res.exit_code == 1 and not (tmp_path / "s").exists()
+    assert res.output.strip().splitlines() == [
+        "Error: --lsl needs the optional extra 'lsl' (pylsl is not installed): pip install 'bendsense[lsl]'"]

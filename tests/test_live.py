@@ -183,3 +183,40 @@ def test_every_received_frame_is_estimated(calibration_path, stream):
     last = [min(i + 40, len(stream)) - 1 for i in range(0, len(stream), 40)]
     np.testing.assert_allclose([f.force_n for f in shown], cold.force_n[last], atol=1e-6)
     assert [f.seq for f in shown] == last
+
+
+def test_view_shows_the_force_history_with_its_band_and_the_status_counts(calibration_path, stream, tmp_path):
+    """Blocks of frames → the scrolling Fx, Fy (±2σ) and pressure plot and the status line; rendered to a PNG."""
+    from bendsense.device.live import status_line
+
+    proc = LiveProcessor(Calibration.load(calibration_path), constraint="normal")
+    view = LiveView(proc, headless=True, window_s=1.5)
+    signals = np.array([c for _, c, _ in stream], dtype=float)
+    pressure = np.array([p for p, _, _ in stream])
+    t = np.arange(len(stream)) / RATE_HZ
+    for i in range(0, len(stream), 30):
+        block = proc.process_block(signals[i:i + 30], pressure[i:i + 30], t_s=t[i:i + 30], seq=np.arange(i, i + 30))
+        view.update_block(block, status_line(block, proc, 123.0, 30.0, lost=2, backlog=5))
+    # the curves hold the last 1.5 s, newest at 0, with the forces of those frames
+    x, fx = view.force_lines[0].get_data()
+    shown = t >= t[-1] - 1.5
+    np.testing.assert_allclose(x, t[shown] - t[-1], atol=1e-12)
+    np.testing.assert_allclose(fx, block_forces(proc, signals, pressure)[shown, 0], atol=1e-6)
+    _, p = view.pressure_line.get_data()
+    np.testing.assert_allclose(p, pressure[shown] * 1e-3)
+    band = view.bands[0].get_paths()[0].vertices
+    assert band[:, 1].min() < fx.min() and band[:, 1].max() > fx.max()
+    status = view.status_text.get_text()
+    assert "estimated 123 frames/s" in status and "backlog 5" in status and "not converged 0" in status
+    assert "extrapolated" in status and "misfit" in status
+    png = tmp_path / "live-view.png"
+    view.save(png)
+    image = matplotlib.image.imread(png)
+    assert image.shape[1] > image.shape[0] > 500
+
+
+def block_forces(proc, signals, pressure):
+    """The forces of the frames as one cold batch (an independent path)."""
+    shape = bendsense.reconstruct(signals, proc.calibration, proc.config.sensor, s_m=proc.s_m)
+    est = estimate_force(shape, pressure, proc.config, constraint="normal", calibration=proc.calibration)
+    return est.force_n

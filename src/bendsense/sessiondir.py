@@ -180,6 +180,9 @@ class SessionWriter:
         Inputs of the command, never to be written over.
     writer : str
         Who writes, for the output manifest.
+    extra_files : sequence of str
+        Further files written into the session directory by others (e.g. the
+        ``results.csv`` of ``record --estimate``), listed in the manifest as bendsense's.
 
     Notes
     -----
@@ -201,6 +204,7 @@ class SessionWriter:
         fsync_interval_s: float = 0.5,
         inputs=(),
         writer: str = "bendsense record",
+        extra_files=(),
     ):
         from bendsense import output
 
@@ -212,7 +216,7 @@ class SessionWriter:
         # and locks the directory, removes an earlier session there (only what bendsense
         # wrote) and writes the manifest before any data
         self._output = output.begin_in_place(
-            self.path, [META, FRAMES, EVENTS], overwrite=overwrite, inputs=inputs, writer=writer
+            self.path, [META, FRAMES, EVENTS, *extra_files], overwrite=overwrite, inputs=inputs, writer=writer
         )
         try:
             self._start(config, adc_bits, device, meta)

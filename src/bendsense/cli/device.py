@@ -9,7 +9,13 @@ from pathlib import Path
 import click
 
 from bendsense import output as outputs
-from bendsense.cli._common import InterspersedCommand, make_config_option, make_overwrite_option, quiet
+from bendsense.cli._common import (
+    CONSTRAINTS,
+    InterspersedCommand,
+    make_config_option,
+    make_overwrite_option,
+    quiet,
+)
 
 
 @click.command("devices")
@@ -20,10 +26,53 @@ def devices():
     click.echo(format_ports(list_ports()))
 
 
-def _status_line(stats) -> str:
-    return (
+def _status_line(stats, est=None) -> str:
+    line = (
         f"{stats.records} frames  lost {stats.lost}  crc {stats.crc_errors}  malformed {stats.malformed}  "
         f"queue drops {stats.queue_drops}  reconnects {stats.reconnects}  {stats.elapsed_s:.1f} s"
+    )
+    if est is not None:
+        counts = est.status_counts
+        line += (
+            f"  | estimated {est.frames} ({est.rate_hz:.0f}/s)  backlog {est.backlog}  "
+            f"extrapolated {counts.get('extrapolated', 0)}  not converged {counts.get('not converged', 0)}"
+        )
+    return line
+
+
+def make_processor(config, calibration_path, constraint, pressure_kpa, estimate=True):
+    """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``."""
+    from bendsense.calibration import Calibration
+    from bendsense.pipeline import LiveProcessor
+
+    return LiveProcessor(
+        Calibration.load(calibration_path),
+        config,
+        constraint=constraint,
+        pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
+        estimate=estimate,
+    )
+
+
+def wait_for_consumer(outlets, timeout_s: float) -> None:
+    """Wait up to ``timeout_s`` for an LSL consumer, so that it receives the first frames too."""
+    end = time.monotonic() + max(0.0, timeout_s)
+    if not quiet() and timeout_s > 0:
+        click.echo(f"waiting up to {timeout_s:g} s for an LSL consumer of bendsense-force ...", err=True)
+    while time.monotonic() < end and not outlets.have_consumers():
+        time.sleep(0.05)
+
+
+def make_outlets(processor, driver, port):
+    """The LSL outlets of ``--lsl`` (nominal rate: the board's HELLO, else irregular)."""
+    from bendsense.interop.lsl import LslOutlets
+
+    rate = 0.0 if driver.hello is None else float(driver.hello.rate_hz)
+    return LslOutlets(
+        processor.config.sensor.n_segments,
+        rate,
+        source_id=f"bendsense {port}",
+        meta={"constraint": processor.constraint, "method": processor.method},
     )
 
 
@@ -41,7 +90,24 @@ def _status_line(stats) -> str:
 @click.option("--no-handshake", is_flag=True, help="Do not wait for the board's HELLO.")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
 @click.option("--hello-timeout", type=float, default=2.0, show_default=True, help="HELLO wait [s].")
-@make_config_option("Config YAML to snapshot into meta.yaml.")
+@make_config_option("Config YAML to snapshot into meta.yaml (and to estimate with).")
+@click.option(
+    "--calibration",
+    "calibration_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Calibration YAML (needed by --estimate and --lsl).",
+)
+@click.option("--estimate", is_flag=True, help="Shape and force of every frame as it arrives, to SESSION/results.csv.")
+@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@click.option("--pressure-kpa", type=float, help="Pressure for frames without a pressure reading [kPa].")
+@click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
+@click.option(
+    "--lsl-wait",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="With --lsl: wait this long for a consumer (e.g. LabRecorder) before starting the board [s].",
+)
 @click.option("--quiet-status", is_flag=True, help="No live status line.")
 def record(
     port,
@@ -56,6 +122,12 @@ def record(
     no_start,
     hello_timeout,
     config_path,
+    calibration_path,
+    estimate,
+    constraint,
+    pressure_kpa,
+    lsl,
+    lsl_wait,
     quiet_status,
 ):
     """Record the board on PORT to a native session directory.
@@ -63,6 +135,14 @@ def record(
     PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path or a
     pyserial URL (loop://, socket://HOST:PORT). A live status line on stderr counts frames, gaps and errors; Ctrl-C
     stops the recording and leaves a complete session.
+
+    With --estimate (and --calibration), every frame is reconstructed and its force
+    estimated as it arrives, in blocks on a background thread, and appended to
+    SESSION/results.csv (the columns of 'save'; synced at least every 0.5 s, so a
+    killed recording keeps its results up to the last second). The status line adds
+    the estimation rate and backlog. --lsl publishes the shapes and forces on Lab
+    Streaming Layer (waiting up to --lsl-wait seconds for a consumer before the board
+    starts, so that LabRecorder gets every frame).
     """
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
@@ -73,19 +153,32 @@ def record(
         raise click.BadParameter(f"expected > 0, got {seconds:g}", param_hint="--seconds")
     if dialect == "line" and channels is None and columns is None:
         raise click.BadParameter("the line dialect needs --channels or --columns", param_hint="--channels")
+    if (estimate or lsl) and calibration_path is None:
+        raise click.BadParameter(
+            f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml", param_hint="--calibration"
+        )
+    results_path = output / "results.csv"
     cols = [c.strip() for c in columns.split(",")] if columns else None
     show = not quiet_status and not quiet()
     # the session directory is checked and locked before the port is opened, until the command ends
     target = outputs.recording(output, overwrite=overwrite)
     click.get_current_context().with_resource(outputs.reserve([target], [config_path]))
+    estimator = None
 
     def progress(stats):
         if show:
-            sys.stderr.write("\r" + _status_line(stats) + "   ")
+            sys.stderr.write("\r" + _status_line(stats, estimator and estimator.stats) + "   ")
             sys.stderr.flush()
 
     try:
         config = load_config(config_path) if config_path else None
+        processor = None
+        if estimate or lsl:
+            if lsl:  # a missing extra is a one-line error before anything is opened
+                from bendsense.errors import require_extra
+
+                require_extra("pylsl", "lsl", "--lsl")
+            processor = make_processor(config or load_config(), calibration_path, constraint, pressure_kpa)
         driver = Driver(
             port,
             baudrate=baud or DEFAULT_BAUDRATE,
@@ -96,8 +189,23 @@ def record(
             hello_timeout_s=hello_timeout,
         )
         with driver:
+            if processor is not None:
+                from bendsense.device.estimator import LiveEstimator
+
+                outlets = make_outlets(processor, driver, port) if lsl else None
+                if outlets is not None:
+                    wait_for_consumer(outlets, lsl_wait)
+                estimator = LiveEstimator(
+                    processor, results_path=results_path if estimate else None, outlets=outlets
+                )
             recorder = Recorder(
-                driver, output, overwrite=overwrite, config=config, meta={"command": "bendsense record"}
+                driver,
+                output,
+                overwrite=overwrite,
+                config=config,
+                meta={"command": "bendsense record"},
+                on_records=None if estimator is None else estimator.put,
+                extra_files=[results_path.name] if estimate else [],
             )
             if not no_start:
                 driver.start()
@@ -106,13 +214,17 @@ def record(
                 outcome = "done"
             except KeyboardInterrupt:
                 stats, outcome = recorder.stats, "interrupted"
+            finally:
+                est_stats = None if estimator is None else estimator.close()
     except BendsenseError:
         if show:  # end the status line before the error
             sys.stderr.write("\n")
         raise
     if show:
-        sys.stderr.write("\r" + _status_line(stats) + "   \n")
+        sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
     click.echo(f"{outcome}: {stats.records} frames written to {output}", err=True)
+    if estimate:
+        click.echo(f"{est_stats.frames} frames estimated to {results_path}", err=True)
 
 
 @click.command("sim-device", cls=InterspersedCommand)

@@ -65,6 +65,14 @@ def _positive(ctx, param, value):
 @click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --save image.")
+@click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
+@click.option(
+    "--lsl-wait",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="With --lsl: wait this long for a consumer (e.g. LabRecorder) before starting the board [s].",
+)
 def live(
     port,
     config_path,
@@ -78,14 +86,18 @@ def live(
     baud,
     no_start,
     overwrite,
+    lsl,
+    lsl_wait,
 ):
-    """Show the shape, the tip force (arrow, value and ±σ) and the channel levels of the board on PORT, live.
+    """Show the shape, the tip force (arrow, value and ±σ), the channel levels and a force plot of PORT, live.
 
     PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path (from
-    'bendsense sim-device') or a pyserial URL. Every displayed frame is the newest
-    one received; its shape is reconstructed and its force estimated, warm-started
-    from the previous frame. At the end, the achieved frame rate and the end-to-end
-    latency per frame (bytes read to artists drawn) are printed.
+    'bendsense sim-device') or a pyserial URL. Every frame received is reconstructed
+    and its force estimated (in blocks, warm-started from the previous block); the
+    newest is drawn, with Fx, Fy (±2σ) and the pressure of the last 10 s, the
+    estimation rate and the counts of extrapolated, not converged and misfit frames.
+    --lsl publishes every frame on Lab Streaming Layer. At the end, the achieved frame
+    rate and the end-to-end latency per frame (bytes read to artists drawn) are printed.
     """
     if calibration_path is None:
         raise click.ClickException(_NO_CALIBRATION)
@@ -100,31 +112,37 @@ def live(
         matplotlib.use("Agg")
         if seconds is None:
             seconds = 3.0
-    from bendsense.calibration import Calibration
+    from bendsense.cli.device import make_outlets, make_processor, wait_for_consumer
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
-    from bendsense.device.live import LiveProcessor, LiveView, run_live
+    from bendsense.device.live import LiveView, run_live
 
     # the library's errors (bad options included) become one line in PipelineGroup
+    if lsl:  # a missing extra is a one-line error before anything is opened
+        from bendsense.errors import require_extra
+
+        require_extra("pylsl", "lsl", "--lsl")
     config = load_config(config_path)
-    calibration = Calibration.load(calibration_path)
-    processor = LiveProcessor(
-        calibration,
-        config,
-        constraint=constraint,
-        pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
-    )
+    processor = make_processor(config, calibration_path, constraint, pressure_kpa)
     if save_path is not None:
         view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:
         view, is_open = _window(processor, scale_mm_per_n * 1e-3)
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE) as driver:
+        outlets = make_outlets(processor, driver, port) if lsl else None
+        if outlets is not None:
+            wait_for_consumer(outlets, lsl_wait)
         if not no_start:
             driver.start()
         try:
-            stats = run_live(driver, processor, view, duration_s=seconds, max_fps=max_fps, is_open=is_open)
+            stats = run_live(
+                driver, processor, view, duration_s=seconds, max_fps=max_fps, is_open=is_open, outlets=outlets
+            )
         except KeyboardInterrupt:
             stats = None
+        finally:
+            if outlets is not None:
+                outlets.close()
     if save_path is not None:
         if stats is None or stats.frames == 0:
             raise click.ClickException(f"{port}: no frames received; nothing to save")

@@ -329,6 +329,11 @@ class Driver:
             bytes=d.bytes,
         )
 
+    @property
+    def queued(self) -> int:
+        """Readings waiting in the queue (0 without a queue)."""
+        return 0 if self._queue is None else self._queue.qsize()
+
     def latest(self) -> Reading | None:
         """Return the most recent reading (lossy; for live views), or None before the first."""
         return self._latest

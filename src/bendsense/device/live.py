@@ -1,20 +1,22 @@
-"""Live view of the sensor: shape, tip force and channel levels, redrawn by blitting.
+"""Live view of the sensor: shape, tip force, channel levels and a scrolling force plot, blitted.
 
 Two halves, so that the numbers can be tested without a display:
 
-- the model, :class:`LiveProcessor`: one :class:`~bendsense.device.driver.Reading` →
-  :class:`LiveFrame` (signals → calibration → PCC shape, paper eq. 1–7; shape and
-  pressure → tip force, eq. 18 and 21). Every frame's force estimate is warm-started
-  from the previous frame's force and beam state, which is what makes it fast enough
-  for every displayed frame;
-- the view, :class:`LiveView`: matplotlib artists updated in place and redrawn with
-  blitting (``copy_from_bbox`` / ``restore_region`` / ``draw_artist`` / ``blit``), so a
-  frame costs a few artists, not a full figure draw.
+- the model, :class:`~bendsense.pipeline.LiveProcessor` (re-exported here): every frame
+  received, in blocks, → shapes (paper eq. 1–7) and warm-started tip forces (eq. 18
+  and 21);
+- the view, :class:`LiveView`: the shape with the force arrow, the channel levels, and
+  Fx, Fy with their ±2σ bands and the pressure over the last seconds; matplotlib
+  artists updated in place and redrawn with blitting (``copy_from_bbox`` /
+  ``restore_region`` / ``draw_artist`` / ``blit``), so a frame costs a few artists, not
+  a full figure draw. The status line shows the estimation rate, the backlog and the
+  counts of frames per status (extrapolated, not converged, misfit).
 
-:func:`run_live` ties them to a :class:`~bendsense.device.driver.Driver`: it takes the
-newest reading (:meth:`Driver.latest`, lossy: a slow display skips frames, it never
-lags behind), processes and draws it, and measures the end-to-end latency per frame
-(bytes read by the driver → shape and force → artists drawn) and the frame rate.
+:func:`run_live` ties them to a :class:`~bendsense.device.driver.Driver`: it takes every
+reading from the driver's queue, processes what arrived as one block (and publishes it on
+LSL if asked), draws the newest frame at most ``max_fps`` times a second, and measures
+the end-to-end latency per drawn frame (bytes read by the driver → shape and force →
+artists drawn) and the rates.
 """
 
 from __future__ import annotations
@@ -25,219 +27,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bendsense.errors import ConfigError
+from bendsense.pipeline import LIVE_MAX_ITER, LiveFrame, LiveProcessor
 
 __all__ = ["LiveFrame", "LiveProcessor", "LiveView", "LiveStats", "run_live", "LIVE_MAX_ITER"]
 
 MM = 1e3
 _BLUE = (0.122, 0.467, 0.706, 1.0)  # matplotlib's C0 and C3
 _RED = (0.839, 0.153, 0.157, 1.0)
-#: Iteration limit of a live force estimate. A warm-started frame converges in a few
-#: iterations; one that cannot (an unconstrained axial force on the straight actuator
-#: does not change its shape) must not stall the display for 100 beam solves.
-LIVE_MAX_ITER = 20
-
-
-# --------------------------------------------------------------------------- model
-
-
-@dataclass(frozen=True, eq=False)
-class LiveFrame:
-    """One processed frame.
-
-    Attributes
-    ----------
-    seq : int
-        Device sequence number (raw, wraps at 65536); -1 if unknown.
-    t_s : float
-        Device clock [s].
-    host_ns : int
-        Host clock when the frame's bytes were read (``time.monotonic_ns()``) [ns].
-    pressure_pa : float
-        Pressure [Pa]; NaN without a reading (no force estimate then).
-    delta_a : ndarray, shape (N,)
-        Offset-free signals ΔA = A − A0 (paper eq. 1) [signal units].
-    shape : Shape
-        Reconstructed shape of the frame (single frame, no batch axis).
-    estimate : ForceEstimate or None
-        Tip force of the frame; None without pressure or with estimation off.
-    process_s : float
-        Wall time of reconstruction and estimation [s].
-    """
-
-    seq: int
-    t_s: float
-    host_ns: int
-    pressure_pa: float
-    delta_a: np.ndarray
-    shape: object
-    estimate: object
-    process_s: float
-
-    @property
-    def force_n(self) -> np.ndarray:
-        """Tip force (Fx, Fy) [N]; NaN when not estimated or not converged."""
-        if self.estimate is None:
-            return np.full(2, np.nan)
-        return np.asarray(self.estimate.force_n, dtype=float)
-
-    @property
-    def std_n(self) -> np.ndarray:
-        """Standard deviation of (Fx, Fy) [N]; NaN when not estimated."""
-        if self.estimate is None:
-            return np.full(2, np.nan)
-        return np.asarray(self.estimate.std_n, dtype=float)
-
-
-class LiveProcessor:
-    """Turn readings into shapes and tip forces, one frame at a time, warm-started.
-
-    Parameters
-    ----------
-    calibration : Calibration
-        Signal → shift calibration (paper eq. 1–2).
-    config : Config, optional
-        Sensor, actuator and estimation options; default the paper's prototype.
-    constraint : str, optional
-        Force constraint (:data:`bendsense.estimation.CONSTRAINTS`); default
-        ``config.estimation.constraint``.
-    pressure_pa : float, optional
-        Pressure for frames without a reading [Pa]; without it such frames get a
-        shape only.
-    n_points : int
-        Points of the displayed shape along the sensor.
-    estimate : bool
-        Estimate the force (False: shapes only).
-    **options
-        Further options of :func:`bendsense.estimation.estimate_force` (``push_only``,
-        ``tip_angle_source``, ...). ``max_iter`` defaults to :data:`LIVE_MAX_ITER`.
-
-    Attributes
-    ----------
-    frames : int
-        Frames processed.
-    failures : int
-        Frames whose force estimate did not converge.
-    """
-
-    def __init__(
-        self, calibration, config=None, *, constraint=None, pressure_pa=None, n_points=41, estimate=True, **options
-    ):
-        from bendsense.config import load_config
-
-        self.config = load_config() if config is None else config
-        sensor = self.config.sensor
-        if calibration.n_channels != sensor.n_segments:
-            raise ConfigError(
-                f"calibration.n_channels: expected {sensor.n_segments} (sensor.n_segments), "
-                f"got {calibration.n_channels}"
-            )
-        self.calibration = calibration
-        self.constraint = self.config.estimation.constraint if constraint is None else constraint
-        self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
-        self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
-        self.estimate = bool(estimate)
-        self.options = {"max_iter": LIVE_MAX_ITER, **options}
-        self.frames = 0
-        self.failures = 0
-        self.estimated = 0
-        self._previous = None
-
-    def reset(self) -> None:
-        """Forget the warm start (e.g. after a reconnect)."""
-        self._previous = None
-
-    def process_signals(self, signals, pressure_pa=None, *, seq=-1, t_s=math.nan, host_ns=None) -> LiveFrame:
-        """Process one frame given as raw signals A (N,) and the pressure [Pa]."""
-        from bendsense.estimation import estimate_force
-        from bendsense.pcc import reconstruct
-
-        t0 = time.perf_counter()
-        host_ns = time.monotonic_ns() if host_ns is None else host_ns
-        a = np.asarray(signals, dtype=float)
-        shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
-        p = self.pressure_pa if pressure_pa is None or not math.isfinite(pressure_pa) else float(pressure_pa)
-        est = None
-        if self.estimate and p is not None:
-            prev = self._previous
-            # a failed frame has NaN forces: it cannot seed the next one
-            warm = {"initial": prev} if prev is not None and bool(prev.success) else {}
-            est = estimate_force(
-                shape, p, self.config, constraint=self.constraint, calibration=self.calibration, **warm, **self.options
-            )
-            self._previous = est
-            self.estimated += 1
-            if not bool(est.success):
-                self.failures += 1
-        self.frames += 1
-        return LiveFrame(
-            seq=int(seq),
-            t_s=float(t_s),
-            host_ns=int(host_ns),
-            pressure_pa=math.nan if p is None else p,
-            delta_a=a - self.calibration.offset,
-            shape=shape,
-            estimate=est,
-            process_s=time.perf_counter() - t0,
-        )
-
-    def process_many(self, readings) -> LiveFrame:
-        """Estimate every reading of a list in one batched call; the newest as a :class:`LiveFrame`.
-
-        Frames along the list are warm-started from each other and the first from the
-        previous estimate, so that the force is estimated at the sensor's rate however
-        often the view is drawn.
-        """
-        from bendsense.estimation import estimate_force
-        from bendsense.pcc import reconstruct
-
-        ps = [r.sample.pressure_pa for r in readings]
-        ps = [self.pressure_pa if p is None or not math.isfinite(p) else float(p) for p in ps]
-        if len(readings) == 1 or not self.estimate or any(p is None for p in ps):
-            for r in readings[:-1]:
-                self.process(r)
-            return self.process(readings[-1])
-        t0 = time.perf_counter()
-        a = np.array([r.sample.adc for r in readings], dtype=float)
-        shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
-        prev = self._previous
-        warm = {"initial": prev} if prev is not None and bool(prev.success) else {}
-        est = estimate_force(shape, np.array(ps), self.config, constraint=self.constraint,
-                             calibration=self.calibration, **warm, **self.options)
-        last = _frame_of(est, -1)
-        self._previous = last
-        self.estimated += len(readings)
-        self.failures += int(np.count_nonzero(~np.asarray(est.success)))
-        self.frames += len(readings)
-        reading = readings[-1]
-        sample = reading.sample
-        return LiveFrame(
-            seq=int(sample.seq),
-            t_s=reading.device_us * 1e-6,
-            host_ns=int(reading.host_ns),
-            pressure_pa=ps[-1],
-            delta_a=a[-1] - self.calibration.offset,
-            shape=reconstruct(a[-1], self.calibration, self.config.sensor, s_m=self.s_m),
-            estimate=last,
-            process_s=time.perf_counter() - t0,
-        )
-
-    def process(self, reading) -> LiveFrame:
-        """Process a :class:`~bendsense.device.driver.Reading`."""
-        sample = reading.sample
-        return self.process_signals(
-            sample.adc, sample.pressure_pa, seq=sample.seq, t_s=reading.device_us * 1e-6, host_ns=reading.host_ns
-        )
-
-
-def _frame_of(est, i):
-    """Frame ``i`` of a batched :class:`~bendsense.estimation.ForceEstimate`."""
-    import dataclasses
-
-    fields = ("force_n", "std_n", "covariance_n2", "residual_m", "success", "message", "iterations",
-              "tip_position_m", "state", "guess_n", "chi2_per_dof")
-    return dataclasses.replace(est, **{f: np.asarray(getattr(est, f))[i] for f in fields
-                                       if getattr(est, f) is not None})
 
 
 # --------------------------------------------------------------------------- view
@@ -261,12 +57,34 @@ class LiveView:
         Shortest time between redraws of the texts [s]; in between, their last pixels
         are restored (numbers changing faster cannot be read anyway, and glyph
         rendering is the most expensive part of a frame).
+    window_s : float
+        Time shown by the scrolling force and pressure plot [s].
+    force_range_n, pressure_range_kpa : float
+        Initial limits of the force [N] (symmetric) and pressure [kPa] axes; they grow
+        (with one full redraw) when the data leave them.
+    max_points : int
+        Most points drawn per curve (the history is thinned to this).
     """
 
     def __init__(
-        self, processor: LiveProcessor, figure=None, *, headless=False, scale_m_per_n=0.2, text_interval_s=0.1
+        self,
+        processor: LiveProcessor,
+        figure=None,
+        *,
+        headless=False,
+        scale_m_per_n=0.2,
+        text_interval_s=0.1,
+        window_s=10.0,
+        force_range_n=0.3,
+        pressure_range_kpa=120.0,
+        max_points=1500,
     ):
         self.processor = processor
+        self.window_s = float(window_s)
+        self.force_range_n = float(force_range_n)
+        self.pressure_range_kpa = float(pressure_range_kpa)
+        self.max_points = int(max_points)
+        self._history = []  # blocks of (t_s, fx, fy, sx, sy, p_kpa), oldest first
         self.scale_m_per_n = float(scale_m_per_n)
         self.text_interval_s = float(text_interval_s)
         self._text_regions = {}
@@ -276,12 +94,12 @@ class LiveView:
                 from matplotlib.backends.backend_agg import FigureCanvasAgg
                 from matplotlib.figure import Figure
 
-                figure = Figure(figsize=(11, 5.5))
+                figure = Figure(figsize=(12, 7))
                 FigureCanvasAgg(figure)
             else:
                 import matplotlib.pyplot as plt
 
-                figure = plt.figure(figsize=(11, 5.5))
+                figure = plt.figure(figsize=(12, 7))
         self.figure = figure
         self._build()
         self._background = None
@@ -299,8 +117,9 @@ class LiveView:
         fig = self.figure
         cal = self.processor.calibration
         length = self.processor.config.sensor.length_m * MM
-        grid = fig.add_gridspec(1, 2, width_ratios=(1, 1.25), left=0.06, right=0.98, bottom=0.1, top=0.9, wspace=0.2)
-        ax = self.ax_shape = fig.add_subplot(grid[0, 0])
+        grid = fig.add_gridspec(2, 2, width_ratios=(1, 1.35), height_ratios=(1, 1), left=0.06, right=0.93,
+                                bottom=0.08, top=0.9, wspace=0.22, hspace=0.42)
+        ax = self.ax_shape = fig.add_subplot(grid[:, 0])
         ax.set_xlim(-0.45 * length, 1.05 * length)
         ax.set_ylim(-0.3 * length, 1.1 * length)
         ax.set_aspect("equal", adjustable="box")
@@ -357,9 +176,41 @@ class LiveView:
         bx.set_title("channel levels", fontsize="medium")
         bx.legend(loc="upper left", fontsize="small", ncols=3)
         bx.grid(True, axis="y", alpha=0.3)
-        self.status_text = fig.text(0.5, 0.97, "", ha="center", va="top", fontsize="medium", animated=True)
+        self._build_series(grid[1, 1])
+        self.status_text = fig.text(0.5, 0.975, "", ha="center", va="top", fontsize="medium", animated=True)
         self.texts = [self.force_text, self.status_text]
-        self.artists = [*self.texts, self.bars, self.shape_line, self.tip_marker, self.arrow]
+        self.artists = [*self.texts, self.bars, self.shape_line, self.tip_marker, self.arrow, *self.series_artists]
+
+    def _build_series(self, cell) -> None:
+        """Fx, Fy with their ±2σ bands and the pressure over the last ``window_s`` (now at 0)."""
+        from matplotlib.collections import PolyCollection
+
+        fig = self.figure
+        tx = self.ax_series = fig.add_subplot(cell)
+        tx.set_xlim(-self.window_s, 0.0)
+        tx.set_ylim(-self.force_range_n, self.force_range_n)
+        tx.set_xlabel("time [s] (0 = newest frame)")
+        tx.set_ylabel("tip force [N]")
+        tx.set_title("force (±2σ band) and pressure", fontsize="medium")
+        tx.axhline(0.0, color="k", linewidth=0.6)
+        tx.grid(True, alpha=0.3)
+        px = self.ax_pressure = tx.twinx()
+        px.set_ylim(0.0, self.pressure_range_kpa)
+        px.set_ylabel("pressure [kPa]", color="0.35")
+        px.tick_params(axis="y", colors="0.35")
+        self.bands = []
+        self.force_lines = []
+        for color, label in (("C0", "Fx"), ("C3", "Fy")):
+            band = PolyCollection([np.zeros((0, 2))], facecolors=color, alpha=0.2, linewidths=0, animated=True)
+            tx.add_collection(band, autolim=False)
+            (line,) = tx.plot([], [], "-", color=color, linewidth=1.4, label=label, animated=True)
+            self.bands.append(band)
+            self.force_lines.append(line)
+        (self.pressure_line,) = px.plot([], [], "-", color="0.45", linewidth=1.0, label="pressure", animated=True)
+        tx.fill_between([], [], [], color="0.6", alpha=0.3, label="±2σ")
+        handles = [*tx.get_legend_handles_labels()[0], self.pressure_line]
+        tx.legend(handles=handles, loc="upper left", fontsize="small", ncols=4)
+        self.series_artists = [*self.bands, *self.force_lines, self.pressure_line]
 
     def _bar_verts(self, values, half_width=0.25):
         x = self._bar_x[:, None]
@@ -396,6 +247,52 @@ class LiveView:
             self._next_text = now + self.text_interval_s
         for artist in self.artists[len(self.texts) :]:
             fig.draw_artist(artist)
+
+    def add_block(self, block) -> None:
+        """Append the frames of a :class:`~bendsense.pipeline.LiveBlock` to the force and pressure history."""
+        t = np.where(np.isfinite(block.t_s), block.t_s, np.asarray(block.host_ns) * 1e-9)
+        f, sd = block.force_n, block.std_n
+        self._history.append(np.column_stack([t, f, sd, block.pressure_pa * 1e-3]))
+        newest = t[-1]
+        while len(self._history) > 1 and self._history[0][-1, 0] < newest - self.window_s:
+            self._history.pop(0)
+
+    def _set_series(self) -> None:
+        """Put the history into the time-series artists; grow the axes when the data leave them."""
+        if not self._history:
+            return
+        h = np.concatenate(self._history)
+        t_now = h[-1, 0]
+        h = h[h[:, 0] >= t_now - self.window_s]
+        if len(h) > self.max_points:  # thin to what the pixels can show
+            h = h[:: int(math.ceil(len(h) / self.max_points))]
+        x = h[:, 0] - t_now
+        for j, (line, band) in enumerate(zip(self.force_lines, self.bands)):
+            f, sd = h[:, 1 + j], h[:, 3 + j]
+            line.set_data(x, f)
+            ok = np.isfinite(f) & np.isfinite(sd)
+            lo, hi = f - 2 * sd, f + 2 * sd
+            # one polygon per run of finite values (a gap where there is no estimate)
+            runs = np.split(np.flatnonzero(ok), np.flatnonzero(np.diff(np.flatnonzero(ok)) > 1) + 1)
+            band.set_verts([np.column_stack([np.r_[x[r], x[r][::-1]], np.r_[lo[r], hi[r][::-1]]])
+                            for r in runs if r.size > 1])
+        self.pressure_line.set_data(x, h[:, 5])
+        # grow the limits (and redraw everything once) when the data leave them
+        f = h[:, 1:3]
+        f = f[np.isfinite(f)]
+        top = float(np.max(np.abs(f))) if f.size else 0.0
+        p = h[:, 5][np.isfinite(h[:, 5])]
+        grown = False
+        if top > self.force_range_n:
+            self.force_range_n = 1.5 * top
+            self.ax_series.set_ylim(-self.force_range_n, self.force_range_n)
+            grown = True
+        if p.size and p.max() > self.pressure_range_kpa:
+            self.pressure_range_kpa = 1.25 * float(p.max())
+            self.ax_pressure.set_ylim(0.0, self.pressure_range_kpa)
+            grown = True
+        if grown:
+            self._background = None
 
     def set_frame(self, frame: LiveFrame, status: str = "") -> None:
         """Update the artists' data from a frame (no drawing)."""
@@ -436,6 +333,7 @@ class LiveView:
     def update(self, frame: LiveFrame, status: str = "") -> None:
         """Show a frame: update the artists and blit them over the saved background."""
         self.set_frame(frame, status)
+        self._set_series()
         canvas = self.canvas
         if self._background is None:
             canvas.draw()  # the draw_event handler saves the background and draws the artists
@@ -444,6 +342,11 @@ class LiveView:
             self._draw_artists()
         canvas.blit(self.figure.bbox)
         canvas.flush_events()
+
+    def update_block(self, block, status: str = "") -> None:
+        """Add a block's frames to the history and show its newest frame."""
+        self.add_block(block)
+        self.update(block.frame(-1), status)
 
     def save(self, path, dpi: int = 120, overwrite: bool = True) -> None:
         """Write the figure with the current frame (atomically; :func:`bendsense.output.write_file`)."""
@@ -475,10 +378,11 @@ class LiveStats:
     Attributes
     ----------
     frames : int
-        Frames processed and displayed.
+        Frames displayed (redraws).
     received : int
-        Samples the driver received meanwhile (the rest were skipped: the view shows
-        the newest frame only).
+        Samples the driver received meanwhile.
+    estimated : int
+        Frames processed (shape and force): every frame received, in blocks.
     failures : int
         Force estimates that did not converge.
     elapsed_s : float
@@ -486,16 +390,12 @@ class LiveStats:
     fps : float
         Displayed frames per second [1/s].
     latency_ms : tuple of float
-        End-to-end latency per frame, median and 95th percentile [ms]: bytes read by
-        the driver → shape and force → artists drawn.
+        End-to-end latency per displayed frame, median and 95th percentile [ms]: bytes
+        read by the driver → shape and force → artists drawn.
     process_ms : float
         Median reconstruction + estimation time per frame [ms].
     draw_ms : float
         Median time to update and blit the artists per frame [ms].
-    estimated : int
-        Frames whose force was estimated (every received frame with a pressure).
-    estimate_hz : float
-        Achieved estimation rate [1/s].
     """
 
     frames: int
@@ -511,13 +411,24 @@ class LiveStats:
 
     def summary(self) -> str:
         """One line for the terminal."""
+        rate = self.estimate_hz
         return (
             f"{self.frames} frames shown ({self.received} received) in {self.elapsed_s:.1f} s: "
             f"{self.fps:.1f} fps, latency median {self.latency_ms[0]:.1f} ms (p95 {self.latency_ms[1]:.1f} ms), "
             f"process {self.process_ms:.2f} ms, draw {self.draw_ms:.2f} ms per frame; "
-            f"{self.estimated} frames estimated ({self.estimate_hz:.0f} estimates/s)"
+            f"{self.estimated} frames estimated ({rate:.0f}/s)"
             + (f", {self.failures} estimates not converged" if self.failures else "")
         )
+
+
+def status_line(block, processor, rate_hz: float, fps: float, lost: int, backlog: int = 0) -> str:
+    """The status line of the live view: frame, rates, backlog and the counts per status."""
+    counts = processor.status_counts
+    return (
+        f"seq {int(block.seq[-1])}   estimated {rate_hz:.0f} frames/s   {fps:.0f} fps   backlog {backlog}   "
+        f"lost {lost}   extrapolated {counts.get('extrapolated', 0)}   "
+        f"not converged {counts.get('not converged', 0)}   misfit {counts.get('model_misfit', 0)}"
+    )
 
 
 def run_live(
@@ -529,24 +440,31 @@ def run_live(
     max_fps=60.0,
     is_open=None,
     on_frame=None,
+    outlets=None,
+    max_block=512,
 ) -> LiveStats:
-    """Show the newest reading of ``driver`` until ``duration_s`` passed or the view closes.
+    """Process every reading of ``driver`` in blocks and show the newest, until ``duration_s`` or the view closes.
 
     Parameters
     ----------
     driver : Driver
-        An open, streaming driver (:meth:`~bendsense.device.driver.Driver.latest` is used).
+        An open, streaming driver with a queue (:meth:`~bendsense.device.driver.Driver.get_batch`).
     processor : LiveProcessor
     view : LiveView, optional
         None: process only (for benchmarks of the model alone).
     duration_s : float, optional
         Run time [s]; None: until ``is_open()`` turns false.
     max_fps : float
-        Upper bound of the display rate [1/s]; the loop idles when no new frame came.
+        Upper bound of the display rate [1/s]; frames arriving in between are processed
+        (and published) but only the newest is drawn.
     is_open : callable, optional
         Returns False when the window was closed.
     on_frame : callable, optional
-        Called with each :class:`LiveFrame` after it was drawn.
+        Called with the newest :class:`LiveFrame` after each redraw.
+    outlets : LslOutlets, optional
+        Publish every processed block on LSL.
+    max_block : int
+        Most frames processed in one block.
 
     Returns
     -------
@@ -561,13 +479,13 @@ def run_live(
 
     min_period = 1.0 / max_fps if max_fps else 0.0
     latencies, process, draw = [], [], []
-    queued = getattr(driver, "_queue", None) is not None
-    estimated0 = processor.estimated
     samples0 = driver.stats.samples
-    last_key = None
+    frames0 = processor.frames
+    recent = []  # (monotonic time, frames) of the last second
     start = time.monotonic()
     end = None if duration_s is None else start + duration_s
-    last_shown = None
+    next_draw = start
+    pending = None  # newest block not drawn yet
     while True:
         now = time.monotonic()
         if end is not None and now >= end:
@@ -576,41 +494,35 @@ def run_live(
             break
         if driver.error is not None:
             raise DeviceError(driver.error)
-        if queued:
-            # every received frame is estimated; the view shows the newest
-            readings = driver.get_batch(timeout=0.002)
-            reading = readings[-1] if readings else None
-        else:
-            reading = driver.latest()
-            readings = [reading]
-        key = None if reading is None else (reading.host_ns, reading.sample.seq)
-        if reading is None or key == last_key:
-            if not queued:
-                time.sleep(0.002)
+        readings = driver.get_batch(timeout=0.005, max_items=max_block)
+        if readings:
+            block = processor.process_readings(readings)
+            if outlets is not None:
+                outlets.push(block)
+            process.append(block.process_s / len(block))
+            recent.append((time.monotonic(), len(block)))
             if view is not None:
-                view.canvas.flush_events()
+                view.add_block(block)
+            pending = block
+        elif view is not None:
+            view.canvas.flush_events()
+        if pending is None or time.monotonic() < next_draw:
             continue
-        last_key = key
-        frame = processor.process_many(readings)
         t_draw = time.perf_counter()
+        frame = pending.frame(-1)
         if view is not None:
-            elapsed = time.monotonic() - start
-            fps = len(latencies) / elapsed if elapsed > 0 else 0.0
-            lat = np.median(latencies[-50:]) if latencies else math.nan
-            view.update(
-                frame, f"seq {reading.sample.seq}   {fps:.0f} fps   latency {lat:.0f} ms   lost {driver.stats.lost}"
-            )
+            t_now = time.monotonic()
+            recent = [(t, n) for t, n in recent if t >= t_now - 1.0]
+            fps = len(latencies) / (t_now - start) if t_now > start else 0.0
+            view.update(frame, status_line(pending, processor, sum(n for _, n in recent), fps,
+                                           driver.stats.lost, driver.queued))
         done_ns = time.monotonic_ns()
         draw.append(time.perf_counter() - t_draw)
-        process.append(frame.process_s)
-        latencies.append((done_ns - reading.host_ns) * 1e-6)
+        latencies.append((done_ns - frame.host_ns) * 1e-6)
         if on_frame is not None:
             on_frame(frame)
-        if min_period and last_shown is not None:
-            wait = last_shown + min_period - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
-        last_shown = time.monotonic()
+        pending = None
+        next_draw = time.monotonic() + min_period
     elapsed = time.monotonic() - start
     n = len(latencies)
     lat = (float(np.median(latencies)), float(np.percentile(latencies, 95))) if n else (math.nan, math.nan)
@@ -621,8 +533,8 @@ def run_live(
         elapsed_s=elapsed,
         fps=n / elapsed if elapsed > 0 else 0.0,
         latency_ms=lat,
-        process_ms=float(np.median(process)) * 1e3 if n else math.nan,
+        process_ms=float(np.median(process)) * 1e3 if process else math.nan,
         draw_ms=float(np.median(draw)) * 1e3 if n else math.nan,
-        estimated=processor.estimated - estimated0,
-        estimate_hz=(processor.estimated - estimated0) / elapsed if elapsed > 0 else 0.0,
+        estimated=processor.frames - frames0,
+        estimate_hz=(processor.frames - frames0) / elapsed if elapsed > 0 else 0.0,
     )

@@ -70,6 +70,11 @@ class Recorder:
         Further metadata for ``meta.yaml``.
     fsync_interval_s : float
         Longest time between ``fsync`` calls [s] (DESIGN.md: at most 1 s).
+    on_records : callable, optional
+        Called with the list of readings just written to ``frames.bin`` (on the
+        recording thread; e.g. :meth:`bendsense.device.estimator.LiveEstimator.put`).
+    extra_files : sequence of str
+        Files others write into the session directory (``results.csv``), for its manifest.
 
     Notes
     -----
@@ -78,8 +83,11 @@ class Recorder:
     :meth:`start` / :meth:`stop` for a background thread.
     """
 
-    def __init__(self, driver, path, *, overwrite=False, config=None, meta=None, fsync_interval_s=0.5):
+    def __init__(self, driver, path, *, overwrite=False, config=None, meta=None, fsync_interval_s=0.5,
+                 on_records=None, extra_files=()):
         self.driver = driver
+        self.on_records = on_records
+        self.extra_files = tuple(extra_files)
         self.path = path
         self.overwrite = bool(overwrite)
         self.config = config
@@ -135,6 +143,7 @@ class Recorder:
                     adc_dtype="<u2" if drv.dialect == "binary" else "<f8",
                     overwrite=self.overwrite,
                     fsync_interval_s=self.fsync_interval_s,
+                    extra_files=self.extra_files,
                 )
                 for ev in self._early_events:
                     self._writer.event(f"{ev.kind}: {ev.text}", ev.time_s)
@@ -170,6 +179,8 @@ class Recorder:
         ]
         rec["adc"] = np.array([r.sample.adc for r in keep])
         writer.write(rec)
+        if self.on_records is not None:
+            self.on_records(keep)
 
     # ------------------------------------------------------------------ running
 

@@ -1,0 +1,105 @@
+"""Live shape and force on Lab Streaming Layer (optional extra ``lsl``, pylsl).
+
+:class:`LslOutlets` publishes two streams, one sample per frame:
+
+- ``bendsense-force``, type ``Force``: ``fx_n, fy_n, fx_std_n, fy_std_n`` [N] (NaN where a
+  frame has no estimate);
+- ``bendsense-shape``, type ``Shape``: ``kappa1 … kappaN`` [1/m], ``tip_x_m``, ``tip_y_m``
+  [m], ``tip_angle_rad`` [rad].
+
+Both are ``double64`` streams whose nominal rate is the board's frame rate (its HELLO);
+each channel's ``label``, ``unit`` and ``type`` are in the stream's XML description
+(``<desc><channels><channel>``), with the frame (``bendsense_base``) and the estimator
+options beside them. A sample's time stamp is the frame's arrival at the host (when its
+bytes were read), on the LSL clock (``pylsl.local_clock()``), so streams of other
+devices recorded with LabRecorder line up with it.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from bendsense.errors import require_extra
+
+__all__ = ["LslOutlets", "FORCE_CHANNELS", "shape_channels"]
+
+FORCE_CHANNELS = (("fx_n", "N"), ("fy_n", "N"), ("fx_std_n", "N"), ("fy_std_n", "N"))
+
+
+def shape_channels(n_segments: int) -> list:
+    """``(label, unit)`` of the channels of ``bendsense-shape`` for a sensor of N segments."""
+    return [*((f"kappa{i + 1}", "1/m") for i in range(n_segments)), ("tip_x_m", "m"), ("tip_y_m", "m"),
+            ("tip_angle_rad", "rad")]
+
+
+def _info(pylsl, name, kind, channels, rate_hz, source_id, meta):
+    info = pylsl.StreamInfo(name, kind, len(channels), float(rate_hz or 0.0), pylsl.cf_double64, source_id)
+    desc = info.desc()
+    chans = desc.append_child("channels")
+    for label, unit in channels:
+        ch = chans.append_child("channel")
+        ch.append_child_value("label", label)
+        ch.append_child_value("unit", unit)
+        ch.append_child_value("type", kind)
+    desc.append_child_value("manufacturer", "bendsense")
+    for key, value in meta.items():
+        desc.append_child_value(key, str(value))
+    return info
+
+
+class LslOutlets:
+    """The two LSL outlets of a live run.
+
+    Parameters
+    ----------
+    n_segments : int
+        Sensor segments N (channels ``kappa1..kappaN`` of the shape stream).
+    rate_hz : float
+        Nominal rate [Hz]: the board's frame rate (0: irregular).
+    source_id : str
+        LSL source id (e.g. the port), so that a restarted run is recognised.
+    meta : dict, optional
+        Further ``key: value`` pairs for both streams' description (constraint, ...).
+
+    Raises
+    ------
+    MissingExtraError
+        If pylsl is not installed (extra ``lsl``).
+    """
+
+    def __init__(self, n_segments: int, rate_hz: float, source_id: str = "bendsense", meta: dict | None = None):
+        pylsl = require_extra("pylsl", "lsl", "--lsl")
+        meta = {"frame": "bendsense_base (+y along the actuator at its base, +x toward the centre of curvature)",
+                **(meta or {})}
+        self.force = pylsl.StreamOutlet(_info(pylsl, "bendsense-force", "Force", FORCE_CHANNELS, rate_hz,
+                                              f"{source_id}-force", meta))
+        self.shape = pylsl.StreamOutlet(_info(pylsl, "bendsense-shape", "Shape", shape_channels(n_segments),
+                                              rate_hz, f"{source_id}-shape", meta))
+        # time.monotonic_ns() (the arrival time of a frame) on the LSL clock
+        self._offset_s = pylsl.local_clock() - time.monotonic()
+        self.pushed = 0
+
+    def push(self, block) -> None:
+        """Publish the frames of a :class:`~bendsense.pipeline.LiveBlock`."""
+        n = len(block)
+        if not n:
+            return
+        stamps = (np.asarray(block.host_ns, dtype=float) * 1e-9 + self._offset_s).tolist()
+        force = np.column_stack([block.force_n, block.std_n])
+        shape = block.shape
+        kappa = np.asarray(shape.curvature_per_m, dtype=float).reshape(n, -1)
+        tip = np.asarray(shape.tip_position_m, dtype=float).reshape(n, 2)
+        angle = np.asarray(shape.tip_angle_rad, dtype=float).reshape(n, 1)
+        self.force.push_chunk(force, stamps)
+        self.shape.push_chunk(np.hstack([kappa, tip, angle]), stamps)
+        self.pushed += n
+
+    def close(self) -> None:
+        """Drop the outlets (consumers see the streams end)."""
+        self.force = self.shape = None
+
+    def have_consumers(self) -> bool:
+        """True when an inlet is connected to the force stream."""
+        return self.force is not None and self.force.have_consumers()

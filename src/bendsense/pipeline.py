@@ -1,0 +1,410 @@
+"""Every frame as it arrives: shapes and warm-started force estimates per block of frames.
+
+:class:`LiveProcessor` is the core of ``bendsense record --estimate``, ``live`` and the
+``--lsl`` streams. It turns a block of frames (raw signals and pressure) into their
+shapes (PCC, paper eq. 1–7, one batched call) and tip forces (eq. 18 and 21, one batched
+:func:`~bendsense.estimation.estimate_force` call), warm-started from the last good
+estimate of the previous block, and returns a :class:`LiveBlock` whose
+:meth:`~LiveBlock.columns` are those of ``results.csv``
+(:class:`~bendsense.results.Results`). A single frame is a block of one; there is no
+second, one-frame code path.
+
+The block is what keeps up with fast boards: a warm-started batch costs a fraction of a
+millisecond per frame (``docs/performance.md``), so a receiver that processes what
+arrived since its last call (a few to a few hundred frames) keeps up with a 2 kHz board
+on one core.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from bendsense.errors import ArgumentError, ConfigError
+
+__all__ = ["LiveBlock", "LiveFrame", "LiveProcessor", "LIVE_MAX_ITER", "NO_PRESSURE_STATUS"]
+
+#: Iteration limit of a live force estimate. A warm-started frame converges in a few
+#: iterations; one that cannot (an unconstrained axial force on the straight actuator
+#: does not change its shape) must not stall the stream for 100 beam solves.
+LIVE_MAX_ITER = 20
+#: ``status`` of a frame that has no pressure reading (and no fallback pressure).
+NO_PRESSURE_STATUS = "no pressure"
+
+
+@dataclass(frozen=True, eq=False)
+class LiveFrame:
+    """One processed frame (a view of one frame of a :class:`LiveBlock`).
+
+    Attributes
+    ----------
+    seq : int
+        Device sequence number (raw, wraps at 65536); -1 if unknown.
+    t_s : float
+        Device clock [s] (from the first frame the processor saw, when given readings).
+    host_ns : int
+        Host clock when the frame's bytes were read (``time.monotonic_ns()``) [ns].
+    pressure_pa : float
+        Pressure [Pa]; NaN without a reading (no force estimate then).
+    delta_a : ndarray, shape (N,)
+        Offset-free signals ΔA = A − A0 (paper eq. 1) [signal units].
+    shape : Shape
+        Reconstructed shape of the frame (single frame, no batch axis).
+    estimate : ForceEstimate or None
+        Tip force of the frame; None without pressure or with estimation off.
+    process_s : float
+        Wall time of reconstruction and estimation of its block, per frame [s].
+    status : str
+        The frame's ``status`` in ``results.csv``.
+    """
+
+    seq: int
+    t_s: float
+    host_ns: int
+    pressure_pa: float
+    delta_a: np.ndarray
+    shape: object
+    estimate: object
+    process_s: float
+    status: str = "ok"
+
+    @property
+    def force_n(self) -> np.ndarray:
+        """Tip force (Fx, Fy) [N]; NaN when not estimated or not converged."""
+        if self.estimate is None:
+            return np.full(2, np.nan)
+        return np.asarray(self.estimate.force_n, dtype=float)
+
+    @property
+    def std_n(self) -> np.ndarray:
+        """Standard deviation of (Fx, Fy) [N]; NaN when not estimated."""
+        if self.estimate is None:
+            return np.full(2, np.nan)
+        return np.asarray(self.estimate.std_n, dtype=float)
+
+
+def _take(obj, index, n: int):
+    """The frames ``index`` of a batched result object (every field with leading axis ``n``)."""
+    changes = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
+            changes[f.name] = value[index]
+    return dataclasses.replace(obj, **changes)
+
+
+def _put(obj, index, part, n: int):
+    """``obj`` (batch axis ``n``) with the frames ``index`` replaced by those of ``part``."""
+    changes = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
+            new = np.array(value, dtype=object if value.dtype.kind in "US" else value.dtype)
+            new[index] = getattr(part, f.name)
+            changes[f.name] = new
+    return dataclasses.replace(obj, **changes)
+
+
+def _expand(est, mask: np.ndarray):
+    """A ForceEstimate for all frames of ``mask`` from one for the frames where it is True.
+
+    The other frames get NaN forces, ``success=False`` and the message "no pressure reading".
+    """
+    n, m = mask.size, int(mask.sum())
+    changes = {}
+    for f in dataclasses.fields(est):
+        value = getattr(est, f.name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == m:
+            if value.dtype.kind == "b":
+                full = np.zeros((n, *value.shape[1:]), dtype=bool)
+            elif value.dtype.kind in "US":
+                full = np.full((n, *value.shape[1:]), "no pressure reading", dtype=object)
+            elif value.dtype.kind in "iu":
+                full = np.zeros((n, *value.shape[1:]), dtype=value.dtype)
+            else:
+                full = np.full((n, *value.shape[1:]), np.nan, dtype=value.dtype if value.dtype.kind == "f" else object)
+            full[mask] = value
+            changes[f.name] = full
+    return dataclasses.replace(est, **changes)
+
+
+@dataclass(frozen=True, eq=False)
+class LiveBlock:
+    """Shapes and force estimates of a block of consecutive frames.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n,)
+        Frame time [s].
+    seq : ndarray of int, shape (n,)
+        Raw sequence numbers (-1 unknown).
+    host_ns : ndarray of int, shape (n,)
+        Arrival time of each frame on the host clock (``time.monotonic_ns()``) [ns].
+    pressure_pa : ndarray, shape (n,)
+        Pressure used [Pa] (the reading, else the processor's fallback); NaN: none.
+    signals : ndarray, shape (n, N)
+        Raw signals A [signal units].
+    shape : Shape
+        Shapes, batch axis n.
+    estimate : ForceEstimate or None
+        Forces, batch axis n; None when estimation is off or no frame has a pressure.
+    estimated : bool
+        Whether the processor estimates forces (the force columns are then present,
+        NaN where there is no estimate).
+    process_s : float
+        Wall time of the block's reconstruction and estimation [s].
+    offset : ndarray, shape (N,)
+        The calibration's offsets A0 (for ΔA).
+    """
+
+    t_s: np.ndarray
+    seq: np.ndarray
+    host_ns: np.ndarray
+    pressure_pa: np.ndarray
+    signals: np.ndarray
+    shape: object
+    estimate: object
+    estimated: bool
+    process_s: float
+    offset: np.ndarray = dataclasses.field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return self.t_s.size
+
+    @property
+    def force_n(self) -> np.ndarray:
+        """Tip forces (n, 2) [N]; NaN where not estimated or not converged."""
+        if self.estimate is None:
+            return np.full((len(self), 2), np.nan)
+        return np.asarray(self.estimate.force_n, dtype=float).reshape(len(self), 2)
+
+    @property
+    def std_n(self) -> np.ndarray:
+        """Standard deviations of the forces (n, 2) [N]; NaN where not estimated."""
+        if self.estimate is None:
+            return np.full((len(self), 2), np.nan)
+        return np.asarray(self.estimate.std_n, dtype=float).reshape(len(self), 2)
+
+    @property
+    def status(self) -> np.ndarray:
+        """Per-frame status of ``results.csv`` (:func:`bendsense.results.frame_status`, and
+        :data:`NO_PRESSURE_STATUS` for frames without pressure)."""
+        from bendsense.results import frame_status
+
+        status = frame_status(self.shape, self.estimate)
+        if self.estimated:
+            status[~np.isfinite(self.pressure_pa)] = NO_PRESSURE_STATUS
+        return status
+
+    def columns(self) -> dict:
+        """The columns of ``results.csv`` for these frames (those of ``bendsense ... save``)."""
+        from bendsense.results import Results
+        from bendsense.session import Session
+
+        session = Session(self.t_s, self.signals, self.pressure_pa)
+        columns = Results.from_state(session, self.shape, self.estimate).columns
+        if self.estimated and self.estimate is None:  # no frame with pressure: NaN forces
+            columns.pop("status")
+            nan = np.full(len(self), np.nan)
+            columns.update({name: nan for name in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m")})
+        columns["status"] = self.status
+        return columns
+
+    def frame(self, i: int = -1) -> LiveFrame:
+        """Frame ``i`` of the block as a :class:`LiveFrame`."""
+        n = len(self)
+        i = range(n)[i]
+        est = None
+        if self.estimate is not None and np.isfinite(self.pressure_pa[i]):
+            est = _take(self.estimate, i, n)
+        return LiveFrame(
+            seq=int(self.seq[i]),
+            t_s=float(self.t_s[i]),
+            host_ns=int(self.host_ns[i]),
+            pressure_pa=float(self.pressure_pa[i]),
+            delta_a=self.signals[i] - self.offset,
+            shape=_take(self.shape, i, n),
+            estimate=est,
+            process_s=self.process_s / n,
+            status=str(self.status[i]),
+        )
+
+
+class LiveProcessor:
+    """Turn frames into shapes and tip forces as they arrive, a block at a time, warm-started.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        Signal → shift calibration (paper eq. 1–2).
+    config : Config, optional
+        Sensor, actuator and estimation options; default the paper's prototype.
+    constraint : str, optional
+        Force constraint (:data:`bendsense.estimation.CONSTRAINTS`); default
+        ``config.estimation.constraint``.
+    method : str, optional
+        Estimator; default ``config.estimation.method``.
+    pressure_pa : float, optional
+        Pressure for frames without a reading [Pa]; without it such frames get a
+        shape only (status :data:`NO_PRESSURE_STATUS`).
+    n_points : int
+        Points of each shape along the sensor.
+    estimate : bool
+        Estimate the force (False: shapes only).
+    **options
+        Further options of :func:`bendsense.estimation.estimate_force` (``push_only``,
+        ``tip_angle_source``, ...). ``max_iter`` defaults to :data:`LIVE_MAX_ITER`.
+
+    Attributes
+    ----------
+    frames : int
+        Frames processed.
+    failures : int
+        Frames whose force estimate did not converge.
+    estimated : int
+        Frames whose force was estimated (those with a pressure).
+    status_counts : dict of str to int
+        Frames per status (``ok``, ``extrapolated``, ``not converged``, ...).
+    """
+
+    def __init__(self, calibration, config=None, *, constraint=None, method=None, pressure_pa=None, n_points=41,
+                 estimate=True, **options):
+        from bendsense.config import load_config
+
+        self.config = load_config() if config is None else config
+        sensor = self.config.sensor
+        if calibration.n_channels != sensor.n_segments:
+            raise ConfigError(
+                f"calibration.n_channels: expected {sensor.n_segments} (sensor.n_segments), "
+                f"got {calibration.n_channels}"
+            )
+        self.calibration = calibration
+        self.constraint = self.config.estimation.constraint if constraint is None else constraint
+        self.method = self.config.estimation.method if method is None else method
+        self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
+        self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
+        self.estimate = bool(estimate)
+        self.options = {"max_iter": LIVE_MAX_ITER, **options}
+        self.frames = 0
+        self.failures = 0
+        self.estimated = 0
+        self.status_counts: dict[str, int] = {}
+        self._previous = None
+        self._t0_us = None
+
+    def reset(self) -> None:
+        """Forget the warm start and the time origin (e.g. after a reconnect)."""
+        self._previous = None
+        self._t0_us = None
+
+    def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None) -> LiveBlock:
+        """Process a block of consecutive frames.
+
+        Parameters
+        ----------
+        signals : array_like, shape (n, N)
+            Raw signals A [signal units].
+        pressure_pa : array_like, shape (n,) or None
+            Pressure per frame [Pa]; NaN or None: no reading (the fallback pressure, if
+            any, is used).
+        t_s, seq, host_ns : array_like, shape (n,), optional
+            Frame time [s], sequence numbers, arrival time [ns]; default NaN, -1, now.
+
+        Returns
+        -------
+        LiveBlock
+        """
+        from bendsense.estimation import estimate_force
+        from bendsense.pcc import reconstruct
+
+        t_start = time.perf_counter()
+        a = np.asarray(signals, dtype=float)
+        if a.ndim != 2:
+            raise ArgumentError(f"signals: expected shape (n, N), got {a.shape}")
+        n = a.shape[0]
+        p = np.full(n, np.nan) if pressure_pa is None else np.broadcast_to(
+            np.asarray(pressure_pa, dtype=float), (n,)).copy()
+        if self.pressure_pa is not None:
+            p[~np.isfinite(p)] = self.pressure_pa
+        shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
+        est = None
+        has_p = np.isfinite(p)
+        if self.estimate and has_p.any():
+            prev = self._previous
+            warm = {"initial": prev} if prev is not None else {}
+            sub = shape if has_p.all() else _take(shape, has_p, n)
+            kwargs = {"constraint": self.constraint, "method": self.method, "calibration": self.calibration,
+                      **self.options}
+            est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
+            m = int(has_p.sum())
+            failed = np.flatnonzero(~np.asarray(est.success).reshape(-1))
+            if warm and failed.size:
+                # a start far from a frame (a block over a fast change) can fail where the
+                # frame's own moment-balance start converges: retry those cold
+                retry = estimate_force(_take(sub, failed, m), p[has_p][failed], self.config, **kwargs)
+                est = _put(est, failed, retry, m)
+            ok = np.flatnonzero(np.asarray(est.success).reshape(-1))
+            if ok.size:  # a failed frame has NaN forces: it cannot seed the next block
+                self._previous = _take(est, int(ok[-1]), m)
+            self.failures += int(np.count_nonzero(~np.asarray(est.success)))
+            self.estimated += int(has_p.sum())
+            if not has_p.all():
+                est = _expand(est, has_p)
+        block = LiveBlock(
+            t_s=np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float),
+            seq=np.full(n, -1, dtype=np.int64) if seq is None else np.asarray(seq, dtype=np.int64),
+            host_ns=np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None
+            else np.asarray(host_ns, dtype=np.int64),
+            pressure_pa=p,
+            signals=a,
+            shape=shape,
+            estimate=est,
+            estimated=self.estimate,
+            process_s=time.perf_counter() - t_start,
+            offset=np.asarray(self.calibration.offset, dtype=float),
+        )
+        self.frames += n
+        for status in block.status:
+            self.status_counts[status] = self.status_counts.get(status, 0) + 1
+        return block
+
+    def process_readings(self, readings) -> LiveBlock:
+        """Process driver readings (:class:`~bendsense.device.driver.Reading`), in arrival order.
+
+        ``t_s`` is the device clock from the first reading this processor saw (as
+        ``t_s`` of the recorded session).
+        """
+        readings = list(readings)
+        if self._t0_us is None and readings:
+            self._t0_us = readings[0].device_us
+        t0 = 0 if self._t0_us is None else self._t0_us
+        return self.process_block(
+            np.array([r.sample.adc for r in readings], dtype=float).reshape(len(readings), -1),
+            np.array([np.nan if r.sample.pressure_pa is None else r.sample.pressure_pa for r in readings], float),
+            t_s=(np.array([r.device_us for r in readings], dtype=np.int64) - t0) * 1e-6,
+            seq=[r.sample.seq for r in readings],
+            host_ns=[r.host_ns for r in readings],
+        )
+
+    def process_signals(self, signals, pressure_pa=None, *, seq=-1, t_s=math.nan, host_ns=None) -> LiveFrame:
+        """Process one frame given as raw signals A (N,) and the pressure [Pa] (a block of one)."""
+        block = self.process_block(
+            np.asarray(signals, dtype=float)[None],
+            None if pressure_pa is None else [pressure_pa],
+            t_s=[t_s],
+            seq=[seq],
+            host_ns=[time.monotonic_ns() if host_ns is None else host_ns],
+        )
+        return block.frame(0)
+
+    def process(self, reading) -> LiveFrame:
+        """Process one :class:`~bendsense.device.driver.Reading`."""
+        return self.process_readings([reading]).frame(0)
+
+    def process_many(self, readings) -> LiveFrame:
+        """Process readings as one block; the newest frame as a :class:`LiveFrame`."""
+        return self.process_readings(readings).frame(-1)
