@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import bendsense
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.results import read_results
@@ -149,8 +148,9 @@ def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_
     out = tmp_path / "s"
     with SimulatedDevice(default_source(rate_hz=1000, seed=SEED), rate_hz=1000) as dev:
         with open(tmp_path / "stderr.txt", "wb") as err, subprocess.Popen(
-            [*CLI, "-q", "record", dev.port, "-o", str(out), "--seconds", "3", "--calibration", str(workdir / "cal.yaml"),
-             "--estimate", "--lsl", "--lsl-wait", "30", "--quiet-status"], stdout=subprocess.DEVNULL, stderr=err
+            [*CLI, "-q", "record", dev.port, "-o", str(out), "--seconds", "3", "--calibration",
+             str(workdir / "cal.yaml"), "--estimate", "--lsl", "--lsl-wait", "30", "--quiet-status"],
+            stdout=subprocess.DEVNULL, stderr=err
         ) as proc:
             try:
                 found = pylsl.resolve_byprop("name", "bendsense-force", minimum=1, timeout=30)

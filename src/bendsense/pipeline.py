@@ -191,8 +191,11 @@ class LiveBlock:
 
     @property
     def status(self) -> np.ndarray:
-        """Per-frame status of ``results.csv`` (:func:`bendsense.results.frame_status`, and
-        :data:`NO_PRESSURE_STATUS` for frames without pressure)."""
+        """Per-frame status of ``results.csv``.
+
+        That of :func:`bendsense.results.frame_status`, and :data:`NO_PRESSURE_STATUS`
+        for frames without pressure when forces are estimated.
+        """
         from bendsense.results import frame_status
 
         status = frame_status(self.shape, self.estimate)
