@@ -324,7 +324,9 @@ def test_shape_indexing_and_plot(tmp_path):
     assert shape[1:].positions_m.shape == (2, 11, 2)
     assert shape.frame(2).tip_angle_rad == pytest.approx(20 * L)
     ax = shape.plot()
-    assert ax.get_xlabel() == "x [m]" and len(ax.lines) == 4
+    # in mm like every other figure: a line per frame, its tip dot, the base
+    assert ax.get_xlabel() == "x [mm]" and len(ax.lines) == 3 * 2 + 1
+    np.testing.assert_allclose(np.column_stack(ax.lines[2].get_data()), shape.positions_m[1] * 1e3)
     ax.figure.savefig(tmp_path / "shape.png")
     plt.close("all")
     assert (tmp_path / "shape.png").stat().st_size > 0

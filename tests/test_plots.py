@@ -114,7 +114,11 @@ def test_plot_shapes_dashes_extrapolated_frames():
     ax = plot_shapes(shape)
     styles = [line.get_linestyle() for line in ax.lines if line.get_label().startswith("frame")]
     assert styles == ["-", "--", "-"]
-    assert ax.get_legend().get_title().get_text() == "dashed: extrapolated"
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend[-1].startswith("dashed: extrapolated") and "outside the calibrated range" in legend[-1]
+    # no extrapolated frame drawn: no such entry
+    ax = plot_shapes(shape, frames=[0, 2])
+    assert not any(t.get_text().startswith("dashed") for t in ax.get_legend().get_texts())
 
 
 def test_plot_shape_comparison_styles(tmp_path):
@@ -201,7 +205,14 @@ def test_time_series_force_band_and_curvatures(results_dir, tmp_path):
     ys = band.get_paths()[0].vertices[:, 1]
     np.testing.assert_allclose([ys.min(), ys.max()], [res["fy_n"].min() - 0.04, res["fy_n"].max() + 0.04])
     legend = [t.get_text() for t in ax_f.get_legend().get_texts()]
-    assert legend == ["F_x ± 2σ", "F_y ± 2σ", "status not ok"]
+    assert legend == ["F_x ± 2σ", "F_y ± 2σ", "status not ok", "pressure (right axis)"]
+    # the pressure on a second axis of the force panel, in kPa
+    px = [a for a in fig.axes if a is not ax_f and a.bbox.bounds == ax_f.bbox.bounds][0]
+    assert px.get_ylabel() == "pressure [kPa]"
+    np.testing.assert_allclose(px.lines[0].get_ydata(), res["pressure_pa"] * 1e-3)
+    # the legend covers no data: it sits above the panel
+    renderer = fig.canvas.get_renderer()
+    assert ax_f.get_legend().get_window_extent(renderer).y0 >= ax_f.get_window_extent(renderer).y1 - 1
     saved(fig, tmp_path / "series.png")
 
 
@@ -247,8 +258,12 @@ def test_plot_results_summary_to_file(results_dir, tmp_path):
     ax_s, ax_f, ax_k = fig.axes[:3]
     assert labels(ax_s) == ("x [mm]", "y [mm]")
     assert ax_f.get_ylabel() == "tip force [N]" and labels(ax_k) == ("time [s]", "curvature κ_i [1/m]")
-    assert fig.get_suptitle() == f"res: {FRAMES} frames"
+    assert fig.get_suptitle() == f"res: shapes and tip forces of {FRAMES} frames"
     assert [t.get_text() for t in ax_s.get_legend().get_texts()][0] == "tip path"
+    renderer = fig._get_renderer()  # the shapes' legend below the panel, over no shape
+    assert ax_s.get_legend().get_window_extent(renderer).y1 <= ax_s.get_window_extent(renderer).y0 + 1
+    fig2 = plot_results(results_dir, tmp_path / "s2.png", estimated="constraint normal, method fast")
+    assert fig2.get_suptitle() == f"res: shapes and tip forces (constraint normal, method fast) of {FRAMES} frames"
     tip = [line for line in ax_s.lines if line.get_label() == "tip path"][0]
     np.testing.assert_allclose(tip.get_xydata()[-1], arc_tip_mm(20.0), rtol=1e-9)
     # vector formats by suffix; unknown suffixes are refused

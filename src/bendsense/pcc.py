@@ -639,24 +639,16 @@ class Shape:
         }
 
     def plot(self, ax=None, *, max_frames: int = 50, **kwargs):
-        """Plot the shape(s) in the base frame: x [m] right, y [m] up, equal aspect.
+        """Plot the shape(s) in the base frame in mm (:func:`bendsense.plots.plot_shapes`).
 
-        Frames flagged ``extrapolated`` are drawn dashed. Returns the axes.
+        Up to ``max_frames`` frames, evenly spaced; frames flagged ``extrapolated`` are
+        dashed (and explained in the legend). ``kwargs`` go to ``Axes.plot``. Returns
+        the axes.
         """
-        import matplotlib.pyplot as plt
+        from bendsense.plots import plot_shapes
 
-        if ax is None:
-            _, ax = plt.subplots()
-        pos = self.positions_m.reshape(-1, self.s_m.size, 2)
-        extra = np.broadcast_to(np.asarray(self.extrapolated, dtype=bool), self.batch_shape).reshape(-1)
-        step = max(1, len(pos) // max_frames)
-        for p, e in zip(pos[::step], extra[::step], strict=True):
-            ax.plot(p[:, 0], p[:, 1], linestyle="--" if e else "-", **kwargs)
-        ax.plot([0.0], [0.0], "ks", markersize=4)
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        ax.set_aspect("equal", adjustable="datalim")
-        return ax
+        frames = int(np.prod(self.batch_shape)) if self.batch_shape else 1
+        return plot_shapes(self, ax, max_frames=max_frames, legend=frames <= 8, **kwargs)
 
 
 def _shape(kappa, grid: _Grid, base_angle_rad, extrapolated, theta=None) -> Shape:

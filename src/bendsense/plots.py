@@ -140,10 +140,15 @@ def plot_shapes(
         ax.plot(p[-1, 0], p[-1, 1], "o", color=style["color"], markersize=4)
     ax.plot([0.0], [0.0], "ks", markersize=6)
     _shape_axes(ax)
-    if legend and len(idx) > 1:
-        title = "dashed: extrapolated" if np.any(flags[idx]) else None
-        ax.legend(fontsize="small", title=title, title_fontsize="small", loc="best")
+    if np.any(flags[idx]):
+        # explained in the legend: a dashed shape is not a measurement like the others
+        ax.plot([], [], "--", color="0.3", linewidth=1.8, label=EXTRAPOLATED_LABEL)
+    if legend and (len(idx) > 1 or np.any(flags[idx])):
+        ax.legend(fontsize="small", loc="best")
     return ax
+
+
+EXTRAPOLATED_LABEL = "dashed: extrapolated\n(a signal outside the calibrated range)"
 
 
 def _shape_axes(ax):
@@ -337,7 +342,7 @@ def _as_results(results):
     return results
 
 
-def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis"):
+def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", pressure: bool = True):
     """Plot tip force (with ±2σ band) and segment curvatures over time (two panels).
 
     Parameters
@@ -351,6 +356,8 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis"):
         (in a new figure), or space taken from the curvature axes (with ``ax``).
     cmap : str
         Colour map of the segments (base: dark, tip: light).
+    pressure : bool
+        Draw the pressure [kPa] on a second axis of the force panel.
 
     Returns
     -------
@@ -358,6 +365,7 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis"):
 
     Notes
     -----
+    The force panel's legend sits above it, where it covers no data.
     Frames whose status is not ``ok`` (``extrapolated``, ``not converged``) are marked
     with grey ticks at the bottom of the force panel.
     """
@@ -378,7 +386,7 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis"):
         ax_f, ax_k = ax
         fig = ax_f.figure
     t = np.asarray(results["t_s"], dtype=float)
-    _force_panel(ax_f, results, t)
+    _force_panel(ax_f, results, t, pressure=pressure)
     kappa = results.curvature_per_m
     n = kappa.shape[1]
     colors = _colors(n, cmap)
@@ -399,7 +407,7 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis"):
     return fig
 
 
-def _force_panel(ax, results, t):
+def _force_panel(ax, results, t, pressure=False):
     ax.set_ylabel("tip force [N]")
     if not results.has_forces:
         ax.text(0.5, 0.5, "no force estimate", transform=ax.transAxes, ha="center", va="center", color="0.4")
@@ -421,7 +429,21 @@ def _force_panel(ax, results, t):
         labels.append("status not ok")
     ax.axhline(0.0, color="k", linewidth=0.5)
     ax.grid(True, alpha=0.3)
-    ax.legend(handles, labels, fontsize="small", ncols=len(labels), loc="best", framealpha=0.8)
+    if pressure and "pressure_pa" in results.columns:
+        p = np.asarray(results["pressure_pa"], dtype=float) * 1e-3
+        if np.any(np.isfinite(p)):
+            px = ax.twinx()
+            (pline,) = px.plot(t, p, color="0.45", linewidth=1.0, label="pressure")
+            px.set_ylabel("pressure [kPa]", color="0.35")
+            px.tick_params(axis="y", colors="0.35")
+            px.set_ylim(0.0, 1.05 * float(np.nanmax(p)) or 1.0)
+            ax.set_zorder(px.get_zorder() + 1)  # forces over the pressure
+            ax.patch.set_visible(False)
+            handles.append(pline)
+            labels.append("pressure (right axis)")
+    # above the panel, where it covers no data
+    ax.legend(handles, labels, fontsize="small", ncols=2, loc="lower right", bbox_to_anchor=(1.0, 1.0),
+              frameon=False, borderaxespad=0.2)
 
 
 def plot_calibration(calibration, data=None, ax=None):
@@ -470,7 +492,14 @@ def results_from_state(session, shape, estimate=None):
 
 
 def plot_results(
-    results, path=None, *, max_shapes: int = 8, dpi: int = 150, title: str | None = None, overwrite: bool = True
+    results,
+    path=None,
+    *,
+    max_shapes: int = 8,
+    dpi: int = 150,
+    title: str | None = None,
+    overwrite: bool = True,
+    estimated: str | None = None,
 ):
     """Summary figure of processed frames: shapes and tip path, tip forces, curvatures over time.
 
@@ -487,7 +516,11 @@ def plot_results(
     dpi : int
         Resolution of raster formats.
     title : str, optional
-        Figure title; default the results directory's name and the frame count.
+        Figure title; default the results directory's name, the frame count and what
+        was estimated.
+    estimated : str, optional
+        How the forces were estimated, for the default title (e.g. ``"constraint
+        normal, method fast"``).
     overwrite : bool
         Replace an existing file at ``path`` (False: :class:`~bendsense.errors.OutputExistsError`).
 
@@ -520,15 +553,20 @@ def plot_results(
     tip = np.column_stack([results["tip_x_m"], results["tip_y_m"]]).astype(float) * MM
     ax_s.plot(tip[:, 0], tip[:, 1], color="0.6", linewidth=0.8, zorder=0, label="tip path")
     plot_shapes(results, ax_s, max_frames=max_shapes, legend=False)
-    ax_s.legend(fontsize="small", loc="best")
+    # below the panel, where it covers no shape
+    ax_s.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.09), ncols=2, frameon=False)
     ax_s.set_title("shapes", fontsize="medium")
     plot_time_series(results, (ax_f, ax_k), cax=cax)
-    ax_f.set_title("tip force (base frame)", fontsize="medium")
+    ax_f.set_title("tip force (base frame)", fontsize="medium", loc="left")
     ax_f.tick_params(labelbottom=False)
     frames = len(results["t_s"])
     if title is None:
         name = Path(source).name if source is not None else "results"
-        title = f"{name}: {frames} frames"
+        if results.has_forces:
+            what = "shapes and tip forces" + (f" ({estimated})" if estimated else "")
+        else:
+            what = "shapes only (no force estimate)"
+        title = f"{name}: {what} of {frames} frames"
     fig.suptitle(title)
     if path is not None:
         from bendsense import output

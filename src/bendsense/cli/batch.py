@@ -150,6 +150,7 @@ def plot(target, figure_path, shapes, dpi, overwrite):
         matplotlib.use("Agg")  # files only: never open a window, work without a display
         from bendsense.plots import plot_results, results_from_state
 
+        estimated = None
         if figure_path is not None:
             if not target.is_dir():
                 raise click.BadParameter(f"{target}: not a results directory", param_hint="RESULTS_DIR")
@@ -157,6 +158,9 @@ def plot(target, figure_path, shapes, dpi, overwrite):
         elif state.get("shape") is not None:
             source = results_from_state(state["session"], state["shape"], state.get("estimate"))
             out = target
+            est = state.get("estimate")
+            if est is not None:
+                estimated = f"constraint {est.constraint}, method {est.method}"
         elif target.is_dir():
             raise click.UsageError(f"give the figure file: 'plot {target} -o FIG.png'")
         else:
@@ -164,7 +168,7 @@ def plot(target, figure_path, shapes, dpi, overwrite):
                 "'plot FIG' needs 'reconstruct' earlier in the chain; "
                 "to plot a results directory use 'plot RESULTS_DIR -o FIG.png'"
             )
-        plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite)
+        plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite, estimated=estimated)
         click.echo(f"wrote {out}")
         return state
 

@@ -443,13 +443,14 @@ def write_figure(results_dir, path, *, title=None, max_shapes: int = 8, dpi: int
 
     tip = np.column_stack([results["tip_x_m"], results["tip_y_m"]]).astype(float) * 1e3
     ax_s.plot(tip[:, 0], tip[:, 1], color="0.6", linewidth=0.8, zorder=0, label="tip path")
-    plot_shapes(results, ax_s, max_frames=max_shapes)
+    plot_shapes(results, ax_s, max_frames=max_shapes, legend=False)
+    # below the panel, where it covers no shape
+    ax_s.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.09), ncols=2, frameon=False)
     ax_s.set_title("reconstructed shapes over time", fontsize="medium")
 
     plot_time_series(results, (ax_f, ax_k), cax=cax)
     ax_f.tick_params(labelbottom=False)
-    ax_f.set_title("tip force (base frame): estimate (normal to the reconstructed tip) vs simulated truth",
-                   fontsize="medium")
+    ax_f.set_ylabel("tip force, base frame [N]")
     t = np.asarray(results["t_s"], dtype=float)
     handles, labels = _force_legend(ax_f)
     for comp, color in (("x", "C0"), ("y", "C3")):
@@ -472,8 +473,24 @@ def write_figure(results_dir, path, *, title=None, max_shapes: int = 8, dpi: int
     shown = shown[np.isfinite(shown)]
     lo, hi = (min(shown.min(), 0.0), max(shown.max(), 0.0)) if shown.size else (-0.1, 0.1)
     pad = 0.15 * max(hi - lo, 0.05)
-    ax_f.set_ylim(lo - pad, hi + 3 * pad)
-    ax_f.legend(handles, labels, fontsize="small", ncols=3, loc="upper right", framealpha=0.85)
+    y0, y1 = lo - pad, hi + 3 * pad
+    ax_f.set_ylim(y0, y1)
+    # the unconstrained estimate can leave that range: mark where it is clipped
+    clipped = False
+    for comp, color in (("x", "C0"), ("y", "C3")):
+        none = np.asarray(results[f"f{comp}_none_n"], dtype=float)
+        none = np.where(np.isfinite(np.asarray(results[f"f{comp}_none_std_n"], dtype=float)), none, np.nan)
+        for beyond, edge, marker in ((none > y1, y1, "^"), (none < y0, y0, "v")):
+            if np.any(beyond):
+                ax_f.plot(t[beyond], np.full(beyond.sum(), edge), marker, color=color, markersize=4, clip_on=False,
+                          linestyle="none")
+                clipped = True
+    if clipped:
+        handles.append(Line2D([], [], marker="^", linestyle="none", color="0.3", markersize=4))
+        labels.append("no constraint: off the axis (clipped)")
+    ax_f.legend(handles, labels, fontsize="small", ncols=4, loc="lower center", bbox_to_anchor=(0.5, 1.0),
+                frameon=False, borderaxespad=0.2, title="estimate normal to the tip vs simulated truth",
+                title_fontsize="small")
     if title:
         fig.suptitle(title)
     path = Path(path)
@@ -500,4 +517,8 @@ def _force_legend(ax):
     if "status not ok" in found:
         handles.append(found["status not ok"])
         labels.append("status not ok")
+    for twin in ax.figure.axes:  # the pressure, on the panel's second axis
+        if twin is not ax and twin.bbox.bounds == ax.bbox.bounds:
+            handles += [line for line in twin.lines if line.get_label() == "pressure"]
+            labels += ["pressure (right axis)"] * (len(handles) - len(labels))
     return handles, labels
