@@ -35,7 +35,7 @@ from scipy.optimize import brentq
 
 import bendsense
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser = argparse.ArgumentParser(description=(__doc__ or "").strip().split("\n")[0])
 parser.add_argument("--out", type=Path, default=None, help="output directory (default: a new temporary one)")
 args, _ = parser.parse_known_args()
 out = args.out if args.out is not None else Path(tempfile.mkdtemp(prefix="bendsense-example-"))
@@ -137,5 +137,4 @@ ax.set_title(f"curved cantilever at {pressure_pa / 1e3:g} kPa: solver (lines), e
              "tip force (150 mm per N)", fontsize="small")
 ax.legend(fontsize="x-small", loc="lower right")
 fig.savefig(out / "beam_vs_elastica.png", dpi=120)
-plt.close(fig)
 print(f"wrote {out / 'beam_vs_elastica.png'}")

@@ -38,7 +38,7 @@ from bendsense.config import (
 from bendsense.plots import plot_shapes
 from bendsense.sim.scenarios import simulate
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser = argparse.ArgumentParser(description=(__doc__ or "").strip().split("\n")[0])
 parser.add_argument("--out", type=Path, default=None, help="output directory (default: a new temporary one)")
 args, _ = parser.parse_known_args()
 out = args.out if args.out is not None else Path(tempfile.mkdtemp(prefix="bendsense-example-"))
@@ -116,5 +116,4 @@ labels = [f"{session.pressure_pa[k] / 1e3:.0f} kPa, Fy = {true_fy[k]:+.1f} N" fo
 plot_shapes(shape, ax, frames=first, labels=labels)
 ax.set_title("hanging 10-coil actuator under vertical tip loads", fontsize="medium")
 fig.savefig(out / "custom_sensor_shapes.png", dpi=120)
-plt.close(fig)
 print(f"wrote {out / 'custom_sensor_shapes.png'}")

@@ -33,7 +33,7 @@ from bendsense.sim.actuator import SimulatedActuator
 from bendsense.sim.scenarios import CALIBRATION_RADII_M, time_varying_profile
 from bendsense.sim.sensor import VirtualSensor, calibration_shifts
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser = argparse.ArgumentParser(description=(__doc__ or "").strip().split("\n")[0])
 parser.add_argument("--out", type=Path, default=None, help="output directory (default: a new temporary one)")
 parser.add_argument("--seconds", type=float, default=5.0, help="length of the simulated session [s]")
 args, _ = parser.parse_known_args()  # parse_known_args: tolerate a notebook kernel's own arguments
@@ -66,7 +66,6 @@ cal.save(out / "calibration.yaml")
 axes = cal.plot()
 axes[0].set_title(f"calibration, degree {cal.degree}")
 axes[0].figure.savefig(out / "calibration.png", dpi=120)
-plt.close(axes[0].figure)
 
 # %% A time-varying session
 # Pressure ramps between 0 and 100 kPa while a 0.15 N contact force, normal to the tip
@@ -121,7 +120,6 @@ plots.plot_shape_comparison(shape.positions_m[frames], truth.positions_m[frames,
                             labels=[f"t = {t_s[k]:.1f} s" for k in frames])
 ax.set_title("reconstructed (solid) and true (dotted) shapes")
 fig.savefig(out / "shapes.png", dpi=120)
-plt.close(fig)
 
 fig, axs = plt.subplots(2, 1, sharex=True, figsize=(8, 5), layout="constrained")
 for i, (ax, comp) in enumerate(zip(axs, ("F_x", "F_y"))):
@@ -133,7 +131,6 @@ for i, (ax, comp) in enumerate(zip(axs, ("F_x", "F_y"))):
 axs[0].legend(fontsize="small", ncols=3)
 axs[1].set_xlabel("t [s]")
 fig.savefig(out / "force.png", dpi=120)
-plt.close(fig)
 
 # %% Save the results as the command line does, and its summary figure
 write_results(out / "results", session, shape, force, overwrite=True)

@@ -321,7 +321,7 @@ def solve(
     force_n, distributed_load_n_per_m : ndarray, shape (..., 2)
         Tip force F [N] and distributed load w [N/m] in the base frame.
     s_m : ndarray, shape (M,)
-        Output arc lengths in [0, L] [m].
+        Output arc lengths 0 ≤ s ≤ L [m].
     n_nodes : int
         Chebyshev–Lobatto nodes of the collocation.
     initial : BeamSolution or ndarray, shape (..., n_nodes), optional
@@ -598,7 +598,7 @@ def solve_beam(
     base_angle_rad : array_like, shape (...)
         Tangent angle at the base, from ``+y`` toward ``+x`` [rad]; rotates the free arc.
     s_m : array_like, shape (M,), optional
-        Output arc lengths in [0, L] [m]; default ``DEFAULT_POINTS`` evenly spaced points.
+        Output arc lengths 0 ≤ s ≤ L [m]; default ``DEFAULT_POINTS`` evenly spaced points.
     method : {"fast", "shooting", "paper"}
         Spectral Newton solver (default) or the paper's shooting method (``"paper"`` is
         an alias).

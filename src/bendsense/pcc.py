@@ -126,7 +126,7 @@ def _grid(lengths_m, s_m) -> _Grid:
 
 
 def default_s_m(lengths_m, n_points: int = DEFAULT_N_POINTS) -> np.ndarray:
-    """``n_points`` equally spaced arc lengths over [0, L_N] [m]."""
+    """``n_points`` equally spaced arc lengths over 0 ≤ s ≤ L_N [m]."""
     return np.linspace(0.0, float(np.sum(lengths_m)), n_points)
 
 
@@ -364,7 +364,7 @@ def forward_kinematics(curvature_per_m, lengths_m, s_m, base_angle_rad=0.0):
     lengths_m : array_like, shape (N,)
         Segment lengths l_i [m].
     s_m : array_like, shape (M,)
-        Arc lengths from the base, any order, each in [0, L_N] [m].
+        Arc lengths from the base, any order, each 0 ≤ s ≤ L_N [m].
     base_angle_rad : float or array_like, shape (...)
         Tangent angle φ at the base, from ``+y`` toward ``+x`` [rad].
 
@@ -700,7 +700,7 @@ def reconstruct(
     sensor : SensorConfig or Config, optional
         Segment lengths and strip gap; ``None`` uses the paper's sensor.
     s_m : array_like, shape (M,), optional
-        Arc lengths of the output points in [0, L_N] [m]; default 101 equally spaced.
+        Arc lengths of the output points, 0 ≤ s ≤ L_N [m]; default 101 equally spaced.
     base_angle_rad : float or array_like, shape (...)
         Base tangent angle [rad].
 
