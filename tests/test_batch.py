@@ -269,7 +269,7 @@ def test_process_session_reports_failures_instead_of_raising(tmp_path):
     # a session with the wrong channel count
     write_session_csv(Session(session.t_s, session.signals[:, :8], session.pressure_pa), tmp_path / "ch8.csv")
     row = process_session(tmp_path / "ch8.csv", tmp_path / "o3", config=CONFIG, calibration=cal, estimate=ESTIMATE)
-    assert row.status == "failed" and "expected 16 channels" in row.reason
+    assert row.status == "failed" and "ch8.csv: 8 signal channels (ch1..ch8), but the calibration has 16" in row.reason
     row = process_session(tmp_path / "missing.csv", tmp_path / "o4", config=CONFIG, calibration=cal)
     assert row.status == "failed" and "missing.csv: no such file" in row.reason
 

@@ -113,7 +113,10 @@ def test_input_columns_named_like_results_are_kept(tmp_path):
     session = Session([0.0, 0.1], np.zeros((2, 16)), [1e4, 2e4], extra={"fx_n": truth, "trial": np.array([7, 8])})
     shape = Shape.from_curvatures(np.zeros((2, 16)), bendsense.load_config().sensor.lengths_m)
     write_results(tmp_path / "shape_only", session, shape)
-    np.testing.assert_array_equal(read_results(tmp_path / "shape_only")["fx_n"], truth)  # passed through
+    shape_only = read_results(tmp_path / "shape_only")
+    # passed through, and never posing as an estimate when there is none
+    np.testing.assert_array_equal(shape_only["input_fx_n"], truth)
+    assert "fx_n" not in shape_only.columns and not shape_only.has_forces
 
     estimate = SimpleNamespace(force_n=np.array([[0.5, 0.0], [0.6, 0.0]]), std_n=np.full((2, 2), 0.01),
                                residual_m=np.zeros(2), success=np.array([True, True]))

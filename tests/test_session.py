@@ -52,7 +52,8 @@ finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 @settings(max_examples=40, deadline=None)
 @given(
     signals=hnp.arrays(np.float64, st.tuples(st.integers(1, 8), st.integers(1, 5)), elements=finite),
-    pressure=finite,
+    # 1 Pa..1 kPa in pressure_pa is refused as kPa in a pascal column (test below)
+    pressure=finite.filter(lambda p: not 1.0 <= abs(p) < 1e3),
 )
 def test_write_read_round_trip_is_bit_exact(tmp_path_factory, signals, pressure):
     n = signals.shape[0]
@@ -106,3 +107,38 @@ def test_shape_errors_name_the_field():
 def test_missing_path(tmp_path):
     with pytest.raises(SessionError, match="no such file"):
         read_session(tmp_path / "none.csv")
+
+
+@pytest.mark.parametrize(
+    ("column", "values", "message"),
+    [
+        ("pressure_pa", "20,60,120", r"line 1, column pressure_pa: every reading is below 1 kPa \(largest 120\); "
+                                     r"looks like kilopascals: name the column pressure_kpa"),
+        ("pressure_kpa", "0,60000,120000", r"line 1, column pressure_kpa: readings up to 120000 kPa \(over 1 MPa\); "
+                                           r"looks like pascals: name the column pressure_pa"),
+    ],
+)
+def test_pressure_a_thousand_times_off_is_refused(tmp_path, column, values, message):
+    path = tmp_path / "s.csv"
+    rows = "\n".join(f"{i},{p},1,2" for i, p in enumerate(values.split(",")))
+    path.write_text(f"t_s,{column},ch1,ch2\n{rows}\n")
+    with pytest.raises(SessionError, match=message):
+        read_session_csv(path)
+
+
+@pytest.mark.parametrize(("column", "values"), [("pressure_pa", "0,0,0"), ("pressure_pa", "0,20000,120000"),
+                                                ("pressure_kpa", "0,20,120"), ("pressure_pa", "-500,0,0.5")])
+def test_plausible_pressure_columns_pass(tmp_path, column, values):
+    path = tmp_path / "s.csv"
+    rows = "\n".join(f"{i},{p},1,2" for i, p in enumerate(values.split(",")))
+    path.write_text(f"t_s,{column},ch1,ch2\n{rows}\n")
+    scale = 1e3 if column == "pressure_kpa" else 1.0
+    np.testing.assert_array_equal(read_session_csv(path).pressure_pa, np.array(values.split(","), float) * scale)
+
+
+def test_all_equal_time_stamps_warn(tmp_path, caplog):
+    path = tmp_path / "s.csv"
+    path.write_text("t_s,ch1\n0,1\n0,2\n0,3\n")
+    with caplog.at_level("WARNING", logger="bendsense"):
+        read_session_csv(path)
+    assert "all 3 time stamps are 0 s" in caplog.text

@@ -61,6 +61,8 @@ class SessionOutcome:
         Frames whose signals lay outside the calibrated range.
     not_converged : int
         Frames whose force estimate did not converge.
+    out_of_range : int
+        Frames whose pressure lay outside ``actuator.pressure_range_pa`` (no force).
     out_dir : str
         Results directory of the session.
     """
@@ -73,6 +75,7 @@ class SessionOutcome:
     reason: str = ""
     extrapolated: int = 0
     not_converged: int = 0
+    out_of_range: int = 0
     out_dir: str = ""
 
     def __post_init__(self):
@@ -328,7 +331,7 @@ def process_session(
         # from a worker process would only clutter the console
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            frames, extrapolated, not_converged = _run(
+            frames, extrapolated, not_converged, out_of_range = _run(
                 path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
@@ -341,6 +344,8 @@ def process_session(
         notes.append(f"{extrapolated} of {frames} frames extrapolated")
     if not_converged:
         notes.append(f"{not_converged} of {frames} frames not converged")
+    if out_of_range:
+        notes.append(f"{out_of_range} of {frames} frames pressure out of range")
     return SessionOutcome(
         status="ok",
         frames=frames,
@@ -348,12 +353,14 @@ def process_session(
         reason=", ".join(notes),
         extrapolated=extrapolated,
         not_converged=not_converged,
+        out_of_range=out_of_range,
         **row,
     )
 
 
 def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite):
     from bendsense.pcc import reconstruct
+    from bendsense.plausibility import check_channels
     from bendsense.results import write_results
     from bendsense.session import read_session
 
@@ -363,6 +370,7 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
         raise SessionError(f"{path}: no frames")
     if pressure_pa is not None:
         session = session.with_pressure(pressure_pa)
+    check_channels(session, calibration, config.sensor)
     shape = reconstruct(session.signals, calibration, config.sensor)
     result = None
     if estimate:
@@ -384,8 +392,13 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
         )
     write_results(out_dir, session, shape, result, overwrite=overwrite, inputs=[path])
     extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(shape.extrapolated), (len(session),))))
-    not_converged = 0 if result is None else int(np.count_nonzero(~np.asarray(result.success, dtype=bool)))
-    return len(session), extrapolated, not_converged
+    outside = np.zeros(len(session), dtype=bool)
+    if result is not None:
+        from bendsense.plausibility import pressure_outside
+
+        outside = pressure_outside(session.pressure_pa, config)
+    not_converged = 0 if result is None else int(np.count_nonzero(~np.asarray(result.success, dtype=bool) & ~outside))
+    return len(session), extrapolated, not_converged, int(outside.sum())
 
 
 # --- many sessions ------------------------------------------------------------------------

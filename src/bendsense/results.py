@@ -3,8 +3,9 @@
 ``results.csv`` has a row per frame: ``t_s``, ``pressure_pa``, ``kappa1..kappaN``
 [1/m], ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, after estimation ``fx_n``,
 ``fy_n``, ``fx_std_n``, ``fy_std_n``, ``residual_m``, ``status``; then the input's
-extra columns unchanged (one whose name is taken by a result column, such as a
-ground-truth ``fx_n``, is written as ``input_fx_n``). ``shape.npz`` holds ``s_m``
+extra columns unchanged (one whose name is a result column's, such as a
+ground-truth ``fx_n``, is written as ``input_fx_n``, also when there is no estimate,
+so that it never poses as one). ``shape.npz`` holds ``s_m``
 (M,) and ``positions_m`` (frames, M, 2).
 """
 
@@ -19,12 +20,14 @@ import numpy as np
 
 from bendsense._io import read_text
 from bendsense.errors import SessionError
+from bendsense.plausibility import OUT_OF_RANGE
 from bendsense.session import _column_array, _format
 
 __all__ = ["Results", "write_results", "read_results", "frame_status"]
 
 _KAPPA = re.compile(r"kappa[0-9]+$")
 FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
+RESULT_COLUMNS = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,8 +66,10 @@ class Results:
         columns["status"] = frame_status(shape, estimate)
         extra_names = []
         for name, values in session.extra.items():
-            # an input column named like a result (e.g. ground truth fx_n) is kept as input_fx_n
-            name = name if name not in columns else f"input_{name}"
+            # an input column named like a result (e.g. ground truth fx_n) is kept as
+            # input_fx_n, with or without an estimate: it never poses as one
+            reserved = name in columns or name in RESULT_COLUMNS or _KAPPA.match(name)
+            name = f"input_{name}" if reserved else name
             columns[name] = values
             extra_names.append(name)
         positions = np.asarray(shape.positions_m).reshape(frames, -1, 2)
@@ -95,6 +100,11 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     if estimate is not None:
         failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
         status[failed] = "not converged"
+        message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
+        status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
+        # a NaN force is never ok, whatever the solver said
+        force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
+        status[(status == "ok") & ~np.isfinite(force).all(axis=1)] = "no force"
     return status
 
 

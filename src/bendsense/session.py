@@ -21,6 +21,7 @@ import numpy as np
 
 from bendsense._io import check_csv_header, read_text
 from bendsense.errors import SessionError
+from bendsense.plausibility import check_pressure_column, check_time_column
 
 __all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
 
@@ -208,6 +209,10 @@ def _parse_session_csv(text: str, source: str) -> Session:
             raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {cells[h][bad].strip()!r}")
         values[h] = arr
     t = values["t_s"]
+    for name in ("pressure_pa", "pressure_kpa"):
+        if name in values:
+            check_pressure_column(name, values[name], header_line)
+    check_time_column(t, source)
     if "pressure_pa" in values:
         pressure = values["pressure_pa"]
     elif "pressure_kpa" in values:

@@ -8,8 +8,11 @@ import click
 
 __all__ = [
     "CONSTRAINTS",
+    "Finite",
+    "SEED",
     "METHODS",
     "InterspersedCommand",
+    "check_figure_suffix",
     "config_option",
     "make_config_option",
     "make_overwrite_option",
@@ -23,6 +26,45 @@ __all__ = [
 # kept in sync with bendsense.config (imported lazily for a fast --help; a test compares them)
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 METHODS = ("fast", "paper")
+
+
+class Finite(click.ParamType):
+    """A finite float option (NaN and inf refused), optionally bounded.
+
+    ``click.FloatRange`` lets NaN through (every comparison with NaN is false), so
+    ``--seconds nan`` would mean "forever".
+    """
+
+    name = "number"
+
+    def __init__(self, min: float | None = None, max: float | None = None, *, min_open: bool = False):
+        self.min, self.max, self.min_open = min, max, min_open
+
+    def convert(self, value, param, ctx):
+        """Parse and check one value."""
+        if isinstance(value, float):
+            number = value
+        else:
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                self.fail(f"expected a number, got {_short(value)}", param, ctx)
+        if number != number or number in (float("inf"), float("-inf")):
+            self.fail(f"expected a finite number, got {value}", param, ctx)
+        if self.min is not None and (number <= self.min if self.min_open else number < self.min):
+            self.fail(f"expected {'>' if self.min_open else '>='} {self.min:g}, got {number:g}", param, ctx)
+        if self.max is not None and number > self.max:
+            self.fail(f"expected <= {self.max:g}, got {number:g}", param, ctx)
+        return number
+
+
+def _short(value, limit: int = 40) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+SEED = click.IntRange(0, 2**32 - 1)
+"""Seeds of numpy's generators: 0..2^32-1 (a negative seed is refused before any work)."""
 
 
 class InterspersedCommand(click.Command):
@@ -89,6 +131,21 @@ def step_io(step, outputs=(), inputs=()):
     step.outputs = list(outputs)
     step.inputs = [p for p in inputs if p is not None]
     return step
+
+
+def check_figure_suffix(path: Path | None, param_hint: str) -> None:
+    """Refuse a figure path whose suffix matplotlib cannot write, before any work starts."""
+    if path is None:
+        return
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if path.suffix[1:].lower() not in formats:
+        got = repr(path.suffix) if path.suffix else "no suffix"
+        raise click.BadParameter(
+            f"{path.name}: unknown figure format {got}; use one of {', '.join('.' + f for f in sorted(formats))}",
+            param_hint=param_hint,
+        )
 
 
 def quiet() -> bool:

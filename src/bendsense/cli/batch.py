@@ -16,7 +16,9 @@ from bendsense import output
 from bendsense.cli._common import (
     CONSTRAINTS,
     METHODS,
+    Finite,
     InterspersedCommand,
+    check_figure_suffix,
     config_option,
     overwrite_option,
     quiet,
@@ -59,7 +61,7 @@ def _dask_executor(address: str):
               help="Run on a Dask distributed scheduler instead (needs bendsense[distributed]).")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
-@click.option("--pressure-kpa", type=float, help="Constant pressure for frames without a reading [kPa].")
+@click.option("--pressure-kpa", type=Finite(), help="Constant pressure for frames without a reading [kPa].")
 @click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
 @overwrite_option
@@ -143,6 +145,10 @@ def plot(target, figure_path, shapes, dpi, overwrite):
     format follows the file suffix (.png, .pdf, .svg, ...). Existing figures are
     replaced only with --overwrite.
     """  # noqa: D301
+    if figure_path is not None:
+        check_figure_suffix(figure_path, "-o/--output")
+    elif not target.is_dir():
+        check_figure_suffix(target, "FIG")
 
     def step(state):
         import matplotlib

@@ -9,6 +9,7 @@ import click
 from bendsense import output as outputs
 from bendsense.cli._common import (
     InterspersedCommand,
+    check_figure_suffix,
     make_config_option,
     make_overwrite_option,
     save_figure,
@@ -71,6 +72,8 @@ def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_pat
           - {radius_m: 0.040, recording: r040.csv}
           - {radius_mm: 50, recording: r050.csv}
     """  # noqa: D301 (click's \b keeps the example's line breaks)
+
+    check_figure_suffix(plot_path, "--plot")
 
     def step(state):
         from bendsense.calibration import Calibration

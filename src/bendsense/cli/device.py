@@ -11,6 +11,8 @@ import click
 from bendsense import output as outputs
 from bendsense.cli._common import (
     CONSTRAINTS,
+    SEED,
+    Finite,
     InterspersedCommand,
     make_config_option,
     make_overwrite_option,
@@ -81,7 +83,7 @@ def make_outlets(processor, driver, port):
 @click.option(
     "-o", "--output", required=True, type=click.Path(file_okay=False, path_type=Path), help="Session directory."
 )
-@click.option("--seconds", type=float, help="Recording time [s] (default: until Ctrl-C).")
+@click.option("--seconds", type=Finite(min=0, min_open=True), help="Recording time [s] (default: until Ctrl-C).")
 @make_overwrite_option("Replace an existing session.")
 @click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
 @click.option("--dialect", type=click.Choice(["binary", "line"]), default="binary", show_default=True)
@@ -89,7 +91,7 @@ def make_outlets(processor, driver, port):
 @click.option("--columns", help="Line dialect: comma-separated column layout, e.g. seq,t_us,pressure_pa,ch1,...")
 @click.option("--no-handshake", is_flag=True, help="Do not wait for the board's HELLO.")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
-@click.option("--hello-timeout", type=float, default=2.0, show_default=True, help="HELLO wait [s].")
+@click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True, help="HELLO wait [s].")
 @make_config_option("Config YAML to snapshot into meta.yaml (and to estimate with).")
 @click.option(
     "--calibration",
@@ -99,11 +101,11 @@ def make_outlets(processor, driver, port):
 )
 @click.option("--estimate", is_flag=True, help="Shape and force of every frame as it arrives, to SESSION/results.csv.")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
-@click.option("--pressure-kpa", type=float, help="Pressure for frames without a pressure reading [kPa].")
+@click.option("--pressure-kpa", type=Finite(), help="Pressure for frames without a pressure reading [kPa].")
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",
-    type=float,
+    type=Finite(min=0),
     default=5.0,
     show_default=True,
     help="With --lsl: wait this long for a consumer (e.g. LabRecorder) before starting the board [s].",
@@ -149,8 +151,6 @@ def record(
     from bendsense.device.recorder import Recorder
     from bendsense.errors import BendsenseError
 
-    if seconds is not None and seconds <= 0:
-        raise click.BadParameter(f"expected > 0, got {seconds:g}", param_hint="--seconds")
     if dialect == "line" and channels is None and columns is None:
         raise click.BadParameter("the line dialect needs --channels or --columns", param_hint="--channels")
     if (estimate or lsl) and calibration_path is None:
@@ -228,12 +228,12 @@ def record(
 
 
 @click.command("sim-device", cls=InterspersedCommand)
-@click.option("--rate", "rate_hz", type=float, default=500.0, show_default=True, help="Frame rate [Hz].")
-@click.option("--seconds", type=float, help="Run time [s] (default: until Ctrl-C).")
-@click.option("--drop", type=float, default=0.0, show_default=True, help="Probability of a dropped frame.")
-@click.option("--corrupt", type=float, default=0.0, show_default=True, help="Probability of a corrupted frame.")
-@click.option("--truncate", type=float, default=0.0, show_default=True, help="Probability of a truncated frame.")
-@click.option("--seed", type=int, help="Seed of the fault injection.")
+@click.option("--rate", "rate_hz", type=Finite(min=0, min_open=True), default=500.0, show_default=True, help="Frame rate [Hz].")
+@click.option("--seconds", type=Finite(min=0, min_open=True), help="Run time [s] (default: until Ctrl-C).")
+@click.option("--drop", type=Finite(0, 1), default=0.0, show_default=True, help="Probability of a dropped frame.")
+@click.option("--corrupt", type=Finite(0, 1), default=0.0, show_default=True, help="Probability of a corrupted frame.")
+@click.option("--truncate", type=Finite(0, 1), default=0.0, show_default=True, help="Probability of a truncated frame.")
+@click.option("--seed", type=SEED, help="Seed of the fault injection.")
 @click.option("--channels", type=int, default=16, show_default=True, help="Number of channels.")
 @click.option("--adc-bits", type=int, default=12, show_default=True, help="ADC resolution [bit].")
 @click.option(
@@ -251,7 +251,7 @@ def record(
     type=click.Path(exists=True, path_type=Path),
     help="Play a recording back (native session directory or session CSV) with its original timing.",
 )
-@click.option("--speed", type=float, default=1.0, show_default=True, help="Replay speed (2: twice as fast).")
+@click.option("--speed", type=Finite(min=0, min_open=True), default=1.0, show_default=True, help="Replay speed (2: twice as fast).")
 @click.option("--loop", is_flag=True, help="Replay: start over after the last frame, until stopped.")
 def sim_device(
     rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop

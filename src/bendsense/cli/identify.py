@@ -7,7 +7,15 @@ from pathlib import Path
 import click
 
 from bendsense import output as outputs
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, save_figure, step_io
+from bendsense.cli._common import (
+    Finite,
+    InterspersedCommand,
+    check_figure_suffix,
+    config_option,
+    overwrite_option,
+    save_figure,
+    step_io,
+)
 from bendsense.errors import BendsenseError
 
 KINDS = ("free-bending", "stiffness")
@@ -62,7 +70,7 @@ def _parse_fix(kind: str, items) -> dict:
 )
 @click.option(
     "--pressure-tolerance-kpa",
-    type=click.FloatRange(min=0),
+    type=Finite(min=0),
     default=1.0,
     show_default=True,
     help="stiffness: rows whose pressures differ by at most this form one level [kPa].",
@@ -96,6 +104,7 @@ def identify(
     Writes the config (--config, or the paper's) with the fitted values to OUTPUT.
     """
     fix = _parse_fix(kind, fix_items)
+    check_figure_suffix(plot_path, "--plot")
 
     def step(state):
         try:

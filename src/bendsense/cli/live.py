@@ -7,19 +7,22 @@ from pathlib import Path
 
 import click
 
-from bendsense.cli._common import CONSTRAINTS, InterspersedCommand, config_option, overwrite_option, quiet
+from bendsense.cli._common import (
+    CONSTRAINTS,
+    SEED,
+    Finite,
+    InterspersedCommand,
+    check_figure_suffix,
+    config_option,
+    overwrite_option,
+    quiet,
+)
 
 _NO_CALIBRATION = (
     "live needs a sensor calibration: --calibration CAL.yaml (make one with "
     "'bendsense calibrate MANIFEST.yaml -o CAL.yaml', or run 'bendsense demo' and use "
     "bendsense-demo/calibration/calibration.yaml for the simulated board)"
 )
-
-
-def _positive(ctx, param, value):
-    if value is not None and not value > 0:
-        raise click.BadParameter(f"expected > 0, got {value:g}", ctx=ctx, param=param)
-    return value
 
 
 @click.command("live", cls=InterspersedCommand)
@@ -40,26 +43,23 @@ def _positive(ctx, param, value):
 )
 @click.option(
     "--seconds",
-    type=float,
-    callback=_positive,
+    type=Finite(min=0, min_open=True),
     help="Run time [s] (default: until the window is closed; 3 s with --save).",
 )
-@click.option("--pressure-kpa", type=float, help="Pressure for frames without a pressure reading [kPa].")
+@click.option("--pressure-kpa", type=Finite(), help="Pressure for frames without a pressure reading [kPa].")
 @click.option(
     "--scale",
     "scale_mm_per_n",
-    type=float,
+    type=Finite(min=0, min_open=True),
     default=200.0,
     show_default=True,
-    callback=_positive,
     help="Force arrow length [mm per N].",
 )
 @click.option(
     "--max-fps",
-    type=float,
+    type=Finite(min=0, min_open=True),
     default=60.0,
     show_default=True,
-    callback=_positive,
     help="Upper bound of the display rate [1/s].",
 )
 @click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
@@ -101,6 +101,7 @@ def live(
     """
     if calibration_path is None:
         raise click.ClickException(_NO_CALIBRATION)
+    check_figure_suffix(save_path, "--save")
     if save_path is not None:
         from bendsense import output
 
@@ -182,17 +183,17 @@ def _window(processor, scale_m_per_n):
     show_default=True,
     help="Output directory.",
 )
-@click.option("--seconds", type=float, default=5.0, show_default=True, callback=_positive, help="Recording time [s].")
+@click.option("--seconds", type=Finite(min=0, min_open=True), default=5.0, show_default=True,
+              help="Recording time [s].")
 @click.option(
     "--rate",
     "rate_hz",
-    type=float,
+    type=Finite(min=0, min_open=True),
     default=100.0,
     show_default=True,
-    callback=_positive,
     help="Frame rate of the simulated board [Hz].",
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the virtual sensor.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the virtual sensor.")
 @overwrite_option
 def demo(out_dir, seconds, rate_hz, seed, overwrite):
     """Run the whole chain on a simulated board, no hardware needed, and check it against the truth.

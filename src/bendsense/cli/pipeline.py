@@ -9,12 +9,21 @@ order given on the command line::
 from __future__ import annotations
 
 import logging
+import sys
 from pathlib import Path
 
 import click
 
 from bendsense import output
-from bendsense.cli._common import CONSTRAINTS, METHODS, InterspersedCommand, config_option, overwrite_option, step_io
+from bendsense.cli._common import (
+    CONSTRAINTS,
+    METHODS,
+    Finite,
+    InterspersedCommand,
+    config_option,
+    overwrite_option,
+    step_io,
+)
 from bendsense.errors import BendsenseError
 
 log = logging.getLogger("bendsense")
@@ -26,6 +35,25 @@ class PipelineGroup(click.Group):
     Every command of ``bendsense`` runs inside :meth:`invoke`, so the commands leave
     these errors to it and catch only what needs a message of their own.
     """
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        """Run the command line; every user mistake is one ``Error:`` line on stderr.
+
+        click prints a usage block and a hint above the error of a bad option; here
+        the error stays one line (``Error: Invalid value for '--seed': ...``), with
+        exit code 2 for usage errors and 1 for the others.
+        """
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.ClickException as err:
+            click.echo(f"Error: {' '.join(err.format_message().split())}", err=True)
+            sys.exit(err.exit_code)
+        except click.Abort:
+            click.echo("Aborted!", err=True)
+            sys.exit(1)
+        sys.exit(rv if isinstance(rv, int) else 0)
 
     def invoke(self, ctx):
         """Invoke the chain; a user mistake becomes one ``Error:`` line and exit code 1."""
@@ -77,7 +105,7 @@ def run_steps(steps) -> dict:
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="Calibration YAML written by 'bendsense calibrate'.",
 )
-@click.option("--pressure-kpa", type=float, help="Constant pressure for frames without a reading [kPa].")
+@click.option("--pressure-kpa", type=Finite(), help="Constant pressure for frames without a reading [kPa].")
 def load(session_path, config_path, calibration_path, pressure_kpa):
     """Load a session (session CSV or native session directory)."""
 
@@ -93,6 +121,7 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
             session=session,
             config=load_config(config_path),
             calibration=Calibration.load(calibration_path) if calibration_path else None,
+            calibration_path=calibration_path,
             name=session_path.stem,
         )
         log.info("loaded %s: %d frames, %d channels", session_path, len(session), session.n_channels)
@@ -111,10 +140,12 @@ def reconstruct(points):
         import numpy as np
 
         from bendsense.pcc import reconstruct as reconstruct_shape
+        from bendsense.plausibility import check_channels
 
         session = _require(state, "session", "reconstruct", "'load SESSION'")
         calibration = _require(state, "calibration", "reconstruct", "'load ... --calibration CAL.yaml'")
         sensor = state["config"].sensor
+        check_channels(session, calibration, sensor, calibration_source=str(state.get("calibration_path") or ""))
         s_m = np.linspace(0.0, sensor.length_m, points)
         shape = reconstruct_shape(session.signals, calibration, sensor, s_m=s_m)
         n_extra = int(np.count_nonzero(shape.extrapolated))
@@ -158,7 +189,14 @@ def estimate(constraint, method, push_only, tip_angle_source):
             tip_angle_source=tip_angle_source,
             calibration=state.get("calibration"),
         )
-        failed = int(np.count_nonzero(~np.asarray(est.success)))
+        from bendsense.plausibility import OUT_OF_RANGE, pressure_outside
+
+        outside = pressure_outside(session.pressure_pa, config)
+        if outside.any():
+            lo, hi = config.actuator.pressure_range_pa
+            log.warning("%d of %d frames have a pressure outside actuator.pressure_range_pa %g..%g kPa: no force "
+                        "(status '%s')", int(outside.sum()), len(session), lo / 1e3, hi / 1e3, OUT_OF_RANGE)
+        failed = int(np.count_nonzero(~np.asarray(est.success) & ~outside))
         if failed:
             log.warning("%d of %d frames did not converge (status 'not converged')", failed, len(session))
         state["estimate"] = est

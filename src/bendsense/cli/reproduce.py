@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from bendsense import output
-from bendsense.cli._common import InterspersedCommand, overwrite_option, quiet, step_io
+from bendsense.cli._common import SEED, InterspersedCommand, overwrite_option, quiet, step_io
 
 
 @click.command("reproduce", cls=InterspersedCommand)
@@ -20,7 +20,8 @@ from bendsense.cli._common import InterspersedCommand, overwrite_option, quiet, 
     type=click.Path(file_okay=False, path_type=Path),
     help="Report directory: report.md and PNG figures (created).",
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the simulated sensor, noise and loads.")
+@click.option("--seed", type=SEED, default=0, show_default=True,
+              help="Seed of the simulated sensor, noise and loads.")
 @click.option("--quick", is_flag=True, help="Fewer frames and configurations (every table and figure; for tests).")
 @overwrite_option
 def reproduce(out_dir, seed, quick, overwrite):

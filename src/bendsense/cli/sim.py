@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from bendsense import output
-from bendsense.cli._common import InterspersedCommand, config_option, overwrite_option, step_io
+from bendsense.cli._common import SEED, Finite, InterspersedCommand, config_option, overwrite_option, step_io
 
 # kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
 _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
@@ -23,14 +23,14 @@ _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying
     type=click.Path(file_okay=False, path_type=Path),
     help="Directory to write (created; with 'all', one subdirectory per scenario).",
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sensor hardware and the noise.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the sensor hardware and the noise.")
 @config_option
-@click.option("--noise-counts", type=click.FloatRange(min=0), help="Sensor noise std [counts] (default 1.5).")
+@click.option("--noise-counts", type=Finite(min=0), help="Sensor noise std [counts] (default 1.5).")
 @click.option("--frames", type=click.IntRange(min=1), help="Frames per strip or configuration (default 50 / 5).")
-@click.option("--ei-error", type=float, help="Model mismatch: relative error of the true EI.")
-@click.option("--k0-error", type=float, help="Model mismatch: relative error of the true K0.")
-@click.option("--base-rotation", type=float, help="Model mismatch: base rotation per radian of bending [rad/rad].")
-@click.option("--hysteresis-kpa", type=click.FloatRange(min=0), help="Model mismatch: pressure play [kPa].")
+@click.option("--ei-error", type=Finite(), help="Model mismatch: relative error of the true EI.")
+@click.option("--k0-error", type=Finite(), help="Model mismatch: relative error of the true K0.")
+@click.option("--base-rotation", type=Finite(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
+@click.option("--hysteresis-kpa", type=Finite(min=0), help="Model mismatch: pressure play [kPa].")
 @overwrite_option
 def simulate(
     scenario,

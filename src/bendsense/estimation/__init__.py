@@ -34,6 +34,7 @@ import numpy as np
 from bendsense import _jit
 from bendsense import beam as _beam
 from bendsense.errors import ArgumentError, ConvergenceError
+from bendsense.plausibility import pressure_range_step
 from bendsense.estimation import kernels as _kernels
 from bendsense.estimation.paper import paper_fit
 from bendsense.estimation.problem import CONSTRAINTS, chebyshev_nodes_m, constraint_basis, quadrature, reference
@@ -84,6 +85,8 @@ def _models(config):
     return cached
 
 
+# first step, kept apart from the estimator: frames outside the actuator's pressure range get no force
+@pressure_range_step
 def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "none", method: str | None = "fast", *,
                    objective: str = "positions", push_only: bool | None = None, tip_angle_source: str | None = None,
                    direction=None, follower_angle_rad: float | None = None, initial_force_n=None,
@@ -138,11 +141,14 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     Returns
     -------
     ForceEstimate
-        Frames that fail have ``success=False``, NaN force and a message.
+        Frames that fail have ``success=False``, NaN force and a message. Frames whose
+        pressure lies outside ``config.actuator.pressure_range_pa`` have no force,
+        ``success=False`` and the message ``"pressure_out_of_range: ..."``
+        (:func:`bendsense.plausibility.pressure_range_step`).
 
     Raises
     ------
-    ValueError
+    ArgumentError
         For a bad argument (the message names it).
     ConvergenceError
         With ``strict=True`` when a frame fails.
