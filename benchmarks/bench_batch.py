@@ -186,7 +186,7 @@ def main():
             else:
                 t0 = time.perf_counter()
                 with LocalCluster(n_workers=args.workers, processes=True, threads_per_worker=1,
-                                  dashboard_address=None, silence_logs=50) as cluster, Client(cluster) as client:
+                                  dashboard_address=":0", silence_logs=50) as cluster, Client(cluster) as client:
                     client.run(_warm)  # the workers' imports
                     start_s = time.perf_counter() - t0
                     label = f"Dask LocalCluster, {args.workers} workers"
