@@ -9,18 +9,7 @@ from hypothesis.extra import numpy as hnp
 from bendsense.errors import OutputExistsError, SessionError
 from bendsense.session import Session, read_session, read_session_csv, write_session_csv
 
-INVALID = sorted((Path(__file__).parent / "data" / "invalid" / "sessions").glob("*.csv"))
-
-
-def _expected(path):
-    first = path.read_bytes().splitlines()[0].decode()
-    return first[len("# expect: ") :]
-
-
-@pytest.mark.parametrize("path", INVALID, ids=[p.stem for p in INVALID])
-def test_invalid_session_corpus(path):
-    with pytest.raises(SessionError, match=_expected(path)):
-        read_session_csv(path)
+# the bad-input corpus (tests/data/invalid/sessions) is run by test_invalid_corpus.py
 
 
 def test_reads_kpa_metadata_and_extra_columns(tmp_path):

@@ -2,7 +2,9 @@
 
 import datetime as dt
 import logging
+import os
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -84,31 +86,39 @@ def test_torn_last_record_is_ignored_and_reported(tmp_path, caplog):
     assert "torn last record (23 of 29 bytes)" in caplog.text
 
 
+TX_DROPS = (65535, 65535, 1, 3)  # the firmware's cumulative counter, wrapping: 4 drops in all
+
+
 def test_writer_layout_matches_the_format(tmp_path):
     dtype = record_dtype(3)
-    assert dtype.itemsize == 8 + 8 + 2 + 1 + 4 + 2 * 3
-    assert [dtype.fields[k][1] for k in dtype.names] == [0, 8, 16, 18, 19, 23]
+    assert dtype.itemsize == 8 + 8 + 2 + 1 + 2 + 4 + 2 * 3
+    assert [dtype.fields[k][1] for k in dtype.names] == [0, 8, 16, 18, 19, 21, 25]
     assert dtype_to_list(dtype) == [
         ["host_ns", "<i8"],
         ["t_us", "<u8"],
         ["seq", "<u2"],
         ["status", "|u1"],
+        ["tx_drops", "<u2"],
         ["pressure_pa", "<i4"],
         ["adc", "(3,)<u2"],
     ]
     assert dtype_from_list(dtype_to_list(dtype)) == dtype
     with SessionWriter(tmp_path / "w", 3, adc_bits=12, device={"firmware": "x"}, config={"a": 1}) as w:
+        assert yaml.safe_load((tmp_path / "w" / "meta.yaml").read_text())["finished"] is False
         rec = w.empty(len(ROWS))
-        for i, r in enumerate(ROWS):
-            rec[i] = (*r[:5], r[5])
+        for i, (r, tx) in enumerate(zip(ROWS, TX_DROPS)):
+            rec[i] = (*r[:4], tx, r[4], r[5])
         w.write(rec[:2])
         w.write(rec[2:])
         w.event("gap: 2 frame(s) lost\nbefore seq 3")
-    expected = b"".join(struct.pack("<qQHBi3H", *r[:5], *r[5]) for r in ROWS)
+    expected = b"".join(struct.pack("<qQHBHi3H", *r[:4], tx, r[4], *r[5]) for r, tx in zip(ROWS, TX_DROPS))
     assert (tmp_path / "w" / "frames.bin").read_bytes() == expected
     meta = yaml.safe_load((tmp_path / "w" / "meta.yaml").read_text())
-    assert meta["format"] == "bendsense-session" and meta["version"] == 1
+    assert meta["format"] == "bendsense-session" and meta["version"] == 2 and meta["finished"] is True
     assert meta["n_channels"] == 3 and meta["adc_bits"] == 12 and meta["n_records"] == 4
+    s = read_session_dir(tmp_path / "w")
+    assert s.meta["tx_drops"] == 4 and s.meta["frames_lost"] == 2 and s.meta["finished"]
+    np.testing.assert_array_equal(s.extra["tx_drops"], TX_DROPS)
     assert meta["config"] == {"a": 1} and meta["device"] == {"firmware": "x"}
     dt.datetime.strptime(meta["start_time_utc"], "%Y-%m-%dT%H:%M:%S.%fZ")
     (line,) = (tmp_path / "w" / "events.log").read_text().splitlines()
@@ -131,8 +141,8 @@ def test_existing_session_is_not_overwritten(tmp_path):
 def test_bad_meta_is_reported(tmp_path):
     hand_made_v1(tmp_path / "s", ROWS)
     meta = yaml.safe_load((tmp_path / "s" / "meta.yaml").read_text())
-    (tmp_path / "s" / "meta.yaml").write_text(yaml.safe_dump({**meta, "version": 2}))
-    with pytest.raises(SessionError, match="version: expected 1, got 2"):
+    (tmp_path / "s" / "meta.yaml").write_text(yaml.safe_dump({**meta, "version": 3}))
+    with pytest.raises(SessionError, match="version: expected 1 or 2, got 3"):
         read_session_dir(tmp_path / "s")
     (tmp_path / "s" / "meta.yaml").write_text(yaml.safe_dump({**meta, "format": "other"}))
     with pytest.raises(SessionError, match="format: expected 'bendsense-session', got 'other'"):
@@ -188,3 +198,37 @@ def test_import_float_signals_and_extra_columns(tmp_path):
     np.testing.assert_array_equal(back.extra["fx_n"], fx)
     assert "label" not in back.extra
     np.testing.assert_array_equal(back.seq, np.arange(6))
+
+
+def test_saved_version_1_session_still_loads():
+    s = read_session(Path(__file__).parent / "data" / "sessions" / "v1_finished")
+    assert len(s) == 5 and s.meta["version"] == 1 and s.meta["finished"] and s.meta["tx_drops"] == 0
+    np.testing.assert_array_equal(s.seq, [65534, 65535, 65536, 65537, 65538])
+    np.testing.assert_array_equal(s.signals[:, 2], [4095, 4094, 4093, 4092, 4091])
+    np.testing.assert_array_equal(s.pressure_pa, [20000, 21000, 22000, 23000, 24000])
+
+
+def test_killed_recording_is_read_and_flagged_unfinished(tmp_path, caplog):
+    w = SessionWriter(tmp_path / "s", 3, adc_bits=12)
+    rec = w.empty(6)
+    rec["seq"] = np.arange(6)
+    w.write(rec)
+    with open(tmp_path / "s" / "frames.bin", "ab") as fh:
+        fh.write(b"\x01" * 7)  # the recorder was killed in the middle of a write
+    # killed: the files are closed by the OS, meta.yaml is never rewritten (finished: false)
+    os.close(w._fd)
+    w._events.close()
+    with caplog.at_level(logging.WARNING, logger="bendsense.sessiondir"):
+        s = read_session_dir(tmp_path / "s")
+    assert len(s) == 6 and not s.meta["finished"] and s.meta["torn_bytes"] == 7
+    assert "unfinished recording (no clean stop: killed, crashed or still recording); 6 records present; " \
+           f"a torn last record (7 of {w.dtype.itemsize} bytes) ignored" in caplog.text
+
+
+def test_finished_session_reports_lost_records_with_the_numbers(tmp_path):
+    with SessionWriter(tmp_path / "s", 2) as w:
+        w.write(w.empty(1500))
+    frames = tmp_path / "s" / "frames.bin"
+    frames.write_bytes(frames.read_bytes()[: 745 * w.dtype.itemsize])
+    with pytest.raises(SessionError, match=r"frames.bin: 745 of 1,500 records present; 755 lost"):
+        read_session_dir(tmp_path / "s")

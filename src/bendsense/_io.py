@@ -35,6 +35,8 @@ def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int 
         raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
     if len(data) > max_bytes:
         raise error(f"{path}: too large for a {what} (over {max_bytes / 2**20:g} MiB)")
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise error(f"{path}: UTF-16 text, not UTF-8; save the file as UTF-8")
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]  # a UTF-8 byte-order mark (spreadsheet exports) is harmless
     nul = data.find(b"\x00")

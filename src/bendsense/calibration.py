@@ -403,16 +403,16 @@ class AngleCovariance:
 
 def _array(where: str, value: Any, length: int | None = None) -> np.ndarray:
     if not isinstance(value, (list, tuple, np.ndarray)):
-        raise ConfigError(f"{where}: expected a list of numbers, got {value!r}")
+        raise ConfigError(f"{where}: expected a list of numbers, got {check.short(value)}")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ConfigError(f"{where}: expected a list of numbers, got {value!r}") from None
+        raise ConfigError(f"{where}: expected a list of numbers, got {check.short(value)}") from None
     if arr.ndim != 1 or (length is not None and arr.size != length):
         want = f"{length} numbers" if length is not None else "a flat list of numbers"
         raise ConfigError(f"{where}: expected {want}, got {arr.size if arr.ndim == 1 else arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{where}: values must be finite, got {value!r}")
+        raise ConfigError(f"{where}: values must be finite, got {check.short(value)}")
     return arr
 
 
@@ -481,7 +481,7 @@ class Calibration:
         c_odd = _array("coefficients_odd", self.coefficients_odd)
         c_even = _array("coefficients_even", self.coefficients_even)
         if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or self.degree < 0:
-            raise ConfigError(f"degree: expected an integer >= 0, got {self.degree!r}")
+            raise ConfigError(f"degree: expected an integer >= 0, got {check.short(self.degree)}")
         for name, c in (("coefficients_odd", c_odd), ("coefficients_even", c_even)):
             if c.size != self.degree + 1:
                 raise ConfigError(
@@ -500,9 +500,9 @@ class Calibration:
             raise ConfigError(f"noise_std: values must be >= 0, got {noise.tolist()}")
         set_(self, "noise_std", noise)
         if self.weighting not in WEIGHTINGS:
-            raise ConfigError(f"weighting: must be one of {', '.join(WEIGHTINGS)}, got {self.weighting!r}")
+            raise ConfigError(f"weighting: must be one of {', '.join(WEIGHTINGS)}, got {check.short(self.weighting)}")
         if not isinstance(self.sleeve, bool):
-            raise ConfigError(f"sleeve: expected true or false, got {self.sleeve!r}")
+            raise ConfigError(f"sleeve: expected true or false, got {check.short(self.sleeve)}")
         if self.sensor is not None and getattr(self.sensor, "n_segments", n) != n:
             raise ConfigError(
                 f"sensor.n_segments: expected {n} (the calibration's channels), got {self.sensor.n_segments}"
@@ -1158,11 +1158,11 @@ class Calibration:
         sensor = _resolve_sensor(sensor)
         n = sensor.n_segments
         if weighting not in WEIGHTINGS:
-            raise ConfigError(f"weighting: must be one of {', '.join(WEIGHTINGS)}, got {weighting!r}")
+            raise ConfigError(f"weighting: must be one of {', '.join(WEIGHTINGS)}, got {check.short(weighting)}")
         auto = isinstance(degree, str) and degree == "auto"
         integer = isinstance(degree, (int, np.integer)) and not isinstance(degree, bool)
         if not auto and not (integer and degree in DEGREES):
-            raise ConfigError(f"degree: must be 1..5 or 'auto', got {degree!r}")
+            raise ConfigError(f"degree: must be 1..5 or 'auto', got {check.short(degree)}")
         sleeve = sensor.calibration_adds_sleeve if sleeve is None else bool(sleeve)
         flat = _signals("flat", flat_signals, n)
         radii = [check.length_m(f"radii_m[{i}]", r, error=ConfigError) for i, r in enumerate(radii_m)]
@@ -1277,10 +1277,10 @@ class Calibration:
         if not isinstance(data, dict):
             raise ConfigError(f"calibration: expected a mapping, got {type(data).__name__}")
         if data.get("format") != FORMAT:
-            raise ConfigError(f"format: expected {FORMAT!r}, got {data.get('format')!r}")
+            raise ConfigError(f"format: expected {FORMAT!r}, got {check.short(data.get('format'))}")
         version = data.get("version")
         if version != VERSION:
-            raise ConfigError(f"version: this bendsense reads version {VERSION}, got {version!r}")
+            raise ConfigError(f"version: this bendsense reads version {VERSION}, got {check.short(version)}")
         allowed = [
             "format", "version", "n_channels", "degree", "offset", "coefficients_odd", "coefficients_even",
             "delta_a_range_odd", "delta_a_range_even", "noise_std", "weighting", "sleeve", "strip_residuals",
@@ -1297,7 +1297,7 @@ class Calibration:
         degree = data.get("degree", coef.size - 1)
         offset = _array("offset", data["offset"])
         if "n_channels" in data and data["n_channels"] != offset.size:
-            raise ConfigError(f"n_channels: {data['n_channels']!r} does not match the {offset.size} offset values")
+            raise ConfigError(f"n_channels: {check.short(data['n_channels'])} does not match the {offset.size} offset values")
         sensor = None
         if data.get("sensor") is not None:
             from bendsense.config import SensorConfig
@@ -1312,11 +1312,11 @@ class Calibration:
         cv = data.get("cv_errors_m")
         if cv is not None:
             if not isinstance(cv, dict):
-                raise ConfigError(f"cv_errors_m: expected a mapping of degree to error, got {cv!r}")
+                raise ConfigError(f"cv_errors_m: expected a mapping of degree to error, got {check.short(cv)}")
             cv = {int(k): float(v) for k, v in cv.items()}
         meta = data.get("meta") or {}
         if not isinstance(meta, dict):
-            raise ConfigError(f"meta: expected a mapping, got {meta!r}")
+            raise ConfigError(f"meta: expected a mapping, got {check.short(meta)}")
         return cls(
             offset=offset,
             coefficients_odd=coef,

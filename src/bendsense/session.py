@@ -22,6 +22,7 @@ import numpy as np
 from bendsense._io import check_csv_header, read_text
 from bendsense.errors import SessionError
 from bendsense.plausibility import check_pressure_column, check_time_column
+from bendsense.validation import short
 
 __all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
 
@@ -79,7 +80,7 @@ class Session:
         for name, values in self.extra.items():
             values = np.asarray(values)
             if values.shape != t.shape:
-                raise SessionError(f"extra column {name!r}: expected shape {t.shape}, got {values.shape}")
+                raise SessionError(f"extra column {short(name)}: expected shape {t.shape}, got {values.shape}")
             extra[name] = values
         object.__setattr__(self, "extra", extra)
 
@@ -114,7 +115,7 @@ def _parse_float(text: str, line: int, column: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise SessionError(f"line {line}, column {column}: expected a number, got {text!r}") from None
+        raise SessionError(f"line {line}, column {column}: expected a number, got {short(text)}") from None
     return value
 
 
@@ -161,6 +162,10 @@ def _parse_session_csv(text: str, source: str) -> Session:
         raise SessionError(f"line {header_line}: missing required column t_s")
     if "pressure_pa" in seen and "pressure_kpa" in seen:
         raise SessionError(f"line {header_line}: give pressure_pa or pressure_kpa, not both")
+    zero = [h for h in header if re.fullmatch(r"ch0[0-9]*", h)]
+    if zero:
+        raise SessionError(f"line {header_line}, column {zero[0]}: signal columns are numbered from 1 "
+                           "without leading zeros (ch1..chN)")
     channels = sorted((int(m.group(1)), h) for h in header if (m := _CHANNEL.match(h)))
     if not channels:
         raise SessionError(f"line {header_line}: no signal columns (expected ch1..chN)")
@@ -206,7 +211,7 @@ def _parse_session_csv(text: str, source: str) -> Session:
         # a missing pressure reading may be NaN; time and signals must be finite
         if not h.startswith("pressure") and not np.isfinite(arr).all():
             bad = int(np.flatnonzero(~np.isfinite(arr))[0])
-            raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {cells[h][bad].strip()!r}")
+            raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {short(cells[h][bad].strip())}")
         values[h] = arr
     t = values["t_s"]
     for name in ("pressure_pa", "pressure_kpa"):

@@ -14,6 +14,8 @@ The record (:func:`record_dtype`) is, in this order and packed::
     t_us         <u8      device clock, unwrapped (u32 wraps removed by the driver) [us]
     seq          <u2      device sequence number, raw (wraps at 65536)
     status       u1       status bits of the SAMPLE
+    tx_drops     <u2      the firmware's cumulative count of frames it could not send
+                          (version 2; wraps at 65536)
     pressure_pa  <i4      pressure [Pa]; 0x7FFFFFFF = no reading
     adc          (N,)<u2  raw counts (a line-dialect or imported session may use <f8)
 
@@ -23,8 +25,23 @@ are read back into ``Session.extra``. ``meta["start_host_ns"]`` pairs the monoto
 clock with ``meta["start_time_utc"]``.
 
 Writes go straight to the OS (unbuffered), so a killed recorder loses nothing it had
-written; ``os.fsync`` runs at least once a second against power loss. A torn last
-record (a partial write) is ignored by the reader and reported in ``meta["torn_bytes"]``.
+written; ``os.fsync`` runs at least once a second against power loss. ``meta.yaml``
+says ``finished: false`` until a clean stop rewrites it with ``finished: true`` and the
+record count ``n_records``.
+
+The reader compares ``frames.bin`` with ``meta.yaml`` and tells the truth:
+
+- the record dtype must be the format's (standard fields with their types, ``adc``
+  with ``n_channels`` values) and its size ``record_size``; raw counts must fit
+  ``adc_bits``: an edited dtype is an error, never garbage;
+- a finished session must hold exactly ``n_records`` whole records: fewer is an
+  error with the numbers (``745 of 1,500 records present; 755 lost``);
+- an unfinished session (killed, crashed, still recording) is read with a warning
+  that says so; its torn last record (a partial write) is ignored and counted in
+  ``meta["torn_bytes"]``.
+
+Version 1 (no ``tx_drops``, no ``finished`` flag: a session without ``n_records`` is
+unfinished) is read as before.
 """
 
 from __future__ import annotations
@@ -41,6 +58,8 @@ import yaml
 
 from bendsense._io import load_yaml
 from bendsense.errors import SessionError
+from bendsense import validation as check
+from bendsense.validation import short
 
 __all__ = [
     "FORMAT",
@@ -62,12 +81,17 @@ __all__ = [
 log = logging.getLogger("bendsense.sessiondir")
 
 FORMAT = "bendsense-session"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READ_VERSIONS = (1, 2)
 NO_PRESSURE = 0x7FFFFFFF
 META = "meta.yaml"
 FRAMES = "frames.bin"
 EVENTS = "events.log"
 STANDARD_FIELDS = ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")
+# the fixed type of each standard field (tx_drops from version 2)
+FIELD_TYPES = {"host_ns": "<i8", "t_us": "<u8", "seq": "<u2", "status": "|u1", "tx_drops": "<u2",
+               "pressure_pa": "<i4"}
+ADC_TYPES = ("<u2", "<f4", "<f8")
 
 
 def utc_now_iso(t: float | None = None) -> str:
@@ -97,6 +121,7 @@ def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=()) -> np
         ("t_us", "<u8"),
         ("seq", "<u2"),
         ("status", "u1"),
+        ("tx_drops", "<u2"),
         ("pressure_pa", "<i4"),
         ("adc", np.dtype(adc_dtype).newbyteorder("<"), (n,)),
         *[(str(name), np.dtype(dt).newbyteorder("<")) for name, dt in extra_fields],
@@ -117,15 +142,32 @@ def dtype_to_list(dtype: np.dtype) -> list:
     return out
 
 
-def dtype_from_list(pairs) -> np.dtype:
-    """Inverse of :func:`dtype_to_list`; raises :class:`SessionError` on a bad list."""
+def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | None = None) -> np.dtype:
+    """Inverse of :func:`dtype_to_list`, checked against the format.
+
+    Raises :class:`SessionError` on a malformed list, a missing standard field, a
+    standard field of another type, or an ``adc`` of another length than ``n_channels``.
+    """
+    where = "meta.yaml record_dtype"
     try:
         dt = np.dtype([(str(name), str(spec)) for name, spec in pairs])
     except (TypeError, ValueError) as err:
-        raise SessionError(f"meta.yaml record_dtype: invalid ({err}); got {pairs!r}") from None
-    missing = [f for f in STANDARD_FIELDS if f not in dt.names]
+        raise SessionError(f"{where}: invalid ({' '.join(str(err).split())[:80]}); got {short(pairs)}") from None
+    standard = [*STANDARD_FIELDS, "tx_drops"] if version >= 2 else list(STANDARD_FIELDS)
+    missing = [f for f in standard if f not in dt.names]
     if missing:
-        raise SessionError(f"meta.yaml record_dtype: missing fields {missing}")
+        raise SessionError(f"{where}: missing fields {missing}")
+    for name, want in FIELD_TYPES.items():
+        if name in dt.names and name in standard and dt.fields[name][0].str != np.dtype(want).str:
+            raise SessionError(f"{where}: field {name}: expected {want}, got {dt.fields[name][0].str} "
+                               "(an edited record dtype?)")
+    adc = dt.fields["adc"][0]
+    base, shape = (adc.subdtype if adc.subdtype is not None else (adc, ()))
+    if base.str not in ADC_TYPES or len(shape) != 1:
+        got = dict((str(k), v) for k, v in pairs).get("adc")
+        raise SessionError(f"{where}: field adc: expected (N,) of {', '.join(ADC_TYPES)}, got {short(got)}")
+    if n_channels is not None and shape[0] != n_channels:
+        raise SessionError(f"{where}: field adc: expected {n_channels} values (n_channels), got {shape[0]}")
     return dt
 
 
@@ -237,6 +279,7 @@ class SessionWriter:
             "adc_bits": adc_bits,
             "record_dtype": dtype_to_list(self.dtype),
             "record_size": self.dtype.itemsize,
+            "finished": False,  # true once close() ran: a clean stop
             "clocks": {
                 "host_ns": "time.monotonic_ns() of the host when the frame was read [ns]",
                 "t_us": "device clock, unwrapped [us]",
@@ -313,6 +356,7 @@ class SessionWriter:
             self._events.close()
         self.meta["end_time_utc"] = utc_now_iso()
         self.meta["n_records"] = self.n_records
+        self.meta["finished"] = True
         if meta_update:
             self.meta.update(_plain(meta_update))
         try:
@@ -331,40 +375,95 @@ class SessionWriter:
 
 
 def read_session_meta(path) -> dict:
-    """``meta.yaml`` of a session directory, checked for format name and version."""
+    """``meta.yaml`` of a session directory, checked for format name, version and field types."""
     path = Path(path)
     if not (path / META).exists():
         raise SessionError(f"{path}: not a session directory (no {META})")
-    meta = load_yaml(path / META, "session meta.yaml", lambda data: data, SessionError)
+    where = path / META
+    meta = load_yaml(where, "session meta.yaml", lambda data: data, SessionError)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
-        raise SessionError(f"{path / META}: format: expected {FORMAT!r}, got {got!r}")
-    if meta.get("version") != FORMAT_VERSION:
-        raise SessionError(f"{path / META}: version: expected {FORMAT_VERSION}, got {meta.get('version')!r}")
+        raise SessionError(f"{where}: format: expected {FORMAT!r}, got {short(got)}")
+    if meta.get("version") not in READ_VERSIONS:
+        raise SessionError(f"{where}: version: expected {' or '.join(map(str, READ_VERSIONS))}, "
+                           f"got {short(meta.get('version'))}")
     if "record_dtype" not in meta:
-        raise SessionError(f"{path / META}: missing record_dtype")
+        raise SessionError(f"{where}: missing record_dtype")
+    if not isinstance(meta["record_dtype"], list):
+        raise SessionError(f"{where}: record_dtype: expected a list of [name, dtype] pairs, "
+                           f"got {short(meta['record_dtype'])}")
+    checks = {"n_channels": (1, 64), "adc_bits": (1, 16), "record_size": (1, None), "n_records": (0, None)}
+    try:
+        for key, (lo, hi) in checks.items():
+            if meta.get(key) is not None:
+                check.integer(key, meta[key], minimum=lo, maximum=hi, error=SessionError)
+        if "finished" in meta:
+            check.boolean("finished", meta["finished"], error=SessionError)
+    except SessionError as err:
+        raise SessionError(f"{where}: {err}") from None
     return meta
 
 
 def read_records(path) -> tuple[np.ndarray, dict]:
-    """Raw records of ``frames.bin`` and the metadata.
+    """Raw records of ``frames.bin`` and the metadata, checked against each other.
 
-    A partial last record (a torn write) is ignored; its size goes to
-    ``meta["torn_bytes"]`` (0 when the file is whole) and is logged.
+    Sets ``meta["n_records"]`` (records present), ``meta["records_recorded"]`` (what
+    a finished session's ``meta.yaml`` says, else None), ``meta["finished"]`` and
+    ``meta["torn_bytes"]``.
+
+    Raises
+    ------
+    SessionError
+        If the record dtype is not the format's or disagrees with ``record_size``,
+        ``n_channels`` or ``adc_bits``, or a finished session does not hold exactly
+        the records it recorded (the message gives the numbers).
     """
     path = Path(path)
     meta = read_session_meta(path)
-    dtype = dtype_from_list(meta["record_dtype"])
+    version = meta["version"]
+    where = path / META
     try:
-        data = (path / FRAMES).read_bytes()
+        dtype = dtype_from_list(meta["record_dtype"], version=version, n_channels=meta.get("n_channels"))
+    except SessionError as err:
+        raise SessionError(f"{path}: {err}") from None
+    size = dtype.itemsize
+    if meta.get("record_size") is not None and meta["record_size"] != size:
+        raise SessionError(f"{where}: record_size is {meta['record_size']} bytes, but record_dtype gives "
+                           f"{size}-byte records (an edited record dtype?)")
+    frames = path / FRAMES
+    try:
+        nbytes = frames.stat().st_size
     except FileNotFoundError:
-        data = b""
-    n, torn = divmod(len(data), dtype.itemsize)
-    if torn:
-        log.warning("%s: ignoring a torn last record (%d of %d bytes)", path / FRAMES, torn, dtype.itemsize)
-    meta["torn_bytes"] = torn
-    meta["n_records"] = n
-    return np.frombuffer(data, dtype=dtype, count=n), meta
+        nbytes = 0
+    n, torn = divmod(nbytes, size)
+    # version 1 has no flag: its writer added n_records at a clean stop only
+    finished = bool(meta.get("finished", "n_records" in meta)) if version >= 2 else "n_records" in meta
+    recorded = meta.get("n_records") if finished else None
+    if finished and recorded is None:
+        raise SessionError(f"{where}: finished, but no n_records")
+    if finished and n < recorded:
+        extra = f", and a torn record of {torn} bytes" if torn else ""
+        raise SessionError(f"{frames}: {n:,} of {recorded:,} records present; {recorded - n:,} lost{extra} "
+                           "(frames.bin was cut short after the recording)")
+    if finished and n > recorded:
+        raise SessionError(f"{frames}: {n:,} records present, but meta.yaml recorded {recorded:,} "
+                           f"({n - recorded:,} more; frames.bin from another recording?)")
+    if finished and torn:
+        raise SessionError(f"{frames}: {torn} stray bytes after the {n:,} records of {size} bytes "
+                           "(frames.bin was damaged after the recording)")
+    if not finished:
+        note = f"; a torn last record ({torn} of {size} bytes) ignored" if torn else ""
+        log.warning("%s: unfinished recording (no clean stop: killed, crashed or still recording); %s records "
+                    "present%s", path, f"{n:,}", note)
+    records = np.fromfile(frames, dtype=dtype, count=n) if n else np.zeros(0, dtype=dtype)
+    bits = meta.get("adc_bits")
+    if n and bits and records.dtype.fields["adc"][0].base.kind == "u":
+        top = int(records["adc"].max())
+        if top >= 2**bits:
+            raise SessionError(f"{frames}: ADC counts up to {top:,} do not fit adc_bits {bits} "
+                               "(an edited record dtype or adc_bits?)")
+    meta.update(torn_bytes=torn, n_records=n, records_recorded=recorded, finished=finished)
+    return records, meta
 
 
 def _unwrap16(seq: np.ndarray) -> np.ndarray:
@@ -380,7 +479,10 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
 
     ``t_s`` is the unwrapped device clock relative to the first frame (plus
     ``meta["t_offset_s"]`` of an imported CSV); ``extra`` holds ``host_s`` (host clock
-    relative to the first frame [s]), ``status`` and any further record fields.
+    relative to the first frame [s]), ``status`` and any further record fields
+    (``tx_drops``: the firmware's cumulative counter). ``meta["frames_lost"]`` counts
+    the sequence gaps and ``meta["tx_drops"]`` the frames the firmware could not send
+    during the session (0 for version 1, which has no counter).
     """
     from bendsense.session import Session
 
@@ -399,7 +501,12 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
         if name not in STANDARD_FIELDS:
             extra[name] = np.array(records[name])
     signals = np.array(records["adc"], dtype=float).reshape(len(records), n_ch)
-    return Session(t_s, signals, pressure, seq=_unwrap16(records["seq"]), meta=meta, extra=extra, source=source)
+    seq = _unwrap16(records["seq"])
+    meta = dict(meta)
+    meta["frames_lost"] = int(seq[-1] - seq[0] + 1 - seq.size) if seq.size else 0
+    drops = _unwrap16(records["tx_drops"]) if "tx_drops" in records.dtype.names else np.zeros(0, np.int64)
+    meta["tx_drops"] = int(drops[-1] - drops[0]) if drops.size else 0
+    return Session(t_s, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
 
 
 def read_session_dir(path):
@@ -436,7 +543,7 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
     counts = bool(np.all((sig == np.round(sig)) & (sig >= 0) & (sig <= 65535)))
     extra_cols = {}
     for name, values in s.extra.items():
-        if name in ("host_s", "status") or name in STANDARD_FIELDS:
+        if name in ("host_s", "status", "tx_drops") or name in STANDARD_FIELDS:
             continue
         if values.dtype.kind in "iub":
             extra_cols[name] = (values, "<i8")
@@ -464,6 +571,8 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
         rec["seq"] = (np.arange(n) if s.seq is None else s.seq) % 65536
         if "status" in s.extra:
             rec["status"] = np.asarray(s.extra["status"]).astype(np.int64) & 0xFF
+        if "tx_drops" in s.extra and s.extra["tx_drops"].dtype.kind in "iu":
+            rec["tx_drops"] = s.extra["tx_drops"].astype(np.int64) & 0xFFFF
         p = s.pressure_pa
         rec["pressure_pa"] = np.where(np.isfinite(p), np.round(np.nan_to_num(p)), NO_PRESSURE).astype(np.int64)
         rec["adc"] = sig

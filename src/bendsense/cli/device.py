@@ -31,7 +31,8 @@ def devices():
 def _status_line(stats, est=None) -> str:
     line = (
         f"{stats.records} frames  lost {stats.lost}  crc {stats.crc_errors}  malformed {stats.malformed}  "
-        f"queue drops {stats.queue_drops}  reconnects {stats.reconnects}  {stats.elapsed_s:.1f} s"
+        f"queue drops {stats.queue_drops}  firmware drops {stats.tx_drops}  reconnects {stats.reconnects}  "
+        f"{stats.elapsed_s:.1f} s"
     )
     if est is not None:
         counts = est.status_counts

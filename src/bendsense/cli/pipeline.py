@@ -24,7 +24,7 @@ from bendsense.cli._common import (
     overwrite_option,
     step_io,
 )
-from bendsense.errors import BendsenseError
+from bendsense.errors import BendsenseError, SessionError
 
 log = logging.getLogger("bendsense")
 
@@ -115,6 +115,8 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
         from bendsense.session import read_session
 
         session = read_session(session_path)
+        if len(session) == 0:
+            raise SessionError(f"{session_path}: no frames (an empty recording)")
         if pressure_kpa is not None:
             session = session.with_pressure(pressure_kpa * 1e3)
         state.update(

@@ -38,6 +38,9 @@ class RecorderStats:
         Samples not written because their channel count differed from the session's.
     lost, crc_errors, malformed, queue_drops, reconnects : int
         The driver's counters (see :class:`bendsense.device.driver.DeviceStats`).
+    tx_drops : int
+        Frames the firmware could not send during the recording (from the SAMPLEs'
+        cumulative ``tx_drops`` counter).
     elapsed_s : float
         Time since the recording started [s].
     """
@@ -50,6 +53,7 @@ class RecorderStats:
     queue_drops: int
     reconnects: int
     elapsed_s: float
+    tx_drops: int = 0
 
 
 class Recorder:
@@ -99,6 +103,8 @@ class Recorder:
         self._early_events = list(driver.events)  # e.g. the HELLO of the handshake
         self._lock = threading.Lock()
         self._skipped = 0
+        self._tx_last = None  # the firmware's cumulative tx_drops counter at the last sample
+        self._tx_drops = 0
         self._t0 = time.monotonic()
         self._stop = threading.Event()
         self._thread = None
@@ -122,6 +128,7 @@ class Recorder:
             queue_drops=d.queue_drops,
             reconnects=d.reconnects,
             elapsed_s=time.monotonic() - self._t0,
+            tx_drops=self._tx_drops,
         )
 
     def _ensure_writer(self, n_channels: int) -> SessionWriter:
@@ -174,6 +181,13 @@ class Recorder:
         rec["t_us"] = [max(r.device_us, 0) for r in keep]
         rec["seq"] = [r.sample.seq for r in keep]
         rec["status"] = [r.sample.status for r in keep]
+        drops = [r.sample.tx_drops for r in keep]
+        rec["tx_drops"] = drops
+        last = drops[0] if self._tx_last is None else self._tx_last
+        for value in drops:  # the u16 counter wraps
+            self._tx_drops += (value - last) & 0xFFFF
+            last = value
+        self._tx_last = last
         rec["pressure_pa"] = [
             NO_PRESSURE if r.sample.pressure_pa is None else round(r.sample.pressure_pa) for r in keep
         ]
