@@ -394,3 +394,22 @@ def test_processes_or_numba_threads_never_both(sessions, tmp_path):
         assert pool.submit(numba.get_num_threads).result() == 1
     finally:
         pool.shutdown()
+
+
+def test_process_reports_lost_frames_and_firmware_drops(tmp_path):
+    from bendsense.sessiondir import SessionWriter
+
+    cal = linear_calibration()
+    with SessionWriter(tmp_path / "runs" / "rec", 16, adc_bits=16) as w:
+        rec = w.empty(6)
+        rec["seq"] = [10, 11, 14, 15, 16, 20]  # 2 + 3 frames missing
+        rec["tx_drops"] = [7, 7, 9, 9, 9, 10]  # the firmware could not send 3 of them
+        rec["t_us"] = np.arange(6) * 1000
+        rec["adc"] = np.asarray(cal.offset).round().astype(np.uint16)
+        w.write(rec)
+    report = process_sessions(tmp_path / "runs", tmp_path / "out", config=CONFIG, calibration=cal, estimate=False,
+                              workers=0, progress=False)
+    (row,) = report.sessions
+    assert row.status == "ok" and row.frames_lost == 5 and row.tx_drops == 3
+    assert "5 frames lost (3 dropped by the firmware)" in row.reason
+    assert report.table().splitlines()[-1] == "5 frames lost in the recordings (3 dropped by the firmware)"

@@ -1,5 +1,7 @@
 """The chained command line: calibrate, then load → reconstruct → save, against a virtual sensor."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import yaml
@@ -135,3 +137,30 @@ def test_cli_choices_match_the_config():
 
     assert _common.CONSTRAINTS == config.CONSTRAINTS
     assert _common.METHODS == config.METHODS
+
+
+def test_shapes_only_results_work_downstream(tmp_path):
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+
+    data = Path(__file__).parent / "data"
+    good = (data / "invalid" / "good" / "session.csv").read_text().splitlines()
+    rows = [good[0] + ",fx_n,fy_n"] + [line + f",{0.1 * i},-0.05" for i, line in enumerate(good[1:])]
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / "truth.csv").write_text("\n".join(rows) + "\n")
+    cal = data / "calibration" / "calibration_v1.yaml"
+    runner = CliRunner()
+    res = runner.invoke(main, ["process", str(tmp_path / "runs"), "--calibration", str(cal), "-o",
+                               str(tmp_path / "out"), "--no-estimate", "--workers", "0", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    results = read_results(tmp_path / "out" / "truth")
+    assert not results.has_forces and "fx_n" not in results.columns
+    np.testing.assert_allclose(results["input_fx_n"], [0.0, 0.1, 0.2, 0.3])
+    res = runner.invoke(main, ["plot", str(tmp_path / "out" / "truth"), "-o", str(tmp_path / "fig.png")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "fig.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    res = runner.invoke(main, ["load", str(tmp_path / "runs" / "truth.csv"), "--calibration", str(cal),
+                               "reconstruct", "save", str(tmp_path / "chain"), "plot", str(tmp_path / "chain.svg")])
+    assert res.exit_code == 0, res.output
+    assert "no force estimate" in (tmp_path / "chain.svg").read_text()

@@ -63,6 +63,10 @@ class SessionOutcome:
         Frames whose force estimate did not converge.
     out_of_range : int
         Frames whose pressure lay outside ``actuator.pressure_range_pa`` (no force).
+    frames_lost : int
+        Frames missing from a native session (gaps in the device's sequence numbers).
+    tx_drops : int
+        Of those, frames the firmware reported it could not send (``tx_drops``).
     out_dir : str
         Results directory of the session.
     """
@@ -76,6 +80,8 @@ class SessionOutcome:
     extrapolated: int = 0
     not_converged: int = 0
     out_of_range: int = 0
+    frames_lost: int = 0
+    tx_drops: int = 0
     out_dir: str = ""
 
     def __post_init__(self):
@@ -172,6 +178,10 @@ class BatchReport:
             f"{self.frames} frames in {self.wall_s:.2f} s ({self.frames_per_s:,.0f} frames/s"
             f"{', ' + self.workers if self.workers else ''})"
         )
+        lost = sum(s.frames_lost for s in self.sessions)
+        if lost:
+            drops = sum(s.tx_drops for s in self.sessions)
+            lines.append(f"{lost} frames lost in the recordings ({drops} dropped by the firmware)")
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -331,7 +341,7 @@ def process_session(
         # from a worker process would only clutter the console
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            frames, extrapolated, not_converged, out_of_range = _run(
+            frames, extrapolated, not_converged, out_of_range, lost, tx_drops = _run(
                 path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
@@ -346,6 +356,8 @@ def process_session(
         notes.append(f"{not_converged} of {frames} frames not converged")
     if out_of_range:
         notes.append(f"{out_of_range} of {frames} frames pressure out of range")
+    if lost or tx_drops:
+        notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")
     return SessionOutcome(
         status="ok",
         frames=frames,
@@ -354,6 +366,8 @@ def process_session(
         extrapolated=extrapolated,
         not_converged=not_converged,
         out_of_range=out_of_range,
+        frames_lost=lost,
+        tx_drops=tx_drops,
         **row,
     )
 
@@ -398,7 +412,8 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
 
         outside = pressure_outside(session.pressure_pa, config)
     not_converged = 0 if result is None else int(np.count_nonzero(~np.asarray(result.success, dtype=bool) & ~outside))
-    return len(session), extrapolated, not_converged, int(outside.sum())
+    lost, tx_drops = int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
+    return len(session), extrapolated, not_converged, int(outside.sum()), lost, tx_drops
 
 
 # --- many sessions ------------------------------------------------------------------------

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -79,6 +82,23 @@ def make_outlets(processor, driver, port):
     )
 
 
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """Turn SIGTERM (``kill``, a service manager) into Ctrl-C: the recorder stops cleanly."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 @click.command("record", cls=InterspersedCommand)
 @click.argument("port")
 @click.option(
@@ -135,9 +155,10 @@ def record(
 ):
     """Record the board on PORT to a native session directory.
 
-    PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path or a
-    pyserial URL (loop://, socket://HOST:PORT). A live status line on stderr counts frames, gaps and errors; Ctrl-C
-    stops the recording and leaves a complete session.
+    PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path or any
+    pyserial URL (rfc2217://HOST:PORT, socket://HOST:PORT, loop://, ...). A live
+    status line on stderr counts frames, gaps, errors and firmware drops; Ctrl-C (or
+    SIGTERM) stops the recording and leaves a complete session marked finished.
 
     With --estimate (and --calibration), every frame is reconstructed and its force
     estimated as it arrives, in blocks on a background thread, and appended to
@@ -211,7 +232,8 @@ def record(
             if not no_start:
                 driver.start()
             try:
-                stats = recorder.run(seconds, on_progress=progress)
+                with _sigterm_as_interrupt():
+                    stats = recorder.run(seconds, on_progress=progress)
                 outcome = "done"
             except KeyboardInterrupt:
                 stats, outcome = recorder.stats, "interrupted"
@@ -223,7 +245,8 @@ def record(
         raise
     if show:
         sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
-    click.echo(f"{outcome}: {stats.records} frames written to {output}", err=True)
+    losses = f"; {stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else ""
+    click.echo(f"{outcome}: {stats.records} frames written to {output}{losses}", err=True)
     if estimate:
         click.echo(f"{est_stats.frames} frames estimated to {results_path}", err=True)
 

@@ -184,16 +184,16 @@ class Driver:
     def _open_serial(self):
         import serial
 
+        kwargs = {"baudrate": self.baudrate, "timeout": self.read_timeout_s, **self.serial_kwargs}
         try:
-            return serial.serial_for_url(
-                self.port,
-                baudrate=self.baudrate,
-                timeout=self.read_timeout_s,
-                write_timeout=1.0,
-                **self.serial_kwargs,
-            )
-        except (serial.SerialException, OSError, ValueError) as err:
-            raise DeviceError(f"{self.port}: cannot open serial port ({err})") from None
+            try:
+                return serial.serial_for_url(self.port, write_timeout=1.0, **kwargs)
+            except NotImplementedError:
+                # some URL handlers (rfc2217://) cannot bound writes; open them without
+                return serial.serial_for_url(self.port, **kwargs)
+        except (serial.SerialException, OSError, ValueError, NotImplementedError) as err:
+            text = " ".join(str(err).split())[:200]
+            raise DeviceError(f"{self.port}: cannot open serial port ({text})") from None
 
     def open(self) -> Driver:
         """Open the port, start the reader and (binary dialect) do the HELLO handshake.

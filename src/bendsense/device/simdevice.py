@@ -441,7 +441,9 @@ class SimulatedDevice:
             with self._lock:
                 self._counts["dropped"] += 1
             return
-        frame = encode_sample(seq, t_us, counts.tolist(), pressure_pa=pressure, status=status)
+        # a dropped frame is one the firmware could not send: it counts it in tx_drops
+        tx_drops = (self._counts["dropped"] + self._counts["tx_overflow"]) & 0xFFFF
+        frame = encode_sample(seq, t_us, counts.tolist(), pressure_pa=pressure, status=status, tx_drops=tx_drops)
         kind = "sent"
         if r < self.drop + self.corrupt:
             frame = self._flip_one_bit(frame)
