@@ -53,13 +53,14 @@ SESSIONS = _files("sessions", "*.csv")
 CALIBRATIONS = _files("calibrations", "*.yaml")
 MANIFESTS = _files("manifests", "*.yaml")
 NATIVE = sorted(p for p in (INVALID / "native").iterdir() if p.is_dir())
+RESULTS = sorted(p for p in (INVALID / "results").iterdir() if p.is_dir())
 CLI = _files("cli", "*.yaml")
 
 
 def test_the_corpus_is_large():
-    cases = [*CONFIGS, *SESSIONS, *CALIBRATIONS, *MANIFESTS, *NATIVE, *CLI]
+    cases = [*CONFIGS, *SESSIONS, *CALIBRATIONS, *MANIFESTS, *NATIVE, *RESULTS, *CLI]
     assert len(cases) >= 100
-    for kind in (CONFIGS, SESSIONS, CALIBRATIONS, MANIFESTS, NATIVE, CLI):
+    for kind in (CONFIGS, SESSIONS, CALIBRATIONS, MANIFESTS, NATIVE, RESULTS, CLI):
         assert len(kind) >= 10
 
 
@@ -87,6 +88,15 @@ def test_native_session_api(path):
         return
     with pytest.raises(SessionError, match=expected(path)) as info:
         read_session(path)
+    assert str(path) in str(info.value)
+
+
+@pytest.mark.parametrize("path", RESULTS, ids=[p.name for p in RESULTS])
+def test_results_api(path):
+    from bendsense.results import read_results
+
+    with pytest.raises(SessionError, match=expected(path)) as info:
+        read_results(path)
     assert str(path) in str(info.value)
 
 
@@ -158,6 +168,11 @@ def test_manifest_cli(path, tmp_path):
 def test_native_session_cli(path, tmp_path):
     args = ["load", path, "--calibration", GOOD_CAL, "reconstruct", "save", OUT]
     run_cli(args, tmp_path, re.escape(str(path)) + ".*" + expected(path))
+
+
+@pytest.mark.parametrize("path", RESULTS, ids=[p.name for p in RESULTS])
+def test_results_cli(path, tmp_path):
+    run_cli(["plot", path, "-o", "fig.png"], tmp_path, re.escape(str(path)) + ".*" + expected(path))
 
 
 @pytest.mark.parametrize("path", CLI, ids=[p.stem for p in CLI])

@@ -57,6 +57,7 @@ from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bendi
 from bendsense._io import check_csv_header, read_text
 from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, ConfigError, SessionError
+from bendsense.plausibility import check_pressure_column
 from bendsense.validation import short
 
 __all__ = [
@@ -132,6 +133,11 @@ def _column(path, header, data, names: Mapping[str, float], what: str, required:
             raise SessionError(f"{path}: missing {what} column ({' or '.join(names)})")
         return None
     name = present[0]
+    if name in ("pressure_pa", "pressure_kpa"):  # kPa numbers in a Pa column and vice versa
+        try:
+            check_pressure_column(name, data[:, header.index(name)], 1)
+        except SessionError as err:
+            raise SessionError(f"{path}: {err}") from None
     values = data[:, header.index(name)] * names[name]
     return values, name
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import re
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -191,11 +192,30 @@ def read_results(out_dir) -> Results:
     header, body = rows[0], rows[1:]
     cells = list(zip(*body)) if body else [[] for _ in header]
     columns = {h: _column_array(list(c)) for h, c in zip(header, cells)}
-    for h in ("t_s", "pressure_pa", "fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m"):
+    numeric = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n",
+               "residual_m")
+    for h in (*numeric, *(h for h in header if _KAPPA.match(h))):
         if h in columns:
-            columns[h] = columns[h].astype(float)
-    with np.load(out_dir / "shape.npz") as npz:
-        s_m, positions = npz["s_m"], npz["positions_m"]
+            try:
+                columns[h] = columns[h].astype(float)
+            except ValueError:
+                raise SessionError(f"{path}: column {h}: expected numbers") from None
+    missing = [h for h in ("t_s", "tip_x_m", "tip_y_m", "tip_angle_rad", "kappa1", "status") if h not in columns]
+    if missing:
+        raise SessionError(f"{path}: not a results.csv of bendsense (no column {missing[0]})")
+    npz_path = out_dir / "shape.npz"
+    try:
+        # our own file object: np.load leaks its handle when the zip is damaged
+        with open(npz_path, "rb") as fh, np.load(fh) as npz:
+            s_m, positions = np.asarray(npz["s_m"], dtype=float), np.asarray(npz["positions_m"], dtype=float)
+    except FileNotFoundError:
+        raise SessionError(f"{npz_path}: missing (every results directory has one)") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
+        raise SessionError(f"{npz_path}: not a shape.npz of bendsense ({' '.join(str(err).split())[:80]})") from None
+    frames = len(columns["t_s"])
+    if positions.ndim != 3 or positions.shape[0] != frames or positions.shape[1:] != (s_m.size, 2):
+        raise SessionError(f"{npz_path}: positions_m has shape {positions.shape}, expected ({frames}, {s_m.size}, 2) "
+                           "for the frames of results.csv")
     known = {"t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS}
     extra = tuple(h for h in header if h not in known and not _KAPPA.match(h))
     return Results(columns=columns, s_m=s_m, positions_m=positions, extra_names=extra)
