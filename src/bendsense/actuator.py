@@ -308,7 +308,7 @@ def solve_bending_angle(
 
     Raises
     ------
-    ValueError
+    ArgumentError
         If ``pressure_pa`` is not finite; :class:`~bendsense.errors.ConfigError` for a
         bad parameter.
     """

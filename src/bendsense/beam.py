@@ -626,7 +626,7 @@ def solve_beam(
 
     Raises
     ------
-    ValueError
+    ArgumentError
         A non-finite or ill-shaped input (the message names the argument).
     ConvergenceError
         With ``strict=True``, if any frame fails.

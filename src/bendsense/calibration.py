@@ -1297,7 +1297,8 @@ class Calibration:
         degree = data.get("degree", coef.size - 1)
         offset = _array("offset", data["offset"])
         if "n_channels" in data and data["n_channels"] != offset.size:
-            raise ConfigError(f"n_channels: {check.short(data['n_channels'])} does not match the {offset.size} offset values")
+            got = check.short(data["n_channels"])
+            raise ConfigError(f"n_channels: {got} does not match the {offset.size} offset values")
         sensor = None
         if data.get("sensor") is not None:
             from bendsense.config import SensorConfig

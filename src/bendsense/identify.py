@@ -521,7 +521,7 @@ def fit_free_bending(
 
     Raises
     ------
-    ValueError
+    ArgumentError
         Bad data shapes or values, too few points for the free parameters.
     ConfigError
         An unknown parameter name.
@@ -816,7 +816,7 @@ def fit_stiffness(
 
     Raises
     ------
-    ValueError
+    ArgumentError
         Too few levels or points for the free parameters.
     """
     from bendsense.actuator import FreeBendingModel

@@ -377,7 +377,7 @@ def forward_kinematics(curvature_per_m, lengths_m, s_m, base_angle_rad=0.0):
 
     Raises
     ------
-    ValueError
+    ArgumentError
         If an arc length lies outside [0, L_N] (no silent extrapolation).
     """
     grid = _grid(lengths_m, s_m)

@@ -112,7 +112,8 @@ def _sigterm_as_interrupt():
 @click.option("--columns", help="Line dialect: comma-separated column layout, e.g. seq,t_us,pressure_pa,ch1,...")
 @click.option("--no-handshake", is_flag=True, help="Do not wait for the board's HELLO.")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
-@click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True, help="HELLO wait [s].")
+@click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
+              help="HELLO wait [s].")
 @make_config_option("Config YAML to snapshot into meta.yaml (and to estimate with).")
 @click.option(
     "--calibration",
@@ -252,7 +253,8 @@ def record(
 
 
 @click.command("sim-device", cls=InterspersedCommand)
-@click.option("--rate", "rate_hz", type=Finite(min=0, min_open=True), default=500.0, show_default=True, help="Frame rate [Hz].")
+@click.option("--rate", "rate_hz", type=Finite(min=0, min_open=True), default=500.0, show_default=True,
+              help="Frame rate [Hz].")
 @click.option("--seconds", type=Finite(min=0, min_open=True), help="Run time [s] (default: until Ctrl-C).")
 @click.option("--drop", type=Finite(0, 1), default=0.0, show_default=True, help="Probability of a dropped frame.")
 @click.option("--corrupt", type=Finite(0, 1), default=0.0, show_default=True, help="Probability of a corrupted frame.")
