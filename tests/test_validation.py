@@ -150,3 +150,20 @@ def test_other_csv_separators_are_named(tmp_path, sep, name):
     path.write_text(f"t_s{sep}ch1{sep}ch2\n0{sep}1,5{sep}2\n")
     with pytest.raises(SessionError, match=rf"excel.csv: line 1: columns are separated by {name}, expected ','"):
         read_session_csv(path)
+
+
+def test_no_bare_value_errors_for_user_input_and_no_cli_handler_catches_them():
+    # ArgumentError (a ValueError) is the library's error for a bad argument; a CLI
+    # handler that caught ValueError would hide real bugs behind a one-line message
+    import re
+    from pathlib import Path
+
+    src = Path(bendsense.__file__).parent
+    raises = [f"{p.name}:{i}" for p in src.rglob("*.py")
+              for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+              if re.search(r"raise ValueError\(", line)]
+    assert raises == []
+    catches = [f"{p.name}:{i}" for p in (src / "cli").rglob("*.py")
+               for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+               if re.search(r"except\s*\(?[^)]*\bValueError\b", line)]
+    assert catches == []

@@ -42,13 +42,7 @@ class Finite(click.ParamType):
 
     def convert(self, value, param, ctx):
         """Parse and check one value."""
-        if isinstance(value, float):
-            number = value
-        else:
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                self.fail(f"expected a number, got {_short(value)}", param, ctx)
+        number = click.FLOAT.convert(value, param, ctx)
         if number != number or number in (float("inf"), float("-inf")):
             self.fail(f"expected a finite number, got {value}", param, ctx)
         if self.min is not None and (number <= self.min if self.min_open else number < self.min):
@@ -56,11 +50,6 @@ class Finite(click.ParamType):
         if self.max is not None and number > self.max:
             self.fail(f"expected <= {self.max:g}, got {number:g}", param, ctx)
         return number
-
-
-def _short(value, limit: int = 40) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 SEED = click.IntRange(0, 2**32 - 1)

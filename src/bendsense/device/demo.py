@@ -39,7 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense.errors import DeviceError, SessionError
+from bendsense.errors import ArgumentError, DeviceError, SessionError
+from bendsense.validation import short
 
 __all__ = ["DemoResult", "run_demo", "DEFAULT_DIR"]
 
@@ -317,9 +318,9 @@ def run_demo(
     echo = _nothing if echo is None else echo
     for name, value in (("seconds", seconds), ("rate_hz", rate_hz)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise ValueError(f"{name}: expected a number > 0, got {value!r}")
+            raise ArgumentError(f"{name}: expected a number > 0, got {short(value)}")
     if rate_hz > 65535:
-        raise ValueError(f"rate_hz: the HELLO carries at most 65535 Hz, got {rate_hz!r}")
+        raise ArgumentError(f"rate_hz: the HELLO carries at most 65535 Hz, got {short(rate_hz)}")
     out = Path(out_dir)
     output.check([output.directory(out, overwrite=overwrite)])
     config = load_config() if config is None else config
