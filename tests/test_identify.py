@@ -154,13 +154,13 @@ def test_read_free_bending_csv_units_and_comments(tmp_path):
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        ("pressure_pa,angle\n1,2\n", "missing bending angle column"),
+        ("pressure_pa,angle\n20000,2\n", "missing bending angle column"),
         ("pressure_pa,pressure_kpa,bending_angle_rad\n1,2,3\n", "give one pressure column"),
         ("pressure_pa,bending_angle_rad\n1,x\n", "line 2: column bending_angle_rad: not a number"),
         ("pressure_pa,bending_angle_rad\n1\n", "line 2: expected 2 values, got 1"),
         ("pressure_pa,bending_angle_rad\n", "no data rows"),
         ("# only a comment\n", "no header row"),
-        ("pressure_pa,bending_angle_rad\n1,\n", "column bending_angle_rad: missing or non-finite value in data row 1"),
+        ("pressure_pa,bending_angle_rad\n20000,\n", "column bending_angle_rad: missing or non-finite value in data row 1"),
     ],
 )
 def test_read_free_bending_csv_errors(tmp_path, text, match):
@@ -400,7 +400,7 @@ def test_cli_refuses_to_overwrite(tmp_path):
 @pytest.mark.parametrize(
     ("kind", "text", "match"),
     [
-        ("free-bending", "pressure_pa,angle\n1,2\n", "missing bending angle column"),
+        ("free-bending", "pressure_pa,angle\n20000,2\n", "missing bending angle column"),
         ("free-bending", "pressure_pa,bending_angle_rad\n1,oops\n", "not a number"),
         ("free-bending", "pressure_pa,bending_angle_rad\n1e3,0.1\n2e3,0.2\n", "need more than 3 points"),
         ("stiffness", "pressure_pa,fx_n,fy_n\n1,0,0\n", "no measured points"),

@@ -58,6 +58,7 @@ from bendsense._io import check_csv_header, read_text
 from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.plausibility import check_pressure_column
+from bendsense.validation import key as _name
 from bendsense.validation import short
 
 __all__ = [
@@ -103,7 +104,7 @@ def _read_table(path) -> tuple[list[str], np.ndarray]:
         raise SessionError(f"{path}: {err}") from None
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
-        raise SessionError(f"{path}: duplicate columns {', '.join(dup)}")
+        raise SessionError(f"{path}: duplicate columns {', '.join(_name(d) for d in dup[:8])}")
     rows = []
     for lineno, cells in enumerate(reader, start=start + 2):
         if not cells or all(not c.strip() for c in cells):
@@ -133,11 +134,6 @@ def _column(path, header, data, names: Mapping[str, float], what: str, required:
             raise SessionError(f"{path}: missing {what} column ({' or '.join(names)})")
         return None
     name = present[0]
-    if name in ("pressure_pa", "pressure_kpa"):  # kPa numbers in a Pa column and vice versa
-        try:
-            check_pressure_column(name, data[:, header.index(name)], 1)
-        except SessionError as err:
-            raise SessionError(f"{path}: {err}") from None
     values = data[:, header.index(name)] * names[name]
     return values, name
 
@@ -149,6 +145,14 @@ def _require_finite(path, name, values):
 
 
 _PRESSURE = {"pressure_pa": 1.0, "pressure_kpa": 1e3}
+
+
+def _check_pressure_unit(path, name, pressure_pa):
+    """kPa numbers in a pressure_pa column (and Pa in pressure_kpa) are refused, after the layout checks."""
+    try:
+        check_pressure_column(name, pressure_pa / _PRESSURE[name], 1)
+    except SessionError as err:
+        raise SessionError(f"{path}: {err}") from None
 
 
 def read_free_bending_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
@@ -166,6 +170,7 @@ def read_free_bending_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarr
     )
     _require_finite(path, pname, pressure)
     _require_finite(path, aname, angle)
+    _check_pressure_unit(path, pname, pressure)
     return pressure, angle
 
 
@@ -265,9 +270,12 @@ def read_stiffness_csv(path: str | os.PathLike, length_m: float) -> StiffnessDat
     if not s_cols:
         raise SessionError(f"{path}: no measured points: give tip_x_m, tip_y_m or s1_m, x1_m, y1_m, ...")
     try:
-        return StiffnessData(pressure, np.stack(forces, axis=-1), np.stack(s_cols, axis=1), np.stack(pos_cols, axis=1))
+        result = StiffnessData(pressure, np.stack(forces, axis=-1), np.stack(s_cols, axis=1),
+                               np.stack(pos_cols, axis=1))
     except ArgumentError as err:
         raise SessionError(f"{path}: {err}") from None
+    _check_pressure_unit(path, pname, pressure)
+    return result
 
 
 # --------------------------------------------------------------------------- helpers

@@ -22,6 +22,7 @@ import numpy as np
 from bendsense._io import check_csv_header, read_text
 from bendsense.errors import SessionError
 from bendsense.plausibility import check_pressure_column, check_time_column
+from bendsense.validation import key as _name
 from bendsense.validation import short
 
 __all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
@@ -156,7 +157,7 @@ def _parse_session_csv(text: str, source: str) -> Session:
         if not h:
             raise SessionError(f"line {header_line}: empty column name in header")
         if h in seen:
-            raise SessionError(f"line {header_line}, column {h}: duplicate column")
+            raise SessionError(f"line {header_line}, column {_name(h)}: duplicate column")
         seen.add(h)
     if "t_s" not in seen:
         raise SessionError(f"line {header_line}: missing required column t_s")

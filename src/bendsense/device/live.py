@@ -316,6 +316,8 @@ class LiveView:
             self.arrow.set_visible(False)
             if frame.estimate is None:
                 text = "F: no pressure reading" if not math.isfinite(frame.pressure_pa) else "F: not estimated"
+            elif str(frame.estimate.message).startswith("pressure_out_of_range"):
+                text = "F: pressure out of range"
             else:
                 text = "F: not converged"
         p = frame.pressure_pa
