@@ -50,7 +50,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from bendsense.errors import OutputError, OutputExistsError
+from bendsense.errors import ArgumentError, OutputError, OutputExistsError
 
 __all__ = [
     "MANIFEST_NAME",
@@ -119,7 +119,7 @@ class Target:
 
     def __post_init__(self):
         if self.kind not in _KINDS:
-            raise ValueError(f"kind: must be one of {', '.join(_KINDS)}, got {self.kind!r}")
+            raise ArgumentError(f"kind: must be one of {', '.join(_KINDS)}, got {self.kind!r}")
         object.__setattr__(self, "path", Path(self.path))
 
 
