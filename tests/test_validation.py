@@ -167,3 +167,13 @@ def test_no_bare_value_errors_for_user_input_and_no_cli_handler_catches_them():
                for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
                if re.search(r"except\s*\(?[^)]*\bValueError\b", line)]
     assert catches == []
+
+
+def test_a_repeated_yaml_key_is_refused_with_both_lines(tmp_path):
+    text = (bendsense.config.resources.files("bendsense.data") / "paper.yaml").read_text()
+    path = tmp_path / "twice.yaml"
+    path.write_text(text + "stiffness:\n  ei0_nm2: 0.001\n")
+    first = 1 + text.splitlines().index("stiffness:")
+    with pytest.raises(ConfigError, match=rf"twice.yaml: duplicate key 'stiffness' \(line {len(text.splitlines()) + 1}; "
+                                          rf"first on line {first}\)"):
+        bendsense.load_config(path)

@@ -116,7 +116,7 @@ def safe_load(text: str, source: str, error=None):
 
 
 def _check_expansion(root, source: str, error) -> None:
-    """Refuse a node graph that expands beyond MAX_YAML_NODES or refers to itself."""
+    """Refuse a node graph that expands beyond MAX_YAML_NODES, refers to itself or repeats a key."""
     import yaml
 
     size: dict[int, int] = {}
@@ -145,6 +145,15 @@ def _check_expansion(root, source: str, error) -> None:
             continue
         if key in active:
             raise error(f"{source}: YAML alias refers to itself (a recursive structure); refused")
+        if isinstance(node, yaml.MappingNode):
+            # YAML lets a repeated key silently replace the first one: a copy-paste mistake
+            seen = {}
+            for k, _ in node.value:
+                if isinstance(k, yaml.ScalarNode):
+                    if k.value in seen and k.value != "<<":
+                        raise error(f"{source}: duplicate key {k.value[:40]!r} (line {k.start_mark.line + 1}; "
+                                    f"first on line {seen[k.value]})")
+                    seen[k.value] = k.start_mark.line + 1
         active.add(key)
         stack.append((node, True))
         children = node.value if isinstance(node, yaml.SequenceNode) else [n for pair in node.value for n in pair]
