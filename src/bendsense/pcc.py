@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bendsense.errors import ArgumentError
+from bendsense.validation import float_array
 
 if TYPE_CHECKING:  # pragma: no cover
     from bendsense.calibration import Calibration
@@ -715,7 +716,7 @@ def reconstruct(
     n = sensor.n_segments
     if calibration.n_channels != n:
         raise ConfigError(f"calibration.n_channels: expected {n} (sensor.n_segments), got {calibration.n_channels}")
-    a = np.asarray(signals, dtype=float)
+    a = float_array("signals", signals)
     if a.shape[-1:] != (n,):
         raise ArgumentError(f"signals: expected {n} channels on the last axis, got shape {a.shape}")
     lengths = sensor.lengths_m

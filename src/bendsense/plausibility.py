@@ -39,8 +39,10 @@ OUT_OF_RANGE = "pressure_out_of_range"
 
 def pressure_outside(pressure_pa, config) -> np.ndarray:
     """True for each finite pressure outside ``config.actuator.pressure_range_pa`` [Pa]."""
+    from bendsense.validation import float_array
+
     lo, hi = config.actuator.pressure_range_pa
-    p = np.asarray(pressure_pa, dtype=float)
+    p = float_array("pressure_pa", pressure_pa)
     with np.errstate(invalid="ignore"):
         return np.isfinite(p) & ((p < lo) | (p > hi))
 

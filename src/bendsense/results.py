@@ -98,6 +98,9 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     status = np.full(n, "ok", dtype=object)
     extrapolated = np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))
     status[extrapolated] = "extrapolated"
+    # a shape from non-finite signals is never ok
+    kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float).reshape(n, -1)
+    status[~np.isfinite(kappa).all(axis=1)] = "no shape"
     if estimate is not None:
         failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
         status[failed] = "not converged"

@@ -29,6 +29,7 @@ __all__ = [
     "duration_s",
     "length_m",
     "parse_number",
+    "float_array",
     "key",
     "MAX_LENGTH_M",
 ]
@@ -166,3 +167,11 @@ def key(value, limit: int = 40) -> str:
     """A mapping key or column name for a message: as written, cut to ``limit`` characters."""
     text = value if isinstance(value, str) else short(value, limit)
     return _cut(text, limit)
+
+
+def float_array(field: str, value, *, error=ArgumentError) -> np.ndarray:
+    """``value`` as a float array; text or objects that are not numbers are refused."""
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise fail(field, "numbers", value, error) from None
