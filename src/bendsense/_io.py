@@ -8,32 +8,31 @@ from pathlib import Path
 __all__ = ["load_yaml", "parse_yaml", "read_text", "safe_load"]
 
 
-MAX_TEXT_BYTES = 64 * 2**20
-"""Largest text file (session CSV, results) a reader accepts [bytes]."""
 MAX_YAML_BYTES = 2 * 2**20
 """Largest YAML file (config, calibration, manifest, meta.yaml) a reader accepts [bytes]."""
 MAX_YAML_NODES = 50_000
 """Most YAML nodes a document may expand to, aliases counted at every use."""
 
 
-def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int = MAX_TEXT_BYTES) -> str:
+def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int | None = None) -> str:
     """The UTF-8 text of ``path`` (a leading byte-order mark dropped).
 
     Every problem is one line that starts with the path: the file cannot be read,
-    is larger than ``max_bytes``, holds NUL bytes (binary, not text), or is not
-    UTF-8 (with the byte offset and line of the first bad byte).
+    is larger than ``max_bytes`` (None: no bound; session CSVs of hours are large),
+    holds NUL bytes (binary, not text), or is not UTF-8 (with the byte offset and
+    line of the first bad byte).
     """
     from bendsense.errors import ConfigError
 
     error = error or ConfigError
     try:
         with open(path, "rb") as fh:
-            data = fh.read(max_bytes + 1)
+            data = fh.read() if max_bytes is None else fh.read(max_bytes + 1)
     except FileNotFoundError:
         raise error(f"{path}: cannot read {what}: no such file") from None
     except OSError as err:
         raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
-    if len(data) > max_bytes:
+    if max_bytes is not None and len(data) > max_bytes:
         raise error(f"{path}: too large for a {what} (over {max_bytes / 2**20:g} MiB)")
     if data.startswith((b"\xff\xfe", b"\xfe\xff")):
         raise error(f"{path}: UTF-16 text, not UTF-8; save the file as UTF-8")
