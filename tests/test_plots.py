@@ -294,7 +294,7 @@ def test_cli_plot_standalone(results_dir, tmp_path):
     result = CliRunner().invoke(main, ["plot", str(tmp_path / "none"), "-o", str(tmp_path / "x.png")])
     assert result.exit_code == 2 and "not a results directory" in result.output
     result = CliRunner().invoke(main, ["plot", str(results_dir), "-o", str(tmp_path / "fig.doc")])
-    assert result.exit_code == 2 and "unknown figure format '.doc'; use one of" in result.output
+    assert result.exit_code == 1 and "unknown figure format '.doc' (-o/--output); use one of" in result.output
 
 
 def test_cli_plot_in_a_chain_after_save(tmp_path):
