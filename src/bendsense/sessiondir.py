@@ -506,6 +506,9 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     meta["frames_lost"] = int(seq[-1] - seq[0] + 1 - seq.size) if seq.size else 0
     drops = _unwrap16(records["tx_drops"]) if "tx_drops" in records.dtype.names else np.zeros(0, np.int64)
     meta["tx_drops"] = int(drops[-1] - drops[0]) if drops.size else 0
+    from bendsense.plausibility import check_time_column
+
+    check_time_column(t_s, source or "session")
     return Session(t_s, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
 
 
