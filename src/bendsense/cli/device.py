@@ -277,7 +277,8 @@ def record(
     type=click.Path(exists=True, path_type=Path),
     help="Play a recording back (native session directory or session CSV) with its original timing.",
 )
-@click.option("--speed", type=Finite(min=0, min_open=True), default=1.0, show_default=True, help="Replay speed (2: twice as fast).")
+@click.option("--speed", type=Finite(min=0, min_open=True), default=1.0, show_default=True,
+              help="Replay speed (2: twice as fast).")
 @click.option("--loop", is_flag=True, help="Replay: start over after the last frame, until stopped.")
 def sim_device(
     rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop
