@@ -1,6 +1,7 @@
 """The estimator reproduces its frozen outputs (tests/data/regression, make_fixtures.py).
 
-Forces to 1e-9 N, σ to 1e-9 relative, the same success flags and messages: a change of
+Forces to 1e-9 N, σ to 1e-9 relative (given the misfit's Birge factor), χ² to 2e-3, the
+same success flags and messages: a change of
 the implementation (e.g. the compiled core) must not change an answer unnoticed.
 """
 
@@ -40,7 +41,17 @@ def test_estimator_reproduces_the_frozen_outputs(case, calibration):
     np.testing.assert_array_equal(out["success"], want["success"])
     np.testing.assert_array_equal(out["message"], want["message"])
     np.testing.assert_allclose(out["force_n"], want["force_n"], rtol=0, atol=1e-9)
-    # σ to 1e-9 relative; a shape made by the beam model itself fits to round-off, and its
-    # residual-based σ (~1e-9 N) is round-off too: it may differ by 1e-13 N
-    np.testing.assert_allclose(out["std_n"], want["std_n"], rtol=1e-9, atol=1e-12)
+    # χ² is a GLS since the compiled core (one Cholesky factorisation instead of the
+    # eigen-decomposition's pseudo-inverse of rank N - k): the same number where the fit
+    # absorbs exactly k free directions; it differs where a bound is active (push_only
+    # at u = 0) or D turns with the shape's tip angle, where neither form is exact
+    old, new = want["chi2_per_dof"], out["chi2_per_dof"]
+    np.testing.assert_array_equal(np.isfinite(new), np.isfinite(old))
+    if not ("push" in case or "shape" in case):
+        np.testing.assert_allclose(new, old, rtol=2e-3)
+    # σ to 1e-9 relative once the Birge factor max(1, χ²/dof) of each version is taken out;
+    # a shape made by the beam model itself fits to round-off, and its residual-based σ
+    # (~1e-9 N) is round-off too: it may differ by 1e-13 N
+    birge = np.sqrt(np.maximum(1.0, np.nan_to_num(new)) / np.maximum(1.0, np.nan_to_num(old)))[..., None]
+    np.testing.assert_allclose(out["std_n"], want["std_n"] * birge, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(out["residual_m"], want["residual_m"], rtol=1e-7, atol=1e-13)

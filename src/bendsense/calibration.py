@@ -46,8 +46,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from bendsense._io import load_yaml
 from bendsense import validation as check
+from bendsense._io import load_yaml
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 
 __all__ = [
@@ -549,16 +549,6 @@ class Calibration:
         return tuple(np.ascontiguousarray(k * c[:, k]) for k in range(self.degree, 0, -1))
 
     @cached_property
-    def _value_slope_columns(self) -> tuple:
-        # (f, f') per channel as one (2, N) Horner column per power, highest first; f'
-        # padded with a leading zero column so that both share the steps
-        cols, dcols = self._coefficient_columns, self._slope_columns
-        if not dcols:
-            return ()
-        slope = (np.zeros(self.n_channels), *dcols)
-        return tuple(np.stack([c, d]) for c, d in zip(cols, slope, strict=True))
-
-    @cached_property
     def _noise_positive(self) -> bool:
         return bool(np.any(self.noise_std > 0))
 
@@ -575,16 +565,6 @@ class Calibration:
         out = cols[0] + 0.0 * delta_a
         for ck in cols[1:]:
             out = out * delta_a + ck
-        return out
-
-    def _shifts_one(self, delta_a):
-        """:meth:`shifts_from_delta` of one frame (N,), in place on one buffer."""
-        cols = self._coefficient_columns
-        out = delta_a * 0.0  # NaN where ΔA is not finite, as shifts_from_delta
-        out += cols[0]
-        for ck in cols[1:]:
-            out *= delta_a
-            out += ck
         return out
 
     def shifts_m(self, signals):
@@ -712,13 +692,6 @@ class Calibration:
         """Per frame: True if any channel's ΔA lies outside the calibrated range."""
         lo, hi = self._channel_range
         return np.any((delta_a < lo) | (delta_a > hi), axis=-1)
-
-    def _extrapolated_one(self, delta_a) -> bool:
-        """:meth:`extrapolated_delta` of one frame (N,)."""
-        lo, hi = self._channel_range
-        out = delta_a < lo
-        out |= delta_a > hi
-        return bool(out.any())
 
     def in_range(self, signals):
         """Per frame (...,): True if every channel's ΔA lies in the fitted range.

@@ -25,7 +25,6 @@ and an infinite standard deviation along that direction.
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 
@@ -34,14 +33,27 @@ import numpy as np
 from bendsense import _jit
 from bendsense import beam as _beam
 from bendsense.errors import ArgumentError, ConvergenceError
-from bendsense.plausibility import pressure_range_step
 from bendsense.estimation import kernels as _kernels
 from bendsense.estimation.paper import paper_fit
-from bendsense.estimation.problem import CONSTRAINTS, chebyshev_nodes_m, constraint_basis, quadrature, reference
+from bendsense.estimation.problem import (
+    CONSTRAINTS,
+    TIP_ANGLE_KINDS,
+    Frames,
+    Problem,
+    chebyshev_nodes_m,
+    constraint_basis,
+    constraint_kind,
+    points,
+    quadrature,
+    reference,
+)
 from bendsense.estimation.result import ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
-from bendsense.estimation.uncertainty import shift_covariance, tip_angle_shift_gradient
+from bendsense.estimation.uncertainty import shift_error_model, tip_angle_shift_gradient
+from bendsense.plausibility import pressure_range_step
 from bendsense.status import Status
+
+_OK, _NOT_IDENTIFIABLE = int(Status.OK), int(Status.NOT_IDENTIFIABLE)
 
 __all__ = [
     "ForceEstimate",
@@ -63,6 +75,7 @@ XTOL_N = 1e-10
 MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
 _N_NODES = _beam.DEFAULT_NODES
+_OPS = _beam._operators(_N_NODES).kernel  # the beam solver's operators (read-only)
 
 
 def _c(a, dtype=float):
@@ -161,122 +174,47 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     est = config.estimation
     constraint = est.constraint if constraint is None else constraint
     method = est.method if method is None else method
-    if constraint not in CONSTRAINTS:
-        raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
     if method not in METHODS:
         raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
-    if objective not in OBJECTIVES:
-        raise ArgumentError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
-    push_only = bool(est.push_only if push_only is None else push_only)
-    source = est.tip_angle_source if tip_angle_source is None else tip_angle_source
-    if source not in ("model", "shape"):
-        raise ArgumentError(f"tip_angle_source: must be one of model, shape, got {source!r}")
-    direction = np.asarray(est.direction if direction is None else direction, dtype=float)
-    if direction.shape != (2,) or not np.all(np.isfinite(direction)) or abs(np.hypot(*direction) - 1.0) > 1e-6:
-        raise ArgumentError(f"direction: expected a unit vector (2,), got {direction.tolist()}")
-    follower = float(est.follower_angle_rad if follower_angle_rad is None else follower_angle_rad)
+    if initial is not None and not isinstance(initial, ForceEstimate):
+        raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
+    L = float(config.actuator.length_m)
     n_points = int(est.n_points if n_points is None else n_points)
     if n_points < 3:
         raise ArgumentError(f"n_points: must be >= 3, got {n_points}")
-    if push_only and constraint == "none":
-        raise ArgumentError("push_only: only for the 1-D constraints (vertical, horizontal, direction, normal, "
-                         "follower), got constraint='none'")
-    if initial is not None and not isinstance(initial, ForceEstimate):
-        raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
-
-    L = float(config.actuator.length_m)
     ref = reference(shape, config, s_m, n_points, L)
+    options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
+        np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
+        None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes())
+    pb, uncertainty = _problem(config, calibration, ref, options, noise_std)
     P = np.asarray(pressure_pa, dtype=float)
     if not np.isfinite(P).all():
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
-    try:
-        batch = np.broadcast_shapes(ref.p0.shape[:-2], P.shape)
-    except ValueError:
-        raise ArgumentError(f"pressure_pa: shape {P.shape} does not broadcast against the shape's frames "
-                         f"{ref.p0.shape[:-2]}") from None
+    batch = _batch(ref.batch_shape, P.shape)
     B = math.prod(batch)
-    M = ref.s.size
-
-    def flat(a, tail=(), dtype=float):
-        a = np.asarray(a)
-        if a.shape != (B, *tail):
-            a = a.reshape(B, *tail) if a.size == B * math.prod(tail) else np.broadcast_to(a, (*batch, *tail)).reshape(
-                B, *tail)
-        return _c(a, dtype)
-
-    Pf = flat(P)
-    model = _models(config)
-    theta = flat(model.bending_angle_rad(Pf))  # free-motion tip angle
-    k0 = theta / model.length_m  # as model.tip_curvature_per_m
-    ei = flat(config.stiffness.ei_nm2(Pf))
-    if not np.all(ei > 0):
-        raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
-                         f"at {float(Pf[np.argmin(ei)])!r} Pa")
-    phi_L = theta if source == "model" else flat(ref.tip_shape)
-    D, dD = constraint_basis(constraint, phi_L, direction=direction, follower_angle_rad=follower)
-    k = D.shape[-1]
-    D = flat(D, (2, k))
-    has_dD = dD is not None and source == "shape"
-    dD = flat(dD, (2, k)) if has_dD else np.zeros((B, 2, k))
-    lower = np.full(k, 0.0 if push_only else -np.inf)
-    ffix = np.zeros((B, 2))
-    wload = _c(np.array(config.weight_per_length_n_per_m, dtype=float))
-    p0 = flat(ref.p0, (M, 2))
-
-    # starting points: the moment-balance guess (in the kernel), corrected by the previous
-    # estimate's offset from its own guess, or a given force
-    u_init = np.zeros((B, k))
-    offset = np.zeros((B, k))
-    use_guess = True
-    chain = warm_start
-    if initial is not None and initial_force_n is None and initial.guess_n is not None:
-        prev_f = flat(np.asarray(initial.force_n, dtype=float), (2,))
-        prev_g = flat(np.asarray(initial.guess_n, dtype=float), (2,))
-        good = np.isfinite(prev_f).all(axis=1) & np.isfinite(prev_g).all(axis=1)
-        offset[good] = np.einsum("bij,bi->bj", D[good], prev_f[good] - prev_g[good])
-        chain = False
-    elif initial is not None and initial_force_n is None:
-        initial_force_n = initial.force_n
-    if initial_force_n is not None and (initial is None or initial.guess_n is None):
-        f0 = np.asarray(initial_force_n, dtype=float)
-        if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
-            raise ArgumentError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
-        u_init = np.einsum("bij,bi->bj", D, flat(f0, (2,)) - ffix)
-        use_guess = False
-        chain = False
-
-    noise = _noise_model(ref, B, config, noise_std, calibration, L)
-    ops = _beam._operators(_N_NODES)  # read-only arrays: their own, fixed types
-    _, PQ = _beam._sampling(_N_NODES, (ref.s / L).tobytes())
-    PQ, q = _c(PQ), _c(ops.Q[-1])
-    state0 = flat(ref.state, (_N_NODES,))
-    force, cov = np.empty((B, 2)), np.empty((B, 2, 2))
-    status, iters = np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
-    residual, chi2, guess_n = np.empty(B), np.empty(B), np.full((B, 2), np.nan)
-    state, tip, blocked_dir = np.empty((B, _N_NODES)), np.empty((B, 2)), np.zeros((B, 2))
-    common = (L, wload, ei, k0, D, dD, has_dD, ffix)
+    fr = _frames(ref if method == "fast" else points(ref), P, batch, B, config)
+    k = pb.lower.size
+    start, use_guess, chain = _starts(initial, initial_force_n, B, batch, warm_start)
+    n = _N_NODES
+    out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
+           np.empty(B), np.empty(B), np.full((B, 2), np.nan), np.empty((B, n)), np.empty((B, 2)), np.zeros((B, 2)))
+    force, cov, status, iters, residual, chi2, guess_n, state, tip, blocked_dir = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
-        args = (p0, _c(ref.s), _c(ref.w), *common, lower, flat(ref.phi[..., -1]), flat(ref.kappa_s, (M,)), state0,
-                u_init, offset, float(xtol_n), int(max_iter), ops.kernel, PQ, q, noise,
-                (force, cov, status, iters, residual, chi2, guess_n, state, tip, blocked_dir))
         if block >= B:  # one block (one frame, a short series): the same kernel without the threads
-            _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, *args)
+            _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, fr, pb, _OPS, start, out)
         else:
-            _jit.call(_kernels.estimate_frames, block, use_guess, *args)
+            _jit.call(_kernels.estimate_frames, block, use_guess, fr, pb, _OPS, start, out)
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force; the
-        # shape, its sensitivities and the uncertainty at its optimum come from the fast solver
-        u, run_status, iters = paper_fit(L, ref.s, ref.w, ref.Lc, wload, p0, ei, k0, D, ffix, lower,
-                                         np.maximum(np.zeros((B, k)), lower))
-        _jit.call(_kernels.evaluate_frames, p0, _c(ref.w), *common, _c(u), _c(run_status, np.int64), state0,
-                  ops.kernel, PQ, q, noise, (force, cov, status, residual, chi2, state, tip))
-    # a NaN force is never a success
-    bad = ((status == Status.OK) | (status == Status.NOT_IDENTIFIABLE)) & ~np.isfinite(force).all(axis=1)
-    if bad.any():
-        status[bad] = Status.NOT_CONVERGED
-        force[bad], cov[bad], chi2[bad] = np.nan, np.nan, np.nan
-    success = (status == Status.OK) | (status == Status.NOT_IDENTIFIABLE)
+        # shape, its sensitivities and the uncertainty at its optimum come from the compiled core
+        tip_angle = (fr.tip_shape if pb.shape_angle else fr.theta)
+        D = constraint_basis(constraint, tip_angle, direction=pb.direction, follower_angle_rad=pb.follower_angle)[0]
+        u, run_status, iters = paper_fit(L, pb.s, pb.w, ref.Lc, pb.wload, fr.p0, fr.ei, fr.k0, D,
+                                         np.broadcast_to(pb.ffix, (B, 2)), pb.lower,
+                                         np.maximum(np.zeros((B, k)), pb.lower))
+        _jit.call(_kernels.evaluate_frames, fr, pb, _OPS, _c(u), _c(run_status, np.int64), out)
+    success = (status == _OK) | (status == _NOT_IDENTIFIABLE)  # never with a NaN force (kernels.finish)
     text = messages(status, residual, blocked_dir, method)
     if strict and not success.all():
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
@@ -287,41 +225,148 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         residual_m=residual.reshape(batch),
         success=success.reshape(batch),
         message=text.reshape(batch) if batch else str(text[0]),
-        iterations=np.asarray(iters).reshape(batch),
+        iterations=iters.reshape(batch),
         wall_time_s=time.perf_counter() - t_start,
         method=method,
         constraint=constraint,
-        uncertainty="propagated" if noise[0] else "residual",
+        uncertainty=uncertainty,
         tip_position_m=tip.reshape(*batch, 2),
-        state=state.reshape(*batch, _N_NODES),
+        state=state.reshape(*batch, n),
         guess_n=guess_n.reshape(*batch, 2),
         chi2_per_dof=chi2.reshape(batch),
     )
 
 
-@functools.lru_cache(maxsize=16)
-def _tip_gradient(lengths: bytes, length_m: float, gap: float) -> np.ndarray:
-    """∂φ_L/∂S (N,) of a sensor (cached)."""
-    return _c(tip_angle_shift_gradient(np.frombuffer(lengths), length_m, gap))
+def _batch(shape_batch, pressure_shape):
+    """The frames' batch shape: the shape's and the pressure's broadcast."""
+    if shape_batch == pressure_shape:
+        return shape_batch
+    try:
+        return np.broadcast_shapes(shape_batch, pressure_shape)
+    except ValueError:
+        raise ArgumentError(f"pressure_pa: shape {pressure_shape} does not broadcast against the shape's frames "
+                            f"{shape_batch}") from None
 
 
-def _noise_model(ref, B, config, noise_opt, calibration, L):
-    """The kernels' noise arguments: (has_cov, Σ_S (B, N, N), κ (B, N), lengths, gap, seg, σ, ∂φ_L/∂S).
+def _flat(a, batch, B, tail=(), dtype=float):
+    """``a`` broadcast to the frames ``batch`` and flattened to (B, *tail), as the kernels take it."""
+    a = np.asarray(a)
+    if a.shape != (B, *tail):
+        a = a.reshape(B, *tail) if a.size == B * math.prod(tail) else np.broadcast_to(a, (*batch, *tail)).reshape(
+            B, *tail)
+    return _c(a, dtype)
 
-    Σ_S is the shift covariance of every frame of a PCC shape with a noise model
-    (signal noise or calibration error); otherwise ``has_cov`` is False and the arrays
-    are placeholders (the residual fallback).
-    """
-    gap = float(config.sensor.strip_gap_m)
+
+def _frames(ref, P, batch, B, config) -> Frames:
+    """The per-frame inputs of the kernels: the shape's and the pressure's (K0, EI, the free tip angle)."""
+    Pf = _flat(P, batch, B)
+    model = _models(config)
+    theta = _c(model.bending_angle_rad(float(Pf[0]) if B == 1 else Pf), float).reshape(B)  # free-motion tip angle
+    ei = _c(config.stiffness.ei_nm2(Pf))
+    if not ei.min() > 0:
+        raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
+                            f"at {float(Pf[np.argmin(ei)])!r} Pa")
+    M, n = ref.s.size, _N_NODES
     if ref.kappa is not None:
-        sigma_a = _signal_noise(noise_opt, calibration, config.estimation)
-        if np.any(sigma_a > 0) or calibration is not None:
-            N = ref.lengths.size
-            kappa = np.broadcast_to(ref.kappa, (*ref.p0.shape[:-2], N)).reshape(-1, N)
-            kappa = _c(np.broadcast_to(kappa, (B, N)))
-            cov_s = shift_covariance(kappa, ref.lengths, gap, np.broadcast_to(sigma_a, (N,)), calibration)
-            if np.any(np.trace(cov_s, axis1=-2, axis2=-1) > 0):
-                return (True, _c(cov_s), _c(kappa), _c(ref.lengths), gap, _c(ref.seg, np.int64), _c(ref.sigma),
-                        _tip_gradient(ref.lengths.tobytes(), L, gap))
-    return (False, np.zeros((B, 1, 1)), np.zeros((B, 1)), np.zeros(1), gap, np.zeros(1, dtype=np.int64), np.zeros(1),
-            np.zeros(1))
+        kappa = _flat(ref.kappa, batch, B, (ref.lengths.size,))
+    else:
+        kappa = np.empty((0, 1))
+    if ref.p0 is None:
+        p0, phi_end, kappa_s, state, tip = np.empty((0, M, 2)), np.empty(0), np.empty((0, M)), np.empty((0, n)), \
+            np.empty(0)
+    else:
+        p0, phi_end = _flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B)
+        kappa_s, state = _flat(ref.kappa_s, batch, B, (M,)), _flat(ref.state, batch, B, (n,))
+        tip = _flat(ref.tip_shape, batch, B)
+    return Frames(kappa, p0, phi_end, kappa_s, state, tip, ei, theta / model.length_m, theta)
+
+
+def _starts(initial, initial_force_n, B, batch, warm_start):
+    """The kernels' start: a force offset from the moment-balance guess, or a force; and whether to chain frames.
+
+    The previous estimate (``initial``) corrects the guess by its own offset from its
+    guess; a given force (``initial_force_n``, or an ``initial`` without guesses) is the
+    start itself. Either disables the chaining of frames along the batch.
+    """
+    start = np.zeros((B, 2))
+    if initial is not None and initial_force_n is None and initial.guess_n is not None:
+        prev_f = _flat(np.asarray(initial.force_n, dtype=float), batch, B, (2,))
+        prev_g = _flat(np.asarray(initial.guess_n, dtype=float), batch, B, (2,))
+        good = np.isfinite(prev_f).all(axis=1) & np.isfinite(prev_g).all(axis=1)
+        start[good] = prev_f[good] - prev_g[good]
+        return start, True, False
+    if initial is not None and initial_force_n is None:
+        initial_force_n = initial.force_n
+    if initial_force_n is not None:
+        f0 = np.asarray(initial_force_n, dtype=float)
+        if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
+            raise ArgumentError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
+        return _flat(f0, batch, B, (2,)), False, False
+    return start, True, warm_start
+
+
+_PROBLEMS: dict = {}  # (config, calibration, grid, options) -> (config, calibration, grid, Problem, uncertainty)
+
+
+def _problem(config, calibration, ref, options, noise_opt):
+    """The constants of an estimate (:class:`~bendsense.estimation.problem.Problem`), cached per inputs."""
+    key = (id(config), id(calibration), id(ref.grid) if ref.kappa is not None else ref.s.tobytes(), options)
+    hit = _PROBLEMS.get(key)
+    if hit is not None and hit[0] is config and hit[1] is calibration and (ref.kappa is None or hit[2] is ref.grid):
+        return hit[3], hit[4]
+    pb, uncertainty = _build_problem(config, calibration, ref, options, noise_opt)
+    if len(_PROBLEMS) >= 32:  # bounded: callers with ever-new configs must not leak
+        _PROBLEMS.clear()
+    _PROBLEMS[key] = (config, calibration, ref.grid, pb, uncertainty)
+    return pb, uncertainty
+
+
+def _build_problem(config, calibration, ref, options, noise_opt):
+    constraint, objective, push_only, source, direction, follower, xtol_n, max_iter, _ = options
+    est = config.estimation
+    if constraint not in CONSTRAINTS:
+        raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+    if objective not in OBJECTIVES:
+        raise ArgumentError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    push_only = bool(est.push_only if push_only is None else push_only)
+    source = est.tip_angle_source if source is None else source
+    if source not in ("model", "shape"):
+        raise ArgumentError(f"tip_angle_source: must be one of model, shape, got {source!r}")
+    direction = np.asarray(est.direction if direction is None else direction, dtype=float)
+    if direction.shape != (2,) or not np.all(np.isfinite(direction)) or abs(np.hypot(*direction) - 1.0) > 1e-6:
+        raise ArgumentError(f"direction: expected a unit vector (2,), got {direction.tolist()}")
+    follower = float(est.follower_angle_rad if follower is None else follower)
+    if push_only and constraint == "none":
+        raise ArgumentError("push_only: only for the 1-D constraints (vertical, horizontal, direction, normal, "
+                            "follower), got constraint='none'")
+    kind, k, fixed = constraint_kind(constraint, direction)
+    L = float(config.actuator.length_m)
+    gap = float(config.sensor.strip_gap_m)
+    pcc = ref.kappa is not None
+    noise = False
+    sigma_a = _signal_noise(noise_opt, calibration, est)
+    if pcc:
+        g = ref.grid
+        lengths = ref.lengths
+        model = shift_error_model(sigma_a, calibration, lengths.size)
+        noise = bool(np.any(sigma_a > 0)) or (calibration is not None and bool(np.any(model["error_odd"] > 0) or np.any(
+            model["error_even"] > 0)))
+        geometry = (g["seg_fk"], g["sigma_fk"], g["beyond"], g["tip_weights"], lengths, gap, g["seg"], g["sigma"],
+                    tip_angle_shift_gradient(lengths, L, gap))
+    else:
+        model = shift_error_model(np.zeros(1), None, 1)
+        geometry = (np.zeros(1, np.int64), np.zeros(1), np.zeros(_N_NODES), np.zeros(1), np.ones(1), gap,
+                    np.zeros(1, np.int64), np.zeros(1), np.zeros(1))
+    ops = _beam._operators(_N_NODES)
+    _, PQ = _beam._sampling(_N_NODES, (ref.s / L).tobytes())
+    seg_fk, sigma_fk, beyond, tip_weights, lengths, gap, seg, sigma, dphi_ds = geometry
+    pb = Problem(
+        pcc=pcc, kind=kind, direction=_c(fixed), follower_angle=follower,
+        shape_angle=source == "shape" and kind in TIP_ANGLE_KINDS,
+        seg_fk=_c(seg_fk, np.int64), sigma_fk=_c(sigma_fk), beyond=_c(beyond), tip_weights=_c(tip_weights),
+        lengths=_c(lengths), gap=gap, seg=_c(seg, np.int64), sigma=_c(sigma), dphi_ds=_c(dphi_ds), noise=noise,
+        **{name: _c(a, a.dtype) if isinstance(a, np.ndarray) else a for name, a in model.items()},
+        s=_c(ref.s), w=_c(ref.w), L=L, wload=_c(config.weight_per_length_n_per_m), ffix=np.zeros(2),
+        lower=np.full(k, 0.0 if push_only else -np.inf), xtol=xtol_n, max_iter=max_iter,
+        PQ=_c(PQ), q=_c(ops.Q[-1]))
+    return pb, ("propagated" if noise else "residual")

@@ -20,7 +20,8 @@ import numpy as np
 from numba import njit, prange
 
 from bendsense import beam_kernels as bk
-from bendsense.estimation.uncertainty import covariance
+from bendsense.estimation import problem as prob
+from bendsense.estimation import uncertainty as unc
 from bendsense.status import Status
 
 _RUNNING = int(Status.RUNNING)
@@ -34,23 +35,6 @@ MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the bounda
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a boundary stop is a failure
 NEWTON_TOL = 1e-11
 NEWTON_MAX_ITER = 30
-
-
-@njit(cache=True)
-def lm_step(H, g, out):
-    """−(H + ε I)⁻¹ g for a 1×1 or 2×2 system (closed form)."""
-    k = g.size
-    if k == 1:
-        h = H[0, 0]
-        out[0] = -g[0] / (h + (1e-14 * h + 1e-300))
-        return
-    eps = 1e-14 * (H[0, 0] + H[1, 1]) + 1e-300
-    a = H[0, 0] + eps
-    d = H[1, 1] + eps
-    b = H[0, 1]
-    det = a * d - b * b
-    out[0] = -((d * g[0] - b * g[1]) / det)
-    out[1] = -((a * g[1] - b * g[0]) / det)
 
 
 @njit(cache=True)
@@ -103,7 +87,7 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, u
         tr += H[q, q]
     for q in range(k):
         H[q, q] += 1e-6 * tr / k
-    lm_step(H, g, u)
+    unc.lm_step(H, g, u)
     norm = 0.0
     for q in range(k):
         norm += u[q] * u[q]
@@ -122,6 +106,7 @@ def workspace(M, n):
 
 @njit(cache=True)
 def copy_workspace(src, dst):
+    """Copy one beam evaluation's workspace into another."""
     dst[0][:, :] = src[0]
     dst[1][:, :, :] = src[1]
     dst[2][:] = src[2]
@@ -266,7 +251,7 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
     GFn = np.empty((2, 2))
     pos, dpos, st, _, dst = ws
     for _ in range(max_iter):
-        lm_step(H, g, step)
+        unc.lm_step(H, g, step)
         size = 0.0
         for c in range(k):
             dstep[c] = max(u[c] + step[c], lower[c]) - u[c]
@@ -345,10 +330,9 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
 
 
 @njit(cache=True)
-def finish(status, L, p0, w, D, dD, has_dD, u, ffix, ws, blocked, has_cov, cov_s, kappa, lengths, gap, seg, sigma,
-           dphi_ds, force, cov, direction):
+def finish(status, pb, p0, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force, cov, direction):
     """Status, force, covariance and χ²/dof of a frame after the iteration; returns (status, residual, χ²/dof)."""
-    pos = ws[0]
+    pos, L, w = ws[0], pb.L, pb.w
     num = 0.0
     den = 0.0
     for j in range(p0.shape[0]):
@@ -359,8 +343,8 @@ def finish(status, L, p0, w, D, dD, has_dD, u, ffix, ws, blocked, has_cov, cov_s
     residual = math.sqrt(num / den)
     ratio = np.nan
     if status == _OK or status == _NOT_IDENTIFIABLE:
-        ratio = covariance(L, p0, w, D, dD, has_dD, u, ws[0], ws[1], has_cov, cov_s, kappa, lengths, gap, seg,
-                           sigma, dphi_ds, cov)
+        ratio = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws[0], ws[1], frame_cov, cov_s, kappa, pb.lengths,
+                               pb.gap, pb.seg, pb.sigma, pb.dphi_ds, cov)
     if status == _NOT_IDENTIFIABLE:
         v = np.empty(2)
         force_of(D, np.zeros(2), blocked, v)
@@ -374,8 +358,10 @@ def finish(status, L, p0, w, D, dD, has_dD, u, ffix, ws, blocked, has_cov, cov_s
         if residual > BOUNDARY_MISFIT * L:
             status = _NO_STABLE_MATCH
     if status == _OK or status == _NOT_IDENTIFIABLE:
-        force_of(D, ffix, u, force)
-    else:
+        force_of(D, pb.ffix, u, force)
+        if not (math.isfinite(force[0]) and math.isfinite(force[1])):
+            status = _NOT_CONVERGED  # a NaN force is never a success
+    if status != _OK and status != _NOT_IDENTIFIABLE:
         force[:] = np.nan
         cov[:, :] = np.nan
         ratio = np.nan
@@ -383,13 +369,46 @@ def finish(status, L, p0, w, D, dD, has_dD, u, ffix, ws, blocked, has_cov, cov_s
 
 
 @njit(cache=True)
-def estimate_block(lo, hi, use_guess, chained, p0, s, w, L, wload, ei, k0, D, dD, has_dD, ffix, lower, phi_end, kappa_s,
-                   state0, u_init, offset, xtol, max_iter, ops, PQ, q, noise, out):
+def buffers(pb, n):
+    """Per-thread buffers of :func:`setup`: reference points and angles, κ at the nodes, beam start, D, ∂D, Σ_S, κ."""
+    m = pb.seg_fk.size
+    N = pb.lengths.size
+    k = pb.lower.size
+    return (np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
+            np.empty((2, k)), np.empty((N, N)), np.zeros(N))
+
+
+@njit(cache=True)
+def setup(i, fr, pb, buf):
+    """Frame ``i``'s reference shape, constraint basis and shift covariance (the kernels' inputs).
+
+    A PCC frame's reference comes from its curvatures
+    (:func:`~bendsense.estimation.problem.pcc_reference`); a shape given by points
+    brings its own (``fr``: :class:`~bendsense.estimation.problem.Frames`). Returns
+    (p⁰, φ at the last node, κ at the nodes, beam start, D, ∂D/∂φ_L, whether Σ_S is
+    known, Σ_S, κ) of the frame; the arrays live in ``buf`` (:func:`buffers`).
+    """
+    pos, ang, ks, st, D, dD, cov_s, no_kappa = buf
+    M = ks.size
+    if pb.pcc:
+        tip = prob.pcc_reference(fr.kappa[i], pb.lengths, pb.seg_fk, pb.sigma_fk, pb.beyond, pb.tip_weights, pos, ang,
+                                 ks, st)
+        p0, phi_end, kappa_s, state0, kappa = pos[:M], ang[M - 1], ks, st, fr.kappa[i]
+    else:
+        tip = fr.tip_shape[i]
+        p0, phi_end, kappa_s, state0, kappa = fr.p0[i], fr.phi_end[i], fr.kappa_s[i], fr.state[i], no_kappa
+    prob.basis(pb.kind, tip if pb.shape_angle else fr.theta[i], pb.direction, pb.follower_angle, D, dD)
+    frame_cov = pb.pcc and pb.noise and unc.shift_covariance(kappa, pb, cov_s) > 0
+    return p0, phi_end, kappa_s, state0, D, dD, frame_cov, cov_s, kappa
+
+
+@njit(cache=True)
+def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
-    has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds = noise
     force, cov, status, iters, residual, chi2, guess_n, state, tip, direction = out
-    k = lower.size
-    ws = workspace(s.size, state0.shape[1])
+    k = pb.lower.size
+    buf = buffers(pb, ops.sigma.size)
+    ws = workspace(pb.s.size, ops.sigma.size)
     u = np.empty(k)
     u0 = np.empty(k)
     prev_u = np.empty(k)
@@ -398,24 +417,28 @@ def estimate_block(lo, hi, use_guess, chained, p0, s, w, L, wload, ei, k0, D, dD
     g = np.empty(k)
     prev_ok = False
     for i in range(lo, hi):
-        moment_guess(p0[i], s, w, L, ei[i], k0[i], wload, D[i], ffix[i], lower, phi_end[i], kappa_s[i], g)
-        force_of(D[i], ffix[i], g, guess_n[i])
+        p0, phi_end, kappa_s, state0, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
+        ei, k0 = fr.ei[i], fr.k0[i]
+        moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, g)
+        force_of(D, pb.ffix, g, guess_n[i])
         for c in range(k):
-            u0[c] = max((g[c] + offset[i, c]) if use_guess else u_init[i, c], lower[c])
+            if use_guess:  # the guess corrected by a previous estimate's offset from its own guess
+                proj = g[c] + D[0, c] * start[i, 0] + D[1, c] * start[i, 1]
+            else:  # a given force
+                proj = D[0, c] * (start[i, 0] - pb.ffix[0]) + D[1, c] * (start[i, 1] - pb.ffix[1])
+            u0[c] = max(proj, pb.lower[c])
             u[c] = u0[c]
             if prev_ok:
-                u[c] = max(u0[c] + prev_u[c] - prev_u0[c], lower[c])
+                u[c] = max(u0[c] + prev_u[c] - prev_u0[c], pb.lower[c])
         blocked[:] = 0.0
-        st, it, _ = gauss_newton(L, ei[i], k0[i], wload, p0[i], w, D[i], ffix[i], lower, u, state0[i], xtol,
-                                 max_iter, ops, PQ, q, ws, blocked)
+        st, it, _ = gauss_newton(pb.L, ei, k0, pb.wload, p0, pb.w, D, pb.ffix, pb.lower, u, state0, pb.xtol,
+                                 pb.max_iter, ops, pb.PQ, pb.q, ws, blocked)
         prev_ok = chained and st == _OK
         prev_u[:] = u
         prev_u0[:] = u0
         direction[i, :] = 0.0
-        st, residual[i], chi2[i] = finish(st, L, p0[i], w, D[i], dD[i], has_dD, u, ffix[i], ws, blocked, has_cov,
-                                          cov_s[i], kappa[i], lengths, gap, seg, sigma, dphi_ds, force[i], cov[i],
-                                          direction[i])
-        status[i] = st
+        status[i], residual[i], chi2[i] = finish(st, pb, p0, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force[i],
+                                                 cov[i], direction[i])
         iters[i] = it
         state[i] = ws[2]
         tip[i, 0] = ws[3][0]
@@ -423,47 +446,39 @@ def estimate_block(lo, hi, use_guess, chained, p0, s, w, L, wload, ei, k0, D, dD
 
 
 @njit(cache=True, parallel=True)
-def estimate_frames(block, use_guess, p0, s, w, L, wload, ei, k0, D, dD, has_dD, ffix, lower, phi_end, kappa_s,
-                    state0, u_init, offset, xtol, max_iter, ops, PQ, q, noise, out):
+def estimate_frames(block, use_guess, fr, pb, ops, start, out):
     """The whole estimate of every frame (B,), in parallel over blocks of ``block`` consecutive frames.
 
-    ``use_guess``: start at the moment-balance guess plus ``offset`` (B, k), else at
-    ``u_init`` (B, k). Within a block (``block`` > 1, a time series) a frame's start is
-    corrected by the previous frame's offset from its own guess when that converged.
-    ``noise``: (has_cov, Σ_S (B, N, N), κ (B, N), lengths, gap, seg, σ, ∂φ_L/∂S).
-    ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof, guess
-    (B, 2), state (B, n), tip (B, 2) and the unidentifiable direction of a boundary stop
-    (B, 2).
+    ``use_guess``: start at the moment-balance guess plus the force offset ``start`` (B, 2)
+    (projected on the constraint), else at the force ``start``. Within a block (``block`` >
+    1, a time series) a frame's start is corrected by the previous frame's offset from its
+    own guess when that converged. ``fr``, ``pb``: :class:`~bendsense.estimation.problem.Frames`
+    and :class:`~bendsense.estimation.problem.Problem`; ``ops`` the beam solver's
+    operators. ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
+    guess (B, 2), state (B, n), tip (B, 2) and the unidentifiable direction of a boundary
+    stop (B, 2).
     """
-    B = p0.shape[0]
+    B = fr.ei.size
     nblocks = (B + block - 1) // block
     for blk in prange(nblocks):
-        estimate_block(blk * block, min(B, (blk + 1) * block), use_guess, block > 1, p0, s, w, L, wload, ei, k0, D,
-                       dD, has_dD, ffix, lower, phi_end, kappa_s, state0, u_init, offset, xtol, max_iter, ops, PQ, q,
-                       noise, out)
+        estimate_block(blk * block, min(B, (blk + 1) * block), use_guess, block > 1, fr, pb, ops, start, out)
 
 
 @njit(cache=True)
-def evaluate_frame(i, p0, w, L, wload, ei, k0, D, dD, has_dD, ffix, u, run_status, state0, ops, PQ, q, noise, out):
-    """Shape, covariance and status of frame ``i`` at given parameters ``u`` (the paper's optimum)."""
-    has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds = noise
-    force, cov, status, residual, chi2, state, tip = out
-    ws = workspace(p0.shape[1], state0.shape[1])
+def evaluate_frames(fr, pb, ops, u, run_status, out):
+    """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
+    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction = out
+    buf = buffers(pb, ops.sigma.size)
+    ws = workspace(pb.s.size, ops.sigma.size)
     F = np.empty(2)
-    force_of(D[i], ffix[i], u[i], F)
-    ok = beam_eval(L, ei[i], k0[i], F, wload, state0[i], True, True, ops, PQ, q, ws)
-    st = run_status[i] if ok else _BEAM_FAILED
-    blocked = np.zeros(u.shape[1])
-    status[i], residual[i], chi2[i] = finish(st, L, p0[i], w, D[i], dD[i], has_dD, u[i], ffix[i], ws, blocked,
-                                             has_cov, cov_s[i], kappa[i], lengths, gap, seg, sigma, dphi_ds,
-                                             force[i], cov[i], np.zeros(2))
-    state[i] = ws[2]
-    tip[i, 0] = ws[3][0]
-    tip[i, 1] = ws[3][1]
-
-
-@njit(cache=True, parallel=True)
-def evaluate_frames(p0, w, L, wload, ei, k0, D, dD, has_dD, ffix, u, run_status, state0, ops, PQ, q, noise, out):
-    """:func:`evaluate_frame` over a batch, in parallel."""
-    for i in prange(p0.shape[0]):
-        evaluate_frame(i, p0, w, L, wload, ei, k0, D, dD, has_dD, ffix, u, run_status, state0, ops, PQ, q, noise, out)
+    blocked = np.zeros(pb.lower.size)
+    for i in range(fr.ei.size):
+        p0, _, _, state0, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
+        force_of(D, pb.ffix, u[i], F)
+        ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, True, True, ops, pb.PQ, pb.q, ws)
+        st = run_status[i] if ok else _BEAM_FAILED
+        status[i], residual[i], chi2[i] = finish(st, pb, p0, D, dD, u[i], ws, blocked, frame_cov, cov_s, kappa,
+                                                 force[i], cov[i], direction[i])
+        state[i] = ws[2]
+        tip[i, 0] = ws[3][0]
+        tip[i, 1] = ws[3][1]

@@ -21,13 +21,15 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
-from bendsense.errors import ArgumentError
-
+from bendsense import _jit, pcc
 from bendsense.beam import DEFAULT_NODES
+from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
 
-__all__ = ["CONSTRAINTS", "Reference", "constraint_basis", "quadrature", "reference", "chebyshev_nodes_m"]
+__all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", "quadrature", "reference", "points",
+           "chebyshev_nodes_m"]
 
 #: The force constraints (module docstring); the CLI's choices come from here.
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
@@ -37,26 +39,83 @@ _N_NODES = DEFAULT_NODES
 class Reference(NamedTuple):
     """The reconstructed shape as the estimate compares it (batched over leading axes ``...``).
 
-    ``p0`` (..., M, 2) points at the comparison arc lengths ``s`` (M,) with weights ``w``
-    over ``[0, Lc]``; ``phi`` (..., M) and ``kappa_s`` (..., M) their tangent angle and
-    curvature (for the moment-balance start); ``tip_shape`` (...) the shape's tip angle;
-    ``state`` (..., n) the angle at the beam's nodes (its Newton start). For a PCC shape
-    also the segment curvatures ``kappa`` (..., N), ``lengths`` (N,), and each point's
-    segment ``seg`` and arc length in it ``sigma`` (M,); None for a shape given by points.
+    The comparison arc lengths ``s`` (M,) with weights ``w`` over ``[0, Lc]``. A PCC
+    shape is its segment curvatures ``kappa`` (..., N) on ``lengths`` (N,) with the
+    per-grid constants ``grid`` (:func:`_pcc_grid`); the compiled kernels make its points
+    frame by frame (:func:`pcc_reference`). A shape given by points brings them: ``p0``
+    (..., M, 2), the tangent angle ``phi`` (..., M) and curvature ``kappa_s`` (..., M)
+    at them (for the moment-balance start), the tip angle ``tip_shape`` (...) and the
+    angle at the beam's nodes ``state`` (..., n) (its Newton start); :func:`points`
+    fills those of a PCC shape.
     """
 
-    p0: np.ndarray
     s: np.ndarray
     w: np.ndarray
     Lc: float
-    kappa: np.ndarray | None
-    lengths: np.ndarray | None
-    seg: np.ndarray | None
-    sigma: np.ndarray | None
-    tip_shape: np.ndarray
-    phi: np.ndarray
-    kappa_s: np.ndarray
-    state: np.ndarray
+    batch_shape: tuple
+    kappa: np.ndarray | None = None
+    lengths: np.ndarray | None = None
+    grid: dict | None = None
+    p0: np.ndarray | None = None
+    phi: np.ndarray | None = None
+    kappa_s: np.ndarray | None = None
+    tip_shape: np.ndarray | None = None
+    state: np.ndarray | None = None
+
+
+class Frames(NamedTuple):
+    """Per-frame inputs of the compiled estimate (B frames; unused fields are empty)."""
+
+    kappa: np.ndarray  # (B, N) segment curvatures of a PCC shape [1/m]
+    p0: np.ndarray  # (B, M, 2) points of a shape given by points [m]
+    phi_end: np.ndarray  # (B,) its tangent angle at the last point [rad]
+    kappa_s: np.ndarray  # (B, M) its curvature at the points [1/m]
+    state: np.ndarray  # (B, n) its angle at the beam's nodes [rad]
+    tip_shape: np.ndarray  # (B,) its tip angle [rad]
+    ei: np.ndarray  # (B,) EI(P) [N m²]
+    k0: np.ndarray  # (B,) K0(P) [1/m]
+    theta: np.ndarray  # (B,) free-motion tip angle [rad]
+
+
+class Problem(NamedTuple):
+    """Constants of an estimate, shared by every frame (the compiled kernels' typed structure)."""
+
+    pcc: bool  # frames are PCC curvatures (else points)
+    kind: int  # constraint kind (:func:`constraint_kind`)
+    direction: np.ndarray  # (2,) fixed direction of a 1-D constraint
+    follower_angle: float  # [rad]
+    shape_angle: bool  # D follows the reconstructed tip angle (∂D/∂φ_L enters the covariance)
+    seg_fk: np.ndarray  # (M + n,) segment of the comparison and beam nodes (PCC)
+    sigma_fk: np.ndarray  # (M + n,) their arc length within it [m]
+    beyond: np.ndarray  # (n,) arc length of the beam's nodes beyond the sensor [m]
+    tip_weights: np.ndarray  # (N,) φ(L) = tip_weights · κ
+    lengths: np.ndarray  # (N,) segment lengths [m]
+    gap: float  # strip gap d [m]
+    seg: np.ndarray  # (M,) segment of each comparison node
+    sigma: np.ndarray  # (M,) its arc length within it [m]
+    dphi_ds: np.ndarray  # (N,) ∂φ(L)/∂S
+    noise: bool  # a noise model is known (shift covariance)
+    # the shift error model (:func:`~bendsense.estimation.uncertainty.shift_covariance`)
+    noise_std: np.ndarray  # (N,) signal noise per channel [signal units; m without a calibration]
+    calibrated: bool  # a calibration maps the noise (else it is in metres of shift)
+    coef: np.ndarray  # (N, n+1) each channel's calibration polynomial, ascending powers
+    dcoef: np.ndarray  # (N, n) its derivative
+    error_grid: np.ndarray  # (G,) |S| grid of the calibration error envelopes [m]
+    error_odd: np.ndarray  # (G,) σ of the odd channels' calibration error [m]
+    error_even: np.ndarray  # (G,) σ of the even channels' [m]
+    odd: np.ndarray  # (N,) bool, the odd channels
+    parity: np.ndarray  # (N, N) correlation factor between the channels' parities
+    error_length: float  # correlation length ℓ of the calibration error [m]
+    s: np.ndarray  # (M,) comparison arc lengths [m]
+    w: np.ndarray  # (M,) their quadrature weights [m]
+    L: float  # actuator length [m]
+    wload: np.ndarray  # (2,) distributed load [N/m]
+    ffix: np.ndarray  # (2,) fixed part of the force [N]
+    lower: np.ndarray  # (k,) lower bounds of u
+    xtol: float  # Gauss–Newton step tolerance [N]
+    max_iter: int
+    PQ: np.ndarray  # (M, n) positions at the comparison nodes from the nodes' sin/cos
+    q: np.ndarray  # (n,) the same for the tip
 
 
 @functools.lru_cache(maxsize=16)
@@ -115,21 +174,59 @@ def _pcc_grid(lengths: tuple, length_m: float, n_points: int, beam_length_m: flo
     own grid of them; the tip-angle weights (:func:`tip_angle_weights`) and the arc
     length of each beam node beyond the sensor (where the last curvature is carried on).
     """
-    from bendsense import pcc
-
     lengths = np.asarray(lengths)
     s, w = quadrature(lengths, length_m, n_points)
     bounds = np.concatenate(([0.0], np.cumsum(lengths)))
     seg = np.clip(np.searchsorted(bounds[1:-1], s, side="left"), 0, lengths.size - 1)
     sc = chebyshev_nodes_m(beam_length_m, _N_NODES)
     s_fk = np.concatenate([s, np.minimum(sc, bounds[-1])])
-    out = {"s": s, "w": w, "seg": seg, "sigma": s - bounds[seg], "s_fk": s_fk,
-           "tip_weights": tip_angle_weights(lengths, beam_length_m),
+    fk = pcc._grid(lengths, s_fk)
+    out = {"s": s, "w": w, "seg": seg, "sigma": s - bounds[seg], "seg_fk": fk.seg, "sigma_fk": fk.sigma,
+           "lengths": fk.lengths, "tip_weights": tip_angle_weights(lengths, beam_length_m),
            "beyond": np.maximum(sc - float(lengths.sum()), 0.0)}
     for a in out.values():
         a.setflags(write=False)
-    out["grid"] = pcc._grid(lengths, s_fk)
     return out
+
+
+_NONE, _FIXED, _NORMAL, _FOLLOWER = 0, 1, 2, 3  # kinds of D: identity, a fixed direction, tip-angle bound
+TIP_ANGLE_KINDS = (_NORMAL, _FOLLOWER)
+
+
+def constraint_kind(constraint: str, direction=(0.0, -1.0)):
+    """The compiled basis' arguments of a constraint: (kind, k, fixed direction (2,))."""
+    if constraint == "none":
+        return _NONE, 2, np.zeros(2)
+    if constraint in ("vertical", "horizontal", "direction"):
+        d = {"vertical": (0.0, 1.0), "horizontal": (1.0, 0.0)}.get(constraint, direction)
+        return _FIXED, 1, np.array(d, dtype=float)
+    if constraint in ("normal", "follower"):
+        return (_NORMAL if constraint == "normal" else _FOLLOWER), 1, np.zeros(2)
+    raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+
+
+@njit(cache=True)
+def basis(kind, phi_tip, direction, follower_angle, D, dD):
+    """D (2, k) of ``F = D u`` and ∂D/∂φ_L into ``dD`` for one frame (module docstring)."""
+    if kind == _NONE:
+        D[0, 0], D[0, 1], D[1, 0], D[1, 1] = 1.0, 0.0, 0.0, 1.0
+        dD[:, :] = 0.0
+    elif kind == _FIXED:
+        D[0, 0], D[1, 0] = direction[0], direction[1]
+        dD[:, :] = 0.0
+    elif kind == _NORMAL:
+        c, s = math.cos(phi_tip), math.sin(phi_tip)
+        D[0, 0], D[1, 0], dD[0, 0], dD[1, 0] = -c, s, s, c
+    else:
+        a = phi_tip - follower_angle
+        c, s = math.cos(a), math.sin(a)
+        D[0, 0], D[1, 0], dD[0, 0], dD[1, 0] = s, c, c, -s
+
+
+@njit(cache=True)
+def _bases(kind, phi_tip, direction, follower_angle, D, dD):
+    for b in range(phi_tip.size):
+        basis(kind, phi_tip[b], direction, follower_angle, D[b], dD[b])
 
 
 def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0), follower_angle_rad=math.pi / 2):
@@ -153,36 +250,53 @@ def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0
     dD : ndarray, shape (..., 2, k) or None
         ∂D/∂φ_L for the tip-angle constraints, else None.
     """
+    kind, k, fixed = constraint_kind(constraint, direction)
     phi = np.asarray(tip_angle_rad, dtype=float)
-    if constraint == "none":
-        return np.broadcast_to(np.eye(2), (*phi.shape, 2, 2)), None
-    if constraint in ("vertical", "horizontal", "direction"):
-        d = {"vertical": (0.0, 1.0), "horizontal": (1.0, 0.0)}.get(constraint, direction)
-        d = np.asarray(d, dtype=float)
-        return np.broadcast_to(d[:, None], (*phi.shape, 2, 1)), None
-    if constraint == "normal":
-        c, s = np.cos(phi), np.sin(phi)
-        return np.stack([-c, s], axis=-1)[..., None], np.stack([s, c], axis=-1)[..., None]
-    if constraint == "follower":
-        a = phi - float(follower_angle_rad)
-        c, s = np.cos(a), np.sin(a)
-        return np.stack([s, c], axis=-1)[..., None], np.stack([c, -s], axis=-1)[..., None]
-    raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
+    D, dD = np.empty((phi.size, 2, k)), np.empty((phi.size, 2, k))
+    _bases(kind, np.ascontiguousarray(phi.reshape(-1)), fixed, float(follower_angle_rad), D, dD)
+    D, dD = D.reshape(*phi.shape, 2, k), dD.reshape(*phi.shape, 2, k)
+    return D, (dD if kind in TIP_ANGLE_KINDS else None)
+
+
+@njit(cache=True)
+def pcc_reference(kappa, lengths, seg_fk, sigma_fk, beyond, tip_weights, pos, ang, kappa_s, state):
+    """The reference of one PCC frame: points and angles at the comparison nodes and the beam's.
+
+    ``seg_fk``, ``sigma_fk`` (M + n,) place the M comparison nodes followed by the n beam
+    nodes (clipped to the sensor) on the segments; writes ``pos`` (M + n, 2), ``ang``
+    (M + n,), the curvature ``kappa_s`` (M,) at the comparison nodes and the beam's Newton
+    start ``state`` (n,) (the shape's angle at its nodes, the last curvature carried on
+    by ``beyond``). Returns the shape's tip angle at the actuator tip.
+    """
+    n_seg = lengths.size
+    theta = np.empty(n_seg)
+    tip = np.empty(2)
+    for i in range(n_seg):
+        theta[i] = kappa[i] * lengths[i]
+    pcc.frame_kinematics(kappa, theta, 0.0, seg_fk, sigma_fk, lengths, pos, ang, tip)
+    M = kappa_s.size
+    for j in range(M):
+        kappa_s[j] = kappa[seg_fk[j]]
+    for j in range(state.size):
+        state[j] = ang[M + j] + kappa[n_seg - 1] * beyond[j]
+    tip_angle = 0.0
+    for i in range(n_seg):
+        tip_angle += kappa[i] * tip_weights[i]
+    return tip_angle
 
 
 def reference(shape, config, s_opt, n_points, L_act) -> Reference:
     """Reference shape p⁰ at the comparison nodes and what the uncertainty needs."""
-    from bendsense import pcc
-
     kappa = None
+    array = isinstance(shape, np.ndarray)  # curvatures (the common case) or positions with s_m
     if s_opt is not None:
         pos = np.asarray(shape, dtype=float)
         s_in = np.asarray(s_opt, dtype=float)
         angle = None
-    elif hasattr(shape, "curvature_per_m") and hasattr(shape, "lengths_m"):
+    elif not array and hasattr(shape, "curvature_per_m") and hasattr(shape, "lengths_m"):
         kappa = np.asarray(shape.curvature_per_m, dtype=float)
         lengths = np.asarray(shape.lengths_m, dtype=float)
-    elif hasattr(shape, "positions_m") and hasattr(shape, "s_m"):
+    elif not array and hasattr(shape, "positions_m") and hasattr(shape, "s_m"):
         pos = np.asarray(shape.positions_m, dtype=float)
         s_in = np.asarray(shape.s_m, dtype=float)
         angle = getattr(shape, "angle_rad", None)
@@ -199,15 +313,8 @@ def reference(shape, config, s_opt, n_points, L_act) -> Reference:
             raise ArgumentError("shape.curvature_per_m: must be finite")
         Lc = min(float(lengths.sum()), L_act)
         grid = _pcc_grid(tuple(lengths.tolist()), Lc, n_points, L_act)
-        s, seg = grid["s"], grid["seg"]
-        # the comparison points and the beam's nodes (for its Newton start) in one pass
-        pos, phi, _, _ = pcc._kinematics(kappa, grid["grid"], 0.0)
-        M = s.size
-        # the beam's Newton start: the shape's angle at its nodes, the last curvature carried on
-        state = phi[..., M:] + kappa[..., -1:] * grid["beyond"]
-        return Reference(p0=pos[..., :M, :], s=s, w=grid["w"], Lc=Lc, kappa=kappa, lengths=lengths, seg=seg,
-                         sigma=grid["sigma"], tip_shape=kappa @ grid["tip_weights"], phi=phi[..., :M],
-                         kappa_s=kappa[..., seg], state=state)
+        return Reference(s=grid["s"], w=grid["w"], Lc=Lc, batch_shape=kappa.shape[:-1], kappa=kappa, lengths=lengths,
+                         grid=grid)
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
         raise ArgumentError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
     if pos.shape[-2:] != (s_in.size, 2):
@@ -231,6 +338,28 @@ def reference(shape, config, s_opt, n_points, L_act) -> Reference:
     t = (sc - s[j]) / (s[j + 1] - s[j])
     state = phi[..., j] * (1.0 - t) + phi[..., j + 1] * t
     state[..., 0] = 0.0
-    return Reference(p0=p0, s=s, w=pcc._trapezoid_weights(s), Lc=float(s[-1]), kappa=None, lengths=None, seg=None,
-                     sigma=None, tip_shape=phi[..., -1], phi=phi, kappa_s=np.gradient(phi, s, axis=-1, edge_order=2),
-                     state=state)
+    return Reference(s=s, w=pcc._trapezoid_weights(s), Lc=float(s[-1]), batch_shape=p0.shape[:-2], p0=p0, phi=phi,
+                     kappa_s=np.gradient(phi, s, axis=-1, edge_order=2), tip_shape=phi[..., -1], state=state)
+
+
+@njit(cache=True)
+def _pcc_references(kappa, lengths, seg_fk, sigma_fk, beyond, tip_weights, pos, ang, kappa_s, state, tip):
+    for b in range(kappa.shape[0]):
+        tip[b] = pcc_reference(kappa[b], lengths, seg_fk, sigma_fk, beyond, tip_weights, pos[b], ang[b], kappa_s[b],
+                               state[b])
+
+
+def points(ref: Reference) -> Reference:
+    """``ref`` with the points, angles, curvatures and beam start of its PCC frames filled in."""
+    if ref.kappa is None:
+        return ref
+    g, n = ref.grid, ref.lengths.size
+    kappa = np.ascontiguousarray(ref.kappa.reshape(-1, n))
+    B, M, m = kappa.shape[0], ref.s.size, g["seg_fk"].size
+    pos, ang, ks = np.empty((B, m, 2)), np.empty((B, m)), np.empty((B, M))
+    state, tip = np.empty((B, m - M)), np.empty(B)
+    _jit.call(_pcc_references, kappa, g["lengths"], g["seg_fk"], g["sigma_fk"], g["beyond"], g["tip_weights"], pos,
+              ang, ks, state, tip)
+    batch = ref.batch_shape
+    return ref._replace(p0=pos[:, :M].reshape(*batch, M, 2), phi=ang[:, :M].reshape(*batch, M),
+                        kappa_s=ks.reshape(*batch, M), tip_shape=tip.reshape(batch), state=state.reshape(*batch, -1))

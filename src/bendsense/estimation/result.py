@@ -11,11 +11,12 @@ from bendsense.status import Status
 __all__ = ["ForceEstimate", "messages"]
 
 OK_MESSAGE = "converged"
+_OK = int(Status.OK)
 
 
 def messages(status, residual_m, direction, method):
     """Per-frame messages (B,) of str from the status codes (:class:`~bendsense.status.Status`)."""
-    if (status == Status.OK).all():
+    if (status == _OK).all():
         return np.full(status.shape, OK_MESSAGE)
     out = np.full(status.shape, OK_MESSAGE, dtype=object)
     out[status == Status.BEAM_FAILED] = "beam model fails (buckling or no equilibrium) at every trial force"

@@ -20,11 +20,10 @@ does not determine (``JᵀJ`` singular) gets an infinite standard deviation.
 import math
 
 import numpy as np
-
-from bendsense.errors import ArgumentError
 from numba import njit
 
-from bendsense.beam_kernels import lu_solve
+from bendsense import beam_kernels as bk
+from bendsense.errors import ArgumentError
 
 
 @njit(cache=True)
@@ -118,11 +117,74 @@ def inverse_cov(H):
 
 
 @njit(cache=True)
-def misfit(Gf, w2, r, JD, Tu, cov_s):
+def lm_step(H, g, out):
+    """−(H + ε I)⁻¹ g for a 1×1 or 2×2 system (closed form)."""
+    k = g.size
+    if k == 1:
+        h = H[0, 0]
+        out[0] = -g[0] / (h + (1e-14 * h + 1e-300))
+        return
+    eps = 1e-14 * (H[0, 0] + H[1, 1]) + 1e-300
+    a = H[0, 0] + eps
+    d = H[1, 1] + eps
+    b = H[0, 1]
+    det = a * d - b * b
+    out[0] = -((d * g[0] - b * g[1]) / det)
+    out[1] = -((a * g[1] - b * g[0]) / det)
+
+
+@njit(cache=True)
+def cholesky(A):
+    """Lower Cholesky factor of a symmetric positive semidefinite A (n, n) in place; returns its rank.
+
+    A pivot at round-off (≤ 1e-12 of the largest diagonal element: a channel without
+    noise) gets a zero column: :func:`forward` leaves that direction out (a pseudo-inverse).
+    """
+    n = A.shape[0]
+    top = 0.0
+    for j in range(n):
+        top = max(top, A[j, j])
+    rank = 0
+    for j in range(n):
+        d = A[j, j]
+        for c in range(j):
+            d -= A[j, c] * A[j, c]
+        if d > 1e-12 * top:
+            d = math.sqrt(d)
+            rank += 1
+        else:
+            d = 0.0
+        A[j, j] = d
+        for i in range(j + 1, n):
+            acc = A[i, j]
+            for c in range(j):
+                acc -= A[i, c] * A[j, c]
+            A[i, j] = acc / d if d > 0.0 else 0.0
+        for c in range(j + 1, n):
+            A[j, c] = 0.0
+    return rank
+
+
+@njit(cache=True)
+def forward(Lc, B):
+    """Solve Lc X = B in place (Lc lower triangular, B (n, m)); rows of a zero pivot get 0."""
+    for i in range(Lc.shape[0]):
+        for c in range(B.shape[1]):
+            acc = B[i, c]
+            for j in range(i):
+                acc -= Lc[i, j] * B[j, c]
+            B[i, c] = acc / Lc[i, i] if Lc[i, i] > 0.0 else 0.0
+
+
+@njit(cache=True)
+def misfit(Gf, w2, r, JD, cov_s):
     """χ² of the residual ``r`` (2M,) against the propagated shift covariance, and its dof.
 
-    ``δŜ = −(GᵀWG)⁻¹ GᵀW r``; with ``Z = (GᵀWG)⁻¹ GᵀW J`` and ``T = ∂u/∂S``,
-    ``C = (I − ZT) Σ_S (I − ZT)ᵀ`` of rank N − k.
+    The residual is pulled back to the shifts, ``δŜ = (GᵀWG)⁻¹ GᵀW r``; shift errors ``e``
+    leave ``δŜ = (I − ZT) e`` with ``Z = (GᵀWG)⁻¹ GᵀW J``: the fit absorbs the part
+    along ``Z``. So ``χ² = min_c (δŜ + Z c)ᵀ Σ_S⁻¹ (δŜ + Z c)`` (the Mahalanobis length of
+    δŜ modulo what the fit absorbs), with rank(Σ_S) − k degrees of freedom: one Cholesky
+    factorisation of Σ_S and a k-parameter least-squares problem.
     """
     N = Gf.shape[1]
     k = JD.shape[1]
@@ -134,25 +196,33 @@ def misfit(Gf, w2, r, JD, Tu, cov_s):
             gi = wr * Gf[row, i]
             if gi == 0.0:
                 continue
-            for j in range(N):
+            for j in range(i + 1):
                 A[i, j] += gi * Gf[row, j]
             rhs[i, 0] += gi * r[row]
             for c in range(k):
                 rhs[i, 1 + c] += gi * JD[row, c]
-    if not lu_solve(A, rhs):
+    for i in range(N):
+        for j in range(i):
+            A[j, i] = A[i, j]
+    if not bk.lu_solve(A, rhs):
         return np.nan, 0
-    proj = np.eye(N) - np.ascontiguousarray(rhs[:, 1:]) @ Tu
-    C = proj @ cov_s @ proj.T
-    C = 0.5 * (C + C.T)
-    lam, V = np.linalg.eigh(C)
-    z = V.T @ np.ascontiguousarray(rhs[:, 0])
+    Lc = cov_s.copy()
+    rank = cholesky(Lc)
+    forward(Lc, rhs)  # whitened: columns ỹ and Z̃
+    H = np.zeros((k, k))
+    g = np.zeros(k)
     chi2 = 0.0
-    dof = 0
-    for i in range(k, N):
-        if lam[i] > 1e-10 * lam[N - 1]:
-            chi2 += z[i] * z[i] / lam[i]
-            dof += 1
-    return chi2, dof
+    for i in range(N):
+        chi2 += rhs[i, 0] * rhs[i, 0]
+        for a in range(k):
+            g[a] += rhs[i, 1 + a] * rhs[i, 0]
+            for b in range(k):
+                H[a, b] += rhs[i, 1 + a] * rhs[i, 1 + b]
+    c = np.empty(k)  # the part the fit absorbs: min_c ‖ỹ − Z̃ c‖²
+    lm_step(H, g, c)
+    for a in range(k):
+        chi2 += c[a] * g[a]
+    return max(chi2, 0.0), max(rank - k, 0)
 
 
 @njit(cache=True)
@@ -196,9 +266,10 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
                 for i in range(N):
                     T[a, i] += Fd[a] * dphi_ds[i]
         c = T @ cov_s @ T.T
-        chi2, dof = misfit(Gf, w2, r, A @ Dc, Tu, cov_s)
-        ratio = chi2 / max(dof, 1)
-        c *= max(ratio, 1.0)
+        chi2, dof = misfit(Gf, w2, r, A @ Dc, cov_s)
+        if dof > 0:  # else nothing is left to test the fit with: χ²/dof is NaN
+            ratio = chi2 / dof
+            c *= max(ratio, 1.0)
     else:
         dof = max(2 * M - k, 1)
         var = (r @ r) / dof  # per coordinate
@@ -216,34 +287,90 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
 
 
 @njit(cache=True)
-def _slope_noise(coef, dcoef, S, noise):
-    """|f'(ΔA)| σ_A per channel at the signal ΔA = f⁻¹(S) (paper eq. 2 inverted by Newton's method).
+def _slope(coef, dcoef, i, shift):
+    """|f'(ΔA)| of channel i at the signal ΔA = f⁻¹(S) (paper eq. 2 inverted by Newton's method).
 
-    ``coef`` (N, n+1) and ``dcoef`` (N, n) ascending powers of each channel's polynomial
-    and its derivative, ``S`` (B, N) shifts, ``noise`` (N,) signal noise.
+    ``coef`` (N, n+1) and ``dcoef`` (N, n): each channel's polynomial and its derivative
+    in ascending powers.
     """
-    B, N = S.shape
-    out = np.empty((B, N))
-    for b in range(B):
-        for i in range(N):
-            x = (S[b, i] - coef[i, 0]) / dcoef[i, 0] if dcoef[i, 0] != 0 else 0.0
-            fp = 0.0
-            for _ in range(50):
-                f = 0.0
-                for j in range(coef.shape[1] - 1, -1, -1):
-                    f = f * x + coef[i, j]
-                fp = 0.0
-                for j in range(dcoef.shape[1] - 1, -1, -1):
-                    fp = fp * x + dcoef[i, j]
-                dx = (f - S[b, i]) / (fp if fp != 0 else 1.0)
-                x -= dx
-                if abs(dx) <= 1e-12 * max(1.0, abs(x)):
-                    break
-            fp = 0.0
-            for j in range(dcoef.shape[1] - 1, -1, -1):
-                fp = fp * x + dcoef[i, j]
-            out[b, i] = abs(fp) * noise[i]
-    return out
+    x = (shift - coef[i, 0]) / dcoef[i, 0] if dcoef[i, 0] != 0 else 0.0
+    fp = 0.0
+    for _ in range(50):
+        f = 0.0
+        for j in range(coef.shape[1] - 1, -1, -1):
+            f = f * x + coef[i, j]
+        fp = 0.0
+        for j in range(dcoef.shape[1] - 1, -1, -1):
+            fp = fp * x + dcoef[i, j]
+        dx = (f - shift) / (fp if fp != 0 else 1.0)
+        x -= dx
+        if abs(dx) <= 1e-12 * max(1.0, abs(x)):
+            break
+    fp = 0.0
+    for j in range(dcoef.shape[1] - 1, -1, -1):
+        fp = fp * x + dcoef[i, j]
+    return abs(fp)
+
+
+@njit(cache=True)
+def shift_covariance(kappa, pb, out):
+    """Σ_S (N, N) [m²] of one frame's shifts into ``out``; returns its trace.
+
+    The error model is in ``pb`` (:class:`~bendsense.estimation.problem.Problem`): the signal
+    noise through the calibration slope f'(ΔA) (paper eq. 2), independent per channel,
+    plus the calibration's own model error, correlated across channels
+    (:meth:`~bendsense.calibration.Calibration.shift_error_m`). Without a calibration
+    the noise is in metres of shift.
+    """
+    noise, coef, dcoef, grid, sig_odd, sig_even, odd = pb.noise_std, pb.coef, pb.dcoef, pb.error_grid, pb.error_odd, \
+        pb.error_even, pb.odd
+    lengths, gap, ell = pb.lengths, pb.gap, pb.error_length
+    n = lengths.size
+    S = np.empty(n)
+    sd = np.empty(n)
+    err = np.empty(n)
+    acc = 0.0
+    for i in range(n):
+        acc += kappa[i] * lengths[i]
+        S[i] = gap * acc  # S_i = d φ(L_i) (paper eq. 3–4)
+        if not pb.calibrated:
+            sd[i] = noise[i]
+            err[i] = 0.0
+        else:
+            sd[i] = (_slope(coef, dcoef, i, S[i]) if dcoef.shape[1] > 0 else 0.0) * noise[i]
+            err[i] = np.interp(abs(S[i]), grid, sig_odd if odd[i] else sig_even)
+    trace = 0.0
+    for i in range(n):
+        for j in range(n):
+            if ell > 0:
+                d = (S[i] - S[j]) / ell
+                rho = math.exp(-0.5 * d * d) * pb.parity[i, j]
+            else:
+                rho = 1.0 if i == j else 0.0
+            out[i, j] = err[i] * err[j] * rho
+        out[i, i] += sd[i] * sd[i]
+        trace += out[i, i]
+    return trace
+
+
+def shift_error_model(noise_std_a, calibration, n_channels) -> dict:
+    """The error model fields of :class:`~bendsense.estimation.problem.Problem` (``noise_std`` to ``error_length``)."""
+    from bendsense.calibration import parity_masks
+
+    noise = np.array(np.broadcast_to(noise_std_a, (n_channels,)), dtype=float)
+    if calibration is None:
+        z = np.zeros(2)
+        odd, _ = parity_masks(n_channels)
+        return {"noise_std": noise, "calibrated": False, "coef": np.zeros((n_channels, 2)),
+                "dcoef": np.zeros((n_channels, 1)), "error_grid": z, "error_odd": z, "error_even": z,
+                "odd": np.array(odd), "parity": np.eye(n_channels), "error_length": 0.0}
+    coef = np.array(calibration._channel_coefficients, dtype=float)
+    table = calibration._shift_error_table
+    odd, parity = calibration._parity_correlation
+    return {"noise_std": noise, "calibrated": True, "coef": coef, "dcoef": coef[:, 1:] * np.arange(1, coef.shape[1]),
+            "error_grid": np.array(table["grid_m"], dtype=float), "error_odd": np.array(table["sigma_odd_m"]),
+            "error_even": np.array(table["sigma_even_m"]), "odd": np.array(odd), "parity": np.array(parity),
+            "error_length": float(table["length_m"])}
 
 
 def tip_angle_weights(lengths, length_m):
@@ -274,29 +401,3 @@ def noise_std(noise_opt, calibration, est):
     if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
         raise ArgumentError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
     return sigma_a
-
-
-def shift_covariance(kappa, lengths, d, noise_std, calibration):
-    """Σ_S (b, N, N) [m²]: covariance of the shifts.
-
-    The signal noise through the calibration slope f'(ΔA) (paper eq. 2), independent per
-    channel, plus the calibration's own model error, correlated across channels
-    (:meth:`~bendsense.calibration.Calibration.shift_error_m`). Without a calibration the
-    noise is in metres of shift.
-    """
-    from bendsense.calibration import parity_masks
-
-    S = d * np.cumsum(kappa * lengths, axis=-1)  # S_i = d φ(L_i) (paper eq. 3–4)
-    if calibration is None:
-        sd = np.broadcast_to(noise_std, S.shape)
-        return sd[..., :, None] * np.eye(S.shape[-1]) * sd[..., None, :]
-    n = S.shape[-1]
-    odd, _ = parity_masks(n)
-    coef = np.where(odd[:, None], calibration.coefficients_odd, calibration.coefficients_even)  # (N, n+1)
-    dcoef = coef[:, 1:] * np.arange(1, coef.shape[1])
-    if dcoef.shape[1] == 0:
-        return np.zeros((*S.shape, n))
-
-    sd = _slope_noise(np.ascontiguousarray(coef), np.ascontiguousarray(dcoef), S.reshape(-1, n),
-                      np.ascontiguousarray(np.broadcast_to(noise_std, (n,)), dtype=float)).reshape(S.shape)
-    return sd[..., :, None] * np.eye(n) * sd[..., None, :] + calibration.shift_error_m(S, covariance=True)
