@@ -42,7 +42,7 @@ def pressure_outside(pressure_pa, config) -> np.ndarray:
     from bendsense.validation import float_array
 
     lo, hi = config.actuator.pressure_range_pa
-    if type(pressure_pa) is float:  # one frame (the live path)
+    if isinstance(pressure_pa, float):  # one frame (the live path)
         return np.bool_(lo > pressure_pa or pressure_pa > hi)
     p = float_array("pressure_pa", pressure_pa)
     with np.errstate(invalid="ignore"):

@@ -47,7 +47,7 @@ from bendsense.estimation.problem import (
     quadrature,
     reference,
 )
-from bendsense.estimation.result import ForceEstimate, messages
+from bendsense.estimation.result import OK_MESSAGE, ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
 from bendsense.estimation.uncertainty import shift_error_model, tip_angle_shift_gradient
 from bendsense.plausibility import pressure_range_step
@@ -197,8 +197,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     start, use_guess, chain = _starts(initial, initial_force_n, B, batch, warm_start)
     n = _N_NODES
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
-           np.empty(B), np.empty(B), np.full((B, 2), np.nan), np.empty((B, n)), np.empty((B, 2)), np.zeros((B, 2)))
-    force, cov, status, iters, residual, chi2, guess_n, state, tip, blocked_dir = out
+           np.empty(B), np.empty(B), np.full((B, 2), np.nan), np.empty((B, n)), np.empty((B, 2)), np.zeros((B, 2)),
+           np.empty((B, 2)))
+    force, cov, status, iters, residual, chi2, guess_n, state, tip, blocked_dir, std = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
         if block >= B:  # one block (one frame, a short series): the same kernel without the threads
@@ -215,12 +216,12 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                                          np.maximum(np.zeros((B, k)), pb.lower))
         _jit.call(_kernels.evaluate_frames, fr, pb, _OPS, _c(u), _c(run_status, np.int64), out)
     success = (status == _OK) | (status == _NOT_IDENTIFIABLE)  # never with a NaN force (kernels.finish)
-    text = messages(status, residual, blocked_dir, method)
+    text = np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK else messages(status, residual, blocked_dir, method)
     if strict and not success.all():
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
     return ForceEstimate(
         force_n=force.reshape(*batch, 2),
-        std_n=np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1)).reshape(*batch, 2),
+        std_n=std.reshape(*batch, 2),
         covariance_n2=cov.reshape(*batch, 2, 2),
         residual_m=residual.reshape(batch),
         success=success.reshape(batch),
@@ -261,7 +262,8 @@ def _frames(ref, P, batch, B, config) -> Frames:
     """The per-frame inputs of the kernels: the shape's and the pressure's (K0, EI, the free tip angle)."""
     Pf = _flat(P, batch, B)
     model = _models(config)
-    theta = _c(model.bending_angle_rad(float(Pf[0]) if B == 1 else Pf), float).reshape(B)  # free-motion tip angle
+    # free-motion tip angle
+    theta = np.array([float(model.bending_angle_rad(float(Pf[0])))]) if B == 1 else _c(model.bending_angle_rad(Pf))
     ei = _c(config.stiffness.ei_nm2(Pf))
     if not ei.min() > 0:
         raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "

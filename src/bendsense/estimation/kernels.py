@@ -405,7 +405,7 @@ def setup(i, fr, pb, buf):
 @njit(cache=True)
 def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
-    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction = out
+    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction, std = out
     k = pb.lower.size
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size)
@@ -440,6 +440,8 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
         status[i], residual[i], chi2[i] = finish(st, pb, p0, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force[i],
                                                  cov[i], direction[i])
         iters[i] = it
+        std[i, 0] = math.sqrt(cov[i, 0, 0])
+        std[i, 1] = math.sqrt(cov[i, 1, 1])
         state[i] = ws[2]
         tip[i, 0] = ws[3][0]
         tip[i, 1] = ws[3][1]
@@ -467,7 +469,7 @@ def estimate_frames(block, use_guess, fr, pb, ops, start, out):
 @njit(cache=True)
 def evaluate_frames(fr, pb, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
-    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction = out
+    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction, std = out
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size)
     F = np.empty(2)
@@ -479,6 +481,8 @@ def evaluate_frames(fr, pb, ops, u, run_status, out):
         st = run_status[i] if ok else _BEAM_FAILED
         status[i], residual[i], chi2[i] = finish(st, pb, p0, D, dD, u[i], ws, blocked, frame_cov, cov_s, kappa,
                                                  force[i], cov[i], direction[i])
+        std[i, 0] = math.sqrt(cov[i, 0, 0])
+        std[i, 1] = math.sqrt(cov[i, 1, 1])
         state[i] = ws[2]
         tip[i, 0] = ws[3][0]
         tip[i, 1] = ws[3][1]

@@ -166,16 +166,17 @@ def quadrature(lengths_m, length_m: float, n_points: int):
 
 
 @functools.lru_cache(maxsize=32)
-def _pcc_grid(lengths: tuple, length_m: float, n_points: int, beam_length_m: float):
-    """Per-grid constants of a PCC reference (cached, read-only).
+def _pcc_grid(lengths: bytes, n_points: int, beam_length_m: float):
+    """Per-grid constants of a PCC reference (cached, read-only) on ``[0, Lc]``, ``Lc = min(L_N, L)``.
 
     The quadrature nodes, weights, segment and local arc length of each node; the nodes
     followed by the beam's nodes clipped to the sensor length, with the PCC kinematics'
     own grid of them; the tip-angle weights (:func:`tip_angle_weights`) and the arc
     length of each beam node beyond the sensor (where the last curvature is carried on).
     """
-    lengths = np.asarray(lengths)
-    s, w = quadrature(lengths, length_m, n_points)
+    lengths = np.frombuffer(lengths)
+    Lc = min(float(lengths.sum()), beam_length_m)
+    s, w = quadrature(lengths, Lc, n_points)
     bounds = np.concatenate(([0.0], np.cumsum(lengths)))
     seg = np.clip(np.searchsorted(bounds[1:-1], s, side="left"), 0, lengths.size - 1)
     sc = chebyshev_nodes_m(beam_length_m, _N_NODES)
@@ -186,6 +187,7 @@ def _pcc_grid(lengths: tuple, length_m: float, n_points: int, beam_length_m: flo
            "beyond": np.maximum(sc - float(lengths.sum()), 0.0)}
     for a in out.values():
         a.setflags(write=False)
+    out["Lc"] = Lc
     return out
 
 
@@ -311,9 +313,8 @@ def reference(shape, config, s_opt, n_points, L_act) -> Reference:
     if kappa is not None:
         if not np.isfinite(kappa).all():
             raise ArgumentError("shape.curvature_per_m: must be finite")
-        Lc = min(float(lengths.sum()), L_act)
-        grid = _pcc_grid(tuple(lengths.tolist()), Lc, n_points, L_act)
-        return Reference(s=grid["s"], w=grid["w"], Lc=Lc, batch_shape=kappa.shape[:-1], kappa=kappa, lengths=lengths,
+        grid = _pcc_grid(lengths.tobytes(), n_points, L_act)
+        return Reference(s=grid["s"], w=grid["w"], Lc=grid["Lc"], batch_shape=kappa.shape[:-1], kappa=kappa, lengths=lengths,
                          grid=grid)
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
         raise ArgumentError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")

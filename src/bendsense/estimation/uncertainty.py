@@ -97,6 +97,30 @@ def shape_jacobian(kappa, lengths, gap, seg, sigma, pos, out):
 
 
 @njit(cache=True)
+def eigh2(H):
+    """Eigenvalues (ascending) and eigenvectors (columns) of a symmetric 2×2 matrix (one Jacobi rotation)."""
+    a, b, d = H[0, 0], 0.5 * (H[0, 1] + H[1, 0]), H[1, 1]
+    lam = np.empty(2)
+    V = np.empty((2, 2))
+    if b == 0.0:
+        c, s = 1.0, 0.0
+        lo, hi = a, d
+    else:
+        t = (d - a) / (2.0 * b)
+        tan = (1.0 if t >= 0 else -1.0) / (abs(t) + math.sqrt(1.0 + t * t))
+        c = 1.0 / math.sqrt(1.0 + tan * tan)
+        s = c * tan
+        lo, hi = a - tan * b, d + tan * b
+    if lo <= hi:  # (c, -s) belongs to lo, (s, c) to hi
+        lam[0], lam[1] = lo, hi
+        V[0, 0], V[1, 0], V[0, 1], V[1, 1] = c, -s, s, c
+    else:
+        lam[0], lam[1] = hi, lo
+        V[0, 0], V[1, 0], V[0, 1], V[1, 1] = s, c, c, -s
+    return lam, V
+
+
+@njit(cache=True)
 def inverse_cov(H):
     """Pseudo-inverse of JᵀJ (k, k), the eigen-directions it cannot resolve and its eigenvectors."""
     k = H.shape[0]
@@ -104,7 +128,7 @@ def inverse_cov(H):
         h = H[0, 0]
         singular = np.array([h <= 1e-12 * max(h, 0.0) + 1e-300])
         return np.array([[0.0 if singular[0] else 1.0 / h]]), singular, np.ones((1, 1))
-    lam, V = np.linalg.eigh(H)
+    lam, V = eigh2(H)
     top = max(lam[k - 1], 0.0)
     singular = lam <= 1e-12 * top + 1e-300
     inv = np.zeros((k, k))
@@ -239,8 +263,11 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
             A[2 * j + a, 1] = dpos[j, a, 1]
             w2[2 * j + a] = w[j]
             r[2 * j + a] = pos[j, a] - p0[j, a]
-    wA = A * w2.reshape(-1, 1)
-    GF = A.T @ wA
+    GF = np.zeros((2, 2))  # AᵀWA
+    for row in range(2 * M):
+        for a in range(2):
+            for b in range(2):
+                GF[a, b] += w2[row] * A[row, a] * A[row, b]
     Dc = np.ascontiguousarray(D)
     Hinv, singular, V = inverse_cov(Dc.T @ GF @ Dc)
     ratio = np.nan
@@ -248,7 +275,13 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
         N = lengths.size
         Gf = np.empty((2 * M, N))
         shape_jacobian(kappa, lengths, gap, seg, sigma, p0, Gf)
-        hs = Dc.T @ (wA.T @ Gf)  # (k, N)
+        hF = np.zeros((2, N))  # AᵀW G
+        for row in range(2 * M):
+            for a in range(2):
+                wa = w2[row] * A[row, a]
+                for i in range(N):
+                    hF[a, i] += wa * Gf[row, i]
+        hs = Dc.T @ hF  # (k, N)
         Fd = np.zeros(2)
         if has_dD:
             # D follows the reconstructed tip angle φ_L
@@ -259,13 +292,18 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
             for c in range(k):
                 for i in range(N):
                     hs[c, i] -= t[c] * dphi_ds[i]
-        Tu = Hinv @ hs  # ∂u/∂S
-        T = Dc @ Tu  # ∂F/∂S
+        T = Dc @ (Hinv @ hs)  # ∂F/∂S
         if has_dD:
             for a in range(2):
                 for i in range(N):
                     T[a, i] += Fd[a] * dphi_ds[i]
-        c = T @ cov_s @ T.T
+        c = np.zeros((2, 2))  # T Σ_S Tᵀ
+        for i in range(N):
+            for j in range(N):
+                sij = cov_s[i, j]
+                for a in range(2):
+                    for b in range(2):
+                        c[a, b] += T[a, i] * sij * T[b, j]
         chi2, dof = misfit(Gf, w2, r, A @ Dc, cov_s)
         if dof > 0:  # else nothing is left to test the fit with: χ²/dof is NaN
             ratio = chi2 / dof
@@ -273,7 +311,7 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
     else:
         dof = max(2 * M - k, 1)
         var = (r @ r) / dof  # per coordinate
-        mid = A.T @ (A * (w2 * w2).reshape(-1, 1))
+        mid = A.T @ (A * (w2 * w2).reshape(-1, 1))  # AᵀW²A
         c = Dc @ (var * (Hinv @ (Dc.T @ mid @ Dc) @ Hinv)) @ Dc.T
     for q in range(k):
         if singular[q]:
@@ -313,6 +351,25 @@ def _slope(coef, dcoef, i, shift):
 
 
 @njit(cache=True)
+def interp(x, xp, fp):
+    """np.interp for one value (ascending ``xp``; constant beyond its ends) without temporaries."""
+    n = xp.size
+    if x <= xp[0]:
+        return fp[0]
+    if x >= xp[n - 1]:
+        return fp[n - 1]
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    t = (x - xp[lo]) / (xp[hi] - xp[lo])
+    return fp[lo] + t * (fp[hi] - fp[lo])
+
+
+@njit(cache=True)
 def shift_covariance(kappa, pb, out):
     """Σ_S (N, N) [m²] of one frame's shifts into ``out``; returns its trace.
 
@@ -338,17 +395,16 @@ def shift_covariance(kappa, pb, out):
             err[i] = 0.0
         else:
             sd[i] = (_slope(coef, dcoef, i, S[i]) if dcoef.shape[1] > 0 else 0.0) * noise[i]
-            err[i] = np.interp(abs(S[i]), grid, sig_odd if odd[i] else sig_even)
+            err[i] = interp(abs(S[i]), grid, sig_odd if odd[i] else sig_even)
     trace = 0.0
     for i in range(n):
-        for j in range(n):
+        for j in range(i):
+            rho = 0.0
             if ell > 0:
                 d = (S[i] - S[j]) / ell
                 rho = math.exp(-0.5 * d * d) * pb.parity[i, j]
-            else:
-                rho = 1.0 if i == j else 0.0
-            out[i, j] = err[i] * err[j] * rho
-        out[i, i] += sd[i] * sd[i]
+            out[i, j] = out[j, i] = err[i] * err[j] * rho
+        out[i, i] = err[i] * err[i] + sd[i] * sd[i]
         trace += out[i, i]
     return trace
 
