@@ -24,6 +24,9 @@ from numba import njit, prange
 
 from bendsense.status import Status
 
+# flags to compiled callees go through bool(): one compiled version for both values, not one per literal
+YES, NO = True, False
+
 STABLE_BOUND = math.pi**2 / 4  # first eigenvalue of -d²/dσ² with η(0)=0, η'(1)=0
 WEIGHT_BOUND = 7.83  # Greenhill: first eigenvalue b of -η'' = b (1 - σ) η, 7.8373 (rounded down)
 QUAD = 1e-4  # Newton's quadratic-regime early stop (see _newton)
@@ -225,7 +228,7 @@ def continuation(phi, k0n, gi, ratio, ops, tol, max_iter, sens, extra):
         start = pred.copy()
         last = lt >= 1.0
         conv, it = newton(pred, lt, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol if last else 1e-6,
-                          max_iter if last else min(STEP_ITER, max_iter), sens, True, x)
+                          max_iter if last else min(STEP_ITER, max_iter), sens, bool(YES), x)
         iters += it
         move = 0.0
         for i in range(n):
@@ -290,7 +293,7 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     if has_state:
         phi[:] = state
         phi[0] = base
-        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, False, x)
+        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, bool(NO), x)
         if conv:
             near = True
             for i in range(1, n):
@@ -308,7 +311,7 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
         arc_tangent(phi, gi, ops.J0inv, tan)
         for i in range(m):
             phi[i + 1] += tan[i]
-        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, False, x)
+        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, bool(NO), x)
         if conv:
             status = _OK
     where = 1.0

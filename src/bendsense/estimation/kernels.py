@@ -31,6 +31,10 @@ _NOT_CONVERGED = int(Status.NOT_CONVERGED)
 _NOT_IDENTIFIABLE = int(Status.NOT_IDENTIFIABLE)
 _NO_STABLE_MATCH = int(Status.NO_STABLE_MATCH)
 
+# flags to compiled callees go through bool()/int(): numba compiles a callee once per literal
+# value it is called with, and once for all non-literal values (compile time)
+YES, NO = bk.YES, bk.NO
+
 MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the boundary
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a boundary stop is a failure
 NEWTON_TOL = 1e-11
@@ -121,9 +125,9 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, PQ
     n = st.size
     extra = np.empty((n - 1, 3))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
-                                  NEWTON_TOL, NEWTON_MAX_ITER, True, allow_continuation, st, extra)
+                                  NEWTON_TOL, int(NEWTON_MAX_ITER), bool(YES), allow_continuation, st, extra)
     bk.node_sensitivity(extra, L, ei, dst)
-    bk.sample(st, dst, L, PQ, q, True, pos, dpos, tip)
+    bk.sample(st, dst, L, PQ, q, bool(YES), pos, dpos, tip)
     return status == _OK
 
 
@@ -207,14 +211,14 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
     unique = bk.load_ratio(F[0] * scale, F[1] * scale, wx * scale, wy * scale) < 1.0
     convex = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wx, F[1] + wy)) * scale < 0.9 * bk.STABLE_BOUND
     iters = 1
-    ok = beam_eval(L, ei, k0, F, wload, state0, unique, True, ops, PQ, q, ws)
+    ok = beam_eval(L, ei, k0, F, wload, state0, unique, bool(YES), ops, PQ, q, ws)
     if not ok:
         # the start may buckle the beam or lead Newton astray: start over from the unloaded
         # arc by continuation at the constraint's zero force
         for c in range(k):
             u[c] = max(0.0, lower[c])
         force_of(D, ffix, u, F)
-        ok = beam_eval(L, ei, k0, F, wload, state0, False, True, ops, PQ, q, ws)
+        ok = beam_eval(L, ei, k0, F, wload, state0, bool(NO), bool(YES), ops, PQ, q, ws)
         iters += 1
     gF = np.empty(2)
     GF = np.empty((2, 2))
@@ -227,7 +231,7 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
             moved |= uc[c] != u[c]
         if moved:
             force_of(D, ffix, uc, F)
-            okc = beam_eval(L, ei, k0, F, wload, state0, True, True, ops, PQ, q, trial)
+            okc = beam_eval(L, ei, k0, F, wload, state0, bool(YES), bool(YES), ops, PQ, q, trial)
             iters += 1
             if okc and objective(trial, p0, w, D, gF, GF) < objective(ws, p0, w, D, gF, GF):
                 u[:] = uc
@@ -285,7 +289,7 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
         force_of(D, ffix, un, F)
         for i in range(n):  # first-order prediction of the new state
             guess[i] = st[i] + dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
-        okn = beam_eval(L, ei, k0, F, wload, guess, True, False, ops, PQ, q, trial)
+        okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, PQ, q, trial)
         iters += 1
         # a shape far from its linear prediction has jumped to another branch of equilibria
         jump = 0.0
@@ -463,7 +467,8 @@ def estimate_frames(block, use_guess, fr, pb, ops, start, out):
     B = fr.ei.size
     nblocks = (B + block - 1) // block
     for blk in prange(nblocks):
-        estimate_block(blk * block, min(B, (blk + 1) * block), use_guess, block > 1, fr, pb, ops, start, out)
+        lo = np.int64(blk) * block  # prange's index is unsigned: one compiled estimate_block for both callers
+        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, pb, ops, start, out)
 
 
 @njit(cache=True)
@@ -477,7 +482,7 @@ def evaluate_frames(fr, pb, ops, u, run_status, out):
     for i in range(fr.ei.size):
         p0, _, _, state0, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
         force_of(D, pb.ffix, u[i], F)
-        ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, True, True, ops, pb.PQ, pb.q, ws)
+        ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, pb.PQ, pb.q, ws)
         st = run_status[i] if ok else _BEAM_FAILED
         status[i], residual[i], chi2[i] = finish(st, pb, p0, D, dD, u[i], ws, blocked, frame_cov, cov_s, kappa,
                                                  force[i], cov[i], direction[i])

@@ -314,8 +314,8 @@ def reference(shape, config, s_opt, n_points, L_act) -> Reference:
         if not np.isfinite(kappa).all():
             raise ArgumentError("shape.curvature_per_m: must be finite")
         grid = _pcc_grid(lengths.tobytes(), n_points, L_act)
-        return Reference(s=grid["s"], w=grid["w"], Lc=grid["Lc"], batch_shape=kappa.shape[:-1], kappa=kappa, lengths=lengths,
-                         grid=grid)
+        return Reference(s=grid["s"], w=grid["w"], Lc=grid["Lc"], batch_shape=kappa.shape[:-1], kappa=kappa,
+                         lengths=lengths, grid=grid)
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
         raise ArgumentError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
     if pos.shape[-2:] != (s_in.size, 2):

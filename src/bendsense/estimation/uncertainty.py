@@ -97,6 +97,30 @@ def shape_jacobian(kappa, lengths, gap, seg, sigma, pos, out):
 
 
 @njit(cache=True)
+def mm(A, B):
+    """A B of small matrices by loops: no BLAS call, no shape-check code to compile."""
+    out = np.zeros((A.shape[0], B.shape[1]))
+    for i in range(A.shape[0]):
+        for c in range(A.shape[1]):
+            a = A[i, c]
+            for j in range(B.shape[1]):
+                out[i, j] += a * B[c, j]
+    return out
+
+
+@njit(cache=True)
+def mtm(A, B):
+    """Aᵀ B of small matrices by loops (:func:`mm`)."""
+    out = np.zeros((A.shape[1], B.shape[1]))
+    for c in range(A.shape[0]):
+        for i in range(A.shape[1]):
+            a = A[c, i]
+            for j in range(B.shape[1]):
+                out[i, j] += a * B[c, j]
+    return out
+
+
+@njit(cache=True)
 def eigh2(H):
     """Eigenvalues (ascending) and eigenvectors (columns) of a symmetric 2×2 matrix (one Jacobi rotation)."""
     a, b, d = H[0, 0], 0.5 * (H[0, 1] + H[1, 0]), H[1, 1]
@@ -268,8 +292,8 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
         for a in range(2):
             for b in range(2):
                 GF[a, b] += w2[row] * A[row, a] * A[row, b]
-    Dc = np.ascontiguousarray(D)
-    Hinv, singular, V = inverse_cov(Dc.T @ GF @ Dc)
+    Dc = D
+    Hinv, singular, V = inverse_cov(mm(mtm(Dc, GF), Dc))
     ratio = np.nan
     if has_cov:
         N = lengths.size
@@ -281,18 +305,18 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
                 wa = w2[row] * A[row, a]
                 for i in range(N):
                     hF[a, i] += wa * Gf[row, i]
-        hs = Dc.T @ hF  # (k, N)
+        hs = mtm(Dc, hF)  # (k, N)
         Fd = np.zeros(2)
         if has_dD:
             # D follows the reconstructed tip angle φ_L
             for a in range(2):
                 for c in range(k):
                     Fd[a] += dD[a, c] * u[c]
-            t = Dc.T @ (GF @ Fd)
+            t = mtm(Dc, mm(GF, Fd.reshape(2, 1)))[:, 0]
             for c in range(k):
                 for i in range(N):
                     hs[c, i] -= t[c] * dphi_ds[i]
-        T = Dc @ (Hinv @ hs)  # ∂F/∂S
+        T = mm(Dc, mm(Hinv, hs))  # ∂F/∂S
         if has_dD:
             for a in range(2):
                 for i in range(N):
@@ -304,18 +328,18 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
                 for a in range(2):
                     for b in range(2):
                         c[a, b] += T[a, i] * sij * T[b, j]
-        chi2, dof = misfit(Gf, w2, r, A @ Dc, cov_s)
+        chi2, dof = misfit(Gf, w2, r, mm(A, Dc), cov_s)
         if dof > 0:  # else nothing is left to test the fit with: χ²/dof is NaN
             ratio = chi2 / dof
             c *= max(ratio, 1.0)
     else:
         dof = max(2 * M - k, 1)
         var = (r @ r) / dof  # per coordinate
-        mid = A.T @ (A * (w2 * w2).reshape(-1, 1))  # AᵀW²A
-        c = Dc @ (var * (Hinv @ (Dc.T @ mid @ Dc) @ Hinv)) @ Dc.T
+        mid = mtm(A, A * (w2 * w2).reshape(-1, 1))  # AᵀW²A
+        c = mm(mm(Dc, mm(mm(Hinv, mm(mtm(Dc, mid), Dc)), Hinv)), Dc.T.copy()) * var
     for q in range(k):
         if singular[q]:
-            v = Dc @ np.ascontiguousarray(V[:, q])
+            v = mm(Dc, V[:, q:q + 1].copy())[:, 0]
             for a in range(2):
                 for b in range(2):
                     if abs(v[a] * v[b]) > 1e-12:
