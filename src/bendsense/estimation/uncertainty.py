@@ -109,18 +109,6 @@ def mm(A, B):
 
 
 @njit(cache=True)
-def mtm(A, B):
-    """Aᵀ B of small matrices by loops (:func:`mm`)."""
-    out = np.zeros((A.shape[1], B.shape[1]))
-    for c in range(A.shape[0]):
-        for i in range(A.shape[1]):
-            a = A[c, i]
-            for j in range(B.shape[1]):
-                out[i, j] += a * B[c, j]
-    return out
-
-
-@njit(cache=True)
 def eigh2(H):
     """Eigenvalues (ascending) and eigenvectors (columns) of a symmetric 2×2 matrix (one Jacobi rotation)."""
     a, b, d = H[0, 0], 0.5 * (H[0, 1] + H[1, 0]), H[1, 1]
@@ -292,8 +280,8 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
         for a in range(2):
             for b in range(2):
                 GF[a, b] += w2[row] * A[row, a] * A[row, b]
-    Dc = D
-    Hinv, singular, V = inverse_cov(mm(mtm(Dc, GF), Dc))
+    Dc, Dt = D, D.T.copy()
+    Hinv, singular, V = inverse_cov(mm(mm(Dt, GF), Dc))
     ratio = np.nan
     if has_cov:
         N = lengths.size
@@ -305,14 +293,14 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
                 wa = w2[row] * A[row, a]
                 for i in range(N):
                     hF[a, i] += wa * Gf[row, i]
-        hs = mtm(Dc, hF)  # (k, N)
+        hs = mm(Dt, hF)  # (k, N)
         Fd = np.zeros(2)
         if has_dD:
             # D follows the reconstructed tip angle φ_L
             for a in range(2):
                 for c in range(k):
                     Fd[a] += dD[a, c] * u[c]
-            t = mtm(Dc, mm(GF, Fd.reshape(2, 1)))[:, 0]
+            t = mm(Dt, mm(GF, Fd.reshape(2, 1)))[:, 0]
             for c in range(k):
                 for i in range(N):
                     hs[c, i] -= t[c] * dphi_ds[i]
@@ -335,8 +323,8 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
     else:
         dof = max(2 * M - k, 1)
         var = (r @ r) / dof  # per coordinate
-        mid = mtm(A, A * (w2 * w2).reshape(-1, 1))  # AᵀW²A
-        c = mm(mm(Dc, mm(mm(Hinv, mm(mtm(Dc, mid), Dc)), Hinv)), Dc.T.copy()) * var
+        mid = mm(A.T.copy(), A * (w2 * w2).reshape(-1, 1))  # AᵀW²A
+        c = mm(mm(Dc, mm(mm(Hinv, mm(mm(Dt, mid), Dc)), Hinv)), Dt) * var
     for q in range(k):
         if singular[q]:
             v = mm(Dc, V[:, q:q + 1].copy())[:, 0]
