@@ -13,8 +13,8 @@ from click.testing import CliRunner
 from bendsense import load_config
 from bendsense.batch import (
     BatchReport,
-    _local_pool,
     SessionOutcome,
+    _local_pool,
     discover_sessions,
     process_session,
     process_sessions,

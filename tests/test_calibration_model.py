@@ -5,10 +5,10 @@ import dataclasses
 import numpy as np
 import pytest
 import yaml
+from test_calibration import DATA, ODD, RADII, SENSOR, SyntheticSensor
 
 from bendsense.calibration import AngleCovariance, Calibration
 from bendsense.errors import ConfigError
-from test_calibration import DATA, ODD, RADII, SENSOR, SyntheticSensor
 
 D = SENSOR.strip_gap_m
 L_CUM = np.cumsum(SENSOR.lengths_m)

@@ -132,11 +132,12 @@ def test_input_columns_named_like_results_are_kept(tmp_path):
 
 def test_cli_choices_match_the_config():
     # the CLI spells them out to keep `bendsense --help` free of numpy; they must not drift
-    from bendsense import config
+    from bendsense import config, estimation
     from bendsense.cli import _common
 
     assert _common.CONSTRAINTS == config.CONSTRAINTS
     assert _common.METHODS == config.METHODS
+    assert _common.OBJECTIVES == config.OBJECTIVES == estimation.OBJECTIVES
 
 
 def test_shapes_only_results_work_downstream(tmp_path):

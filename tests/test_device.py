@@ -15,7 +15,7 @@ from bendsense import read_session
 from bendsense.cli import main
 from bendsense.device import Driver, Recorder, SimulatedDevice, ramp_source
 from bendsense.device import ports as ports_mod
-from bendsense.errors import OutputExistsError, DeviceError, SessionError
+from bendsense.errors import DeviceError, OutputExistsError
 from bendsense.frames import encode_hello, encode_sample, encode_text
 from bendsense.sessiondir import SessionWriter
 

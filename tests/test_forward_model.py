@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from forward_model import HiddenSensor, forward, free_bending_k0, solve_beam_bvp
 
 import bendsense
 from bendsense.actuator import FreeBendingModel
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from forward_model import HiddenSensor, forward, free_bending_k0, solve_beam_bvp
 
 CFG = bendsense.load_config()
 L = CFG.actuator.length_m

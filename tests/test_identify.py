@@ -392,7 +392,12 @@ def test_cli_refuses_to_overwrite(tmp_path):
     assert result.exit_code != 0
     assert "--overwrite" in result.output
     assert out.read_text(encoding="utf-8") == "keep me"
-    result = CliRunner().invoke(main, [*args, "--overwrite"])
+    result = CliRunner().invoke(main, [*args, "--overwrite"])  # not bendsense's file: kept even so
+    assert result.exit_code == 1 and "bendsense did not write it" in result.output, result.output
+    assert out.read_text(encoding="utf-8") == "keep me"
+    out.unlink()
+    assert CliRunner().invoke(main, args).exit_code == 0
+    result = CliRunner().invoke(main, [*args, "--overwrite"])  # its own output it replaces
     assert result.exit_code == 0, result.output
     bendsense.load_config(out)
 

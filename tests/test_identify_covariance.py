@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from test_identify import CFG, LOADS, P_FB, P_LEVELS, TRUE_FB, L, fb_data, loaded_shapes, write_fb_csv
 
 import bendsense
 from bendsense.cli import main
 from bendsense.config import MODEL_PARAMETERS
 from bendsense.identify import StiffnessData, fit_free_bending, fit_stiffness
-from test_identify import CFG, LOADS, P_FB, P_LEVELS, TRUE_FB, L, fb_data, loaded_shapes, write_fb_csv
 
 
 @pytest.fixture(scope="module")

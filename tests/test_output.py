@@ -124,12 +124,16 @@ def test_refuses_inputs_and_directories_holding_them(cwd):
 
 
 def test_file_writer(cwd):
-    output.write_text("a/b/cal.yaml", "one", suffixes=output.YAML)
-    assert (cwd / "a/b/cal.yaml").read_text() == "one"
+    output.write_text("a/b/cal.yaml", "# bendsense one", suffixes=output.YAML)
+    assert (cwd / "a/b/cal.yaml").read_text() == "# bendsense one"
     with pytest.raises(OutputExistsError, match=r"^a/b/cal.yaml: exists \(use --overwrite to replace it\)$"):
         output.write_text("a/b/cal.yaml", "two")
-    output.write_text("a/b/cal.yaml", "two", overwrite=True)
-    assert (cwd / "a/b/cal.yaml").read_text() == "two"
+    output.write_text("a/b/cal.yaml", "# bendsense two", overwrite=True)  # it carries bendsense's mark
+    assert (cwd / "a/b/cal.yaml").read_text() == "# bendsense two"
+    (cwd / "mine.yaml").write_text("a user's file")  # no mark: never replaced
+    with pytest.raises(OutputError, match=r"^mine.yaml: exists and bendsense did not write it"):
+        output.write_text("mine.yaml", "x", overwrite=True)
+    assert (cwd / "mine.yaml").read_text() == "a user's file"
     with pytest.raises(OutputError, match=r"^cal.txt: unknown suffix '.txt'; use one of .yaml, .yml$"):
         output.write_text("cal.txt", "x", suffixes=output.YAML)
     with pytest.raises(OutputError, match=r"^fig.xyz: unknown figure format '.xyz'; use one of .*\.png"):
@@ -139,7 +143,7 @@ def test_file_writer(cwd):
     with pytest.raises(RuntimeError), output.write_file("a/b/cal.yaml", overwrite=True) as tmp:
         tmp.write_text("half")
         raise RuntimeError
-    assert (cwd / "a/b/cal.yaml").read_text() == "two" and _visible(cwd / "a/b") == ["cal.yaml"]
+    assert (cwd / "a/b/cal.yaml").read_text() == "# bendsense two" and _visible(cwd / "a/b") == ["cal.yaml"]
 
 
 def test_file_in_an_output_directory_joins_its_manifest(cwd):

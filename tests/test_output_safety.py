@@ -139,6 +139,26 @@ def test_user_files_next_to_an_output_directory_survive_and_overwrite_replaces_o
     assert intact(planted)
 
 
+@pytest.mark.parametrize("name", CHEAP)
+def test_an_edited_manifest_never_reaches_outside_its_directory(work, name):
+    """Entries with '..', absolute paths or paths through a symbolic link are never removed."""
+    args = DIRECTORY_COMMANDS[name]
+    assert run(*args("out")).exit_code == 0
+    planted = plant(work, work.parent / "beside", work / "linked")
+    path = work / "out" / output.MANIFEST_NAME
+    manifest = json.loads(path.read_text())
+    for edit in (["../USER_NOTES.txt", "../../beside/USER_NOTES.txt"], [str(work / "USER_NOTES.txt")]):
+        path.write_text(json.dumps({**manifest, "files": manifest["files"] + edit}))
+        result = run(*args("out"), "--overwrite")  # not a manifest of bendsense's: refused
+        assert one_line_error(result), result.output
+        assert intact(planted)
+    # a manifest that lists a link and a file behind it: the link may go, never what it points to
+    (work / "out" / "link").symlink_to(work / "linked", target_is_directory=True)
+    path.write_text(json.dumps({**manifest, "files": manifest["files"] + ["link", "link/USER_NOTES.txt"]}))
+    run(*args("out"), "--overwrite")
+    assert intact(planted)
+
+
 def test_process_never_replaces_user_files(work):
     args = ["process", "run.csv", "native", "--calibration", "cal.yaml", "-o", "out", "--workers", "0",
             "--no-estimate", "--no-progress"]
@@ -169,10 +189,19 @@ def test_file_outputs_never_replace_a_file_without_overwrite(work, command):
     }[command]
     result = run(*args)
     assert one_line_error(result) and "exists (use --overwrite to replace it)" in result.output
+    # with --overwrite too: bendsense replaces only files it wrote (they carry its mark)
+    result = run(*args, "--overwrite")
+    assert one_line_error(result) and "bendsense did not write it" in result.output, result.output
     assert (work / "target.yaml").read_text() == "user's yaml"
     assert (work / "target.png").read_bytes() == b"user's png"
     assert (work / "target.csv").read_text() == "user's csv"
     assert not (work / "new.yaml").exists()  # checked before any work: the calibration was not written
+    assert intact(planted) and not litter(work)
+    # what bendsense wrote there, it replaces
+    for f in ("target.yaml", "target.png", "target.csv"):
+        (work / f).unlink()
+    assert run(*args).exit_code == 0
+    assert run(*args, "--overwrite").exit_code == 0
     assert intact(planted) and not litter(work)
 
 
@@ -393,3 +422,12 @@ def test_a_plot_that_cannot_be_drawn_leaves_no_calibration(work, monkeypatch):
     result = CliRunner().invoke(main, ["calibrate", "calib/manifest.yaml", "-o", "new.yaml", "--plot", "fit.png"])
     assert result.exit_code != 0 and isinstance(result.exception, RuntimeError)
     assert not (work / "new.yaml").exists() and not (work / "fit.png").exists() and not litter(work)
+
+
+def test_a_chain_whose_estimate_lacks_pressure_writes_nothing(work):
+    session = Session(np.arange(FRAMES) * 0.1, np.full((FRAMES, N), 2000.0), np.full(FRAMES, np.nan))
+    write_session_csv(session, work / "nopressure.csv")
+    result = run("load", "nopressure.csv", "--calibration", "cal.yaml", "reconstruct", "save", "first", "estimate",
+                 "save", "second")
+    assert result.exit_code == 2 and f"{FRAMES} of {FRAMES} frames without pressure" in result.output, result.output
+    assert not (work / "first").exists() and not (work / "second").exists() and not litter(work)

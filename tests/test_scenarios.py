@@ -13,7 +13,7 @@ import bendsense
 from bendsense.calibration import read_manifest
 from bendsense.cli import main
 from bendsense.config import load_config
-from bendsense.errors import OutputError, ConfigError
+from bendsense.errors import ConfigError, OutputError
 from bendsense.sim import VirtualSensor, calibration_shifts
 from bendsense.sim.scenarios import (
     CALIBRATION_RADII_M,

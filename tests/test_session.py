@@ -70,11 +70,11 @@ def test_failed_write_leaves_no_file(tmp_path, monkeypatch):
 
     monkeypatch.setattr(session_module, "_format", failing_format)
     target = tmp_path / "out.csv"
-    target.write_text("previous content")
+    target.write_text("# written by bendsense earlier\nprevious content")  # a file of bendsense's
     s = Session([0.0, 1.0, 2.0], [[1.0], [2.0], [3.0]], 0.0)
     with pytest.raises(OSError, match="disk full"):
         write_session_csv(s, target)
-    assert target.read_text() == "previous content"
+    assert target.read_text() == "# written by bendsense earlier\nprevious content"
     assert list(tmp_path.iterdir()) == [target]
 
 
@@ -129,3 +129,10 @@ def test_all_equal_time_stamps_warn(tmp_path, caplog):
     with caplog.at_level("WARNING", logger="bendsense"):
         read_session_csv(path)
     assert "all 3 time stamps are 0 s" in caplog.text
+
+
+def test_an_infinite_pressure_is_no_missing_reading(tmp_path):
+    path = tmp_path / "inf.csv"
+    path.write_text("t_s,pressure_pa,ch1\n0,50000,1\n0.1,inf,2\n0.2,nan,3\n")
+    with pytest.raises(SessionError, match=r"line 3, column pressure_pa: must be finite, got 'inf'"):
+        read_session_csv(path)

@@ -232,3 +232,12 @@ def test_finished_session_reports_lost_records_with_the_numbers(tmp_path):
     frames.write_bytes(frames.read_bytes()[: 745 * w.dtype.itemsize])
     with pytest.raises(SessionError, match=r"frames.bin: 745 of 1,500 records present; 755 lost"):
         read_session_dir(tmp_path / "s")
+
+
+def test_pressures_in_kilopascals_are_refused_as_in_a_csv(tmp_path):
+    # firmware that sends kPa in the pressure_pa field: every reading below 1 kPa
+    rows = [(1_000_000_000 + i, 1000 * i, i, 0, 50 + i, (1, 2, 3)) for i in range(5)]
+    hand_made_v1(tmp_path / "kpa", rows)
+    with pytest.raises(SessionError, match=r"kpa/frames\.bin, field pressure_pa: every reading is below 1 kPa "
+                                           r"\(largest 54\); looks like kilopascals"):
+        read_session(tmp_path / "kpa")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 __all__ = ["load_yaml", "parse_yaml", "read_text", "safe_load"]
 

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+
 from bendsense import _jit
 from bendsense import beam_kernels as _k
 from bendsense.errors import ArgumentError, ConvergenceError, ConvergenceWarning

@@ -515,6 +515,11 @@ class Calibration:
                 if arr.ndim != 2 or arr.shape[1] != n:
                     raise ConfigError(f"{name}: expected shape (recordings, {n}), got {arr.shape}")
                 set_(self, name, arr)
+        if self.fit_delta_a is not None and self.fit_shifts_m is not None:
+            rows = (self.fit_delta_a.shape[0], self.fit_shifts_m.shape[0])
+            if rows[0] != rows[1]:
+                raise ConfigError(f"fit_delta_a, fit_shifts_m: expected the same recordings, got {rows[0]} and "
+                                  f"{rows[1]} rows")
 
     # -- the hot path: per-channel arrays precomputed once ---------------------------
 

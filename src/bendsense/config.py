@@ -46,6 +46,8 @@ PRESSURE_RANGE_PA = (0.0, 200e3)
 """Default working range of the actuator's gauge pressure (the paper's prototype) [Pa]."""
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 METHODS = ("fast", "paper")
+#: What the fit compares: the PCC positions (paper eq. 18) or the coil angles S/d the sensor measures.
+OBJECTIVES = ("positions", "angles")
 ANGLE_SOURCES = ("model", "shape")
 # the identified model parameters θ (paper eq. 8–12, 15) and the config section of each
 FREE_BENDING_PARAMETERS = ("shear_modulus_pa", "sensor_stiffness_nm_per_rad", "prebend_angle_rad")
@@ -258,6 +260,8 @@ class MaterialConfig(_Section):
         object.__setattr__(
             self, "shear_modulus_pa", _number(f"{p}.shear_modulus_pa", self.shear_modulus_pa, positive=True)
         )
+        if self.shear_modulus_pa < 1e3:  # elastomers of soft actuators: ~10 kPa to ~10 MPa
+            raise _fail(f"{p}.shear_modulus_pa", f"{self.shear_modulus_pa:g} Pa is below 1 kPa; looks like kilopascals")
         object.__setattr__(
             self,
             "sensor_stiffness_nm_per_rad",
@@ -314,6 +318,11 @@ class EstimationConfig(_Section):
         ``follower_angle_rad`` to the tip tangent).
     method : str
         ``fast`` (default) or ``paper`` (shooting + Nelder–Mead / SLSQP).
+    objective : str
+        ``positions`` (default): the beam's points against the PCC shape's at quadrature
+        nodes (paper eq. 18); ``angles``: the beam's tangent angle at each coil against
+        the measured ``S_i / d``, weighted by the inverse covariance of the measured
+        angles (what the sensor measures; no PCC bias).
     n_points : int
         Sample points along the actuator for the shape-distance quadrature.
     tip_angle_source : str
@@ -335,6 +344,7 @@ class EstimationConfig(_Section):
     section: ClassVar[str] = "estimation"
     constraint: str = "none"
     method: str = "fast"
+    objective: str = "positions"
     n_points: int = 41
     tip_angle_source: str = "model"
     direction: tuple = (0.0, -1.0)
@@ -347,6 +357,7 @@ class EstimationConfig(_Section):
         p = self.section
         _choice(f"{p}.constraint", self.constraint, CONSTRAINTS)
         _choice(f"{p}.method", self.method, METHODS)
+        _choice(f"{p}.objective", self.objective, OBJECTIVES)
         _integer(f"{p}.n_points", self.n_points, minimum=3, maximum=1000)
         _choice(f"{p}.tip_angle_source", self.tip_angle_source, ANGLE_SOURCES)
         d = _numbers(f"{p}.direction", self.direction, 2)
@@ -503,6 +514,16 @@ class Config:
                 raise _fail(key, f"expected a {cls.__name__}, got {type(getattr(self, key)).__name__}")
         if not isinstance(self.name, str):
             raise check.fail("name", "a string", self.name, ConfigError)
+        sensor_m, length_m = float(np.sum(self.sensor.lengths_m)), self.actuator.length_m
+        if sensor_m > 1.05 * length_m:
+            raise _fail("actuator.length_m", f"{length_m:g} m is shorter than the sensor glued along it "
+                        f"(sensor.segment_lengths_m sum to {sensor_m:g} m)")
+        top = self.actuator.pressure_range_pa[1]
+        stiffening = self.stiffness.ei1_nm2_per_pa * top / self.stiffness.ei0_nm2
+        if stiffening > 100.0:
+            raise _fail("stiffness.ei1_nm2_per_pa", f"{self.stiffness.ei1_nm2_per_pa:g} N·m²/Pa makes EI "
+                        f"{stiffening + 1:.0f} times stiffer at {top / 1e3:g} kPa than at rest; looks like "
+                        "N·m²/kPa (the paper's γ1 = 1.25e-5 N·m²/kPa is 1.25e-8 N·m²/Pa)")
 
     @classmethod
     def from_dict(cls, data: Any) -> Config:
@@ -576,5 +597,6 @@ def save_config(config: Config, path: str | os.PathLike, *, overwrite: bool = Tr
     """
     from bendsense import output
 
-    output.write_text(path, yaml.safe_dump(config.to_dict(), sort_keys=False), overwrite=overwrite,
+    text = "# bendsense config (actuator, sensor and model parameters; docs/formats.md)\n"
+    output.write_text(path, text + yaml.safe_dump(config.to_dict(), sort_keys=False), overwrite=overwrite,
                       writer="bendsense identify")

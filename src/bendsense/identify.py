@@ -53,8 +53,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
 from bendsense._io import check_csv_header, read_text
+from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
 from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.plausibility import check_pressure_column
@@ -148,7 +148,7 @@ _PRESSURE = {"pressure_pa": 1.0, "pressure_kpa": 1e3}
 
 
 def _check_pressure_unit(path, name, pressure_pa):
-    """kPa numbers in a pressure_pa column (and Pa in pressure_kpa) are refused, after the layout checks."""
+    """KPa numbers in a pressure_pa column (and Pa in pressure_kpa) are refused, after the layout checks."""
     try:
         check_pressure_column(name, pressure_pa / _PRESSURE[name], 1)
     except SessionError as err:

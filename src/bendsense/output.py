@@ -247,6 +247,37 @@ def _check_file(t: Target, r: Path) -> None:
             raise OutputExistsError(f"{p}: exists (use --overwrite to replace it)")
         if not r.is_file():
             raise OutputError(f"{p}: exists and is not a regular file; refusing to replace it")
+        if not _written_by_us(r):
+            raise OutputError(f"{p}: exists and bendsense did not write it (no bendsense mark); refusing to replace "
+                              "it even with --overwrite: remove it or choose another name")
+
+
+MARK = b"bendsense"
+"""Every file bendsense writes carries this in its first or last 64 KiB: a header line of its
+CSV and YAML files, the metadata of its figures (Software/Creator) and MCAP files."""
+
+
+def _written_by_us(r: Path) -> bool:
+    """Whether the existing file ``r`` is bendsense's: listed by its directory's manifest, or marked."""
+    manifest = read_manifest(r.parent)
+    if manifest is not None and r.name in manifest["files"]:
+        return True
+    try:
+        with open(r, "rb") as fh:
+            head = fh.read(1 << 16)
+            size = fh.seek(0, os.SEEK_END)
+            fh.seek(max(size - (1 << 16), 0))
+            tail = fh.read()
+    except OSError:
+        return False
+    return MARK in head or MARK in tail
+
+
+def figure_metadata(fmt: str) -> dict | None:
+    """The bendsense mark as matplotlib's ``savefig(metadata=...)`` for ``fmt`` (None: no metadata there)."""
+    key = {"png": "Software", "pdf": "Creator", "svg": "Creator", "svgz": "Creator", "eps": "Creator",
+           "ps": "Creator"}.get(fmt.lower())
+    return {key: "bendsense (matplotlib)"} if key else None
 
 
 def _check_dir(t: Target, r: Path) -> None:
@@ -292,7 +323,17 @@ def read_manifest(path) -> dict | None:
         return None
     if not (isinstance(data, dict) and data.get("format") == MANIFEST_FORMAT and isinstance(data.get("files"), list)):
         return None
+    if not all(_inside_entry(f) for f in data["files"]):
+        return None  # an edited manifest that names something outside its directory is not ours
     return data
+
+
+def _inside_entry(name) -> bool:
+    """Whether a manifest entry is a plain relative path inside its directory (no ``..``, not absolute)."""
+    if not isinstance(name, str) or not name or "\\" in name or "\0" in name or name.startswith("/"):
+        return False
+    parts = name[:-1].split("/") if name.endswith("/") else name.split("/")
+    return all(part not in ("", ".", "..") for part in parts)
 
 
 def foreign_entries(path) -> list[str]:
@@ -596,8 +637,11 @@ def _swap_in(tmp: Path, target: Target, r: Path) -> None:
 def _remove_ours(d: Path, user: Path, keep_root: bool = False) -> None:
     """Remove what the manifest of ``d`` lists (and bendsense's litter); never anything else."""
     manifest = read_manifest(d)
+    inside = d.resolve()
     for name in manifest["files"] if manifest else ():
         f = d / name
+        if f.parent.resolve() != inside and inside not in f.parent.resolve().parents:
+            continue  # reached through a symbolic link to elsewhere: never removed
         if name.endswith("/"):
             if f.is_dir() and not f.is_symlink():
                 _remove_ours(f, user / name)

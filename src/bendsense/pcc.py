@@ -625,8 +625,12 @@ def reconstruct(
     Shape
         With ``extrapolated`` set per frame from ``calibration.in_range``.
     """
+    from bendsense.calibration import Calibration
     from bendsense.errors import ConfigError
 
+    if not isinstance(calibration, Calibration):
+        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
+                            f"{type(calibration).__name__}")
     sensor = _resolve_sensor(sensor)
     n = sensor.n_segments
     if calibration.n_channels != n:

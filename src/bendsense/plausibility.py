@@ -65,10 +65,13 @@ def pressure_range_step(estimate):
 
     @functools.wraps(estimate)
     def estimate_force(shape, pressure_pa, config=None, *args, **options):
-        if config is None:
-            from bendsense.config import load_config
+        from bendsense.config import Config, load_config
 
+        if config is None:
             config = load_config()
+        elif not isinstance(config, Config):
+            raise ArgumentError(f"config: expected a Config (bendsense.load_config(path)), got "
+                                f"{type(config).__name__}")
         outside = pressure_outside(pressure_pa, config)
         if not outside.any():
             return estimate(shape, pressure_pa, config, *args, **options)
@@ -108,24 +111,28 @@ def _mark(result, outside, p, lo, hi):
     )
 
 
-def check_pressure_column(name: str, values: np.ndarray, line: int, error=SessionError) -> None:
+def check_pressure_column(name: str, values: np.ndarray, line, error=SessionError) -> None:
     """Refuse a pressure column whose numbers are a thousand times off its unit.
+
+    ``line``: the header line of a CSV column, or the place of a record field (e.g.
+    ``"run/frames.bin"``) for the message.
 
     ``pressure_pa`` whose largest reading is between 1 Pa and 1 kPa holds kilopascals
     (a soft actuator at under 1 kPa does not bend; a column of zeros is an
     unpressurised session and passes); ``pressure_kpa`` with a reading over
     1,000 kPa (1 MPa) holds pascals.
     """
+    where = f"line {line}, column" if isinstance(line, int) else f"{line}, field"
     finite = values[np.isfinite(values)]
     if not finite.size:
         return
     top = float(finite.max())
     if name == "pressure_pa" and 1.0 <= top < 1e3:
-        raise error(f"line {line}, column pressure_pa: every reading is below 1 kPa (largest {top:g}); "
-                    "looks like kilopascals: name the column pressure_kpa")
+        raise error(f"{where} pressure_pa: every reading is below 1 kPa (largest {top:g}); "
+                    "looks like kilopascals" + (": name the column pressure_kpa" if isinstance(line, int) else ""))
     top = float(np.abs(finite).max())
     if name == "pressure_kpa" and top > 1e3:
-        raise error(f"line {line}, column pressure_kpa: readings up to {top:g} kPa (over 1 MPa); "
+        raise error(f"{where} pressure_kpa: readings up to {top:g} kPa (over 1 MPa); "
                     "looks like pascals: name the column pressure_pa")
 
 

@@ -572,5 +572,5 @@ def plot_results(
         from bendsense import output
 
         with output.write_file(path, overwrite=overwrite, inputs=[source], writer="bendsense plot") as tmp:
-            fig.savefig(tmp, format=fmt, dpi=dpi)
+            fig.savefig(tmp, format=fmt, dpi=dpi, metadata=output.figure_metadata(fmt))
     return fig

@@ -209,9 +209,10 @@ def _parse_session_csv(text: str, source: str) -> Session:
             arr = np.array(list(map(float, cells[h])))
         except ValueError:
             arr = np.array([_parse_float(c.strip(), row_lines[i], h) for i, c in enumerate(cells[h])])
-        # a missing pressure reading may be NaN; time and signals must be finite
-        if not h.startswith("pressure") and not np.isfinite(arr).all():
-            bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+        # a missing pressure reading may be NaN (never ±inf); time and signals must be finite
+        wrong = np.isinf(arr) if h.startswith("pressure") else ~np.isfinite(arr)
+        if wrong.any():
+            bad = int(np.flatnonzero(wrong)[0])
             raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {short(cells[h][bad].strip())}")
         values[h] = arr
     t = values["t_s"]
@@ -279,6 +280,7 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
         output.write_file(path, overwrite=overwrite, inputs=[source], writer="bendsense export") as tmp,
         open(tmp, "w", encoding="utf-8", newline="") as fh,
     ):
+        fh.write("# written by bendsense (a session CSV, docs/formats.md)\n")  # output.MARK; no key, no metadata
         for key, value in session.meta.items():
             if isinstance(value, (str, int, float)):
                 fh.write(f"# {key}: {value}\n")

@@ -56,9 +56,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from bendsense import validation as check
 from bendsense._io import load_yaml
 from bendsense.errors import SessionError
-from bendsense import validation as check
 from bendsense.validation import short
 
 __all__ = [
@@ -506,8 +506,9 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     meta["frames_lost"] = int(seq[-1] - seq[0] + 1 - seq.size) if seq.size else 0
     drops = _unwrap16(records["tx_drops"]) if "tx_drops" in records.dtype.names else np.zeros(0, np.int64)
     meta["tx_drops"] = int(drops[-1] - drops[0]) if drops.size else 0
-    from bendsense.plausibility import check_time_column
+    from bendsense.plausibility import check_pressure_column, check_time_column
 
+    check_pressure_column("pressure_pa", pressure, f"{source or 'session'}/{FRAMES}")
     check_time_column(t_s, source or "session")
     return Session(t_s, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
 

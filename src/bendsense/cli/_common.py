@@ -26,6 +26,7 @@ __all__ = [
 # kept in sync with bendsense.config (imported lazily for a fast --help; a test compares them)
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 METHODS = ("fast", "paper")
+OBJECTIVES = ("positions", "angles")
 
 
 class Finite(click.ParamType):
@@ -153,7 +154,8 @@ def save_figure(figure, path: Path, overwrite: bool = False) -> None:
 
     try:
         with output.write_file(path, overwrite=overwrite, suffixes=output.FIGURE) as tmp:
-            figure.savefig(tmp, dpi=120, format=path.suffix[1:].lower())
+            fmt = path.suffix[1:].lower()
+            figure.savefig(tmp, dpi=120, format=fmt, metadata=output.figure_metadata(fmt))
     finally:
         plt.close(figure)
     click.echo(f"wrote {path}")

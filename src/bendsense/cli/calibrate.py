@@ -72,7 +72,6 @@ def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_pat
           - {radius_m: 0.040, recording: r040.csv}
           - {radius_mm: 50, recording: r050.csv}
     """  # noqa: D301 (click's \b keeps the example's line breaks)
-
     check_figure_suffix(plot_path, "--plot")
 
     def step(state):

@@ -18,6 +18,7 @@ from bendsense import output
 from bendsense.cli._common import (
     CONSTRAINTS,
     METHODS,
+    OBJECTIVES,
     Finite,
     InterspersedCommand,
     config_option,
@@ -91,8 +92,12 @@ def run_steps(steps) -> dict:
         written.update(output.resolve(t.path) for t in getattr(step, "outputs", ()))
     state: dict = {}
     with output.reserve(targets, inputs):
-        for step in steps:
+        for i, step in enumerate(steps):
             state = step(state) or state
+            if i == 0:  # the session is loaded: what later steps need of it is checked before any work
+                for later in steps[1:]:
+                    if hasattr(later, "precheck"):
+                        later.precheck(state)
     return state
 
 
@@ -163,10 +168,13 @@ def reconstruct(points):
 @click.command("estimate", cls=InterspersedCommand)
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
+@click.option("--objective", type=click.Choice(OBJECTIVES),
+              help="Fit the coil angles S/d the sensor measures ('angles') or the PCC positions of paper eq. 18 "
+                   "('positions'); default: from the config.")
 @click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
 @click.option("--tip-angle-source", type=click.Choice(["model", "shape"]),
               help="Tip angle of the normal/follower constraints (default: from the config).")
-def estimate(constraint, method, push_only, tip_angle_source):
+def estimate(constraint, method, objective, push_only, tip_angle_source):
     """Estimate the tip force of every frame from its shape and pressure."""
 
     def step(state):
@@ -176,8 +184,6 @@ def estimate(constraint, method, push_only, tip_angle_source):
 
         shape = _require(state, "shape", "estimate", "'reconstruct'")
         session = state["session"]
-        if not session.has_pressure:
-            raise click.UsageError("the session has frames without pressure: give 'load ... --pressure-kpa P'")
         config = state["config"]
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
@@ -187,6 +193,7 @@ def estimate(constraint, method, push_only, tip_angle_source):
             config,
             constraint=constraint or config.estimation.constraint,
             method=method or config.estimation.method,
+            objective=objective,
             push_only=push_only,
             tip_angle_source=tip_angle_source,
             calibration=state.get("calibration"),
@@ -204,6 +211,16 @@ def estimate(constraint, method, push_only, tip_angle_source):
         state["estimate"] = est
         return state
 
+    def precheck(state):
+        import numpy as np
+
+        session = state.get("session")
+        if session is not None and not session.has_pressure:
+            missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
+            raise click.UsageError(f"{session.source or 'the session'}: {missing} of {len(session)} frames without "
+                                   "pressure: give 'load ... --pressure-kpa P'")
+
+    step.precheck = precheck
     return step
 
 

@@ -496,7 +496,7 @@ def write_figure(results_dir, path, *, title=None, max_shapes: int = 8, dpi: int
         fig.suptitle(title)
     path = Path(path)
     with output.write_file(path, overwrite=True, writer="bendsense demo") as tmp:
-        fig.savefig(tmp, format="png", dpi=dpi)
+        fig.savefig(tmp, format="png", dpi=dpi, metadata=output.figure_metadata("png"))
     return fig
 
 

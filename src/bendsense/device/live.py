@@ -363,7 +363,7 @@ class LiveView:
             artist.set_animated(False)
         try:
             with output.write_file(path, overwrite=overwrite, writer="bendsense live") as tmp:
-                self.figure.savefig(tmp, format=fmt, dpi=dpi)
+                self.figure.savefig(tmp, format=fmt, dpi=dpi, metadata=output.figure_metadata(fmt))
         finally:
             for artist in self.artists:
                 artist.set_animated(True)

@@ -32,11 +32,15 @@ import numpy as np
 
 from bendsense import _jit
 from bendsense import beam as _beam
+from bendsense.calibration import Calibration
+from bendsense.config import OBJECTIVES
 from bendsense.errors import ArgumentError, ConvergenceError
 from bendsense.estimation import kernels as _kernels
 from bendsense.estimation.paper import paper_fit
 from bendsense.estimation.problem import (
+    ANGLES,
     CONSTRAINTS,
+    POSITIONS,
     TIP_ANGLE_KINDS,
     Frames,
     Problem,
@@ -68,8 +72,6 @@ __all__ = [
 ]
 
 METHODS = ("fast", "paper")
-#: Residuals the fit can minimise (the positions of paper eq. 18).
-OBJECTIVES = ("positions",)
 #: Gauss–Newton stops when its step is below this [N].
 XTOL_N = 1e-10
 MAX_ITER = 100
@@ -101,7 +103,7 @@ def _models(config):
 # first step, kept apart from the estimator: frames outside the actuator's pressure range get no force
 @pressure_range_step
 def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "none", method: str | None = "fast", *,
-                   objective: str = "positions", push_only: bool | None = None, tip_angle_source: str | None = None,
+                   objective: str | None = None, push_only: bool | None = None, tip_angle_source: str | None = None,
                    direction=None, follower_angle_rad: float | None = None, initial_force_n=None,
                    initial: ForceEstimate | None = None, warm_start: bool = True, noise_std=None, calibration=None,
                    strict: bool = False, s_m=None, n_points: int | None = None, xtol_n: float = XTOL_N,
@@ -123,8 +125,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         One of :data:`CONSTRAINTS` (:mod:`~bendsense.estimation.problem`); None: the config's.
     method : {"fast", "paper"}
         The compiled Gauss–Newton core, or the paper's shooting + Nelder–Mead / SLSQP.
-    objective : {"positions"}
-        The residual fitted (paper eq. 18 on the PCC positions).
+    objective : {"positions", "angles"}, optional
+        The residual fitted (:data:`OBJECTIVES`): the PCC positions (paper eq. 18) or the
+        coil angles ``S_i / d`` the sensor measures (a PCC shape only); None: the config's.
     push_only : bool
         ``u ≥ 0`` for the 1-D constraints (default ``config.estimation.push_only``).
     tip_angle_source, direction, follower_angle_rad
@@ -174,14 +177,22 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     est = config.estimation
     constraint = est.constraint if constraint is None else constraint
     method = est.method if method is None else method
+    objective = est.objective if objective is None else objective
     if method not in METHODS:
         raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+    if method == "paper" and objective != "positions":
+        raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     L = float(config.actuator.length_m)
     n_points = int(est.n_points if n_points is None else n_points)
     if n_points < 3:
         raise ArgumentError(f"n_points: must be >= 3, got {n_points}")
+    if not max_iter >= 1:
+        raise ArgumentError(f"max_iter: must be >= 1, got {max_iter!r}")
+    if calibration is not None and not isinstance(calibration, Calibration):
+        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
+                            f"{type(calibration).__name__}")
     ref = reference(shape, config, s_m, n_points, L)
     options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
         np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
@@ -330,6 +341,10 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
     if objective not in OBJECTIVES:
         raise ArgumentError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    angles = objective == "angles"
+    if angles and ref.kappa is None:
+        raise ArgumentError("objective: 'angles' fits the coil angles S/d of a PCC shape (curvatures or a Shape); "
+                            "a shape given by points has none: use objective='positions'")
     push_only = bool(est.push_only if push_only is None else push_only)
     source = est.tip_angle_source if source is None else source
     if source not in ("model", "shape"):
@@ -361,6 +376,14 @@ def _build_problem(config, calibration, ref, options, noise_opt):
                     np.zeros(1, np.int64), np.zeros(1), np.zeros(1))
     ops = _beam._operators(_N_NODES)
     _, PQ = _beam._sampling(_N_NODES, (ref.s / L).tobytes())
+    if angles:  # the coils on the actuator: their tangent angle φ(L_i) is what the sensor measures
+        ends = np.cumsum(lengths)
+        coils = np.flatnonzero(ends <= L * (1.0 + 1e-12))
+        PA = _beam._sampling(_N_NODES, (ends[coils] / L).tobytes())[0]
+        PQ_fit, sw, jump_floor = PQ[:0], np.ones(coils.size), 1e-6
+    else:
+        coils, PA = np.zeros(0, np.int64), np.zeros((0, _N_NODES))
+        PQ_fit, sw, jump_floor = PQ, np.repeat(np.sqrt(ref.w), 2), 1e-6 * L
     seg_fk, sigma_fk, beyond, tip_weights, lengths, gap, seg, sigma, dphi_ds = geometry
     pb = Problem(
         pcc=pcc, kind=kind, direction=_c(fixed), follower_angle=follower,
@@ -370,5 +393,6 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         **{name: _c(a, a.dtype) if isinstance(a, np.ndarray) else a for name, a in model.items()},
         s=_c(ref.s), w=_c(ref.w), L=L, wload=_c(config.weight_per_length_n_per_m), ffix=np.zeros(2),
         lower=np.full(k, 0.0 if push_only else -np.inf), xtol=xtol_n, max_iter=max_iter,
-        PQ=_c(PQ), q=_c(ops.Q[-1]))
-    return pb, ("propagated" if noise else "residual")
+        PQ=_c(PQ), q=_c(ops.Q[-1]), objective=ANGLES if angles else POSITIONS, PQ_fit=_c(PQ_fit),
+        coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor)
+    return pb, ("propagated" if noise else "none" if angles else "residual")

@@ -35,6 +35,8 @@ _NO_STABLE_MATCH = int(Status.NO_STABLE_MATCH)
 # value it is called with, and once for all non-literal values (compile time)
 YES, NO = bk.YES, bk.NO
 
+POSITIONS, ANGLES = prob.POSITIONS, prob.ANGLES
+
 MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the boundary
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a boundary stop is a failure
 NEWTON_TOL = 1e-11
@@ -103,9 +105,15 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, u
 
 
 @njit(cache=True)
-def workspace(M, n):
-    """Buffers of one beam evaluation: positions, ∂p/∂F, state, tip (+ ∂tip/∂F), ∂φ_nodes/∂F."""
-    return np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 2))
+def workspace(M, n, R):
+    """Buffers of one beam evaluation.
+
+    Positions (M, 2) and ∂p/∂F (M, 2, 2) at the comparison nodes, the state (n,), the tip
+    (+ ∂tip/∂F) (6,), ∂φ_nodes/∂F (n, 2), and the fitted response y (R,) with ∂y/∂F
+    (R, 2): the positions flattened, or the tangent angles at the coils.
+    """
+    return (np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 2)), np.empty(R),
+            np.empty((R, 2)))
 
 
 @njit(cache=True)
@@ -116,40 +124,84 @@ def copy_workspace(src, dst):
     dst[2][:] = src[2]
     dst[3][:] = src[3]
     dst[4][:, :] = src[4]
+    dst[5][:] = src[5]
+    dst[6][:, :] = src[6]
 
 
 @njit(cache=True)
-def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, PQ, q, ws):
-    """The beam shape at the comparison points with ∂p/∂F, into the workspace ``ws``; True if stable."""
-    pos, dpos, st, tip, dst = ws
+def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb, ws):
+    """The beam at force ``F`` and its fitted response with ∂y/∂F, into the workspace ``ws``; True if stable.
+
+    The positions objective samples the positions at the comparison nodes (rows of
+    ``pb.PQ_fit``), the angles objective interpolates the tangent angle at the coils
+    (rows of ``pb.PA``): ``φ(L_i)``, what the sensor measures as ``S_i / d``.
+    """
+    pos, dpos, st, tip, dst, y, dy = ws
     n = st.size
     extra = np.empty((n - 1, 3))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
                                   NEWTON_TOL, int(NEWTON_MAX_ITER), bool(YES), allow_continuation, st, extra)
     bk.node_sensitivity(extra, L, ei, dst)
-    bk.sample(st, dst, L, PQ, q, bool(YES), pos, dpos, tip)
+    bk.sample(st, dst, L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
+    if pb.objective == ANGLES:
+        for i in range(y.size):
+            a = 0.0
+            d0 = 0.0
+            d1 = 0.0
+            for j in range(n):
+                a += pb.PA[i, j] * st[j]
+                d0 += pb.PA[i, j] * dst[j, 0]
+                d1 += pb.PA[i, j] * dst[j, 1]
+            y[i] = a
+            dy[i, 0] = d0
+            dy[i, 1] = d1
+    else:
+        for j in range(pos.shape[0]):
+            for a in range(2):
+                y[2 * j + a] = pos[j, a]
+                dy[2 * j + a, 0] = dpos[j, a, 0]
+                dy[2 * j + a, 1] = dpos[j, a, 1]
     return status == _OK
 
 
 @njit(cache=True)
-def objective(ws, p0, w, D, gF, GF):
-    """Positions objective (paper eq. 18): cost Σ w ‖p − p⁰‖², force gradient and Gram matrix.
+def whitened(ws, tg):
+    """The whitened residual e (R,) and its Jacobian ∂e/∂F (R, 2) of the target ``tg``.
 
-    Writes ``gF`` (2,) = Σ w (∂p/∂F)ᵀ (p − p⁰) and ``GF`` (2, 2) = Σ w (∂p/∂F)ᵀ ∂p/∂F;
-    returns the cost.
+    ``tg`` = (y⁰, √w, L_w, whiten): e = √w (y − y⁰) with per-row weights (positions,
+    paper eq. 18's quadrature), or e = L_w⁻¹ (y − y⁰) with L_w the Cholesky factor of the
+    measured angles' covariance (angles objective: weights Σ_θ⁻¹).
     """
-    pos, dpos = ws[0], ws[1]
+    y, dy = ws[5], ws[6]
+    y0, sw, Lw, whiten = tg
+    R = y.size
+    e = np.empty((R, 3))
+    for i in range(R):
+        e[i, 0] = (y[i] - y0[i]) * sw[i]
+        e[i, 1] = dy[i, 0] * sw[i]
+        e[i, 2] = dy[i, 1] * sw[i]
+    if whiten:
+        unc.forward(Lw, e)
+    return e
+
+
+@njit(cache=True)
+def objective(ws, tg, gF, GF):
+    """The cost ‖e‖² of the whitened residual (:func:`whitened`), its force gradient and Gram matrix.
+
+    Writes ``gF`` (2,) = (∂e/∂F)ᵀ e and ``GF`` (2, 2) = (∂e/∂F)ᵀ ∂e/∂F; returns the cost.
+    For the positions objective the cost is Σ w ‖p − p⁰‖² (paper eq. 18).
+    """
+    e = whitened(ws, tg)
     cost = 0.0
     gF[:] = 0.0
     GF[:, :] = 0.0
-    for j in range(p0.shape[0]):
-        for a in range(2):
-            r = pos[j, a] - p0[j, a]
-            cost += w[j] * r * r
-            for b in range(2):
-                gF[b] += w[j] * dpos[j, a, b] * r
-                for c in range(2):
-                    GF[b, c] += w[j] * dpos[j, a, b] * dpos[j, a, c]
+    for i in range(e.shape[0]):
+        cost += e[i, 0] * e[i, 0]
+        for b in range(2):
+            gF[b] += e[i, 1 + b] * e[i, 0]
+            for c in range(2):
+                GF[b, c] += e[i, 1 + b] * e[i, 1 + c]
     return cost
 
 
@@ -186,7 +238,7 @@ def convex_start(L, ei, wload, D, ffix, lower, u, out):
 
 
 @njit(cache=True)
-def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_iter, ops, PQ, q, ws, blocked):
+def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter, ops, pb, ws, blocked):
     """Projected Gauss–Newton with a trust region on ``u`` (k,) for one frame; ``u`` updated in place.
 
     The first beam solve starts Newton from the reference shape ``state0`` where the
@@ -200,7 +252,6 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
     left the stable branch (status NOT_IDENTIFIABLE).
     """
     k = u.size
-    M = p0.shape[0]
     n = state0.size
     for c in range(k):
         u[c] = max(u[c], lower[c])
@@ -211,18 +262,18 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
     unique = bk.load_ratio(F[0] * scale, F[1] * scale, wx * scale, wy * scale) < 1.0
     convex = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wx, F[1] + wy)) * scale < 0.9 * bk.STABLE_BOUND
     iters = 1
-    ok = beam_eval(L, ei, k0, F, wload, state0, unique, bool(YES), ops, PQ, q, ws)
+    ok = beam_eval(L, ei, k0, F, wload, state0, unique, bool(YES), ops, pb, ws)
     if not ok:
         # the start may buckle the beam or lead Newton astray: start over from the unloaded
         # arc by continuation at the constraint's zero force
         for c in range(k):
             u[c] = max(0.0, lower[c])
         force_of(D, ffix, u, F)
-        ok = beam_eval(L, ei, k0, F, wload, state0, bool(NO), bool(YES), ops, PQ, q, ws)
+        ok = beam_eval(L, ei, k0, F, wload, state0, bool(NO), bool(YES), ops, pb, ws)
         iters += 1
     gF = np.empty(2)
     GF = np.empty((2, 2))
-    trial = workspace(M, n)
+    trial = workspace(ws[0].shape[0], n, ws[5].size)
     if not convex and ok:
         uc = np.empty(k)
         convex_start(L, ei, wload, D, ffix, lower, u, uc)
@@ -231,14 +282,14 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
             moved |= uc[c] != u[c]
         if moved:
             force_of(D, ffix, uc, F)
-            okc = beam_eval(L, ei, k0, F, wload, state0, bool(YES), bool(YES), ops, PQ, q, trial)
+            okc = beam_eval(L, ei, k0, F, wload, state0, bool(YES), bool(YES), ops, pb, trial)
             iters += 1
-            if okc and objective(trial, p0, w, D, gF, GF) < objective(ws, p0, w, D, gF, GF):
+            if okc and objective(trial, tg, gF, GF) < objective(ws, tg, gF, GF):
                 u[:] = uc
                 copy_workspace(trial, ws)
     if not ok:
         return _BEAM_FAILED, iters, np.nan
-    cost = objective(ws, p0, w, D, gF, GF)
+    cost = objective(ws, tg, gF, GF)
     g = np.empty(k)
     H = np.empty((k, k))
     project(D, gF, GF, g, H)
@@ -253,7 +304,7 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
     guess = np.empty(n)
     gFn = np.empty(2)
     GFn = np.empty((2, 2))
-    pos, dpos, st, _, dst = ws
+    st, dst, y, dy = ws[2], ws[4], ws[5], ws[6]
     for _ in range(max_iter):
         unc.lm_step(H, g, step)
         size = 0.0
@@ -289,18 +340,17 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
         force_of(D, ffix, un, F)
         for i in range(n):  # first-order prediction of the new state
             guess[i] = st[i] + dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
-        okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, PQ, q, trial)
+        okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, pb, trial)
         iters += 1
         # a shape far from its linear prediction has jumped to another branch of equilibria
         jump = 0.0
         lin_max = 0.0
-        for j in range(M):
-            for a in range(2):
-                lin = dpos[j, a, 0] * dF[0] + dpos[j, a, 1] * dF[1]
-                lin_max = max(lin_max, abs(lin))
-                jump = max(jump, abs(trial[0][j, a] - pos[j, a] - lin))
-        okn = okn and jump <= 0.5 * lin_max + 1e-6 * L
-        cn = objective(trial, p0, w, D, gFn, GFn)
+        for i in range(y.size):
+            lin = dy[i, 0] * dF[0] + dy[i, 1] * dF[1]
+            lin_max = max(lin_max, abs(lin))
+            jump = max(jump, abs(trial[5][i] - y[i] - lin))
+        okn = okn and jump <= 0.5 * lin_max + pb.jump_floor
+        cn = objective(trial, tg, gFn, GFn)
         rho = (cost - cn) / (predicted if predicted > 0 else np.inf)
         # below ~1e-6 N the cost change is lost in the beam's round-off: the step is trusted
         acc = okn and (rho > 1e-4 or norm < 1e-6)
@@ -334,9 +384,11 @@ def gauss_newton(L, ei, k0, wload, p0, w, D, ffix, lower, u, state0, xtol, max_i
 
 
 @njit(cache=True)
-def finish(status, pb, p0, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force, cov, direction):
+def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force, cov, direction):
     """Status, force, covariance and χ²/dof of a frame after the iteration; returns (status, residual, χ²/dof)."""
     pos, L, w = ws[0], pb.L, pb.w
+    if pb.objective == ANGLES:  # the positions at the comparison nodes, for the residual
+        bk.sample(ws[2], ws[4], L, pb.PQ, pb.q, bool(YES), pos, ws[1], ws[3])
     num = 0.0
     den = 0.0
     for j in range(p0.shape[0]):
@@ -347,8 +399,12 @@ def finish(status, pb, p0, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force
     residual = math.sqrt(num / den)
     ratio = np.nan
     if status == _OK or status == _NOT_IDENTIFIABLE:
-        ratio = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws[0], ws[1], frame_cov, cov_s, kappa, pb.lengths,
-                               pb.gap, pb.seg, pb.sigma, pb.dphi_ds, cov)
+        if pb.objective == ANGLES:
+            ratio = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
+                                          pb.gap, pb.dphi_ds, ws[6], cov)
+        else:
+            ratio = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws[0], ws[1], frame_cov, cov_s, kappa,
+                                   pb.lengths, pb.gap, pb.seg, pb.sigma, pb.dphi_ds, cov)
     if status == _NOT_IDENTIFIABLE:
         v = np.empty(2)
         force_of(D, np.zeros(2), blocked, v)
@@ -374,25 +430,34 @@ def finish(status, pb, p0, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force
 
 @njit(cache=True)
 def buffers(pb, n):
-    """Per-thread buffers of :func:`setup`: reference points and angles, κ at the nodes, beam start, D, ∂D, Σ_S, κ."""
+    """Per-thread buffers of :func:`setup`.
+
+    Reference points and angles, κ at the nodes, beam start, D, ∂D, Σ_S, κ, and the
+    target's y⁰ and L_w (:func:`whitened`).
+    """
     m = pb.seg_fk.size
     N = pb.lengths.size
     k = pb.lower.size
+    R = pb.sw.size
+    Rw = R if pb.objective == ANGLES else 1
     return (np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
-            np.empty((2, k)), np.empty((N, N)), np.zeros(N))
+            np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)))
 
 
 @njit(cache=True)
 def setup(i, fr, pb, buf):
-    """Frame ``i``'s reference shape, constraint basis and shift covariance (the kernels' inputs).
+    """Frame ``i``'s reference shape, fit target, constraint basis and shift covariance (the kernels' inputs).
 
     A PCC frame's reference comes from its curvatures
     (:func:`~bendsense.estimation.problem.pcc_reference`); a shape given by points
-    brings its own (``fr``: :class:`~bendsense.estimation.problem.Frames`). Returns
-    (p⁰, φ at the last node, κ at the nodes, beam start, D, ∂D/∂φ_L, whether Σ_S is
+    brings its own (``fr``: :class:`~bendsense.estimation.problem.Frames`). The target
+    (:func:`whitened`) is the reference's positions with the quadrature weights, or the
+    measured angles ``S_i / d = Σ_{j ≤ i} κ_j l_j`` at the coils weighted by the inverse
+    of their covariance ``Σ_S / d²`` (unweighted without a noise model). Returns (p⁰, φ
+    at the last node, κ at the nodes, beam start, target, D, ∂D/∂φ_L, whether Σ_S is
     known, Σ_S, κ) of the frame; the arrays live in ``buf`` (:func:`buffers`).
     """
-    pos, ang, ks, st, D, dD, cov_s, no_kappa = buf
+    pos, ang, ks, st, D, dD, cov_s, no_kappa, y0, Lw = buf
     M = ks.size
     if pb.pcc:
         tip = prob.pcc_reference(fr.kappa[i], pb.lengths, pb.seg_fk, pb.sigma_fk, pb.beyond, pb.tip_weights, pos, ang,
@@ -403,7 +468,26 @@ def setup(i, fr, pb, buf):
         p0, phi_end, kappa_s, state0, kappa = fr.p0[i], fr.phi_end[i], fr.kappa_s[i], fr.state[i], no_kappa
     prob.basis(pb.kind, tip if pb.shape_angle else fr.theta[i], pb.direction, pb.follower_angle, D, dD)
     frame_cov = pb.pcc and pb.noise and unc.shift_covariance(kappa, pb, cov_s) > 0
-    return p0, phi_end, kappa_s, state0, D, dD, frame_cov, cov_s, kappa
+    whiten = False
+    if pb.objective == ANGLES:
+        acc = 0.0
+        c = 0
+        for j in range(pb.lengths.size):
+            acc += kappa[j] * pb.lengths[j]  # φ(L_j) = S_j / d (paper eq. 3–4)
+            if c < pb.coils.size and pb.coils[c] == j:
+                y0[c] = acc
+                c += 1
+        if frame_cov:
+            inv_d2 = 1.0 / (pb.gap * pb.gap)
+            for a in range(pb.coils.size):
+                for b in range(pb.coils.size):
+                    Lw[a, b] = cov_s[pb.coils[a], pb.coils[b]] * inv_d2
+            whiten = unc.cholesky(Lw) > 0
+    else:
+        for j in range(M):
+            y0[2 * j] = p0[j, 0]
+            y0[2 * j + 1] = p0[j, 1]
+    return p0, phi_end, kappa_s, state0, (y0, pb.sw, Lw, whiten), D, dD, frame_cov, cov_s, kappa
 
 
 @njit(cache=True)
@@ -412,7 +496,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     force, cov, status, iters, residual, chi2, guess_n, state, tip, direction, std = out
     k = pb.lower.size
     buf = buffers(pb, ops.sigma.size)
-    ws = workspace(pb.s.size, ops.sigma.size)
+    ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
     u = np.empty(k)
     u0 = np.empty(k)
     prev_u = np.empty(k)
@@ -421,7 +505,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     g = np.empty(k)
     prev_ok = False
     for i in range(lo, hi):
-        p0, phi_end, kappa_s, state0, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
+        p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
         ei, k0 = fr.ei[i], fr.k0[i]
         moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, g)
         force_of(D, pb.ffix, g, guess_n[i])
@@ -435,14 +519,14 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
             if prev_ok:
                 u[c] = max(u0[c] + prev_u[c] - prev_u0[c], pb.lower[c])
         blocked[:] = 0.0
-        st, it, _ = gauss_newton(pb.L, ei, k0, pb.wload, p0, pb.w, D, pb.ffix, pb.lower, u, state0, pb.xtol,
-                                 pb.max_iter, ops, pb.PQ, pb.q, ws, blocked)
+        st, it, _ = gauss_newton(pb.L, ei, k0, pb.wload, tg, D, pb.ffix, pb.lower, u, state0, pb.xtol, pb.max_iter,
+                                 ops, pb, ws, blocked)
         prev_ok = chained and st == _OK
         prev_u[:] = u
         prev_u0[:] = u0
         direction[i, :] = 0.0
-        status[i], residual[i], chi2[i] = finish(st, pb, p0, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force[i],
-                                                 cov[i], direction[i])
+        status[i], residual[i], chi2[i] = finish(st, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa,
+                                                 force[i], cov[i], direction[i])
         iters[i] = it
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
@@ -476,15 +560,15 @@ def evaluate_frames(fr, pb, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
     force, cov, status, iters, residual, chi2, guess_n, state, tip, direction, std = out
     buf = buffers(pb, ops.sigma.size)
-    ws = workspace(pb.s.size, ops.sigma.size)
+    ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
     F = np.empty(2)
     blocked = np.zeros(pb.lower.size)
     for i in range(fr.ei.size):
-        p0, _, _, state0, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
+        p0, _, _, state0, tg, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
         force_of(D, pb.ffix, u[i], F)
-        ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, pb.PQ, pb.q, ws)
+        ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, pb, ws)
         st = run_status[i] if ok else _BEAM_FAILED
-        status[i], residual[i], chi2[i] = finish(st, pb, p0, D, dD, u[i], ws, blocked, frame_cov, cov_s, kappa,
+        status[i], residual[i], chi2[i] = finish(st, pb, p0, tg, D, dD, u[i], ws, blocked, frame_cov, cov_s, kappa,
                                                  force[i], cov[i], direction[i])
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])

@@ -33,6 +33,7 @@ __all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", 
 
 #: The force constraints (module docstring); the CLI's choices come from here.
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
+POSITIONS, ANGLES = 0, 1  # codes of config.OBJECTIVES in the kernels
 _N_NODES = DEFAULT_NODES
 
 
@@ -116,6 +117,12 @@ class Problem(NamedTuple):
     max_iter: int
     PQ: np.ndarray  # (M, n) positions at the comparison nodes from the nodes' sin/cos
     q: np.ndarray  # (n,) the same for the tip
+    objective: int  # POSITIONS or ANGLES (:data:`OBJECTIVES`)
+    PQ_fit: np.ndarray  # the rows of PQ evaluated while fitting (none for the angles objective)
+    coils: np.ndarray  # (Nc,) the coils on the actuator (angles objective)
+    PA: np.ndarray  # (Nc, n) the tangent angle at the coils from the nodes' angles
+    sw: np.ndarray  # (R,) square root of each fitted row's weight: (2M,) positions, (Nc,) ones for angles
+    jump_floor: float  # a trial response this far from its linear prediction is no branch jump [m or rad]
 
 
 @functools.lru_cache(maxsize=16)

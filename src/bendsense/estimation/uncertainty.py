@@ -337,6 +337,70 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
 
 
 @njit(cache=True)
+def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_ds, dy, out):
+    """Cov(F) (2, 2) into ``out`` and χ²/dof of one frame fitted to the measured coil angles.
+
+    ``e`` (R, 3): the whitened residual and its Jacobian by F at the optimum
+    (:func:`bendsense.estimation.kernels.whitened`); the measured angles are
+    ``θ_i = S_(c_i) / d`` at the coils ``coils``. The optimum moves by
+    ``δu = −H⁻¹ J̃ᵀ L_w⁻¹ ∂r/∂S δS`` with ``J̃ = L_w⁻¹ (∂y/∂F) D``, ``H = J̃ᵀ J̃`` and
+    ``∂r/∂S = −E/d`` (plus the turn of D with the shape's tip angle for
+    ``has_dD``); ``Cov(F) = T Σ_S Tᵀ`` with ``T = ∂F/∂S``, which is ``D H⁻¹ Dᵀ`` when the
+    weights are the inverse covariance of the angles. χ² = ‖e‖² with rank(Σ_θ) − k
+    degrees of freedom; the covariance is scaled by ``max(1, χ²/dof)``. Without a
+    noise model (``has_cov`` False) the covariance is NaN.
+    """
+    R = e.shape[0]
+    k = D.shape[1]
+    N = dphi_ds.size
+    JD = mm(e[:, 1:].copy(), D)
+    Hinv, singular, V = inverse_cov(mm(JD.T.copy(), JD))
+    if not has_cov:
+        out[:, :] = np.nan
+        return np.nan
+    Fd = np.zeros(2)
+    if has_dD:
+        for a in range(2):
+            for c in range(k):
+                Fd[a] += dD[a, c] * u[c]
+    B = np.zeros((R, N))  # ∂r/∂S, then whitened
+    for a in range(R):
+        B[a, coils[a]] = -1.0 / gap
+        if has_dD:
+            t = dy[a, 0] * Fd[0] + dy[a, 1] * Fd[1]
+            for j in range(N):
+                B[a, j] += t * dphi_ds[j]
+    y0, sw, Lw, whiten = tg
+    if whiten:
+        forward(Lw, B)
+    T = mm(D, mm(Hinv, mm(JD.T.copy(), B)))
+    for a in range(2):
+        for j in range(N):
+            T[a, j] = Fd[a] * dphi_ds[j] - T[a, j]
+    c = mm(mm(T, cov_s), T.T.copy())
+    chi2 = 0.0
+    for a in range(R):
+        chi2 += e[a, 0] * e[a, 0]
+    rank = 0
+    for a in range(Lw.shape[0] if whiten else 0):
+        rank += Lw[a, a] > 0.0
+    dof = rank - k
+    ratio = np.nan
+    if dof > 0:
+        ratio = chi2 / dof
+        c *= max(ratio, 1.0)
+    for q in range(k):
+        if singular[q]:
+            v = mm(D, V[:, q:q + 1].copy())[:, 0]
+            for a in range(2):
+                for b in range(2):
+                    if abs(v[a] * v[b]) > 1e-12:
+                        c[a, b] = np.inf
+    out[:, :] = c
+    return ratio
+
+
+@njit(cache=True)
 def _slope(coef, dcoef, i, shift):
     """|f'(ΔA)| of channel i at the signal ΔA = f⁻¹(S) (paper eq. 2 inverted by Newton's method).
 

@@ -187,6 +187,7 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
     with output.write_file(path, overwrite=overwrite, suffixes=MCAP, writer="bendsense mcap") as tmp, \
             open(tmp, "wb") as fh:
         writer = writer_mod.Writer(fh)
+        writer._writer.add_metadata("bendsense", {"written_by": "bendsense mcap"})  # the mark (output.MARK)
         schemas = {name: writer.register_msgdef(name, text) for name, text in SCHEMAS.items()}
         for k, stamp in enumerate(stamps.tolist()):
             header = _header(stamp)
