@@ -466,3 +466,16 @@ def test_stiffness_with_paper_shooting_solver_agrees():
     fit = fit_stiffness(StiffnessData.from_tip(p, f, tip, L), CFG, method="shooting")
     assert fit.success, fit.message
     np.testing.assert_allclose(fit.level_ei_nm2, CFG.stiffness.ei_nm2(np.array([30e3, 90e3])), rtol=1e-6)
+
+
+def test_unit_mistakes_in_identification_data_are_refused(tmp_path):
+    degrees = tmp_path / "fb.csv"
+    degrees.write_text("pressure_kpa,bending_angle_rad\n20,25\n40,55\n60,80\n")
+    with pytest.raises(SessionError, match=r"fb\.csv: column bending_angle_rad: angles up to 80 rad \(over a full "
+                                           r"turn\); looks like degrees"):
+        read_free_bending_csv(degrees)
+    mm = tmp_path / "st.csv"
+    mm.write_text("pressure_kpa,fx_n,fy_n,tip_x_m,tip_y_m\n40,0,-0.1,60.5,110.2\n80,0,-0.1,95.0,70.1\n")
+    with pytest.raises(SessionError, match=r"st\.csv: measured points up to 125\.7\d* m from the base, farther "
+                                           r"than the actuator is long \(0\.134 m\); looks like millimetres"):
+        read_stiffness_csv(mm, 0.134)

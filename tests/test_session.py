@@ -136,3 +136,10 @@ def test_an_infinite_pressure_is_no_missing_reading(tmp_path):
     path.write_text("t_s,pressure_pa,ch1\n0,50000,1\n0.1,inf,2\n0.2,nan,3\n")
     with pytest.raises(SessionError, match=r"line 3, column pressure_pa: must be finite, got 'inf'"):
         read_session_csv(path)
+
+
+def test_an_empty_pressure_cell_is_no_reading(tmp_path):
+    path = tmp_path / "gap.csv"
+    path.write_text("t_s,pressure_kpa,ch1\n0,50,1\n0.1,,2\n0.2,nan,3\n")
+    p = read_session_csv(path).pressure_pa
+    assert p[0] == 50e3 and np.isnan(p[1:]).all()

@@ -171,6 +171,10 @@ def read_free_bending_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarr
     _require_finite(path, pname, pressure)
     _require_finite(path, aname, angle)
     _check_pressure_unit(path, pname, pressure)
+    top = float(np.abs(angle).max())
+    if aname == "bending_angle_rad" and top > 2.0 * math.pi:
+        raise SessionError(f"{path}: column bending_angle_rad: angles up to {top:g} rad (over a full turn); "
+                           "looks like degrees: name the column bending_angle_deg")
     return pressure, angle
 
 
@@ -275,6 +279,10 @@ def read_stiffness_csv(path: str | os.PathLike, length_m: float) -> StiffnessDat
     except ArgumentError as err:
         raise SessionError(f"{path}: {err}") from None
     _check_pressure_unit(path, pname, pressure)
+    reach = np.hypot(result.positions_m[..., 0], result.positions_m[..., 1])
+    if np.nanmax(reach, initial=0.0) > 1.05 * length_m:
+        raise SessionError(f"{path}: measured points up to {np.nanmax(reach):g} m from the base, farther than the "
+                           f"actuator is long ({length_m:g} m); looks like millimetres")
     return result
 
 

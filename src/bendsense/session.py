@@ -113,6 +113,8 @@ class Session:
 
 
 def _parse_float(text: str, line: int, column: str) -> float:
+    if not text and column.startswith("pressure"):
+        return math.nan  # an empty pressure cell: no reading (docs/formats.md)
     try:
         value = float(text)
     except ValueError:
