@@ -77,3 +77,22 @@ def test_misfit_gls_equals_the_pseudo_inverse_form_when_the_fit_absorbs_k_direct
     want = np.sum(z[k:] ** 2 / lam[k:])
     assert dof == N - k
     assert chi2 == pytest.approx(want, rel=1e-8)
+
+
+def test_lu_factor_and_apply_solve_column_by_column_as_together():
+    from bendsense import beam_kernels as bk
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        A = rng.standard_normal((19, 19))
+        A[:, 0] *= 1e-3  # pivoting needed
+        B = rng.standard_normal((19, 4))
+        together, split = B.copy(), B.copy()
+        assert bk.lu_solve(A.copy(), together)
+        LU, piv = A.copy(), np.empty(19, dtype=np.int64)
+        assert bk.lu_factor(LU, piv)
+        bk.lu_apply(LU, piv, split, 0, 1)
+        bk.lu_apply(LU, piv, split, 1, 4)
+        np.testing.assert_array_equal(split, together)
+        np.testing.assert_allclose(together, np.linalg.solve(A, B), rtol=1e-9, atol=1e-9)
+    assert not bk.lu_solve(np.zeros((3, 3)), np.ones((3, 1)))

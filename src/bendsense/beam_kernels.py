@@ -57,48 +57,75 @@ def load_ratio(fx, fy, wx, wy):
 
 
 @njit(cache=True)
-def lu_solve(A, B):
-    """Solve A X = B in place (X in B) by Gaussian elimination with partial pivoting.
+def lu_factor(A, piv):
+    """LU factorisation of A (m, m) in place with partial pivoting (row swaps in ``piv``).
 
-    A (m, m) is overwritten. Returns False for a singular (or non-finite) matrix. For the
-    19×19 collocation Jacobian with 2–4 right-hand sides: ~1.5 µs.
+    The multipliers are kept below the diagonal. Returns False for a singular (or
+    non-finite) matrix. For the 19×19 collocation Jacobian: ~1 µs.
     """
     m = A.shape[0]
-    ncol = B.shape[1]
     for k in range(m):
-        piv = k
+        p = k
         big = abs(A[k, k])
         for i in range(k + 1, m):
             v = abs(A[i, k])
             if v > big:
                 big = v
-                piv = i
+                p = i
         if not big > 0.0:  # zero or NaN
             return False
-        if piv != k:
-            for j in range(m):
+        piv[k] = p
+        if p != k:  # the multipliers left of k stay where they were made: lu_apply replays the steps in order
+            for j in range(k, m):
                 t = A[k, j]
-                A[k, j] = A[piv, j]
-                A[piv, j] = t
-            for j in range(ncol):
-                t = B[k, j]
-                B[k, j] = B[piv, j]
-                B[piv, j] = t
+                A[k, j] = A[p, j]
+                A[p, j] = t
         inv = 1.0 / A[k, k]
         for i in range(k + 1, m):
             f = A[i, k] * inv
+            A[i, k] = f
             if f != 0.0:
                 for j in range(k + 1, m):
                     A[i, j] -= f * A[k, j]
-                for j in range(ncol):
+    return True
+
+
+@njit(cache=True)
+def lu_apply(A, piv, B, lo, hi):
+    """Solve A X = B for the columns ``lo:hi`` of B in place, with A factored by :func:`lu_factor`.
+
+    Column by column the same operations as an elimination of A and B together: a
+    column solved later is bit for bit the column solved with the others.
+    """
+    m = A.shape[0]
+    for k in range(m):
+        p = piv[k]
+        if p != k:
+            for j in range(lo, hi):
+                t = B[k, j]
+                B[k, j] = B[p, j]
+                B[p, j] = t
+        for i in range(k + 1, m):
+            f = A[i, k]
+            if f != 0.0:
+                for j in range(lo, hi):
                     B[i, j] -= f * B[k, j]
     for k in range(m - 1, -1, -1):
         inv = 1.0 / A[k, k]
-        for j in range(ncol):
+        for j in range(lo, hi):
             acc = B[k, j]
             for i in range(k + 1, m):
                 acc -= A[k, i] * B[i, j]
             B[k, j] = acc * inv
+
+
+@njit(cache=True)
+def lu_solve(A, B):
+    """Solve A X = B in place (X in B) by Gaussian elimination with partial pivoting; False if A is singular."""
+    piv = np.empty(A.shape[0], dtype=np.int64)
+    if not lu_factor(A, piv):
+        return False
+    lu_apply(A, piv, B, 0, B.shape[1])
     return True
 
 
@@ -119,6 +146,7 @@ def newton(p, lam, k0n, gi, J0, D2i, Dtip, tol, limit, sens, tangent, x):
     quad = QUAD_SENS if sens else QUAD
     J = np.empty((m, m))
     rhs = np.empty((m, ncol))
+    piv = np.empty(m, dtype=np.int64)
     prev = np.inf
     it = 0
     while it < limit:
@@ -149,7 +177,10 @@ def newton(p, lam, k0n, gi, J0, D2i, Dtip, tol, limit, sens, tangent, x):
             rhs[m - 1, c_] = 0.0
         for j in range(m):
             J[m - 1, j] = J0[m - 1, j]
-        good = lu_solve(J, rhs)
+        # the step now; the other columns (Jacobi field, sensitivities) only at the last iterate
+        good = lu_factor(J, piv)
+        if good:
+            lu_apply(J, piv, rhs, 0, 1)
         size = 0.0
         for i in range(m):
             size = max(size, abs(rhs[i, 0]))
@@ -162,6 +193,7 @@ def newton(p, lam, k0n, gi, J0, D2i, Dtip, tol, limit, sens, tangent, x):
             p[i + 1] += rhs[i, 0] * damp
         prev = size
         if done:
+            lu_apply(J, piv, rhs, 1, ncol)
             for i in range(m):
                 for c_ in range(ncol - 1):
                     x[i, c_] = rhs[i, c_ + 1]

@@ -188,8 +188,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     n_points = int(est.n_points if n_points is None else n_points)
     if n_points < 3:
         raise ArgumentError(f"n_points: must be >= 3, got {n_points}")
-    if not max_iter >= 1:
-        raise ArgumentError(f"max_iter: must be >= 1, got {max_iter!r}")
+    if not max_iter >= 0:
+        raise ArgumentError(f"max_iter: must be >= 0, got {max_iter!r}")
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
