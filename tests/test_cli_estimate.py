@@ -85,3 +85,18 @@ def test_push_only_without_a_direction_is_a_usage_error(workdir):
     assert res.exit_code != 0
     assert "push_only" in res.output and "Traceback" not in res.output
     assert not (workdir / "never").exists()
+
+
+@pytest.mark.parametrize("factor", [10.0, 1000.0])
+def test_a_calibration_off_by_a_factor_gives_no_ok_frame(workdir, tmp_path, factor):
+    # a calibration in mm where metres belong (or any unit slip): the shapes and forces are nonsense
+    cal = Calibration(offset=np.full(16, OFFSET), coefficients_odd=[0.0, SLOPE_M * factor],
+                      coefficients_even=[0.0, SLOPE_M * factor], degree=1, delta_a_range_odd=(-1e4, 1e4),
+                      delta_a_range_even=(-1e4, 1e4), noise_std=np.full(16, 0.5))
+    cal.save(tmp_path / "cal_off.yaml")
+    args = ["load", str(workdir / "session.csv"), "--calibration", str(tmp_path / "cal_off.yaml")]
+    res = CliRunner().invoke(main, [*args,
+                                    "reconstruct", "estimate", "--constraint", "vertical", "save", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    status = set(read_results(tmp_path / "o")["status"])
+    assert "ok" not in status and status <= {"model_misfit", "implausible shape", "not converged"}, status

@@ -12,6 +12,8 @@ import pathlib
 import numpy as np
 import pytest
 
+import bendsense
+
 HERE = pathlib.Path(__file__).parent / "data" / "regression"
 _spec = importlib.util.spec_from_file_location("make_fixtures", HERE / "make_fixtures.py")
 fixtures = importlib.util.module_from_spec(_spec)
@@ -38,8 +40,14 @@ def test_estimator_reproduces_the_frozen_outputs(case, calibration):
     inputs = {k[3:]: data[k] for k in data.files if k.startswith("in_")}
     out = fixtures.run_case(inputs, str(data["mode"]), json.loads(str(data["options"])), calibration)
     want = {k[4:]: data[k] for k in data.files if k.startswith("out_")}
-    np.testing.assert_array_equal(out["success"], want["success"])
-    np.testing.assert_array_equal(out["message"], want["message"])
+    # since the frozen run, a converged fit whose model shape stays over 5 % of the length
+    # from the shape is flagged model_misfit (e.g. push-only contact on a pulling shape,
+    # formerly "ok" at F = 0); its force is still reported
+    misfit = want["success"] & (want["residual_m"] > 0.05 * bendsense.load_config().actuator.length_m)
+    misfit &= np.char.startswith(want["message"].astype(str), "converged")
+    np.testing.assert_array_equal(out["success"], want["success"] & ~misfit)
+    assert all(str(m).startswith("model_misfit") for m in np.asarray(out["message"])[misfit])
+    np.testing.assert_array_equal(np.asarray(out["message"])[~misfit], np.asarray(want["message"])[~misfit])
     np.testing.assert_allclose(out["force_n"], want["force_n"], rtol=0, atol=1e-9)
     # χ² is a GLS since the compiled core (one Cholesky factorisation instead of the
     # eigen-decomposition's pseudo-inverse of rank N - k): the same number where the fit

@@ -61,6 +61,8 @@ class SessionOutcome:
         Frames whose signals lay outside the calibrated range.
     not_converged : int
         Frames whose force estimate did not converge.
+    model_misfit : int
+        Frames whose model shape stays far from the measured one (status ``model_misfit``).
     out_of_range : int
         Frames whose pressure lay outside ``actuator.pressure_range_pa`` (no force).
     frames_lost : int
@@ -79,6 +81,7 @@ class SessionOutcome:
     reason: str = ""
     extrapolated: int = 0
     not_converged: int = 0
+    model_misfit: int = 0
     out_of_range: int = 0
     frames_lost: int = 0
     tx_drops: int = 0
@@ -341,7 +344,7 @@ def process_session(
         # from a worker process would only clutter the console
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            frames, extrapolated, not_converged, out_of_range, lost, tx_drops = _run(
+            frames, extrapolated, not_converged, misfit, out_of_range, lost, tx_drops = _run(
                 path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
@@ -354,6 +357,8 @@ def process_session(
         notes.append(f"{extrapolated} of {frames} frames extrapolated")
     if not_converged:
         notes.append(f"{not_converged} of {frames} frames not converged")
+    if misfit:
+        notes.append(f"{misfit} of {frames} frames model_misfit")
     if out_of_range:
         notes.append(f"{out_of_range} of {frames} frames pressure out of range")
     if lost or tx_drops:
@@ -365,6 +370,7 @@ def process_session(
         reason=", ".join(notes),
         extrapolated=extrapolated,
         not_converged=not_converged,
+        model_misfit=misfit,
         out_of_range=out_of_range,
         frames_lost=lost,
         tx_drops=tx_drops,
@@ -411,9 +417,12 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
         from bendsense.plausibility import pressure_outside
 
         outside = pressure_outside(session.pressure_pa, config)
-    not_converged = 0 if result is None else int(np.count_nonzero(~np.asarray(result.success, dtype=bool) & ~outside))
+    failed = np.zeros(len(session), dtype=bool) if result is None else ~np.asarray(result.success, dtype=bool)
+    misfit = failed & np.char.startswith(np.broadcast_to(np.asarray(
+        getattr(result, "message", ""), dtype=str), (len(session),)), "model_misfit")
+    not_converged = int(np.count_nonzero(failed & ~outside & ~misfit))
     lost, tx_drops = int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
-    return len(session), extrapolated, not_converged, int(outside.sum()), lost, tx_drops
+    return len(session), extrapolated, not_converged, int(misfit.sum()), int(outside.sum()), lost, tx_drops
 
 
 # --- many sessions ------------------------------------------------------------------------

@@ -518,7 +518,11 @@ class Config:
         if sensor_m > 1.05 * length_m:
             raise _fail("actuator.length_m", f"{length_m:g} m is shorter than the sensor glued along it "
                         f"(sensor.segment_lengths_m sum to {sensor_m:g} m)")
-        top = self.actuator.pressure_range_pa[1]
+        lo, top = self.actuator.pressure_range_pa
+        for p in (lo, top):
+            if self.stiffness.ei_nm2(p) <= 0:
+                raise _fail("stiffness", f"EI(P) = ei0_nm2 + ei1_nm2_per_pa P is not positive at {p / 1e3:g} kPa, "
+                            "inside actuator.pressure_range_pa")
         stiffening = self.stiffness.ei1_nm2_per_pa * top / self.stiffness.ei0_nm2
         if stiffening > 100.0:
             raise _fail("stiffness.ei1_nm2_per_pa", f"{self.stiffness.ei1_nm2_per_pa:g} N·m²/Pa makes EI "

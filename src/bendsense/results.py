@@ -24,6 +24,9 @@ from bendsense.errors import SessionError
 from bendsense.plausibility import OUT_OF_RANGE
 from bendsense.session import _column_array, _format
 
+MODEL_MISFIT = "model_misfit"
+IMPLAUSIBLE = "implausible shape"  # a tip angle beyond a full turn
+
 __all__ = ["Results", "write_results", "read_results", "frame_status"]
 
 _KAPPA = re.compile(r"kappa[0-9]+$")
@@ -93,7 +96,13 @@ class Results:
 
 
 def frame_status(shape, estimate=None) -> np.ndarray:
-    """Per-frame status strings: ``ok`` or a short reason."""
+    """Per-frame status strings: ``ok`` or a short reason.
+
+    ``extrapolated`` (signals outside the calibrated range), ``no shape`` (non-finite
+    signals), ``not converged``, ``pressure_out_of_range``, ``model_misfit`` (the model
+    shape stays over 5 % of the length from the measured one), ``no force``, and
+    ``implausible shape`` (a tip angle beyond a full turn: a unit or calibration mistake).
+    """
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
     status = np.full(n, "ok", dtype=object)
     extrapolated = np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))
@@ -106,9 +115,13 @@ def frame_status(shape, estimate=None) -> np.ndarray:
         status[failed] = "not converged"
         message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
         status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
+        status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
         # a NaN force is never ok, whatever the solver said
         force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
         status[(status == "ok") & ~np.isfinite(force).all(axis=1)] = "no force"
+    # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
+    tip = np.broadcast_to(np.asarray(shape.tip_angle_rad, dtype=float), (n,))
+    status[np.abs(tip) > 2.0 * np.pi] = IMPLAUSIBLE
     return status
 
 

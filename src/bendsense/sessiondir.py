@@ -153,6 +153,10 @@ def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | N
         dt = np.dtype([(str(name), str(spec)) for name, spec in pairs])
     except (TypeError, ValueError) as err:
         raise SessionError(f"{where}: invalid ({' '.join(str(err).split())[:80]}); got {short(pairs)}") from None
+    loose = [name for name in dt.names if dt.fields[name][0].hasobject or dt.fields[name][0].base.kind not in "biuf"]
+    if loose:
+        raise SessionError(f"{where}: field {loose[0]}: expected a number type (integer, float or bool), got "
+                           f"{dt.fields[loose[0]][0].str}")
     standard = [*STANDARD_FIELDS, "tx_drops"] if version >= 2 else list(STANDARD_FIELDS)
     missing = [f for f in standard if f not in dt.names]
     if missing:

@@ -30,3 +30,7 @@ class Status(IntEnum):
     NOT_IDENTIFIABLE = 7
     #: estimate: stopped at the stability boundary far from the shape (a failure)
     NO_STABLE_MATCH = 8
+    #: estimate: converged, but the model shape stays far from the measured one (over 5 % of
+    #: the length): the shape is no bending of this actuator (wrong units, calibration or
+    #: config); the force is reported, not ok
+    MODEL_MISFIT = 9

@@ -56,6 +56,7 @@ from bendsense.estimation.uncertainty import noise_std as _signal_noise
 from bendsense.estimation.uncertainty import shift_error_model, tip_angle_shift_gradient
 from bendsense.plausibility import pressure_range_step
 from bendsense.status import Status
+from bendsense.validation import float_array
 
 _OK, _NOT_IDENTIFIABLE = int(Status.OK), int(Status.NOT_IDENTIFIABLE)
 
@@ -186,8 +187,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     L = float(config.actuator.length_m)
     n_points = int(est.n_points if n_points is None else n_points)
-    if n_points < 3:
-        raise ArgumentError(f"n_points: must be >= 3, got {n_points}")
+    if not 3 <= n_points <= 1000:
+        raise ArgumentError(f"n_points: must be between 3 and 1000, got {n_points}")
     if not max_iter >= 0:
         raise ArgumentError(f"max_iter: must be >= 0, got {max_iter!r}")
     if calibration is not None and not isinstance(calibration, Calibration):
@@ -311,7 +312,7 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
     if initial is not None and initial_force_n is None:
         initial_force_n = initial.force_n
     if initial_force_n is not None:
-        f0 = np.asarray(initial_force_n, dtype=float)
+        f0 = float_array("initial_force_n", initial_force_n)
         if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
             raise ArgumentError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
         return _flat(f0, batch, B, (2,)), False, False

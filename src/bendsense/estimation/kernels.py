@@ -30,6 +30,7 @@ _BEAM_FAILED = int(Status.BEAM_FAILED)
 _NOT_CONVERGED = int(Status.NOT_CONVERGED)
 _NOT_IDENTIFIABLE = int(Status.NOT_IDENTIFIABLE)
 _NO_STABLE_MATCH = int(Status.NO_STABLE_MATCH)
+_MODEL_MISFIT = int(Status.MODEL_MISFIT)
 
 # flags to compiled callees go through bool()/int(): numba compiles a callee once per literal
 # value it is called with, and once for all non-literal values (compile time)
@@ -38,7 +39,7 @@ YES, NO = bk.YES, bk.NO
 POSITIONS, ANGLES = prob.POSITIONS, prob.ANGLES
 
 MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the boundary
-BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a boundary stop is a failure
+BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a shape is no bending of the model actuator
 NEWTON_TOL = 1e-11
 NEWTON_MAX_ITER = 30
 
@@ -421,7 +422,9 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, f
         force_of(D, pb.ffix, u, force)
         if not (math.isfinite(force[0]) and math.isfinite(force[1])):
             status = _NOT_CONVERGED  # a NaN force is never a success
-    if status != _OK and status != _NOT_IDENTIFIABLE:
+        elif status == _OK and residual > BOUNDARY_MISFIT * L:
+            status = _MODEL_MISFIT  # the force is kept, flagged
+    if status != _OK and status != _NOT_IDENTIFIABLE and status != _MODEL_MISFIT:
         force[:] = np.nan
         cov[:, :] = np.nan
         ratio = np.nan

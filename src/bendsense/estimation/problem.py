@@ -27,6 +27,7 @@ from bendsense import _jit, pcc
 from bendsense.beam import DEFAULT_NODES
 from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
+from bendsense.validation import float_array
 
 __all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", "quadrature", "reference", "points",
            "chebyshev_nodes_m"]
@@ -299,8 +300,8 @@ def reference(shape, config, s_opt, n_points, L_act) -> Reference:
     kappa = None
     array = isinstance(shape, np.ndarray)  # curvatures (the common case) or positions with s_m
     if s_opt is not None:
-        pos = np.asarray(shape, dtype=float)
-        s_in = np.asarray(s_opt, dtype=float)
+        pos = float_array("shape", shape)
+        s_in = float_array("s_m", s_opt)
         angle = None
     elif not array and hasattr(shape, "curvature_per_m") and hasattr(shape, "lengths_m"):
         kappa = np.asarray(shape.curvature_per_m, dtype=float)
@@ -310,7 +311,7 @@ def reference(shape, config, s_opt, n_points, L_act) -> Reference:
         s_in = np.asarray(shape.s_m, dtype=float)
         angle = getattr(shape, "angle_rad", None)
     else:
-        kappa = np.asarray(shape, dtype=float)
+        kappa = float_array("shape", shape)
         lengths = config.sensor.lengths_m
         if kappa.ndim == 0 or kappa.shape[-1] != lengths.size:
             raise ArgumentError(

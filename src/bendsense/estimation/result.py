@@ -26,6 +26,9 @@ def messages(status, residual_m, direction, method):
         x, y = direction[i]
         out[i] = (f"not identifiable along ({x:.3f}, {y:.3f}): trial loads leave the stable branch "
                   "(buckling) or the shape's linear range; best stable estimate, std inf")
+    for i in np.flatnonzero(status == Status.MODEL_MISFIT):
+        out[i] = (f"model_misfit: the model shape stays {residual_m[i] * 1e3:.3g} mm (RMS) from the measured one, "
+                  "over 5 % of the length: check the calibration, the config's units and the pressure")
     for i in np.flatnonzero(status == Status.NO_STABLE_MATCH):
         out[i] = (f"no stable equilibrium matches the shape: stopped at the stability boundary "
                   f"{residual_m[i] * 1e3:.3g} mm from it (a load beyond buckling?)")
