@@ -165,3 +165,23 @@ def test_shapes_only_results_work_downstream(tmp_path):
                                "reconstruct", "save", str(tmp_path / "chain"), "plot", str(tmp_path / "chain.svg")])
     assert res.exit_code == 0, res.output
     assert "no force estimate" in (tmp_path / "chain.svg").read_text()
+
+
+
+def test_plot_of_results_with_an_infinite_pressure_is_one_line(workdir, tmp_path):
+    runner = CliRunner()
+    cal = tmp_path / "cal.yaml"
+    assert runner.invoke(main, ["calibrate", str(workdir / "manifest.yaml"), "-o", str(cal)]).exit_code == 0
+    out = tmp_path / "out"
+    res = runner.invoke(main, ["load", str(workdir / "validation.csv"), "--calibration", str(cal), "reconstruct",
+                               "save", str(out)])
+    assert res.exit_code == 0, res.output
+    lines = (out / "results.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    row = lines[2].split(",")
+    row[header.index("pressure_pa")] = "inf"
+    lines[2] = ",".join(row)
+    (out / "results.csv").write_text("\n".join(lines) + "\n")
+    res = runner.invoke(main, ["plot", str(out), "-o", str(tmp_path / "f.png")])
+    assert res.exit_code == 1 and "line 3, column pressure_pa: must be finite or nan, got inf" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "f.png").exists()

@@ -158,3 +158,13 @@ def test_cli_replay_then_record(tmp_path):
                 proc.kill()
                 proc.communicate()
     assert_same_frames(original, read_session(tmp_path / "again"))
+
+
+def test_a_pressure_beyond_the_wire_format_is_refused_before_replay():
+    from bendsense.device.replay import replay_frames
+    from bendsense.errors import SessionError
+    from bendsense.session import Session
+
+    s = Session([0.0, 0.001], [[100.0, 200.0], [101.0, 201.0]], [50e3, 3e9], source="big.csv")
+    with pytest.raises(SessionError, match=r"big\.csv: frame 1, pressure_pa: 3e\+09 Pa does not fit"):
+        replay_frames(s)

@@ -216,6 +216,9 @@ def read_results(out_dir) -> Results:
                 columns[h] = columns[h].astype(float)
             except ValueError:
                 raise SessionError(f"{path}: column {h}: expected numbers") from None
+            inf = np.flatnonzero(np.isinf(columns[h]))
+            if inf.size and h in ("t_s", "pressure_pa"):  # (an infinite std marks an unidentifiable direction)
+                raise SessionError(f"{path}: line {inf[0] + 2}, column {h}: must be finite or nan, got inf")
     missing = [h for h in ("t_s", "tip_x_m", "tip_y_m", "tip_angle_rad", "kappa1", "status") if h not in columns]
     if missing:
         raise SessionError(f"{path}: not a results.csv of bendsense (no column {missing[0]})")

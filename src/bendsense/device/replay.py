@@ -55,6 +55,12 @@ def replay_frames(session) -> dict:
         )
     if not 1 <= session.n_channels <= 64:
         raise SessionError(f"{where}: expected 1..64 channels to replay, got {session.n_channels}")
+    p = session.pressure_pa
+    wide = np.isfinite(p) & ~((p >= -(2**31)) & (p < 2**31 - 1))  # the wire's i32, 0x7FFFFFFF: no reading
+    if wide.any():
+        frame = int(np.flatnonzero(wide)[0])
+        raise SessionError(f"{where}: frame {frame}, pressure_pa: {p[frame]:g} Pa does not fit the wire format's "
+                           "32-bit pressure field")
     t_us = np.round((session.t_s - session.t_s[0]) * 1e6).astype(np.int64)
     back = np.flatnonzero(np.diff(t_us) < 0)
     if back.size:
