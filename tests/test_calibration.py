@@ -454,3 +454,13 @@ def test_cli_user_errors_are_one_line(tmp_path):
     errors = [line for line in result.output.splitlines() if line.startswith("Error")]
     assert len(errors) == 1 and "strips[0].radius_m: expected > 0, got 0" in errors[0]
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_two_strips_of_the_same_radius_warn(manifest_dir, caplog):
+    import logging
+
+    path = with_manifest(manifest_dir, {"flat": "flat.csv", "strips": [
+        {"radius_m": 0.04, "recording": "r040.0.csv"}, {"radius_m": 0.04, "recording": "r050.0.csv"}]})
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        read_manifest(path)
+    assert "strips[0] and strips[1] have the same radius 0.04 m (r040.0.csv, r050.0.csv)" in caplog.text

@@ -15,7 +15,7 @@ import bendsense
 from bendsense.actuator import FreeBendingModel
 from bendsense.beam import solve_beam
 from bendsense.calibration import Calibration
-from bendsense.errors import ConvergenceError
+from bendsense.errors import ArgumentError, ConvergenceError
 from bendsense.estimation import ForceEstimate, constraint_basis, estimate_force, quadrature
 from bendsense.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.sensor import shifts_from_shape
@@ -428,3 +428,17 @@ def test_single_frame_path_equals_the_batched_path(frames, constraint):
         warm = estimate_force(kappa[i], p[idx][i], CFG, constraint=constraint, calibration=cal, initial=previous)
         np.testing.assert_allclose(warm.force_n, batch.force_n[i], atol=1e-8)
         previous = warm
+
+
+def test_option_values_of_the_wrong_kind_name_the_option():
+    kappa = np.full(16, 5.0)
+    with pytest.raises(ArgumentError, match="push_only: expected True or False, got 'yes'"):
+        estimate_force(kappa, 60e3, CFG, constraint="normal", push_only="yes")
+    with pytest.raises(ArgumentError, match="follower_angle_rad: expected a finite angle"):
+        estimate_force(kappa, 60e3, CFG, constraint="follower", follower_angle_rad=float("nan"))
+    with pytest.raises(ArgumentError, match="xtol_n: expected a finite tolerance"):
+        estimate_force(kappa, 60e3, CFG, xtol_n=float("nan"))
+    with pytest.raises(ArgumentError, match="n_points: must be between 3 and 1000"):
+        estimate_force(kappa, 60e3, CFG, n_points=10**9)
+    with pytest.raises(ArgumentError, match="config: expected a Config"):
+        estimate_force(kappa, 60e3, "configs/paper.yaml")

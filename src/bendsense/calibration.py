@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import logging
 import math
 import os
 from dataclasses import dataclass, field
@@ -49,6 +50,8 @@ import yaml
 from bendsense import validation as check
 from bendsense._io import load_yaml
 from bendsense.errors import ArgumentError, ConfigError, SessionError
+
+log = logging.getLogger("bendsense")
 
 __all__ = [
     "Calibration",
@@ -328,9 +331,13 @@ def _parse_manifest(data: Any, base: Path, source: str) -> Manifest:
         # one recording counted twice would weigh its strip double; the flat as a strip is a mix-up
         if recording.resolve() == flat.resolve():
             raise ConfigError(f"{where}.recording: {recording.name} is the flat recording too")
-        for j, (_, seen) in enumerate(out):
+        for j, (seen_radius, seen) in enumerate(out):
             if recording.resolve() == seen.resolve():
                 raise ConfigError(f"{where}.recording: {recording.name} is listed twice (strips[{j}] too)")
+            if seen_radius == radius:  # a repeated strip is fine; a mistyped radius is the common cause
+                log.warning("%s: strips[%d] and strips[%d] have the same radius %g m (%s, %s): a repeated "
+                            "measurement, or a mistyped radius?", source, j, len(out), radius, seen.name,
+                            recording.name)
         out.append((radius, recording))
     return Manifest(flat=flat, strips=tuple(out), source=source)
 

@@ -346,7 +346,10 @@ def _build_problem(config, calibration, ref, options, noise_opt):
     if angles and ref.kappa is None:
         raise ArgumentError("objective: 'angles' fits the coil angles S/d of a PCC shape (curvatures or a Shape); "
                             "a shape given by points has none: use objective='positions'")
-    push_only = bool(est.push_only if push_only is None else push_only)
+    push_only = est.push_only if push_only is None else push_only
+    if not isinstance(push_only, (bool, np.bool_)):
+        raise ArgumentError(f"push_only: expected True or False, got {push_only!r}")
+    push_only = bool(push_only)
     source = est.tip_angle_source if source is None else source
     if source not in ("model", "shape"):
         raise ArgumentError(f"tip_angle_source: must be one of model, shape, got {source!r}")
@@ -354,6 +357,10 @@ def _build_problem(config, calibration, ref, options, noise_opt):
     if direction.shape != (2,) or not np.all(np.isfinite(direction)) or abs(np.hypot(*direction) - 1.0) > 1e-6:
         raise ArgumentError(f"direction: expected a unit vector (2,), got {direction.tolist()}")
     follower = float(est.follower_angle_rad if follower is None else follower)
+    if not math.isfinite(follower):
+        raise ArgumentError(f"follower_angle_rad: expected a finite angle [rad], got {follower!r}")
+    if not (math.isfinite(xtol_n) and xtol_n > 0):
+        raise ArgumentError(f"xtol_n: expected a finite tolerance > 0 [N], got {xtol_n!r}")
     if push_only and constraint == "none":
         raise ArgumentError("push_only: only for the 1-D constraints (vertical, horizontal, direction, normal, "
                             "follower), got constraint='none'")
