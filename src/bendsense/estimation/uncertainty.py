@@ -262,6 +262,19 @@ def misfit(Gf, w2, r, JD, cov_s):
 
 
 @njit(cache=True)
+def unresolved(c, D, V, singular, out):
+    """``out`` = the covariance ``c`` (2, 2) with an infinite variance along each direction the fit cannot resolve."""
+    for q in range(singular.size):
+        if singular[q]:
+            v = mm(D, V[:, q:q + 1].copy())[:, 0]
+            for a in range(2):
+                for b in range(2):
+                    if abs(v[a] * v[b]) > 1e-12:
+                        c[a, b] = np.inf
+    out[:, :] = c
+
+
+@njit(cache=True)
 def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds, out):
     """Cov(F) (2, 2) into ``out`` and χ²/dof (NaN for the residual fallback) of one frame (module docstring)."""
     M = p0.shape[0]
@@ -325,14 +338,7 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
         var = (r @ r) / dof  # per coordinate
         mid = mm(A.T.copy(), A * (w2 * w2).reshape(-1, 1))  # AᵀW²A
         c = mm(mm(Dc, mm(mm(Hinv, mm(mm(Dt, mid), Dc)), Hinv)), Dt) * var
-    for q in range(k):
-        if singular[q]:
-            v = mm(Dc, V[:, q:q + 1].copy())[:, 0]
-            for a in range(2):
-                for b in range(2):
-                    if abs(v[a] * v[b]) > 1e-12:
-                        c[a, b] = np.inf
-    out[:, :] = c
+    unresolved(c, Dc, V, singular, out)
     return ratio
 
 
@@ -389,14 +395,7 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
     if dof > 0:
         ratio = chi2 / dof
         c *= max(ratio, 1.0)
-    for q in range(k):
-        if singular[q]:
-            v = mm(D, V[:, q:q + 1].copy())[:, 0]
-            for a in range(2):
-                for b in range(2):
-                    if abs(v[a] * v[b]) > 1e-12:
-                        c[a, b] = np.inf
-    out[:, :] = c
+    unresolved(c, D, V, singular, out)
     return ratio
 
 
