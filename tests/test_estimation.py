@@ -15,7 +15,7 @@ import bendsense
 from bendsense.actuator import FreeBendingModel
 from bendsense.beam import solve_beam
 from bendsense.calibration import Calibration
-from bendsense.errors import ArgumentError, ConvergenceError
+from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import ForceEstimate, constraint_basis, estimate_force, quadrature
 from bendsense.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.sensor import shifts_from_shape
@@ -122,7 +122,7 @@ def test_paper_method_agrees_with_fast(constraint):
     kappa = pcc_curvatures(sol)  # PCC shapes: the optimum is not the true force
     frames_ = slice(0, 1) if constraint == "none" else slice(None)  # Nelder–Mead is slow
     paper = estimate_force(kappa[frames_], p[frames_], CFG, constraint=constraint, method="paper")
-    fast = estimate_force(kappa[frames_], p[frames_], CFG, constraint=constraint)
+    fast = estimate_force(kappa[frames_], p[frames_], CFG, constraint=constraint, objective="positions")
     assert paper.success.all() and fast.success.all()
     assert paper.method == "paper" and fast.method == "fast"
     np.testing.assert_allclose(paper.force_n, fast.force_n, atol=1e-4)
@@ -249,7 +249,9 @@ def test_two_sigma_coverage_of_the_true_force(constraint, pressure_pa, u, noise)
     signals = clean + noise * rng.standard_normal((n, 16))
     est = estimate_force(reconstruct(signals, cal, SENSOR), pressure_pa, CFG, constraint=constraint,
                          calibration=cal)
-    assert est.success.all() and est.uncertainty == "propagated"
+    # χ² beyond chance (p < 0.001) flags a frame model_misfit, its force kept: about 1 in 1000
+    misfit = np.char.startswith(est.message.astype(str), "model_misfit")
+    assert (est.success | misfit).all() and misfit.sum() <= 3 and est.uncertainty == "propagated"
     std = est.std_n.mean(axis=0)
     assert np.all(np.abs(bias.force_n - force) < 0.35 * std + 1e-12)  # the PCC bias is small against σ
     # the spread of the estimates is what the propagation predicts
@@ -280,7 +282,8 @@ def test_uncertainty_matches_finite_differences_of_the_estimator(constraint, sou
 
     def est(s, **kw):
         kappa = shifts_to_curvatures(s, SENSOR.lengths_m, SENSOR.strip_gap_m)
-        return estimate_force(kappa, p, CFG, constraint=constraint, tip_angle_source=source, **kw)
+        return estimate_force(kappa, p, CFG, constraint=constraint, tip_angle_source=source, objective="positions",
+                              **kw)
 
     h = 1e-7
     for i in (0, 7, 15):
@@ -307,11 +310,18 @@ def test_axial_load_on_a_straight_actuator_is_not_identifiable():
     assert est.std_n[1] > 20 * est.std_n[0]
 
 
-def test_residual_fallback_when_noise_is_unknown():
+@pytest.mark.parametrize("objective", ["angles", "positions"])
+def test_no_noise_model_gives_no_sigma_and_one_warning(objective):
+    """Never a residual-based σ that looks precise: NaN, uncertainty="none", one warning."""
     sol = beam_shape(60e3, (0.1, 0.1))
-    est = estimate_force(pcc_curvatures(sol), 60e3, CFG)
-    assert est.uncertainty == "residual"
-    assert np.all(np.isfinite(est.std_n)) and np.all(est.std_n > 0)
+    with pytest.warns(NoNoiseModelWarning, match="no noise model") as record:
+        est = estimate_force(pcc_curvatures(sol), 60e3, CFG, objective=objective)
+    assert len(record) == 1
+    assert est.success and np.all(np.isfinite(est.force_n))
+    assert est.uncertainty == "none"
+    assert np.isnan(est.std_n).all() and np.isnan(est.covariance_n2).all()
+    with_noise = estimate_force(pcc_curvatures(sol), 60e3, CFG, objective=objective, noise_std=0.01)
+    assert with_noise.uncertainty == "propagated" and np.all(with_noise.std_n > 0)
 
 
 # --------------------------------------------------------------------------- batches

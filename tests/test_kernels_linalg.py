@@ -96,3 +96,14 @@ def test_lu_factor_and_apply_solve_column_by_column_as_together():
         np.testing.assert_array_equal(split, together)
         np.testing.assert_allclose(together, np.linalg.solve(A, B), rtol=1e-9, atol=1e-9)
     assert not bk.lu_solve(np.zeros((3, 3)), np.ones((3, 1)))
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3, 4, 7, 14, 15, 16, 41])
+def test_chi2_sf_is_the_chi2_survival_function(dof):
+    from scipy import stats
+
+    from bendsense.estimation.uncertainty import chi2_sf
+
+    for x in (0.0, 1e-6, 0.3, 1.0, dof - 1.0, float(dof), 2.0 * dof, 5.0 * dof + 20.0, 300.0):
+        x = max(x, 0.0)
+        np.testing.assert_allclose(chi2_sf(x, dof), stats.chi2.sf(x, dof), rtol=1e-10, atol=1e-300)

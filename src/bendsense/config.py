@@ -344,7 +344,7 @@ class EstimationConfig(_Section):
     section: ClassVar[str] = "estimation"
     constraint: str = "none"
     method: str = "fast"
-    objective: str = "positions"
+    objective: str = "angles"
     n_points: int = 41
     tip_angle_source: str = "model"
     direction: tuple = (0.0, -1.0)

@@ -18,6 +18,7 @@ __all__ = [
     "MissingExtraError",
     "BendsenseWarning",
     "ConvergenceWarning",
+    "NoNoiseModelWarning",
 ]
 
 
@@ -98,3 +99,7 @@ class BendsenseWarning(UserWarning):
 
 class ConvergenceWarning(BendsenseWarning, RuntimeWarning):
     """Some frames of a batch did not converge; they are flagged with ``success=False``."""
+
+
+class NoNoiseModelWarning(BendsenseWarning):
+    """An estimate without a noise model: its σ is NaN (``uncertainty="none"``)."""

@@ -108,6 +108,7 @@ def _mark(result, outside, p, lo, hi):
         success=np.where(mask, False, result.success),
         message=message.astype(str) if batch else str(message[()]),
         chi2_per_dof=None if chi2 is None else np.where(mask, np.nan, chi2),
+        p_value=None if result.p_value is None else np.where(mask, np.nan, result.p_value),
     )
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from bendsense import _jit
 from bendsense import beam as _beam
 from bendsense.calibration import Calibration
 from bendsense.config import OBJECTIVES
-from bendsense.errors import ArgumentError, ConvergenceError
+from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import kernels as _kernels
 from bendsense.estimation.paper import paper_fit
 from bendsense.estimation.problem import (
@@ -128,7 +129,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         The compiled Gauss–Newton core, or the paper's shooting + Nelder–Mead / SLSQP.
     objective : {"positions", "angles"}, optional
         The residual fitted (:data:`OBJECTIVES`): the PCC positions (paper eq. 18) or the
-        coil angles ``S_i / d`` the sensor measures (a PCC shape only); None: the config's.
+        coil angles ``S_i / d`` the sensor measures (a PCC shape only); None: the config's
+        (default ``angles``), or ``positions`` for ``method="paper"`` and a shape given by
+        points.
     push_only : bool
         ``u ≥ 0`` for the 1-D constraints (default ``config.estimation.push_only``).
     tip_angle_source, direction, follower_angle_rad
@@ -178,10 +181,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     est = config.estimation
     constraint = est.constraint if constraint is None else constraint
     method = est.method if method is None else method
-    objective = est.objective if objective is None else objective
     if method not in METHODS:
         raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
-    if method == "paper" and objective != "positions":
+    if method == "paper" and objective not in (None, "positions"):
         raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
@@ -195,6 +197,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
     ref = reference(shape, config, s_m, n_points, L)
+    if objective is None:  # the paper's method fits the positions (paper eq. 18), and so must a shape of points
+        objective = "positions" if method == "paper" or ref.kappa is None else est.objective
     options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
         np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
         None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes())
@@ -209,9 +213,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     start, use_guess, chain = _starts(initial, initial_force_n, B, batch, warm_start)
     n = _N_NODES
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
-           np.empty(B), np.empty(B), np.full((B, 2), np.nan), np.empty((B, n)), np.empty((B, 2)), np.zeros((B, 2)),
-           np.empty((B, 2)))
-    force, cov, status, iters, residual, chi2, guess_n, state, tip, blocked_dir, std = out
+           np.empty(B), np.empty(B), np.empty(B), np.full((B, 2), np.nan), np.empty((B, n)), np.empty((B, 2)),
+           np.zeros((B, 2)), np.empty((B, 2)))
+    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
         if block >= B:  # one block (one frame, a short series): the same kernel without the threads
@@ -227,8 +231,12 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                                          np.broadcast_to(pb.ffix, (B, 2)), pb.lower,
                                          np.maximum(np.zeros((B, k)), pb.lower))
         _jit.call(_kernels.evaluate_frames, fr, pb, _OPS, _c(u), _c(run_status, np.int64), out)
+    if uncertainty == "none":
+        warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
+                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=2)
     success = (status == _OK) | (status == _NOT_IDENTIFIABLE)  # never with a NaN force (kernels.finish)
-    text = np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK else messages(status, residual, blocked_dir, method)
+    text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
+            else messages(status, residual, chi2, p_value, blocked_dir, method))
     if strict and not success.all():
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
     return ForceEstimate(
@@ -247,6 +255,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         state=state.reshape(*batch, n),
         guess_n=guess_n.reshape(*batch, 2),
         chi2_per_dof=chi2.reshape(batch),
+        p_value=p_value.reshape(batch),
     )
 
 
@@ -403,4 +412,4 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         lower=np.full(k, 0.0 if push_only else -np.inf), xtol=xtol_n, max_iter=max_iter,
         PQ=_c(PQ), q=_c(ops.Q[-1]), objective=ANGLES if angles else POSITIONS, PQ_fit=_c(PQ_fit),
         coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor)
-    return pb, ("propagated" if noise else "none" if angles else "residual")
+    return pb, ("propagated" if noise else "none")

@@ -40,6 +40,9 @@ POSITIONS, ANGLES = prob.POSITIONS, prob.ANGLES
 
 MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the boundary
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a shape is no bending of the model actuator
+SIGMA_STEP = 1e-4  # a step below this many σ (a whitened cost) changes nothing a user can see: converged
+MISFIT_P = 1e-3  # χ² p-value below which a converged fit is model_misfit
+FLAT = 2.0  # σ beyond FLAT · EI/L² (the force that bends the actuator a radian): the data do not determine it
 NEWTON_TOL = 1e-11
 NEWTON_MAX_ITER = 30
 
@@ -306,8 +309,15 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     gFn = np.empty(2)
     GFn = np.empty((2, 2))
     st, dst, y, dy = ws[2], ws[4], ws[5], ws[6]
+    weak = False
     for _ in range(max_iter):
-        unc.lm_step(H, g, step)
+        if tg[3] and flat_direction(H, (FLAT * ei / (L * L)) ** -2, blocked):
+            # a χ² cost that does not determine the load along ``blocked``: the steps keep
+            # to the determined direction, and the frame ends not identifiable along it
+            weak = True
+            restricted_step(H, g, blocked, step)
+        else:
+            unc.lm_step(H, g, step)
         size = 0.0
         for c in range(k):
             dstep[c] = max(u[c] + step[c], lower[c]) - u[c]
@@ -316,8 +326,17 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         rate = size / last if seen else size
         left = size * rate / (1.0 - rate) if seen and rate < 0.5 else size
         # converged: the step, or the error left by a contraction at the observed rate,
-        # is below xtol; or stalled at the round-off floor of the beam solutions
-        if left <= xtol or (seen and size <= 1e3 * xtol and rate > 0.5):
+        # is below xtol; or below SIGMA_STEP standard deviations when the cost is a χ²
+        # (H⁻¹ the covariance of u: a flat, poorly determined direction); or stalled at
+        # the round-off floor of the beam solutions
+        small = False
+        if tg[3]:
+            q = 0.0
+            for c in range(k):
+                for r in range(k):
+                    q += dstep[c] * H[c, r] * dstep[r]
+            small = q <= SIGMA_STEP * SIGMA_STEP
+        if left <= xtol or small or (seen and size <= 1e3 * xtol and rate > 0.5):
             for c in range(k):
                 u[c] += dstep[c]
             status = _OK
@@ -381,12 +400,42 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
             break
     if status == _RUNNING:
         status = _NOT_CONVERGED
+    if status == _OK and weak:
+        status = _NOT_IDENTIFIABLE
     return status, iters, cost
 
 
 @njit(cache=True)
+def flat_direction(H, floor, out):
+    """Whether ``H`` (k, k) has an eigenvalue below ``floor``; its eigenvector into ``out``."""
+    if H.shape[0] == 1:
+        out[0] = 1.0
+        return H[0, 0] < floor
+    lam, V = unc.eigh2(H)
+    out[0], out[1] = V[0, 0], V[1, 0]
+    return lam[0] < floor
+
+
+@njit(cache=True)
+def restricted_step(H, g, v, out):
+    """The Gauss–Newton step −(wᵀHw)⁻¹(wᵀg) w in the direction w ⊥ ``v`` (none for k = 1)."""
+    if H.shape[0] == 1:
+        out[0] = 0.0
+        return
+    w0, w1 = -v[1], v[0]
+    h = w0 * (H[0, 0] * w0 + H[0, 1] * w1) + w1 * (H[1, 0] * w0 + H[1, 1] * w1)
+    t = -(w0 * g[0] + w1 * g[1]) / h if h > 0 else 0.0
+    out[0], out[1] = t * w0, t * w1
+
+
+@njit(cache=True)
 def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force, cov, direction):
-    """Status, force, covariance and χ²/dof of a frame after the iteration; returns (status, residual, χ²/dof)."""
+    """Status, force, covariance and χ² of a frame after the iteration; returns (status, residual, χ²/dof, p-value).
+
+    A converged fit is ``model_misfit`` (force kept) when its model shape stays over
+    ``BOUNDARY_MISFIT`` of the length from the measured one, or when its χ² is beyond
+    chance under the stated covariance (p < ``MISFIT_P``).
+    """
     pos, L, w = ws[0], pb.L, pb.w
     if pb.objective == ANGLES:  # the positions at the comparison nodes, for the residual
         bk.sample(ws[2], ws[4], L, pb.PQ, pb.q, bool(YES), pos, ws[1], ws[3])
@@ -399,12 +448,13 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, f
         den += w[j]
     residual = math.sqrt(num / den)
     ratio = np.nan
+    p = np.nan
     if status == _OK or status == _NOT_IDENTIFIABLE:
         if pb.objective == ANGLES:
-            ratio = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
+            ratio, p = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
                                           pb.gap, pb.dphi_ds, ws[6], cov)
         else:
-            ratio = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws[0], ws[1], frame_cov, cov_s, kappa,
+            ratio, p = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws[0], ws[1], frame_cov, cov_s, kappa,
                                    pb.lengths, pb.gap, pb.seg, pb.sigma, pb.dphi_ds, cov)
     if status == _NOT_IDENTIFIABLE:
         v = np.empty(2)
@@ -422,13 +472,14 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, f
         force_of(D, pb.ffix, u, force)
         if not (math.isfinite(force[0]) and math.isfinite(force[1])):
             status = _NOT_CONVERGED  # a NaN force is never a success
-        elif status == _OK and residual > BOUNDARY_MISFIT * L:
+        elif status == _OK and (residual > BOUNDARY_MISFIT * L or p < MISFIT_P):
             status = _MODEL_MISFIT  # the force is kept, flagged
     if status != _OK and status != _NOT_IDENTIFIABLE and status != _MODEL_MISFIT:
         force[:] = np.nan
         cov[:, :] = np.nan
         ratio = np.nan
-    return status, residual, ratio
+        p = np.nan
+    return status, residual, ratio, p
 
 
 @njit(cache=True)
@@ -496,7 +547,7 @@ def setup(i, fr, pb, buf):
 @njit(cache=True)
 def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
-    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction, std = out
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std = out
     k = pb.lower.size
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
@@ -528,8 +579,8 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
         prev_u[:] = u
         prev_u0[:] = u0
         direction[i, :] = 0.0
-        status[i], residual[i], chi2[i] = finish(st, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa,
-                                                 force[i], cov[i], direction[i])
+        status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s,
+                                                          kappa, force[i], cov[i], direction[i])
         iters[i] = it
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
@@ -548,7 +599,7 @@ def estimate_frames(block, use_guess, fr, pb, ops, start, out):
     own guess when that converged. ``fr``, ``pb``: :class:`~bendsense.estimation.problem.Frames`
     and :class:`~bendsense.estimation.problem.Problem`; ``ops`` the beam solver's
     operators. ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
-    guess (B, 2), state (B, n), tip (B, 2) and the unidentifiable direction of a boundary
+    its p-value, guess (B, 2), state (B, n), tip (B, 2) and the unidentifiable direction of a boundary
     stop (B, 2).
     """
     B = fr.ei.size
@@ -561,7 +612,7 @@ def estimate_frames(block, use_guess, fr, pb, ops, start, out):
 @njit(cache=True)
 def evaluate_frames(fr, pb, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
-    force, cov, status, iters, residual, chi2, guess_n, state, tip, direction, std = out
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std = out
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
     F = np.empty(2)
@@ -571,8 +622,8 @@ def evaluate_frames(fr, pb, ops, u, run_status, out):
         force_of(D, pb.ffix, u[i], F)
         ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, pb, ws)
         st = run_status[i] if ok else _BEAM_FAILED
-        status[i], residual[i], chi2[i] = finish(st, pb, p0, tg, D, dD, u[i], ws, blocked, frame_cov, cov_s, kappa,
-                                                 force[i], cov[i], direction[i])
+        status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u[i], ws, blocked, frame_cov, cov_s,
+                                                          kappa, force[i], cov[i], direction[i])
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
         state[i] = ws[2]

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bendsense.estimation.kernels import MISFIT_P
 from bendsense.status import Status
 
 __all__ = ["ForceEstimate", "messages"]
@@ -14,7 +15,7 @@ OK_MESSAGE = "converged"
 _OK = int(Status.OK)
 
 
-def messages(status, residual_m, direction, method):
+def messages(status, residual_m, chi2_per_dof, p_value, direction, method):
     """Per-frame messages (B,) of str from the status codes (:class:`~bendsense.status.Status`)."""
     if (status == _OK).all():
         return np.full(status.shape, OK_MESSAGE)
@@ -27,8 +28,13 @@ def messages(status, residual_m, direction, method):
         out[i] = (f"not identifiable along ({x:.3f}, {y:.3f}): trial loads leave the stable branch "
                   "(buckling) or the shape's linear range; best stable estimate, std inf")
     for i in np.flatnonzero(status == Status.MODEL_MISFIT):
-        out[i] = (f"model_misfit: the model shape stays {residual_m[i] * 1e3:.3g} mm (RMS) from the measured one, "
-                  "over 5 % of the length: check the calibration, the config's units and the pressure")
+        if not p_value[i] < MISFIT_P:
+            out[i] = (f"model_misfit: the model shape stays {residual_m[i] * 1e3:.3g} mm (RMS) from the measured one, "
+                      "over 5 % of the length: check the calibration, the config's units and the pressure")
+        else:
+            out[i] = (f"model_misfit: chi2/dof = {chi2_per_dof[i]:.3g}, p = {p_value[i]:.2g} < {MISFIT_P:g}: the model "
+                      "does not explain the shape within the stated noise (a load not at the tip, contact along the "
+                      "body, or a mis-identified actuator)")
     for i in np.flatnonzero(status == Status.NO_STABLE_MATCH):
         out[i] = (f"no stable equilibrium matches the shape: stopped at the stability boundary "
                   f"{residual_m[i] * 1e3:.3g} mm from it (a load beyond buckling?)")
@@ -67,8 +73,8 @@ class ForceEstimate:
     constraint : str
         The constraint (see the module docstring).
     uncertainty : str
-        ``"propagated"`` (sensor noise through calibration and PCC) or ``"residual"``
-        (fallback from the fit residual).
+        ``"propagated"`` (sensor noise and calibration error through the fit) or ``"none"``
+        (no noise model: ``std_n`` and ``covariance_n2`` NaN).
     tip_position_m : ndarray, shape (..., 2)
         Tip of the model shape at the estimate [m].
     state : ndarray, shape (..., n_nodes) or None
@@ -79,7 +85,10 @@ class ForceEstimate:
     chi2_per_dof : ndarray, shape (...) or None
         Misfit of the fit against the propagated shift errors, χ²/dof (about 1 when
         the errors are as modelled); ``std_n`` includes the factor ``max(1, χ²/dof)``
-        on the variance. NaN for ``uncertainty="residual"`` and failed frames.
+        on the variance. NaN without a noise model and for failed frames.
+    p_value : ndarray, shape (...) or None
+        Probability of a χ² at least as large as the frame's under the stated covariance;
+        below 0.001 a converged frame is ``model_misfit``. NaN where χ² is.
     """
 
     force_n: np.ndarray
@@ -97,6 +106,7 @@ class ForceEstimate:
     state: np.ndarray | None = field(default=None, repr=False)
     guess_n: np.ndarray | None = field(default=None, repr=False)
     chi2_per_dof: np.ndarray | None = None
+    p_value: np.ndarray | None = None
 
     @property
     def batch_shape(self) -> tuple:
@@ -118,6 +128,7 @@ class ForceEstimate:
             "constraint": self.constraint,
             "uncertainty": self.uncertainty,
             "chi2_per_dof": None if self.chi2_per_dof is None else np.asarray(self.chi2_per_dof).tolist(),
+            "p_value": None if self.p_value is None else np.asarray(self.p_value).tolist(),
         }
 
     def plot(self, ax=None, *, shape=None, t_s=None, scale_m_per_n: float = 0.1):

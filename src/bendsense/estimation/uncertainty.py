@@ -10,8 +10,8 @@ calibration slope and the calibration's own model error (:func:`shift_covariance
 The misfit: the residual is pulled back to the shift perturbation that explains it
 best, ``δŜ = −(GᵀWG)⁻¹ GᵀW r``, and ``χ² = δŜᵀ C⁺ δŜ`` with ``C`` the covariance that
 ``Σ_S`` predicts for ``δŜ`` (rank N − k); ``Cov(F)`` is scaled by ``max(1, χ²/dof)``
-(the Birge ratio). Without a noise model the residuals are taken as independent per
-point with the variance of the fit (``uncertainty="residual"``). A direction the shape
+(the Birge ratio). Without a noise model there is no σ: NaN (``uncertainty="none"``),
+never one from the fit residual, which looks precise and is not. A direction the shape
 does not determine (``JᵀJ`` singular) gets an infinite standard deviation.
 
 :func:`covariance` is the compiled per-frame kernel (~15 µs for N = 16, M = 41).
@@ -276,7 +276,7 @@ def unresolved(c, D, V, singular, out):
 
 @njit(cache=True)
 def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds, out):
-    """Cov(F) (2, 2) into ``out`` and χ²/dof (NaN for the residual fallback) of one frame (module docstring)."""
+    """Cov(F) (2, 2) into ``out``; returns χ²/dof and its p-value (module docstring); NaN without a noise model."""
     M = p0.shape[0]
     k = D.shape[1]
     A = np.empty((2 * M, 2))  # ∂p/∂F
@@ -296,6 +296,7 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
     Dc, Dt = D, D.T.copy()
     Hinv, singular, V = inverse_cov(mm(mm(Dt, GF), Dc))
     ratio = np.nan
+    p = np.nan
     if has_cov:
         N = lengths.size
         Gf = np.empty((2 * M, N))
@@ -332,19 +333,18 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
         chi2, dof = misfit(Gf, w2, r, mm(A, Dc), cov_s)
         if dof > 0:  # else nothing is left to test the fit with: χ²/dof is NaN
             ratio = chi2 / dof
+            p = chi2_sf(chi2, dof)
             c *= max(ratio, 1.0)
-    else:
-        dof = max(2 * M - k, 1)
-        var = (r @ r) / dof  # per coordinate
-        mid = mm(A.T.copy(), A * (w2 * w2).reshape(-1, 1))  # AᵀW²A
-        c = mm(mm(Dc, mm(mm(Hinv, mm(mm(Dt, mid), Dc)), Hinv)), Dt) * var
+    else:  # no noise model: no σ (never one from the fit residual, which looks precise and is not)
+        out[:, :] = np.nan
+        return ratio, p
     unresolved(c, Dc, V, singular, out)
-    return ratio
+    return ratio, p
 
 
 @njit(cache=True)
 def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_ds, dy, out):
-    """Cov(F) (2, 2) into ``out`` and χ²/dof of one frame fitted to the measured coil angles.
+    """Cov(F) (2, 2) into ``out``, χ²/dof and its p-value of one frame fitted to the measured coil angles.
 
     ``e`` (R, 3): the whitened residual and its Jacobian by F at the optimum
     (:func:`bendsense.estimation.kernels.whitened`); the measured angles are
@@ -363,7 +363,7 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
     Hinv, singular, V = inverse_cov(mm(JD.T.copy(), JD))
     if not has_cov:
         out[:, :] = np.nan
-        return np.nan
+        return np.nan, np.nan
     Fd = np.zeros(2)
     if has_dD:
         for a in range(2):
@@ -392,11 +392,36 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
         rank += Lw[a, a] > 0.0
     dof = rank - k
     ratio = np.nan
+    p = np.nan
     if dof > 0:
         ratio = chi2 / dof
+        p = chi2_sf(chi2, dof)
         c *= max(ratio, 1.0)
     unresolved(c, D, V, singular, out)
-    return ratio
+    return ratio, p
+
+
+@njit(cache=True)
+def chi2_sf(x, dof):
+    """P(χ² > x) for ``dof`` degrees of freedom: the closed forms of Q(dof/2, x/2).
+
+    Even dof: ``e^(−h) Σ_(j<dof/2) h^j / j!``; odd: ``erfc(√h) + e^(−h) Σ_(j<(dof−1)/2)
+    h^(j+½) / Γ(j + 3/2)``, with ``h = x/2`` (Abramowitz & Stegun 6.5.13, 26.4.4).
+    """
+    h = 0.5 * max(x, 0.0)
+    if dof % 2 == 0:
+        term = math.exp(-h)
+        total = term
+        for j in range(1, dof // 2):
+            term *= h / j
+            total += term
+    else:
+        total = math.erfc(math.sqrt(h))
+        term = math.exp(-h) * math.sqrt(h) / math.gamma(1.5)
+        for j in range(dof // 2):
+            total += term
+            term *= h / (j + 1.5)
+    return min(total, 1.0)
 
 
 @njit(cache=True)
