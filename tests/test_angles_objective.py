@@ -15,6 +15,7 @@ from bendsense.cli import main
 from bendsense.errors import ArgumentError, ConfigError
 from bendsense.estimation import estimate_force
 from bendsense.pcc import shifts_to_curvatures
+from bendsense.pipeline import LiveProcessor
 from bendsense.results import read_results
 
 CFG = bendsense.load_config()
@@ -103,7 +104,7 @@ def test_without_a_noise_model_sigma_is_not_a_number(truths):
 
 def test_objective_errors_name_the_option(truths):
     t = truths[0]
-    with pytest.raises(ArgumentError, match="objective: must be one of positions, angles, got 'shape'"):
+    with pytest.raises(ArgumentError, match="objective: must be one of angles, positions, got 'shape'"):
         estimate_force(_kappa(t.shifts_m), t.pressure_pa, CFG, objective="shape")
     with pytest.raises(ArgumentError, match="objective: method='paper' fits the positions"):
         estimate_force(_kappa(t.shifts_m), t.pressure_pa, CFG, objective="angles", method="paper")
@@ -129,3 +130,19 @@ def test_config_and_cli_choose_the_objective(workdir, tmp_path):  # noqa: F811
     assert np.abs(runs["positions"]["fy_n"] - fy_true).max() > 1e-4
     res = CliRunner().invoke(main, [*base, "--objective", "shape"])
     assert res.exit_code == 2 and "--objective" in res.output
+    # process and the live processor (live, record --estimate) take the same option, default angles
+    session = bendsense.read_session(workdir / "session.csv")
+    cal = bendsense.Calibration.load(workdir / "cal.yaml")
+    for objective in ("angles", "positions", None):
+        out = tmp_path / f"process-{objective}"
+        res = CliRunner().invoke(main, ["process", str(workdir / "session.csv"), "--calibration",
+                                        str(workdir / "cal.yaml"), "-o", str(out), "--workers", "0",
+                                        "--constraint", "vertical", "--no-progress",
+                                        *(["--objective", objective] if objective else [])])
+        assert res.exit_code == 0, res.output
+        got = read_results(out / "session")
+        np.testing.assert_allclose(got["fy_n"], runs[objective or "angles"]["fy_n"], rtol=0, atol=1e-9)
+        live = LiveProcessor(cal, CFG, constraint="vertical", objective=objective)
+        assert live.objective == (objective or "angles")
+        block = live.process_block(session.signals[:5], session.pressure_pa[:5])
+        np.testing.assert_allclose(block.force_n[:, 1], runs[objective or "angles"]["fy_n"][:5], atol=1e-6)

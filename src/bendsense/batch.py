@@ -312,6 +312,7 @@ def process_session(
     calibration,
     constraint=None,
     method=None,
+    objective=None,
     pressure_pa=None,
     estimate: bool = True,
     overwrite: bool = False,
@@ -345,7 +346,7 @@ def process_session(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             frames, extrapolated, not_converged, misfit, out_of_range, lost, tx_drops = _run(
-                path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite
+                path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
         return SessionOutcome(status="failed", reason=str(err), seconds=time.perf_counter() - start, **row)
@@ -378,7 +379,7 @@ def process_session(
     )
 
 
-def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, estimate, overwrite):
+def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite):
     from bendsense.pcc import reconstruct
     from bendsense.plausibility import check_channels
     from bendsense.results import write_results
@@ -408,6 +409,7 @@ def _run(path, out_dir, config, calibration, constraint, method, pressure_pa, es
             config,
             constraint=constraint or config.estimation.constraint,
             method=method or config.estimation.method,
+            objective=objective,
             calibration=calibration,  # its noise_std gives the force uncertainty std_n
         )
     write_results(out_dir, session, shape, result, overwrite=overwrite, inputs=[path])
@@ -468,6 +470,7 @@ def process_sessions(
     workers: int | None = None,
     constraint: str | None = None,
     method: str | None = None,
+    objective: str | None = None,
     overwrite: bool = False,
     pressure_pa: float | None = None,
     estimate: bool = True,
@@ -497,8 +500,8 @@ def process_sessions(
     workers : int, optional
         Processes of the default pool (default: ``os.cpu_count()``); ``0`` runs the
         sessions one after the other in this process (no executor).
-    constraint, method : str, optional
-        Force constraint and estimator (default: from ``config.estimation``).
+    constraint, method, objective : str, optional
+        Force constraint, estimator and objective (default: from ``config.estimation``).
     overwrite : bool
         Reprocess sessions whose output directory exists (default: skip them); a
         session's directory that holds files bendsense did not write is never replaced
@@ -535,12 +538,13 @@ def process_sessions(
     # the root collects one results directory per session; it is never replaced
     with output.reserve([output.collection(out_dir)], inputs):
         return _process(given, out_dir, start, config=config, calibration=calibration, executor=executor,
-                        workers=workers, constraint=constraint, method=method, overwrite=overwrite,
+                        workers=workers, constraint=constraint, method=method, objective=objective,
+                        overwrite=overwrite,
                         pressure_pa=pressure_pa, estimate=estimate, recursive=recursive, progress=progress)
 
 
-def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, overwrite,
-             pressure_pa, estimate, recursive, progress) -> BatchReport:
+def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
+             overwrite, pressure_pa, estimate, recursive, progress) -> BatchReport:
     from tqdm import tqdm
 
     from bendsense.calibration import Calibration
@@ -584,6 +588,7 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         calibration=calibration,
         constraint=constraint,
         method=method,
+        objective=objective,
         pressure_pa=pressure_pa,
         estimate=estimate,
         overwrite=overwrite,

@@ -47,7 +47,7 @@ PRESSURE_RANGE_PA = (0.0, 200e3)
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 METHODS = ("fast", "paper")
 #: What the fit compares: the PCC positions (paper eq. 18) or the coil angles S/d the sensor measures.
-OBJECTIVES = ("positions", "angles")
+OBJECTIVES = ("angles", "positions")
 ANGLE_SOURCES = ("model", "shape")
 # the identified model parameters θ (paper eq. 8–12, 15) and the config section of each
 FREE_BENDING_PARAMETERS = ("shear_modulus_pa", "sensor_stiffness_nm_per_rad", "prebend_angle_rad")

@@ -251,6 +251,9 @@ class LiveProcessor:
         ``config.estimation.constraint``.
     method : str, optional
         Estimator; default ``config.estimation.method``.
+    objective : str, optional
+        What the fit compares (:data:`bendsense.estimation.OBJECTIVES`); default
+        ``config.estimation.objective``.
     pressure_pa : float, optional
         Pressure for frames without a reading [Pa]; without it such frames get a
         shape only (status :data:`NO_PRESSURE_STATUS`).
@@ -274,8 +277,8 @@ class LiveProcessor:
         Frames per status (``ok``, ``extrapolated``, ``not converged``, ...).
     """
 
-    def __init__(self, calibration, config=None, *, constraint=None, method=None, pressure_pa=None, n_points=41,
-                 estimate=True, **options):
+    def __init__(self, calibration, config=None, *, constraint=None, method=None, objective=None, pressure_pa=None,
+                 n_points=41, estimate=True, **options):
         from bendsense.config import load_config
 
         self.config = load_config() if config is None else config
@@ -288,6 +291,9 @@ class LiveProcessor:
         self.calibration = calibration
         self.constraint = self.config.estimation.constraint if constraint is None else constraint
         self.method = self.config.estimation.method if method is None else method
+        if objective is None:  # the paper's method fits the positions (paper eq. 18)
+            objective = "positions" if self.method == "paper" else self.config.estimation.objective
+        self.objective = objective
         self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
         self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
         self.estimate = bool(estimate)
@@ -340,8 +346,8 @@ class LiveProcessor:
             prev = self._previous
             warm = {"initial": prev} if prev is not None else {}
             sub = shape if has_p.all() else _take(shape, has_p, n)
-            kwargs = {"constraint": self.constraint, "method": self.method, "calibration": self.calibration,
-                      **self.options}
+            kwargs = {"constraint": self.constraint, "method": self.method, "objective": self.objective,
+                      "calibration": self.calibration, **self.options}
             est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
             m = int(has_p.sum())
             failed = np.flatnonzero(~np.asarray(est.success).reshape(-1))

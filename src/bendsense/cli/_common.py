@@ -17,6 +17,7 @@ __all__ = [
     "make_config_option",
     "make_overwrite_option",
     "overwrite_option",
+    "objective_option",
     "quiet",
     "refuse_existing",
     "save_figure",
@@ -26,7 +27,7 @@ __all__ = [
 # kept in sync with bendsense.config (imported lazily for a fast --help; a test compares them)
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 METHODS = ("fast", "paper")
-OBJECTIVES = ("positions", "angles")
+OBJECTIVES = ("angles", "positions")
 
 
 class Finite(click.ParamType):
@@ -104,6 +105,10 @@ def make_overwrite_option(help_text: str):
 
 config_option = make_config_option("Config YAML (default: the paper's prototype, built in).")
 overwrite_option = make_overwrite_option("Replace existing output.")
+objective_option = click.option(
+    "--objective", type=click.Choice(OBJECTIVES),
+    help="Fit the coil angles S/d the sensor measures ('angles') or the PCC positions of paper eq. 18 "
+         "('positions'); default: from the config (angles).")
 
 
 def refuse_existing(path: Path, overwrite: bool) -> None:

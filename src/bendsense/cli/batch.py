@@ -20,6 +20,7 @@ from bendsense.cli._common import (
     InterspersedCommand,
     check_figure_suffix,
     config_option,
+    objective_option,
     overwrite_option,
     quiet,
     step_io,
@@ -61,12 +62,13 @@ def _dask_executor(address: str):
               help="Run on a Dask distributed scheduler instead (needs bendsense[distributed]).")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
+@objective_option
 @click.option("--pressure-kpa", type=Finite(), help="Constant pressure for frames without a reading [kPa].")
 @click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
 @overwrite_option
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
-def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, pressure_kpa,
+def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, objective, pressure_kpa,
             no_estimate, recursive, overwrite, no_progress):
     """Process many sessions in parallel: reconstruct, estimate and save each one.
 
@@ -101,6 +103,7 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
                 workers=workers,
                 constraint=constraint,
                 method=method,
+                objective=objective,
                 overwrite=overwrite,
                 pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
                 estimate=not no_estimate,
@@ -166,7 +169,7 @@ def plot(target, figure_path, shapes, dpi, overwrite):
             out = target
             est = state.get("estimate")
             if est is not None:
-                estimated = f"constraint {est.constraint}, method {est.method}"
+                estimated = f"constraint {est.constraint}, method {est.method}, objective {est.objective}"
         elif target.is_dir():
             raise click.UsageError(f"give the figure file: 'plot {target} -o FIG.png'")
         else:

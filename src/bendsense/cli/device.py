@@ -19,6 +19,7 @@ from bendsense.cli._common import (
     InterspersedCommand,
     make_config_option,
     make_overwrite_option,
+    objective_option,
     quiet,
 )
 
@@ -41,12 +42,13 @@ def _status_line(stats, est=None) -> str:
         counts = est.status_counts
         line += (
             f"  | estimated {est.frames} ({est.rate_hz:.0f}/s)  backlog {est.backlog}  "
-            f"extrapolated {counts.get('extrapolated', 0)}  not converged {counts.get('not converged', 0)}"
+            f"extrapolated {counts.get('extrapolated', 0)}  not converged {counts.get('not converged', 0)}  "
+            f"misfit {counts.get('model_misfit', 0)}"
         )
     return line
 
 
-def make_processor(config, calibration_path, constraint, pressure_kpa, estimate=True):
+def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True):
     """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``."""
     from bendsense.calibration import Calibration
     from bendsense.pipeline import LiveProcessor
@@ -55,6 +57,7 @@ def make_processor(config, calibration_path, constraint, pressure_kpa, estimate=
         Calibration.load(calibration_path),
         config,
         constraint=constraint,
+        objective=objective,
         pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
         estimate=estimate,
     )
@@ -78,7 +81,7 @@ def make_outlets(processor, driver, port):
         processor.config.sensor.n_segments,
         rate,
         source_id=f"bendsense {port}",
-        meta={"constraint": processor.constraint, "method": processor.method},
+        meta={"constraint": processor.constraint, "method": processor.method, "objective": processor.objective},
     )
 
 
@@ -123,6 +126,7 @@ def _sigterm_as_interrupt():
 )
 @click.option("--estimate", is_flag=True, help="Shape and force of every frame as it arrives, to SESSION/results.csv.")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@objective_option
 @click.option("--pressure-kpa", type=Finite(), help="Pressure for frames without a pressure reading [kPa].")
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
@@ -149,6 +153,7 @@ def record(
     calibration_path,
     estimate,
     constraint,
+    objective,
     pressure_kpa,
     lsl,
     lsl_wait,
@@ -201,7 +206,7 @@ def record(
                 from bendsense.errors import require_extra
 
                 require_extra("pylsl", "lsl", "--lsl")
-            processor = make_processor(config or load_config(), calibration_path, constraint, pressure_kpa)
+            processor = make_processor(config or load_config(), calibration_path, constraint, objective, pressure_kpa)
         driver = Driver(
             port,
             baudrate=baud or DEFAULT_BAUDRATE,

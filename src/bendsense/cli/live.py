@@ -14,6 +14,7 @@ from bendsense.cli._common import (
     InterspersedCommand,
     check_figure_suffix,
     config_option,
+    objective_option,
     overwrite_option,
     quiet,
 )
@@ -35,6 +36,7 @@ _NO_CALIBRATION = (
     help="Calibration YAML written by 'bendsense calibrate' (required).",
 )
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@objective_option
 @click.option(
     "--save",
     "save_path",
@@ -78,6 +80,7 @@ def live(
     config_path,
     calibration_path,
     constraint,
+    objective,
     save_path,
     seconds,
     pressure_kpa,
@@ -124,7 +127,7 @@ def live(
 
         require_extra("pylsl", "lsl", "--lsl")
     config = load_config(config_path)
-    processor = make_processor(config, calibration_path, constraint, pressure_kpa)
+    processor = make_processor(config, calibration_path, constraint, objective, pressure_kpa)
     if save_path is not None:
         view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:

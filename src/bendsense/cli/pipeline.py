@@ -18,10 +18,10 @@ from bendsense import output
 from bendsense.cli._common import (
     CONSTRAINTS,
     METHODS,
-    OBJECTIVES,
     Finite,
     InterspersedCommand,
     config_option,
+    objective_option,
     overwrite_option,
     step_io,
 )
@@ -168,9 +168,7 @@ def reconstruct(points):
 @click.command("estimate", cls=InterspersedCommand)
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
-@click.option("--objective", type=click.Choice(OBJECTIVES),
-              help="Fit the coil angles S/d the sensor measures ('angles') or the PCC positions of paper eq. 18 "
-                   "('positions'); default: from the config.")
+@objective_option
 @click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
 @click.option("--tip-angle-source", type=click.Choice(["model", "shape"]),
               help="Tip angle of the normal/follower constraints (default: from the config).")
@@ -205,9 +203,14 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
             lo, hi = config.actuator.pressure_range_pa
             log.warning("%d of %d frames have a pressure outside actuator.pressure_range_pa %g..%g kPa: no force "
                         "(status '%s')", int(outside.sum()), len(session), lo / 1e3, hi / 1e3, OUT_OF_RANGE)
-        failed = int(np.count_nonzero(~np.asarray(est.success) & ~outside))
-        if failed:
-            log.warning("%d of %d frames did not converge (status 'not converged')", failed, len(session))
+        failed = ~np.asarray(est.success) & ~outside
+        misfit = failed & np.char.startswith(np.asarray(est.message, dtype=str), "model_misfit")
+        if (failed & ~misfit).any():
+            log.warning("%d of %d frames did not converge (status 'not converged')", int((failed & ~misfit).sum()),
+                        len(session))
+        if misfit.any():
+            log.warning("%d of %d frames: the model does not explain the shape (status 'model_misfit', force kept)",
+                        int(misfit.sum()), len(session))
         state["estimate"] = est
         return state
 

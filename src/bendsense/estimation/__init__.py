@@ -256,6 +256,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         guess_n=guess_n.reshape(*batch, 2),
         chi2_per_dof=chi2.reshape(batch),
         p_value=p_value.reshape(batch),
+        objective=objective,
     )
 
 

@@ -86,6 +86,8 @@ class ForceEstimate:
         Misfit of the fit against the propagated shift errors, χ²/dof (about 1 when
         the errors are as modelled); ``std_n`` includes the factor ``max(1, χ²/dof)``
         on the variance. NaN without a noise model and for failed frames.
+    objective : str
+        What the fit compared: ``"angles"`` (the coil angles) or ``"positions"``.
     p_value : ndarray, shape (...) or None
         Probability of a χ² at least as large as the frame's under the stated covariance;
         below 0.001 a converged frame is ``model_misfit``. NaN where χ² is.
@@ -107,6 +109,7 @@ class ForceEstimate:
     guess_n: np.ndarray | None = field(default=None, repr=False)
     chi2_per_dof: np.ndarray | None = None
     p_value: np.ndarray | None = None
+    objective: str = "angles"
 
     @property
     def batch_shape(self) -> tuple:
@@ -127,6 +130,7 @@ class ForceEstimate:
             "method": self.method,
             "constraint": self.constraint,
             "uncertainty": self.uncertainty,
+            "objective": self.objective,
             "chi2_per_dof": None if self.chi2_per_dof is None else np.asarray(self.chi2_per_dof).tolist(),
             "p_value": None if self.p_value is None else np.asarray(self.p_value).tolist(),
         }
