@@ -277,7 +277,7 @@ def continuation(phi, k0n, gi, ratio, ops, tol, max_iter, sens, extra):
             lam = lt
             for i in range(m):
                 tan[i] = x[i, ncol - 2]
-                for c in range(ncol - 2):
+                for c in range(extra.shape[1]):  # with sens the tangent dφ/dλ too
                     extra[i, c] = x[i, c]
             dlam = min(1.0, 1.5 * dlam)
             if lam >= 1.0:
@@ -304,8 +304,9 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     convexity bound as ``WARM_UNSTABLE`` instead of continuing from the arc. Without a
     state, convex loads start from the arc plus its first-order change. Everything else
     follows the branch from the unloaded arc (:func:`continuation`). ``extra`` (n-1,
-    1 + 2 sens): the Jacobi field and, with ``sens``, ∂φ/∂g. Returns (status, load
-    factor of a failure, Newton iterations).
+    1 + 3 sens): the Jacobi field ψ = ∂φ/∂(K0 L) and, with ``sens``, ∂φ/∂g and the load
+    tangent dφ/dλ (= −EI ∂φ/∂EI at λ = 1). Returns (status, load factor of a failure,
+    Newton iterations).
     """
     n = phi.size
     m = n - 1
@@ -321,11 +322,11 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     convex = ratio < 1.0
     status = _RUNNING
     iters = 0
-    x = np.full((m, 1 + 2 * sens), np.nan)
+    x = np.full((m, 1 + 3 * sens), np.nan)
     if has_state:
         phi[:] = state
         phi[0] = base
-        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, bool(NO), x)
+        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, sens, x)
         if conv:
             near = True
             for i in range(1, n):
@@ -343,7 +344,7 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
         arc_tangent(phi, gi, ops.J0inv, tan)
         for i in range(m):
             phi[i + 1] += tan[i]
-        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, bool(NO), x)
+        conv, iters = newton(phi, 1.0, k0n, gi, ops.J0, ops.D2i, ops.Dtip, tol, max_iter, sens, sens, x)
         if conv:
             status = _OK
     where = 1.0
@@ -419,7 +420,7 @@ def solve_sample(b, L, ei, k0, base, F, w, state, has_state, ops, tol, max_iter,
     phi, status, where, iters, angle, pos, dpos, dang, tip = out
     n = ops.sigma.size
     M = P.shape[0]
-    extra = np.empty((n - 1, 1 + 2 * sens))
+    extra = np.empty((n - 1, 1 + 3 * sens))
     st, wh, it = solve_frame(L, ei[b], k0[b], base[b], F[b, 0], F[b, 1], w[b, 0], w[b, 1], state[b], has_state, ops,
                              tol, max_iter, sens, allow_continuation, phi[b], extra)
     status[b] = st

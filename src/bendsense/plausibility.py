@@ -109,6 +109,8 @@ def _mark(result, outside, p, lo, hi):
         message=message.astype(str) if batch else str(message[()]),
         chi2_per_dof=None if chi2 is None else np.where(mask, np.nan, chi2),
         p_value=None if result.p_value is None else np.where(mask, np.nan, result.p_value),
+        covariance_parts_n2=None if result.covariance_parts_n2 is None else np.where(
+            mask[..., None, None, None], np.nan, result.covariance_parts_n2),
     )
 
 

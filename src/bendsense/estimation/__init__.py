@@ -33,6 +33,7 @@ import numpy as np
 
 from bendsense import _jit
 from bendsense import beam as _beam
+from bendsense.actuator import model_jacobian
 from bendsense.calibration import Calibration
 from bendsense.config import OBJECTIVES
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
@@ -214,8 +215,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     n = _N_NODES
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
            np.empty(B), np.empty(B), np.empty(B), np.full((B, 2), np.nan), np.empty((B, n)), np.empty((B, 2)),
-           np.zeros((B, 2)), np.empty((B, 2)))
-    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std = out
+           np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)))
+    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
         if block >= B:  # one block (one frame, a short series): the same kernel without the threads
@@ -257,6 +258,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         chi2_per_dof=chi2.reshape(batch),
         p_value=p_value.reshape(batch),
         objective=objective,
+        covariance_parts_n2=parts.reshape(*batch, 3, 2, 2),
     )
 
 
@@ -302,7 +304,20 @@ def _frames(ref, P, batch, B, config) -> Frames:
         p0, phi_end = _flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B)
         kappa_s, state = _flat(ref.kappa_s, batch, B, (M,)), _flat(ref.state, batch, B, (n,))
         tip = _flat(ref.tip_shape, batch, B)
-    return Frames(kappa, p0, phi_end, kappa_s, state, tip, ei, theta / model.length_m, theta)
+    return Frames(kappa, p0, phi_end, kappa_s, state, tip, ei, theta / model.length_m, theta, _model_cov(config, Pf))
+
+
+def _model_cov(config, pressure_pa):
+    """Covariance (B, 2, 2) of the beam's inputs (K0, EI) from the identified parameters' (zero without them).
+
+    ``Σ_m = J Σ_θ Jᵀ`` with ``J = ∂(K0, EI)/∂θ`` (:func:`bendsense.actuator.model_jacobian`)
+    and ``Σ_θ`` the config's ``parameter_covariance`` (written by ``bendsense identify``).
+    """
+    section = config.parameter_covariance
+    if section is None:
+        return np.zeros((pressure_pa.size, 2, 2))
+    J = model_jacobian(config, pressure_pa, section.parameters)
+    return _c(J @ np.asarray(section.covariance, dtype=float) @ np.swapaxes(J, -1, -2))
 
 
 def _starts(initial, initial_force_n, B, batch, warm_start):

@@ -113,10 +113,10 @@ def workspace(M, n, R):
     """Buffers of one beam evaluation.
 
     Positions (M, 2) and ∂p/∂F (M, 2, 2) at the comparison nodes, the state (n,), the tip
-    (+ ∂tip/∂F) (6,), ∂φ_nodes/∂F (n, 2), and the fitted response y (R,) with ∂y/∂F
-    (R, 2): the positions flattened, or the tangent angles at the coils.
+    (+ ∂tip/∂F) (6,), ∂φ_nodes/∂(Fx, Fy, K0, EI) (n, 4), and the fitted response y (R,)
+    with ∂y/∂F (R, 2): the positions flattened, or the tangent angles at the coils.
     """
-    return (np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 2)), np.empty(R),
+    return (np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 4)), np.empty(R),
             np.empty((R, 2)))
 
 
@@ -142,10 +142,17 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
     """
     pos, dpos, st, tip, dst, y, dy = ws
     n = st.size
-    extra = np.empty((n - 1, 3))
+    extra = np.empty((n - 1, 4))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
                                   NEWTON_TOL, int(NEWTON_MAX_ITER), bool(YES), allow_continuation, st, extra)
     bk.node_sensitivity(extra, L, ei, dst)
+    # the model inputs: ∂φ/∂K0 = L ψ (ψ = ∂φ/∂(K0 L), the Jacobi field); EI scales the
+    # load factor, λ ∝ 1/EI: ∂φ/∂EI = −(dφ/dλ)/EI at λ = 1
+    dst[0, 2] = 0.0
+    dst[0, 3] = 0.0
+    for i in range(n - 1):
+        dst[i + 1, 2] = extra[i, 0] * L
+        dst[i + 1, 3] = -extra[i, 3] / ei
     bk.sample(st, dst, L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
     if pb.objective == ANGLES:
         for i in range(y.size):
@@ -429,7 +436,8 @@ def restricted_step(H, g, v, out):
 
 
 @njit(cache=True)
-def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, force, cov, direction):
+def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_var, model_cov, kappa, force, cov,
+           parts, direction):
     """Status, force, covariance and χ² of a frame after the iteration; returns (status, residual, χ²/dof, p-value).
 
     A converged fit is ``model_misfit`` (force kept) when its model shape stays over
@@ -449,13 +457,16 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, f
     residual = math.sqrt(num / den)
     ratio = np.nan
     p = np.nan
+    parts[:, :, :] = np.nan
     if status == _OK or status == _NOT_IDENTIFIABLE:
+        dym = model_response(pb, ws)
         if pb.objective == ANGLES:
             ratio, p = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
-                                          pb.gap, pb.dphi_ds, ws[6], cov)
+                                             pb.gap, pb.dphi_ds, ws[6], cov, noise_var, dym, model_cov, parts)
         else:
             ratio, p = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws[0], ws[1], frame_cov, cov_s, kappa,
-                                   pb.lengths, pb.gap, pb.seg, pb.sigma, pb.dphi_ds, cov)
+                                      pb.lengths, pb.gap, pb.seg, pb.sigma, pb.dphi_ds, cov, noise_var, dym, model_cov,
+                                      parts)
     if status == _NOT_IDENTIFIABLE:
         v = np.empty(2)
         force_of(D, np.zeros(2), blocked, v)
@@ -477,17 +488,42 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, kappa, f
     if status != _OK and status != _NOT_IDENTIFIABLE and status != _MODEL_MISFIT:
         force[:] = np.nan
         cov[:, :] = np.nan
+        parts[:, :, :] = np.nan
         ratio = np.nan
         p = np.nan
     return status, residual, ratio, p
 
 
 @njit(cache=True)
+def model_response(pb, ws):
+    """∂y/∂(K0, EI) (R, 2) of the fitted response at the beam in ``ws`` (:func:`beam_eval`)."""
+    dphi = ws[4][:, 2:].copy()
+    R = ws[5].size
+    out = np.empty((R, 2))
+    if pb.objective == ANGLES:
+        for i in range(R):
+            for c in range(2):
+                acc = 0.0
+                for j in range(dphi.shape[0]):
+                    acc += pb.PA[i, j] * dphi[j, c]
+                out[i, c] = acc
+    else:
+        M = pb.PQ_fit.shape[0]
+        pos, dpos, tip = np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(6)
+        bk.sample(ws[2], dphi, pb.L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
+        for j in range(M):
+            for a in range(2):
+                out[2 * j + a, 0] = dpos[j, a, 0]
+                out[2 * j + a, 1] = dpos[j, a, 1]
+    return out
+
+
+@njit(cache=True)
 def buffers(pb, n):
     """Per-thread buffers of :func:`setup`.
 
-    Reference points and angles, κ at the nodes, beam start, D, ∂D, Σ_S, κ, and the
-    target's y⁰ and L_w (:func:`whitened`).
+    Reference points and angles, κ at the nodes, beam start, D, ∂D, Σ_S, κ, the
+    target's y⁰ and L_w (:func:`whitened`), and Σ_S's signal-noise variances.
     """
     m = pb.seg_fk.size
     N = pb.lengths.size
@@ -495,7 +531,7 @@ def buffers(pb, n):
     R = pb.sw.size
     Rw = R if pb.objective == ANGLES else 1
     return (np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
-            np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)))
+            np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N))
 
 
 @njit(cache=True)
@@ -509,9 +545,9 @@ def setup(i, fr, pb, buf):
     measured angles ``S_i / d = Σ_{j ≤ i} κ_j l_j`` at the coils weighted by the inverse
     of their covariance ``Σ_S / d²`` (unweighted without a noise model). Returns (p⁰, φ
     at the last node, κ at the nodes, beam start, target, D, ∂D/∂φ_L, whether Σ_S is
-    known, Σ_S, κ) of the frame; the arrays live in ``buf`` (:func:`buffers`).
+    known, Σ_S, its noise variances, κ) of the frame; the arrays live in ``buf`` (:func:`buffers`).
     """
-    pos, ang, ks, st, D, dD, cov_s, no_kappa, y0, Lw = buf
+    pos, ang, ks, st, D, dD, cov_s, no_kappa, y0, Lw, noise_var = buf
     M = ks.size
     if pb.pcc:
         tip = prob.pcc_reference(fr.kappa[i], pb.lengths, pb.seg_fk, pb.sigma_fk, pb.beyond, pb.tip_weights, pos, ang,
@@ -521,7 +557,7 @@ def setup(i, fr, pb, buf):
         tip = fr.tip_shape[i]
         p0, phi_end, kappa_s, state0, kappa = fr.p0[i], fr.phi_end[i], fr.kappa_s[i], fr.state[i], no_kappa
     prob.basis(pb.kind, tip if pb.shape_angle else fr.theta[i], pb.direction, pb.follower_angle, D, dD)
-    frame_cov = pb.pcc and pb.noise and unc.shift_covariance(kappa, pb, cov_s) > 0
+    frame_cov = pb.pcc and pb.noise and unc.shift_covariance(kappa, pb, cov_s, noise_var) > 0
     whiten = False
     if pb.objective == ANGLES:
         acc = 0.0
@@ -541,13 +577,13 @@ def setup(i, fr, pb, buf):
         for j in range(M):
             y0[2 * j] = p0[j, 0]
             y0[2 * j + 1] = p0[j, 1]
-    return p0, phi_end, kappa_s, state0, (y0, pb.sw, Lw, whiten), D, dD, frame_cov, cov_s, kappa
+    return p0, phi_end, kappa_s, state0, (y0, pb.sw, Lw, whiten), D, dD, frame_cov, cov_s, noise_var, kappa
 
 
 @njit(cache=True)
 def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
-    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std = out
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
     k = pb.lower.size
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
@@ -559,7 +595,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     g = np.empty(k)
     prev_ok = False
     for i in range(lo, hi):
-        p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
+        p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, buf)
         ei, k0 = fr.ei[i], fr.k0[i]
         moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, g)
         force_of(D, pb.ffix, g, guess_n[i])
@@ -580,7 +616,8 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
         prev_u0[:] = u0
         direction[i, :] = 0.0
         status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s,
-                                                          kappa, force[i], cov[i], direction[i])
+                                                          noise_var, fr.model_cov[i], kappa, force[i], cov[i],
+                                                          parts[i], direction[i])
         iters[i] = it
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
@@ -612,18 +649,19 @@ def estimate_frames(block, use_guess, fr, pb, ops, start, out):
 @njit(cache=True)
 def evaluate_frames(fr, pb, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
-    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std = out
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
     F = np.empty(2)
     blocked = np.zeros(pb.lower.size)
     for i in range(fr.ei.size):
-        p0, _, _, state0, tg, D, dD, frame_cov, cov_s, kappa = setup(i, fr, pb, buf)
+        p0, _, _, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, buf)
         force_of(D, pb.ffix, u[i], F)
         ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, pb, ws)
         st = run_status[i] if ok else _BEAM_FAILED
         status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u[i], ws, blocked, frame_cov, cov_s,
-                                                          kappa, force[i], cov[i], direction[i])
+                                                          noise_var, fr.model_cov[i], kappa, force[i], cov[i],
+                                                          parts[i], direction[i])
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
         state[i] = ws[2]

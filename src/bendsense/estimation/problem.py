@@ -77,6 +77,7 @@ class Frames(NamedTuple):
     ei: np.ndarray  # (B,) EI(P) [N m²]
     k0: np.ndarray  # (B,) K0(P) [1/m]
     theta: np.ndarray  # (B,) free-motion tip angle [rad]
+    model_cov: np.ndarray  # (B, 2, 2) covariance of (K0, EI) from the identified parameters [1/m², N m³]
 
 
 class Problem(NamedTuple):

@@ -12,6 +12,7 @@ from bendsense.status import Status
 __all__ = ["ForceEstimate", "messages"]
 
 OK_MESSAGE = "converged"
+BUDGET = ("noise", "calibration", "model")  # the parts of the force covariance, in ForceEstimate.covariance_parts_n2
 _OK = int(Status.OK)
 
 
@@ -88,6 +89,9 @@ class ForceEstimate:
         on the variance. NaN without a noise model and for failed frames.
     objective : str
         What the fit compared: ``"angles"`` (the coil angles) or ``"positions"``.
+    covariance_parts_n2 : ndarray, shape (..., 3, 2, 2) or None
+        The parts of ``covariance_n2`` [N²] in the order of :data:`BUDGET` (sensor noise,
+        calibration error, model parameters); see :attr:`budget`.
     p_value : ndarray, shape (...) or None
         Probability of a χ² at least as large as the frame's under the stated covariance;
         below 0.001 a converged frame is ``model_misfit``. NaN where χ² is.
@@ -110,6 +114,20 @@ class ForceEstimate:
     chi2_per_dof: np.ndarray | None = None
     p_value: np.ndarray | None = None
     objective: str = "angles"
+    covariance_parts_n2: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def budget(self) -> dict:
+        """The uncertainty budget: the standard deviation (..., 2) [N] of each part.
+
+        ``noise`` (the signal noise of the flat recording), ``calibration`` (the
+        calibration polynomials' error) and ``model`` (the identified parameters'
+        covariance, ``config.parameter_covariance``); their variances add up to
+        ``std_n**2`` (each scaled by the same misfit factor ``max(1, χ²/dof)``).
+        """
+        parts = np.asarray(self.covariance_parts_n2)
+        diag = np.sqrt(np.maximum(np.diagonal(parts, axis1=-2, axis2=-1), 0.0))
+        return {name: diag[..., i, :] for i, name in enumerate(BUDGET)}
 
     @property
     def batch_shape(self) -> tuple:

@@ -275,8 +275,13 @@ def unresolved(c, D, V, singular, out):
 
 
 @njit(cache=True)
-def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds, out):
-    """Cov(F) (2, 2) into ``out``; returns χ²/dof and its p-value (module docstring); NaN without a noise model."""
+def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds, out,
+               noise_var, dym, model_cov, parts):
+    """Cov(F) (2, 2) into ``out`` and its parts into ``parts`` (:func:`budget`); returns χ²/dof and its p-value.
+
+    The module docstring derives it; ``dym`` (2M, 2) = ∂p/∂(K0, EI) at the comparison
+    nodes carries the model inputs' covariance ``model_cov``. NaN without a noise model.
+    """
     M = p0.shape[0]
     k = D.shape[1]
     A = np.empty((2 * M, 2))  # ∂p/∂F
@@ -323,28 +328,30 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
             for a in range(2):
                 for i in range(N):
                     T[a, i] += Fd[a] * dphi_ds[i]
-        c = np.zeros((2, 2))  # T Σ_S Tᵀ
-        for i in range(N):
-            for j in range(N):
-                sij = cov_s[i, j]
-                for a in range(2):
-                    for b in range(2):
-                        c[a, b] += T[a, i] * sij * T[b, j]
+        hm = np.zeros((2, 2))  # AᵀW ∂p/∂(K0, EI)
+        for row in range(2 * M):
+            for a in range(2):
+                for b in range(2):
+                    hm[a, b] += w2[row] * A[row, a] * dym[row, b]
+        c = budget(T, cov_s, noise_var, -mm(Dc, mm(Hinv, mm(Dt, hm))), model_cov, parts)
         chi2, dof = misfit(Gf, w2, r, mm(A, Dc), cov_s)
         if dof > 0:  # else nothing is left to test the fit with: χ²/dof is NaN
             ratio = chi2 / dof
             p = chi2_sf(chi2, dof)
             c *= max(ratio, 1.0)
+            parts *= max(ratio, 1.0)
     else:  # no noise model: no σ (never one from the fit residual, which looks precise and is not)
         out[:, :] = np.nan
+        parts[:, :, :] = np.nan
         return ratio, p
     unresolved(c, Dc, V, singular, out)
     return ratio, p
 
 
 @njit(cache=True)
-def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_ds, dy, out):
-    """Cov(F) (2, 2) into ``out``, χ²/dof and its p-value of one frame fitted to the measured coil angles.
+def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_ds, dy, out, noise_var, dym, model_cov,
+                      parts):
+    """Cov(F) (2, 2) into ``out``, its parts into ``parts``, χ²/dof and p of one frame fitted to the coil angles.
 
     ``e`` (R, 3): the whitened residual and its Jacobian by F at the optimum
     (:func:`bendsense.estimation.kernels.whitened`); the measured angles are
@@ -352,9 +359,11 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
     ``δu = −H⁻¹ J̃ᵀ L_w⁻¹ ∂r/∂S δS`` with ``J̃ = L_w⁻¹ (∂y/∂F) D``, ``H = J̃ᵀ J̃`` and
     ``∂r/∂S = −E/d`` (plus the turn of D with the shape's tip angle for
     ``has_dD``); ``Cov(F) = T Σ_S Tᵀ`` with ``T = ∂F/∂S``, which is ``D H⁻¹ Dᵀ`` when the
-    weights are the inverse covariance of the angles. χ² = ‖e‖² with rank(Σ_θ) − k
-    degrees of freedom; the covariance is scaled by ``max(1, χ²/dof)``. Without a
-    noise model (``has_cov`` False) the covariance is NaN.
+    weights are the inverse covariance of the angles. The model inputs (K0, EI) with
+    covariance ``model_cov`` move it by ``T_m = −D H⁻¹ J̃ᵀ L_w⁻¹ ∂y/∂(K0, EI)`` (``dym``,
+    (R, 2)); :func:`budget` sums the parts. χ² = ‖e‖² with rank(Σ_θ) − k degrees of
+    freedom; the covariance is scaled by ``max(1, χ²/dof)``. Without a noise model
+    (``has_cov`` False) the covariance is NaN.
     """
     R = e.shape[0]
     k = D.shape[1]
@@ -363,6 +372,7 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
     Hinv, singular, V = inverse_cov(mm(JD.T.copy(), JD))
     if not has_cov:
         out[:, :] = np.nan
+        parts[:, :, :] = np.nan
         return np.nan, np.nan
     Fd = np.zeros(2)
     if has_dD:
@@ -377,16 +387,20 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
             for j in range(N):
                 B[a, j] += t * dphi_ds[j]
     y0, sw, Lw, whiten = tg
+    Bm = dym.copy()  # ∂r/∂(K0, EI), then whitened
     if whiten:
         forward(Lw, B)
+        forward(Lw, Bm)
     T = mm(D, mm(Hinv, mm(JD.T.copy(), B)))
     for a in range(2):
         for j in range(N):
             T[a, j] = Fd[a] * dphi_ds[j] - T[a, j]
-    c = mm(mm(T, cov_s), T.T.copy())
+    c = budget(T, cov_s, noise_var, -mm(D, mm(Hinv, mm(JD.T.copy(), Bm))), model_cov, parts)
     chi2 = 0.0
     for a in range(R):
         chi2 += e[a, 0] * e[a, 0]
+    if model_cov[0, 0] > 0.0 or model_cov[1, 1] > 0.0:
+        chi2 = chi2_with_model(e[:, 0].copy(), JD, Bm, model_cov)
     rank = 0
     for a in range(Lw.shape[0] if whiten else 0):
         rank += Lw[a, a] > 0.0
@@ -397,8 +411,63 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
         ratio = chi2 / dof
         p = chi2_sf(chi2, dof)
         c *= max(ratio, 1.0)
+        parts *= max(ratio, 1.0)
     unresolved(c, D, V, singular, out)
     return ratio, p
+
+
+@njit(cache=True)
+def chi2_with_model(e, JD, Bm, model_cov):
+    """χ² of the whitened residual ``e`` (R,) when the model inputs are uncertain too.
+
+    In whitened units the residual's covariance is ``C = I + B_m Σ_m B_mᵀ`` (``Bm`` (R, 2)
+    = whitened ∂r/∂(K0, EI)); χ² = min_δu (e + J̃ δu)ᵀ C⁻¹ (e + J̃ δu), a k-parameter
+    least-squares problem after one Cholesky factorisation of C (docs/theory.md).
+    """
+    R = e.size
+    k = JD.shape[1]
+    C = mm(mm(Bm, model_cov), Bm.T.copy())
+    for a in range(R):
+        C[a, a] += 1.0
+    cholesky(C)
+    rhs = np.empty((R, 1 + k))
+    for a in range(R):
+        rhs[a, 0] = e[a]
+        for c in range(k):
+            rhs[a, 1 + c] = JD[a, c]
+    forward(C, rhs)
+    G = mm(rhs[:, 1:].T.copy(), rhs[:, 1:].copy())
+    g = mm(rhs[:, 1:].T.copy(), rhs[:, :1].copy())[:, 0]
+    step = np.empty(k)
+    lm_step(G, g, step)
+    chi2 = 0.0
+    for a in range(R):
+        r = rhs[a, 0]
+        for c in range(k):
+            r += rhs[a, 1 + c] * step[c]
+        chi2 += r * r
+    return chi2
+
+
+@njit(cache=True)
+def budget(T, cov_s, noise_var, Tm, model_cov, parts):
+    """The force covariance's parts into ``parts`` (3, 2, 2) and their sum (2, 2).
+
+    Sensor noise ``T diag(noise_var) Tᵀ``, calibration error ``T (Σ_S − diag(noise_var))
+    Tᵀ`` and model parameters ``T_m Σ_m T_mᵀ``: ``T`` (2, N) = ∂F/∂S, ``Σ_S`` = ``cov_s``
+    whose diagonal holds the signal noise ``noise_var`` (N,) [m²] besides the
+    calibration's error; ``Tm`` (2, 2) = ∂F/∂(K0, EI) and ``model_cov`` their covariance.
+    """
+    shifts = mm(mm(T, cov_s), T.T.copy())
+    noise = np.zeros((2, 2))
+    for i in range(noise_var.size):
+        for a in range(2):
+            for b in range(2):
+                noise[a, b] += T[a, i] * noise_var[i] * T[b, i]
+    parts[0] = noise
+    parts[1] = shifts - noise
+    parts[2] = mm(mm(Tm, model_cov), Tm.T.copy())
+    return shifts + parts[2]
 
 
 @njit(cache=True)
@@ -470,8 +539,8 @@ def interp(x, xp, fp):
 
 
 @njit(cache=True)
-def shift_covariance(kappa, pb, out):
-    """Σ_S (N, N) [m²] of one frame's shifts into ``out``; returns its trace.
+def shift_covariance(kappa, pb, out, noise_var):
+    """Σ_S (N, N) [m²] of one frame's shifts into ``out`` and its signal-noise part (N,) into ``noise_var``; returns its trace.
 
     The error model is in ``pb`` (:class:`~bendsense.estimation.problem.Problem`): the signal
     noise through the calibration slope f'(ΔA) (paper eq. 2), independent per channel,
@@ -504,7 +573,8 @@ def shift_covariance(kappa, pb, out):
                 d = (S[i] - S[j]) / ell
                 rho = math.exp(-0.5 * d * d) * pb.parity[i, j]
             out[i, j] = out[j, i] = err[i] * err[j] * rho
-        out[i, i] = err[i] * err[i] + sd[i] * sd[i]
+        noise_var[i] = sd[i] * sd[i]
+        out[i, i] = err[i] * err[i] + noise_var[i]
         trace += out[i, i]
     return trace
 
