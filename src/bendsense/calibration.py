@@ -907,6 +907,40 @@ class Calibration:
         """
         return self.shifts_m(signals) / self.strip_gap_m(sensor)
 
+    def error_model(self, noise_std_counts=None):
+        """The errors of this calibration's shifts as the compiled kernels take them.
+
+        Parameters
+        ----------
+        noise_std_counts : array_like (N,), optional
+            Signal noise per channel [counts]; default the flat recording's
+            (``noise_std``, zero where unknown).
+
+        Returns
+        -------
+        bendsense.shift_errors.ShiftErrorModel
+            The channels' polynomials, the noise, the misfit envelopes with their
+            correlation (:meth:`shift_error_m`) and the coefficients' and offsets'
+            covariance (:attr:`coefficient_covariance`; zeros when the file lacks what
+            it needs). :func:`bendsense.shift_errors.shift_covariance` evaluates it.
+        """
+        from bendsense.shift_errors import ShiftErrorModel
+
+        noise = self.noise_std if noise_std_counts is None else noise_std_counts
+        noise = np.array(np.broadcast_to(np.asarray(noise, dtype=float), (self.n_channels,)))
+        coef = np.array(self._channel_coefficients, dtype=float)
+        table = self._shift_error_table
+        odd, parity = self._parity_correlation
+        try:
+            q = np.array(self.coefficient_covariance, dtype=float)
+        except ConfigError:  # an old file without the fitted data or frame counts
+            q = np.zeros((1, 1))
+        return ShiftErrorModel(
+            calibrated=True, noise_std=noise, coef=coef, dcoef=coef[:, 1:] * np.arange(1, coef.shape[1]),
+            grid_m=np.array(table["grid_m"], dtype=float), sigma_odd_m=np.array(table["sigma_odd_m"], dtype=float),
+            sigma_even_m=np.array(table["sigma_even_m"], dtype=float), odd=np.array(odd), parity=np.array(parity),
+            length_m=float(table["length_m"]), coef_cov=q)
+
     def angle_covariance(self, signals, sensor=None) -> AngleCovariance:
         """Covariance of the measured angles :meth:`angles_rad`, by source (docs/theory.md).
 
@@ -936,29 +970,22 @@ class Calibration:
             Naming what the calibration lacks (``noise_std``, the fitted data
             ``fit_delta_a``/``fit_shifts_m``, frame counts) — never a silent zero.
         """
+        from bendsense.shift_errors import shift_covariances
+
         a = np.asarray(signals, dtype=float)
         self._check_channels(a)
         d = self.strip_gap_m(sensor)
-        sigma = self.noise_std_counts()
-        q = self.coefficient_covariance
-        delta = a - self.offset
-        slope = self._slopes_from_delta(delta)
-        n, k = self.n_channels, self.degree + 1
-        idx = np.arange(n)
-        noise = np.zeros((*delta.shape, n))
-        noise[..., idx, idx] = np.square(slope * sigma)
-        odd, _ = parity_masks(n)
-        # ∂S_i/∂(a, b, A0): (1, ΔA_i, ΔA_i², …) in the block of channel i's parity, −f_i' at A0_i
-        lin = np.zeros((*delta.shape, 2 * k + n))
-        lin[..., odd, 0] = 1.0
-        lin[..., ~odd, k] = 1.0
-        for j in range(1, k):
-            lin[..., odd, j] = lin[..., odd, j - 1] * delta[..., odd]
-            lin[..., ~odd, k + j] = lin[..., ~odd, k + j - 1] * delta[..., ~odd]
-        lin[..., idx, 2 * k + idx] = -slope
-        coef = lin @ q @ np.swapaxes(lin, -1, -2)
-        misfit = self.shift_error_m(self.shifts_from_delta(delta), covariance=True)
-        return AngleCovariance(noise=noise / d**2, calibration=(coef + misfit) / d**2)
+        sigma = self.noise_std_counts()  # these two raise, naming what an old file lacks
+        self.coefficient_covariance  # noqa: B018
+        model = self.error_model(sigma)
+        n = self.n_channels
+        shifts = np.ascontiguousarray(self.shifts_from_delta(a - self.offset).reshape(-1, n))
+        total, noise_var = np.empty((shifts.shape[0], n, n)), np.empty((shifts.shape[0], n))
+        shift_covariances(model, shifts, total, noise_var)
+        noise = np.zeros_like(total)
+        noise[:, np.arange(n), np.arange(n)] = noise_var
+        shape = (*a.shape[:-1], n, n)
+        return AngleCovariance(noise=noise.reshape(shape) / d**2, calibration=(total - noise).reshape(shape) / d**2)
 
     def _fit_operator(self, mask):
         """The fit's least-squares operator of one parity: ``c = op @ y[keep]`` (as :func:`polyfit_shift`)."""

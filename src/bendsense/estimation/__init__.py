@@ -55,8 +55,9 @@ from bendsense.estimation.problem import (
 )
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
-from bendsense.estimation.uncertainty import shift_error_model, tip_angle_shift_gradient
+from bendsense.estimation.uncertainty import tip_angle_shift_gradient
 from bendsense.plausibility import pressure_range_step
+from bendsense.shift_errors import noise_only
 from bendsense.status import Status
 from bendsense.validation import float_array
 
@@ -203,7 +204,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
         np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
         None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes())
-    pb, uncertainty = _problem(config, calibration, ref, options, noise_std)
+    pb, err, uncertainty = _problem(config, calibration, ref, options, noise_std)
     P = np.asarray(pressure_pa, dtype=float)
     if not np.isfinite(P).all():
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
@@ -220,9 +221,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
         if block >= B:  # one block (one frame, a short series): the same kernel without the threads
-            _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, fr, pb, _OPS, start, out)
+            _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, fr, pb, err, _OPS, start, out)
         else:
-            _jit.call(_kernels.estimate_frames, block, use_guess, fr, pb, _OPS, start, out)
+            _jit.call(_kernels.estimate_frames, block, use_guess, fr, pb, err, _OPS, start, out)
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force; the
         # shape, its sensitivities and the uncertainty at its optimum come from the compiled core
@@ -231,7 +232,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         u, run_status, iters = paper_fit(L, pb.s, pb.w, ref.Lc, pb.wload, fr.p0, fr.ei, fr.k0, D,
                                          np.broadcast_to(pb.ffix, (B, 2)), pb.lower,
                                          np.maximum(np.zeros((B, k)), pb.lower))
-        _jit.call(_kernels.evaluate_frames, fr, pb, _OPS, _c(u), _c(run_status, np.int64), out)
+        _jit.call(_kernels.evaluate_frames, fr, pb, err, _OPS, _c(u), _c(run_status, np.int64), out)
     if uncertainty == "none":
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
                       "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=2)
@@ -344,20 +345,24 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
     return start, True, warm_start
 
 
-_PROBLEMS: dict = {}  # (config, calibration, grid, options) -> (config, calibration, grid, Problem, uncertainty)
+_PROBLEMS: dict = {}  # (config, calibration, grid, options) -> (config, calibration, grid, constants)
 
 
 def _problem(config, calibration, ref, options, noise_opt):
-    """The constants of an estimate (:class:`~bendsense.estimation.problem.Problem`), cached per inputs."""
+    """The constants of an estimate, cached per inputs.
+
+    Returns (:class:`~bendsense.estimation.problem.Problem`, the shift error model
+    (:class:`~bendsense.shift_errors.ShiftErrorModel`), the ``uncertainty`` label).
+    """
     key = (id(config), id(calibration), id(ref.grid) if ref.kappa is not None else ref.s.tobytes(), options)
     hit = _PROBLEMS.get(key)
     if hit is not None and hit[0] is config and hit[1] is calibration and (ref.kappa is None or hit[2] is ref.grid):
-        return hit[3], hit[4]
-    pb, uncertainty = _build_problem(config, calibration, ref, options, noise_opt)
+        return hit[3]
+    constants = _build_problem(config, calibration, ref, options, noise_opt)
     if len(_PROBLEMS) >= 32:  # bounded: callers with ever-new configs must not leak
         _PROBLEMS.clear()
-    _PROBLEMS[key] = (config, calibration, ref.grid, pb, uncertainty)
-    return pb, uncertainty
+    _PROBLEMS[key] = (config, calibration, ref.grid, constants)
+    return constants
 
 
 def _build_problem(config, calibration, ref, options, noise_opt):
@@ -398,13 +403,15 @@ def _build_problem(config, calibration, ref, options, noise_opt):
     if pcc:
         g = ref.grid
         lengths = ref.lengths
-        model = shift_error_model(sigma_a, calibration, lengths.size)
-        noise = bool(np.any(sigma_a > 0)) or (calibration is not None and bool(np.any(model["error_odd"] > 0) or np.any(
-            model["error_even"] > 0)))
+        if calibration is None:
+            err = noise_only(sigma_a, lengths.size)
+        else:  # the calibration's own statement of its errors (public: Calibration.error_model)
+            err = calibration.error_model(sigma_a)
+        noise = err.positive
         geometry = (g["seg_fk"], g["sigma_fk"], g["beyond"], g["tip_weights"], lengths, gap, g["seg"], g["sigma"],
                     tip_angle_shift_gradient(lengths, L, gap))
     else:
-        model = shift_error_model(np.zeros(1), None, 1)
+        err = noise_only(0.0, 1)
         geometry = (np.zeros(1, np.int64), np.zeros(1), np.zeros(_N_NODES), np.zeros(1), np.ones(1), gap,
                     np.zeros(1, np.int64), np.zeros(1), np.zeros(1))
     ops = _beam._operators(_N_NODES)
@@ -423,9 +430,9 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         shape_angle=source == "shape" and kind in TIP_ANGLE_KINDS,
         seg_fk=_c(seg_fk, np.int64), sigma_fk=_c(sigma_fk), beyond=_c(beyond), tip_weights=_c(tip_weights),
         lengths=_c(lengths), gap=gap, seg=_c(seg, np.int64), sigma=_c(sigma), dphi_ds=_c(dphi_ds), noise=noise,
-        **{name: _c(a, a.dtype) if isinstance(a, np.ndarray) else a for name, a in model.items()},
         s=_c(ref.s), w=_c(ref.w), L=L, wload=_c(config.weight_per_length_n_per_m), ffix=np.zeros(2),
         lower=np.full(k, 0.0 if push_only else -np.inf), xtol=xtol_n, max_iter=max_iter,
         PQ=_c(PQ), q=_c(ops.Q[-1]), objective=ANGLES if angles else POSITIONS, PQ_fit=_c(PQ_fit),
         coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor)
-    return pb, ("propagated" if noise else "none")
+    err = err._replace(**{name: _c(a, a.dtype) for name, a in err._asdict().items() if isinstance(a, np.ndarray)})
+    return pb, err, ("propagated" if noise else "none")

@@ -22,6 +22,7 @@ from numba import njit, prange
 from bendsense import beam_kernels as bk
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
+from bendsense.shift_errors import shift_covariance
 from bendsense.status import Status
 
 _RUNNING = int(Status.RUNNING)
@@ -523,7 +524,7 @@ def buffers(pb, n):
     """Per-thread buffers of :func:`setup`.
 
     Reference points and angles, κ at the nodes, beam start, D, ∂D, Σ_S, κ, the
-    target's y⁰ and L_w (:func:`whitened`), and Σ_S's signal-noise variances.
+    target's y⁰ and L_w (:func:`whitened`), Σ_S's signal-noise variances and the shifts.
     """
     m = pb.seg_fk.size
     N = pb.lengths.size
@@ -531,11 +532,11 @@ def buffers(pb, n):
     R = pb.sw.size
     Rw = R if pb.objective == ANGLES else 1
     return (np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
-            np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N))
+            np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N), np.empty(N))
 
 
 @njit(cache=True)
-def setup(i, fr, pb, buf):
+def setup(i, fr, pb, err, buf):
     """Frame ``i``'s reference shape, fit target, constraint basis and shift covariance (the kernels' inputs).
 
     A PCC frame's reference comes from its curvatures
@@ -547,7 +548,7 @@ def setup(i, fr, pb, buf):
     at the last node, κ at the nodes, beam start, target, D, ∂D/∂φ_L, whether Σ_S is
     known, Σ_S, its noise variances, κ) of the frame; the arrays live in ``buf`` (:func:`buffers`).
     """
-    pos, ang, ks, st, D, dD, cov_s, no_kappa, y0, Lw, noise_var = buf
+    pos, ang, ks, st, D, dD, cov_s, no_kappa, y0, Lw, noise_var, shifts = buf
     M = ks.size
     if pb.pcc:
         tip = prob.pcc_reference(fr.kappa[i], pb.lengths, pb.seg_fk, pb.sigma_fk, pb.beyond, pb.tip_weights, pos, ang,
@@ -557,7 +558,13 @@ def setup(i, fr, pb, buf):
         tip = fr.tip_shape[i]
         p0, phi_end, kappa_s, state0, kappa = fr.p0[i], fr.phi_end[i], fr.kappa_s[i], fr.state[i], no_kappa
     prob.basis(pb.kind, tip if pb.shape_angle else fr.theta[i], pb.direction, pb.follower_angle, D, dD)
-    frame_cov = pb.pcc and pb.noise and unc.shift_covariance(kappa, pb, cov_s, noise_var) > 0
+    frame_cov = False
+    if pb.pcc and pb.noise:
+        acc = 0.0
+        for j in range(pb.lengths.size):
+            acc += kappa[j] * pb.lengths[j]
+            shifts[j] = pb.gap * acc  # S_j = d φ(L_j) (paper eq. 3–4)
+        frame_cov = shift_covariance(err, shifts, cov_s, noise_var) > 0
     whiten = False
     if pb.objective == ANGLES:
         acc = 0.0
@@ -581,7 +588,7 @@ def setup(i, fr, pb, buf):
 
 
 @njit(cache=True)
-def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
+def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
     k = pb.lower.size
@@ -595,7 +602,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
     g = np.empty(k)
     prev_ok = False
     for i in range(lo, hi):
-        p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, buf)
+        p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
         ei, k0 = fr.ei[i], fr.k0[i]
         moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, g)
         force_of(D, pb.ffix, g, guess_n[i])
@@ -627,7 +634,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, ops, start, out):
 
 
 @njit(cache=True, parallel=True)
-def estimate_frames(block, use_guess, fr, pb, ops, start, out):
+def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
     """The whole estimate of every frame (B,), in parallel over blocks of ``block`` consecutive frames.
 
     ``use_guess``: start at the moment-balance guess plus the force offset ``start`` (B, 2)
@@ -643,11 +650,11 @@ def estimate_frames(block, use_guess, fr, pb, ops, start, out):
     nblocks = (B + block - 1) // block
     for blk in prange(nblocks):
         lo = np.int64(blk) * block  # prange's index is unsigned: one compiled estimate_block for both callers
-        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, pb, ops, start, out)
+        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, pb, err, ops, start, out)
 
 
 @njit(cache=True)
-def evaluate_frames(fr, pb, ops, u, run_status, out):
+def evaluate_frames(fr, pb, err, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
     buf = buffers(pb, ops.sigma.size)
@@ -655,7 +662,7 @@ def evaluate_frames(fr, pb, ops, u, run_status, out):
     F = np.empty(2)
     blocked = np.zeros(pb.lower.size)
     for i in range(fr.ei.size):
-        p0, _, _, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, buf)
+        p0, _, _, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
         force_of(D, pb.ffix, u[i], F)
         ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, pb, ws)
         st = run_status[i] if ok else _BEAM_FAILED

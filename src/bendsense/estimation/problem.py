@@ -97,18 +97,7 @@ class Problem(NamedTuple):
     seg: np.ndarray  # (M,) segment of each comparison node
     sigma: np.ndarray  # (M,) its arc length within it [m]
     dphi_ds: np.ndarray  # (N,) ∂φ(L)/∂S
-    noise: bool  # a noise model is known (shift covariance)
-    # the shift error model (:func:`~bendsense.estimation.uncertainty.shift_covariance`)
-    noise_std: np.ndarray  # (N,) signal noise per channel [signal units; m without a calibration]
-    calibrated: bool  # a calibration maps the noise (else it is in metres of shift)
-    coef: np.ndarray  # (N, n+1) each channel's calibration polynomial, ascending powers
-    dcoef: np.ndarray  # (N, n) its derivative
-    error_grid: np.ndarray  # (G,) |S| grid of the calibration error envelopes [m]
-    error_odd: np.ndarray  # (G,) σ of the odd channels' calibration error [m]
-    error_even: np.ndarray  # (G,) σ of the even channels' [m]
-    odd: np.ndarray  # (N,) bool, the odd channels
-    parity: np.ndarray  # (N, N) correlation factor between the channels' parities
-    error_length: float  # correlation length ℓ of the calibration error [m]
+    noise: bool  # a noise model is known (the shift covariance, bendsense.shift_errors)
     s: np.ndarray  # (M,) comparison arc lengths [m]
     w: np.ndarray  # (M,) their quadrature weights [m]
     L: float  # actuator length [m]

@@ -5,7 +5,7 @@ optimum moves by ``δu = (JᵀJ)⁻¹ Jᵀ W^½ δp⁰`` when the reconstructed 
 ``δp⁰ = G δS``, ``G = ∂p⁰/∂S`` through the PCC kinematics (paper eq. 3–7). So
 ``Cov(F) = T Σ_S Tᵀ`` with ``T = ∂F/∂S`` (including the change of ``D`` with the tip
 angle for ``tip_angle_source="shape"``). ``Σ_S`` holds the signal noise through the
-calibration slope and the calibration's own model error (:func:`shift_covariance`).
+calibration slope and the calibration's own error (:func:`bendsense.shift_errors.shift_covariance`).
 
 The misfit: the residual is pulled back to the shift perturbation that explains it
 best, ``δŜ = −(GᵀWG)⁻¹ GᵀW r``, and ``χ² = δŜᵀ C⁺ δŜ`` with ``C`` the covariance that
@@ -491,112 +491,6 @@ def chi2_sf(x, dof):
             total += term
             term *= h / (j + 1.5)
     return min(total, 1.0)
-
-
-@njit(cache=True)
-def _slope(coef, dcoef, i, shift):
-    """|f'(ΔA)| of channel i at the signal ΔA = f⁻¹(S) (paper eq. 2 inverted by Newton's method).
-
-    ``coef`` (N, n+1) and ``dcoef`` (N, n): each channel's polynomial and its derivative
-    in ascending powers.
-    """
-    x = (shift - coef[i, 0]) / dcoef[i, 0] if dcoef[i, 0] != 0 else 0.0
-    fp = 0.0
-    for _ in range(50):
-        f = 0.0
-        for j in range(coef.shape[1] - 1, -1, -1):
-            f = f * x + coef[i, j]
-        fp = 0.0
-        for j in range(dcoef.shape[1] - 1, -1, -1):
-            fp = fp * x + dcoef[i, j]
-        dx = (f - shift) / (fp if fp != 0 else 1.0)
-        x -= dx
-        if abs(dx) <= 1e-12 * max(1.0, abs(x)):
-            break
-    fp = 0.0
-    for j in range(dcoef.shape[1] - 1, -1, -1):
-        fp = fp * x + dcoef[i, j]
-    return abs(fp)
-
-
-@njit(cache=True)
-def interp(x, xp, fp):
-    """np.interp for one value (ascending ``xp``; constant beyond its ends) without temporaries."""
-    n = xp.size
-    if x <= xp[0]:
-        return fp[0]
-    if x >= xp[n - 1]:
-        return fp[n - 1]
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    t = (x - xp[lo]) / (xp[hi] - xp[lo])
-    return fp[lo] + t * (fp[hi] - fp[lo])
-
-
-@njit(cache=True)
-def shift_covariance(kappa, pb, out, noise_var):
-    """Σ_S (N, N) [m²] of one frame's shifts into ``out`` and its signal-noise part (N,) into ``noise_var``; returns its trace.
-
-    The error model is in ``pb`` (:class:`~bendsense.estimation.problem.Problem`): the signal
-    noise through the calibration slope f'(ΔA) (paper eq. 2), independent per channel,
-    plus the calibration's own model error, correlated across channels
-    (:meth:`~bendsense.calibration.Calibration.shift_error_m`). Without a calibration
-    the noise is in metres of shift.
-    """
-    noise, coef, dcoef, grid, sig_odd, sig_even, odd = pb.noise_std, pb.coef, pb.dcoef, pb.error_grid, pb.error_odd, \
-        pb.error_even, pb.odd
-    lengths, gap, ell = pb.lengths, pb.gap, pb.error_length
-    n = lengths.size
-    S = np.empty(n)
-    sd = np.empty(n)
-    err = np.empty(n)
-    acc = 0.0
-    for i in range(n):
-        acc += kappa[i] * lengths[i]
-        S[i] = gap * acc  # S_i = d φ(L_i) (paper eq. 3–4)
-        if not pb.calibrated:
-            sd[i] = noise[i]
-            err[i] = 0.0
-        else:
-            sd[i] = (_slope(coef, dcoef, i, S[i]) if dcoef.shape[1] > 0 else 0.0) * noise[i]
-            err[i] = interp(abs(S[i]), grid, sig_odd if odd[i] else sig_even)
-    trace = 0.0
-    for i in range(n):
-        for j in range(i):
-            rho = 0.0
-            if ell > 0:
-                d = (S[i] - S[j]) / ell
-                rho = math.exp(-0.5 * d * d) * pb.parity[i, j]
-            out[i, j] = out[j, i] = err[i] * err[j] * rho
-        noise_var[i] = sd[i] * sd[i]
-        out[i, i] = err[i] * err[i] + noise_var[i]
-        trace += out[i, i]
-    return trace
-
-
-def shift_error_model(noise_std_a, calibration, n_channels) -> dict:
-    """The error model fields of :class:`~bendsense.estimation.problem.Problem` (``noise_std`` to ``error_length``)."""
-    from bendsense.calibration import parity_masks
-
-    noise = np.array(np.broadcast_to(noise_std_a, (n_channels,)), dtype=float)
-    if calibration is None:
-        z = np.zeros(2)
-        odd, _ = parity_masks(n_channels)
-        return {"noise_std": noise, "calibrated": False, "coef": np.zeros((n_channels, 2)),
-                "dcoef": np.zeros((n_channels, 1)), "error_grid": z, "error_odd": z, "error_even": z,
-                "odd": np.array(odd), "parity": np.eye(n_channels), "error_length": 0.0}
-    coef = np.array(calibration._channel_coefficients, dtype=float)
-    table = calibration._shift_error_table
-    odd, parity = calibration._parity_correlation
-    return {"noise_std": noise, "calibrated": True, "coef": coef, "dcoef": coef[:, 1:] * np.arange(1, coef.shape[1]),
-            "error_grid": np.array(table["grid_m"], dtype=float), "error_odd": np.array(table["sigma_odd_m"]),
-            "error_even": np.array(table["sigma_even_m"]), "odd": np.array(odd), "parity": np.array(parity),
-            "error_length": float(table["length_m"])}
 
 
 def tip_angle_weights(lengths, length_m):
