@@ -14,7 +14,8 @@ from bendsense.output import write_dir
 from bendsense.pcc import arc_positions
 from bendsense.sim.reproduce import PAPER, shape_accuracy
 
-FIGURES = ("fig8_validation_shapes.png", "fig9_static_model.png", "fig10_tip_load_error.png", "identification.png")
+FIGURES = ("fig8_validation_shapes.png", "fig9_static_model.png", "fig10_tip_load_error.png", "identification.png",
+           "coverage_calibration.png")
 RADII_MM = (45.75, 55.75, 65.75, 75.75, 85.75, 95.75, 150.75)
 NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 
@@ -110,23 +111,45 @@ def test_static_model_and_tip_loads(run):
     np.testing.assert_allclose(values[-1], values[:-1].max(axis=0))
     rows = table_rows(section(run[2], "## Fig. 10"))
     assert [r[0] for r in rows] == ["0–0.3 N", "0–0.2 N"]
-    for row in rows:
-        mean, std = numbers(row[1])
-        assert 0 < mean < 50 and 0 <= std < 50
-    assert numbers(rows[0][2]) == list(PAPER["fig10_all_pct"])
+    for row in rows:  # both objectives, then the paper, then the two coverages
+        for cell in row[1:3]:
+            mean, std = numbers(cell)
+            assert 0 < mean < 50 and 0 <= std < 50
+        for cell in row[4:6]:
+            assert cell.endswith(" %") and 0 <= numbers(cell)[0] <= 100
+    assert numbers(rows[0][3]) == list(PAPER["fig10_all_pct"])
+
+
+def test_coverage_calibration(run):
+    text = section(run[2], "## Calibration of the uncertainty")
+    rows = table_rows(text)
+    assert [r[0] for r in rows] == ["±1σ", "±2σ", "±3σ"]
+    assert [numbers(r[1])[0] for r in rows] == [68.3, 95.4, 99.7]
+    for r in rows:
+        assert all(0 <= numbers(c)[0] <= 100 for c in r[2:4])
+    # coverage grows with the level
+    for col in (2, 3):
+        got = [numbers(r[col])[0] for r in rows]
+        assert got == sorted(got)
+    assert "coverage_calibration.png" in text
 
 
 def test_table_ii(run):
     here, paper = section(run[2], "## Table II").split("Paper (12 configurations):")
-    rows = table_rows(here)
-    assert [r[0] for r in rows] == ["0–0.1", "0.1–0.2", "0.2–0.3", "0.3–0.4", "mean of full range"]
-    counts = [int(r[1]) for r in rows]
-    assert sum(counts[:4]) == counts[4] == 6 * 2  # quick: 6 configurations × 2 frames
-    for row in rows:
-        assert len(row) == 2 + 9
-        for cell in row[2:]:
-            assert cell == "–" or 0 <= float(cell) < 1000
-    assert all(math.isfinite(float(c)) for c in rows[-1][2:])
+    angles, positions = here.split("Here, PCC positions")
+    assert "Here, coil angles (default):" in angles
+    for part in (angles, positions):
+        rows = table_rows(part)
+        assert [r[0] for r in rows] == ["0–0.1", "0.1–0.2", "0.2–0.3", "0.3–0.4", "mean of full range"]
+        counts = [int(r[1]) for r in rows]
+        assert sum(counts[:4]) == counts[4] == 6 * 2  # quick: 6 configurations × 2 frames
+        for row in rows:
+            assert len(row) == 2 + 9 + 3
+            for cell in row[2:11]:
+                assert cell == "–" or 0 <= float(cell) < 1000
+            for cell in row[11:]:  # a coverage column per mode
+                assert cell == "–" or (cell.endswith(" %") and 0 <= numbers(cell)[0] <= 100)
+        assert all(math.isfinite(float(c)) for c in rows[-1][2:11])
     prow = table_rows(paper)[-1]
     assert [float(c) for c in prow[1:]] == [14.90, 12.91, 7.21, 5.15, 6.77, 4.86]
 

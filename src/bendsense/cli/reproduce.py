@@ -49,9 +49,11 @@ def reproduce(out_dir, seed, quick, overwrite):
         )
         t1 = result.table_i[3]
         tip = result.tip_load
+        errors = "; ".join(f"{objective} {t['all_pct'][0]:.1f} % +- {t['all_pct'][1]:.1f} % (2-sigma covers "
+                           f"{100 * t['coverage']:.0f} %)" for objective, t in tip.items())
         click.echo(
             f"n = 3: dkappa {t1['dkappa_all_pct'][0]:.2f} %, (dp)max {t1['dp_max_all_pct'][0]:.2f} %; "
-            f"tip-load error {tip['all_pct'][0]:.1f} % +- {tip['all_pct'][1]:.1f} % of 0.3 N"
+            f"tip-load error of 0.3 N: {errors}"
         )
         click.echo(f"wrote {result.report_path} and {len(result.figures)} figures in {result.wall_time_s:.1f} s")
         return state
