@@ -84,14 +84,16 @@ def test_an_exact_calibration_has_no_model_error():
         cal.shift_error_m(s[:5])
 
 
-@pytest.mark.parametrize(("phase_even", "expected_c"), [(0.0, 1.0), (math.pi, 0.0)])
+@pytest.mark.parametrize(("phase_even", "expected_c"), [(0.0, 1.0), (math.pi, 0.0), (math.pi / 2, 0.0)])
 def test_error_model_recovers_a_known_residual_function(phase_even, expected_c):
-    """r(S) = A sin(2πS/Λ + phase): RMS A/√2, correlation cos(2πh/Λ) ≈ exp(−h²/2ℓ²), ℓ = Λ/2π.
+    """r(S) = A sin(2πS/Λ + phase): RMS A/√2, correlation cos(2πh/Λ) ≈ exp(−h²/2ℓ²) at short lags.
 
-    The parities' residuals in phase are fully correlated; in antiphase the
-    correlation (−1) is clipped to 0. (Intermediate phases are overestimated: the even
-    channels of a strip always sit at larger S than their odd neighbours, so the
-    short-lag cross-correlogram is one-sided.)
+    The parities' residuals in phase are fully correlated; in antiphase or in
+    quadrature the zero-lag cross-correlation is ≤ 0, which the model takes as 0. The
+    maximum-likelihood ℓ of a squared-exponential process on one smooth sinusoid lies
+    between the short-lag Λ/2π and about twice that (it sees the whole wave, not only the
+    short lags); what matters, the force's coverage, is tested against a hidden nonlinear
+    sensor in test_uncertainty_budget.py.
     """
     amp, wave = 8e-6, 1.2e-3
     cal = _calibration_with_residual(lambda s, odd: amp * np.sin(2 * np.pi * s / wave + np.where(odd, 0.0,
@@ -100,7 +102,7 @@ def test_error_model_recovers_a_known_residual_function(phase_even, expected_c):
     sigma = cal.shift_error_m(s)
     np.testing.assert_allclose(sigma, amp / math.sqrt(2.0), rtol=0.35)
     model = cal._shift_error_table
-    assert 0.6 < model["length_m"] / (wave / (2 * np.pi)) < 1.6
+    assert 0.6 < model["length_m"] / (wave / (2 * np.pi)) < 2.5
     assert abs(model["parity_correlation"] - expected_c) < 0.25
     cov = cal.shift_error_m(np.tile(s, (3, 1)), covariance=True)
     assert cov.shape == (3, 16, 16)

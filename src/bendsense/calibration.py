@@ -160,6 +160,36 @@ def polyfit_shift(delta_a, shifts_m, degree: int, weights=None):
     return coef / scale ** np.arange(degree + 1)
 
 
+def _misfit_correlation(x, z, odd, top) -> dict:
+    """Maximum-likelihood correlation of the calibration misfit (:meth:`Calibration.shift_error_m`).
+
+    ``z`` (K,): the fit residuals at the shifts ``x`` scaled by their envelope σ, ``odd``
+    their parity. The model: a Gaussian process with ``Cov(z_a, z_b) = (1 − w) c_ab
+    exp(−(x_a − x_b)² / 2ℓ²) + w δ_ab`` (``c_ab`` 1 within a parity, ``c`` between),
+    its parameters ℓ, ``c`` and the white fraction ``w`` chosen on a grid by the
+    likelihood of ``z``. The white part (the noise of the strip means, the offsets)
+    keeps ℓ from collapsing onto the closest pair of points.
+    """
+    same = odd[:, None] == odd[None, :]
+    lag2 = np.square(x[:, None] - x[None, :])
+    eye = np.eye(x.size)
+    best = (-np.inf, 0.0, 0.0, 1.0)
+    for ell in np.geomspace(top / 300.0, top, 30):
+        g = np.exp(-0.5 * lag2 / ell**2)
+        for c in (0.0, 0.5, 0.9, 0.97):
+            gc = g * np.where(same, 1.0, c)
+            for w in (1e-3, 1e-2, 3e-2, 0.1, 0.3):
+                try:
+                    lc = np.linalg.cholesky((1.0 - w) * gc + w * eye)
+                except np.linalg.LinAlgError:
+                    continue
+                y = np.linalg.solve(lc, z)
+                ll = -0.5 * float(y @ y) - float(np.log(np.diag(lc)).sum())
+                if ll > best[0]:
+                    best = (ll, float(ell), float(c), float(w))
+    return {"length_m": best[1], "parity_correlation": best[2], "white_fraction": best[3]}
+
+
 def _shift_weights(shifts):
     """Trapezoid weights along the sorted shifts (the ``"shift"`` weighting), mean 1."""
     s = np.asarray(shifts, dtype=float).ravel()
@@ -594,12 +624,11 @@ class Calibration:
         deviation ``σ_p(|S|)`` the kernel-smoothed RMS of the fit residuals of the
         channels of parity p (Gaussian kernel, bandwidth a tenth of the largest fitted
         shift; constant beyond the largest fitted shift), and correlation
-        ``ρ_ij = c_ij exp(−(S_i − S_j)² / 2ℓ²)`` between channels i and j, with
+        ``ρ_ij = (1 − w) c_ij exp(−(S_i − S_j)² / 2ℓ²)`` between channels i ≠ j, with
         ``c_ij = 1`` within a parity and ``c`` between the odd and even polynomials.
-        ``ℓ`` and ``c`` are least-squares fits of that form to the empirical
-        correlogram of the residuals scaled by ``σ`` at lags below a third of the
-        fitted range (pairs of calibration points binned by ``|S_a − S_b|``). So
-        channels whose shifts are close err together, which independent errors miss.
+        ``ℓ``, ``c`` and the white fraction ``w`` are maximum-likelihood fits of that
+        Gaussian process to the residuals scaled by ``σ`` (:func:`_misfit_correlation`).
+        So channels whose shifts are close err together, which independent errors miss.
         Without the fitted data (an old calibration file) ``σ`` is the RMS of the
         per-strip residuals for both parities and the channels are independent.
 
@@ -640,15 +669,20 @@ class Calibration:
 
     @cached_property
     def _parity_correlation(self):
-        # the odd channels, and c_ij of shift_error_m: 1 within a parity, c between them
+        # the odd channels, and c_ij of shift_error_m: 1 on the diagonal, 1 − w within a
+        # parity, (1 − w) c between them (w: the misfit's white fraction)
         odd, _ = parity_masks(self.n_channels)
         same = odd[:, None] == odd[None, :]
-        return odd, np.where(same, 1.0, self._shift_error_table["parity_correlation"])
+        table = self._shift_error_table
+        smooth = 1.0 - table.get("white_fraction", 0.0)
+        c = np.where(same, smooth, smooth * table["parity_correlation"])
+        np.fill_diagonal(c, 1.0)
+        return odd, c
 
     @cached_property
     def _shift_error_table(self) -> dict:
         # grid_m, sigma_odd_m, sigma_even_m: the envelopes σ_p(|S|) [m]; length_m: ℓ [m]
-        # (0: independent channels); parity_correlation: c (see shift_error_m)
+        # (0: independent channels); parity_correlation: c; white_fraction: w (see shift_error_m)
         if self.fit_delta_a is None or self.fit_shifts_m is None:
             rms = [r.rms_shift_m for r in self.strip_residuals]
             level = float(np.sqrt(np.mean(np.square(rms)))) if rms else 0.0
@@ -673,31 +707,8 @@ class Calibration:
                "parity_correlation": 0.0}
         level = np.where(odd, np.interp(np.abs(shifts), grid, sig_odd), np.interp(np.abs(shifts), grid, sig_even))
         if top > 0 and np.all(level > 0):
-            x, z = shifts.ravel(), (resid / level).ravel()
-            par = np.broadcast_to(odd, shifts.shape).ravel()
-            lag = np.abs(x[:, None] - x[None, :])
-            prod = z[:, None] * z[None, :]
-            same = par[:, None] == par[None, :]
-            # the correlogram at short lags (the residual oscillates, which a positive
-            # correlation function cannot follow at long lags)
-            width = top / 30.0
-            near = (lag < top / 3.0) & ~np.eye(x.size, dtype=bool)
-            curves = []
-            for pick in (same & near, ~same & near):
-                b = (lag[pick] / width).astype(int)
-                count = np.bincount(b, minlength=10)[:10]
-                mean = np.bincount(b, prod[pick], minlength=10)[:10] / np.maximum(count, 1)
-                curves.append((count, mean))
-            centre = (np.arange(10) + 0.5) * width
-            ells = np.geomspace(top / 300.0, top, 200)
-            g = np.exp(-0.5 * (centre[None, :] / ells[:, None]) ** 2)  # (ells, bins)
-            count, mean = curves[0]
-            ell = float(ells[np.argmin((count * (mean - g) ** 2).sum(axis=1))])
-            gl = np.exp(-0.5 * (centre / ell) ** 2)
-            cnt_x, mean_x = curves[1]
-            denom = float((cnt_x * gl * gl).sum())
-            c = float(np.clip((cnt_x * gl * mean_x).sum() / denom, 0.0, 1.0)) if denom > 0 else 0.0
-            out.update(length_m=ell, parity_correlation=c)
+            out.update(_misfit_correlation(shifts.ravel(), (resid / level).ravel(),
+                                           np.broadcast_to(odd, shifts.shape).ravel(), top))
         return out
 
     def extrapolated_delta(self, delta_a):
