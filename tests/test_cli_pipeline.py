@@ -130,14 +130,24 @@ def test_input_columns_named_like_results_are_kept(tmp_path):
     assert results.extra_names == ("input_fx_n", "trial")
 
 
-def test_cli_choices_match_the_config():
-    # the CLI spells them out to keep `bendsense --help` free of numpy; they must not drift
-    from bendsense import config, estimation
+def test_the_choices_are_declared_once_and_help_stays_free_of_numpy():
+    import subprocess
+    import sys
+
+    from bendsense import choices, config, estimation
     from bendsense.cli import _common
 
-    assert _common.CONSTRAINTS == config.CONSTRAINTS
-    assert _common.METHODS == config.METHODS
-    assert _common.OBJECTIVES == config.OBJECTIVES == estimation.OBJECTIVES
+    for name in ("CONSTRAINTS", "METHODS", "OBJECTIVES", "ANGLE_SOURCES"):
+        assert getattr(_common, name) is getattr(choices, name) is getattr(config, name)
+    assert estimation.CONSTRAINTS is estimation.problem.CONSTRAINTS is choices.CONSTRAINTS
+    assert estimation.METHODS is choices.METHODS and estimation.OBJECTIVES is choices.OBJECTIVES
+    # the CLI's options come from the same tuples, and `bendsense --help` does not load numpy
+    code = ("import sys; from bendsense.cli import main; from click.testing import CliRunner; "
+            "r = CliRunner().invoke(main, ['estimate', '--help']); "
+            "assert r.exit_code == 0 and 'angles|positions' in r.output, r.output; "
+            "print('numpy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
 
 
 def test_shapes_only_results_work_downstream(tmp_path):

@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 
 from bendsense import validation as check
+from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, METHODS, OBJECTIVES  # noqa: F401 (re-exported)
 from bendsense.errors import ConfigError
 
 __all__ = [
@@ -44,11 +45,6 @@ SMALL_M = 0.1
 """Largest plausible cross-section dimension (strip gap, sleeve, wall, chamber radius) [m]."""
 PRESSURE_RANGE_PA = (0.0, 200e3)
 """Default working range of the actuator's gauge pressure (the paper's prototype) [Pa]."""
-CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
-METHODS = ("fast", "paper")
-#: What the fit compares: the PCC positions (paper eq. 18) or the coil angles S/d the sensor measures.
-OBJECTIVES = ("angles", "positions")
-ANGLE_SOURCES = ("model", "shape")
 # the identified model parameters θ (paper eq. 8–12, 15) and the config section of each
 FREE_BENDING_PARAMETERS = ("shear_modulus_pa", "sensor_stiffness_nm_per_rad", "prebend_angle_rad")
 STIFFNESS_PARAMETERS = ("ei0_nm2", "ei1_nm2_per_pa")

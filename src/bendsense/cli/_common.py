@@ -6,7 +6,10 @@ from pathlib import Path
 
 import click
 
+from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, METHODS, OBJECTIVES  # noqa: F401 (the CLI's choices)
+
 __all__ = [
+    "ANGLE_SOURCES",
     "CONSTRAINTS",
     "Finite",
     "SEED",
@@ -24,10 +27,6 @@ __all__ = [
     "step_io",
 ]
 
-# kept in sync with bendsense.config (imported lazily for a fast --help; a test compares them)
-CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
-METHODS = ("fast", "paper")
-OBJECTIVES = ("angles", "positions")
 
 
 class Finite(click.ParamType):

@@ -16,6 +16,7 @@ import click
 
 from bendsense import output
 from bendsense.cli._common import (
+    ANGLE_SOURCES,
     CONSTRAINTS,
     METHODS,
     Finite,
@@ -170,7 +171,7 @@ def reconstruct(points):
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
 @objective_option
 @click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
-@click.option("--tip-angle-source", type=click.Choice(["model", "shape"]),
+@click.option("--tip-angle-source", type=click.Choice(ANGLE_SOURCES),
               help="Tip angle of the normal/follower constraints (default: from the config).")
 def estimate(constraint, method, objective, push_only, tip_angle_source):
     """Estimate the tip force of every frame from its shape and pressure."""

@@ -35,7 +35,7 @@ from bendsense import _jit
 from bendsense import beam as _beam
 from bendsense.actuator import model_jacobian
 from bendsense.calibration import Calibration
-from bendsense.config import OBJECTIVES
+from bendsense.choices import ANGLE_SOURCES, METHODS, OBJECTIVES
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import kernels as _kernels
 from bendsense.estimation.paper import paper_fit
@@ -75,7 +75,6 @@ __all__ = [
     "XTOL_N",
 ]
 
-METHODS = ("fast", "paper")
 #: Gauss–Newton stops when its step is below this [N].
 XTOL_N = 1e-10
 MAX_ITER = 100
@@ -381,8 +380,8 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         raise ArgumentError(f"push_only: expected True or False, got {push_only!r}")
     push_only = bool(push_only)
     source = est.tip_angle_source if source is None else source
-    if source not in ("model", "shape"):
-        raise ArgumentError(f"tip_angle_source: must be one of model, shape, got {source!r}")
+    if source not in ANGLE_SOURCES:
+        raise ArgumentError(f"tip_angle_source: must be one of {', '.join(ANGLE_SOURCES)}, got {source!r}")
     direction = np.asarray(est.direction if direction is None else direction, dtype=float)
     if direction.shape != (2,) or not np.all(np.isfinite(direction)) or abs(np.hypot(*direction) - 1.0) > 1e-6:
         raise ArgumentError(f"direction: expected a unit vector (2,), got {direction.tolist()}")

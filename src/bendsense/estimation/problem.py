@@ -25,6 +25,7 @@ from numba import njit
 
 from bendsense import _jit, pcc
 from bendsense.beam import DEFAULT_NODES
+from bendsense.choices import CONSTRAINTS
 from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
 from bendsense.validation import float_array
@@ -32,8 +33,6 @@ from bendsense.validation import float_array
 __all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", "quadrature", "reference", "points",
            "chebyshev_nodes_m"]
 
-#: The force constraints (module docstring); the CLI's choices come from here.
-CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
 POSITIONS, ANGLES = 0, 1  # codes of config.OBJECTIVES in the kernels
 _N_NODES = DEFAULT_NODES
 
