@@ -68,8 +68,8 @@ def _dask_executor(address: str):
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
 @overwrite_option
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
-def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, objective, pressure_kpa,
-            no_estimate, recursive, overwrite, no_progress):
+def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, objective,
+            pressure_kpa, no_estimate, recursive, overwrite, no_progress):
     """Process many sessions in parallel: reconstruct, estimate and save each one.
 
     Every SESSION_OR_DIR is a session CSV, a native session directory, or a

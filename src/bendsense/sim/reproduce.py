@@ -1240,7 +1240,7 @@ def reproduce(
             _fig8(work / names["fig8"], table_i, table_i["radius_m"], table_i["kappa_val_per_m"], s_val),
             _fig9(work / names["fig9"], static),
             _fig10(work / names["fig10"], tip),
-            _fig_coverage(work / names["coverage"], {obj: _pooled_z(tip[obj], table_ii[obj]) for obj in OBJECTIVE_NAMES}),
+            _fig_coverage(work / names["coverage"], {o: _pooled_z(tip[o], table_ii[o]) for o in OBJECTIVE_NAMES}),
             _fig_identification(work / names["identification"], identification, nominal, true, model_config),
         )
         result = ReproduceResult(
