@@ -7,6 +7,7 @@ computation on the linearised equation), the moment balance of the returned shap
 and central finite differences.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -455,9 +456,18 @@ def test_plot():
     import matplotlib.pyplot as plt
 
     sol = solve_beam(L, 2.53e-3, np.array([0.0, 10.0]), (0.05, -0.05), GRAVITY)
-    ax = sol.plot()
-    assert ax.get_xlabel() == "x [m]" and ax.get_ylabel() == "y [m]"
+    ax = sol.plot()  # plots.plot_shapes: mm like every other figure
+    assert ax.get_xlabel() == "x [mm]" and ax.get_ylabel() == "y [mm]"
     assert ax.get_aspect() == 1.0
+    tips = [line.get_xydata()[-1] for line in ax.get_lines() if len(line.get_xydata()) == sol.s_m.size]
+    np.testing.assert_allclose(tips, sol.tip_position_m * 1e3)
+    plt.close(ax.figure)
+    # a frame without a converged solution is dashed and the legend says why
+    failed = dataclasses.replace(sol, success=np.array([True, False]))
+    ax = failed.plot()
+    styles = [line.get_linestyle() for line in ax.get_lines() if len(line.get_xydata()) == sol.s_m.size]
+    assert styles == ["-", "--"]
+    assert "not converged" in " ".join(t.get_text() for t in ax.get_legend().get_texts())
     plt.close(ax.figure)
 
 

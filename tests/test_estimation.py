@@ -316,7 +316,7 @@ def test_no_noise_model_gives_no_sigma_and_one_warning(objective):
     sol = beam_shape(60e3, (0.1, 0.1))
     with pytest.warns(NoNoiseModelWarning, match="no noise model") as record:
         est = estimate_force(pcc_curvatures(sol), 60e3, CFG, objective=objective)
-    assert len(record) == 1
+    assert len(record) == 1 and record[0].filename == __file__  # it points at the caller's line
     assert est.success and np.all(np.isfinite(est.force_n))
     assert est.uncertainty == "none"
     assert np.isnan(est.std_n).all() and np.isnan(est.covariance_n2).all()
@@ -407,11 +407,17 @@ def test_result_object(tmp_path):
     assert isinstance(est, ForceEstimate) and est.constraint == "none" and est.wall_time_s > 0
     d = est.to_dict()
     assert d["force_n"] == pytest.approx([0.1, -0.1], abs=1e-6) and d["success"] is True
-    ax = est.plot(shape=sol)
-    batch = estimate_force(pcc_curvatures(beam_shape(np.full(4, 60e3), np.zeros((4, 2)))), 60e3, CFG)
-    batch.plot(t_s=np.arange(4) * 0.1)
+    ax = est.plot(shape=sol)  # plots.plot_force: mm, an arrow from the model's tip
+    assert ax.get_xlabel() == "x [mm]" and "F = (0.1" in ax.get_title()
+    arrow = [a for a in ax.texts if hasattr(a, "xy")][0]
+    np.testing.assert_allclose(arrow.xyann, est.tip_position_m * 1e3)
+    np.testing.assert_allclose(np.subtract(arrow.xy, arrow.xyann), 100.0 * est.force_n)
+    batch = estimate_force(pcc_curvatures(beam_shape(np.full(4, 60e3), np.zeros((4, 2)))), 60e3, CFG,
+                           noise_std=1e-6)
+    ax = batch.plot(t_s=np.arange(4) * 0.1)
+    assert ax.get_xlabel() == "t [s]" and len(ax.collections) == 2  # the two ±2σ bands
+    np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), batch.force_n[:, 0])
     plt.close("all")
-    assert ax is not None
 
 
 @pytest.mark.parametrize("constraint", ("none", "vertical", "normal"))

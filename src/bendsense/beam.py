@@ -128,25 +128,16 @@ class BeamSolution:
         """Beam length L [m]."""
         return float(self.s_m[-1]) if self.s_m.size else 0.0
 
-    def plot(self, ax=None, **kwargs):
-        """Draw the shape(s) in the base frame; returns the matplotlib axes.
+    def plot(self, ax=None, *, max_frames: int = 50, **kwargs):
+        """Draw the shape(s) in the base frame in mm (:func:`bendsense.plots.plot_shapes`).
 
-        Frames with ``success=False`` are drawn dashed. Keyword arguments go to
-        ``ax.plot``.
+        Frames with ``success=False`` are dashed (and explained in the legend). Keyword
+        arguments go to ``Axes.plot``. Returns the matplotlib axes.
         """
-        import matplotlib.pyplot as plt
+        from bendsense.plots import plot_shapes
 
-        if ax is None:
-            _, ax = plt.subplots()
-        pos = self.positions_m.reshape(-1, self.s_m.size, 2)
-        ok = np.asarray(self.success).reshape(-1)
-        for p, good in zip(pos, ok, strict=True):
-            ax.plot(p[:, 0], p[:, 1], "-" if good else "--", **kwargs)
-        ax.plot([0.0], [0.0], "ks", markersize=4)
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        ax.set_aspect("equal", adjustable="datalim")
-        return ax
+        frames = int(np.prod(np.shape(self.success))) if np.ndim(self.success) else 1
+        return plot_shapes(self, ax, max_frames=max_frames, legend=frames <= 8, **kwargs)
 
 
 # --------------------------------------------------------------------------- operators

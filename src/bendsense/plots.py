@@ -23,6 +23,7 @@ from bendsense.errors import ArgumentError
 __all__ = [
     "plot_shapes",
     "plot_shape_comparison",
+    "plot_force",
     "plot_force_error_map",
     "plot_time_series",
     "plot_calibration",
@@ -51,13 +52,16 @@ def _positions(obj) -> np.ndarray:
     return pos.reshape(-1, pos.shape[-2], 2)
 
 
-def _flags(obj, frames: int) -> np.ndarray:
-    flags = getattr(obj, "extrapolated", None)
+def _flags(obj, frames: int):
+    """Frames drawn dashed (frames,) and the legend's explanation of them."""
+    flags, label = getattr(obj, "extrapolated", None), EXTRAPOLATED_LABEL
     if flags is None and hasattr(obj, "columns") and "status" in obj.columns:
         flags = np.asarray(obj.columns["status"]) == "extrapolated"
+    if flags is None and hasattr(obj, "success"):  # a BeamSolution: the frames that did not converge
+        flags, label = ~np.asarray(obj.success, dtype=bool), NOT_CONVERGED_LABEL
     if flags is None:
-        return np.zeros(frames, dtype=bool)
-    return np.broadcast_to(np.asarray(flags, dtype=bool).reshape(-1) if np.ndim(flags) else flags, (frames,))
+        return np.zeros(frames, dtype=bool), label
+    return np.broadcast_to(np.asarray(flags, dtype=bool).reshape(-1) if np.ndim(flags) else flags, (frames,)), label
 
 
 def _pick(n: int, frames, max_frames: int) -> np.ndarray:
@@ -122,7 +126,7 @@ def plot_shapes(
     ax = _new_axes(ax, figsize=(5, 5))
     pos = _positions(shape_or_positions)
     idx = _pick(len(pos), frames, max_frames)
-    flags = _flags(shape_or_positions, len(pos))
+    flags, dashed = _flags(shape_or_positions, len(pos))
     if labels is None:
         columns = getattr(shape_or_positions, "columns", None)
         if columns is not None and "t_s" in columns:
@@ -142,13 +146,14 @@ def plot_shapes(
     _shape_axes(ax)
     if np.any(flags[idx]):
         # explained in the legend: a dashed shape is not a measurement like the others
-        ax.plot([], [], "--", color="0.3", linewidth=1.8, label=EXTRAPOLATED_LABEL)
+        ax.plot([], [], "--", color="0.3", linewidth=1.8, label=dashed)
     if legend and (len(idx) > 1 or np.any(flags[idx])):
         ax.legend(fontsize="small", loc="best")
     return ax
 
 
 EXTRAPOLATED_LABEL = "dashed: extrapolated\n(a signal outside the calibrated range)"
+NOT_CONVERGED_LABEL = "dashed: not converged"
 
 
 def _shape_axes(ax):
@@ -221,6 +226,58 @@ def plot_shape_comparison(
         handles.append(Line2D([], [], color="k", linestyle="--", label=names[1]))
     handles.append(Line2D([], [], color="k", linestyle=":", marker="o", markersize=3, label=names[2]))
     ax.legend(handles=handles, fontsize="small", loc="best")
+    return ax
+
+
+def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float = 100.0):
+    """Plot a force estimate (:class:`~bendsense.estimation.ForceEstimate`).
+
+    Parameters
+    ----------
+    estimate : ForceEstimate
+        One frame or a batch.
+    ax : matplotlib.axes.Axes, optional
+    shape : Shape or BeamSolution, optional
+        One frame: the shape drawn under the force arrow.
+    t_s : array_like, optional
+        A batch: the time of each frame [s] (default the frame index).
+    scale_mm_per_n : float
+        One frame: arrow length [mm per N].
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        One frame: the force as an arrow at the model's tip, in mm, titled with its
+        value and σ. A batch: Fx and Fy against time with their ±2σ bands.
+    """
+    force = np.asarray(estimate.force_n, dtype=float)
+    if force.ndim == 1:
+        ax = _new_axes(ax, figsize=(5, 5))
+        if shape is not None:
+            p = _positions(shape)[0] * MM
+            ax.plot(p[:, 0], p[:, 1], "-", color="0.4")
+        tip = np.zeros(2) if estimate.tip_position_m is None else np.asarray(estimate.tip_position_m) * MM
+        head = tip + scale_mm_per_n * force
+        ax.annotate("", xy=head, xytext=tip, arrowprops={"arrowstyle": "->", "color": "C3"})
+        ax.plot([0.0, tip[0], head[0]], [0.0, tip[1], head[1]], alpha=0.0)  # the arrow inside the limits
+        ax.plot([0.0], [0.0], "ks", markersize=6)
+        _shape_axes(ax)
+        std = np.asarray(estimate.std_n, dtype=float)
+        parts = [f"{f:.3g}" + (f" ± {s:.2g}" if np.isfinite(s) else "") for f, s in zip(force, std, strict=True)]
+        ax.set_title(f"F = ({parts[0]}, {parts[1]}) N", fontsize="medium")
+        return ax
+    ax = _new_axes(ax, figsize=(7, 4))
+    force = force.reshape(-1, 2)
+    std = np.asarray(estimate.std_n, dtype=float).reshape(-1, 2)
+    t = np.arange(len(force)) if t_s is None else np.asarray(t_s, dtype=float).reshape(-1)
+    for i, name in enumerate(("Fx", "Fy")):
+        ax.plot(t, force[:, i], label=f"{name} ± 2σ", color=f"C{i}")
+        band = np.where(np.isfinite(std[:, i]), 2.0 * std[:, i], np.nan)
+        ax.fill_between(t, force[:, i] - band, force[:, i] + band, color=f"C{i}", alpha=0.2, linewidth=0)
+    ax.set_xlabel("t [s]" if t_s is not None else "frame")
+    ax.set_ylabel("tip force, base frame [N]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
     return ax
 
 

@@ -234,7 +234,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         _jit.call(_kernels.evaluate_frames, fr, pb, err, _OPS, _c(u), _c(run_status, np.int64), out)
     if uncertainty == "none":
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
-                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=2)
+                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)  # past pressure_range_step
     success = (status == _OK) | (status == _NOT_IDENTIFIABLE)  # never with a NaN force (kernels.finish)
     text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
             else messages(status, residual, chi2, p_value, blocked_dir, method))

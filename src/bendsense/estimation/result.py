@@ -153,41 +153,13 @@ class ForceEstimate:
             "p_value": None if self.p_value is None else np.asarray(self.p_value).tolist(),
         }
 
-    def plot(self, ax=None, *, shape=None, t_s=None, scale_m_per_n: float = 0.1):
-        """Draw the estimate; returns the matplotlib axes.
+    def plot(self, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float = 100.0):
+        """Draw the estimate (:func:`bendsense.plots.plot_force`); returns the matplotlib axes.
 
-        One frame: the force as an arrow at the model tip (``scale_m_per_n`` metres per
-        newton), over ``shape`` if given. A batch: Fx and Fy against ``t_s`` (default the
-        frame index) with ±2σ bands.
+        One frame: the force as an arrow at the model tip (``scale_mm_per_n`` mm per
+        newton), over ``shape`` if given, in mm. A batch: Fx and Fy against ``t_s``
+        (default the frame index) with ±2σ bands.
         """
-        import matplotlib.pyplot as plt
+        from bendsense.plots import plot_force
 
-        if ax is None:
-            _, ax = plt.subplots()
-        force = np.asarray(self.force_n)
-        if force.ndim == 1:
-            if shape is not None:
-                pos = np.asarray(shape.positions_m).reshape(-1, 2)
-                ax.plot(pos[:, 0], pos[:, 1], "-", color="0.4")
-            tip = np.zeros(2) if self.tip_position_m is None else np.asarray(self.tip_position_m)
-            ax.annotate("", xy=tip + scale_m_per_n * force, xytext=tip,
-                        arrowprops={"arrowstyle": "->", "color": "C3"})
-            ax.plot([0.0, tip[0], tip[0] + scale_m_per_n * force[0]], [0.0, tip[1], tip[1] + scale_m_per_n * force[1]],
-                    alpha=0.0)
-            ax.plot([0.0], [0.0], "ks", markersize=4)
-            ax.set_xlabel("x [m]")
-            ax.set_ylabel("y [m]")
-            ax.set_aspect("equal", adjustable="datalim")
-            ax.set_title(f"F = ({force[0]:.3g}, {force[1]:.3g}) N")
-            return ax
-        force = force.reshape(-1, 2)
-        std = np.asarray(self.std_n).reshape(-1, 2)
-        t = np.arange(len(force)) if t_s is None else np.asarray(t_s).reshape(-1)
-        for i, name in enumerate(("Fx", "Fy")):
-            ax.plot(t, force[:, i], label=name, color=f"C{i}")
-            band = np.where(np.isfinite(std[:, i]), 2.0 * std[:, i], np.nan)
-            ax.fill_between(t, force[:, i] - band, force[:, i] + band, color=f"C{i}", alpha=0.2)
-        ax.set_xlabel("t [s]" if t_s is not None else "frame")
-        ax.set_ylabel("force [N]")
-        ax.legend()
-        return ax
+        return plot_force(self, ax, shape=shape, t_s=t_s, scale_mm_per_n=scale_mm_per_n)
