@@ -113,6 +113,19 @@ def test_objective_errors_name_the_option(truths):
         estimate_force(points, t.pressure_pa, CFG, objective="angles", s_m=t.shape.s_m)
     with pytest.raises(ConfigError, match="estimation.objective"):
         bendsense.config.Config.from_dict({**CFG.to_dict(), "estimation": {"objective": "shape"}})
+    # the live processor says so when it is made, not at its first frame
+    with pytest.raises(ArgumentError, match="objective: must be one of angles, positions, got 'shape'"):
+        LiveProcessor(_any_calibration(), CFG, objective="shape")
+    with pytest.raises(ArgumentError, match="noise_std_counts: must be finite and >= 0"):
+        _any_calibration().error_model(-1.0)
+
+
+def _any_calibration():
+    from bendsense.calibration import Calibration
+
+    return Calibration(offset=np.zeros(16), coefficients_odd=np.array([0.0, 1e-6]),
+                       coefficients_even=np.array([0.0, -1e-6]), degree=1, delta_a_range_odd=(-1e3, 1e3),
+                       delta_a_range_even=(-1e3, 1e3), noise_std=np.ones(16))
 
 
 def test_config_and_cli_choose_the_objective(workdir, tmp_path):  # noqa: F811

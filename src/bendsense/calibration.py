@@ -938,7 +938,13 @@ class Calibration:
         from bendsense.shift_errors import ShiftErrorModel
 
         noise = self.noise_std if noise_std_counts is None else noise_std_counts
-        noise = np.array(np.broadcast_to(np.asarray(noise, dtype=float), (self.n_channels,)))
+        try:
+            noise = np.array(np.broadcast_to(np.asarray(noise, dtype=float), (self.n_channels,)))
+        except (TypeError, ValueError):
+            raise ArgumentError(f"noise_std_counts: expected a number or {self.n_channels} numbers [counts], got "
+                                f"{check.short(noise_std_counts)}") from None
+        if not (np.all(np.isfinite(noise)) and np.all(noise >= 0)):
+            raise ArgumentError(f"noise_std_counts: must be finite and >= 0, got {noise.tolist()}")
         coef = np.array(self._channel_coefficients, dtype=float)
         table = self._shift_error_table
         odd, parity = self._parity_correlation

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError
 
 __all__ = ["LiveBlock", "LiveFrame", "LiveProcessor", "LIVE_MAX_ITER", "NO_PRESSURE_STATUS"]
@@ -293,6 +294,8 @@ class LiveProcessor:
         self.method = self.config.estimation.method if method is None else method
         if objective is None:  # the paper's method fits the positions (paper eq. 18)
             objective = "positions" if self.method == "paper" else self.config.estimation.objective
+        if objective not in OBJECTIVES:
+            raise ArgumentError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
         self.objective = objective
         self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
         self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
