@@ -782,7 +782,8 @@ class InPlace:
         self.close()
 
 
-def begin_in_place(path, files, *, overwrite: bool = False, inputs: Iterable = (), writer: str = "bendsense") -> InPlace:
+def begin_in_place(path, files, *, overwrite: bool = False, inputs: Iterable = (),
+                   writer: str = "bendsense") -> InPlace:
     """Start a directory output written in place (a recording).
 
     Checks and locks ``path``, removes a previous output there (only what its manifest

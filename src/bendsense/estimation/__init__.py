@@ -232,9 +232,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                                          np.broadcast_to(pb.ffix, (B, 2)), pb.lower,
                                          np.maximum(np.zeros((B, k)), pb.lower))
         _jit.call(_kernels.evaluate_frames, fr, pb, err, _OPS, _c(u), _c(run_status, np.int64), out)
-    if uncertainty == "none":
+    if uncertainty == "none":  # stacklevel 3: the caller of the public wrapper (pressure_range_step)
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
-                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)  # past pressure_range_step
+                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)
     success = (status == _OK) | (status == _NOT_IDENTIFIABLE)  # never with a NaN force (kernels.finish)
     text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
             else messages(status, residual, chi2, p_value, blocked_dir, method))
