@@ -160,6 +160,9 @@ def polyfit_shift(delta_a, shifts_m, degree: int, weights=None):
     return coef / scale ** np.arange(degree + 1)
 
 
+_MISFIT_POINTS = 240  # calibration points in the misfit likelihood (16 channels × 15 strips)
+
+
 def _misfit_correlation(x, z, odd, top) -> dict:
     """Maximum-likelihood correlation of the calibration misfit (:meth:`Calibration.shift_error_m`).
 
@@ -168,8 +171,12 @@ def _misfit_correlation(x, z, odd, top) -> dict:
     exp(−(x_a − x_b)² / 2ℓ²) + w δ_ab`` (``c_ab`` 1 within a parity, ``c`` between),
     its parameters ℓ, ``c`` and the white fraction ``w`` chosen on a grid by the
     likelihood of ``z``. The white part (the noise of the strip means, the offsets)
-    keeps ℓ from collapsing onto the closest pair of points.
+    keeps ℓ from collapsing onto the closest pair of points. At most ``_MISFIT_POINTS``
+    points, evenly spaced in ``x``, enter the likelihood (its cost grows with their cube).
     """
+    if x.size > _MISFIT_POINTS:
+        keep = np.argsort(x, kind="stable")[np.linspace(0, x.size - 1, _MISFIT_POINTS).round().astype(int)]
+        x, z, odd = x[keep], z[keep], odd[keep]
     same = odd[:, None] == odd[None, :]
     lag2 = np.square(x[:, None] - x[None, :])
     eye = np.eye(x.size)
