@@ -270,14 +270,8 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
     force = force.reshape(-1, 2)
     std = np.asarray(estimate.std_n, dtype=float).reshape(-1, 2)
     t = np.arange(len(force)) if t_s is None else np.asarray(t_s, dtype=float).reshape(-1)
-    for i, name in enumerate(("Fx", "Fy")):
-        ax.plot(t, force[:, i], label=f"{name} ± 2σ", color=f"C{i}")
-        band = np.where(np.isfinite(std[:, i]), 2.0 * std[:, i], np.nan)
-        ax.fill_between(t, force[:, i] - band, force[:, i] + band, color=f"C{i}", alpha=0.2, linewidth=0)
+    _force_panel(ax, t, force, std)
     ax.set_xlabel("t [s]" if t_s is not None else "frame")
-    ax.set_ylabel("tip force, base frame [N]")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize="small")
     return ax
 
 
@@ -443,7 +437,16 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
         ax_f, ax_k = ax
         fig = ax_f.figure
     t = np.asarray(results["t_s"], dtype=float)
-    _force_panel(ax_f, results, t, pressure=pressure)
+    if results.has_forces:
+        force = np.stack([np.asarray(results[f"f{c}_n"], dtype=float) for c in "xy"], axis=-1)
+        std = np.stack([np.asarray(results[f"f{c}_std_n"], dtype=float) for c in "xy"], axis=-1)
+        status = np.asarray(results["status"]) if "status" in results.columns else None
+        kpa = (np.asarray(results["pressure_pa"], dtype=float) * 1e-3
+               if pressure and "pressure_pa" in results.columns else None)
+        _force_panel(ax_f, t, force, std, status=status, pressure_kpa=kpa)
+    else:
+        ax_f.set_ylabel("tip force [N]")
+        ax_f.text(0.5, 0.5, "no force estimate", transform=ax_f.transAxes, ha="center", va="center", color="0.4")
     kappa = results.curvature_per_m
     n = kappa.shape[1]
     colors = _colors(n, cmap)
@@ -464,20 +467,16 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
     return fig
 
 
-def _force_panel(ax, results, t, pressure=False):
+def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None):
+    """Fx, Fy (frames, 2) [N] against ``t`` with their ±2σ bands; frames not ``ok`` ticked; pressure on the right."""
     ax.set_ylabel("tip force [N]")
-    if not results.has_forces:
-        ax.text(0.5, 0.5, "no force estimate", transform=ax.transAxes, ha="center", va="center", color="0.4")
-        return
     handles = []
-    for comp, color, label in (("x", "C0", "F_x"), ("y", "C3", "F_y")):
-        f = np.asarray(results[f"f{comp}_n"], dtype=float)
-        s = np.asarray(results[f"f{comp}_std_n"], dtype=float)
+    for i, (color, label) in enumerate((("C0", "F_x"), ("C3", "F_y"))):
+        f, band = force[:, i], 2.0 * std[:, i]
         (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label)
-        band = ax.fill_between(t, f - 2 * s, f + 2 * s, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
-        handles.append((line, band))
+        fill = ax.fill_between(t, f - band, f + band, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
+        handles.append((line, fill))
     labels = ["F_x ± 2σ", "F_y ± 2σ"]
-    status = np.asarray(results["status"]) if "status" in results.columns else None
     if status is not None and np.any(status != "ok"):
         bad = status != "ok"
         (ticks,) = ax.plot(t[bad], np.zeros(bad.sum()), "|", color="0.5", transform=ax.get_xaxis_transform(),
@@ -486,18 +485,16 @@ def _force_panel(ax, results, t, pressure=False):
         labels.append("status not ok")
     ax.axhline(0.0, color="k", linewidth=0.5)
     ax.grid(True, alpha=0.3)
-    if pressure and "pressure_pa" in results.columns:
-        p = np.asarray(results["pressure_pa"], dtype=float) * 1e-3
-        if np.any(np.isfinite(p)):
-            px = ax.twinx()
-            (pline,) = px.plot(t, p, color="0.45", linewidth=1.0, label="pressure")
-            px.set_ylabel("pressure [kPa]", color="0.35")
-            px.tick_params(axis="y", colors="0.35")
-            px.set_ylim(0.0, 1.05 * float(np.nanmax(p)) or 1.0)
-            ax.set_zorder(px.get_zorder() + 1)  # forces over the pressure
-            ax.patch.set_visible(False)
-            handles.append(pline)
-            labels.append("pressure (right axis)")
+    if pressure_kpa is not None and np.any(np.isfinite(pressure_kpa)):
+        px = ax.twinx()
+        (pline,) = px.plot(t, pressure_kpa, color="0.45", linewidth=1.0, label="pressure")
+        px.set_ylabel("pressure [kPa]", color="0.35")
+        px.tick_params(axis="y", colors="0.35")
+        px.set_ylim(0.0, 1.05 * float(np.nanmax(pressure_kpa)) or 1.0)
+        ax.set_zorder(px.get_zorder() + 1)  # forces over the pressure
+        ax.patch.set_visible(False)
+        handles.append(pline)
+        labels.append("pressure (right axis)")
     # above the panel, where it covers no data
     ax.legend(handles, labels, fontsize="small", ncols=2, loc="lower right", bbox_to_anchor=(1.0, 1.0),
               frameon=False, borderaxespad=0.2)
