@@ -36,6 +36,7 @@ from numba import njit, prange
 
 from bendsense import _jit
 from bendsense.errors import ArgumentError
+from bendsense.shift_errors import horner
 from bendsense.validation import float_array
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -223,9 +224,7 @@ def frame_curvatures(signals, offset, coef, lo, hi, lengths, gap, kappa, theta):
     for i in range(lengths.size):
         delta = signals[i] - offset[i]
         extrapolated |= delta < lo[i] or delta > hi[i]
-        shift = coef[i, coef.shape[1] - 1] + 0.0 * delta  # NaN for a non-finite signal
-        for j in range(coef.shape[1] - 2, -1, -1):
-            shift = shift * delta + coef[i, j]
+        shift = horner(coef[i], delta)  # NaN for a non-finite signal
         theta[i] = (shift - prev) / gap
         kappa[i] = theta[i] / lengths[i]
         prev = shift

@@ -76,7 +76,6 @@ def horner(c, x):
 def _inverse(c, dc, shift):
     """ΔA with ``f(ΔA) = shift`` by Newton's method from the linear inverse; returns (ΔA, f'(ΔA))."""
     x = (shift - c[0]) / dc[0] if dc[0] != 0 else 0.0
-    fp = horner(dc, x)
     for _ in range(50):
         fp = horner(dc, x)
         dx = (horner(c, x) - shift) / (fp if fp != 0 else 1.0)

@@ -446,8 +446,8 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
     chance under the stated covariance (p < ``MISFIT_P``).
     """
     pos, L, w = ws[0], pb.L, pb.w
-    if pb.objective == ANGLES:  # the positions at the comparison nodes, for the residual
-        bk.sample(ws[2], ws[4], L, pb.PQ, pb.q, bool(YES), pos, ws[1], ws[3])
+    if pb.objective == ANGLES:  # the positions at the comparison nodes, for the residual (no sensitivities)
+        bk.sample(ws[2], ws[4], L, pb.PQ, pb.q, bool(NO), pos, ws[1], ws[3])
     num = 0.0
     den = 0.0
     for j in range(p0.shape[0]):
@@ -558,22 +558,18 @@ def setup(i, fr, pb, err, buf):
         tip = fr.tip_shape[i]
         p0, phi_end, kappa_s, state0, kappa = fr.p0[i], fr.phi_end[i], fr.kappa_s[i], fr.state[i], no_kappa
     prob.basis(pb.kind, tip if pb.shape_angle else fr.theta[i], pb.direction, pb.follower_angle, D, dD)
-    frame_cov = False
-    if pb.pcc and pb.noise:
-        acc = 0.0
-        for j in range(pb.lengths.size):
-            acc += kappa[j] * pb.lengths[j]
-            shifts[j] = pb.gap * acc  # S_j = d φ(L_j) (paper eq. 3–4)
-        frame_cov = shift_covariance(err, shifts, cov_s, noise_var) > 0
-    whiten = False
-    if pb.objective == ANGLES:
+    if pb.pcc:  # φ(L_j) = S_j / d = Σ_{i ≤ j} κ_i l_i (paper eq. 3–4), the angles objective's target
         acc = 0.0
         c = 0
         for j in range(pb.lengths.size):
-            acc += kappa[j] * pb.lengths[j]  # φ(L_j) = S_j / d (paper eq. 3–4)
+            acc += kappa[j] * pb.lengths[j]
+            shifts[j] = pb.gap * acc
             if c < pb.coils.size and pb.coils[c] == j:
                 y0[c] = acc
                 c += 1
+    frame_cov = pb.pcc and pb.noise and shift_covariance(err, shifts, cov_s, noise_var) > 0
+    whiten = False
+    if pb.objective == ANGLES:
         if frame_cov:
             inv_d2 = 1.0 / (pb.gap * pb.gap)
             for a in range(pb.coils.size):
