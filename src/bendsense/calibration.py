@@ -655,24 +655,19 @@ class Calibration:
         n = self.n_channels
         if s.ndim == 0 or s.shape[-1] != n:
             raise ArgumentError(f"shifts_m: expected shape (..., {n}), got {s.shape}")
+        if covariance:  # the misfit part of the one shift-covariance kernel (no noise, exact coefficients)
+            from bendsense.shift_errors import shift_covariances
+
+            model = self.error_model(0.0)._replace(coef_cov=np.zeros((1, 1)))
+            flat = np.ascontiguousarray(np.broadcast_to(s, s.shape).reshape(-1, n))
+            out, noise_var = np.empty((flat.shape[0], n, n)), np.empty((flat.shape[0], n))
+            shift_covariances(model, flat, out, noise_var)
+            return out.reshape(*s.shape, n)
         model = self._shift_error_table
-        odd, parity = self._parity_correlation
+        odd, _ = self._parity_correlation
         grid = model["grid_m"]
         a = np.abs(s)
-        sigma = np.where(odd, np.interp(a, grid, model["sigma_odd_m"]), np.interp(a, grid, model["sigma_even_m"]))
-        if not covariance:
-            return sigma
-        ell = model["length_m"]
-        if ell > 0:
-            rho = np.subtract.outer(s, s) if s.ndim == 1 else s[..., :, None] - s[..., None, :]
-            rho /= ell
-            np.square(rho, out=rho)
-            rho *= -0.5
-            np.exp(rho, out=rho)
-        else:
-            rho = np.broadcast_to(np.eye(n), (*s.shape[:-1], n, n))
-        rho = rho * parity
-        return sigma[..., :, None] * sigma[..., None, :] * rho
+        return np.where(odd, np.interp(a, grid, model["sigma_odd_m"]), np.interp(a, grid, model["sigma_even_m"]))
 
     @cached_property
     def _parity_correlation(self):
