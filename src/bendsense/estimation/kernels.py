@@ -460,7 +460,8 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
     p = np.nan
     parts[:, :, :] = np.nan
     if status == _OK or status == _NOT_IDENTIFIABLE:
-        dym = model_response(pb, ws)
+        # a covariance with a zero diagonal is zero: no parameter term (the config has no parameter_covariance)
+        dym = model_response(pb, ws) if model_cov[0, 0] > 0.0 or model_cov[1, 1] > 0.0 else np.zeros((ws[5].size, 2))
         if pb.objective == ANGLES:
             ratio, p = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
                                              pb.gap, pb.dphi_ds, ws[6], cov, noise_var, dym, model_cov, parts)

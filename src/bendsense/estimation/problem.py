@@ -33,7 +33,7 @@ from bendsense.validation import float_array
 __all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", "quadrature", "reference", "points",
            "chebyshev_nodes_m"]
 
-POSITIONS, ANGLES = 0, 1  # codes of config.OBJECTIVES in the kernels
+POSITIONS, ANGLES = 0, 1  # codes of bendsense.choices.OBJECTIVES in the kernels
 _N_NODES = DEFAULT_NODES
 
 
