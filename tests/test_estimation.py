@@ -17,6 +17,7 @@ from bendsense.beam import solve_beam
 from bendsense.calibration import Calibration
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import ForceEstimate, constraint_basis, estimate_force, quadrature
+from bendsense.estimation.kernels import SIGMA_STEP
 from bendsense.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.sensor import shifts_from_shape
 
@@ -345,7 +346,7 @@ def test_batch_shapes_broadcast_and_match_single_frames():
     np.testing.assert_allclose(many.force_n[1], estimate_force(kappa[0, 0], 60e3, CFG).force_n, atol=1e-9)
 
 
-def test_warm_start_along_a_smooth_series_saves_iterations():
+def test_warm_start_along_a_smooth_series_reaches_the_cold_optimum_at_no_more_cost():
     t = np.linspace(0.0, 2.0, 200)
     p = 70e3 + 40e3 * np.sin(2 * math.pi * 0.5 * t)
     force = np.stack([0.15 * np.sin(2 * math.pi * t), -0.1 + 0.05 * np.cos(math.pi * t)], axis=-1)
@@ -354,7 +355,9 @@ def test_warm_start_along_a_smooth_series_saves_iterations():
     cold = estimate_force(kappa, p, CFG, warm_start=False)
     assert warm.success.all() and cold.success.all()
     np.testing.assert_allclose(warm.force_n, cold.force_n, atol=1e-8)
-    assert warm.iterations.mean() < cold.iterations.mean()
+    # the integrated moment balance starts a noise-free cold frame so close that it
+    # converges in two solves (the start and one step), as a warm frame does
+    assert warm.iterations.mean() <= cold.iterations.mean() <= 2.1
     # the previous estimate as the start of a single real-time frame
     prev = estimate_force(kappa[100], p[100], CFG)
     nxt = estimate_force(kappa[101], p[101], CFG, initial=prev)
@@ -440,9 +443,11 @@ def test_single_frame_path_equals_the_batched_path(frames, constraint):
         one_of_batch = estimate_force(kappa[i : i + 1], p[idx][i : i + 1], CFG, constraint=constraint, calibration=cal)
         assert one_of_batch.force_n.shape == (1, 2)
         np.testing.assert_allclose(one_of_batch.std_n[0], one.std_n, rtol=1e-12)
-        # warm-started from the previous frame, as the live view does: the same optimum
+        # warm-started from the previous frame, as the live view does: the same optimum, to
+        # the 1e-4 σ within which each converges (kernels.SIGMA_STEP)
         warm = estimate_force(kappa[i], p[idx][i], CFG, constraint=constraint, calibration=cal, initial=previous)
-        np.testing.assert_allclose(warm.force_n, batch.force_n[i], atol=1e-8)
+        tol = np.maximum(1e-8, 2 * SIGMA_STEP * np.nan_to_num(one.std_n, posinf=0.0))
+        assert np.all(np.abs(warm.force_n - batch.force_n[i]) <= tol)
         previous = warm
 
 

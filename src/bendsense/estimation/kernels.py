@@ -59,13 +59,17 @@ def force_of(D, ffix, u, out):
 
 
 @njit(cache=True)
-def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, u):
+def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, group, u):
     """Starting force from the moment balance ``EI (κ(s) − K0) = −M_z(s)`` (linear in F).
 
     With the reference shape's curvature and points, the moment of the tip force about
     ``r(s)``, ``(r_L − r(s)) × F``, and of the distributed load are known: a small
-    weighted linear least-squares problem in ``u``, exact for a beam-model shape. A ridge
-    keeps directions it hardly sees near zero; beyond 3 EI/L² the guess is scaled down.
+    weighted linear least-squares problem in ``u``. The balance is integrated over each
+    group of comparison nodes (``group`` (M,), ascending): over a PCC segment, where the
+    sensor measures the integral of the curvature ``κ_i l_i`` exactly and not its course,
+    the integrated balance has no PCC bias; a shape given by points has one node per
+    group (exact for a beam-model shape). A ridge keeps directions it hardly sees near
+    zero; beyond 3 EI/L² the guess is scaled down.
     """
     M = s.size
     k = u.size
@@ -73,7 +77,9 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, u
     ty = p0[M - 1, 1] + (L - s[M - 1]) * math.cos(phi_end)
     H = np.zeros((k, k))
     g = np.zeros(k)
-    aD = np.empty(k)
+    A = np.zeros(k)  # the group's ∫ (moment arm · D) ds, ∫ (the known moments) ds and length
+    C = 0.0
+    W = 0.0
     tail_x = 0.0  # ∫_{s_j}^{L} r dσ, accumulated from the tip
     tail_y = 0.0
     nx, ny = tx, ty  # the next point out
@@ -88,11 +94,17 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, u
         ay = tx - p0[j, 0]
         c = ei * (kappa_s[j] - k0) + arm_x * wload[1] - arm_y * wload[0] + ax * ffix[0] + ay * ffix[1]
         for q in range(k):
-            aD[q] = ax * D[0, q] + ay * D[1, q]
-        for q in range(k):
-            g[q] += w[j] * aD[q] * c
-            for r in range(k):
-                H[q, r] += w[j] * aD[q] * aD[r]
+            A[q] += w[j] * (ax * D[0, q] + ay * D[1, q])
+        C += w[j] * c
+        W += w[j]
+        if j == 0 or group[j - 1] != group[j]:  # the group is complete: its balance into the normal equations
+            for q in range(k):
+                g[q] += A[q] * C / W
+                for r in range(k):
+                    H[q, r] += A[q] * A[r] / W
+                A[q] = 0.0
+            C = 0.0
+            W = 0.0
     tr = 0.0
     for q in range(k):
         tr += H[q, q]
@@ -334,16 +346,16 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         rate = size / last if seen else size
         left = size * rate / (1.0 - rate) if seen and rate < 0.5 else size
         # converged: the step, or the error left by a contraction at the observed rate,
-        # is below xtol; or below SIGMA_STEP standard deviations when the cost is a χ²
-        # (H⁻¹ the covariance of u: a flat, poorly determined direction); or stalled at
-        # the round-off floor of the beam solutions
+        # is below xtol; or that error is below SIGMA_STEP standard deviations when the
+        # cost is a χ² (H⁻¹ the covariance of u: a flat, poorly determined direction); or
+        # stalled at the round-off floor of the beam solutions
         small = False
-        if tg[3]:
+        if tg[3] and size > 0.0:
             q = 0.0
             for c in range(k):
                 for r in range(k):
                     q += dstep[c] * H[c, r] * dstep[r]
-            small = q <= SIGMA_STEP * SIGMA_STEP
+            small = q * (left / size) ** 2 <= SIGMA_STEP * SIGMA_STEP
         if left <= xtol or small or (seen and size <= 1e3 * xtol and rate > 0.5):
             for c in range(k):
                 u[c] += dstep[c]
@@ -601,7 +613,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
     for i in range(lo, hi):
         p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
         ei, k0 = fr.ei[i], fr.k0[i]
-        moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, g)
+        moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, pb.group, g)
         force_of(D, pb.ffix, g, guess_n[i])
         for c in range(k):
             if use_guess:  # the guess corrected by a previous estimate's offset from its own guess
