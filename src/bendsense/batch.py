@@ -26,8 +26,6 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from bendsense import output
 from bendsense.errors import ArgumentError, BendsenseError, OutputError, SessionError
 
@@ -321,11 +319,10 @@ def process_session(
     """Process one session and write its results; never raises for a bad session.
 
     Reads ``path`` (:func:`bendsense.session.read_session`), reconstructs the shapes
-    (:func:`bendsense.pcc.reconstruct`, paper eq. 1–7), estimates the tip forces
-    (:func:`bendsense.estimation.estimate_force`, paper eq. 18) unless ``estimate``
-    is False, and writes ``results.csv`` and ``shape.npz`` into ``out_dir``
-    (:func:`bendsense.results.write_results`). This is the task that
-    :func:`process_sessions` sends to its executor; its arguments pickle.
+    (paper eq. 1–7) and estimates the tip forces (paper eq. 18) unless ``estimate`` is
+    False (:func:`bendsense.pipeline.process`), and writes ``results.csv`` and
+    ``shape.npz`` into ``out_dir`` (:func:`bendsense.results.write_results`). This is
+    the task that :func:`process_sessions` sends to its executor; its arguments pickle.
 
     Returns
     -------
@@ -380,51 +377,19 @@ def process_session(
 
 
 def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite):
-    from bendsense.pcc import reconstruct
-    from bendsense.plausibility import check_channels
+    from bendsense.pipeline import process
     from bendsense.results import write_results
     from bendsense.session import read_session
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
-    session = read_session(path)
-    if len(session) == 0:
-        raise SessionError(f"{path}: no frames")
-    if pressure_pa is not None:
-        session = session.with_pressure(pressure_pa)
-    check_channels(session, calibration, config.sensor)
-    shape = reconstruct(session.signals, calibration, config.sensor)
-    result = None
-    if estimate:
-        if not session.has_pressure:
-            missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
-            raise SessionError(
-                f"{path}: {missing} of {len(session)} frames have no pressure reading "
-                "(give pressure_pa, or --pressure-kpa on the command line)"
-            )
-        from bendsense.estimation import estimate_force
-
-        result = estimate_force(
-            shape,
-            session.pressure_pa,
-            config,
-            constraint=constraint or config.estimation.constraint,
-            method=method or config.estimation.method,
-            objective=objective,
-            calibration=calibration,  # its noise_std gives the force uncertainty std_n
-        )
-    write_results(out_dir, session, shape, result, overwrite=overwrite, inputs=[path])
-    extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(shape.extrapolated), (len(session),))))
-    outside = np.zeros(len(session), dtype=bool)
-    if result is not None:
-        from bendsense.plausibility import pressure_outside
-
-        outside = pressure_outside(session.pressure_pa, config)
-    failed = np.zeros(len(session), dtype=bool) if result is None else ~np.asarray(result.success, dtype=bool)
-    misfit = failed & np.char.startswith(np.broadcast_to(np.asarray(
-        getattr(result, "message", ""), dtype=str), (len(session),)), "model_misfit")
-    not_converged = int(np.count_nonzero(failed & ~outside & ~misfit))
+    processed = process(read_session(path), config, calibration, constraint=constraint, method=method,
+                        objective=objective, pressure_pa=pressure_pa, estimate=estimate)
+    session = processed.session
+    write_results(out_dir, session, processed.shape, processed.estimate, overwrite=overwrite, inputs=[path])
+    counts = processed.counts()
     lost, tx_drops = int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
-    return len(session), extrapolated, not_converged, int(misfit.sum()), int(outside.sum()), lost, tx_drops
+    return (counts.frames, counts.extrapolated, counts.not_converged, counts.model_misfit, counts.out_of_range, lost,
+            tx_drops)
 
 
 # --- many sessions ------------------------------------------------------------------------
