@@ -331,8 +331,7 @@ def run_demo(
 
 def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progress) -> DemoResult:
     """The demo's steps, writing into ``work`` (swapped in as ``out`` at the end)."""
-    from bendsense.estimation import estimate_force
-    from bendsense.pcc import reconstruct
+    from bendsense.pipeline import process
     from bendsense.results import write_results
     from bendsense.session import Session
     from bendsense.sessiondir import read_session_dir
@@ -355,22 +354,16 @@ def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progres
     true_force, true_fc, valid = true_force[k], true_fc[k], valid[k]
 
     echo(f"processing {len(session)} frames: shape, force (constraint normal and none) ...")
-    lengths = config.sensor.length_m
-    t0 = time.perf_counter()
-    shape = reconstruct(session.signals, cal, config.sensor, s_m=np.linspace(0.0, lengths, 101))
-    recon_rate = len(session) / max(time.perf_counter() - t0, 1e-9)
-    estimates, rates = {}, {}
     # the contact is normal to the loaded tip, so the normal takes the reconstructed tip
     # angle (the paper takes the free-motion model's, which a contact force turns away)
-    for constraint, options in (("normal", {"tip_angle_source": "shape"}), ("none", {"max_iter": NONE_MAX_ITER})):
-        t0 = time.perf_counter()
-        estimates[constraint] = estimate_force(
-            shape, session.pressure_pa, config, constraint=constraint, calibration=cal, **options
-        )
-        rates[constraint] = len(session) / max(time.perf_counter() - t0, 1e-9)
+    normal = process(session, config, cal, constraint="normal", tip_angle_source="shape", points=101)
+    none = process(session, config, cal, constraint="none", shape=normal.shape, max_iter=NONE_MAX_ITER)
+    recon_rate = len(session) / max(normal.reconstruct_s, 1e-9)
+    estimates = {"normal": normal.estimate, "none": none.estimate}
+    rates = {name: len(session) / max(p.estimate_s, 1e-9) for name, p in (("normal", normal), ("none", none))}
     stats = {name: _force_stats(est, true_force, valid) for name, est in estimates.items()}
 
-    none = estimates["none"]
+    none = none.estimate
     extra = {
         **session.extra,
         "frame": k,
@@ -386,7 +379,7 @@ def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progres
     annotated = Session(
         session.t_s, session.signals, session.pressure_pa, session.seq, dict(session.meta), extra, session.source
     )
-    write_results(results_dir, annotated, shape, estimates["normal"], overwrite=True)
+    write_results(results_dir, annotated, normal.shape, normal.estimate, overwrite=True)
     echo(f"figure: {out / figure_path.name} ...")
     write_figure(results_dir, figure_path, title=f"bendsense demo: simulated board, seed {seed}, {len(session)} frames")
 
