@@ -210,7 +210,7 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
     if rate_hz > 65535:
         raise click.BadParameter(f"expected at most 65535, got {rate_hz:g}", param_hint="--rate")
     from bendsense import output
-    from bendsense.device.demo import run_demo
+    from bendsense.apps.demo import run_demo
 
     target = output.directory(out_dir, overwrite=overwrite)
 
