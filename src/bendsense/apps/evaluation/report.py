@@ -43,14 +43,32 @@ def _table(header, rows) -> str:
     return "\n".join(lines)
 
 
+
 def report(res, names: dict, command: str) -> str:
-    """The text of ``report.md`` for ``res`` (:class:`~.run.ReproduceResult`), figures by ``names``."""
+    """The text of ``report.md`` for ``res`` (:class:`~.run.ReproduceResult`), the figures' files by ``names``.
+
+    One section after the other, each written by its own function: the introduction,
+    Table I with Fig. 8, the identification, Fig. 9, Fig. 10, Table II, the calibration of
+    the uncertainty and the timing.
+    """
+    sections = (
+        _introduction(res, command),
+        _table_i(res, names),
+        _identification(res, names),
+        _fig9(res, names),
+        _fig10(res, names),
+        _table_ii(res),
+        _uncertainty(res, names),
+        _timing(res),
+    )
+    return "\n".join(line for section in sections for line in section)
+
+
+def _introduction(res, command: str) -> list:
+    """The title, the command and how the experiments were simulated."""
     from bendsense import __version__
 
-    paper_i = PAPER["table_i"]
-    t1 = res.table_i
-    radii = t1["radius_m"]
-    lines = [
+    return [
         "# The paper's evaluation on simulated data",
         "",
         f"Written by `{command}` (bendsense {__version__}, seed {res.seed}"
@@ -69,6 +87,15 @@ def report(res, names: dict, command: str) -> str:
         f"offsets, {MISMATCH['noise_counts']:g} counts of Gaussian noise, a 12-bit ADC.",
         f"- **Camera.** Free-bending angles with {math.degrees(CAMERA_ANGLE_STD_RAD):g}° noise; loaded shapes as "
         f"{CAMERA_MARKERS} markers with {CAMERA_POINT_STD_M * 1e3:g} mm noise per coordinate (stiffness fit only).",
+    ]
+
+
+def _table_i(res, names: dict) -> list:
+    """Table I (paper V-B) beside the paper's values, and Fig. 8."""
+    paper_i = PAPER["table_i"]
+    t1 = res.table_i
+    radii = t1["radius_m"]
+    lines = [
         "",
         "## Table I: shape reconstruction on the validation strips (paper section V-B)",
         "",
@@ -96,9 +123,13 @@ def report(res, names: dict, command: str) -> str:
         f"![Fig. 8 analogue]({names['fig8']})",
         "",
     ]
+    return lines
 
+
+def _identification(res, names: dict) -> list:
+    """The identified parameters (paper V-C) against the true and the nominal ones."""
     ident = res.identification
-    lines += [
+    lines = [
         "## Identification (paper section V-C)",
         "",
         "μ̄, μ_s and the prebend from the free-bending angles (actuator on its side, 0–120 kPa); EI per pressure "
@@ -125,9 +156,13 @@ def report(res, names: dict, command: str) -> str:
                      _f(rel, 1)])
     lines += [_table(["parameter", "true (simulated)", "nominal (start)", "identified ± s.e.", "error [%]"], rows), ""]
     lines += [f"![identification]({names['identification']})", ""]
+    return lines
 
+
+def _fig9(res, names: dict) -> list:
+    """Fig. 9: the static model and the sensor against the true shapes."""
     st = res.static
-    lines += [
+    lines = [
         "## Fig. 9: static model and sensor against the true shapes (paper section V-C)",
         "",
         "Max distance between the predicted and the true shape along the sensor line, relative to the actuator "
@@ -144,10 +179,14 @@ def report(res, names: dict, command: str) -> str:
     if st["model_failed"]:
         lines += [f"The beam model found no stable equilibrium for {st['model_failed']} combination(s).", ""]
     lines += [f"![Fig. 9 analogue]({names['fig9']})", ""]
+    return lines
 
+
+def _fig10(res, names: dict) -> list:
+    """Fig. 10: tip-load estimation with the vertical constraint, for both objectives."""
     tips = res.tip_load
     objectives = list(tips)
-    lines += [
+    lines = [
         "## Fig. 10: tip-load estimation (paper section V-D1)",
         "",
         "The vertical constraint Fx = 0; error |F̂y − Fy| in % of the largest load, 0.3 N, over every frame, for "
@@ -167,12 +206,15 @@ def report(res, names: dict, command: str) -> str:
         "",
     ]
     failed = {o: tips[o]["failed"] for o in objectives if tips[o]["failed"]}
-    if failed:
-        lines += ["Frames without a converged estimate (left out): "
-                  + ", ".join(f"{o}: {n}" for o, n in failed.items()) + ".", ""]
+    lines += _failed_note(failed)
     lines += [f"![Fig. 10 analogue]({names['fig10']})", ""]
+    return lines
 
-    lines += [
+
+def _table_ii(res) -> list:
+    """Table II: contact forces without and with the normal constraint, beside the paper's."""
+    objectives = list(res.tip_load)
+    lines = [
         "## Table II: contact force estimation (paper section V-D2)",
         "",
         f"Mean errors in % of the largest contact force ({MAX_CONTACT_N:g} N) per range of the true contact force; "
@@ -217,12 +259,16 @@ def report(res, names: dict, command: str) -> str:
     ]
     failed = {f"{o}, {label}": res.contact[o][label]["failed"] for o in objectives for label in labels
               if res.contact[o][label]["failed"]}
-    if failed:
-        lines += ["Frames without a converged estimate (left out): "
-                  + ", ".join(f"{k}: {v}" for k, v in failed.items()) + ".", ""]
+    lines += _failed_note(failed)
+    return lines
 
+
+def _uncertainty(res, names: dict) -> list:
+    """The calibration of the uncertainty: observed against nominal coverage at 1σ, 2σ, 3σ."""
+    tips = res.tip_load
+    objectives = list(tips)
     zs = {o: pooled_z(tips[o], res.contact[o]) for o in objectives}
-    lines += [
+    return [
         "## Calibration of the uncertainty",
         "",
         "How often the truth lies within ±kσ of the estimate, against the Gaussian's nominal probability, over "
@@ -239,9 +285,12 @@ def report(res, names: dict, command: str) -> str:
         "",
     ]
 
+
+def _timing(res) -> list:
+    """The time of each stage, beside the paper's."""
     tm = res.timings
     ms = 1e3
-    lines += [
+    lines = [
         "## Timing",
         "",
         f"Measured in this run on a machine with {os.cpu_count()} CPUs (shared; load average "
@@ -288,7 +337,15 @@ def report(res, names: dict, command: str) -> str:
             "varies a lot between frames.",
             "",
         ]
-    return "\n".join(lines)
+    return lines
+
+
+def _failed_note(failed: dict) -> list:
+    """A note on the frames left out of a table (``failed``: case → frames), if any."""
+    if not failed:
+        return []
+    return ["Frames without a converged estimate (left out): "
+            + ", ".join(f"{case}: {n}" for case, n in failed.items()) + ".", ""]
 
 
 def _miss_note(ident) -> str:
