@@ -510,8 +510,6 @@ def process_sessions(
 
 def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
              overwrite, pressure_pa, estimate, recursive, progress) -> BatchReport:
-    from tqdm import tqdm
-
     from bendsense.calibration import Calibration
     from bendsense.config import Config, load_config
 
@@ -525,7 +523,28 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
     if not sessions:
         raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, paths))}")
     names = session_names(sessions)
+    rows, todo = _plan(sessions, names, out_dir, overwrite)
+    options = dict(
+        config=config,
+        calibration=calibration,
+        constraint=constraint,
+        method=method,
+        objective=objective,
+        pressure_pa=pressure_pa,
+        estimate=estimate,
+        overwrite=overwrite,
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    output.add_to_manifest(out_dir, [], writer="bendsense process")
+    tasks = [(i, sessions[i], names[i]) for i in todo]
+    description = _run_tasks(tasks, rows, out_dir, options, executor=executor, workers=workers, progress=progress)
+    return BatchReport(
+        sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start, workers=description
+    )
 
+
+def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
+    """Rows of the sessions skipped or refused before any work, and the indices of those to process."""
     rows: list[SessionOutcome | None] = [None] * len(sessions)
     todo = []
     for i, (path, name) in enumerate(zip(sessions, names, strict=True)):
@@ -548,19 +567,14 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
             todo.append(i)
         else:
             todo.append(i)
-    options = dict(
-        config=config,
-        calibration=calibration,
-        constraint=constraint,
-        method=method,
-        objective=objective,
-        pressure_pa=pressure_pa,
-        estimate=estimate,
-        overwrite=overwrite,
-    )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    output.add_to_manifest(out_dir, [], writer="bendsense process")
-    bar = tqdm(total=len(todo), unit="session", desc="process", disable=not progress or not todo, leave=False)
+    return rows, todo
+
+
+def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, workers, progress) -> str:
+    """Process the sessions of ``tasks`` ((row index, path, name)) into ``rows``; a description of the workers."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(tasks), unit="session", desc="process", disable=not progress or not tasks, leave=False)
 
     def finish(i, row):
         rows[i] = row
@@ -576,35 +590,31 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
             import numba
 
             description = f"in-process, {numba.get_num_threads()} numba threads"
-            for i in todo:
-                finish(i, process_session(sessions[i], out_dir / names[i], name=names[i], **options))
+            for i, path, name in tasks:
+                finish(i, process_session(path, out_dir / name, name=name, **options))
         else:
-            if executor is None and todo:
-                own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(todo)))
+            if executor is None and tasks:
+                own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(tasks)))
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description.replace(" workers)", " workers, 1 numba thread each)")
-            futures = {
-                executor.submit(process_session, sessions[i], out_dir / names[i], name=names[i], **options): i
-                for i in todo
-            }
+            futures = {executor.submit(process_session, path, out_dir / name, name=name, **options): (i, path, name)
+                       for i, path, name in tasks}
             for future in cf.as_completed(futures):
-                i = futures[future]
+                i, path, name = futures[future]
                 try:
                     row = future.result()
                 except Exception as err:  # noqa: BLE001 - a worker died or the task could not be sent
                     row = SessionOutcome(
-                        name=names[i],
-                        source=str(sessions[i]),
+                        name=name,
+                        source=str(path),
                         status="failed",
                         reason=f"worker error: {type(err).__name__}: {err}",
-                        out_dir=str(out_dir / names[i]),
+                        out_dir=str(out_dir / name),
                     )
                 finish(i, row)
     finally:
         bar.close()
         if own is not None:
             own.shutdown(cancel_futures=True)
-    return BatchReport(
-        sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start, workers=description
-    )
+    return description
