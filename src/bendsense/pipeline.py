@@ -107,7 +107,7 @@ class FrameCounts:
     out_of_range : int
         Frames whose pressure lay outside ``actuator.pressure_range_pa`` (no force).
     not_converged : int
-        Frames whose force estimate failed for another reason than those two.
+        Frames whose force estimate failed, other than those out of range or ``model_misfit``.
     model_misfit : int
         Frames whose model shape stays far from the measured one (status ``model_misfit``).
     """
