@@ -31,10 +31,11 @@ matplotlib.use("Agg")
 
 import numpy as np  # noqa: E402
 
+from bendsense.apps.live_view import LiveView, run_live  # noqa: E402
 from bendsense.calibration import Calibration  # noqa: E402
 from bendsense.device.driver import Driver  # noqa: E402
-from bendsense.device.live import LiveProcessor, LiveView, run_live  # noqa: E402
 from bendsense.device.simdevice import SimulatedDevice, default_source  # noqa: E402
+from bendsense.pipeline import LiveProcessor  # noqa: E402
 from bendsense.sim.scenarios import simulate, time_varying_frames  # noqa: E402
 
 SEED = 0

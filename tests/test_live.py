@@ -9,12 +9,13 @@ import pytest
 from click.testing import CliRunner
 
 import bendsense
+from bendsense.apps.live_view import LiveView
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from bendsense.device.live import LiveFrame, LiveProcessor, LiveView
 from bendsense.device.simdevice import SimulatedDevice, default_source
 from bendsense.errors import ConfigError
 from bendsense.estimation import estimate_force
+from bendsense.pipeline import LiveFrame, LiveProcessor
 from bendsense.sim.scenarios import simulate, time_varying_frames
 
 SEED = 0
@@ -187,7 +188,7 @@ def test_every_received_frame_is_estimated(calibration_path, stream):
 
 def test_view_shows_the_force_history_with_its_band_and_the_status_counts(calibration_path, stream, tmp_path):
     """Blocks of frames → the scrolling Fx, Fy (±2σ) and pressure plot and the status line; rendered to a PNG."""
-    from bendsense.device.live import status_line
+    from bendsense.apps.live_view import status_line
 
     proc = LiveProcessor(Calibration.load(calibration_path), constraint="normal")
     view = LiveView(proc, headless=True, window_s=1.5)

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from bendsense.apps.evaluation import PAPER, shape_accuracy
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.config import load_config
 from bendsense.output import write_dir
 from bendsense.pcc import arc_positions
-from bendsense.sim.reproduce import PAPER, shape_accuracy
 
 FIGURES = ("fig8_validation_shapes.png", "fig9_static_model.png", "fig10_tip_load_error.png", "identification.png",
            "coverage_calibration.png")

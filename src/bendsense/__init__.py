@@ -3,8 +3,9 @@
 The data flow, module by module: ``frames`` (device bytes) → ``session`` (recordings)
 → ``calibration`` (signals → shifts) → ``pcc`` (shifts → curvatures → shape) →
 ``actuator`` (free bending, stiffness) → ``beam`` (curved cantilever under load) →
-``estimation`` (tip force). ``sim`` runs the chain backwards; ``plots``, ``device``
-and ``cli`` sit at the edges.
+``estimation`` (tip force), with ``pipeline`` running a session or a live stream through
+the chain. ``sim`` runs the chain backwards; ``plots``, ``device``, ``apps`` (the live
+view, the demo, the paper's evaluation) and ``cli`` sit at the edges.
 """
 
 from importlib import import_module

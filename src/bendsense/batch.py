@@ -26,8 +26,6 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from bendsense import output
 from bendsense.errors import ArgumentError, BendsenseError, OutputError, SessionError
 
@@ -321,11 +319,10 @@ def process_session(
     """Process one session and write its results; never raises for a bad session.
 
     Reads ``path`` (:func:`bendsense.session.read_session`), reconstructs the shapes
-    (:func:`bendsense.pcc.reconstruct`, paper eq. 1–7), estimates the tip forces
-    (:func:`bendsense.estimation.estimate_force`, paper eq. 18) unless ``estimate``
-    is False, and writes ``results.csv`` and ``shape.npz`` into ``out_dir``
-    (:func:`bendsense.results.write_results`). This is the task that
-    :func:`process_sessions` sends to its executor; its arguments pickle.
+    (paper eq. 1–7) and estimates the tip forces (paper eq. 18) unless ``estimate`` is
+    False (:func:`bendsense.pipeline.process`), and writes ``results.csv`` and
+    ``shape.npz`` into ``out_dir`` (:func:`bendsense.results.write_results`). This is
+    the task that :func:`process_sessions` sends to its executor; its arguments pickle.
 
     Returns
     -------
@@ -380,51 +377,19 @@ def process_session(
 
 
 def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite):
-    from bendsense.pcc import reconstruct
-    from bendsense.plausibility import check_channels
+    from bendsense.pipeline import process
     from bendsense.results import write_results
     from bendsense.session import read_session
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
-    session = read_session(path)
-    if len(session) == 0:
-        raise SessionError(f"{path}: no frames")
-    if pressure_pa is not None:
-        session = session.with_pressure(pressure_pa)
-    check_channels(session, calibration, config.sensor)
-    shape = reconstruct(session.signals, calibration, config.sensor)
-    result = None
-    if estimate:
-        if not session.has_pressure:
-            missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
-            raise SessionError(
-                f"{path}: {missing} of {len(session)} frames have no pressure reading "
-                "(give pressure_pa, or --pressure-kpa on the command line)"
-            )
-        from bendsense.estimation import estimate_force
-
-        result = estimate_force(
-            shape,
-            session.pressure_pa,
-            config,
-            constraint=constraint or config.estimation.constraint,
-            method=method or config.estimation.method,
-            objective=objective,
-            calibration=calibration,  # its noise_std gives the force uncertainty std_n
-        )
-    write_results(out_dir, session, shape, result, overwrite=overwrite, inputs=[path])
-    extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(shape.extrapolated), (len(session),))))
-    outside = np.zeros(len(session), dtype=bool)
-    if result is not None:
-        from bendsense.plausibility import pressure_outside
-
-        outside = pressure_outside(session.pressure_pa, config)
-    failed = np.zeros(len(session), dtype=bool) if result is None else ~np.asarray(result.success, dtype=bool)
-    misfit = failed & np.char.startswith(np.broadcast_to(np.asarray(
-        getattr(result, "message", ""), dtype=str), (len(session),)), "model_misfit")
-    not_converged = int(np.count_nonzero(failed & ~outside & ~misfit))
+    processed = process(read_session(path), config, calibration, constraint=constraint, method=method,
+                        objective=objective, pressure_pa=pressure_pa, estimate=estimate)
+    session = processed.session
+    write_results(out_dir, session, processed.shape, processed.estimate, overwrite=overwrite, inputs=[path])
+    counts = processed.counts()
     lost, tx_drops = int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
-    return len(session), extrapolated, not_converged, int(misfit.sum()), int(outside.sum()), lost, tx_drops
+    return (counts.frames, counts.extrapolated, counts.not_converged, counts.model_misfit, counts.out_of_range, lost,
+            tx_drops)
 
 
 # --- many sessions ------------------------------------------------------------------------
@@ -545,8 +510,6 @@ def process_sessions(
 
 def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
              overwrite, pressure_pa, estimate, recursive, progress) -> BatchReport:
-    from tqdm import tqdm
-
     from bendsense.calibration import Calibration
     from bendsense.config import Config, load_config
 
@@ -560,7 +523,28 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
     if not sessions:
         raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, paths))}")
     names = session_names(sessions)
+    rows, todo = _plan(sessions, names, out_dir, overwrite)
+    options = dict(
+        config=config,
+        calibration=calibration,
+        constraint=constraint,
+        method=method,
+        objective=objective,
+        pressure_pa=pressure_pa,
+        estimate=estimate,
+        overwrite=overwrite,
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    output.add_to_manifest(out_dir, [], writer="bendsense process")
+    tasks = [(i, sessions[i], names[i]) for i in todo]
+    description = _run_tasks(tasks, rows, out_dir, options, executor=executor, workers=workers, progress=progress)
+    return BatchReport(
+        sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start, workers=description
+    )
 
+
+def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
+    """Rows of the sessions skipped or refused before any work, and the indices of those to process."""
     rows: list[SessionOutcome | None] = [None] * len(sessions)
     todo = []
     for i, (path, name) in enumerate(zip(sessions, names, strict=True)):
@@ -583,19 +567,14 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
             todo.append(i)
         else:
             todo.append(i)
-    options = dict(
-        config=config,
-        calibration=calibration,
-        constraint=constraint,
-        method=method,
-        objective=objective,
-        pressure_pa=pressure_pa,
-        estimate=estimate,
-        overwrite=overwrite,
-    )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    output.add_to_manifest(out_dir, [], writer="bendsense process")
-    bar = tqdm(total=len(todo), unit="session", desc="process", disable=not progress or not todo, leave=False)
+    return rows, todo
+
+
+def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, workers, progress) -> str:
+    """Process the sessions of ``tasks`` ((row index, path, name)) into ``rows``; a description of the workers."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(tasks), unit="session", desc="process", disable=not progress or not tasks, leave=False)
 
     def finish(i, row):
         rows[i] = row
@@ -611,35 +590,31 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
             import numba
 
             description = f"in-process, {numba.get_num_threads()} numba threads"
-            for i in todo:
-                finish(i, process_session(sessions[i], out_dir / names[i], name=names[i], **options))
+            for i, path, name in tasks:
+                finish(i, process_session(path, out_dir / name, name=name, **options))
         else:
-            if executor is None and todo:
-                own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(todo)))
+            if executor is None and tasks:
+                own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(tasks)))
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description.replace(" workers)", " workers, 1 numba thread each)")
-            futures = {
-                executor.submit(process_session, sessions[i], out_dir / names[i], name=names[i], **options): i
-                for i in todo
-            }
+            futures = {executor.submit(process_session, path, out_dir / name, name=name, **options): (i, path, name)
+                       for i, path, name in tasks}
             for future in cf.as_completed(futures):
-                i = futures[future]
+                i, path, name = futures[future]
                 try:
                     row = future.result()
                 except Exception as err:  # noqa: BLE001 - a worker died or the task could not be sent
                     row = SessionOutcome(
-                        name=names[i],
-                        source=str(sessions[i]),
+                        name=name,
+                        source=str(path),
                         status="failed",
                         reason=f"worker error: {type(err).__name__}: {err}",
-                        out_dir=str(out_dir / names[i]),
+                        out_dir=str(out_dir / name),
                     )
                 finish(i, row)
     finally:
         bar.close()
         if own is not None:
             own.shutdown(cancel_futures=True)
-    return BatchReport(
-        sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start, workers=description
-    )
+    return description

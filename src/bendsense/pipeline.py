@@ -1,13 +1,23 @@
-"""Every frame as it arrives: shapes and warm-started force estimates per block of frames.
+"""The processing pipeline: signals and pressure → shapes → tip forces, for a session or live.
 
-:class:`LiveProcessor` is the core of ``bendsense record --estimate``, ``live`` and the
-``--lsl`` streams. It turns a block of frames (raw signals and pressure) into their
-shapes (PCC, paper eq. 1–7, one batched call) and tip forces (eq. 18 and 21, one batched
-:func:`~bendsense.estimation.estimate_force` call), warm-started from the last good
-estimate of the previous block, and returns a :class:`LiveBlock` whose
-:meth:`~LiveBlock.columns` are those of ``results.csv``
-(:class:`~bendsense.results.Results`). A single frame is a block of one; there is no
-second, one-frame code path.
+Two entry points share the same option fallbacks and checks:
+
+- :func:`process` runs a whole :class:`~bendsense.session.Session` at once: it checks the
+  session against the calibration and the config, reconstructs the shapes (PCC, paper
+  eq. 1–7, one batched call) and estimates the tip forces (eq. 18 and 21, one batched
+  :func:`~bendsense.estimation.estimate_force` call), and returns :class:`Processed`,
+  the :class:`~bendsense.results.Results` of ``results.csv`` with the objects they came
+  from. It is the chain of ``bendsense load ... reconstruct estimate``, of every session
+  of ``bendsense process`` (:mod:`bendsense.batch`) and of the demo.
+- :class:`LiveProcessor` is the core of ``bendsense record --estimate``, ``live`` and the
+  ``--lsl`` streams. It turns a block of frames (raw signals and pressure) into their
+  shapes and tip forces, warm-started from the last good estimate of the previous block,
+  and returns a :class:`LiveBlock` whose :meth:`~LiveBlock.columns` are those of
+  ``results.csv``. A single frame is a block of one; there is no second, one-frame code
+  path.
+
+Both take the constraint, method and objective given, else the config's
+(:func:`estimation_options`).
 
 The block is what keeps up with fast boards: a warm-started batch costs a fraction of a
 millisecond per frame (``docs/performance.md``), so a receiver that processes what
@@ -25,9 +35,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.choices import OBJECTIVES
-from bendsense.errors import ArgumentError, ConfigError
+from bendsense.errors import ArgumentError, ConfigError, SessionError
+from bendsense.results import Results
 
-__all__ = ["LiveBlock", "LiveFrame", "LiveProcessor", "LIVE_MAX_ITER", "NO_PRESSURE_STATUS"]
+__all__ = [
+    "FrameCounts",
+    "LiveBlock",
+    "LiveFrame",
+    "LiveProcessor",
+    "LIVE_MAX_ITER",
+    "NO_PRESSURE_STATUS",
+    "Processed",
+    "estimation_options",
+    "process",
+]
 
 #: Iteration limit of a live force estimate. A warm-started frame converges in a few
 #: iterations; one that cannot (an unconstrained axial force on the straight actuator
@@ -35,6 +56,214 @@ __all__ = ["LiveBlock", "LiveFrame", "LiveProcessor", "LIVE_MAX_ITER", "NO_PRESS
 LIVE_MAX_ITER = 20
 #: ``status`` of a frame that has no pressure reading (and no fallback pressure).
 NO_PRESSURE_STATUS = "no pressure"
+
+
+def estimation_options(config, constraint=None, method=None, objective=None) -> tuple[str, str, str]:
+    """The constraint, method and objective of a force estimate: those given, else the config's.
+
+    Parameters
+    ----------
+    config : Config
+        Its ``estimation`` section gives the defaults.
+    constraint, method, objective : str, optional
+        Force constraint (:data:`bendsense.choices.CONSTRAINTS`), estimator
+        (:data:`~bendsense.choices.METHODS`) and what the fit compares
+        (:data:`~bendsense.choices.OBJECTIVES`); None: the config's. The paper's method
+        fits the positions (paper eq. 18), so its default objective is ``positions``.
+
+    Returns
+    -------
+    tuple of str
+        ``(constraint, method, objective)``.
+
+    Raises
+    ------
+    ArgumentError
+        For an objective that is not one of :data:`~bendsense.choices.OBJECTIVES`.
+    """
+    est = config.estimation
+    constraint = est.constraint if constraint is None else constraint
+    method = est.method if method is None else method
+    if objective is None:
+        objective = "positions" if method == "paper" else est.objective
+    if objective not in OBJECTIVES:
+        raise ArgumentError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    return constraint, method, objective
+
+
+# --------------------------------------------------------------------------- a whole session
+
+
+@dataclass(frozen=True)
+class FrameCounts:
+    """How many frames of a processed session are flagged, by reason.
+
+    Attributes
+    ----------
+    frames : int
+        Frames processed.
+    extrapolated : int
+        Frames whose signals lay outside the calibrated range (whatever their status).
+    out_of_range : int
+        Frames whose pressure lay outside ``actuator.pressure_range_pa`` (no force).
+    not_converged : int
+        Frames whose force estimate failed, other than those out of range or ``model_misfit``.
+    model_misfit : int
+        Frames whose model shape stays far from the measured one (status ``model_misfit``).
+    """
+
+    frames: int
+    extrapolated: int = 0
+    out_of_range: int = 0
+    not_converged: int = 0
+    model_misfit: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class Processed(Results):
+    """The results of :func:`process`: the columns of ``results.csv``, and what they were made from.
+
+    Attributes
+    ----------
+    columns, s_m, positions_m, extra_names
+        Those of :class:`~bendsense.results.Results` (``results.csv`` and ``shape.npz``).
+    session : Session
+        The session processed (with the constant pressure filled in, if one was given).
+    shape : Shape
+        Reconstructed shapes, batch axis over the session's frames.
+    estimate : ForceEstimate or None
+        Tip forces of the same frames; None when not estimated.
+    config : Config
+        The config used.
+    reconstruct_s, estimate_s : float
+        Wall time of the reconstruction and of the force estimate (0 when not done here) [s].
+    """
+
+    session: object = None
+    shape: object = None
+    estimate: object = None
+    config: object = dataclasses.field(default=None, repr=False)
+    reconstruct_s: float = 0.0
+    estimate_s: float = 0.0
+
+    def counts(self) -> FrameCounts:
+        """Frames flagged ``extrapolated``, pressure out of range, not converged and ``model_misfit``."""
+        from bendsense.plausibility import pressure_outside
+        from bendsense.results import MODEL_MISFIT
+
+        n = len(self.session)
+        extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(self.shape.extrapolated), (n,))))
+        if self.estimate is None:
+            return FrameCounts(frames=n, extrapolated=extrapolated)
+        outside = pressure_outside(self.session.pressure_pa, self.config)
+        failed = ~np.asarray(self.estimate.success, dtype=bool) & ~outside
+        misfit = failed & np.char.startswith(np.broadcast_to(np.asarray(self.estimate.message, dtype=str), (n,)),
+                                             MODEL_MISFIT)
+        return FrameCounts(frames=n, extrapolated=extrapolated, out_of_range=int(outside.sum()),
+                           not_converged=int(np.count_nonzero(failed & ~misfit)), model_misfit=int(misfit.sum()))
+
+
+def _source(session) -> str:
+    return session.source or "the session"
+
+
+def process(session, config=None, calibration=None, *, constraint=None, objective=None, method=None,
+            pressure_pa=None, estimate: bool = True, points: int | None = None, shape=None,
+            push_only: bool | None = None, tip_angle_source: str | None = None, calibration_source: str = "",
+            **options) -> Processed:
+    """Reconstruct the shapes and estimate the tip forces of every frame of a session.
+
+    Parameters
+    ----------
+    session : Session
+        Signals and pressure of the frames (:func:`bendsense.read_session`).
+    config : Config, optional
+        Sensor, actuator and estimation settings; default the paper's prototype.
+    calibration : Calibration
+        Signal → shift calibration (paper eq. 1–2); required.
+    constraint, objective, method : str, optional
+        Force constraint, what the fit compares and the estimator; None: the config's
+        (:func:`estimation_options`).
+    pressure_pa : float, optional
+        Pressure for frames without a reading [Pa].
+    estimate : bool
+        Estimate the tip forces (False: shapes only).
+    points : int, optional
+        Points of each shape along the sensor (default that of
+        :func:`bendsense.pcc.reconstruct`).
+    shape : Shape, optional
+        The shapes of these frames, reconstructed earlier (the ``reconstruct`` step of a
+        command line chain, or another estimate of the same session); None: reconstructed
+        here.
+    push_only : bool, optional
+        Contact forces only push (default ``config.estimation.push_only``).
+    tip_angle_source : str, optional
+        Tip angle of the ``normal`` and ``follower`` constraints (default the config's).
+    calibration_source : str
+        Where the calibration came from (its file), named in messages.
+    **options
+        Further options of :func:`bendsense.estimation.estimate_force` (``max_iter``, ...).
+
+    Returns
+    -------
+    Processed
+        The columns of ``results.csv`` (:class:`~bendsense.results.Results`), with the
+        session, the shapes and the estimate. Frames whose pressure lies outside
+        ``actuator.pressure_range_pa`` have no force (status ``pressure_out_of_range``).
+
+    Raises
+    ------
+    SessionError
+        If the session has no frames, its channels do not match the calibration and the
+        sensor, or (with ``estimate``) frames have no pressure and none is given.
+    ArgumentError
+        For a bad option (the message names it).
+    """
+    from bendsense.calibration import Calibration
+    from bendsense.pcc import reconstruct
+    from bendsense.plausibility import check_channels
+
+    if config is None:
+        from bendsense.config import load_config
+
+        config = load_config()
+    if not isinstance(calibration, Calibration):
+        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
+                            f"{type(calibration).__name__}")
+    if len(session) == 0:
+        raise SessionError(f"{_source(session)}: no frames")
+    if pressure_pa is not None:
+        session = session.with_pressure(pressure_pa)
+    check_channels(session, calibration, config.sensor, calibration_source=calibration_source)
+    if estimate and not session.has_pressure:
+        missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
+        raise SessionError(f"{_source(session)}: {missing} of {len(session)} frames have no pressure reading "
+                           "(give pressure_pa, or --pressure-kpa on the command line)")
+    reconstruct_s = 0.0
+    if shape is None:
+        s_m = None if points is None else np.linspace(0.0, config.sensor.length_m, int(points))
+        t0 = time.perf_counter()
+        shape = reconstruct(session.signals, calibration, config.sensor, s_m=s_m)
+        reconstruct_s = time.perf_counter() - t0
+    elif np.shape(shape.tip_angle_rad)[:1] != (len(session),):
+        raise ArgumentError(f"shape: expected the shapes of the session's {len(session)} frames, got batch shape "
+                            f"{np.shape(shape.tip_angle_rad)}")
+    est, estimate_s = None, 0.0
+    if estimate:
+        from bendsense.estimation import estimate_force
+
+        constraint, method, objective = estimation_options(config, constraint, method, objective)
+        t0 = time.perf_counter()
+        est = estimate_force(shape, session.pressure_pa, config, constraint=constraint, method=method,
+                             objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
+                             calibration=calibration, **options)  # its noise model gives std_n
+        estimate_s = time.perf_counter() - t0
+    results = Results.from_state(session, shape, est)
+    return Processed(**{f.name: getattr(results, f.name) for f in dataclasses.fields(Results)}, session=session,
+                     shape=shape, estimate=est, config=config, reconstruct_s=reconstruct_s, estimate_s=estimate_s)
+
+
+# --------------------------------------------------------------------------- as frames arrive
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,13 +519,7 @@ class LiveProcessor:
                 f"got {calibration.n_channels}"
             )
         self.calibration = calibration
-        self.constraint = self.config.estimation.constraint if constraint is None else constraint
-        self.method = self.config.estimation.method if method is None else method
-        if objective is None:  # the paper's method fits the positions (paper eq. 18)
-            objective = "positions" if self.method == "paper" else self.config.estimation.objective
-        if objective not in OBJECTIVES:
-            raise ArgumentError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
-        self.objective = objective
+        self.constraint, self.method, self.objective = estimation_options(self.config, constraint, method, objective)
         self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
         self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
         self.estimate = bool(estimate)

@@ -116,10 +116,10 @@ def live(
         matplotlib.use("Agg")
         if seconds is None:
             seconds = 3.0
+    from bendsense.apps.live_view import LiveView, run_live
     from bendsense.cli.device import make_outlets, make_processor, wait_for_consumer
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
-    from bendsense.device.live import LiveView, run_live
 
     # the library's errors (bad options included) become one line in PipelineGroup
     if lsl:  # a missing extra is a one-line error before anything is opened
@@ -162,7 +162,7 @@ def _window(processor, scale_m_per_n):
     import matplotlib
     import matplotlib.pyplot as plt
 
-    from bendsense.device.live import LiveView
+    from bendsense.apps.live_view import LiveView
 
     backend = matplotlib.get_backend().lower()
     if backend in ("agg", "pdf", "ps", "svg", "cairo", "template") or backend.startswith("module://matplotlib_inline"):
@@ -210,7 +210,7 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
     if rate_hz > 65535:
         raise click.BadParameter(f"expected at most 65535, got {rate_hz:g}", param_hint="--rate")
     from bendsense import output
-    from bendsense.device.demo import run_demo
+    from bendsense.apps.demo import run_demo
 
     target = output.directory(out_dir, overwrite=overwrite)
 

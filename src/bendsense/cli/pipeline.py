@@ -145,22 +145,17 @@ def reconstruct(points):
     """Reconstruct curvatures and the continuous shape (PCC) of every frame."""
 
     def step(state):
-        import numpy as np
-
-        from bendsense.pcc import reconstruct as reconstruct_shape
-        from bendsense.plausibility import check_channels
+        from bendsense.pipeline import process
 
         session = _require(state, "session", "reconstruct", "'load SESSION'")
         calibration = _require(state, "calibration", "reconstruct", "'load ... --calibration CAL.yaml'")
-        sensor = state["config"].sensor
-        check_channels(session, calibration, sensor, calibration_source=str(state.get("calibration_path") or ""))
-        s_m = np.linspace(0.0, sensor.length_m, points)
-        shape = reconstruct_shape(session.signals, calibration, sensor, s_m=s_m)
-        n_extra = int(np.count_nonzero(shape.extrapolated))
+        processed = process(session, state["config"], calibration, estimate=False, points=points,
+                            calibration_source=str(state.get("calibration_path") or ""))
+        n_extra = processed.counts().extrapolated
         if n_extra:
             log.warning("%d of %d frames outside the calibrated signal range (status 'extrapolated')",
                         n_extra, len(session))
-        state["shape"] = shape
+        state["shape"] = processed.shape
         return state
 
     return step
@@ -177,42 +172,29 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
     """Estimate the tip force of every frame from its shape and pressure."""
 
     def step(state):
-        import numpy as np
-
-        from bendsense.estimation import estimate_force
+        from bendsense.pipeline import process
+        from bendsense.plausibility import OUT_OF_RANGE
 
         shape = _require(state, "shape", "estimate", "'reconstruct'")
         session = state["session"]
         config = state["config"]
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
-        est = estimate_force(
-            shape,
-            session.pressure_pa,
-            config,
-            constraint=constraint or config.estimation.constraint,
-            method=method or config.estimation.method,
-            objective=objective,
-            push_only=push_only,
-            tip_angle_source=tip_angle_source,
-            calibration=state.get("calibration"),
-        )
-        from bendsense.plausibility import OUT_OF_RANGE, pressure_outside
-
-        outside = pressure_outside(session.pressure_pa, config)
-        if outside.any():
+        processed = process(session, config, state["calibration"], shape=shape, constraint=constraint, method=method,
+                            objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
+                            calibration_source=str(state.get("calibration_path") or ""))
+        counts = processed.counts()
+        if counts.out_of_range:
             lo, hi = config.actuator.pressure_range_pa
             log.warning("%d of %d frames have a pressure outside actuator.pressure_range_pa %g..%g kPa: no force "
-                        "(status '%s')", int(outside.sum()), len(session), lo / 1e3, hi / 1e3, OUT_OF_RANGE)
-        failed = ~np.asarray(est.success) & ~outside
-        misfit = failed & np.char.startswith(np.asarray(est.message, dtype=str), "model_misfit")
-        if (failed & ~misfit).any():
-            log.warning("%d of %d frames did not converge (status 'not converged')", int((failed & ~misfit).sum()),
+                        "(status '%s')", counts.out_of_range, len(session), lo / 1e3, hi / 1e3, OUT_OF_RANGE)
+        if counts.not_converged:
+            log.warning("%d of %d frames did not converge (status 'not converged')", counts.not_converged,
                         len(session))
-        if misfit.any():
+        if counts.model_misfit:
             log.warning("%d of %d frames: the model does not explain the shape (status 'model_misfit', force kept)",
-                        int(misfit.sum()), len(session))
-        state["estimate"] = est
+                        counts.model_misfit, len(session))
+        state["estimate"] = processed.estimate
         return state
 
     def precheck(state):

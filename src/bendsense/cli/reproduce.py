@@ -36,7 +36,7 @@ def reproduce(out_dir, seed, quick, overwrite):
     """
 
     def step(state):
-        from bendsense.sim.reproduce import reproduce as run
+        from bendsense.apps.evaluation import reproduce as run
 
         command = f"bendsense reproduce -o {out_dir.as_posix()} --seed {seed}" + (" --quick" if quick else "")
         result = run(

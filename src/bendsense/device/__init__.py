@@ -1,9 +1,12 @@
-"""The sensor board: serial driver, simulated board, recorder and port listing.
+"""The sensor board: serial driver, simulated board, replay, recorder and port listing.
 
 Layers, from the wire up: :mod:`bendsense.frames` (protocol, pure) ←
 :mod:`~bendsense.device.driver` (serial port, reader thread) ←
-:mod:`~bendsense.device.recorder` (session directory on disk). The simulated board
-(:mod:`~bendsense.device.simdevice`) needs a POSIX pseudo-terminal.
+:mod:`~bendsense.device.recorder` (session directory on disk), with
+:mod:`~bendsense.device.estimator` estimating a recording's frames as they arrive. The
+simulated board (:mod:`~bendsense.device.simdevice`) and the replay of a recording
+(:mod:`~bendsense.device.replay`) need a POSIX pseudo-terminal. Applications that use the
+board (the live window, the demo) are in :mod:`bendsense.apps`.
 """
 
 from importlib import import_module
