@@ -21,6 +21,7 @@ import logging
 import numpy as np
 
 from bendsense.errors import ArgumentError, SessionError
+from bendsense.validation import float_array
 
 __all__ = [
     "OUT_OF_RANGE",
@@ -39,8 +40,6 @@ OUT_OF_RANGE = "pressure_out_of_range"
 
 def pressure_outside(pressure_pa, config) -> np.ndarray:
     """True for each finite pressure outside ``config.actuator.pressure_range_pa`` [Pa]."""
-    from bendsense.validation import float_array
-
     lo, hi = config.actuator.pressure_range_pa
     if isinstance(pressure_pa, float):  # one frame (the live path)
         return np.bool_(lo > pressure_pa or pressure_pa > hi)
@@ -62,11 +61,10 @@ def pressure_range_step(estimate):
     ``"pressure_out_of_range: ..."``. With ``strict=True`` they raise
     :class:`~bendsense.errors.ArgumentError` instead.
     """
+    from bendsense.config import Config, load_config
 
     @functools.wraps(estimate)
     def estimate_force(shape, pressure_pa, config=None, *args, **options):
-        from bendsense.config import Config, load_config
-
         if config is None:
             config = load_config()
         elif not isinstance(config, Config):

@@ -81,6 +81,7 @@ MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
 _N_NODES = _beam.DEFAULT_NODES
 _OPS = _beam._operators(_N_NODES).kernel  # the beam solver's operators (read-only)
+_NONE = np.empty(0)  # a per-frame input the frames do not have
 
 
 def _c(a, dtype=float):
@@ -205,7 +206,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes())
     pb, err, uncertainty = _problem(config, calibration, ref, options, noise_std)
     P = np.asarray(pressure_pa, dtype=float)
-    if not np.isfinite(P).all():
+    if not (math.isfinite(P.item()) if P.size == 1 else np.isfinite(P).all()):
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
     batch = _batch(ref.batch_shape, P.shape)
     B = math.prod(batch)
@@ -214,8 +215,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     start, use_guess, chain = _starts(initial, initial_force_n, B, batch, warm_start)
     n = _N_NODES
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
-           np.empty(B), np.empty(B), np.empty(B), np.full((B, 2), np.nan), np.empty((B, n)), np.empty((B, 2)),
+           np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2)), np.empty((B, n)), np.empty((B, 2)),
            np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)))
+    out[7][...] = np.nan  # the guesses: the paper's baseline makes none
     force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
@@ -284,12 +286,12 @@ def _flat(a, batch, B, tail=(), dtype=float):
 
 def _frames(ref, P, batch, B, config) -> Frames:
     """The per-frame inputs of the kernels: the shape's and the pressure's (K0, EI, the free tip angle)."""
-    Pf = _flat(P, batch, B)
+    Pf = P.reshape(B) if P.size == B else _flat(P, batch, B)
     model = _models(config)
     # free-motion tip angle
     theta = np.array([float(model.bending_angle_rad(float(Pf[0])))]) if B == 1 else _c(model.bending_angle_rad(Pf))
     ei = _c(config.stiffness.ei_nm2(Pf))
-    if not ei.min() > 0:
+    if not (ei.item() if B == 1 else ei.min()) > 0:
         raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
                             f"at {float(Pf[np.argmin(ei)])!r} Pa")
     M, n = ref.s.size, _N_NODES
@@ -298,8 +300,7 @@ def _frames(ref, P, batch, B, config) -> Frames:
     else:
         kappa = np.empty((0, 1))
     if ref.p0 is None:
-        p0, phi_end, kappa_s, state, tip = np.empty((0, M, 2)), np.empty(0), np.empty((0, M)), np.empty((0, n)), \
-            np.empty(0)
+        p0, phi_end, kappa_s, state, tip = np.empty((0, M, 2)), _NONE, np.empty((0, M)), np.empty((0, n)), _NONE
     else:
         p0, phi_end = _flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B)
         kappa_s, state = _flat(ref.kappa_s, batch, B, (M,)), _flat(ref.state, batch, B, (n,))
