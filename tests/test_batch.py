@@ -282,7 +282,7 @@ def test_extrapolated_frames_are_counted(tmp_path):
     cal = linear_calibration()
     row = process_session(tmp_path / "x.csv", tmp_path / "o", config=CONFIG, calibration=cal, estimate=ESTIMATE)
     assert row.status == "ok" and row.extrapolated == 1 and "1 of 5 frames extrapolated" in row.reason
-    assert list(read_results(tmp_path / "o")["status"])[2] in ("extrapolated", "not converged", "model_misfit")
+    assert list(read_results(tmp_path / "o")["status"])[2] in ("extrapolated", "not_converged", "model_misfit")
 
 
 def test_no_sessions_is_an_error(tmp_path):

@@ -99,4 +99,4 @@ def test_a_calibration_off_by_a_factor_gives_no_ok_frame(workdir, tmp_path, fact
                                     "reconstruct", "estimate", "--constraint", "vertical", "save", str(tmp_path / "o")])
     assert res.exit_code == 0, res.output
     status = set(read_results(tmp_path / "o")["status"])
-    assert "ok" not in status and status <= {"model_misfit", "implausible shape", "not converged"}, status
+    assert "ok" not in status and status <= {"model_misfit", "implausible_shape", "not_converged"}, status

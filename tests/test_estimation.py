@@ -7,6 +7,7 @@ built from the shifts ``S_i = d φ(L_i)`` of such a beam shape.
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarnin
 from bendsense.estimation import ForceEstimate, constraint_basis, estimate_force, quadrature
 from bendsense.estimation.kernels import SIGMA_STEP
 from bendsense.pcc import reconstruct, shifts_to_curvatures
+from bendsense.results import frame_status
 from bendsense.sim.sensor import shifts_from_shape
 
 CFG = bendsense.load_config()
@@ -304,6 +306,9 @@ def test_axial_load_on_a_straight_actuator_is_not_identifiable():
     assert est.success
     assert np.isfinite(est.std_n[0]) and est.std_n[1] == np.inf
     np.testing.assert_allclose(est.force_n, 0.0, atol=1e-12)
+    # results.csv does not call it ok (DESIGN section 3): its axial force is no measurement
+    shape = SimpleNamespace(tip_angle_rad=np.zeros(1), curvature_per_m=straight[None], extrapolated=np.zeros(1, bool))
+    assert list(frame_status(shape, est)) == ["not_identifiable"]
     # nearly straight (a small side load): the axial component is determined, but poorly
     kappa = pcc_curvatures(beam_shape(0.0, (0.01, 0.0)))
     est = estimate_force(kappa, 0.0, CFG, noise_std=1e-6)

@@ -66,7 +66,7 @@ def test_mcap_wrench_per_frame_equals_results_csv(workdir):
     np.testing.assert_array_equal([m.ros_msg.vector.y for m in std], results["fy_std_n"])
     status = by_topic["/bendsense/status"]
     assert [m.ros_msg.status[0].message for m in status] == list(results["status"])
-    levels = {"ok": 0, "extrapolated": 1, "model_misfit": 1, "not converged": 2}
+    levels = {"ok": 0, "extrapolated": 1, "model_misfit": 1, "not_identifiable": 1, "not_converged": 2}
     assert [m.ros_msg.status[0].level for m in status] == [levels[s] for s in results["status"]]
 
     # the shape: one pose per arc-length sample, at the positions of shape.npz

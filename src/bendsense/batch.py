@@ -54,13 +54,17 @@ class SessionOutcome:
         Time spent on the session in its worker, reading to writing [s].
     reason : str
         Why the session failed or was skipped; for ``ok`` sessions a note on frames
-        flagged ``extrapolated`` or ``not converged`` (empty if none).
+        flagged ``extrapolated``, ``not_converged``, ``model_misfit``, ``not_identifiable`` or
+        out of range (empty if none).
     extrapolated : int
         Frames whose signals lay outside the calibrated range.
     not_converged : int
         Frames whose force estimate did not converge.
     model_misfit : int
         Frames whose model shape stays far from the measured one (status ``model_misfit``).
+    not_identifiable : int
+        Frames whose shape does not determine the load along one direction (status
+        ``not_identifiable``).
     out_of_range : int
         Frames whose pressure lay outside ``actuator.pressure_range_pa`` (no force).
     frames_lost : int
@@ -80,6 +84,7 @@ class SessionOutcome:
     extrapolated: int = 0
     not_converged: int = 0
     model_misfit: int = 0
+    not_identifiable: int = 0
     out_of_range: int = 0
     frames_lost: int = 0
     tx_drops: int = 0
@@ -342,7 +347,7 @@ def process_session(
         # from a worker process would only clutter the console
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            frames, extrapolated, not_converged, misfit, out_of_range, lost, tx_drops = _run(
+            counts, lost, tx_drops = _run(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
@@ -350,15 +355,11 @@ def process_session(
     except Exception as err:  # noqa: BLE001 - isolate any failure to its session
         reason = f"{type(err).__name__}: {err}"
         return SessionOutcome(status="failed", reason=reason, seconds=time.perf_counter() - start, **row)
-    notes = []
-    if extrapolated:
-        notes.append(f"{extrapolated} of {frames} frames extrapolated")
-    if not_converged:
-        notes.append(f"{not_converged} of {frames} frames not converged")
-    if misfit:
-        notes.append(f"{misfit} of {frames} frames model_misfit")
-    if out_of_range:
-        notes.append(f"{out_of_range} of {frames} frames pressure out of range")
+    frames = counts.frames
+    notes = [f"{n} of {frames} frames {what}" for n, what in (
+        (counts.extrapolated, "extrapolated"), (counts.not_converged, "not converged"),
+        (counts.model_misfit, "model_misfit"), (counts.not_identifiable, "not identifiable"),
+        (counts.out_of_range, "pressure out of range")) if n]
     if lost or tx_drops:
         notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")
     return SessionOutcome(
@@ -366,10 +367,11 @@ def process_session(
         frames=frames,
         seconds=time.perf_counter() - start,
         reason=", ".join(notes),
-        extrapolated=extrapolated,
-        not_converged=not_converged,
-        model_misfit=misfit,
-        out_of_range=out_of_range,
+        extrapolated=counts.extrapolated,
+        not_converged=counts.not_converged,
+        model_misfit=counts.model_misfit,
+        not_identifiable=counts.not_identifiable,
+        out_of_range=counts.out_of_range,
         frames_lost=lost,
         tx_drops=tx_drops,
         **row,
@@ -386,10 +388,7 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
                         objective=objective, pressure_pa=pressure_pa, estimate=estimate)
     session = processed.session
     write_results(out_dir, session, processed.shape, processed.estimate, overwrite=overwrite, inputs=[path])
-    counts = processed.counts()
-    lost, tx_drops = int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
-    return (counts.frames, counts.extrapolated, counts.not_converged, counts.model_misfit, counts.out_of_range, lost,
-            tx_drops)
+    return processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
 
 
 # --- many sessions ------------------------------------------------------------------------

@@ -36,7 +36,7 @@ import numpy as np
 
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, SessionError
-from bendsense.results import Results
+from bendsense.results import NOT_IDENTIFIABLE, Results
 
 __all__ = [
     "FrameCounts",
@@ -55,7 +55,7 @@ __all__ = [
 #: does not change its shape) must not stall the stream for 100 beam solves.
 LIVE_MAX_ITER = 20
 #: ``status`` of a frame that has no pressure reading (and no fallback pressure).
-NO_PRESSURE_STATUS = "no pressure"
+NO_PRESSURE_STATUS = "no_pressure"
 
 
 def estimation_options(config, constraint=None, method=None, objective=None) -> tuple[str, str, str]:
@@ -110,6 +110,9 @@ class FrameCounts:
         Frames whose force estimate failed, other than those out of range or ``model_misfit``.
     model_misfit : int
         Frames whose model shape stays far from the measured one (status ``model_misfit``).
+    not_identifiable : int
+        Frames whose shape does not determine the load along one direction (status
+        ``not_identifiable``; e.g. an axial load on a nearly straight actuator).
     """
 
     frames: int
@@ -117,6 +120,7 @@ class FrameCounts:
     out_of_range: int = 0
     not_converged: int = 0
     model_misfit: int = 0
+    not_identifiable: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,7 +151,7 @@ class Processed(Results):
     estimate_s: float = 0.0
 
     def counts(self) -> FrameCounts:
-        """Frames flagged ``extrapolated``, pressure out of range, not converged and ``model_misfit``."""
+        """Frames flagged: extrapolated, pressure out of range, not converged, model_misfit, not identifiable."""
         from bendsense.plausibility import pressure_outside
         from bendsense.results import MODEL_MISFIT
 
@@ -160,7 +164,8 @@ class Processed(Results):
         misfit = failed & np.char.startswith(np.broadcast_to(np.asarray(self.estimate.message, dtype=str), (n,)),
                                              MODEL_MISFIT)
         return FrameCounts(frames=n, extrapolated=extrapolated, out_of_range=int(outside.sum()),
-                           not_converged=int(np.count_nonzero(failed & ~misfit)), model_misfit=int(misfit.sum()))
+                           not_converged=int(np.count_nonzero(failed & ~misfit)), model_misfit=int(misfit.sum()),
+                           not_identifiable=int(np.count_nonzero(self.columns["status"] == NOT_IDENTIFIABLE)))
 
 
 def _source(session) -> str:
@@ -504,7 +509,7 @@ class LiveProcessor:
     estimated : int
         Frames whose force was estimated (those with a pressure).
     status_counts : dict of str to int
-        Frames per status (``ok``, ``extrapolated``, ``not converged``, ...).
+        Frames per status (``ok``, ``extrapolated``, ``not_converged``, ...).
     """
 
     def __init__(self, calibration, config=None, *, constraint=None, method=None, objective=None, pressure_pa=None,

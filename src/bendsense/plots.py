@@ -468,11 +468,15 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
 
 
 def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None):
-    """Fx, Fy (frames, 2) [N] against ``t`` with their ±2σ bands; frames not ``ok`` ticked; pressure on the right."""
+    """Fx, Fy (frames, 2) [N] against ``t`` with their ±2σ bands; frames not ``ok`` ticked; pressure on the right.
+
+    A component with an infinite σ (not identifiable: the shape does not determine it)
+    is left out, not drawn at the value where the fit stopped.
+    """
     ax.set_ylabel("tip force [N]")
     handles = []
     for i, (color, label) in enumerate((("C0", "F_x"), ("C3", "F_y"))):
-        f, band = force[:, i], 2.0 * std[:, i]
+        f, band = np.where(np.isinf(std[:, i]), np.nan, force[:, i]), 2.0 * std[:, i]
         (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label)
         fill = ax.fill_between(t, f - band, f + band, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
         handles.append((line, fill))

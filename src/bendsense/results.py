@@ -24,8 +24,15 @@ from bendsense.errors import SessionError
 from bendsense.plausibility import OUT_OF_RANGE
 from bendsense.session import _column_array, _format
 
+# the per-frame ``status`` of results.csv (DESIGN section 3): ``ok`` or a short reason
+OK = "ok"
+EXTRAPOLATED = "extrapolated"  # a signal outside the calibrated range
+NO_SHAPE = "no_shape"  # non-finite signals
+NOT_CONVERGED = "not_converged"  # the force estimate failed
+NOT_IDENTIFIABLE = "not_identifiable"  # the shape does not determine the load along one direction (σ inf)
 MODEL_MISFIT = "model_misfit"
-IMPLAUSIBLE = "implausible shape"  # a tip angle beyond a full turn
+NO_FORCE = "no_force"  # a NaN force is never ok
+IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
 
 __all__ = ["Results", "write_results", "read_results", "frame_status"]
 
@@ -98,27 +105,30 @@ class Results:
 def frame_status(shape, estimate=None) -> np.ndarray:
     """Per-frame status strings: ``ok`` or a short reason.
 
-    ``extrapolated`` (signals outside the calibrated range), ``no shape`` (non-finite
-    signals), ``not converged``, ``pressure_out_of_range``, ``model_misfit`` (the model
-    shape stays over 5 % of the length from the measured one), ``no force``, and
-    ``implausible shape`` (a tip angle beyond a full turn: a unit or calibration mistake).
+    ``extrapolated`` (signals outside the calibrated range), ``no_shape`` (non-finite
+    signals), ``not_converged``, ``not_identifiable`` (the shape does not determine the
+    load along one direction: σ is infinite there), ``pressure_out_of_range``,
+    ``model_misfit`` (the model shape stays over 5 % of the length from the measured one,
+    or a χ² beyond chance), ``no_force``, and ``implausible_shape`` (a tip angle beyond a
+    full turn: a unit or calibration mistake).
     """
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
-    status = np.full(n, "ok", dtype=object)
+    status = np.full(n, OK, dtype=object)
     extrapolated = np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))
-    status[extrapolated] = "extrapolated"
+    status[extrapolated] = EXTRAPOLATED
     # a shape from non-finite signals is never ok
     kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float).reshape(n, -1)
-    status[~np.isfinite(kappa).all(axis=1)] = "no shape"
+    status[~np.isfinite(kappa).all(axis=1)] = NO_SHAPE
     if estimate is not None:
         failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
-        status[failed] = "not converged"
+        status[failed] = NOT_CONVERGED
         message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
+        status[~failed & (status == OK) & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
         status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
         status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
         # a NaN force is never ok, whatever the solver said
         force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
-        status[(status == "ok") & ~np.isfinite(force).all(axis=1)] = "no force"
+        status[(status == OK) & ~np.isfinite(force).all(axis=1)] = NO_FORCE
     # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
     tip = np.broadcast_to(np.asarray(shape.tip_angle_rad, dtype=float), (n,))
     status[np.abs(tip) > 2.0 * np.pi] = IMPLAUSIBLE

@@ -189,11 +189,15 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
             log.warning("%d of %d frames have a pressure outside actuator.pressure_range_pa %g..%g kPa: no force "
                         "(status '%s')", counts.out_of_range, len(session), lo / 1e3, hi / 1e3, OUT_OF_RANGE)
         if counts.not_converged:
-            log.warning("%d of %d frames did not converge (status 'not converged')", counts.not_converged,
+            log.warning("%d of %d frames did not converge (status 'not_converged')", counts.not_converged,
                         len(session))
         if counts.model_misfit:
             log.warning("%d of %d frames: the model does not explain the shape (status 'model_misfit', force kept)",
                         counts.model_misfit, len(session))
+        if counts.not_identifiable:
+            log.warning("%d of %d frames: the shape does not determine the load along one direction (status "
+                        "'not_identifiable', σ inf along it; e.g. an axial load on a nearly straight actuator)",
+                        counts.not_identifiable, len(session))
         state["estimate"] = processed.estimate
         return state
 

@@ -98,7 +98,7 @@ SCHEMAS = {
         "std_msgs/Header header\nfloat64 fluid_pressure\nfloat64 variance\n", _HEADER, _TIME
     ),
 }
-_LEVEL = {"ok": 0, "extrapolated": 1, "model_misfit": 1, "not converged": 2}
+_LEVEL = {"ok": 0, "extrapolated": 1, "model_misfit": 1, "not_identifiable": 1, "not_converged": 2}
 
 
 def session_epoch_s(session) -> float:
