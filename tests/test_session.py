@@ -58,17 +58,18 @@ def test_write_read_round_trip_is_bit_exact(tmp_path_factory, signals, pressure)
 
 
 def test_failed_write_leaves_no_file(tmp_path, monkeypatch):
-    import bendsense.session as session_module
+    from bendsense.session import cells
 
     calls = []
+    column_cells = cells.column_cells
 
-    def failing_format(value):
-        calls.append(value)
-        if len(calls) > 5:
+    def failing_cells(values):  # the disk fills up after the header, while the columns are written
+        calls.append(values)
+        if len(calls) > 2:
             raise OSError("disk full")
-        return str(value)
+        return column_cells(values)
 
-    monkeypatch.setattr(session_module, "_format", failing_format)
+    monkeypatch.setattr(cells, "column_cells", failing_cells)
     target = tmp_path / "out.csv"
     target.write_text("# written by bendsense earlier\nprevious content")  # a file of bendsense's
     s = Session([0.0, 1.0, 2.0], [[1.0], [2.0], [3.0]], 0.0)

@@ -241,3 +241,14 @@ def test_pressures_in_kilopascals_are_refused_as_in_a_csv(tmp_path):
     with pytest.raises(SessionError, match=r"kpa/frames\.bin, field pressure_pa: every reading is below 1 kPa "
                                            r"\(largest 54\); looks like kilopascals"):
         read_session(tmp_path / "kpa")
+
+
+def test_sessiondir_still_imports_the_native_format():
+    # bendsense.sessiondir was the module of the native format before bendsense.session became a package
+    import bendsense.session.native as native
+    import bendsense.sessiondir as sessiondir
+
+    for name in sessiondir.__all__:
+        assert getattr(sessiondir, name) is getattr(native, name), name
+    assert sessiondir.NO_PRESSURE == 0x7FFFFFFF
+    assert sessiondir.STANDARD_FIELDS == ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")

@@ -198,7 +198,7 @@ class BatchReport:
 
 
 def _is_session_dir(path: Path) -> bool:
-    from bendsense.sessiondir import is_session_dir
+    from bendsense.session.native import is_session_dir
 
     return is_session_dir(path)
 

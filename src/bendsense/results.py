@@ -22,7 +22,7 @@ import numpy as np
 from bendsense._io import read_text
 from bendsense.errors import SessionError
 from bendsense.plausibility import OUT_OF_RANGE
-from bendsense.session import _column_array, _format
+from bendsense.session.cells import parse_column, write_columns
 
 # the per-frame ``status`` of results.csv (DESIGN section 3): ``ok`` or a short reason
 OK = "ok"
@@ -171,39 +171,11 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
     columns = results.columns
     with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
         with open(tmp / "results.csv", "w", encoding="utf-8", newline="") as fh:
-            writer = csv.writer(fh, lineterminator="\n")
-            writer.writerow(columns)
-            cells = [_cells(v) for v in columns.values()]
-            if any(c is None for c in cells):
-                for row in zip(*columns.values()):
-                    writer.writerow([_format(v) for v in row])
-            elif cells and len(cells[0]):
-                fh.write("\n".join(map(",".join, zip(*cells))))
-                fh.write("\n")
+            write_columns(fh, list(columns), list(columns.values()))
         # stored, not deflated: positions of noisy shapes deflate by ~10 % at ~35 ms per
         # 1,000 frames, the largest cost of writing; np.load reads either
         np.savez(tmp / "shape.npz", s_m=results.s_m, positions_m=results.positions_m)
     return out_dir
-
-
-_NEEDS_QUOTES = re.compile(r'[,"\r\n]')
-
-
-def _cells(values):
-    """The cells of one column as csv.writer writes them (:func:`bendsense.session._format`).
-
-    Floats by ``repr`` of the Python float, which round-trips exactly (``nan``, ``inf``
-    included); integers and booleans by ``str``. None for a column with a cell the csv
-    module would quote (the caller then writes row by row).
-    """
-    values = np.asarray(values)
-    kind = values.dtype.kind
-    if kind == "f":
-        return list(map(repr, values.tolist()))
-    if kind in "iub":
-        return list(map(str, values.tolist()))
-    cells = [_format(v) for v in values]
-    return None if any(_NEEDS_QUOTES.search(c) for c in cells) else cells
 
 
 def read_results(out_dir) -> Results:
@@ -217,7 +189,7 @@ def read_results(out_dir) -> Results:
         raise SessionError(f"{path}: empty (no header row)")
     header, body = rows[0], rows[1:]
     cells = list(zip(*body)) if body else [[] for _ in header]
-    columns = {h: _column_array(list(c)) for h, c in zip(header, cells)}
+    columns = {h: parse_column(list(c)) for h, c in zip(header, cells)}
     numeric = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n",
                "residual_m")
     for h in (*numeric, *(h for h in header if _KAPPA.match(h))):

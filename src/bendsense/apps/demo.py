@@ -230,7 +230,7 @@ def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo, progress
 
 def _frame_index(session_dir: Path, rate_hz: float) -> np.ndarray:
     """Scenario frame index k of every recorded frame, from the device clock, checked against seq."""
-    from bendsense.sessiondir import read_records
+    from bendsense.session.native import read_records
 
     records, _ = read_records(session_dir)
     k = np.rint(records["t_us"].astype(np.int64) * rate_hz / 1e6).astype(np.int64)
@@ -334,7 +334,7 @@ def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progres
     """The demo's steps, writing into ``work`` (swapped in as ``out`` at the end)."""
     from bendsense.pipeline import process
     from bendsense.results import write_results
-    from bendsense.sessiondir import read_session_dir
+    from bendsense.session.native import read_session_dir
 
     session_dir, results_dir, figure_path = work / "session", work / "results", work / "demo.png"
     cal, reused = _calibrate(work / "calibration", out / "calibration", config, seed, echo)

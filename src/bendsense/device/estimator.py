@@ -55,7 +55,7 @@ class ResultsAppender:
 
     def write(self, block) -> None:
         """Append the rows of ``block``."""
-        from bendsense.results import _cells
+        from bendsense.session.cells import column_cells
 
         columns = block.columns()
         names = list(columns)
@@ -67,7 +67,7 @@ class ResultsAppender:
             raise SessionError(f"{self.path}: a block with columns {names} after {self._header}")
         if self._fd is None:
             self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
-        cells = [_cells(v) for v in columns.values()]
+        cells = [column_cells(v) for v in columns.values()]
         text.extend(",".join(row) for row in zip(*cells))
         data = memoryview(("\n".join(text) + "\n").encode("utf-8"))
         while data:

@@ -1,4 +1,4 @@
-"""Record a device to a native session directory (:mod:`bendsense.sessiondir`), crash-safely.
+"""Record a device to a native session directory (:mod:`bendsense.session.native`), crash-safely.
 
 The recorder drains the driver's queue in batches, appends the batches to
 ``frames.bin`` (unbuffered, so a killed recorder loses nothing it had written;
@@ -19,7 +19,7 @@ import numpy as np
 
 from bendsense import output
 from bendsense.errors import DeviceError
-from bendsense.sessiondir import NO_PRESSURE, SessionWriter
+from bendsense.session.native import NO_PRESSURE, SessionWriter
 
 __all__ = ["Recorder", "RecorderStats"]
 

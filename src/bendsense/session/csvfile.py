@@ -1,10 +1,8 @@
-"""Sessions: a recording of sensor signals and pressure, frame by frame.
+"""The session CSV (DESIGN.md section 3): the interchange format, read and written.
 
-The interchange format is the session CSV of DESIGN.md section 3: a header row with
-``t_s``, an optional pressure column (``pressure_pa`` or ``pressure_kpa``) and the
-signal columns ``ch1..chN``; ``#`` lines before the header are metadata; any other
-column is kept and passed through. Native session directories written by the
-recorder are read by :func:`read_session` as well.
+A header row with ``t_s``, an optional pressure column (``pressure_pa`` or
+``pressure_kpa``) and the signal columns ``ch1..chN``; ``#`` lines before the header
+are metadata; any other column is kept and passed through.
 """
 
 from __future__ import annotations
@@ -14,7 +12,6 @@ import io
 import math
 import os
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,94 +19,14 @@ import numpy as np
 from bendsense._io import check_csv_header, read_text
 from bendsense.errors import SessionError
 from bendsense.plausibility import check_pressure_column, check_time_column
+from bendsense.session.base import Session
+from bendsense.session.cells import parse_column, write_columns
 from bendsense.validation import key as _name
 from bendsense.validation import short
 
-__all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
+__all__ = ["read_session_csv", "write_session_csv"]
 
 _CHANNEL = re.compile(r"ch([1-9][0-9]*)$")
-
-
-@dataclass(frozen=True, eq=False)
-class Session:
-    """Recorded frames of one session.
-
-    Parameters
-    ----------
-    t_s : ndarray, shape (frames,)
-        Time of each frame [s].
-    signals : ndarray, shape (frames, N)
-        Signal value of each receiver channel (ADC counts or volts, as recorded).
-    pressure_pa : ndarray, shape (frames,)
-        Actuation (gauge) pressure [Pa]; NaN where there is no reading.
-    seq : ndarray of int, shape (frames,), optional
-        Device sequence number, unwrapped, where known.
-    meta : dict
-        Metadata: the ``# key: value`` lines of a CSV, or ``meta.yaml`` of a native session.
-    extra : dict of str to ndarray
-        Further per-frame columns, kept in file order and passed through (e.g. the
-        ground truth ``fx_n``, ``fy_n`` of a simulated session).
-    source : str
-        Where the session was read from.
-    """
-
-    t_s: np.ndarray
-    signals: np.ndarray
-    pressure_pa: np.ndarray
-    seq: np.ndarray | None = None
-    meta: dict = field(default_factory=dict)
-    extra: dict = field(default_factory=dict)
-    source: str = ""
-
-    def __post_init__(self):
-        t = np.asarray(self.t_s, dtype=float)
-        sig = np.asarray(self.signals, dtype=float)
-        if t.ndim != 1:
-            raise SessionError(f"t_s: expected shape (frames,), got {t.shape}")
-        if sig.ndim != 2 or sig.shape[0] != t.size:
-            raise SessionError(f"signals: expected shape ({t.size}, N), got {sig.shape}")
-        p = np.broadcast_to(np.asarray(self.pressure_pa, dtype=float), t.shape).copy()
-        object.__setattr__(self, "t_s", t)
-        object.__setattr__(self, "signals", sig)
-        object.__setattr__(self, "pressure_pa", p)
-        if self.seq is not None:
-            seq = np.asarray(self.seq, dtype=np.int64)
-            if seq.shape != t.shape:
-                raise SessionError(f"seq: expected shape {t.shape}, got {seq.shape}")
-            object.__setattr__(self, "seq", seq)
-        extra = {}
-        for name, values in self.extra.items():
-            values = np.asarray(values)
-            if values.shape != t.shape:
-                raise SessionError(f"extra column {short(name)}: expected shape {t.shape}, got {values.shape}")
-            extra[name] = values
-        object.__setattr__(self, "extra", extra)
-
-    def __len__(self) -> int:
-        return self.t_s.size
-
-    @property
-    def n_channels(self) -> int:
-        """Number of signal channels N."""
-        return self.signals.shape[1]
-
-    @property
-    def has_pressure(self) -> bool:
-        """True when every frame has a pressure reading."""
-        return bool(np.all(np.isfinite(self.pressure_pa)))
-
-    def with_pressure(self, pressure_pa: float) -> Session:
-        """A copy whose frames without a pressure reading get ``pressure_pa`` [Pa]."""
-        p = np.where(np.isfinite(self.pressure_pa), self.pressure_pa, float(pressure_pa))
-        return Session(self.t_s, self.signals, p, self.seq, dict(self.meta), dict(self.extra), self.source)
-
-    def select(self, index) -> Session:
-        """A new session with the frames picked by ``index`` (slice, mask or indices)."""
-        seq = None if self.seq is None else self.seq[index]
-        extra = {k: v[index] for k, v in self.extra.items()}
-        return Session(
-            self.t_s[index], self.signals[index], self.pressure_pa[index], seq, dict(self.meta), extra, self.source
-        )
 
 
 def _parse_float(text: str, line: int, column: str) -> float:
@@ -229,28 +146,9 @@ def _parse_session_csv(text: str, source: str) -> Session:
     else:
         pressure = np.full(t.shape, np.nan)
     signals = np.column_stack([values[h] for _, h in channels])
-    extra = {h: _column_array([c.strip() for c in cells[h]]) for h in header if h not in numeric}
+    extra = {h: parse_column([c.strip() for c in cells[h]]) for h in header if h not in numeric}
     seq = extra.pop("seq").astype(np.int64) if "seq" in extra and extra["seq"].dtype.kind in "iu" else None
     return Session(t, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
-
-
-def _column_array(cells: list[str]) -> np.ndarray:
-    """Numbers where every cell is numeric (ints kept as ints), else strings."""
-    try:
-        ints = [int(c) for c in cells]
-        return np.array(ints, dtype=np.int64)
-    except ValueError:
-        pass
-    try:
-        return np.array([float(c) for c in cells])
-    except ValueError:
-        return np.array(cells, dtype=object)
-
-
-def _format(value) -> str:
-    if isinstance(value, (float, np.floating)):
-        return "nan" if math.isnan(value) else repr(float(value))
-    return str(value)
 
 
 def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: bool = True) -> None:
@@ -286,38 +184,4 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
         for key, value in session.meta.items():
             if isinstance(value, (str, int, float)):
                 fh.write(f"# {key}: {value}\n")
-        writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(header)
-        cells = [_column_cells(c) for c in cols]
-        if any(c is None for c in cells):
-            for row in zip(*cols):
-                writer.writerow([_format(v) for v in row])
-        elif len(cells[0]):
-            # the rows as csv.writer writes them when no cell needs quotes
-            fh.write("\n".join(map(",".join, zip(*cells))))
-            fh.write("\n")
-
-
-_NEEDS_QUOTES = re.compile(r'[,"\r\n]')
-
-
-def _column_cells(values):
-    """:func:`_format` of every cell of a column, or None if one needs the csv module's quotes."""
-    values = np.asarray(values)
-    if values.dtype.kind in "fiub":
-        # Python floats and ints format as the numpy scalars do, faster
-        return list(map(_format, values.tolist()))
-    cells = [_format(v) for v in values]
-    return None if any(_NEEDS_QUOTES.search(c) for c in cells) else cells
-
-
-def read_session(path: str | os.PathLike) -> Session:
-    """Read a session: a native session directory or a session CSV."""
-    path = Path(path)
-    if path.is_dir():
-        from bendsense.sessiondir import read_session_dir
-
-        return read_session_dir(path)
-    if not path.exists():
-        raise SessionError(f"{path}: no such file or session directory")
-    return read_session_csv(path)
+        write_columns(fh, header, cols)

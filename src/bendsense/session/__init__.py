@@ -1,0 +1,52 @@
+"""Sessions: a recording of sensor signals and pressure, frame by frame.
+
+:class:`Session` holds the frames in memory, and :func:`read_session` reads either file
+format into one. Each format of DESIGN.md section 3 is a module of its own:
+
+- :mod:`bendsense.session.csvfile`: the session CSV, for interchange (read and written);
+- :mod:`bendsense.session.native`: the native session directory the recorder writes,
+  crash-safe, with the device's raw records (and its export to and import from CSV);
+- :mod:`bendsense.session.cells`: how one CSV cell is written and read back (shared
+  with ``results.csv``).
+
+:mod:`bendsense.session.base` holds the :class:`Session` object alone, so that the
+format modules build it without importing this package's dispatch.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from bendsense.errors import SessionError
+from bendsense.session.base import Session
+from bendsense.session.csvfile import read_session_csv, write_session_csv
+from bendsense.session.native import read_session_dir
+
+__all__ = ["Session", "read_session", "read_session_csv", "write_session_csv"]
+
+
+def read_session(path: str | os.PathLike) -> Session:
+    """Read a session: a native session directory or a session CSV.
+
+    Parameters
+    ----------
+    path : path
+        A native session directory (:func:`bendsense.session.native.read_session_dir`)
+        or a session CSV (:func:`bendsense.session.csvfile.read_session_csv`).
+
+    Returns
+    -------
+    Session
+
+    Raises
+    ------
+    SessionError
+        If ``path`` does not exist or is not a readable session.
+    """
+    path = Path(path)
+    if path.is_dir():
+        return read_session_dir(path)
+    if not path.exists():
+        raise SessionError(f"{path}: no such file or session directory")
+    return read_session_csv(path)

@@ -1,0 +1,99 @@
+"""The :class:`Session` object: recorded frames in memory, whatever file they came from.
+
+Every format of :mod:`bendsense.session` reads into a :class:`Session` and writes from
+one; this module holds the object alone, so that the format modules can build it
+without importing the package that dispatches to them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bendsense.errors import SessionError
+from bendsense.validation import short
+
+__all__ = ["Session"]
+
+
+@dataclass(frozen=True, eq=False)
+class Session:
+    """Recorded frames of one session.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (frames,)
+        Time of each frame [s].
+    signals : ndarray, shape (frames, N)
+        Signal value of each receiver channel (ADC counts or volts, as recorded).
+    pressure_pa : ndarray, shape (frames,)
+        Actuation (gauge) pressure [Pa]; NaN where there is no reading.
+    seq : ndarray of int, shape (frames,), optional
+        Device sequence number, unwrapped, where known.
+    meta : dict
+        Metadata: the ``# key: value`` lines of a CSV, or ``meta.yaml`` of a native session.
+    extra : dict of str to ndarray
+        Further per-frame columns, kept in file order and passed through (e.g. the
+        ground truth ``fx_n``, ``fy_n`` of a simulated session).
+    source : str
+        Where the session was read from.
+    """
+
+    t_s: np.ndarray
+    signals: np.ndarray
+    pressure_pa: np.ndarray
+    seq: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)
+    source: str = ""
+
+    def __post_init__(self):
+        t = np.asarray(self.t_s, dtype=float)
+        sig = np.asarray(self.signals, dtype=float)
+        if t.ndim != 1:
+            raise SessionError(f"t_s: expected shape (frames,), got {t.shape}")
+        if sig.ndim != 2 or sig.shape[0] != t.size:
+            raise SessionError(f"signals: expected shape ({t.size}, N), got {sig.shape}")
+        p = np.broadcast_to(np.asarray(self.pressure_pa, dtype=float), t.shape).copy()
+        object.__setattr__(self, "t_s", t)
+        object.__setattr__(self, "signals", sig)
+        object.__setattr__(self, "pressure_pa", p)
+        if self.seq is not None:
+            seq = np.asarray(self.seq, dtype=np.int64)
+            if seq.shape != t.shape:
+                raise SessionError(f"seq: expected shape {t.shape}, got {seq.shape}")
+            object.__setattr__(self, "seq", seq)
+        extra = {}
+        for name, values in self.extra.items():
+            values = np.asarray(values)
+            if values.shape != t.shape:
+                raise SessionError(f"extra column {short(name)}: expected shape {t.shape}, got {values.shape}")
+            extra[name] = values
+        object.__setattr__(self, "extra", extra)
+
+    def __len__(self) -> int:
+        return self.t_s.size
+
+    @property
+    def n_channels(self) -> int:
+        """Number of signal channels N."""
+        return self.signals.shape[1]
+
+    @property
+    def has_pressure(self) -> bool:
+        """True when every frame has a pressure reading."""
+        return bool(np.all(np.isfinite(self.pressure_pa)))
+
+    def with_pressure(self, pressure_pa: float) -> Session:
+        """A copy whose frames without a pressure reading get ``pressure_pa`` [Pa]."""
+        p = np.where(np.isfinite(self.pressure_pa), self.pressure_pa, float(pressure_pa))
+        return Session(self.t_s, self.signals, p, self.seq, dict(self.meta), dict(self.extra), self.source)
+
+    def select(self, index) -> Session:
+        """A new session with the frames picked by ``index`` (slice, mask or indices)."""
+        seq = None if self.seq is None else self.seq[index]
+        extra = {k: v[index] for k, v in self.extra.items()}
+        return Session(
+            self.t_s[index], self.signals[index], self.pressure_pa[index], seq, dict(self.meta), extra, self.source
+        )

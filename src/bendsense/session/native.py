@@ -1,0 +1,587 @@
+"""Native session directory (DESIGN.md section 3): crash-safe recording of device frames.
+
+A session is a directory::
+
+    meta.yaml    format name and version, device HELLO, channel count, ADC bits, record
+                 dtype, start time, config snapshot; written atomically (rewritten at close
+                 with the end time and the counters)
+    frames.bin   append-only fixed-size little-endian records, no header
+    events.log   one line per event: ISO-8601 UTC time, a space, the text
+
+The record (:func:`record_dtype`) is, in this order and packed::
+
+    host_ns      <i8      host clock, time.monotonic_ns() when the bytes were read [ns]
+    t_us         <u8      device clock, unwrapped (u32 wraps removed by the driver) [us]
+    seq          <u2      device sequence number, raw (wraps at 65536)
+    status       u1       status bits of the SAMPLE
+    tx_drops     <u2      the firmware's cumulative count of frames it could not send
+                          (version 2; wraps at 65536)
+    pressure_pa  <i4      pressure [Pa]; 0x7FFFFFFF = no reading
+    adc          (N,)<u2  raw counts (a line-dialect or imported session may use <f8)
+
+``meta.yaml`` lists the dtype as ``[name, numpy dtype string]`` pairs, so a reader never
+guesses the layout; further fields (from an imported CSV) follow the standard ones and
+are read back into ``Session.extra``. ``meta["start_host_ns"]`` pairs the monotonic host
+clock with ``meta["start_time_utc"]``.
+
+Writes go straight to the OS (unbuffered), so a killed recorder loses nothing it had
+written; ``os.fsync`` runs at least once a second against power loss. ``meta.yaml``
+says ``finished: false`` until a clean stop rewrites it with ``finished: true`` and the
+record count ``n_records``.
+
+The reader compares ``frames.bin`` with ``meta.yaml`` and tells the truth:
+
+- the record dtype must be the format's (standard fields with their types, ``adc``
+  with ``n_channels`` values) and its size ``record_size``; raw counts must fit
+  ``adc_bits``: an edited dtype is an error, never garbage;
+- a finished session must hold exactly ``n_records`` whole records: fewer is an
+  error with the numbers (``745 of 1,500 records present; 755 lost``);
+- an unfinished session (killed, crashed, still recording) is read with a warning
+  that says so; its torn last record (a partial write) is ignored and counted in
+  ``meta["torn_bytes"]``.
+
+Version 1 (no ``tx_drops``, no ``finished`` flag: a session without ``n_records`` is
+unfinished) is read as before.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import logging
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from bendsense import validation as check
+from bendsense._io import load_yaml
+from bendsense.errors import SessionError
+from bendsense.plausibility import check_pressure_column, check_time_column
+from bendsense.session.base import Session
+from bendsense.session.csvfile import read_session_csv, write_session_csv
+from bendsense.validation import short
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "NO_PRESSURE",
+    "record_dtype",
+    "dtype_to_list",
+    "dtype_from_list",
+    "is_session_dir",
+    "SessionWriter",
+    "read_session_meta",
+    "read_records",
+    "records_to_session",
+    "read_session_dir",
+    "export_session_csv",
+    "import_session_csv",
+]
+
+# the logger keeps the name of this module's earlier home, bendsense.sessiondir (logging configurations name it)
+log = logging.getLogger("bendsense.sessiondir")
+
+FORMAT = "bendsense-session"
+FORMAT_VERSION = 2
+READ_VERSIONS = (1, 2)
+NO_PRESSURE = 0x7FFFFFFF
+META = "meta.yaml"
+FRAMES = "frames.bin"
+EVENTS = "events.log"
+STANDARD_FIELDS = ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")
+# the fixed type of each standard field (tx_drops from version 2)
+FIELD_TYPES = {"host_ns": "<i8", "t_us": "<u8", "seq": "<u2", "status": "|u1", "tx_drops": "<u2",
+               "pressure_pa": "<i4"}
+ADC_TYPES = ("<u2", "<f4", "<f8")
+
+
+def utc_now_iso(t: float | None = None) -> str:
+    """ISO-8601 UTC time with microseconds and a ``Z`` suffix."""
+    t = time.time() if t is None else t
+    return _dt.datetime.fromtimestamp(t, _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=()) -> np.dtype:
+    """Structured dtype of one ``frames.bin`` record (packed, little-endian).
+
+    Parameters
+    ----------
+    n_channels : int
+        Number of ADC channels N (1..64).
+    adc_dtype : str
+        dtype of the ADC values: ``"<u2"`` for raw counts, ``"<f4"``/``"<f8"`` for
+        sessions whose signals are not raw counts.
+    extra_fields : sequence of (name, dtype str)
+        Further per-frame columns appended after the standard ones.
+    """
+    n = int(n_channels)
+    if not 1 <= n <= 64:
+        raise SessionError(f"n_channels: expected 1..64, got {n_channels!r}")
+    fields = [
+        ("host_ns", "<i8"),
+        ("t_us", "<u8"),
+        ("seq", "<u2"),
+        ("status", "u1"),
+        ("tx_drops", "<u2"),
+        ("pressure_pa", "<i4"),
+        ("adc", np.dtype(adc_dtype).newbyteorder("<"), (n,)),
+        *[(str(name), np.dtype(dt).newbyteorder("<")) for name, dt in extra_fields],
+    ]
+    return np.dtype(fields)
+
+
+def dtype_to_list(dtype: np.dtype) -> list:
+    """``[[name, dtype string], ...]`` for ``meta.yaml``; sub-arrays as ``"(N,)<u2"``."""
+    out = []
+    for name in dtype.names:
+        ft = dtype.fields[name][0]
+        if ft.subdtype is not None:
+            base, shape = ft.subdtype
+            out.append([name, f"{tuple(shape)}{base.str}".replace(" ", "")])
+        else:
+            out.append([name, ft.str])
+    return out
+
+
+def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | None = None) -> np.dtype:
+    """Inverse of :func:`dtype_to_list`, checked against the format.
+
+    Raises :class:`SessionError` on a malformed list, a missing standard field, a
+    standard field of another type, or an ``adc`` of another length than ``n_channels``.
+    """
+    where = "meta.yaml record_dtype"
+    try:
+        dt = np.dtype([(str(name), str(spec)) for name, spec in pairs])
+    except (TypeError, ValueError) as err:
+        raise SessionError(f"{where}: invalid ({' '.join(str(err).split())[:80]}); got {short(pairs)}") from None
+    loose = [name for name in dt.names if dt.fields[name][0].hasobject or dt.fields[name][0].base.kind not in "biuf"]
+    if loose:
+        raise SessionError(f"{where}: field {loose[0]}: expected a number type (integer, float or bool), got "
+                           f"{dt.fields[loose[0]][0].str}")
+    standard = [*STANDARD_FIELDS, "tx_drops"] if version >= 2 else list(STANDARD_FIELDS)
+    missing = [f for f in standard if f not in dt.names]
+    if missing:
+        raise SessionError(f"{where}: missing fields {missing}")
+    for name, want in FIELD_TYPES.items():
+        if name in dt.names and name in standard and dt.fields[name][0].str != np.dtype(want).str:
+            raise SessionError(f"{where}: field {name}: expected {want}, got {dt.fields[name][0].str} "
+                               "(an edited record dtype?)")
+    adc = dt.fields["adc"][0]
+    base, shape = (adc.subdtype if adc.subdtype is not None else (adc, ()))
+    if base.str not in ADC_TYPES or len(shape) != 1:
+        got = dict((str(k), v) for k, v in pairs).get("adc")
+        raise SessionError(f"{where}: field adc: expected (N,) of {', '.join(ADC_TYPES)}, got {short(got)}")
+    if n_channels is not None and shape[0] != n_channels:
+        raise SessionError(f"{where}: field adc: expected {n_channels} values (n_channels), got {shape[0]}")
+    return dt
+
+
+def is_session_dir(path) -> bool:
+    """Tell whether ``path`` is a directory holding ``meta.yaml`` or ``frames.bin``."""
+    p = Path(path)
+    return p.is_dir() and ((p / META).exists() or (p / FRAMES).exists())
+
+
+def _plain(obj):
+    """YAML-safe copy (numpy scalars and tuples to built-ins)."""
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+class SessionWriter:
+    """Append records to a native session directory.
+
+    Parameters
+    ----------
+    path : path
+        Session directory; created. An existing session is refused unless ``overwrite``.
+    n_channels : int
+        Number of ADC channels N.
+    adc_bits : int, optional
+        ADC resolution (from the HELLO).
+    device : dict, optional
+        Device description for ``meta.yaml`` (HELLO fields, port, ...).
+    config : Config or dict, optional
+        Config snapshot stored in ``meta.yaml``.
+    meta : dict, optional
+        Further metadata.
+    adc_dtype : str
+        dtype of the ADC values (see :func:`record_dtype`).
+    extra_fields : sequence of (name, dtype str)
+        Further per-frame columns.
+    overwrite : bool
+        Replace an existing session (only what bendsense wrote there, see
+        :mod:`bendsense.output`; a directory with other files is refused).
+    fsync_interval_s : float
+        Longest time between ``os.fsync`` calls while writing [s].
+    inputs : iterable of paths
+        Inputs of the command, never to be written over.
+    writer : str
+        Who writes, for the output manifest.
+    extra_files : sequence of str
+        Further files written into the session directory by others (e.g. the
+        ``results.csv`` of ``record --estimate``), listed in the manifest as bendsense's.
+
+    Notes
+    -----
+    :meth:`write` and :meth:`event` may be called from different threads.
+    """
+
+    def __init__(
+        self,
+        path,
+        n_channels: int,
+        *,
+        adc_bits: int | None = None,
+        device: dict | None = None,
+        config=None,
+        meta: dict | None = None,
+        adc_dtype: str = "<u2",
+        extra_fields=(),
+        overwrite: bool = False,
+        fsync_interval_s: float = 0.5,
+        inputs=(),
+        writer: str = "bendsense record",
+        extra_files=(),
+    ):
+        from bendsense import output
+
+        self.path = Path(path)
+        self.dtype = record_dtype(n_channels, adc_dtype, extra_fields)
+        self.n_channels = int(n_channels)
+        self.fsync_interval_s = float(fsync_interval_s)
+        # written in place (a recording must survive being killed): the output layer checks
+        # and locks the directory, removes an earlier session there (only what bendsense
+        # wrote) and writes the manifest before any data
+        self._output = output.begin_in_place(
+            self.path, [META, FRAMES, EVENTS, *extra_files], overwrite=overwrite, inputs=inputs, writer=writer
+        )
+        try:
+            self._start(config, adc_bits, device, meta)
+        except BaseException:
+            self._output.close()
+            raise
+
+    def _start(self, config, adc_bits, device, meta) -> None:
+        if config is not None and hasattr(config, "to_dict"):
+            config = config.to_dict()
+        now_ns = time.monotonic_ns()
+        self.meta = {
+            "format": FORMAT,
+            "version": FORMAT_VERSION,
+            "start_time_utc": utc_now_iso(),
+            "start_host_ns": now_ns,
+            "n_channels": self.n_channels,
+            "adc_bits": adc_bits,
+            "record_dtype": dtype_to_list(self.dtype),
+            "record_size": self.dtype.itemsize,
+            "finished": False,  # true once close() ran: a clean stop
+            "clocks": {
+                "host_ns": "time.monotonic_ns() of the host when the frame was read [ns]",
+                "t_us": "device clock, unwrapped [us]",
+            },
+            "device": _plain(device or {}),
+            **_plain(meta or {}),
+        }
+        if config is not None:
+            self.meta["config"] = _plain(config)
+        self._write_meta()
+        self._lock = threading.Lock()
+        self._fd = os.open(self.path / FRAMES, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o666)
+        self._events = open(self.path / EVENTS, "a", encoding="utf-8", buffering=1)
+        self._last_sync = time.monotonic()
+        self.n_records = 0
+        self.closed = False
+
+    def _write_meta(self) -> None:
+        from bendsense import output
+
+        text = yaml.safe_dump(self.meta, sort_keys=False, allow_unicode=True)
+        output.write_text(self.path / META, text, overwrite=True)
+
+    def empty(self, n: int) -> np.ndarray:
+        """``n`` zeroed records of this session's dtype (pressure set to "no reading")."""
+        rec = np.zeros(n, dtype=self.dtype)
+        rec["pressure_pa"] = NO_PRESSURE
+        return rec
+
+    def write(self, records: np.ndarray) -> None:
+        """Append structured ``records`` (this session's dtype) to ``frames.bin``."""
+        records = np.asarray(records)
+        if records.dtype != self.dtype:
+            raise SessionError(f"records: expected dtype {self.dtype}, got {records.dtype}")
+        data = records.tobytes()
+        with self._lock:
+            view = memoryview(data)
+            while view:
+                written = os.write(self._fd, view)
+                view = view[written:]
+            self.n_records += len(records)
+        self.maybe_sync()
+
+    def event(self, text: str, when: float | None = None) -> None:
+        """Append one line to ``events.log`` (``when``: wall-clock time [s], default now)."""
+        line = " ".join(str(text).split())  # one event, one line
+        with self._lock:
+            if not self.closed:
+                self._events.write(f"{utc_now_iso(when)} {line}\n")
+
+    def maybe_sync(self) -> None:
+        """``fsync`` if the last one is older than ``fsync_interval_s``."""
+        if time.monotonic() - self._last_sync >= self.fsync_interval_s:
+            self.sync()
+
+    def sync(self) -> None:
+        """Flush and ``fsync`` both data files."""
+        with self._lock:
+            if self.closed:
+                return
+            self._events.flush()
+            os.fsync(self._events.fileno())
+            os.fsync(self._fd)
+            self._last_sync = time.monotonic()
+
+    def close(self, meta_update: dict | None = None) -> None:
+        """Sync, close, and rewrite ``meta.yaml`` with the end time, record count and ``meta_update``."""
+        if self.closed:
+            return
+        self.sync()
+        with self._lock:
+            self.closed = True
+            os.close(self._fd)
+            self._events.close()
+        self.meta["end_time_utc"] = utc_now_iso()
+        self.meta["n_records"] = self.n_records
+        self.meta["finished"] = True
+        if meta_update:
+            self.meta.update(_plain(meta_update))
+        try:
+            self._write_meta()
+        finally:
+            self._output.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_session_meta(path) -> dict:
+    """``meta.yaml`` of a session directory, checked for format name, version and field types."""
+    path = Path(path)
+    if not (path / META).exists():
+        raise SessionError(f"{path}: not a session directory (no {META})")
+    where = path / META
+    meta = load_yaml(where, "session meta.yaml", lambda data: data, SessionError)
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+        raise SessionError(f"{where}: format: expected {FORMAT!r}, got {short(got)}")
+    if meta.get("version") not in READ_VERSIONS:
+        raise SessionError(f"{where}: version: expected {' or '.join(map(str, READ_VERSIONS))}, "
+                           f"got {short(meta.get('version'))}")
+    if "record_dtype" not in meta:
+        raise SessionError(f"{where}: missing record_dtype")
+    if not isinstance(meta["record_dtype"], list):
+        raise SessionError(f"{where}: record_dtype: expected a list of [name, dtype] pairs, "
+                           f"got {short(meta['record_dtype'])}")
+    checks = {"n_channels": (1, 64), "adc_bits": (1, 16), "record_size": (1, None), "n_records": (0, None)}
+    try:
+        for key, (lo, hi) in checks.items():
+            if meta.get(key) is not None:
+                check.integer(key, meta[key], minimum=lo, maximum=hi, error=SessionError)
+        if "finished" in meta:
+            check.boolean("finished", meta["finished"], error=SessionError)
+    except SessionError as err:
+        raise SessionError(f"{where}: {err}") from None
+    return meta
+
+
+def read_records(path) -> tuple[np.ndarray, dict]:
+    """Raw records of ``frames.bin`` and the metadata, checked against each other.
+
+    Sets ``meta["n_records"]`` (records present), ``meta["records_recorded"]`` (what
+    a finished session's ``meta.yaml`` says, else None), ``meta["finished"]`` and
+    ``meta["torn_bytes"]``.
+
+    Raises
+    ------
+    SessionError
+        If the record dtype is not the format's or disagrees with ``record_size``,
+        ``n_channels`` or ``adc_bits``, or a finished session does not hold exactly
+        the records it recorded (the message gives the numbers).
+    """
+    path = Path(path)
+    meta = read_session_meta(path)
+    version = meta["version"]
+    where = path / META
+    try:
+        dtype = dtype_from_list(meta["record_dtype"], version=version, n_channels=meta.get("n_channels"))
+    except SessionError as err:
+        raise SessionError(f"{path}: {err}") from None
+    size = dtype.itemsize
+    if meta.get("record_size") is not None and meta["record_size"] != size:
+        raise SessionError(f"{where}: record_size is {meta['record_size']} bytes, but record_dtype gives "
+                           f"{size}-byte records (an edited record dtype?)")
+    frames = path / FRAMES
+    try:
+        nbytes = frames.stat().st_size
+    except FileNotFoundError:
+        nbytes = 0
+    n, torn = divmod(nbytes, size)
+    # version 1 has no flag: its writer added n_records at a clean stop only
+    finished = bool(meta.get("finished", "n_records" in meta)) if version >= 2 else "n_records" in meta
+    recorded = meta.get("n_records") if finished else None
+    if finished and recorded is None:
+        raise SessionError(f"{where}: finished, but no n_records")
+    if finished and n < recorded:
+        extra = f", and a torn record of {torn} bytes" if torn else ""
+        raise SessionError(f"{frames}: {n:,} of {recorded:,} records present; {recorded - n:,} lost{extra} "
+                           "(frames.bin was cut short after the recording)")
+    if finished and n > recorded:
+        raise SessionError(f"{frames}: {n:,} records present, but meta.yaml recorded {recorded:,} "
+                           f"({n - recorded:,} more; frames.bin from another recording?)")
+    if finished and torn:
+        raise SessionError(f"{frames}: {torn} stray bytes after the {n:,} records of {size} bytes "
+                           "(frames.bin was damaged after the recording)")
+    if not finished:
+        note = f"; a torn last record ({torn} of {size} bytes) ignored" if torn else ""
+        log.warning("%s: unfinished recording (no clean stop: killed, crashed or still recording); %s records "
+                    "present%s", path, f"{n:,}", note)
+    records = np.fromfile(frames, dtype=dtype, count=n) if n else np.zeros(0, dtype=dtype)
+    bits = meta.get("adc_bits")
+    if n and bits and records.dtype.fields["adc"][0].base.kind == "u":
+        top = int(records["adc"].max())
+        if top >= 2**bits:
+            raise SessionError(f"{frames}: ADC counts up to {top:,} do not fit adc_bits {bits} "
+                               "(an edited record dtype or adc_bits?)")
+    meta.update(torn_bytes=torn, n_records=n, records_recorded=recorded, finished=finished)
+    return records, meta
+
+
+def _unwrap16(seq: np.ndarray) -> np.ndarray:
+    seq = seq.astype(np.int64)
+    if seq.size == 0:
+        return seq
+    steps = np.diff(seq) % 65536
+    return seq[0] + np.concatenate([[0], np.cumsum(steps)])
+
+
+def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
+    """Build a :class:`~bendsense.session.Session` from raw records.
+
+    ``t_s`` is the unwrapped device clock relative to the first frame (plus
+    ``meta["t_offset_s"]`` of an imported CSV); ``extra`` holds ``host_s`` (host clock
+    relative to the first frame [s]), ``status`` and any further record fields
+    (``tx_drops``: the firmware's cumulative counter). ``meta["frames_lost"]`` counts
+    the sequence gaps and ``meta["tx_drops"]`` the frames the firmware could not send
+    during the session (0 for version 1, which has no counter).
+    """
+    n_ch = records.dtype.fields["adc"][0].shape[0]
+    t_us = records["t_us"].astype(np.int64)
+    t0 = float(meta.get("t_offset_s") or 0.0)
+    t_s = t0 + (t_us - (t_us[0] if t_us.size else 0)) * 1e-6
+    p = records["pressure_pa"]
+    pressure = np.where(p == NO_PRESSURE, np.nan, p.astype(float))
+    host = records["host_ns"]
+    extra = {
+        "host_s": (host - (host[0] if host.size else 0)) * 1e-9,
+        "status": records["status"].astype(np.int64),
+    }
+    for name in records.dtype.names:
+        if name not in STANDARD_FIELDS:
+            extra[name] = np.array(records[name])
+    signals = np.array(records["adc"], dtype=float).reshape(len(records), n_ch)
+    seq = _unwrap16(records["seq"])
+    meta = dict(meta)
+    meta["frames_lost"] = int(seq[-1] - seq[0] + 1 - seq.size) if seq.size else 0
+    drops = _unwrap16(records["tx_drops"]) if "tx_drops" in records.dtype.names else np.zeros(0, np.int64)
+    meta["tx_drops"] = int(drops[-1] - drops[0]) if drops.size else 0
+    check_pressure_column("pressure_pa", pressure, f"{source or 'session'}/{FRAMES}")
+    check_time_column(t_s, source or "session")
+    return Session(t_s, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
+
+
+def read_session_dir(path):
+    """Read a native session directory into a :class:`~bendsense.session.Session`.
+
+    Raises
+    ------
+    SessionError
+        If ``meta.yaml`` is missing, of another format or version, or has a bad dtype.
+    """
+    records, meta = read_records(path)
+    return records_to_session(records, meta, source=str(path))
+
+
+def export_session_csv(session_dir, csv_path, *, overwrite: bool = False) -> None:
+    """Write a native session as a session CSV (via :func:`bendsense.session.write_session_csv`)."""
+    write_session_csv(read_session_dir(session_dir), csv_path, overwrite=overwrite)
+
+
+def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> None:
+    """Write a session CSV as a native session directory.
+
+    Time is stored in whole microseconds (``t_s[0]`` kept as ``meta["t_offset_s"]``) and
+    pressure in whole pascals; signals are stored as ``<u2`` when they are all counts
+    in 0..65535, else as ``<f8``. Numeric extra columns become further record fields;
+    text columns are dropped (and logged).
+    """
+    s = read_session_csv(csv_path)
+    sig = s.signals
+    counts = bool(np.all((sig == np.round(sig)) & (sig >= 0) & (sig <= 65535)))
+    extra_cols = {}
+    for name, values in s.extra.items():
+        if name in ("host_s", "status", "tx_drops") or name in STANDARD_FIELDS:
+            continue
+        if values.dtype.kind in "iub":
+            extra_cols[name] = (values, "<i8")
+        elif values.dtype.kind == "f":
+            extra_cols[name] = (values, "<f8")
+        else:
+            log.warning("%s: text column %r is not stored in a native session", csv_path, name)
+    n = len(s)
+    writer = SessionWriter(
+        session_dir,
+        s.n_channels,
+        adc_dtype="<u2" if counts else "<f8",
+        extra_fields=[(k, dt) for k, (_, dt) in extra_cols.items()],
+        meta={"imported_from": str(csv_path), "t_offset_s": float(s.t_s[0]) if n else 0.0, "csv_meta": s.meta},
+        overwrite=overwrite,
+        inputs=[csv_path],
+        writer="bendsense import",
+    )
+    try:
+        rec = writer.empty(n)
+        rec["t_us"] = np.round((s.t_s - s.t_s[0]) * 1e6).astype(np.int64) if n else 0
+        host_s = s.extra.get("host_s")
+        host = s.t_s - s.t_s[0] if host_s is None else np.asarray(host_s, float) - float(host_s[0])
+        rec["host_ns"] = np.round(host * 1e9).astype(np.int64)
+        rec["seq"] = (np.arange(n) if s.seq is None else s.seq) % 65536
+        if "status" in s.extra:
+            rec["status"] = np.asarray(s.extra["status"]).astype(np.int64) & 0xFF
+        if "tx_drops" in s.extra and s.extra["tx_drops"].dtype.kind in "iu":
+            rec["tx_drops"] = s.extra["tx_drops"].astype(np.int64) & 0xFFFF
+        p = s.pressure_pa
+        rec["pressure_pa"] = np.where(np.isfinite(p), np.round(np.nan_to_num(p)), NO_PRESSURE).astype(np.int64)
+        rec["adc"] = sig
+        for name, (values, _) in extra_cols.items():
+            rec[name] = values
+        writer.write(rec)
+    finally:
+        writer.close()
