@@ -426,3 +426,13 @@ def test_line_decoder_bounded_and_errors():
 @given(st.binary(max_size=500))
 def test_line_decoder_never_raises(data):
     LineDecoder(columns=("seq", "ch1", "ch2")).feed(data)
+
+
+def test_sample_fields_table_names_sample_attributes():
+    # the recorder copies each field of the table from the Sample attribute of the same name
+    from bendsense.frames import SAMPLE_FIELDS, Sample
+
+    names = [f.name for f in SAMPLE_FIELDS]
+    assert len(set(names)) == len(names)
+    assert set(names) <= set(Sample.__dataclass_fields__) - {"n_channels", "adc"}
+    assert [f.name for f in SAMPLE_FIELDS if f.since == 1] == ["t_us", "seq", "status", "pressure_pa"]

@@ -252,3 +252,46 @@ def test_sessiondir_still_imports_the_native_format():
         assert getattr(sessiondir, name) is getattr(native, name), name
     assert sessiondir.NO_PRESSURE == 0x7FFFFFFF
     assert sessiondir.STANDARD_FIELDS == ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")
+
+
+def test_a_new_sample_field_reaches_every_layer(tmp_path, monkeypatch):
+    """The recipe of bendsense.frames.SAMPLE_FIELDS, step 1: one table entry, and the record
+    dtype, the recorder's copy, the Session, the CSV export and the import all carry the field."""
+    from types import SimpleNamespace
+
+    import bendsense.device.recorder as recorder
+    import bendsense.session.native as native
+    from bendsense.frames import SAMPLE_FIELDS, SampleField
+
+    old = tmp_path / "v2"
+    with SessionWriter(old, 2) as w:  # written before the field existed
+        w.write(native.sample_records(w.dtype, [SimpleNamespace(seq=0, status=0, tx_drops=0, pressure_pa=None,
+                                                                adc=(1, 2))], [0], [0]))
+    temp = SampleField("temp_cdeg", "<i2", 3, "board temperature [0.01 °C]")
+    monkeypatch.setattr(native, "SAMPLE_FIELDS", (*SAMPLE_FIELDS, temp))
+    monkeypatch.setattr(native, "FORMAT_VERSION", 3)
+    monkeypatch.setattr(native, "READ_VERSIONS", (1, 2, 3))
+    assert recorder.sample_records is native.sample_records  # what the recorder copies a sample with
+
+    dtype = record_dtype(2)
+    assert dtype.names == ("host_ns", "t_us", "seq", "status", "tx_drops", "pressure_pa", "temp_cdeg", "adc")
+    samples = [SimpleNamespace(seq=k, status=0, tx_drops=0, pressure_pa=20_000.4, adc=(k, 2 * k), temp_cdeg=2150 - k)
+               for k in range(5)]
+    path = tmp_path / "v3"
+    with SessionWriter(path, 2) as w:
+        w.write(native.sample_records(w.dtype, samples, range(0, 5000, 1000), range(0, 50, 10)))
+    s = read_session(path)
+    assert s.meta["version"] == 3
+    np.testing.assert_array_equal(s.extra["temp_cdeg"], [2150, 2149, 2148, 2147, 2146])
+    np.testing.assert_array_equal(s.pressure_pa, 20_000.0)
+
+    export_session_csv(path, tmp_path / "v3.csv")
+    np.testing.assert_array_equal(read_session_csv(tmp_path / "v3.csv").extra["temp_cdeg"], s.extra["temp_cdeg"])
+    import_session_csv(tmp_path / "v3.csv", tmp_path / "back")
+    records, _ = read_records(tmp_path / "back")
+    assert records.dtype.names == dtype.names  # back into its own field, not an extra column
+    np.testing.assert_array_equal(records["temp_cdeg"], [2150, 2149, 2148, 2147, 2146])
+
+    assert "temp_cdeg" not in read_session(old).extra  # older sessions still read
+    with pytest.raises(SessionError, match=r"missing fields \['temp_cdeg'\]"):
+        dtype_from_list(dtype_to_list(record_dtype(2)[[n for n in dtype.names if n != "temp_cdeg"]]), version=3)

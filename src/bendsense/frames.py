@@ -9,7 +9,8 @@ CCITT-FALSE of the payload, little-endian). Payload, little-endian::
     2  u16  seq: +1 per device frame of any type, wraps at 65536
     4  u32  t_us: device clock [us], wraps
     SAMPLE 8: u8 n_channels (1..64), u8 status, u16 tx_drops, i32 pressure_pa
-              (0x7FFFFFFF = no reading), u16[n] adc
+              (0x7FFFFFFF = no reading), u16[n] adc; what a recording keeps of it:
+              SAMPLE_FIELDS
     HELLO  8: u8 n_channels, u8 adc_bits, u16 rate_hz, u16 vref_mv, <= 32 B firmware (ASCII)
     TEXT   8: UTF-8 log line
 
@@ -27,6 +28,7 @@ import functools
 import struct
 from collections import deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from bendsense.errors import FrameError
 
@@ -36,6 +38,8 @@ __all__ = [
     "FrameType",
     "StatusBits",
     "Sample",
+    "SampleField",
+    "SAMPLE_FIELDS",
     "Hello",
     "Text",
     "Command",
@@ -113,6 +117,72 @@ class Sample:
     tx_drops: int
     pressure_pa: int | float | None
     adc: tuple
+
+
+class SampleField(NamedTuple):
+    """One scalar value of every SAMPLE, as a recording stores it (an entry of :data:`SAMPLE_FIELDS`).
+
+    Attributes
+    ----------
+    name : str
+        The :class:`Sample` attribute, the field of a native session's record and, for
+        the fields a :class:`~bendsense.session.Session` has no column of its own for,
+        the ``Session.extra`` column.
+    dtype : str
+        numpy dtype of the record field in ``frames.bin`` (little-endian).
+    since : int
+        The native session format version that first records the field.
+    description : str
+        What the value is, with its unit.
+    """
+
+    name: str
+    dtype: str
+    since: int
+    description: str
+
+
+SAMPLE_FIELDS = (
+    #           name           record dtype  since (session version)  what
+    SampleField("t_us", "<u8", 1, "device clock [us]; u32 on the wire (wraps), recorded unwrapped"),
+    SampleField("seq", "<u2", 1, "sequence number, raw: +1 per device frame of any type, wraps at 65536"),
+    SampleField("status", "|u1", 1, "status bits (StatusBits)"),
+    SampleField("tx_drops", "<u2", 2, "cumulative frames the firmware could not send, wraps at 65536"),
+    SampleField("pressure_pa", "<i4", 1, "actuation pressure [Pa]; NO_PRESSURE = no reading"),
+)
+"""The scalar fields of a SAMPLE, in the order a recording stores them.
+
+A native session's record is ``host_ns`` (when the host read the bytes), these fields,
+then the N ``adc`` counts. The record dtype (:func:`bendsense.session.native.record_dtype`,
+and the reader's checks of it), the recorder's copy of each sample into a record
+(:func:`bendsense.session.native.sample_records`) and what a recording gives a
+:class:`~bendsense.session.Session` (:func:`bendsense.session.native.records_to_session`:
+a field without a column of its own goes to ``Session.extra`` under its name, and from
+there into the session CSV and back) are derived from this table. The wire bytes are
+not: ``_SAMPLE_HEAD`` and :func:`_parse_body` spell them out, because the payload puts
+``seq`` before ``t_us`` (the header every frame type shares) and the decoder's hot path
+unpacks by position.
+
+Where do I add a wire field? The SAMPLE layout is fixed by DESIGN.md section 3, so a
+new field is a new protocol version, agreed there first. Then, for a board temperature
+``temp_cdeg`` (i16, 0.01 °C):
+
+1. here, one entry: ``SampleField("temp_cdeg", "<i2", 3, "board temperature [0.01 °C]")``,
+   ``since`` one above :data:`bendsense.session.native.FORMAT_VERSION`;
+2. here, the bytes: the new ``VERSION`` read by :func:`_parse_body` beside the old one
+   (boards in the field keep sending theirs), the struct, a :class:`Sample` attribute
+   with the value an old board means as its default, an argument of
+   :func:`encode_sample`, and the layout in the module docstring;
+3. :mod:`bendsense.session.native`: ``FORMAT_VERSION`` up by one, and the new version
+   added to ``READ_VERSIONS`` (older sessions still read; their records lack the field);
+4. ``tests/data/formats/``: a frozen session and byte stream of the new version beside
+   the old ones (``make.py`` there writes them); the old ones must keep loading.
+
+The record dtype, the recorder, ``Session.extra``, the session CSV export and import
+follow from step 1; the simulated board sends :func:`encode_sample`'s default until
+it is given a value. ``tests/test_sessiondir.py::test_a_new_sample_field_reaches_every_layer``
+does step 1 and checks those.
+"""
 
 
 @dataclass(slots=True)

@@ -15,11 +15,9 @@ import threading
 import time
 from dataclasses import asdict, dataclass
 
-import numpy as np
-
 from bendsense import output
 from bendsense.errors import DeviceError
-from bendsense.session.native import NO_PRESSURE, SessionWriter
+from bendsense.session.native import SessionWriter, sample_records
 
 __all__ = ["Recorder", "RecorderStats"]
 
@@ -176,22 +174,15 @@ class Recorder:
             writer.event(f"skipped: {bad} sample(s) with a channel count other than {n}")
         if not keep:
             return
-        rec = writer.empty(len(keep))
-        rec["host_ns"] = [r.host_ns for r in keep]
-        rec["t_us"] = [max(r.device_us, 0) for r in keep]
-        rec["seq"] = [r.sample.seq for r in keep]
-        rec["status"] = [r.sample.status for r in keep]
+        rec = sample_records(
+            writer.dtype, [r.sample for r in keep], [r.host_ns for r in keep], [max(r.device_us, 0) for r in keep]
+        )
         drops = [r.sample.tx_drops for r in keep]
-        rec["tx_drops"] = drops
         last = drops[0] if self._tx_last is None else self._tx_last
         for value in drops:  # the u16 counter wraps
             self._tx_drops += (value - last) & 0xFFFF
             last = value
         self._tx_last = last
-        rec["pressure_pa"] = [
-            NO_PRESSURE if r.sample.pressure_pa is None else round(r.sample.pressure_pa) for r in keep
-        ]
-        rec["adc"] = np.array([r.sample.adc for r in keep])
         writer.write(rec)
         if self.on_records is not None:
             self.on_records(keep)

@@ -8,7 +8,8 @@ A session is a directory::
     frames.bin   append-only fixed-size little-endian records, no header
     events.log   one line per event: ISO-8601 UTC time, a space, the text
 
-The record (:func:`record_dtype`) is, in this order and packed::
+The record (:func:`record_dtype`) is ``host_ns``, the SAMPLE's fields of
+:data:`bendsense.frames.SAMPLE_FIELDS` and the ADC counts; today, in this order and packed::
 
     host_ns      <i8      host clock, time.monotonic_ns() when the bytes were read [ns]
     t_us         <u8      device clock, unwrapped (u32 wraps removed by the driver) [us]
@@ -59,6 +60,7 @@ import yaml
 from bendsense import validation as check
 from bendsense._io import load_yaml
 from bendsense.errors import SessionError
+from bendsense.frames import NO_PRESSURE, SAMPLE_FIELDS
 from bendsense.plausibility import check_pressure_column, check_time_column
 from bendsense.session.base import Session
 from bendsense.session.csvfile import read_session_csv, write_session_csv
@@ -69,6 +71,7 @@ __all__ = [
     "FORMAT_VERSION",
     "NO_PRESSURE",
     "record_dtype",
+    "sample_records",
     "dtype_to_list",
     "dtype_from_list",
     "is_session_dir",
@@ -87,15 +90,30 @@ log = logging.getLogger("bendsense.sessiondir")
 FORMAT = "bendsense-session"
 FORMAT_VERSION = 2
 READ_VERSIONS = (1, 2)
-NO_PRESSURE = 0x7FFFFFFF
 META = "meta.yaml"
 FRAMES = "frames.bin"
 EVENTS = "events.log"
-STANDARD_FIELDS = ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")
-# the fixed type of each standard field (tx_drops from version 2)
-FIELD_TYPES = {"host_ns": "<i8", "t_us": "<u8", "seq": "<u2", "status": "|u1", "tx_drops": "<u2",
-               "pressure_pa": "<i4"}
+HOST_FIELD = ("host_ns", "<i8")  # the host's clock when it read the frame: first in every record
 ADC_TYPES = ("<u2", "<f4", "<f8")
+# record fields that become the Session's own columns (t_s, seq, pressure_pa, signals) or
+# host_s and status; every other field goes to Session.extra under its own name
+SESSION_COLUMNS = ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")
+
+
+def _field_types() -> dict:
+    """The fixed type of each standard scalar field."""
+    return dict([HOST_FIELD, *((f.name, f.dtype) for f in SAMPLE_FIELDS)])
+
+
+def _standard_fields(version: int) -> list:
+    """The fields every record of ``version`` has, oldest first (the order of messages)."""
+    fields = [(HOST_FIELD[0], 1), *((f.name, f.since) for f in SAMPLE_FIELDS), ("adc", 1)]
+    return [name for name, since in sorted(fields, key=lambda f: f[1]) if since <= version]
+
+
+# as bendsense.sessiondir had them
+STANDARD_FIELDS = tuple(_standard_fields(1))  # the fields of version 1
+FIELD_TYPES = _field_types()
 
 
 def utc_now_iso(t: float | None = None) -> str:
@@ -106,6 +124,9 @@ def utc_now_iso(t: float | None = None) -> str:
 
 def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=()) -> np.dtype:
     """Structured dtype of one ``frames.bin`` record (packed, little-endian).
+
+    ``host_ns``, the fields of :data:`bendsense.frames.SAMPLE_FIELDS`, ``adc``, then
+    ``extra_fields``.
 
     Parameters
     ----------
@@ -121,16 +142,47 @@ def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=()) -> np
     if not 1 <= n <= 64:
         raise SessionError(f"n_channels: expected 1..64, got {n_channels!r}")
     fields = [
-        ("host_ns", "<i8"),
-        ("t_us", "<u8"),
-        ("seq", "<u2"),
-        ("status", "u1"),
-        ("tx_drops", "<u2"),
-        ("pressure_pa", "<i4"),
+        HOST_FIELD,
+        *((f.name, f.dtype) for f in SAMPLE_FIELDS),
         ("adc", np.dtype(adc_dtype).newbyteorder("<"), (n,)),
         *[(str(name), np.dtype(dt).newbyteorder("<")) for name, dt in extra_fields],
     ]
     return np.dtype(fields)
+
+
+def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
+    """Records of ``dtype`` holding ``samples``, as the recorder writes them.
+
+    Every field of :data:`bendsense.frames.SAMPLE_FIELDS` is the sample's attribute of
+    the same name, except two: ``t_us`` is the device clock given here, unwrapped, and
+    ``pressure_pa`` is rounded to whole pascals, with :data:`NO_PRESSURE` for None (no
+    reading). Further fields of ``dtype`` are left zero.
+
+    Parameters
+    ----------
+    dtype : numpy.dtype
+        A record dtype (:func:`record_dtype`).
+    samples : sequence of Sample
+        Decoded SAMPLE frames (:class:`bendsense.frames.Sample`), all with as many
+        channels as ``dtype``.
+    host_ns : sequence of int, length len(samples)
+        Host clock when each sample's bytes were read [ns].
+    t_us : sequence of int, length len(samples)
+        Device clock of each sample with the u32 wraps removed [us].
+
+    Returns
+    -------
+    ndarray of dtype, shape (len(samples),)
+    """
+    rec = np.zeros(len(samples), dtype=dtype)
+    rec["host_ns"] = host_ns
+    rec["t_us"] = t_us
+    for f in SAMPLE_FIELDS:
+        if f.name not in ("t_us", "pressure_pa"):
+            rec[f.name] = [getattr(s, f.name) for s in samples]
+    rec["pressure_pa"] = [NO_PRESSURE if s.pressure_pa is None else round(s.pressure_pa) for s in samples]
+    rec["adc"] = np.array([s.adc for s in samples])
+    return rec
 
 
 def dtype_to_list(dtype: np.dtype) -> list:
@@ -161,11 +213,11 @@ def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | N
     if loose:
         raise SessionError(f"{where}: field {loose[0]}: expected a number type (integer, float or bool), got "
                            f"{dt.fields[loose[0]][0].str}")
-    standard = [*STANDARD_FIELDS, "tx_drops"] if version >= 2 else list(STANDARD_FIELDS)
+    standard = _standard_fields(version)
     missing = [f for f in standard if f not in dt.names]
     if missing:
         raise SessionError(f"{where}: missing fields {missing}")
-    for name, want in FIELD_TYPES.items():
+    for name, want in _field_types().items():
         if name in dt.names and name in standard and dt.fields[name][0].str != np.dtype(want).str:
             raise SessionError(f"{where}: field {name}: expected {want}, got {dt.fields[name][0].str} "
                                "(an edited record dtype?)")
@@ -488,7 +540,9 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     ``t_s`` is the unwrapped device clock relative to the first frame (plus
     ``meta["t_offset_s"]`` of an imported CSV); ``extra`` holds ``host_s`` (host clock
     relative to the first frame [s]), ``status`` and any further record fields
-    (``tx_drops``: the firmware's cumulative counter). ``meta["frames_lost"]`` counts
+    (``tx_drops``: the firmware's cumulative counter; any field of
+    :data:`bendsense.frames.SAMPLE_FIELDS` beyond ``SESSION_COLUMNS`` under its own name,
+    as recorded). ``meta["frames_lost"]`` counts
     the sequence gaps and ``meta["tx_drops"]`` the frames the firmware could not send
     during the session (0 for version 1, which has no counter).
     """
@@ -504,7 +558,7 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
         "status": records["status"].astype(np.int64),
     }
     for name in records.dtype.names:
-        if name not in STANDARD_FIELDS:
+        if name not in SESSION_COLUMNS:
             extra[name] = np.array(records[name])
     signals = np.array(records["adc"], dtype=float).reshape(len(records), n_ch)
     seq = _unwrap16(records["seq"])
@@ -540,14 +594,16 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
     Time is stored in whole microseconds (``t_s[0]`` kept as ``meta["t_offset_s"]``) and
     pressure in whole pascals; signals are stored as ``<u2`` when they are all counts
     in 0..65535, else as ``<f8``. Numeric extra columns become further record fields;
-    text columns are dropped (and logged).
+    text columns are dropped (and logged). Columns named after a field of
+    :data:`bendsense.frames.SAMPLE_FIELDS` (an exported native session's ``status``,
+    ``tx_drops``) go back into that field.
     """
     s = read_session_csv(csv_path)
     sig = s.signals
     counts = bool(np.all((sig == np.round(sig)) & (sig >= 0) & (sig <= 65535)))
     extra_cols = {}
     for name, values in s.extra.items():
-        if name in ("host_s", "status", "tx_drops") or name in STANDARD_FIELDS:
+        if name in ("host_s", "adc") or name in _field_types():
             continue
         if values.dtype.kind in "iub":
             extra_cols[name] = (values, "<i8")
@@ -575,8 +631,10 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
         rec["seq"] = (np.arange(n) if s.seq is None else s.seq) % 65536
         if "status" in s.extra:
             rec["status"] = np.asarray(s.extra["status"]).astype(np.int64) & 0xFF
-        if "tx_drops" in s.extra and s.extra["tx_drops"].dtype.kind in "iu":
-            rec["tx_drops"] = s.extra["tx_drops"].astype(np.int64) & 0xFFFF
+        for f in SAMPLE_FIELDS:  # the others (tx_drops) when they are integers, wrapped to their type
+            values = s.extra.get(f.name)
+            if f.name not in SESSION_COLUMNS and values is not None and values.dtype.kind in "iu":
+                rec[f.name] = values.astype(np.int64).astype(f.dtype)
         p = s.pressure_pa
         rec["pressure_pa"] = np.where(np.isfinite(p), np.round(np.nan_to_num(p)), NO_PRESSURE).astype(np.int64)
         rec["adc"] = sig
