@@ -429,7 +429,8 @@ def status_line(block, processor, rate_hz: float, fps: float, lost: int, backlog
     return (
         f"seq {int(block.seq[-1])}   estimated {rate_hz:.0f} frames/s   {fps:.0f} fps   backlog {backlog}   "
         f"lost {lost}   extrapolated {counts.get('extrapolated', 0)}   "
-        f"not converged {counts.get('not_converged', 0)}   misfit {counts.get('model_misfit', 0)}"
+        f"not converged {counts.get('not_converged', 0)}   misfit {counts.get('model_misfit', 0)}   "
+        f"not identifiable {counts.get('not_identifiable', 0)}"
     )
 
 

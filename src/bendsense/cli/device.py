@@ -43,7 +43,7 @@ def _status_line(stats, est=None) -> str:
         line += (
             f"  | estimated {est.frames} ({est.rate_hz:.0f}/s)  backlog {est.backlog}  "
             f"extrapolated {counts.get('extrapolated', 0)}  not converged {counts.get('not_converged', 0)}  "
-            f"misfit {counts.get('model_misfit', 0)}"
+            f"misfit {counts.get('model_misfit', 0)}  not identifiable {counts.get('not_identifiable', 0)}"
         )
     return line
 
