@@ -262,21 +262,15 @@ def convex_start(L, ei, wload, D, ffix, lower, u, out):
 
 
 @njit(cache=True)
-def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter, ops, pb, ws, blocked):
-    """Projected Gauss–Newton with a trust region on ``u`` (k,) for one frame; ``u`` updated in place.
+def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial):
+    """The iteration's first beam at ``u`` (into ``ws``); returns (stable, beam solves).
 
-    The first beam solve starts Newton from the reference shape ``state0`` where the
-    load is provably convex, else by continuation from the unloaded arc; a start that
-    fails restarts at zero force; a start beyond the convexity bound competes with the
-    same start scaled into the convex region (the lower cost wins). Each trial solve
-    starts from the first-order prediction of the state and may not leave its linear
-    prediction (a jump to another branch). Converged when the step, or the error left
-    by the observed contraction, is below ``xtol`` [N]. Returns (status, beam solves,
-    cost); ``ws`` holds the beam at the last accepted ``u``; ``blocked`` the last step that
-    left the stable branch (status NOT_IDENTIFIABLE).
+    Newton starts from the reference shape ``state0`` where the load is provably convex,
+    else by continuation from the unloaded arc; a start that fails restarts at zero force;
+    a start beyond the convexity bound competes with the same start scaled into the convex
+    region (the lower cost wins; ``trial`` is scratch).
     """
     k = u.size
-    n = state0.size
     for c in range(k):
         u[c] = max(u[c], lower[c])
     F = np.empty(2)
@@ -295,10 +289,9 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         force_of(D, ffix, u, F)
         ok = beam_eval(L, ei, k0, F, wload, state0, bool(NO), bool(YES), ops, pb, ws)
         iters += 1
-    gF = np.empty(2)
-    GF = np.empty((2, 2))
-    trial = workspace(ws[0].shape[0], n, ws[5].size)
     if not convex and ok:
+        gF = np.empty(2)
+        GF = np.empty((2, 2))
         uc = np.empty(k)
         convex_start(L, ei, wload, D, ffix, lower, u, uc)
         moved = False
@@ -311,8 +304,78 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
             if okc and objective(trial, tg, gF, GF) < objective(ws, tg, gF, GF):
                 u[:] = uc
                 copy_workspace(trial, ws)
+    return ok, iters
+
+
+@njit(cache=True)
+def converged(dstep, size, last, H, chi2, xtol):
+    """Whether the iteration stops with the step ``dstep`` (k,) of largest component ``size`` [N].
+
+    It stops when the step, or the error left by a contraction at the rate observed
+    against the previous step ``last``, is below ``xtol``; or, when the cost is a χ²
+    (``chi2``: ``H⁻¹`` the covariance of u), when that error is below ``SIGMA_STEP``
+    standard deviations (a flat, poorly determined direction); or when the steps stall at
+    the round-off floor of the beam solutions.
+    """
+    seen = math.isfinite(last)
+    rate = size / last if seen else size
+    left = size * rate / (1.0 - rate) if seen and rate < 0.5 else size
+    small = False
+    if chi2 and size > 0.0:
+        q = 0.0
+        for c in range(dstep.size):
+            for r in range(dstep.size):
+                q += dstep[c] * H[c, r] * dstep[r]
+        small = q * (left / size) ** 2 <= SIGMA_STEP * SIGMA_STEP
+    return left <= xtol or small or (seen and size <= 1e3 * xtol and rate > 0.5)
+
+
+@njit(cache=True)
+def decrease(g, H, step):
+    """The cost decrease −(2 gᵀ step + stepᵀ H step) that the Gauss–Newton model predicts for ``step``."""
+    predicted = 0.0
+    for c in range(step.size):
+        predicted -= 2.0 * g[c] * step[c]
+        for r in range(step.size):
+            predicted -= step[c] * H[c, r] * step[r]
+    return predicted
+
+
+@njit(cache=True)
+def jumped(y, dy, y_trial, dF, floor):
+    """Whether the trial response ``y_trial`` lies far from its linear prediction ``y + dy dF``.
+
+    A shape that far has jumped to another branch of equilibria: more than half the
+    predicted change, plus ``floor`` (the round-off of the response) [m or rad].
+    """
+    jump = 0.0
+    lin_max = 0.0
+    for i in range(y.size):
+        lin = dy[i, 0] * dF[0] + dy[i, 1] * dF[1]
+        lin_max = max(lin_max, abs(lin))
+        jump = max(jump, abs(y_trial[i] - y[i] - lin))
+    return not jump <= 0.5 * lin_max + floor  # NaN: jumped
+
+
+@njit(cache=True)
+def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter, ops, pb, ws, blocked):
+    """Projected Gauss–Newton with a trust region on ``u`` (k,) for one frame; ``u`` updated in place.
+
+    The first beam comes from :func:`first_solve`. Each trial solve starts from the
+    first-order prediction of the state and may not leave its linear prediction (a jump
+    to another branch). Stops by :func:`converged`. Returns (status, beam solves, cost);
+    ``ws`` holds the beam at the last accepted ``u``; ``blocked`` the last step that left
+    the stable branch (status NOT_IDENTIFIABLE).
+    """
+    k = u.size
+    n = state0.size
+    trial = workspace(ws[0].shape[0], n, ws[5].size)
+    ok, iters = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial)
     if not ok:
         return _BEAM_FAILED, iters, np.nan
+    F = np.empty(2)
+    gF = np.empty(2)
+    GF = np.empty((2, 2))
     cost = objective(ws, tg, gF, GF)
     g = np.empty(k)
     H = np.empty((k, k))
@@ -342,21 +405,7 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         for c in range(k):
             dstep[c] = max(u[c] + step[c], lower[c]) - u[c]
             size = max(size, abs(dstep[c]))
-        seen = math.isfinite(last)
-        rate = size / last if seen else size
-        left = size * rate / (1.0 - rate) if seen and rate < 0.5 else size
-        # converged: the step, or the error left by a contraction at the observed rate,
-        # is below xtol; or that error is below SIGMA_STEP standard deviations when the
-        # cost is a χ² (H⁻¹ the covariance of u: a flat, poorly determined direction); or
-        # stalled at the round-off floor of the beam solutions
-        small = False
-        if tg[3] and size > 0.0:
-            q = 0.0
-            for c in range(k):
-                for r in range(k):
-                    q += dstep[c] * H[c, r] * dstep[r]
-            small = q * (left / size) ** 2 <= SIGMA_STEP * SIGMA_STEP
-        if left <= xtol or small or (seen and size <= 1e3 * xtol and rate > 0.5):
+        if converged(dstep, size, last, H, tg[3], xtol):
             for c in range(k):
                 u[c] += dstep[c]
             status = _OK
@@ -368,28 +417,17 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         norm = math.sqrt(norm)
         shrink = min(1.0, radius / norm)
         norm *= shrink
-        predicted = 0.0
         for c in range(k):
             un[c] = max(u[c] + dstep[c] * shrink, lower[c])
             dstep[c] = un[c] - u[c]
-        for c in range(k):
-            predicted -= 2.0 * g[c] * dstep[c]
-            for r in range(k):
-                predicted -= dstep[c] * H[c, r] * dstep[r]
+        predicted = decrease(g, H, dstep)
         force_of(D, np.zeros(2), dstep, dF)
         force_of(D, ffix, un, F)
         for i in range(n):  # first-order prediction of the new state
             guess[i] = st[i] + dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
         okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, pb, trial)
         iters += 1
-        # a shape far from its linear prediction has jumped to another branch of equilibria
-        jump = 0.0
-        lin_max = 0.0
-        for i in range(y.size):
-            lin = dy[i, 0] * dF[0] + dy[i, 1] * dF[1]
-            lin_max = max(lin_max, abs(lin))
-            jump = max(jump, abs(trial[5][i] - y[i] - lin))
-        okn = okn and jump <= 0.5 * lin_max + pb.jump_floor
+        okn = okn and not jumped(y, dy, trial[5], dF, pb.jump_floor)
         cn = objective(trial, tg, gFn, GFn)
         rho = (cost - cn) / (predicted if predicted > 0 else np.inf)
         # below ~1e-6 N the cost change is lost in the beam's round-off: the step is trusted
