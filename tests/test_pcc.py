@@ -348,3 +348,20 @@ def test_reconstruct_blocks_and_base_angles_agree_with_single_frames():
     np.testing.assert_allclose(per_frame_base.tip_angle_rad, batch.tip_angle_rad, rtol=0, atol=1e-13)
     pos, _ = forward_kinematics(batch.curvature_per_m, LENGTHS, s, base_angle_rad=0.3)
     np.testing.assert_allclose(batch.positions_m, pos, rtol=0, atol=1e-16)
+
+
+def test_the_grid_cache_leaves_the_callers_arrays_alone():
+    lengths, s = LENGTHS.copy(), np.linspace(0.0, L, 7)
+    kappa = np.full(16, 10.0)
+    first, _ = forward_kinematics(kappa, lengths, s)
+    assert lengths.flags.writeable and s.flags.writeable
+    # an array changed in place is a new grid, not the cached one: one arc of 10 /m over twice the length
+    lengths *= 2.0
+    second, _ = forward_kinematics(kappa, lengths, 2.0 * s)
+    np.testing.assert_allclose(second[-1], arc_tip(10.0, 2.0 * L), atol=1e-12)
+    np.testing.assert_allclose(first[-1], arc_tip(10.0, L), atol=1e-12)
+
+
+def arc_tip(kappa, length):
+    theta = kappa * length
+    return np.array([(1.0 - np.cos(theta)) / kappa, np.sin(theta) / kappa])

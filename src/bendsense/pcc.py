@@ -27,6 +27,7 @@ which equals the paper's ``(1/κ (1 − cos κσ), 1/κ sin κσ)`` for φ0 = 0.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -114,20 +115,16 @@ class _Grid:
             a.setflags(write=False)
 
 
-_GRID_CACHE: dict = {}
-
-
 def _grid(lengths_m, s_m) -> _Grid:
     lengths = np.ascontiguousarray(lengths_m, dtype=float)
     s = np.ascontiguousarray(s_m, dtype=float)
-    key = (lengths.tobytes(), s.tobytes(), s.shape)
-    grid = _GRID_CACHE.get(key)
-    if grid is None:
-        grid = _Grid(lengths, s)
-        if len(_GRID_CACHE) > 64:  # bounded: callers with ever-changing s_m must not leak
-            _GRID_CACHE.clear()
-        _GRID_CACHE[key] = grid
-    return grid
+    return _grid_of_bytes(lengths.tobytes(), lengths.shape, s.tobytes(), s.shape)
+
+
+@functools.lru_cache(maxsize=64)  # bounded: callers with ever-changing s_m must not leak
+def _grid_of_bytes(lengths: bytes, lengths_shape: tuple, s: bytes, s_shape: tuple) -> _Grid:
+    # rebuilt from the key's bytes: the grid never holds (nor makes read-only) a caller's array
+    return _Grid(np.frombuffer(lengths).reshape(lengths_shape), np.frombuffer(s).reshape(s_shape))
 
 
 def default_s_m(lengths_m, n_points: int = DEFAULT_N_POINTS) -> np.ndarray:
@@ -582,17 +579,16 @@ def _shape(kappa, grid: _Grid, base_angle_rad, extrapolated, theta=None) -> Shap
     )
 
 
-_PAPER_SENSOR = None
+@functools.lru_cache(maxsize=1)
+def _paper_sensor() -> SensorConfig:
+    from bendsense.config import load_config
+
+    return load_config().sensor
 
 
 def _resolve_sensor(sensor):
-    global _PAPER_SENSOR
     if sensor is None:
-        if _PAPER_SENSOR is None:
-            from bendsense.config import load_config
-
-            _PAPER_SENSOR = load_config().sensor
-        return _PAPER_SENSOR
+        return _paper_sensor()
     return getattr(sensor, "sensor", sensor)  # a whole Config is accepted too
 
 

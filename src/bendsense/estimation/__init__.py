@@ -92,6 +92,8 @@ def _c(a, dtype=float):
 
 
 def _models(config):
+    # memoised on the config object itself (one attribute lookup per call); an lru_cache on the
+    # value-hashable config would do the same at the cost of hashing it (~1 µs) every frame
     from bendsense.actuator import FreeBendingModel
 
     cached = getattr(config, "_free_bending_cache", None)
@@ -345,6 +347,9 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
     return start, True, warm_start
 
 
+# Keyed by id(), not an lru_cache on the (value-hashable) config: hashing a Config by value
+# costs ~1 µs per call, a warm frame's budget is 20 µs; the value keeps the objects alive and
+# the `is` checks catch an id reused after garbage collection.
 _PROBLEMS: dict = {}  # (config, calibration, grid, options) -> (config, calibration, grid, constants)
 
 
