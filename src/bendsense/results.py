@@ -188,6 +188,9 @@ def read_results(out_dir) -> Results:
     if not rows:
         raise SessionError(f"{path}: empty (no header row)")
     header, body = rows[0], rows[1:]
+    for line, row in enumerate(body, start=2):
+        if len(row) != len(header):  # (zip below would cut every column to the shortest row)
+            raise SessionError(f"{path}: line {line}: {len(row)} cells, expected {len(header)} (one per column)")
     cells = list(zip(*body)) if body else [[] for _ in header]
     columns = {h: parse_column(list(c)) for h, c in zip(header, cells)}
     numeric = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n",
@@ -197,7 +200,8 @@ def read_results(out_dir) -> Results:
             try:
                 columns[h] = columns[h].astype(float)
             except ValueError:
-                raise SessionError(f"{path}: column {h}: expected numbers") from None
+                line, cell = next((k, c) for k, c in enumerate(columns[h], start=2) if not _is_number(c))
+                raise SessionError(f"{path}: column {h}: expected numbers, got {cell!r} on line {line}") from None
             inf = np.flatnonzero(np.isinf(columns[h]))
             if inf.size and h in ("t_s", "pressure_pa"):  # (an infinite std marks an unidentifiable direction)
                 raise SessionError(f"{path}: line {inf[0] + 2}, column {h}: must be finite or nan, got inf")
@@ -220,3 +224,11 @@ def read_results(out_dir) -> Results:
     known = {"t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS}
     extra = tuple(h for h in header if h not in known and not _KAPPA.match(h))
     return Results(columns=columns, s_m=s_m, positions_m=positions, extra_names=extra)
+
+
+def _is_number(cell) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
