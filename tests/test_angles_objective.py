@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from forward_model import forward
+from helpers import curvatures_for as _kappa
 from test_cli_estimate import workdir  # noqa: F401 (the CLI session fixture)
 
 import bendsense
 from bendsense.cli import main
 from bendsense.errors import ArgumentError, ConfigError
 from bendsense.estimation import estimate_force
-from bendsense.pcc import shifts_to_curvatures
 from bendsense.pipeline import LiveProcessor
 from bendsense.results import read_results
 
@@ -36,10 +36,6 @@ def _truths(n, seed):
 @pytest.fixture(scope="module")
 def truths():
     return _truths(24, seed=5)
-
-
-def _kappa(shifts):
-    return shifts_to_curvatures(shifts, SENSOR.lengths_m, SENSOR.strip_gap_m)
 
 
 def test_noise_free_exact_shifts_give_the_force_without_pcc_bias(truths):

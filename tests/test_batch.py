@@ -1,7 +1,6 @@
 """Batch processing of many sessions (bendsense.batch) and the ``process`` command."""
 
 import concurrent.futures as cf
-import functools
 import importlib.util
 import pickle
 import sys
@@ -9,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import linear_calibration, loaded_curvatures, signals_for
 
 from bendsense import load_config
 from bendsense.batch import (
@@ -20,7 +20,6 @@ from bendsense.batch import (
     process_sessions,
     session_names,
 )
-from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.errors import SessionError
 from bendsense.results import read_results
@@ -30,32 +29,9 @@ from bendsense.sessiondir import SessionWriter
 CONFIG = load_config()
 SENSOR = CONFIG.sensor
 N = SENSOR.n_segments
-ODD = np.arange(N) % 2 == 0  # channels 1, 3, ... (1-based)
-GAIN = 2e-6  # shift per signal unit of the linear test calibration [m]
 # the force estimator is written in parallel; until it lands the batch runs shapes only
 ESTIMATE = importlib.util.find_spec("bendsense.estimation") is not None
 FRAMES = 40
-
-
-def linear_calibration():
-    """S_i = ±GAIN · ΔA_i (odd +, even −), offset 2000 + 10 i: an exactly invertible calibration."""
-    return Calibration(
-        offset=2000.0 + 10.0 * np.arange(N),
-        coefficients_odd=[0.0, GAIN],
-        coefficients_even=[0.0, -GAIN],
-        degree=1,
-        delta_a_range_odd=(-3000.0, 3000.0),
-        delta_a_range_even=(-3000.0, 3000.0),
-        noise_std=np.full(N, 1.0),
-        sensor=SENSOR,
-    )
-
-
-@functools.cache
-def actuator():
-    from bendsense.sim.actuator import SimulatedActuator
-
-    return SimulatedActuator.from_config(CONFIG, noise_counts=0.0)
 
 
 def loading(frames, seed):
@@ -69,13 +45,7 @@ def loading(frames, seed):
 
 def true_curvatures(frames, seed):
     """Segment curvatures (frames, N) [1/m] of the simulated actuator (beam model) under ``loading``."""
-    return actuator().frames(*loading(frames, seed), noise=False).curvature_per_m
-
-
-def signals_for(kappa, calibration):
-    # independent of bendsense.pcc: S_i = d Σ_{j≤i} κ_j l_j (paper eq. 3-4), then invert S = ±GAIN ΔA
-    shifts = SENSOR.strip_gap_m * np.cumsum(kappa * SENSOR.lengths_m, axis=-1)
-    return calibration.offset + np.where(ODD, shifts / GAIN, -shifts / GAIN)
+    return loaded_curvatures(*loading(frames, seed))
 
 
 def make_session(seed, frames=FRAMES):

@@ -1,6 +1,7 @@
 """Third-party readers of what bendsense writes: ROS 2 messages in MCAP (``mcap_ros2``), LSL inlets (``pylsl``)."""
 
 import csv
+import shutil
 import subprocess
 import sys
 import time
@@ -9,21 +10,19 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.results import read_results
 from bendsense.session import Session, write_session_csv
-from bendsense.sim.scenarios import simulate, time_varying_frames
+from bendsense.sim.scenarios import time_varying_frames
 
 SEED = 0
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory):
+def workdir(tmp_path_factory, calibration_path):
     """The virtual sensor's calibration and 1.2 s of its time-varying session at 50 Hz, as a session CSV."""
     root = tmp_path_factory.mktemp("interop")
-    simulate("calibration", root / "cal", seed=SEED, frames_per_strip=20)
-    Calibration.fit(root / "cal" / "manifest.yaml").save(root / "cal.yaml")
+    shutil.copyfile(calibration_path, root / "cal.yaml")
     frames = list(time_varying_frames(None, 50.0, SEED, duration_s=1.2))
     n = len(frames)
     pressure = np.array([p for p, _ in frames], dtype=float)

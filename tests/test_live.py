@@ -16,7 +16,7 @@ from bendsense.device.simdevice import SimulatedDevice, default_source
 from bendsense.errors import ConfigError
 from bendsense.estimation import estimate_force
 from bendsense.pipeline import LiveFrame, LiveProcessor
-from bendsense.sim.scenarios import simulate, time_varying_frames
+from bendsense.sim.scenarios import time_varying_frames
 
 SEED = 0
 RATE_HZ = 100.0
@@ -25,16 +25,6 @@ RATE_HZ = 100.0
 def invoke(*args):
     """Run ``bendsense live ...``."""
     return CliRunner().invoke(main, ["live", *args])
-
-
-@pytest.fixture(scope="module")
-def calibration_path(tmp_path_factory):
-    """The calibration of the virtual sensor of SEED, as 'bendsense demo' makes it."""
-    root = tmp_path_factory.mktemp("live")
-    simulate("calibration", root / "cal", seed=SEED, frames_per_strip=20)
-    path = root / "calibration.yaml"
-    Calibration.fit(root / "cal" / "manifest.yaml").save(path)
-    return path
 
 
 @pytest.fixture(scope="module")

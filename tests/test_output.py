@@ -6,6 +6,7 @@ import os
 import stat
 
 import pytest
+from helpers import hold_output
 
 from bendsense import output
 from bendsense.errors import BendsenseError, OutputError, OutputExistsError
@@ -192,16 +193,10 @@ def test_error_messages_name_the_users_path_not_the_temporary_one(cwd):
     assert isinstance(info.value, BendsenseError)
 
 
-def _hold(path, ready, release):
-    with output.reserve([output.directory(path)]):
-        ready.set()
-        release.wait(10)
-
-
 def test_a_second_writer_refuses_while_the_first_holds_the_output(cwd):
     ctx = multiprocessing.get_context("spawn")
     ready, release = ctx.Event(), ctx.Event()
-    proc = ctx.Process(target=_hold, args=(str(cwd / "out"), ready, release))
+    proc = ctx.Process(target=hold_output, args=(str(cwd / "out"), ready, release, 10))
     proc.start()
     try:
         assert ready.wait(30)

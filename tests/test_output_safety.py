@@ -16,6 +16,7 @@ import stat
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import hold_output, linear_calibration, signals_for
 
 from bendsense import load_config, output
 from bendsense.calibration import Calibration
@@ -26,7 +27,6 @@ from bendsense.sim.scenarios import simulate
 
 SENSOR = load_config().sensor
 N = SENSOR.n_segments
-GAIN = 2e-6
 FRAMES = 6
 
 
@@ -34,13 +34,10 @@ FRAMES = 6
 def lab(tmp_path_factory):
     """A small lab: a calibration, a session CSV, a native session, calibration recordings."""
     root = tmp_path_factory.mktemp("lab")
-    cal = Calibration(offset=np.full(N, 2000.0), coefficients_odd=[0.0, GAIN], coefficients_even=[0.0, -GAIN],
-                      degree=1, delta_a_range_odd=(-5e3, 5e3), delta_a_range_even=(-5e3, 5e3))
+    cal = linear_calibration(offset=np.full(N, 2000.0), delta_a=5e3, noise_std=None, sensor=None)
     cal.save(root / "cal.yaml")
     kappa = np.linspace(2.0, 12.0, FRAMES)[:, None] * np.ones(N)
-    shifts = SENSOR.strip_gap_m * np.cumsum(kappa * SENSOR.lengths_m, axis=-1)
-    odd = np.arange(N) % 2 == 0
-    signals = 2000.0 + np.where(odd, shifts, -shifts) / GAIN
+    signals = signals_for(kappa, cal)
     session = Session(np.arange(FRAMES) * 0.1, signals, np.full(FRAMES, 50e3))
     write_session_csv(session, root / "run.csv")
     with SessionWriter(root / "native", N) as w:
@@ -346,16 +343,10 @@ def test_a_failure_half_way_leaves_nothing(work, monkeypatch):
 # --- concurrency, permissions, recordings ---------------------------------------------------
 
 
-def _hold(path, ready, release):
-    with output.reserve([output.directory(path)]):
-        ready.set()
-        release.wait(30)
-
-
 def test_two_runs_on_one_output_the_second_refuses(work):
     ctx = multiprocessing.get_context("spawn")
     ready, release = ctx.Event(), ctx.Event()
-    proc = ctx.Process(target=_hold, args=(str(work / "out"), ready, release))
+    proc = ctx.Process(target=hold_output, args=(str(work / "out"), ready, release, 30))
     proc.start()
     try:
         assert ready.wait(60)

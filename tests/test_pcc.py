@@ -2,6 +2,7 @@
 
 import math
 
+import helpers
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -9,7 +10,6 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 
 from bendsense import load_config
-from bendsense.calibration import Calibration
 from bendsense.errors import ConfigError
 from bendsense.pcc import (
     Shape,
@@ -255,20 +255,12 @@ def test_max_position_error():
 
 def linear_calibration(gain_m_per_unit=1e-5):
     """S = ±gain · ΔA, the odd and even channels with opposite signs; range ±500 units."""
-    return Calibration(
-        offset=np.linspace(100.0, 250.0, 16),
-        coefficients_odd=[0.0, gain_m_per_unit],
-        coefficients_even=[0.0, -gain_m_per_unit],
-        degree=1,
-        delta_a_range_odd=(-500.0, 500.0),
-        delta_a_range_even=(-500.0, 500.0),
-    )
+    return helpers.linear_calibration(gain_m_per_unit, offset=np.linspace(100.0, 250.0, 16), delta_a=500.0,
+                                      noise_std=None, sensor=None)
 
 
 def signals_for(kappa, cal, gain=1e-5):
-    shifts = np.cumsum(np.asarray(kappa) * SENSOR.strip_gap_m * LENGTHS, axis=-1)  # inverse of eq. 3–4
-    sign = np.where(np.arange(16) % 2 == 0, 1.0, -1.0)
-    return cal.offset + sign * shifts / gain
+    return helpers.signals_for(kappa, cal, gain)
 
 
 def test_reconstruct_chain():

@@ -6,6 +6,7 @@ import functools
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import linear_calibration, loaded_curvatures, signals_for
 
 from bendsense import load_config, read_session
 from bendsense.calibration import Calibration
@@ -18,36 +19,17 @@ from bendsense.session import Session, write_session_csv
 CONFIG = load_config()
 SENSOR = CONFIG.sensor
 N = SENSOR.n_segments
-ODD = np.arange(N) % 2 == 0  # channels 1, 3, ... (1-based)
-GAIN = 2e-6  # shift per signal unit of the linear calibration [m]
 FRAMES = 12
-
-
-def linear_calibration():
-    """S_i = ±GAIN · ΔA_i (odd +, even −): an exactly invertible calibration with a noise model."""
-    return Calibration(
-        offset=2000.0 + 10.0 * np.arange(N),
-        coefficients_odd=[0.0, GAIN],
-        coefficients_even=[0.0, -GAIN],
-        degree=1,
-        delta_a_range_odd=(-3000.0, 3000.0),
-        delta_a_range_even=(-3000.0, 3000.0),
-        noise_std=np.full(N, 1.0),
-        sensor=SENSOR,
-    )
 
 
 @functools.cache
 def frames():
     """Pressure [Pa], tip force [N] and signals of a loaded actuator (the beam model, no noise)."""
-    from bendsense.sim.actuator import SimulatedActuator
-
     t = np.linspace(0.0, 1.0, FRAMES)
     pressure = 40e3 + 40e3 * t
     force = np.column_stack([0.05 * np.sin(2 * np.pi * t), -0.1 - 0.1 * t])
-    kappa = SimulatedActuator.from_config(CONFIG, noise_counts=0.0).frames(pressure, force, noise=False).curvature_per_m
-    shifts = SENSOR.strip_gap_m * np.cumsum(kappa * SENSOR.lengths_m, axis=-1)
-    signals = linear_calibration().offset + np.where(ODD, shifts / GAIN, -shifts / GAIN)
+    kappa = loaded_curvatures(pressure, force)
+    signals = signals_for(kappa, linear_calibration())
     return pressure, force, signals
 
 

@@ -8,6 +8,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from click.testing import CliRunner  # noqa: E402
+from helpers import linear_calibration, signals_for  # noqa: E402
 
 from bendsense import load_config  # noqa: E402
 from bendsense.calibration import Calibration  # noqa: E402
@@ -300,12 +301,9 @@ def test_cli_plot_standalone(results_dir, tmp_path):
 def test_cli_plot_in_a_chain_after_save(tmp_path):
     # signals of a linear calibration S = ±2e-6 ΔA for curvatures 2..20 1/m
     kappa = uniform_kappa()
-    odd = np.arange(N) % 2 == 0
-    shifts = SENSOR.strip_gap_m * np.cumsum(kappa * SENSOR.lengths_m, axis=-1)
-    cal = Calibration(offset=np.full(N, 2000.0), coefficients_odd=[0.0, 2e-6], coefficients_even=[0.0, -2e-6],
-                      degree=1, delta_a_range_odd=(-5e3, 5e3), delta_a_range_even=(-5e3, 5e3))
+    cal = linear_calibration(2e-6, offset=np.full(N, 2000.0), delta_a=5e3, noise_std=None, sensor=None)
     cal.save(tmp_path / "cal.yaml")
-    signals = 2000.0 + np.where(odd, shifts, -shifts) / 2e-6
+    signals = signals_for(kappa, cal, 2e-6)
     write_session_csv(Session(np.arange(FRAMES) * 0.1, signals, np.full(FRAMES, 50e3)), tmp_path / "run.csv")
     fig = tmp_path / "fig.png"
     args = ["load", str(tmp_path / "run.csv"), "--calibration", str(tmp_path / "cal.yaml"), "reconstruct",

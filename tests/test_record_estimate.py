@@ -16,20 +16,11 @@ from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.device.simdevice import SimulatedDevice, default_source
 from bendsense.pipeline import LiveProcessor
-from bendsense.sim.scenarios import simulate, time_varying_frames
+from bendsense.sim.scenarios import time_varying_frames
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 SEED = 0
 CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]
-
-
-@pytest.fixture(scope="module")
-def calibration_path(tmp_path_factory):
-    """The calibration of the simulated board's virtual sensor (seed 0)."""
-    root = tmp_path_factory.mktemp("rec-est")
-    simulate("calibration", root / "cal", seed=SEED, frames_per_strip=20)
-    Calibration.fit(root / "cal" / "manifest.yaml").save(root / "cal.yaml")
-    return root / "cal.yaml"
 
 
 def read_rows(path):

@@ -12,7 +12,6 @@ from click.testing import CliRunner
 import bendsense
 from bendsense.calibration import read_manifest
 from bendsense.cli import main
-from bendsense.config import load_config
 from bendsense.errors import ConfigError, OutputError
 from bendsense.sim import VirtualSensor, calibration_shifts
 from bendsense.sim.scenarios import (
@@ -26,11 +25,6 @@ from bendsense.sim.scenarios import (
 )
 
 FAST = {"frames_per_strip": 3, "frames_per_config": 2, "duration_s": 0.3}
-
-
-@pytest.fixture(scope="module")
-def config():
-    return load_config()
 
 
 @pytest.fixture(scope="module")

@@ -7,15 +7,9 @@ import numpy as np
 import pytest
 
 from bendsense.actuator import FreeBendingModel
-from bendsense.config import load_config
 from bendsense.errors import ConfigError
 from bendsense.sim import VirtualSensor, shifts_from_curvatures
 from bendsense.sim.actuator import SimulatedActuator, play_operator
-
-
-@pytest.fixture(scope="module")
-def config():
-    return load_config()
 
 
 @pytest.fixture(scope="module")

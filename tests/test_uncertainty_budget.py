@@ -11,13 +11,14 @@ import dataclasses
 import numpy as np
 import pytest
 from forward_model import HiddenSensor, forward
+from helpers import curvatures_for as _kappa
 
 import bendsense
 from bendsense.calibration import Calibration
 from bendsense.config import ParameterCovarianceConfig
 from bendsense.estimation import estimate_force
 from bendsense.estimation.result import BUDGET
-from bendsense.pcc import reconstruct, shifts_to_curvatures
+from bendsense.pcc import reconstruct
 
 CFG = bendsense.load_config()
 SENSOR = CFG.sensor
@@ -47,10 +48,6 @@ def _loads(rng, n):
     p = rng.uniform(20e3, 120e3, n)
     a, r = rng.uniform(0.0, 2.0 * np.pi, n), 0.25 * np.sqrt(rng.uniform(size=n))
     return p, np.stack([r * np.cos(a), r * np.sin(a)], axis=-1)
-
-
-def _kappa(shifts):
-    return shifts_to_curvatures(shifts, SENSOR.lengths_m, SENSOR.strip_gap_m)
 
 
 def _coverage(est, force):

@@ -1,0 +1,23 @@
+"""Fixtures shared by the tests (plain helpers are in ``helpers.py``)."""
+
+import pytest
+
+from bendsense import load_config
+
+
+@pytest.fixture(scope="session")
+def config():
+    """The paper's configuration shipped with bendsense."""
+    return load_config()
+
+
+@pytest.fixture(scope="session")
+def calibration_path(tmp_path_factory):
+    """The calibration of the virtual sensor of seed 0 (as ``bendsense demo`` makes it), saved as YAML."""
+    from bendsense.calibration import Calibration
+    from bendsense.sim.scenarios import simulate
+
+    root = tmp_path_factory.mktemp("virtual-calibration")
+    simulate("calibration", root / "cal", seed=0, frames_per_strip=20)
+    Calibration.fit(root / "cal" / "manifest.yaml").save(root / "cal.yaml")
+    return root / "cal.yaml"

@@ -1,0 +1,72 @@
+"""Helpers shared by the tests: data made in the test, independently of the code under test.
+
+``from helpers import ...`` (the tests directory is on ``sys.path``, as for
+``forward_model``). Fixtures built on these live in ``conftest.py``.
+"""
+
+import functools
+
+import numpy as np
+
+from bendsense import load_config, output
+from bendsense.calibration import Calibration
+
+CONFIG = load_config()
+SENSOR = CONFIG.sensor
+N = SENSOR.n_segments
+ODD = np.arange(N) % 2 == 0  # channels 1, 3, ... (1-based)
+GAIN = 2e-6  # shift per signal unit of the linear test calibration [m]
+
+
+def linear_calibration(gain=GAIN, *, offset=None, delta_a=3000.0, noise_std=1.0, sensor=SENSOR):
+    """S_i = ±gain · ΔA_i (odd channels +, even −): an exactly invertible calibration.
+
+    ``offset`` defaults to 2000 + 10 i; ``noise_std`` (per channel) and ``sensor`` may be None.
+    """
+    return Calibration(
+        offset=2000.0 + 10.0 * np.arange(N) if offset is None else offset,
+        coefficients_odd=[0.0, gain],
+        coefficients_even=[0.0, -gain],
+        degree=1,
+        delta_a_range_odd=(-delta_a, delta_a),
+        delta_a_range_even=(-delta_a, delta_a),
+        noise_std=None if noise_std is None else np.full(N, noise_std),
+        sensor=sensor,
+    )
+
+
+def shifts_for(kappa):
+    """Total shifts S_i = d Σ_{j≤i} κ_j l_j [m] (paper eq. 3–4), independent of bendsense.pcc."""
+    return SENSOR.strip_gap_m * np.cumsum(np.asarray(kappa) * SENSOR.lengths_m, axis=-1)
+
+
+def signals_for(kappa, calibration, gain=GAIN):
+    """The signals that ``linear_calibration(gain)`` turns into the curvatures ``kappa`` [1/m]."""
+    shifts = shifts_for(kappa)
+    return calibration.offset + np.where(ODD, shifts / gain, -shifts / gain)
+
+
+def curvatures_for(shifts):
+    """Segment curvatures [1/m] of total shifts [m] on the paper's sensor."""
+    from bendsense.pcc import shifts_to_curvatures
+
+    return shifts_to_curvatures(shifts, SENSOR.lengths_m, SENSOR.strip_gap_m)
+
+
+@functools.cache
+def _actuator():
+    from bendsense.sim.actuator import SimulatedActuator
+
+    return SimulatedActuator.from_config(CONFIG, noise_counts=0.0)
+
+
+def loaded_curvatures(pressure_pa, force_n):
+    """Segment curvatures (frames, N) [1/m] of the simulated actuator (beam model, no noise)."""
+    return _actuator().frames(pressure_pa, force_n, noise=False).curvature_per_m
+
+
+def hold_output(path, ready, release, timeout_s):
+    """Hold ``path`` as an output (in another process) from ``ready`` until ``release``."""
+    with output.reserve([output.directory(path)]):
+        ready.set()
+        release.wait(timeout_s)
