@@ -230,7 +230,18 @@ def elastic_moment_slope(
     length_m: float,
     shear_modulus_pa: float,
 ) -> np.ndarray:
-    """Derivative dM_θ0/dθ0 of :func:`elastic_moment` [N·m/rad] (same quadrature, exact)."""
+    """Derivative dM_θ0/dθ0 of :func:`elastic_moment` [N·m/rad] (same quadrature, exact).
+
+    Parameters
+    ----------
+    theta0_rad : float or array_like
+        Bending angle θ0 of the free actuator [rad].
+    chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m : float
+        Actuator geometry: chamber radius a, bottom layer thickness b, wall thickness t
+        and length L [m].
+    shear_modulus_pa : float
+        Shear modulus μ̄ of the elastomer [Pa].
+    """
     return _elastic(
         theta0_rad, chamber_radius_m, bottom_thickness_m, wall_thickness_m, length_m, shear_modulus_pa, slope=True
     )
@@ -325,6 +336,15 @@ def ei_nm2(pressure_pa, ei0_nm2: float, ei1_nm2_per_pa: float) -> np.ndarray:
     """Flexural rigidity EI(P) = ei0 + ei1 · P (paper eq. 15) [N·m²].
 
     The same formula as :meth:`bendsense.config.StiffnessConfig.ei_nm2`, which it calls.
+
+    Parameters
+    ----------
+    pressure_pa : float or array_like
+        Actuation pressure P [Pa].
+    ei0_nm2 : float
+        Flexural rigidity at zero pressure, γ0 [N·m²].
+    ei1_nm2_per_pa : float
+        Its growth with pressure, γ1 [N·m²/Pa].
     """
     p = _finite("pressure_pa", pressure_pa)
     return StiffnessConfig(ei0_nm2=ei0_nm2, ei1_nm2_per_pa=ei1_nm2_per_pa).ei_nm2(p)

@@ -329,6 +329,28 @@ def process_session(
     ``shape.npz`` into ``out_dir`` (:func:`bendsense.results.write_results`). This is
     the task that :func:`process_sessions` sends to its executor; its arguments pickle.
 
+    Parameters
+    ----------
+    path : str or path-like
+        The session: a native session directory or a session CSV.
+    out_dir : str or path-like
+        Output directory of its results.
+    config : Config
+        Sensor and actuator configuration.
+    calibration : Calibration
+        Signal → shift calibration of the sensor.
+    constraint, method, objective : str, optional
+        Force estimate options (:func:`bendsense.estimation.estimate_force`); None takes
+        the config's.
+    pressure_pa : float, optional
+        Constant pressure for a session without a pressure column [Pa].
+    estimate : bool, default True
+        Estimate the tip forces; False writes the shapes only.
+    overwrite : bool, default False
+        Replace a previous bendsense output in ``out_dir``.
+    name : str, optional
+        Name of the session in the outcome (default: the file or directory name).
+
     Returns
     -------
     SessionOutcome

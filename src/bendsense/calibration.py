@@ -101,13 +101,27 @@ def strip_shifts(curvature_per_m, lengths_m, strip_gap_m):
 
 
 def parity_masks(n_channels: int):
-    """Boolean masks of the odd (1-based i = 1, 3, …) and even channels."""
+    """Boolean masks of the odd (1-based i = 1, 3, …) and even channels.
+
+    Parameters
+    ----------
+    n_channels : int
+        Number of channels N.
+    """
     odd = (np.arange(n_channels) % 2) == 0
     return odd, ~odd
 
 
 def polyval_shift(coefficients, delta_a):
-    """Evaluate ``Σ_k c_k ΔA^k`` (ascending powers, Horner's rule; paper eq. 2)."""
+    """Evaluate ``Σ_k c_k ΔA^k`` (ascending powers, Horner's rule; paper eq. 2).
+
+    Parameters
+    ----------
+    coefficients : array_like, shape (n + 1,) or (..., n + 1)
+        Coefficients c_k in ascending powers [m / unit^k].
+    delta_a : array_like
+        Signal change ΔA = A − A0 [signal units].
+    """
     c = np.asarray(coefficients, dtype=float)
     x = np.asarray(delta_a, dtype=float)
     out = np.full(x.shape, c[-1])
@@ -280,6 +294,11 @@ def select_degree(fold_errors: dict) -> int:
     Extra degrees fit the noise of the training strips as readily as the sensor's
     curve; the rule keeps the simplest polynomial that CV cannot tell apart from the
     best one.
+
+    Parameters
+    ----------
+    fold_errors : dict of int to ndarray
+        Per degree, the leave-one-strip-out RMS shift error of each fold [m].
     """
     mean = {d: float(np.mean(e)) for d, e in fold_errors.items()}
     best = min(mean, key=mean.get)
@@ -317,6 +336,11 @@ def _radius_m(where: str, item: dict) -> float:
 
 def read_manifest(path: str | os.PathLike) -> Manifest:
     """Read and check a calibration manifest (DESIGN.md section 3).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The manifest YAML file; recording paths in it are relative to it.
 
     Raises
     ------

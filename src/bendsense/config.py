@@ -577,6 +577,11 @@ class Config:
 def load_config(path: str | os.PathLike | None = None) -> Config:
     """Load a config YAML; ``None`` loads the paper's prototype shipped with the package.
 
+    Parameters
+    ----------
+    path : str or path-like, optional
+        Config YAML file; None loads the paper's prototype shipped with bendsense.
+
     Raises
     ------
     ConfigError
@@ -594,6 +599,15 @@ def save_config(config: Config, path: str | os.PathLike, *, overwrite: bool = Tr
     """Write ``config`` as YAML atomically (:func:`bendsense.output.write_text`).
 
     ``overwrite=False`` refuses an existing file (:class:`~bendsense.errors.OutputExistsError`).
+
+    Parameters
+    ----------
+    config : Config
+        The configuration to write.
+    path : str or path-like
+        Output YAML file.
+    overwrite : bool, default True
+        Replace an existing file; False refuses one.
     """
     from bendsense import output
 

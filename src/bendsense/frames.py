@@ -233,12 +233,23 @@ def crc16_ccitt_false(data: bytes) -> int:
     """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor).
 
     The check value, ``crc16_ccitt_false(b"123456789")``, is 0x29B1.
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes to check (a frame's payload).
     """
     return binascii.crc_hqx(data, 0xFFFF)
 
 
 def cobs_encode(data: bytes) -> bytes:
-    """Consistent Overhead Byte Stuffing: ``data`` without any zero byte, overhead 1 + len/254."""
+    """Consistent Overhead Byte Stuffing: ``data`` without any zero byte, overhead 1 + len/254.
+
+    Parameters
+    ----------
+    data : bytes
+        The bytes to stuff.
+    """
     out = bytearray()
     for part in bytes(data).split(b"\x00"):
         while len(part) >= 254:
@@ -252,6 +263,11 @@ def cobs_encode(data: bytes) -> bytes:
 
 def cobs_decode(data: bytes) -> bytes:
     """Inverse of :func:`cobs_encode`.
+
+    Parameters
+    ----------
+    data : bytes
+        Stuffed bytes, without delimiters.
 
     Raises
     ------
@@ -303,7 +319,13 @@ def _cobs_decode_general(data: bytes) -> bytes | None:
 
 
 def frame_bytes(payload: bytes) -> bytes:
-    """Wire frame of ``payload``: ``0x00, COBS(payload + CRC16 LE), 0x00``."""
+    """Wire frame of ``payload``: ``0x00, COBS(payload + CRC16 LE), 0x00``.
+
+    Parameters
+    ----------
+    payload : bytes
+        The frame's payload (DESIGN.md section 3).
+    """
     body = payload + crc16_ccitt_false(payload).to_bytes(2, "little")
     return b"\x00" + cobs_encode(body) + b"\x00"
 
@@ -373,7 +395,25 @@ def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0) -> byt
 
 
 def encode_hello(seq, t_us, n_channels, adc_bits, rate_hz, vref_mv, firmware="") -> bytes:
-    """Encode a HELLO as a whole wire frame (``firmware``: ASCII, at most 32 bytes)."""
+    """Encode a HELLO as a whole wire frame (``firmware``: ASCII, at most 32 bytes).
+
+    Parameters
+    ----------
+    seq : int
+        Sequence number (0..65535).
+    t_us : int
+        Device clock [µs] (0..2**32-1).
+    n_channels : int
+        Number of ADC channels (1..64).
+    adc_bits : int
+        ADC resolution [bits].
+    rate_hz : int
+        Frame rate [Hz].
+    vref_mv : int
+        ADC reference voltage [mV].
+    firmware : str, default ""
+        Firmware identifier, ASCII, at most 32 bytes.
+    """
     fw = str(firmware).encode("ascii", errors="strict") if firmware else b""
     if len(fw) > MAX_FIRMWARE_BYTES:
         raise FrameError(f"firmware: at most {MAX_FIRMWARE_BYTES} ASCII bytes, got {len(fw)}")
@@ -391,7 +431,17 @@ def encode_hello(seq, t_us, n_channels, adc_bits, rate_hz, vref_mv, firmware="")
 
 
 def encode_text(seq, t_us, text: str) -> bytes:
-    """Encode a TEXT (UTF-8 log line) as a whole wire frame."""
+    """Encode a TEXT (UTF-8 log line) as a whole wire frame.
+
+    Parameters
+    ----------
+    seq : int
+        Sequence number (0..65535).
+    t_us : int
+        Device clock [µs] (0..2**32-1).
+    text : str
+        The log line.
+    """
     payload = _HEADER.pack(VERSION, FrameType.TEXT, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF)
     return frame_bytes(payload + str(text).encode("utf-8"))
 
@@ -415,13 +465,28 @@ def encode_command(kind, seq: int = 0, t_us: int = 0) -> bytes:
     The host has no sequence of its own that the device checks; the driver sends
     ``seq`` = a per-connection counter of commands and ``t_us`` = 0, both of which the
     firmware may ignore.
+
+    Parameters
+    ----------
+    kind : FrameType or int
+        ``START``, ``STOP`` or ``HELLO_REQUEST``.
+    seq : int, default 0
+        Sequence number (0..65535).
+    t_us : int, default 0
+        Host clock [µs]; the firmware may ignore it.
     """
     k = _command_kind(kind)
     return frame_bytes(_HEADER.pack(VERSION, k, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF))
 
 
 def encode_frame(frame) -> bytes:
-    """Encode any frame object (:class:`Sample`, :class:`Hello`, :class:`Text`, :class:`Command`)."""
+    """Encode any frame object (:class:`Sample`, :class:`Hello`, :class:`Text`, :class:`Command`).
+
+    Parameters
+    ----------
+    frame : Sample, Hello, Text or Command
+        The frame to encode.
+    """
     if isinstance(frame, Sample):
         return encode_sample(frame.seq, frame.t_us or 0, frame.adc, frame.pressure_pa, frame.status, frame.tx_drops)
     if isinstance(frame, Hello):
@@ -486,6 +551,14 @@ def _parse_body(body: bytes, adc_bits: int | None):
 def decode_body(body: bytes, adc_bits: int | None = None):
     """Decode one un-stuffed body (payload + CRC) into a frame object.
 
+    Parameters
+    ----------
+    body : bytes
+        Un-stuffed body: payload followed by its CRC-16 (little-endian).
+    adc_bits : int, optional
+        ADC resolution [bits] from the device's HELLO; ADC values at or above
+        ``2**adc_bits`` make the frame malformed. None skips that check.
+
     Raises
     ------
     FrameError
@@ -500,7 +573,15 @@ def decode_body(body: bytes, adc_bits: int | None = None):
 
 
 def decode_frame(data: bytes, adc_bits: int | None = None):
-    """Decode exactly one wire frame (delimiters optional); raises :class:`FrameError` if bad."""
+    """Decode exactly one wire frame (delimiters optional); raises :class:`FrameError` if bad.
+
+    Parameters
+    ----------
+    data : bytes
+        One wire frame, with or without its ``0x00`` delimiters.
+    adc_bits : int, optional
+        ADC resolution [bits] (see :func:`decode_body`).
+    """
     return decode_body(cobs_decode(bytes(data).strip(b"\x00")), adc_bits)
 
 

@@ -158,6 +158,11 @@ def _check_pressure_unit(path, name, pressure_pa):
 def read_free_bending_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read free-bending data (module docstring): pressures [Pa] and total bending angles [rad].
 
+    Parameters
+    ----------
+    path : str or path-like
+        CSV file with a pressure column and a bending angle column.
+
     Raises
     ------
     SessionError
@@ -237,6 +242,13 @@ class StiffnessData:
 
 def read_stiffness_csv(path: str | os.PathLike, length_m: float) -> StiffnessData:
     """Read loaded shapes for the stiffness fit (module docstring); ``length_m`` places the tip columns.
+
+    Parameters
+    ----------
+    path : str or path-like
+        CSV file of loaded shapes.
+    length_m : float
+        Actuator length L [m]: the arc length of the tip columns.
 
     Raises
     ------

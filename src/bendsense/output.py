@@ -124,22 +124,54 @@ class Target:
 
 
 def directory(path, *, overwrite: bool = False) -> Target:
-    """A directory output, written aside and swapped in."""
+    """A directory output, written aside and swapped in.
+
+    Parameters
+    ----------
+    path : path
+        The output directory.
+    overwrite : bool, default False
+        Replace a previous bendsense output there.
+    """
     return Target(path=path, kind="dir", overwrite=overwrite)
 
 
 def file(path, *, overwrite: bool = False, suffixes=()) -> Target:
-    """A file output, written to a temporary file and renamed over ``path``."""
+    """A file output, written to a temporary file and renamed over ``path``.
+
+    Parameters
+    ----------
+    path : path
+        The output file.
+    overwrite : bool, default False
+        Replace an existing file.
+    suffixes : tuple of str or FIGURE
+        Allowed suffixes (empty: any).
+    """
     return Target(path=path, kind="file", overwrite=overwrite, suffixes=suffixes)
 
 
 def recording(path, *, overwrite: bool = False) -> Target:
-    """A directory written in place (a recording that must survive being killed)."""
+    """A directory written in place (a recording that must survive being killed).
+
+    Parameters
+    ----------
+    path : path
+        The recording's directory.
+    overwrite : bool, default False
+        Replace a previous bendsense recording there.
+    """
     return Target(path=path, kind="recording", overwrite=overwrite)
 
 
 def collection(path) -> Target:
-    """A directory that collects outputs (``process``'s root); existing content is kept."""
+    """A directory that collects outputs (``process``'s root); existing content is kept.
+
+    Parameters
+    ----------
+    path : path
+        The collecting directory.
+    """
     return Target(path=path, kind="collection")
 
 
@@ -151,7 +183,13 @@ def _resolve(path) -> Path:
 
 
 def resolve(path) -> Path:
-    """The absolute path with every ``..`` and symlink resolved: what the checks compare."""
+    """The absolute path with every ``..`` and symlink resolved: what the checks compare.
+
+    Parameters
+    ----------
+    path : path
+        Any path, relative to the working directory or absolute.
+    """
     return _resolve(path)
 
 
@@ -315,7 +353,13 @@ def _foreign_message(p: Path, r: Path, foreign: list) -> str:
 
 
 def read_manifest(path) -> dict | None:
-    """The manifest of the output directory ``path``, or None if it has none (or a broken one)."""
+    """The manifest of the output directory ``path``, or None if it has none (or a broken one).
+
+    Parameters
+    ----------
+    path : path
+        The output directory.
+    """
     try:
         with open(Path(path) / MANIFEST_NAME, encoding="utf-8") as fh:
             data = json.load(fh)
@@ -343,6 +387,11 @@ def foreign_entries(path) -> list[str]:
     entry ``name/``. An entry ``name/`` in the manifest is a nested output with its own
     manifest, checked in turn. bendsense's lock files and temporary directories are
     never foreign.
+
+    Parameters
+    ----------
+    path : path
+        The directory to list.
     """
     root = Path(path)
     manifest = read_manifest(root)
@@ -422,6 +471,15 @@ def add_to_manifest(path, names: Iterable[str], *, writer: str = "bendsense") ->
 
     Creates the manifest if there is none. The caller holds the lock of ``path``
     (:func:`reserve` or a writer).
+
+    Parameters
+    ----------
+    path : path
+        The output directory.
+    names : iterable of str
+        Entries to add.
+    writer : str, default "bendsense"
+        Who writes, for a new manifest.
     """
     path = _resolve(path)
     previous = read_manifest(path)
@@ -517,6 +575,13 @@ def reserve(targets: Iterable[Target], inputs: Iterable = ()) -> Iterator[None]:
     """Check all outputs of a command (:func:`check`) and lock them until the block ends.
 
     The CLI calls this before any work; the writers inside the block re-enter the locks.
+
+    Parameters
+    ----------
+    targets : iterable of Target
+        Every output of the command (:func:`directory`, :func:`file`, ...).
+    inputs : iterable of paths
+        The command's inputs, never to be written over.
     """
     targets, inputs = list(targets), list(inputs)
     check(targets, inputs)  # before the locks create any missing parent directory
@@ -744,7 +809,17 @@ def _register(r: Path, writer: str) -> None:
 
 
 def write_text(path, text: str, **options) -> None:
-    """Write ``text`` (UTF-8) to the file ``path`` (options of :func:`write_file`)."""
+    """Write ``text`` (UTF-8) to the file ``path`` (options of :func:`write_file`).
+
+    Parameters
+    ----------
+    path : path
+        The output file.
+    text : str
+        The text to write.
+    **options
+        ``overwrite``, ``inputs``, ``suffixes``, ``writer`` of :func:`write_file`.
+    """
     with write_file(path, **options) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
@@ -790,5 +865,18 @@ def begin_in_place(path, files, *, overwrite: bool = False, inputs: Iterable = (
     lists; anything else makes it refuse) and writes the manifest listing ``files``
     first, so that a recording killed at any moment is still recognised as bendsense's.
     The returned :class:`InPlace` holds the lock until its ``close()``.
+
+    Parameters
+    ----------
+    path : path
+        The output directory.
+    files : iterable of str
+        Names of the files the writer will create there.
+    overwrite : bool, default False
+        Replace a previous bendsense output there.
+    inputs : iterable of paths
+        The command's inputs, never to be written over.
+    writer : str, default "bendsense"
+        Who writes, for the manifest.
     """
     return InPlace(path, files, overwrite=overwrite, inputs=inputs, writer=writer)

@@ -128,7 +128,15 @@ def _grid_of_bytes(lengths: bytes, lengths_shape: tuple, s: bytes, s_shape: tupl
 
 
 def default_s_m(lengths_m, n_points: int = DEFAULT_N_POINTS) -> np.ndarray:
-    """``n_points`` equally spaced arc lengths over 0 ≤ s ≤ L_N [m]."""
+    """``n_points`` equally spaced arc lengths over 0 ≤ s ≤ L_N [m].
+
+    Parameters
+    ----------
+    lengths_m : array_like, shape (N,)
+        Segment lengths l_i [m].
+    n_points : int, default 101
+        Number of arc lengths.
+    """
     return np.linspace(0.0, float(np.sum(lengths_m)), n_points)
 
 

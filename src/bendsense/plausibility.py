@@ -39,7 +39,15 @@ OUT_OF_RANGE = "pressure_out_of_range"
 
 
 def pressure_outside(pressure_pa, config) -> np.ndarray:
-    """True for each finite pressure outside ``config.actuator.pressure_range_pa`` [Pa]."""
+    """True for each finite pressure outside ``config.actuator.pressure_range_pa`` [Pa].
+
+    Parameters
+    ----------
+    pressure_pa : float or array_like
+        Actuation pressures [Pa]; NaN (no reading) is never outside.
+    config : Config
+        Its ``actuator.pressure_range_pa`` gives the range [Pa].
+    """
     lo, hi = config.actuator.pressure_range_pa
     if isinstance(pressure_pa, float):  # one frame (the live path)
         return np.bool_(lo > pressure_pa or pressure_pa > hi)
@@ -60,6 +68,11 @@ def pressure_range_step(estimate):
     ``std_n``, ``covariance_n2``, ``residual_m`` NaN, ``success`` False and the message
     ``"pressure_out_of_range: ..."``. With ``strict=True`` they raise
     :class:`~bendsense.errors.ArgumentError` instead.
+
+    Parameters
+    ----------
+    estimate : callable
+        ``estimate_force`` or a function with its signature.
     """
     from bendsense.config import Config, load_config
 
@@ -122,6 +135,17 @@ def check_pressure_column(name: str, values: np.ndarray, line, error=SessionErro
     (a soft actuator at under 1 kPa does not bend; a column of zeros is an
     unpressurised session and passes); ``pressure_kpa`` with a reading over
     1,000 kPa (1 MPa) holds pascals.
+
+    Parameters
+    ----------
+    name : str
+        Column name, ``pressure_pa`` or ``pressure_kpa``.
+    values : ndarray
+        The column's values, in the column's unit [Pa or kPa].
+    line : int or str
+        Where the column is, for the message (see above).
+    error : type, default SessionError
+        The exception class to raise.
     """
     where = f"line {line}, column" if isinstance(line, int) else f"{line}, field"
     finite = values[np.isfinite(values)]
@@ -138,14 +162,34 @@ def check_pressure_column(name: str, values: np.ndarray, line, error=SessionErro
 
 
 def check_time_column(t_s: np.ndarray, source: str) -> None:
-    """Warn (log) when every time stamp of a multi-frame session is the same."""
+    """Warn (log) when every time stamp of a multi-frame session is the same.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (frames,)
+        Time stamps [s].
+    source : str
+        The session's file, for the message.
+    """
     if t_s.size > 1 and np.all(t_s == t_s[0]):
         log.warning("%s: all %d time stamps are %g s; plots over time will be meaningless", source, t_s.size,
                     float(t_s[0]))
 
 
 def check_channels(session, calibration, sensor, *, calibration_source: str = "") -> None:
-    """Refuse a session, calibration and sensor whose channel counts differ (one line naming them)."""
+    """Refuse a session, calibration and sensor whose channel counts differ (one line naming them).
+
+    Parameters
+    ----------
+    session : Session
+        The session (its signals' channel count).
+    calibration : Calibration or None
+        The calibration (its channel count), if any.
+    sensor : SensorConfig
+        The sensor (its segment count).
+    calibration_source : str, default ""
+        The calibration's file, for the message.
+    """
     cal = f"the calibration {calibration_source}" if calibration_source else "the calibration"
     if calibration.n_channels != sensor.n_segments:
         raise SessionError(f"{cal} has {calibration.n_channels} channels, but the config's sensor has "

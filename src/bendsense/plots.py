@@ -543,7 +543,17 @@ def plot_calibration(calibration, data=None, ax=None):
 
 
 def results_from_state(session, shape, estimate=None):
-    """In-memory :class:`~bendsense.results.Results` of a pipeline state (for plots)."""
+    """In-memory :class:`~bendsense.results.Results` of a pipeline state (for plots).
+
+    Parameters
+    ----------
+    session : Session
+        The processed session.
+    shape : Shape
+        Its reconstructed shapes.
+    estimate : ForceEstimate, optional
+        Its force estimates.
+    """
     from bendsense.results import Results
 
     return Results.from_state(session, shape, estimate)

@@ -111,6 +111,13 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     ``model_misfit`` (the model shape stays over 5 % of the length from the measured one,
     or a χ² beyond chance), ``no_force``, and ``implausible_shape`` (a tip angle beyond a
     full turn: a unit or calibration mistake).
+
+    Parameters
+    ----------
+    shape : Shape
+        Reconstructed shapes, batch axis over frames.
+    estimate : ForceEstimate, optional
+        Force estimates of the same frames.
     """
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
     status = np.full(n, OK, dtype=object)
@@ -179,7 +186,13 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
 
 
 def read_results(out_dir) -> Results:
-    """Read an output directory written by :func:`write_results`."""
+    """Read an output directory written by :func:`write_results`.
+
+    Parameters
+    ----------
+    out_dir : str or path-like
+        The output directory (holding ``results.csv`` and ``shape.npz``).
+    """
     out_dir = Path(out_dir)
     path = out_dir / "results.csv"
     if not path.is_file():

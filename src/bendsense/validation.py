@@ -45,6 +45,13 @@ def short(value, limit: int = SHORT_LIMIT) -> str:
     """``repr`` of ``value`` cut to at most ``limit`` characters (``...`` marks the cut).
 
     Long sequences are cut before they are formatted, so a huge list costs nothing.
+
+    Parameters
+    ----------
+    value : object
+        The value to show.
+    limit : int, default 60
+        Longest result, in characters.
     """
     if isinstance(value, np.ndarray):
         if value.size > 8:
@@ -71,7 +78,21 @@ def _cut(text: str, limit: int) -> str:
 
 
 def fail(field: str, expected: str, got, error=ArgumentError, *, raw: bool = False):
-    """The error ``field: expected <expected>, got <short(got)>`` (``raw``: ``got`` as given)."""
+    """The error ``field: expected <expected>, got <short(got)>`` (``raw``: ``got`` as given).
+
+    Parameters
+    ----------
+    field : str
+        The field or option, e.g. ``sensor.strip_gap_m``.
+    expected : str
+        What is allowed.
+    got : object
+        What was received.
+    error : type, default ArgumentError
+        The exception class to return.
+    raw : bool, default False
+        Show ``got`` as given instead of its shortened ``repr``.
+    """
     return error(f"{field}: expected {expected}, got {got if raw else short(got)}")
 
 
@@ -85,7 +106,21 @@ def number(
     minimum: float | None = None,
     maximum: float | None = None,
 ) -> float:
-    """A finite real number (not a bool, not a string), optionally bounded."""
+    """A finite real number (not a bool, not a string), optionally bounded.
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    value : object
+        The value to check.
+    error : type, default ArgumentError
+        The exception class to raise.
+    positive, nonnegative : bool, default False
+        Require > 0, or >= 0.
+    minimum, maximum : float, optional
+        Inclusive bounds.
+    """
     # bool is an int subclass; a YAML "true" where a number belongs is a mistake
     if isinstance(value, bool) or not isinstance(value, Real):
         raise fail(field, "a number", value, error)
@@ -104,7 +139,19 @@ def number(
 
 
 def integer(field: str, value, *, error=ArgumentError, minimum: int | None = None, maximum: int | None = None) -> int:
-    """An integer (not a bool, not a float), optionally bounded."""
+    """An integer (not a bool, not a float), optionally bounded.
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    value : object
+        The value to check.
+    error : type, default ArgumentError
+        The exception class to raise.
+    minimum, maximum : int, optional
+        Inclusive bounds.
+    """
     if isinstance(value, bool) or not isinstance(value, Integral):
         raise fail(field, "an integer", value, error)
     value = int(value)
@@ -118,14 +165,36 @@ def integer(field: str, value, *, error=ArgumentError, minimum: int | None = Non
 
 
 def boolean(field: str, value, *, error=ArgumentError) -> bool:
-    """``True`` or ``False`` (not 0/1, not a string)."""
+    """``True`` or ``False`` (not 0/1, not a string).
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    value : object
+        The value to check.
+    error : type, default ArgumentError
+        The exception class to raise.
+    """
     if not isinstance(value, (bool, np.bool_)):
         raise fail(field, "true or false", value, error)
     return bool(value)
 
 
 def choice(field: str, value, choices: Iterable[str], *, error=ArgumentError) -> str:
-    """One of ``choices``."""
+    """One of ``choices``.
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    value : object
+        The value to check.
+    choices : iterable of str
+        The allowed values.
+    error : type, default ArgumentError
+        The exception class to raise.
+    """
     choices = tuple(choices)
     if not isinstance(value, str) or value not in choices:
         raise fail(field, f"one of {', '.join(choices)}", value, error)
@@ -133,7 +202,19 @@ def choice(field: str, value, choices: Iterable[str], *, error=ArgumentError) ->
 
 
 def duration_s(field: str, value, *, error=ArgumentError, allow_zero: bool = False) -> float:
-    """A time span: finite and > 0 (``allow_zero``: >= 0) [s]; NaN, inf and negatives are refused."""
+    """A time span: finite and > 0 (``allow_zero``: >= 0) [s]; NaN, inf and negatives are refused.
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    value : object
+        The value to check [s].
+    error : type, default ArgumentError
+        The exception class to raise.
+    allow_zero : bool, default False
+        Accept 0.
+    """
     if allow_zero:
         return number(field, value, error=error, nonnegative=True)
     return number(field, value, error=error, positive=True)
@@ -144,6 +225,19 @@ def length_m(field: str, value, *, error=ArgumentError, max_m: float = MAX_LENGT
 
     A value over ``max_m`` is almost always millimetres written where metres belong,
     and the message says so.
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    value : object
+        The value to check [m].
+    error : type, default ArgumentError
+        The exception class to raise.
+    max_m : float, default 1.0
+        Largest length accepted [m].
+    positive : bool, default True
+        Require > 0 (False: >= 0).
     """
     value = number(field, value, error=error, positive=positive, nonnegative=not positive)
     if value > max_m:
@@ -155,7 +249,17 @@ def length_m(field: str, value, *, error=ArgumentError, max_m: float = MAX_LENGT
 
 
 def parse_number(field: str, text: str, *, error=ArgumentError) -> float:
-    """The number written in ``text`` (e.g. a command-line value), finite."""
+    """The number written in ``text`` (e.g. a command-line value), finite.
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    text : str
+        The text to parse.
+    error : type, default ArgumentError
+        The exception class to raise.
+    """
     try:
         value = float(text)
     except (TypeError, ValueError):
@@ -164,13 +268,31 @@ def parse_number(field: str, text: str, *, error=ArgumentError) -> float:
 
 
 def key(value, limit: int = 40) -> str:
-    """A mapping key or column name for a message: as written, cut to ``limit`` characters."""
+    """A mapping key or column name for a message: as written, cut to ``limit`` characters.
+
+    Parameters
+    ----------
+    value : object
+        The key or column name.
+    limit : int, default 40
+        Longest result, in characters.
+    """
     text = value if isinstance(value, str) else short(value, limit)
     return _cut(text, limit)
 
 
 def float_array(field: str, value, *, error=ArgumentError) -> np.ndarray:
-    """``value`` as a float array; text or objects that are not numbers are refused."""
+    """``value`` as a float array; text or objects that are not numbers are refused.
+
+    Parameters
+    ----------
+    field : str
+        The field or option, for the message.
+    value : array_like
+        The value to convert.
+    error : type, default ArgumentError
+        The exception class to raise.
+    """
     try:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError):

@@ -432,6 +432,19 @@ def write_figure(results_dir, path, *, title=None, max_shapes: int = 8, dpi: int
     estimated tip force (constraint ``normal``) with its ±2σ band against the simulated
     truth (dashed), the unconstrained estimate (thin), and the segment curvatures.
     Drawn with :func:`bendsense.plots.plot_shapes` and :func:`bendsense.plots.plot_time_series`.
+
+    Parameters
+    ----------
+    results_dir : path
+        Results directory of the demo (with truth columns).
+    path : path
+        Figure file to write.
+    title : str, optional
+        Figure title.
+    max_shapes : int, default 8
+        Number of frames whose shapes are drawn.
+    dpi : int, default 130
+        Resolution of a raster figure [dots per inch].
     """
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D

@@ -424,7 +424,23 @@ class LiveStats:
 
 
 def status_line(block, processor, rate_hz: float, fps: float, lost: int, backlog: int = 0) -> str:
-    """The status line of the live view: frame, rates, backlog and the counts per status."""
+    """The status line of the live view: frame, rates, backlog and the counts per status.
+
+    Parameters
+    ----------
+    block : LiveFrame
+        The latest processed block of frames.
+    processor : LiveProcessor
+        The processor, for its status counts.
+    rate_hz : float
+        Frames estimated per second [Hz].
+    fps : float
+        Figure updates per second [Hz].
+    lost : int
+        Frames lost on the wire so far.
+    backlog : int, default 0
+        Frames received and not yet processed.
+    """
     counts = processor.status_counts
     return (
         f"seq {int(block.seq[-1])}   estimated {rate_hz:.0f} frames/s   {fps:.0f} fps   backlog {backlog}   "

@@ -49,7 +49,21 @@ def _status_line(stats, est=None) -> str:
 
 
 def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True):
-    """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``."""
+    """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``.
+
+    Parameters
+    ----------
+    config : Config
+        Sensor and actuator configuration.
+    calibration_path : path
+        Calibration YAML.
+    constraint, objective : str or None
+        Force estimate options; None takes the config's.
+    pressure_kpa : float or None
+        Constant pressure for a board without a pressure reading [kPa].
+    estimate : bool, default True
+        Estimate the tip forces; False reconstructs shapes only.
+    """
     from bendsense.calibration import Calibration
     from bendsense.pipeline import LiveProcessor
 
@@ -64,7 +78,15 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
 
 
 def wait_for_consumer(outlets, timeout_s: float) -> None:
-    """Wait up to ``timeout_s`` for an LSL consumer, so that it receives the first frames too."""
+    """Wait up to ``timeout_s`` for an LSL consumer, so that it receives the first frames too.
+
+    Parameters
+    ----------
+    outlets : LslOutlets
+        The LSL outlets.
+    timeout_s : float
+        Longest wait [s]; 0 or less does not wait.
+    """
     end = time.monotonic() + max(0.0, timeout_s)
     if not quiet() and timeout_s > 0:
         click.echo(f"waiting up to {timeout_s:g} s for an LSL consumer of bendsense-force ...", err=True)
@@ -73,7 +95,17 @@ def wait_for_consumer(outlets, timeout_s: float) -> None:
 
 
 def make_outlets(processor, driver, port):
-    """The LSL outlets of ``--lsl`` (nominal rate: the board's HELLO, else irregular)."""
+    """The LSL outlets of ``--lsl`` (nominal rate: the board's HELLO, else irregular).
+
+    Parameters
+    ----------
+    processor : LiveProcessor
+        Gives the channel count and the estimate options for the streams' metadata.
+    driver : Driver
+        The board's driver (its HELLO gives the nominal rate).
+    port : str
+        The board's port, part of the streams' source id.
+    """
     from bendsense.interop.lsl import LslOutlets
 
     rate = 0.0 if driver.hello is None else float(driver.hello.rate_hz)

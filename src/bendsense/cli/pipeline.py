@@ -84,6 +84,11 @@ def run_steps(steps) -> dict:
     against the inputs of all steps, so that a bad output path stops the command before
     any work and nothing is half-done. What a step reads after an earlier step wrote it
     (``save out plot out -o fig.png``) is the chain's own product, not an input.
+
+    Parameters
+    ----------
+    steps : list of callable
+        The chain's steps, each taking and returning the state dict.
     """
     steps = [step for step in steps if step is not None]
     targets, inputs, written = [], [], set()

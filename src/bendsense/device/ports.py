@@ -45,7 +45,13 @@ def list_ports() -> list[PortInfo]:
 
 
 def format_ports(ports) -> str:
-    """Format a plain-text table of ``ports`` (or ``"no serial ports found"``)."""
+    """Format a plain-text table of ``ports`` (or ``"no serial ports found"``).
+
+    Parameters
+    ----------
+    ports : list of PortInfo
+        The ports to list (:func:`list_ports`).
+    """
     ports = list(ports)
     if not ports:
         return "no serial ports found"

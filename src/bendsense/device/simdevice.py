@@ -99,6 +99,15 @@ def ramp_source(n_channels: int = 16, adc_bits: int = 12, pressure_pa: float | N
     Channel ``c`` of frame ``k`` is ``(k + 100 c) mod 2**adc_bits``, so a receiver can
     check exactly which frames arrived.
 
+    Parameters
+    ----------
+    n_channels : int, default 16
+        Number of channels.
+    adc_bits : int, default 12
+        ADC resolution [bits].
+    pressure_pa : float or None, default 20000.0
+        Pressure of every frame [Pa]; None for "no reading".
+
     Returns
     -------
     callable

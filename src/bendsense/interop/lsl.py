@@ -29,7 +29,13 @@ FORCE_CHANNELS = (("fx_n", "N"), ("fy_n", "N"), ("fx_std_n", "N"), ("fy_std_n", 
 
 
 def shape_channels(n_segments: int) -> list:
-    """``(label, unit)`` of the channels of ``bendsense-shape`` for a sensor of N segments."""
+    """``(label, unit)`` of the channels of ``bendsense-shape`` for a sensor of N segments.
+
+    Parameters
+    ----------
+    n_segments : int
+        Number of sensor segments N.
+    """
     return [*((f"kappa{i + 1}", "1/m") for i in range(n_segments)), ("tip_x_m", "m"), ("tip_y_m", "m"),
             ("tip_angle_rad", "rad")]
 

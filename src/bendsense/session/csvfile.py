@@ -42,6 +42,11 @@ def _parse_float(text: str, line: int, column: str) -> float:
 def read_session_csv(path: str | os.PathLike) -> Session:
     """Read a session CSV (DESIGN.md section 3).
 
+    Parameters
+    ----------
+    path : str or path-like
+        The session CSV file.
+
     Raises
     ------
     SessionError
@@ -157,6 +162,15 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
     Floats are written with ``repr`` so that reading the file back gives the same
     numbers bit for bit. Pressure is written as ``pressure_pa`` when any frame has
     a reading.
+
+    Parameters
+    ----------
+    session : Session
+        The session to write.
+    path : str or path-like
+        Output CSV file.
+    overwrite : bool, default True
+        Replace an existing file; False refuses one.
     """
     from bendsense import output
 

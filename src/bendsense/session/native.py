@@ -186,7 +186,13 @@ def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
 
 
 def dtype_to_list(dtype: np.dtype) -> list:
-    """``[[name, dtype string], ...]`` for ``meta.yaml``; sub-arrays as ``"(N,)<u2"``."""
+    """``[[name, dtype string], ...]`` for ``meta.yaml``; sub-arrays as ``"(N,)<u2"``.
+
+    Parameters
+    ----------
+    dtype : numpy.dtype
+        A structured record dtype.
+    """
     out = []
     for name in dtype.names:
         ft = dtype.fields[name][0]
@@ -203,6 +209,15 @@ def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | N
 
     Raises :class:`SessionError` on a malformed list, a missing standard field, a
     standard field of another type, or an ``adc`` of another length than ``n_channels``.
+
+    Parameters
+    ----------
+    pairs : list
+        ``[[name, dtype string], ...]`` as read from ``meta.yaml``.
+    version : int, default 2
+        Format version of the session (version 1 has no ``tx_drops``).
+    n_channels : int, optional
+        Channel count the ``adc`` field must have.
     """
     where = "meta.yaml record_dtype"
     try:
@@ -232,7 +247,13 @@ def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | N
 
 
 def is_session_dir(path) -> bool:
-    """Tell whether ``path`` is a directory holding ``meta.yaml`` or ``frames.bin``."""
+    """Tell whether ``path`` is a directory holding ``meta.yaml`` or ``frames.bin``.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Any path.
+    """
     p = Path(path)
     return p.is_dir() and ((p / META).exists() or (p / FRAMES).exists())
 
@@ -435,7 +456,13 @@ class SessionWriter:
 
 
 def read_session_meta(path) -> dict:
-    """``meta.yaml`` of a session directory, checked for format name, version and field types."""
+    """``meta.yaml`` of a session directory, checked for format name, version and field types.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The session directory.
+    """
     path = Path(path)
     if not (path / META).exists():
         raise SessionError(f"{path}: not a session directory (no {META})")
@@ -470,6 +497,11 @@ def read_records(path) -> tuple[np.ndarray, dict]:
     Sets ``meta["n_records"]`` (records present), ``meta["records_recorded"]`` (what
     a finished session's ``meta.yaml`` says, else None), ``meta["finished"]`` and
     ``meta["torn_bytes"]``.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The session directory.
 
     Raises
     ------
@@ -545,6 +577,15 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     as recorded). ``meta["frames_lost"]`` counts
     the sequence gaps and ``meta["tx_drops"]`` the frames the firmware could not send
     during the session (0 for version 1, which has no counter).
+
+    Parameters
+    ----------
+    records : ndarray
+        Structured records of ``frames.bin``.
+    meta : dict
+        The session's metadata (:func:`read_records`).
+    source : str, default ""
+        Where the records came from, kept as ``Session.source``.
     """
     n_ch = records.dtype.fields["adc"][0].shape[0]
     t_us = records["t_us"].astype(np.int64)
@@ -574,6 +615,11 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
 def read_session_dir(path):
     """Read a native session directory into a :class:`~bendsense.session.Session`.
 
+    Parameters
+    ----------
+    path : str or path-like
+        The session directory.
+
     Raises
     ------
     SessionError
@@ -584,7 +630,17 @@ def read_session_dir(path):
 
 
 def export_session_csv(session_dir, csv_path, *, overwrite: bool = False) -> None:
-    """Write a native session as a session CSV (via :func:`bendsense.session.write_session_csv`)."""
+    """Write a native session as a session CSV (via :func:`bendsense.session.write_session_csv`).
+
+    Parameters
+    ----------
+    session_dir : str or path-like
+        The native session directory.
+    csv_path : str or path-like
+        Output CSV file.
+    overwrite : bool, default False
+        Replace an existing file.
+    """
     write_session_csv(read_session_dir(session_dir), csv_path, overwrite=overwrite)
 
 
@@ -597,6 +653,15 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
     text columns are dropped (and logged). Columns named after a field of
     :data:`bendsense.frames.SAMPLE_FIELDS` (an exported native session's ``status``,
     ``tx_drops``) go back into that field.
+
+    Parameters
+    ----------
+    csv_path : str or path-like
+        The session CSV file.
+    session_dir : str or path-like
+        Output session directory.
+    overwrite : bool, default False
+        Replace a previous bendsense session there.
     """
     s = read_session_csv(csv_path)
     sig = s.signals

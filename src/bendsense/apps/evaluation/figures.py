@@ -33,7 +33,21 @@ def _save(fig, path: Path) -> Path:
 
 
 def fig8_validation_shapes(path, table, radii, kappa_val, s_m) -> Path:
-    """Fig. 8: the validation strips reconstructed with n = 3 against the actual arcs (camera markers)."""
+    """Fig. 8: the validation strips reconstructed with n = 3 against the actual arcs (camera markers).
+
+    Parameters
+    ----------
+    path : path
+        Figure file to write.
+    table : dict
+        Table I: per degree, the reconstructed validation shapes under ``"shapes"`` [m].
+    radii : array_like
+        Validation radii, for the labels [m].
+    kappa_val : array_like
+        Actual curvature of each validation strip [1/m].
+    s_m : ndarray
+        Arc lengths of the shapes [m].
+    """
     from bendsense.pcc import arc_positions
     from bendsense.plots import plot_shape_comparison
 
@@ -54,7 +68,15 @@ def fig8_validation_shapes(path, table, radii, kappa_val, s_m) -> Path:
 
 
 def fig9_static_model(path, static) -> Path:
-    """Fig. 9: (a) max position error of the model and the sensor per pressure, (b) the shapes at 40 kPa."""
+    """Fig. 9: (a) max position error of the model and the sensor per pressure, (b) the shapes at 40 kPa.
+
+    Parameters
+    ----------
+    path : path
+        Figure file to write.
+    static : dict
+        The result of :func:`~bendsense.apps.evaluation.metrics.static_model_errors`.
+    """
     from bendsense.plots import plot_shape_comparison
 
     fig = _figure(figsize=(11.0, 5.0))
@@ -93,7 +115,15 @@ def fig9_static_model(path, static) -> Path:
 
 
 def fig10_tip_load_error(path, tips) -> Path:
-    """Fig. 10: the tip-load error over pressure and load, one panel per objective."""
+    """Fig. 10: the tip-load error over pressure and load, one panel per objective.
+
+    Parameters
+    ----------
+    path : path
+        Figure file to write.
+    tips : dict
+        Per objective, the result of :func:`~bendsense.apps.evaluation.metrics.tip_load_errors`.
+    """
     from bendsense.plots import plot_force_error_map
 
     fig = _figure(figsize=(8.0, 7.0))
@@ -111,7 +141,15 @@ def fig10_tip_load_error(path, tips) -> Path:
 
 
 def fig_coverage(path, zs) -> Path:
-    """Nominal against observed coverage of |z| ≤ k (k from 0 to 3.5), one curve per objective."""
+    """Nominal against observed coverage of |z| ≤ k (k from 0 to 3.5), one curve per objective.
+
+    Parameters
+    ----------
+    path : path
+        Figure file to write.
+    zs : dict
+        Per objective, the pooled errors in units of σ (:func:`~bendsense.apps.evaluation.metrics.pooled_z`).
+    """
     fig = _figure(figsize=(5.6, 5.0))
     ax = fig.add_subplot()
     k = np.linspace(0.0, 3.5, 141)
@@ -136,7 +174,17 @@ def fig_coverage(path, zs) -> Path:
 
 
 def fig_identification(path, ident, nominal, true, identified) -> Path:
-    """Identification: (a) free bending angle and (b) EI per pressure, identified against true and nominal."""
+    """Identification: (a) free bending angle and (b) EI per pressure, identified against true and nominal.
+
+    Parameters
+    ----------
+    path : path
+        Figure file to write.
+    ident : dict
+        The identification's data (:func:`~bendsense.apps.evaluation.protocol.identify_parameters`).
+    nominal, true, identified : Config
+        The nominal, the simulated (true) and the identified actuator models.
+    """
     from bendsense.actuator import FreeBendingModel
 
     fig = _figure(figsize=(11.0, 4.4))

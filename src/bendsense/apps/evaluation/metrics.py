@@ -33,7 +33,13 @@ __all__ = [
 
 
 def mean_std(values) -> tuple:
-    """Mean and sample standard deviation of the finite ``values`` (NaN where there are too few)."""
+    """Mean and sample standard deviation of the finite ``values`` (NaN where there are too few).
+
+    Parameters
+    ----------
+    values : array_like
+        The values; NaN and inf are left out.
+    """
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
     if v.size == 0:
@@ -42,14 +48,30 @@ def mean_std(values) -> tuple:
 
 
 def coverage(z, k: float = 2.0) -> float:
-    """Fraction of the finite ``z`` (errors in units of their σ) with |z| ≤ k."""
+    """Fraction of the finite ``z`` (errors in units of their σ) with |z| ≤ k.
+
+    Parameters
+    ----------
+    z : array_like
+        Errors in units of their σ; non-finite values are left out.
+    k : float, default 2.0
+        Half-width of the band, in σ.
+    """
     z = np.asarray(z, dtype=float).ravel()
     z = z[~np.isnan(z)]
     return float(np.mean(np.abs(z) <= k)) if z.size else math.nan
 
 
 def pooled_z(tip, contact) -> np.ndarray:
-    """Every tested z of one objective: the tip loads' F̂y and each contact mode's F̂x, F̂y."""
+    """Every tested z of one objective: the tip loads' F̂y and each contact mode's F̂x, F̂y.
+
+    Parameters
+    ----------
+    tip : dict
+        The result of :func:`tip_load_errors` for the objective.
+    contact : dict
+        The result of :func:`contact_errors` for the objective.
+    """
     parts = [np.asarray(tip["z"]).ravel()]
     parts += [np.asarray(contact[label]["z"]).ravel() for label, _, _ in CONTACT_MODES]
     return np.concatenate(parts)
@@ -173,6 +195,19 @@ def tip_load_errors(shape, tips, calibration, model_config: Config, objective: s
     failed), ``all_pct`` and ``low_pct`` (mean, std over all frames and over loads of
     0–0.2 N), ``z`` (the error of F̂y in units of its σ), ``coverage`` (fraction of the
     frames with |z| ≤ 2), ``failed`` and the :class:`~bendsense.estimation.ForceEstimate`.
+
+    Parameters
+    ----------
+    shape : Shape
+        Reconstructed shapes of the tip-load frames.
+    tips : Session
+        The tip-load session, with truth columns ``fy_n`` and ``load_n`` [N].
+    calibration : Calibration
+        The sensor calibration (its noise model gives σ).
+    model_config : Config
+        The identified model of the actuator.
+    objective : str, default "angles"
+        Force estimate objective, ``"angles"`` or ``"positions"``.
     """
     from bendsense.estimation import estimate_force
 
@@ -206,6 +241,19 @@ def contact_errors(shape, contact, calibration, model_config: Config, objective:
     (frames per range), ``failed`` and ``seconds_per_frame``; and ``tip_angle_offset_deg``: mean
     and max of |φ_free(P) − φ_L|, how far the free-motion tip angle of the model (which
     sets the paper's constraint direction) is from the true loaded tip angle [deg].
+
+    Parameters
+    ----------
+    shape : Shape
+        Reconstructed shapes of the contact frames.
+    contact : Session
+        The contact session, with the true contact force in its extra columns [N].
+    calibration : Calibration
+        The sensor calibration (its noise model gives σ).
+    model_config : Config
+        The identified model of the actuator.
+    objective : str, default "angles"
+        Force estimate objective, ``"angles"`` or ``"positions"``.
     """
     from bendsense.actuator import FreeBendingModel
     from bendsense.estimation import estimate_force

@@ -158,7 +158,13 @@ class Plan:
 
 
 def true_config(nominal: Config | None = None) -> Config:
-    """The simulated actuator: ``nominal`` with :data:`TRUE_MATERIAL` and :data:`TRUE_STIFFNESS`."""
+    """The simulated actuator: ``nominal`` with :data:`TRUE_MATERIAL` and :data:`TRUE_STIFFNESS`.
+
+    Parameters
+    ----------
+    nominal : Config, optional
+        The nominal config; None takes the paper's (:func:`bendsense.load_config`).
+    """
     if nominal is None:
         from bendsense.config import load_config
 
@@ -171,7 +177,15 @@ def true_config(nominal: Config | None = None) -> Config:
 
 
 def timed(fn, *args, **kwargs) -> tuple:
-    """``fn(*args, **kwargs)`` and its wall time [s]."""
+    """``fn(*args, **kwargs)`` and its wall time [s].
+
+    Parameters
+    ----------
+    fn : callable
+        The function to time.
+    *args, **kwargs
+        Its arguments.
+    """
     t = time.perf_counter()
     out = fn(*args, **kwargs)
     return out, time.perf_counter() - t
@@ -179,6 +193,13 @@ def timed(fn, *args, **kwargs) -> tuple:
 
 def combinations(pressure, load) -> tuple:
     """First frame and label index of each (pressure, load) combination.
+
+    Parameters
+    ----------
+    pressure : array_like, shape (frames,)
+        Pressure of each frame [Pa].
+    load : array_like, shape (frames,)
+        Tip load of each frame [N].
 
     Returns
     -------
@@ -196,7 +217,19 @@ def combinations(pressure, load) -> tuple:
 
 
 def simulate_experiments(tmp: Path, config: Config, seed: int, plan: Plan) -> dict:
-    """Write the simulated experiments into ``tmp``; return their paths."""
+    """Write the simulated experiments into ``tmp``; return their paths.
+
+    Parameters
+    ----------
+    tmp : Path
+        Directory to write into.
+    config : Config
+        The simulated (true) actuator and sensor.
+    seed : int
+        Seed of the simulation.
+    plan : Plan
+        How many frames and combinations to simulate.
+    """
     from bendsense.sim.scenarios import simulate
 
     def run(name, scenario=None, cfg=config, **options):
@@ -223,6 +256,13 @@ def simulate_experiments(tmp: Path, config: Config, seed: int, plan: Plan) -> di
 def calibrate_degrees(manifest: Path, sensor) -> tuple:
     """Calibrations of degree n = 1, 2, 3 from one manifest (paper V-B), and the seconds each fit took.
 
+    Parameters
+    ----------
+    manifest : Path
+        The calibration manifest of the simulated strips.
+    sensor : SensorConfig
+        The sensor the calibration is for.
+
     Returns
     -------
     tuple of dict
@@ -246,7 +286,13 @@ def _camera_points(truth_s, truth_positions, rng):
 
 
 def parameters(config: Config) -> dict:
-    """The identified parameters of ``config``: μ̄, μ_s, prebend, ei0 (γ0) and ei1 (γ1), by field name."""
+    """The identified parameters of ``config``: μ̄, μ_s, prebend, ei0 (γ0) and ei1 (γ1), by field name.
+
+    Parameters
+    ----------
+    config : Config
+        The config to read.
+    """
     return {
         "shear_modulus_pa": config.material.shear_modulus_pa,
         "sensor_stiffness_nm_per_rad": config.material.sensor_stiffness_nm_per_rad,
@@ -266,6 +312,19 @@ def identify_parameters(free, tips, tip_truth, nominal: Config, rng) -> tuple:
     ``ei_nm2``, ``ei_stderr_nm2`` (EI per pressure level), ``stderr`` (of every
     identified parameter), ``correlation_mu_mus`` (of μ̄ and μ_s), ``stiffness_frames``
     (the chosen tip-load frames), ``fits`` (the two fit objects).
+
+    Parameters
+    ----------
+    free : Session
+        The free-bending session.
+    tips : Session
+        The tip-load session.
+    tip_truth : dict
+        The simulated truth of the tip-load frames (``truth.npz``).
+    nominal : Config
+        The nominal config the fit starts from.
+    rng : numpy.random.Generator
+        Draws the camera noise and the chosen frames.
     """
     from bendsense.identify import StiffnessData, fit_free_bending, fit_stiffness
 
@@ -306,7 +365,25 @@ def identify_parameters(free, tips, tip_truth, nominal: Config, rng) -> tuple:
 
 
 def time_stages(tips, contact_shape, contact, cal, model_config, plan, say) -> dict:
-    """Time per frame of reconstruction and force estimation, fast and the paper's method."""
+    """Time per frame of reconstruction and force estimation, fast and the paper's method.
+
+    Parameters
+    ----------
+    tips : Session
+        The tip-load session (its signals and pressures are timed).
+    contact_shape : Shape
+        Reconstructed shapes of the contact frames.
+    contact : Session
+        The contact session.
+    cal : Calibration
+        The sensor calibration.
+    model_config : Config
+        The identified model of the actuator.
+    plan : Plan
+        How many frames to time.
+    say : callable
+        Progress messages, ``say(text)``.
+    """
     from bendsense.estimation import estimate_force
     from bendsense.pcc import reconstruct
 

@@ -50,6 +50,15 @@ def report(res, names: dict, command: str) -> str:
     One section after the other, each written by its own function: the introduction,
     Table I with Fig. 8, the identification, Fig. 9, Fig. 10, Table II, the calibration of
     the uncertainty and the timing.
+
+    Parameters
+    ----------
+    res : ReproduceResult
+        The numbers of the run.
+    names : dict
+        File name of each figure, by figure key.
+    command : str
+        The command line that made the report, quoted in it.
     """
     sections = (
         _introduction(res, command),
