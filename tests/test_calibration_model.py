@@ -103,6 +103,7 @@ def test_noise_part_is_the_slope_times_the_flat_noise():
         assert np.allclose(c, c.T) and np.linalg.eigvalsh(c).min() > -1e-12 * np.abs(c).max()
 
 
+@pytest.mark.slow
 def test_coefficient_covariance_matches_refits_with_fresh_noise():
     """Monte Carlo: refit with new noise; the spread of coefficients, offsets and shifts."""
     radii = RADII[:6]
@@ -149,6 +150,7 @@ def test_covariance_uses_the_fits_own_least_squares_operator():
         assert np.allclose(q, q.T) and np.linalg.eigvalsh(q).min() > -1e-9 * np.abs(q).max()
 
 
+@pytest.mark.slow
 def test_saved_calibration_keeps_the_model(tmp_path):
     model, cal = fitted(noise=1.0, seed=7)
     path = tmp_path / "cal.yaml"

@@ -182,6 +182,7 @@ def test_the_pages_with_commands_are_run():
     assert {p.name for p in RUNNABLE} >= {"README.md", "getting-started.md", "cli.md", "calibration.md"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
 def test_page_runs(page: Path, tmp_path: Path):
     blocks = extract_blocks(page.read_text(encoding="utf-8"))
