@@ -1,9 +1,16 @@
-"""The package's layout holds: no import cycle, and the core stays free of the edges.
+"""The package's layout holds (issue 13, "What must hold").
 
-Imports are read from the source (every ``import`` statement, also those inside
-functions), not from a running interpreter, so a cycle hidden behind a lazy import
-counts. Imports by name in a string (``bendsense.__init__``'s lazy public names, the
-unpickling of errors) are not statements and do not count.
+No import cycle, and the core stays free of the edges: imports are read from the source
+(every ``import`` statement, also those inside functions), not from a running
+interpreter, so a cycle hidden behind a lazy import counts. Imports by name in a string
+(``bendsense.__init__``'s lazy public names, the unpickling of errors) are not
+statements and do not count.
+
+Sizes and errors, also read with ``ast``: no module over ~900 lines, no function body
+over ~100 lines, no ``except ValueError`` in the CLI (user mistakes arrive as
+bendsense's own errors, which the CLI turns into one line), no ``ValueError`` raised
+bare by the library (its user-input errors are ``ConfigError``/``ArgumentError``/...,
+ValueErrors too, which carry the field's name).
 """
 
 from __future__ import annotations
@@ -148,3 +155,110 @@ def test_core_loads_without_the_edges():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == []
+
+
+# --------------------------------------------------------------------------- sizes and errors
+
+PACKAGE = SRC / "bendsense"
+
+MAX_MODULE_LINES = 900
+MAX_FUNCTION_LINES = 100
+
+# Today's offenders, each to be split; an entry is taken off when its module is.
+LONG_MODULES = {
+    "bendsense/calibration.py",  # 1,542 lines: the fit, the measurement and error model, the file format
+    "bendsense/identify.py",  # 975 lines: free-bending and stiffness identification
+}
+# Under 100 lines on main today (94 and 87), listed while another engineer reworks them.
+LONG_FUNCTIONS = {
+    "bendsense/estimation/kernels.py::gauss_newton",
+    "bendsense/estimation/__init__.py::estimate_force",
+}
+
+
+def _sources():
+    return sorted(PACKAGE.rglob("*.py"))
+
+
+def _name(path: Path) -> str:
+    return path.relative_to(SRC).as_posix()
+
+
+def _body_lines(node) -> int:
+    """Lines of a function's body, its docstring left out."""
+    body = node.body
+    first = body[0]
+    if len(body) > 1 and isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) \
+            and isinstance(first.value.value, str):
+        first = body[1]
+    return node.end_lineno - first.lineno + 1
+
+
+def _functions(path: Path):
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            yield node
+
+
+def _names(node) -> set[str]:
+    """The exception names an ``except`` clause or a ``raise`` names."""
+    if node is None:
+        return set()
+    if isinstance(node, ast.Tuple):
+        return set().union(*(_names(e) for e in node.elts))
+    if isinstance(node, ast.Call):
+        return _names(node.func)
+    if isinstance(node, ast.Name):
+        return {node.id}
+    if isinstance(node, ast.Attribute):
+        return {node.attr}
+    return set()
+
+
+def test_no_module_over_900_lines():
+    long = {_name(p): n for p in _sources() if (n := p.read_text(encoding="utf-8").count("\n")) > MAX_MODULE_LINES}
+    assert sorted(set(long) - LONG_MODULES) == [], long
+    # an entry that no longer offends is taken off the list
+    assert sorted(LONG_MODULES - set(long)) == []
+
+
+def test_no_function_body_over_100_lines():
+    long = {f"{_name(p)}::{f.name}": _body_lines(f) for p in _sources() for f in _functions(p)
+            if _body_lines(f) > MAX_FUNCTION_LINES}
+    assert sorted(set(long) - LONG_FUNCTIONS) == [], long
+    names = {f"{_name(p)}::{f.name}" for p in _sources() for f in _functions(p)}
+    assert LONG_FUNCTIONS <= names  # the list names real functions
+
+
+def test_the_cli_catches_no_value_error():
+    found = []
+    for path in sorted((PACKAGE / "cli").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ExceptHandler) and "ValueError" in _names(node.type):
+                found.append(f"{_name(path)}:{node.lineno}")
+    assert found == []
+
+
+def test_the_library_raises_no_bare_value_error():
+    found = []
+    for path in _sources():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Raise) and "ValueError" in _names(node.exc):
+                found.append(f"{_name(path)}:{node.lineno}")
+    assert found == []
+
+
+def test_the_checks_see_what_they_look_for():
+    tree = ast.parse(
+        "def f(x):\n"
+        "    '''Doc.'''\n"
+        "    try:\n"
+        "        pass\n"
+        "    except (KeyError, ValueError):\n"
+        "        raise ValueError('bad')\n"
+    )
+    handler = next(n for n in ast.walk(tree) if isinstance(n, ast.ExceptHandler))
+    raised = next(n for n in ast.walk(tree) if isinstance(n, ast.Raise))
+    assert "ValueError" in _names(handler.type) and "ValueError" in _names(raised.exc)
+    assert _body_lines(tree.body[0]) == 4  # the docstring left out
