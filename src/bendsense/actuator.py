@@ -570,6 +570,11 @@ class FreeBendingModel:
         """Build the model of ``config.actuator`` and ``config.material``.
 
         The interpolant covers ``[0, config.estimation.pressure_max_pa]``.
+
+        Parameters
+        ----------
+        config : Config
+            Its ``actuator``, ``material`` and ``estimation.pressure_max_pa``.
         """
         act, mat = config.actuator, config.material
         return cls(
@@ -597,7 +602,13 @@ class FreeBendingModel:
         }
 
     def solve(self, pressure_pa) -> np.ndarray:
-        """θ [rad] by the direct solve of eq. 8 (slow path; reference for the interpolant)."""
+        """θ [rad] by the direct solve of eq. 8 (slow path; reference for the interpolant).
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return solve_bending_angle(pressure_pa, **self.params)
 
     def _theta0_scalar(self, p: float) -> float:
@@ -618,7 +629,13 @@ class FreeBendingModel:
         return c0 + u * (c1 + u * (c2 + u * c3))
 
     def theta0_rad(self, pressure_pa) -> np.ndarray:
-        """Pressure-induced bending angle θ0 without the prebend [rad], same shape as ``pressure_pa``."""
+        """Pressure-induced bending angle θ0 without the prebend [rad], same shape as ``pressure_pa``.
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         if isinstance(pressure_pa, (float, int)) and not isinstance(pressure_pa, bool):
             return np.float64(self._theta0_scalar(float(pressure_pa)))
         p = _finite("pressure_pa", pressure_pa)
@@ -640,15 +657,33 @@ class FreeBendingModel:
         return theta
 
     def bending_angle_rad(self, pressure_pa) -> np.ndarray:
-        """Total free bending angle θ = θ0(P) + θ_pre [rad] (paper eq. 8 plus prebend)."""
+        """Total free bending angle θ = θ0(P) + θ_pre [rad] (paper eq. 8 plus prebend).
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return self.theta0_rad(pressure_pa) + self.prebend_angle_rad
 
     def tip_angle_rad(self, pressure_pa) -> np.ndarray:
-        """Tangent angle at the tip in free motion [rad]; equal to θ for a base angle of 0."""
+        """Tangent angle at the tip in free motion [rad]; equal to θ for a base angle of 0.
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return self.bending_angle_rad(pressure_pa)
 
     def tip_curvature_per_m(self, pressure_pa) -> np.ndarray:
-        """Curvature of the free arc K0 = θ / L [1/m] (paper section IV-A)."""
+        """Curvature of the free arc K0 = θ / L [1/m] (paper section IV-A).
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return self.bending_angle_rad(pressure_pa) / self.length_m
 
     # -- sensitivities (uncertainty of the model parameters) ----------------------------
@@ -704,7 +739,13 @@ class FreeBendingModel:
         return (4.0 * a**3 + 3.0 * math.pi * a**2 * b) / 6.0  # c_a of eq. 9 [N·m/Pa]
 
     def tip_curvature_slope(self, pressure_pa) -> np.ndarray:
-        """dK0/dP = (dθ/dP) / L [1/(m·Pa)] (see :meth:`bending_angle_slope`)."""
+        """dK0/dP = (dθ/dP) / L [1/(m·Pa)] (see :meth:`bending_angle_slope`).
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return self.bending_angle_slope(pressure_pa) / self.length_m
 
     def tip_curvature_jacobian(self, pressure_pa) -> np.ndarray:
@@ -739,7 +780,13 @@ class FreeBendingModel:
         return out / self.length_m
 
     def elastic_moment(self, theta0_rad) -> np.ndarray:
-        """M_θ0(θ0) + μ_s θ0, the total restoring moment [N·m] (paper eq. 10–12)."""
+        """M_θ0(θ0) + μ_s θ0, the total restoring moment [N·m] (paper eq. 10–12).
+
+        Parameters
+        ----------
+        theta0_rad : float or array_like
+            Pressure-induced bending angle θ0 [rad].
+        """
         p = self.params
         del p["prebend_angle_rad"], p["sensor_stiffness_nm_per_rad"]
         theta0 = _finite("theta0_rad", theta0_rad)

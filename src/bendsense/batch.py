@@ -169,7 +169,13 @@ class BatchReport:
         }
 
     def table(self, *, max_reason: int = 100) -> str:
-        """Text summary: one line per session, then the totals."""
+        """Text summary: one line per session, then the totals.
+
+        Parameters
+        ----------
+        max_reason : int, default 100
+            Longest reason shown per session, in characters.
+        """
         width = max([len("session")] + [len(s.name) for s in self.sessions])
         lines = [f"{'session':<{width}}  {'status':<7} {'frames':>8} {'time [s]':>9}  note"]
         for s in self.sessions:

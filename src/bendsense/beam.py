@@ -133,6 +133,15 @@ class BeamSolution:
 
         Frames with ``success=False`` are dashed (and explained in the legend). Keyword
         arguments go to ``Axes.plot``. Returns the matplotlib axes.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; None makes a new figure.
+        max_frames : int, default 50
+            Most frames drawn, evenly spaced.
+        **kwargs
+            Passed to ``Axes.plot``.
         """
         from bendsense.plots import plot_shapes
 

@@ -633,7 +633,13 @@ class Calibration:
         return nonzero, np.where(nonzero, slope, 1.0)
 
     def shifts_from_delta(self, delta_a):
-        """Shifts S (..., N) [m] from offset-free signals ΔA (..., N) (paper eq. 2)."""
+        """Shifts S (..., N) [m] from offset-free signals ΔA (..., N) (paper eq. 2).
+
+        Parameters
+        ----------
+        delta_a : array_like, shape (..., N)
+            Signal changes ΔA = A − A0 [signal units].
+        """
         cols = self._coefficient_columns
         out = cols[0] + 0.0 * delta_a
         for ck in cols[1:]:
@@ -641,7 +647,13 @@ class Calibration:
         return out
 
     def shifts_m(self, signals):
-        """Total relative shifts S (..., N) [m] from raw signals A (..., N) (paper eq. 1–2)."""
+        """Total relative shifts S (..., N) [m] from raw signals A (..., N) (paper eq. 1–2).
+
+        Parameters
+        ----------
+        signals : array_like, shape (..., N)
+            Raw signals A [signal units].
+        """
         a = np.asarray(signals, dtype=float)
         self._check_channels(a)
         return self.shifts_from_delta(a - self.offset)
@@ -738,7 +750,13 @@ class Calibration:
         return out
 
     def extrapolated_delta(self, delta_a):
-        """Per frame: True if any channel's ΔA lies outside the calibrated range."""
+        """Per frame: True if any channel's ΔA lies outside the calibrated range.
+
+        Parameters
+        ----------
+        delta_a : array_like, shape (..., N)
+            Signal changes ΔA = A − A0 [signal units].
+        """
         lo, hi = self._channel_range
         return np.any((delta_a < lo) | (delta_a > hi), axis=-1)
 
@@ -749,6 +767,11 @@ class Calibration:
         by 3 × the channel's flat-recording noise so that a flat, noisy sensor is not
         flagged. Outside it the polynomials extrapolate and the shape is not to be
         trusted; :func:`bendsense.pcc.reconstruct` reports this as ``Shape.extrapolated``.
+
+        Parameters
+        ----------
+        signals : array_like, shape (..., N)
+            Raw signals A [signal units].
         """
         a = np.asarray(signals, dtype=float)
         self._check_channels(a)
@@ -890,6 +913,11 @@ class Calibration:
         The calibration's own sensor snapshot wins: its shifts are ``d_cal`` times an
         angle, whatever gap another config states (docs/theory.md, "What the sensor
         measures"). Without a snapshot (an old file) the ``sensor`` given is used.
+
+        Parameters
+        ----------
+        sensor : SensorConfig or Config, optional
+            The sensor to use when the calibration has no snapshot of its own.
 
         Raises
         ------
@@ -1319,6 +1347,13 @@ class Calibration:
         """Write the calibration YAML atomically (``format: bendsense-calibration``, ``version: 1``).
 
         ``overwrite=False`` refuses an existing file (:class:`~bendsense.errors.OutputExistsError`).
+
+        Parameters
+        ----------
+        path : str or path-like
+            Output YAML file.
+        overwrite : bool, default True
+            Replace an existing file; False refuses one.
         """
         from bendsense import output
 
@@ -1328,7 +1363,13 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, data: Any) -> Calibration:
-        """Build a calibration from its YAML layout; raises `ConfigError` naming the field."""
+        """Build a calibration from its YAML layout; raises `ConfigError` naming the field.
+
+        Parameters
+        ----------
+        data : dict
+            The calibration YAML's layout, as read by ``yaml.safe_load``.
+        """
         if not isinstance(data, dict):
             raise ConfigError(f"calibration: expected a mapping, got {type(data).__name__}")
         if data.get("format") != FORMAT:
@@ -1395,6 +1436,11 @@ class Calibration:
     def load(cls, path: str | os.PathLike) -> Calibration:
         """Read a calibration YAML written by :meth:`save`.
 
+        Parameters
+        ----------
+        path : str or path-like
+            Calibration YAML file.
+
         Raises
         ------
         ConfigError
@@ -1436,6 +1482,11 @@ class Calibration:
 
         With ``ax=None`` a figure with two panels (fit, residuals) is created and both
         axes are returned; with an ``ax`` only the fit is drawn on it.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes for the fit; None makes a figure with fit and residual panels.
         """
         import matplotlib.pyplot as plt
 

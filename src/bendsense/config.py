@@ -280,7 +280,13 @@ class StiffnessConfig(_Section):
         object.__setattr__(self, "ei1_nm2_per_pa", _number(f"{p}.ei1_nm2_per_pa", self.ei1_nm2_per_pa))
 
     def ei_nm2(self, pressure_pa):
-        """Flexural rigidity EI [N·m²] at gauge pressure ``pressure_pa`` [Pa]."""
+        """Flexural rigidity EI [N·m²] at gauge pressure ``pressure_pa`` [Pa].
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Gauge pressure P [Pa].
+        """
         return self.ei0_nm2 + self.ei1_nm2_per_pa * np.asarray(pressure_pa, dtype=float)
 
 
@@ -527,7 +533,13 @@ class Config:
 
     @classmethod
     def from_dict(cls, data: Any) -> Config:
-        """Build a config from the YAML layout; raises `ConfigError` naming the bad field."""
+        """Build a config from the YAML layout; raises `ConfigError` naming the bad field.
+
+        Parameters
+        ----------
+        data : dict
+            The config YAML's layout, as read by ``yaml.safe_load``.
+        """
         if not isinstance(data, dict):
             raise check.fail("config", "a mapping of sections", data, ConfigError)
         allowed = ["name", *_SECTIONS]
@@ -549,7 +561,13 @@ class Config:
         return out
 
     def replace(self, **sections) -> Config:
-        """A copy with whole sections replaced, e.g. ``config.replace(stiffness=...)``."""
+        """A copy with whole sections replaced, e.g. ``config.replace(stiffness=...)``.
+
+        Parameters
+        ----------
+        **sections
+            Whole sections by name, e.g. ``stiffness=StiffnessConfig(...)``.
+        """
         return dataclasses.replace(self, **sections)
 
     def model_parameters(self) -> dict:
@@ -557,7 +575,13 @@ class Config:
         return {n: getattr(getattr(self, _PARAMETER_SECTION[n]), n) for n in MODEL_PARAMETERS}
 
     def with_model_parameters(self, values) -> Config:
-        """A copy with some of the ``MODEL_PARAMETERS`` replaced: ``{name: value}``."""
+        """A copy with some of the ``MODEL_PARAMETERS`` replaced: ``{name: value}``.
+
+        Parameters
+        ----------
+        values : dict
+            ``{name: value}`` of ``MODEL_PARAMETERS`` [SI units].
+        """
         unknown = [check.short(str(n)) for n in values if n not in MODEL_PARAMETERS]
         if unknown:
             raise check.fail("parameters", f"names from {', '.join(MODEL_PARAMETERS)}", ", ".join(unknown), raw=True)

@@ -714,7 +714,13 @@ class Decoder(_StreamDecoder):
         self.max_frame_bytes = int(max_frame_bytes)
 
     def feed(self, data: bytes) -> list:
-        """Decode ``data`` appended to what came before; return the complete frames in it."""
+        """Decode ``data`` appended to what came before; return the complete frames in it.
+
+        Parameters
+        ----------
+        data : bytes
+            The next bytes of the stream, cut anywhere.
+        """
         if not data:
             return []
         out = []
@@ -793,7 +799,13 @@ class LineDecoder(_StreamDecoder):
         self.adc_bits = None  # crc_errors stays 0: no CRC in this dialect (uniform stats)
 
     def feed(self, data) -> list:
-        """Decode ``data`` (bytes or str) appended to what came before; return complete frames."""
+        """Decode ``data`` (bytes or str) appended to what came before; return complete frames.
+
+        Parameters
+        ----------
+        data : bytes or str
+            The next characters of the stream, cut anywhere.
+        """
         if not data:
             return []
         if isinstance(data, str):

@@ -234,7 +234,19 @@ class StiffnessData:
 
     @classmethod
     def from_tip(cls, pressure_pa, force_n, tip_position_m, length_m: float) -> StiffnessData:
-        """Data with the tip position r(L) [m] only."""
+        """Data with the tip position r(L) [m] only.
+
+        Parameters
+        ----------
+        pressure_pa : array_like, shape (K,)
+            Pressure of each loaded shape [Pa].
+        force_n : array_like, shape (K, 2)
+            Tip force of each loaded shape in the base frame [N].
+        tip_position_m : array_like, shape (K, 2)
+            Measured tip position r(L) [m].
+        length_m : float
+            Actuator length L [m].
+        """
         tip = np.asarray(tip_position_m, dtype=float)
         n = tip.shape[0]
         return cls(np.asarray(pressure_pa, dtype=float), force_n, np.full((n, 1), float(length_m)), tip[:, None, :])
@@ -471,6 +483,11 @@ class FreeBendingFit:
         The covariance goes into ``parameter_covariance`` (the block of the three
         free-bending parameters; another fit's block already there is kept, with zero
         cross-covariance). Not written if the parameters are not identifiable.
+
+        Parameters
+        ----------
+        config : Config
+            The config to copy.
         """
         new = config.replace(material=dataclasses.replace(config.material, **self.params))
         if self.covariance is None:
@@ -495,7 +512,15 @@ class FreeBendingFit:
         return "\n".join(lines)
 
     def plot(self, ax=None, config=None):
-        """Measured and fitted bending angle over pressure; returns the axes."""
+        """Measured and fitted bending angle over pressure; returns the axes.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; None makes a new figure.
+        config : Config, optional
+            The config whose actuator geometry the model curve uses; default the paper's.
+        """
         import matplotlib.pyplot as plt
 
         from bendsense.config import load_config
@@ -712,6 +737,11 @@ class StiffnessFit:
         The covariance of ``ei0_nm2``, ``ei1_nm2_per_pa`` goes into
         ``parameter_covariance`` beside the free-bending block (block diagonal:
         the two fits are separate).
+
+        Parameters
+        ----------
+        config : Config
+            The config to copy.
         """
         new = config.replace(stiffness=dataclasses.replace(config.stiffness, **self.params))
         if self.covariance is None:
@@ -737,7 +767,13 @@ class StiffnessFit:
         return "\n".join(lines)
 
     def plot(self, ax=None):
-        """EI per pressure level with error bars and the fitted line; returns the axes."""
+        """EI per pressure level with error bars and the fitted line; returns the axes.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; None makes a new figure.
+        """
         import matplotlib.pyplot as plt
 
         if ax is None:

@@ -503,7 +503,21 @@ class Shape:
 
     @classmethod
     def from_curvatures(cls, curvature_per_m, lengths_m, s_m=None, base_angle_rad=0.0, extrapolated=None) -> Shape:
-        """Build a shape from segment curvatures (paper eq. 5–7)."""
+        """Build a shape from segment curvatures (paper eq. 5–7).
+
+        Parameters
+        ----------
+        curvature_per_m : array_like, shape (..., N)
+            Segment curvatures κ [1/m].
+        lengths_m : array_like, shape (N,)
+            Segment lengths l_i [m].
+        s_m : array_like, shape (M,), optional
+            Arc lengths of the output points [m]; default :func:`default_s_m`.
+        base_angle_rad : float or array_like, default 0.0
+            Tangent angle at the base [rad].
+        extrapolated : array_like of bool, shape (...), optional
+            Frames whose signals lay outside the calibrated range.
+        """
         kappa = np.asarray(curvature_per_m, dtype=float)
         lengths = np.asarray(lengths_m, dtype=float)
         s = default_s_m(lengths) if s_m is None else np.asarray(s_m, dtype=float)
@@ -542,7 +556,13 @@ class Shape:
         )
 
     def frame(self, i) -> Shape:
-        """One frame (index into the first batch axis)."""
+        """One frame (index into the first batch axis).
+
+        Parameters
+        ----------
+        i : int
+            Index into the first batch axis.
+        """
         return self[i]
 
     def to_dict(self) -> dict:
@@ -564,6 +584,15 @@ class Shape:
         Up to ``max_frames`` frames, evenly spaced; frames flagged ``extrapolated`` are
         dashed (and explained in the legend). ``kwargs`` go to ``Axes.plot``. Returns
         the axes.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; None makes a new figure.
+        max_frames : int, default 50
+            Most frames drawn, evenly spaced.
+        **kwargs
+            Passed to ``Axes.plot``.
         """
         from bendsense.plots import plot_shapes
 

@@ -453,7 +453,13 @@ class LiveBlock:
         return columns
 
     def frame(self, i: int = -1) -> LiveFrame:
-        """Frame ``i`` of the block as a :class:`LiveFrame`."""
+        """Frame ``i`` of the block as a :class:`LiveFrame`.
+
+        Parameters
+        ----------
+        i : int, default -1
+            Index of the frame in the block (-1: the newest).
+        """
         n = len(self)
         i = range(n)[i]
         est = None
@@ -617,6 +623,11 @@ class LiveProcessor:
 
         ``t_s`` is the device clock from the first reading this processor saw (as
         ``t_s`` of the recorded session).
+
+        Parameters
+        ----------
+        readings : list of Reading
+            Driver readings, oldest first.
         """
         readings = list(readings)
         if self._t0_us is None and readings:
@@ -631,7 +642,21 @@ class LiveProcessor:
         )
 
     def process_signals(self, signals, pressure_pa=None, *, seq=-1, t_s=math.nan, host_ns=None) -> LiveFrame:
-        """Process one frame given as raw signals A (N,) and the pressure [Pa] (a block of one)."""
+        """Process one frame given as raw signals A (N,) and the pressure [Pa] (a block of one).
+
+        Parameters
+        ----------
+        signals : array_like, shape (N,)
+            Raw signals A [signal units].
+        pressure_pa : float, optional
+            Actuation pressure [Pa]; None or NaN takes the processor's constant pressure, if it has one.
+        seq : int, default -1
+            Sequence number of the frame.
+        t_s : float, default nan
+            Time of the frame [s].
+        host_ns : int, optional
+            Host clock when the frame arrived [ns].
+        """
         block = self.process_block(
             np.asarray(signals, dtype=float)[None],
             None if pressure_pa is None else [pressure_pa],
@@ -642,9 +667,21 @@ class LiveProcessor:
         return block.frame(0)
 
     def process(self, reading) -> LiveFrame:
-        """Process one :class:`~bendsense.device.driver.Reading`."""
+        """Process one :class:`~bendsense.device.driver.Reading`.
+
+        Parameters
+        ----------
+        reading : Reading
+            One driver reading.
+        """
         return self.process_readings([reading]).frame(0)
 
     def process_many(self, readings) -> LiveFrame:
-        """Process readings as one block; the newest frame as a :class:`LiveFrame`."""
+        """Process readings as one block; the newest frame as a :class:`LiveFrame`.
+
+        Parameters
+        ----------
+        readings : list of Reading
+            Driver readings, oldest first.
+        """
         return self.process_readings(readings).frame(-1)

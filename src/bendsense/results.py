@@ -52,7 +52,17 @@ class Results:
 
     @classmethod
     def from_state(cls, session, shape, estimate=None) -> Results:
-        """The results of a processed session in memory: the columns of ``results.csv``."""
+        """The results of a processed session in memory: the columns of ``results.csv``.
+
+        Parameters
+        ----------
+        session : Session
+            The processed session.
+        shape : Shape
+            Its reconstructed shapes.
+        estimate : ForceEstimate, optional
+            Its force estimates.
+        """
         frames = len(session)
         kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
         tip = np.asarray(shape.tip_position_m).reshape(frames, 2)

@@ -249,7 +249,13 @@ class LiveView:
             fig.draw_artist(artist)
 
     def add_block(self, block) -> None:
-        """Append the frames of a :class:`~bendsense.pipeline.LiveBlock` to the force and pressure history."""
+        """Append the frames of a :class:`~bendsense.pipeline.LiveBlock` to the force and pressure history.
+
+        Parameters
+        ----------
+        block : LiveBlock
+            The newly processed frames.
+        """
         t = np.where(np.isfinite(block.t_s), block.t_s, np.asarray(block.host_ns) * 1e-9)
         f, sd = block.force_n, block.std_n
         self._history.append(np.column_stack([t, f, sd, block.pressure_pa * 1e-3]))
@@ -295,7 +301,15 @@ class LiveView:
             self._background = None
 
     def set_frame(self, frame: LiveFrame, status: str = "") -> None:
-        """Update the artists' data from a frame (no drawing)."""
+        """Update the artists' data from a frame (no drawing).
+
+        Parameters
+        ----------
+        frame : LiveFrame
+            The frame to show.
+        status : str, default ""
+            The status line under the figure.
+        """
         shape = frame.shape
         pos = np.asarray(shape.positions_m) * MM
         self.shape_line.set_data(pos[:, 0], pos[:, 1])
@@ -333,7 +347,15 @@ class LiveView:
         self.status_text.set_text(status)
 
     def update(self, frame: LiveFrame, status: str = "") -> None:
-        """Show a frame: update the artists and blit them over the saved background."""
+        """Show a frame: update the artists and blit them over the saved background.
+
+        Parameters
+        ----------
+        frame : LiveFrame
+            The frame to show.
+        status : str, default ""
+            The status line under the figure.
+        """
         self.set_frame(frame, status)
         self._set_series()
         canvas = self.canvas
@@ -346,12 +368,30 @@ class LiveView:
         canvas.flush_events()
 
     def update_block(self, block, status: str = "") -> None:
-        """Add a block's frames to the history and show its newest frame."""
+        """Add a block's frames to the history and show its newest frame.
+
+        Parameters
+        ----------
+        block : LiveBlock
+            The newly processed frames.
+        status : str, default ""
+            The status line under the figure.
+        """
         self.add_block(block)
         self.update(block.frame(-1), status)
 
     def save(self, path, dpi: int = 120, overwrite: bool = True) -> None:
-        """Write the figure with the current frame (atomically; :func:`bendsense.output.write_file`)."""
+        """Write the figure with the current frame (atomically; :func:`bendsense.output.write_file`).
+
+        Parameters
+        ----------
+        path : path
+            Figure file; its suffix gives the format.
+        dpi : int, default 120
+            Resolution of a raster figure [dots per inch].
+        overwrite : bool, default True
+            Replace an existing figure bendsense wrote.
+        """
         from pathlib import Path
 
         from bendsense import output

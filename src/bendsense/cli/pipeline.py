@@ -44,6 +44,17 @@ class PipelineGroup(click.Group):
         click prints a usage block and a hint above the error of a bad option; here
         the error stays one line (``Error: Invalid value for '--seed': ...``), with
         exit code 2 for usage errors and 1 for the others.
+
+        Parameters
+        ----------
+        args : list of str, optional
+            The command line; None reads ``sys.argv``.
+        prog_name, complete_var : str, optional
+            As for :meth:`click.Group.main`.
+        standalone_mode : bool, default True
+            Exit with the exit code instead of returning (click's meaning).
+        **extra
+            Passed to :meth:`click.Group.main`.
         """
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
@@ -58,7 +69,13 @@ class PipelineGroup(click.Group):
         sys.exit(rv if isinstance(rv, int) else 0)
 
     def invoke(self, ctx):
-        """Invoke the chain; a user mistake becomes one ``Error:`` line and exit code 1."""
+        """Invoke the chain; a user mistake becomes one ``Error:`` line and exit code 1.
+
+        Parameters
+        ----------
+        ctx : click.Context
+            The command line's context.
+        """
         try:
             return super().invoke(ctx)
         except BendsenseError as err:

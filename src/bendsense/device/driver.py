@@ -217,7 +217,13 @@ class Driver:
         return self
 
     def request_hello(self, timeout_s: float = 2.0) -> Hello:
-        """Send HELLO_REQUEST (re-sent every 0.5 s) and wait for the HELLO."""
+        """Send HELLO_REQUEST (re-sent every 0.5 s) and wait for the HELLO.
+
+        Parameters
+        ----------
+        timeout_s : float, default 2.0
+            Longest wait for the HELLO [s].
+        """
         self._hello_event.clear()
         deadline = time.monotonic() + timeout_s
         while True:
@@ -267,7 +273,13 @@ class Driver:
     # ------------------------------------------------------------------ commands
 
     def write(self, data: bytes) -> None:
-        """Write raw bytes to the port."""
+        """Write raw bytes to the port.
+
+        Parameters
+        ----------
+        data : bytes
+            The bytes to write.
+        """
         if self._closed or self._ser is None:
             raise DeviceError(f"{self.port}: not open")
         try:
@@ -278,7 +290,13 @@ class Driver:
             raise DeviceError(f"{self.port}: write failed ({err})") from None
 
     def send(self, kind: str) -> None:
-        """Send a command: ``"start"``, ``"stop"`` or ``"hello_request"`` (binary dialect only)."""
+        """Send a command: ``"start"``, ``"stop"`` or ``"hello_request"`` (binary dialect only).
+
+        Parameters
+        ----------
+        kind : str
+            ``"start"``, ``"stop"`` or ``"hello_request"``.
+        """
         if self.dialect != "binary":
             return
         self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
@@ -339,7 +357,13 @@ class Driver:
         return self._latest
 
     def add_listener(self, callback) -> None:
-        """Call ``callback(event)`` for every :class:`Event` (from the reader thread)."""
+        """Call ``callback(event)`` for every :class:`Event` (from the reader thread).
+
+        Parameters
+        ----------
+        callback : callable
+            Called as ``callback(event)``.
+        """
         self._listeners.append(callback)
 
     def _check_alive(self) -> None:
@@ -371,7 +395,15 @@ class Driver:
         return batch[0] if batch else None
 
     def get_batch(self, timeout: float | None = None, max_items: int = 4096) -> list:
-        """Up to ``max_items`` readings: waits up to ``timeout`` for the first, then takes what is queued."""
+        """Up to ``max_items`` readings: waits up to ``timeout`` for the first, then takes what is queued.
+
+        Parameters
+        ----------
+        timeout : float, optional
+            Longest wait for the first reading [s]; None waits for ever.
+        max_items : int, default 4096
+            Most readings returned.
+        """
         if self._queue is None:
             raise DeviceError(f"{self.port}: opened with queue_size=None; use latest()")
         q = self._queue

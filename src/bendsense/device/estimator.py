@@ -54,7 +54,13 @@ class ResultsAppender:
         self.rows = 0
 
     def write(self, block) -> None:
-        """Append the rows of ``block``."""
+        """Append the rows of ``block``.
+
+        Parameters
+        ----------
+        block : LiveBlock
+            The processed frames to append.
+        """
         from bendsense.session.cells import column_cells
 
         columns = block.columns()
@@ -165,7 +171,13 @@ class LiveEstimator:
                               status_counts=dict(p.status_counts))
 
     def put(self, readings) -> None:
-        """Queue readings (:class:`~bendsense.device.driver.Reading`) for processing; never blocks."""
+        """Queue readings (:class:`~bendsense.device.driver.Reading`) for processing; never blocks.
+
+        Parameters
+        ----------
+        readings : list of Reading
+            Readings as the recorder wrote them.
+        """
         readings = list(readings)
         if readings:
             with self._lock:

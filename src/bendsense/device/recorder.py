@@ -239,7 +239,13 @@ class Recorder:
         return self.stats
 
     def close(self, outcome: str = "stopped") -> None:
-        """Write the final counters to ``meta.yaml`` and close the session (idempotent)."""
+        """Write the final counters to ``meta.yaml`` and close the session (idempotent).
+
+        Parameters
+        ----------
+        outcome : str, default "stopped"
+            How the recording ended, for ``meta.yaml``.
+        """
         with self._lock:
             writer = self._writer
         if writer is None:
@@ -252,7 +258,13 @@ class Recorder:
         writer.close({"stats": asdict(stats), "outcome": outcome})
 
     def start(self, duration_s: float | None = None) -> Recorder:
-        """Run :meth:`run` on a background thread."""
+        """Run :meth:`run` on a background thread.
+
+        Parameters
+        ----------
+        duration_s : float, optional
+            Stop after this long [s]; None records until :meth:`stop`.
+        """
 
         def target():
             try:
@@ -265,7 +277,13 @@ class Recorder:
         return self
 
     def stop(self, timeout_s: float = 5.0) -> RecorderStats:
-        """Stop the background recording, wait for it and re-raise its error, if any."""
+        """Stop the background recording, wait for it and re-raise its error, if any.
+
+        Parameters
+        ----------
+        timeout_s : float, default 5.0
+            Longest wait for the recording thread [s].
+        """
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout_s)

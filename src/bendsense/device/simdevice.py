@@ -284,7 +284,13 @@ class SimulatedDevice:
         return self
 
     def send_text(self, text: str) -> None:
-        """Have the firmware send a TEXT log line."""
+        """Have the firmware send a TEXT log line.
+
+        Parameters
+        ----------
+        text : str
+            The log line.
+        """
         with self._lock:
             self._texts.append(str(text))
 

@@ -88,7 +88,13 @@ class LslOutlets:
         self.pushed = 0
 
     def push(self, block) -> None:
-        """Publish the frames of a :class:`~bendsense.pipeline.LiveBlock`."""
+        """Publish the frames of a :class:`~bendsense.pipeline.LiveBlock`.
+
+        Parameters
+        ----------
+        block : LiveBlock
+            The processed frames to publish.
+        """
         n = len(block)
         if not n:
             return

@@ -86,12 +86,24 @@ class Session:
         return bool(np.all(np.isfinite(self.pressure_pa)))
 
     def with_pressure(self, pressure_pa: float) -> Session:
-        """A copy whose frames without a pressure reading get ``pressure_pa`` [Pa]."""
+        """A copy whose frames without a pressure reading get ``pressure_pa`` [Pa].
+
+        Parameters
+        ----------
+        pressure_pa : float
+            The constant pressure [Pa].
+        """
         p = np.where(np.isfinite(self.pressure_pa), self.pressure_pa, float(pressure_pa))
         return Session(self.t_s, self.signals, p, self.seq, dict(self.meta), dict(self.extra), self.source)
 
     def select(self, index) -> Session:
-        """A new session with the frames picked by ``index`` (slice, mask or indices)."""
+        """A new session with the frames picked by ``index`` (slice, mask or indices).
+
+        Parameters
+        ----------
+        index : slice, array_like of bool or of int
+            The frames to keep.
+        """
         seq = None if self.seq is None else self.seq[index]
         extra = {k: v[index] for k, v in self.extra.items()}
         return Session(

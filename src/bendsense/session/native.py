@@ -385,13 +385,25 @@ class SessionWriter:
         output.write_text(self.path / META, text, overwrite=True)
 
     def empty(self, n: int) -> np.ndarray:
-        """``n`` zeroed records of this session's dtype (pressure set to "no reading")."""
+        """``n`` zeroed records of this session's dtype (pressure set to "no reading").
+
+        Parameters
+        ----------
+        n : int
+            Number of records.
+        """
         rec = np.zeros(n, dtype=self.dtype)
         rec["pressure_pa"] = NO_PRESSURE
         return rec
 
     def write(self, records: np.ndarray) -> None:
-        """Append structured ``records`` (this session's dtype) to ``frames.bin``."""
+        """Append structured ``records`` (this session's dtype) to ``frames.bin``.
+
+        Parameters
+        ----------
+        records : ndarray
+            Structured records of this session's dtype.
+        """
         records = np.asarray(records)
         if records.dtype != self.dtype:
             raise SessionError(f"records: expected dtype {self.dtype}, got {records.dtype}")
@@ -405,7 +417,15 @@ class SessionWriter:
         self.maybe_sync()
 
     def event(self, text: str, when: float | None = None) -> None:
-        """Append one line to ``events.log`` (``when``: wall-clock time [s], default now)."""
+        """Append one line to ``events.log`` (``when``: wall-clock time [s], default now).
+
+        Parameters
+        ----------
+        text : str
+            The event, one line.
+        when : float, optional
+            Wall-clock time of the event [s]; None is now.
+        """
         line = " ".join(str(text).split())  # one event, one line
         with self._lock:
             if not self.closed:
@@ -427,7 +447,13 @@ class SessionWriter:
             self._last_sync = time.monotonic()
 
     def close(self, meta_update: dict | None = None) -> None:
-        """Sync, close, and rewrite ``meta.yaml`` with the end time, record count and ``meta_update``."""
+        """Sync, close, and rewrite ``meta.yaml`` with the end time, record count and ``meta_update``.
+
+        Parameters
+        ----------
+        meta_update : dict, optional
+            Further metadata for ``meta.yaml``.
+        """
         if self.closed:
             return
         self.sync()

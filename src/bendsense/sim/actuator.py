@@ -143,7 +143,13 @@ class ActuatorFrames:
         return int(np.size(self.valid) - np.count_nonzero(self.valid))
 
     def select(self, index) -> ActuatorFrames:
-        """Pick the frames given by ``index`` along the first axis (slice, mask or indices)."""
+        """Pick the frames given by ``index`` along the first axis (slice, mask or indices).
+
+        Parameters
+        ----------
+        index : slice, array_like of bool or of int
+            The frames to keep.
+        """
         s_m = self.s_m
         values = {name: getattr(self, name)[index] for name in self.__dataclass_fields__ if name != "s_m"}
         return ActuatorFrames(s_m=s_m, **values)
@@ -267,19 +273,45 @@ class SimulatedActuator:
         return self._s_beam[: self.n_points]
 
     def tip_curvature_per_m(self, pressure_pa) -> np.ndarray:
-        """Return the true natural curvature K0_true(P) = (1 + k0_error) K0(P) [1/m]."""
+        """Return the true natural curvature K0_true(P) = (1 + k0_error) K0(P) [1/m].
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return (1.0 + self.k0_error) * self._bending.tip_curvature_per_m(np.asarray(pressure_pa, dtype=float))
 
     def ei_nm2(self, pressure_pa) -> np.ndarray:
-        """Return the true flexural rigidity EI_true(P) = (1 + ei_error) EI(P) [N·m²]."""
+        """Return the true flexural rigidity EI_true(P) = (1 + ei_error) EI(P) [N·m²].
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return (1.0 + self.ei_error) * self.config.stiffness.ei_nm2(pressure_pa)
 
     def base_angle_rad(self, pressure_pa) -> np.ndarray:
-        """Return the true base angle β θ_true(P) [rad], toward ``+x``."""
+        """Return the true base angle β θ_true(P) [rad], toward ``+x``.
+
+        Parameters
+        ----------
+        pressure_pa : float or array_like
+            Actuation pressure P [Pa].
+        """
         return self.base_rotation_rad_per_rad * self.tip_curvature_per_m(pressure_pa) * self.config.actuator.length_m
 
     def effective_pressure_pa(self, pressure_pa, initial_pa=None) -> np.ndarray:
-        """Return the pressure that bends the actuator, for a time series of readings (first axis = time) [Pa]."""
+        """Return the pressure that bends the actuator, for a time series of readings (first axis = time) [Pa].
+
+        Parameters
+        ----------
+        pressure_pa : array_like, shape (frames, ...)
+            Pressure readings, first axis time [Pa].
+        initial_pa : float or array_like, optional
+            The effective pressure before the first reading [Pa]; default the first reading.
+        """
         return play_operator(pressure_pa, self.hysteresis_pa, initial_pa)
 
     def solve(self, pressure_pa, force_n=(0.0, 0.0), *, initial=None, sensitivities=False):

@@ -245,7 +245,15 @@ class CoilGeometry:
 
     @classmethod
     def from_sensor_config(cls, sensor, **kwargs) -> CoilGeometry:
-        """Build the paper's spiral model of a :class:`~bendsense.config.SensorConfig`'s coils."""
+        """Build the paper's spiral model of a :class:`~bendsense.config.SensorConfig`'s coils.
+
+        Parameters
+        ----------
+        sensor : SensorConfig or Config
+            The sensor.
+        **kwargs
+            Passed to :meth:`flat_spiral` (e.g. ``layers``).
+        """
         turns = sensor.coil_turns
         kwargs.setdefault("layers", 2 if turns % 2 == 0 else 1)
         return cls.flat_spiral(outer_radius_m=0.5 * sensor.coil_diameter_m, turns=turns, **kwargs)
@@ -425,7 +433,15 @@ class CoilArrayModel:
 
     @classmethod
     def from_config(cls, sensor, **kwargs) -> CoilArrayModel:
-        """Build the model of a :class:`~bendsense.config.SensorConfig` (or a whole ``Config``)."""
+        """Build the model of a :class:`~bendsense.config.SensorConfig` (or a whole ``Config``).
+
+        Parameters
+        ----------
+        sensor : SensorConfig or Config
+            The sensor.
+        **kwargs
+            Passed to :meth:`build` (e.g. ``receiver_coil``).
+        """
         sensor = getattr(sensor, "sensor", sensor)
         coil = kwargs.pop("receiver_coil", None) or CoilGeometry.from_sensor_config(sensor)
         return cls.build(
@@ -448,7 +464,13 @@ class CoilArrayModel:
         return s
 
     def coil_mutual_inductance(self, rho_m) -> np.ndarray:
-        """M_coil(ρ) of one transmitter–receiver pair from the precomputed spline [H]."""
+        """M_coil(ρ) of one transmitter–receiver pair from the precomputed spline [H].
+
+        Parameters
+        ----------
+        rho_m : float or array_like
+            Lateral distance ρ between the coils' axes [m].
+        """
         rho = np.abs(np.asarray(rho_m, dtype=float))
         out = self._spline(np.minimum(rho, self._spline.x[-1]))
         far = rho > self._spline.x[-1]
@@ -457,7 +479,13 @@ class CoilArrayModel:
         return out
 
     def direct(self, shifts_m) -> np.ndarray:
-        """Compute the normalized signals by the full transmitter sum (slower; no table) [-]."""
+        """Compute the normalized signals by the full transmitter sum (slower; no table) [-].
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Total shifts S [m].
+        """
         s = self._check(shifts_m)
         rho = self._offsets_m + s[..., None]
         return (self.coil_mutual_inductance(rho) * self._polarity).sum(axis=-1) / self.mutual_ref_h
@@ -492,7 +520,13 @@ class CoilArrayModel:
         return out
 
     def derivative(self, shifts_m) -> np.ndarray:
-        """Evaluate the slopes d u_i / d S_i from the spline of M_coil [1/m], shape (..., N)."""
+        """Evaluate the slopes d u_i / d S_i from the spline of M_coil [1/m], shape (..., N).
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Total shifts S [m].
+        """
         s = self._check(shifts_m)
         rho = self._offsets_m + s[..., None]
         dm = self._spline(np.abs(rho), 1) * np.sign(rho)
@@ -503,11 +537,25 @@ class CoilArrayModel:
 
         ``frequency_hz`` is the excitation frequency (paper: 1 MHz) and ``current_a``
         the transmitter current amplitude [A] (not given in the paper; a placeholder).
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Total shifts S [m].
+        frequency_hz : float, default 1e6
+            Excitation frequency [Hz].
+        current_a : float, default 0.01
+            Transmitter current amplitude [A].
         """
         return 2.0 * math.pi * frequency_hz * current_a * self.mutual_ref_h * self.signal(shifts_m)
 
     def monotonic_range_m(self, *, step_m: float | None = None) -> np.ndarray:
         """Per channel, the interval of shifts around 0 where u_i is strictly monotonic.
+
+        Parameters
+        ----------
+        step_m : float, optional
+            Sampling step of the shifts [m]; default the table step.
 
         Returns
         -------

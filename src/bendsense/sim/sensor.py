@@ -329,7 +329,13 @@ class VirtualSensor:
         return 2**self.adc_bits - 1
 
     def lockin(self, shifts_m) -> np.ndarray:
-        """Evaluate the normalized in-phase lock-in amplitudes u_i(S_i) [-], shape (..., N)."""
+        """Evaluate the normalized in-phase lock-in amplitudes u_i(S_i) [-], shape (..., N).
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Total shifts S [m].
+        """
         return self.model.signal(shifts_m)
 
     def signal(self, shifts_m) -> np.ndarray:
@@ -337,11 +343,22 @@ class VirtualSensor:
 
         The flat-sensor value of this (``S = 0``) is the calibration offset A0 of paper
         eq. 1, which includes the small flat-state signal of the end receivers.
+
+        Parameters
+        ----------
+        shifts_m : array_like, shape (..., N)
+            Total shifts S [m].
         """
         return self.offset_counts + self.gain_counts * self.model.signal(shifts_m)
 
     def quantize(self, values_counts) -> SensorReading:
-        """Round to integer counts and clip to the ADC range, flagging clipped values."""
+        """Round to integer counts and clip to the ADC range, flagging clipped values.
+
+        Parameters
+        ----------
+        values_counts : array_like, shape (..., N)
+            Readings [counts], not yet rounded.
+        """
         raw = np.rint(np.asarray(values_counts, dtype=float))
         saturated = (raw < 0) | (raw > self.full_scale_counts)
         dtype = np.uint16 if self.adc_bits <= 16 else np.int64
@@ -368,15 +385,35 @@ class VirtualSensor:
         return self.quantize(values)
 
     def shifts_from_curvatures(self, curvature_per_m) -> np.ndarray:
-        """Shifts S_i [m] of PCC curvatures κ (..., N) [1/m] on this sensor."""
+        """Shifts S_i [m] of PCC curvatures κ (..., N) [1/m] on this sensor.
+
+        Parameters
+        ----------
+        curvature_per_m : array_like, shape (..., N)
+            Segment curvatures κ [1/m].
+        """
         return shifts_from_curvatures(curvature_per_m, self.lengths_m, self.strip_gap_m)
 
     def shifts_from_shape(self, s_m, angle_rad) -> np.ndarray:
-        """Shifts S_i [m] of a sampled shape φ(s), e.g. a ``BeamSolution``'s ``s_m``, ``angle_rad``."""
+        """Shifts S_i [m] of a sampled shape φ(s), e.g. a ``BeamSolution``'s ``s_m``, ``angle_rad``.
+
+        Parameters
+        ----------
+        s_m : array_like, shape (M,)
+            Arc lengths of the samples [m].
+        angle_rad : array_like, shape (..., M)
+            Tangent angles φ(s) [rad].
+        """
         return shifts_from_shape(s_m, angle_rad, self.lengths_m, self.strip_gap_m)
 
     def volts(self, counts) -> np.ndarray:
-        """ADC counts as volts at the ADC input [V]."""
+        """ADC counts as volts at the ADC input [V].
+
+        Parameters
+        ----------
+        counts : array_like
+            ADC counts.
+        """
         return np.asarray(counts, dtype=float) * self.vref_v / 2**self.adc_bits
 
 
