@@ -330,13 +330,10 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
     guess; a given force (``initial_force_n``, or an ``initial`` without guesses) is the
     start itself. Either disables the chaining of frames along the batch.
     """
-    start = np.zeros((B, 2))
     if initial is not None and initial_force_n is None and initial.guess_n is not None:
-        prev_f = _flat(np.asarray(initial.force_n, dtype=float), batch, B, (2,))
-        prev_g = _flat(np.asarray(initial.guess_n, dtype=float), batch, B, (2,))
-        good = np.isfinite(prev_f).all(axis=1) & np.isfinite(prev_g).all(axis=1)
-        start[good] = prev_f[good] - prev_g[good]
-        return start, True, False
+        offset = _flat(np.subtract(initial.force_n, initial.guess_n, dtype=float), batch, B, (2,))
+        offset[~np.isfinite(offset.sum(axis=1))] = 0.0  # a failed estimate corrects nothing
+        return offset, True, False
     if initial is not None and initial_force_n is None:
         initial_force_n = initial.force_n
     if initial_force_n is not None:
@@ -344,7 +341,7 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
         if f0.shape[-1:] != (2,) or not np.all(np.isfinite(f0)):
             raise ArgumentError(f"initial_force_n: expected finite values of shape (..., 2), got shape {f0.shape}")
         return _flat(f0, batch, B, (2,)), False, False
-    return start, True, warm_start
+    return np.zeros((B, 2)), True, warm_start
 
 
 # Keyed by id(), not an lru_cache on the (value-hashable) config: hashing a Config by value

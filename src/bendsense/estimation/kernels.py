@@ -635,6 +635,17 @@ def setup(i, fr, pb, err, buf):
 
 
 @njit(cache=True)
+def near(u0, prev_u0, prev_u):
+    """Whether the start ``u0`` lies closer to the previous start than the previous estimate did."""
+    d = 0.0
+    off = 0.0
+    for c in range(u0.size):
+        d += (u0[c] - prev_u0[c]) ** 2
+        off += (prev_u[c] - prev_u0[c]) ** 2
+    return d <= off
+
+
+@njit(cache=True)
 def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
@@ -660,7 +671,10 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
                 proj = D[0, c] * (start[i, 0] - pb.ffix[0]) + D[1, c] * (start[i, 1] - pb.ffix[1])
             u0[c] = max(proj, pb.lower[c])
             u[c] = u0[c]
-            if prev_ok:
+        # the previous frame's offset corrects this frame's start where the two frames are
+        # near (their starts closer than that offset): along a time series, not across a shuffle
+        if prev_ok and near(u0, prev_u0, prev_u):
+            for c in range(k):
                 u[c] = max(u0[c] + prev_u[c] - prev_u0[c], pb.lower[c])
         blocked[:] = 0.0
         st, it, _ = gauss_newton(pb.L, ei, k0, pb.wload, tg, D, pb.ffix, pb.lower, u, state0, pb.xtol, pb.max_iter,
