@@ -1,0 +1,176 @@
+"""The calibration file (DESIGN.md section 3): ``format: bendsense-calibration``, ``version: 1``.
+
+The YAML layout of a :class:`~bendsense.calibration.Calibration` (:func:`to_dict`,
+:func:`fields_from_dict`) and the checks of its array fields, which the class's
+constructor shares.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+import yaml
+
+from bendsense import validation as check
+from bendsense.calibration.fit import StripResidual
+from bendsense.errors import ConfigError
+
+__all__ = []
+
+FORMAT = "bendsense-calibration"
+VERSION = 1
+
+
+def _array(where: str, value: Any, length: int | None = None) -> np.ndarray:
+    if not isinstance(value, (list, tuple, np.ndarray)):
+        raise ConfigError(f"{where}: expected a list of numbers, got {check.short(value)}")
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: expected a list of numbers, got {check.short(value)}") from None
+    if arr.ndim != 1 or (length is not None and arr.size != length):
+        want = f"{length} numbers" if length is not None else "a flat list of numbers"
+        raise ConfigError(f"{where}: expected {want}, got {arr.size if arr.ndim == 1 else arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{where}: values must be finite, got {check.short(value)}")
+    return arr
+
+
+def _range(where: str, value: Any) -> tuple:
+    arr = _array(where, value, 2)
+    if arr[0] > arr[1]:
+        raise ConfigError(f"{where}: expected [min, max] with min <= max, got {arr.tolist()}")
+    return (float(arr[0]), float(arr[1]))
+
+
+def to_dict(cal) -> dict:
+    """The calibration YAML layout of ``cal`` (plain lists, floats and strings).
+
+    Parameters
+    ----------
+    cal : Calibration
+        The calibration to write.
+
+    Returns
+    -------
+    dict
+    """
+    cv = cal.cv_errors_m
+    out = {
+        "format": FORMAT,
+        "version": VERSION,
+        "n_channels": cal.n_channels,
+        "degree": cal.degree,
+        "offset": cal.offset.tolist(),
+        "coefficients_odd": cal.coefficients_odd.tolist(),
+        "coefficients_even": cal.coefficients_even.tolist(),
+        "delta_a_range_odd": list(cal.delta_a_range_odd),
+        "delta_a_range_even": list(cal.delta_a_range_even),
+        "noise_std": cal.noise_std.tolist() if cal.noise_known else None,
+        "weighting": cal.weighting,
+        "sleeve": cal.sleeve,
+        "strip_residuals": [r.to_dict() for r in cal.strip_residuals],
+        "cv_errors_m": None if cv is None else {int(k): float(v) for k, v in cv.items()},
+        "sensor": None if cal.sensor is None else cal.sensor.to_dict(),
+        "fit_delta_a": None if cal.fit_delta_a is None else cal.fit_delta_a.tolist(),
+        "fit_shifts_m": None if cal.fit_shifts_m is None else cal.fit_shifts_m.tolist(),
+        "meta": dict(cal.meta),
+    }
+    return out
+
+
+def save(cal, path: str | os.PathLike, *, overwrite: bool = True) -> None:
+    """Write the calibration YAML atomically (:meth:`Calibration.save`).
+
+    Parameters
+    ----------
+    cal : Calibration
+        The calibration to write.
+    path : path
+        The YAML file.
+    overwrite : bool
+        ``False`` refuses an existing file.
+    """
+    from bendsense import output
+
+    header = "# bendsense sensor calibration: S_i = sum_k c_k (A_i - offset_i)^k (ascending powers, paper eq. 2)\n"
+    text = header + yaml.safe_dump(cal.to_dict(), sort_keys=False)
+    output.write_text(path, text, overwrite=overwrite, writer="bendsense calibrate")
+
+
+def fields_from_dict(data: Any) -> dict:
+    """The keyword arguments of a calibration from its YAML layout; raises `ConfigError` naming the field.
+
+    Parameters
+    ----------
+    data : Any
+        The parsed YAML.
+
+    Returns
+    -------
+    dict
+        The keyword arguments of :class:`~bendsense.calibration.Calibration`.
+    """
+    if not isinstance(data, dict):
+        raise ConfigError(f"calibration: expected a mapping, got {type(data).__name__}")
+    if data.get("format") != FORMAT:
+        raise ConfigError(f"format: expected {FORMAT!r}, got {check.short(data.get('format'))}")
+    version = data.get("version")
+    if version != VERSION:
+        raise ConfigError(f"version: this bendsense reads version {VERSION}, got {check.short(version)}")
+    allowed = [
+        "format", "version", "n_channels", "degree", "offset", "coefficients_odd", "coefficients_even",
+        "delta_a_range_odd", "delta_a_range_even", "noise_std", "weighting", "sleeve", "strip_residuals",
+        "cv_errors_m", "sensor", "fit_delta_a", "fit_shifts_m", "meta",
+    ]  # fmt: skip
+    unknown = [str(k) for k in data if k not in allowed]
+    if unknown:
+        raise ConfigError(f"calibration: unknown keys {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+    required = ["offset", "coefficients_odd", "coefficients_even", "delta_a_range_odd", "delta_a_range_even"]
+    missing = [k for k in required if k not in data]
+    if missing:
+        raise ConfigError(f"calibration: missing keys {', '.join(missing)}")
+    coef = _array("coefficients_odd", data["coefficients_odd"])
+    degree = data.get("degree", coef.size - 1)
+    offset = _array("offset", data["offset"])
+    if "n_channels" in data and data["n_channels"] != offset.size:
+        got = check.short(data["n_channels"])
+        raise ConfigError(f"n_channels: {got} does not match the {offset.size} offset values")
+    sensor = None
+    if data.get("sensor") is not None:
+        from bendsense.config import SensorConfig
+
+        sensor = SensorConfig.from_dict(data["sensor"])
+    residuals = []
+    for i, item in enumerate(data.get("strip_residuals") or []):
+        try:
+            residuals.append(StripResidual(**item))
+        except TypeError as err:
+            raise ConfigError(f"strip_residuals[{i}]: {err}") from None
+    cv = data.get("cv_errors_m")
+    if cv is not None:
+        if not isinstance(cv, dict):
+            raise ConfigError(f"cv_errors_m: expected a mapping of degree to error, got {check.short(cv)}")
+        cv = {int(k): float(v) for k, v in cv.items()}
+    meta = data.get("meta") or {}
+    if not isinstance(meta, dict):
+        raise ConfigError(f"meta: expected a mapping, got {check.short(meta)}")
+    return {
+        "offset": offset,
+        "coefficients_odd": coef,
+        "coefficients_even": data["coefficients_even"],
+        "degree": degree,
+        "delta_a_range_odd": data["delta_a_range_odd"],
+        "delta_a_range_even": data["delta_a_range_even"],
+        "noise_std": data.get("noise_std"),
+        "strip_residuals": residuals,
+        "cv_errors_m": cv,
+        "weighting": data.get("weighting", "none"),
+        "sleeve": data.get("sleeve", False),
+        "sensor": sensor,
+        "fit_delta_a": data.get("fit_delta_a"),
+        "fit_shifts_m": data.get("fit_shifts_m"),
+        "meta": meta,
+    }
