@@ -40,26 +40,33 @@ one pressure level. The model shapes come from :func:`bendsense.beam.solve_beam`
 K0(P) from the free-bending model of the config (identify it first), gravity
 ``config.weight_per_length_n_per_m`` and the row's own pressure for K0. Rows with no
 load still count: gravity bends them.
+
+The two CSVs are read and checked in :mod:`bendsense.identify_data`; its names are
+importable from here.
 """
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
-import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from bendsense._io import check_csv_header, read_text
 from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
 from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
-from bendsense.errors import ArgumentError, ConfigError, SessionError
-from bendsense.plausibility import check_pressure_column
-from bendsense.validation import key as _name
-from bendsense.validation import short
+from bendsense.errors import ArgumentError, ConfigError
+from bendsense.identify_data import (
+    _PRESSURE,
+    StiffnessData,
+    _check_pressure_unit,
+    _column,
+    _read_table,
+    _require_finite,
+    read_free_bending_csv,
+    read_stiffness_csv,
+)
 
 __all__ = [
     "FREE_BENDING_PARAMS",
@@ -85,229 +92,11 @@ _TYPICAL = {
 }
 
 
-# --------------------------------------------------------------------------- CSV input
-
-
-def _read_table(path) -> tuple[list[str], np.ndarray]:
-    """Header and float rows of a CSV; ``#`` lines before the header are skipped, empty cells are NaN."""
-    lines = read_text(path, "CSV table", SessionError).splitlines()
-    start = 0
-    while start < len(lines) and (not lines[start].strip() or lines[start].lstrip().startswith("#")):
-        start += 1
-    if start == len(lines):
-        raise SessionError(f"{path}: no header row")
-    reader = csv.reader(lines[start:])
-    header = [h.strip() for h in next(reader)]
-    try:
-        check_csv_header(header, start + 1, SessionError)
-    except SessionError as err:
-        raise SessionError(f"{path}: {err}") from None
-    if len(set(header)) != len(header):
-        dup = sorted({h for h in header if header.count(h) > 1})
-        raise SessionError(f"{path}: duplicate columns {', '.join(_name(d) for d in dup[:8])}")
-    rows = []
-    for lineno, cells in enumerate(reader, start=start + 2):
-        if not cells or all(not c.strip() for c in cells):
-            continue
-        if len(cells) != len(header):
-            raise SessionError(f"{path}: line {lineno}: expected {len(header)} values, got {len(cells)}")
-        row = []
-        for name, cell in zip(header, cells, strict=True):
-            text = cell.strip()
-            try:
-                row.append(float(text) if text else math.nan)
-            except ValueError:
-                raise SessionError(f"{path}: line {lineno}: column {name}: not a number: {short(text)}") from None
-        rows.append(row)
-    if not rows:
-        raise SessionError(f"{path}: no data rows")
-    return header, np.asarray(rows, dtype=float)
-
-
-def _column(path, header, data, names: Mapping[str, float], what: str, required: bool = True):
-    """The one present column of ``names`` (name → factor to SI), converted; None if absent and optional."""
-    present = [n for n in names if n in header]
-    if len(present) > 1:
-        raise SessionError(f"{path}: give one {what} column, got {', '.join(present)}")
-    if not present:
-        if required:
-            raise SessionError(f"{path}: missing {what} column ({' or '.join(names)})")
-        return None
-    name = present[0]
-    values = data[:, header.index(name)] * names[name]
-    return values, name
-
-
-def _require_finite(path, name, values):
-    bad = np.flatnonzero(~np.isfinite(values))
-    if bad.size:
-        raise SessionError(f"{path}: column {name}: missing or non-finite value in data row {bad[0] + 1}")
-
-
-_PRESSURE = {"pressure_pa": 1.0, "pressure_kpa": 1e3}
-
-
-def _check_pressure_unit(path, name, pressure_pa):
-    """KPa numbers in a pressure_pa column (and Pa in pressure_kpa) are refused, after the layout checks."""
-    try:
-        check_pressure_column(name, pressure_pa / _PRESSURE[name], 1)
-    except SessionError as err:
-        raise SessionError(f"{path}: {err}") from None
-
-
-def read_free_bending_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Read free-bending data (module docstring): pressures [Pa] and total bending angles [rad].
-
-    Parameters
-    ----------
-    path : str or path-like
-        CSV file with a pressure column and a bending angle column.
-
-    Raises
-    ------
-    SessionError
-        If the file is missing, malformed, or lacks a column; the message names it.
-    """
-    header, data = _read_table(path)
-    pressure, pname = _column(path, header, data, _PRESSURE, "pressure")
-    angle, aname = _column(
-        path, header, data, {"bending_angle_rad": 1.0, "bending_angle_deg": math.pi / 180}, "bending angle"
-    )
-    _require_finite(path, pname, pressure)
-    _require_finite(path, aname, angle)
-    _check_pressure_unit(path, pname, pressure)
-    top = float(np.abs(angle).max())
-    if aname == "bending_angle_rad" and top > 2.0 * math.pi:
-        raise SessionError(f"{path}: column bending_angle_rad: angles up to {top:g} rad (over a full turn); "
-                           "looks like degrees: name the column bending_angle_deg")
-    return pressure, angle
-
-
-@dataclass(frozen=True, eq=False)
-class StiffnessData:
-    """Loaded shapes for the stiffness fit, one row per measurement.
-
-    Attributes
-    ----------
-    pressure_pa : ndarray, shape (n,)
-        Gauge pressure [Pa].
-    force_n : ndarray, shape (n, 2)
-        Known tip force in the base frame [N].
-    s_m : ndarray, shape (n, M)
-        Arc length of each measured point from the base [m]; NaN where absent.
-    positions_m : ndarray, shape (n, M, 2)
-        Measured points [m]; NaN where absent.
-    """
-
-    pressure_pa: np.ndarray
-    force_n: np.ndarray
-    s_m: np.ndarray
-    positions_m: np.ndarray
-
-    def __post_init__(self):
-        p = np.asarray(self.pressure_pa, dtype=float)
-        f = np.asarray(self.force_n, dtype=float)
-        s = np.asarray(self.s_m, dtype=float)
-        r = np.asarray(self.positions_m, dtype=float)
-        n = p.shape[0] if p.ndim == 1 else -1
-        if p.ndim != 1 or n == 0:
-            raise ArgumentError(f"pressure_pa: expected shape (n,) with n >= 1, got {p.shape}")
-        if f.shape != (n, 2):
-            raise ArgumentError(f"force_n: expected shape ({n}, 2), got {f.shape}")
-        if s.ndim != 2 or s.shape[0] != n:
-            raise ArgumentError(f"s_m: expected shape ({n}, M), got {s.shape}")
-        if r.shape != (*s.shape, 2):
-            raise ArgumentError(f"positions_m: expected shape {(*s.shape, 2)}, got {r.shape}")
-        for name, arr in (("pressure_pa", p), ("force_n", f)):
-            if not np.all(np.isfinite(arr)):
-                raise ArgumentError(f"{name}: must be finite")
-        seen = np.isfinite(s) & np.all(np.isfinite(r), axis=-1)
-        if not np.all(seen.any(axis=1)):
-            raise ArgumentError(f"positions_m: row {int(np.argmin(seen.any(axis=1)))} has no measured point")
-        for name, arr in (("pressure_pa", p), ("force_n", f), ("s_m", s), ("positions_m", r)):
-            object.__setattr__(self, name, arr)
-
-    @property
-    def observed(self) -> np.ndarray:
-        """Mask (n, M) of the points measured in each row."""
-        return np.isfinite(self.s_m) & np.all(np.isfinite(self.positions_m), axis=-1)
-
-    @classmethod
-    def from_tip(cls, pressure_pa, force_n, tip_position_m, length_m: float) -> StiffnessData:
-        """Data with the tip position r(L) [m] only.
-
-        Parameters
-        ----------
-        pressure_pa : array_like, shape (K,)
-            Pressure of each loaded shape [Pa].
-        force_n : array_like, shape (K, 2)
-            Tip force of each loaded shape in the base frame [N].
-        tip_position_m : array_like, shape (K, 2)
-            Measured tip position r(L) [m].
-        length_m : float
-            Actuator length L [m].
-        """
-        tip = np.asarray(tip_position_m, dtype=float)
-        n = tip.shape[0]
-        return cls(np.asarray(pressure_pa, dtype=float), force_n, np.full((n, 1), float(length_m)), tip[:, None, :])
-
-
-def read_stiffness_csv(path: str | os.PathLike, length_m: float) -> StiffnessData:
-    """Read loaded shapes for the stiffness fit (module docstring); ``length_m`` places the tip columns.
-
-    Parameters
-    ----------
-    path : str or path-like
-        CSV file of loaded shapes.
-    length_m : float
-        Actuator length L [m]: the arc length of the tip columns.
-
-    Raises
-    ------
-    SessionError
-        If the file is missing, malformed, lacks a column or has no measured points.
-    """
-    header, data = _read_table(path)
-    pressure, pname = _column(path, header, data, _PRESSURE, "pressure")
-    _require_finite(path, pname, pressure)
-    forces = []
-    for name in ("fx_n", "fy_n"):
-        if name not in header:
-            raise SessionError(f"{path}: missing column {name}")
-        forces.append(data[:, header.index(name)])
-        _require_finite(path, name, forces[-1])
-    s_cols, pos_cols = [], []
-    if "tip_x_m" in header or "tip_y_m" in header:
-        for name in ("tip_x_m", "tip_y_m"):
-            if name not in header:
-                raise SessionError(f"{path}: missing column {name} (tip columns come in pairs)")
-        s_cols.append(np.full(len(data), float(length_m)))
-        pos_cols.append(np.stack([data[:, header.index("tip_x_m")], data[:, header.index("tip_y_m")]], axis=-1))
-    i = 1
-    while f"s{i}_m" in header or f"x{i}_m" in header or f"y{i}_m" in header:
-        names = (f"s{i}_m", f"x{i}_m", f"y{i}_m")
-        missing = [n for n in names if n not in header]
-        if missing:
-            raise SessionError(f"{path}: missing column {', '.join(missing)} (shape point {i} needs s, x and y)")
-        s = data[:, header.index(names[0])]
-        if np.any(np.isfinite(s) & ((s < 0) | (s > length_m * (1 + 1e-9)))):
-            raise SessionError(f"{path}: column {names[0]}: arc lengths must lie in [0, {length_m:g}] m")
-        s_cols.append(s)
-        pos_cols.append(np.stack([data[:, header.index(names[1])], data[:, header.index(names[2])]], axis=-1))
-        i += 1
-    if not s_cols:
-        raise SessionError(f"{path}: no measured points: give tip_x_m, tip_y_m or s1_m, x1_m, y1_m, ...")
-    try:
-        result = StiffnessData(pressure, np.stack(forces, axis=-1), np.stack(s_cols, axis=1),
-                               np.stack(pos_cols, axis=1))
-    except ArgumentError as err:
-        raise SessionError(f"{path}: {err}") from None
-    _check_pressure_unit(path, pname, pressure)
-    reach = np.hypot(result.positions_m[..., 0], result.positions_m[..., 1])
-    if np.nanmax(reach, initial=0.0) > 1.05 * length_m:
-        raise SessionError(f"{path}: measured points up to {np.nanmax(reach):g} m from the base, farther than the "
-                           f"actuator is long ({length_m:g} m); looks like millimetres")
-    return result
+# the measurements (identify_data.py) keep this module as theirs: the API docs, pickles
+for _obj in (StiffnessData, read_free_bending_csv, read_stiffness_csv):
+    _obj.__module__ = __name__
+del _obj
+_DATA_HELPERS = (_PRESSURE, _check_pressure_unit, _column, _read_table, _require_finite)  # importable from here too
 
 
 # --------------------------------------------------------------------------- helpers
@@ -579,12 +368,51 @@ def fit_free_bending(
     ConfigError
         An unknown parameter name.
     """
-    from scipy.optimize import least_squares
-
     from bendsense.config import load_config
 
     if config is None:
         config = load_config()
+    p, y = _free_bending_data(pressure_pa, bending_angle_rad)
+    start = _free_bending_start(config.material, initial)
+    free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start)
+    if len(p) <= len(free):
+        raise ArgumentError(
+            f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
+        )
+    scale = np.array([abs(start[n]) or _TYPICAL[n] for n in free])
+    lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf}
+    lb = np.array([lower[n] for n in free]) / scale
+    x0 = np.array([start[n] for n in free]) / scale
+    x0 = np.maximum(x0, np.where(np.isfinite(lb), lb + 1e-6, -np.inf))
+    unpack, resid, jac = _free_bending_problem(p, y, _geometry(config.actuator), free, fixed, scale)
+    x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, free)
+    values = unpack(x)
+    r = resid(x)
+    cov, dof = _covariance(jac(x) / scale, r)
+    stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
+    if at_bound:
+        ok = False
+        message += f"; {', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
+    if not all(math.isfinite(stderr[n]) for n in free):
+        ok = False
+        message += "; parameters not identifiable from these data (fix one)"
+    return FreeBendingFit(
+        params=values,
+        stderr=stderr,
+        free=tuple(free),
+        correlation=_correlation(cov),
+        residuals=r,
+        pressure_pa=p,
+        bending_angle_rad=y,
+        dof=dof,
+        success=ok,
+        message=message,
+        covariance=_full_covariance(cov, free, FREE_BENDING_PARAMS),
+    )
+
+
+def _free_bending_data(pressure_pa, bending_angle_rad):
+    """The pressures [Pa] and angles [rad] as float arrays of one shape (n,), checked finite."""
     p = np.asarray(pressure_pa, dtype=float)
     y = np.asarray(bending_angle_rad, dtype=float)
     if p.ndim != 1 or y.shape != p.shape:
@@ -592,23 +420,27 @@ def fit_free_bending(
     for name, arr in (("pressure_pa", p), ("bending_angle_rad", y)):
         if not np.all(np.isfinite(arr)):
             raise ArgumentError(f"{name}: must be finite")
-    start = {n: getattr(config.material, n) for n in FREE_BENDING_PARAMS}
+    return p, y
+
+
+def _free_bending_start(material, initial) -> dict:
+    """Start values of the free-bending parameters: ``material``'s, overridden by ``initial``."""
+    start = {n: getattr(material, n) for n in FREE_BENDING_PARAMS}
     if initial:
         for name, value in initial.items():
             if name not in start:
                 raise ConfigError(f"initial: unknown parameter {name!r}; allowed: {', '.join(FREE_BENDING_PARAMS)}")
             start[name] = float(value)
-    free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start)
-    if len(p) <= len(free):
-        raise ArgumentError(
-            f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
-        )
-    geom = _geometry(config.actuator)
-    scale = np.array([abs(start[n]) or _TYPICAL[n] for n in free])
-    lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf}
-    lb = np.array([lower[n] for n in free]) / scale
-    x0 = np.array([start[n] for n in free]) / scale
-    x0 = np.maximum(x0, np.where(np.isfinite(lb), lb + 1e-6, -np.inf))
+    return start
+
+
+def _free_bending_problem(p, y, geom, free, fixed, scale):
+    """The least-squares problem in the scaled free parameters x: ``(unpack, resid, jac)``.
+
+    ``unpack(x)`` gives every parameter's value, ``resid(x)`` the angle residuals
+    θ_model(P_i) − θ_i [rad], ``jac(x)`` their exact Jacobian in x from the implicit
+    function theorem on eq. 8.
+    """
 
     def unpack(x):
         values = dict(fixed)
@@ -637,46 +469,30 @@ def fit_free_bending(
         }
         return np.stack([cols[n] for n in free], axis=-1) * scale if free else np.zeros((len(p), 0))
 
-    if free:
-        sol = least_squares(
-            resid,
-            x0,
-            jac=jac,
-            bounds=(lb, np.inf),
-            method="trf",
-            x_scale=1.0,
-            xtol=1e-14,
-            ftol=1e-14,
-            gtol=1e-14,
-            max_nfev=500,
-        )
-        x, ok, message = sol.x, bool(sol.success), str(sol.message)
-        at_bound = [n for n, v, b in zip(free, x, lb, strict=True) if np.isfinite(b) and v <= b * (1 + 1e-9) + 1e-12]
-    else:
-        x, ok, message, at_bound = np.zeros(0), True, "all parameters fixed", []
-    values = unpack(x)
-    r = resid(x)
-    cov, dof = _covariance(jac(x) / scale, r)
-    stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
-    if at_bound:
-        ok = False
-        message += f"; {', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
-    if not all(math.isfinite(stderr[n]) for n in free):
-        ok = False
-        message += "; parameters not identifiable from these data (fix one)"
-    return FreeBendingFit(
-        params=values,
-        stderr=stderr,
-        free=tuple(free),
-        correlation=_correlation(cov),
-        residuals=r,
-        pressure_pa=p,
-        bending_angle_rad=y,
-        dof=dof,
-        success=ok,
-        message=message,
-        covariance=_full_covariance(cov, free, FREE_BENDING_PARAMS),
+    return unpack, resid, jac
+
+
+def _solve_free_bending(resid, jac, x0, lb, free):
+    """Bounded least squares in x: ``(x, success, message, names at their lower bound)``."""
+    from scipy.optimize import least_squares
+
+    if not free:
+        return np.zeros(0), True, "all parameters fixed", []
+    sol = least_squares(
+        resid,
+        x0,
+        jac=jac,
+        bounds=(lb, np.inf),
+        method="trf",
+        x_scale=1.0,
+        xtol=1e-14,
+        ftol=1e-14,
+        gtol=1e-14,
+        max_nfev=500,
     )
+    x = sol.x
+    at_bound = [n for n, v, b in zip(free, x, lb, strict=True) if np.isfinite(b) and v <= b * (1 + 1e-9) + 1e-12]
+    return x, bool(sol.success), str(sol.message), at_bound
 
 
 # --------------------------------------------------------------------------- stiffness
@@ -904,50 +720,9 @@ def fit_stiffness(
             f"stiffness data: {n_levels} pressure level(s) cannot determine {len(free)} parameters "
             f"({', '.join(free)}); measure more pressures or fix one"
         )
-    lp, lei, lse, lrms = (np.empty(n_levels) for _ in range(4))
-    pos_res = np.full(data.positions_m.shape, np.nan)
-    failed = []
-    for j in range(n_levels):
-        rows = np.flatnonzero(level == j)
-        lp[j] = float(np.mean(data.pressure_pa[rows]))
-        n_obs = int(data.observed[rows].sum()) * 2
-        if n_obs < 2:
-            raise ArgumentError(f"stiffness data: level {lp[j] / 1e3:.3g} kPa has one coordinate only; need two")
-        ei_start = float(config.stiffness.ei_nm2(lp[j]))
-        if not ei_start > 0:
-            ei_start = config.stiffness.ei0_nm2
-        lei[j], lse[j], lrms[j], pos_res[rows], ok = _fit_level(data, rows, k0, w, length, ei_start, method)
-        if not ok:
-            failed.append(f"{lp[j] / 1e3:.3g} kPa")
-
-    # linear regression EI_j = ei0 + ei1 P_j over the levels
-    design = {"ei0_nm2": np.ones(n_levels), "ei1_nm2_per_pa": lp}
-    target = lei - sum(fixed[n] * design[n] for n in fixed)
-    X = np.stack([design[n] for n in free], axis=-1) if free else np.zeros((n_levels, 0))
-    finite_se = np.isfinite(lse) & (lse > 0)
-    use_weights = weighted and bool(np.all(finite_se))
-    weights = 1.0 / lse**2 if use_weights else np.ones(n_levels)
-    sw = np.sqrt(weights)
-    if free:
-        beta, *_ = np.linalg.lstsq(X * sw[:, None], target * sw, rcond=None)
-    else:
-        beta = np.zeros(0)
-    values = dict(fixed)
-    values.update({n: float(b) for n, b in zip(free, beta, strict=True)})
-    line = values["ei0_nm2"] + values["ei1_nm2_per_pa"] * lp
-    residuals = lei - line
-    dof = n_levels - len(free)
+    lp, lei, lse, lrms, pos_res, failed = _fit_levels(data, level, n_levels, config.stiffness, k0, w, length, method)
+    values, residuals, cov, use_weights = _regress_levels(lp, lei, lse, free, fixed, weighted)
     message = "converged"
-    if free:
-        xtwx_inv = np.linalg.pinv((X * weights[:, None]).T @ X)
-        chi2 = float(np.sum(weights * residuals**2))
-        if use_weights:
-            factor = max(1.0, chi2 / dof) if dof > 0 else 1.0
-        else:
-            factor = chi2 / dof if dof > 0 else math.inf
-        cov = xtwx_inv * factor
-    else:
-        cov = np.zeros((0, 0))
     stderr = _stderr(cov, free, STIFFNESS_PARAMS)
     success = not failed
     if failed:
@@ -973,3 +748,66 @@ def fit_stiffness(
         message=message,
         covariance=_full_covariance(cov, free, STIFFNESS_PARAMS),
     )
+
+
+def _fit_levels(data: StiffnessData, level, n_levels: int, stiffness, k0, w, length_m, method):
+    """EI at every pressure level (:func:`_fit_level`), started from ``stiffness``'s line.
+
+    Returns the levels' mean pressures [Pa], EI [N m²], its standard errors, the RMS
+    position residuals [m], the position residuals per row and point [m] and the
+    levels whose fit failed (as "40 kPa").
+    """
+    lp, lei, lse, lrms = (np.empty(n_levels) for _ in range(4))
+    pos_res = np.full(data.positions_m.shape, np.nan)
+    failed = []
+    for j in range(n_levels):
+        rows = np.flatnonzero(level == j)
+        lp[j] = float(np.mean(data.pressure_pa[rows]))
+        n_obs = int(data.observed[rows].sum()) * 2
+        if n_obs < 2:
+            raise ArgumentError(f"stiffness data: level {lp[j] / 1e3:.3g} kPa has one coordinate only; need two")
+        ei_start = float(stiffness.ei_nm2(lp[j]))
+        if not ei_start > 0:
+            ei_start = stiffness.ei0_nm2
+        lei[j], lse[j], lrms[j], pos_res[rows], ok = _fit_level(data, rows, k0, w, length_m, ei_start, method)
+        if not ok:
+            failed.append(f"{lp[j] / 1e3:.3g} kPa")
+    return lp, lei, lse, lrms, pos_res, failed
+
+
+def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool):
+    """Linear regression EI_j = ei0 + ei1 P_j over the levels (paper eq. 15).
+
+    Weighted by 1/σ_EI² when ``weighted`` and every level has a finite standard error;
+    the covariance scaled up by χ²/(levels − k) when the levels scatter more than their
+    errors say. Returns the parameters' values, the levels' residuals [N m²], the free
+    parameters' covariance and whether the weights were used.
+    """
+    n_levels = len(lp)
+    design = {"ei0_nm2": np.ones(n_levels), "ei1_nm2_per_pa": lp}
+    target = lei - sum(fixed[n] * design[n] for n in fixed)
+    X = np.stack([design[n] for n in free], axis=-1) if free else np.zeros((n_levels, 0))
+    finite_se = np.isfinite(lse) & (lse > 0)
+    use_weights = weighted and bool(np.all(finite_se))
+    weights = 1.0 / lse**2 if use_weights else np.ones(n_levels)
+    sw = np.sqrt(weights)
+    if free:
+        beta, *_ = np.linalg.lstsq(X * sw[:, None], target * sw, rcond=None)
+    else:
+        beta = np.zeros(0)
+    values = dict(fixed)
+    values.update({n: float(b) for n, b in zip(free, beta, strict=True)})
+    line = values["ei0_nm2"] + values["ei1_nm2_per_pa"] * lp
+    residuals = lei - line
+    dof = n_levels - len(free)
+    if free:
+        xtwx_inv = np.linalg.pinv((X * weights[:, None]).T @ X)
+        chi2 = float(np.sum(weights * residuals**2))
+        if use_weights:
+            factor = max(1.0, chi2 / dof) if dof > 0 else 1.0
+        else:
+            factor = chi2 / dof if dof > 0 else math.inf
+        cov = xtwx_inv * factor
+    else:
+        cov = np.zeros((0, 0))
+    return values, residuals, cov, use_weights
