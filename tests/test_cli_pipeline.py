@@ -141,6 +141,11 @@ def test_the_choices_are_declared_once_and_help_stays_free_of_numpy():
         assert getattr(_common, name) is getattr(choices, name) is getattr(config, name)
     assert estimation.CONSTRAINTS is estimation.problem.CONSTRAINTS is choices.CONSTRAINTS
     assert estimation.METHODS is choices.METHODS and estimation.OBJECTIVES is choices.OBJECTIVES
+    # the calibration model's choices: declared once, offered by calibrate
+    from bendsense.calibration import polynomials
+
+    assert polynomials.DEGREES is choices.CALIBRATION_DEGREES
+    assert polynomials.WEIGHTINGS is choices.CALIBRATION_WEIGHTINGS
     # the CLI's options come from the same tuples, and `bendsense --help` does not load numpy
     code = ("import sys; from bendsense.cli import main; from click.testing import CliRunner; "
             "r = CliRunner().invoke(main, ['estimate', '--help']); "

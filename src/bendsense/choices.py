@@ -6,7 +6,8 @@ estimator dispatches on them (:mod:`bendsense.estimation`) and the CLI's ``--con
 ``--method``, ``--objective`` and ``--tip-angle-source`` list them.
 """
 
-__all__ = ["ANGLE_SOURCES", "CONSTRAINTS", "METHODS", "OBJECTIVES"]
+__all__ = ["ANGLE_SOURCES", "BEAM_METHODS", "CALIBRATION_DEGREES", "CALIBRATION_WEIGHTINGS", "CONSTRAINTS", "METHODS",
+           "OBJECTIVES"]
 
 #: Force constraints ``F = F_fixed + D u`` (:func:`bendsense.estimation.constraint_basis`).
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
@@ -16,3 +17,8 @@ METHODS = ("fast", "paper")
 OBJECTIVES = ("angles", "positions")
 #: Where the tip angle of the normal and follower constraints comes from.
 ANGLE_SOURCES = ("model", "shape")
+#: The calibration model: degrees n of the polynomials f_odd, f_even (paper eq. 2) and the fit's weightings.
+CALIBRATION_DEGREES = (1, 2, 3, 4, 5)
+CALIBRATION_WEIGHTINGS = ("none", "shift")
+#: Beam solvers of ``identify``: the spectral collocation, or the paper's shooting.
+BEAM_METHODS = ("fast", "shooting")

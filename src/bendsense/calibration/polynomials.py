@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from bendsense.choices import CALIBRATION_DEGREES, CALIBRATION_WEIGHTINGS
 from bendsense.errors import ConfigError
 
 __all__ = [
@@ -25,8 +26,7 @@ __all__ = [
     "DEGREES",
 ]
 
-WEIGHTINGS = ("none", "shift")
-DEGREES = (1, 2, 3, 4, 5)
+WEIGHTINGS, DEGREES = CALIBRATION_WEIGHTINGS, CALIBRATION_DEGREES  # declared once, in bendsense.choices
 
 
 def strip_shifts(curvature_per_m, lengths_m, strip_gap_m):

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from bendsense import output as outputs
+from bendsense.choices import CALIBRATION_DEGREES, CALIBRATION_WEIGHTINGS
 from bendsense.cli._common import (
     InterspersedCommand,
     check_figure_suffix,
@@ -16,6 +17,8 @@ from bendsense.cli._common import (
     step_io,
 )
 
+_DEGREES = f"{CALIBRATION_DEGREES[0]}..{CALIBRATION_DEGREES[-1]}"
+
 
 def _degree(ctx, param, value):
     if value is None:
@@ -23,9 +26,9 @@ def _degree(ctx, param, value):
     text = str(value).strip().lower()
     if text == "auto":
         return "auto"
-    if text.isdigit() and 1 <= int(text) <= 5:
+    if text.isdigit() and int(text) in CALIBRATION_DEGREES:
         return int(text)
-    raise click.BadParameter(f"expected 1..5 or 'auto', got {value!r}", ctx=ctx, param=param)
+    raise click.BadParameter(f"expected {_DEGREES} or 'auto', got {value!r}", ctx=ctx, param=param)
 
 
 @click.command("calibrate", cls=InterspersedCommand)
@@ -43,12 +46,12 @@ def _degree(ctx, param, value):
     default="3",
     show_default=True,
     callback=_degree,
-    metavar="1..5|auto",
+    metavar=f"{_DEGREES}|auto",
     help="Polynomial degree n of f_odd/f_even; 'auto' picks it by leave-one-strip-out cross-validation.",
 )
 @click.option(
     "--weighting",
-    type=click.Choice(["none", "shift"]),
+    type=click.Choice(CALIBRATION_WEIGHTINGS),
     default="none",
     show_default=True,
     help="'none': the paper's least squares; 'shift': balance small and large shifts.",

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from bendsense import output as outputs
+from bendsense.choices import BEAM_METHODS
 from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
@@ -80,7 +81,7 @@ def _parse_fix(kind: str, items) -> dict:
 )
 @click.option(
     "--method",
-    type=click.Choice(["fast", "shooting"]),
+    type=click.Choice(BEAM_METHODS),
     default="fast",
     show_default=True,
     help="stiffness: beam solver ('shooting' is the paper's method).",
