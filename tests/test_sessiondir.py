@@ -200,6 +200,18 @@ def test_import_float_signals_and_extra_columns(tmp_path):
     np.testing.assert_array_equal(back.seq, np.arange(6))
 
 
+def test_import_of_a_text_status_column_keeps_the_frames_and_says_so(tmp_path, caplog):
+    # e.g. a results.csv's status ("ok", "not_converged"): no device status bits
+    t = np.arange(3) * 0.01
+    s = Session(t, np.ones((3, 2)), np.full(3, 1e4), extra={"status": np.array(["ok", "no_force", "ok"], dtype=object)})
+    write_session_csv(s, tmp_path / "in.csv")
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        import_session_csv(tmp_path / "in.csv", tmp_path / "s")
+    back = read_session_dir(tmp_path / "s")
+    assert len(back) == 3 and back.extra["status"].tolist() == [0, 0, 0]
+    assert "text column 'status' is not stored" in caplog.text
+
+
 def test_saved_version_1_session_still_loads():
     s = read_session(Path(__file__).parent / "data" / "sessions" / "v1_finished")
     assert len(s) == 5 and s.meta["version"] == 1 and s.meta["finished"] and s.meta["tx_drops"] == 0

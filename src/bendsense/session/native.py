@@ -720,8 +720,11 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
         host = s.t_s - s.t_s[0] if host_s is None else np.asarray(host_s, float) - float(host_s[0])
         rec["host_ns"] = np.round(host * 1e9).astype(np.int64)
         rec["seq"] = (np.arange(n) if s.seq is None else s.seq) % 65536
-        if "status" in s.extra:
-            rec["status"] = np.asarray(s.extra["status"]).astype(np.int64) & 0xFF
+        status = s.extra.get("status")
+        if status is not None and status.dtype.kind in "iuf":
+            rec["status"] = status.astype(np.int64) & 0xFF
+        elif status is not None:  # e.g. the text status of a results.csv: no device status bits
+            log.warning("%s: text column 'status' is not stored in a native session", csv_path)
         for f in SAMPLE_FIELDS:  # the others (tx_drops) when they are integers, wrapped to their type
             values = s.extra.get(f.name)
             if f.name not in SESSION_COLUMNS and values is not None and values.dtype.kind in "iu":
