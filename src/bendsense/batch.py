@@ -408,14 +408,13 @@ def process_session(
 
 def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite):
     from bendsense.pipeline import process
-    from bendsense.results import write_results
     from bendsense.session import read_session
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
     processed = process(read_session(path), config, calibration, constraint=constraint, method=method,
                         objective=objective, pressure_pa=pressure_pa, estimate=estimate)
     session = processed.session
-    write_results(out_dir, session, processed.shape, processed.estimate, overwrite=overwrite, inputs=[path])
+    processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made
     return processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
 
 

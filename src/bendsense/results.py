@@ -97,6 +97,31 @@ class Results:
         return cls(columns=columns, s_m=np.asarray(shape.s_m), positions_m=positions,
                    extra_names=tuple(extra_names))
 
+    def write(self, out_dir, *, overwrite: bool = False, inputs=()) -> Path:
+        """Write ``results.csv`` and ``shape.npz`` into ``out_dir`` (as :func:`write_results`).
+
+        Parameters
+        ----------
+        out_dir : path
+            Output directory (:func:`write_results`).
+        overwrite : bool, default False
+            Replace only a previous bendsense output there.
+        inputs : iterable of paths
+            Inputs never to be written over (the session's source among them).
+        """
+        from bendsense import output
+
+        out_dir = Path(out_dir)
+        output.check([output.directory(out_dir, overwrite=overwrite)], inputs)
+        columns = self.columns
+        with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
+            with open(tmp / "results.csv", "w", encoding="utf-8", newline="") as fh:
+                write_columns(fh, list(columns), list(columns.values()))
+            # stored, not deflated: positions of noisy shapes deflate by ~10 % at ~35 ms per
+            # 1,000 frames, the largest cost of writing; np.load reads either
+            np.savez(tmp / "shape.npz", s_m=self.s_m, positions_m=self.positions_m)
+        return out_dir
+
     def __getitem__(self, name):
         return self.columns[name]
 
@@ -178,21 +203,9 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
     OutputExistsError, OutputError
         See :func:`bendsense.output.check`.
     """
-    from bendsense import output
-
-    out_dir = Path(out_dir)
     source = getattr(session, "source", None)
     inputs = [*inputs, *([source] if source and Path(source).exists() else [])]
-    output.check([output.directory(out_dir, overwrite=overwrite)], inputs)
-    results = Results.from_state(session, shape, estimate)
-    columns = results.columns
-    with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
-        with open(tmp / "results.csv", "w", encoding="utf-8", newline="") as fh:
-            write_columns(fh, list(columns), list(columns.values()))
-        # stored, not deflated: positions of noisy shapes deflate by ~10 % at ~35 ms per
-        # 1,000 frames, the largest cost of writing; np.load reads either
-        np.savez(tmp / "shape.npz", s_m=results.s_m, positions_m=results.positions_m)
-    return out_dir
+    return Results.from_state(session, shape, estimate).write(out_dir, overwrite=overwrite, inputs=inputs)
 
 
 def read_results(out_dir) -> Results:
