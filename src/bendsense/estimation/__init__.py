@@ -415,7 +415,7 @@ def _build_problem(config, calibration, ref, options, noise_opt):
     else:
         err = noise_only(0.0, 1)
         geometry = (np.zeros(1, np.int64), np.zeros(1), np.zeros(_N_NODES), np.zeros(1), np.ones(1), gap,
-                    np.zeros(1, np.int64), np.zeros(1), np.zeros(1))
+                    np.arange(ref.s.size), np.zeros(1), np.zeros(1))
     ops = _beam._operators(_N_NODES)
     _, PQ = _beam._sampling(_N_NODES, (ref.s / L).tobytes())
     if angles:  # the coils on the actuator: their tangent angle φ(L_i) is what the sensor measures
@@ -431,8 +431,7 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         pcc=pcc, kind=kind, direction=_c(fixed), follower_angle=follower,
         shape_angle=source == "shape" and kind in TIP_ANGLE_KINDS,
         seg_fk=_c(seg_fk, np.int64), sigma_fk=_c(sigma_fk), beyond=_c(beyond), tip_weights=_c(tip_weights),
-        lengths=_c(lengths), gap=gap, seg=_c(seg, np.int64), sigma=_c(sigma),
-        group=_c(seg if pcc else np.arange(ref.s.size), np.int64), dphi_ds=_c(dphi_ds), noise=noise,
+        lengths=_c(lengths), gap=gap, seg=_c(seg, np.int64), sigma=_c(sigma), dphi_ds=_c(dphi_ds), noise=noise,
         s=_c(ref.s), w=_c(ref.w), L=L, wload=_c(config.weight_per_length_n_per_m), ffix=np.zeros(2),
         lower=np.full(k, 0.0 if push_only else -np.inf), xtol=xtol_n, max_iter=max_iter,
         PQ=_c(PQ), q=_c(ops.Q[-1]), objective=ANGLES if angles else POSITIONS, PQ_fit=_c(PQ_fit),

@@ -662,7 +662,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
     for i in range(lo, hi):
         p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
         ei, k0 = fr.ei[i], fr.k0[i]
-        moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, pb.group, g)
+        moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, pb.seg, g)
         force_of(D, pb.ffix, g, guess_n[i])
         for c in range(k):
             if use_guess:  # the guess corrected by a previous estimate's offset from its own guess

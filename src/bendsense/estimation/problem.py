@@ -93,9 +93,8 @@ class Problem(NamedTuple):
     tip_weights: np.ndarray  # (N,) φ(L) = tip_weights · κ
     lengths: np.ndarray  # (N,) segment lengths [m]
     gap: float  # strip gap d [m]
-    seg: np.ndarray  # (M,) segment of each comparison node
+    seg: np.ndarray  # (M,) segment of each comparison node (a shape given by points: one per point)
     sigma: np.ndarray  # (M,) its arc length within it [m]
-    group: np.ndarray  # (M,) the comparison nodes' groups of the moment balance: segments, or one per point
     dphi_ds: np.ndarray  # (N,) ∂φ(L)/∂S
     noise: bool  # a noise model is known (the shift covariance, bendsense.shift_errors)
     s: np.ndarray  # (M,) comparison arc lengths [m]
