@@ -33,6 +33,9 @@ NOT_IDENTIFIABLE = "not_identifiable"  # the shape does not determine the load a
 MODEL_MISFIT = "model_misfit"
 NO_FORCE = "no_force"  # a NaN force is never ok
 IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
+#: the flagged statuses that the status lines of ``record`` and ``live`` count, with their labels
+FLAGGED = ((EXTRAPOLATED, "extrapolated"), (NOT_CONVERGED, "not converged"), (MODEL_MISFIT, "misfit"),
+           (NOT_IDENTIFIABLE, "not identifiable"))
 
 __all__ = ["Results", "write_results", "read_results", "frame_status"]
 
@@ -175,6 +178,19 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     tip = np.broadcast_to(np.asarray(shape.tip_angle_rad, dtype=float), (n,))
     status[np.abs(tip) > 2.0 * np.pi] = IMPLAUSIBLE
     return status
+
+
+def flagged_counts(counts: dict, sep: str = "  ") -> str:
+    """``extrapolated N  not converged N  misfit N  not identifiable N`` for a status line.
+
+    Parameters
+    ----------
+    counts : dict of str to int
+        Frames per status (e.g. ``LiveProcessor.status_counts``).
+    sep : str
+        Between the counts.
+    """
+    return sep.join(f"{label} {counts.get(status, 0)}" for status, label in FLAGGED)
 
 
 def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = False, inputs=()) -> Path:

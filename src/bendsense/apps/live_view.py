@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.pipeline import LiveFrame, LiveProcessor
+from bendsense.results import flagged_counts
 
 __all__ = ["LiveView", "LiveStats", "run_live", "status_line"]
 
@@ -481,12 +482,9 @@ def status_line(block, processor, rate_hz: float, fps: float, lost: int, backlog
     backlog : int, default 0
         Frames received and not yet processed.
     """
-    counts = processor.status_counts
     return (
         f"seq {int(block.seq[-1])}   estimated {rate_hz:.0f} frames/s   {fps:.0f} fps   backlog {backlog}   "
-        f"lost {lost}   extrapolated {counts.get('extrapolated', 0)}   "
-        f"not converged {counts.get('not_converged', 0)}   misfit {counts.get('model_misfit', 0)}   "
-        f"not identifiable {counts.get('not_identifiable', 0)}"
+        f"lost {lost}   {flagged_counts(processor.status_counts, '   ')}"
     )
 
 

@@ -39,12 +39,10 @@ def _status_line(stats, est=None) -> str:
         f"{stats.elapsed_s:.1f} s"
     )
     if est is not None:
-        counts = est.status_counts
-        line += (
-            f"  | estimated {est.frames} ({est.rate_hz:.0f}/s)  backlog {est.backlog}  "
-            f"extrapolated {counts.get('extrapolated', 0)}  not converged {counts.get('not_converged', 0)}  "
-            f"misfit {counts.get('model_misfit', 0)}  not identifiable {counts.get('not_identifiable', 0)}"
-        )
+        from bendsense.results import flagged_counts
+
+        line += (f"  | estimated {est.frames} ({est.rate_hz:.0f}/s)  backlog {est.backlog}  "
+                 f"{flagged_counts(est.status_counts)}")
     return line
 
 

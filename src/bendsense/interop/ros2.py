@@ -42,6 +42,7 @@ import numpy as np
 
 from bendsense import output
 from bendsense.errors import SessionError, require_extra
+from bendsense.results import EXTRAPOLATED, MODEL_MISFIT, NOT_CONVERGED, NOT_IDENTIFIABLE, OK
 
 __all__ = ["write_mcap", "FRAME_ID", "TOPICS"]
 
@@ -98,7 +99,7 @@ SCHEMAS = {
         "std_msgs/Header header\nfloat64 fluid_pressure\nfloat64 variance\n", _HEADER, _TIME
     ),
 }
-_LEVEL = {"ok": 0, "extrapolated": 1, "model_misfit": 1, "not_identifiable": 1, "not_converged": 2}
+_LEVEL = {OK: 0, EXTRAPOLATED: 1, MODEL_MISFIT: 1, NOT_IDENTIFIABLE: 1, NOT_CONVERGED: 2}  # diagnostic levels
 
 
 def session_epoch_s(session) -> float:
