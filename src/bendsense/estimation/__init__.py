@@ -80,7 +80,7 @@ XTOL_N = 1e-10
 MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
 _N_NODES = _beam.DEFAULT_NODES
-_OPS = _beam._operators(_N_NODES).kernel  # the beam solver's operators (read-only)
+_OPS = tuple(_beam._operators(_N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 
 
@@ -206,7 +206,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
         np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
         None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes())
-    pb, err, uncertainty = _problem(config, calibration, ref, options, noise_std)
+    pb, plain_pb, plain_err, uncertainty = _problem(config, calibration, ref, options, noise_std)
     P = np.asarray(pressure_pa, dtype=float)
     if not (math.isfinite(P.item()) if P.size == 1 else np.isfinite(P).all()):
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
@@ -224,9 +224,10 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
         if block >= B:  # one block (one frame, a short series): the same kernel without the threads
-            _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, fr, pb, err, _OPS, start, out)
+            _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, tuple(fr), plain_pb, plain_err, _OPS,
+                      start, out)
         else:
-            _jit.call(_kernels.estimate_frames, block, use_guess, fr, pb, err, _OPS, start, out)
+            _jit.call(_kernels.estimate_frames, block, use_guess, tuple(fr), plain_pb, plain_err, _OPS, start, out)
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force; the
         # shape, its sensitivities and the uncertainty at its optimum come from the compiled core
@@ -235,7 +236,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         u, run_status, iters = paper_fit(L, pb.s, pb.w, ref.Lc, pb.wload, fr.p0, fr.ei, fr.k0, D,
                                          np.broadcast_to(pb.ffix, (B, 2)), pb.lower,
                                          np.maximum(np.zeros((B, k)), pb.lower))
-        _jit.call(_kernels.evaluate_frames, fr, pb, err, _OPS, _c(u), _c(run_status, np.int64), out)
+        _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _c(u), _c(run_status, np.int64),
+                  out)
     if uncertainty == "none":  # stacklevel 3: the caller of the public wrapper (pressure_range_step)
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
                       "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)
@@ -353,8 +355,9 @@ _PROBLEMS: dict = {}  # (config, calibration, grid, options) -> (config, calibra
 def _problem(config, calibration, ref, options, noise_opt):
     """The constants of an estimate, cached per inputs.
 
-    Returns (:class:`~bendsense.estimation.problem.Problem`, the shift error model
-    (:class:`~bendsense.shift_errors.ShiftErrorModel`), the ``uncertainty`` label).
+    Returns (:class:`~bendsense.estimation.problem.Problem`, it and the shift error model
+    (:class:`~bendsense.shift_errors.ShiftErrorModel`) as the kernels take them
+    (:func:`~bendsense.estimation.kernels.plain`), the ``uncertainty`` label).
     """
     key = (id(config), id(calibration), id(ref.grid) if ref.kappa is not None else ref.s.tobytes(), options)
     hit = _PROBLEMS.get(key)
@@ -437,4 +440,4 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         PQ=_c(PQ), q=_c(ops.Q[-1]), objective=ANGLES if angles else POSITIONS, PQ_fit=_c(PQ_fit),
         coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor)
     err = err._replace(**{name: _c(a, a.dtype) for name, a in err._asdict().items() if isinstance(a, np.ndarray)})
-    return pb, err, ("propagated" if noise else "none")
+    return pb, *_kernels.plain(pb, err), ("propagated" if noise else "none")

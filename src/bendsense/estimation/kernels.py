@@ -20,9 +20,10 @@ import numpy as np
 from numba import njit, prange
 
 from bendsense import beam_kernels as bk
+from bendsense.beam import _KernelOperators
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
-from bendsense.shift_errors import shift_covariance
+from bendsense.shift_errors import ShiftErrorModel, shift_covariance
 from bendsense.status import Status
 
 _RUNNING = int(Status.RUNNING)
@@ -646,8 +647,28 @@ def near(u0, prev_u0, prev_u):
 
 
 @njit(cache=True)
+def typed(fr, pb, err, ops):
+    """The kernels' structures from the plain tuples they are called with.
+
+    numba types a plain tuple of arrays in its compiled dispatcher, a named tuple in
+    Python (~3 µs of a one-frame call): the entry points take plain tuples
+    (:func:`plain`) and name their fields here.
+    """
+    return prob.Frames(*fr), prob.Problem(*pb), ShiftErrorModel(*err), _KernelOperators(*ops)
+
+
+def plain(*structures):
+    """The structures as the entry points take them: plain tuples (:func:`typed`)."""
+    return tuple(tuple(s) for s in structures)
+
+
+@njit(cache=True)
 def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
-    """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`)."""
+    """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`).
+
+    ``fr``, ``pb``, ``err``, ``ops``: the plain tuples of :func:`plain`.
+    """
+    fr, pb, err, ops = typed(fr, pb, err, ops)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
     k = pb.lower.size
     buf = buffers(pb, ops.sigma.size)
@@ -701,13 +722,14 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
     ``use_guess``: start at the moment-balance guess plus the force offset ``start`` (B, 2)
     (projected on the constraint), else at the force ``start``. Within a block (``block`` >
     1, a time series) a frame's start is corrected by the previous frame's offset from its
-    own guess when that converged. ``fr``, ``pb``: :class:`~bendsense.estimation.problem.Frames`
-    and :class:`~bendsense.estimation.problem.Problem`; ``ops`` the beam solver's
-    operators. ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
+    own guess when that converged. ``fr``, ``pb``, ``err``, ``ops``: the plain tuples
+    (:func:`plain`) of :class:`~bendsense.estimation.problem.Frames`,
+    :class:`~bendsense.estimation.problem.Problem`, the shift error model and the beam
+    solver's operators. ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
     its p-value, guess (B, 2), state (B, n), tip (B, 2) and the unidentifiable direction of a boundary
     stop (B, 2).
     """
-    B = fr.ei.size
+    B = prob.Frames(*fr).ei.size
     nblocks = (B + block - 1) // block
     for blk in prange(nblocks):
         lo = np.int64(blk) * block  # prange's index is unsigned: one compiled estimate_block for both callers
@@ -717,6 +739,7 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
 @njit(cache=True)
 def evaluate_frames(fr, pb, err, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
+    fr, pb, err, ops = typed(fr, pb, err, ops)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
