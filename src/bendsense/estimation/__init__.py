@@ -82,6 +82,8 @@ _CHAIN = 32  # consecutive frames per warm-started block along a batch
 _N_NODES = _beam.DEFAULT_NODES
 _OPS = tuple(_beam._operators(_N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
 _NONE = np.empty(0)  # a per-frame input the frames do not have
+_NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
+_NO_MODEL_COV = np.zeros((1, 2, 2))  # one frame's, without a parameter covariance (the kernels only read it)
 
 
 def _c(a, dtype=float):
@@ -219,7 +221,6 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
            np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2)), np.empty((B, n)), np.empty((B, 2)),
            np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)))
-    out[7][...] = np.nan  # the guesses: the paper's baseline makes none
     force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
@@ -229,8 +230,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         else:
             _jit.call(_kernels.estimate_frames, block, use_guess, tuple(fr), plain_pb, plain_err, _OPS, start, out)
     else:
-        # the paper's baseline starts where fminsearch/fmincon would: at zero force; the
-        # shape, its sensitivities and the uncertainty at its optimum come from the compiled core
+        # the paper's baseline starts where fminsearch/fmincon would: at zero force (it makes no
+        # guess); the shape, its sensitivities and the uncertainty at its optimum come from the compiled core
+        guess_n[...] = np.nan
         tip_angle = (fr.tip_shape if pb.shape_angle else fr.theta)
         D = constraint_basis(constraint, tip_angle, direction=pb.direction, follower_angle_rad=pb.follower_angle)[0]
         u, run_status, iters = paper_fit(L, pb.s, pb.w, ref.Lc, pb.wload, fr.p0, fr.ei, fr.k0, D,
@@ -290,26 +292,27 @@ def _flat(a, batch, B, tail=(), dtype=float):
 
 def _frames(ref, P, batch, B, config) -> Frames:
     """The per-frame inputs of the kernels: the shape's and the pressure's (K0, EI, the free tip angle)."""
-    Pf = P.reshape(B) if P.size == B else _flat(P, batch, B)
     model = _models(config)
-    # free-motion tip angle
-    theta = np.array([float(model.bending_angle_rad(float(Pf[0])))]) if B == 1 else _c(model.bending_angle_rad(Pf))
-    ei = _c(config.stiffness.ei_nm2(Pf))
-    if not (ei.item() if B == 1 else ei.min()) > 0:
+    if B == 1:  # one frame (the live path): plain floats, as numpy costs ~1 µs a call on one value
+        Pf = P.reshape(1)
+        p = float(Pf[0])
+        theta = float(model.bending_angle_rad(p))
+        ei = np.array([float(config.stiffness.ei_nm2(p))])
+        theta, k0 = np.array([theta]), np.array([theta / model.length_m])
+    else:
+        Pf = P.reshape(B) if P.size == B else _flat(P, batch, B)
+        theta = _c(model.bending_angle_rad(Pf))
+        ei, k0 = _c(config.stiffness.ei_nm2(Pf)), theta / model.length_m
+    if not (ei[0] if B == 1 else ei.min()) > 0:
         raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
                             f"at {float(Pf[np.argmin(ei)])!r} Pa")
-    M, n = ref.s.size, _N_NODES
-    if ref.kappa is not None:
-        kappa = _flat(ref.kappa, batch, B, (ref.lengths.size,))
-    else:
-        kappa = np.empty((0, 1))
-    if ref.p0 is None:
-        p0, phi_end, kappa_s, state, tip = np.empty((0, M, 2)), _NONE, np.empty((0, M)), np.empty((0, n)), _NONE
-    else:
-        p0, phi_end = _flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B)
-        kappa_s, state = _flat(ref.kappa_s, batch, B, (M,)), _flat(ref.state, batch, B, (n,))
-        tip = _flat(ref.tip_shape, batch, B)
-    return Frames(kappa, p0, phi_end, kappa_s, state, tip, ei, theta / model.length_m, theta, _model_cov(config, Pf))
+    kappa = np.empty((0, 1)) if ref.kappa is None else _flat(ref.kappa, batch, B, (ref.lengths.size,))
+    given = _NO_POINTS
+    if ref.p0 is not None:  # a shape given by points (or the paper's baseline, which compares points)
+        M, n = ref.s.size, _N_NODES
+        given = (_flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B), _flat(ref.kappa_s, batch, B, (M,)),
+                 _flat(ref.state, batch, B, (n,)), _flat(ref.tip_shape, batch, B))
+    return Frames(kappa, *given, ei, k0, theta, _model_cov(config, Pf))
 
 
 def _model_cov(config, pressure_pa):
@@ -320,7 +323,7 @@ def _model_cov(config, pressure_pa):
     """
     section = config.parameter_covariance
     if section is None:
-        return np.zeros((pressure_pa.size, 2, 2))
+        return _NO_MODEL_COV if pressure_pa.size == 1 else np.zeros((pressure_pa.size, 2, 2))
     J = model_jacobian(config, pressure_pa, section.parameters)
     return _c(J @ np.asarray(section.covariance, dtype=float) @ np.swapaxes(J, -1, -2))
 
