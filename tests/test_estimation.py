@@ -116,6 +116,37 @@ def test_fast_recovers_the_model_force_exactly(frames, constraint):
     assert np.nanmax(est.residual_m[keep]) < 1e-7  # at the last beam solve, one tiny step before
 
 
+def test_the_estimates_beam_is_converged_in_its_nodes(frames):
+    """The estimate's beam (N_NODES nodes) is the 40-node beam to < 1e-8 rad and < 1e-9 m, and so is its shape.
+
+    Over the frames' pressures and loads (up to 0.4 N) the beam solved on the estimate's
+    nodes equals a 40-node solve; the estimate of a shape it did not make (noisy PCC
+    curvatures) returns the model shape of a 40-node beam at its force, up to the final
+    Gauss–Newton step below 1e-4 σ that it takes without a solve.
+    """
+    from bendsense.estimation import N_NODES, chebyshev_nodes_m
+
+    p, mag, ang = frames
+    force = np.stack([mag * np.cos(ang), mag * np.sin(ang)], axis=-1)
+    args = (L, CFG.stiffness.ei_nm2(p), MODEL.tip_curvature_per_m(p), force, W, 0.0, chebyshev_nodes_m(L))
+    coarse = solve_beam(*args, warn=False, n_nodes=N_NODES)
+    fine = solve_beam(*args, warn=False, n_nodes=40)
+    ok = coarse.success & fine.success
+    assert ok.mean() > 0.8
+    assert np.abs(coarse.angle_rad - fine.angle_rad)[ok].max() < 1e-8
+    assert np.abs(coarse.positions_m - fine.positions_m)[ok].max() < 1e-9
+
+    noise = 1.0 + 0.02 * np.random.default_rng(5).standard_normal((ok.sum(), SENSOR.n_segments))
+    kappa = pcc_curvatures(beam_shape(p[ok], force[ok])) * noise
+    est = estimate_force(kappa, p[ok], CFG)
+    assert est.success.mean() > 0.9 and est.state.shape[-1] == N_NODES
+    good = est.success
+    at = solve_beam(L, CFG.stiffness.ei_nm2(p[ok][good]), MODEL.tip_curvature_per_m(p[ok][good]), est.force_n[good], W,
+                    0.0, chebyshev_nodes_m(L), warn=False, n_nodes=40)
+    np.testing.assert_allclose(est.tip_position_m[good], at.positions_m[:, -1], atol=1e-7)
+    np.testing.assert_allclose(est.state[good], at.angle_rad, atol=1e-5)
+
+
 @pytest.mark.parametrize("constraint", ("none", "vertical", "normal"))
 def test_paper_method_agrees_with_fast(constraint):
     p = np.array([35e3, 100e3])

@@ -42,6 +42,7 @@ from bendsense.estimation.paper import paper_fit
 from bendsense.estimation.problem import (
     ANGLES,
     CONSTRAINTS,
+    N_NODES,
     POSITIONS,
     TIP_ANGLE_KINDS,
     Frames,
@@ -79,8 +80,7 @@ __all__ = [
 XTOL_N = 1e-10
 MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
-_N_NODES = _beam.DEFAULT_NODES
-_OPS = tuple(_beam._operators(_N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
+_OPS = tuple(_beam._operators(N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 _NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
 _NO_MODEL_COV = np.zeros((1, 2, 2))  # one frame's, without a parameter covariance (the kernels only read it)
@@ -217,7 +217,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     fr = _frames(ref if method == "fast" else points(ref), P, batch, B, config)
     k = pb.lower.size
     start, use_guess, chain = _starts(initial, initial_force_n, B, batch, warm_start)
-    n = _N_NODES
+    n = N_NODES
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
            np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2)), np.empty((B, n)), np.empty((B, 2)),
            np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)))
@@ -309,7 +309,7 @@ def _frames(ref, P, batch, B, config) -> Frames:
     kappa = np.empty((0, 1)) if ref.kappa is None else _flat(ref.kappa, batch, B, (ref.lengths.size,))
     given = _NO_POINTS
     if ref.p0 is not None:  # a shape given by points (or the paper's baseline, which compares points)
-        M, n = ref.s.size, _N_NODES
+        M, n = ref.s.size, N_NODES
         given = (_flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B), _flat(ref.kappa_s, batch, B, (M,)),
                  _flat(ref.state, batch, B, (n,)), _flat(ref.tip_shape, batch, B))
     return Frames(kappa, *given, ei, k0, theta, _model_cov(config, Pf))
@@ -420,17 +420,17 @@ def _build_problem(config, calibration, ref, options, noise_opt):
                     tip_angle_shift_gradient(lengths, L, gap))
     else:
         err = noise_only(0.0, 1)
-        geometry = (np.zeros(1, np.int64), np.zeros(1), np.zeros(_N_NODES), np.zeros(1), np.ones(1), gap,
+        geometry = (np.zeros(1, np.int64), np.zeros(1), np.zeros(N_NODES), np.zeros(1), np.ones(1), gap,
                     np.arange(ref.s.size), np.zeros(1), np.zeros(1))
-    ops = _beam._operators(_N_NODES)
-    _, PQ = _beam._sampling(_N_NODES, (ref.s / L).tobytes())
+    ops = _beam._operators(N_NODES)
+    _, PQ = _beam._sampling(N_NODES, (ref.s / L).tobytes())
     if angles:  # the coils on the actuator: their tangent angle φ(L_i) is what the sensor measures
         ends = np.cumsum(lengths)
         coils = np.flatnonzero(ends <= L * (1.0 + 1e-12))
-        PA = _beam._sampling(_N_NODES, (ends[coils] / L).tobytes())[0]
+        PA = _beam._sampling(N_NODES, (ends[coils] / L).tobytes())[0]
         PQ_fit, sw, jump_floor = PQ[:0], np.ones(coils.size), 1e-6
     else:
-        coils, PA = np.zeros(0, np.int64), np.zeros((0, _N_NODES))
+        coils, PA = np.zeros(0, np.int64), np.zeros((0, N_NODES))
         PQ_fit, sw, jump_floor = PQ, np.repeat(np.sqrt(ref.w), 2), 1e-6 * L
     seg_fk, sigma_fk, beyond, tip_weights, lengths, gap, seg, sigma, dphi_ds = geometry
     pb = Problem(

@@ -658,7 +658,13 @@ def typed(fr, pb, err, ops):
 
 
 def plain(*structures):
-    """The structures as the entry points take them: plain tuples (:func:`typed`)."""
+    """The structures as the entry points take them: plain tuples (:func:`typed`).
+
+    Parameters
+    ----------
+    *structures : NamedTuple
+        Frames, Problem, shift error model and beam operators, in any number.
+    """
     return tuple(tuple(s) for s in structures)
 
 

@@ -24,7 +24,6 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit, pcc
-from bendsense.beam import DEFAULT_NODES
 from bendsense.choices import CONSTRAINTS
 from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
@@ -34,7 +33,12 @@ __all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", 
            "chebyshev_nodes_m"]
 
 POSITIONS, ANGLES = 0, 1  # codes of bendsense.choices.OBJECTIVES in the kernels
-_N_NODES = DEFAULT_NODES
+
+#: Chebyshev–Lobatto nodes of the estimate's beam. Against a 40-node solve over 15–120 kPa
+#: and tip loads up to 0.3 N, 16 nodes are within 4e-9 rad in angle and 3e-10 m in position
+#: (20 nodes, the default of :func:`bendsense.beam.solve_beam`: 2e-11 rad), some six orders
+#: below the sensor's noise, and the 15 × 15 Newton systems cost half the 19 × 19 ones.
+N_NODES = 16
 
 
 class Reference(NamedTuple):
@@ -116,7 +120,7 @@ class Problem(NamedTuple):
 
 
 @functools.lru_cache(maxsize=16)
-def chebyshev_nodes_m(length_m: float, n_nodes: int = _N_NODES) -> np.ndarray:
+def chebyshev_nodes_m(length_m: float, n_nodes: int = N_NODES) -> np.ndarray:
     """Arc lengths of the fast beam solver's Chebyshev–Lobatto nodes, base first [m]."""
     j = np.arange(n_nodes)
     s = 0.5 * length_m * (1.0 - np.cos(np.pi * j / (n_nodes - 1)))
@@ -176,7 +180,7 @@ def _pcc_grid(lengths: bytes, n_points: int, beam_length_m: float):
     s, w = quadrature(lengths, Lc, n_points)
     bounds = np.concatenate(([0.0], np.cumsum(lengths)))
     seg = np.clip(np.searchsorted(bounds[1:-1], s, side="left"), 0, lengths.size - 1)
-    sc = chebyshev_nodes_m(beam_length_m, _N_NODES)
+    sc = chebyshev_nodes_m(beam_length_m, N_NODES)
     s_fk = np.concatenate([s, np.minimum(sc, bounds[-1])])
     fk = pcc._grid(lengths, s_fk)
     out = {"s": s, "w": w, "seg": seg, "sigma": s - bounds[seg], "seg_fk": fk.seg, "sigma_fk": fk.sigma,

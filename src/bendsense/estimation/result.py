@@ -79,7 +79,9 @@ class ForceEstimate:
     tip_position_m : ndarray, shape (..., 2)
         Tip of the model shape at the estimate [m].
     state : ndarray, shape (..., n_nodes) or None
-        Beam state at the estimate.
+        Beam state at the estimate: the tangent angle [rad] at the
+        :data:`~bendsense.estimation.problem.N_NODES` Chebyshev–Lobatto nodes
+        (:func:`~bendsense.estimation.chebyshev_nodes_m`).
     guess_n : ndarray, shape (..., 2) or None
         The moment-balance starting force; with ``force_n`` it corrects the start of
         the next frame (``initial=`` of the next call).
