@@ -62,7 +62,7 @@ from bendsense.shift_errors import noise_only
 from bendsense.status import Status
 from bendsense.validation import float_array
 
-_OK, _NOT_IDENTIFIABLE = int(Status.OK), int(Status.NOT_IDENTIFIABLE)
+_OK = int(Status.OK)
 
 __all__ = [
     "ForceEstimate",
@@ -220,8 +220,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     n = N_NODES
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
            np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2)), np.empty((B, n)), np.empty((B, 2)),
-           np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)))
-    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts = out
+           np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)), np.empty(B, dtype=bool))
+    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
         if block >= B:  # one block (one frame, a short series): the same kernel without the threads
@@ -243,7 +243,6 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if uncertainty == "none":  # stacklevel 3: the caller of the public wrapper (pressure_range_step)
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
                       "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)
-    success = (status == _OK) | (status == _NOT_IDENTIFIABLE)  # never with a NaN force (kernels.finish)
     text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
             else messages(status, residual, chi2, p_value, blocked_dir, method))
     if strict and not success.all():

@@ -675,7 +675,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
     ``fr``, ``pb``, ``err``, ``ops``: the plain tuples of :func:`plain`.
     """
     fr, pb, err, ops = typed(fr, pb, err, ops)
-    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out
     k = pb.lower.size
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
@@ -714,6 +714,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
                                                           noise_var, fr.model_cov[i], kappa, force[i], cov[i],
                                                           parts[i], direction[i])
         iters[i] = it
+        success[i] = status[i] == _OK or status[i] == _NOT_IDENTIFIABLE  # never with a NaN force (finish)
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
         state[i] = ws[2]
@@ -732,8 +733,9 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
     (:func:`plain`) of :class:`~bendsense.estimation.problem.Frames`,
     :class:`~bendsense.estimation.problem.Problem`, the shift error model and the beam
     solver's operators. ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
-    its p-value, guess (B, 2), state (B, n), tip (B, 2) and the unidentifiable direction of a boundary
-    stop (B, 2).
+    its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable direction of a boundary
+    stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2) and success (B,) (converged or not
+    identifiable).
     """
     B = prob.Frames(*fr).ei.size
     nblocks = (B + block - 1) // block
@@ -746,7 +748,7 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
 def evaluate_frames(fr, pb, err, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
     fr, pb, err, ops = typed(fr, pb, err, ops)
-    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts = out
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
     F = np.empty(2)
@@ -759,6 +761,7 @@ def evaluate_frames(fr, pb, err, ops, u, run_status, out):
         status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u[i], ws, blocked, frame_cov, cov_s,
                                                           noise_var, fr.model_cov[i], kappa, force[i], cov[i],
                                                           parts[i], direction[i])
+        success[i] = status[i] == _OK or status[i] == _NOT_IDENTIFIABLE
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
         state[i] = ws[2]
