@@ -116,6 +116,19 @@ def test_mcap_without_the_extra_names_it(workdir, monkeypatch):
     ]
 
 
+def test_mcap_without_the_extra_stops_the_chain_before_any_step(workdir, monkeypatch):
+    """The missing extra is named before the chain's steps ran: the 'save' before 'mcap' wrote nothing."""
+    monkeypatch.setitem(sys.modules, "mcap", None)  # as if not installed
+    out = workdir / "not-saved"
+    res = CliRunner().invoke(main, ["load", str(workdir / "tv.csv"), "--calibration", str(workdir / "cal.yaml"),
+                                    "reconstruct", "save", str(out), "mcap", str(workdir / "none.mcap")])
+    assert res.exit_code == 1
+    assert res.output.strip().splitlines() == [
+        "Error: the mcap step needs the optional extra 'ros' (mcap is not installed): pip install 'bendsense[ros]'"
+    ]
+    assert not out.exists() and not (workdir / "none.mcap").exists()
+
+
 CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]
 
 

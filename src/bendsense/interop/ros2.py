@@ -44,7 +44,7 @@ from bendsense import output
 from bendsense.errors import SessionError, require_extra
 from bendsense.results import EXTRAPOLATED, MODEL_MISFIT, NOT_CONVERGED, NOT_IDENTIFIABLE, OK
 
-__all__ = ["write_mcap", "FRAME_ID", "TOPICS"]
+__all__ = ["write_mcap", "require_ros", "FRAME_ID", "TOPICS"]
 
 FRAME_ID = "bendsense_base"
 MCAP = (".mcap",)
@@ -100,6 +100,23 @@ SCHEMAS = {
     ),
 }
 _LEVEL = {OK: 0, EXTRAPOLATED: 1, MODEL_MISFIT: 1, NOT_IDENTIFIABLE: 1, NOT_CONVERGED: 2}  # diagnostic levels
+
+
+def require_ros():
+    """Import the MCAP writer of ROS 2 messages, or say which extra installs it.
+
+    Returns
+    -------
+    module
+        ``mcap_ros2.writer``.
+
+    Raises
+    ------
+    MissingExtraError
+        If ``mcap`` or ``mcap-ros2-support`` is not installed (extra ``ros``).
+    """
+    require_extra("mcap", "ros", "the mcap step")
+    return require_extra("mcap_ros2.writer", "ros", "the mcap step")
 
 
 def session_epoch_s(session) -> float:
@@ -174,8 +191,7 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
     MissingExtraError
         If ``mcap`` or ``mcap-ros2-support`` is not installed (extra ``ros``).
     """
-    require_extra("mcap", "ros", "the mcap step")
-    writer_mod = require_extra("mcap_ros2.writer", "ros", "the mcap step")
+    writer_mod = require_ros()
     from bendsense.results import Results
 
     path = Path(path)
