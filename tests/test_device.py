@@ -254,6 +254,31 @@ def test_default_source_gives_pressure_and_counts_per_frame():
     assert np.isfinite(pressure) and all(0 <= c < 2**12 for c in counts)
 
 
+def test_default_source_computes_its_first_frame_before_the_board_streams(monkeypatch):
+    """The slow first simulation (numba compiling on a fresh install) happens before the port is
+    printed, not while a receiver waits; the frames are those of the scenario, none lost."""
+    from itertools import islice
+
+    import bendsense.sim.scenarios as scenarios
+    from bendsense.device.simdevice import default_source
+
+    computed = []
+    original = scenarios.time_varying_frames
+
+    def watched(*args, **kwargs):
+        for frame in original(*args, **kwargs):
+            computed.append(frame)
+            yield frame
+
+    monkeypatch.setattr(scenarios, "time_varying_frames", watched)
+    source = default_source(rate_hz=100.0, seed=1)
+    assert len(computed) == 1  # before anyone asked for a frame
+    got = list(islice(source, 5))
+    expected = list(islice(original(None, 100.0, 1), 5))
+    for (p, counts), (p_exp, counts_exp) in zip(got, expected, strict=True):
+        assert p == p_exp and np.array_equal(counts, counts_exp)
+
+
 def test_recorder_refuses_existing_session(tmp_path):
     SessionWriter(tmp_path / "s", 1).close()
     with Driver("loop://", handshake=False) as drv, pytest.raises(OutputExistsError, match="exists and is not empty"):

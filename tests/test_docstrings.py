@@ -11,6 +11,7 @@ import importlib
 import inspect
 import pkgutil
 import re
+from pathlib import Path
 
 import bendsense
 
@@ -70,6 +71,33 @@ def test_the_walk_finds_the_public_api():
             "bendsense.output.write_file"} <= set(OBJECTS)
     assert len(FUNCTIONS) > 150 and len(CLASSES) > 50
     assert NO_PARAMETERS_YET <= set(FUNCTIONS) | set(_methods())  # the allow-list names real functions
+
+
+def _api_reference() -> dict:
+    """``{module: names shown, or None for all}`` of the ``::: module`` directives in docs/api."""
+    shown = {}
+    for page in (Path(__file__).resolve().parents[1] / "docs" / "api").glob("*.md"):
+        for m in re.finditer(r"^::: ([\w.]+)\n((?:[ \t]+.*\n)*)", page.read_text(encoding="utf-8"), re.M):
+            members = re.search(r"members:\s*\[([^\]]*)\]", m.group(2))
+            shown[m.group(1)] = None if members is None else {n.strip() for n in members.group(1).split(",")}
+    return shown
+
+
+def test_the_api_reference_shows_every_public_function_and_class():
+    """Each one is rendered by mkdocstrings: in its own module's section, or re-exported by a package's."""
+    shown = _api_reference()
+
+    def rendered(module, name):
+        return module in shown and (shown[module] is None or name in shown[module])
+
+    missing = [
+        qualname for qualname, obj in OBJECTS.items()
+        if not rendered(obj.__module__, obj.__qualname__)
+        and not any(rendered(package, obj.__name__) and obj.__name__ in getattr(importlib.import_module(package),
+                                                                                "__all__", ())
+                    for package in shown)
+    ]
+    assert missing == [], f"not in the API reference (docs/api/*.md): {missing}"
 
 
 def test_every_function_and_class_has_a_summary_line():

@@ -84,6 +84,29 @@ def test_mcap_wrench_per_frame_equals_results_csv(workdir):
     assert pressure[3].ros_msg.fluid_pressure == 40e3
 
 
+def test_mcap_stamps_of_a_recorded_session_are_exact_to_the_nanosecond(workdir):
+    """A recorded session: stamps = its start time (meta.yaml) + t_s, in integer ns (no float rounding)."""
+    import calendar
+    import dataclasses
+
+    from mcap_ros2.reader import read_ros2_messages
+
+    import bendsense
+    from bendsense.interop.ros2 import write_mcap
+
+    csv_session = bendsense.read_session(workdir / "tv.csv")
+    t_s = 5.000123 + np.arange(len(csv_session)) * 0.001  # a 1 kHz device clock; stamps count from its first frame
+    session = dataclasses.replace(csv_session, t_s=t_s, meta={"start_time_utc": "2026-03-04T05:06:07.891011Z"})
+    shape = bendsense.reconstruct(session.signals, bendsense.Calibration.load(workdir / "cal.yaml"),
+                                  bendsense.load_config().sensor)
+    write_mcap(workdir / "stamps.mcap", session, shape)
+    start_ns = calendar.timegm((2026, 3, 4, 5, 6, 7)) * 10**9 + 891_011_000
+    expected = [start_ns + k * 1_000_000 for k in range(len(session))]
+    msgs = list(read_ros2_messages(str(workdir / "stamps.mcap"), topics=["/bendsense/shape"]))
+    assert [m.ros_msg.header.stamp.sec * 10**9 + m.ros_msg.header.stamp.nanosec for m in msgs] == expected
+    assert [m.log_time_ns for m in msgs] == expected
+
+
 def test_mcap_after_reconstruct_only_and_overwrite(workdir):
     out = workdir / "shape.mcap"
     args = ["load", str(workdir / "tv.csv"), "--calibration", str(workdir / "cal.yaml"), "reconstruct",
@@ -114,6 +137,19 @@ def test_mcap_without_the_extra_names_it(workdir, monkeypatch):
         "Error: the mcap step needs the optional extra 'ros' (mcap_ros2.writer is not installed): "
         "pip install 'bendsense[ros]'"
     ]
+
+
+def test_mcap_without_the_extra_stops_the_chain_before_any_step(workdir, monkeypatch):
+    """The missing extra is named before the chain's steps ran: the 'save' before 'mcap' wrote nothing."""
+    monkeypatch.setitem(sys.modules, "mcap", None)  # as if not installed
+    out = workdir / "not-saved"
+    res = CliRunner().invoke(main, ["load", str(workdir / "tv.csv"), "--calibration", str(workdir / "cal.yaml"),
+                                    "reconstruct", "save", str(out), "mcap", str(workdir / "none.mcap")])
+    assert res.exit_code == 1
+    assert res.output.strip().splitlines() == [
+        "Error: the mcap step needs the optional extra 'ros' (mcap is not installed): pip install 'bendsense[ros]'"
+    ]
+    assert not out.exists() and not (workdir / "none.mcap").exists()
 
 
 CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]

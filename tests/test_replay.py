@@ -138,6 +138,17 @@ def test_replay_refuses_signals_that_are_not_counts(tmp_path):
     assert res.exit_code == 2 and "--replay" in res.output
 
 
+@pytest.mark.parametrize("option", [["--rate", "100"], ["--channels", "6"], ["--adc-bits", "10"],
+                                    ["--source", "ramp"]])
+def test_replay_refuses_the_options_of_the_virtual_board(tmp_path, option):
+    """What the recording fixes is not silently ignored: one line naming the option, exit 2."""
+    make_recording(tmp_path / "orig", n=20)
+    res = CliRunner().invoke(main, ["sim-device", "--replay", str(tmp_path / "orig"), *option, "--seconds", "0.1"])
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert res.output.strip().splitlines() == [f"Error: {option[0]} does not apply to --replay: the recording "
+                                                "gives it (--speed changes the pace)"]
+
+
 def test_cli_replay_then_record(tmp_path):
     """The commands a user runs: 'sim-device --replay' in one process, 'record' in another."""
     original = make_recording(tmp_path / "orig", n=200)

@@ -332,6 +332,13 @@ def sim_device(
     if replay_path is not None:
         from bendsense.device.replay import ReplayDevice
 
+        ctx = click.get_current_context()
+        for name, flag in (("rate_hz", "--rate"), ("channels", "--channels"), ("adc_bits", "--adc-bits"),
+                           ("source", "--source")):
+            if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
+                raise click.UsageError(f"{flag} does not apply to --replay: the recording gives it "
+                                       "(--speed changes the pace)")
+
         dev = ReplayDevice(
             replay_path, speed=speed, loop=loop, drop=drop, corrupt=corrupt, truncate=truncate, seed=seed,
             autostart=autostart,

@@ -264,9 +264,11 @@ def mcap(mcap_path, overwrite):
     /bendsense/force_std, /bendsense/status, /bendsense/shape (nav_msgs/msg/Path) and
     /bendsense/pressure (sensor_msgs/msg/FluidPressure), stamped with the session's time.
     """
+    from bendsense.interop.ros2 import require_ros, write_mcap
+
+    require_ros()  # a missing extra stops the command line before any step ran
 
     def step(state):
-        from bendsense.interop.ros2 import write_mcap
 
         shape = _require(state, "shape", "mcap", "'reconstruct'")
         write_mcap(mcap_path, state["session"], shape, state.get("estimate"), overwrite=overwrite)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import itertools
 import logging
 import os
 import random
@@ -71,7 +72,8 @@ def default_source(
     Returns
     -------
     iterator
-        Of ``(pressure_pa, adc_counts)``; endless unless ``duration_s`` is given.
+        Of ``(pressure_pa, adc_counts)``; endless unless ``duration_s`` is given. Its first
+        frame is already computed (the slow first run after an install happens here).
     """
     import dataclasses
 
@@ -90,7 +92,12 @@ def default_source(
         options["sensor"] = VirtualSensor.from_config(
             sensor, noise_counts=options.pop("noise_counts", 1.5), adc_bits=adc_bits, seed=seed
         )
-    return time_varying_frames(config, rate_hz, seed, **options)
+    frames = time_varying_frames(config, rate_hz, seed, **options)
+    # the first block is simulated here, before the board exists: on the first run after an
+    # install it compiles the beam kernels (seconds), which must not happen while a
+    # receiver that opened the printed port waits for frames
+    first = next(frames, None)
+    return frames if first is None else itertools.chain([first], frames)
 
 
 def ramp_source(n_channels: int = 16, adc_bits: int = 12, pressure_pa: float | None = 20_000.0):

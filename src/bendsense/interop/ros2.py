@@ -44,7 +44,7 @@ from bendsense import output
 from bendsense.errors import SessionError, require_extra
 from bendsense.results import EXTRAPOLATED, MODEL_MISFIT, NOT_CONVERGED, NOT_IDENTIFIABLE, OK
 
-__all__ = ["write_mcap", "FRAME_ID", "TOPICS"]
+__all__ = ["write_mcap", "require_ros", "FRAME_ID", "TOPICS"]
 
 FRAME_ID = "bendsense_base"
 MCAP = (".mcap",)
@@ -102,24 +102,55 @@ SCHEMAS = {
 _LEVEL = {OK: 0, EXTRAPOLATED: 1, MODEL_MISFIT: 1, NOT_IDENTIFIABLE: 1, NOT_CONVERGED: 2}  # diagnostic levels
 
 
-def session_epoch_s(session) -> float:
-    """Wall-clock time of the session's first frame [s since 1970]; 0 when unknown."""
+def require_ros():
+    """Import the MCAP writer of ROS 2 messages, or say which extra installs it.
+
+    Returns
+    -------
+    module
+        ``mcap_ros2.writer``.
+
+    Raises
+    ------
+    MissingExtraError
+        If ``mcap`` or ``mcap-ros2-support`` is not installed (extra ``ros``).
+    """
+    require_extra("mcap", "ros", "the mcap step")
+    return require_extra("mcap_ros2.writer", "ros", "the mcap step")
+
+
+def session_epoch_ns(session) -> int:
+    """Wall-clock time of the session's first frame [ns since 1970]; 0 when unknown.
+
+    Parameters
+    ----------
+    session : Session
+        A session; ``meta["start_time_utc"]`` (ISO 8601, µs) gives the time.
+    """
     start = session.meta.get("start_time_utc")
     if not start:
-        return 0.0
+        return 0
     try:
         t = _dt.datetime.strptime(str(start).rstrip("Z"), "%Y-%m-%dT%H:%M:%S.%f")
     except ValueError:
-        return 0.0
-    return t.replace(tzinfo=_dt.timezone.utc).timestamp()
+        return 0
+    # integer arithmetic: a float of seconds since 1970 resolves only about 0.2 µs
+    since = t.replace(tzinfo=_dt.timezone.utc) - _dt.datetime(1970, 1, 1, tzinfo=_dt.timezone.utc)
+    return ((since.days * 86_400 + since.seconds) * 1_000_000 + since.microseconds) * 1_000
 
 
 def frame_stamps_ns(session) -> np.ndarray:
-    """Time stamp of every frame [ns since 1970] (see the module docstring)."""
+    """Time stamp of every frame [ns since 1970] (see the module docstring).
+
+    Parameters
+    ----------
+    session : Session
+        The session whose frames are stamped.
+    """
     t = np.asarray(session.t_s, dtype=float)
-    epoch = session_epoch_s(session)
+    epoch = session_epoch_ns(session)
     rel = t - t[0] if epoch and t.size else t
-    stamps = np.round((epoch + rel) * 1e9).astype(np.int64)
+    stamps = epoch + np.round(rel * 1e9).astype(np.int64)
     if stamps.size and stamps.min() < 0:
         raise SessionError(f"{session.source or 'session'}: t_s: negative times cannot be ROS time stamps")
     return stamps
@@ -174,8 +205,7 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
     MissingExtraError
         If ``mcap`` or ``mcap-ros2-support`` is not installed (extra ``ros``).
     """
-    require_extra("mcap", "ros", "the mcap step")
-    writer_mod = require_extra("mcap_ros2.writer", "ros", "the mcap step")
+    writer_mod = require_ros()
     from bendsense.results import Results
 
     path = Path(path)
