@@ -21,6 +21,7 @@ from bendsense.actuator import FreeBendingModel
 from bendsense.beam import solve_beam
 from bendsense.calibration import Calibration, parity_masks, strip_shifts
 from bendsense.estimation import estimate_force
+from bendsense.estimation.kernels import MAX_JUMPS
 from bendsense.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.scenarios import simulate
 from bendsense.sim.sensor import shifts_from_shape
@@ -197,7 +198,9 @@ def test_low_pressure_unconstrained_is_flagged_fast_not_failed(sim):
     assert flagged.any()
     assert np.all(np.isinf(est.std_n[flagged, 1]))
     assert np.all(np.isfinite(est.force_n))
-    assert est.iterations.max() <= 12
+    # a stop at the boundary takes at most MAX_JUMPS trial steps off the branch, each after
+    # an accepted step or a shrunk trust region
+    assert est.iterations.max() <= 2 * MAX_JUMPS + 4
     assert np.all(_coverage(est, truth) >= 0.9)
     # the same frames one by one (the real-time path) agree
     one = estimate_force(reconstruct(tv.signals[low[0]], sim["cal"], SENSOR), tv.pressure_pa[low[0]], CFG,

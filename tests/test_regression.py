@@ -72,11 +72,23 @@ def test_estimator_reproduces_the_frozen_outputs(case, calibration):
     far = want["residual_m"] > 0.05 * bendsense.load_config().actuator.length_m
     misfit = want["success"] & (far | (out["p_value"] < 1e-3))
     misfit &= np.char.startswith(want["message"].astype(str), "converged")
-    np.testing.assert_array_equal(out["success"], want["success"] & ~misfit)
+    # the frozen path stopped at the stability boundary after 2 trial steps off the stable
+    # branch; since 8 are allowed (kernels.MAX_JUMPS) the iteration may reach a stable
+    # equilibrium that matches the shape: then converged, within 5 % of the length, χ² not
+    # beyond chance, a finite force (better than a stop tens of mm from the shape)
+    found = ~want["success"] & np.char.startswith(want["message"].astype(str), "no stable equilibrium") & out["success"]
+    assert np.all(np.asarray(out["message"])[found] == "converged")
+    assert np.all(out["residual_m"][found] <= 0.05 * bendsense.load_config().actuator.length_m)
+    assert np.all(np.isfinite(out["force_n"][found]))
+    np.testing.assert_array_equal(out["success"] & ~found, want["success"] & ~misfit)
     assert all(str(m).startswith("model_misfit") for m in np.asarray(out["message"])[misfit])
-    np.testing.assert_array_equal(_path_free(out["message"])[~misfit], _path_free(want["message"])[~misfit])
+    keep = ~found  # the frames compared with their frozen outputs from here on
+    same = keep & ~misfit
+    np.testing.assert_array_equal(_path_free(out["message"])[same], _path_free(want["message"])[same])
     # 1e-9 N, or 1e-6 σ where σ is larger than 1 mN (the iteration stops when the error
     # left is below 1e-4 σ, kernels.SIGMA_STEP)
+    want = {k: v[keep] for k, v in want.items() if k in ("force_n", "std_n", "chi2_per_dof", "residual_m", "message")}
+    out = {k: out[k][keep] for k in want}
     tol = np.maximum(1e-9, 1e-6 * np.nan_to_num(want["std_n"], nan=0.0, posinf=0.0))
     off = np.abs(out["force_n"] - want["force_n"])
     assert np.all(np.isnan(off) == np.isnan(want["force_n"])) and np.all(off[~np.isnan(off)] <= tol[~np.isnan(off)])

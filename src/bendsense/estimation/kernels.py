@@ -40,7 +40,7 @@ YES, NO = bk.YES, bk.NO
 
 POSITIONS, ANGLES = prob.POSITIONS, prob.ANGLES
 
-MAX_JUMPS = 2  # trial steps off the stable branch before stopping at the boundary
+MAX_JUMPS = 8  # trial steps off the stable branch before stopping at the boundary
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a shape is no bending of the model actuator
 SIGMA_STEP = 1e-4  # a step below this many σ (a whitened cost) changes nothing a user can see: converged
 MISFIT_P = 1e-3  # χ² p-value below which a converged fit is model_misfit
@@ -395,10 +395,11 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     st, dst, y, dy = ws[2], ws[4], ws[5], ws[6]
     weak = False
     for _ in range(max_iter):
-        if tg[3] and flat_direction(H, (FLAT * ei / (L * L)) ** -2, blocked):
-            # a χ² cost that does not determine the load along ``blocked``: the steps keep
-            # to the determined direction, and the frame ends not identifiable along it
-            weak = True
+        # a χ² cost that does not determine the load along ``blocked`` here: the step keeps
+        # to the determined direction; where the iteration ends so (the cost's shape at the
+        # optimum, not at the iterates on the way there), the frame is not identifiable along it
+        weak = tg[3] and flat_direction(H, (FLAT * ei / (L * L)) ** -2, blocked)
+        if weak:
             restricted_step(H, g, blocked, step)
         else:
             unc.lm_step(H, g, step)
