@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 
 import bendsense
@@ -41,8 +42,10 @@ def test_record_estimate_every_frame_of_a_2khz_board(calibration_path, tmp_path)
     session = bendsense.read_session(out)
     assert len(session) > 3000 and session.meta["stats"]["queue_drops"] == 0
     header, rows = read_rows(out / "results.csv")
-    assert header[:2] == ["t_s", "pressure_pa"] and header[-7:] == [
-        "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status"]
+    # DESIGN section 3: the result columns end with status, then the session's extra columns
+    assert header[:2] == ["t_s", "pressure_pa"] and header[-10:] == [
+        "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status",
+        "host_s", "input_status", "tx_drops"]
     assert len(rows) == len(session)  # every recorded frame has a result
     cols = {h: np.array([r[i] for r in rows]) for i, h in enumerate(header)}
     np.testing.assert_array_equal(cols["t_s"].astype(float), session.t_s)
@@ -114,3 +117,48 @@ def test_processor_block_equals_frames_one_by_one(calibration_path):
     b2 = LiveProcessor(cal, constraint="normal").process_block(signals, pressure)
     assert b2.status[5] == "no_pressure" and np.isnan(b2.force_n[5]).all() and np.isfinite(b2.force_n[6]).all()
     assert b2.frame(5).estimate is None and b2.frame(6).estimate is not None
+
+
+def test_record_estimate_writes_the_columns_of_save(calibration_path, tmp_path):
+    """The live results.csv has the header of 'load SESSION reconstruct estimate save' of the same session,
+    and its pass-through columns equal those the saved results read from frames.bin."""
+    out = tmp_path / "s"
+    with SimulatedDevice(default_source(rate_hz=500, seed=SEED), rate_hz=500, drop=0.05, seed=SEED) as dev:
+        res = CliRunner().invoke(main, ["record", dev.port, "-o", str(out), "--seconds", "1",
+                                        "--calibration", str(calibration_path), "--estimate", "--quiet-status"])
+    assert res.exit_code == 0, res.output
+    saved = tmp_path / "saved"
+    res = CliRunner().invoke(main, ["load", str(out), "--calibration", str(calibration_path), "reconstruct",
+                                    "estimate", "save", str(saved)])
+    assert res.exit_code == 0, res.output
+    live_header, live_rows = read_rows(out / "results.csv")
+    save_header, save_rows = read_rows(saved / "results.csv")
+    assert live_header == save_header
+    assert live_header[-4:] == ["status", "host_s", "input_status", "tx_drops"]
+    assert len(live_rows) == len(save_rows) == len(bendsense.read_session(out)) > 300
+    for name in ("t_s", "host_s", "input_status", "tx_drops"):
+        i = live_header.index(name)
+        assert [r[i] for r in live_rows] == [r[i] for r in save_rows], name
+    # and against the records of frames.bin, read here with yaml and numpy alone
+    meta = yaml.safe_load((out / "meta.yaml").read_text())
+    dtype = np.dtype([(name, "<u2", (meta["n_channels"],)) if name == "adc" else (name, t)
+                      for name, t in meta["record_dtype"]])
+    raw = np.fromfile(out / "frames.bin", dtype=dtype)
+    cols = {h: [r[i] for r in live_rows] for i, h in enumerate(live_header)}
+    assert raw["tx_drops"].max() > 0  # the board dropped frames: the counter is not all zeros
+    np.testing.assert_array_equal(np.array(cols["host_s"], float), (raw["host_ns"] - raw["host_ns"][0]) * 1e-9)
+    np.testing.assert_array_equal(np.array(cols["input_status"], int), raw["status"])
+    np.testing.assert_array_equal(np.array(cols["tx_drops"], int), raw["tx_drops"])
+
+
+def test_block_without_pressure_keeps_the_column_order(calibration_path):
+    """No frame with a pressure (NaN forces): the same columns in the same order as a block with one."""
+    frames = [next(src) for src in [default_source(rate_hz=100, seed=SEED)] for _ in range(5)]
+    signals = np.array([c for _, c in frames], dtype=float)
+    extra = {"host_s": np.arange(5.0), "status": np.zeros(5, int)}
+    cal = Calibration.load(calibration_path)
+    with_p = LiveProcessor(cal).process_block(signals, [p for p, _ in frames], extra=extra).columns()
+    without = LiveProcessor(cal).process_block(signals, None, extra=extra).columns()
+    assert list(without) == list(with_p)
+    assert list(with_p)[-3:] == ["status", "host_s", "input_status"]
+    assert list(without["status"]) == ["no_pressure"] * 5

@@ -394,6 +394,10 @@ class LiveBlock:
         Wall time of the block's reconstruction and estimation [s].
     offset : ndarray, shape (N,)
         The calibration's offsets A0 (for ΔA).
+    extra : dict of str to ndarray, shape (n,)
+        Per-frame columns the recorded session has beside its own (``Session.extra``:
+        ``host_s``, ``status``, ``tx_drops`` of a recording), written after ``status``
+        as ``save`` writes them.
     """
 
     t_s: np.ndarray
@@ -406,6 +410,7 @@ class LiveBlock:
     estimated: bool
     process_s: float
     offset: np.ndarray = dataclasses.field(default=None, repr=False)
+    extra: dict = dataclasses.field(default_factory=dict, repr=False)
 
     def __len__(self) -> int:
         return self.t_s.size
@@ -443,12 +448,16 @@ class LiveBlock:
         from bendsense.results import Results
         from bendsense.session import Session
 
-        session = Session(self.t_s, self.signals, self.pressure_pa)
-        columns = Results.from_state(session, self.shape, self.estimate).columns
-        if self.estimated and self.estimate is None:  # no frame with pressure: NaN forces
+        session = Session(self.t_s, self.signals, self.pressure_pa, extra=self.extra)
+        results = Results.from_state(session, self.shape, self.estimate)
+        columns = results.columns
+        if self.estimated and self.estimate is None:  # no frame with pressure: NaN forces, in save's order
+            extra = {name: columns.pop(name) for name in results.extra_names}
             columns.pop("status")
             nan = np.full(len(self), np.nan)
             columns.update({name: nan for name in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m")})
+            columns["status"] = None
+            columns.update(extra)
         columns["status"] = self.status
         return columns
 
@@ -541,13 +550,16 @@ class LiveProcessor:
         self.status_counts: dict[str, int] = {}
         self._previous = None
         self._t0_us = None
+        self._host0_ns = None
 
     def reset(self) -> None:
         """Forget the warm start and the time origin (e.g. after a reconnect)."""
         self._previous = None
         self._t0_us = None
+        self._host0_ns = None
 
-    def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None) -> LiveBlock:
+    def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
+                      extra=None) -> LiveBlock:
         """Process a block of consecutive frames.
 
         Parameters
@@ -559,6 +571,8 @@ class LiveProcessor:
             any, is used).
         t_s, seq, host_ns : array_like, shape (n,), optional
             Frame time [s], sequence numbers, arrival time [ns]; default NaN, -1, now.
+        extra : dict of str to array_like, shape (n,), optional
+            Further per-frame columns for ``results.csv`` (:attr:`LiveBlock.extra`).
 
         Returns
         -------
@@ -612,6 +626,7 @@ class LiveProcessor:
             estimated=self.estimate,
             process_s=time.perf_counter() - t_start,
             offset=np.asarray(self.calibration.offset, dtype=float),
+            extra={} if extra is None else {k: np.asarray(v) for k, v in extra.items()},
         )
         self.frames += n
         for status in block.status:
@@ -621,24 +636,36 @@ class LiveProcessor:
     def process_readings(self, readings) -> LiveBlock:
         """Process driver readings (:class:`~bendsense.device.driver.Reading`), in arrival order.
 
-        ``t_s`` is the device clock from the first reading this processor saw (as
-        ``t_s`` of the recorded session).
+        ``t_s`` is the device clock from the first reading this processor saw, and the
+        block's :attr:`~LiveBlock.extra` the columns a recording of these readings has
+        beside its own (``host_s`` from that first reading, ``status``, ``tx_drops``;
+        :func:`bendsense.session.native.records_extra`), as the recorded session gives
+        them to ``save``.
 
         Parameters
         ----------
         readings : list of Reading
             Driver readings, oldest first.
         """
+        from bendsense.session.native import record_dtype, records_extra, sample_records
+
         readings = list(readings)
         if self._t0_us is None and readings:
             self._t0_us = readings[0].device_us
+            self._host0_ns = readings[0].host_ns
         t0 = 0 if self._t0_us is None else self._t0_us
+        signals = np.array([r.sample.adc for r in readings], dtype=float).reshape(len(readings), -1)
+        host_ns = [r.host_ns for r in readings]
+        # the records the recorder writes of these readings, for the same extra columns
+        records = sample_records(record_dtype(max(signals.shape[1], 1), "<f8"), [r.sample for r in readings],
+                                 host_ns, [max(r.device_us, 0) for r in readings])
         return self.process_block(
-            np.array([r.sample.adc for r in readings], dtype=float).reshape(len(readings), -1),
+            signals,
             np.array([np.nan if r.sample.pressure_pa is None else r.sample.pressure_pa for r in readings], float),
             t_s=(np.array([r.device_us for r in readings], dtype=np.int64) - t0) * 1e-6,
             seq=[r.sample.seq for r in readings],
-            host_ns=[r.host_ns for r in readings],
+            host_ns=host_ns,
+            extra=records_extra(records, self._host0_ns),
         )
 
     def process_signals(self, signals, pressure_pa=None, *, seq=-1, t_s=math.nan, host_ns=None) -> LiveFrame:

@@ -72,6 +72,7 @@ __all__ = [
     "NO_PRESSURE",
     "record_dtype",
     "sample_records",
+    "records_extra",
     "dtype_to_list",
     "dtype_from_list",
     "is_session_dir",
@@ -592,6 +593,34 @@ def _unwrap16(seq: np.ndarray) -> np.ndarray:
     return seq[0] + np.concatenate([[0], np.cumsum(steps)])
 
 
+def records_extra(records: np.ndarray, host0_ns: int | None = None) -> dict:
+    """The ``Session.extra`` columns of native records, in order.
+
+    ``host_s`` (host clock relative to ``host0_ns`` [s]), ``status`` (the status bits)
+    and every record field without a column of its own (``tx_drops``, ...), under its
+    name. :func:`records_to_session` gives a recording these; ``record --estimate``
+    gives its live ``results.csv`` the same, so that its columns are those of ``save``.
+
+    Parameters
+    ----------
+    records : ndarray
+        Structured records (:func:`record_dtype`).
+    host0_ns : int, optional
+        Host clock of the session's first frame [ns]; default: that of the first record.
+    """
+    host = records["host_ns"]
+    if host0_ns is None:
+        host0_ns = host[0] if host.size else 0
+    extra = {
+        "host_s": (host - host0_ns) * 1e-9,
+        "status": records["status"].astype(np.int64),
+    }
+    for name in records.dtype.names:
+        if name not in SESSION_COLUMNS:
+            extra[name] = np.array(records[name])
+    return extra
+
+
 def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     """Build a :class:`~bendsense.session.Session` from raw records.
 
@@ -619,14 +648,7 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     t_s = t0 + (t_us - (t_us[0] if t_us.size else 0)) * 1e-6
     p = records["pressure_pa"]
     pressure = np.where(p == NO_PRESSURE, np.nan, p.astype(float))
-    host = records["host_ns"]
-    extra = {
-        "host_s": (host - (host[0] if host.size else 0)) * 1e-9,
-        "status": records["status"].astype(np.int64),
-    }
-    for name in records.dtype.names:
-        if name not in SESSION_COLUMNS:
-            extra[name] = np.array(records[name])
+    extra = records_extra(records)
     signals = np.array(records["adc"], dtype=float).reshape(len(records), n_ch)
     seq = _unwrap16(records["seq"])
     meta = dict(meta)
