@@ -1,8 +1,10 @@
 """Replay of recorded sessions over a pseudo-terminal (``sim-device --replay``)."""
 
 import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -149,26 +151,97 @@ def test_replay_refuses_the_options_of_the_virtual_board(tmp_path, option):
                                                 "gives it (--speed changes the pace)"]
 
 
+CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]
+
+
+class Lines:
+    """The lines a subprocess writes to a pipe, collected on a thread (never blocking the test)."""
+
+    def __init__(self, pipe):
+        self.lines = []
+        self._thread = threading.Thread(target=lambda: self.lines.extend(iter(pipe.readline, "")), daemon=True)
+        self._thread.start()
+
+    def wait_for(self, text, timeout=20.0):
+        end = time.monotonic() + timeout
+        while not any(text in line for line in self.lines):
+            assert time.monotonic() < end, f"no {text!r} in {self.lines}"
+            time.sleep(0.02)
+
+    def join(self):
+        self._thread.join(10)
+        return "".join(self.lines)
+
+
+def finish(proc):
+    """Kill ``proc`` if it still runs, and close its pipes."""
+    if proc is None:
+        return
+    if proc.poll() is None:
+        proc.kill()
+    proc.communicate()
+
+
+def replay_process(session):
+    proc = subprocess.Popen([*CLI, "sim-device", "--replay", str(session)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    return proc, proc.stdout.readline().strip()
+
+
 def test_cli_replay_then_record(tmp_path):
-    """The commands a user runs: 'sim-device --replay' in one process, 'record' in another."""
+    """The commands a user runs: 'sim-device --replay' in one process, 'record --seconds' in another that
+    outlasts the replay: record ends normally, sim-device says once that the replay finished and keeps the port
+    open until Ctrl-C."""
     original = make_recording(tmp_path / "orig", n=200)
-    with subprocess.Popen(
-        [sys.executable, "-c", "from bendsense.cli import main; main()", "sim-device", "--replay",
-         str(tmp_path / "orig")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    ) as proc:
-        try:
-            port = proc.stdout.readline().strip()
-            res = CliRunner().invoke(main, ["record", port, "-o", str(tmp_path / "again"), "--seconds", "1.5",
-                                            "--quiet-status"])
-            assert res.exit_code == 0, res.output
-            _, err = proc.communicate(timeout=10)  # the replay ends after its last frame
-            assert proc.returncode == 0, err
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-    assert_same_frames(original, read_session(tmp_path / "again"))
+    proc, port = replay_process(tmp_path / "orig")
+    try:
+        err = Lines(proc.stderr)
+        res = CliRunner().invoke(main, ["record", port, "-o", str(tmp_path / "again"), "--seconds", "1.5",
+                                        "--quiet-status"])
+        assert res.exit_code == 0, res.output
+        assert "done: 200 frames written" in res.output and "disconnect" not in res.output
+        err.wait_for("replay finished")
+        assert proc.poll() is None  # still serving the port, silent
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 0
+        text = err.join()
+        assert text.count("replay finished: 200 frames sent") == 1 and "Traceback" not in text
+    finally:
+        finish(proc)
+    again = read_session(tmp_path / "again")
+    assert_same_frames(original, again)
+    assert again.meta["finished"] and again.meta["stats"]["reconnects"] == 0
+    assert "disconnect" not in (tmp_path / "again" / "events.log").read_text()
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_record_without_seconds_outlives_the_replay(tmp_path, stop):
+    """'record' with no --seconds, stopped by Ctrl-C (or SIGTERM) after the replay ended: exit 0, a finished
+    session identical frame by frame to the original (no 'device disconnected', no reconnect attempts)."""
+    original = make_recording(tmp_path / "orig", n=300)
+    board, port = replay_process(tmp_path / "orig")
+    rec = None
+    try:
+        board_err = Lines(board.stderr)
+        rec = subprocess.Popen([*CLI, "record", port, "-o", str(tmp_path / "again"), "--quiet-status"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        board_err.wait_for("replay finished")
+        time.sleep(0.5)  # silence after the last frame: not a disconnect
+        assert rec.poll() is None
+        rec.send_signal(getattr(signal, stop))
+        out, err = rec.communicate(timeout=20)
+        assert rec.returncode == 0, err
+        assert "interrupted: 300 frames written" in err and "disconnect" not in err and "Traceback" not in err
+        board.send_signal(signal.SIGTERM)  # a board stopped with kill: its counts, exit 0
+        assert board.wait(10) == 0
+        assert "generated 300" in board_err.join()
+    finally:
+        finish(board)
+        finish(rec)
+    again = read_session(tmp_path / "again")
+    assert_same_frames(original, again)
+    assert again.meta["finished"] and again.meta["outcome"] == "interrupted"
+    assert "disconnect" not in (tmp_path / "again" / "events.log").read_text()
 
 
 def test_a_pressure_beyond_the_wire_format_is_refused_before_replay():

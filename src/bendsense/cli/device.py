@@ -321,9 +321,11 @@ def sim_device(
     """Run a simulated sensor board on a pseudo-terminal and print its port path.
 
     Open the printed path with 'bendsense record PATH -o SESSION' or 'live'. Runs
-    until Ctrl-C or for --seconds (a replay also ends after its last frame unless
-    --loop). With --replay SESSION the board sends the recorded frames (counts,
-    pressure, status, sequence numbers and device clock) at their recorded times.
+    until Ctrl-C (or SIGTERM) or for --seconds. With --replay SESSION the board sends
+    the recorded frames (counts, pressure, status, sequence numbers and device clock)
+    at their recorded times; after the last one (unless --loop) it says so on stderr
+    and keeps the port open and silent, like BrainFlow's playback board, so that a
+    client ends its recording when it chooses instead of seeing the board unplugged.
     """
     from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
 
@@ -343,7 +345,7 @@ def sim_device(
             replay_path, speed=speed, loop=loop, drop=drop, corrupt=corrupt, truncate=truncate, seed=seed,
             autostart=autostart,
         )
-        return _serve(dev, seconds)
+        return _serve(dev, seconds, replay=True)
     if speed != 1.0 or loop:
         raise click.BadParameter("--speed and --loop need --replay SESSION", param_hint="--speed/--loop")
     if not 1 <= channels <= 64:
@@ -368,14 +370,28 @@ def sim_device(
     _serve(dev, seconds)
 
 
-def _serve(dev, seconds) -> None:
-    """Print the board's port, run it until it finishes, --seconds pass or Ctrl-C, and print its counts."""
+def _serve(dev, seconds, *, replay: bool = False) -> None:
+    """Print the board's port, run it until --seconds pass or Ctrl-C (or SIGTERM), and print its counts.
+
+    A board ends early when its device fails; a replay that has sent its last frame
+    says so once and stays open and silent (a real board unplugged is what a client
+    reports as an error: a finished replay is not one).
+    """
     click.echo(dev.port)
     sys.stdout.flush()
     end = None if seconds is None else time.monotonic() + seconds
+    announced = False
     try:
-        with dev:
-            while not dev.finished.is_set() and (end is None or time.monotonic() < end):
+        with _sigterm_as_interrupt(), dev:
+            while end is None or time.monotonic() < end:
+                if dev.finished.is_set():
+                    if not replay or dev.stats.disconnected:
+                        break
+                    if not announced:
+                        until = "Ctrl-C" if end is None else "Ctrl-C or the end of --seconds"
+                        click.echo(f"replay finished: {dev.stats.sent} frames sent; the port stays open, "
+                                   f"without data, until {until}", err=True)
+                        announced = True
                 time.sleep(0.05)
     except KeyboardInterrupt:
         pass

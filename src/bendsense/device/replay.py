@@ -7,7 +7,10 @@ number and device clock, and is sent at the recorded time (divided by ``speed``)
 replayed session recorded again with ``bendsense record`` therefore has the same frames:
 signals, pressure, status, ``seq`` (with the original gaps) and ``t_s``. With ``loop``,
 the recording starts over after its last frame, the clock and the sequence numbers going
-on from where they ended (a board that never stops).
+on from where they ended (a board that never stops); without it, the board sends nothing
+after the last frame but keeps the port open (:attr:`~SimulatedDevice.finished` is set),
+as BrainFlow's playback board sleeps at the end of its file: a client that records the
+replay ends when it chooses, not with a disconnected port.
 """
 
 from __future__ import annotations
