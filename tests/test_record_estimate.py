@@ -162,3 +162,20 @@ def test_block_without_pressure_keeps_the_column_order(calibration_path):
     assert list(without) == list(with_p)
     assert list(with_p)[-3:] == ["status", "host_s", "input_status"]
     assert list(without["status"]) == ["no_pressure"] * 5
+
+
+def test_record_estimate_of_no_frames_writes_no_results(calibration_path, tmp_path):
+    """A board that never starts: an empty session, no results.csv, and a message that says so (as 'save',
+    which refuses a session without frames)."""
+    out = tmp_path / "s"
+    with SimulatedDevice(default_source(rate_hz=500, seed=SEED), rate_hz=500) as dev:
+        res = CliRunner().invoke(main, ["record", dev.port, "-o", str(out), "--seconds", "0.3", "--no-start",
+                                        "--calibration", str(calibration_path), "--estimate", "--quiet-status"])
+    assert res.exit_code == 0, res.output
+    assert len(bendsense.read_session(out)) == 0 and (out / "frames.bin").stat().st_size == 0
+    assert not (out / "results.csv").exists()
+    assert "no frames to estimate: no results.csv written" in res.output
+    assert "estimated to" not in res.output
+    saved = CliRunner().invoke(main, ["load", str(out), "--calibration", str(calibration_path), "reconstruct",
+                                      "estimate", "save", str(tmp_path / "saved")])
+    assert saved.exit_code != 0 and "no frames" in saved.output and not (tmp_path / "saved").exists()

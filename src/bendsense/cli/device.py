@@ -283,8 +283,10 @@ def record(
         sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
     losses = f"; {stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else ""
     click.echo(f"{outcome}: {stats.records} frames written to {output}{losses}", err=True)
-    if estimate:
+    if estimate and est_stats.frames:
         click.echo(f"{est_stats.frames} frames estimated to {results_path}", err=True)
+    elif estimate:  # as 'save' and 'process', which refuse a session without frames
+        click.echo(f"no frames to estimate: no {results_path.name} written", err=True)
 
 
 @click.command("sim-device", cls=InterspersedCommand)
