@@ -157,7 +157,8 @@ def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
     Every field of :data:`bendsense.frames.SAMPLE_FIELDS` is the sample's attribute of
     the same name, except two: ``t_us`` is the device clock given here, unwrapped, and
     ``pressure_pa`` is rounded to whole pascals, with :data:`NO_PRESSURE` for None (no
-    reading). Further fields of ``dtype`` are left zero.
+    reading). Further fields of ``dtype`` are left zero, and so is a field the sample has no
+    attribute for (a reading made up by hand, without ``status`` or ``tx_drops``).
 
     Parameters
     ----------
@@ -180,7 +181,7 @@ def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
     rec["t_us"] = t_us
     for f in SAMPLE_FIELDS:
         if f.name not in ("t_us", "pressure_pa"):
-            rec[f.name] = [getattr(s, f.name) for s in samples]
+            rec[f.name] = [getattr(s, f.name, 0) for s in samples]
     rec["pressure_pa"] = [NO_PRESSURE if s.pressure_pa is None else round(s.pressure_pa) for s in samples]
     rec["adc"] = np.array([s.adc for s in samples])
     return rec
