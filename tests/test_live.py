@@ -241,3 +241,39 @@ def test_live_and_offline_give_each_frame_the_same_status_near_the_identifiabili
     both = (live == "ok") & (offline == "ok")
     force = np.concatenate([b.estimate.force_n for b in blocks])
     assert np.all(np.abs(force[both] - cold.force_n[both]) <= 0.01 * cold.std_n[both])
+
+
+def test_warm_up_readies_both_compiled_paths_and_forgets_its_frames(calibration_path):
+    """``record`` and ``live`` warm the processor before a port opens: no board streams into a compiling process.
+
+    In a fresh process, the warm-up calls the one-frame and the batched kernel (a live
+    block of one frame, and of several); afterwards the processor counts nothing and
+    estimates a block exactly as a processor that never saw the warm-up frames.
+    """
+    import subprocess
+    import sys
+
+    code = (
+        "import bendsense\n"
+        "from bendsense.calibration import Calibration\n"
+        "from bendsense.estimation import kernels\n"
+        "from bendsense.pipeline import LiveProcessor\n"
+        f"p = LiveProcessor(Calibration.load({str(calibration_path)!r}), bendsense.load_config())\n"
+        "assert not kernels.estimate_block.signatures and not kernels.estimate_frames.signatures\n"
+        "p.warm_up()\n"
+        "print(len(kernels.estimate_block.signatures), len(kernels.estimate_frames.signatures), p.frames, p.estimated,"
+        " p.status_counts)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True)
+    assert out.stdout.split() == ["1", "1", "0", "0", "{}"]
+
+    cal = Calibration.load(calibration_path)
+    config = bendsense.load_config()
+    frames = list(time_varying_frames(config, 100.0, SEED, duration_s=0.5))
+    signals = np.array([c for _, c in frames], dtype=float)
+    pressure = np.array([p for p, _ in frames])
+    warmed, fresh = LiveProcessor(cal, config), LiveProcessor(cal, config)
+    warmed.warm_up()
+    a, b = warmed.process_block(signals, pressure), fresh.process_block(signals, pressure)
+    np.testing.assert_array_equal(a.estimate.force_n, b.estimate.force_n)
+    assert warmed.frames == fresh.frames == len(frames)

@@ -556,6 +556,22 @@ class LiveProcessor:
         """Forget the warm start and the time origin (e.g. after a reconnect)."""
         self._previous = None
         self._t0_us = None
+
+    def warm_up(self) -> None:
+        """Compile or load the kernels before the first frame arrives, then forget the frames used.
+
+        On the first run after an install the kernels compile for ~30 s (announced on
+        stderr): a recording must not spend that time with a board streaming into a full
+        queue. A block of one frame and one of two (the two compiled paths) of the flat
+        calibration signals, at the middle of the actuator's pressure range.
+        """
+        lo, hi = self.config.actuator.pressure_range_pa
+        flat = np.asarray(self.calibration.offset, dtype=float)
+        for n in (1, 2):
+            self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)))
+        self.reset()
+        self.frames = self.failures = self.estimated = 0
+        self.status_counts = {}
         self._host0_ns = None
 
     def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,

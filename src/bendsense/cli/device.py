@@ -47,7 +47,10 @@ def _status_line(stats, est=None) -> str:
 
 
 def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True):
-    """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``.
+    """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``, its kernels ready.
+
+    The kernels compile (first run after an install) or load here, before a port opens
+    (:meth:`~bendsense.pipeline.LiveProcessor.warm_up`).
 
     Parameters
     ----------
@@ -65,7 +68,7 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     from bendsense.calibration import Calibration
     from bendsense.pipeline import LiveProcessor
 
-    return LiveProcessor(
+    processor = LiveProcessor(
         Calibration.load(calibration_path),
         config,
         constraint=constraint,
@@ -73,6 +76,8 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
         estimate=estimate,
     )
+    processor.warm_up()
+    return processor
 
 
 def wait_for_consumer(outlets, timeout_s: float) -> None:

@@ -71,6 +71,7 @@ __all__ = [
     "quadrature",
     "chebyshev_nodes_m",
     "CONSTRAINTS",
+    "N_NODES",
     "METHODS",
     "OBJECTIVES",
     "XTOL_N",
@@ -295,9 +296,8 @@ def _frames(ref, P, batch, B, config) -> Frames:
     if B == 1:  # one frame (the live path): plain floats, as numpy costs ~1 µs a call on one value
         Pf = P.reshape(1)
         p = float(Pf[0])
-        theta = float(model.bending_angle_rad(p))
-        ei = np.array([float(config.stiffness.ei_nm2(p))])
-        theta, k0 = np.array([theta]), np.array([theta / model.length_m])
+        angle = float(model.bending_angle_rad(p))
+        theta, k0, ei = np.array([angle]), np.array([angle / model.length_m]), np.array([config.stiffness.ei_nm2(p)])
     else:
         Pf = P.reshape(B) if P.size == B else _flat(P, batch, B)
         theta = _c(model.bending_angle_rad(Pf))
