@@ -248,10 +248,11 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
             else messages(status, residual, chi2, p_value, blocked_dir, method))
     if strict and not success.all():
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
+    b2, b22 = batch + (2,), batch + (2, 2)
     return ForceEstimate(
-        force_n=force.reshape(*batch, 2),
-        std_n=std.reshape(*batch, 2),
-        covariance_n2=cov.reshape(*batch, 2, 2),
+        force_n=force.reshape(b2),
+        std_n=std.reshape(b2),
+        covariance_n2=cov.reshape(b22),
         residual_m=residual.reshape(batch),
         success=success.reshape(batch),
         message=text.reshape(batch) if batch else str(text[0]),
@@ -260,13 +261,13 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         method=method,
         constraint=constraint,
         uncertainty=uncertainty,
-        tip_position_m=tip.reshape(*batch, 2),
-        state=state.reshape(*batch, n),
-        guess_n=guess_n.reshape(*batch, 2),
+        tip_position_m=tip.reshape(b2),
+        state=state.reshape(batch + (n,)),
+        guess_n=guess_n.reshape(b2),
         chi2_per_dof=chi2.reshape(batch),
         p_value=p_value.reshape(batch),
         objective=objective,
-        covariance_parts_n2=parts.reshape(*batch, 3, 2, 2),
+        covariance_parts_n2=parts.reshape(batch + (3, 2, 2)),
     )
 
 

@@ -263,25 +263,31 @@ def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0
 
 @njit(cache=True)
 def pcc_reference(kappa, lengths, seg_fk, sigma_fk, beyond, tip_weights, pos, ang, kappa_s, state):
-    """The reference of one PCC frame: points and angles at the comparison nodes and the beam's.
+    """The reference of one PCC frame: points and angles at the comparison nodes, angles at the beam's.
 
     ``seg_fk``, ``sigma_fk`` (M + n,) place the M comparison nodes followed by the n beam
-    nodes (clipped to the sensor) on the segments; writes ``pos`` (M + n, 2), ``ang``
-    (M + n,), the curvature ``kappa_s`` (M,) at the comparison nodes and the beam's Newton
-    start ``state`` (n,) (the shape's angle at its nodes, the last curvature carried on
-    by ``beyond``). Returns the shape's tip angle at the actuator tip.
+    nodes (clipped to the sensor) on the segments; writes ``pos`` (M, 2) and ``ang`` (M,)
+    (of buffers of M + n rows), the curvature ``kappa_s`` (M,) at the comparison nodes and
+    the beam's Newton start ``state`` (n,) (the shape's angle at its nodes, the last
+    curvature carried on by ``beyond``; no points there, no trigonometry). Returns the
+    shape's tip angle at the actuator tip.
     """
     n_seg = lengths.size
+    M = kappa_s.size
     theta = np.empty(n_seg)
+    start = np.empty(n_seg)  # each segment's start angle
     tip = np.empty(2)
+    acc = 0.0
     for i in range(n_seg):
         theta[i] = kappa[i] * lengths[i]
-    pcc.frame_kinematics(kappa, theta, 0.0, seg_fk, sigma_fk, lengths, pos, ang, tip)
-    M = kappa_s.size
+        start[i] = acc
+        acc += theta[i]
+    pcc.frame_kinematics(kappa, theta, 0.0, seg_fk[:M], sigma_fk[:M], lengths, pos, ang, tip)
     for j in range(M):
         kappa_s[j] = kappa[seg_fk[j]]
     for j in range(state.size):
-        state[j] = ang[M + j] + kappa[n_seg - 1] * beyond[j]
+        g = seg_fk[M + j]
+        state[j] = start[g] + kappa[g] * sigma_fk[M + j] + kappa[n_seg - 1] * beyond[j]
     tip_angle = 0.0
     for i in range(n_seg):
         tip_angle += kappa[i] * tip_weights[i]
