@@ -152,8 +152,8 @@ def main():
     first = time.perf_counter() - t0
     rows = []
     cold = per_frame(kappa[: args.frames], p[: args.frames], cal) * 1e6
-    rows.append(("one frame, cold (force + σ)", f"median {np.median(cold):.0f} µs, p99 {np.percentile(cold, 99):.0f} µs",
-                 "≤ 50 µs, ≤ 500 µs"))
+    rows.append(("one frame, cold (force + σ)",
+                 f"median {np.median(cold):.0f} µs, p99 {np.percentile(cold, 99):.0f} µs", "≤ 50 µs, ≤ 500 µs"))
     ks, ps = smooth_series(args.frames)
     warm = per_frame(ks, ps, cal, warm=True) * 1e6
     rows.append(("one frame, warm (initial=previous)", f"median {np.median(warm):.0f} µs, "

@@ -348,7 +348,10 @@ def test_cli_process_option_errors(sessions, tmp_path, monkeypatch):
 
 
 def test_processes_or_numba_threads_never_both(sessions, tmp_path):
-    """The default pool's workers run one numba thread each; in-process runs use numba's threads; the report says which."""
+    """The default pool's workers run one numba thread each; in-process runs use numba's threads.
+
+    The report says which.
+    """
     import numba
 
     runs, truth = sessions

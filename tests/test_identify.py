@@ -160,7 +160,8 @@ def test_read_free_bending_csv_units_and_comments(tmp_path):
         ("pressure_pa,bending_angle_rad\n1\n", "line 2: expected 2 values, got 1"),
         ("pressure_pa,bending_angle_rad\n", "no data rows"),
         ("# only a comment\n", "no header row"),
-        ("pressure_pa,bending_angle_rad\n20000,\n", "column bending_angle_rad: missing or non-finite value in data row 1"),
+        ("pressure_pa,bending_angle_rad\n20000,\n",
+         "column bending_angle_rad: missing or non-finite value in data row 1"),
     ],
 )
 def test_read_free_bending_csv_errors(tmp_path, text, match):

@@ -87,7 +87,8 @@ def test_overwrite_refuses_and_names_user_files(cwd):
 
 def test_directory_without_manifest_is_not_ours(cwd):
     _write(cwd, **{"out/results.csv": "mine"})  # looks like an output, but bendsense did not write it
-    with pytest.raises(OutputError, match=r"out: not a bendsense output \(no .bendsense-output.json\); it holds results.csv"):
+    not_ours = r"out: not a bendsense output \(no .bendsense-output.json\); it holds results.csv"
+    with pytest.raises(OutputError, match=not_ours):
         output.check([output.directory("out", overwrite=True)])
     with pytest.raises(OutputError, match="out: not a bendsense output"):
         with output.write_dir("out", overwrite=True):

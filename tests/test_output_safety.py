@@ -394,7 +394,8 @@ def test_a_killed_recording_is_still_bendsenses_and_user_files_stop_record(work)
 
 
 def test_what_a_chain_wrote_earlier_is_not_an_input_of_its_later_steps(work):
-    args = ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "save", "out", "plot", "out", "-o", "fig.png"]
+    args = ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "save", "out", "plot", "out", "-o",
+            "fig.png"]
     result = run(*args)
     assert result.exit_code == 0, result.output
     assert (work / "fig.png").is_file() and (work / "out" / "results.csv").is_file()

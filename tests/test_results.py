@@ -132,7 +132,8 @@ def test_refuses_to_overwrite_files_it_did_not_write(tmp_path):
     (out / "notes.txt").write_text("mine")
     with pytest.raises(OutputExistsError, match=r"out: exists and is not empty \(use --overwrite"):
         write_results(out, *inputs())
-    with pytest.raises(OutputError, match=r"out: not a bendsense output \(no .bendsense-output.json\); it holds notes.txt"):
+    not_ours = r"out: not a bendsense output \(no .bendsense-output.json\); it holds notes.txt"
+    with pytest.raises(OutputError, match=not_ours):
         write_results(out, *inputs(), overwrite=True)
     assert (out / "notes.txt").read_text() == "mine" and sorted(p.name for p in out.iterdir()) == ["notes.txt"]
     # its own earlier output is replaced with overwrite, and only with it

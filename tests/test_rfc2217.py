@@ -78,43 +78,46 @@ class RFC2217Server:
                 conn, _ = self.listener.accept()
             except (TimeoutError, OSError):
                 continue
-            conn.settimeout(0.05)
-            ser = serial.serial_for_url(self.port, timeout=0.02)
-            manager = serial.rfc2217.PortManager(_PtyPort(ser), _Connection(conn))
-            done = threading.Event()
+            self._serve(conn)
 
-            def to_client():
-                while not (self.stop.is_set() or done.is_set()):
-                    data = ser.read(4096)
-                    if data:
-                        try:
-                            conn.sendall(b"".join(manager.escape(data)))
-                        except OSError:
-                            break
-                done.set()
+    def _serve(self, conn):
+        """Bridge one client connection and the pseudo-terminal until either side ends."""
+        conn.settimeout(0.05)
+        ser = serial.serial_for_url(self.port, timeout=0.02)
+        manager = serial.rfc2217.PortManager(_PtyPort(ser), _Connection(conn))
+        done = threading.Event()
 
-            def from_client():
-                while not (self.stop.is_set() or done.is_set()):
+        def to_client():
+            while not (self.stop.is_set() or done.is_set()):
+                data = ser.read(4096)
+                if data:
                     try:
-                        data = conn.recv(4096)
-                    except TimeoutError:
-                        continue
+                        conn.sendall(b"".join(manager.escape(data)))
                     except OSError:
                         break
-                    if not data:
-                        break
-                    ser.write(b"".join(manager.filter(data)))
-                done.set()
+            done.set()
 
-            workers = [threading.Thread(target=to_client, daemon=True), threading.Thread(target=from_client,
-                                                                                         daemon=True)]
-            for w in workers:
-                w.start()
-            done.wait()
-            for w in workers:
-                w.join(1.0)
-            ser.close()
-            conn.close()
+        def from_client():
+            while not (self.stop.is_set() or done.is_set()):
+                try:
+                    data = conn.recv(4096)
+                except TimeoutError:
+                    continue
+                except OSError:
+                    break
+                if not data:
+                    break
+                ser.write(b"".join(manager.filter(data)))
+            done.set()
+
+        workers = [threading.Thread(target=to_client, daemon=True), threading.Thread(target=from_client, daemon=True)]
+        for w in workers:
+            w.start()
+        done.wait()
+        for w in workers:
+            w.join(1.0)
+        ser.close()
+        conn.close()
 
 
 @pytest.fixture

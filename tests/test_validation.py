@@ -174,6 +174,7 @@ def test_a_repeated_yaml_key_is_refused_with_both_lines(tmp_path):
     path = tmp_path / "twice.yaml"
     path.write_text(text + "stiffness:\n  ei0_nm2: 0.001\n")
     first = 1 + text.splitlines().index("stiffness:")
-    with pytest.raises(ConfigError, match=rf"twice.yaml: duplicate key 'stiffness' \(line {len(text.splitlines()) + 1}; "
-                                          rf"first on line {first}\)"):
+    second = len(text.splitlines()) + 1
+    message = rf"twice.yaml: duplicate key 'stiffness' \(line {second}; first on line {first}\)"
+    with pytest.raises(ConfigError, match=message):
         bendsense.load_config(path)
