@@ -49,8 +49,8 @@ def _call(dispatcher, args):
     global _announced
     if not _announced and not _cached(dispatcher):
         _announced = True
-        sys.stderr.write("bendsense: compiling the estimation kernels (first run after install, about half a "
-                         "minute; cached for later runs)\n")
+        sys.stderr.write("bendsense: compiling the estimation kernels (first run after install, about a minute; "
+                         "cached for later runs)\n")
         sys.stderr.flush()
     from numba.core.errors import NumbaWarning
 

@@ -560,7 +560,7 @@ class LiveProcessor:
     def warm_up(self) -> None:
         """Compile or load the kernels before the first frame arrives, then forget the frames used.
 
-        On the first run after an install the kernels compile for ~30 s (announced on
+        On the first run after an install the kernels compile for about a minute (announced on
         stderr): a recording must not spend that time with a board streaming into a full
         queue. A block of one frame and one of two (the two compiled paths) of the flat
         calibration signals, at the middle of the actuator's pressure range.
