@@ -1,10 +1,21 @@
-"""Calling the compiled kernels as a user sees it: announced compilation, no numba warnings.
+"""Calling the compiled kernels as a user sees it: compilation shown as it goes, no numba warnings.
 
 The kernels are compiled by numba on first use and cached on disk next to their modules
 (``cache=True``), so only the first run after an install (or a change of the source)
-compiles, and says so in one line on stderr. Later processes load the cache in well
-under a second. numba's compile-time hints (performance, deprecation) are for
+compiles. Later processes load the cache in well under a second. While a kernel
+compiles, one line on stderr says what is compiling and how far it is (the functions of
+its call tree done out of all, and the seconds so far), updated in place on a terminal
+and every 10 s otherwise. numba's compile-time hints (performance, deprecation) are for
 developers and never reach a user.
+
+Optimisation level: bendsense's kernels are compiled at LLVM level 1 (``NUMBA_OPT=1``)
+unless ``NUMBA_OPT`` is set in the environment. It cuts the first compile by a quarter
+and the kernels run as fast as at numba's default level 3 (docs/performance.md); the
+setting applies only while bendsense's own kernels compile and is restored after.
+
+The cache: several processes may start cold at once (a process pool's workers, a
+notebook beside a command); reads and writes of bendsense's cache entries hold a lock
+file in the cache directory, so that no two processes write numba's cache at once.
 
 Threads: the batch kernels run their ``prange`` loops on numba's ``workqueue`` layer,
 which is safe across ``fork`` (a process pool created after an estimate, e.g. by a
@@ -13,27 +24,23 @@ threads at once, so the calls are serialised by a lock (concurrent callers would
 oversubscribe the cores). ``NUMBA_THREADING_LAYER`` in the environment takes precedence.
 """
 
+import contextlib
 import os
 import sys
 import threading
+import time
+import types
 import warnings
 
 import numba
+from numba.core.dispatcher import Dispatcher
 
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "workqueue"
 
-_announced = False
+_OPT_LEVEL = "1"
 _lock = threading.Lock()
 _ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)
-
-
-def _cached(dispatcher) -> bool:
-    """Whether ``dispatcher`` has a cache index on disk (a compiled version of its source)."""
-    try:
-        return os.path.exists(dispatcher._cache._cache_file._index_path)
-    except AttributeError:  # numba internals moved: assume cached, stay quiet
-        return True
 
 
 def call(dispatcher, *args):
@@ -46,14 +53,202 @@ def _call(dispatcher, args):
     if dispatcher in _ready:
         return dispatcher(*args)
     _ready.add(dispatcher)
-    global _announced
-    if not _announced and not _cached(dispatcher):
-        _announced = True
-        sys.stderr.write("bendsense: compiling the estimation kernels (first run after install, about a minute; "
-                         "cached for later runs)\n")
-        sys.stderr.flush()
     from numba.core.errors import NumbaWarning
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _progress(dispatcher), _optimisation_level():
         warnings.simplefilter("ignore", NumbaWarning)
         return dispatcher(*args)
+
+
+def guard_cache(namespace: dict) -> None:
+    """Make the cache reads and writes of the kernels in ``namespace`` (a module's globals) hold the lock file.
+
+    Call at the end of every module that defines ``@njit(cache=True)`` kernels.
+    """
+    for obj in list(namespace.values()):
+        if isinstance(obj, Dispatcher) and getattr(obj, "_cache", None) is not None:
+            cache = obj._cache
+            for name in ("load_overload", "save_overload"):
+                method = getattr(cache, name)
+                if not getattr(method, "_bendsense_locked", False):
+                    setattr(cache, name, _locked(method, cache))
+
+
+def _locked(method, cache):
+    def locked(self, *args, **kwargs):
+        with _cache_lock():
+            return method(*args, **kwargs)
+
+    locked._bendsense_locked = True
+    return types.MethodType(locked, cache)
+
+
+_cache_rlock = threading.RLock()
+_cache_depth = 0
+
+
+@contextlib.contextmanager
+def _cache_lock():
+    """One exclusive ``flock`` per user across processes, re-entrant within a process.
+
+    A single lock file (in the temporary directory) for all of bendsense's cache
+    entries, so that nested loads cannot deadlock two processes.
+    """
+    global _cache_depth
+    with _cache_rlock:
+        if _cache_depth:
+            _cache_depth += 1
+            try:
+                yield
+            finally:
+                _cache_depth -= 1
+            return
+        fd = _open_lock_file()
+        _cache_depth = 1
+        try:
+            if fd is not None:
+                import fcntl
+
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            yield
+        finally:
+            _cache_depth = 0
+            if fd is not None:
+                os.close(fd)  # closing releases the lock
+
+
+def _open_lock_file():
+    """The lock file's descriptor, or None where there is no ``flock`` (Windows) or it cannot be opened."""
+    try:
+        import fcntl  # noqa: F401
+    except ImportError:  # Windows: numba's own atomic renames only
+        return None
+    import tempfile
+
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    try:
+        return os.open(os.path.join(tempfile.gettempdir(), f"bendsense-numba-cache-{uid}.lock"),
+                       os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError:
+        return None
+
+
+@contextlib.contextmanager
+def _optimisation_level():
+    """Compile at LLVM optimisation level 1 (numba's default is 3), unless ``NUMBA_OPT`` is set."""
+    if "NUMBA_OPT" in os.environ:
+        yield
+        return
+    from numba.core import config, registry
+
+    registry.cpu_target.target_context.codegen()  # the machine-code level stays the user's
+    os.environ["NUMBA_OPT"] = _OPT_LEVEL
+    config.reload_config()
+    try:
+        yield
+    finally:
+        os.environ.pop("NUMBA_OPT", None)
+        config.reload_config()
+
+
+def _cached(dispatcher) -> bool:
+    """Whether ``dispatcher`` has a cache index on disk (a compiled version of its source)."""
+    try:
+        return os.path.exists(dispatcher._cache._cache_file._index_path)
+    except AttributeError:  # numba internals moved: assume cached, stay quiet
+        return True
+
+
+def call_tree(dispatcher) -> set:
+    """The bendsense kernels that ``dispatcher`` calls, directly or through others, itself included.
+
+    Read from the names each function's code uses, looked up in its module's globals
+    (and one level into imported modules: ``bk.solve_frame``); an upper bound of what
+    numba compiles for it.
+    """
+    seen, todo = set(), [dispatcher]
+    while todo:
+        d = todo.pop()
+        if d in seen:
+            continue
+        seen.add(d)
+        code, space = d.py_func.__code__, d.py_func.__globals__
+        names = set()
+        stack = [code]
+        while stack:
+            c = stack.pop()
+            names.update(c.co_names)
+            stack.extend(k for k in c.co_consts if isinstance(k, types.CodeType))
+        for name in names:
+            obj = space.get(name)
+            if isinstance(obj, types.ModuleType):
+                todo.extend(a for a in (getattr(obj, n, None) for n in names) if isinstance(a, Dispatcher))
+            elif isinstance(obj, Dispatcher):
+                todo.append(obj)
+    return seen
+
+
+@contextlib.contextmanager
+def _progress(dispatcher):
+    """Say on stderr what compiles and how far it is, while ``dispatcher``'s first call compiles its tree."""
+    if _cached(dispatcher):
+        yield
+        return
+    from numba.core import event
+
+    tree = call_tree(dispatcher)
+    done = set()
+    state = {"current": dispatcher.py_func.__name__, "last": 0.0}
+    start = time.perf_counter()
+    tty = sys.stderr.isatty()
+    what = _KERNEL_NAMES.get(dispatcher.py_func.__module__, "compiled kernels")
+
+    def show(final=False):
+        elapsed = time.perf_counter() - start
+        n = min(len(done), len(tree)) if not final else len(tree)
+        text = (f"bendsense: compiling the {what} (first run after install, cached for later runs): "
+                f"{n}/{len(tree)} functions, {elapsed:.0f} s" + ("" if final else f" ({state['current']})"))
+        if tty:
+            sys.stderr.write("\r\033[K" + text + ("\n" if final else ""))
+        elif final or elapsed - state["last"] >= 10.0 or state["last"] == 0.0:
+            state["last"] = max(elapsed, 1e-9)
+            sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            d = ev.data.get("dispatcher")
+            if d is not None and d in tree:
+                state["current"] = d.py_func.__name__
+
+        def on_end(self, ev):
+            d = ev.data.get("dispatcher")
+            if d is not None and d in tree:
+                done.add(d)
+
+    stop = threading.Event()
+
+    def tick():
+        while not stop.wait(1.0):
+            show()
+
+    show()
+    ticker = threading.Thread(target=tick, name="bendsense-compile-progress", daemon=True)
+    ticker.start()
+    try:
+        with event.install_listener("numba:compile", Listener()):
+            yield
+    finally:
+        stop.set()
+        ticker.join()
+        show(final=True)
+
+
+_KERNEL_NAMES = {
+    "bendsense.estimation.kernels": "estimation kernels",
+    "bendsense.beam_kernels": "beam solver",
+    "bendsense.pcc": "shape reconstruction",
+    "bendsense.shift_errors": "shift error model",
+    "bendsense.estimation.problem": "estimation set-up",
+    "bendsense.estimation.uncertainty": "uncertainty kernels",
+}

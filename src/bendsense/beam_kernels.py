@@ -22,6 +22,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from bendsense import _jit
 from bendsense.status import Status
 
 # flags to compiled callees go through bool(): one compiled version for both values, not one per literal
@@ -457,3 +458,6 @@ def solve_frames(L, ei, k0, base, F, w, state, has_state, ops, tol, max_iter, se
     for b in prange(ei.size):
         solve_sample(b, L, ei, k0, base, F, w, state, has_state, ops, tol, max_iter, sens, allow_continuation, P, PQ, q,
                      out)
+
+
+_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

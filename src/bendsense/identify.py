@@ -54,6 +54,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense._blas import one_thread
 from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
 from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, ConfigError
@@ -327,6 +328,7 @@ class FreeBendingFit:
         return ax
 
 
+@one_thread
 def fit_free_bending(
     pressure_pa,
     bending_angle_rad,
@@ -655,6 +657,7 @@ def _fit_level(data: StiffnessData, rows, k0, w, length_m, ei_start, method):
     return ei, se, float(np.sqrt(np.mean(r**2))), full, success
 
 
+@one_thread
 def fit_stiffness(
     data: StiffnessData,
     config=None,

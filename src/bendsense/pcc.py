@@ -704,3 +704,6 @@ def reconstruct(
         lengths_m=grid.lengths,
         extrapolated=extrapolated.reshape(batch),
     )
+
+
+_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

@@ -560,10 +560,11 @@ class LiveProcessor:
     def warm_up(self) -> None:
         """Compile or load the kernels before the first frame arrives, then forget the frames used.
 
-        On the first run after an install the kernels compile for about a minute (announced on
-        stderr): a recording must not spend that time with a board streaming into a full
-        queue. A block of one frame and one of two (the two compiled paths) of the flat
-        calibration signals, at the middle of the actuator's pressure range.
+        On the first run after an install the kernels compile (shown on stderr as it goes):
+        a recording must not spend that time with a board streaming into a full queue. A
+        block of one frame and one of two (a cold frame and a warm-started series: a live
+        block never needs the batch kernel of large batches) of the flat calibration
+        signals, at the middle of the actuator's pressure range.
         """
         lo, hi = self.config.actuator.pressure_range_pa
         flat = np.asarray(self.calibration.offset, dtype=float)

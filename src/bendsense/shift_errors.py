@@ -25,6 +25,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit, prange
 
+from bendsense import _jit
+
 __all__ = ["ShiftErrorModel", "noise_only", "shift_covariance", "shift_covariances", "horner"]
 
 
@@ -160,3 +162,6 @@ def shift_covariances(m, S, out, noise_var):
     """:func:`shift_covariance` of every frame: ``S`` (B, N), ``out`` (B, N, N), ``noise_var`` (B, N)."""
     for b in prange(S.shape[0]):
         shift_covariance(m, S[b], out[b], noise_var[b])
+
+
+_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense import validation as check
+from bendsense._blas import one_thread
 from bendsense.calibration.polynomials import _shift_weights, parity_masks, polyval_shift
 from bendsense.errors import ArgumentError, ConfigError
 
@@ -91,6 +92,7 @@ class AngleCovariance:
         return np.sqrt(np.diagonal(self.total, axis1=-2, axis2=-1))
 
 
+@one_thread
 def shift_error_table(cal) -> dict:
     """The misfit's envelopes and correlation of a calibration (``Calibration._shift_error_table``).
 
@@ -135,6 +137,7 @@ def shift_error_table(cal) -> dict:
     return out
 
 
+@one_thread
 def parity_correlation(cal):
     """The odd channels, and ``c_ij`` of the misfit's correlation (``Calibration._parity_correlation``).
 
@@ -189,6 +192,7 @@ def fit_operator(cal, mask):
     return keep, op / scale ** np.arange(k)[:, None]
 
 
+@one_thread
 def coefficient_covariance(cal) -> np.ndarray:
     """Joint covariance of ``(a_0..a_n, b_0..b_n, A0_1..A0_N)`` (:attr:`Calibration.coefficient_covariance`).
 

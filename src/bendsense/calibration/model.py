@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from bendsense import validation as check
+from bendsense._blas import one_thread
 from bendsense._io import load_yaml
 from bendsense.calibration import error_model as errors
 from bendsense.calibration import io, report
@@ -563,6 +564,7 @@ class Calibration:
     # -- fitting (bendsense.calibration.fit) ---------------------------------------------
 
     @classmethod
+    @one_thread
     def fit(
         cls,
         manifest_path: str | os.PathLike,

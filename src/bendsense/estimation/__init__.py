@@ -29,6 +29,7 @@ import math
 import time
 import warnings
 
+import numba
 import numpy as np
 
 from bendsense import _jit
@@ -81,6 +82,7 @@ __all__ = [
 XTOL_N = 1e-10
 MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
+_PARALLEL_MIN = 2048  # frames from which a batch runs on numba's threads (below: ~0.1 s of work, not worth a compile)
 _OPS = tuple(_beam._operators(N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 _NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
@@ -225,9 +227,13 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out
     if method == "fast":
         block = min(B, _CHAIN) if chain and B > 1 else 1
-        if block >= B:  # one block (one frame, a short series): the same kernel without the threads
-            _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, tuple(fr), plain_pb, plain_err, _OPS,
-                      start, out)
+        if B < _PARALLEL_MIN or numba.get_num_threads() == 1:
+            # one frame, a live block, a worker of a process pool: the per-frame kernel, block by block as the
+            # batch kernel runs it (the same results); only a large batch on several threads compiles the batch
+            plain_fr = tuple(fr)
+            for lo in range(0, B, block if block > 1 else B):
+                _jit.call(_kernels.estimate_block, lo, min(B, lo + block) if block > 1 else B, use_guess, block > 1,
+                          plain_fr, plain_pb, plain_err, _OPS, start, out)
         else:
             _jit.call(_kernels.estimate_frames, block, use_guess, tuple(fr), plain_pb, plain_err, _OPS, start, out)
     else:

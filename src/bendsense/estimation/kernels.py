@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from bendsense import _jit
 from bendsense import beam_kernels as bk
 from bendsense.beam import _KernelOperators
 from bendsense.estimation import problem as prob
@@ -768,3 +769,6 @@ def evaluate_frames(fr, pb, err, ops, u, run_status, out):
         state[i] = ws[2]
         tip[i, 0] = ws[3][0]
         tip[i, 1] = ws[3][1]
+
+
+_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

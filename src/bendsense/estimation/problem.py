@@ -372,3 +372,6 @@ def points(ref: Reference) -> Reference:
     batch = ref.batch_shape
     return ref._replace(p0=pos[:, :M].reshape(*batch, M, 2), phi=ang[:, :M].reshape(*batch, M),
                         kappa_s=ks.reshape(*batch, M), tip_shape=tip.reshape(batch), state=state.reshape(*batch, -1))
+
+
+_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

@@ -22,6 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
+from bendsense import _jit
 from bendsense import beam_kernels as bk
 from bendsense.errors import ArgumentError
 
@@ -521,3 +522,6 @@ def noise_std(noise_opt, calibration, est):
     if np.any(sigma_a < 0) or not np.all(np.isfinite(sigma_a)):
         raise ArgumentError(f"noise_std: must be finite and >= 0, got {sigma_a.tolist()}")
     return sigma_a
+
+
+_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

@@ -1,0 +1,179 @@
+"""The first run after an install: compilation shown as it goes, at one optimisation level, one cache writer.
+
+And what keeps a first call fast beside other work: bendsense's own linear algebra on
+one BLAS thread, and only the kernels a command needs compiled (a live block, a
+worker of a process pool and a batch below ``_PARALLEL_MIN`` frames never compile the
+batch kernel).
+"""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numba
+import numpy as np
+import pytest
+import scipy.linalg  # noqa: F401 (loads scipy's BLAS before the limits are read)
+from threadpoolctl import threadpool_info, threadpool_limits
+
+import bendsense
+from bendsense import _blas, _jit
+from bendsense import estimation as est
+
+KERNEL = textwrap.dedent('''
+    import numpy as np
+    from numba import njit
+
+    from bendsense import _jit
+
+
+    @njit(cache=True)
+    def inner(x):
+        return x * 2.0
+
+
+    @njit(cache=True)
+    def outer(a):
+        s = 0.0
+        for v in a:
+            s += inner(v)
+        return s
+
+
+    _jit.guard_cache(globals())
+''')
+
+
+def _run(tmp_path, code, env_extra=None, **kwargs):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
+    env.pop("NUMBA_OPT", None)
+    env.update(env_extra or {})
+    return subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, **kwargs)
+
+
+def test_a_cold_compile_says_what_compiles_and_how_far_then_the_cache_is_quiet(tmp_path):
+    (tmp_path / "bs_toy_kernels.py").write_text(KERNEL)
+    code = textwrap.dedent('''
+        import os, numpy as np, numba
+        from bendsense import _jit
+        import bs_toy_kernels as k
+        print(_jit.call(k.outer, np.arange(4.0)))
+        print(sorted(d.py_func.__name__ for d in _jit.call_tree(k.outer)))
+        print(os.environ.get("NUMBA_OPT"), int(numba.config.OPT))
+    ''')
+    first = _run(tmp_path, code)
+    out, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err
+    assert out.split("\n")[:3] == ["12.0", "['inner', 'outer']", "None 3"]  # the user's setting is back
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert lines and lines[-1].startswith("bendsense: compiling the compiled kernels")
+    assert lines[-1].endswith("2/2 functions, " + lines[-1].split(", ")[-1]) and " s" in lines[-1]
+    again = _run(tmp_path, code)
+    out2, err2 = again.communicate(timeout=300)
+    assert again.returncode == 0 and out2 == out
+    assert err2 == ""  # loaded from the cache: nothing to say
+
+
+def test_two_cold_processes_compile_side_by_side_and_both_find_the_result(tmp_path):
+    """No two processes write the cache at once (a lock file); both compile, both answer, a third loads."""
+    (tmp_path / "bs_toy_kernels.py").write_text(KERNEL)
+    code = "import numpy as np\nfrom bendsense import _jit\nimport bs_toy_kernels as k\nprint(_jit.call(k.outer, np.ones(3)))\n"
+    procs = [_run(tmp_path, code) for _ in range(2)]
+    results = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], results
+    assert [r[0] for r in results] == ["6.0\n", "6.0\n"]
+    third = _run(tmp_path, code)
+    out, err = third.communicate(timeout=300)
+    assert (third.returncode, out, err) == (0, "6.0\n", "")
+
+
+def test_the_optimisation_level_of_the_user_is_kept(tmp_path):
+    """``NUMBA_OPT`` set by the user is left alone (and not removed after the compile)."""
+    (tmp_path / "bs_toy_kernels.py").write_text(KERNEL)
+    code = ("import os, numpy as np, numba\nfrom bendsense import _jit\nimport bs_toy_kernels as k\n"
+            "_jit.call(k.outer, np.ones(3))\nprint(os.environ['NUMBA_OPT'], int(numba.config.OPT))\n")
+    p = _run(tmp_path, code, {"NUMBA_OPT": "2"})
+    out, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    assert out.split() == ["2", "2"]
+
+
+def test_bendsense_linear_algebra_runs_on_one_blas_thread_and_restores_the_users_setting():
+    seen = []
+
+    @_blas.one_thread
+    def work():
+        seen.append({lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"})
+        inner()
+
+    @_blas.one_thread
+    def inner():  # nested: still limited, and the outer call restores
+        seen.append({lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"})
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = {lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+        work()
+        after = {lib["filepath"]: lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+    assert before and set(before.values()) == {2}
+    assert len(seen) == 2 and all(set(s.values()) == {1} for s in seen)
+    assert after == before
+
+
+def test_a_calibration_fit_limits_blas_while_it_runs(monkeypatch, tmp_path):
+    """The calibration's least squares run inside the limit (numpy's lstsq sees one thread)."""
+    from bendsense.calibration import polynomials
+
+    threads = []
+    real = np.linalg.lstsq
+
+    def spy(*args, **kwargs):
+        threads.append({lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"})
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(polynomials.np.linalg, "lstsq", spy)
+    from bendsense.sim.scenarios import simulate
+
+    simulate("calibration", tmp_path / "cal", seed=1, frames_per_strip=20)
+    with threadpool_limits(limits=2, user_api="blas"):
+        bendsense.Calibration.fit(tmp_path / "cal" / "manifest.yaml")
+    assert threads and all(t == {1} for t in threads)
+
+
+def test_small_batches_and_single_threads_use_the_per_frame_kernel_with_the_batch_kernels_results():
+    """A batch below ``_PARALLEL_MIN`` (or on one numba thread) runs block by block on the per-frame kernel.
+
+    The same frames through the batch kernel on two threads give the same forces,
+    statuses and σ bit for bit: blocks of consecutive frames are chained the same way.
+    """
+    config = bendsense.load_config()
+    rng = np.random.default_rng(3)
+    B = est._PARALLEL_MIN + 37
+    kappa = rng.uniform(2.0, 10.0, (B, 16))
+    pressure = rng.uniform(20e3, 90e3, B)
+    previous = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = est.estimate_force(kappa, pressure, config, noise_std=0.02)
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        many = est.estimate_force(kappa, pressure, config, noise_std=0.02)
+    finally:
+        numba.set_num_threads(previous)
+    np.testing.assert_array_equal(one.force_n, many.force_n)
+    np.testing.assert_array_equal(one.std_n, many.std_n)
+    np.testing.assert_array_equal(one.message, many.message)
+
+
+@pytest.mark.parametrize("n", [1, 5])
+def test_live_sized_blocks_never_compile_the_batch_kernel(n, calibration_path):
+    code = textwrap.dedent(f'''
+        import numpy as np, bendsense
+        from bendsense.calibration import Calibration
+        from bendsense.estimation import kernels
+        cal = Calibration.load({str(calibration_path)!r})
+        bendsense.estimate_force(np.full(({n}, 16), 5.0), np.full({n}, 4e4), bendsense.load_config(), calibration=cal)
+        print(len(kernels.estimate_block.signatures), len(kernels.estimate_frames.signatures))
+    ''')
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True)
+    assert out.stdout.split() == ["1", "0"]
