@@ -177,3 +177,42 @@ def test_live_sized_blocks_never_compile_the_batch_kernel(n, calibration_path):
     ''')
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True)
     assert out.stdout.split() == ["1", "0"]
+
+
+BACKGROUND = textwrap.dedent('''
+    import sys, time
+    import numpy as np
+    from bendsense import _jit
+    import bs_toy_kernels as k
+    with _jit.Background(k.outer, "bs_toy_kernels:compile_toy") as bg:
+        started = bg.process is not None
+        if sys.argv[1] == "leave":
+            pid = bg.process.pid
+    if sys.argv[1] == "leave":  # left before waiting: the second process is gone
+        import os
+        time.sleep(0.2)
+        try:
+            os.kill(pid, 0)
+            print("alive")
+        except ProcessLookupError:
+            print("gone")
+    else:
+        with _jit.Background(k.outer, "bs_toy_kernels:compile_toy") as bg:
+            bg.wait()
+        print(started, _jit._cached(k.outer), _jit.call(k.outer, np.ones(2)))
+''')
+
+
+@pytest.mark.parametrize("how", ["wait", "leave"])
+def test_a_second_process_compiles_meanwhile_and_this_one_loads_its_cache(tmp_path, how):
+    (tmp_path / "bs_toy_kernels.py").write_text(KERNEL + "\n\ndef compile_toy():\n    _jit.call(outer, np.ones(1))\n")
+    p = _run(tmp_path, BACKGROUND.replace("sys.argv[1]", repr(how)))
+    out, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    if how == "leave":
+        assert out.split() == ["gone"]
+    else:
+        assert out.split() == ["True", "True", "4.0"]
+        assert "compiling the compiled kernels in a second process meanwhile" in err
+        assert err.rstrip().splitlines()[-1].startswith("bendsense: compiling the compiled kernels")
+        assert "2/2 functions" in err.rstrip().splitlines()[-1]  # the second process's last word

@@ -252,3 +252,111 @@ _KERNEL_NAMES = {
     "bendsense.estimation.problem": "estimation set-up",
     "bendsense.estimation.uncertainty": "uncertainty kernels",
 }
+
+
+class Background:
+    """Compile a kernel in a second process while this one works; :meth:`wait` before the first call.
+
+    On a cold cache, ``bendsense demo`` simulates and records (the beam solver's kernels)
+    while the estimation kernels compile beside it, on the second core: the first run
+    takes the longer of the two instead of their sum. The second process writes the
+    cache (the lock file keeps the two processes' writes apart) and this one loads it.
+    Nothing starts when the kernel is cached. If the second process fails, this one
+    compiles on its first call as it would have without it. Use as a context manager:
+    leaving it stops a process still running (an error, Ctrl-C), and a second process
+    whose parent dies is stopped by the kernel (Linux) or notices within a second.
+
+    Parameters
+    ----------
+    dispatcher : numba Dispatcher
+        The kernel, to tell whether it is cached and to name it.
+    target : str
+        ``"module:function"``: a function without arguments that compiles it (by a call).
+    """
+
+    def __init__(self, dispatcher, target: str):
+        self.dispatcher, self.target = dispatcher, target
+        self.process = None
+        self._log = None
+
+    def __enter__(self):
+        if dispatcher_ready(self.dispatcher):
+            return self
+        import subprocess
+        import tempfile
+
+        module, function = self.target.split(":")
+        self._log = tempfile.TemporaryFile(mode="w+")
+        code = ("import os, sys, threading, time\n"
+                "parent = os.getppid()\n"
+                "def watch():\n"
+                "    while os.getppid() == parent: time.sleep(1.0)\n"
+                "    os._exit(1)\n"
+                "threading.Thread(target=watch, daemon=True).start()\n"
+                f"from {module} import {function}\n{function}()\n")
+        self.process = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                                        stdout=subprocess.DEVNULL, stderr=self._log, preexec_fn=_die_with_parent
+                                        if sys.platform.startswith("linux") else None)
+        what = _KERNEL_NAMES.get(self.dispatcher.py_func.__module__, "compiled kernels")
+        sys.stderr.write(f"bendsense: compiling the {what} in a second process meanwhile "
+                         "(first run after install, cached for later runs)\n")
+        sys.stderr.flush()
+        self._start = time.perf_counter()
+        return self
+
+    def wait(self) -> None:
+        """Wait for the second process, showing its progress; return at once if there is none."""
+        if self.process is None:
+            return
+        tty = sys.stderr.isatty()
+        last_shown = -10.0
+        while self.process.poll() is None:
+            elapsed = time.perf_counter() - self._start
+            if tty or elapsed - last_shown >= 10.0:
+                last_shown = elapsed
+                line = self._last_line().removeprefix("bendsense: ")
+                text = f"bendsense: waiting for the second process, {line or 'starting'}"
+                sys.stderr.write(("\r\033[K" + text) if tty else text + "\n")
+                sys.stderr.flush()
+            time.sleep(0.5)
+        if tty:
+            sys.stderr.write("\r\033[K")
+        line = self._last_line()
+        if self.process.returncode != 0:
+            sys.stderr.write("bendsense: the second process could not compile the kernels; compiling here\n")
+        elif line:
+            sys.stderr.write(line + "\n")  # its last word: "... 59/59 functions, 35 s"
+        sys.stderr.flush()
+        self.process = None
+
+    def _last_line(self) -> str:
+        self._log.seek(0)
+        lines = [line.strip() for line in self._log.read().replace("\r", "\n").splitlines() if line.strip()]
+        return lines[-1] if lines else ""
+
+    def __exit__(self, *exc):
+        if self.process is not None and self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=2.0)
+            except Exception:  # noqa: BLE001 (it must not outlive us)
+                self.process.kill()
+        self.process = None
+        if self._log is not None:
+            self._log.close()
+        return False
+
+
+def dispatcher_ready(dispatcher) -> bool:
+    """Whether ``dispatcher`` needs no compile: called in this process already, or cached on disk."""
+    return dispatcher in _ready or _cached(dispatcher)
+
+
+def _die_with_parent():  # pragma: no cover (runs in the child between fork and exec)
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass

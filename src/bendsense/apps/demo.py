@@ -332,19 +332,24 @@ def run_demo(
 
 def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progress) -> DemoResult:
     """The demo's steps, writing into ``work`` (swapped in as ``out`` at the end)."""
+    from bendsense import _jit
+    from bendsense.estimation import kernels
     from bendsense.pipeline import process
     from bendsense.results import write_results
     from bendsense.session.native import read_session_dir
 
     session_dir, results_dir, figure_path = work / "session", work / "results", work / "demo.png"
-    cal, reused = _calibrate(work / "calibration", out / "calibration", config, seed, echo)
-
-    sim_stats, drv_stats = _record(
-        session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed, echo=echo, progress=progress
-    )
-
-    session = read_session_dir(session_dir)
-    truth = _aligned_truth(session, session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed, echo=echo)
+    # first run after an install: the estimation kernels compile on the second core while
+    # this process simulates (the beam solver's kernels) and records
+    with _jit.Background(kernels.estimate_block, "bendsense.estimation:compile_kernels") as compiling:
+        cal, reused = _calibrate(work / "calibration", out / "calibration", config, seed, echo)
+        sim_stats, drv_stats = _record(
+            session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed, echo=echo, progress=progress
+        )
+        session = read_session_dir(session_dir)
+        truth = _aligned_truth(session, session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed,
+                               echo=echo)
+        compiling.wait()
 
     echo(f"processing {len(session)} frames: shape, force (constraint normal and none) ...")
     # the first estimate compiles (first run after install) or loads the kernels: the rates

@@ -450,3 +450,14 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor)
     err = err._replace(**{name: _c(a, a.dtype) for name, a in err._asdict().items() if isinstance(a, np.ndarray)})
     return pb, *_kernels.plain(pb, err), ("propagated" if noise else "none")
+
+
+def compile_kernels() -> None:
+    """Compile (or load from the cache) the per-frame estimation kernel: one frame of the paper's actuator.
+
+    Every estimate of one frame, a live block or a batch below ``_PARALLEL_MIN`` frames
+    runs this one compiled kernel, whatever its constraint, objective or noise model.
+    """
+    from bendsense.config import load_config
+
+    estimate_force(np.full(16, 5.0), 40e3, load_config(), noise_std=0.02)
