@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from bendsense import output
+from bendsense._io import check_regular_file
 from bendsense.errors import ArgumentError, BendsenseError, OutputError, SessionError
 
 __all__ = ["SessionOutcome", "BatchReport", "discover_sessions", "process_session", "process_sessions"]
@@ -263,7 +264,8 @@ def discover_sessions(paths, *, recursive: bool = False, exclude=None) -> list[P
     Raises
     ------
     SessionError
-        If a path does not exist.
+        If a path does not exist, or a session found is neither a regular file nor a
+        directory (a FIFO, a device).
     """
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
@@ -278,6 +280,8 @@ def discover_sessions(paths, *, recursive: bool = False, exclude=None) -> list[P
             found.append(p)
     seen, unique = set(), []
     for p in found:
+        if not p.is_dir():  # a FIFO or a device would block or never end: refused before any work
+            check_regular_file(p, "session (a session CSV or a native session directory)", SessionError)
         key = p.resolve()
         if key not in seen:
             seen.add(key)

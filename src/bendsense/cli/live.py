@@ -207,8 +207,11 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
     the tip force of every frame, and writes DIR/session, DIR/results, DIR/demo.png
     with a summary of the force error against the simulated truth.
     """
-    if rate_hz > 65535:
-        raise click.BadParameter(f"expected at most 65535, got {rate_hz:g}", param_hint="--rate")
+    from bendsense.device.simdevice import max_rate_hz
+
+    if rate_hz > max_rate_hz(16):  # the demo's board: 16 channels
+        raise click.BadParameter(f"expected at most {max_rate_hz(16):,} Hz (what a USB full-speed link carries "
+                                 f"for 16 channels), got {rate_hz:g}", param_hint="--rate")
     from bendsense import output
     from bendsense.apps.demo import run_demo
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from bendsense._io import check_regular_file
 from bendsense.errors import SessionError
 from bendsense.session.base import Session
 from bendsense.session.csvfile import read_session_csv, write_session_csv
@@ -42,11 +43,13 @@ def read_session(path: str | os.PathLike) -> Session:
     Raises
     ------
     SessionError
-        If ``path`` does not exist or is not a readable session.
+        If ``path`` does not exist, is neither a regular file nor a directory (a FIFO,
+        a device), or is not a readable session.
     """
     path = Path(path)
     if path.is_dir():
         return read_session_dir(path)
     if not path.exists():
         raise SessionError(f"{path}: no such file or session directory")
+    check_regular_file(path, "session (a session CSV or a native session directory)", SessionError)
     return read_session_csv(path)

@@ -58,7 +58,7 @@ import numpy as np
 import yaml
 
 from bendsense import validation as check
-from bendsense._io import load_yaml
+from bendsense._io import check_regular_file, load_yaml, open_regular
 from bendsense.errors import SessionError
 from bendsense.frames import NO_PRESSURE, SAMPLE_FIELDS
 from bendsense.plausibility import check_pressure_column, check_time_column
@@ -552,8 +552,10 @@ def read_records(path) -> tuple[np.ndarray, dict]:
                            f"{size}-byte records (an edited record dtype?)")
     frames = path / FRAMES
     try:
-        nbytes = frames.stat().st_size
-    except FileNotFoundError:
+        nbytes = check_regular_file(frames, "frames.bin of a session", SessionError).st_size
+    except SessionError:
+        if frames.exists() or frames.is_symlink():
+            raise
         nbytes = 0
     n, torn = divmod(nbytes, size)
     # version 1 has no flag: its writer added n_records at a clean stop only
@@ -575,7 +577,11 @@ def read_records(path) -> tuple[np.ndarray, dict]:
         note = f"; a torn last record ({torn} of {size} bytes) ignored" if torn else ""
         log.warning("%s: unfinished recording (no clean stop: killed, crashed or still recording); %s records "
                     "present%s", path, f"{n:,}", note)
-    records = np.fromfile(frames, dtype=dtype, count=n) if n else np.zeros(0, dtype=dtype)
+    if n:
+        with open_regular(frames, "frames.bin of a session", SessionError) as fh:
+            records = np.fromfile(fh, dtype=dtype, count=n)
+    else:
+        records = np.zeros(0, dtype=dtype)
     bits = meta.get("adc_bits")
     if n and bits and records.dtype.fields["adc"][0].base.kind == "u":
         top = int(records["adc"].max())

@@ -181,6 +181,8 @@ man("alias_bomb.yaml", r"YAML expands to more than 50,000 nodes", text="\n".join
 man("latin1.yaml", r"not UTF-8 text \(byte offset \d+, line 1\)", raw="# r\u00e9glage\nflat: rec/flat.csv\n".encode("latin-1"))
 man("binary.yaml", r"binary data, not a manifest", raw=b"\x00\x01\x02flat")
 man("utf16.yaml", r"UTF-16 text, not UTF-8", raw="flat: rec/flat.csv\n".encode("utf-16"))
+man("recording_dev_zero.yaml", r"flat: recording '/dev/zero' is a character device, not a session CSV",
+    {"flat": "/dev/zero", "strips": ok})
 
 # ---- native sessions: directories; "expect" holds the regex
 NAT = ROOT / "native"
@@ -334,6 +336,26 @@ cases = {
                                        r"free_bending_pa_holds_kpa\.csv: line 1, column pressure_pa: every reading is below "
                                        r"1 kPa \(largest 120\); looks like kilopascals"),
 }
+# inputs that are not files, and what the machine cannot do
+cases.update({
+    "load_dev_zero": ("load /dev/zero --calibration {good_cal} reconstruct save out",
+                      r"^Error: /dev/zero: a character device, not a session \(a session CSV or a native session directory\)"),
+    "load_calibration_dev_zero": ("load {good_csv} --calibration /dev/zero reconstruct save out",
+                                  r"^Error: /dev/zero: a character device, not a calibration"),
+    "load_config_dev_zero": ("load {good_csv} --config /dev/zero --calibration {good_cal} reconstruct save out",
+                             r"^Error: /dev/zero: a character device, not a config"),
+    "calibrate_dev_zero": ("calibrate /dev/zero -o cal.yaml", r"^Error: /dev/zero: a character device, not a manifest"),
+    "process_dev_zero": ("process /dev/zero --calibration {good_cal} -o out", r"^Error: /dev/zero: a character device"),
+    "identify_dev_zero": ("identify stiffness /dev/zero -o cfg.yaml", r"^Error: /dev/zero: a character device, not a CSV"),
+    "sim_device_replay_dev_zero": ("sim-device --replay /dev/zero", r"^Error: /dev/zero: a character device, not a session"),
+    "plot_results_dev_null": ("plot /dev/null -o fig.png", r"/dev/null"),
+    "sim_device_rate_beyond_the_link": ("sim-device --rate 1e9",
+                                        r"--rate: expected at most 22,943 Hz \(what a USB full-speed link carries"),
+    "demo_rate_beyond_the_link": ("demo -o d --rate 100000", r"--rate: expected at most 22,943 Hz"),
+    "simulate_frames_beyond_memory": ("simulate tip-loads -o sim --frames 100000000",
+                                      r"--frames: tip-loads would hold 4,400,000,000 frames in memory, about 52\.8 TB; "
+                                      r"this machine has .* available"),
+})
 for name, (args, expect) in cases.items():
     (CLI / f"{name}.yaml").write_text(yaml.safe_dump({"args": args, "expect": expect}, sort_keys=False, width=200))
 print(len(cases), "cli cases")
