@@ -143,7 +143,7 @@ def _parse_session_csv(text: str, source: str) -> Session:
     for name in ("pressure_pa", "pressure_kpa"):
         if name in values:
             check_pressure_column(name, values[name], header_line)
-    check_time_column(t, source)
+    check_time_column(t, source, row_lines)
     if "pressure_pa" in values:
         pressure = values["pressure_pa"]
     elif "pressure_kpa" in values:

@@ -68,6 +68,16 @@ put(S / "ch0.csv", "t_s,ch0,ch1\n0,1,2\n", r"line 2, column ch0: signal columns 
 put(S / "ch01.csv", "t_s,ch01,ch02\n0,1,2\n", r"line 2, column ch01: signal columns are numbered from 1")
 put(S / "empty_header_cell.csv", "t_s,,ch1\n0,1,2\n", r"line 2: empty column name in header")
 put(S / "row_too_long.csv", "t_s,ch1\n0,1\n1,2,3\n", r"line 4: expected 2 columns, got 3")
+# time that does not increase strictly (docs/formats.md, "Time"): refused with the first rows
+rows4 = csv_text(rows=6).splitlines()
+put(S / "t_backwards.csv", "\n".join(rows4[:4] + [rows4[4].replace("0.03,", "0.01,", 1)] + rows4[5:]) + "\n",
+    r"line 6, column t_s: time runs backwards \(0\.01 s after 0\.02 s on line 5\); t_s must increase from row to row")
+put(S / "t_repeated.csv", "\n".join(rows4[:3] + [rows4[3].replace("0.02,", "0.01,", 1)] + rows4[4:]) + "\n",
+    r"line 5, column t_s: time repeats \(0\.01 s after 0\.01 s on line 4\)")
+put(S / "t_shuffled.csv", "\n".join([rows4[0], rows4[3], rows4[1], rows4[5], rows4[2], rows4[6], rows4[4]]) + "\n",
+    r"line 4, column t_s: time runs backwards \(0 s after 0\.02 s on line 3\); 3 rows out of order in all "
+    r"\(also lines 6, 8\)")
+put(S / "t_all_equal.csv", "t_s,ch1\n5,1\n5,2\n5,3\n", r"line 4, column t_s: time repeats \(5 s after 5 s on line 3\)")
 put(S / "nul_in_middle.csv", csv_text()[:40] + "\x00" + csv_text()[40:],
     r"binary data, not a session CSV \(NUL byte at byte offset \d+\)")
 
