@@ -14,13 +14,12 @@ import socket
 
 import pytest
 from click.testing import CliRunner
+from test_invalid_corpus import GOOD_CAL, GOOD_CSV
 
 import bendsense
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from bendsense.errors import ConfigError, DeviceError, SessionError
-
-from test_invalid_corpus import GOOD_CAL, GOOD_CSV
+from bendsense.errors import ArgumentError, ConfigError, DeviceError, SessionError
 
 
 class Hung(Exception):
@@ -186,7 +185,7 @@ def test_simulate_refuses_frames_beyond_the_free_memory(tmp_path, monkeypatch):
     assert not (tmp_path / "sim").exists()
     # the bound is the machine's: with 1 GB free, 5,000 frames per configuration (2.9 GB) are too many
     monkeypatch.setattr(scenarios, "available_memory_bytes", lambda: 1e9)
-    with pytest.raises(bendsense.errors.ArgumentError, match=r"frames_per_config: .* \(at most 1,325 frames per configuration\)"):
+    with pytest.raises(ArgumentError, match=r"frames_per_config: .* \(at most 1,325 frames per configuration\)"):
         scenarios.simulate("tip-loads", tmp_path / "sim2", frames_per_config=5000)
     assert not (tmp_path / "sim2").exists()
 

@@ -52,8 +52,10 @@ def check_regular_file(path: str | os.PathLike, what: str, error=None) -> os.sta
         The exception class (default :class:`~bendsense.errors.ConfigError`).
     """
     from bendsense.errors import ConfigError
+    from bendsense.validation import path as _path
 
     error = error or ConfigError
+    path = _path("path", path, error=error)
     try:
         st = os.stat(path)
     except FileNotFoundError:
@@ -87,8 +89,10 @@ def open_regular(path: str | os.PathLike, what: str, error=None):
         Binary, buffered; the caller closes it.
     """
     from bendsense.errors import ConfigError
+    from bendsense.validation import path as _path
 
     error = error or ConfigError
+    path = _path("path", path, error=error)
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
@@ -113,7 +117,8 @@ def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int 
     """The UTF-8 text of ``path`` (a leading byte-order mark dropped).
 
     Every problem is one line that starts with the path: the file cannot be read,
-    is not a regular file (a FIFO, a device, a directory: :func:`open_regular`), is larger than ``max_bytes`` (None: no bound; session CSVs of hours are large),
+    is not a regular file (a FIFO, a device, a directory: :func:`open_regular`), is
+    larger than ``max_bytes`` (None: no bound; session CSVs of hours are large),
     holds NUL bytes (binary, not text), or is not UTF-8 (with the byte offset and
     line of the first bad byte).
     """

@@ -379,7 +379,7 @@ def process_session(
         # from a worker process would only clutter the console
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            counts, lost, tx_drops = _run(
+            counts, lost, tx_drops, pressure_ignored = _run(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
@@ -394,6 +394,8 @@ def process_session(
         (counts.out_of_range, "pressure out of range")) if n]
     if lost or tx_drops:
         notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")
+    if pressure_ignored:
+        notes.append("the fallback pressure ignored (every frame has a pressure reading)")
     return SessionOutcome(
         status="ok",
         frames=frames,
@@ -411,15 +413,21 @@ def process_session(
 
 
 def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite):
+    import numpy as np
+
     from bendsense.pipeline import process
     from bendsense.session import read_session
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
-    processed = process(read_session(path), config, calibration, constraint=constraint, method=method,
+    session = read_session(path)
+    # (a worker's log line would be lost in the console: the session's report row says it)
+    ignored = pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
+    processed = process(session, config, calibration, constraint=constraint, method=method,
                         objective=objective, pressure_pa=pressure_pa, estimate=estimate)
     session = processed.session
     processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made
-    return processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
+    return (processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)),
+            ignored)
 
 
 # --- many sessions ------------------------------------------------------------------------

@@ -197,7 +197,8 @@ def check_time_column(t_s: np.ndarray, source: str, rows=None, error=SessionErro
     also = ""
     if bad.size > 1:
         more = ", ".join(where(int(j)).split()[-1] for j in bad[1:4])
-        noun = ("lines" if rows is not None else "frames") if bad.size > 2 else ("line" if rows is not None else "frame")
+        noun = "line" if rows is not None else "frame"
+        noun += "s" if bad.size > 2 else ""
         also = f"; {bad.size} rows out of order in all (also {noun} {more}"
         also += ", ...)" if bad.size > 4 else ")"
     raise error(f"{where(k)}, column t_s: time {how} ({t[k]:.9g} s after {t[k - 1]:.9g} s on "

@@ -144,7 +144,8 @@ def _sigterm_as_interrupt():
 )
 @click.option("--seconds", type=Finite(min=0, min_open=True), help="Recording time [s] (default: until Ctrl-C).")
 @make_overwrite_option("Replace an existing session.")
-@click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
+@click.option("--baud", type=click.IntRange(50, 12_000_000), default=None,
+              help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--dialect", type=click.Choice(["binary", "line"]), default="binary", show_default=True)
 @click.option("--channels", type=int, help="Line dialect: number of channels (columns ch1..chN).")
 @click.option("--columns", help="Line dialect: comma-separated column layout, e.g. seq,t_us,pressure_pa,ch1,...")

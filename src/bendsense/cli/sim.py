@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from bendsense import output
-from bendsense.cli._common import SEED, Finite, InterspersedCommand, config_option, overwrite_option, step_io
+from bendsense.cli._common import SEED, Finite, InterspersedCommand, config_option, overwrite_option, say, step_io
 
 # kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
 _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
@@ -55,7 +55,6 @@ def simulate(
     tip-loads (20-120 kPa x 0-0.3 N), contact (12 random normal contact forces),
     time-varying (10 s at 100 Hz), or all.
     """
-
     options = {
         "noise_counts": noise_counts,
         "ei_error": ei_error,
@@ -81,7 +80,7 @@ def simulate(
         for name, summary in summaries.items():
             excluded = summary["excluded_frames"]
             note = f", {excluded} excluded (beam solve failed)" if excluded else ""
-            click.echo(
+            say(
                 f"{name}: wrote {len(summary['files'])} files, {summary['frames']} frames{note} to {summary['path']}"
             )
         return state

@@ -362,6 +362,12 @@ cases.update({
     "sim_device_rate_beyond_the_link": ("sim-device --rate 1e9",
                                         r"--rate: expected at most 22,943 Hz \(what a USB full-speed link carries"),
     "demo_rate_beyond_the_link": ("demo -o d --rate 100000", r"--rate: expected at most 22,943 Hz"),
+    "load_twice": ("load {good_csv} --calibration {good_cal} reconstruct save a load {good_csv} reconstruct save b",
+                   r"'load' given 2 times \(.*session\.csv, .*session\.csv\); a chain processes one session"),
+    "record_baud_zero": ("record loop:// -o rec --baud 0", r"'--baud': 0 is not in the range 50<=x<=12000000"),
+    "record_baud_negative": ("record loop:// -o rec --baud -9600", r"'--baud': -9600 is not in the range"),
+    "live_baud_absurd": ("live loop:// --calibration {good_cal} --baud 1000000000",
+                         r"'--baud': 1000000000 is not in the range 50<=x<=12000000"),
     "simulate_frames_beyond_memory": ("simulate tip-loads -o sim --frames 100000000",
                                       r"--frames: tip-loads would hold 4,400,000,000 frames in memory, about 52\.8 TB; "
                                       r"this machine has .* available"),
