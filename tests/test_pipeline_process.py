@@ -143,8 +143,8 @@ def test_pressure_out_of_range_and_extrapolated_frames_are_counted():
 
 def test_mistakes_are_one_line():
     cal = linear_calibration()
-    with pytest.raises(ArgumentError, match=r"calibration: expected a Calibration \(Calibration.load\(path\)\), got "
-                                            "NoneType"):
+    with pytest.raises(ArgumentError, match=r"calibration: expected a Calibration \(Calibration.load\(path\), or the "
+                                            r"path\), got NoneType"):
         process(session(), CONFIG)
     with pytest.raises(SessionError, match=r"^the session: no frames$"):
         process(Session(np.zeros(0), np.zeros((0, N)), np.zeros(0)), CONFIG, cal)

@@ -124,12 +124,13 @@ def test_plausible_pressure_columns_pass(tmp_path, column, values):
     np.testing.assert_array_equal(read_session_csv(path).pressure_pa, np.array(values.split(","), float) * scale)
 
 
-def test_all_equal_time_stamps_warn(tmp_path, caplog):
+def test_all_equal_time_stamps_are_refused(tmp_path):
+    # (they were a warning: plots over time meaningless; tracking and windows are wrong too)
     path = tmp_path / "s.csv"
     path.write_text("t_s,ch1\n0,1\n0,2\n0,3\n")
-    with caplog.at_level("WARNING", logger="bendsense"):
+    with pytest.raises(SessionError, match=r"line 3, column t_s: time repeats \(0 s after 0 s on line 2\); 2 rows out "
+                                           r"of order in all \(also line 4\)"):
         read_session_csv(path)
-    assert "all 3 time stamps are 0 s" in caplog.text
 
 
 def test_an_infinite_pressure_is_no_missing_reading(tmp_path):

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import os
+import stat
 
-__all__ = ["load_yaml", "parse_yaml", "read_text", "safe_load"]
+__all__ = ["check_regular_file", "file_kind", "load_yaml", "open_regular", "parse_yaml", "read_text", "safe_load"]
 
 
 MAX_YAML_BYTES = 2 * 2**20
@@ -13,11 +14,111 @@ MAX_YAML_NODES = 50_000
 """Most YAML nodes a document may expand to, aliases counted at every use."""
 
 
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def file_kind(mode: int) -> str | None:
+    """What a file of ``st_mode`` ``mode`` is, for a message (``"a FIFO (named pipe)"``); None: a regular file."""
+    if stat.S_ISREG(mode):
+        return None
+    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
+
+
+def _not_regular(path, kind: str, what: str, error):
+    return error(f"{path}: {kind}, not a {what}; give a regular file")
+
+
+def check_regular_file(path: str | os.PathLike, what: str, error=None) -> os.stat_result:
+    """``os.stat`` of ``path``, refusing anything but a regular file with one line naming what it is.
+
+    A FIFO blocks its reader until something writes to it, ``/dev/zero`` never ends,
+    a socket cannot be read as a file: every reader of a user's file (session,
+    config, calibration, manifest, recording) checks its path here, or opens it with
+    :func:`open_regular`, before reading a byte.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file.
+    what : str
+        What the file should be, for the message (``"session CSV"``).
+    error : type, optional
+        The exception class (default :class:`~bendsense.errors.ConfigError`).
+    """
+    from bendsense.errors import ConfigError
+    from bendsense.validation import path as _path
+
+    error = error or ConfigError
+    path = _path("path", path, error=error)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise error(f"{path}: cannot read {what}: no such file") from None
+    except OSError as err:
+        raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
+    kind = file_kind(st.st_mode)
+    if kind is not None:
+        raise _not_regular(path, kind, what, error)
+    return st
+
+
+def open_regular(path: str | os.PathLike, what: str, error=None):
+    """``path`` opened for binary reading, if it is a regular file (else one line naming what it is).
+
+    The file is opened non-blocking and checked on the open descriptor, so that a
+    FIFO neither blocks the open nor can be swapped in between a check and the open.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file.
+    what : str
+        What the file should be, for the message (``"session CSV"``).
+    error : type, optional
+        The exception class (default :class:`~bendsense.errors.ConfigError`).
+
+    Returns
+    -------
+    file object
+        Binary, buffered; the caller closes it.
+    """
+    from bendsense.errors import ConfigError
+    from bendsense.validation import path as _path
+
+    error = error or ConfigError
+    path = _path("path", path, error=error)
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise error(f"{path}: cannot read {what}: no such file") from None
+    except IsADirectoryError:  # (platforms that cannot open a directory)
+        raise _not_regular(path, "a directory", what, error) from None
+    except OSError as err:
+        raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
+    try:
+        kind = file_kind(os.fstat(fd).st_mode)
+        if kind is not None:
+            raise _not_regular(path, kind, what, error)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
 def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int | None = None) -> str:
     """The UTF-8 text of ``path`` (a leading byte-order mark dropped).
 
     Every problem is one line that starts with the path: the file cannot be read,
-    is larger than ``max_bytes`` (None: no bound; session CSVs of hours are large),
+    is not a regular file (a FIFO, a device, a directory: :func:`open_regular`), is
+    larger than ``max_bytes`` (None: no bound; session CSVs of hours are large),
     holds NUL bytes (binary, not text), or is not UTF-8 (with the byte offset and
     line of the first bad byte).
     """
@@ -25,10 +126,8 @@ def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int 
 
     error = error or ConfigError
     try:
-        with open(path, "rb") as fh:
+        with open_regular(path, what, error) as fh:
             data = fh.read() if max_bytes is None else fh.read(max_bytes + 1)
-    except FileNotFoundError:
-        raise error(f"{path}: cannot read {what}: no such file") from None
     except OSError as err:
         raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
     if max_bytes is not None and len(data) > max_bytes:

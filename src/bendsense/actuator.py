@@ -32,7 +32,7 @@ import numpy as np
 
 from bendsense.config import FREE_BENDING_PARAMETERS, MODEL_PARAMETERS, STIFFNESS_PARAMETERS, StiffnessConfig
 from bendsense.errors import ArgumentError, ConfigError, ConvergenceError
-from bendsense.validation import short
+from bendsense.validation import float_array, instance, short
 
 __all__ = [
     "pressure_moment",
@@ -60,7 +60,7 @@ _N_PHI = 16
 
 
 def _finite(name: str, value) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
+    arr = float_array(name, value)
     if not np.all(np.isfinite(arr)):
         bad = arr[~np.isfinite(arr)].flat[0]
         raise ArgumentError(f"{name}: must be finite, got {bad!r}")
@@ -576,6 +576,9 @@ class FreeBendingModel:
         config : Config
             Its ``actuator``, ``material`` and ``estimation.pressure_max_pa``.
         """
+        from bendsense.config import Config
+
+        instance("config", config, Config, "bendsense.load_config(path)")
         act, mat = config.actuator, config.material
         return cls(
             chamber_radius_m=act.chamber_radius_m,

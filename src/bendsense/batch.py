@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from bendsense import output
+from bendsense._io import check_regular_file
 from bendsense.errors import ArgumentError, BendsenseError, OutputError, SessionError
 
 __all__ = ["SessionOutcome", "BatchReport", "discover_sessions", "process_session", "process_sessions"]
@@ -263,7 +264,8 @@ def discover_sessions(paths, *, recursive: bool = False, exclude=None) -> list[P
     Raises
     ------
     SessionError
-        If a path does not exist.
+        If a path does not exist, or a session found is neither a regular file nor a
+        directory (a FIFO, a device).
     """
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
@@ -278,6 +280,8 @@ def discover_sessions(paths, *, recursive: bool = False, exclude=None) -> list[P
             found.append(p)
     seen, unique = set(), []
     for p in found:
+        if not p.is_dir():  # a FIFO or a device would block or never end: refused before any work
+            check_regular_file(p, "session (a session CSV or a native session directory)", SessionError)
         key = p.resolve()
         if key not in seen:
             seen.add(key)
@@ -375,7 +379,7 @@ def process_session(
         # from a worker process would only clutter the console
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            counts, lost, tx_drops = _run(
+            counts, lost, tx_drops, pressure_ignored = _run(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
@@ -390,6 +394,8 @@ def process_session(
         (counts.out_of_range, "pressure out of range")) if n]
     if lost or tx_drops:
         notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")
+    if pressure_ignored:
+        notes.append("the fallback pressure ignored (every frame has a pressure reading)")
     return SessionOutcome(
         status="ok",
         frames=frames,
@@ -407,15 +413,21 @@ def process_session(
 
 
 def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite):
+    import numpy as np
+
     from bendsense.pipeline import process
     from bendsense.session import read_session
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
-    processed = process(read_session(path), config, calibration, constraint=constraint, method=method,
+    session = read_session(path)
+    # (a worker's log line would be lost in the console: the session's report row says it)
+    ignored = pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
+    processed = process(session, config, calibration, constraint=constraint, method=method,
                         objective=objective, pressure_pa=pressure_pa, estimate=estimate)
     session = processed.session
     processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made
-    return processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0))
+    return (processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)),
+            ignored)
 
 
 # --- many sessions ------------------------------------------------------------------------

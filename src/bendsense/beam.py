@@ -48,6 +48,7 @@ from bendsense import _jit
 from bendsense import beam_kernels as _k
 from bendsense.errors import ArgumentError, ConvergenceError, ConvergenceWarning
 from bendsense.status import Status
+from bendsense.validation import short
 
 __all__ = [
     "BeamSolution",
@@ -643,6 +644,8 @@ def solve_beam(
     F = _as_vector("force_n", force_n)
     w = _as_vector("distributed_load_n_per_m", distributed_load_n_per_m)
     base = _as_float("base_angle_rad", base_angle_rad)
+    if not isinstance(method, str) or method not in ("fast", "shooting", "paper"):
+        raise ArgumentError(f"method: must be one of fast, shooting, paper, got {short(method)}")
     s = _grid(L, s_m)
     try:
         np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1])

@@ -636,7 +636,11 @@ def save_config(config: Config, path: str | os.PathLike, *, overwrite: bool = Tr
         Replace an existing file; False refuses one.
     """
     from bendsense import output
+    from bendsense.validation import instance
+    from bendsense.validation import path as _path
 
+    instance("config", config, Config, "bendsense.load_config(path)")
+    path = _path("path", path)
     text = "# bendsense config (actuator, sensor and model parameters; docs/formats.md)\n"
     output.write_text(path, text + yaml.safe_dump(config.to_dict(), sort_keys=False), overwrite=overwrite,
                       writer="bendsense identify")

@@ -776,7 +776,8 @@ class LineDecoder(_StreamDecoder):
     def __init__(self, columns=None, n_channels: int | None = None, max_line_bytes: int = 4096):
         if columns is None:
             if n_channels is None:
-                raise FrameError("LineDecoder: give columns or n_channels")
+                raise FrameError("the line dialect needs its column layout: give columns (e.g. seq,t_us,ch1,...) "
+                                 "or n_channels")
             columns = [f"ch{i + 1}" for i in range(_check_int("n_channels", n_channels, 1, MAX_CHANNELS))]
         columns = [str(c).strip() for c in columns]
         chans = {}

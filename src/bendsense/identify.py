@@ -708,7 +708,8 @@ def fit_stiffness(
     if config is None:
         config = load_config()
     if not isinstance(data, StiffnessData):
-        raise ArgumentError(f"data: expected StiffnessData, got {type(data).__name__}")
+        raise ArgumentError(f"data: expected the table of hanging-weight frames (read_stiffness_csv(path)), got "
+                            f"{type(data).__name__}")
     if not (math.isfinite(pressure_tolerance_pa) and pressure_tolerance_pa >= 0):
         raise ArgumentError(f"pressure_tolerance_pa: must be finite and >= 0, got {pressure_tolerance_pa!r}")
     start = {n: getattr(config.stiffness, n) for n in STIFFNESS_PARAMS}

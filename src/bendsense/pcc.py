@@ -38,7 +38,7 @@ from numba import njit, prange
 from bendsense import _jit
 from bendsense.errors import ArgumentError
 from bendsense.shift_errors import horner
-from bendsense.validation import float_array
+from bendsense.validation import float_array, short
 
 if TYPE_CHECKING:  # pragma: no cover
     from bendsense.calibration import Calibration
@@ -86,10 +86,10 @@ class _Grid:
     __slots__ = ("lengths", "s", "seg", "sigma", "half_sigma", "total", "scale", "scale_one", "half_lengths")
 
     def __init__(self, lengths_m, s_m):
-        lengths = np.asarray(lengths_m, dtype=float)
+        lengths = float_array("lengths_m", lengths_m)
         if lengths.ndim != 1 or lengths.size == 0 or not np.all(lengths > 0):
-            raise ArgumentError(f"lengths_m: expected a 1-D array of positive segment lengths, got {lengths_m!r}")
-        s = np.asarray(s_m, dtype=float)
+            raise ArgumentError(f"lengths_m: expected a 1-D array of positive segment lengths, got {short(lengths_m)}")
+        s = float_array("s_m", s_m)
         if s.ndim != 1:
             raise ArgumentError(f"s_m: expected a 1-D array of arc lengths, got shape {s.shape}")
         bounds = np.concatenate(([0.0], np.cumsum(lengths)))
@@ -116,8 +116,8 @@ class _Grid:
 
 
 def _grid(lengths_m, s_m) -> _Grid:
-    lengths = np.ascontiguousarray(lengths_m, dtype=float)
-    s = np.ascontiguousarray(s_m, dtype=float)
+    lengths = np.ascontiguousarray(float_array("lengths_m", lengths_m))
+    s = np.ascontiguousarray(float_array("s_m", s_m))
     return _grid_of_bytes(lengths.tobytes(), lengths.shape, s.tobytes(), s.shape)
 
 
@@ -626,7 +626,13 @@ def _paper_sensor() -> SensorConfig:
 def _resolve_sensor(sensor):
     if sensor is None:
         return _paper_sensor()
-    return getattr(sensor, "sensor", sensor)  # a whole Config is accepted too
+    from bendsense.config import SensorConfig
+
+    sensor = getattr(sensor, "sensor", sensor)  # a whole Config is accepted too
+    if not isinstance(sensor, SensorConfig):
+        raise ArgumentError(f"sensor: expected a SensorConfig or a Config (bendsense.load_config(path)), got "
+                            f"{type(sensor).__name__}")
+    return sensor
 
 
 def reconstruct(

@@ -28,6 +28,7 @@ on one core.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -37,6 +38,8 @@ import numpy as np
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.results import NOT_IDENTIFIABLE, Results
+
+log = logging.getLogger("bendsense")
 
 __all__ = [
     "FrameCounts",
@@ -48,6 +51,7 @@ __all__ = [
     "Processed",
     "estimation_options",
     "process",
+    "warn_pressure_fallback",
 ]
 
 #: Iteration limit of a live force estimate. A warm-started frame converges in a few
@@ -172,6 +176,30 @@ def _source(session) -> str:
     return session.source or "the session"
 
 
+def warn_pressure_fallback(session, name: str = "pressure_pa") -> None:
+    """Warn (one log line) when a fallback pressure ``name`` does not apply to every frame of ``session``.
+
+    The fallback fills only frames without a pressure reading: given for a session
+    whose frames all have one, it changes nothing, and a user who meant it to replace
+    the recorded pressure must be told.
+
+    Parameters
+    ----------
+    session : Session
+        The session.
+    name : str, default "pressure_pa"
+        The argument or option, for the message (``"--pressure-kpa"``).
+    """
+    has = np.isfinite(session.pressure_pa)
+    n = int(has.sum())
+    if n == len(session):
+        log.warning("%s ignored: every frame of %s has a pressure reading (the fallback fills only frames "
+                    "without one)", name, _source(session))
+    elif n:
+        log.warning("%s fills the %d of %d frames of %s without a pressure reading; the other %d keep their "
+                    "reading", name, len(session) - n, len(session), _source(session), n)
+
+
 def process(session, config=None, calibration=None, *, constraint=None, objective=None, method=None,
             pressure_pa=None, estimate: bool = True, points: int | None = None, shape=None,
             push_only: bool | None = None, tip_angle_source: str | None = None, calibration_source: str = "",
@@ -180,12 +208,15 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
 
     Parameters
     ----------
-    session : Session
-        Signals and pressure of the frames (:func:`bendsense.read_session`).
-    config : Config, optional
-        Sensor, actuator and estimation settings; default the paper's prototype.
-    calibration : Calibration
-        Signal → shift calibration (paper eq. 1–2); required.
+    session : Session or path
+        Signals and pressure of the frames (:func:`bendsense.read_session`), or the path
+        of a session CSV or native session directory to read. Its ``t_s`` must increase
+        strictly (docs/formats.md, "Time").
+    config : Config or path, optional
+        Sensor, actuator and estimation settings (or the config YAML); default the
+        paper's prototype.
+    calibration : Calibration or path
+        Signal → shift calibration (paper eq. 1–2), or its YAML; required.
     constraint, objective, method : str, optional
         Force constraint, what the fit compares and the estimator; None: the config's
         (:func:`estimation_options`).
@@ -219,25 +250,42 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     Raises
     ------
     SessionError
-        If the session has no frames, its channels do not match the calibration and the
-        sensor, or (with ``estimate``) frames have no pressure and none is given.
+        If the session has no frames, time that does not increase, its channels do not
+        match the calibration and the sensor, or (with ``estimate``) frames have no
+        pressure and none is given.
     ArgumentError
-        For a bad option (the message names it).
+        For a bad option or an argument of the wrong type (the message names it).
     """
+    import os
+
+    from bendsense import validation as check
     from bendsense.calibration import Calibration
+    from bendsense.config import Config, load_config
     from bendsense.pcc import reconstruct
-    from bendsense.plausibility import check_channels
+    from bendsense.plausibility import check_channels, check_time_column
+    from bendsense.session import Session, read_session
 
+    # the obvious alternative to each object: the path of its file
+    if isinstance(session, (str, os.PathLike)):
+        session = read_session(session)
+    if isinstance(config, (str, os.PathLike)):
+        config = load_config(config)
+    if isinstance(calibration, (str, os.PathLike)):
+        calibration_source = calibration_source or str(calibration)
+        calibration = Calibration.load(calibration)
+    check.instance("session", session, Session, "bendsense.read_session(path), or the path")
     if config is None:
-        from bendsense.config import load_config
-
         config = load_config()
+    check.instance("config", config, Config, "bendsense.load_config(path), or the path")
     if not isinstance(calibration, Calibration):
-        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
+        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path), or the path), got "
                             f"{type(calibration).__name__}")
     if len(session) == 0:
         raise SessionError(f"{_source(session)}: no frames")
+    check_time_column(session.t_s, _source(session), error=ArgumentError if not session.source else SessionError)
     if pressure_pa is not None:
+        pressure_pa = check.number("pressure_pa", pressure_pa)
+        warn_pressure_fallback(session)
         session = session.with_pressure(pressure_pa)
     check_channels(session, calibration, config.sensor, calibration_source=calibration_source)
     if estimate and not session.has_pressure:
@@ -541,6 +589,7 @@ class LiveProcessor:
         self.calibration = calibration
         self.constraint, self.method, self.objective = estimation_options(self.config, constraint, method, objective)
         self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
+        self._fallback_told = False
         self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
         self.estimate = bool(estimate)
         self.options = {"max_iter": LIVE_MAX_ITER, **options}
@@ -606,7 +655,13 @@ class LiveProcessor:
         p = np.full(n, np.nan) if pressure_pa is None else np.broadcast_to(
             np.asarray(pressure_pa, dtype=float), (n,)).copy()
         if self.pressure_pa is not None:
-            p[~np.isfinite(p)] = self.pressure_pa
+            has = np.isfinite(p)
+            if has.any() and not self._fallback_told:
+                # once: a fallback that the board's own readings override must not pass silently
+                log.warning("the fallback pressure %g kPa is ignored for frames with a pressure reading (the board "
+                            "sends one); it fills only frames without", self.pressure_pa / 1e3)
+                self._fallback_told = True
+            p[~has] = self.pressure_pa
         shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
         est = None
         has_p = np.isfinite(p)

@@ -161,19 +161,48 @@ def check_pressure_column(name: str, values: np.ndarray, line, error=SessionErro
                     "looks like pascals: name the column pressure_pa")
 
 
-def check_time_column(t_s: np.ndarray, source: str) -> None:
-    """Warn (log) when every time stamp of a multi-frame session is the same.
+def check_time_column(t_s: np.ndarray, source: str, rows=None, error=SessionError) -> None:
+    """Refuse time stamps that are not finite or do not increase strictly from frame to frame.
+
+    A session whose ``t_s`` runs backwards, repeats or is out of order (rows sorted
+    by another column, two recordings pasted together, a clock reset) would be
+    tracked, windowed and plotted as if nothing were wrong; which order is right
+    cannot be guessed, so it is refused with the first offending rows (docs/formats.md,
+    "Time").
 
     Parameters
     ----------
     t_s : ndarray, shape (frames,)
         Time stamps [s].
     source : str
-        The session's file, for the message.
+        The session's file, for the message (not repeated when a reader adds it).
+    rows : sequence of int, optional
+        The CSV line of each frame; None: frames are named by their 0-based index.
+    error : type, default SessionError
+        The exception class to raise.
     """
-    if t_s.size > 1 and np.all(t_s == t_s[0]):
-        log.warning("%s: all %d time stamps are %g s; plots over time will be meaningless", source, t_s.size,
-                    float(t_s[0]))
+    t = np.asarray(t_s, dtype=float)
+    where = (lambda k: f"line {rows[k]}") if rows is not None else (lambda k: f"frame {k}")
+    finite = np.isfinite(t)
+    if not finite.all():
+        k = int(np.flatnonzero(~finite)[0])
+        raise error(f"{where(k)}, column t_s: must be finite, got {t[k]!r}")
+    if t.size < 2:
+        return
+    bad = np.flatnonzero(np.diff(t) <= 0) + 1
+    if not bad.size:
+        return
+    k = int(bad[0])
+    how = "repeats" if t[k] == t[k - 1] else "runs backwards"
+    also = ""
+    if bad.size > 1:
+        more = ", ".join(where(int(j)).split()[-1] for j in bad[1:4])
+        noun = "line" if rows is not None else "frame"
+        noun += "s" if bad.size > 2 else ""
+        also = f"; {bad.size} rows out of order in all (also {noun} {more}"
+        also += ", ...)" if bad.size > 4 else ")"
+    raise error(f"{where(k)}, column t_s: time {how} ({t[k]:.9g} s after {t[k - 1]:.9g} s on "
+                f"{where(k - 1)}){also}; t_s must increase from row to row")
 
 
 def check_channels(session, calibration, sensor, *, calibration_source: str = "") -> None:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense._io import read_text
+from bendsense._io import open_regular, read_text
 from bendsense.errors import SessionError
 from bendsense.plausibility import OUT_OF_RANGE
 from bendsense.session.cells import parse_column, write_columns
@@ -234,7 +234,7 @@ def read_results(out_dir) -> Results:
     """
     out_dir = Path(out_dir)
     path = out_dir / "results.csv"
-    if not path.is_file():
+    if not path.exists():
         raise SessionError(f"{out_dir}: no results.csv (not a results directory)")
     rows = list(csv.reader(read_text(path, "results CSV", SessionError).splitlines()))
     if not rows:
@@ -261,12 +261,13 @@ def read_results(out_dir) -> Results:
     if missing:
         raise SessionError(f"{path}: not a results.csv of bendsense (no column {missing[0]})")
     npz_path = out_dir / "shape.npz"
+    if not npz_path.exists():
+        raise SessionError(f"{npz_path}: missing (every results directory has one)")
+    # our own file object: np.load leaks its handle when the zip is damaged
+    fh = open_regular(npz_path, "shape.npz", SessionError)
     try:
-        # our own file object: np.load leaks its handle when the zip is damaged
-        with open(npz_path, "rb") as fh, np.load(fh) as npz:
+        with fh, np.load(fh) as npz:
             s_m, positions = np.asarray(npz["s_m"], dtype=float), np.asarray(npz["positions_m"], dtype=float)
-    except FileNotFoundError:
-        raise SessionError(f"{npz_path}: missing (every results directory has one)") from None
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
         raise SessionError(f"{npz_path}: not a shape.npz of bendsense ({' '.join(str(err).split())[:80]})") from None
     frames = len(columns["t_s"])

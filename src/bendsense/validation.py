@@ -12,8 +12,10 @@ YAML in a field stays one short line).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterable
 from numbers import Integral, Real
+from pathlib import Path
 
 import numpy as np
 
@@ -31,6 +33,8 @@ __all__ = [
     "parse_number",
     "float_array",
     "key",
+    "path",
+    "instance",
     "MAX_LENGTH_M",
 ]
 
@@ -297,3 +301,54 @@ def float_array(field: str, value, *, error=ArgumentError) -> np.ndarray:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise fail(field, "numbers", value, error) from None
+
+
+def path(field: str, value, *, error=ArgumentError) -> Path:
+    """``value`` as a :class:`~pathlib.Path`: a non-empty ``str`` or ``os.PathLike`` without NUL characters.
+
+    Parameters
+    ----------
+    field : str
+        The argument, for the message.
+    value : object
+        The value to check.
+    error : type, default ArgumentError
+        The exception class to raise.
+    """
+    if isinstance(value, (str, os.PathLike)):
+        text = os.fspath(value)
+        if isinstance(text, str) and text and "\x00" not in text:
+            return Path(text)
+    raise fail(field, "a file path (str or os.PathLike)", value if isinstance(value, str) else _type(value), error,
+               raw=not isinstance(value, str))
+
+
+def instance(field: str, value, cls: type, how: str = "", *, error=ArgumentError):
+    """``value`` if it is a ``cls``; else the error ``field: expected a <cls> (<how>), got <type>``.
+
+    Parameters
+    ----------
+    field : str
+        The argument, for the message.
+    value : object
+        The value to check.
+    cls : type
+        The class expected.
+    how : str, optional
+        How to get one, for the message (``"bendsense.read_session(path)"``).
+    error : type, default ArgumentError
+        The exception class to raise.
+    """
+    if isinstance(value, cls):
+        return value
+    hint = f" ({how})" if how else ""
+    raise fail(field, f"a {cls.__name__}{hint}", _type(value), error, raw=True)
+
+
+def _type(value) -> str:
+    """What ``value`` is, for a message: its type, with the shape of an array."""
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape}"
+    if value is None:
+        return "None"
+    return type(value).__name__

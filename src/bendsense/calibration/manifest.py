@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bendsense import validation as check
-from bendsense._io import load_yaml
+from bendsense._io import file_kind, load_yaml
 from bendsense.errors import ConfigError
 
 log = logging.getLogger("bendsense")
@@ -62,8 +62,12 @@ def _recording(where: str, value: Any, base: Path) -> Path:
     if not isinstance(value, str) or not value:
         raise check.fail(where, "a file name", value, ConfigError)
     full = base / value
-    if not full.is_file():
+    if not full.exists():
         raise ConfigError(f"{where}: no such recording {check.short(value)} ({check.short(str(full), 200)})")
+    kind = file_kind(full.stat().st_mode)
+    if kind is not None:
+        raise ConfigError(f"{where}: recording {check.short(value)} is {kind}, not a session CSV; "
+                          f"give a regular file ({check.short(str(full), 200)})")
     return full
 
 

@@ -596,6 +596,7 @@ class Calibration:
         SessionError
             For a malformed recording (line and column in the message).
         """
+        manifest_path = check.path("manifest_path", manifest_path)
         return cls.from_data(**load_recordings(manifest_path, sensor), degree=degree, weighting=weighting,
                              sleeve=sleeve)
 
@@ -653,7 +654,7 @@ class Calibration:
         overwrite : bool, default True
             Replace an existing file; False refuses one.
         """
-        io.save(self, path, overwrite=overwrite)
+        io.save(self, check.path("path", path), overwrite=overwrite)
 
     @classmethod
     def from_dict(cls, data: Any) -> Calibration:

@@ -24,6 +24,7 @@ __all__ = [
     "quiet",
     "refuse_existing",
     "save_figure",
+    "say",
     "step_io",
 ]
 
@@ -150,6 +151,12 @@ def quiet() -> bool:
     return bool(isinstance(obj, dict) and obj.get("quiet"))
 
 
+def say(text: str) -> None:
+    """Print ``text`` (a report, a ``wrote ...`` line) unless ``bendsense -q`` was given (only errors then)."""
+    if not quiet():
+        click.echo(text)
+
+
 def save_figure(figure, path: Path, overwrite: bool = False) -> None:
     """Write a matplotlib figure to ``path`` at 120 dpi (atomically), close it and say so."""
     import matplotlib.pyplot as plt
@@ -162,4 +169,4 @@ def save_figure(figure, path: Path, overwrite: bool = False) -> None:
             figure.savefig(tmp, dpi=120, format=fmt, metadata=output.figure_metadata(fmt))
     finally:
         plt.close(figure)
-    click.echo(f"wrote {path}")
+    say(f"wrote {path}")

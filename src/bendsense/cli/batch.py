@@ -23,6 +23,7 @@ from bendsense.cli._common import (
     objective_option,
     overwrite_option,
     quiet,
+    say,
     step_io,
 )
 
@@ -113,7 +114,7 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
         finally:
             if client is not None:
                 client.close()
-        click.echo(report.table())
+        say(report.table())
         state["batch_report"] = report
         if not report.ok:
             click.echo(f"error: {report.n_failed} of {len(report.sessions)} sessions failed", err=True)
@@ -178,7 +179,7 @@ def plot(target, figure_path, shapes, dpi, overwrite):
                 "to plot a results directory use 'plot RESULTS_DIR -o FIG.png'"
             )
         plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite, estimated=estimated)
-        click.echo(f"wrote {out}")
+        say(f"wrote {out}")
         return state
 
     # the figure is checked (suffix, existing file, --overwrite) before any step runs

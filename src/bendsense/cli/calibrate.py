@@ -14,6 +14,7 @@ from bendsense.cli._common import (
     make_config_option,
     make_overwrite_option,
     save_figure,
+    say,
     step_io,
 )
 
@@ -90,8 +91,8 @@ def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_pat
             matplotlib.use("Agg")
             figure = cal.plot()[0].figure
         cal.save(output, overwrite=overwrite)
-        click.echo(cal.report())
-        click.echo(f"wrote {output}")
+        say(cal.report())
+        say(f"wrote {output}")
         if figure is not None:
             save_figure(figure, plot_path, overwrite=overwrite)
         state["calibration"] = cal

@@ -144,7 +144,8 @@ def _sigterm_as_interrupt():
 )
 @click.option("--seconds", type=Finite(min=0, min_open=True), help="Recording time [s] (default: until Ctrl-C).")
 @make_overwrite_option("Replace an existing session.")
-@click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
+@click.option("--baud", type=click.IntRange(50, 12_000_000), default=None,
+              help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--dialect", type=click.Choice(["binary", "line"]), default="binary", show_default=True)
 @click.option("--channels", type=int, help="Line dialect: number of channels (columns ch1..chN).")
 @click.option("--columns", help="Line dialect: comma-separated column layout, e.g. seq,t_us,pressure_pa,ch1,...")
@@ -296,7 +297,8 @@ def record(
 
 @click.command("sim-device", cls=InterspersedCommand)
 @click.option("--rate", "rate_hz", type=Finite(min=0, min_open=True), default=500.0, show_default=True,
-              help="Frame rate [Hz].")
+              help="Frame rate [Hz]; at most what a USB full-speed link carries (~22,900 Hz for 16 channels): "
+                   "a faster board would only queue frames it cannot send.")
 @click.option("--seconds", type=Finite(min=0, min_open=True), help="Run time [s] (default: until Ctrl-C).")
 @click.option("--drop", type=Finite(0, 1), default=0.0, show_default=True, help="Probability of a dropped frame.")
 @click.option("--corrupt", type=Finite(0, 1), default=0.0, show_default=True, help="Probability of a corrupted frame.")
@@ -359,6 +361,11 @@ def sim_device(
         raise click.BadParameter(f"expected 1..64, got {channels}", param_hint="--channels")
     if not 1 <= adc_bits <= 16:
         raise click.BadParameter(f"expected 1..16, got {adc_bits}", param_hint="--adc-bits")
+    from bendsense.device.simdevice import max_rate_hz
+
+    if rate_hz > max_rate_hz(channels):
+        raise click.BadParameter(f"expected at most {max_rate_hz(channels):,} Hz (what a USB full-speed link carries "
+                                 f"for {channels} channels), got {rate_hz:g}", param_hint="--rate")
     if source == "ramp":
         src = ramp_source(channels, adc_bits)
     else:

@@ -15,6 +15,7 @@ from bendsense.cli._common import (
     config_option,
     overwrite_option,
     save_figure,
+    say,
     step_io,
 )
 from bendsense.errors import BendsenseError
@@ -134,7 +135,7 @@ def identify(
             new_config = fit.to_config(config)
         except BendsenseError as err:
             raise click.ClickException(f"{data}: {err}" if str(data) not in str(err) else str(err)) from None
-        click.echo(fit.report())
+        say(fit.report())
         ax = None
         if plot_path is not None:  # drawn before anything is written: a failure leaves no config
             import matplotlib
@@ -142,7 +143,7 @@ def identify(
             matplotlib.use("Agg")
             ax = fit.plot(config=config) if kind == "free-bending" else fit.plot()
         save_config(new_config, output, overwrite=overwrite)
-        click.echo(f"wrote {output}")
+        say(f"wrote {output}")
         if ax is not None:
             save_figure(ax.figure, plot_path, overwrite=overwrite)
         state["config"] = new_config

@@ -17,6 +17,7 @@ from bendsense.cli._common import (
     objective_option,
     overwrite_option,
     quiet,
+    say,
 )
 
 _NO_CALIBRATION = (
@@ -64,7 +65,8 @@ _NO_CALIBRATION = (
     show_default=True,
     help="Upper bound of the display rate [1/s].",
 )
-@click.option("--baud", type=int, default=None, help="Baud rate (default 921600; USB CDC ignores it).")
+@click.option("--baud", type=click.IntRange(50, 12_000_000), default=None,
+              help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --save image.")
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
@@ -152,9 +154,9 @@ def live(
             raise click.ClickException(f"{port}: no frames received; nothing to save")
         view.save(save_path, overwrite=overwrite)
     if stats is not None:
-        click.echo(stats.summary())
+        say(stats.summary())
     if save_path is not None:
-        click.echo(f"wrote {save_path}")
+        say(f"wrote {save_path}")
 
 
 def _window(processor, scale_m_per_n):
@@ -207,8 +209,11 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
     the tip force of every frame, and writes DIR/session, DIR/results, DIR/demo.png
     with a summary of the force error against the simulated truth.
     """
-    if rate_hz > 65535:
-        raise click.BadParameter(f"expected at most 65535, got {rate_hz:g}", param_hint="--rate")
+    from bendsense.device.simdevice import max_rate_hz
+
+    if rate_hz > max_rate_hz(16):  # the demo's board: 16 channels
+        raise click.BadParameter(f"expected at most {max_rate_hz(16):,} Hz (what a USB full-speed link carries "
+                                 f"for 16 channels), got {rate_hz:g}", param_hint="--rate")
     from bendsense import output
     from bendsense.apps.demo import run_demo
 
@@ -245,7 +250,7 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
     finally:
         if bar is not None:
             bar.close()
-    click.echo(result.summary())
+    say(result.summary())
 
 
 COMMANDS = [live, demo]

@@ -24,6 +24,7 @@ from bendsense.cli._common import (
     config_option,
     objective_option,
     overwrite_option,
+    say,
     step_io,
 )
 from bendsense.errors import BendsenseError, SessionError
@@ -108,6 +109,10 @@ def run_steps(steps) -> dict:
         The chain's steps, each taking and returning the state dict.
     """
     steps = [step for step in steps if step is not None]
+    loads = [step for step in steps if getattr(step, "loads", None) is not None]
+    if len(loads) > 1:  # a second load would replace the first session without a word
+        raise click.UsageError(f"'load' given {len(loads)} times ({', '.join(str(s.loads) for s in loads)}); "
+                               "a chain processes one session: use 'bendsense process SESSION... -o OUT' for several")
     targets, inputs, written = [], [], set()
     for step in steps:
         inputs += [p for p in getattr(step, "inputs", ()) if output.resolve(p) not in written]
@@ -140,12 +145,14 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
     def step(state):
         from bendsense.calibration import Calibration
         from bendsense.config import load_config
+        from bendsense.pipeline import warn_pressure_fallback
         from bendsense.session import read_session
 
         session = read_session(session_path)
         if len(session) == 0:
             raise SessionError(f"{session_path}: no frames (an empty recording)")
         if pressure_kpa is not None:
+            warn_pressure_fallback(session, "--pressure-kpa")
             session = session.with_pressure(pressure_kpa * 1e3)
         state.update(
             session=session,
@@ -157,6 +164,7 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
         log.info("loaded %s: %d frames, %d channels", session_path, len(session), session.n_channels)
         return state
 
+    step.loads = session_path
     return step_io(step, inputs=[session_path, config_path, calibration_path])
 
 
@@ -248,7 +256,7 @@ def save(out_dir, overwrite):
         shape = _require(state, "shape", "save", "'reconstruct'")
         write_results(out_dir, state["session"], shape, state.get("estimate"), overwrite=overwrite)
         state["out_dir"] = out_dir
-        click.echo(f"wrote {out_dir}/results.csv and shape.npz ({len(state['session'])} frames)")
+        say(f"wrote {out_dir}/results.csv and shape.npz ({len(state['session'])} frames)")
         return state
 
     return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)])
@@ -272,7 +280,7 @@ def mcap(mcap_path, overwrite):
 
         shape = _require(state, "shape", "mcap", "'reconstruct'")
         write_mcap(mcap_path, state["session"], shape, state.get("estimate"), overwrite=overwrite)
-        click.echo(f"wrote {mcap_path} ({len(state['session'])} frames)")
+        say(f"wrote {mcap_path} ({len(state['session'])} frames)")
         return state
 
     return step_io(step, outputs=[output.file(mcap_path, overwrite=overwrite, suffixes=(".mcap",))])
@@ -289,7 +297,7 @@ def export(csv_path, overwrite):
 
         session = _require(state, "session", "export", "'load SESSION'")
         write_session_csv(session, csv_path, overwrite=overwrite)
-        click.echo(f"wrote {csv_path} ({len(session)} frames)")
+        say(f"wrote {csv_path} ({len(session)} frames)")
         return state
 
     return step_io(step, outputs=[output.file(csv_path, overwrite=overwrite, suffixes=output.CSV)])

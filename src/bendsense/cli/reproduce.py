@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from bendsense import output
-from bendsense.cli._common import SEED, InterspersedCommand, overwrite_option, quiet, step_io
+from bendsense.cli._common import SEED, InterspersedCommand, overwrite_option, quiet, say, step_io
 
 
 @click.command("reproduce", cls=InterspersedCommand)
@@ -51,11 +51,11 @@ def reproduce(out_dir, seed, quick, overwrite):
         tip = result.tip_load
         errors = "; ".join(f"{objective} {t['all_pct'][0]:.1f} % +- {t['all_pct'][1]:.1f} % (2-sigma covers "
                            f"{100 * t['coverage']:.0f} %)" for objective, t in tip.items())
-        click.echo(
+        say(
             f"n = 3: dkappa {t1['dkappa_all_pct'][0]:.2f} %, (dp)max {t1['dp_max_all_pct'][0]:.2f} %; "
             f"tip-load error of 0.3 N: {errors}"
         )
-        click.echo(f"wrote {result.report_path} and {len(result.figures)} figures in {result.wall_time_s:.1f} s")
+        say(f"wrote {result.report_path} and {len(result.figures)} figures in {result.wall_time_s:.1f} s")
         return state
 
     return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)])

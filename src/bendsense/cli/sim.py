@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from bendsense import output
-from bendsense.cli._common import SEED, Finite, InterspersedCommand, config_option, overwrite_option, step_io
+from bendsense.cli._common import SEED, Finite, InterspersedCommand, config_option, overwrite_option, say, step_io
 
 # kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
 _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
@@ -26,7 +26,10 @@ _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the sensor hardware and the noise.")
 @config_option
 @click.option("--noise-counts", type=Finite(min=0), help="Sensor noise std [counts] (default 1.5).")
-@click.option("--frames", type=click.IntRange(min=1), help="Frames per strip or configuration (default 50 / 5).")
+@click.option("--frames", type=click.IntRange(min=1),
+              help="Frames per strip or configuration (default 50 / 5). A scenario is simulated in memory, "
+                   "one recording at a time (tip-loads: 44 configurations, ~10 kB a frame): a number whose "
+                   "frames would not fit the free memory is refused before any work.")
 @click.option("--ei-error", type=Finite(), help="Model mismatch: relative error of the true EI.")
 @click.option("--k0-error", type=Finite(), help="Model mismatch: relative error of the true K0.")
 @click.option("--base-rotation", type=Finite(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
@@ -52,28 +55,32 @@ def simulate(
     tip-loads (20-120 kPa x 0-0.3 N), contact (12 random normal contact forces),
     time-varying (10 s at 100 Hz), or all.
     """
+    options = {
+        "noise_counts": noise_counts,
+        "ei_error": ei_error,
+        "k0_error": k0_error,
+        "base_rotation_rad_per_rad": base_rotation,
+        "hysteresis_pa": None if hysteresis_kpa is None else hysteresis_kpa * 1e3,
+    }
+    if frames is not None:
+        if scenario in ("calibration", "validation", "all"):
+            options["frames_per_strip"] = frames
+        if scenario in ("tip-loads", "contact", "all"):
+            options["frames_per_config"] = frames
+    options = {k: v for k, v in options.items() if v is not None}
+    if frames is not None:
+        from bendsense.sim.scenarios import check_memory
+
+        check_memory(scenario, options, field="--frames")  # before any work (the group makes it one line)
 
     def step(state):
         from bendsense.sim.scenarios import _simulate
 
-        options = {
-            "noise_counts": noise_counts,
-            "ei_error": ei_error,
-            "k0_error": k0_error,
-            "base_rotation_rad_per_rad": base_rotation,
-            "hysteresis_pa": None if hysteresis_kpa is None else hysteresis_kpa * 1e3,
-        }
-        if frames is not None:
-            if scenario in ("calibration", "validation", "all"):
-                options["frames_per_strip"] = frames
-            if scenario in ("tip-loads", "contact", "all"):
-                options["frames_per_config"] = frames
-        options = {k: v for k, v in options.items() if v is not None}
         _, summaries = _simulate(scenario, out_dir, config_path, seed, overwrite=overwrite, **options)
         for name, summary in summaries.items():
             excluded = summary["excluded_frames"]
             note = f", {excluded} excluded (beam solve failed)" if excluded else ""
-            click.echo(
+            say(
                 f"{name}: wrote {len(summary['files'])} files, {summary['frames']} frames{note} to {summary['path']}"
             )
         return state

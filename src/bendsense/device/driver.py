@@ -18,6 +18,7 @@ hanging.
 from __future__ import annotations
 
 import logging
+import numbers
 import queue
 import threading
 import time
@@ -32,6 +33,8 @@ __all__ = ["Reading", "Event", "DeviceStats", "Driver", "DEFAULT_BAUDRATE"]
 log = logging.getLogger("bendsense.device")
 
 DEFAULT_BAUDRATE = 921_600
+BAUD_RANGE = (50, 12_000_000)
+"""Baud rates a serial port can be opened at: the slowest standard rate to the fastest USB-serial bridges (FT232H)."""
 """Default baud rate; 16 channels at 1 kHz need ~0.5 Mbit/s (USB CDC ignores it)."""
 
 
@@ -144,6 +147,9 @@ class Driver:
             raise DeviceError(f"dialect: expected 'binary' or 'line', got {dialect!r}")
         if queue_size is not None and queue_size < 1:
             raise DeviceError(f"queue_size: expected a positive integer or None, got {queue_size!r}")
+        lo, hi = BAUD_RANGE
+        if isinstance(baudrate, bool) or not isinstance(baudrate, numbers.Integral) or not lo <= baudrate <= hi:
+            raise DeviceError(f"baudrate: expected an integer in {lo}..{hi:,} (serial baud rates), got {baudrate!r}")
         self.port = str(port)
         self.baudrate = int(baudrate)
         self.dialect = dialect

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bendsense.device.simdevice import SimulatedDevice
+from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
 from bendsense.errors import SessionError
 
 __all__ = ["ReplayDevice", "replay_frames"]
@@ -126,7 +126,12 @@ class ReplayDevice(SimulatedDevice):
         self.speed = float(speed)
         self.loop = bool(loop)
         self.n_frames = len(adc)
-        period_us = round(1e6 / _rate_hz(frames["t_us"]))
+        rate = _rate_hz(frames["t_us"])
+        if rate > max_rate_hz(session.n_channels):
+            raise SessionError(f"{session.source or 'session'}: frames {1e6 / rate:g} us apart ({rate:,.0f} Hz), more "
+                               f"than a USB full-speed link carries for {session.n_channels} channels "
+                               f"({max_rate_hz(session.n_channels):,} Hz); cannot replay (is t_s in seconds?)")
+        period_us = round(1e6 / rate)
         self._span_us = int(frames["t_us"][-1]) + period_us  # one pass of the clock
         self._span_seq = int(frames["seq"][-1] - frames["seq"][0]) + 1
         self._seq_shift = 0

@@ -35,6 +35,27 @@ __all__ = ["SimulatedDevice", "SimStats", "default_source", "ramp_source"]
 
 log = logging.getLogger("bendsense.device.sim")
 
+USB_FULL_SPEED_BYTES_PER_S = 1_216_000
+"""Most a USB full-speed CDC link carries: 19 bulk packets of 64 bytes per 1 ms USB frame [bytes/s]."""
+
+
+def max_rate_hz(n_channels: int = 16) -> int:
+    """Highest frame rate a board of ``n_channels`` can send over a USB full-speed link [Hz].
+
+    A SAMPLE frame on the wire is its payload (16 + 2 N bytes), the CRC (2), COBS's
+    overhead (1 byte per 254) and two delimiters: 53 bytes for 16 channels, so at
+    most ~22,900 frames/s; and the HELLO's ``rate_hz`` field is a u16 (65535).
+
+    Parameters
+    ----------
+    n_channels : int, default 16
+        Channels per SAMPLE.
+    """
+    body = 16 + 2 * int(n_channels) + 2
+    wire = body + 1 + body // 254 + 2
+    return int(min(USB_FULL_SPEED_BYTES_PER_S // wire, 0xFFFF))
+
+
 _MAX_PENDING = 64 * 1024  # bytes queued for the pseudo-terminal before frames count as TX overflow
 
 
@@ -227,6 +248,10 @@ class SimulatedDevice:
     ):
         if not rate_hz > 0:
             raise DeviceError(f"rate_hz: expected > 0, got {rate_hz!r}")
+        if rate_hz > max_rate_hz(n_channels):
+            # the board would simulate rate_hz x 0.1 s of frames per block and queue what the link cannot carry
+            raise DeviceError(f"rate_hz: expected at most {max_rate_hz(n_channels):,} Hz (what a USB full-speed "
+                              f"link carries for {n_channels} channels), got {rate_hz:g}")
         for name, p in (("drop", drop), ("corrupt", corrupt), ("truncate", truncate)):
             if not 0.0 <= p <= 1.0:
                 raise DeviceError(f"{name}: expected a probability in [0, 1], got {p!r}")

@@ -61,7 +61,7 @@ from bendsense.estimation.uncertainty import tip_angle_shift_gradient
 from bendsense.plausibility import pressure_range_step
 from bendsense.shift_errors import noise_only
 from bendsense.status import Status
-from bendsense.validation import float_array
+from bendsense.validation import float_array, short
 
 _OK = int(Status.OK)
 
@@ -190,8 +190,10 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     est = config.estimation
     constraint = est.constraint if constraint is None else constraint
     method = est.method if method is None else method
-    if method not in METHODS:
-        raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+    if not isinstance(method, str) or method not in METHODS:
+        raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {short(method)}")
+    if not isinstance(constraint, str) or constraint not in CONSTRAINTS:
+        raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {short(constraint)}")
     if method == "paper" and objective not in (None, "positions"):
         raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
     if initial is not None and not isinstance(initial, ForceEstimate):
@@ -217,6 +219,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
     batch = _batch(ref.batch_shape, P.shape)
     B = math.prod(batch)
+    if B == 0:
+        raise ArgumentError(f"shape: no frames to estimate (batch shape {batch})")
     fr = _frames(ref if method == "fast" else points(ref), P, batch, B, config)
     k = pb.lower.size
     start, use_guess, chain = _starts(initial, initial_force_n, B, batch, warm_start)

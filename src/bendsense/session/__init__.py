@@ -16,8 +16,9 @@ format modules build it without importing this package's dispatch.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
+from bendsense import validation as check
+from bendsense._io import check_regular_file
 from bendsense.errors import SessionError
 from bendsense.session.base import Session
 from bendsense.session.csvfile import read_session_csv, write_session_csv
@@ -41,12 +42,16 @@ def read_session(path: str | os.PathLike) -> Session:
 
     Raises
     ------
+    ArgumentError
+        If ``path`` is not a path (a ``str`` or ``os.PathLike``).
     SessionError
-        If ``path`` does not exist or is not a readable session.
+        If ``path`` does not exist, is neither a regular file nor a directory (a FIFO,
+        a device), or is not a readable session.
     """
-    path = Path(path)
+    path = check.path("path", path)
     if path.is_dir():
         return read_session_dir(path)
     if not path.exists():
         raise SessionError(f"{path}: no such file or session directory")
+    check_regular_file(path, "session (a session CSV or a native session directory)", SessionError)
     return read_session_csv(path)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bendsense.errors import SessionError
-from bendsense.validation import short
+from bendsense.validation import float_array, short
 
 __all__ = ["Session"]
 
@@ -49,21 +49,31 @@ class Session:
     source: str = ""
 
     def __post_init__(self):
-        t = np.asarray(self.t_s, dtype=float)
-        sig = np.asarray(self.signals, dtype=float)
+        t = float_array("t_s", self.t_s, error=SessionError)
+        sig = float_array("signals", self.signals, error=SessionError)
         if t.ndim != 1:
             raise SessionError(f"t_s: expected shape (frames,), got {t.shape}")
         if sig.ndim != 2 or sig.shape[0] != t.size:
-            raise SessionError(f"signals: expected shape ({t.size}, N), got {sig.shape}")
-        p = np.broadcast_to(np.asarray(self.pressure_pa, dtype=float), t.shape).copy()
+            raise SessionError(f"signals: expected shape ({t.size}, N) (frames of t_s, channels), got {sig.shape}")
+        p = float_array("pressure_pa", self.pressure_pa, error=SessionError)
+        if p.shape not in ((), (1,), t.shape):
+            raise SessionError(f"pressure_pa: expected one number or shape ({t.size},) (frames of t_s), got shape "
+                               f"{p.shape}")
+        p = np.broadcast_to(p, t.shape).copy()
         object.__setattr__(self, "t_s", t)
         object.__setattr__(self, "signals", sig)
         object.__setattr__(self, "pressure_pa", p)
         if self.seq is not None:
-            seq = np.asarray(self.seq, dtype=np.int64)
+            try:
+                seq = np.asarray(self.seq, dtype=np.int64)
+            except (TypeError, ValueError):
+                raise SessionError(f"seq: expected integers, got {short(self.seq)}") from None
             if seq.shape != t.shape:
                 raise SessionError(f"seq: expected shape {t.shape}, got {seq.shape}")
             object.__setattr__(self, "seq", seq)
+        if not isinstance(self.meta, dict) or not isinstance(self.extra, dict):
+            bad = "meta" if not isinstance(self.meta, dict) else "extra"
+            raise SessionError(f"{bad}: expected a dict, got {type(getattr(self, bad)).__name__}")
         extra = {}
         for name, values in self.extra.items():
             values = np.asarray(values)

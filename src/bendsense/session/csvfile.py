@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bendsense import validation as check
 from bendsense._io import check_csv_header, read_text
 from bendsense.errors import SessionError
 from bendsense.plausibility import check_pressure_column, check_time_column
@@ -52,7 +53,7 @@ def read_session_csv(path: str | os.PathLike) -> Session:
     SessionError
         If the file is malformed; the message gives the line number and the column.
     """
-    path = Path(path)
+    path = check.path("path", path)
     text = read_text(path, "session CSV", SessionError)
     try:
         return _parse_session_csv(text, str(path))
@@ -143,7 +144,7 @@ def _parse_session_csv(text: str, source: str) -> Session:
     for name in ("pressure_pa", "pressure_kpa"):
         if name in values:
             check_pressure_column(name, values[name], header_line)
-    check_time_column(t, source)
+    check_time_column(t, source, row_lines)
     if "pressure_pa" in values:
         pressure = values["pressure_pa"]
     elif "pressure_kpa" in values:
@@ -174,7 +175,8 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
     """
     from bendsense import output
 
-    path = Path(path)
+    check.instance("session", session, Session, "bendsense.read_session(path)")
+    path = check.path("path", path)
     source = session.source if session.source and Path(session.source).exists() else None
     output.check([output.file(path, overwrite=overwrite)], [source])
     header = ["t_s"]

@@ -58,7 +58,7 @@ import numpy as np
 import yaml
 
 from bendsense import validation as check
-from bendsense._io import load_yaml
+from bendsense._io import check_regular_file, load_yaml, open_regular
 from bendsense.errors import SessionError
 from bendsense.frames import NO_PRESSURE, SAMPLE_FIELDS
 from bendsense.plausibility import check_pressure_column, check_time_column
@@ -552,8 +552,10 @@ def read_records(path) -> tuple[np.ndarray, dict]:
                            f"{size}-byte records (an edited record dtype?)")
     frames = path / FRAMES
     try:
-        nbytes = frames.stat().st_size
-    except FileNotFoundError:
+        nbytes = check_regular_file(frames, "frames.bin of a session", SessionError).st_size
+    except SessionError:
+        if frames.exists() or frames.is_symlink():
+            raise
         nbytes = 0
     n, torn = divmod(nbytes, size)
     # version 1 has no flag: its writer added n_records at a clean stop only
@@ -575,7 +577,11 @@ def read_records(path) -> tuple[np.ndarray, dict]:
         note = f"; a torn last record ({torn} of {size} bytes) ignored" if torn else ""
         log.warning("%s: unfinished recording (no clean stop: killed, crashed or still recording); %s records "
                     "present%s", path, f"{n:,}", note)
-    records = np.fromfile(frames, dtype=dtype, count=n) if n else np.zeros(0, dtype=dtype)
+    if n:
+        with open_regular(frames, "frames.bin of a session", SessionError) as fh:
+            records = np.fromfile(fh, dtype=dtype, count=n)
+    else:
+        records = np.zeros(0, dtype=dtype)
     bits = meta.get("adc_bits")
     if n and bits and records.dtype.fields["adc"][0].base.kind == "u":
         top = int(records["adc"].max())
@@ -622,11 +628,50 @@ def records_extra(records: np.ndarray, host0_ns: int | None = None) -> dict:
     return extra
 
 
+def device_time_us(records: np.ndarray, source: str = "session") -> np.ndarray:
+    """The device clock of ``records`` [us], with resets bridged by the host clock (and a warning).
+
+    The driver removes the u32 wraps of ``t_us`` as it records (a wrap every 71.6 min
+    is normal), but a board that resets or reconnects restarts its clock: ``t_us``
+    jumps back or stands still. Such a recording is legitimate, so it is kept: at
+    each step that does not advance, the interval is taken from the host clock
+    (``host_ns``, monotonic; the typical device step when the host's is 0, as for
+    frames read in one burst), and the device clock goes on from there. The warning
+    names the frames (0-based) where it happened.
+
+    Parameters
+    ----------
+    records : ndarray
+        Structured records with ``t_us`` and ``host_ns``.
+    source : str, default "session"
+        The session, for the warning.
+    """
+    t_us = records["t_us"].astype(np.int64)
+    if t_us.size < 2:
+        return t_us
+    step = np.diff(t_us)
+    bad = np.flatnonzero(step <= 0)
+    if not bad.size:
+        return t_us
+    forward = step[step > 0]
+    typical = int(np.median(forward)) if forward.size else 1
+    host_us = np.diff(records["host_ns"].astype(np.int64)) // 1000
+    bridged = step.copy()
+    bridged[bad] = np.where(host_us[bad] > 0, host_us[bad], typical)
+    first = int(bad[0]) + 1
+    frames = ", ".join(str(int(k) + 1) for k in bad[:5]) + (", ..." if bad.size > 5 else "")
+    log.warning("%s: the device clock (t_us) goes back or stands still at %d frame(s) (frame %s: %d us after %d us; a "
+                "board reset?); time from there on continues from the host clock (frames %s)", source, bad.size,
+                first, int(t_us[first]), int(t_us[first - 1]), frames)
+    return t_us[0] + np.concatenate([[0], np.cumsum(bridged)])
+
+
 def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     """Build a :class:`~bendsense.session.Session` from raw records.
 
     ``t_s`` is the unwrapped device clock relative to the first frame (plus
-    ``meta["t_offset_s"]`` of an imported CSV); ``extra`` holds ``host_s`` (host clock
+    ``meta["t_offset_s"]`` of an imported CSV), with clock resets bridged by the host
+    clock (:func:`device_time_us`); ``extra`` holds ``host_s`` (host clock
     relative to the first frame [s]), ``status`` and any further record fields
     (``tx_drops``: the firmware's cumulative counter; any field of
     :data:`bendsense.frames.SAMPLE_FIELDS` beyond ``SESSION_COLUMNS`` under its own name,
@@ -644,7 +689,7 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
         Where the records came from, kept as ``Session.source``.
     """
     n_ch = records.dtype.fields["adc"][0].shape[0]
-    t_us = records["t_us"].astype(np.int64)
+    t_us = device_time_us(records, source or "session")
     t0 = float(meta.get("t_offset_s") or 0.0)
     t_s = t0 + (t_us - (t_us[0] if t_us.size else 0)) * 1e-6
     p = records["pressure_pa"]
@@ -657,7 +702,7 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     drops = _unwrap16(records["tx_drops"]) if "tx_drops" in records.dtype.names else np.zeros(0, np.int64)
     meta["tx_drops"] = int(drops[-1] - drops[0]) if drops.size else 0
     check_pressure_column("pressure_pa", pressure, f"{source or 'session'}/{FRAMES}")
-    check_time_column(t_s, source or "session")
+    check_time_column(t_s, f"{source or 'session'}/{FRAMES}")
     return Session(t_s, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
 
 

@@ -64,7 +64,7 @@ import yaml
 from bendsense import output
 from bendsense.calibration import strip_shifts
 from bendsense.config import Config
-from bendsense.errors import ConfigError
+from bendsense.errors import ArgumentError, ConfigError
 from bendsense.session import Session, write_session_csv
 from bendsense.sim.actuator import SimulatedActuator
 from bendsense.sim.sensor import VirtualSensor, calibration_shifts
@@ -560,6 +560,9 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
     ------
     ConfigError
         An unknown scenario or option, or an invalid value.
+    ArgumentError
+        If the frames it would hold in memory at once do not fit the machine's free
+        memory (:func:`check_memory`).
     OutputExistsError
         If ``out_dir`` exists and ``overwrite`` is false (a ``FileExistsError``).
     OutputError
@@ -567,6 +570,106 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
         (:func:`bendsense.output.check`).
     """
     return _simulate(scenario, out_dir, config, seed, overwrite=overwrite, **options)[0]
+
+
+# Peak memory per simulated frame held at once [bytes], measured with /usr/bin/time
+# (`simulate SCENARIO --frames 200` vs `--frames 2000`): ~10 KB a frame for the
+# scenarios with a beam solve and truth shapes (tip-loads 10.1 KB, contact 9.5 KB), well
+# under 1 KB for the strip recordings (written one strip at a time); rounded up.
+_BYTES_PER_FRAME = {"calibration": 2_000, "validation": 2_000, "tip-loads": 12_000, "contact": 12_000,
+                    "time-varying": 12_000}
+_BASE_BYTES = 300e6  # the process before the first frame: numpy, scipy, numba and the kernels
+
+
+def frames_in_memory(name: str, options: dict) -> tuple[int, int]:
+    """Frames of scenario ``name`` held in memory at once, and frames written in all.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SCENARIOS`.
+    options : dict
+        The scenario's options (defaults filled in from the scenario's table).
+    """
+    opts = {**_OPTIONS[name], **{k: v for k, v in options.items() if k in _OPTIONS[name]}}
+    if name in ("calibration", "validation"):
+        per = int(opts["frames_per_strip"])
+        return per, per * (len(opts["radii_m"]) + (name == "calibration"))
+    if name == "tip-loads":
+        n = int(opts["frames_per_config"]) * len(opts["pressures_pa"]) * len(opts["loads_n"])
+        return n, n
+    if name == "contact":
+        n = int(opts["frames_per_config"]) * int(opts["n_configs"])
+        return n, n
+    n = int(math.ceil(float(opts["rate_hz"]) * float(opts["duration_s"])))
+    return n, n
+
+
+def available_memory_bytes() -> float | None:
+    """Memory this machine can give a new allocation now (Linux ``MemAvailable``) [bytes]; None if unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _size(nbytes: float) -> str:
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.3g} {unit}"
+    return f"{nbytes / 1e3:.3g} kB"
+
+
+def check_memory(scenario: str, options: dict, field: str | None = None) -> None:
+    """Refuse a simulation whose frames would not fit this machine's free memory, before any work.
+
+    A scenario is simulated and written in memory (one recording at a time); a
+    ``--frames 100000000`` would grow until the machine swaps or kills it. The
+    estimate uses the measured memory per frame (:data:`_BYTES_PER_FRAME`).
+
+    Parameters
+    ----------
+    scenario : str
+        One of :data:`SCENARIOS` or ``"all"``.
+    options : dict
+        The options given to :func:`simulate`.
+    field : str, optional
+        The option to name in the message (default: the scenario's own option name).
+
+    Raises
+    ------
+    ArgumentError
+        Naming the option, the memory needed and the memory available.
+    """
+    available = available_memory_bytes()
+    if available is None:
+        return
+    names = list(SCENARIOS) if scenario == "all" else [scenario]
+    for name in names:
+        try:
+            at_once, _ = frames_in_memory(name, options)
+        except (TypeError, ValueError):  # an option that is not a number: the scenario's own check says so
+            continue
+        need = _BASE_BYTES + at_once * _BYTES_PER_FRAME[name]
+        if need <= available:
+            continue
+        key = {"calibration": "frames_per_strip", "validation": "frames_per_strip",
+               "time-varying": "duration_s"}.get(name, "frames_per_config")
+        per_frame = _BYTES_PER_FRAME[name]
+        per_unit = at_once / max(float(options.get(key, _OPTIONS[name][key])), 1e-300)
+        most = int((available - _BASE_BYTES) / per_frame / per_unit) if available > _BASE_BYTES else 0
+        raise ArgumentError(
+            f"{field or key}: {name} would hold {at_once:,} frames in memory, about {_size(need)}; this machine "
+            f"has {_size(available)} available (at most {max(most, 0):,} {'s' if key == 'duration_s' else 'frames'}"
+            f"{'' if key == 'duration_s' else ' per ' + ('strip' if key == 'frames_per_strip' else 'configuration')})"
+        )
 
 
 def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **options):
@@ -578,6 +681,7 @@ def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **opti
     unknown = sorted(set(options) - known)
     if unknown:
         raise ConfigError(f"options: unknown {', '.join(unknown)} for {scenario}; allowed: {', '.join(sorted(known))}")
+    check_memory(scenario, options)
     out = Path(out_dir)
     config_path = config if isinstance(config, (str, os.PathLike)) else None
     output.check([output.directory(out, overwrite=overwrite)], [config_path])

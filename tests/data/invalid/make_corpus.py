@@ -68,6 +68,16 @@ put(S / "ch0.csv", "t_s,ch0,ch1\n0,1,2\n", r"line 2, column ch0: signal columns 
 put(S / "ch01.csv", "t_s,ch01,ch02\n0,1,2\n", r"line 2, column ch01: signal columns are numbered from 1")
 put(S / "empty_header_cell.csv", "t_s,,ch1\n0,1,2\n", r"line 2: empty column name in header")
 put(S / "row_too_long.csv", "t_s,ch1\n0,1\n1,2,3\n", r"line 4: expected 2 columns, got 3")
+# time that does not increase strictly (docs/formats.md, "Time"): refused with the first rows
+rows4 = csv_text(rows=6).splitlines()
+put(S / "t_backwards.csv", "\n".join(rows4[:4] + [rows4[4].replace("0.03,", "0.01,", 1)] + rows4[5:]) + "\n",
+    r"line 6, column t_s: time runs backwards \(0\.01 s after 0\.02 s on line 5\); t_s must increase from row to row")
+put(S / "t_repeated.csv", "\n".join(rows4[:3] + [rows4[3].replace("0.02,", "0.01,", 1)] + rows4[4:]) + "\n",
+    r"line 5, column t_s: time repeats \(0\.01 s after 0\.01 s on line 4\)")
+put(S / "t_shuffled.csv", "\n".join([rows4[0], rows4[3], rows4[1], rows4[5], rows4[2], rows4[6], rows4[4]]) + "\n",
+    r"line 4, column t_s: time runs backwards \(0 s after 0\.02 s on line 3\); 3 rows out of order in all "
+    r"\(also lines 6, 8\)")
+put(S / "t_all_equal.csv", "t_s,ch1\n5,1\n5,2\n5,3\n", r"line 4, column t_s: time repeats \(5 s after 5 s on line 3\)")
 put(S / "nul_in_middle.csv", csv_text()[:40] + "\x00" + csv_text()[40:],
     r"binary data, not a session CSV \(NUL byte at byte offset \d+\)")
 
@@ -181,6 +191,8 @@ man("alias_bomb.yaml", r"YAML expands to more than 50,000 nodes", text="\n".join
 man("latin1.yaml", r"not UTF-8 text \(byte offset \d+, line 1\)", raw="# r\u00e9glage\nflat: rec/flat.csv\n".encode("latin-1"))
 man("binary.yaml", r"binary data, not a manifest", raw=b"\x00\x01\x02flat")
 man("utf16.yaml", r"UTF-16 text, not UTF-8", raw="flat: rec/flat.csv\n".encode("utf-16"))
+man("recording_dev_zero.yaml", r"flat: recording '/dev/zero' is a character device, not a session CSV",
+    {"flat": "/dev/zero", "strips": ok})
 
 # ---- native sessions: directories; "expect" holds the regex
 NAT = ROOT / "native"
@@ -334,6 +346,32 @@ cases = {
                                        r"free_bending_pa_holds_kpa\.csv: line 1, column pressure_pa: every reading is below "
                                        r"1 kPa \(largest 120\); looks like kilopascals"),
 }
+# inputs that are not files, and what the machine cannot do
+cases.update({
+    "load_dev_zero": ("load /dev/zero --calibration {good_cal} reconstruct save out",
+                      r"^Error: /dev/zero: a character device, not a session \(a session CSV or a native session directory\)"),
+    "load_calibration_dev_zero": ("load {good_csv} --calibration /dev/zero reconstruct save out",
+                                  r"^Error: /dev/zero: a character device, not a calibration"),
+    "load_config_dev_zero": ("load {good_csv} --config /dev/zero --calibration {good_cal} reconstruct save out",
+                             r"^Error: /dev/zero: a character device, not a config"),
+    "calibrate_dev_zero": ("calibrate /dev/zero -o cal.yaml", r"^Error: /dev/zero: a character device, not a manifest"),
+    "process_dev_zero": ("process /dev/zero --calibration {good_cal} -o out", r"^Error: /dev/zero: a character device"),
+    "identify_dev_zero": ("identify stiffness /dev/zero -o cfg.yaml", r"^Error: /dev/zero: a character device, not a CSV"),
+    "sim_device_replay_dev_zero": ("sim-device --replay /dev/zero", r"^Error: /dev/zero: a character device, not a session"),
+    "plot_results_dev_null": ("plot /dev/null -o fig.png", r"/dev/null"),
+    "sim_device_rate_beyond_the_link": ("sim-device --rate 1e9",
+                                        r"--rate: expected at most 22,943 Hz \(what a USB full-speed link carries"),
+    "demo_rate_beyond_the_link": ("demo -o d --rate 100000", r"--rate: expected at most 22,943 Hz"),
+    "load_twice": ("load {good_csv} --calibration {good_cal} reconstruct save a load {good_csv} reconstruct save b",
+                   r"'load' given 2 times \(.*session\.csv, .*session\.csv\); a chain processes one session"),
+    "record_baud_zero": ("record loop:// -o rec --baud 0", r"'--baud': 0 is not in the range 50<=x<=12000000"),
+    "record_baud_negative": ("record loop:// -o rec --baud -9600", r"'--baud': -9600 is not in the range"),
+    "live_baud_absurd": ("live loop:// --calibration {good_cal} --baud 1000000000",
+                         r"'--baud': 1000000000 is not in the range 50<=x<=12000000"),
+    "simulate_frames_beyond_memory": ("simulate tip-loads -o sim --frames 100000000",
+                                      r"--frames: tip-loads would hold 4,400,000,000 frames in memory, about 52\.8 TB; "
+                                      r"this machine has .* available"),
+})
 for name, (args, expect) in cases.items():
     (CLI / f"{name}.yaml").write_text(yaml.safe_dump({"args": args, "expect": expect}, sort_keys=False, width=200))
 print(len(cases), "cli cases")
