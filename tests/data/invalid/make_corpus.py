@@ -271,7 +271,7 @@ cases = {
     "simulate_noise_nan": ("simulate validation -o sim --noise-counts nan", r"'--noise-counts': expected a finite number, got nan"),
     "simulate_hysteresis_negative": ("simulate contact -o sim --hysteresis-kpa -1", r"'--hysteresis-kpa': expected >= 0, got -1"),
     "simulate_bad_config": ("simulate calibration -o sim --config {invalid}/configs/segment_lengths_mm.yaml",
-                            r"segment_lengths_mm\.yaml: sensor\.segment_lengths_m\[0\]: .* looks like millimetres"),
+                            r"segment_lengths_mm\.yaml: sensor\.segment_lengths_m\[0\] = 10 .* if it was entered in mm, it is 0\.01 m"),
     "record_seconds_nan": ("record loop:// -o rec --seconds nan", r"'--seconds': expected a finite number, got nan"),
     "record_seconds_inf": ("record loop:// -o rec --seconds inf", r"'--seconds': expected a finite number, got inf"),
     "record_seconds_negative": ("record loop:// -o rec --seconds -3", r"'--seconds': expected > 0, got -3"),
@@ -328,7 +328,7 @@ cases = {
     "process_bad_calibration": ("process {good_csv} --calibration {invalid}/calibrations/alias_bomb.yaml -o out",
                                 r"alias_bomb\.yaml: YAML expands to more than 50,000 nodes"),
     "process_bad_config": ("process {good_csv} --calibration {good_cal} --config {invalid}/configs/pressure_range_kpa.yaml -o out",
-                           r"pressure_range_kpa\.yaml: actuator\.pressure_range_pa: expected pascals"),
+                           r"pressure_range_kpa\.yaml: actuator\.pressure_range_pa\[1\] = 200 .* if it was entered in kPa, it is 200000 Pa"),
     "unknown_command": ("fly", r"No such command 'fly'"),
     "identify_pressure_pa_holds_kpa": ("identify free-bending {invalid}/good/free_bending_pa_holds_kpa.csv -o cfg.yaml",
                                        r"free_bending_pa_holds_kpa\.csv: line 1, column pressure_pa: every reading is below "
