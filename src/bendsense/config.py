@@ -67,8 +67,11 @@ def _number(path: str, value: Any, *, positive: bool = False, nonnegative: bool 
 
 def _length(path: str, value: Any, *, max_m: float = check.MAX_LENGTH_M, positive: bool = True,
             typical_m: float = 0.01) -> float:
-    """A length [m]: finite, > 0 (or >= 0) and at most ``max_m``; beyond, the message names the unit slip
-    (mm or cm, whichever gives a value nearer ``typical_m``) and the value in metres."""
+    """A length [m]: finite, > 0 (or >= 0) and at most ``max_m``.
+
+    Beyond, the message names the unit slip (mm or cm, whichever gives a value nearer
+    ``typical_m``) and the value in metres.
+    """
     value = _number(path, value, positive=positive, nonnegative=not positive)
     what = "length" if max_m >= check.MAX_LENGTH_M else "cross-section or sensor dimension"
     plausibility.Bound(what, 0.0, max_m, "m", "", plausibility.LENGTH_SLIPS, typical=typical_m).check(path, value)

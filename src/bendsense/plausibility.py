@@ -255,7 +255,7 @@ GRAVITY_SLIPS = (("units of g", 9.80665), ("cm/s²", 1e-2))
 
 def _g(x: float, digits: int = 2) -> str:
     """``x`` to ``digits`` significant digits, exponents short (``1e6``, ``4.4e-6``)."""
-    text = f"{x:.{digits}g}"
+    text = f"{float(f'{x:.{digits}g}'):g}"
     if "e" in text:
         mantissa, exponent = text.split("e")
         text = f"{mantissa}e{int(exponent)}"
@@ -300,7 +300,8 @@ class Bound:
     def message(self, field: str, value: float) -> str:
         """``field = value is not a plausible ... (lo..hi unit why); if it was entered in U, it is V unit``."""
         why = f", {self.why}" if self.why else ""
-        text = f"{field} = {_g(value, 6)} is not a plausible {self.what} ({_g(self.lo)}..{_g(self.hi)} {self.unit}{why})"
+        span = f"{_g(self.lo)}..{_g(self.hi)} {self.unit}{why}"
+        text = f"{field} = {_g(value, 6)} is not a plausible {self.what} ({span})"
         fits = [(name, value * factor) for name, factor in self.slips if self.contains(value * factor)]
         typical = self.typical if self.typical is not None else (
             math.sqrt(self.lo * self.hi) if self.lo > 0 else None)

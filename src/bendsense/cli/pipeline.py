@@ -19,8 +19,8 @@ from bendsense.cli._common import (
     ANGLE_SOURCES,
     CONSTRAINTS,
     METHODS,
-    Finite,
     InterspersedCommand,
+    PressureKpa,
     config_option,
     objective_option,
     overwrite_option,
@@ -133,7 +133,7 @@ def run_steps(steps) -> dict:
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="Calibration YAML written by 'bendsense calibrate'.",
 )
-@click.option("--pressure-kpa", type=Finite(), help="Constant pressure for frames without a reading [kPa].")
+@click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")
 def load(session_path, config_path, calibration_path, pressure_kpa):
     """Load a session (session CSV or native session directory)."""
 
