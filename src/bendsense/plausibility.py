@@ -530,3 +530,108 @@ def check_config(config) -> None:
             Bound(f"variance of {name}", 0.0, top, f"({b.unit})²", f"σ at most {_g(math.sqrt(top))} {b.unit}, "
                   "its whole plausible range", tuple((f"({u})²", f * f) for u, f in b.slips)).check(
                 f"parameter_covariance.covariance[{i}][{i}]", float(var))
+
+
+# --- per frame: a force the actuator cannot carry -------------------------------------------
+
+IMPLAUSIBLE_FORCE = "implausible_force"
+"""Status (and message prefix) of a frame whose fitted force is beyond what the actuator can carry."""
+FORCE_MARGIN = 10.0
+"""Factor of :func:`force_bound_n` over the force that bends the actuator by the sensor's range."""
+
+
+def force_bound_n(pressure_pa, config):
+    """The largest tip force a measured shape of this actuator can come from [N].
+
+    ``F_max(P) = FORCE_MARGIN · EI(P) · κ_max / L``, with ``κ_max`` the largest
+    curvature the sensor can measure (:func:`max_curvature_per_m`) and ``FORCE_MARGIN``
+    = 10. Why: in equilibrium ``EI (κ(s) − K0) = −M_z(s)`` (DESIGN section 2), and the
+    moment of a tip force F about a point of the beam is ``|F|`` times that point's
+    distance from the force's line of action. Every curvature of a shape the sensor
+    measured, the natural one K0 included, is within ``κ_max``, so
+    ``|F| · h ≤ 2 EI κ_max`` with ``h`` the largest distance of the beam from the line of
+    action. A factor 10 leaves ``h`` down to L/5: only an actuator lying along its own
+    load line is left out, and there the load is compression (it buckles at
+    ``π² EI / 4L²``, far below the bound) or tension, which no shape shows (such a
+    frame is ``not_identifiable``: its force is where the fit stopped, not a
+    measurement). For the paper's prototype ``F_max`` is 74 N at 0 kPa and 147 N at
+    200 kPa, beyond anything a 13 cm silicone finger holds; forces beyond it come from
+    a unit slip (an EI in N·mm², a calibration a thousand times off), not from a load.
+
+    Parameters
+    ----------
+    pressure_pa : float or array_like
+        Gauge pressures [Pa].
+    config : Config
+        The actuator (``stiffness``, ``actuator.length_m``) and its sensor.
+
+    Returns
+    -------
+    float or ndarray
+        ``F_max`` at each pressure [N] (NaN where the pressure is).
+    """
+    scale = FORCE_MARGIN * max_curvature_per_m(config.sensor) / config.actuator.length_m
+    if isinstance(pressure_pa, float):
+        return scale * config.stiffness.ei_nm2(pressure_pa)
+    return scale * config.stiffness.ei_nm2(np.asarray(pressure_pa, dtype=float))
+
+
+def force_bound_step(estimate):
+    """Wrap ``estimate_force``: a frame whose force is beyond :func:`force_bound_n` is not ok.
+
+    The force is kept (as with ``model_misfit``) but a frame that succeeded gets
+    ``success`` False and the message ``"implausible_force: ..."`` (status ``implausible_force``); with
+    ``strict=True`` such a frame raises :class:`~bendsense.errors.ConvergenceError`.
+
+    Parameters
+    ----------
+    estimate : callable
+        ``estimate_force`` or a function with its signature.
+    """
+
+    @functools.wraps(estimate)
+    def estimate_force(shape, pressure_pa, config=None, *args, **options):
+        result = estimate(shape, pressure_pa, config, *args, **options)
+        if config is None:
+            from bendsense.config import load_config
+
+            config = load_config()
+        force = np.asarray(result.force_n, dtype=float)
+        if force.ndim == 1:  # one frame (the live path): float arithmetic
+            magnitude = math.hypot(float(force[0]), float(force[1]))
+            p = float(np.asarray(pressure_pa, dtype=float).reshape(-1)[0])
+            top = force_bound_n(p, config)
+            if not (magnitude > top and bool(result.success)):  # a failed frame keeps its own reason
+                return result
+            over, magnitude, top, p = np.bool_(True), np.float64(magnitude), np.float64(top), np.float64(p)
+        else:
+            magnitude = np.hypot(force[..., 0], force[..., 1])
+            p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
+            top = force_bound_n(p, config)
+            with np.errstate(invalid="ignore"):  # a failed frame keeps its own reason
+                over = np.isfinite(magnitude) & (magnitude > top) & np.broadcast_to(result.success, magnitude.shape)
+            if not over.any():
+                return result
+        if options.get("strict"):
+            from bendsense.errors import ConvergenceError
+
+            first = np.argwhere(np.atleast_1d(over))[0]
+            m, t = np.atleast_1d(magnitude)[tuple(first)], np.atleast_1d(top)[tuple(first)]
+            raise ConvergenceError(f"{int(np.count_nonzero(over))} frame(s) {IMPLAUSIBLE_FORCE}: |F| = {m:.3g} N "
+                                   f"beyond the {t:.3g} N this actuator can carry")
+        return _mark_force(result, over, magnitude, top, p)
+
+    return estimate_force
+
+
+def _mark_force(result, over, magnitude, top, p):
+    """``result`` with the frames where ``over`` is true flagged ``implausible_force`` (force kept)."""
+    batch = result.batch_shape
+    message = np.array(np.broadcast_to(np.asarray(result.message, dtype=object), batch), dtype=object)
+    for index in zip(*np.nonzero(over)) if batch else [()]:
+        message[index] = (f"{IMPLAUSIBLE_FORCE}: |F| = {float(magnitude[index]):.3g} N is beyond the "
+                          f"{float(top[index]):.3g} N this actuator can carry at {float(p[index]) / 1e3:g} kPa "
+                          f"({FORCE_MARGIN:g} EI(P) κ_max / L): check the units of the config's stiffness and the "
+                          "calibration")
+    return dataclasses.replace(result, success=np.where(over, False, result.success),
+                               message=message.astype(str) if batch else str(message[()]))

@@ -216,6 +216,10 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
         if counts.model_misfit:
             log.warning("%d of %d frames: the model does not explain the shape (status 'model_misfit', force kept)",
                         counts.model_misfit, len(session))
+        if counts.implausible_force:
+            log.warning("%d of %d frames: a force beyond what the actuator can carry (status 'implausible_force', "
+                        "force kept): check the units of the config's stiffness and the calibration",
+                        counts.implausible_force, len(session))
         if counts.not_identifiable:
             log.warning("%d of %d frames: the shape does not determine the load along one direction (status "
                         "'not_identifiable', σ inf along it; e.g. an axial load on a nearly straight actuator)",
