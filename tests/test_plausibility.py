@@ -1,6 +1,7 @@
 """Plausibility at the edges: no ok force outside the actuator's pressure range; channel counts agree."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from bendsense.results import frame_status
 from bendsense.session import Session
 
 CONFIG = bendsense.load_config()
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _shapes(pressures):
@@ -82,3 +84,185 @@ def test_channel_counts_must_agree():
     with pytest.raises(SessionError, match=r"^run.csv: 8 signal channels \(ch1..ch8\), but the calibration cal.yaml "
                                            rf"has {cal.n_channels}$"):
         check_channels(session, cal, CONFIG.sensor, calibration_source="cal.yaml")
+
+
+# --- physical bounds of config values (issue 21: units and magnitudes) ------------------------
+
+def _cross_section_on_a_grid(a, t, b, hollow, n=1201):
+    """Area and second moment about the centroid of the actuator's section, by summing grid cells."""
+    r = a + t
+    x = np.linspace(-r, r, n)
+    y = np.linspace(0.0, b + r, n)
+    dx, dy = x[1] - x[0], y[1] - y[0]
+    xx, yy = np.meshgrid(x, y)
+    inside = (yy <= b) | (xx**2 + (yy - b) ** 2 <= r**2)
+    if hollow:
+        inside &= ~((yy > b) & (xx**2 + (yy - b) ** 2 < a**2))
+    area = inside.sum() * dx * dy
+    yc = (yy[inside]).sum() * dx * dy / area
+    return area, ((yy[inside] - yc) ** 2).sum() * dx * dy
+
+
+def test_cross_section_matches_a_grid_integration():
+    from bendsense.plausibility import cross_section
+
+    got = cross_section(CONFIG.actuator)
+    act = CONFIG.actuator
+    for hollow in (False, True):
+        area, inertia = _cross_section_on_a_grid(act.chamber_radius_m, act.wall_thickness_m, act.bottom_thickness_m,
+                                                 hollow)
+        name = "hollow" if hollow else "solid"
+        assert got[f"area_{name}_m2"] == pytest.approx(area, rel=5e-3)
+        assert got[f"i_{name}_m4"] == pytest.approx(inertia, rel=5e-3)
+
+
+def test_stiffness_bound_is_e_times_i_of_soft_silicones_and_holds_the_paper():
+    from bendsense.plausibility import stiffness_bound_nm2
+
+    act = CONFIG.actuator
+    _, i_solid = _cross_section_on_a_grid(act.chamber_radius_m, act.wall_thickness_m, act.bottom_thickness_m, False)
+    _, i_hollow = _cross_section_on_a_grid(act.chamber_radius_m, act.wall_thickness_m, act.bottom_thickness_m, True)
+    lo, hi = stiffness_bound_nm2(act)
+    assert lo == pytest.approx(0.05e6 * i_hollow / 10, rel=5e-3)
+    assert hi == pytest.approx(10e6 * i_solid * 10, rel=5e-3)
+    assert lo < CONFIG.stiffness.ei_nm2(0.0) < CONFIG.stiffness.ei_nm2(200e3) < hi
+    assert not lo <= 2530.0 <= hi and lo <= 2530.0 * 1e-6 <= hi  # N·mm² is out, its SI value in
+
+
+def _config_dict():
+    import yaml
+
+    return yaml.safe_load((ROOT / "configs" / "paper.yaml").read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize(("section", "key", "value", "message"), [
+    ("stiffness", "ei0_nm2", 2530.0, r"^stiffness\.ei0_nm2 = 2530 is not a plausible bending stiffness for this "
+     r"actuator \(4\.4e-6\.\.0\.11 N·m², from its cross-section\); if it was entered in N·mm², it is 0\.00253 N·m²$"),
+    ("stiffness", "ei1_nm2_per_pa", 1.25e-5, r"^stiffness\.ei1_nm2_per_pa = 1\.25e-5 .*if it was entered in N·m²/kPa, "
+     r"it is 1\.25e-8 N·m²/Pa$"),
+    ("actuator", "pressure_range_pa", [0.0, 1e12], r"^actuator\.pressure_range_pa\[1\] = 1e12 is not a plausible "
+     r"maximum pressure of a soft pneumatic actuator \(1000\.\.1e6 Pa\)$"),
+    ("actuator", "pressure_range_pa", [0.0, 200.0], r"pressure_range_pa\[1\] = 200 .*entered in kPa, it is 200000 Pa$"),
+    ("actuator", "mass_kg", 39.27, r"^actuator\.mass_kg = 39\.27 .*if it was entered in g, it is 0\.03927 kg$"),
+    ("actuator", "length_m", 134.0, r"^actuator\.length_m = 134 .*if it was entered in mm, it is 0\.134 m$"),
+    ("sensor", "strip_gap_m", 0.1,
+     r"^sensor\.strip_gap_m = 0\.1 .*at most the shortest segment.*in cm, it is 0\.001 m$"),
+    ("material", "prebend_angle_rad", 5.0,
+     r"^material\.prebend_angle_rad = 5 .*entered in degrees, it is 0\.0872665 rad"),
+    ("material", "shear_modulus_pa", 0.18,
+     r"^material\.shear_modulus_pa = 0\.18 .*entered in MPa, it is 180000 Pa$"),
+])
+def test_each_unit_slip_is_named_with_the_si_value(section, key, value, message):
+    from bendsense.config import Config
+    from bendsense.errors import ConfigError
+
+    data = _config_dict()
+    data[section][key] = value
+    with pytest.raises(ConfigError, match=message):
+        Config.from_dict(data)
+
+
+def test_the_mass_bound_comes_from_the_volume_and_silicone_density():
+    from bendsense.config import Config
+    from bendsense.errors import ConfigError
+
+    act = CONFIG.actuator
+    area, _ = _cross_section_on_a_grid(act.chamber_radius_m, act.wall_thickness_m, act.bottom_thickness_m, False)
+    top = 1500.0 * area * act.length_m * 10  # densest silicone, the whole envelope, widened tenfold
+    data = _config_dict()
+    data["actuator"]["mass_kg"] = 0.98 * top
+    Config.from_dict(data)
+    data["actuator"]["mass_kg"] = 1.02 * top
+    with pytest.raises(ConfigError, match=r"actuator\.mass_kg = .* not a plausible mass"):
+        Config.from_dict(data)
+
+
+def test_shipped_configs_pass():
+    from bendsense.config import load_config
+
+    for path in ("configs/paper.yaml", "src/bendsense/data/paper.yaml"):
+        load_config(ROOT / path)
+
+
+def test_identify_fix_names_the_parameter_given_not_another():
+    from bendsense.identify import check_fixed, fit_free_bending
+
+    with pytest.raises(ArgumentError, match=r"^fix prebend_angle_rad = 5 .*if it was entered in degrees, "
+                                            r"it is 0\.0872665 rad$"):
+        fit_free_bending([20e3, 60e3, 120e3], np.radians([25.0, 80.0, 176.0]), CONFIG,
+                         fix={"prebend_angle_rad": 5.0})
+    with pytest.raises(ArgumentError, match=r"^fix ei1_nm2_per_pa = 1\.25e-5 .*if it was entered in N·m²/kPa, "
+                                            r"it is 1\.25e-8 N·m²/Pa$"):
+        check_fixed({"ei1_nm2_per_pa": 1.25e-5}, CONFIG)
+    with pytest.raises(ArgumentError, match=r"^--fix ei0_nm2 = 2530 .*N·mm²"):
+        check_fixed({"ei0_nm2": 2530.0}, CONFIG, field="--fix")
+    check_fixed({"ei0_nm2": 2.53e-3, "ei1_nm2_per_pa": 1.25e-8, "prebend_angle_rad": 0.05}, CONFIG)
+
+
+def test_pressure_options_name_the_slip():
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+
+    res = CliRunner().invoke(main, ["load", str(ROOT / "tests" / "data" / "invalid" / "good" / "session.csv"),
+                                    "--pressure-kpa", "60000"])
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert "--pressure-kpa = 60000 is not a plausible gauge pressure" in res.output
+    assert "if it was entered in Pa, it is 60 kPa" in res.output
+
+
+# --- no frame is ok with a force the actuator cannot carry -----------------------------------
+
+def _wide_gap_config():
+    # eight long segments and a strip gap as wide as one (16.5 mm): the sensor measures curvatures up to
+    # 1/d = 60.6 1/m only, so a moderate tip force is already beyond what this actuator can carry
+    sensor = dataclasses.replace(CONFIG.sensor, n_segments=8, segment_lengths_m=(0.0165,) * 8, strip_gap_m=0.0165)
+    return CONFIG.replace(sensor=sensor)
+
+
+def _beam_curvatures(config, force_n, pressure_pa):
+    from bendsense.actuator import FreeBendingModel
+
+    s = np.concatenate([[0.0], np.cumsum(config.sensor.lengths_m)])
+    sol = solve_beam(config.actuator.length_m, config.stiffness.ei_nm2(pressure_pa),
+                     FreeBendingModel.from_config(config).tip_curvature_per_m(pressure_pa), force_n=force_n,
+                     distributed_load_n_per_m=config.weight_per_length_n_per_m, s_m=s)
+    assert sol.success
+    return np.diff(sol.angle_rad) / config.sensor.lengths_m
+
+
+def test_a_force_beyond_what_the_actuator_carries_is_never_ok():
+    from bendsense.plausibility import IMPLAUSIBLE_FORCE
+
+    config = _wide_gap_config()
+    p = 60e3
+    # the bound, computed here from its definition: 10 EI(P) min(1/d, π/l_min) / L
+    kappa_max = min(1.0 / 0.0165, np.pi / 0.0165)
+    bound = 10.0 * (2.53e-3 + 1.25e-8 * p) * kappa_max / 0.134
+    assert 2.0 < bound < 20.0
+    kappa = np.array([_beam_curvatures(config, (2.0, 0.0), p), _beam_curvatures(config, (20.0, 0.0), p)])
+    est = estimate_force(kappa, np.full(2, p), config, warm_start=False)
+    # both fits find their force (the estimator is not at fault) ...
+    np.testing.assert_allclose(est.force_n, [[2.0, 0.0], [20.0, 0.0]], atol=1e-3)
+    # ... but the second is beyond what the actuator can carry: flagged, force kept
+    assert list(est.success) == [True, False]
+    assert est.message[1].startswith(f"{IMPLAUSIBLE_FORCE}: |F| = 20 N is beyond the {bound:.3g} N")
+    assert est.residual_m[1] < 0.05 * 0.134  # a fit that matches the shape: no model_misfit to hide behind
+    shape = bendsense.pcc.Shape.from_curvatures(kappa, config.sensor.lengths_m)
+    assert list(frame_status(shape, est)) == ["ok", IMPLAUSIBLE_FORCE]
+    one = estimate_force(kappa[1], p, config)  # the one-frame path
+    assert not one.success and one.message.startswith(IMPLAUSIBLE_FORCE)
+    from bendsense.errors import ConvergenceError
+
+    with pytest.raises(ConvergenceError, match=IMPLAUSIBLE_FORCE):
+        estimate_force(kappa[1:], np.full(1, p), config, warm_start=False, strict=True)
+
+
+def test_the_paper_prototype_carries_tens_of_newtons_not_kilonewtons():
+    from bendsense.plausibility import force_bound_n
+
+    # paper: 10 EI(P) min(1/1 mm, π/8 mm) / 134 mm
+    assert force_bound_n(0.0, CONFIG) == pytest.approx(10 * 2.53e-3 * (np.pi / 0.008) / 0.134)
+    p = np.array([0.0, 200e3])
+    np.testing.assert_allclose(force_bound_n(p, CONFIG), 10 * (2.53e-3 + 1.25e-8 * p) * (np.pi / 0.008) / 0.134)
+    assert 50.0 < force_bound_n(0.0, CONFIG) < force_bound_n(200e3, CONFIG) < 200.0  # tens of newtons

@@ -391,6 +391,7 @@ def process_session(
     notes = [f"{n} of {frames} frames {what}" for n, what in (
         (counts.extrapolated, "extrapolated"), (counts.not_converged, "not converged"),
         (counts.model_misfit, "model_misfit"), (counts.not_identifiable, "not identifiable"),
+        (counts.implausible_force, "implausible_force"),
         (counts.out_of_range, "pressure out of range")) if n]
     if lost or tx_drops:
         notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")

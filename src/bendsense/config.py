@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 import yaml
 
+from bendsense import plausibility
 from bendsense import validation as check
 from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, METHODS, OBJECTIVES  # noqa: F401 (re-exported)
 from bendsense.errors import ConfigError
@@ -64,8 +65,17 @@ def _number(path: str, value: Any, *, positive: bool = False, nonnegative: bool 
     return check.number(path, value, error=ConfigError, positive=positive, nonnegative=nonnegative)
 
 
-def _length(path: str, value: Any, *, max_m: float = check.MAX_LENGTH_M, positive: bool = True) -> float:
-    return check.length_m(path, value, error=ConfigError, max_m=max_m, positive=positive)
+def _length(path: str, value: Any, *, max_m: float = check.MAX_LENGTH_M, positive: bool = True,
+            typical_m: float = 0.01) -> float:
+    """A length [m]: finite, > 0 (or >= 0) and at most ``max_m``.
+
+    Beyond, the message names the unit slip (mm or cm, whichever gives a value nearer
+    ``typical_m``) and the value in metres.
+    """
+    value = _number(path, value, positive=positive, nonnegative=not positive)
+    what = "length" if max_m >= check.MAX_LENGTH_M else "cross-section or sensor dimension"
+    plausibility.Bound(what, 0.0, max_m, "m", "", plausibility.LENGTH_SLIPS, typical=typical_m).check(path, value)
+    return value
 
 
 def _integer(path: str, value: Any, *, minimum: int | None = None, maximum: int | None = None) -> int:
@@ -165,9 +175,10 @@ class SensorConfig(_Section):
         lengths = _numbers(f"{p}.segment_lengths_m", self.segment_lengths_m, n, check_one=_length)
         set_(self, "segment_lengths_m", lengths)
         # small dimensions: over 0.1 m is a unit mistake ("looks like millimetres")
-        set_(self, "strip_gap_m", _length(f"{p}.strip_gap_m", self.strip_gap_m, max_m=SMALL_M))
+        set_(self, "strip_gap_m", _length(f"{p}.strip_gap_m", self.strip_gap_m, max_m=SMALL_M, typical_m=1e-3))
         set_(self, "sleeve_thickness_m",
-             _length(f"{p}.sleeve_thickness_m", self.sleeve_thickness_m, max_m=SMALL_M, positive=False))
+             _length(f"{p}.sleeve_thickness_m", self.sleeve_thickness_m, max_m=SMALL_M, positive=False,
+                     typical_m=1e-3))
         _boolean(f"{p}.calibration_adds_sleeve", self.calibration_adds_sleeve)
         set_(self, "coil_diameter_m", _length(f"{p}.coil_diameter_m", self.coil_diameter_m, max_m=SMALL_M))
         _integer(f"{p}.coil_turns", self.coil_turns, minimum=1)
@@ -217,8 +228,8 @@ class ActuatorConfig(_Section):
     def __post_init__(self):
         p, set_ = self.section, object.__setattr__
         for name in ("chamber_radius_m", "bottom_thickness_m", "wall_thickness_m"):
-            set_(self, name, _length(f"{p}.{name}", getattr(self, name), max_m=SMALL_M))
-        set_(self, "length_m", _length(f"{p}.length_m", self.length_m))
+            set_(self, name, _length(f"{p}.{name}", getattr(self, name), max_m=SMALL_M, typical_m=3e-3))
+        set_(self, "length_m", _length(f"{p}.length_m", self.length_m, typical_m=0.1))
         set_(self, "mass_kg", _number(f"{p}.mass_kg", self.mass_kg, positive=True))
         lo, hi = _numbers(f"{p}.pressure_range_pa", self.pressure_range_pa, 2)
         where = f"{p}.pressure_range_pa"
@@ -226,9 +237,7 @@ class ActuatorConfig(_Section):
             raise check.fail(where, "a minimum >= -101325 Pa (vacuum)", lo, ConfigError)
         if not hi > lo:
             raise check.fail(where, "[min, max] with min < max", [lo, hi], ConfigError)
-        if hi < 1000:
-            raise ConfigError(f"{where}: expected pascals, got a maximum of {hi:g} Pa; looks like kilopascals "
-                              f"(did you mean [{lo * 1e3:g}, {hi * 1e3:g}]?)")
+        plausibility.pressure_bound("maximum pressure of a soft pneumatic actuator").check(f"{where}[1]", hi)
         set_(self, "pressure_range_pa", (lo, hi))
 
 
@@ -256,14 +265,14 @@ class MaterialConfig(_Section):
         object.__setattr__(
             self, "shear_modulus_pa", _number(f"{p}.shear_modulus_pa", self.shear_modulus_pa, positive=True)
         )
-        if self.shear_modulus_pa < 1e3:  # elastomers of soft actuators: ~10 kPa to ~10 MPa
-            raise _fail(f"{p}.shear_modulus_pa", f"{self.shear_modulus_pa:g} Pa is below 1 kPa; looks like kilopascals")
+        plausibility.shear_modulus_bound().check(f"{p}.shear_modulus_pa", self.shear_modulus_pa)
         object.__setattr__(
             self,
             "sensor_stiffness_nm_per_rad",
             _number(f"{p}.sensor_stiffness_nm_per_rad", self.sensor_stiffness_nm_per_rad, nonnegative=True),
         )
         object.__setattr__(self, "prebend_angle_rad", _number(f"{p}.prebend_angle_rad", self.prebend_angle_rad))
+        plausibility.prebend_bound().check(f"{p}.prebend_angle_rad", self.prebend_angle_rad)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -303,10 +312,18 @@ class GravityConfig(_Section):
     def __post_init__(self):
         p = self.section
         object.__setattr__(self, "g_m_per_s2", _number(f"{p}.g_m_per_s2", self.g_m_per_s2, nonnegative=True))
+        gravity = plausibility.Bound("gravity of a rig", *plausibility.GRAVITY_M_PER_S2, "m/s²", "or 0: none",
+                                     plausibility.GRAVITY_SLIPS, typical=9.81)
+        if self.g_m_per_s2 != 0.0:
+            gravity.check(f"{p}.g_m_per_s2", self.g_m_per_s2)
         d = _numbers(f"{p}.direction", self.direction, 2)
         norm = math.hypot(*d)
         if abs(norm - 1.0) > 1e-6:
-            raise _fail(f"{p}.direction", f"must be a unit vector, got {list(d)} (norm {norm:.6g})")
+            hint = ""
+            if gravity.contains(norm):  # the acceleration vector where its direction belongs
+                hint = (f"; looks like the acceleration in m/s²: direction [{d[0] / norm:g}, {d[1] / norm:g}] "
+                        f"with g_m_per_s2: {norm:g}")
+            raise _fail(f"{p}.direction", f"must be a unit vector, got {list(d)} (norm {norm:.6g}){hint}")
         object.__setattr__(self, "direction", d)
 
 
@@ -370,6 +387,8 @@ class EstimationConfig(_Section):
             raise _fail(f"{p}.direction", f"must be a unit vector, got {list(d)} (norm {norm:.6g})")
         object.__setattr__(self, "direction", d)
         object.__setattr__(self, "follower_angle_rad", _number(f"{p}.follower_angle_rad", self.follower_angle_rad))
+        plausibility.angle_bound("angle from the tip tangent").check(f"{p}.follower_angle_rad",
+                                                                     self.follower_angle_rad)
         _boolean(f"{p}.push_only", self.push_only)
         object.__setattr__(
             self, "signal_noise_std", _number(f"{p}.signal_noise_std", self.signal_noise_std, nonnegative=True)
@@ -377,6 +396,8 @@ class EstimationConfig(_Section):
         object.__setattr__(
             self, "pressure_max_pa", _number(f"{p}.pressure_max_pa", self.pressure_max_pa, positive=True)
         )
+        plausibility.pressure_bound("maximum pressure of a soft pneumatic actuator").check(
+            f"{p}.pressure_max_pa", self.pressure_max_pa)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -518,20 +539,9 @@ class Config:
                 raise _fail(key, f"expected a {cls.__name__}, got {type(getattr(self, key)).__name__}")
         if not isinstance(self.name, str):
             raise check.fail("name", "a string", self.name, ConfigError)
-        sensor_m, length_m = float(np.sum(self.sensor.lengths_m)), self.actuator.length_m
-        if sensor_m > 1.05 * length_m:
-            raise _fail("actuator.length_m", f"{length_m:g} m is shorter than the sensor glued along it "
-                        f"(sensor.segment_lengths_m sum to {sensor_m:g} m)")
-        lo, top = self.actuator.pressure_range_pa
-        for p in (lo, top):
-            if self.stiffness.ei_nm2(p) <= 0:
-                raise _fail("stiffness", f"EI(P) = ei0_nm2 + ei1_nm2_per_pa P is not positive at {p / 1e3:g} kPa, "
-                            "inside actuator.pressure_range_pa")
-        stiffening = self.stiffness.ei1_nm2_per_pa * top / self.stiffness.ei0_nm2
-        if stiffening > 100.0:
-            raise _fail("stiffness.ei1_nm2_per_pa", f"{self.stiffness.ei1_nm2_per_pa:g} N·m²/Pa makes EI "
-                        f"{stiffening + 1:.0f} times stiffer at {top / 1e3:g} kPa than at rest; looks like "
-                        "N·m²/kPa (the paper's γ1 = 1.25e-5 N·m²/kPa is 1.25e-8 N·m²/Pa)")
+        # the bounds that need the geometry (EI from the cross-section, mass from the volume, ...);
+        # each segment within the length first, so that segments in cm are not blamed on length_m
+        plausibility.check_config(self)
 
     @classmethod
     def from_dict(cls, data: Any) -> Config:

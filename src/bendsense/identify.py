@@ -75,6 +75,7 @@ __all__ = [
     "FreeBendingFit",
     "StiffnessData",
     "StiffnessFit",
+    "check_fixed",
     "fit_free_bending",
     "fit_stiffness",
     "read_free_bending_csv",
@@ -103,18 +104,57 @@ _DATA_HELPERS = (_PRESSURE, _check_pressure_unit, _column, _read_table, _require
 # --------------------------------------------------------------------------- helpers
 
 
-def _split_fix(fix, names: tuple[str, ...], values: dict) -> tuple[list[str], dict]:
-    """Free names and fixed values from ``fix``: names, or a mapping name → value (None: the start value)."""
+def _split_fix(fix, names: tuple[str, ...], values: dict, config=None) -> tuple[list[str], dict]:
+    """Free names and fixed values from ``fix``: names, or a mapping name → value (None: the start value).
+
+    With ``config``, a value given for a parameter is checked against its plausible
+    range for that actuator (:func:`check_fixed`).
+    """
     fixed = {}
     if fix is None:
         fix = ()
     items = fix.items() if isinstance(fix, Mapping) else ((n, None) for n in ([fix] if isinstance(fix, str) else fix))
+    given = {}
     for name, value in items:
         if name not in names:
             raise ConfigError(f"fix: unknown parameter {name!r}; allowed: {', '.join(names)}")
         fixed[name] = values[name] if value is None else float(value)
+        if value is not None:
+            given[name] = fixed[name]
+    if config is not None:
+        check_fixed(given, config)
     free = [n for n in names if n not in fixed]
     return free, fixed
+
+
+def check_fixed(values: Mapping, config, field: str = "fix") -> None:
+    """Refuse a value to hold a model parameter at that no actuator of ``config``'s geometry can have.
+
+    The bounds are those of the config's own values
+    (:func:`bendsense.plausibility.parameter_bounds`); ``ei1_nm2_per_pa`` is judged at
+    the ``ei0_nm2`` given beside it, else for any plausible ei0. The message names the
+    parameter, its range, the likely unit slip (N·m²/kPa for N·m²/Pa, degrees for
+    radians, ...) and the value in SI units.
+
+    Parameters
+    ----------
+    values : mapping of str to float
+        Parameter name → value [SI units].
+    config : Config
+        The actuator (geometry, pressure range).
+    field : str, default "fix"
+        Prefix of the field in the message (``--fix`` on the command line).
+
+    Raises
+    ------
+    ArgumentError
+    """
+    from bendsense.plausibility import parameter_bounds
+
+    bounds = parameter_bounds(config.actuator, ei0_nm2=values.get("ei0_nm2"))
+    for name, value in values.items():
+        if value is not None and name in bounds:
+            bounds[name].check(f"{field} {name}", float(value), error=ArgumentError)
 
 
 def _covariance(jac: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, int]:
@@ -376,7 +416,7 @@ def fit_free_bending(
         config = load_config()
     p, y = _free_bending_data(pressure_pa, bending_angle_rad)
     start = _free_bending_start(config.material, initial)
-    free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start)
+    free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start, config)
     if len(p) <= len(free):
         raise ArgumentError(
             f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
@@ -713,7 +753,7 @@ def fit_stiffness(
     if not (math.isfinite(pressure_tolerance_pa) and pressure_tolerance_pa >= 0):
         raise ArgumentError(f"pressure_tolerance_pa: must be finite and >= 0, got {pressure_tolerance_pa!r}")
     start = {n: getattr(config.stiffness, n) for n in STIFFNESS_PARAMS}
-    free, fixed = _split_fix(fix, STIFFNESS_PARAMS, start)
+    free, fixed = _split_fix(fix, STIFFNESS_PARAMS, start, config)
     length = config.actuator.length_m
     k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(data.pressure_pa)
     w = config.weight_per_length_n_per_m

@@ -117,6 +117,9 @@ class FrameCounts:
     not_identifiable : int
         Frames whose shape does not determine the load along one direction (status
         ``not_identifiable``; e.g. an axial load on a nearly straight actuator).
+    implausible_force : int
+        Frames whose force is beyond what the actuator can carry (status
+        ``implausible_force``, force kept).
     """
 
     frames: int
@@ -125,6 +128,7 @@ class FrameCounts:
     not_converged: int = 0
     model_misfit: int = 0
     not_identifiable: int = 0
+    implausible_force: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,7 +160,7 @@ class Processed(Results):
 
     def counts(self) -> FrameCounts:
         """Frames flagged: extrapolated, pressure out of range, not converged, model_misfit, not identifiable."""
-        from bendsense.plausibility import pressure_outside
+        from bendsense.plausibility import IMPLAUSIBLE_FORCE, pressure_outside
         from bendsense.results import MODEL_MISFIT
 
         n = len(self.session)
@@ -165,10 +169,12 @@ class Processed(Results):
             return FrameCounts(frames=n, extrapolated=extrapolated)
         outside = pressure_outside(self.session.pressure_pa, self.config)
         failed = ~np.asarray(self.estimate.success, dtype=bool) & ~outside
-        misfit = failed & np.char.startswith(np.broadcast_to(np.asarray(self.estimate.message, dtype=str), (n,)),
-                                             MODEL_MISFIT)
+        message = np.broadcast_to(np.asarray(self.estimate.message, dtype=str), (n,))
+        misfit = failed & np.char.startswith(message, MODEL_MISFIT)
+        implausible = failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)
         return FrameCounts(frames=n, extrapolated=extrapolated, out_of_range=int(outside.sum()),
-                           not_converged=int(np.count_nonzero(failed & ~misfit)), model_misfit=int(misfit.sum()),
+                           not_converged=int(np.count_nonzero(failed & ~misfit & ~implausible)),
+                           model_misfit=int(misfit.sum()), implausible_force=int(implausible.sum()),
                            not_identifiable=int(np.count_nonzero(self.columns["status"] == NOT_IDENTIFIABLE)))
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from bendsense._io import open_regular, read_text
 from bendsense.errors import SessionError
-from bendsense.plausibility import OUT_OF_RANGE
+from bendsense.plausibility import IMPLAUSIBLE_FORCE, OUT_OF_RANGE
 from bendsense.session.cells import parse_column, write_columns
 
 # the per-frame ``status`` of results.csv (DESIGN section 3): ``ok`` or a short reason
@@ -147,8 +147,10 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     signals), ``not_converged``, ``not_identifiable`` (the shape does not determine the
     load along one direction: σ is infinite there), ``pressure_out_of_range``,
     ``model_misfit`` (the model shape stays over 5 % of the length from the measured one,
-    or a χ² beyond chance), ``no_force``, and ``implausible_shape`` (a tip angle beyond a
-    full turn: a unit or calibration mistake).
+    or a χ² beyond chance), ``implausible_force`` (a force beyond what the actuator can
+    carry, :func:`bendsense.plausibility.force_bound_n`: a unit or calibration mistake;
+    force kept), ``no_force``, and ``implausible_shape`` (a tip angle beyond a full
+    turn: a unit or calibration mistake).
 
     Parameters
     ----------
@@ -171,6 +173,7 @@ def frame_status(shape, estimate=None) -> np.ndarray:
         status[~failed & (status == OK) & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
         status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
         status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
+        status[failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)] = IMPLAUSIBLE_FORCE
         # a NaN force is never ok, whatever the solver said
         force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
         status[(status == OK) & ~np.isfinite(force).all(axis=1)] = NO_FORCE

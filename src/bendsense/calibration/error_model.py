@@ -56,12 +56,16 @@ def _misfit_correlation(x, z, odd, top) -> dict:
             for w in (1e-3, 1e-2, 3e-2, 0.1, 0.3):
                 try:
                     lc = np.linalg.cholesky((1.0 - w) * gc + w * eye)
-                except np.linalg.LinAlgError:
+                except np.linalg.LinAlgError:  # this grid point's covariance is not positive definite: not a model
                     continue
                 y = np.linalg.solve(lc, z)
                 ll = -0.5 * float(y @ y) - float(np.log(np.diag(lc)).sum())
                 if ll > best[0]:
                     best = (ll, float(ell), float(c), float(w))
+    if best[0] == -np.inf:  # never a silent fallback to white noise: the calibration-error part of σ depends on it
+        raise ConfigError(f"calibration: no correlation model of the fit residuals has a finite likelihood "
+                          f"({x.size} points; non-finite residuals, or every grid covariance singular): the "
+                          "calibration-error part of σ cannot be estimated; refit with `bendsense calibrate`")
     return {"length_m": best[1], "parity_correlation": best[2], "white_fraction": best[3]}
 
 
@@ -110,6 +114,10 @@ def shift_error_table(cal) -> dict:
     """
     if cal.fit_delta_a is None or cal.fit_shifts_m is None:
         rms = [r.rms_shift_m for r in cal.strip_residuals]
+        if not rms:
+            _warn_once(cal, "misfit", "σ leaves out the calibration misfit (how far the polynomials miss the strips): "
+                       "the calibration has neither fit_delta_a, fit_shifts_m nor strip_residuals; refit with "
+                       "`bendsense calibrate` to include it")
         level = float(np.sqrt(np.mean(np.square(rms)))) if rms else 0.0
         flat = np.array([level, level])
         return {"grid_m": np.array([0.0, 1.0]), "sigma_odd_m": flat, "sigma_even_m": flat, "length_m": 0.0,
@@ -250,6 +258,23 @@ def coefficient_covariance(cal) -> np.ndarray:
     return q
 
 
+def _warn_once(cal, key: str, message: str) -> None:
+    """Log ``message`` as a warning the first time ``key`` is missing from this calibration.
+
+    Through the ``bendsense`` logger (a ``WARNING:`` line on the command line, Python's
+    last-resort handler in a notebook), once per calibration object: the error model is
+    built once per call of ``estimate_force``, and a live run calls it per block.
+    """
+    import logging
+
+    done = cal.__dict__.setdefault("_sigma_warnings", set())
+    if key not in done:
+        done.add(key)
+        source = cal.meta.get("manifest") if isinstance(cal.meta, dict) else None
+        where = f"calibration (from {source})" if source else "calibration"
+        logging.getLogger("bendsense").warning("%s: %s", where, message)
+
+
 def error_model(cal, noise_std_counts=None):
     """The errors of a calibration's shifts as the compiled kernels take them (:meth:`Calibration.error_model`).
 
@@ -279,8 +304,10 @@ def error_model(cal, noise_std_counts=None):
     odd, parity = cal._parity_correlation
     try:
         q = np.array(cal.coefficient_covariance, dtype=float)
-    except ConfigError:  # an old file without the fitted data or frame counts
+    except ConfigError as err:  # an old file without the fitted data or frame counts: said, once, never silent
         q = np.zeros((1, 1))
+        _warn_once(cal, "coefficient_covariance", f"σ leaves out the calibration-coefficient part (the uncertainty "
+                   f"of the fitted polynomials and offsets): {err}")
     return ShiftErrorModel(
         calibrated=True, noise_std=noise, coef=coef, dcoef=coef[:, 1:] * np.arange(1, coef.shape[1]),
         grid_m=np.array(table["grid_m"], dtype=float), sigma_odd_m=np.array(table["sigma_odd_m"], dtype=float),

@@ -38,6 +38,53 @@ def _array(where: str, value: Any, length: int | None = None) -> np.ndarray:
     return arr
 
 
+def _matrix(where: str, value: Any, n: int) -> np.ndarray:
+    """A (rows, n) matrix of finite numbers, from a list of rows."""
+    if not isinstance(value, (list, tuple)) or not all(isinstance(row, (list, tuple)) for row in value):
+        raise ConfigError(f"{where}: expected a list of rows of {n} numbers, got {check.short(value)}")
+    rows = [_array(f"{where}[{i}]", row, n) for i, row in enumerate(value)]
+    if not rows:
+        raise ConfigError(f"{where}: expected at least one row, got none")
+    return np.array(rows)
+
+
+_STRIP_FIELDS = ("radius_m", "curvature_per_m", "rms_shift_m", "max_abs_shift_m", "signal_std", "n_frames",
+                 "recording")
+
+
+def _strip_residual(i: int, item: Any) -> StripResidual:
+    """One entry of ``strip_residuals``, every field checked (the frame count enters σ)."""
+    where = f"strip_residuals[{i}]"
+    if not isinstance(item, dict):
+        raise ConfigError(f"{where}: expected a mapping with keys {', '.join(_STRIP_FIELDS)}, got {check.short(item)}")
+    unknown = [check.key(k) for k in item if k not in _STRIP_FIELDS]
+    if unknown:
+        raise ConfigError(f"{where}: unknown keys {', '.join(unknown)}; allowed: {', '.join(_STRIP_FIELDS)}")
+    missing = [k for k in ("radius_m", "curvature_per_m", "rms_shift_m", "max_abs_shift_m") if k not in item]
+    if missing:
+        raise ConfigError(f"{where}: missing keys {', '.join(missing)}")
+    kwargs = {
+        "radius_m": check.number(f"{where}.radius_m", item["radius_m"], error=ConfigError, positive=True),
+        "curvature_per_m": check.number(f"{where}.curvature_per_m", item["curvature_per_m"], error=ConfigError),
+        "rms_shift_m": check.number(f"{where}.rms_shift_m", item["rms_shift_m"], error=ConfigError, nonnegative=True),
+        "max_abs_shift_m": check.number(f"{where}.max_abs_shift_m", item["max_abs_shift_m"], error=ConfigError,
+                                        nonnegative=True),
+    }
+    if kwargs["max_abs_shift_m"] < kwargs["rms_shift_m"] * (1 - 1e-9):
+        raise ConfigError(f"{where}.max_abs_shift_m: {kwargs['max_abs_shift_m']:g} is below its rms_shift_m "
+                          f"{kwargs['rms_shift_m']:g} (the largest error is never below the RMS)")
+    if "signal_std" in item:
+        kwargs["signal_std"] = check.number(f"{where}.signal_std", item["signal_std"], error=ConfigError,
+                                            nonnegative=True)
+    if "n_frames" in item:  # the strip means' variance is σ²/n_frames (coefficient_covariance)
+        kwargs["n_frames"] = check.integer(f"{where}.n_frames", item["n_frames"], error=ConfigError, minimum=1)
+    if "recording" in item:
+        if not isinstance(item["recording"], str):
+            raise ConfigError(f"{where}.recording: expected a file name, got {check.short(item['recording'])}")
+        kwargs["recording"] = item["recording"]
+    return StripResidual(**kwargs)
+
+
 def _range(where: str, value: Any) -> tuple:
     arr = _array(where, value, 2)
     if arr[0] > arr[1]:
@@ -143,20 +190,37 @@ def fields_from_dict(data: Any) -> dict:
         from bendsense.config import SensorConfig
 
         sensor = SensorConfig.from_dict(data["sensor"])
-    residuals = []
-    for i, item in enumerate(data.get("strip_residuals") or []):
-        try:
-            residuals.append(StripResidual(**item))
-        except TypeError as err:
-            raise ConfigError(f"strip_residuals[{i}]: {err}") from None
+    strips = data.get("strip_residuals")
+    if strips is not None and not isinstance(strips, list):
+        raise ConfigError(f"strip_residuals: expected a list of mappings, got {check.short(strips)}")
+    residuals = [_strip_residual(i, item) for i, item in enumerate(strips or [])]
     cv = data.get("cv_errors_m")
     if cv is not None:
         if not isinstance(cv, dict):
             raise ConfigError(f"cv_errors_m: expected a mapping of degree to error, got {check.short(cv)}")
-        cv = {int(k): float(v) for k, v in cv.items()}
+        cv = {check.integer(f"cv_errors_m key {check.short(k)}", k, error=ConfigError, minimum=0):
+              check.number(f"cv_errors_m[{check.short(k)}]", v, error=ConfigError, nonnegative=True)
+              for k, v in cv.items()}
     meta = data.get("meta") or {}
     if not isinstance(meta, dict):
         raise ConfigError(f"meta: expected a mapping, got {check.short(meta)}")
+    if "flat_frames" in meta:
+        # the offsets' variance is σ²/flat_frames: a count that is no count drops or inflates it
+        frames = check.integer("meta.flat_frames", meta["flat_frames"], error=ConfigError, minimum=1)
+        if frames < 2 and data.get("noise_std") is not None:
+            raise ConfigError("meta.flat_frames: 1 frame cannot have given noise_std (a standard deviation over "
+                              "the flat recording's frames); expected >= 2")
+    fit = {}
+    for name in ("fit_delta_a", "fit_shifts_m"):
+        if data.get(name) is not None:
+            fit[name] = _matrix(name, data[name], offset.size)
+    rows = {name: a.shape[0] for name, a in fit.items()}
+    if residuals and rows:
+        # one row for the flat recording, then one per strip (coefficient_covariance pairs them)
+        name, got = next(iter(rows.items()))
+        if got != len(residuals) + 1:
+            raise ConfigError(f"{name}: expected {len(residuals) + 1} rows (the flat recording and "
+                              f"{len(residuals)} strips of strip_residuals), got {got}")
     return {
         "offset": offset,
         "coefficients_odd": coef,
@@ -170,7 +234,7 @@ def fields_from_dict(data: Any) -> dict:
         "weighting": data.get("weighting", "none"),
         "sleeve": data.get("sleeve", False),
         "sensor": sensor,
-        "fit_delta_a": data.get("fit_delta_a"),
-        "fit_shifts_m": data.get("fit_shifts_m"),
+        "fit_delta_a": fit.get("fit_delta_a"),
+        "fit_shifts_m": fit.get("fit_shifts_m"),
         "meta": meta,
     }

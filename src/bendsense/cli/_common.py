@@ -54,6 +54,29 @@ class Finite(click.ParamType):
         return number
 
 
+class PressureKpa(Finite):
+    """A gauge pressure option in kPa: finite, from ``min`` (default vacuum) to 1 MPa.
+
+    Above, the message names the likely unit slip (pascals, bar, psi) and the value in
+    kPa (:class:`bendsense.plausibility.Bound`).
+    """
+
+    def __init__(self, min: float = -101.325):
+        super().__init__(min=min)
+
+    def convert(self, value, param, ctx):
+        """Parse and check one value."""
+        from bendsense.plausibility import PRESSURE_MAX_PA, Bound
+
+        number = super().convert(value, param, ctx)  # finite, >= min
+        bound = Bound("gauge pressure of a soft pneumatic actuator", self.min, PRESSURE_MAX_PA / 1e3, "kPa",
+                      slips=(("Pa", 1e-3), ("bar", 100.0), ("psi", 6.894757), ("MPa", 1e3)), typical=100.0)
+        if not bound.contains(number):
+            name = param.opts[0] if param is not None and param.opts else "value"
+            self.fail(bound.message(name, number), param, ctx)
+        return number
+
+
 SEED = click.IntRange(0, 2**32 - 1)
 """Seeds of numpy's generators: 0..2^32-1 (a negative seed is refused before any work)."""
 

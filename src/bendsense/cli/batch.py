@@ -16,8 +16,8 @@ from bendsense import output
 from bendsense.cli._common import (
     CONSTRAINTS,
     METHODS,
-    Finite,
     InterspersedCommand,
+    PressureKpa,
     check_figure_suffix,
     config_option,
     objective_option,
@@ -64,7 +64,7 @@ def _dask_executor(address: str):
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
 @objective_option
-@click.option("--pressure-kpa", type=Finite(), help="Constant pressure for frames without a reading [kPa].")
+@click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")
 @click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
 @overwrite_option

@@ -17,6 +17,7 @@ from bendsense.cli._common import (
     SEED,
     Finite,
     InterspersedCommand,
+    PressureKpa,
     make_config_option,
     make_overwrite_option,
     objective_option,
@@ -163,7 +164,7 @@ def _sigterm_as_interrupt():
 @click.option("--estimate", is_flag=True, help="Shape and force of every frame as it arrives, to SESSION/results.csv.")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @objective_option
-@click.option("--pressure-kpa", type=Finite(), help="Pressure for frames without a pressure reading [kPa].")
+@click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",

@@ -9,8 +9,8 @@ import click
 from bendsense import output as outputs
 from bendsense.choices import BEAM_METHODS
 from bendsense.cli._common import (
-    Finite,
     InterspersedCommand,
+    PressureKpa,
     check_figure_suffix,
     config_option,
     overwrite_option,
@@ -72,7 +72,7 @@ def _parse_fix(kind: str, items) -> dict:
 )
 @click.option(
     "--pressure-tolerance-kpa",
-    type=Finite(min=0),
+    type=PressureKpa(min=0),
     default=1.0,
     show_default=True,
     help="stiffness: rows whose pressures differ by at most this form one level [kPa].",
@@ -109,6 +109,11 @@ def identify(
     check_figure_suffix(plot_path, "--plot")
 
     def step(state):
+        from bendsense.config import load_config
+        from bendsense.identify import check_fixed
+
+        # a held value no actuator of this geometry can have: named before any data is read
+        check_fixed(fix, load_config(config_path), field="--fix")
         try:
             from bendsense.config import load_config, save_config
             from bendsense.identify import (

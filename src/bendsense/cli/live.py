@@ -12,6 +12,7 @@ from bendsense.cli._common import (
     SEED,
     Finite,
     InterspersedCommand,
+    PressureKpa,
     check_figure_suffix,
     config_option,
     objective_option,
@@ -49,7 +50,7 @@ _NO_CALIBRATION = (
     type=Finite(min=0, min_open=True),
     help="Run time [s] (default: until the window is closed; 3 s with --save).",
 )
-@click.option("--pressure-kpa", type=Finite(), help="Pressure for frames without a pressure reading [kPa].")
+@click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
 @click.option(
     "--scale",
     "scale_mm_per_n",

@@ -19,8 +19,8 @@ from bendsense.cli._common import (
     ANGLE_SOURCES,
     CONSTRAINTS,
     METHODS,
-    Finite,
     InterspersedCommand,
+    PressureKpa,
     config_option,
     objective_option,
     overwrite_option,
@@ -138,7 +138,7 @@ def run_steps(steps) -> dict:
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="Calibration YAML written by 'bendsense calibrate'.",
 )
-@click.option("--pressure-kpa", type=Finite(), help="Constant pressure for frames without a reading [kPa].")
+@click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")
 def load(session_path, config_path, calibration_path, pressure_kpa):
     """Load a session (session CSV or native session directory)."""
 
@@ -224,6 +224,10 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
         if counts.model_misfit:
             log.warning("%d of %d frames: the model does not explain the shape (status 'model_misfit', force kept)",
                         counts.model_misfit, len(session))
+        if counts.implausible_force:
+            log.warning("%d of %d frames: a force beyond what the actuator can carry (status 'implausible_force', "
+                        "force kept): check the units of the config's stiffness and the calibration",
+                        counts.implausible_force, len(session))
         if counts.not_identifiable:
             log.warning("%d of %d frames: the shape does not determine the load along one direction (status "
                         "'not_identifiable', σ inf along it; e.g. an axial load on a nearly straight actuator)",

@@ -7,7 +7,16 @@ from pathlib import Path
 import click
 
 from bendsense import output
-from bendsense.cli._common import SEED, Finite, InterspersedCommand, config_option, overwrite_option, say, step_io
+from bendsense.cli._common import (
+    SEED,
+    Finite,
+    InterspersedCommand,
+    PressureKpa,
+    config_option,
+    overwrite_option,
+    say,
+    step_io,
+)
 
 # kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
 _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
@@ -33,7 +42,7 @@ _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying
 @click.option("--ei-error", type=Finite(), help="Model mismatch: relative error of the true EI.")
 @click.option("--k0-error", type=Finite(), help="Model mismatch: relative error of the true K0.")
 @click.option("--base-rotation", type=Finite(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
-@click.option("--hysteresis-kpa", type=Finite(min=0), help="Model mismatch: pressure play [kPa].")
+@click.option("--hysteresis-kpa", type=PressureKpa(min=0), help="Model mismatch: pressure play [kPa].")
 @overwrite_option
 def simulate(
     scenario,

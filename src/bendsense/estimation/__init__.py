@@ -58,7 +58,7 @@ from bendsense.estimation.problem import (
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
 from bendsense.estimation.uncertainty import tip_angle_shift_gradient
-from bendsense.plausibility import pressure_range_step
+from bendsense.plausibility import force_bound_step, pressure_range_step
 from bendsense.shift_errors import noise_only
 from bendsense.status import Status
 from bendsense.validation import float_array, short
@@ -111,8 +111,10 @@ def _models(config):
     return cached
 
 
-# first step, kept apart from the estimator: frames outside the actuator's pressure range get no force
+# steps kept apart from the estimator: frames outside the actuator's pressure range get no force (first),
+# a force beyond what the actuator can carry is not ok (last)
 @pressure_range_step
+@force_bound_step
 def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "none", method: str | None = "fast", *,
                    objective: str | None = None, push_only: bool | None = None, tip_angle_source: str | None = None,
                    direction=None, follower_angle_rad: float | None = None, initial_force_n=None,
@@ -173,7 +175,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         Frames that fail have ``success=False``, NaN force and a message. Frames whose
         pressure lies outside ``config.actuator.pressure_range_pa`` have no force,
         ``success=False`` and the message ``"pressure_out_of_range: ..."``
-        (:func:`bendsense.plausibility.pressure_range_step`).
+        (:func:`bendsense.plausibility.pressure_range_step`). Frames whose force is beyond
+        what the actuator can carry keep it, with ``success=False`` and the message
+        ``"implausible_force: ..."`` (:func:`bendsense.plausibility.force_bound_step`).
 
     Raises
     ------
@@ -251,9 +255,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                                          np.maximum(np.zeros((B, k)), pb.lower))
         _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _c(u), _c(run_status, np.int64),
                   out)
-    if uncertainty == "none":  # stacklevel 3: the caller of the public wrapper (pressure_range_step)
+    if uncertainty == "none":  # stacklevel 4: the caller of the public wrappers (pressure_range_step, force_bound_step)
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
-                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)
+                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=4)
     text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
             else messages(status, residual, chi2, p_value, blocked_dir, method))
     if strict and not success.all():

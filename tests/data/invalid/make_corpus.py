@@ -126,6 +126,61 @@ cal_case("coefficients_not_list.yaml", r"coefficients_odd: expected a list of nu
 cal_case("range_reversed.yaml", r"delta_a_range_odd: expected \[min, max\] with min <= max",
          lambda d: d.update(delta_a_range_odd=[600.0, 0.0]))
 
+
+# impossible counts and values on the σ path (issue 21): every field a reader uses is checked
+
+
+def strip(i, **change):
+    def edit(d):
+        d["strip_residuals"] = [dict(r) for r in d["strip_residuals"]]
+        d["strip_residuals"][i].update(change)
+    return edit
+
+
+def fit_rows(rows, n=N, value=0.0):
+    return lambda d: d.update(fit_delta_a=[[value] * n for _ in range(rows)], fit_shifts_m=[[0.0] * n for _ in range(rows)])
+
+
+cal_case("strip_n_frames_negative.yaml", r"strip_residuals\[0\]\.n_frames: expected an integer >= 1, got -5",
+         strip(0, n_frames=-5))
+cal_case("strip_n_frames_zero.yaml", r"strip_residuals\[1\]\.n_frames: expected an integer >= 1, got 0",
+         strip(1, n_frames=0))
+cal_case("strip_n_frames_float.yaml", r"strip_residuals\[0\]\.n_frames: expected an integer, got 200\.5",
+         strip(0, n_frames=200.5))
+cal_case("strip_radius_negative.yaml", r"strip_residuals\[0\]\.radius_m: expected > 0, got -0\.04",
+         strip(0, radius_m=-0.04))
+cal_case("strip_rms_nan.yaml", r"strip_residuals\[1\]\.rms_shift_m: expected a finite number, got nan",
+         strip(1, rms_shift_m=float("nan")))
+cal_case("strip_max_below_rms.yaml", r"strip_residuals\[0\]\.max_abs_shift_m: 1e-07 is below its rms_shift_m 1\.2e-06",
+         strip(0, max_abs_shift_m=1e-7))
+cal_case("strip_signal_std_negative.yaml", r"strip_residuals\[1\]\.signal_std: expected >= 0, got -0\.55",
+         strip(1, signal_std=-0.55))
+cal_case("strip_unknown_key.yaml", r"strip_residuals\[0\]: unknown keys frames; allowed: radius_m",
+         strip(0, frames=200))
+cal_case("strip_not_mapping.yaml", r"strip_residuals\[0\]: expected a mapping with keys radius_m",
+         lambda d: d.update(strip_residuals=["r040.csv"]))
+cal_case("strip_residuals_mapping.yaml", r"strip_residuals: expected a list of mappings",
+         lambda d: d.update(strip_residuals={"r040.csv": 1}))
+cal_case("flat_frames_zero.yaml", r"meta\.flat_frames: expected an integer >= 1, got 0",
+         lambda d: d.update(meta={**d["meta"], "flat_frames": 0}))
+cal_case("flat_frames_negative.yaml", r"meta\.flat_frames: expected an integer >= 1, got -5",
+         lambda d: d.update(meta={**d["meta"], "flat_frames": -5}))
+cal_case("flat_frames_text.yaml", r"meta\.flat_frames: expected an integer, got 'many'",
+         lambda d: d.update(meta={**d["meta"], "flat_frames": "many"}))
+cal_case("flat_frames_one_with_noise.yaml", r"meta\.flat_frames: 1 frame cannot have given noise_std",
+         lambda d: d.update(meta={**d["meta"], "flat_frames": 1}))
+cal_case("cv_error_text.yaml", r"cv_errors_m\[2\]: expected a number, got 'small'",
+         lambda d: d.update(cv_errors_m={2: "small"}))
+cal_case("cv_error_negative.yaml", r"cv_errors_m\[1\]: expected >= 0, got -1e-06", lambda d: d.update(cv_errors_m={1: -1e-6}))
+cal_case("cv_degree_text.yaml", r"cv_errors_m key 'two': expected an integer, got 'two'",
+         lambda d: d.update(cv_errors_m={"two": 1e-6}))
+cal_case("fit_rows_vs_strips.yaml", r"fit_delta_a: expected 3 rows \(the flat recording and 2 strips of strip_residuals\), got 2",
+         fit_rows(2))
+cal_case("fit_delta_a_nan.yaml", r"fit_delta_a\[0\]: values must be finite", fit_rows(3, value=float("nan")))
+cal_case("fit_shifts_8_channels.yaml", r"fit_delta_a\[0\]: expected 16 numbers, got 8", fit_rows(3, n=8))
+cal_case("fit_delta_a_flat_list.yaml", r"fit_delta_a: expected a list of rows of 16 numbers",
+         lambda d: d.update(fit_delta_a=[0.0] * 16, fit_shifts_m=[0.0] * 16))
+
 # ---- manifests: Calibration.fit(manifest); recordings in manifests/rec/
 M = ROOT / "manifests"
 rec = M / "rec"
@@ -283,7 +338,7 @@ cases = {
     "simulate_noise_nan": ("simulate validation -o sim --noise-counts nan", r"'--noise-counts': expected a finite number, got nan"),
     "simulate_hysteresis_negative": ("simulate contact -o sim --hysteresis-kpa -1", r"'--hysteresis-kpa': expected >= 0, got -1"),
     "simulate_bad_config": ("simulate calibration -o sim --config {invalid}/configs/segment_lengths_mm.yaml",
-                            r"segment_lengths_mm\.yaml: sensor\.segment_lengths_m\[0\]: .* looks like millimetres"),
+                            r"segment_lengths_mm\.yaml: sensor\.segment_lengths_m\[0\] = 10 .* if it was entered in mm, it is 0\.01 m"),
     "record_seconds_nan": ("record loop:// -o rec --seconds nan", r"'--seconds': expected a finite number, got nan"),
     "record_seconds_inf": ("record loop:// -o rec --seconds inf", r"'--seconds': expected a finite number, got inf"),
     "record_seconds_negative": ("record loop:// -o rec --seconds -3", r"'--seconds': expected > 0, got -3"),
@@ -340,8 +395,21 @@ cases = {
     "process_bad_calibration": ("process {good_csv} --calibration {invalid}/calibrations/alias_bomb.yaml -o out",
                                 r"alias_bomb\.yaml: YAML expands to more than 50,000 nodes"),
     "process_bad_config": ("process {good_csv} --calibration {good_cal} --config {invalid}/configs/pressure_range_kpa.yaml -o out",
-                           r"pressure_range_kpa\.yaml: actuator\.pressure_range_pa: expected pascals"),
+                           r"pressure_range_kpa\.yaml: actuator\.pressure_range_pa\[1\] = 200 .* if it was entered in kPa, it is 200000 Pa"),
     "unknown_command": ("fly", r"No such command 'fly'"),
+    # unit slips in held model parameters and pressure options (issue 21)
+    "identify_fix_ei1_per_kpa": ("identify stiffness {good_csv} -o cfg.yaml --fix ei1=1.25e-5",
+                                r"--fix ei1_nm2_per_pa = 1\.25e-5 is not a plausible pressure stiffening .*; if it was entered in N·m²/kPa, it is 1\.25e-8 N·m²/Pa"),
+    "identify_fix_ei0_n_mm2": ("identify stiffness {good_csv} -o cfg.yaml --fix ei0=2530",
+                              r"--fix ei0_nm2 = 2530 is not a plausible bending stiffness .*; if it was entered in N·mm², it is 0\.00253 N·m²"),
+    "identify_fix_prebend_degrees": ("identify free-bending {good_csv} -o cfg.yaml --fix prebend=5",
+                                    r"--fix prebend_angle_rad = 5 is not a plausible prebend angle .*; if it was entered in degrees, it is 0\.0872665 rad"),
+    "identify_fix_mu_mpa": ("identify free-bending {good_csv} -o cfg.yaml --fix mu=0.18",
+                           r"--fix shear_modulus_pa = 0\.18 is not a plausible shear modulus .*; if it was entered in MPa, it is 180000 Pa"),
+    "load_pressure_kpa_in_pa": ("load {good_csv} --pressure-kpa 200000",
+                               r"--pressure-kpa = 200000 is not a plausible gauge pressure .*; if it was entered in Pa, it is 200 kPa"),
+    "process_pressure_kpa_in_pa": ("process {good_csv} --calibration {good_cal} -o out --pressure-kpa 60000",
+                                  r"--pressure-kpa = 60000 is not a plausible gauge pressure .*; if it was entered in Pa, it is 60 kPa"),
     "identify_pressure_pa_holds_kpa": ("identify free-bending {invalid}/good/free_bending_pa_holds_kpa.csv -o cfg.yaml",
                                        r"free_bending_pa_holds_kpa\.csv: line 1, column pressure_pa: every reading is below "
                                        r"1 kPa \(largest 120\); looks like kilopascals"),
