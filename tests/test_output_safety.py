@@ -328,7 +328,7 @@ def test_a_failure_half_way_leaves_nothing(work, monkeypatch):
         m.setattr(bendsense.results.np, "savez", disk_full)
         result = run(*DIRECTORY_COMMANDS["save"]("out"))
     assert one_line_error(result)
-    assert "out/shape.npz: cannot write: No space left on device" in result.output
+    assert "out/shape.npz: no space left on device; nothing was written" in result.output
     assert ".bendsense-tmp" not in result.output  # the user's path, not the hidden one
     assert not (work / "out").exists() and not litter(work)
     assert run(*DIRECTORY_COMMANDS["save"]("out")).exit_code == 0
