@@ -678,8 +678,10 @@ def add_to_manifest(path, names: Iterable[str], *, writer: str = "bendsense") ->
     path = _resolve(path)
     previous = read_manifest(path)
     files = list(previous["files"]) if previous else []
-    files += [n for n in names if n not in files]
-    _write_manifest(path, files, writer, previous)
+    new = [n for n in names if n not in files]
+    if previous is not None and not new:
+        return  # nothing to add: not rewritten (a full disk may refuse even that)
+    _write_manifest(path, files + new, writer, previous)
 
 
 # --------------------------------------------------------------------------- locks
@@ -864,7 +866,7 @@ def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: s
     with _locked([(p, r)]):
         check([target], inputs)
         _clear_litter(r)
-        consequence = "nothing was written" + (f" ({p} is unchanged)" if r.exists() else "")
+        consequence = "nothing was written" + ("; the earlier output is unchanged" if r.exists() else "")
         tmp = None
         try:
             try:
@@ -986,7 +988,7 @@ def write_file(
     with _locked([(p, r)]):
         check([target], inputs)
         existed = r.exists()
-        consequence = "nothing was written" + (f" ({p} is unchanged)" if existed else "")
+        consequence = "nothing was written" + ("; the earlier output is unchanged" if existed else "")
         tmp = None
         try:
             try:
