@@ -252,3 +252,22 @@ def test_record_keeps_every_frame_written_before_the_disk_filled(tmp_path, calib
         width = rows[0].count(",")
         assert all(row.count(",") == width for row in rows)  # no torn row
         assert 0 < len(rows) - 1 <= len(session)
+
+
+def test_record_under_a_file_size_limit_keeps_its_frames(tmp_path):
+    from bendsense.device.simdevice import SimulatedDevice, default_source
+
+    from bendsense.session.native import record_dtype
+
+    out = tmp_path / "rec"
+    size = record_dtype(16).itemsize
+    limit = size * 1000 + size // 3  # frames.bin reaches it after 1,000 records, the next one torn
+    with SimulatedDevice(default_source(rate_hz=2000, seed=2), rate_hz=2000) as dev:
+        result = subprocess.run([*CLI, "record", dev.port, "-o", out, "--seconds", "20", "--quiet-status"],
+                                capture_output=True, text=True, timeout=120, preexec_fn=_file_size_limit(limit))
+    line = one_error_line(result, rf"^Error: {re.escape(str(out))}/frames.bin: file too large \(beyond the "
+                                  r"file-size limit, see 'ulimit -f'.*; recording stopped; 1,000 frames kept")
+    session = bendsense.read_session(out)
+    assert len(session) == 1000 and (out / "frames.bin").stat().st_size == size * 1000
+    assert session.meta["finished"] is True and np.all(np.diff(session.seq) == 1)
+    assert "1,000 frames kept" in session.meta["outcome"] and line.endswith("(the session is readable)")

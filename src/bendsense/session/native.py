@@ -409,7 +409,7 @@ class SessionWriter:
         output.write_text(self.path / META, text, overwrite=True)
 
     def _hold_reserve(self) -> None:
-        """Hold back the space of the final ``meta.yaml`` (allocated, not sparse)."""
+        """Hold back the space of the final ``meta.yaml`` (allocated, not sparse), where the file system allows."""
         size = RESERVE_BYTES + 4 * len(yaml.safe_dump(self.meta, sort_keys=False, allow_unicode=True).encode())
         fd = os.open(self.path / _RESERVE, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         try:
@@ -419,11 +419,12 @@ class SessionWriter:
                 if isinstance(err, OSError) and err.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
                     raise
                 os.write(fd, bytes(size))  # a file system without fallocate
-        except BaseException:
+        except OSError as err:
+            # no room (or a file-size limit below it): record without; the first refused write says so
+            log.debug("%s: no reserve for meta.yaml (%s)", self.path, err)
+            self._release_reserve()
+        finally:
             os.close(fd)
-            os.unlink(self.path / _RESERVE)
-            raise
-        os.close(fd)
 
     def _release_reserve(self) -> None:
         with contextlib.suppress(OSError):
