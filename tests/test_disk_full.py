@@ -256,7 +256,6 @@ def test_record_keeps_every_frame_written_before_the_disk_filled(tmp_path, calib
 
 def test_record_under_a_file_size_limit_keeps_its_frames(tmp_path):
     from bendsense.device.simdevice import SimulatedDevice, default_source
-
     from bendsense.session.native import record_dtype
 
     out = tmp_path / "rec"
