@@ -111,7 +111,7 @@ def test_session_api_message_starts_with_the_file(path):
 
 
 def _tree(root: Path) -> dict:
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
+    return {str(p.relative_to(root)): (p.lstat().st_size, p.lstat().st_mtime_ns)  # lstat: links/dangling
             for p in sorted(root.rglob("*"))}
 
 

@@ -10,6 +10,7 @@ existing plot, two concurrent writers, the umask, a failure half-way) each have 
 import json
 import multiprocessing
 import os
+import re
 import shutil
 import stat
 
@@ -328,7 +329,7 @@ def test_a_failure_half_way_leaves_nothing(work, monkeypatch):
         m.setattr(bendsense.results.np, "savez", disk_full)
         result = run(*DIRECTORY_COMMANDS["save"]("out"))
     assert one_line_error(result)
-    assert "out/shape.npz: cannot write: No space left on device" in result.output
+    assert "out/shape.npz: no space left on device; nothing was written" in result.output
     assert ".bendsense-tmp" not in result.output  # the user's path, not the hidden one
     assert not (work / "out").exists() and not litter(work)
     assert run(*DIRECTORY_COMMANDS["save"]("out")).exit_code == 0
@@ -423,3 +424,50 @@ def test_a_chain_whose_estimate_lacks_pressure_writes_nothing(work):
                  "save", "second")
     assert result.exit_code == 2 and f"{FRAMES} of {FRAMES} frames without pressure" in result.output, result.output
     assert not (work / "first").exists() and not (work / "second").exists() and not litter(work)
+
+
+# --- two steps writing one file; outputs through symbolic links (issue 21) --------------------
+
+
+def test_two_steps_writing_one_file_are_refused_before_any_work(work):
+    load = ["load", "run.csv", "--calibration", "cal.yaml", "reconstruct"]
+    for steps, named in (
+        (["save", "out", "export", "out/results.csv", "--overwrite"], "out/results.csv: .*'save' and 'export'"),
+        (["export", "out/shape.npz", "save", "out"], "out/shape.npz: .*'export' and 'save'"),
+        (["plot", "fig.png", "plot", "fig.png"], r"fig.png: .*'plot' \(step 3\) and 'plot' \(step 4\)"),
+        (["save", "res", "mcap", "res/results.csv"], "res/results.csv: .*'save' and 'mcap'"),
+    ):
+        result = run(*load, *steps)
+        assert one_line_error(result) and "written by two steps of this command line" in result.output
+        assert re.search(named, result.output), result.output
+        assert not (work / "out").exists() and not (work / "res").exists() and not (work / "fig.png").exists()
+    # a file added to an earlier step's results directory is not one of its files: fine
+    assert run(*load, "save", "out", "export", "out/session.csv").exit_code == 0
+    assert output.read_manifest(work / "out")["files"] == ["results.csv", "shape.npz", "session.csv"]
+
+
+@pytest.mark.parametrize("name", ["save", "simulate", "record", "export", "calibrate", "process"])
+def test_an_output_through_a_dangling_link_creates_nothing_at_its_target(work, tmp_path, name):
+    (work / "link").symlink_to(tmp_path / "elsewhere" / "deep")
+    args = {
+        "save": DIRECTORY_COMMANDS["save"]("link/out"),
+        "simulate": DIRECTORY_COMMANDS["simulate"]("link/out"),
+        "record": DIRECTORY_COMMANDS["record"]("link/out"),
+        "export": ["load", "run.csv", "export", "link/x.csv"],
+        "calibrate": ["calibrate", "calib/manifest.yaml", "-o", "link/cal.yaml"],
+        "process": ["process", "run.csv", "--calibration", "cal.yaml", "-o", "link", "--workers", "0"],
+    }[name]
+    result = run(*args)
+    assert one_line_error(result), result.output
+    assert result.output.startswith(f"Error: link: a symbolic link to {tmp_path / 'elsewhere' / 'deep'}, which does "
+                                    "not exist; refusing to write through it")
+    assert not (tmp_path / "elsewhere").exists() and not litter(work)
+
+
+def test_an_output_that_is_a_link_out_of_its_directory_is_refused(work, tmp_path):
+    (tmp_path / "shared").mkdir()
+    (work / "out").symlink_to(tmp_path / "shared")
+    result = run(*DIRECTORY_COMMANDS["save"]("out"))
+    assert one_line_error(result) and "out: a symbolic link to" in result.output
+    assert "outside its directory" in result.output
+    assert os.listdir(tmp_path / "shared") == []

@@ -18,6 +18,8 @@ finish. Outputs that exist are skipped unless ``overwrite``.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
+import errno
 import logging
 import os
 import time
@@ -29,6 +31,9 @@ from pathlib import Path
 from bendsense import output
 from bendsense._io import check_regular_file
 from bendsense.errors import ArgumentError, BendsenseError, OutputError, SessionError
+
+# the output's file system refuses every further session: stop, instead of failing each one
+_FATAL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS})
 
 __all__ = ["SessionOutcome", "BatchReport", "discover_sessions", "process_session", "process_sessions"]
 
@@ -369,6 +374,12 @@ def process_session(
         unexpected exception is reported with its type. Warnings raised on the way
         (e.g. solver non-convergence) are not propagated: the frames they concern are
         counted in ``extrapolated`` and ``not_converged``.
+
+    Raises
+    ------
+    OutputError
+        Only when the output's file system refuses any further write (no space left,
+        quota exceeded, read-only): not this session's fault, so the batch stops.
     """
     path, out_dir = Path(path), Path(out_dir)
     name = name or (path.stem if path.is_file() else path.name)
@@ -383,6 +394,8 @@ def process_session(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite
             )
     except (BendsenseError, OSError) as err:
+        if isinstance(err, OutputError) and err.errno in _FATAL_ERRNOS:
+            raise  # a full disk is not this session's fault: process_sessions stops
         return SessionOutcome(status="failed", reason=str(err), seconds=time.perf_counter() - start, **row)
     except Exception as err:  # noqa: BLE001 - isolate any failure to its session
         reason = f"{type(err).__name__}: {err}"
@@ -533,7 +546,10 @@ def process_sessions(
         If the config or the calibration file is invalid.
     OutputError
         If ``out_dir`` may not be written (the working directory or one of its
-        ancestors, an input, or another run is writing there; :mod:`bendsense.output`).
+        ancestors, an input, or another run is writing there; :mod:`bendsense.output`),
+        or its file system fills up (or is read-only, or over quota) on the way: the
+        batch stops, the sessions written before are kept, and the message says how
+        many.
     """
     start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -577,8 +593,17 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         estimate=estimate,
         overwrite=overwrite,
     )
-    out_dir.mkdir(parents=True, exist_ok=True)
-    output.add_to_manifest(out_dir, [], writer="bendsense process")
+    created = not out_dir.exists()
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        output.add_to_manifest(out_dir, [], writer="bendsense process")
+    except OSError as err:
+        if created:  # nothing of ours is left behind
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        if isinstance(err, OutputError):
+            raise
+        raise output.write_error(out_dir, err) from None
     tasks = [(i, sessions[i], names[i]) for i in todo]
     description = _run_tasks(tasks, rows, out_dir, options, executor=executor, workers=workers, progress=progress)
     return BatchReport(
@@ -647,6 +672,11 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
                 i, path, name = futures[future]
                 try:
                     row = future.result()
+                except OutputError as err:
+                    if err.errno in _FATAL_ERRNOS:
+                        raise
+                    row = SessionOutcome(name=name, source=str(path), status="failed", reason=str(err),
+                                         out_dir=str(out_dir / name))
                 except Exception as err:  # noqa: BLE001 - a worker died or the task could not be sent
                     row = SessionOutcome(
                         name=name,
@@ -656,6 +686,12 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
                         out_dir=str(out_dir / name),
                     )
                 finish(i, row)
+    except OutputError as err:
+        if err.errno not in _FATAL_ERRNOS:
+            raise
+        done = sum(1 for row in rows if row is not None and row.status == "ok")
+        raise OutputError(f"{err}; processing stopped ({done} of {len(rows)} sessions written before)",
+                          errno=err.errno) from None
     finally:
         bar.close()
         if own is not None:

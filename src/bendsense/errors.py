@@ -51,7 +51,22 @@ class DeviceError(BendsenseError, OSError):
 
 
 class OutputError(BendsenseError, OSError):
-    """An output cannot be written without destroying something; the message names the path."""
+    """An output cannot be written (or not without destroying something); the message names the path.
+
+    ``errno`` is that of the file system's refusal behind it (``errno.ENOSPC`` for a
+    full disk, ...), None for a refusal of bendsense's own; it survives pickling.
+    """
+
+    def __init__(self, message, *, errno=None):
+        super().__init__(message)
+        self.errno = errno
+
+    def __reduce__(self):
+        return _output_error, (type(self), str(self), self.errno)
+
+
+def _output_error(cls, message, errno):
+    return cls(message, errno=errno)
 
 
 class OutputExistsError(OutputError, FileExistsError):

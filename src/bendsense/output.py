@@ -73,6 +73,9 @@ __all__ = [
     "read_manifest",
     "foreign_entries",
     "resolve",
+    "reason",
+    "write_error",
+    "check_steps",
 ]
 
 log = logging.getLogger("bendsense")
@@ -90,6 +93,62 @@ CSV = (".csv",)
 FIGURE = "figure"  # suffixes: the formats matplotlib can write (looked up when needed)
 
 _KINDS = ("dir", "file", "recording", "collection")
+
+# the file system's refusals in words, for one-line messages (strerror is capitalised, and
+# says nothing of the limit behind EFBIG or EMFILE)
+_REASONS = {
+    errno.ENOSPC: "no space left on device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EFBIG: "file too large (beyond the file-size limit, see 'ulimit -f', or the file system's largest file)",
+    errno.ENAMETOOLONG: "file name too long",
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+    errno.EISDIR: "is a directory",
+    errno.ENOTDIR: "a part of the path is not a directory",
+    errno.EMFILE: "too many open files (the per-process limit, see 'ulimit -n')",
+    errno.ENFILE: "too many open files on this system",
+    errno.EIO: "input/output error (a failing disk or a disconnected drive?)",
+    errno.ENOENT: "no such file or directory",
+    errno.ELOOP: "too many levels of symbolic links",
+}
+# refusals that concern the file being written even when the OSError names no file (a write or
+# close of an open file): they are about the output, not about an input
+_WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO, errno.EMFILE,
+                           errno.ENFILE, errno.ENAMETOOLONG})
+
+
+def reason(err: OSError) -> str:
+    """The file system's refusal ``err`` in words, for a message (``"no space left on device"``).
+
+    Parameters
+    ----------
+    err : OSError
+        The error.
+    """
+    text = _REASONS.get(getattr(err, "errno", None))
+    if text is None:
+        text = str(getattr(err, "strerror", None) or err)
+        text = text[:1].lower() + text[1:]
+    return text
+
+
+def write_error(path, err: OSError, consequence: str = "") -> OutputError:
+    """An :class:`~bendsense.errors.OutputError` ``"PATH: reason[; consequence]"`` for the OSError ``err``.
+
+    The error keeps ``err.errno`` (e.g. ``errno.ENOSPC``).
+
+    Parameters
+    ----------
+    path : path
+        The path to name: the user's, never a hidden temporary one.
+    err : OSError
+        The file system's refusal.
+    consequence : str, optional
+        What it means for the output, e.g. ``"nothing was written"``.
+    """
+    tail = f"; {consequence}" if consequence else ""
+    return OutputError(f"{path}: {reason(err)}{tail}", errno=getattr(err, "errno", None))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -110,12 +169,16 @@ class Target:
     suffixes : tuple of str or str
         File outputs: the allowed suffixes (lower case, with the dot), :data:`FIGURE`
         for the formats matplotlib writes, or empty for any.
+    files : tuple of str
+        Directory outputs: the names it writes (e.g. ``results.csv``), so that another
+        output of the same command line may not be one of them (:func:`check_steps`).
     """
 
     path: Path
     kind: str
     overwrite: bool = False
     suffixes: tuple | str = ()
+    files: tuple = ()
 
     def __post_init__(self):
         if self.kind not in _KINDS:
@@ -123,7 +186,7 @@ class Target:
         object.__setattr__(self, "path", Path(self.path))
 
 
-def directory(path, *, overwrite: bool = False) -> Target:
+def directory(path, *, overwrite: bool = False, files=()) -> Target:
     """A directory output, written aside and swapped in.
 
     Parameters
@@ -132,8 +195,10 @@ def directory(path, *, overwrite: bool = False) -> Target:
         The output directory.
     overwrite : bool, default False
         Replace a previous bendsense output there.
+    files : iterable of str, optional
+        The names it writes, where known (for :func:`check_steps`).
     """
-    return Target(path=path, kind="dir", overwrite=overwrite)
+    return Target(path=path, kind="dir", overwrite=overwrite, files=tuple(files))
 
 
 def file(path, *, overwrite: bool = False, suffixes=()) -> Target:
@@ -238,6 +303,7 @@ def check(targets: Iterable[Target], inputs: Iterable = ()) -> None:
     cwd = _resolve(os.getcwd())
     seen: dict[Path, Target] = {}
     for t in targets:
+        _check_names(t)
         p, r = t.path, _resolve(t.path)
         if r in seen:
             raise OutputError(f"{p}: given as output twice")
@@ -252,6 +318,7 @@ def check(targets: Iterable[Target], inputs: Iterable = ()) -> None:
                 raise OutputError(f"{p}: is an input of this command ({given}); choose another output")
             if t.kind != "file" and _is_within(resolved, r):
                 raise OutputError(f"{p}: holds the input {given} of this command; choose another output")
+        _check_links(p)
         _check_parent(p, r)
         if t.kind == "file":
             _check_file(t, r)
@@ -259,16 +326,138 @@ def check(targets: Iterable[Target], inputs: Iterable = ()) -> None:
             _check_dir(t, r)
 
 
-def _check_parent(p: Path, r: Path) -> None:
-    anc = r.parent
-    while not anc.exists():
-        if anc == anc.parent:
-            break
+def _existing_ancestor(path: Path) -> Path:
+    anc = path
+    while not os.path.lexists(anc) and anc != anc.parent:
         anc = anc.parent
+    return anc
+
+
+def check_steps(steps: Iterable[tuple[str, Iterable[Target]]]) -> None:
+    """Refuse a command line two of whose steps write one file, before any work.
+
+    Two outputs collide when they are one path, when a later step writes into the
+    directory of an earlier step one of the names that step writes there (``save out``
+    then ``export out/results.csv``), or when a later step replaces a directory that
+    holds an earlier step's output (``plot out/fig.png`` then ``save out``). A file
+    that a later step adds to an earlier step's results directory (``save out`` then
+    ``plot out/fig.png``) joins its manifest and is fine.
+
+    Parameters
+    ----------
+    steps : iterable of (str, iterable of Target)
+        Each step's label (e.g. ``"save"``) and outputs, in the order they run.
+
+    Raises
+    ------
+    OutputError
+        Naming both steps and the path.
+    """
+    seen: list[tuple[int, str, Target, Path]] = []
+    for i, (label, targets) in enumerate(steps, 1):
+        for t in targets:
+            r = _resolve(t.path)
+            for j, other, o, ro in seen:
+                if j == i and r != ro:
+                    continue  # one step's own outputs: check() compares them
+                clash = r == ro
+                if not clash and _is_within(r, ro) and o.kind != "file":  # into an earlier directory
+                    first = r.relative_to(ro).parts[0]
+                    clash = o.kind != "dir" or not o.files or first in (*o.files, MANIFEST_NAME)
+                if not clash and _is_within(ro, r) and t.kind != "file":  # replaces what an earlier step wrote
+                    clash = True
+                if clash:
+                    where = t.path if _is_within(r, ro) else o.path
+                    steps_text = (f"'{other}' (step {j}) and '{label}' (step {i})" if other == label
+                                  else f"'{other}' and '{label}'")
+                    raise OutputError(f"{where}: written by two steps of this command line, {steps_text}; "
+                                      "give each step its own output")
+            seen.append((i, label, t, r))
+
+
+def _check_parent(p: Path, r: Path) -> None:
+    anc = _existing_ancestor(r.parent)
     if not anc.is_dir():
-        raise OutputError(f"{p}: {anc} is not a directory")
+        raise OutputError(f"{p}: {anc} is not a directory", errno=errno.ENOTDIR)
     if not os.access(anc, os.W_OK | os.X_OK):
-        raise OutputError(f"{p}: cannot write in {anc} (permission denied)")
+        if _read_only(anc):
+            raise OutputError(f"{p}: cannot write in {anc} (read-only file system)", errno=errno.EROFS)
+        raise OutputError(f"{p}: cannot write in {anc} (permission denied)", errno=errno.EACCES)
+
+
+def _read_only(path: Path) -> bool:
+    try:
+        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        return False
+
+
+def _aside_overhead(t: Target) -> int:
+    """Bytes that bendsense's hidden siblings of an output add to its name (``.NAME.bendsense-tmp-XXXXXXXX.SUF``)."""
+    suffix = len(os.fsencode(t.path.suffix)) if t.kind == "file" else 0
+    return 1 + max(len(_TMP_MARK), len(_OLD_MARK), len(_LOCK_SUFFIX)) + 8 + suffix
+
+
+def _check_names(t: Target) -> None:
+    """Refuse a name the file system cannot hold, before anything is created (ENAMETOOLONG)."""
+    p = t.path
+    full = os.path.abspath(p)
+    anc = _existing_ancestor(Path(full))
+    try:
+        name_max = os.pathconf(anc, "PC_NAME_MAX")
+        path_max = os.pathconf(anc, "PC_PATH_MAX")
+    except (OSError, ValueError, AttributeError):
+        name_max, path_max = 255, 4096
+    if len(os.fsencode(full)) + _aside_overhead(t) >= path_max:
+        raise OutputError(f"{_short_path(p)}: path too long ({len(os.fsencode(full)):,} bytes; this file system "
+                          f"allows {path_max - 1 - _aside_overhead(t):,} for an output)", errno=errno.ENAMETOOLONG)
+    parts = Path(full).parts
+    for i, part in enumerate(parts):
+        n = len(os.fsencode(part))
+        last = i == len(parts) - 1
+        limit = name_max - _aside_overhead(t) if last else name_max
+        if n > limit:
+            extra = "" if not last or n > name_max else " (bendsense writes a hidden temporary file beside it first)"
+            where = "" if last else f" in {_short_name(part)}"
+            raise OutputError(f"{_short_path(p)}: file name too long ({n} bytes{where}; at most {limit} here{extra})",
+                              errno=errno.ENAMETOOLONG)
+
+
+def _short_name(name: str) -> str:
+    return repr(name) if len(name) <= 40 else repr(name[:16] + "..." + name[-16:])
+
+
+def _short_path(p: Path) -> str:
+    """The user's path for a message, its overlong names shortened."""
+    text = str(p)
+    if len(text) <= 200:
+        return text
+    return os.sep.join(part if len(part) <= 40 else part[:16] + "..." + part[-16:] for part in text.split(os.sep))
+
+
+def _check_links(p: Path) -> None:
+    """Refuse symbolic links on an output path that lead out of the directory that holds them.
+
+    A dangling link anywhere on the path would make bendsense create directories at its
+    target; the output itself as a link to another directory would write there. A link
+    to a sibling (``out -> results-v2``) is followed, and links among the existing
+    ancestors of the path the user typed (a data directory on another disk) are part
+    of where the user works.
+    """
+    parts = p.parts
+    for i in range(1, len(parts) + 1):
+        q = Path(*parts[:i])
+        if not q.is_symlink():
+            if not os.path.lexists(q):
+                return  # the rest is to be created
+            continue
+        target = os.readlink(q)
+        if not q.exists():
+            raise OutputError(f"{q}: a symbolic link to {target}, which does not exist; refusing to write through it "
+                              "(it would create directories at its target): remove the link or give another path")
+        if i == len(parts) and _resolve(q).parent != _resolve(q.parent):
+            raise OutputError(f"{q}: a symbolic link to {target}, outside its directory; refusing to write through "
+                              "it: give the path it points to, or another name")
 
 
 def _check_file(t: Target, r: Path) -> None:
@@ -453,16 +642,21 @@ def _write_manifest(directory: Path, files: list[str], writer: str, previous: di
     if previous is not None:
         doc["updated_utc"] = now
     path = directory / MANIFEST_NAME
-    fd, tmp = tempfile.mkstemp(prefix=f".{MANIFEST_NAME}{_TMP_MARK}", dir=directory)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{MANIFEST_NAME}{_TMP_MARK}", dir=directory)
+    except OSError as err:
+        raise write_error(path, err) from None
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             json.dump(doc, fh, indent=1)
             fh.write("\n")
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(err, OSError):
+            raise write_error(path, err) from None
         raise
 
 
@@ -484,8 +678,10 @@ def add_to_manifest(path, names: Iterable[str], *, writer: str = "bendsense") ->
     path = _resolve(path)
     previous = read_manifest(path)
     files = list(previous["files"]) if previous else []
-    files += [n for n in names if n not in files]
-    _write_manifest(path, files, writer, previous)
+    new = [n for n in names if n not in files]
+    if previous is not None and not new:
+        return  # nothing to add: not rewritten (a full disk may refuse even that)
+    _write_manifest(path, files + new, writer, previous)
 
 
 # --------------------------------------------------------------------------- locks
@@ -541,11 +737,11 @@ def _locked(targets: list[tuple[Path, Path]]) -> Iterator[None]:
                     _held[lock][1] += 1
                     taken.append(lock)
                     continue
-            lock.parent.mkdir(parents=True, exist_ok=True)
             try:
+                lock.parent.mkdir(parents=True, exist_ok=True)
                 fd = _try_lock(lock)
             except OSError as err:
-                raise OutputError(f"{p}: cannot lock the output: {err.strerror or err}") from None
+                raise OutputError(f"{p}: cannot lock the output: {reason(err)}", errno=err.errno) from None
             if fd is None:
                 raise OutputError(f"{p}: another bendsense run is writing there; try again when it has finished")
             with _held_guard:
@@ -607,10 +803,12 @@ def _umask() -> int:
 
 
 @contextlib.contextmanager
-def _user_paths(tmp: Path, user: Path) -> Iterator[None]:
+def _user_paths(tmp: Path, user: Path, consequence: str = "") -> Iterator[None]:
     """Re-raise an error about the hidden ``tmp`` as one naming ``user``.
 
-    An OSError becomes an OutputError; a bendsense error keeps its class.
+    An OSError about ``tmp`` (or about no file, when it is a refusal to write: a full
+    disk, a file-size limit, ...) becomes an OutputError that ends with ``consequence``;
+    a bendsense error keeps its class.
     """
     from bendsense.errors import BendsenseError
 
@@ -619,14 +817,21 @@ def _user_paths(tmp: Path, user: Path) -> Iterator[None]:
     except BendsenseError as err:
         if str(tmp) not in str(err) or len(err.args) != 1:
             raise
-        raise type(err)(str(err).replace(str(tmp), str(user))) from None
+        text = str(err).replace(str(tmp), str(user))
+        if isinstance(err, OutputError):
+            raise type(err)(text, errno=err.errno) from None
+        raise type(err)(text) from None
     except OSError as err:
-        names = [n for n in (err.filename, getattr(err, "filename2", None)) if n is not None]
         hidden = str(tmp)
-        if not any(str(n).startswith(hidden) for n in names):
+        names = [str(n) for n in (err.filename, getattr(err, "filename2", None)) if n is not None]
+        ours = [n for n in names if n.startswith(hidden)]
+        if names and not ours:
+            raise  # about another file (an input): not the output's
+        if not names and err.errno not in _WRITE_ERRNOS:
             raise
-        where = str(names[0]).replace(hidden, str(user), 1)
-        raise OutputError(f"{where}: cannot write: {err.strerror or err}") from None
+        # a write or close names no file: the output as a whole
+        where = ours[0].replace(hidden, str(user), 1) if ours else str(user)
+        raise write_error(where, err, consequence) from None
 
 
 @contextlib.contextmanager
@@ -661,6 +866,7 @@ def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: s
     with _locked([(p, r)]):
         check([target], inputs)
         _clear_litter(r)
+        consequence = "nothing was written" + ("; the earlier output is unchanged" if r.exists() else "")
         tmp = None
         try:
             try:
@@ -668,11 +874,16 @@ def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: s
                 tmp = Path(tempfile.mkdtemp(prefix=f".{r.name}{_TMP_MARK}", dir=r.parent))
                 os.chmod(tmp, 0o777 & ~_umask())
             except OSError as err:
-                raise OutputError(f"{p}: cannot write: {err.strerror or err}") from None
-            with _user_paths(tmp, p):
+                raise write_error(p, err, consequence) from None
+            with _user_paths(tmp, p, consequence):
                 yield tmp
                 _write_manifest(tmp, _listing(tmp), writer)
-            _swap_in(tmp, target, r)
+            try:
+                _swap_in(tmp, target, r)
+            except OutputError:
+                raise
+            except OSError as err:
+                raise write_error(p, err, consequence) from None
         except BaseException:
             if tmp is not None:
                 shutil.rmtree(tmp, ignore_errors=True)
@@ -776,6 +987,8 @@ def write_file(
     check([target], inputs)
     with _locked([(p, r)]):
         check([target], inputs)
+        existed = r.exists()
+        consequence = "nothing was written" + ("; the earlier output is unchanged" if existed else "")
         tmp = None
         try:
             try:
@@ -785,27 +998,45 @@ def write_file(
                 os.fchmod(fd, 0o666 & ~_umask())
                 os.close(fd)
             except OSError as err:
-                raise OutputError(f"{p}: cannot write: {err.strerror or err}") from None
-            with _user_paths(tmp, p):
+                raise write_error(p, err, consequence) from None
+            with _user_paths(tmp, p, consequence):
                 yield tmp
             if r.exists() and not overwrite:  # appeared while we worked
                 raise OutputExistsError(f"{p}: exists (use --overwrite to replace it)")
-            os.replace(tmp, r)
+            try:  # first: a manifest that cannot be written leaves the file unchanged
+                _register(r, writer)
+            except OutputError as err:
+                raise write_error(p, err, consequence) if err.errno else err from None
+            try:
+                os.replace(tmp, r)
+            except OSError as err:
+                raise write_error(p, err, consequence) from None
             tmp = None
         finally:
             if tmp is not None:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
-        _register(r, writer)
 
 
 def _register(r: Path, writer: str) -> None:
-    """Add the file ``r`` to the manifest of its directory, when that is a bendsense output."""
+    """Add the file ``r`` to the manifest of its directory, when that is a bendsense output.
+
+    A directory another run is writing is left alone; a manifest the file system refuses
+    (a full disk) stops the write.
+    """
     parent = r.parent
-    if read_manifest(parent) is None:
+    manifest = read_manifest(parent)
+    if manifest is None or r.name in manifest["files"]:
         return
-    with contextlib.suppress(OutputError), _locked([(parent, parent)]):
+    try:
+        lock = _locked([(parent, parent)])
+        lock.__enter__()
+    except OutputError:
+        return
+    try:
         add_to_manifest(parent, [r.name], writer=writer)
+    finally:
+        lock.__exit__(None, None, None)
 
 
 def write_text(path, text: str, **options) -> None:

@@ -148,6 +148,8 @@ def step_io(step, outputs=(), inputs=()):
     """
     step.outputs = list(outputs)
     step.inputs = [p for p in inputs if p is not None]
+    ctx = click.get_current_context(silent=True)
+    step.step_name = ctx.info_name if ctx is not None else None  # for messages naming the step
     return step
 
 

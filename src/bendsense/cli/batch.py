@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import re
 from pathlib import Path
 
@@ -149,9 +150,11 @@ def plot(target, figure_path, shapes, dpi, overwrite):
     format follows the file suffix (.png, .pdf, .svg, ...). Existing figures are
     replaced only with --overwrite.
     """  # noqa: D301
+    # os.path.isdir, not Path.is_dir: a name too long for the file system is refused by the output checks
+    target_is_dir = os.path.isdir(target)
     if figure_path is not None:
         check_figure_suffix(figure_path, "-o/--output")
-    elif not target.is_dir():
+    elif not target_is_dir:
         check_figure_suffix(target, "FIG")
 
     def step(state):
@@ -186,7 +189,7 @@ def plot(target, figure_path, shapes, dpi, overwrite):
     if figure_path is not None:
         return step_io(step, outputs=[output.file(figure_path, overwrite=overwrite, suffixes=output.FIGURE)],
                        inputs=[target])
-    if target.is_dir():  # not a figure: the step says how to plot a results directory
+    if target_is_dir:  # not a figure: the step says how to plot a results directory
         return step
     return step_io(step, outputs=[output.file(target, overwrite=overwrite, suffixes=output.FIGURE)])
 

@@ -31,6 +31,8 @@ from bendsense.errors import BendsenseError, SessionError
 
 log = logging.getLogger("bendsense")
 
+RESULTS_FILES = ("results.csv", "shape.npz")  # what 'save' writes into its directory
+
 
 class PipelineGroup(click.Group):
     """A chained group that runs pipeline steps in order and turns user errors into one line.
@@ -87,6 +89,12 @@ class PipelineGroup(click.Group):
             raise click.ClickException(f"{err.filename}: no such file or directory") from None
         except PermissionError as err:
             raise click.ClickException(f"{err.filename}: permission denied") from None
+        except OSError as err:  # the file system says no (a full disk, a file-size limit, ...): one line
+            if err.errno is None:
+                raise
+            where = next((str(n) for n in (err.filename, err.filename2) if n is not None), None)
+            text = output.reason(err)
+            raise click.ClickException(f"{where}: {text}" if where else text) from None
 
 
 def _require(state: dict, key: str, step: str, hint: str) -> object:
@@ -113,6 +121,8 @@ def run_steps(steps) -> dict:
     if len(loads) > 1:  # a second load would replace the first session without a word
         raise click.UsageError(f"'load' given {len(loads)} times ({', '.join(str(s.loads) for s in loads)}); "
                                "a chain processes one session: use 'bendsense process SESSION... -o OUT' for several")
+    # two steps writing one file (save out, then export out/results.csv): refused before any work
+    output.check_steps((getattr(step, "step_name", None) or "step", getattr(step, "outputs", ())) for step in steps)
     targets, inputs, written = [], [], set()
     for step in steps:
         inputs += [p for p in getattr(step, "inputs", ()) if output.resolve(p) not in written]
@@ -263,7 +273,7 @@ def save(out_dir, overwrite):
         say(f"wrote {out_dir}/results.csv and shape.npz ({len(state['session'])} frames)")
         return state
 
-    return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)])
+    return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite, files=RESULTS_FILES)])
 
 
 @click.command("mcap", cls=InterspersedCommand)

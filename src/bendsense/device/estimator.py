@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bendsense.errors import SessionError
+from bendsense.errors import BendsenseError, OutputError, SessionError
 
 __all__ = ["LiveEstimator", "EstimatorStats", "ResultsAppender"]
 
@@ -35,7 +35,8 @@ class ResultsAppender:
     directory's manifest and decides about ``--overwrite``). Every block's rows go to
     the file in one unbuffered write of whole lines (a killed process leaves no torn row
     behind what it had written), and ``os.fsync`` runs at least every
-    ``fsync_interval_s``.
+    ``fsync_interval_s``. A write the file system refuses (a full disk) is cut back to
+    the rows before it and raises :class:`~bendsense.errors.OutputError`.
 
     Parameters
     ----------
@@ -49,6 +50,7 @@ class ResultsAppender:
         self.path = Path(path)
         self.fsync_interval_s = float(fsync_interval_s)
         self._fd = None
+        self._size = 0  # bytes of whole rows in the file
         self._header = None
         self._last_sync = time.monotonic()
         self.rows = 0
@@ -71,16 +73,32 @@ class ResultsAppender:
             text.append(",".join(names))
         elif names != self._header:
             raise SessionError(f"{self.path}: a block with columns {names} after {self._header}")
-        if self._fd is None:
-            self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
         cells = [column_cells(v) for v in columns.values()]
         text.extend(",".join(row) for row in zip(*cells))
         data = memoryview(("\n".join(text) + "\n").encode("utf-8"))
-        while data:
-            data = data[os.write(self._fd, data):]
-        self.rows += len(block)
-        if time.monotonic() - self._last_sync >= self.fsync_interval_s:
-            self.sync()
+        try:
+            if self._fd is None:
+                self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+                self._size = 0
+            while data:
+                data = data[os.write(self._fd, data):]
+            self._size = os.fstat(self._fd).st_size
+            self.rows += len(block)
+            if time.monotonic() - self._last_sync >= self.fsync_interval_s:
+                self.sync()
+        except OSError as err:
+            raise self._refused(err) from None
+
+    def _refused(self, err: OSError) -> OutputError:
+        from bendsense import output
+
+        if self._fd is not None:
+            try:  # no torn row: back to the rows written whole
+                os.ftruncate(self._fd, self._size)
+                os.fsync(self._fd)
+            except OSError:
+                pass
+        return output.write_error(self.path, err, f"estimation stopped; {self.rows:,} rows kept")
 
     def sync(self) -> None:
         """``fsync`` the file."""
@@ -91,9 +109,13 @@ class ResultsAppender:
     def close(self) -> None:
         """Sync and close (idempotent)."""
         if self._fd is not None:
-            self.sync()
-            os.close(self._fd)
-            self._fd = None
+            fd, self._fd = self._fd, None
+            try:
+                os.fsync(fd)
+            except OSError as err:
+                raise self._refused(err) from None
+            finally:
+                os.close(fd)
 
 
 @dataclass(frozen=True)
@@ -178,6 +200,8 @@ class LiveEstimator:
         readings : list of Reading
             Readings as the recorder wrote them.
         """
+        if self.error is not None:  # stops the recording: its frames would get no results
+            raise self.error
         readings = list(readings)
         if readings:
             with self._lock:
@@ -218,7 +242,8 @@ class LiveEstimator:
                     self._backlog -= len(readings)
                     self._done.append((time.monotonic(), len(readings)))
         except BaseException as err:  # kept for close() to re-raise
-            log.exception("live estimation failed")
+            if not isinstance(err, BendsenseError):  # a user-level error is one line, where it is re-raised
+                log.exception("live estimation failed")
             self.error = err
 
     def close(self, timeout_s: float | None = None) -> EstimatorStats:

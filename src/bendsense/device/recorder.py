@@ -5,6 +5,9 @@ The recorder drains the driver's queue in batches, appends the batches to
 ``fsync`` at least every ``fsync_interval_s``) and writes every driver event (gaps, CRC
 errors, reconnects, queue drops, firmware TEXT) to ``events.log``. When the device
 fails, the session is closed cleanly and the :class:`~bendsense.errors.DeviceError`
+propagates. When the disk fills (or a file-size limit or quota is reached), the
+recording stops: every frame written so far is kept, the session is closed and readable,
+and the :class:`~bendsense.errors.OutputError` (which says how many frames were kept)
 propagates.
 """
 
@@ -16,7 +19,7 @@ import time
 from dataclasses import asdict, dataclass
 
 from bendsense import output
-from bendsense.errors import DeviceError
+from bendsense.errors import DeviceError, OutputError
 from bendsense.session.native import SessionWriter, sample_records
 
 __all__ = ["Recorder", "RecorderStats"]
@@ -208,6 +211,9 @@ class Recorder:
         DeviceError
             If the device disconnects and does not come back; the session written so
             far is closed and readable.
+        OutputError
+            If the file system refuses a write (a full disk, ...); the frames written
+            before are kept, the session is closed and readable.
         """
         self._t0 = time.monotonic()
         end = None if duration_s is None else self._t0 + duration_s
@@ -231,11 +237,16 @@ class Recorder:
         except DeviceError as err:
             outcome = f"device error: {err}"
             raise
+        except OutputError as err:
+            outcome = f"output error: {err}"
+            raise
         except KeyboardInterrupt:
             outcome = "interrupted"
             raise
         finally:
             self.close(outcome)
+        if self._writer is not None and self._writer.failed is not None:
+            raise self._writer.failed  # refused at the last sync
         return self.stats
 
     def close(self, outcome: str = "stopped") -> None:

@@ -30,6 +30,13 @@ written; ``os.fsync`` runs at least once a second against power loss. ``meta.yam
 says ``finished: false`` until a clean stop rewrites it with ``finished: true`` and the
 record count ``n_records``.
 
+A full disk (or a file-size limit, a quota) stops the writer, never the session: the
+writer cuts ``frames.bin`` back to its last whole record, keeps every frame written
+before, and raises an :class:`~bendsense.errors.OutputError` that says how many frames
+it kept. A hidden reserve file (:data:`RESERVE_BYTES`, removed at close) is given back
+to the file system first, so that the final ``meta.yaml`` still fits and the session
+ends finished.
+
 The reader compares ``frames.bin`` with ``meta.yaml`` and tells the truth:
 
 - the record dtype must be the format's (standard fields with their types, ``adc``
@@ -47,7 +54,9 @@ unfinished) is read as before.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import errno
 import logging
 import os
 import threading
@@ -59,7 +68,7 @@ import yaml
 
 from bendsense import validation as check
 from bendsense._io import check_regular_file, load_yaml, open_regular
-from bendsense.errors import SessionError
+from bendsense.errors import OutputError, SessionError
 from bendsense.frames import NO_PRESSURE, SAMPLE_FIELDS
 from bendsense.plausibility import check_pressure_column, check_time_column
 from bendsense.session.base import Session
@@ -275,6 +284,11 @@ def _plain(obj):
     return obj
 
 
+RESERVE_BYTES = 64 * 1024
+"""Space a writer holds back (a hidden file in the session directory) for its final ``meta.yaml``."""
+_RESERVE = ".meta.yaml.bendsense-tmp-reserve"  # bendsense's own litter: never a foreign file
+
+
 class SessionWriter:
     """Append records to a native session directory.
 
@@ -343,8 +357,15 @@ class SessionWriter:
         self._output = output.begin_in_place(
             self.path, [META, FRAMES, EVENTS, *extra_files], overwrite=overwrite, inputs=inputs, writer=writer
         )
+        self.failed = None  # the OutputError that stopped the writer (a full disk, ...)
         try:
-            self._start(config, adc_bits, device, meta)
+            try:
+                self._start(config, adc_bits, device, meta)
+            except OSError as err:
+                if isinstance(err, OutputError):
+                    raise
+                where = err.filename if err.filename is not None else self.path
+                raise output.write_error(where, err, "nothing recorded") from None
         except BaseException:
             self._output.close()
             raise
@@ -374,6 +395,7 @@ class SessionWriter:
             self.meta["config"] = _plain(config)
         self._write_meta()
         self._lock = threading.Lock()
+        self._hold_reserve()
         self._fd = os.open(self.path / FRAMES, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o666)
         self._events = open(self.path / EVENTS, "a", encoding="utf-8", buffering=1)
         self._last_sync = time.monotonic()
@@ -385,6 +407,43 @@ class SessionWriter:
 
         text = yaml.safe_dump(self.meta, sort_keys=False, allow_unicode=True)
         output.write_text(self.path / META, text, overwrite=True)
+
+    def _hold_reserve(self) -> None:
+        """Hold back the space of the final ``meta.yaml`` (allocated, not sparse), where the file system allows."""
+        size = RESERVE_BYTES + 4 * len(yaml.safe_dump(self.meta, sort_keys=False, allow_unicode=True).encode())
+        fd = os.open(self.path / _RESERVE, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        try:
+            try:
+                os.posix_fallocate(fd, 0, size)
+            except (AttributeError, OSError) as err:
+                if isinstance(err, OSError) and err.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+                    raise
+                os.write(fd, bytes(size))  # a file system without fallocate
+        except OSError as err:
+            # no room (or a file-size limit below it): record without; the first refused write says so
+            log.debug("%s: no reserve for meta.yaml (%s)", self.path, err)
+            self._release_reserve()
+        finally:
+            os.close(fd)
+
+    def _release_reserve(self) -> None:
+        with contextlib.suppress(OSError):
+            os.unlink(self.path / _RESERVE)
+
+    def _fail(self, err: OSError):
+        """Stop writing after the file system refused ``err``: keep every whole record, free the reserve."""
+        from bendsense import output
+
+        size = self.dtype.itemsize
+        with contextlib.suppress(OSError):
+            end = os.fstat(self._fd).st_size
+            os.ftruncate(self._fd, end - end % size)  # a torn last record is removed, no whole one
+            self.n_records = (end - end % size) // size
+            os.fsync(self._fd)
+        self._release_reserve()
+        self.failed = output.write_error(
+            self.path / FRAMES, err, f"recording stopped; {self.n_records:,} frames kept (the session is readable)")
+        return self.failed
 
     def empty(self, n: int) -> np.ndarray:
         """``n`` zeroed records of this session's dtype (pressure set to "no reading").
@@ -411,10 +470,15 @@ class SessionWriter:
             raise SessionError(f"records: expected dtype {self.dtype}, got {records.dtype}")
         data = records.tobytes()
         with self._lock:
-            view = memoryview(data)
-            while view:
-                written = os.write(self._fd, view)
-                view = view[written:]
+            if self.failed is not None:
+                raise self.failed
+            try:
+                view = memoryview(data)
+                while view:
+                    written = os.write(self._fd, view)
+                    view = view[written:]
+            except OSError as err:
+                raise self._fail(err) from None
             self.n_records += len(records)
         self.maybe_sync()
 
@@ -431,7 +495,11 @@ class SessionWriter:
         line = " ".join(str(text).split())  # one event, one line
         with self._lock:
             if not self.closed:
-                self._events.write(f"{utc_now_iso(when)} {line}\n")
+                try:  # called from the driver's thread too: a full disk stops the next write, not the driver
+                    self._events.write(f"{utc_now_iso(when)} {line}\n")
+                except OSError as err:
+                    if self.failed is None:
+                        self._fail(err)
 
     def maybe_sync(self) -> None:
         """``fsync`` if the last one is older than ``fsync_interval_s``."""
@@ -443,9 +511,13 @@ class SessionWriter:
         with self._lock:
             if self.closed:
                 return
-            self._events.flush()
-            os.fsync(self._events.fileno())
-            os.fsync(self._fd)
+            try:
+                self._events.flush()
+                os.fsync(self._events.fileno())
+                os.fsync(self._fd)
+            except OSError as err:
+                if self.failed is None:
+                    raise self._fail(err) from None
             self._last_sync = time.monotonic()
 
     def close(self, meta_update: dict | None = None) -> None:
@@ -458,11 +530,18 @@ class SessionWriter:
         """
         if self.closed:
             return
-        self.sync()
+        try:
+            self.sync()
+        except OSError:
+            pass  # self.failed says it; the frames written are kept and counted
         with self._lock:
             self.closed = True
             os.close(self._fd)
-            self._events.close()
+            try:
+                self._events.close()
+            except OSError:
+                pass  # a last event line the full disk refused
+        self._release_reserve()
         self.meta["end_time_utc"] = utc_now_iso()
         self.meta["n_records"] = self.n_records
         self.meta["finished"] = True
@@ -470,6 +549,11 @@ class SessionWriter:
             self.meta.update(_plain(meta_update))
         try:
             self._write_meta()
+        except OSError as err:
+            if self.failed is None:
+                raise
+            # meta.yaml stays "unfinished": the reader reads every whole record and says so
+            log.warning("%s: meta.yaml not updated at the end (%s)", self.path, err)
         finally:
             self._output.close()
 

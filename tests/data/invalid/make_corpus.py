@@ -3,6 +3,7 @@
 The cases are committed; run this only to regenerate them after a deliberate change of a
 message (then review the diff). Configs and the older session CSVs are written by hand.
 """
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -439,6 +440,39 @@ cases.update({
     "simulate_frames_beyond_memory": ("simulate tip-loads -o sim --frames 100000000",
                                       r"--frames: tip-loads would hold 4,400,000,000 frames in memory, about 52\.8 TB; "
                                       r"this machine has .* available"),
+})
+# outputs: two steps writing one file, and output paths through symbolic links that lead elsewhere
+# (links/dangling -> ../no-such-directory/results; links/outward -> ../results)
+LINKS = ROOT / "links"
+shutil.rmtree(LINKS, ignore_errors=True)
+LINKS.mkdir()
+os.symlink("../no-such-directory/results", LINKS / "dangling")
+os.symlink("../results", LINKS / "outward")
+LOADED = "load {good_csv} --calibration {good_cal} reconstruct"
+cases.update({
+    "save_then_export_its_results_csv": (f"{LOADED} save out export out/results.csv --overwrite",
+                                         r"^Error: out/results\.csv: written by two steps of this command line, "
+                                         r"'save' and 'export'; give each step its own output"),
+    "plot_twice_one_path": (f"{LOADED} plot fig.png plot ./fig.png",
+                            r"fig\.png: written by two steps .*'plot' \(step 3\) and 'plot' \(step 4\)"),
+    "plot_into_a_later_save": (f"{LOADED} plot out/fig.png save out",
+                               r"out/fig\.png: written by two steps of this command line, 'plot' and 'save'"),
+    "save_and_mcap_one_path": (f"{LOADED} save run.mcap mcap run.mcap",
+                               r"run\.mcap: written by two steps of this command line, 'save' and 'mcap'"),
+    "export_twice": ("load {good_csv} export a.csv export sub/../a.csv --overwrite",
+                     r"a\.csv: written by two steps .*'export' \(step 2\) and 'export' \(step 3\)"),
+    "save_through_a_dangling_link": (f"{LOADED} save {{invalid}}/links/dangling/out",
+                                     r"links/dangling: a symbolic link to \.\./no-such-directory/results, which does "
+                                     r"not exist; refusing to write through it"),
+    "save_to_a_dangling_link": (f"{LOADED} save {{invalid}}/links/dangling",
+                                r"links/dangling: a symbolic link to .*which does not exist"),
+    "record_through_a_dangling_link": ("record loop:// -o {invalid}/links/dangling/rec --seconds 1",
+                                       r"links/dangling: a symbolic link to .*which does not exist"),
+    "export_through_a_dangling_link": ("load {good_csv} export {invalid}/links/dangling/x.csv",
+                                       r"links/dangling: a symbolic link to .*which does not exist"),
+    "save_to_a_link_out_of_its_directory": (f"{LOADED} save {{invalid}}/links/outward --overwrite",
+                                            r"links/outward: a symbolic link to \.\./results, outside its directory; "
+                                            r"refusing to write through it"),
 })
 for name, (args, expect) in cases.items():
     (CLI / f"{name}.yaml").write_text(yaml.safe_dump({"args": args, "expect": expect}, sort_keys=False, width=200))
