@@ -779,8 +779,12 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
             own = None
         for future in futures:
             future.cancel()
-        _clear_unfinished(out_dir, [name for i, _, name in tasks if i not in done])
-        ok = sum(1 for i, _, _ in tasks if i in done and rows[i].status == "ok")
+        # a worker may have swapped a session in just before it was killed: complete, so counted
+        late = [name for i, _, name in tasks if i not in done and (out_dir / name).is_dir()]
+        if late:
+            output.add_to_manifest(out_dir, [f"{name}/" for name in late])
+        _clear_unfinished(out_dir, [name for i, _, name in tasks if i not in done and name not in late])
+        ok = sum(1 for i, _, _ in tasks if i in done and rows[i].status == "ok") + len(late)
         text = (f"{ok} of {len(tasks)} sessions finished in {out_dir} (each complete); the rest have no output: "
                 "run the same command again to process them (finished sessions are skipped)")
         err.__notes__ = [*getattr(err, "__notes__", []), text]

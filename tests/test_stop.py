@@ -1,0 +1,226 @@
+"""Stopping a run: real signals to real process trees of the ``bendsense`` command.
+
+Ctrl-C (SIGINT to the process group) or SIGTERM (to the command alone) stops every long
+command within seconds with one ``Interrupted (...)`` line and exit status 130 / 143,
+takes its workers with it and leaves every output complete or absent; a worker whose
+parent was killed exits by itself and writes nothing; a rerun finishes the job.
+Processes are found through /proc (``/proc/<pid>/stat``: state, ppid, process group).
+"""
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import linear_calibration, loaded_curvatures, signals_for
+
+from bendsense.session import Session, write_session_csv
+
+pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process trees from /proc")
+
+SCRIPT = Path(sys.executable).with_name("bendsense")
+CLI = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-c", "from bendsense.cli import main; main()"]
+STOP_S = 5.0  # the promise is 2 s; slack for a loaded CI machine
+SESSIONS, FRAMES = 16, 2000
+
+
+# --- process trees ------------------------------------------------------------------------
+
+
+def _stat(pid):
+    """(state, ppid, pgrp) of ``pid``, or None if it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
+            fields = fh.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return fields[0], int(fields[1]), int(fields[2])
+
+
+def _pids():
+    return [int(d) for d in os.listdir("/proc") if d.isdigit()]
+
+
+def alive(pid) -> bool:
+    """Running (a zombie is dead: it only waits for its parent to read its status)."""
+    st = _stat(pid)
+    return st is not None and st[0] not in ("Z", "X")
+
+
+def children(pid) -> list:
+    return [p for p in _pids() if (st := _stat(p)) is not None and st[1] == pid and alive(p)]
+
+
+def group(pgid) -> list:
+    return [p for p in _pids() if (st := _stat(p)) is not None and st[2] == pgid and alive(p)]
+
+
+def cmdline(pid) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
+def wait_until(predicate, timeout, what):
+    end = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < end, what
+        time.sleep(0.05)
+
+
+def start(args, tmp_path, **kw):
+    """The bendsense command in a session of its own (its own process group), stderr to a file."""
+    err = open(tmp_path / "stderr.txt", "w+", encoding="utf-8")  # noqa: SIM115 - closed by stop()
+    proc = subprocess.Popen([*CLI, *args], start_new_session=True, stdout=subprocess.DEVNULL, stderr=err,
+                            cwd=tmp_path, **kw)
+    proc.err_file = err
+    return proc
+
+
+def stderr_of(proc) -> str:
+    proc.err_file.flush()
+    return Path(proc.err_file.name).read_text(encoding="utf-8")
+
+
+def stop(proc, sig, *, whole_group):
+    """Send ``sig`` (to the group or the command alone); the exit status and the seconds until it came."""
+    t0 = time.monotonic()
+    if whole_group:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
+    try:
+        code = proc.wait(60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    return code, time.monotonic() - t0
+
+
+def cleanup(proc):
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    for p in group(proc.pid):
+        os.kill(p, signal.SIGKILL)
+    proc.err_file.close()
+
+
+def assert_one_interrupted_line(text, sig):
+    lines = [line for line in text.replace("\r", "\n").splitlines() if line.strip()]
+    assert "Traceback" not in text, text
+    assert lines[-1].startswith(f"Interrupted ({signal.Signals(sig).name}): "), text
+    assert sum("Interrupted" in line for line in lines) == 1, text
+    return lines[-1]
+
+
+# --- process --------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def batch(tmp_path_factory):
+    """Many copies of one session CSV: a ``process`` run of several seconds on two workers."""
+    root = tmp_path_factory.mktemp("batch")
+    cal = linear_calibration()
+    cal.save(root / "cal.yaml")
+    t = np.linspace(0.0, 1.0, FRAMES)
+    pressure = 40e3 + 40e3 * t
+    force = np.column_stack([0.05 * np.sin(2 * np.pi * t), -0.1 - 0.1 * t])
+    session = Session(0.01 * np.arange(FRAMES), signals_for(loaded_curvatures(pressure, force), cal), pressure)
+    (root / "runs").mkdir()
+    write_session_csv(session, root / "runs" / "s00.csv")
+    for i in range(1, SESSIONS):
+        shutil.copy(root / "runs" / "s00.csv", root / "runs" / f"s{i:02d}.csv")
+    return root
+
+
+def process_args(batch, out):
+    return ["process", str(batch / "runs"), "--calibration", str(batch / "cal.yaml"), "-o", str(out),
+            "--workers", "2", "--no-progress"]
+
+
+def finished_sessions(out: Path) -> list:
+    return sorted(p.name for p in out.iterdir() if p.is_dir() and not p.name.startswith(".")) if out.exists() else []
+
+
+def assert_complete(out: Path, names):
+    """Each session directory holds its manifest and a results.csv with a row for every frame."""
+    for name in names:
+        assert (out / name / ".bendsense-output.json").is_file(), name
+        with open(out / name / "results.csv", newline="", encoding="utf-8") as fh:
+            rows = [r for r in csv.reader(fh) if r and not r[0].startswith("#")]
+        assert len(rows) == FRAMES + 1 and all(len(r) == len(rows[0]) for r in rows), name
+
+
+def running_process(batch, out, tmp_path):
+    """``process`` started and caught with its two workers running and at least one session finished."""
+    proc = start(process_args(batch, out), tmp_path)
+    wait_until(lambda: finished_sessions(out) or proc.poll() is not None, 120,
+               "no session finished")
+    assert proc.poll() is None, stderr_of(proc)
+    workers = [p for p in children(proc.pid) if "spawn_main" in cmdline(p)]
+    assert len(workers) == 2, [cmdline(p) for p in children(proc.pid)]
+    assert len(finished_sessions(out)) < SESSIONS  # still working
+    return proc, workers
+
+
+@pytest.mark.parametrize(("sig", "whole_group"), [(signal.SIGINT, True), (signal.SIGTERM, False)],
+                         ids=["ctrl-c-to-the-group", "sigterm-to-the-command"])
+def test_process_stops_with_its_workers_and_a_rerun_finishes(batch, tmp_path, sig, whole_group):
+    out = tmp_path / "out"
+    proc, workers = running_process(batch, out, tmp_path)
+    try:
+        code, seconds = stop(proc, sig, whole_group=whole_group)
+        text = stderr_of(proc)
+    finally:
+        cleanup(proc)
+    assert code == 128 + sig, text
+    assert seconds < STOP_S, f"{seconds:.1f} s to stop"
+    wait_until(lambda: not any(alive(w) for w in workers), STOP_S, "a worker outlived the command")
+    wait_until(lambda: group(proc.pid) == [], STOP_S, "a process of the run is left")  # resource tracker neither
+    line = assert_one_interrupted_line(text, sig)
+    done = finished_sessions(out)
+    assert f": {len(done)} of {SESSIONS} sessions finished in " in line
+    assert_complete(out, done)  # every session directory there is whole ...
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".bendsense-output.json"]  # ... no litter
+    # the rerun processes the rest and skips what is done, without --overwrite
+    rerun = subprocess.run([*CLI, *process_args(batch, out)], capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"{SESSIONS} sessions: {SESSIONS - len(done)} ok, {len(done)} skipped, 0 failed" in rerun.stdout
+    assert_complete(out, [f"s{i:02d}" for i in range(SESSIONS)])
+
+
+def test_workers_of_a_killed_process_exit_and_write_nothing(batch, tmp_path):
+    """SIGKILL of the command alone (no cleanup of its own): its workers notice and exit; nothing is written
+    after; a rerun finishes the job and removes the killed run's leftovers."""
+    out = tmp_path / "out"
+    proc, workers = running_process(batch, out, tmp_path)
+    try:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        wait_until(lambda: not any(alive(w) for w in workers), STOP_S, "a worker outlived its killed parent")
+    finally:
+        cleanup(proc)
+
+    def listing():
+        return sorted((str(p.relative_to(out)), p.stat().st_size if p.is_file() else -1)
+                      for p in out.rglob("*"))
+
+    before = listing()
+    time.sleep(2.0)
+    assert listing() == before  # nobody writes for a run that is over
+    done = finished_sessions(out)
+    assert_complete(out, done)
+    rerun = subprocess.run([*CLI, *process_args(batch, out)], capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"{SESSIONS} sessions: {SESSIONS - len(done)} ok, {len(done)} skipped, 0 failed" in rerun.stdout
+    assert_complete(out, [f"s{i:02d}" for i in range(SESSIONS)])
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".bendsense-output.json"]
