@@ -224,3 +224,126 @@ def test_workers_of_a_killed_process_exit_and_write_nothing(batch, tmp_path):
     assert f"{SESSIONS} sessions: {SESSIONS - len(done)} ok, {len(done)} skipped, 0 failed" in rerun.stdout
     assert_complete(out, [f"s{i:02d}" for i in range(SESSIONS)])
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".bendsense-output.json"]
+
+
+# --- the other long commands ------------------------------------------------------------------
+
+
+def run_and_stop(args, tmp_path, sig, *, whole_group, after_s=None, ready=None):
+    """Start ``bendsense ARGS``, wait ``after_s`` seconds or until ``ready()``, send ``sig``; (exit status,
+    seconds to stop, stderr), after checking that no process of the command is left."""
+    proc = start(args, tmp_path)
+    try:
+        if ready is not None:
+            wait_until(lambda: ready() or proc.poll() is not None, 120, "the command never got going")
+        else:
+            time.sleep(after_s)
+        assert proc.poll() is None, stderr_of(proc)  # still working when stopped
+        code, seconds = stop(proc, sig, whole_group=whole_group)
+        text = stderr_of(proc)
+        wait_until(lambda: group(proc.pid) == [], STOP_S, "a process of the command is left")
+    finally:
+        cleanup(proc)
+    assert code == 128 + sig, text
+    assert seconds < STOP_S, f"{seconds:.1f} s to stop"
+    return assert_one_interrupted_line(text, sig)
+
+
+def no_output(tmp_path, name):
+    """Neither the output nor any hidden working copy of it."""
+    return [p.name for p in tmp_path.iterdir() if p.name == name or p.name.startswith(f".{name}.")] == []
+
+
+@pytest.fixture(scope="module")
+def long_session(tmp_path_factory):
+    """One session CSV long enough that reading, reconstructing and estimating it takes seconds."""
+    root = tmp_path_factory.mktemp("long")
+    cal = linear_calibration()
+    cal.save(root / "cal.yaml")
+    t = np.linspace(0.0, 1.0, 500)
+    pressure = 40e3 + 40e3 * t
+    force = np.column_stack([0.05 * np.sin(2 * np.pi * t), -0.1 - 0.1 * t])
+    signals = signals_for(loaded_curvatures(pressure, force), cal)
+    reps = 120  # 60,000 frames
+    session = Session(1e-3 * np.arange(500 * reps), np.tile(signals, (reps, 1)), np.tile(pressure, reps))
+    write_session_csv(session, root / "long.csv")
+    return root
+
+
+@pytest.mark.parametrize("after_s", [1.0, 3.0])
+def test_chain_stops_and_writes_nothing(long_session, tmp_path, after_s):
+    """``load ... reconstruct estimate save`` stopped while reading or estimating: no results directory."""
+    line = run_and_stop(["load", str(long_session / "long.csv"), "--calibration", str(long_session / "cal.yaml"),
+                         "reconstruct", "estimate", "save", "res"], tmp_path, signal.SIGTERM, whole_group=False,
+                        after_s=after_s)
+    assert line == "Interrupted (SIGTERM): no output left half-written"
+    assert no_output(tmp_path, "res")
+
+
+def test_simulate_stops_and_writes_nothing(tmp_path):
+    line = run_and_stop(["simulate", "all", "-o", "sim", "--frames", "3000"], tmp_path, signal.SIGINT,
+                        whole_group=True, after_s=2.0)
+    assert line == "Interrupted (SIGINT): no output left half-written"
+    assert no_output(tmp_path, "sim")
+
+
+def test_calibrate_stops_and_writes_nothing(tmp_path):
+    made = subprocess.run([*CLI, "simulate", "calibration", "-o", str(tmp_path / "c"), "--frames", "20000"],
+                          capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0, made.stderr
+    line = run_and_stop(["calibrate", str(tmp_path / "c" / "manifest.yaml"), "-o", "cal.yaml", "--plot", "fit.png"],
+                        tmp_path, signal.SIGTERM, whole_group=False, after_s=1.0)
+    assert line == "Interrupted (SIGTERM): no output left half-written"
+    assert no_output(tmp_path, "cal.yaml") and no_output(tmp_path, "fit.png")
+
+
+def test_reproduce_stops_and_writes_nothing(tmp_path):
+    line = run_and_stop(["reproduce", "--quick", "-o", "rep"], tmp_path, signal.SIGINT, whole_group=True,
+                        ready=lambda: "simulating" in stderr_of_file(tmp_path))
+    assert line == "Interrupted (SIGINT): no output left half-written"
+    assert no_output(tmp_path, "rep")
+
+
+def test_demo_stops_and_writes_nothing(tmp_path):
+    """Stopped while it records its simulated board (a thread and a pseudo-terminal of its own)."""
+    line = run_and_stop(["demo", "-o", "d", "--seconds", "5"], tmp_path, signal.SIGINT, whole_group=True,
+                        ready=lambda: "recording" in stderr_of_file(tmp_path))
+    assert line == "Interrupted (SIGINT): no output left half-written"
+    assert no_output(tmp_path, "d")
+
+
+def stderr_of_file(tmp_path):
+    return (tmp_path / "stderr.txt").read_text(encoding="utf-8") if (tmp_path / "stderr.txt").exists() else ""
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
+@pytest.mark.parametrize(("sig", "whole_group"), [(signal.SIGINT, True), (signal.SIGTERM, False)],
+                         ids=["ctrl-c-to-the-group", "sigterm-to-the-command"])
+def test_record_stops_and_keeps_its_frames(tmp_path, sig, whole_group):
+    """The simulated board on a pseudo-terminal: the session keeps every frame written, marked finished, and the
+    one line says how many."""
+    import bendsense
+    from bendsense.device.simdevice import SimulatedDevice, default_source
+
+    with SimulatedDevice(default_source(rate_hz=500, seed=0), rate_hz=500) as dev:
+        line = run_and_stop(["record", dev.port, "-o", "run", "--quiet-status"], tmp_path, sig,
+                            whole_group=whole_group,
+                            ready=lambda: (tmp_path / "run" / "frames.bin").exists()
+                            and (tmp_path / "run" / "frames.bin").stat().st_size > 10_000)
+    session = bendsense.read_session(tmp_path / "run")
+    assert line == (f"Interrupted ({signal.Signals(sig).name}): kept {len(session)} frames in run "
+                    "(synced to disk, session marked finished)")
+    assert session.meta["finished"] and session.meta["outcome"] == "interrupted"
+    assert np.all(np.diff(session.seq) >= 1)
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
+def test_live_stops_without_an_image(tmp_path):
+    from bendsense.device.simdevice import SimulatedDevice, default_source
+
+    linear_calibration().save(tmp_path / "cal.yaml")
+    with SimulatedDevice(default_source(rate_hz=200, seed=0), rate_hz=200) as dev:
+        line = run_and_stop(["live", dev.port, "--calibration", "cal.yaml", "--save", "fig.png", "--seconds", "60"],
+                            tmp_path, signal.SIGTERM, whole_group=False, ready=lambda: dev.stats.sent > 400)
+    assert line == "Interrupted (SIGTERM): no figure saved (fig.png is written when --seconds ends)"
+    assert no_output(tmp_path, "fig.png")

@@ -81,6 +81,7 @@ __all__ = [
 XTOL_N = 1e-10
 MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
+_PIECE = 4096  # frames per compiled call of a large batch (~0.2 s on 2 cores): signals are handled between calls
 _OPS = tuple(_beam._operators(N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 _NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
@@ -229,7 +230,15 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
             _jit.call(_kernels.estimate_block, 0, B, use_guess, block > 1, tuple(fr), plain_pb, plain_err, _OPS,
                       start, out)
         else:
-            _jit.call(_kernels.estimate_frames, block, use_guess, tuple(fr), plain_pb, plain_err, _OPS, start, out)
+            # in pieces of whole blocks, a fraction of a second each: a compiled call keeps Python (and so
+            # Ctrl-C and SIGTERM) waiting until it returns
+            step = max(block, _PIECE // block * block)
+            for lo in range(0, B, step):
+                def piece(a, lo=lo):
+                    return a[lo:lo + step] if a.shape[:1] == (B,) else a
+
+                _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), plain_pb, plain_err,
+                          _OPS, piece(start), tuple(map(piece, out)))
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force (it makes no
         # guess); the shape, its sensitivities and the uncertainty at its optimum come from the compiled core
