@@ -347,3 +347,45 @@ def test_live_stops_without_an_image(tmp_path):
                             tmp_path, signal.SIGTERM, whole_group=False, ready=lambda: dev.stats.sent > 400)
     assert line == "Interrupted (SIGTERM): no figure saved (fig.png is written when --seconds ends)"
     assert no_output(tmp_path, "fig.png")
+
+
+# --- the first run: compiled once, before the workers start ---------------------------------------
+
+ANNOUNCEMENT = "bendsense: compiling the estimation kernels"
+
+DASK_RUN = """
+import sys
+from dask.distributed import Client, LocalCluster
+from bendsense.batch import process_sessions
+if __name__ == "__main__":
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \\
+            Client(cluster) as client:
+        report = process_sessions([sys.argv[1]], sys.argv[2], calibration=sys.argv[3],
+                                  executor=client.get_executor(), progress=False)
+    print(report.table())
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("executor", ["pool", "dask"])
+def test_a_cold_cache_compiles_once_before_the_workers_start(batch, tmp_path, executor):
+    """numba's cache in a fresh directory (NUMBA_CACHE_DIR): the first ``process`` compiles the kernels in one
+    process (one announcement, not one per worker) and the two workers load its cache. Cold: about two minutes."""
+    if executor == "dask":
+        pytest.importorskip("dask.distributed")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    for i in range(4):
+        shutil.copy(batch / "runs" / "s00.csv", runs / f"r{i}.csv")
+    if executor == "pool":
+        args = [*CLI, "process", str(runs), "--calibration", str(batch / "cal.yaml"), "-o", str(tmp_path / "out"),
+                "--workers", "2", "--no-progress"]
+    else:
+        (tmp_path / "run.py").write_text(DASK_RUN, encoding="utf-8")
+        args = [sys.executable, str(tmp_path / "run.py"), str(runs), str(tmp_path / "out"), str(batch / "cal.yaml")]
+    res = subprocess.run(args, capture_output=True, text=True, env=env, timeout=1200, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "4 sessions: 4 ok" in res.stdout
+    assert res.stderr.count(ANNOUNCEMENT) == 1, res.stderr  # one process compiled; the workers found its cache
+    assert list((tmp_path / "numba-cache").rglob("*.nbi"))  # (the cache really was the fresh directory)

@@ -543,7 +543,7 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     On a cold cache (the first run after an install) this process compiles them once,
     announced on stderr, and writes numba's cache; the workers then only load it. Without
     this every worker would compile the same kernels at the same time and write the same
-    cache files concurrently. Runs :func:`bendsense.pipeline.process` on a session of two
+    cache files concurrently. Runs :func:`bendsense.pipeline.process` on a session of 100
     flat frames (the batch kernels) at the middle of the pressure range, with the batch's
     options.
     """
@@ -553,8 +553,9 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     from bendsense.session import Session
 
     lo, hi = config.actuator.pressure_range_pa
-    flat = np.tile(np.asarray(calibration.offset, dtype=float), (2, 1))
-    session = Session(np.array([0.0, 0.01]), flat, np.full(2, 0.5 * (lo + hi)), source="warm-up")
+    frames = 100  # more than one warm-started block: the parallel batch kernels, as for any real session
+    flat = np.tile(np.asarray(calibration.offset, dtype=float), (frames, 1))
+    session = Session(0.01 * np.arange(frames), flat, np.full(frames, 0.5 * (lo + hi)), source="warm-up")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         process(session, config, calibration, constraint=constraint, method=method, objective=objective,
