@@ -18,7 +18,7 @@ import scipy.linalg  # noqa: F401 (loads scipy's BLAS before the limits are read
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import bendsense
-from bendsense import _blas, _jit
+from bendsense import _blas
 from bendsense import estimation as est
 
 KERNEL = textwrap.dedent('''
@@ -79,7 +79,8 @@ def test_a_cold_compile_says_what_compiles_and_how_far_then_the_cache_is_quiet(t
 def test_two_cold_processes_compile_side_by_side_and_both_find_the_result(tmp_path):
     """No two processes write the cache at once (a lock file); both compile, both answer, a third loads."""
     (tmp_path / "bs_toy_kernels.py").write_text(KERNEL)
-    code = "import numpy as np\nfrom bendsense import _jit\nimport bs_toy_kernels as k\nprint(_jit.call(k.outer, np.ones(3)))\n"
+    code = ("import numpy as np\nfrom bendsense import _jit\nimport bs_toy_kernels as k\n"
+            "print(_jit.call(k.outer, np.ones(3)))\n")
     procs = [_run(tmp_path, code) for _ in range(2)]
     results = [p.communicate(timeout=300) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], results

@@ -216,7 +216,7 @@ def test_cli_replay_then_record(tmp_path):
 
 @pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
 def test_record_without_seconds_outlives_the_replay(tmp_path, stop):
-    """'record' with no --seconds, stopped by Ctrl-C (or SIGTERM) after the replay ended: exit 0, a finished
+    """'record' with no --seconds, stopped by Ctrl-C (or SIGTERM) after the replay ended: exit 130 (143), a finished
     session identical frame by frame to the original (no 'device disconnected', no reconnect attempts)."""
     original = make_recording(tmp_path / "orig", n=300)
     board, port = replay_process(tmp_path / "orig")
@@ -230,8 +230,9 @@ def test_record_without_seconds_outlives_the_replay(tmp_path, stop):
         assert rec.poll() is None
         rec.send_signal(getattr(signal, stop))
         out, err = rec.communicate(timeout=20)
-        assert rec.returncode == 0, err
-        assert "interrupted: 300 frames written" in err and "disconnect" not in err and "Traceback" not in err
+        assert rec.returncode == 128 + getattr(signal, stop), err
+        assert err.splitlines()[-1].startswith(f"Interrupted ({stop}): kept 300 frames in ")
+        assert "disconnect" not in err and "Traceback" not in err
         board.send_signal(signal.SIGTERM)  # a board stopped with kill: its counts, exit 0
         assert board.wait(10) == 0
         assert "generated 300" in board_err.join()

@@ -453,11 +453,65 @@ def _executor_name(executor) -> str:
     return f"{kind}({workers} workers)" if workers else kind
 
 
-def _one_thread() -> None:
-    """Pool worker initializer: one numba thread (the processes are the parallelism)."""
+def _worker_init(parent_pid: int | None = None) -> None:
+    """Pool worker initializer: one numba thread, Ctrl-C left to the parent, and exit with the parent.
+
+    One numba thread because the processes are the parallelism. SIGINT (Ctrl-C reaches
+    the whole process group) is ignored: the parent stops the workers itself, so that
+    no worker prints a traceback or leaves half a session behind on its own. A worker
+    whose parent died (SIGKILL, a crash) exits at once: it must not go on using the
+    CPU nor write results for a run that is over (:func:`exit_with_parent`).
+    """
+    import signal
+
     import numba
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):  # the parent blocked it while starting us (_started_quietly)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    if parent_pid is not None:
+        exit_with_parent(parent_pid)
     numba.set_num_threads(1)
+
+
+def exit_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
+    """End this process as soon as the process ``parent_pid`` (its parent) ends.
+
+    On Linux the kernel does it: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, which also stops a
+    worker inside a compiled kernel. Elsewhere (or if prctl fails) a daemon thread
+    compares ``os.getppid()`` with ``parent_pid`` every ``poll_s`` seconds and calls
+    ``os._exit`` when the parent is gone (the worker is then re-parented).
+    """
+    import sys
+    import threading
+
+    if sys.platform.startswith("linux") and _pdeathsig():
+        if os.getppid() != parent_pid:  # the parent died before the prctl took effect
+            os._exit(1)
+        return
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    if os.getppid() != parent_pid:
+        os._exit(1)
+    threading.Thread(target=watch, name="bendsense-parent-watch", daemon=True).start()
+
+
+def _pdeathsig() -> bool:
+    """Ask Linux to SIGKILL this process when its parent dies; False if that is not possible."""
+    import ctypes
+    import ctypes.util
+    import signal
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        pr_set_pdeathsig = 1
+        return libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
@@ -467,14 +521,70 @@ def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
     kernels' threads (``--workers 0``, in-process), never both: two levels of threads on
     few cores only oversubscribe them. The workers are spawned (not forked) so that
     they import numpy afresh with these variables, even if this process has numpy
-    loaded already.
+    loaded already. They ignore Ctrl-C and exit with this process (:func:`_worker_init`).
     """
     import multiprocessing
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=_one_thread)
+                                  initializer=_worker_init, initargs=(os.getpid(),))
+
+
+@contextlib.contextmanager
+def _started_quietly():
+    """Block SIGINT in this thread while workers start: they inherit the mask and ignore Ctrl-C from birth.
+
+    A Ctrl-C meanwhile stays pending and is delivered here when the block ends.
+    """
+    import signal
+    import threading
+
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
+    """Kill the pool's worker processes now (an interrupted batch), then shut the pool down."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for proc in processes:
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            proc.kill()
+    for proc in processes:
+        with contextlib.suppress(OSError, ValueError, AttributeError, AssertionError):
+            proc.join(2.0)
+    pool.shutdown(wait=False, cancel_futures=True)
+
+
+def warm_up(config, calibration, *, constraint=None, method=None, objective=None, estimate: bool = True) -> None:
+    """Compile or load the kernels a batch uses, here, before any worker starts.
+
+    On a cold cache (the first run after an install) this process compiles them once,
+    announced on stderr, and writes numba's cache; the workers then only load it. Without
+    this every worker would compile the same kernels at the same time and write the same
+    cache files concurrently. Runs :func:`bendsense.pipeline.process` on a session of 100
+    flat frames (the batch kernels) at the middle of the pressure range, with the batch's
+    options.
+    """
+    import numpy as np
+
+    from bendsense.pipeline import process
+    from bendsense.session import Session
+
+    lo, hi = config.actuator.pressure_range_pa
+    frames = 100  # more than one warm-started block: the parallel batch kernels, as for any real session
+    flat = np.tile(np.asarray(calibration.offset, dtype=float), (frames, 1))
+    session = Session(0.01 * np.arange(frames), flat, np.full(frames, 0.5 * (lo + hi)), source="warm-up")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        process(session, config, calibration, constraint=constraint, method=method, objective=objective,
+                estimate=estimate)
 
 
 def process_sessions(
@@ -639,13 +749,22 @@ def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
 
 
 def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, workers, progress) -> str:
-    """Process the sessions of ``tasks`` ((row index, path, name)) into ``rows``; a description of the workers."""
+    """Process the sessions of ``tasks`` ((row index, path, name)) into ``rows``; a description of the workers.
+
+    Interrupted (Ctrl-C, SIGTERM: a KeyboardInterrupt), the local pool's workers are
+    killed at once and an external executor's queued tasks cancelled; every session
+    finished so far is complete on disk (each is written aside and swapped in), the
+    others have no output, and the KeyboardInterrupt goes on up with a note of how many
+    finished (a rerun skips them).
+    """
     from tqdm import tqdm
 
     bar = tqdm(total=len(tasks), unit="session", desc="process", disable=not progress or not tasks, leave=False)
+    done: set = set()
 
     def finish(i, row):
         rows[i] = row
+        done.add(i)
         bar.update(1)
         if row.status == "ok":
             output.add_to_manifest(out_dir, [f"{row.name}/"])
@@ -653,6 +772,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
             log.warning("%s: failed: %s", row.name, row.reason)
 
     own = None
+    futures: dict = {}
     try:
         if executor is None and workers == 0:
             import numba
@@ -661,13 +781,23 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
             for i, path, name in tasks:
                 finish(i, process_session(path, out_dir / name, name=name, **options))
         else:
+            if tasks:  # compile once, here, before any worker could start compiling the same kernels
+                warm_up(options["config"], options["calibration"], constraint=options["constraint"],
+                        method=options["method"], objective=options["objective"], estimate=options["estimate"])
             if executor is None and tasks:
                 own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(tasks)))
+            elif tasks and not isinstance(executor, cf.ProcessPoolExecutor):
+                # a cluster (Dask): one worker compiles or loads first, the others then find its cache
+                executor.submit(warm_up, options["config"], options["calibration"], constraint=options["constraint"],
+                                method=options["method"], objective=options["objective"],
+                                estimate=options["estimate"]).result()
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description.replace(" workers)", " workers, 1 numba thread each)")
-            futures = {executor.submit(process_session, path, out_dir / name, name=name, **options): (i, path, name)
-                       for i, path, name in tasks}
+            with _started_quietly() if own is not None else contextlib.nullcontext():
+                for i, path, name in tasks:
+                    future = executor.submit(process_session, path, out_dir / name, name=name, **options)
+                    futures[future] = (i, path, name)
             for future in cf.as_completed(futures):
                 i, path, name = futures[future]
                 try:
@@ -689,11 +819,40 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
     except OutputError as err:
         if err.errno not in _FATAL_ERRNOS:
             raise
-        done = sum(1 for row in rows if row is not None and row.status == "ok")
-        raise OutputError(f"{err}; processing stopped ({done} of {len(rows)} sessions written before)",
+        written = sum(1 for row in rows if row is not None and row.status == "ok")
+        raise OutputError(f"{err}; processing stopped ({written} of {len(rows)} sessions written before)",
                           errno=err.errno) from None
+    except KeyboardInterrupt as err:
+        if own is not None:
+            _stop_pool(own)
+            own = None
+        for future in futures:
+            future.cancel()
+        # a worker may have swapped a session in just before it was killed: complete, so counted
+        late = [name for i, _, name in tasks if i not in done and (out_dir / name).is_dir()]
+        if late:
+            output.add_to_manifest(out_dir, [f"{name}/" for name in late])
+        _clear_unfinished(out_dir, [name for i, _, name in tasks if i not in done and name not in late])
+        ok = sum(1 for i, _, _ in tasks if i in done and rows[i].status == "ok") + len(late)
+        text = (f"{ok} of {len(tasks)} sessions finished in {out_dir} (each complete); the rest have no output: "
+                "run the same command again to process them (finished sessions are skipped)")
+        err.__notes__ = [*getattr(err, "__notes__", []), text]
+        raise
     finally:
         bar.close()
         if own is not None:
             own.shutdown(cancel_futures=True)
     return description
+
+
+def _clear_unfinished(out_dir: Path, names) -> None:
+    """Remove the hidden working copies that killed workers left of the sessions they did not finish."""
+    for name in names:
+        target = output.resolve(out_dir / name)
+        with contextlib.suppress(OSError):
+            output._clear_litter(target)
+            lock = output._lock_path(target)
+            fd = output._try_lock(lock) if lock.exists() else None
+            if fd is not None:  # a dead worker's: nobody holds it
+                os.unlink(lock)
+                os.close(fd)

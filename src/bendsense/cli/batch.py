@@ -81,6 +81,13 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
     fails is reported with its reason while the others finish; the exit code is 1
     if any failed. Prints a summary table at the end.
 
+    Ctrl-C or SIGTERM stops the run at once and its workers with it: each session
+    finished so far is complete, the others have no output, one line says how many
+    finished, and the exit code is 130 (Ctrl-C) or 143 (SIGTERM). Running the same
+    command again skips the finished sessions and processes the rest. The kernels
+    are compiled (first run after an install) or loaded here once, before the
+    workers start.
+
     \b
     Example:
         bendsense process runs/ --calibration cal.yaml -o out/ --workers 2

@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 
 from bendsense import output as outputs
+from bendsense.cli import _signals
 from bendsense.cli._common import (
     CONSTRAINTS,
     SEED,
@@ -201,7 +202,10 @@ def record(
     PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path or any
     pyserial URL (rfc2217://HOST:PORT, socket://HOST:PORT, loop://, ...). A live
     status line on stderr counts frames, gaps, errors and firmware drops; Ctrl-C (or
-    SIGTERM) stops the recording and leaves a complete session marked finished.
+    SIGTERM) stops the recording and leaves a complete session marked finished:
+    every frame received is kept (synced to disk), one line says how many, and
+    the exit status is 130 (Ctrl-C) or 143 (SIGTERM). A new recording goes to a
+    new directory (or --overwrite).
 
     With --estimate (and --calibration), every frame is reconstructed and its force
     estimated as it arrives, in blocks on a background thread, and appended to
@@ -274,12 +278,11 @@ def record(
             )
             if not no_start:
                 driver.start()
+            interrupted = None
             try:
-                with _sigterm_as_interrupt():
-                    stats = recorder.run(seconds, on_progress=progress)
-                outcome = "done"
-            except KeyboardInterrupt:
-                stats, outcome = recorder.stats, "interrupted"
+                stats = recorder.run(seconds, on_progress=progress)
+            except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: the recorder has closed the session
+                stats, interrupted = recorder.stats, err
             finally:
                 est_stats = None if estimator is None else estimator.close()
     except BendsenseError:
@@ -289,11 +292,17 @@ def record(
     if show:
         sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
     losses = f"; {stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else ""
-    click.echo(f"{outcome}: {stats.records} frames written to {output}{losses}", err=True)
     if estimate and est_stats.frames:
-        click.echo(f"{est_stats.frames} frames estimated to {results_path}", err=True)
+        estimated = f"{est_stats.frames} frames estimated to {results_path}"
     elif estimate:  # as 'save' and 'process', which refuse a session without frames
-        click.echo(f"no frames to estimate: no {results_path.name} written", err=True)
+        estimated = f"no frames to estimate: no {results_path.name} written"
+    if interrupted is not None:  # one line, by the group: what was kept, exit 130 / 143
+        kept = f"kept {stats.records} frames in {output} (synced to disk, session marked finished){losses}"
+        _signals.note(interrupted, kept + (f"; {estimated}" if estimate else ""))
+        raise interrupted
+    click.echo(f"done: {stats.records} frames written to {output}{losses}", err=True)
+    if estimate:
+        click.echo(estimated, err=True)
 
 
 @click.command("sim-device", cls=InterspersedCommand)

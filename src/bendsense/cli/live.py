@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from bendsense.cli import _signals
 from bendsense.cli._common import (
     CONSTRAINTS,
     SEED,
@@ -104,6 +105,8 @@ def live(
     estimation rate and the counts of extrapolated, not converged and misfit frames.
     --lsl publishes every frame on Lab Streaming Layer. At the end, the achieved frame
     rate and the end-to-end latency per frame (bytes read to artists drawn) are printed.
+    Ctrl-C or SIGTERM stops it with one line and exit status 130 or 143 (no --save image
+    then).
     """
     if calibration_path is None:
         raise click.ClickException(_NO_CALIBRATION)
@@ -145,13 +148,15 @@ def live(
             stats = run_live(
                 driver, processor, view, duration_s=seconds, max_fps=max_fps, is_open=is_open, outlets=outlets
             )
-        except KeyboardInterrupt:
-            stats = None
+        except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line by the group, exit 130 / 143
+            if save_path is not None:
+                _signals.note(err, f"no figure saved ({save_path} is written when --seconds ends)")
+            raise
         finally:
             if outlets is not None:
                 outlets.close()
     if save_path is not None:
-        if stats is None or stats.frames == 0:
+        if stats.frames == 0:
             raise click.ClickException(f"{port}: no frames received; nothing to save")
         view.save(save_path, overwrite=overwrite)
     if stats is not None:

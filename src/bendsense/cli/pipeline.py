@@ -15,6 +15,7 @@ from pathlib import Path
 import click
 
 from bendsense import output
+from bendsense.cli import _signals
 from bendsense.cli._common import (
     ANGLE_SOURCES,
     CONSTRAINTS,
@@ -32,6 +33,10 @@ from bendsense.errors import BendsenseError, SessionError
 log = logging.getLogger("bendsense")
 
 RESULTS_FILES = ("results.csv", "shape.npz")  # what 'save' writes into its directory
+
+
+class _Interrupted(click.ClickException):
+    """A stop signal on its way from the steps to :meth:`PipelineGroup.main` (past click's own handling)."""
 
 
 class PipelineGroup(click.Group):
@@ -62,11 +67,18 @@ class PipelineGroup(click.Group):
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
-            rv = super().main(args, prog_name, complete_var, False, **extra)
+            with _signals.installed():
+                rv = super().main(args, prog_name, complete_var, False, **extra)
+        except _Interrupted as err:
+            click.echo(_signals.message(err.__cause__), err=True)
+            sys.exit(_signals.exit_code())
         except click.ClickException as err:
             click.echo(f"Error: {' '.join(err.format_message().split())}", err=True)
             sys.exit(err.exit_code)
-        except click.Abort:
+        except click.Abort as err:
+            if isinstance(err.__context__, KeyboardInterrupt):  # a stop signal outside the chain's steps
+                click.echo(_signals.message(err.__context__), err=True)
+                sys.exit(_signals.exit_code())
             click.echo("Aborted!", err=True)
             sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
@@ -81,6 +93,8 @@ class PipelineGroup(click.Group):
         """
         try:
             return super().invoke(ctx)
+        except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM (_signals): one line, exit 130 / 143 in main
+            raise _Interrupted("interrupted") from err
         except BendsenseError as err:
             raise click.ClickException(str(err)) from None
         except FileExistsError as err:  # outputs that need --overwrite; the library's message says so

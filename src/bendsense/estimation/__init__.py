@@ -83,6 +83,7 @@ XTOL_N = 1e-10
 MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
 _PARALLEL_MIN = 2048  # frames from which a batch runs on numba's threads (below: ~0.1 s of work, not worth a compile)
+_PIECE = 4096  # frames per compiled call of a large batch (~0.2 s on 2 cores): signals are handled between calls
 _OPS = tuple(_beam._operators(N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 _NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
@@ -237,13 +238,23 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         block = min(B, _CHAIN) if chain and B > 1 else 1
         if B < _PARALLEL_MIN or numba.get_num_threads() == 1:
             # one frame, a live block, a worker of a process pool: the per-frame kernel, block by block as the
-            # batch kernel runs it (the same results); only a large batch on several threads compiles the batch
+            # batch kernel runs it (the same results), independent frames in pieces (Ctrl-C is handled between
+            # calls); only a large batch on several threads compiles the batch kernel
             plain_fr = tuple(fr)
-            for lo in range(0, B, block if block > 1 else B):
-                _jit.call(_kernels.estimate_block, lo, min(B, lo + block) if block > 1 else B, use_guess, block > 1,
-                          plain_fr, plain_pb, plain_err, _OPS, start, out)
+            step = block if block > 1 else _PIECE
+            for lo in range(0, B, step):
+                _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, plain_fr, plain_pb,
+                          plain_err, _OPS, start, out)
         else:
-            _jit.call(_kernels.estimate_frames, block, use_guess, tuple(fr), plain_pb, plain_err, _OPS, start, out)
+            # in pieces of whole blocks, a fraction of a second each: a compiled call keeps Python (and so
+            # Ctrl-C and SIGTERM) waiting until it returns
+            step = max(block, _PIECE // block * block)
+            for lo in range(0, B, step):
+                def piece(a, lo=lo):
+                    return a[lo:lo + step] if a.shape[:1] == (B,) else a
+
+                _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), plain_pb, plain_err,
+                          _OPS, piece(start), tuple(map(piece, out)))
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force (it makes no
         # guess); the shape, its sensitivities and the uncertainty at its optimum come from the compiled core

@@ -1,0 +1,72 @@
+"""Stopping a command: Ctrl-C (SIGINT) and SIGTERM end every command the same way.
+
+installed() (entered once by the ``bendsense`` group) makes both signals raise
+:class:`KeyboardInterrupt` in the main thread, so that every ``finally`` and every
+output writer cleans up on the way out (outputs are written whole or not at all,
+:mod:`bendsense.output`). The group then prints one line, ``Interrupted (SIGINT): ...``
+with what the command kept, and exits 130 for SIGINT, 143 for SIGTERM (128 + the
+signal number, as a shell reports a command killed by it).
+
+A layer that knows what it kept says so on the exception on its way up
+(:func:`note`): ``record`` its fsync'ed frames, ``process`` how many sessions
+finished.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+
+__all__ = ["installed", "note", "exit_code", "message"]
+
+_received: list[int] = []  # the stop signals seen, first first
+
+
+def _raise(signum, frame):
+    _received.append(signum)
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def installed():
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread while the block runs.
+
+    A signal ignored at start (a job started in the background by a shell) stays
+    ignored; the previous handlers come back when the block ends.
+    """
+    _received.clear()
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            previous[signum] = signal.signal(signum, _raise)
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def note(err: BaseException, text: str) -> None:
+    """Add what an interrupted command kept to the KeyboardInterrupt ``err`` (shown in its one line)."""
+    err.__notes__ = [*getattr(err, "__notes__", []), text]
+
+
+def signum() -> int:
+    """The signal that stopped the command (SIGINT if none was seen: a KeyboardInterrupt raised otherwise)."""
+    return _received[0] if _received else signal.SIGINT
+
+
+def exit_code() -> int:
+    """128 + the signal number: 130 for SIGINT, 143 for SIGTERM."""
+    return 128 + int(signum())
+
+
+def message(err: BaseException | None) -> str:
+    """The one line of an interrupted command: the signal, then what was kept."""
+    notes = [n for n in getattr(err, "__notes__", []) if n]
+    kept = "; ".join(notes) if notes else "no output left half-written"
+    return f"Interrupted ({signal.Signals(signum()).name}): {kept}"
