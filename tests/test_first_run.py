@@ -61,12 +61,12 @@ def test_a_cold_compile_says_what_compiles_and_how_far_then_the_cache_is_quiet(t
         import bs_toy_kernels as k
         print(_jit.call(k.outer, np.arange(4.0)))
         print(sorted(d.py_func.__name__ for d in _jit.call_tree(k.outer)))
-        print(os.environ.get("NUMBA_OPT"), int(numba.config.OPT))
+        print(os.environ.get("NUMBA_OPT"), int(numba.config.OPT), numba.config.THREADING_LAYER)
     ''')
     first = _run(tmp_path, code)
     out, err = first.communicate(timeout=300)
     assert first.returncode == 0, err
-    assert out.split("\n")[:3] == ["12.0", "['inner', 'outer']", "None 3"]  # the user's setting is back
+    assert out.split("\n")[:3] == ["12.0", "['inner', 'outer']", "None 3 workqueue"]  # the user's settings are back
     lines = [line for line in err.splitlines() if line.strip()]
     assert lines and lines[-1].startswith("bendsense: compiling the compiled kernels")
     assert lines[-1].endswith("2/2 functions, " + lines[-1].split(", ")[-1]) and " s" in lines[-1]

@@ -38,7 +38,7 @@ from numba.core.dispatcher import Dispatcher
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "workqueue"
 
-_OPT_LEVEL = "1"
+_OPT_LEVEL = 1
 _lock = threading.Lock()
 _ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)
 
@@ -135,20 +135,25 @@ def _open_lock_file():
 
 @contextlib.contextmanager
 def _optimisation_level():
-    """Compile at LLVM optimisation level 1 (numba's default is 3), unless ``NUMBA_OPT`` is set."""
+    """Compile at LLVM optimisation level 1 (numba's default is 3), unless ``NUMBA_OPT`` is set.
+
+    numba's setting is changed in place and put back, not through the environment: a
+    change of the environment makes numba re-read all of its settings from it, which
+    would undo bendsense's threading layer.
+    """
     if "NUMBA_OPT" in os.environ:
         yield
         return
     from numba.core import config, registry
 
+    config.reload_config()  # take in any change of the environment now, not halfway through the compile
     registry.cpu_target.target_context.codegen()  # the machine-code level stays the user's
-    os.environ["NUMBA_OPT"] = _OPT_LEVEL
-    config.reload_config()
+    previous = config.OPT
+    config.OPT = getattr(config, "_OptLevel", int)(_OPT_LEVEL)
     try:
         yield
     finally:
-        os.environ.pop("NUMBA_OPT", None)
-        config.reload_config()
+        config.OPT = previous
 
 
 def _cached(dispatcher) -> bool:
