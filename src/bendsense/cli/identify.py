@@ -109,16 +109,16 @@ def identify(
     check_figure_suffix(plot_path, "--plot")
 
     def step(state):
-        try:
-            from bendsense.config import load_config, save_config
-            from bendsense.identify import (
-                fit_free_bending,
-                fit_stiffness,
-                read_free_bending_csv,
-                read_stiffness_csv,
-            )
+        from bendsense.config import load_config, save_config
+        from bendsense.identify import (
+            fit_free_bending,
+            fit_stiffness,
+            read_free_bending_csv,
+            read_stiffness_csv,
+        )
 
-            config = load_config(config_path)
+        config = load_config(config_path)  # (its errors name the config, not the data)
+        try:
             if kind == "free-bending":
                 pressure, angle = read_free_bending_csv(data)
                 fit = fit_free_bending(pressure, angle, config, fix=fix)
