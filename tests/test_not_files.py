@@ -209,3 +209,11 @@ def test_replay_refuses_a_recording_faster_than_the_link(tmp_path):
     (tmp_path / "fast.csv").write_text("t_s,ch1,ch2\n" + rows + "\n")
     with pytest.raises(SessionError, match=r"fast\.csv: frames 1 us apart \(1,000,000 Hz\), more than a USB"):
         ReplayDevice(tmp_path / "fast.csv")
+
+
+def test_an_output_directory_whose_manifest_is_a_fifo_does_not_block(tmp_path):
+    from bendsense import output
+
+    (tmp_path / "out").mkdir()
+    os.mkfifo(tmp_path / "out" / output.MANIFEST_NAME)
+    assert output.read_manifest(tmp_path / "out") is None  # not a manifest; before, open() waited for a writer

@@ -549,9 +549,12 @@ def read_manifest(path) -> dict | None:
     path : path
         The output directory.
     """
+    from bendsense._io import open_regular
+
     try:
-        with open(Path(path) / MANIFEST_NAME, encoding="utf-8") as fh:
-            data = json.load(fh)
+        # a FIFO in its place must not block: not a regular file, not a manifest
+        with open_regular(Path(path) / MANIFEST_NAME, "manifest of an output directory", OutputError) as fh:
+            data = json.loads(fh.read(1 << 20).decode("utf-8"))
     except (OSError, ValueError):
         return None
     if not (isinstance(data, dict) and data.get("format") == MANIFEST_FORMAT and isinstance(data.get("files"), list)):

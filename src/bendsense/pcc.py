@@ -252,8 +252,12 @@ def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
     n = grid.lengths.size
     if kappa.shape[-1:] != (n,):
         raise ArgumentError(f"curvature_per_m: expected {n} values on the last axis, got {kappa.shape}")
-    base = np.asarray(base_angle_rad, dtype=float)
-    batch = np.broadcast_shapes(kappa.shape[:-1], base.shape)
+    base = float_array("base_angle_rad", base_angle_rad)
+    try:
+        batch = np.broadcast_shapes(kappa.shape[:-1], base.shape)
+    except ValueError:
+        raise ArgumentError(f"base_angle_rad: shape {base.shape} does not broadcast against the frames "
+                            f"{kappa.shape[:-1]}") from None
     frames = math.prod(batch)
     k2 = np.ascontiguousarray(np.broadcast_to(kappa, (*batch, n)).reshape(frames, n), dtype=float)
     th2 = k2 * grid.lengths if theta is None else np.ascontiguousarray(

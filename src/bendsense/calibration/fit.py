@@ -35,7 +35,7 @@ from bendsense.calibration.polynomials import (
     select_degree,
     strip_shifts,
 )
-from bendsense.errors import ConfigError, SessionError
+from bendsense.errors import ArgumentError, ConfigError, SessionError
 
 __all__ = ["StripResidual"]
 
@@ -271,4 +271,10 @@ def _resolve_sensor(sensor):
         from bendsense.config import load_config
 
         return load_config().sensor
-    return getattr(sensor, "sensor", sensor)
+    from bendsense.config import SensorConfig
+
+    sensor = getattr(sensor, "sensor", sensor)  # a whole Config is accepted too
+    if not isinstance(sensor, SensorConfig):
+        raise ArgumentError(f"sensor: expected a SensorConfig or a Config (bendsense.load_config(path)), got "
+                            f"{type(sensor).__name__}")
+    return sensor

@@ -109,21 +109,19 @@ def identify(
     check_figure_suffix(plot_path, "--plot")
 
     def step(state):
-        from bendsense.config import load_config
-        from bendsense.identify import check_fixed
+        from bendsense.config import load_config, save_config
+        from bendsense.identify import (
+            check_fixed,
+            fit_free_bending,
+            fit_stiffness,
+            read_free_bending_csv,
+            read_stiffness_csv,
+        )
 
+        config = load_config(config_path)  # (its errors name the config, not the data)
         # a held value no actuator of this geometry can have: named before any data is read
-        check_fixed(fix, load_config(config_path), field="--fix")
+        check_fixed(fix, config, field="--fix")
         try:
-            from bendsense.config import load_config, save_config
-            from bendsense.identify import (
-                fit_free_bending,
-                fit_stiffness,
-                read_free_bending_csv,
-                read_stiffness_csv,
-            )
-
-            config = load_config(config_path)
             if kind == "free-bending":
                 pressure, angle = read_free_bending_csv(data)
                 fit = fit_free_bending(pressure, angle, config, fix=fix)

@@ -199,16 +199,23 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {short(method)}")
     if not isinstance(constraint, str) or constraint not in CONSTRAINTS:
         raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {short(constraint)}")
+    for name, value, allowed in (("objective", objective, OBJECTIVES), ("tip_angle_source", tip_angle_source,
+                                                                         ANGLE_SOURCES)):
+        if value is not None and (not isinstance(value, str) or value not in allowed):
+            raise ArgumentError(f"{name}: must be one of {', '.join(allowed)}, got {short(value)}")
     if method == "paper" and objective not in (None, "positions"):
         raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     L = float(config.actuator.length_m)
-    n_points = int(est.n_points if n_points is None else n_points)
-    if not 3 <= n_points <= 1000:
-        raise ArgumentError(f"n_points: must be between 3 and 1000, got {n_points}")
-    if not max_iter >= 0:
-        raise ArgumentError(f"max_iter: must be >= 0, got {max_iter!r}")
+    n_points = est.n_points if n_points is None else n_points
+    if not _whole(n_points) or not 3 <= n_points <= 1000:
+        raise ArgumentError(f"n_points: must be between 3 and 1000 (an integer), got {short(n_points)}")
+    n_points = int(n_points)
+    if not _whole(max_iter) or not max_iter >= 0:
+        raise ArgumentError(f"max_iter: must be >= 0 (an integer), got {short(max_iter)}")
+    if noise_std is not None:
+        noise_std = float_array("noise_std", noise_std)
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
@@ -294,6 +301,13 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         objective=objective,
         covariance_parts_n2=parts.reshape(batch + (3, 2, 2)),
     )
+
+
+def _whole(value) -> bool:
+    """Whether ``value`` is a whole number (an int, or a float without a fraction; not a bool, not text)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return False
+    return math.isfinite(value) and float(value).is_integer()
 
 
 def _batch(shape_batch, pressure_shape):
@@ -416,7 +430,7 @@ def _build_problem(config, calibration, ref, options, noise_opt):
     source = est.tip_angle_source if source is None else source
     if source not in ANGLE_SOURCES:
         raise ArgumentError(f"tip_angle_source: must be one of {', '.join(ANGLE_SOURCES)}, got {source!r}")
-    direction = np.asarray(est.direction if direction is None else direction, dtype=float)
+    direction = float_array("direction", est.direction if direction is None else direction)
     if direction.shape != (2,) or not np.all(np.isfinite(direction)) or abs(np.hypot(*direction) - 1.0) > 1e-6:
         raise ArgumentError(f"direction: expected a unit vector (2,), got {direction.tolist()}")
     follower = float(est.follower_angle_rad if follower is None else follower)

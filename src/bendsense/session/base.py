@@ -103,7 +103,10 @@ class Session:
         pressure_pa : float
             The constant pressure [Pa].
         """
-        p = np.where(np.isfinite(self.pressure_pa), self.pressure_pa, float(pressure_pa))
+        from bendsense.validation import number
+
+        fill = number("pressure_pa", pressure_pa, error=SessionError)
+        p = np.where(np.isfinite(self.pressure_pa), self.pressure_pa, fill)
         return Session(self.t_s, self.signals, p, self.seq, dict(self.meta), dict(self.extra), self.source)
 
     def select(self, index) -> Session:
@@ -114,8 +117,15 @@ class Session:
         index : slice, array_like of bool or of int
             The frames to keep.
         """
+        try:
+            t_s = self.t_s[index]
+        except (IndexError, TypeError, ValueError) as err:
+            raise SessionError(f"index: expected a slice, a boolean mask of {len(self)} frames or frame numbers "
+                               f"below {len(self)}, got {short(index)} ({err})") from None
         seq = None if self.seq is None else self.seq[index]
         extra = {k: v[index] for k, v in self.extra.items()}
         return Session(
-            self.t_s[index], self.signals[index], self.pressure_pa[index], seq, dict(self.meta), extra, self.source
+            np.atleast_1d(t_s), self.signals[index].reshape(-1, self.n_channels),
+            np.atleast_1d(self.pressure_pa[index]), None if seq is None else np.atleast_1d(seq), dict(self.meta),
+            {k: np.atleast_1d(v) for k, v in extra.items()}, self.source,
         )

@@ -426,6 +426,8 @@ cases.update({
     "calibrate_dev_zero": ("calibrate /dev/zero -o cal.yaml", r"^Error: /dev/zero: a character device, not a manifest"),
     "process_dev_zero": ("process /dev/zero --calibration {good_cal} -o out", r"^Error: /dev/zero: a character device"),
     "identify_dev_zero": ("identify stiffness /dev/zero -o cfg.yaml", r"^Error: /dev/zero: a character device, not a CSV"),
+    "identify_config_dev_zero": ("identify free-bending {good_csv} -o cfg.yaml --config /dev/zero",
+                                 r"^Error: /dev/zero: a character device, not a config"),
     "sim_device_replay_dev_zero": ("sim-device --replay /dev/zero", r"^Error: /dev/zero: a character device, not a session"),
     "plot_results_dev_null": ("plot /dev/null -o fig.png", r"/dev/null"),
     "sim_device_rate_beyond_the_link": ("sim-device --rate 1e9",
