@@ -239,11 +239,25 @@ def scheduler_without_scheme(tmp):
     return bendsense(tmp, "process", "run.csv", "--calibration", "cal.yaml", "-o", "out", "--scheduler", "localhost")
 
 
+UNWRITABLE_FOR_ROOT = ("/sys/kernel/uevent_seqnum", "/proc/sys/kernel/osrelease", "/proc/sys/kernel/ostype")
+
+
+def _refuses_write(path: str) -> bool:
+    try:
+        os.close(os.open(path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK))
+    except PermissionError:
+        return True
+    except OSError:
+        return False
+    return False
+
+
 @provokes(r"/dev/ttyACM0: cannot open serial port \(\[Errno 13\]")
 def permission_denied(tmp):
-    # root opens any file; a read-only sysfs attribute refuses even root
+    # root opens any file; a read-only sysfs or sysctl file refuses even root
     if os.geteuid() == 0:
-        port = "/sys/kernel/uevent_seqnum"
+        port = next((f for f in UNWRITABLE_FOR_ROOT if _refuses_write(f)), None)
+        assert port, f"none of {UNWRITABLE_FOR_ROOT} refuses root's O_RDWR open with EACCES here"
     else:
         port = str(tmp / "ttyACM0")
         Path(port).touch()
