@@ -25,8 +25,8 @@ output of the nearest runnable block above it, and that block's fenced neighbour
 above the marker must be that runnable block (or another output block of it). Every
 non-empty line of the documented output must appear as a line of the block's real
 stdout + stderr, after masking what legitimately differs between runs (rates
-``4,618 frames/s``, durations ``in 115.4 s`` or ``, 10 s``, ``/dev/pts/N``, temporary
-paths); everything else must match exactly. A line ``...`` abridges (it is not
+``4,618 frames/s``, durations ``in 115.4 s`` or ``, 10 s``, ISO time stamps,
+``/dev/pts/N``, temporary paths); everything else must match exactly. A line ``...`` abridges (it is not
 compared) and a line ending in `` ...`` matches the lines that start with the text
 before it.
 """
@@ -98,6 +98,7 @@ VARYING = [
     (re.compile(r"\d[\d,]*(?:\.\d+)?(?= frames/s\b)"), "<RATE>"),
     (re.compile(r"(?<=\bin )\d+(?:\.\d+)?(?= (?:s|ms|min)\b)"), "<DURATION>"),
     (re.compile(r"(?<=, )\d+(?:\.\d+)?(?= s\b)"), "<DURATION>"),
+    (re.compile(r"\b\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?(?:Z|[+-]\d\d:?\d\d)?"), "<TIME>"),
     (re.compile(r"/dev/pts/\d+"), "/dev/pts/<N>"),
     (re.compile(r"(?:/private)?(?:/tmp|/var/folders|" + re.escape(tempfile.gettempdir()) + r")/[^\s'\"),:;]*"),
      "<TMP>"),
@@ -241,6 +242,7 @@ def test_masking_hides_rates_durations_terminals_and_temporary_paths():
     assert mask("processed 500 frames in 115.4 s") == "processed 500 frames in <DURATION> s"
     assert mask("compiling: 7/12 functions, 20 s (continuation)") == "compiling: 7/12 functions, <DURATION> s (continuation)"
     assert mask("board on /dev/pts/7") == "board on /dev/pts/<N>"
+    assert mask("2026-11-21T11:06:14.082922Z crc: 1 CRC error(s)") == "<TIME> crc: 1 CRC error(s)"
     assert mask("wrote /tmp/pytest-of-x/test_a0/out/results.csv") == "wrote <TMP>"
     # what does not vary is kept: errors, coverages, counts, seeded numbers
     kept = "force vs simulated truth (500 frames, peak contact force 0.15 N): RMS error 0.0039 N, 84 %"
