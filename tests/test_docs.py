@@ -18,6 +18,17 @@ What is not run as written:
   minutes; the quick one makes every table and figure);
 - ``python benchmarks/...`` (docs/performance.md) runs with its ``--quick`` flag
   (a few seconds: every row, fewer repetitions).
+
+Example output is checked, not pasted: a ``text`` block right after an
+``<!-- output -->`` line (an HTML comment, invisible on the rendered site) is the
+output of the nearest runnable block above it, and that block's fenced neighbour
+above the marker must be that runnable block (or another output block of it). Every
+non-empty line of the documented output must appear as a line of the block's real
+stdout + stderr, after masking what legitimately differs between runs (rates
+``4,618 frames/s``, durations ``in 115.4 s`` or ``, 10 s``, ISO time stamps,
+``/dev/pts/N``, temporary paths); everything else must match exactly. A line ``...`` abridges (it is not
+compared) and a line ending in `` ...`` matches the lines that start with the text
+before it.
 """
 
 from __future__ import annotations
@@ -40,20 +51,83 @@ COPIED = ("configs", "examples", "benchmarks")
 HARDWARE = re.compile(r"^\s*#\s*needs hardware\b", re.IGNORECASE)
 FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[\w+-]*)[^\n]*\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
 TIMEOUT_S = 300
+OUTPUT_MARK = re.compile(r"^[ \t]*<!--\s*output\s*-->[ \t]*\n[ \t]*\Z")
+
+
+def extract_steps(text: str) -> list[tuple[str, str, list[str]]]:
+    """``(language, code, outputs)`` of every fenced bash or python block, in page order.
+
+    ``outputs`` are the bodies of the ``<!-- output -->`` text blocks that document
+    what the block prints. A marked output block whose fenced neighbour above is
+    neither a runnable block nor another output block of one is an error (its
+    command would not be run, so its output could not be checked).
+    """
+    out: list[tuple[str, str, list[str]]] = []
+    previous = None  # what the last fenced block was: "run", "output" or "other"
+    for m in FENCE.finditer(text):
+        lang = m["lang"].lower()
+        line_start = text.rfind("\n", 0, max(m.start() - 1, 0)) + 1 if m.start() else 0
+        marked = bool(OUTPUT_MARK.match(text[line_start:m.start()]))
+        if marked:
+            if lang != "text" or previous not in ("run", "output"):
+                line = text.count("\n", 0, m.start()) + 1
+                raise ValueError(f"line {line}: an <!-- output --> block must be a text block after a runnable "
+                                 f"block (bash or python, not only hardware commands)")
+            out[-1][2].append(m["body"])
+            previous = "output"
+            continue
+        previous = "other"
+        if lang in ("bash", "sh", "shell"):
+            code = runnable_shell(m["body"])
+            if code.strip():
+                out.append(("bash", code, []))
+                previous = "run"
+        elif lang == "python":
+            out.append(("python", m["body"], []))
+            previous = "run"
+    return out
 
 
 def extract_blocks(text: str) -> list[tuple[str, str]]:
     """The ``(language, code)`` of every fenced bash or python block, in page order."""
-    out = []
-    for m in FENCE.finditer(text):
-        lang = m["lang"].lower()
-        if lang in ("bash", "sh", "shell"):
-            code = runnable_shell(m["body"])
-            if code.strip():
-                out.append(("bash", code))
-        elif lang == "python":
-            out.append(("python", m["body"]))
-    return out
+    return [(lang, code) for lang, code, _ in extract_steps(text)]
+
+
+# what differs between two runs of the same command: (pattern, replacement)
+VARYING = [
+    (re.compile(r"\d[\d,]*(?:\.\d+)?(?= frames/s\b)"), "<RATE>"),
+    (re.compile(r"(?<=\bin )\d+(?:\.\d+)?(?= (?:s|ms|min)\b)"), "<DURATION>"),
+    (re.compile(r"(?<=, )\d+(?:\.\d+)?(?= s\b)"), "<DURATION>"),
+    (re.compile(r"\b\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?(?:Z|[+-]\d\d:?\d\d)?"), "<TIME>"),
+    (re.compile(r"/dev/pts/\d+"), "/dev/pts/<N>"),
+    (re.compile(r"(?:/private)?(?:/tmp|/var/folders|" + re.escape(tempfile.gettempdir()) + r")/[^\s'\"),:;]*"),
+     "<TMP>"),
+]
+
+
+def mask(line: str) -> str:
+    """``line`` with what legitimately varies between runs replaced by placeholders."""
+    for pattern, placeholder in VARYING:
+        line = pattern.sub(placeholder, line)
+    return line.rstrip()
+
+
+def missing_output(documented: str, actual: str) -> list[str]:
+    """The documented lines (masked) that are not lines of ``actual`` (masked)."""
+    real = [mask(line) for line in actual.splitlines()]
+    missing = []
+    for line in documented.splitlines():
+        if not line.strip() or line.strip() in ("...", "…"):
+            continue
+        want = mask(line)
+        if want.endswith(" ..."):
+            prefix = want[:-len(" ...")]
+            found = any(r.startswith(prefix) for r in real)
+        else:
+            found = want in real
+        if not found:
+            missing.append(want)
+    return missing
 
 
 def runnable_shell(code: str) -> str:
@@ -137,6 +211,58 @@ def test_other_languages_are_not_run_and_order_is_kept():
     assert extract_blocks(text) == [("python", "print(1)\n"), ("bash", "echo 2\n")]
 
 
+def test_output_blocks_belong_to_the_runnable_block_above():
+    text = (
+        "```bash\necho one\n```\n\nIt prints:\n\n<!-- output -->\n```text\none\n```\n"
+        "```text\nnot output\n```\n```python\nprint(2)\n```\n<!-- output -->\n```text\n2\n```\n"
+        "<!-- output -->\n```text\n2 again\n```\n"
+    )
+    assert extract_steps(text) == [("bash", "echo one\n", ["one\n"]), ("python", "print(2)\n", ["2\n", "2 again\n"])]
+
+
+def test_output_block_after_no_runnable_block_is_an_error():
+    after_text = "```bash\necho 1\n```\n```text\nx\n```\n<!-- output -->\n```text\n1\n```\n"
+    after_hardware = "```bash\n# needs hardware\nbendsense record /dev/ttyACM0 -o s\n```\n<!-- output -->\n```text\n1\n```\n"
+    first = "<!-- output -->\n```text\n1\n```\n"
+    not_text = "```bash\necho 1\n```\n<!-- output -->\n```yaml\na: 1\n```\n"
+    for text in (after_text, after_hardware, first, not_text):
+        with pytest.raises(ValueError, match="output"):
+            extract_steps(text)
+
+
+def test_an_unmarked_text_block_is_no_output():
+    # the marker must be the line right before the fence
+    text = "```bash\necho 1\n```\n<!-- output -->\n\n```text\n2\n```\n"
+    assert extract_steps(text) == [("bash", "echo 1\n", [])]
+
+
+def test_masking_hides_rates_durations_terminals_and_temporary_paths():
+    assert mask("  constraint none  RMS error 0.1421 N, converged 100 %, 4,618 frames/s") == (
+        "  constraint none  RMS error 0.1421 N, converged 100 %, <RATE> frames/s")
+    assert mask("processed 500 frames in 115.4 s") == "processed 500 frames in <DURATION> s"
+    assert mask("compiling: 7/12 functions, 20 s (continuation)") == "compiling: 7/12 functions, <DURATION> s (continuation)"
+    assert mask("board on /dev/pts/7") == "board on /dev/pts/<N>"
+    assert mask("2026-11-21T11:06:14.082922Z crc: 1 CRC error(s)") == "<TIME> crc: 1 CRC error(s)"
+    assert mask(f"wrote {Path(tempfile.gettempdir(), 'pytest-of-x', 'test_a0', 'results.csv')}") == "wrote <TMP>"
+    assert mask("wrote results/results.csv") == "wrote results/results.csv"
+    # what does not vary is kept: errors, coverages, counts, seeded numbers
+    kept = "force vs simulated truth (500 frames, peak contact force 0.15 N): RMS error 0.0039 N, 84 %"
+    assert mask(kept) == kept
+
+
+def test_documented_output_must_match_the_real_output():
+    actual = "noise\n  constraint normal  RMS error 0.0041 N, 3,120 frames/s\nError: x.csv: line 2: bad\n"
+    assert missing_output("  constraint normal  RMS error 0.0041 N, 4,618 frames/s\n", actual) == []
+    # a changed deterministic number is caught, as is a missing line or a changed indentation
+    assert missing_output("  constraint normal  RMS error 0.0039 N, 4,618 frames/s\n", actual) == [
+        "  constraint normal  RMS error 0.0039 N, <RATE> frames/s"]
+    assert missing_output("Error: x.csv: line 3: bad\n", actual) == ["Error: x.csv: line 3: bad"]
+    assert missing_output("constraint normal  RMS error 0.0041 N, 1 frames/s\n", actual) != []
+    # "..." abridges: a line of its own is skipped, a trailing one matches a prefix
+    assert missing_output("...\nError: x.csv: line 2: ...\n\n", actual) == []
+    assert missing_output("Error: y.csv: ...\n", actual) == ["Error: y.csv: ..."]
+
+
 def test_fences_name_their_language_without_a_space():
     # a page whose fences were mistyped (e.g. ``` bash) would silently run nothing
     for page in PAGES:
@@ -185,7 +311,7 @@ def test_the_pages_with_commands_are_run():
 @pytest.mark.slow
 @pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
 def test_page_runs(page: Path, tmp_path: Path):
-    blocks = extract_blocks(page.read_text(encoding="utf-8"))
+    blocks = extract_steps(page.read_text(encoding="utf-8"))
     assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
     for name in COPIED:
         if (ROOT / name).is_dir():
@@ -193,12 +319,19 @@ def test_page_runs(page: Path, tmp_path: Path):
     # single-threaded BLAS as the CLI sets it (troubleshooting.md): the python blocks'
     # many small matrices crawl when threaded BLAS competes for the cores
     env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    for k, (lang, code) in enumerate(blocks, start=1):
+    for k, (lang, code, outputs) in enumerate(blocks, start=1):
         proc = _run(lang, code, tmp_path, env)
         assert proc.returncode == 0, (
             f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
             f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
         )
+        for documented in outputs:
+            missing = missing_output(documented, proc.stdout + "\n" + proc.stderr)
+            assert not missing, (
+                f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it prints;\n"
+                f"documented lines not printed (masked):\n" + "\n".join(missing) + "\n"
+                f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
+            )
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
