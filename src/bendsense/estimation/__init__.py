@@ -242,26 +242,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
            np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)), np.empty(B, dtype=bool))
     force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out
     if method == "fast":
-        block = min(B, _CHAIN) if chain and B > 1 else 1
-        if B < _PARALLEL_MIN or numba.get_num_threads() == 1:
-            # one frame, a live block, a worker of a process pool: the per-frame kernel, block by block as the
-            # batch kernel runs it (the same results), independent frames in pieces (Ctrl-C is handled between
-            # calls); only a large batch on several threads compiles the batch kernel
-            plain_fr = tuple(fr)
-            step = block if block > 1 else _PIECE
-            for lo in range(0, B, step):
-                _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, plain_fr, plain_pb,
-                          plain_err, _OPS, start, out)
-        else:
-            # in pieces of whole blocks, a fraction of a second each: a compiled call keeps Python (and so
-            # Ctrl-C and SIGTERM) waiting until it returns
-            step = max(block, _PIECE // block * block)
-            for lo in range(0, B, step):
-                def piece(a, lo=lo):
-                    return a[lo:lo + step] if a.shape[:1] == (B,) else a
-
-                _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), plain_pb, plain_err,
-                          _OPS, piece(start), tuple(map(piece, out)))
+        _run_fast(B, chain, use_guess, tuple(fr), plain_pb, plain_err, start, out)
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force (it makes no
         # guess); the shape, its sensitivities and the uncertainty at its optimum come from the compiled core
@@ -308,6 +289,31 @@ def _whole(value) -> bool:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return False
     return math.isfinite(value) and float(value).is_integer()
+
+
+def _run_fast(B, chain, use_guess, fr, pb, err, start, out):
+    """Run the compiled estimate of ``B`` frames into ``out``, in calls of a fraction of a second each.
+
+    One frame, a live block, a worker of a process pool (one numba thread), a batch
+    below ``_PARALLEL_MIN``: the per-frame kernel, block by block as the batch kernel
+    runs it (the same results), independent frames in pieces; only a large batch on
+    several threads compiles the batch kernel. A compiled call keeps Python (and so
+    Ctrl-C and SIGTERM) waiting until it returns: pieces of ``_PIECE`` frames.
+    """
+    block = min(B, _CHAIN) if chain and B > 1 else 1
+    if B < _PARALLEL_MIN or numba.get_num_threads() == 1:
+        step = block if block > 1 else _PIECE
+        for lo in range(0, B, step):
+            _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, pb, err, _OPS, start,
+                      out)
+        return
+    step = max(block, _PIECE // block * block)
+    for lo in range(0, B, step):
+        def piece(a, lo=lo):
+            return a[lo:lo + step] if a.shape[:1] == (B,) else a
+
+        _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), pb, err, _OPS, piece(start),
+                  tuple(map(piece, out)))
 
 
 def _batch(shape_batch, pressure_shape):
