@@ -262,30 +262,11 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     ArgumentError
         For a bad option or an argument of the wrong type (the message names it).
     """
-    import os
-
     from bendsense import validation as check
-    from bendsense.calibration import Calibration
-    from bendsense.config import Config, load_config
     from bendsense.pcc import reconstruct
     from bendsense.plausibility import check_channels, check_time_column
-    from bendsense.session import Session, read_session
 
-    # the obvious alternative to each object: the path of its file
-    if isinstance(session, (str, os.PathLike)):
-        session = read_session(session)
-    if isinstance(config, (str, os.PathLike)):
-        config = load_config(config)
-    if isinstance(calibration, (str, os.PathLike)):
-        calibration_source = calibration_source or str(calibration)
-        calibration = Calibration.load(calibration)
-    check.instance("session", session, Session, "bendsense.read_session(path), or the path")
-    if config is None:
-        config = load_config()
-    check.instance("config", config, Config, "bendsense.load_config(path), or the path")
-    if not isinstance(calibration, Calibration):
-        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path), or the path), got "
-                            f"{type(calibration).__name__}")
+    session, config, calibration, calibration_source = _inputs(session, config, calibration, calibration_source)
     if len(session) == 0:
         raise SessionError(f"{_source(session)}: no frames")
     check_time_column(session.t_s, _source(session), error=ArgumentError if not session.source else SessionError)
@@ -320,6 +301,32 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     results = Results.from_state(session, shape, est)
     return Processed(**{f.name: getattr(results, f.name) for f in dataclasses.fields(Results)}, session=session,
                      shape=shape, estimate=est, config=config, reconstruct_s=reconstruct_s, estimate_s=estimate_s)
+
+
+def _inputs(session, config, calibration, calibration_source):
+    """:func:`process`'s inputs as objects: each may be given as the path of its file; checked types."""
+    import os
+
+    from bendsense import validation as check
+    from bendsense.calibration import Calibration
+    from bendsense.config import Config, load_config
+    from bendsense.session import Session, read_session
+
+    if isinstance(session, (str, os.PathLike)):
+        session = read_session(session)
+    if isinstance(config, (str, os.PathLike)):
+        config = load_config(config)
+    if isinstance(calibration, (str, os.PathLike)):
+        calibration_source = calibration_source or str(calibration)
+        calibration = Calibration.load(calibration)
+    check.instance("session", session, Session, "bendsense.read_session(path), or the path")
+    if config is None:
+        config = load_config()
+    check.instance("config", config, Config, "bendsense.load_config(path), or the path")
+    if not isinstance(calibration, Calibration):
+        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path), or the path), got "
+                            f"{type(calibration).__name__}")
+    return session, config, calibration, calibration_source
 
 
 # --------------------------------------------------------------------------- as frames arrive
