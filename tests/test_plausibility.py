@@ -104,7 +104,7 @@ def _cross_section_on_a_grid(a, t, b, hollow, n=1201):
 
 
 def test_cross_section_matches_a_grid_integration():
-    from bendsense.plausibility import cross_section
+    from bendsense.bounds import cross_section
 
     got = cross_section(CONFIG.actuator)
     act = CONFIG.actuator
@@ -117,7 +117,7 @@ def test_cross_section_matches_a_grid_integration():
 
 
 def test_stiffness_bound_is_e_times_i_of_soft_silicones_and_holds_the_paper():
-    from bendsense.plausibility import stiffness_bound_nm2
+    from bendsense.bounds import stiffness_bound_nm2
 
     act = CONFIG.actuator
     _, i_solid = _cross_section_on_a_grid(act.chamber_radius_m, act.wall_thickness_m, act.bottom_thickness_m, False)

@@ -130,7 +130,7 @@ def check_fixed(values: Mapping, config, field: str = "fix") -> None:
     """Refuse a value to hold a model parameter at that no actuator of ``config``'s geometry can have.
 
     The bounds are those of the config's own values
-    (:func:`bendsense.plausibility.parameter_bounds`); ``ei1_nm2_per_pa`` is judged at
+    (:func:`bendsense.bounds.parameter_bounds`); ``ei1_nm2_per_pa`` is judged at
     the ``ei0_nm2`` given beside it, else for any plausible ei0. The message names the
     parameter, its range, the likely unit slip (N·m²/kPa for N·m²/Pa, degrees for
     radians, ...) and the value in SI units.
@@ -148,7 +148,7 @@ def check_fixed(values: Mapping, config, field: str = "fix") -> None:
     ------
     ArgumentError
     """
-    from bendsense.plausibility import parameter_bounds
+    from bendsense.bounds import parameter_bounds
 
     bounds = parameter_bounds(config.actuator, ei0_nm2=values.get("ei0_nm2"))
     for name, value in values.items():

@@ -57,7 +57,7 @@ class PressureKpa(Finite):
     """A gauge pressure option in kPa: finite, from ``min`` (default vacuum) to 1 MPa.
 
     Above, the message names the likely unit slip (pascals, bar, psi) and the value in
-    kPa (:class:`bendsense.plausibility.Bound`).
+    kPa (:class:`bendsense.bounds.Bound`).
     """
 
     def __init__(self, min: float = -101.325):
@@ -65,7 +65,7 @@ class PressureKpa(Finite):
 
     def convert(self, value, param, ctx):
         """Parse and check one value."""
-        from bendsense.plausibility import PRESSURE_MAX_PA, Bound
+        from bendsense.bounds import PRESSURE_MAX_PA, Bound
 
         number = super().convert(value, param, ctx)  # finite, >= min
         bound = Bound("gauge pressure of a soft pneumatic actuator", self.min, PRESSURE_MAX_PA / 1e3, "kPa",
