@@ -246,10 +246,19 @@ def force_bound_n(pressure_pa, config):
     float or ndarray
         ``F_max`` at each pressure [N] (NaN where the pressure is).
     """
-    scale = FORCE_MARGIN * max_curvature_per_m(config.sensor) / config.actuator.length_m
+    scale = _force_scale(config)
     if isinstance(pressure_pa, float):
         return scale * config.stiffness.ei_nm2(pressure_pa)
     return scale * config.stiffness.ei_nm2(np.asarray(pressure_pa, dtype=float))
+
+
+def _force_scale(config) -> float:
+    """``FORCE_MARGIN · κ_max / L`` [1/m²], memoised on the (frozen) config: the live path asks every frame."""
+    scale = config.__dict__.get("_force_scale_cache")
+    if scale is None:
+        scale = FORCE_MARGIN * max_curvature_per_m(config.sensor) / config.actuator.length_m
+        object.__setattr__(config, "_force_scale_cache", scale)
+    return scale
 
 
 def force_bound_step(estimate):
@@ -272,15 +281,16 @@ def force_bound_step(estimate):
             from bendsense.config import load_config
 
             config = load_config()
-        force = np.asarray(result.force_n, dtype=float)
+        force = result.force_n
         if force.ndim == 1:  # one frame (the live path): float arithmetic
-            magnitude = math.hypot(float(force[0]), float(force[1]))
-            p = float(np.asarray(pressure_pa, dtype=float).reshape(-1)[0])
-            top = force_bound_n(p, config)
+            magnitude = math.hypot(*force.tolist())
+            p = pressure_pa if isinstance(pressure_pa, float) else float(np.asarray(pressure_pa, dtype=float).flat[0])
+            top = _force_scale(config) * config.stiffness.ei_nm2(p)
             if not (magnitude > top and bool(result.success)):  # a failed frame keeps its own reason
                 return result
             over, magnitude, top, p = np.bool_(True), np.float64(magnitude), np.float64(top), np.float64(p)
         else:
+            force = np.asarray(force, dtype=float)
             magnitude = np.hypot(force[..., 0], force[..., 1])
             p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
             top = force_bound_n(p, config)
