@@ -125,7 +125,8 @@ class Bound:
             The value as given [``unit``].
         """
         why = f", {self.why}" if self.why else ""
-        span = f"{_g(self.lo)}..{_g(self.hi)} {self.unit}{why}"
+        unit = f" {self.unit}" if self.unit else ""
+        span = f"{_g(self.lo)}..{_g(self.hi)}{unit}{why}"
         text = f"{field} = {_g(value, 6)} is not a plausible {self.what} ({span})"
         fits = [(name, value * factor) for name, factor in self.slips if self.contains(value * factor)]
         typical = self.typical if self.typical is not None else (
@@ -134,7 +135,7 @@ class Bound:
             fits = [min(fits, key=lambda f: abs(math.log(abs(f[1]) / typical)) if f[1] else math.inf)]
         if fits:
             name, si = fits[0]
-            text += f"; if it was entered in {name}, it is {_g(si, 6)} {self.unit}"
+            text += f"; if it was entered in {name}, it is {_g(si, 6)}{unit}"
         return text
 
     def check(self, field: str, value: float, error=ConfigError) -> float:

@@ -267,7 +267,7 @@ def _warn_once(cal, key: str, message: str) -> None:
     if key not in done:
         done.add(key)
         source = cal.meta.get("manifest") if isinstance(cal.meta, dict) else None
-        where = f"calibration (from {source})" if source else "calibration"
+        where = f"calibration (fitted from {source})" if source else "calibration"
         logging.getLogger("bendsense").warning("%s: %s", where, message)
 
 

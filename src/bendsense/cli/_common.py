@@ -76,6 +76,24 @@ class PressureKpa(Finite):
         return number
 
 
+class Relative(Finite):
+    """A relative error option (0.1: 10 %): finite, above -1 and at most 1 (a model 100 % off).
+
+    Beyond, the message names the likely slip (percent) and the fraction.
+    """
+
+    def convert(self, value, param, ctx):
+        """Parse and check one value."""
+        from bendsense.bounds import Bound
+
+        number = super().convert(value, param, ctx)
+        bound = Bound("relative error", -0.99, 1.0, "", "a fraction: 0.1 is 10 %", (("percent", 0.01),))
+        if not bound.contains(number):
+            name = param.opts[0] if param is not None and param.opts else "value"
+            self.fail(bound.message(name, number), param, ctx)
+        return number
+
+
 SEED = click.IntRange(0, 2**32 - 1)
 """Seeds of numpy's generators: 0..2^32-1 (a negative seed is refused before any work)."""
 

@@ -12,6 +12,7 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
+    Relative,
     config_option,
     overwrite_option,
     step_io,
@@ -35,9 +36,9 @@ _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying
 @config_option
 @click.option("--noise-counts", type=Finite(min=0), help="Sensor noise std [counts] (default 1.5).")
 @click.option("--frames", type=click.IntRange(min=1), help="Frames per strip or configuration (default 50 / 5).")
-@click.option("--ei-error", type=Finite(), help="Model mismatch: relative error of the true EI.")
-@click.option("--k0-error", type=Finite(), help="Model mismatch: relative error of the true K0.")
-@click.option("--base-rotation", type=Finite(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
+@click.option("--ei-error", type=Relative(), help="Model mismatch: relative error of the true EI.")
+@click.option("--k0-error", type=Relative(), help="Model mismatch: relative error of the true K0.")
+@click.option("--base-rotation", type=Relative(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
 @click.option("--hysteresis-kpa", type=PressureKpa(min=0), help="Model mismatch: pressure play [kPa].")
 @overwrite_option
 def simulate(
