@@ -104,7 +104,7 @@ def _cross_section_on_a_grid(a, t, b, hollow, n=1201):
 
 
 def test_cross_section_matches_a_grid_integration():
-    from bendsense.plausibility import cross_section
+    from bendsense.bounds import cross_section
 
     got = cross_section(CONFIG.actuator)
     act = CONFIG.actuator
@@ -117,7 +117,7 @@ def test_cross_section_matches_a_grid_integration():
 
 
 def test_stiffness_bound_is_e_times_i_of_soft_silicones_and_holds_the_paper():
-    from bendsense.plausibility import stiffness_bound_nm2
+    from bendsense.bounds import stiffness_bound_nm2
 
     act = CONFIG.actuator
     _, i_solid = _cross_section_on_a_grid(act.chamber_radius_m, act.wall_thickness_m, act.bottom_thickness_m, False)
@@ -266,3 +266,14 @@ def test_the_paper_prototype_carries_tens_of_newtons_not_kilonewtons():
     p = np.array([0.0, 200e3])
     np.testing.assert_allclose(force_bound_n(p, CONFIG), 10 * (2.53e-3 + 1.25e-8 * p) * (np.pi / 0.008) / 0.134)
     assert 50.0 < force_bound_n(0.0, CONFIG) < force_bound_n(200e3, CONFIG) < 200.0  # tens of newtons
+
+
+def test_a_fit_to_angles_in_degrees_is_not_written_as_a_config():
+    from bendsense.errors import ConfigError
+    from bendsense.identify import fit_free_bending
+
+    # bending angles in degrees where radians belong: the fit runs, its prebend is no actuator's
+    fit = fit_free_bending([20e3, 40e3, 60e3, 90e3, 120e3], [25.0, 50.0, 80.0, 130.0, 176.0], CONFIG)
+    with pytest.raises(ConfigError, match=r"^the free-bending fit gives a value no actuator of this geometry can "
+                                          r"have .*material\.prebend_angle_rad = "):
+        fit.to_config(CONFIG)

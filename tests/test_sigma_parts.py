@@ -89,3 +89,18 @@ def test_impossible_counts_are_refused_naming_the_file_and_field(edit, message, 
     with pytest.raises(ConfigError, match=message) as info:
         Calibration.load(path)
     assert str(info.value).startswith(str(path))
+
+
+def test_the_constructor_refuses_impossible_counts_and_data_too():
+    from bendsense.calibration.fit import StripResidual
+
+    full = Calibration.load(FULL_CAL)
+    fields = {name: getattr(full, name) for name in ("offset", "coefficients_odd", "coefficients_even", "degree",
+                                                     "delta_a_range_odd", "delta_a_range_even", "noise_std")}
+    bad = StripResidual(radius_m=0.04, curvature_per_m=25.0, rms_shift_m=1e-6, max_abs_shift_m=2e-6, n_frames=-5)
+    with pytest.raises(ConfigError, match=r"^strip_residuals\[0\]\.n_frames: expected an integer >= 1"):
+        Calibration(**fields, strip_residuals=(bad,))
+    data = np.array(full.fit_delta_a)
+    data[2, 3] = np.nan
+    with pytest.raises(ConfigError, match=r"^fit_delta_a: values must be finite"):
+        Calibration(**fields, strip_residuals=full.strip_residuals, fit_delta_a=data, fit_shifts_m=full.fit_shifts_m)

@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 import yaml
 
-from bendsense import plausibility
+from bendsense import bounds
 from bendsense import validation as check
 from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, METHODS, OBJECTIVES  # noqa: F401 (re-exported)
 from bendsense.errors import ConfigError
@@ -74,7 +74,7 @@ def _length(path: str, value: Any, *, max_m: float = check.MAX_LENGTH_M, positiv
     """
     value = _number(path, value, positive=positive, nonnegative=not positive)
     what = "length" if max_m >= check.MAX_LENGTH_M else "cross-section or sensor dimension"
-    plausibility.Bound(what, 0.0, max_m, "m", "", plausibility.LENGTH_SLIPS, typical=typical_m).check(path, value)
+    bounds.Bound(what, 0.0, max_m, "m", "", bounds.LENGTH_SLIPS, typical=typical_m).check(path, value)
     return value
 
 
@@ -237,7 +237,7 @@ class ActuatorConfig(_Section):
             raise check.fail(where, "a minimum >= -101325 Pa (vacuum)", lo, ConfigError)
         if not hi > lo:
             raise check.fail(where, "[min, max] with min < max", [lo, hi], ConfigError)
-        plausibility.pressure_bound("maximum pressure of a soft pneumatic actuator").check(f"{where}[1]", hi)
+        bounds.pressure_bound("maximum pressure of a soft pneumatic actuator").check(f"{where}[1]", hi)
         set_(self, "pressure_range_pa", (lo, hi))
 
 
@@ -265,14 +265,14 @@ class MaterialConfig(_Section):
         object.__setattr__(
             self, "shear_modulus_pa", _number(f"{p}.shear_modulus_pa", self.shear_modulus_pa, positive=True)
         )
-        plausibility.shear_modulus_bound().check(f"{p}.shear_modulus_pa", self.shear_modulus_pa)
+        bounds.shear_modulus_bound().check(f"{p}.shear_modulus_pa", self.shear_modulus_pa)
         object.__setattr__(
             self,
             "sensor_stiffness_nm_per_rad",
             _number(f"{p}.sensor_stiffness_nm_per_rad", self.sensor_stiffness_nm_per_rad, nonnegative=True),
         )
         object.__setattr__(self, "prebend_angle_rad", _number(f"{p}.prebend_angle_rad", self.prebend_angle_rad))
-        plausibility.prebend_bound().check(f"{p}.prebend_angle_rad", self.prebend_angle_rad)
+        bounds.prebend_bound().check(f"{p}.prebend_angle_rad", self.prebend_angle_rad)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -312,8 +312,8 @@ class GravityConfig(_Section):
     def __post_init__(self):
         p = self.section
         object.__setattr__(self, "g_m_per_s2", _number(f"{p}.g_m_per_s2", self.g_m_per_s2, nonnegative=True))
-        gravity = plausibility.Bound("gravity of a rig", *plausibility.GRAVITY_M_PER_S2, "m/s²", "or 0: none",
-                                     plausibility.GRAVITY_SLIPS, typical=9.81)
+        gravity = bounds.Bound("gravity of a rig", *bounds.GRAVITY_M_PER_S2, "m/s²", "or 0: none",
+                                     bounds.GRAVITY_SLIPS, typical=9.81)
         if self.g_m_per_s2 != 0.0:
             gravity.check(f"{p}.g_m_per_s2", self.g_m_per_s2)
         d = _numbers(f"{p}.direction", self.direction, 2)
@@ -387,7 +387,7 @@ class EstimationConfig(_Section):
             raise _fail(f"{p}.direction", f"must be a unit vector, got {list(d)} (norm {norm:.6g})")
         object.__setattr__(self, "direction", d)
         object.__setattr__(self, "follower_angle_rad", _number(f"{p}.follower_angle_rad", self.follower_angle_rad))
-        plausibility.angle_bound("angle from the tip tangent").check(f"{p}.follower_angle_rad",
+        bounds.angle_bound("angle from the tip tangent").check(f"{p}.follower_angle_rad",
                                                                      self.follower_angle_rad)
         _boolean(f"{p}.push_only", self.push_only)
         object.__setattr__(
@@ -396,7 +396,7 @@ class EstimationConfig(_Section):
         object.__setattr__(
             self, "pressure_max_pa", _number(f"{p}.pressure_max_pa", self.pressure_max_pa, positive=True)
         )
-        plausibility.pressure_bound("maximum pressure of a soft pneumatic actuator").check(
+        bounds.pressure_bound("maximum pressure of a soft pneumatic actuator").check(
             f"{p}.pressure_max_pa", self.pressure_max_pa)
 
 
@@ -541,7 +541,7 @@ class Config:
             raise check.fail("name", "a string", self.name, ConfigError)
         # the bounds that need the geometry (EI from the cross-section, mass from the volume, ...);
         # each segment within the length first, so that segments in cm are not blamed on length_m
-        plausibility.check_config(self)
+        bounds.check_config(self)
 
     @classmethod
     def from_dict(cls, data: Any) -> Config:

@@ -127,11 +127,20 @@ def _split_fix(fix, names: tuple[str, ...], values: dict, config=None) -> tuple[
     return free, fixed
 
 
+def _implausible_fit(kind: str, build):
+    """``build()``, a config with fitted values; a value no actuator can have is the fit's, and said so."""
+    try:
+        return build()
+    except ConfigError as err:
+        raise ConfigError(f"the {kind} fit gives a value no actuator of this geometry can have (the data do not "
+                          f"determine it, or hold a unit slip; fix a parameter with --fix): {err}") from None
+
+
 def check_fixed(values: Mapping, config, field: str = "fix") -> None:
     """Refuse a value to hold a model parameter at that no actuator of ``config``'s geometry can have.
 
     The bounds are those of the config's own values
-    (:func:`bendsense.plausibility.parameter_bounds`); ``ei1_nm2_per_pa`` is judged at
+    (:func:`bendsense.bounds.parameter_bounds`); ``ei1_nm2_per_pa`` is judged at
     the ``ei0_nm2`` given beside it, else for any plausible ei0. The message names the
     parameter, its range, the likely unit slip (N·m²/kPa for N·m²/Pa, degrees for
     radians, ...) and the value in SI units.
@@ -149,7 +158,7 @@ def check_fixed(values: Mapping, config, field: str = "fix") -> None:
     ------
     ArgumentError
     """
-    from bendsense.plausibility import parameter_bounds
+    from bendsense.bounds import parameter_bounds
 
     bounds = parameter_bounds(config.actuator, ei0_nm2=values.get("ei0_nm2"))
     for name, value in values.items():
@@ -319,7 +328,8 @@ class FreeBendingFit:
         config : Config
             The config to copy.
         """
-        new = config.replace(material=dataclasses.replace(config.material, **self.params))
+        new = _implausible_fit("free-bending", lambda: config.replace(
+            material=dataclasses.replace(config.material, **self.params)))
         if self.covariance is None:
             return new
         what = f"free-bending fit of {len(self.residuals)} points"
@@ -601,7 +611,8 @@ class StiffnessFit:
         config : Config
             The config to copy.
         """
-        new = config.replace(stiffness=dataclasses.replace(config.stiffness, **self.params))
+        new = _implausible_fit("stiffness", lambda: config.replace(
+            stiffness=dataclasses.replace(config.stiffness, **self.params)))
         if self.covariance is None:
             return new
         what = f"stiffness fit of {len(self.level_ei_nm2)} pressure levels"

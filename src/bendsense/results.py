@@ -35,7 +35,7 @@ NO_FORCE = "no_force"  # a NaN force is never ok
 IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
 #: the flagged statuses that the status lines of ``record`` and ``live`` count, with their labels
 FLAGGED = ((EXTRAPOLATED, "extrapolated"), (NOT_CONVERGED, "not converged"), (MODEL_MISFIT, "misfit"),
-           (NOT_IDENTIFIABLE, "not identifiable"))
+           (NOT_IDENTIFIABLE, "not identifiable"), (IMPLAUSIBLE_FORCE, "implausible force"))
 
 __all__ = ["Results", "write_results", "read_results", "frame_status"]
 
@@ -184,7 +184,7 @@ def frame_status(shape, estimate=None) -> np.ndarray:
 
 
 def flagged_counts(counts: dict, sep: str = "  ") -> str:
-    """``extrapolated N  not converged N  misfit N  not identifiable N`` for a status line.
+    """``extrapolated N  not converged N  misfit N  not identifiable N  implausible force N`` for a status line.
 
     Parameters
     ----------

@@ -271,7 +271,7 @@ def _warn_once(cal, key: str, message: str) -> None:
     if key not in done:
         done.add(key)
         source = cal.meta.get("manifest") if isinstance(cal.meta, dict) else None
-        where = f"calibration (from {source})" if source else "calibration"
+        where = f"calibration (fitted from {source})" if source else "calibration"
         logging.getLogger("bendsense").warning("%s: %s", where, message)
 
 
@@ -307,7 +307,7 @@ def error_model(cal, noise_std_counts=None):
     except ConfigError as err:  # an old file without the fitted data or frame counts: said, once, never silent
         q = np.zeros((1, 1))
         _warn_once(cal, "coefficient_covariance", f"σ leaves out the calibration-coefficient part (the uncertainty "
-                   f"of the fitted polynomials and offsets): {err}")
+                   f"of the fitted polynomials and offsets): {str(err).removeprefix('calibration: ')}")
     return ShiftErrorModel(
         calibrated=True, noise_std=noise, coef=coef, dcoef=coef[:, 1:] * np.arange(1, coef.shape[1]),
         grid_m=np.array(table["grid_m"], dtype=float), sigma_odd_m=np.array(table["sigma_odd_m"], dtype=float),

@@ -24,7 +24,7 @@ from bendsense._io import load_yaml
 from bendsense.calibration import error_model as errors
 from bendsense.calibration import io, report
 from bendsense.calibration.error_model import AngleCovariance
-from bendsense.calibration.fit import fit_fields, load_recordings
+from bendsense.calibration.fit import StripResidual, fit_fields, load_recordings
 from bendsense.calibration.io import _array, _range
 from bendsense.calibration.polynomials import WEIGHTINGS, parity_masks
 from bendsense.errors import ArgumentError, ConfigError
@@ -119,12 +119,25 @@ class Calibration:
                 f"sensor.n_segments: expected {n} (the calibration's channels), got {self.sensor.n_segments}"
             )
         set_(self, "strip_residuals", tuple(self.strip_residuals))
+        for i, r in enumerate(self.strip_residuals):
+            # the strip means' variance is σ²/n_frames: a count that is no count would drop it or blow it up
+            if not isinstance(r, StripResidual):
+                raise ConfigError(f"strip_residuals[{i}]: expected a StripResidual, got {type(r).__name__}")
+            if isinstance(r.n_frames, bool) or not isinstance(r.n_frames, (int, np.integer)) or r.n_frames < 0:
+                raise ConfigError(f"strip_residuals[{i}].n_frames: expected an integer >= 1 (0: not recorded), got "
+                                  f"{check.short(r.n_frames)}")
         for name in ("fit_delta_a", "fit_shifts_m"):
             value = getattr(self, name)
             if value is not None:
-                arr = np.asarray(value, dtype=float)
+                try:
+                    arr = np.asarray(value, dtype=float)
+                except (TypeError, ValueError):
+                    raise ConfigError(f"{name}: expected a (recordings, {n}) array of numbers, got "
+                                      f"{check.short(value)}") from None
                 if arr.ndim != 2 or arr.shape[1] != n:
                     raise ConfigError(f"{name}: expected shape (recordings, {n}), got {arr.shape}")
+                if not np.all(np.isfinite(arr)):
+                    raise ConfigError(f"{name}: values must be finite")
                 set_(self, name, arr)
         if self.fit_delta_a is not None and self.fit_shifts_m is not None:
             rows = (self.fit_delta_a.shape[0], self.fit_shifts_m.shape[0])

@@ -58,7 +58,7 @@ class PressureKpa(Finite):
     """A gauge pressure option in kPa: finite, from ``min`` (default vacuum) to 1 MPa.
 
     Above, the message names the likely unit slip (pascals, bar, psi) and the value in
-    kPa (:class:`bendsense.plausibility.Bound`).
+    kPa (:class:`bendsense.bounds.Bound`).
     """
 
     def __init__(self, min: float = -101.325):
@@ -66,11 +66,29 @@ class PressureKpa(Finite):
 
     def convert(self, value, param, ctx):
         """Parse and check one value."""
-        from bendsense.plausibility import PRESSURE_MAX_PA, Bound
+        from bendsense.bounds import PRESSURE_MAX_PA, Bound
 
         number = super().convert(value, param, ctx)  # finite, >= min
         bound = Bound("gauge pressure of a soft pneumatic actuator", self.min, PRESSURE_MAX_PA / 1e3, "kPa",
                       slips=(("Pa", 1e-3), ("bar", 100.0), ("psi", 6.894757), ("MPa", 1e3)), typical=100.0)
+        if not bound.contains(number):
+            name = param.opts[0] if param is not None and param.opts else "value"
+            self.fail(bound.message(name, number), param, ctx)
+        return number
+
+
+class Relative(Finite):
+    """A relative error option (0.1: 10 %): finite, above -1 and at most 1 (a model 100 % off).
+
+    Beyond, the message names the likely slip (percent) and the fraction.
+    """
+
+    def convert(self, value, param, ctx):
+        """Parse and check one value."""
+        from bendsense.bounds import Bound
+
+        number = super().convert(value, param, ctx)
+        bound = Bound("relative error", -0.99, 1.0, "", "a fraction: 0.1 is 10 %", (("percent", 0.01),))
         if not bound.contains(number):
             name = param.opts[0] if param is not None and param.opts else "value"
             self.fail(bound.message(name, number), param, ctx)

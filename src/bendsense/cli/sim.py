@@ -12,6 +12,7 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
+    Relative,
     config_option,
     overwrite_option,
     say,
@@ -39,9 +40,9 @@ _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying
               help="Frames per strip or configuration (default 50 / 5). A scenario is simulated in memory, "
                    "one recording at a time (tip-loads: 44 configurations, ~10 kB a frame): a number whose "
                    "frames would not fit the free memory is refused before any work.")
-@click.option("--ei-error", type=Finite(), help="Model mismatch: relative error of the true EI.")
-@click.option("--k0-error", type=Finite(), help="Model mismatch: relative error of the true K0.")
-@click.option("--base-rotation", type=Finite(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
+@click.option("--ei-error", type=Relative(), help="Model mismatch: relative error of the true EI.")
+@click.option("--k0-error", type=Relative(), help="Model mismatch: relative error of the true K0.")
+@click.option("--base-rotation", type=Relative(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
 @click.option("--hysteresis-kpa", type=PressureKpa(min=0), help="Model mismatch: pressure play [kPa].")
 @overwrite_option
 def simulate(

@@ -399,6 +399,8 @@ cases = {
                            r"pressure_range_kpa\.yaml: actuator\.pressure_range_pa\[1\] = 200 .* if it was entered in kPa, it is 200000 Pa"),
     "unknown_command": ("fly", r"No such command 'fly'"),
     # unit slips in held model parameters and pressure options (issue 21)
+    "simulate_ei_error_percent": ("simulate validation -o sim --ei-error 20",
+                                 r"--ei-error = 20 is not a plausible relative error .*; if it was entered in percent, it is 0\.2"),
     "identify_fix_ei1_per_kpa": ("identify stiffness {good_csv} -o cfg.yaml --fix ei1=1.25e-5",
                                 r"--fix ei1_nm2_per_pa = 1\.25e-5 is not a plausible pressure stiffening .*; if it was entered in N·m²/kPa, it is 1\.25e-8 N·m²/Pa"),
     "identify_fix_ei0_n_mm2": ("identify stiffness {good_csv} -o cfg.yaml --fix ei0=2530",
