@@ -222,7 +222,8 @@ def test_output_blocks_belong_to_the_runnable_block_above():
 
 def test_output_block_after_no_runnable_block_is_an_error():
     after_text = "```bash\necho 1\n```\n```text\nx\n```\n<!-- output -->\n```text\n1\n```\n"
-    after_hardware = "```bash\n# needs hardware\nbendsense record /dev/ttyACM0 -o s\n```\n<!-- output -->\n```text\n1\n```\n"
+    after_hardware = ("```bash\n# needs hardware\nbendsense record /dev/ttyACM0 -o s\n```\n"
+                      "<!-- output -->\n```text\n1\n```\n")
     first = "<!-- output -->\n```text\n1\n```\n"
     not_text = "```bash\necho 1\n```\n<!-- output -->\n```yaml\na: 1\n```\n"
     for text in (after_text, after_hardware, first, not_text):
@@ -240,7 +241,8 @@ def test_masking_hides_rates_durations_terminals_and_temporary_paths():
     assert mask("  constraint none  RMS error 0.1421 N, converged 100 %, 4,618 frames/s") == (
         "  constraint none  RMS error 0.1421 N, converged 100 %, <RATE> frames/s")
     assert mask("processed 500 frames in 115.4 s") == "processed 500 frames in <DURATION> s"
-    assert mask("compiling: 7/12 functions, 20 s (continuation)") == "compiling: 7/12 functions, <DURATION> s (continuation)"
+    assert mask("compiling: 7/12 functions, 20 s (continuation)") == (
+        "compiling: 7/12 functions, <DURATION> s (continuation)")
     assert mask("board on /dev/pts/7") == "board on /dev/pts/<N>"
     assert mask("2026-11-21T11:06:14.082922Z crc: 1 CRC error(s)") == "<TIME> crc: 1 CRC error(s)"
     assert mask(f"wrote {Path(tempfile.gettempdir(), 'pytest-of-x', 'test_a0', 'results.csv')}") == "wrote <TMP>"

@@ -26,10 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
 from test_docs import FENCE, OUTPUT_MARK, PAGES, ROOT, missing_output
-from test_invalid_corpus import (CALIBRATIONS, CLI, CONFIGS, GOOD_CAL, MANIFESTS, NATIVE, RESULTS, SESSIONS,
-                                 expected)
+from test_invalid_corpus import CALIBRATIONS, CLI, CONFIGS, GOOD_CAL, MANIFESTS, NATIVE, RESULTS, SESSIONS, expected
 
 MESSAGE = re.compile(r"^\s*(?:Error|WARNING):")
 N = 16
