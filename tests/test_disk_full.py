@@ -106,9 +106,9 @@ def test_a_full_disk_leaves_the_earlier_output_intact(lab, disk, name):
     assert disk.files() == before  # unchanged, nothing half-written, no temporary file left
 
 
-@pytest.mark.parametrize("name", [*CHEAP, "demo"])
+@pytest.mark.parametrize("name", [*CHEAP, "demo", "reproduce"])
 def test_a_full_disk_writes_nothing(lab, disk, name):
-    args = commands(lab, disk.path)[name]
+    args = commands(lab, disk.path).get(name) or ["reproduce", "-o", disk.path / "rep", "--quick"]
     disk.fill(0)
     result = disk.run([*CLI, *args])
     one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/\S+: no space left on device")
@@ -270,3 +270,19 @@ def test_record_under_a_file_size_limit_keeps_its_frames(tmp_path):
     assert len(session) == 1000 and (out / "frames.bin").stat().st_size == size * 1000
     assert session.meta["finished"] is True and np.all(np.diff(session.seq) == 1)
     assert "1,000 frames kept" in session.meta["outcome"] and line.endswith("(the session is readable)")
+
+
+def test_live_save_on_a_full_disk(lab, disk):
+    from bendsense.device.simdevice import SimulatedDevice, default_source
+
+    with SimulatedDevice(default_source(rate_hz=500, seed=3), rate_hz=500) as dev:
+        first = disk.run([*CLI, "live", dev.port, "--calibration", lab / "cal.yaml", "--seconds", "0.5", "--save",
+                          disk.path / "live.png"], timeout=120)
+        assert first.returncode == 0, first.stderr
+        before = disk.files()
+        disk.fill(0)
+        result = disk.run([*CLI, "live", dev.port, "--calibration", lab / "cal.yaml", "--seconds", "0.5", "--save",
+                           disk.path / "live.png", "--overwrite"], timeout=120)
+    one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/live.png: no space left on device; nothing was "
+                           "written; the earlier output is unchanged")
+    assert disk.files() == before
