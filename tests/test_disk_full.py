@@ -115,13 +115,18 @@ def test_a_full_disk_writes_nothing(lab, disk, name):
     assert disk.files() == {}
 
 
-def test_save_fails_half_way_through_its_files(lab, disk):
-    """Space for results.csv but not for shape.npz: the directory is complete or absent."""
-    args = commands(lab, disk.path)["save"]
-    assert disk.fill(8192) <= 8192
-    result = disk.run([*CLI, *args])
-    one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/out\S*: no space left on device; nothing was written")
-    assert disk.files() == {}
+@pytest.mark.parametrize(("name", "leave"), [("save", 32 << 10), ("demo", 256 << 10), ("simulate", 16 << 10)])
+def test_a_disk_that_fills_half_way_through_an_output(lab, disk, name, leave):
+    """Space for some of the files, not for all: the earlier output stays whole and nothing else is left."""
+    args = commands(lab, disk.path)[name]
+    first = disk.run([*CLI, *args])
+    assert first.returncode == 0, first.stderr
+    before = disk.files()
+    assert disk.fill(leave) <= leave
+    result = disk.run([*CLI, *args, "--overwrite"])
+    one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/\S+: no space left on device; nothing was written; "
+                           "the earlier output is unchanged")
+    assert disk.files() == before
 
 
 @pytest.mark.parametrize("workers", ["0", "2"])

@@ -90,7 +90,9 @@ def write_error(path, err: OSError, consequence: str = "") -> OutputError:
         What it means for the output, e.g. ``"nothing was written"``.
     """
     tail = f"; {consequence}" if consequence else ""
-    return OutputError(f"{path}: {reason(err)}{tail}", errno=getattr(err, "errno", None))
+    refusal = OutputError(f"{path}: {reason(err)}{tail}", errno=getattr(err, "errno", None))
+    refusal.path = str(path)  # (not .filename: OSError's str() would show it)
+    return refusal
 
 
 
@@ -245,6 +247,10 @@ def _user_paths(tmp: Path, user: Path, consequence: str = "") -> Iterator[None]:
     except BendsenseError as err:
         if str(tmp) not in str(err) or len(err.args) != 1:
             raise
+        inner = getattr(err, "path", None)
+        if isinstance(err, OutputError) and err.errno and inner and str(tmp) in inner:
+            # a refusal inside (a file of a directory output): what it means for the whole output
+            raise write_error(inner.replace(str(tmp), str(user), 1), err, consequence) from None
         text = str(err).replace(str(tmp), str(user))
         if isinstance(err, OutputError):
             raise type(err)(text, errno=err.errno) from None
