@@ -203,6 +203,18 @@ def test_a_name_that_fits_but_leaves_no_room_for_the_temporary_file(lab, tmp_pat
     assert "hidden temporary file beside it" in result.output and os.listdir(tmp_path) == []
 
 
+def test_a_path_longer_than_the_file_system_allows(lab, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    deep = "/".join(["d" * 200] * 25)  # every name fits, the whole path (5,024 bytes) does not
+    for args in (["load", lab / "run.csv", "--calibration", lab / "cal.yaml", "reconstruct", "save", f"{deep}/out"],
+                 ["calibrate", lab / "calib" / "manifest.yaml", "-o", f"{deep}/cal.yaml"]):
+        result = CliRunner().invoke(main, [str(a) for a in args])
+        assert result.exit_code == 1 and "Traceback" not in result.output
+        assert re.fullmatch(r"Error: d{16}\.\.\.d{16}/.*: path too long \([\d,]+ bytes; this file system allows "
+                            r"[\d,]+ for an output\)\n", result.output), result.output
+    assert os.listdir(tmp_path) == []
+
+
 def test_a_read_only_disk(lab, tmp_path):
     fs = SmallDisk(tmp_path / "ro", 1 << 20, read_only=True)
     try:
