@@ -95,7 +95,6 @@ def write_error(path, err: OSError, consequence: str = "") -> OutputError:
     return refusal
 
 
-
 def _existing_ancestor(path: Path) -> Path:
     """``path`` or its nearest ancestor that exists (or is a link)."""
     anc = path
@@ -171,8 +170,8 @@ def _check_links(p: Path) -> None:
     """Refuse symbolic links on an output path that lead out of the directory that holds them.
 
     A dangling link anywhere on the path would make bendsense create directories at its
-    target; the output itself as a link to another directory would write there. A link
-    to a sibling (``out -> results-v2``) is followed, and links among the existing
+    target; the output itself as a link out of its directory would write there. A link
+    within its directory (``out -> results-v2``) is followed, and links among the existing
     ancestors of the path the user typed (a data directory on another disk) are part
     of where the user works.
     """
@@ -187,7 +186,8 @@ def _check_links(p: Path) -> None:
         if not q.exists():
             raise OutputError(f"{q}: a symbolic link to {target}, which does not exist; refusing to write through it "
                               "(it would create directories at its target): remove the link or give another path")
-        if i == len(parts) and _resolve(q).parent != _resolve(q.parent):
+        res, home = _resolve(q), _resolve(q.parent)
+        if i == len(parts) and (res == home or not res.is_relative_to(home)):
             raise OutputError(f"{q}: a symbolic link to {target}, outside its directory; refusing to write through "
                               "it: give the path it points to, or another name")
 
