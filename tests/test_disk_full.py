@@ -303,3 +303,48 @@ def test_live_save_on_a_full_disk(lab, disk):
     one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/live.png: no space left on device; nothing was "
                            "written; the earlier output is unchanged")
     assert disk.files() == before
+
+
+# --- the library: OutputError naming the path, with the errno ------------------------------
+
+_LIBRARY = r"""
+import errno, pickle, sys
+import numpy as np
+import bendsense
+from bendsense.calibration import Calibration
+from bendsense.errors import OutputError
+from bendsense.session import read_session_csv, write_session_csv
+from bendsense.sessiondir import SessionWriter, record_dtype
+
+disk, lab = sys.argv[1], sys.argv[2]
+session = read_session_csv(lab + "/run.csv")
+calls = {
+    "Calibration.save": lambda: Calibration.load(lab + "/cal.yaml").save(disk + "/cal.yaml"),
+    "write_session_csv": lambda: write_session_csv(session, disk + "/s.csv"),
+    "SessionWriter": lambda: SessionWriter(disk + "/rec", 16).write(np.zeros(100000, record_dtype(16))),
+}
+for name, call in calls.items():
+    try:
+        call()
+    except OutputError as err:
+        back = pickle.loads(pickle.dumps(err))
+        print(name, "|", type(err).__name__, "|", errno.errorcode[err.errno], "|", back.errno == err.errno, "|", err)
+    else:
+        print(name, "| no error")
+"""
+
+
+def test_the_library_raises_output_errors_naming_the_path(lab, disk):
+    disk.fill(0)
+    result = disk.run([sys.executable, "-c", _LIBRARY, disk.path, lab])
+    assert result.returncode == 0, result.stderr
+    lines = dict(line.split(" | ", 1) for line in result.stdout.splitlines())
+    d = re.escape(str(disk.path))
+    assert re.fullmatch(rf"OutputError \| ENOSPC \| True \| {d}/cal\.yaml: no space left on device; nothing was "
+                        "written", lines["Calibration.save"])
+    assert re.fullmatch(rf"OutputError \| ENOSPC \| True \| {d}/s\.csv: no space left on device; nothing was "
+                        "written", lines["write_session_csv"])
+    # a recording that cannot start: nothing of it is left
+    assert re.fullmatch(rf"OutputError \| ENOSPC \| True \| {d}/rec/\S+: no space left on device.*",
+                        lines["SessionWriter"])
+    assert disk.files() == {}

@@ -849,6 +849,7 @@ class InPlace:
         check([target], inputs)
         self._stack = contextlib.ExitStack()
         self._stack.enter_context(_locked([(p, r)]))
+        self._user, self._created = p, not r.exists()
         try:
             check([target], inputs)
             with _user_paths(r, p):
@@ -857,12 +858,20 @@ class InPlace:
                 r.mkdir(parents=True, exist_ok=True)
                 _write_manifest(r, list(files), writer)
         except BaseException:
-            self._stack.close()
+            self.abandon()
             raise
 
     def close(self) -> None:
         """Release the lock."""
         self._stack.close()
+
+    def abandon(self) -> None:
+        """Remove what was written (nothing was recorded: a start the file system refused) and release the lock."""
+        try:
+            if self.path.is_dir():
+                _remove_ours(self.path, self._user, keep_root=not self._created)
+        finally:
+            self.close()
 
     def __enter__(self):
         return self
