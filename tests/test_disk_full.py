@@ -106,22 +106,27 @@ def test_a_full_disk_leaves_the_earlier_output_intact(lab, disk, name):
     assert disk.files() == before  # unchanged, nothing half-written, no temporary file left
 
 
-@pytest.mark.parametrize("name", [*CHEAP, "demo"])
+@pytest.mark.parametrize("name", [*CHEAP, "demo", "reproduce"])
 def test_a_full_disk_writes_nothing(lab, disk, name):
-    args = commands(lab, disk.path)[name]
+    args = commands(lab, disk.path).get(name) or ["reproduce", "-o", disk.path / "rep", "--quick"]
     disk.fill(0)
     result = disk.run([*CLI, *args])
     one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/\S+: no space left on device")
     assert disk.files() == {}
 
 
-def test_save_fails_half_way_through_its_files(lab, disk):
-    """Space for results.csv but not for shape.npz: the directory is complete or absent."""
-    args = commands(lab, disk.path)["save"]
-    assert disk.fill(8192) <= 8192
-    result = disk.run([*CLI, *args])
-    one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/out\S*: no space left on device; nothing was written")
-    assert disk.files() == {}
+@pytest.mark.parametrize(("name", "leave"), [("save", 32 << 10), ("demo", 256 << 10), ("simulate", 16 << 10)])
+def test_a_disk_that_fills_half_way_through_an_output(lab, disk, name, leave):
+    """Space for some of the files, not for all: the earlier output stays whole and nothing else is left."""
+    args = commands(lab, disk.path)[name]
+    first = disk.run([*CLI, *args])
+    assert first.returncode == 0, first.stderr
+    before = disk.files()
+    assert disk.fill(leave) <= leave
+    result = disk.run([*CLI, *args, "--overwrite"])
+    one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/\S+: no space left on device; nothing was written; "
+                           "the earlier output is unchanged")
+    assert disk.files() == before
 
 
 @pytest.mark.parametrize("workers", ["0", "2"])
@@ -198,6 +203,18 @@ def test_a_name_that_fits_but_leaves_no_room_for_the_temporary_file(lab, tmp_pat
     assert "hidden temporary file beside it" in result.output and os.listdir(tmp_path) == []
 
 
+def test_a_path_longer_than_the_file_system_allows(lab, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    deep = "/".join(["d" * 200] * 25)  # every name fits, the whole path (5,024 bytes) does not
+    for args in (["load", lab / "run.csv", "--calibration", lab / "cal.yaml", "reconstruct", "save", f"{deep}/out"],
+                 ["calibrate", lab / "calib" / "manifest.yaml", "-o", f"{deep}/cal.yaml"]):
+        result = CliRunner().invoke(main, [str(a) for a in args])
+        assert result.exit_code == 1 and "Traceback" not in result.output
+        assert re.fullmatch(r"Error: d{16}\.\.\.d{16}/.*: path too long \([\d,]+ bytes; this file system allows "
+                            r"[\d,]+ for an output\)\n", result.output), result.output
+    assert os.listdir(tmp_path) == []
+
+
 def test_a_read_only_disk(lab, tmp_path):
     fs = SmallDisk(tmp_path / "ro", 1 << 20, read_only=True)
     try:
@@ -270,3 +287,64 @@ def test_record_under_a_file_size_limit_keeps_its_frames(tmp_path):
     assert len(session) == 1000 and (out / "frames.bin").stat().st_size == size * 1000
     assert session.meta["finished"] is True and np.all(np.diff(session.seq) == 1)
     assert "1,000 frames kept" in session.meta["outcome"] and line.endswith("(the session is readable)")
+
+
+def test_live_save_on_a_full_disk(lab, disk):
+    from bendsense.device.simdevice import SimulatedDevice, default_source
+
+    with SimulatedDevice(default_source(rate_hz=500, seed=3), rate_hz=500) as dev:
+        first = disk.run([*CLI, "live", dev.port, "--calibration", lab / "cal.yaml", "--seconds", "0.5", "--save",
+                          disk.path / "live.png"], timeout=120)
+        assert first.returncode == 0, first.stderr
+        before = disk.files()
+        disk.fill(0)
+        result = disk.run([*CLI, "live", dev.port, "--calibration", lab / "cal.yaml", "--seconds", "0.5", "--save",
+                           disk.path / "live.png", "--overwrite"], timeout=120)
+    one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/live.png: no space left on device; nothing was "
+                           "written; the earlier output is unchanged")
+    assert disk.files() == before
+
+
+# --- the library: OutputError naming the path, with the errno ------------------------------
+
+_LIBRARY = r"""
+import errno, pickle, sys
+import numpy as np
+import bendsense
+from bendsense.calibration import Calibration
+from bendsense.errors import OutputError
+from bendsense.session import read_session_csv, write_session_csv
+from bendsense.sessiondir import SessionWriter, record_dtype
+
+disk, lab = sys.argv[1], sys.argv[2]
+session = read_session_csv(lab + "/run.csv")
+calls = {
+    "Calibration.save": lambda: Calibration.load(lab + "/cal.yaml").save(disk + "/cal.yaml"),
+    "write_session_csv": lambda: write_session_csv(session, disk + "/s.csv"),
+    "SessionWriter": lambda: SessionWriter(disk + "/rec", 16).write(np.zeros(100000, record_dtype(16))),
+}
+for name, call in calls.items():
+    try:
+        call()
+    except OutputError as err:
+        back = pickle.loads(pickle.dumps(err))
+        print(name, "|", type(err).__name__, "|", errno.errorcode[err.errno], "|", back.errno == err.errno, "|", err)
+    else:
+        print(name, "| no error")
+"""
+
+
+def test_the_library_raises_output_errors_naming_the_path(lab, disk):
+    disk.fill(0)
+    result = disk.run([sys.executable, "-c", _LIBRARY, disk.path, lab])
+    assert result.returncode == 0, result.stderr
+    lines = dict(line.split(" | ", 1) for line in result.stdout.splitlines())
+    d = re.escape(str(disk.path))
+    assert re.fullmatch(rf"OutputError \| ENOSPC \| True \| {d}/cal\.yaml: no space left on device; nothing was "
+                        "written", lines["Calibration.save"])
+    assert re.fullmatch(rf"OutputError \| ENOSPC \| True \| {d}/s\.csv: no space left on device; nothing was "
+                        "written", lines["write_session_csv"])
+    # a recording that cannot start: nothing of it is left
+    assert re.fullmatch(rf"OutputError \| ENOSPC \| True \| {d}/rec/\S+: no space left on device.*",
+                        lines["SessionWriter"])
+    assert disk.files() == {}

@@ -471,3 +471,8 @@ def test_an_output_that_is_a_link_out_of_its_directory_is_refused(work, tmp_path
     assert one_line_error(result) and "out: a symbolic link to" in result.output
     assert "outside its directory" in result.output
     assert os.listdir(tmp_path / "shared") == []
+    # a link within its own directory is followed
+    (work / "sub" / "results").mkdir(parents=True)  # empty: an output may go there
+    (work / "inner").symlink_to(work / "sub" / "results")
+    assert run(*DIRECTORY_COMMANDS["save"]("inner")).exit_code == 0
+    assert (work / "sub" / "results" / "results.csv").is_file() and (work / "inner").is_symlink()

@@ -51,6 +51,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bendsense.errors import ArgumentError, OutputError, OutputExistsError
+from bendsense.output_paths import (
+    _check_links,
+    _check_names,
+    _check_parent,
+    _is_within,
+    _resolve,
+    _user_paths,
+    check_steps,
+    reason,
+    write_error,
+)
 
 __all__ = [
     "MANIFEST_NAME",
@@ -93,63 +104,6 @@ CSV = (".csv",)
 FIGURE = "figure"  # suffixes: the formats matplotlib can write (looked up when needed)
 
 _KINDS = ("dir", "file", "recording", "collection")
-
-# the file system's refusals in words, for one-line messages (strerror is capitalised, and
-# says nothing of the limit behind EFBIG or EMFILE)
-_REASONS = {
-    errno.ENOSPC: "no space left on device",
-    errno.EDQUOT: "disk quota exceeded",
-    errno.EFBIG: "file too large (beyond the file-size limit, see 'ulimit -f', or the file system's largest file)",
-    errno.ENAMETOOLONG: "file name too long",
-    errno.EROFS: "read-only file system",
-    errno.EACCES: "permission denied",
-    errno.EPERM: "operation not permitted",
-    errno.EISDIR: "is a directory",
-    errno.ENOTDIR: "a part of the path is not a directory",
-    errno.EMFILE: "too many open files (the per-process limit, see 'ulimit -n')",
-    errno.ENFILE: "too many open files on this system",
-    errno.EIO: "input/output error (a failing disk or a disconnected drive?)",
-    errno.ENOENT: "no such file or directory",
-    errno.ELOOP: "too many levels of symbolic links",
-}
-# refusals that concern the file being written even when the OSError names no file (a write or
-# close of an open file): they are about the output, not about an input
-_WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO, errno.EMFILE,
-                           errno.ENFILE, errno.ENAMETOOLONG})
-
-
-def reason(err: OSError) -> str:
-    """The file system's refusal ``err`` in words, for a message (``"no space left on device"``).
-
-    Parameters
-    ----------
-    err : OSError
-        The error.
-    """
-    text = _REASONS.get(getattr(err, "errno", None))
-    if text is None:
-        text = str(getattr(err, "strerror", None) or err)
-        text = text[:1].lower() + text[1:]
-    return text
-
-
-def write_error(path, err: OSError, consequence: str = "") -> OutputError:
-    """An :class:`~bendsense.errors.OutputError` ``"PATH: reason[; consequence]"`` for the OSError ``err``.
-
-    The error keeps ``err.errno`` (e.g. ``errno.ENOSPC``).
-
-    Parameters
-    ----------
-    path : path
-        The path to name: the user's, never a hidden temporary one.
-    err : OSError
-        The file system's refusal.
-    consequence : str, optional
-        What it means for the output, e.g. ``"nothing was written"``.
-    """
-    tail = f"; {consequence}" if consequence else ""
-    return OutputError(f"{path}: {reason(err)}{tail}", errno=getattr(err, "errno", None))
-
 
 @dataclass(frozen=True, kw_only=True)
 class Target:
@@ -243,10 +197,6 @@ def collection(path) -> Target:
 # --------------------------------------------------------------------------- checks
 
 
-def _resolve(path) -> Path:
-    return Path(os.path.abspath(path)).resolve()
-
-
 def resolve(path) -> Path:
     """The absolute path with every ``..`` and symlink resolved: what the checks compare.
 
@@ -256,10 +206,6 @@ def resolve(path) -> Path:
         Any path, relative to the working directory or absolute.
     """
     return _resolve(path)
-
-
-def _is_within(inner: Path, outer: Path) -> bool:
-    return inner == outer or inner.is_relative_to(outer)
 
 
 def _litter(name: str) -> bool:
@@ -303,7 +249,7 @@ def check(targets: Iterable[Target], inputs: Iterable = ()) -> None:
     cwd = _resolve(os.getcwd())
     seen: dict[Path, Target] = {}
     for t in targets:
-        _check_names(t)
+        _check_names(t.path, _aside_overhead(t))
         p, r = t.path, _resolve(t.path)
         if r in seen:
             raise OutputError(f"{p}: given as output twice")
@@ -326,138 +272,10 @@ def check(targets: Iterable[Target], inputs: Iterable = ()) -> None:
             _check_dir(t, r)
 
 
-def _existing_ancestor(path: Path) -> Path:
-    anc = path
-    while not os.path.lexists(anc) and anc != anc.parent:
-        anc = anc.parent
-    return anc
-
-
-def check_steps(steps: Iterable[tuple[str, Iterable[Target]]]) -> None:
-    """Refuse a command line two of whose steps write one file, before any work.
-
-    Two outputs collide when they are one path, when a later step writes into the
-    directory of an earlier step one of the names that step writes there (``save out``
-    then ``export out/results.csv``), or when a later step replaces a directory that
-    holds an earlier step's output (``plot out/fig.png`` then ``save out``). A file
-    that a later step adds to an earlier step's results directory (``save out`` then
-    ``plot out/fig.png``) joins its manifest and is fine.
-
-    Parameters
-    ----------
-    steps : iterable of (str, iterable of Target)
-        Each step's label (e.g. ``"save"``) and outputs, in the order they run.
-
-    Raises
-    ------
-    OutputError
-        Naming both steps and the path.
-    """
-    seen: list[tuple[int, str, Target, Path]] = []
-    for i, (label, targets) in enumerate(steps, 1):
-        for t in targets:
-            r = _resolve(t.path)
-            for j, other, o, ro in seen:
-                if j == i and r != ro:
-                    continue  # one step's own outputs: check() compares them
-                clash = r == ro
-                if not clash and _is_within(r, ro) and o.kind != "file":  # into an earlier directory
-                    first = r.relative_to(ro).parts[0]
-                    clash = o.kind != "dir" or not o.files or first in (*o.files, MANIFEST_NAME)
-                if not clash and _is_within(ro, r) and t.kind != "file":  # replaces what an earlier step wrote
-                    clash = True
-                if clash:
-                    where = t.path if _is_within(r, ro) else o.path
-                    steps_text = (f"'{other}' (step {j}) and '{label}' (step {i})" if other == label
-                                  else f"'{other}' and '{label}'")
-                    raise OutputError(f"{where}: written by two steps of this command line, {steps_text}; "
-                                      "give each step its own output")
-            seen.append((i, label, t, r))
-
-
-def _check_parent(p: Path, r: Path) -> None:
-    anc = _existing_ancestor(r.parent)
-    if not anc.is_dir():
-        raise OutputError(f"{p}: {anc} is not a directory", errno=errno.ENOTDIR)
-    if not os.access(anc, os.W_OK | os.X_OK):
-        if _read_only(anc):
-            raise OutputError(f"{p}: cannot write in {anc} (read-only file system)", errno=errno.EROFS)
-        raise OutputError(f"{p}: cannot write in {anc} (permission denied)", errno=errno.EACCES)
-
-
-def _read_only(path: Path) -> bool:
-    try:
-        return bool(os.statvfs(path).f_flag & os.ST_RDONLY)
-    except (OSError, AttributeError):
-        return False
-
-
 def _aside_overhead(t: Target) -> int:
     """Bytes that bendsense's hidden siblings of an output add to its name (``.NAME.bendsense-tmp-XXXXXXXX.SUF``)."""
     suffix = len(os.fsencode(t.path.suffix)) if t.kind == "file" else 0
     return 1 + max(len(_TMP_MARK), len(_OLD_MARK), len(_LOCK_SUFFIX)) + 8 + suffix
-
-
-def _check_names(t: Target) -> None:
-    """Refuse a name the file system cannot hold, before anything is created (ENAMETOOLONG)."""
-    p = t.path
-    full = os.path.abspath(p)
-    anc = _existing_ancestor(Path(full))
-    try:
-        name_max = os.pathconf(anc, "PC_NAME_MAX")
-        path_max = os.pathconf(anc, "PC_PATH_MAX")
-    except (OSError, ValueError, AttributeError):
-        name_max, path_max = 255, 4096
-    if len(os.fsencode(full)) + _aside_overhead(t) >= path_max:
-        raise OutputError(f"{_short_path(p)}: path too long ({len(os.fsencode(full)):,} bytes; this file system "
-                          f"allows {path_max - 1 - _aside_overhead(t):,} for an output)", errno=errno.ENAMETOOLONG)
-    parts = Path(full).parts
-    for i, part in enumerate(parts):
-        n = len(os.fsencode(part))
-        last = i == len(parts) - 1
-        limit = name_max - _aside_overhead(t) if last else name_max
-        if n > limit:
-            extra = "" if not last or n > name_max else " (bendsense writes a hidden temporary file beside it first)"
-            where = "" if last else f" in {_short_name(part)}"
-            raise OutputError(f"{_short_path(p)}: file name too long ({n} bytes{where}; at most {limit} here{extra})",
-                              errno=errno.ENAMETOOLONG)
-
-
-def _short_name(name: str) -> str:
-    return repr(name) if len(name) <= 40 else repr(name[:16] + "..." + name[-16:])
-
-
-def _short_path(p: Path) -> str:
-    """The user's path for a message, its overlong names shortened."""
-    text = str(p)
-    if len(text) <= 200:
-        return text
-    return os.sep.join(part if len(part) <= 40 else part[:16] + "..." + part[-16:] for part in text.split(os.sep))
-
-
-def _check_links(p: Path) -> None:
-    """Refuse symbolic links on an output path that lead out of the directory that holds them.
-
-    A dangling link anywhere on the path would make bendsense create directories at its
-    target; the output itself as a link to another directory would write there. A link
-    to a sibling (``out -> results-v2``) is followed, and links among the existing
-    ancestors of the path the user typed (a data directory on another disk) are part
-    of where the user works.
-    """
-    parts = p.parts
-    for i in range(1, len(parts) + 1):
-        q = Path(*parts[:i])
-        if not q.is_symlink():
-            if not os.path.lexists(q):
-                return  # the rest is to be created
-            continue
-        target = os.readlink(q)
-        if not q.exists():
-            raise OutputError(f"{q}: a symbolic link to {target}, which does not exist; refusing to write through it "
-                              "(it would create directories at its target): remove the link or give another path")
-        if i == len(parts) and _resolve(q).parent != _resolve(q.parent):
-            raise OutputError(f"{q}: a symbolic link to {target}, outside its directory; refusing to write through "
-                              "it: give the path it points to, or another name")
 
 
 def _check_file(t: Target, r: Path) -> None:
@@ -806,38 +624,6 @@ def _umask() -> int:
 
 
 @contextlib.contextmanager
-def _user_paths(tmp: Path, user: Path, consequence: str = "") -> Iterator[None]:
-    """Re-raise an error about the hidden ``tmp`` as one naming ``user``.
-
-    An OSError about ``tmp`` (or about no file, when it is a refusal to write: a full
-    disk, a file-size limit, ...) becomes an OutputError that ends with ``consequence``;
-    a bendsense error keeps its class.
-    """
-    from bendsense.errors import BendsenseError
-
-    try:
-        yield
-    except BendsenseError as err:
-        if str(tmp) not in str(err) or len(err.args) != 1:
-            raise
-        text = str(err).replace(str(tmp), str(user))
-        if isinstance(err, OutputError):
-            raise type(err)(text, errno=err.errno) from None
-        raise type(err)(text) from None
-    except OSError as err:
-        hidden = str(tmp)
-        names = [str(n) for n in (err.filename, getattr(err, "filename2", None)) if n is not None]
-        ours = [n for n in names if n.startswith(hidden)]
-        if names and not ours:
-            raise  # about another file (an input): not the output's
-        if not names and err.errno not in _WRITE_ERRNOS:
-            raise
-        # a write or close names no file: the output as a whole
-        where = ours[0].replace(hidden, str(user), 1) if ours else str(user)
-        raise write_error(where, err, consequence) from None
-
-
-@contextlib.contextmanager
 def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: str = "bendsense") -> Iterator[Path]:
     """Write a directory output: yield a fresh hidden sibling, swap it in when the block ends.
 
@@ -1031,15 +817,12 @@ def _register(r: Path, writer: str) -> None:
     manifest = read_manifest(parent)
     if manifest is None or r.name in manifest["files"]:
         return
-    try:
-        lock = _locked([(parent, parent)])
-        lock.__enter__()
-    except OutputError:
-        return
-    try:
+    with contextlib.ExitStack() as stack:
+        try:
+            stack.enter_context(_locked([(parent, parent)]))
+        except OutputError:
+            return  # another run is writing that directory: left alone
         add_to_manifest(parent, [r.name], writer=writer)
-    finally:
-        lock.__exit__(None, None, None)
 
 
 def write_text(path, text: str, **options) -> None:
@@ -1069,6 +852,7 @@ class InPlace:
         check([target], inputs)
         self._stack = contextlib.ExitStack()
         self._stack.enter_context(_locked([(p, r)]))
+        self._user, self._created = p, not r.exists()
         try:
             check([target], inputs)
             with _user_paths(r, p):
@@ -1077,12 +861,20 @@ class InPlace:
                 r.mkdir(parents=True, exist_ok=True)
                 _write_manifest(r, list(files), writer)
         except BaseException:
-            self._stack.close()
+            self.abandon()
             raise
 
     def close(self) -> None:
         """Release the lock."""
         self._stack.close()
+
+    def abandon(self) -> None:
+        """Remove what was written (nothing was recorded: a start the file system refused) and release the lock."""
+        try:
+            if self.path.is_dir():
+                _remove_ours(self.path, self._user, keep_root=not self._created)
+        finally:
+            self.close()
 
     def __enter__(self):
         return self

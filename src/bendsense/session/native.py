@@ -367,8 +367,17 @@ class SessionWriter:
                 where = err.filename if err.filename is not None else self.path
                 raise output.write_error(where, err, "nothing recorded") from None
         except BaseException:
-            self._output.close()
+            self._abandon()
             raise
+
+    def _abandon(self) -> None:
+        """Undo a start that failed: close what is open, remove what was written (nothing recorded)."""
+        for name in ("_fd", "_events"):
+            handle = self.__dict__.pop(name, None)
+            with contextlib.suppress(OSError):
+                os.close(handle) if isinstance(handle, int) else handle is not None and handle.close()
+        self._release_reserve()
+        self._output.abandon()
 
     def _start(self, config, adc_bits, device, meta) -> None:
         if config is not None and hasattr(config, "to_dict"):
