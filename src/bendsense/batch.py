@@ -400,6 +400,11 @@ def process_session(
     except Exception as err:  # noqa: BLE001 - isolate any failure to its session
         reason = f"{type(err).__name__}: {err}"
         return SessionOutcome(status="failed", reason=reason, seconds=time.perf_counter() - start, **row)
+    return _outcome(counts, lost, tx_drops, pressure_ignored, time.perf_counter() - start, row)
+
+
+def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row) -> SessionOutcome:
+    """The outcome of a processed session: its counts, and a note of each kind of flagged frame."""
     frames = counts.frames
     notes = [f"{n} of {frames} frames {what}" for n, what in (
         (counts.extrapolated, "extrapolated"), (counts.not_converged, "not converged"),
@@ -413,7 +418,7 @@ def process_session(
     return SessionOutcome(
         status="ok",
         frames=frames,
-        seconds=time.perf_counter() - start,
+        seconds=seconds,
         reason=", ".join(notes),
         extrapolated=counts.extrapolated,
         not_converged=counts.not_converged,
