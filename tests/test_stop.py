@@ -339,6 +339,30 @@ def test_record_stops_and_keeps_its_frames(tmp_path, sig, whole_group):
 
 
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
+def test_record_estimate_stops_with_whole_results(tmp_path):
+    """``record --estimate``: the results of a prefix of the kept frames, in whole rows, and the line says how
+    many."""
+    import bendsense
+    from bendsense.device.simdevice import SimulatedDevice, default_source
+
+    linear_calibration().save(tmp_path / "cal.yaml")
+    with SimulatedDevice(default_source(rate_hz=500, seed=0), rate_hz=500) as dev:
+        line = run_and_stop(["record", dev.port, "-o", "run", "--quiet-status", "--calibration", "cal.yaml",
+                             "--estimate"], tmp_path, signal.SIGTERM, whole_group=False,
+                            ready=lambda: (tmp_path / "run" / "results.csv").exists()
+                            and (tmp_path / "run" / "results.csv").stat().st_size > 20_000
+                            and (tmp_path / "run" / "frames.bin").stat().st_size > 40_000)
+    session = bendsense.read_session(tmp_path / "run")
+    raw = (tmp_path / "run" / "results.csv").read_bytes()
+    with open(tmp_path / "run" / "results.csv", newline="", encoding="utf-8") as fh:
+        rows = [r for r in csv.reader(fh) if r and not r[0].startswith("#")]
+    assert raw.endswith(b"\n") and all(len(r) == len(rows[0]) for r in rows)
+    assert 0 < len(rows) - 1 <= len(session)
+    assert line == (f"Interrupted (SIGTERM): kept {len(session)} frames in run (synced to disk, session marked "
+                    f"finished); {len(rows) - 1} of them estimated to {Path('run') / 'results.csv'}")
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 def test_live_stops_without_an_image(tmp_path):
     from bendsense.device.simdevice import SimulatedDevice, default_source
 
@@ -391,3 +415,24 @@ def test_a_cold_cache_compiles_once_before_the_workers_start(batch, tmp_path, ex
     assert "4 sessions: 4 ok" in res.stdout
     assert len(COMPILED.findall(res.stderr)) == 1, res.stderr  # one process compiled; the workers found its cache
     assert list((tmp_path / "numba-cache").rglob("*.nbi"))  # (the cache really was the fresh directory)
+
+
+def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path):
+    """``process --scheduler``: Ctrl-C cancels the queued sessions and closes the client within seconds; the
+    sessions the cluster finished are complete (a running one may still finish: then whole), a rerun does the
+    rest."""
+    distributed = pytest.importorskip("dask.distributed")
+    out = tmp_path / "out"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        args = [*process_args(batch, out)[:-3], "--scheduler", cluster.scheduler_address, "--no-progress"]
+        line = run_and_stop(args, tmp_path, signal.SIGINT, whole_group=True, ready=lambda: finished_sessions(out))
+        time.sleep(2.0)  # what the cluster was running when the client left
+        done = finished_sessions(out)
+        assert 0 < len(done) < SESSIONS
+        assert_complete(out, done)
+        assert f" of {SESSIONS} sessions finished in " in line
+        rerun = subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"{SESSIONS} sessions: {SESSIONS - len(done)} ok, {len(done)} skipped, 0 failed" in rerun.stdout
+    assert_complete(out, [f"s{i:02d}" for i in range(SESSIONS)])

@@ -561,10 +561,9 @@ def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
     for proc in processes:
         with contextlib.suppress(OSError, ValueError, AttributeError):
             proc.kill()
-    for proc in processes:
-        with contextlib.suppress(OSError, ValueError, AttributeError, AssertionError):
-            proc.join(2.0)
-    pool.shutdown(wait=False, cancel_futures=True)
+    # waits for the pool's manager thread, which sees the workers gone at once; left running, it would race
+    # the interpreter's exit (a traceback from concurrent.futures' exit hook)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def warm_up(config, calibration, *, constraint=None, method=None, objective=None, estimate: bool = True) -> None:

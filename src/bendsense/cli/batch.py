@@ -119,6 +119,13 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
                 recursive=recursive,
                 progress=not no_progress and not quiet(),
             )
+        except KeyboardInterrupt:
+            if client is not None:  # its connections close under the cluster's feet: no tracebacks of theirs
+                quiet_loggers = ("distributed", "tornado", "asyncio")
+                for name in [*quiet_loggers, *logging.root.manager.loggerDict]:
+                    if name.split(".")[0] in quiet_loggers:  # with their children that Dask sets a level on
+                        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+            raise
         finally:
             if client is not None:
                 client.close()

@@ -283,8 +283,8 @@ def record(
                 stats = recorder.run(seconds, on_progress=progress)
             except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: the recorder has closed the session
                 stats, interrupted = recorder.stats, err
-            finally:
-                est_stats = None if estimator is None else estimator.close()
+            finally:  # interrupted: what is still queued is not estimated (it stays in frames.bin)
+                est_stats = None if estimator is None else estimator.close(None if interrupted is None else 0.5)
     except BendsenseError:
         if show:  # end the status line before the error
             sys.stderr.write("\n")
@@ -298,7 +298,9 @@ def record(
         estimated = f"no frames to estimate: no {results_path.name} written"
     if interrupted is not None:  # one line, by the group: what was kept, exit 130 / 143
         kept = f"kept {stats.records} frames in {output} (synced to disk, session marked finished){losses}"
-        _signals.note(interrupted, kept + (f"; {estimated}" if estimate else ""))
+        if estimate:  # the frames still queued are in frames.bin, not estimated
+            kept += f"; {est_stats.frames} of them estimated to {results_path}"
+        _signals.note(interrupted, kept)
         raise interrupted
     click.echo(f"done: {stats.records} frames written to {output}{losses}", err=True)
     if estimate:

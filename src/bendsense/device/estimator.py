@@ -176,6 +176,7 @@ class LiveEstimator:
         self._backlog = 0
         self._done = collections.deque()  # (monotonic time, frames) of recent blocks
         self._stop = threading.Event()
+        self._abandon = threading.Event()  # stop at the next block, backlog or not (an interrupted close)
         self._thread = threading.Thread(target=self._run, name="bendsense-estimator", daemon=True)
         self._thread.start()
 
@@ -230,6 +231,8 @@ class LiveEstimator:
                     if self._stop.is_set():
                         return
                     continue
+                if self._abandon.is_set():
+                    return
                 readings, pending = pending[: self.max_block], pending[self.max_block:]
                 block = self.processor.process_readings(readings)
                 if self.writer is not None:
@@ -252,10 +255,15 @@ class LiveEstimator:
         Parameters
         ----------
         timeout_s : float, optional
-            Longest wait for the backlog [s]; None: until it is done.
+            Longest wait for the backlog [s]; None: until it is done. What is left then is
+            not processed (``results.csv`` ends with whole rows of the frames before it);
+            the block being processed is finished first.
         """
         self._stop.set()
         self._thread.join(timeout_s)
+        if self._thread.is_alive():
+            self._abandon.set()
+            self._thread.join()
         if self.writer is not None:
             self.writer.close()
         if self.outlets is not None:
