@@ -252,7 +252,12 @@ def run_and_stop(args, tmp_path, sig, *, whole_group, after_s=None, ready=None):
 
 def no_output(tmp_path, name):
     """Neither the output nor any hidden working copy of it."""
-    return [p.name for p in tmp_path.iterdir() if p.name == name or p.name.startswith(f".{name}.")] == []
+    left = [str(p.relative_to(tmp_path)) for p in tmp_path.iterdir()
+            if p.name == name or p.name.startswith(f".{name}.")]
+    left += [str(q.relative_to(tmp_path)) for p in tmp_path.iterdir() if p.name.startswith(f".{name}.") and p.is_dir()
+             for q in p.rglob("*")]
+    assert left == []
+    return True
 
 
 @pytest.fixture(scope="module")

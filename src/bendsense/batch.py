@@ -587,8 +587,11 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     session = Session(0.01 * np.arange(frames), flat, np.full(frames, 0.5 * (lo + hi)), source="warm-up")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        process(session, config, calibration, constraint=constraint, method=method, objective=objective,
-                estimate=estimate)
+        try:
+            process(session, config, calibration, constraint=constraint, method=method, objective=objective,
+                    estimate=estimate)
+        except (BendsenseError, ValueError) as err:  # a mismatch every session reports itself, under its name
+            log.debug("warm-up skipped: %s", err)
 
 
 def process_sessions(

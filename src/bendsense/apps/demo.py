@@ -205,23 +205,24 @@ def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo, progress
             f"{hello.rate_hz} Hz; recording {n_frames} frames ({seconds:g} s) ..."
         )
         recorder = Recorder(driver, session_dir, overwrite=True, config=config, meta=meta)
-        driver.start()
-        recorder.start()
-        deadline = time.monotonic() + 3.0 * seconds + 30.0
-        while not device.finished.wait(timeout=0.1):
-            if progress is not None:
-                progress(recorder.stats.records, n_frames)
-            if time.monotonic() > deadline:
-                recorder.stop()
-                raise DeviceError(f"{device.port}: the simulated board did not finish {n_frames} frames in time")
-        # the last frames may still be on their way through the pty, the driver and the queue
-        deadline = time.monotonic() + 5.0
-        while time.monotonic() < deadline:
-            ds = driver.stats
-            if ds.samples + ds.lost >= device.stats.generated and recorder.stats.records >= ds.samples:
-                break
-            time.sleep(0.02)
-        recorder.stop()
+        with recorder:  # stopped and joined on the way out, also when interrupted: nothing writes after
+            driver.start()
+            recorder.start()
+            deadline = time.monotonic() + 3.0 * seconds + 30.0
+            while not device.finished.wait(timeout=0.1):
+                if progress is not None:
+                    progress(recorder.stats.records, n_frames)
+                if time.monotonic() > deadline:
+                    recorder.stop()
+                    raise DeviceError(f"{device.port}: the simulated board did not finish {n_frames} frames in time")
+            # the last frames may still be on their way through the pty, the driver and the queue
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                ds = driver.stats
+                if ds.samples + ds.lost >= device.stats.generated and recorder.stats.records >= ds.samples:
+                    break
+                time.sleep(0.02)
+            recorder.stop()
         stats = driver.stats
         if progress is not None:
             progress(recorder.stats.records, n_frames)
