@@ -441,3 +441,40 @@ def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path)
     assert rerun.returncode == 0, rerun.stderr
     assert f"{SESSIONS} sessions: {SESSIONS - len(done)} ok, {len(done)} skipped, 0 failed" in rerun.stdout
     assert_complete(out, [f"s{i:02d}" for i in range(SESSIONS)])
+
+
+WATCHED = """
+import os, subprocess, sys, time
+import bendsense.batch as batch
+if sys.argv[1] == "parent":
+    child = subprocess.Popen([sys.executable, __file__, "worker", str(os.getpid()), sys.argv[2]])
+    print(child.pid, flush=True)
+    time.sleep(600)
+else:
+    if sys.argv[3] == "thread":  # the portable fallback: a thread that watches the parent's pid
+        batch._pdeathsig = lambda: False
+    batch.exit_with_parent(int(sys.argv[2]), poll_s=0.1)
+    print("watching", flush=True)
+    end = time.monotonic() + 600
+    while time.monotonic() < end:  # busy, as a worker in its session
+        sum(range(1000))
+"""
+
+
+@pytest.mark.parametrize("how", ["prctl", "thread"])
+def test_a_worker_exits_when_its_parent_is_killed(tmp_path, how):
+    """bendsense.batch.exit_with_parent, both ways (Linux's PR_SET_PDEATHSIG and the thread that polls the
+    parent's pid): a busy child of a parent killed with SIGKILL ends within seconds."""
+    (tmp_path / "watched.py").write_text(WATCHED, encoding="utf-8")
+    parent = subprocess.Popen([sys.executable, str(tmp_path / "watched.py"), "parent", how], stdout=subprocess.PIPE,
+                              text=True, start_new_session=True)
+    try:
+        worker = int(parent.stdout.readline())
+        assert parent.stdout.readline() == "watching\n" and alive(worker)
+        parent.kill()
+        parent.wait(10)
+        wait_until(lambda: not alive(worker), STOP_S, f"the worker outlived its parent ({how})")
+    finally:
+        for p in group(parent.pid):
+            os.kill(p, signal.SIGKILL)
+        parent.stdout.close()
