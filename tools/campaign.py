@@ -16,6 +16,7 @@ and classifies what happened:
   data-loss  a file that existed before the run changed or disappeared
   poor       a non-zero exit without one clear ``Error:`` line, an internal class name
              or a Python repr in the message, or a valid input refused
+  skipped    the machine cannot provoke the condition (a permission case, as root)
 
 Usage:
 
@@ -51,20 +52,25 @@ from typing import Callable
 BIN = Path(sys.executable).with_name("bendsense")
 PY = sys.executable
 FAILING = ("traceback", "crash", "hang", "wrong-ok", "data-loss")
-KINDS = ("handled", *FAILING, "poor")
+KINDS = ("handled", *FAILING, "poor", "skipped")
 TIMEOUT = 60.0
 ABSURD_FORCE_N = 50.0  # a silicone finger of the paper's size carries a few newtons
+TRUTH_SIGMAS = 8.0  # the lab's own results are within 3 sigma of the simulated truth
 
 # A Python repr or an internal name in a message meant for a user.
 REPR = re.compile(
     r"<[\w.]+ object at 0x|\barray\(|np\.float\d*\(|\bdtype\(|\bPosixPath\(|"
     r"\b[A-Z][a-z]+(?:[A-Z][a-z]+)+(?:Error|Exception|Decoder|Writer|Reader|Processor)\b|"
     r"\bKeyError\b|\bIndexError\b|\bTypeError\b|\bValueError\b|\bAttributeError\b|"
-    r"\bOSError\b|\bErrno\b"
+    r"\bOSError\b|\bErrno\b|\(\d+, '"
 )
 
 
 # --- cases ------------------------------------------------------------------------------
+
+
+class Skip(Exception):
+    """The machine cannot provoke this case's condition."""
 
 
 @dataclasses.dataclass
@@ -77,6 +83,8 @@ class Case:
     trusted). ``expect`` is ``"error"`` (nonsense: success is wrong-ok), ``"ok"`` (valid:
     a refusal is poor) or ``"any"``. ``check(work, output)`` returns a reason when an exit
     0 is a wrong ok. ``run`` replaces the whole subprocess (interactive cases).
+    A setup or driver raises :class:`Skip` when the machine cannot provoke the condition
+    (permissions, as root).
     """
 
     name: str
@@ -111,6 +119,24 @@ def case(*args, **kwargs) -> None:
 
 
 # --- helpers used by the cases --------------------------------------------------------------
+
+
+def readonly_dir(d: Path) -> None:
+    """A directory nobody can write: mode 555, or as root (who ignores modes) a read-only tmpfs."""
+    d.mkdir(parents=True, exist_ok=True)
+    if os.geteuid() != 0:
+        d.chmod(0o555)
+        return
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k,mode=0755", "tmpfs", str(d)],
+                       capture_output=True, text=True)
+    if r.returncode:
+        raise Skip("root ignores permissions and cannot mount a read-only tmpfs: " + r.stderr.strip())
+
+
+def unreadable(f: Path) -> None:
+    if os.geteuid() == 0:
+        raise Skip("root reads any file")
+    f.chmod(0)
 
 CHAIN = ["--calibration", "lab/cal.yaml", "reconstruct", "estimate", "save", "out"]
 
@@ -175,6 +201,12 @@ def edit_column(path, column, value, row=None):
     return edit_csv(path, fn)
 
 
+def without_pressure(path):
+    return edit_csv(path, lambda h, r: [",".join(c for c in h.split(",") if c != "pressure_pa"),
+                                        *(",".join(c for c, n in zip(x.split(","), h.split(","))
+                                                   if n != "pressure_pa") for x in r)])
+
+
 def edit_yaml(path, src, fn):
     """Write PATH from the lab's YAML SRC edited by fn(dict)."""
     def setup(work):
@@ -224,6 +256,24 @@ def results_ok_sane(work, output, root="out"):
                     return f"{path.relative_to(work)} line {n}: {col}={v:g} N with status ok"
                 if col.startswith("tip_") and abs(v) > 1.0:
                     return f"{path.relative_to(work)} line {n}: {col}={v:g} m with status ok"
+            far = _far_from_truth(head, r)
+            if far:
+                return f"{path.relative_to(work)} line {n}: status ok but {far}"
+    return None
+
+
+def _far_from_truth(head, row):
+    """The simulated truth travels with the lab's session (input_fx_n, input_fy_n): an ok
+    force more than TRUTH_SIGMAS standard deviations (plus a small floor) from it is not ok."""
+    try:
+        for axis in ("x", "y"):
+            f = float(row[head.index(f"f{axis}_n")])
+            sd = float(row[head.index(f"f{axis}_std_n")])
+            truth = float(row[head.index(f"input_f{axis}_n")])
+            if abs(f - truth) > TRUTH_SIGMAS * sd + 0.05:
+                return f"f{axis}_n={f:.3g} N, the truth {truth:.3g} N, sigma {sd:.2g} N"
+    except (ValueError, IndexError):
+        return None
     return None
 
 
@@ -411,16 +461,20 @@ API_PRELUDE = textwrap.dedent("""
     LAB = sys.argv[1]
     def wrong(why):
         print("WRONG-OK: " + why)
+    def trusted(est):
+        # frames an API user would trust: success and no model misfit
+        ok = np.atleast_1d(np.asarray(est.success, dtype=bool))
+        p = getattr(est, "p_value", None)
+        if p is not None:
+            ok = ok & ~(np.atleast_1d(np.asarray(p, dtype=float)) < 1e-3)
+        return ok.reshape(-1)
     def finite_ok(est):
-        f = np.asarray(est.force_n, dtype=float)
-        st = np.atleast_1d(np.asarray(est.status))
-        ok = st == "ok"
-        fr = f.reshape(-1, 2) if f.size >= 2 else f.reshape(-1, 1)
-        okr = ok.reshape(-1)
-        if okr.size == fr.shape[0] and okr.any():
-            bad = ~np.isfinite(fr[okr]).all(axis=1) | (np.abs(fr[okr]) > 50).any(axis=1)
+        fr = np.asarray(est.force_n, dtype=float).reshape(-1, 2)
+        ok = trusted(est)
+        if ok.size == fr.shape[0] and ok.any():
+            bad = ~np.isfinite(fr[ok]).all(axis=1) | (np.abs(fr[ok]) > 50).any(axis=1)
             if bad.any():
-                wrong(f"status ok with force {fr[okr][bad][0]}")
+                wrong(f"success with force {fr[ok][bad][0]}")
     try:
 """)
 API_EPILOGUE = textwrap.dedent("""
@@ -429,6 +483,18 @@ API_EPILOGUE = textwrap.dedent("""
         print("Error: " + msg, file=sys.stderr)
         sys.exit(1)
 """)
+
+
+def unmount_under(work: Path) -> None:
+    """Unmount what a case mounted (read-only tmpfs) inside its working directory."""
+    try:
+        mounts = Path("/proc/mounts").read_text().splitlines()
+    except OSError:
+        return
+    for line in reversed(mounts):
+        point = line.split()[1].replace("\\040", " ")
+        if point.startswith(str(work) + os.sep):
+            subprocess.run(["umount", "-l", point], capture_output=True)
 
 
 def run_case(c: Case, lab: Path, tmp: Path) -> Outcome:
@@ -442,12 +508,19 @@ def run_case(c: Case, lab: Path, tmp: Path) -> Outcome:
     try:
         if c.setup:
             c.setup(work)
+    except Skip as e:
+        unmount_under(work)
+        return Outcome(c, "skipped", str(e), 0.0, None)
     except Exception as e:  # a broken case is the campaign's fault: say so
         return Outcome(c, "poor", f"CAMPAIGN SETUP FAILED: {type(e).__name__}: {e}", 0.0, None)
     before = snapshot(work)
     t0 = time.monotonic()
     if c.run is not None:
-        rc, out, hung = c.run(work, env, c.timeout)
+        try:
+            rc, out, hung = c.run(work, env, c.timeout)
+        except Skip as e:
+            unmount_under(work)
+            return Outcome(c, "skipped", str(e), 0.0, None)
     else:
         if c.api is not None:
             body = textwrap.indent(textwrap.dedent(c.api).strip("\n"), "    ")
@@ -468,6 +541,7 @@ def run_case(c: Case, lab: Path, tmp: Path) -> Outcome:
         out = (o + e).decode("utf-8", errors="replace")
         _kill(p)  # nothing of the case outlives it
     seconds = time.monotonic() - t0
+    unmount_under(work)
     # restore permissions the case removed, so that the snapshot and cleanup can read
     for d in [work, *work.rglob("*")]:
         try:
@@ -510,7 +584,13 @@ def classify(c: Case, work: Path, before: dict, rc, out: str, hung: bool) -> tup
         if why:
             return "wrong-ok", why
         return "handled", "exit 0"
+    glued = re.search(r"[^\n\r]((WARNING|Error): .*)", out)
+    if glued:  # e.g. a progress bar drawn with \r into a log file, the message at its end
+        return "poor", "a message glued to other output on one line: " + glued.group(0)[-160:]
+    out = out.replace("\r", "\n")
     errors = [ln for ln in out.splitlines() if ln.startswith("Error:")]
+    if c.command == "process" and not errors and rc == 1 and re.search(r"(?m)^error: \d+ of \d+ sessions failed$", out):
+        return "handled", "documented: " + first_line(out, r"failed: ")  # each failure in the table, exit 1
     if rc in (130, 143) and not errors:
         return "handled", f"stopped, exit {rc}"
     if len(errors) != 1:
@@ -669,8 +749,8 @@ case("load-signal-negative-zero", "load", chain("sneg0.csv"), setup=edit_column(
 case("load-signal-negative", "load", chain("sneg.csv"), check=no_ok_rows,
      setup=edit_column("sneg.csv", "ch5", "-40000"))
 case("load-signal-hex", "load", chain("hex.csv"), expect="error", setup=edit_column("hex.csv", "ch2", "0x7ff"))
-case("load-signal-underscore", "load", chain("us.csv"), expect="error", setup=edit_column("us.csv", "ch2", "2_000"))
-case("load-signal-fullwidth-digits", "load", chain("fw.csv"), expect="error",
+case("load-signal-underscore", "load", chain("us.csv"), setup=edit_column("us.csv", "ch2", "2_000"))
+case("load-signal-fullwidth-digits", "load", chain("fw.csv"),
      setup=edit_column("fw.csv", "ch2", "２０００"))
 case("load-signal-comma-decimal", "load", chain("cd.csv"), expect="error",
      setup=edit_csv("cd.csv", lambda h, r: [h, *(x.replace(".", ",", 1) for x in r)]))
@@ -678,6 +758,8 @@ case("load-pressure-1e308", "load", chain("p308.csv"), check=no_ok_rows,
      setup=edit_column("p308.csv", "pressure_pa", "1e308"))
 case("load-pressure-negative-zero", "load", chain("pneg0.csv"),
      setup=edit_column("pneg0.csv", "pressure_pa", "-0"))
+case("load-pressure-below-vacuum", "load", chain("vac.csv"), check=no_ok_rows,
+     setup=edit_column("vac.csv", "pressure_pa", "-200000"))
 case("load-pressure-subnormal", "load", chain("psub.csv"), setup=edit_column("psub.csv", "pressure_pa", "5e-324"))
 case("load-pressure-empty-cells", "load", chain("pe.csv"), setup=edit_column("pe.csv", "pressure_pa", ""))
 case("load-pressure-empty-one-cell", "load", chain("pe1.csv"), setup=edit_column("pe1.csv", "pressure_pa", "", row=0))
@@ -700,7 +782,7 @@ case("load-empty-directory", "load", chain("emptydir"), expect="error", setup=la
 case("load-symlink-loop", "load", chain("loop.csv"), expect="error",
      setup=lambda w: (os.symlink("loop2.csv", w / "loop.csv"), os.symlink("loop.csv", w / "loop2.csv")))
 case("load-unreadable-file", "load", chain("secret.csv"), expect="error",
-     setup=lambda w: (shutil.copy(w / "lab/run.csv", w / "secret.csv"), (w / "secret.csv").chmod(0)))
+     setup=lambda w: (shutil.copy(w / "lab/run.csv", w / "secret.csv"), unreadable(w / "secret.csv")))
 case("load-session-empty-name", "load", chain(""), expect="error")
 case("load-csv-extension-on-yaml", "load", chain("lab/cal.yaml"), expect="error")
 case("load-calibration-is-session", "load", ["load", "lab/run.csv", "--calibration", "lab/run.csv",
@@ -708,15 +790,12 @@ case("load-calibration-is-session", "load", ["load", "lab/run.csv", "--calibrati
 case("load-config-is-calibration", "load", ["load", "lab/run.csv", "--config", "lab/cal.yaml", *CHAIN],
      expect="error")
 case("load-option-repeated", "load", ["load", "lab/run.csv", "--pressure-kpa", "20", "--pressure-kpa", "60", *CHAIN])
-case("load-pressure-kpa-1e308", "load", chain("lab/run.csv", "--pressure-kpa", "1e308"), check=no_ok_rows)
+case("load-pressure-kpa-1e308", "load", chain("nop.csv", "--pressure-kpa", "1e308"), check=no_ok_rows,
+     setup=without_pressure("nop.csv"))
 case("load-pressure-kpa-neg-zero", "load", chain("nop.csv", "--pressure-kpa", "-0"),
-     setup=edit_csv("nop.csv", lambda h, r: [",".join(c for c in h.split(",") if c != "pressure_pa"),
-                                             *(",".join(c for c, n in zip(x.split(","), h.split(","))
-                                                        if n != "pressure_pa") for x in r)]))
-case("load-pressure-kpa-tiny", "load", chain("nop2.csv", "--pressure-kpa", "1e-300"),
-     setup=edit_csv("nop2.csv", lambda h, r: [",".join(c for c in h.split(",") if c != "pressure_pa"),
-                                              *(",".join(c for c, n in zip(x.split(","), h.split(","))
-                                                         if n != "pressure_pa") for x in r)]))
+     setup=without_pressure("nop.csv"))
+case("load-pressure-kpa-tiny", "load", chain("nop.csv", "--pressure-kpa", "1e-300"),
+     setup=without_pressure("nop.csv"))
 case("load-pressure-kpa-empty", "load", chain("lab/run.csv", "--pressure-kpa", ""), expect="error")
 case("chain-no-steps-but-load", "load", ["load", "lab/run.csv"])
 case("chain-save-twice-same-dir", "save", ["load", "lab/run.csv", "--calibration", "lab/cal.yaml",
@@ -739,6 +818,8 @@ case("estimate-follower-positions-paper", "estimate",
 case("estimate-calibration-from-other-sensor", "estimate", chain("lab/run.csv"), check=no_ok_rows,
      setup=edit_yaml("lab/cal.yaml", "lab/cal.yaml",
                      lambda d: d.update(offset=[x + 3000 for x in d["offset"]])), may_change=("lab/cal.yaml",))
+case("load-config-1-segment", "load", chain("lab/run.csv", "--config", "one.yaml"), expect="error",
+     setup=edit_yaml("one.yaml", "lab/cfg.yaml", lambda d: d["sensor"].update(n_segments=1, segment_lengths_m=[0.13])))
 case("estimate-flat-session", "estimate", chain("lab/calsim/flat.csv", "--pressure-kpa", "0"))
 
 # --- native sessions ---------------------------------------------------------------------------
@@ -804,7 +885,7 @@ case("native-results-inside-session", "save", ["load", "lab/native", "--calibrat
 # --- save / export / plot / mcap outputs ---------------------------------------------------------
 
 case("save-into-readonly-dir", "save", chain("lab/run.csv", tail=[*CHAIN[:-1], "ro/out"]), expect="error",
-     setup=lambda w: ((w / "ro").mkdir(), (w / "ro").chmod(0o555)))
+     setup=lambda w: (readonly_dir(w / "ro"), None), timeout=240)
 case("save-target-is-file", "save", chain("lab/run.csv", tail=[*CHAIN[:-1], "afile"]), expect="error",
      setup=text("afile", "user data\n"))
 case("save-into-calibration-path", "save", chain("lab/run.csv", tail=[*CHAIN[:-1], "lab/cal.yaml"]), expect="error")
@@ -829,18 +910,18 @@ case("export-twice-same-file", "export", ["load", "lab/run.csv", "export", "a.cs
      expect="error")
 
 
-def readonly_cwd(args, expect="error"):
+def readonly_cwd(args):
     def run(work, env, timeout):
         d = work / "rocwd"
-        d.mkdir()
-        d.chmod(0o555)
+        readonly_dir(d)
         try:
             p = subprocess.run([str(BIN), *args], cwd=d, env=env, capture_output=True, timeout=timeout)
             return p.returncode, (p.stdout + p.stderr).decode(errors="replace"), False
         except subprocess.TimeoutExpired as e:
             return None, str(e), True
         finally:
-            d.chmod(0o755)
+            if os.geteuid() != 0:
+                d.chmod(0o755)
     return run
 
 
@@ -932,7 +1013,7 @@ case("identify-bend-crlf-bom", "identify", ["identify", "free-bending", "b.csv",
 case("identify-bend-one-row", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"], expect="error",
      setup=text("b.csv", "pressure_kpa,bending_angle_deg\n60,80\n"))
 case("identify-bend-all-same-pressure", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"],
-     expect="error", setup=text("b.csv", "pressure_kpa,bending_angle_deg\n60,80\n60,81\n60,79\n60,80\n"))
+     check=lambda w, o: None if "not identifiable" in o else "a fit from one pressure level, without a warning", setup=text("b.csv", "pressure_kpa,bending_angle_deg\n60,80\n60,81\n60,79\n60,80\n"))
 case("identify-bend-negative-angles", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"],
      expect="error", setup=text("b.csv", "pressure_kpa,bending_angle_deg\n20,-25\n40,-55\n60,-80\n90,-130\n"))
 case("identify-bend-angle-1e308", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"],
@@ -950,7 +1031,7 @@ case("identify-fix-stiffness-param-in-bending", "identify",
 case("identify-fix-1e308", "identify", ["identify", "free-bending", "lab/bend.csv", "-o", "c.yaml",
                                         "--fix", "mu=1e308"], expect="error")
 case("identify-fix-empty-value", "identify", ["identify", "free-bending", "lab/bend.csv", "-o", "c.yaml",
-                                              "--fix", "mu="], expect="error")
+                                              "--fix", "mu="])
 case("identify-output-is-input", "identify", ["identify", "free-bending", "lab/bend.csv", "-o", "lab/bend.csv",
                                               "--overwrite"], expect="error")
 case("identify-output-is-config", "identify", ["identify", "free-bending", "lab/bend.csv", "--config", "lab/cfg.yaml",
@@ -988,7 +1069,7 @@ case("simulate-output-inside-lab-session", "simulate", ["simulate", "validation"
 case("simulate-config-64-segments", "simulate", ["simulate", "calibration", "-o", "s", "--config", "c64.yaml",
                                                  "--frames", "1"], timeout=90,
      setup=edit_yaml("c64.yaml", "lab/cfg.yaml",
-                     lambda d: d["sensor"].update(segment_lengths_m=[0.13 / 64] * 64)))
+                     lambda d: d["sensor"].update(n_segments=64, segment_lengths_m=[0.13 / 64] * 64)))
 case("simulate-seed-max", "simulate", ["simulate", "validation", "-o", "s", "--seed", "4294967295", "--frames", "1"],
      expect="ok")
 case("simulate-scenario-case", "simulate", ["simulate", "Validation", "-o", "s"], expect="error")
@@ -1022,6 +1103,20 @@ case("sim-device-loop-without-replay", "sim-device", ["sim-device", "--loop", "-
 case("sim-device-sigint-while-client-reads", "sim-device",
      run=with_board(lambda port: ["record", port, "-o", "rec", "--seconds", "5", "--quiet-status"],
                     during=sigint_after(2.5, "board"), expect_board=True))
+
+
+
+def kill_client_after(seconds):
+    def during(client, board, work):
+        time.sleep(seconds)
+        _kill(client)
+        time.sleep(1.0)  # the board sees its client gone while it streams
+    return during
+
+
+case("sim-device-client-killed-midstream", "sim-device",
+     run=with_board(lambda port: ["record", port, "-o", "rec", "--seconds", "20", "--quiet-status"],
+                    during=kill_client_after(3), expect_board=True), timeout=30)
 
 # --- record -----------------------------------------------------------------------------------------
 
@@ -1170,6 +1265,14 @@ case("process-scheduler-unreachable", "process", ["process", "lab/run.csv", "--c
 case("process-no-estimate-pressure-nan", "process", ["process", "pn.csv", "--calibration", "lab/cal.yaml", "-o",
                                                      "out", "--workers", "0", "--no-estimate", "--no-progress"],
      setup=edit_column("pn.csv", "pressure_pa", "nan"))
+def no_negative_counts(work, output):
+    m = re.search(r"(?<![\w.])-\d+ frames (lost|dropped)", output)
+    return f"a negative count printed: {m.group(0)!r}" if m else results_ok_sane(work, output)
+
+
+case("process-native-seq-all-zero", "process", ["process", "lab/native", "--calibration", "lab/cal.yaml", "-o", "out",
+                                                "--workers", "0", "--no-progress"], check=no_negative_counts)
+case("load-native-seq-all-zero", "load", chain("lab/native"), check=no_negative_counts)
 case("process-one-frame-session", "process", ["process", "one.csv", "--calibration", "lab/cal.yaml", "-o", "out",
                                               "--workers", "0", "--no-progress"],
      setup=edit_csv("one.csv", lambda h, r: [h, r[0]]))
@@ -1182,14 +1285,14 @@ case("process-header-only-native-and-csv", "process", ["process", "hdr.csv", "n0
 case("reproduce-output-is-file", "reproduce", ["reproduce", "-o", "lab/run.csv", "--quick", "--overwrite"],
      expect="error")
 case("reproduce-output-readonly-parent", "reproduce", ["reproduce", "-o", "ro/rep", "--quick"], expect="error",
-     setup=lambda w: ((w / "ro").mkdir(), (w / "ro").chmod(0o555)))
+     setup=lambda w: (readonly_dir(w / "ro"), None), timeout=240)
 case("demo-seconds-zero", "demo", ["demo", "-o", "d", "--seconds", "0"], expect="error")
 case("demo-seconds-nan", "demo", ["demo", "-o", "d", "--seconds", "nan"], expect="error")
 case("demo-rate-inf", "demo", ["demo", "-o", "d", "--rate", "inf"], expect="error")
 case("demo-rate-negative", "demo", ["demo", "-o", "d", "--rate", "-100"], expect="error")
 case("demo-output-is-file", "demo", ["demo", "-o", "lab/run.csv", "--overwrite"], expect="error")
 case("demo-output-readonly", "demo", ["demo", "-o", "ro/d"], expect="error",
-     setup=lambda w: ((w / "ro").mkdir(), (w / "ro").chmod(0o555)))
+     setup=lambda w: (readonly_dir(w / "ro"), None), timeout=240)
 case("demo-seconds-tiny", "demo", ["demo", "-o", "d", "--seconds", "0.01"], timeout=120)
 case("devices-no-sys", "devices", ["devices"])
 case("devices-extra-arg", "devices", ["devices", "extra"], expect="error")
@@ -1208,22 +1311,27 @@ case("env-numba-cache-not-writable", "load", chain("lab/run.csv"), env={"NUMBA_C
 case("env-mplconfigdir-not-writable", "plot", ["plot", "lab/res", "-o", "f.png"], env={"MPLCONFIGDIR": "/proc/x"})
 
 
-def closed_stdout(args):
+def broken_stdout(args):
+    """stdout is a pipe nobody reads (``bendsense ... | head -0``): quiet, no traceback."""
     def run(work, env, timeout):
-        p = subprocess.run([str(BIN), *args], cwd=work, env=env, stdout=subprocess.DEVNULL,
-                           stderr=subprocess.PIPE, timeout=timeout)
         r, w = os.pipe()
         os.close(r)
         try:
-            q = subprocess.run([str(BIN), *args[:1], "--help"], cwd=work, env=env, stdout=w,
-                               stderr=subprocess.PIPE, timeout=timeout)
+            q = subprocess.run([str(BIN), *args], cwd=work, env=env, stdout=w, stderr=subprocess.PIPE,
+                               timeout=timeout)
+        except subprocess.TimeoutExpired as e:
+            return None, str(e), True
         finally:
             os.close(w)
-        return q.returncode or p.returncode, (p.stderr + q.stderr).decode(errors="replace"), False
+        err = q.stderr.decode(errors="replace")
+        return (0 if "Traceback" not in err else q.returncode), err, False
     return run
 
 
-case("env-stdout-broken-pipe", "load", run=closed_stdout(chain("lab/run.csv")))
+case("env-stdout-broken-pipe-export", "export", run=broken_stdout(["load", "lab/run.csv", "export", "/dev/stdout",
+                                                                   "--overwrite"]))
+case("env-stdout-broken-pipe-help", "load", run=broken_stdout(["load", "--help"]))
+case("env-stdout-broken-pipe-devices", "devices", run=broken_stdout(["devices"]))
 case("cli-verbose-and-quiet", "load", ["-v", "-q", *chain("lab/run.csv")])
 case("cli-triple-verbose", "load", ["-vvv", *chain("lab/run.csv")])
 case("cli-help-of-chain-step", "estimate", ["load", "lab/run.csv", "estimate", "--help"])
@@ -1251,7 +1359,12 @@ api_case("api-session-0d", "bs.Session(np.float64(0), np.zeros(16), np.float64(5
 api_case("api-session-3d-signals", "bs.Session(np.arange(2.0), np.zeros((2, 4, 4)), np.zeros(2))", expect="error")
 api_case("api-session-negative-pressure", """
     s = bs.Session(np.arange(3.0), np.full((3, 16), 2000.0), np.full(3, -2e5))
-""", expect="error")
+    from bendsense import pipeline
+    r = pipeline.process(s, calibration=bs.Calibration.load(LAB + '/cal.yaml'))
+    st = np.asarray(getattr(r, "status", []))
+    if (st == "ok").any():
+        wrong("ok at -200 kPa (below vacuum)")
+""")
 api_case("api-session-string-signals", "bs.Session(np.arange(2.0), [['a'] * 16] * 2, np.zeros(2))", expect="error")
 api_case("api-session-select-out-of-range", """
     s = bs.read_session_csv(LAB + '/run.csv')
@@ -1310,7 +1423,7 @@ api_case("api-estimate-negative-pressure", """
     s = bs.read_session_csv(LAB + '/run.csv')
     e = bs.estimate_force(bs.reconstruct(s.signals, c), -np.abs(s.pressure_pa), calibration=c)
     finite_ok(e)
-    if (np.atleast_1d(e.status) == 'ok').any():
+    if trusted(e).any():
         wrong('status ok at a negative (vacuum beyond the range) pressure')
 """)
 api_case("api-estimate-pressure-list", """
@@ -1338,7 +1451,7 @@ api_case("api-estimate-pressure-1e308", """
     c = bs.Calibration.load(LAB + '/cal.yaml')
     s = bs.read_session_csv(LAB + '/run.csv')
     e = bs.estimate_force(bs.reconstruct(s.signals, c), np.full(len(s.t_s), 1e308), calibration=c)
-    if (np.atleast_1d(e.status) == 'ok').any():
+    if trusted(e).any():
         wrong('status ok at 1e308 Pa')
 """)
 api_case("api-estimate-constraint-bad", """
@@ -1365,7 +1478,8 @@ api_case("api-estimate-max-iter-zero", """
     e = bs.estimate_force(bs.reconstruct(s.signals, c), s.pressure_pa, max_iter=0)
     finite_ok(e)
 """)
-api_case("api-estimate-not-a-shape", "bs.estimate_force(np.zeros((3, 16)), 5e4)", expect="error")
+api_case("api-estimate-curvatures-zero", "finite_ok(bs.estimate_force(np.zeros((3, 16)), 5e4))")
+api_case("api-estimate-curvatures-wrong-width", "bs.estimate_force(np.zeros((3, 7)), 5e4)", expect="error")
 api_case("api-estimate-config-path", """
     c = bs.Calibration.load(LAB + '/cal.yaml')
     s = bs.read_session_csv(LAB + '/run.csv')
@@ -1377,8 +1491,11 @@ api_case("api-solve-beam-ei-negative", "bs.solve_beam(0.13, -2.5e-3, 5.0)", expe
 api_case("api-solve-beam-length-nan", "bs.solve_beam(float('nan'), 2.5e-3, 5.0)", expect="error")
 api_case("api-solve-beam-force-1e308", """
     b = bs.solve_beam(0.13, 2.5e-3, 5.0, force_n=(1e308, 0))
-    print(b)
-""", expect="error")
+    if np.all(b.success) and not np.isfinite(np.asarray(b.positions_m)).all():
+        wrong("success with non-finite positions")
+    if np.all(b.success):
+        wrong("success under a tip force of 1e308 N")
+""")
 api_case("api-solve-beam-force-3-components", "bs.solve_beam(0.13, 2.5e-3, 5.0, force_n=(1, 2, 3))",
          expect="error")
 api_case("api-solve-beam-method-bad", "bs.solve_beam(0.13, 2.5e-3, 5.0, method='rk4')", expect="error")
@@ -1403,7 +1520,7 @@ api_case("api-config-mutate-then-estimate", """
         c = bs.Calibration.load(LAB + '/cal.yaml')
         s = bs.read_session_csv(LAB + '/run.csv')
         e = bs.estimate_force(bs.reconstruct(s.signals, c), s.pressure_pa, config=cfg)
-        if (np.atleast_1d(e.status) == 'ok').any():
+        if trusted(e).any():
             wrong('ok from a config mutated to a negative length')
 """)
 api_case("api-pipeline-process-native-path", """
