@@ -1,4 +1,5 @@
 #!/usr/bin/env python
+# ruff: noqa: D103  (the small builders of the cases below say what they do in their names)
 """A re-runnable campaign of hostile inputs against every command and the public API.
 
 Each case runs the real ``bendsense`` (the one next to ``sys.executable``) or a snippet
@@ -46,8 +47,8 @@ import tempfile
 import textwrap
 import time
 from collections import Counter, defaultdict
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 BIN = Path(sys.executable).with_name("bendsense")
 PY = sys.executable
@@ -104,6 +105,8 @@ class Case:
 
 @dataclasses.dataclass
 class Outcome:
+    """What one case did."""
+
     case: Case
     kind: str
     detail: str
@@ -263,8 +266,11 @@ def results_ok_sane(work, output, root="out"):
 
 
 def _far_from_truth(head, row):
-    """The simulated truth travels with the lab's session (input_fx_n, input_fy_n): an ok
-    force more than TRUTH_SIGMAS standard deviations (plus a small floor) from it is not ok."""
+    """Why an ok force is far from the simulated truth, or None.
+
+    The truth travels with the lab's session (input_fx_n, input_fy_n); an ok force more
+    than TRUTH_SIGMAS standard deviations (plus a small floor) from it is not ok.
+    """
     try:
         for axis in ("x", "y"):
             f = float(row[head.index(f"f{axis}_n")])
@@ -740,9 +746,11 @@ case("load-100k-frames", "load", chain("big.csv", tail=["--calibration", "lab/ca
      timeout=120, setup=edit_csv("big.csv", lambda h, r: [h, *(
          ",".join([f"{k * 1e-3:.3f}", *x.split(",")[1:]]) for k, x in enumerate((r * 100000)[:100000]))]))
 case("load-time-1e308", "load", chain("t308.csv"), setup=edit_column("t308.csv", "t_s", "1e308", row=0))
-case("load-time-negative-zero", "load", chain("tneg0.csv"), setup=edit_column("tneg0.csv", "t_s", "-0", row=0))
+case("load-time-negative-zero", "load", chain("tneg0.csv"),
+     setup=edit_column("tneg0.csv", "t_s", "-0", row=0))
 case("load-time-negative", "load", chain("tneg.csv"),
-     setup=edit_csv("tneg.csv", lambda h, r: [h, *(",".join([str(-100 + k), *x.split(",")[1:]]) for k, x in enumerate(r))]))
+     setup=edit_csv("tneg.csv", lambda h, r: [h, *(",".join([str(-100 + k), *x.split(",")[1:]])
+                                                   for k, x in enumerate(r))]))
 case("load-signal-1e308", "load", chain("s308.csv"), check=no_ok_rows,
      setup=edit_column("s308.csv", "ch3", "1e308"))
 case("load-signal-negative-zero", "load", chain("sneg0.csv"), setup=edit_column("sneg0.csv", "ch3", "-0.0"))
@@ -867,9 +875,11 @@ case("native-frames-bin-directory", "load", chain("nd"), expect="error",
 case("native-meta-directory", "load", chain("nm"), expect="error",
      setup=native_copy("nm", lambda d: ((d / "meta.yaml").unlink(), (d / "meta.yaml").mkdir())))
 case("native-meta-bom", "load", chain("nb"), expect="ok",
-     setup=native_copy("nb", lambda d: (d / "meta.yaml").write_bytes(b"\xef\xbb\xbf" + (d / "meta.yaml").read_bytes())))
+     setup=native_copy("nb", lambda d: (d / "meta.yaml").write_bytes(
+         b"\xef\xbb\xbf" + (d / "meta.yaml").read_bytes())))
 case("native-meta-crlf", "load", chain("nc"), expect="ok",
-     setup=native_copy("nc", lambda d: (d / "meta.yaml").write_bytes((d / "meta.yaml").read_bytes().replace(b"\n", b"\r\n"))))
+     setup=native_copy("nc", lambda d: (d / "meta.yaml").write_bytes(
+         (d / "meta.yaml").read_bytes().replace(b"\n", b"\r\n"))))
 case("native-meta-start-time-garbage", "load", chain("ns"), setup=native_copy("ns", meta_set("start_time", [1, 2])))
 case("native-meta-config-snapshot-garbage", "load", chain("ncf"),
      setup=native_copy("ncf", meta_set("config", "not a config")))
@@ -1009,17 +1019,20 @@ case("calibrate-sleeve-both", "calibrate", ["calibrate", "lab/calsim/manifest.ya
 # --- identify ---------------------------------------------------------------------------------------
 
 case("identify-bend-crlf-bom", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"], expect="ok",
-     setup=lambda w: (w / "b.csv").write_bytes(b"\xef\xbb\xbf" + (w / "lab/bend.csv").read_bytes().replace(b"\n", b"\r\n")))
+     setup=lambda w: (w / "b.csv").write_bytes(
+         b"\xef\xbb\xbf" + (w / "lab/bend.csv").read_bytes().replace(b"\n", b"\r\n")))
 case("identify-bend-one-row", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"], expect="error",
      setup=text("b.csv", "pressure_kpa,bending_angle_deg\n60,80\n"))
 case("identify-bend-all-same-pressure", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"],
-     check=lambda w, o: None if "not identifiable" in o else "a fit from one pressure level, without a warning", setup=text("b.csv", "pressure_kpa,bending_angle_deg\n60,80\n60,81\n60,79\n60,80\n"))
+     check=lambda w, o: None if "not identifiable" in o else "a fit from one pressure level, without a warning",
+     setup=text("b.csv", "pressure_kpa,bending_angle_deg\n60,80\n60,81\n60,79\n60,80\n"))
 case("identify-bend-negative-angles", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"],
      expect="error", setup=text("b.csv", "pressure_kpa,bending_angle_deg\n20,-25\n40,-55\n60,-80\n90,-130\n"))
 case("identify-bend-angle-1e308", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"],
      expect="error", setup=text("b.csv", "pressure_kpa,bending_angle_deg\n20,25\n40,1e308\n60,80\n90,130\n"))
 case("identify-bend-radians-in-deg-column", "identify", ["identify", "free-bending", "b.csv", "-o", "c.yaml"],
-     expect="error", setup=text("b.csv", "pressure_kpa,bending_angle_deg\n20,0.44\n40,0.96\n60,1.4\n90,2.27\n120,3.07\n"))
+     expect="error",
+     setup=text("b.csv", "pressure_kpa,bending_angle_deg\n20,0.44\n40,0.96\n60,1.4\n90,2.27\n120,3.07\n"))
 case("identify-fix-all", "identify", ["identify", "free-bending", "lab/bend.csv", "-o", "c.yaml", "--fix", "mu",
                                       "--fix", "mu_s", "--fix", "prebend"])
 case("identify-fix-same-twice", "identify", ["identify", "free-bending", "lab/bend.csv", "-o", "c.yaml",
@@ -1312,7 +1325,7 @@ case("env-mplconfigdir-not-writable", "plot", ["plot", "lab/res", "-o", "f.png"]
 
 
 def broken_stdout(args):
-    """stdout is a pipe nobody reads (``bendsense ... | head -0``): quiet, no traceback."""
+    """Standard output is a pipe nobody reads (``bendsense ... | head -0``): quiet, no traceback."""
     def run(work, env, timeout):
         r, w = os.pipe()
         os.close(r)
