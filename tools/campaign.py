@@ -871,6 +871,12 @@ case("estimate-follower-positions-paper", "estimate",
      chain("lab/run.csv", tail=["--calibration", "lab/cal.yaml", "reconstruct", "estimate", "--constraint",
                                 "follower", "--method", "paper", "--objective", "positions", "save", "out"]),
      timeout=120)
+case("estimate-wrong-constraint-horizontal", "estimate",
+     chain("lab/run.csv", tail=["--calibration", "lab/cal.yaml", "reconstruct", "estimate", "--constraint",
+                                "horizontal", "save", "out"]))
+case("estimate-wrong-constraint-normal-push-only", "estimate",
+     chain("lab/run.csv", tail=["--calibration", "lab/cal.yaml", "reconstruct", "estimate", "--constraint",
+                                "normal", "--push-only", "save", "out"]))
 case("estimate-calibration-from-other-sensor", "estimate", chain("lab/run.csv"), check=no_ok_rows,
      setup=edit_yaml("lab/cal.yaml", "lab/cal.yaml",
                      lambda d: d.update(offset=[x + 3000 for x in d["offset"]])), may_change=("lab/cal.yaml",))
