@@ -567,12 +567,12 @@ def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
 
 
 def warm_up(config, calibration, *, constraint=None, method=None, objective=None, estimate: bool = True) -> None:
-    """Compile or load the kernels a batch uses, here, before any worker starts.
+    """Compile or load the kernels a batch uses, in one worker, before the others start.
 
-    On a cold cache (the first run after an install) this process compiles them once,
-    announced on stderr, and writes numba's cache; the workers then only load it. Without
-    this every worker would compile the same kernels at the same time and write the same
-    cache files concurrently. Runs :func:`bendsense.pipeline.process` on a session of 100
+    :func:`process_sessions` runs it as the first task and waits for it: on a cold cache
+    (the first run after an install) that worker compiles the kernels once, announced on
+    stderr, and writes numba's cache; the other workers then only load it. Without this
+    every worker would compile the same kernels at the same time. Runs :func:`bendsense.pipeline.process` on a session of 100
     flat frames (the batch kernels) at the middle of the pressure range, with the batch's
     options.
     """
@@ -788,20 +788,21 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
             for i, path, name in tasks:
                 finish(i, process_session(path, out_dir / name, name=name, **options))
         else:
-            if tasks:  # compile once, here, before any worker could start compiling the same kernels
-                warm_up(options["config"], options["calibration"], constraint=options["constraint"],
-                        method=options["method"], objective=options["objective"], estimate=options["estimate"])
             if executor is None and tasks:
                 own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(tasks)))
-            elif tasks and not isinstance(executor, cf.ProcessPoolExecutor):
-                # a cluster (Dask): one worker compiles or loads first, the others then find its cache
-                executor.submit(warm_up, options["config"], options["calibration"], constraint=options["constraint"],
-                                method=options["method"], objective=options["objective"],
-                                estimate=options["estimate"]).result()
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description.replace(" workers)", " workers, 1 numba thread each)")
-            with _started_quietly() if own is not None else contextlib.nullcontext():
+            quietly = _started_quietly if own is not None else contextlib.nullcontext
+            if tasks:
+                # compile once: one worker compiles the kernels (or loads them) before any other starts, and the
+                # others find its cache. Not here: numba's threads in this process would break a forking pool.
+                with quietly():
+                    first = executor.submit(warm_up, options["config"], options["calibration"],
+                                            constraint=options["constraint"], method=options["method"],
+                                            objective=options["objective"], estimate=options["estimate"])
+                first.result()
+            with quietly():
                 for i, path, name in tasks:
                     future = executor.submit(process_session, path, out_dir / name, name=name, **options)
                     futures[future] = (i, path, name)

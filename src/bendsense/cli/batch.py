@@ -85,8 +85,8 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
     finished so far is complete, the others have no output, one line says how many
     finished, and the exit code is 130 (Ctrl-C) or 143 (SIGTERM). Running the same
     command again skips the finished sessions and processes the rest. The kernels
-    are compiled (first run after an install) or loaded here once, before the
-    workers start.
+    are compiled (first run after an install) or loaded once, by one worker,
+    before the others start.
 
     \b
     Example:
