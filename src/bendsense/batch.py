@@ -572,9 +572,9 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     :func:`process_sessions` runs it as the first task and waits for it: on a cold cache
     (the first run after an install) that worker compiles the kernels once, announced on
     stderr, and writes numba's cache; the other workers then only load it. Without this
-    every worker would compile the same kernels at the same time. Runs :func:`bendsense.pipeline.process` on a session of 100
-    flat frames (the batch kernels) at the middle of the pressure range, with the batch's
-    options.
+    every worker would compile the same kernels at the same time. Runs
+    :func:`bendsense.pipeline.process` on a session of 100 flat frames (a worker's
+    per-frame kernel) at the middle of the pressure range, with the batch's options.
     """
     import numpy as np
 
@@ -765,6 +765,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
     finished (a rerun skips them).
     """
     from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
 
     bar = tqdm(total=len(tasks), unit="session", desc="process", disable=not progress or not tasks, leave=False)
     done: set = set()
@@ -775,8 +776,9 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
         bar.update(1)
         if row.status == "ok":
             output.add_to_manifest(out_dir, [f"{row.name}/"])
-        if row.status == "failed":
-            log.warning("%s: failed: %s", row.name, row.reason)
+        if row.status == "failed":  # above the progress bar, not glued to it
+            with contextlib.nullcontext() if bar.disable else logging_redirect_tqdm():
+                log.warning("%s: failed: %s", row.name, row.reason)
 
     own = None
     futures: dict = {}

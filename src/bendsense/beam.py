@@ -256,7 +256,7 @@ def _grid(length_m: float, s_m) -> np.ndarray:
         raise ArgumentError(f"s_m: expected a non-empty 1-D array of arc lengths [m], got shape {s.shape}")
     tol = 1e-12 * length_m
     if s.min() < -tol or s.max() > length_m + tol:
-        raise ArgumentError(f"s_m: must lie in [0, length_m] = [0, {length_m!r}], got [{s.min()!r}, {s.max()!r}]")
+        raise ArgumentError(f"s_m: must lie in [0, length_m] = [0, {length_m:g}], got [{s.min():g}, {s.max():g}]")
     return np.clip(s, 0.0, length_m)
 
 

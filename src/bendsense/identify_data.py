@@ -116,6 +116,10 @@ def read_free_bending_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarr
     if aname == "bending_angle_rad" and top > 2.0 * math.pi:
         raise SessionError(f"{path}: column bending_angle_rad: angles up to {top:g} rad (over a full turn); "
                            "looks like degrees: name the column bending_angle_deg")
+    if top > 2.0 * math.pi:  # no bending actuator winds more than a full turn
+        row = int(np.argmax(np.abs(angle)))
+        raise SessionError(f"{path}: line {row + 2}, column {aname}: a bending angle of {top * 180 / math.pi:g}° "
+                           "is more than a full turn; no bending actuator winds that far")
     return pressure, angle
 
 

@@ -29,11 +29,20 @@ class Manifest:
 _STRIP_KEYS = ("radius_m", "radius_mm", "recording")
 
 
+#: Smallest strip radius [m]: a sensor bent tighter than about its strip gap (1 mm) measures nothing
+#: the shifts' model holds for (the tightest curvature it resolves is ~1/d, bendsense.bounds).
+MIN_RADIUS_M = 1e-3
+
+
 def _radius_m(where: str, item: dict) -> float:
     """The strip radius of a manifest entry [m]: ``radius_m``, or ``radius_mm`` converted."""
     if "radius_m" in item:
         # a strip radius over 1 m is millimetres written as metres
-        return check.length_m(f"{where}.radius_m", item["radius_m"], error=ConfigError)
+        radius = check.length_m(f"{where}.radius_m", item["radius_m"], error=ConfigError)
+        if radius < MIN_RADIUS_M:
+            raise ConfigError(f"{where}.radius_m: expected a strip radius of at least 1 mm (0.001 m), got "
+                              f"{radius:g} m; no sensor bends that tightly")
+        return radius
     radius_mm = check.number(f"{where}.radius_mm", item["radius_mm"], error=ConfigError, positive=True)
     if radius_mm < 1:
         raise ConfigError(f"{where}.radius_mm: expected a radius in millimetres >= 1, got {radius_mm:g}; "

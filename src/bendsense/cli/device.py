@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import signal
 import sys
 import threading
@@ -24,6 +25,8 @@ from bendsense.cli._common import (
     objective_option,
     quiet,
 )
+
+log = logging.getLogger("bendsense")
 
 
 @click.command("devices")
@@ -303,6 +306,9 @@ def record(
         _signals.note(interrupted, kept)
         raise interrupted
     click.echo(f"done: {stats.records} frames written to {output}{losses}", err=True)
+    if stats.records == 0:
+        log.warning("%s: no sample frames arrived; the recording %s holds none (is the board streaming samples?)",
+                    port, output)
     if estimate:
         click.echo(estimated, err=True)
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import numbers
+import os
 import queue
 import threading
 import time
@@ -191,6 +192,7 @@ class Driver:
         import serial
 
         kwargs = {"baudrate": self.baudrate, "timeout": self.read_timeout_s, **self.serial_kwargs}
+        _check_port_path(self.port)
         try:
             try:
                 return serial.serial_for_url(self.port, write_timeout=1.0, **kwargs)
@@ -567,3 +569,21 @@ class Driver:
         if bad - (over - o0) != b0:
             self._emit("malformed", f"{bad - b0 - (over - o0)} malformed frame(s) (total {bad})")
         self._seen = (crc, bad, over)
+
+
+def _check_port_path(port: str) -> None:
+    """Refuse a path that exists but is no terminal device (a directory, a regular file, a FIFO), naming what it is."""
+    import stat
+
+    if "://" in port:
+        return  # a pyserial URL (loop://, rfc2217://, socket://)
+    try:
+        mode = os.stat(port).st_mode
+    except OSError:
+        return  # missing or unreadable: pyserial's own message names it
+    if not stat.S_ISCHR(mode):
+        from bendsense._io import file_kind
+
+        kind = file_kind(mode) or "a regular file"
+        raise DeviceError(f"{port}: {kind}, not a serial port (give the board's port, e.g. /dev/ttyACM0; "
+                          "'bendsense devices' lists them)")

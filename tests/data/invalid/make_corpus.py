@@ -229,6 +229,8 @@ man("strip_unknown_key.yaml", r"strips\[0\]\.radius_cm: unknown key",
     {"flat": "rec/flat.csv", "strips": [{"radius_cm": 4, "recording": "rec/r040.csv"}]})
 man("both_radii.yaml", r"strips\[0\]: give exactly one of radius_m, radius_mm, got both",
     {"flat": "rec/flat.csv", "strips": [{"radius_m": 0.04, "radius_mm": 40, "recording": "rec/r040.csv"}]})
+man("radius_tiny.yaml", r"strips\[0\]\.radius_m: expected a strip radius of at least 1 mm \(0\.001 m\), got 1e-300 m",
+    {"flat": "rec/flat.csv", "strips": [{"radius_m": 1e-300, "recording": "rec/r040.csv"}]})
 man("no_recording.yaml", r"strips\[0\]: missing key recording", {"flat": "rec/flat.csv", "strips": [{"radius_m": 0.04}]})
 man("recording_number.yaml", r"strips\[0\]\.recording: expected a file name, got 40",
     {"flat": "rec/flat.csv", "strips": [{"radius_m": 0.04, "recording": 40}]})
