@@ -26,7 +26,8 @@ def test_a_bending_angle_beyond_a_full_turn_is_refused_naming_its_line(tmp_path)
     assert read_free_bending_csv(path)[1][-1] == pytest.approx(np.deg2rad(350))
 
 
-@pytest.mark.parametrize("seq, lost", [([5, 5, 5, 5], 0), ([0, 1, 4, 5], 2), ([0, 2, 2, 5], 3), ([65534, 65535, 0, 2], 1)])
+@pytest.mark.parametrize("seq, lost", [([5, 5, 5, 5], 0), ([0, 1, 4, 5], 2), ([0, 2, 2, 5], 3),
+                                       ([65534, 65535, 0, 2], 1)])
 def test_frames_lost_counts_the_gaps_never_a_repeat(seq, lost, caplog):
     records = np.zeros(len(seq), dtype=record_dtype(2))
     records["seq"] = seq
