@@ -791,8 +791,7 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     signals = np.array(records["adc"], dtype=float).reshape(len(records), n_ch)
     seq = _unwrap16(records["seq"])
     meta = dict(meta)
-    step = np.diff(seq)  # a repeated or reset sequence number (a board restart) is no loss
-    meta["frames_lost"] = int(np.sum(step[step > 1] - 1))
+    meta["frames_lost"] = int(np.maximum(np.diff(seq) - 1, 0).sum())  # the gaps; a repeated seq is no loss
     drops = _unwrap16(records["tx_drops"]) if "tx_drops" in records.dtype.names else np.zeros(0, np.int64)
     meta["tx_drops"] = int(drops[-1] - drops[0]) if drops.size else 0
     check_pressure_column("pressure_pa", pressure, f"{source or 'session'}/{FRAMES}")
