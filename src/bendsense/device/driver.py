@@ -17,6 +17,7 @@ hanging.
 
 from __future__ import annotations
 
+import errno
 import logging
 import numbers
 import os
@@ -192,7 +193,6 @@ class Driver:
         import serial
 
         kwargs = {"baudrate": self.baudrate, "timeout": self.read_timeout_s, **self.serial_kwargs}
-        _check_port_path(self.port)
         try:
             try:
                 return serial.serial_for_url(self.port, write_timeout=1.0, **kwargs)
@@ -200,6 +200,8 @@ class Driver:
                 # some URL handlers (rfc2217://) cannot bound writes; open them without
                 return serial.serial_for_url(self.port, **kwargs)
         except (serial.SerialException, OSError, ValueError, NotImplementedError) as err:
+            if getattr(err, "errno", None) != errno.EACCES:  # denied: that is the message, whatever the path is
+                _check_port_path(self.port)  # a directory or a regular file: say so, not pyserial's ioctl error
             text = " ".join(str(err).split())[:200]
             raise DeviceError(f"{self.port}: cannot open serial port ({text})") from None
 
