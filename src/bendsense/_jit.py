@@ -291,7 +291,10 @@ class Background:
         import tempfile
 
         module, function = self.target.split(":")
-        self._log = tempfile.TemporaryFile(mode="w+")
+        try:
+            self._log = tempfile.TemporaryFile(mode="w+")
+        except OSError:  # no temporary directory to write to: this process compiles on its first call
+            return self
         code = ("import os, sys, threading, time\n"
                 "parent = os.getppid()\n"
                 "def watch():\n"
