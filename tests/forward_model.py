@@ -7,10 +7,13 @@ contain. Used by the force-validation tests (issue 12) and tested in
 ``tests/test_forward_model.py`` against closed forms and the library.
 
 - :func:`free_bending_k0` — K0(P) (paper eq. 8–12), Gauss–Legendre 40 × 40 × 40, brentq.
-- :func:`solve_beam_bvp` — ``EI φ'' = sin φ G_y − cos φ G_x``, ``φ(0) = 0``,
-  ``φ'(L) = K0``, positions integrated as two more states; continuation in the load.
-- :func:`forward` — for a config, pressure and tip force: φ at the coil positions L_i,
-  the exact shifts ``S_i = d φ(L_i)``, positions.
+- :func:`solve_beam_bvp` — ``EI φ'' = sin φ G_y − cos φ G_x``, ``G = F [s < s_c] +
+  w (L − s)`` (a point load at ``s_c ≤ L``: the BVP is split there exactly), ``φ(0) = 0``
+  or a compliant base ``φ(0) = c M_base``, ``φ'(L) = K0``, positions integrated as two
+  more states; continuation in the load.
+- :func:`forward` — for a config, pressure and force: φ at the coil positions L_i,
+  the exact shifts ``S_i = d (φ(L_i) − φ(0))``, positions; the true actuator may depart
+  from the config (K0, EI, load point, base compliance).
 - :class:`HiddenSensor` — exact shifts → ADC-like signals through a monotone nonlinear
   odd/even map (not a polynomial), per-channel offsets and Gaussian noise; writes the
   flat and strip recordings and the manifest that ``bendsense calibrate`` reads.
@@ -89,12 +92,22 @@ class BeamShape:
     tip_angle_rad: float
 
 
-def solve_beam_bvp(length_m, ei_nm2, k0_per_m, force_n=(0.0, 0.0), load_n_per_m=(0.0, 0.0), s_m=None, tol=1e-9):
-    """Solve ``EI φ'' = sin φ G_y − cos φ G_x``, ``G = F + w (L − s)``, ``φ(0) = 0``, ``φ'(L) = K0``.
+def solve_beam_bvp(length_m, ei_nm2, k0_per_m, force_n=(0.0, 0.0), load_n_per_m=(0.0, 0.0), s_m=None, tol=1e-9,
+                   *, contact_s_m=None, base_compliance_rad_per_nm=0.0):
+    """Solve ``EI φ'' = sin φ G_y − cos φ G_x``, ``G = F [s < s_c] + w (L − s)``, ``φ'(L) = K0``.
 
-    States ``(φ, φ', x, y)`` with ``x' = sin φ``, ``y' = cos φ``, ``x(0) = y(0) = 0``.
-    Started from the free arc and continued in the load (0 → 1 in steps that halve
-    on failure), so the solution is the branch connected to the unloaded shape.
+    The base is clamped (``φ(0) = 0``) or compliant: ``φ(0) = c M_b`` with ``c =
+    base_compliance_rad_per_nm`` and ``M_b = EI (φ'(0) − K0)`` the moment the loads put on
+    the base (positive when it bends toward ``+x``: the base turns with the load), so an unloaded arc keeps ``φ(0) = 0``.
+    ``contact_s_m`` (default ``L``): the force acts at ``s_c``; beyond it the beam carries
+    only its weight. The BVP is split exactly at ``s_c``: each part is mapped onto
+    ``τ ∈ [0, 1]`` and the two are joined by continuity of ``φ``, ``φ'`` (the moment is
+    continuous at a point force) and position, a two-point problem of 8 states.
+
+    States ``(φ, φ', x, y)`` per part with ``x' = sin φ``, ``y' = cos φ``,
+    ``x(0) = y(0) = 0``. Started from the free arc and continued in the load (0 → 1 in
+    steps that halve on failure), so the solution is the branch connected to the unloaded
+    shape.
 
     Raises
     ------
@@ -102,47 +115,80 @@ def solve_beam_bvp(length_m, ei_nm2, k0_per_m, force_n=(0.0, 0.0), load_n_per_m=
         If ``solve_bvp`` does not converge.
     """
     L, ei, k0 = float(length_m), float(ei_nm2), float(k0_per_m)
+    sc = L if contact_s_m is None else float(contact_s_m)
+    if not 0.0 < sc <= L:
+        raise ValueError(f"contact_s_m: expected 0 < s_c <= L = {L}, got {sc}")
+    comp = float(base_compliance_rad_per_nm)
     F = np.asarray(force_n, dtype=float)
     w = np.asarray(load_n_per_m, dtype=float)
     s_out = np.linspace(0.0, L, 41) if s_m is None else np.asarray(s_m, dtype=float)
+    split = sc < L
+    # part a: s = sc τ (force and weight), part b: s = sc + (L − sc) τ (weight only)
+    parts = [(0.0, sc, 1.0)] + ([(sc, L - sc, 0.0)] if split else [])
 
     def make(scale):
         f, q = scale * F, scale * w
 
-        def fun(s, y):
-            gx = f[0] + q[0] * (L - s)
-            gy = f[1] + q[1] * (L - s)
-            sn, cs = np.sin(y[0]), np.cos(y[0])
-            return np.vstack([y[1], (sn * gy - cs * gx) / ei, sn, cs])
+        def fun(tau, y):
+            out = np.empty_like(y)
+            for k, (s0, h, on) in enumerate(parts):
+                s = s0 + h * tau
+                gx = on * f[0] + q[0] * (L - s)
+                gy = on * f[1] + q[1] * (L - s)
+                z = y[4 * k: 4 * k + 4]
+                sn, cs = np.sin(z[0]), np.cos(z[0])
+                out[4 * k: 4 * k + 4] = h * np.vstack([z[1], (sn * gy - cs * gx) / ei, sn, cs])
+            return out
 
-        def jac(s, y):
-            gx = f[0] + q[0] * (L - s)
-            gy = f[1] + q[1] * (L - s)
-            sn, cs = np.sin(y[0]), np.cos(y[0])
-            out = np.zeros((4, 4, s.size))
-            out[0, 1] = 1.0
-            out[1, 0] = (cs * gy + sn * gx) / ei
-            out[2, 0] = cs
-            out[3, 0] = -sn
+        def jac(tau, y):
+            out = np.zeros((y.shape[0], y.shape[0], tau.size))
+            for k, (s0, h, on) in enumerate(parts):
+                s = s0 + h * tau
+                gx = on * f[0] + q[0] * (L - s)
+                gy = on * f[1] + q[1] * (L - s)
+                sn, cs = np.sin(y[4 * k]), np.cos(y[4 * k])
+                i = 4 * k
+                out[i, i + 1] = h
+                out[i + 1, i] = h * (cs * gy + sn * gx) / ei
+                out[i + 2, i] = h * cs
+                out[i + 3, i] = -h * sn
             return out
 
         return fun, jac
 
     def bc(ya, yb):
-        return np.array([ya[0], ya[2], ya[3], yb[1] - k0])
+        # compliant base: φ(0) − c EI (φ'(0) − K0) = 0
+        res = [ya[0] - comp * ei * (ya[1] - k0), ya[2], ya[3]]
+        if split:
+            res += [yb[0] - ya[4], yb[1] - ya[5], yb[2] - ya[6], yb[3] - ya[7]]
+        res.append(yb[-3] - k0)
+        return np.array(res)
+
+    n = 4 * len(parts)
 
     def bc_jac(ya, yb):
-        da, db = np.zeros((4, 4)), np.zeros((4, 4))
-        da[0, 0] = da[1, 2] = da[2, 3] = 1.0
-        db[3, 1] = 1.0
+        da, db = np.zeros((n, n)), np.zeros((n, n))
+        da[0, 0], da[0, 1] = 1.0, -comp * ei
+        da[1, 2] = da[2, 3] = 1.0
+        if split:
+            for j in range(4):
+                db[3 + j, j] = 1.0
+                da[3 + j, 4 + j] = -1.0
+        db[n - 1, n - 3] = 1.0
         return da, db
 
-    mesh = np.unique(np.concatenate([np.linspace(0.0, L, 81), s_out]))
-    arc = k0 * mesh
-    with np.errstate(invalid="ignore", divide="ignore"):
-        x0 = np.where(abs(k0) > 1e-12, (1 - np.cos(arc)) / (k0 if k0 else 1.0), 0.0)
-        y0 = np.where(abs(k0) > 1e-12, np.sin(arc) / (k0 if k0 else 1.0), mesh)
-    guess = np.vstack([arc, np.full_like(mesh, k0), x0, y0])
+    tau_out = [np.clip((s_out - s0) / h, 0.0, 1.0) for s0, h, _ in parts]
+    mesh = np.unique(np.concatenate([np.linspace(0.0, 1.0, 81), *tau_out]))
+    mesh = mesh[np.concatenate([[True], np.diff(mesh) > 1e-9])]  # no near-duplicate nodes
+    rows = []
+    for s0, h, _ in parts:
+        s = s0 + h * mesh
+        arc = k0 * s
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x0 = np.where(abs(k0) > 1e-12, (1 - np.cos(arc)) / (k0 if k0 else 1.0), 0.0)
+            y0 = np.where(abs(k0) > 1e-12, np.sin(arc) / (k0 if k0 else 1.0), s)
+        rows += [arc, np.full_like(mesh, k0), x0, y0]
+    guess = np.vstack(rows)
     done, step, sol = 0.0, 1.0, None
     while done < 1.0:
         target = min(1.0, done + step)
@@ -157,8 +203,12 @@ def solve_beam_bvp(length_m, ei_nm2, k0_per_m, force_n=(0.0, 0.0), load_n_per_m=
             step /= 2
             if step < 1e-3:
                 raise RuntimeError(f"solve_bvp did not converge at load fraction {target:.4g}: {trial.message}")
-    y = sol.sol(s_out)
-    tip = sol.sol(L)
+    y = np.empty((4, s_out.size))
+    for k, (s0, h, _) in enumerate(parts):
+        here = (s_out <= sc) if k == 0 else (s_out > sc)
+        z = sol.sol(tau_out[k][here])[4 * k: 4 * k + 4]
+        y[:, here] = z  # the states are φ and dφ/ds in both parts
+    tip = sol.sol(1.0)[-4:]
     return BeamShape(
         s_m=s_out,
         angle_rad=y[0],
@@ -179,26 +229,34 @@ class Truth:
     shifts_m: np.ndarray  # S_i = d φ(L_i), (N,)
     positions_m: np.ndarray  # r(L_i), (N, 2)
     shape: BeamShape
+    base_angle_rad: float = 0.0  # φ(0): the base's turn under load (a compliant base)
 
 
-def forward(config, pressure_pa, force_n, *, material=None, stiffness=None, s_m=None):
-    """Exact sensor shifts of the beam at pressure P under the tip force F and gravity.
+def forward(config, pressure_pa, force_n, *, material=None, stiffness=None, s_m=None, k0_scale=1.0,
+            contact_s_m=None, base_compliance_rad_per_nm=0.0):
+    """Exact sensor shifts of the beam at pressure P under the force F and gravity.
 
     ``material`` / ``stiffness``: mappings overriding the config's parameters (the
-    "true" actuator differs from the identified one).
+    "true" actuator differs from the identified one); ``k0_scale``: the true natural
+    curvature is ``k0_scale K0(P)``. ``contact_s_m``: the force acts at ``s_c`` (default
+    the tip). ``base_compliance_rad_per_nm``: the base turns by ``c M_b`` under the base
+    moment (:func:`solve_beam_bvp`); the strips are pinned at the base and turn with it, so
+    the sensor sees ``S_i = d (φ(L_i) − φ(0))`` and ``angles_rad`` are those relative angles.
     """
     stiff = dict(vars(config.stiffness))
     stiff.update(stiffness or {})
     ei = stiff["ei0_nm2"] + stiff["ei1_nm2_per_pa"] * float(pressure_pa)
-    k0 = free_bending_k0(config, pressure_pa, material)
+    k0 = k0_scale * free_bending_k0(config, pressure_pa, material)
     ends = np.cumsum(config.sensor.lengths_m)
     s_all = np.unique(np.concatenate([ends, [0.0], [] if s_m is None else np.asarray(s_m, dtype=float)]))
     q = config.actuator.mass_kg * config.gravity.g_m_per_s2 / config.actuator.length_m
     shape = solve_beam_bvp(
-        config.actuator.length_m, ei, k0, force_n, q * np.asarray(config.gravity.direction), s_m=s_all
+        config.actuator.length_m, ei, k0, force_n, q * np.asarray(config.gravity.direction), s_m=s_all,
+        contact_s_m=contact_s_m, base_compliance_rad_per_nm=base_compliance_rad_per_nm,
     )
     idx = np.searchsorted(shape.s_m, ends)
-    angles = shape.angle_rad[idx]
+    base = float(shape.angle_rad[0])
+    angles = shape.angle_rad[idx] - base
     return Truth(
         pressure_pa=float(pressure_pa),
         force_n=np.asarray(force_n, dtype=float),
@@ -206,6 +264,7 @@ def forward(config, pressure_pa, force_n, *, material=None, stiffness=None, s_m=
         shifts_m=config.sensor.strip_gap_m * angles,
         positions_m=shape.positions_m[idx],
         shape=shape,
+        base_angle_rad=base,
     )
 
 

@@ -113,3 +113,75 @@ def test_hidden_sensor_calibrates_through_the_cli(tmp_path):
     err = angles - truth.angles_rad
     assert np.abs(err).max() < 0.02  # a cubic misfit of a few µm of shift, d = 1 mm
     assert np.abs(err).max() > 1e-7  # and not exact: the map is not a polynomial
+
+
+def test_point_load_small_deflection_closed_form():
+    """A small force at s_c: x(s) = F s² (3 s_c − s) / 6EI before s_c, straight beyond."""
+    force, sc = 1e-5, 0.6 * L
+    s = np.linspace(0.0, L, 57)
+    shape = solve_beam_bvp(L, EI, 0.0, (force, 0.0), s_m=s, contact_s_m=sc)
+    before = s <= sc
+    x = np.where(before, force * s**2 * (3 * sc - s) / (6 * EI), force * sc**2 * (3 * s - sc) / (6 * EI))
+    np.testing.assert_allclose(shape.positions_m[:, 0], x, rtol=1e-5, atol=1e-15)
+    angle = np.where(before, force * s * (2 * sc - s) / (2 * EI), force * sc**2 / (2 * EI))
+    np.testing.assert_allclose(shape.angle_rad, angle, rtol=1e-5, atol=1e-15)
+    assert shape.tip_angle_rad == pytest.approx(force * sc**2 / (2 * EI), rel=1e-6)
+
+
+def test_point_load_large_deflection_balances_the_base_moment():
+    """Large loads: beyond s_c the beam is a free arc (φ' = K0), and EI (φ'(0) − K0) = −r(s_c) × F."""
+    k0, force, sc = 15.0, np.array([0.2, -0.15]), 0.7 * L
+    s = np.unique(np.concatenate([np.linspace(0.0, L, 41), [sc]]))
+    shape = solve_beam_bvp(L, EI, k0, force, s_m=s, contact_s_m=sc)
+    np.testing.assert_allclose(shape.curvature_per_m[s > sc + 1e-9], k0, atol=1e-7)
+    xc, yc = shape.positions_m[np.searchsorted(s, sc)]
+    assert EI * (shape.curvature_per_m[0] - k0) == pytest.approx(-(xc * force[1] - yc * force[0]), rel=1e-6)
+    # the load's moment vanishes at its point: φ'(s_c) = K0 from both sides, and not before
+    k = np.searchsorted(s, sc)
+    assert shape.curvature_per_m[k] == pytest.approx(k0, abs=1e-7)
+    assert abs(shape.curvature_per_m[k // 2] - k0) > 1.0
+
+
+def test_point_load_at_the_tip_is_the_library_tip_load():
+    model = FreeBendingModel.from_config(CFG)
+    pressure, force = 60e3, np.array([0.15, -0.1])
+    w = CFG.weight_per_length_n_per_m
+    sol = bendsense.solve_beam(L, CFG.stiffness.ei_nm2(pressure), model.tip_curvature_per_m(pressure), force, w)
+    k0 = model.tip_curvature_per_m(pressure)
+    at_tip = solve_beam_bvp(L, CFG.stiffness.ei_nm2(pressure), k0, force, w, s_m=sol.s_m, contact_s_m=L)
+    np.testing.assert_allclose(at_tip.angle_rad, sol.angle_rad, atol=1e-6)
+    # the split problem converges to it as s_c → L, at first order in L − s_c
+    err = [np.abs(solve_beam_bvp(L, CFG.stiffness.ei_nm2(pressure), k0, force, w, s_m=sol.s_m,
+                                 contact_s_m=L * (1 - f)).angle_rad - sol.angle_rad).max() for f in (1e-2, 5e-3)]
+    assert 1.8 < err[0] / err[1] < 2.2 and err[1] < 1e-3
+    # and a force at 0.7 L bends less than the same force at the tip
+    mid = forward(CFG, pressure, force, contact_s_m=0.7 * L)
+    tip = forward(CFG, pressure, force)
+    assert abs(mid.angles_rad[-1] - k0 * CFG.sensor.lengths_m.sum()) < abs(tip.angles_rad[-1] - k0 * CFG.sensor.lengths_m.sum())
+
+
+def test_compliant_base_turns_with_the_base_moment():
+    force, c = 1e-5, 40.0  # rad per N·m
+    shape = solve_beam_bvp(L, EI, 0.0, (force, 0.0), base_compliance_rad_per_nm=c)
+    beta = c * force * L  # small deflection: base moment F L
+    assert shape.angle_rad[0] == pytest.approx(beta, rel=1e-6)
+    assert shape.tip_position_m[0] == pytest.approx(force * L**3 / (3 * EI) + beta * L, rel=1e-6)
+    # an unloaded arc does not turn its base
+    assert abs(solve_beam_bvp(L, EI, 20.0, base_compliance_rad_per_nm=c).angle_rad[0]) < 1e-12
+
+
+def test_compliant_base_is_a_clamped_beam_under_the_rotated_force():
+    """ψ = φ − β solves the clamped problem with G turned by −β: what the pinned sensor sees."""
+    k0, force, c = 18.0, np.array([0.2, -0.1]), 4.0
+    s = np.linspace(0.0, L, 33)
+    soft = solve_beam_bvp(L, EI, k0, force, s_m=s, base_compliance_rad_per_nm=c)
+    beta = soft.angle_rad[0]
+    assert beta == pytest.approx(c * EI * (soft.curvature_per_m[0] - k0), rel=1e-9)
+    assert np.degrees(abs(beta)) > 2.0
+    cb, sb = np.cos(beta), np.sin(beta)
+    turned = np.array([cb * force[0] - sb * force[1], cb * force[1] + sb * force[0]])
+    clamped = solve_beam_bvp(L, EI, k0, turned, s_m=s)
+    np.testing.assert_allclose(soft.angle_rad - beta, clamped.angle_rad, atol=1e-7)
+    truth = forward(CFG, 60e3, force, base_compliance_rad_per_nm=c)
+    assert truth.base_angle_rad != 0.0
+    np.testing.assert_allclose(truth.shifts_m, CFG.sensor.strip_gap_m * truth.angles_rad, rtol=1e-15)
