@@ -561,7 +561,9 @@ class Config:
         missing = [k for k in ("sensor", "actuator", "material", "stiffness") if k not in data]
         if missing:
             raise ConfigError(f"config: missing keys {', '.join(missing)}")
-        kwargs = {k: c.from_dict(data[k]) for k, c in _SECTIONS.items() if k in data}
+        # an optional section may be given as null: absent (e.g. parameters known exactly, as in a simulation)
+        kwargs = {k: c.from_dict(data[k]) for k, c in _SECTIONS.items()
+                  if k in data and not (k in _OPTIONAL and data[k] is None)}
         if "name" in data:
             kwargs["name"] = data["name"]
         return cls(**kwargs)

@@ -19,6 +19,7 @@ __all__ = [
     "BendsenseWarning",
     "ConvergenceWarning",
     "NoNoiseModelWarning",
+    "NoParameterCovarianceWarning",
 ]
 
 
@@ -118,3 +119,13 @@ class ConvergenceWarning(BendsenseWarning, RuntimeWarning):
 
 class NoNoiseModelWarning(BendsenseWarning):
     """An estimate without a noise model: its σ is NaN (``uncertainty="none"``)."""
+
+
+class NoParameterCovarianceWarning(BendsenseWarning):
+    """An estimate with a config that declares no ``parameter_covariance``.
+
+    Its σ holds sensor noise and calibration error only, as if the model parameters
+    (μ̄, μ_s, prebend, γ0, γ1) were exact; the shipped paper config states a prior for
+    an actuator nobody identified, ``bendsense identify`` writes the covariance of a fit.
+    Warned once per process by :func:`bendsense.estimate_force`.
+    """

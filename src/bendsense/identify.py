@@ -213,26 +213,30 @@ def _with_covariance(config, names: tuple[str, ...], block: np.ndarray, what: st
     """
     from bendsense.config import MODEL_PARAMETERS, ParameterCovarianceConfig
 
-    blocks = []
+    blocks, kept, prior = [], [], ""
     old = config.parameter_covariance
     if old is not None:
         keep = [i for i, n in enumerate(old.parameters) if n not in names]
         if keep:
-            blocks.append(([old.parameters[i] for i in keep], old.matrix[np.ix_(keep, keep)]))
+            kept = [old.parameters[i] for i in keep]
+            blocks.append((kept, old.matrix[np.ix_(keep, keep)]))
+            if not old.source.startswith("identify "):  # e.g. the shipped config's prior: not a fit
+                prior = f"; {', '.join(kept)} kept from the config's prior ({old.source or 'no source given'})"
     if np.all(np.isfinite(block)):
         blocks.append((list(names), 0.5 * (block + block.T)))
     if not blocks:
         return config.replace(parameter_covariance=None)
     fits = []
     listed = [n for b, _ in blocks for n in b]
-    if any(n in listed for n in FREE_BENDING_PARAMETERS):
+    fitted = [n for n in listed if not (prior and n in kept)]
+    if any(n in fitted for n in FREE_BENDING_PARAMETERS):
         fits.append("identify free-bending")
-    if any(n in listed for n in STIFFNESS_PARAMETERS):
+    if any(n in fitted for n in STIFFNESS_PARAMETERS):
         fits.append("identify stiffness")
-    source = " and ".join(fits)
-    if len(fits) > 1:
+    source = " and ".join(fits) or "none identified"
+    if len(fits) > 1 or prior:
         source += ", fitted separately: block diagonal (cross-covariances between the fits taken as zero)"
-    source += f"; last: {what}; fixed parameters have variance 0"
+    source += f"; last: {what}; fixed parameters have variance 0{prior}"
     # list the parameters in the canonical order
     order = sorted(range(len(listed)), key=lambda i: MODEL_PARAMETERS.index(listed[i]))
     full = ParameterCovarianceConfig.from_blocks(blocks, source=source)

@@ -200,6 +200,20 @@ def say(text: str) -> None:
         click.echo(text)
 
 
+def log_no_parameter_covariance(config) -> None:
+    """One ``WARNING:`` line when ``config`` declares no ``parameter_covariance`` (σ without the model's part).
+
+    The CLI's form of :class:`~bendsense.errors.NoParameterCovarianceWarning`: said once per
+    command that estimates (the library's warning is silenced there, it would repeat it).
+    """
+    import logging
+
+    from bendsense.estimation.uncertainty import no_parameter_covariance_message
+
+    if config is not None and config.parameter_covariance is None:
+        logging.getLogger("bendsense").warning("%s", no_parameter_covariance_message(config))
+
+
 def save_figure(figure, path: Path, overwrite: bool = False) -> None:
     """Write a matplotlib figure to ``path`` at 120 dpi (atomically), close it and say so."""
     import matplotlib.pyplot as plt

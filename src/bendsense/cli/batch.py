@@ -21,6 +21,7 @@ from bendsense.cli._common import (
     PressureKpa,
     check_figure_suffix,
     config_option,
+    log_no_parameter_covariance,
     objective_option,
     overwrite_option,
     quiet,
@@ -99,6 +100,14 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
 
         if scheduler and workers is not None:
             raise click.UsageError("give --workers or --scheduler, not both")
+        if not no_estimate and config_path is not None:  # the workers' warnings are silenced: say it here, once
+            from bendsense.config import load_config
+            from bendsense.errors import BendsenseError
+
+            try:
+                log_no_parameter_covariance(load_config(config_path))
+            except BendsenseError:
+                pass  # process_sessions reports a bad config as it does without this check
         client = executor = None
         if scheduler:
             client, executor = _dask_executor(scheduler)

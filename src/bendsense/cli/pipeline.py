@@ -23,6 +23,7 @@ from bendsense.cli._common import (
     InterspersedCommand,
     PressureKpa,
     config_option,
+    log_no_parameter_covariance,
     objective_option,
     overwrite_option,
     say,
@@ -226,6 +227,9 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
     """Estimate the tip force of every frame from its shape and pressure."""
 
     def step(state):
+        import warnings
+
+        from bendsense.errors import NoParameterCovarianceWarning
         from bendsense.pipeline import process
         from bendsense.plausibility import OUT_OF_RANGE
 
@@ -234,9 +238,14 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
         config = state["config"]
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
-        processed = process(session, config, state["calibration"], shape=shape, constraint=constraint, method=method,
-                            objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
-                            calibration_source=str(state.get("calibration_path") or ""))
+        with warnings.catch_warnings():  # said below as one WARNING line per chain, not as a Python warning
+            warnings.simplefilter("ignore", NoParameterCovarianceWarning)
+            processed = process(session, config, state["calibration"], shape=shape, constraint=constraint,
+                                method=method, objective=objective, push_only=push_only,
+                                tip_angle_source=tip_angle_source,
+                                calibration_source=str(state.get("calibration_path") or ""))
+        if processed.estimate.uncertainty != "none":
+            log_no_parameter_covariance(config)
         counts = processed.counts()
         if counts.out_of_range:
             lo, hi = config.actuator.pressure_range_pa

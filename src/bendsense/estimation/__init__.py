@@ -57,7 +57,7 @@ from bendsense.estimation.problem import (
 )
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
-from bendsense.estimation.uncertainty import tip_angle_shift_gradient
+from bendsense.estimation.uncertainty import tip_angle_shift_gradient, warn_no_parameter_covariance
 from bendsense.plausibility import force_bound_step, pressure_range_step
 from bendsense.shift_errors import noise_only
 from bendsense.status import Status
@@ -258,6 +258,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if uncertainty == "none":  # stacklevel 4: the caller of the public wrappers (pressure_range_step, force_bound_step)
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
                       "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=4)
+    else:  # once per process: σ without the model parameters' uncertainty (the config declares none)
+        warn_no_parameter_covariance(config, stacklevel=4)
     text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
             else messages(status, residual, chi2, p_value, blocked_dir, method))
     if strict and not success.all():

@@ -524,4 +524,43 @@ def noise_std(noise_opt, calibration, est):
     return sigma_a
 
 
+
+def no_parameter_covariance_message(config) -> str:
+    """What an estimate with ``config`` leaves out of σ when it declares no ``parameter_covariance``.
+
+    Parameters
+    ----------
+    config : Config
+        The config of the estimate (its ``name`` is quoted when it has one).
+    """
+    which = f"config {config.name!r}" if config.name else "config"
+    return (f"{which} declares no parameter_covariance: σ holds sensor noise and calibration only; identify your "
+            "actuator (bendsense identify free-bending / stiffness) or keep the shipped paper config's prior "
+            "(docs/theory.md, 'The parameter prior')")
+
+
+_PRIOR_WARNED = [False]  # NoParameterCovarianceWarning is given once per process (a live loop calls per frame)
+
+
+def warn_no_parameter_covariance(config, stacklevel: int = 2) -> None:
+    """Warn once per process (:class:`~bendsense.errors.NoParameterCovarianceWarning`) for a config without a prior.
+
+    Costs one attribute look-up per call after that (the per-frame path calls it).
+
+    Parameters
+    ----------
+    config : Config
+        The config of the estimate.
+    stacklevel : int
+        As for :func:`warnings.warn`, counted from the caller of this function.
+    """
+    if _PRIOR_WARNED[0] or config.parameter_covariance is not None:
+        return
+    import warnings
+
+    from bendsense.errors import NoParameterCovarianceWarning
+
+    _PRIOR_WARNED[0] = True
+    warnings.warn(no_parameter_covariance_message(config), NoParameterCovarianceWarning, stacklevel=stacklevel + 1)
+
 _jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once
