@@ -45,6 +45,7 @@ import bendsense  # noqa: E402
 from bendsense.calibration import Calibration  # noqa: E402
 from bendsense.config import ParameterCovarianceConfig  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
+from bendsense.estimation.kernels import MISFIT_P  # noqa: E402
 from bendsense.pcc import reconstruct  # noqa: E402
 from bendsense.results import frame_status  # noqa: E402
 
@@ -56,7 +57,7 @@ PRESSURE_PA = (30e3, 110e3)
 MAX_FORCE_N = 0.25
 NOISES = (0.25, 1.5, 4.0)
 MAIN_NOISE = 1.5
-BASE_COMPLIANCE = 3.0  # rad per N·m: the base turns ~5° under the larger loads (measured and printed)
+BASE_COMPLIANCE = 8.0  # rad per N·m: the base turns ~5° under the loads of the holds (median printed)
 CACHE = ROOT / ".cache" / "model_error"
 
 
@@ -153,6 +154,7 @@ class Series:
     angles_rad: np.ndarray  # (B, N) the true coil angles the sensor sees
     base_angle_rad: np.ndarray  # (B,)
     window: np.ndarray  # (B,) index of the 50 ms window (holds × 6)
+    hold: np.ndarray  # (B,) bool: the frame is in a hold (the load constant)
 
 
 def series(config, case, seed, holds, use_cache=True):
@@ -170,7 +172,7 @@ def series(config, case, seed, holds, use_cache=True):
     B = holds * n
     return Series(t_s=np.arange(B) / RATE_HZ, pressure_pa=np.repeat(p, n), force_n=np.concatenate(force),
                   angles_rad=np.concatenate(ang), base_angle_rad=np.concatenate(base),
-                  window=np.arange(B) // WINDOW_FRAMES)
+                  window=np.arange(B) // WINDOW_FRAMES, hold=np.tile(alpha == 1.0, holds))
 
 
 _CALIBRATIONS: dict = {}
@@ -212,41 +214,49 @@ def scores(force_n, std_n, ok, truth_n):
     return {"flagged": 1.0 - float(np.mean(ok)), "cover": cover, "beyond": float(beyond), "rms": rms}
 
 
-def windows_flagged(window_p, window):
-    """Fraction of windows whose test is below 0.001 (windows without a test left out), and their count."""
-    ids = np.unique(window)
+def windows_flagged(window_p, window, hold):
+    """Windows whose test is below 0.001 (windows without a test left out): fractions and counts.
+
+    Returns (fraction of hold windows, their count, fraction of all windows, their count);
+    a hold window lies wholly in a hold (the ramps start and end at no load, where no
+    check can see a load's model error).
+    """
+    ids, first = np.unique(window, return_index=True)
     p = np.array([np.nanmedian(window_p[window == i]) if np.isfinite(window_p[window == i]).any() else np.nan
                   for i in ids])
+    in_hold = np.array([hold[window == i].all() for i in ids])
     tested = np.isfinite(p)
-    return float(np.mean(p[tested] < bendsense.estimation.kernels.MISFIT_P)), int(tested.sum())
+    flagged = p < MISFIT_P
+    held = tested & in_hold
+    return (float(np.mean(flagged[held])), int(held.sum()), float(np.mean(flagged[tested])), int(tested.sum()))
 
 
 def run_case(config, case, seeds, holds, noise_counts, configs, use_cache=True, after=True):
     """Before/after scores and the window check's power for one case at one noise level."""
     before_cfg = configs["declared"] if case.declared else configs["bare"]
     after_cfg = configs["declared"] if case.declared else configs["shipped"]
-    rows = {"before": [], "after": [], "windows": [], "truth": [], "frame_err": [], "base": []}
+    rows = {"before": [], "shipped": [], "after": [], "windows": [], "base": []}
     for seed in seeds:
         truth = series(config, case, seed, holds, use_cache)
         shape, est = per_frame(truth, config, before_cfg, seed, noise_counts)
         checked = bendsense.check_windows(est, truth.t_s, pressure_pa=truth.pressure_pa)
         rows["before"].append((est.force_n, est.std_n, frame_status(shape, est) == "ok", truth.force_n))
-        rows["windows"].append((checked.window_p_value, truth.window + seed * 10_000))
-        rows["base"].append(truth.base_angle_rad)
+        rows["windows"].append((checked.window_p_value, truth.window + seed * 10_000, truth.hold))
+        rows["base"].append(truth.base_angle_rad[truth.hold])
         if after:
             if after_cfg is not before_cfg:
                 shape, est = per_frame(truth, config, after_cfg, seed, noise_counts)
                 checked = bendsense.check_windows(est, truth.t_s, pressure_pa=truth.pressure_pa)
+            rows["shipped"].append((est.force_n, est.std_n, frame_status(shape, est) == "ok", truth.force_n))
             tr = bendsense.track(checked, truth.t_s, mode="smooth", pressure_pa=truth.pressure_pa)
             # a tracked frame is ok when the tracker says so and its shape is (in the calibrated range)
             ok = (np.asarray(tr.status) == "ok") & (frame_status(shape, checked) == "ok")
             rows["after"].append((tr.force_n, tr.std_n, ok, truth.force_n))
     out = {}
-    for part in ("before", "after"):
+    for part in ("before", "shipped", "after"):
         if rows[part]:
             out[part] = scores(*(np.concatenate(x) for x in zip(*rows[part])))
-    p, w = (np.concatenate(x) for x in zip(*rows["windows"]))
-    out["windows"], out["n_windows"] = windows_flagged(p, w)
+    out["windows"] = windows_flagged(*(np.concatenate(x) for x in zip(*rows["windows"])))
     base = np.abs(np.concatenate(rows["base"]))
     out["base_deg"] = float(np.degrees(np.median(base[base > 0]))) if np.any(base > 0) else 0.0
     out["frames"] = sum(len(x[0]) for x in rows["before"])
@@ -272,10 +282,19 @@ def main_table(results, all_cases):
         b, a = res["before"], res["after"]
         label = all_cases[name].label
         if name == "base":
-            label += f" (median {res['base_deg']:.1f}°)"
+            label += f" (median {res['base_deg']:.1f}° in the holds)"
         lines.append(f"| {label} | {_pct(b['flagged'])} | {_cov(b['cover'])} | {_pct(b['beyond'])} | "
                      f"{_pct(a['flagged'])} | {_cov(a['cover'])} | {_pct(a['beyond'])} | "
                      f"{1e3 * b['rms']:.1f} → {1e3 * a['rms']:.1f} mN |")
+    return "\n".join(lines)
+
+
+def prior_table(results, all_cases):
+    lines = ["| truth departs from the model by | flagged | ±2σ coverage Fx/Fy | `ok` and beyond 3σ |",
+             "|---|---|---|---|"]
+    for name, res in results.items():
+        b = res["shipped"]
+        lines.append(f"| {all_cases[name].label} | {_pct(b['flagged'])} | {_cov(b['cover'])} | {_pct(b['beyond'])} |")
     return "\n".join(lines)
 
 
@@ -283,7 +302,7 @@ def power_table(power, all_cases):
     lines = ["| truth departs from the model by | " + " | ".join(f"{n} counts" for n in NOISES) + " |",
              "|---|" + "---|" * len(NOISES)]
     for name, by_noise in power.items():
-        cells = [f"{_pct(by_noise[n][0])} of {by_noise[n][1]}" for n in NOISES]
+        cells = [f"{_pct(w[0])} of {w[1]} (all: {_pct(w[2])} of {w[3]})" for w in (by_noise[n] for n in NOISES)]
         lines.append(f"| {all_cases[name].label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -326,6 +345,8 @@ def main(argv=None):
                for name, case in all_cases.items()}
     print(f"## Before (per frame) and after (window check, RTS smoother, shipped prior), {MAIN_NOISE} counts\n")
     print(main_table(results, all_cases))
+    print(f"\n## Per frame with the shipped prior (or the declared error), no window check, {MAIN_NOISE} counts\n")
+    print(prior_table(results, all_cases))
     power = {}
     for name, case in all_cases.items():
         if case.declared:
@@ -334,8 +355,9 @@ def main(argv=None):
         for noise in NOISES:
             res = results[name] if noise == MAIN_NOISE else run_case(
                 config, case, seeds, holds, noise, configs, use_cache, after=False)
-            power[name][noise] = (res["windows"], res["n_windows"])
-    print("\n## Windows (50 ms) flagged by the window check, error undeclared (no parameter covariance)\n")
+            power[name][noise] = res["windows"]
+    print("\n## Windows (50 ms) flagged by the window check, error undeclared (no parameter covariance):"
+          " hold windows (all windows, ramps included)\n")
     print(power_table(power, all_cases))
     print(f"\n{results['control']['frames']} frames per case; {time.perf_counter() - start:.0f} s")
     return results, power
