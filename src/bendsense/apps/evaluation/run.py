@@ -34,6 +34,7 @@ from bendsense.apps.evaluation.metrics import (
     static_model_errors,
     tip_load_errors,
 )
+from bendsense.apps.evaluation.model_error import fig_model_error, model_error_evaluation
 from bendsense.apps.evaluation.protocol import (
     OBJECTIVE_NAMES,
     Plan,
@@ -56,6 +57,7 @@ FIGURE_NAMES = {
     "fig10": "fig10_tip_load_error.png",
     "coverage": "coverage_calibration.png",
     "identification": "identification.png",
+    "model_error": "model_error.png",
 }
 
 
@@ -103,6 +105,7 @@ class ReproduceResult:
     wall_time_s: float
     seed: int = 0
     quick: bool = False
+    model_error: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict, repr=False)
 
 
@@ -163,6 +166,7 @@ def reproduce(
             contact=numbers["contact"],
             identification=numbers["identification"],
             timings=numbers["timings"],
+            model_error={k: v for k, v in numbers["model_error"].items() if k != "series"},
             report_path=out / "report.md",
             figures=tuple(out / f.name for f in figures),
             wall_time_s=math.nan,
@@ -223,6 +227,9 @@ def _evaluate(data: Path, seed: int, plan: Plan, say) -> dict:
     contact_shape = reconstruct(contact.signals, cals[3], sensor)
     table_ii = {obj: contact_errors(contact_shape, contact, cals[3], model_config, obj) for obj in OBJECTIVE_NAMES}
 
+    say("model error (K0, EI, base rotation) over 2 kHz ramp-and-hold series ...")
+    model_error, timings["model_error_s"] = timed(model_error_evaluation, cals[3], nominal, seed)
+
     say("timing ...")
     timings.update(time_stages(tips, contact_shape, contact, cals[3], model_config, plan, say))
     identification = {
@@ -232,7 +239,8 @@ def _evaluate(data: Path, seed: int, plan: Plan, say) -> dict:
         **ident_info,
     }
     return {"table_i": table_i, "s_val": s_val, "static": static, "tip_load": tip, "contact": table_ii,
-            "identification": identification, "timings": timings, "configs": (nominal, true, model_config)}
+            "identification": identification, "timings": timings, "configs": (nominal, true, model_config),
+            "model_error": model_error}
 
 
 def _table_i(validation: Path, cals: dict, sensor) -> tuple:
@@ -263,4 +271,5 @@ def _figures(work: Path, numbers: dict) -> tuple:
         fig_coverage(work / FIGURE_NAMES["coverage"], {o: pooled_z(tip[o], table_ii[o]) for o in OBJECTIVE_NAMES}),
         fig_identification(work / FIGURE_NAMES["identification"], numbers["identification"], nominal, true,
                            model_config),
+        fig_model_error(work / FIGURE_NAMES["model_error"], numbers["model_error"]["series"]),
     )
