@@ -19,7 +19,11 @@ command, and writes it as Markdown with ``--markdown FILE``. The rows:
   same frames in this run: time ratio and largest force difference;
 - the fast beam solver's tip against the exact elastica of a straight cantilever under a
   perpendicular tip load (elliptic integrals, ``bench_beam.exact_tip``);
-- the binary frame decoder (``bench_frames``).
+- the binary frame decoder (``bench_frames``);
+- issue 22 (``bench_model_error``): tracking and the window check added per frame (cold
+  and warm), the tracked error and coverage on a 2 kHz ramp-and-hold, the windows flagged
+  under an off-tip load, K0 +5 % and none, coverage with the shipped prior, on data from
+  the independent forward model (tools/model_error.py).
 
 "pass?" judges CPU time of the measuring processes (on a shared machine the fairer
 number) and wall time: ``yes`` when both meet the target, ``CPU only`` when the wall
@@ -256,6 +260,15 @@ def bench_decoder(table, quick):
 # --------------------------------------------------------------------------- output
 
 
+def bench_model_error(table, quick):
+    """The issue-22 rows (bench_model_error.py): tracking cost, tracked error, window check, prior."""
+    from bench_model_error import rows
+
+    measured, note = rows(quick)
+    for what, target, text, ok in measured:
+        table.value(what, "—", target, f"{text} ({note})" if what.startswith("tracked RMS") else text, ok)
+
+
 def cpu_model():
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
@@ -306,6 +319,7 @@ def main(argv=None):
     bench_estimate_batch(table, args.quick, args.workers)
     bench_elastica(table)
     bench_decoder(table, args.quick)
+    bench_model_error(table, args.quick)
     w1, c1 = clocks()
 
     header = [

@@ -57,7 +57,7 @@ PRESSURE_PA = (30e3, 110e3)
 MAX_FORCE_N = 0.25
 NOISES = (0.25, 1.5, 4.0)
 MAIN_NOISE = 1.5
-BASE_COMPLIANCE = 8.0  # rad per N·m: the base turns ~5° under the loads of the holds (median printed)
+BASE_COMPLIANCE = 4.5  # rad per N·m: the base turns ~5° under the loads of the holds (median printed)
 CACHE = ROOT / ".cache" / "model_error"
 
 
