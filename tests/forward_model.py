@@ -98,7 +98,8 @@ def solve_beam_bvp(length_m, ei_nm2, k0_per_m, force_n=(0.0, 0.0), load_n_per_m=
 
     The base is clamped (``φ(0) = 0``) or compliant: ``φ(0) = c M_b`` with ``c =
     base_compliance_rad_per_nm`` and ``M_b = EI (φ'(0) − K0)`` the moment the loads put on
-    the base (positive when it bends toward ``+x``: the base turns with the load), so an unloaded arc keeps ``φ(0) = 0``.
+    the base (positive when it bends toward ``+x``: the base turns with the load), so an
+    unloaded arc keeps ``φ(0) = 0``.
     ``contact_s_m`` (default ``L``): the force acts at ``s_c``; beyond it the beam carries
     only its weight. The BVP is split exactly at ``s_c``: each part is mapped onto
     ``τ ∈ [0, 1]`` and the two are joined by continuity of ``φ``, ``φ'`` (the moment is
@@ -204,7 +205,7 @@ def solve_beam_bvp(length_m, ei_nm2, k0_per_m, force_n=(0.0, 0.0), load_n_per_m=
             if step < 1e-3:
                 raise RuntimeError(f"solve_bvp did not converge at load fraction {target:.4g}: {trial.message}")
     y = np.empty((4, s_out.size))
-    for k, (s0, h, _) in enumerate(parts):
+    for k in range(len(parts)):
         here = (s_out <= sc) if k == 0 else (s_out > sc)
         z = sol.sol(tau_out[k][here])[4 * k: 4 * k + 4]
         y[:, here] = z  # the states are φ and dφ/ds in both parts

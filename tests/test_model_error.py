@@ -15,7 +15,8 @@ import pytest
 
 import bendsense
 
-_spec = importlib.util.spec_from_file_location("model_error", Path(__file__).resolve().parents[1] / "tools" / "model_error.py")
+_TOOL = Path(__file__).resolve().parents[1] / "tools" / "model_error.py"
+_spec = importlib.util.spec_from_file_location("model_error", _TOOL)
 me = importlib.util.module_from_spec(_spec)
 sys.modules["model_error"] = me  # its dataclasses look their module up
 _spec.loader.exec_module(me)

@@ -318,8 +318,8 @@ def _model_error(res, names: dict) -> list:
                  f"{_pct(r['coverage_track'][0])} / {_pct(r['coverage_track'][1])}", _pct(r["flagged_track"])]
                 for r in rows.values()]),
         "",
-        "EI alone scales a load's shape much like the load itself (only gravity tells them apart): a check of the shape "
-        "hardly sees it, and a declared covariance (the prior) is what covers it.",
+        "EI alone scales a load's shape much like the load itself (only gravity tells them apart): a check of "
+        "the shape hardly sees it, and a declared covariance (the prior) is what covers it.",
         "",
         f"![per-frame and tracked force under K0 +5 %]({names['model_error']})",
         "",
