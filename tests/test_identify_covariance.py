@@ -38,7 +38,7 @@ def test_free_bending_covariance_matches_the_scatter_of_refits():
 
 def test_free_bending_block_in_the_config():
     fit = fit_free_bending(P_FB, fb_data(np.random.default_rng(3)), CFG, fix=["prebend_angle_rad"])
-    new = fit.to_config(CFG)
+    new = fit.to_config(CFG.replace(parameter_covariance=None))
     section = new.parameter_covariance
     assert section.parameters == MODEL_PARAMETERS[:3]
     c = section.matrix
@@ -47,18 +47,32 @@ def test_free_bending_block_in_the_config():
     assert "identify free-bending" in section.source
     # the config it gives validates and round-trips
     assert bendsense.config.Config.from_dict(new.to_dict()) == new
+    # from the shipped config: the stiffness block stays its prior (not fitted yet), named as such
+    prior = CFG.parameter_covariance
+    section = fit.to_config(CFG).parameter_covariance
+    assert section.parameters == MODEL_PARAMETERS
+    np.testing.assert_array_equal(section.matrix[:3, :3], c)
+    np.testing.assert_array_equal(section.matrix[3:, 3:], prior.matrix[3:, 3:])
+    assert np.all(section.matrix[:3, 3:] == 0)
+    assert section.source.startswith("identify free-bending,") and "identify stiffness" not in section.source
+    assert "ei0_nm2, ei1_nm2_per_pa kept from the config's prior (prior for an actuator not identified" in section.source
 
 
 def test_not_identifiable_is_not_written():
     # two points for three parameters cannot identify them: no covariance, old block removed
     few = fit_free_bending(P_FB[:4], fb_data()[:4] + [0.001, -0.002, 0.001, 0.0], CFG)
-    with_old = fit_free_bending(P_FB, fb_data(np.random.default_rng(2)), CFG).to_config(CFG)
+    known = CFG.replace(parameter_covariance=None)
+    with_old = fit_free_bending(P_FB, fb_data(np.random.default_rng(2)), CFG).to_config(known)
     assert with_old.parameter_covariance is not None
     few_cov = few.covariance.copy()
     few_cov[0, 0] = np.inf
     broken = type(few)(**{**few.__dict__, "covariance": few_cov})
     assert broken.to_config(with_old).parameter_covariance is None
     assert "NOT written" in broken.report()
+    # from the shipped config: the free-bending prior goes too (its values are replaced), the stiffness one stays
+    kept = broken.to_config(CFG).parameter_covariance
+    assert kept.parameters == MODEL_PARAMETERS[3:]
+    assert kept.source.startswith("none identified")
 
 
 def test_stiffness_block_joins_the_free_bending_block(tips):
@@ -91,7 +105,9 @@ def test_cli_writes_the_covariance_section(tmp_path, tips):
     text = free.read_text()
     assert "parameter_covariance:" in text
     loaded = bendsense.load_config(free)
-    assert loaded.parameter_covariance.parameters == MODEL_PARAMETERS[:3]
+    # the shipped config's prior for the stiffness stays until identify stiffness replaces it
+    assert loaded.parameter_covariance.parameters == MODEL_PARAMETERS
+    np.testing.assert_array_equal(loaded.parameter_covariance.matrix[3:, 3:], CFG.parameter_covariance.matrix[3:, 3:])
     p, f, tip = tips
     noisy = tip + 0.3e-3 * np.random.default_rng(12).standard_normal(tip.shape)
     lines = ["pressure_pa,fx_n,fy_n,tip_x_m,tip_y_m"]
@@ -103,7 +119,9 @@ def test_cli_writes_the_covariance_section(tmp_path, tips):
     assert result.exit_code == 0, result.output
     final = bendsense.load_config(out)
     assert final.parameter_covariance.parameters == MODEL_PARAMETERS
-    np.testing.assert_array_equal(final.parameter_covariance.matrix[:3, :3], loaded.parameter_covariance.matrix)
+    np.testing.assert_array_equal(final.parameter_covariance.matrix[:3, :3],
+                                  loaded.parameter_covariance.matrix[:3, :3])
+    assert "kept from the config's prior" not in final.parameter_covariance.source  # both blocks fitted now
     sd = final.parameter_covariance.std
     assert 0 < sd["ei0_nm2"] < 0.1 * final.stiffness.ei0_nm2
     assert TRUE_FB["shear_modulus_pa"] == pytest.approx(final.material.shear_modulus_pa, rel=0.2)

@@ -104,7 +104,7 @@ def covariance_section(names=("shear_modulus_pa", "ei0_nm2"), matrix=((1e8, 3e-2
 
 def test_covariance_section_round_trips_through_yaml(tmp_path):
     data = CONFIG.to_dict()
-    assert "parameter_covariance" not in data and CONFIG.parameter_covariance is None
+    assert data.pop("parameter_covariance")["parameters"] == list(MODEL_PARAMETERS)  # the shipped prior, replaced
     data["parameter_covariance"] = covariance_section()
     config = Config.from_dict(data)
     section = config.parameter_covariance

@@ -234,8 +234,10 @@ def _with_covariance(config, names: tuple[str, ...], block: np.ndarray, what: st
     if any(n in fitted for n in STIFFNESS_PARAMETERS):
         fits.append("identify stiffness")
     source = " and ".join(fits) or "none identified"
-    if len(fits) > 1 or prior:
+    if len(fits) > 1:
         source += ", fitted separately: block diagonal (cross-covariances between the fits taken as zero)"
+    elif prior and fits:
+        source += ", block diagonal (no covariance with the prior's parameters)"
     source += f"; last: {what}; fixed parameters have variance 0{prior}"
     # list the parameters in the canonical order
     order = sorted(range(len(listed)), key=lambda i: MODEL_PARAMETERS.index(listed[i]))

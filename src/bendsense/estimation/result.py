@@ -52,7 +52,8 @@ class ForceEstimate:
         Tip force (Fx, Fy) in the base frame [N].
     std_n : ndarray, shape (..., 2)
         Standard deviation of each component [N] from the propagated shift errors
-        (signal noise and calibration error, scaled by ``max(1, χ²/dof)``; module
+        (signal noise, calibration error and the config's ``parameter_covariance``,
+        scaled by ``max(1, χ²/dof)``; module
         docstring, Uncertainty); ``inf`` for a component the shape cannot determine.
     covariance_n2 : ndarray, shape (..., 2, 2)
         Covariance of ``force_n`` [N²].
@@ -74,7 +75,7 @@ class ForceEstimate:
     constraint : str
         The constraint (see the module docstring).
     uncertainty : str
-        ``"propagated"`` (sensor noise and calibration error through the fit) or ``"none"``
+        ``"propagated"`` (sensor noise, calibration error and parameter covariance through the fit) or ``"none"``
         (no noise model: ``std_n`` and ``covariance_n2`` NaN).
     tip_position_m : ndarray, shape (..., 2)
         Tip of the model shape at the estimate [m].
