@@ -15,7 +15,7 @@ from bendsense.output import write_dir
 from bendsense.pcc import arc_positions
 
 FIGURES = ("fig8_validation_shapes.png", "fig9_static_model.png", "fig10_tip_load_error.png", "identification.png",
-           "coverage_calibration.png")
+           "coverage_calibration.png", "model_error.png")
 RADII_MM = (45.75, 55.75, 65.75, 75.75, 85.75, 95.75, 150.75)
 NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 
@@ -62,7 +62,7 @@ def test_report_and_figures_written(run):
         assert 5_000 < len(data) < 400_000
         assert f"]({name})" in report
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no temporary directories left
-    for title in ("Table I", "Fig. 8", "Identification", "Fig. 9", "Fig. 10", "Table II", "Timing"):
+    for title in ("Table I", "Fig. 8", "Identification", "Fig. 9", "Fig. 10", "Table II", "Model error", "Timing"):
         assert f"## {title}" in report
 
 
@@ -89,6 +89,23 @@ def test_table_i(run):
         assert mean_std[0] == pytest.approx(np.mean(ours(dkappa)), abs=0.01)
         # the paper's numbers ride along in parentheses
         assert numbers(recon[2])[1] == PAPER["table_i"][n]["kappa_recon_per_m"][0]
+
+
+def test_model_error_section(run):
+    """The simulated board's mismatches: correct data is neither flagged nor under-covered, the prior covers."""
+    text = section(run[2], "## Model error")
+    assert "bendsense's own model" in text
+    rows = table_rows(text)
+    assert [r[0] for r in rows] == ["nothing (control)", "K0 +5 %", "EI +15 %", "base rotates 0.05 rad/rad"]
+    for row in rows:
+        flagged, held = numbers(row[1])
+        assert held == 12 and 0 <= flagged <= 100  # 3 holds of 4 windows each
+        assert all(0 <= v <= 100 for cell in row[2:] for v in numbers(cell))
+    control = rows[0]
+    assert numbers(control[1])[0] <= 5.0
+    assert min(numbers(control[2])) >= 85.0  # per frame, nothing undeclared to miss
+    for row in rows[1:3]:  # K0 +5 %, EI +15 %: the shipped prior covers them
+        assert min(numbers(row[3])) >= 85.0
 
 
 def test_identification_plausible(run):

@@ -319,7 +319,9 @@ def _model_error(res, names: dict) -> list:
                 for r in rows.values()]),
         "",
         "EI alone scales a load's shape much like the load itself (only gravity tells them apart): a check of "
-        "the shape hardly sees it, and a declared covariance (the prior) is what covers it.",
+        "the shape hardly sees it, and a declared covariance (the prior) is what covers it. Whether a window sees "
+        "K0 +5 % depends on the sensor's resolution in angle: the simulated board's sensor spans fewer counts "
+        "over the same bending than the independent model's (docs/model-error.md).",
         "",
         f"![per-frame and tracked force under K0 +5 %]({names['model_error']})",
         "",
