@@ -26,7 +26,7 @@ from helpers import curvatures_for
 import bendsense
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from bendsense.config import MODEL_PARAMETERS, Config, ParameterCovarianceConfig, save_config
+from bendsense.config import MODEL_PARAMETERS, Config, save_config
 from bendsense.errors import ConfigError, NoNoiseModelWarning, NoParameterCovarianceWarning
 from bendsense.estimation import estimate_force, uncertainty
 from bendsense.pcc import reconstruct
