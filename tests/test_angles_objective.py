@@ -20,6 +20,8 @@ from bendsense.results import read_results
 
 CFG = bendsense.load_config()
 SENSOR = CFG.sensor
+# the truths have the config's own parameters: known exactly, no parameter_covariance (σ is the noise's alone)
+KNOWN = CFG.replace(parameter_covariance=None)
 
 
 def _truths(n, seed):
@@ -60,7 +62,7 @@ def test_two_sigma_covers_the_truth_under_shift_noise(truths):
             kappa.append(_kappa(t.shifts_m + sigma_s * rng.standard_normal(t.shifts_m.shape)))
             p.append(t.pressure_pa)
             force.append(t.force_n)
-    est = estimate_force(np.array(kappa), np.array(p), CFG, objective="angles", noise_std=sigma_s)
+    est = estimate_force(np.array(kappa), np.array(p), KNOWN, objective="angles", noise_std=sigma_s)
     ok = est.success & np.isfinite(est.std_n).all(axis=-1)
     assert ok.mean() > 0.98
     z = (est.force_n - np.array(force))[ok] / est.std_n[ok]
@@ -75,15 +77,15 @@ def test_sigma_is_the_inverse_fisher_information(truths):
     # differences of the estimate: Cov = T Σ_S Tᵀ with T = ∂F/∂S
     t = truths[3]
     sigma_s = np.linspace(2e-6, 6e-6, 16)
-    base = estimate_force(_kappa(t.shifts_m), t.pressure_pa, CFG, objective="angles", noise_std=sigma_s)
+    base = estimate_force(_kappa(t.shifts_m), t.pressure_pa, KNOWN, objective="angles", noise_std=sigma_s)
     h = 1e-8
     T = np.empty((2, 16))
     for i in range(16):
         up, down = t.shifts_m.copy(), t.shifts_m.copy()
         up[i] += h
         down[i] -= h
-        f_up = estimate_force(_kappa(up), t.pressure_pa, CFG, objective="angles", noise_std=sigma_s, xtol_n=1e-13)
-        f_down = estimate_force(_kappa(down), t.pressure_pa, CFG, objective="angles", noise_std=sigma_s,
+        f_up = estimate_force(_kappa(up), t.pressure_pa, KNOWN, objective="angles", noise_std=sigma_s, xtol_n=1e-13)
+        f_down = estimate_force(_kappa(down), t.pressure_pa, KNOWN, objective="angles", noise_std=sigma_s,
                                 xtol_n=1e-13)
         T[:, i] = (f_up.force_n - f_down.force_n) / (2 * h)
     want = T @ np.diag(sigma_s**2) @ T.T * max(1.0, float(base.chi2_per_dof))

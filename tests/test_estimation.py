@@ -270,18 +270,19 @@ def test_two_sigma_coverage_of_the_true_force(constraint, pressure_pa, u, noise)
     estimate; the noise level is chosen so that this bias is a small fraction of σ,
     and the test checks that it is.
     """
+    known = CFG.replace(parameter_covariance=None)  # the true beam has the config's parameters: σ is the noise's
     cal = _cubic_calibration(noise)  # noise in signal units: σ_S ≈ 2e-5 m per unit
     force = true_force(constraint, pressure_pa, np.array(u))
     sol = beam_shape(pressure_pa, force)
     shifts = shifts_from_shape(sol.s_m, sol.angle_rad, SENSOR.lengths_m, SENSOR.strip_gap_m)
     clean = _signals_for(cal, shifts)
     np.testing.assert_allclose(cal.shifts_m(clean), shifts, atol=1e-12)
-    bias = estimate_force(reconstruct(clean, cal, SENSOR), pressure_pa, CFG, constraint=constraint,
+    bias = estimate_force(reconstruct(clean, cal, SENSOR), pressure_pa, known, constraint=constraint,
                           calibration=cal)
     n = 600
     rng = np.random.default_rng(11)
     signals = clean + noise * rng.standard_normal((n, 16))
-    est = estimate_force(reconstruct(signals, cal, SENSOR), pressure_pa, CFG, constraint=constraint,
+    est = estimate_force(reconstruct(signals, cal, SENSOR), pressure_pa, known, constraint=constraint,
                          calibration=cal)
     # χ² beyond chance (p < 0.001) flags a frame model_misfit, its force kept: about 1 in 1000
     misfit = np.char.startswith(est.message.astype(str), "model_misfit")

@@ -26,7 +26,7 @@ from helpers import curvatures_for
 import bendsense
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from bendsense.config import MODEL_PARAMETERS, Config, ParameterCovarianceConfig, save_config
+from bendsense.config import MODEL_PARAMETERS, Config, save_config
 from bendsense.errors import ConfigError, NoNoiseModelWarning, NoParameterCovarianceWarning
 from bendsense.estimation import estimate_force, uncertainty
 from bendsense.pcc import reconstruct
@@ -279,3 +279,18 @@ def test_the_stiffness_covariance_written_matches_a_monte_carlo_of_refits():
     # and unbiased: the refits scatter about the truth
     mean = np.mean(fits, axis=0)
     assert np.all(np.abs(mean - NOMINAL[3:]) < 4 * sd_e / math.sqrt(60))
+
+
+def test_record_and_live_say_it_once_when_their_processor_is_made(cli_session, caplog, monkeypatch):
+    """``record --estimate`` and ``live`` build their processor with ``make_processor``: one WARNING line."""
+    from bendsense.cli.device import make_processor
+
+    monkeypatch.setattr(uncertainty, "_PRIOR_WARNED", [False])
+    with caplog.at_level(logging.WARNING, logger="bendsense"), warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        processor = make_processor(KNOWN, cli_session / "cal.yaml", None, None, None)
+        block = processor.process_block(np.tile(processor.calibration.offset, (3, 1)), np.full(3, 60e3))
+    assert np.isfinite(block.estimate.force_n).all()
+    said = [r.getMessage() for r in caplog.records if "parameter_covariance" in r.getMessage()]
+    assert said == [uncertainty.no_parameter_covariance_message(KNOWN)]
+    assert not [w for w in record if issubclass(w.category, NoParameterCovarianceWarning)]

@@ -20,6 +20,7 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
+    log_no_parameter_covariance,
     make_config_option,
     make_overwrite_option,
     objective_option,
@@ -81,7 +82,16 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
         estimate=estimate,
     )
-    processor.warm_up()
+    import warnings
+
+    from bendsense.errors import NoParameterCovarianceWarning
+
+    # the warm-up's estimate gives the library's once-per-process warning: said as one WARNING line instead
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NoParameterCovarianceWarning)
+        processor.warm_up()
+    if estimate:
+        log_no_parameter_covariance(config)
     return processor
 
 

@@ -258,7 +258,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if uncertainty == "none":  # stacklevel 4: the caller of the public wrappers (pressure_range_step, force_bound_step)
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
                       "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=4)
-    else:  # once per process: σ without the model parameters' uncertainty (the config declares none)
+    elif config.parameter_covariance is None:  # once per process: σ without the model parameters' part
         warn_no_parameter_covariance(config, stacklevel=4)
     text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
             else messages(status, residual, chi2, p_value, blocked_dir, method))
