@@ -37,7 +37,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _model_error():
-    spec = importlib.util.spec_from_file_location("model_error", ROOT / "tools" / "model_error.py")
+    """tools/model_error.py of this checkout (or of the checkout bendsense is imported from: a copied benchmarks/)."""
+    import bendsense
+
+    candidates = [ROOT, Path(bendsense.__file__).resolve().parents[2]]
+    found = [c / "tools" / "model_error.py" for c in candidates if (c / "tools" / "model_error.py").is_file()]
+    if not found:
+        raise SystemExit("bench_model_error: tools/model_error.py not found: run it from a bendsense checkout")
+    spec = importlib.util.spec_from_file_location("model_error", found[0])
     module = importlib.util.module_from_spec(spec)
     sys.modules["model_error"] = module
     spec.loader.exec_module(module)
