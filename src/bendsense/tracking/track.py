@@ -121,7 +121,9 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     Parameters
     ----------
     estimate : ForceEstimate
-        Per-frame estimates (B,) of a time series (``estimate_force``).
+        Per-frame estimates (B,) of a time series (``estimate_force``). Without a noise
+        model (``uncertainty="none"``: no noise covariance) nothing is observed and the
+        tracked force is NaN.
     t_s : array_like, shape (B,)
         Time of each frame [s], not decreasing.
     mode : {"smooth", "filter"}
