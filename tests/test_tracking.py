@@ -329,3 +329,17 @@ def test_streaming_windows_report_the_latest_completed_window(ramp_and_hold):
     assert np.isnan(streamed[:100]).all()  # no window has completed yet
     np.testing.assert_array_equal(streamed[100:], offline[:-100])
     assert np.isfinite(offline).all() and np.unique(offline).size == 40
+
+
+def test_a_tracker_takes_single_frames(cases):
+    """The live path estimates one frame at a time (batch shape ()): the same numbers as blocks."""
+    est, t, pressure = cases
+    whole = Tracker(bandwidth_hz=12.0).update(est, t, pressure)
+    tracker = Tracker(bandwidth_hz=12.0)
+    one = [tracker.update(dataclasses.replace(
+        _cut(est, k, k + 1), **{name: getattr(_cut(est, k, k + 1), name)[0] for name in
+                                ("force_n", "std_n", "covariance_n2", "residual_m", "success", "iterations",
+                                 "covariance_parts_n2")}, message=str(est.message[k])), t[k], pressure[k])
+        for k in range(60)]
+    np.testing.assert_array_equal(np.concatenate([o.force_n for o in one]), whole.force_n)
+    np.testing.assert_array_equal(np.concatenate([o.status for o in one]), whole.status)
