@@ -30,7 +30,7 @@ RATE_HZ = 2000.0
 
 @functools.lru_cache(maxsize=64)
 def riccati_ratio(bandwidth_hz, dt_s):
-    """Q/R of the random walk whose steady-state filter is −3 dB at ``bandwidth_hz``: Riccati iteration + root search."""
+    """Q/R of the random walk whose steady filter is −3 dB at ``bandwidth_hz``: Riccati iteration, root search."""
     w = 2 * np.pi * bandwidth_hz * dt_s
 
     def gain(rho):

@@ -103,7 +103,7 @@ def _window_p(est, pressure):
 
 def test_the_payload_is_the_residual_and_the_sensitivities_of_the_coil_angles():
     """residual = S/d − φ_model(L_i) at the estimate, Jacobian and model factor by finite differences of solve_beam."""
-    cov = np.array([[4e-4, 1e-7], [1e-7, 1e-8]])  # of (K0 [1/m], EI [N m²]): a covariance stated directly on the beam inputs
+    cov = np.array([[4e-4, 1e-7], [1e-7, 1e-8]])  # of (K0 [1/m], EI [N m²]), stated directly on the beam inputs
     cal = linear_calibration(noise_std=1.5)
     pressure = 45e3
     kappa = curvatures_for(shifts_for(loaded_curvatures(pressure, (0.05, -0.04))) + 1e-7 * np.sin(np.arange(16)))
