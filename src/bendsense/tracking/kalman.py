@@ -22,7 +22,9 @@ does not give (NaN force, infinite σ: failed or ``not_identifiable``) is not ob
 other one is; a frame without any is predicted only. The innovations' log-likelihood
 (the diffuse first observations left out) chooses B offline (:mod:`bendsense.tracking.track`).
 
-Speed: ~0.05 µs per frame and filter pass, ~0.1 µs with the smoother (benchmarks/bench_track.py).
+Speed, measured on the shared 2-core machine: 0.1–0.2 µs per frame and filter pass, 0.02 µs
+for the smoother's backward pass; ``track`` as a whole ~0.9 µs per frame with a given
+bandwidth, ~3 µs with the maximum-likelihood choice (16 passes) (benchmarks/bench_track.py).
 """
 
 import math
