@@ -30,7 +30,7 @@ RATE_HZ = 2000.0
 
 @functools.lru_cache(maxsize=64)
 def riccati_ratio(bandwidth_hz, dt_s):
-    """Q/R of the random walk whose steady-state filter is −3 dB at ``bandwidth_hz``: Riccati iteration + root search."""
+    """Q/R of the random walk whose steady filter is −3 dB at ``bandwidth_hz``: Riccati iteration, root search."""
     w = 2 * np.pi * bandwidth_hz * dt_s
 
     def gain(rho):
@@ -301,6 +301,10 @@ def test_the_smoother_cuts_the_error_and_covers_the_truth_over_several_sensors(r
     assert ratio <= 0.45
     assert 0.85 <= inside[:, 0].mean() <= 0.99 and 0.85 <= inside[:, 1].mean() <= 0.99
     assert all((tr.status == "ok").mean() > 0.99 for _, tr, _ in runs)
+    for est, smooth, filtered in runs:  # never below the frame's calibration and parameter parts
+        floor = np.diagonal(est.covariance_parts_n2[:, 1] + est.covariance_parts_n2[:, 2], axis1=1, axis2=2)
+        assert np.all(smooth.std_n ** 2 >= floor) and np.all(filtered.std_n ** 2 >= floor)
+        assert np.all(smooth.std_n < est.std_n)  # and below the frame's own σ, where the noise averages down
 
 
 def test_the_causal_filter_cuts_the_error_too(ramp_and_hold):
@@ -313,3 +317,33 @@ def test_the_causal_filter_cuts_the_error_too(ramp_and_hold):
     holds = np.tile(((t > 0.4) & (t < 0.9)) | ((t > 1.3) & (t < 1.8)), len(runs))  # 0.1 s after each ramp
     inside = np.concatenate([np.abs(tr.force_n - truth) <= 2 * tr.std_n for _, _, tr in runs])[holds]
     assert inside.mean() >= 0.85  # on the holds, where it does not lag
+
+
+def test_streaming_windows_report_the_latest_completed_window(ramp_and_hold):
+    """A frame's streamed window p is that of the window completed when it arrived (offline: its own window's)."""
+    from bendsense import check_windows
+
+    est = ramp_and_hold[1][0][0]
+    t = np.arange(4000) / RATE_HZ
+    offline = check_windows(est, t).window_p_value
+    tracker = Tracker(bandwidth_hz=10.0)
+    cuts = list(range(0, 4000, 37)) + [4000]
+    streamed = np.concatenate([tracker.update(_cut(est, lo, hi), t[lo:hi]).window_p_value
+                               for lo, hi in zip(cuts[:-1], cuts[1:])])
+    assert np.isnan(streamed[:100]).all()  # no window has completed yet
+    np.testing.assert_array_equal(streamed[100:], offline[:-100])
+    assert np.isfinite(offline).all() and np.unique(offline).size == 40
+
+
+def test_a_tracker_takes_single_frames(cases):
+    """The live path estimates one frame at a time (batch shape ()): the same numbers as blocks."""
+    est, t, pressure = cases
+    whole = Tracker(bandwidth_hz=12.0).update(est, t, pressure)
+    tracker = Tracker(bandwidth_hz=12.0)
+    one = [tracker.update(dataclasses.replace(
+        _cut(est, k, k + 1), **{name: getattr(_cut(est, k, k + 1), name)[0] for name in
+                                ("force_n", "std_n", "covariance_n2", "residual_m", "success", "iterations",
+                                 "covariance_parts_n2")}, message=str(est.message[k])), t[k], pressure[k])
+        for k in range(60)]
+    np.testing.assert_array_equal(np.concatenate([o.force_n for o in one]), whole.force_n)
+    np.testing.assert_array_equal(np.concatenate([o.status for o in one]), whole.status)
