@@ -839,15 +839,17 @@ def _fit_levels(data: StiffnessData, level, n_levels: int, stiffness, k0, w, len
 
 
 def _pooled_errors(lse, lrms, counts):
-    """The levels' standard errors of EI with the residual variance pooled over the levels.
+    """The levels' standard errors of EI, their residual variance at least the one pooled over the levels.
 
     Each level's fit scales its ``(JᵀJ)⁻¹`` by its own ``s_j² = RSS_j / (n_j − 1)``: from
     the 4–6 coordinates of two or three loads, an estimate with 3–5 degrees of freedom.
     A regression weighted by such noisy ``1/se²`` came out more confident than its scatter
     (two loads per level, 8 levels, 200 Monte-Carlo refits: the σ of γ1 written 0.77 of
-    the refits' scatter; tests/test_parameter_prior.py). One camera sees every level with
-    the same noise, so ``s² = Σ RSS_j / Σ (n_j − 1)`` (``RSS_j = n_j rms_j²``) replaces
-    ``s_j²``; a level's own misfit beyond it still shows in the regression's χ².
+    the refits' scatter; tests/test_parameter_prior.py): a level whose few residuals
+    happen to be small got a weight it did not earn. One camera sees every level with the
+    same noise, so ``max(s_j², s²)`` with the pooled ``s² = Σ RSS_j / Σ (n_j − 1)``
+    (``RSS_j = n_j rms_j²``) replaces ``s_j²``: a level that misfits more than the others
+    (a model error growing with pressure) keeps its larger error and smaller weight.
     """
     dof = counts - 1
     rss = counts * lrms**2
@@ -858,7 +860,7 @@ def _pooled_errors(lse, lrms, counts):
     pooled = rss[use].sum() / dof[use].sum()
     scale = use & (own > 0)
     out = lse.copy()
-    out[scale] = lse[scale] * np.sqrt(pooled / own[scale])
+    out[scale] = lse[scale] * np.sqrt(np.maximum(pooled, own[scale]) / own[scale])
     return out
 
 
