@@ -841,15 +841,11 @@ def _fit_levels(data: StiffnessData, level, n_levels: int, stiffness, k0, w, len
 def _pooled_errors(lse, lrms, counts):
     """The levels' standard errors of EI, their residual variance at least the one pooled over the levels.
 
-    Each level's fit scales its ``(JᵀJ)⁻¹`` by its own ``s_j² = RSS_j / (n_j − 1)``: from
-    the 4–6 coordinates of two or three loads, an estimate with 3–5 degrees of freedom.
-    A regression weighted by such noisy ``1/se²`` came out more confident than its scatter
-    (two loads per level, 8 levels, 200 Monte-Carlo refits: the σ of γ1 written 0.77 of
-    the refits' scatter; tests/test_parameter_prior.py): a level whose few residuals
-    happen to be small got a weight it did not earn. One camera sees every level with the
-    same noise, so ``max(s_j², s²)`` with the pooled ``s² = Σ RSS_j / Σ (n_j − 1)``
-    (``RSS_j = n_j rms_j²``) replaces ``s_j²``: a level that misfits more than the others
-    (a model error growing with pressure) keeps its larger error and smaller weight.
+    A level's own ``s_j² = RSS_j / (n_j − 1)`` rests on 3–5 degrees of freedom (two or
+    three loads); weighted by such noisy ``1/se²`` the regression claimed a σ of γ1 0.77 of
+    its scatter over 200 refits (tests/test_parameter_prior.py). One camera sees every
+    level with the same noise: ``max(s_j², s²)``, ``s² = Σ RSS_j / Σ (n_j − 1)``,
+    ``RSS_j = n_j rms_j²``; a level that misfits more than the others keeps its weight down.
     """
     dof = counts - 1
     rss = counts * lrms**2
