@@ -615,21 +615,31 @@ class FreeBendingModel:
         return solve_bending_angle(pressure_pa, **self.params)
 
     def _theta0_scalar(self, p: float) -> float:
-        # one frame: plain floats are ~10x faster than numpy for a single value
+        return self._interpolant_scalar(p, slope=False)[0]
+
+    def _interpolant_scalar(self, p: float, slope: bool) -> tuple[float, float]:
+        """θ0(P) [rad] and, if ``slope``, dθ0/dP [rad/Pa] of one frame (else NaN).
+
+        One frame: plain floats are ~10x faster than numpy for a single value; the same
+        table and formulas as :meth:`theta0_rad` and :meth:`bending_angle_slope`.
+        """
         if not math.isfinite(p):
             raise ArgumentError(f"pressure_pa: must be finite, got {p!r}")
         if p <= 0.0:
-            return 0.0
+            return 0.0, 0.0
         tab = self._table
         if p > self.pressure_max_pa or not tab.converged:
-            return float(self.solve(p)) - self.prebend_angle_rad
+            theta0 = float(self.solve(p)) - self.prebend_angle_rad
+            return theta0, float(self._exact_slope(np.array([p]))[0]) if slope else math.nan
         j = min(int(p / tab.bucket_pa), len(tab.bucket_start) - 1)
         k = int(tab.bucket_start[j])
         if k + 1 < len(tab.coef) and p >= tab.p_pa[k + 1]:
             k += 1
-        u = (p - float(tab.p_pa[k])) * float(tab.inv_width[k])
+        width = float(tab.inv_width[k])
+        u = (p - float(tab.p_pa[k])) * width
         c0, c1, c2, c3 = tab.coef[k].tolist()
-        return c0 + u * (c1 + u * (c2 + u * c3))
+        d = (c1 + u * (2.0 * c2 + 3.0 * u * c3)) * width if slope else math.nan
+        return c0 + u * (c1 + u * (c2 + u * c3)), d
 
     def theta0_rad(self, pressure_pa) -> np.ndarray:
         """Pressure-induced bending angle θ0 without the prebend [rad], same shape as ``pressure_pa``.
@@ -774,11 +784,15 @@ class FreeBendingModel:
             ``prebend_angle_rad``) [1/(m·Pa), rad/(m·N·m), 1/(m·rad)], in the
             order of :data:`FREE_BENDING_PARAMETERS`.
         """
+        mu, mu_s, c_a = self.shear_modulus_pa, self.sensor_stiffness_nm_per_rad, self._moment_per_pa
+        if isinstance(pressure_pa, float):  # one frame (the live path): plain floats
+            theta0, slope = self._interpolant_scalar(pressure_pa, slope=True)
+            per, unit = slope / c_a, (c_a * max(pressure_pa, 0.0) - mu_s * theta0) / mu
+            return np.array([-unit * per, -theta0 * per, 1.0]) / self.length_m
         p = _finite("pressure_pa", pressure_pa)
         theta0 = np.asarray(self.theta0_rad(p), dtype=float)
-        per = self.bending_angle_slope(p) / self._moment_per_pa  # 1 / D
-        mu, mu_s = self.shear_modulus_pa, self.sensor_stiffness_nm_per_rad
-        unit_moment = (self._moment_per_pa * np.maximum(p, 0.0) - mu_s * theta0) / mu
+        per = self.bending_angle_slope(p) / c_a  # 1 / D
+        unit_moment = (c_a * np.maximum(p, 0.0) - mu_s * theta0) / mu
         out = np.stack([-unit_moment * per, -theta0 * per, np.ones(p.shape)], axis=-1)
         return out / self.length_m
 

@@ -409,8 +409,33 @@ def _model_cov(config, pressure_pa):
     section = config.parameter_covariance
     if section is None:
         return _NO_MODEL_COV if pressure_pa.size == 1 else np.zeros((pressure_pa.size, 2, 2))
+    if pressure_pa.size == 1:  # one frame (the live path): plain floats, ~3 µs instead of ~60 µs of numpy calls
+        p = float(pressure_pa.reshape(-1)[0])
+        m = _full_covariance(section)
+        k = _models(config).tip_curvature_jacobian(p).tolist()  # ∂K0/∂(μ̄, μ_s, θ_pre); ∂EI/∂(γ0, γ1) = (1, P)
+        kk = sum(k[i] * k[j] * m[i][j] for i in range(3) for j in range(3))
+        ke = sum(k[i] * (m[i][3] + p * m[i][4]) for i in range(3))
+        ee = m[3][3] + 2.0 * p * m[3][4] + p * p * m[4][4]
+        return np.array([[[kk, ke], [ke, ee]]])
     J = model_jacobian(config, pressure_pa, section.parameters)
     return _c(J @ np.asarray(section.covariance, dtype=float) @ np.swapaxes(J, -1, -2))
+
+
+def _full_covariance(section):
+    """``section``'s covariance over all :data:`MODEL_PARAMETERS` (0 where not listed), as nested lists.
+
+    Memoised on the section: a live loop asks every frame.
+    """
+    cached = getattr(section, "_full", None)
+    if cached is None:
+        from bendsense.config import MODEL_PARAMETERS
+
+        idx = [MODEL_PARAMETERS.index(n) for n in section.parameters]
+        full = np.zeros((len(MODEL_PARAMETERS), len(MODEL_PARAMETERS)))
+        full[np.ix_(idx, idx)] = section.matrix
+        cached = full.tolist()
+        object.__setattr__(section, "_full", cached)
+    return cached
 
 
 def _starts(initial, initial_force_n, B, batch, warm_start):
