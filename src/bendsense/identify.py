@@ -166,19 +166,27 @@ def check_fixed(values: Mapping, config, field: str = "fix") -> None:
             bounds[name].check(f"{field} {name}", float(value), error=ArgumentError)
 
 
-def _covariance(jac: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, int]:
-    """s² (JᵀJ)⁻¹ with s² = RSS / (n − k); inf where the parameters are not identifiable."""
+def _covariance(jac: np.ndarray, resid: np.ndarray, data_cov: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    """s² (JᵀJ)⁻¹ with s² = RSS / (n − k); inf where the parameters are not identifiable.
+
+    With the data's covariance Σ (n, n): the sandwich ``A Σ Aᵀ``, ``A = (JᵀJ)⁻¹Jᵀ``,
+    times ``max(1, RSS / E[RSS])`` with ``E[RSS] = tr((I − H) Σ)`` (H the hat matrix).
+    """
     n, k = jac.shape
     dof = n - k
     if k == 0:
         return np.zeros((0, 0)), dof
     # SVD keeps the inverse honest when μ̄ and μ_s are nearly collinear
-    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+    u, sv, vt = np.linalg.svd(jac, full_matrices=False)
     s2 = float(resid @ resid) / dof if dof > 0 else math.nan
     if sv[0] == 0 or sv[-1] <= sv[0] * np.finfo(float).eps * max(n, k):
         return np.full((k, k), np.inf), dof
-    cov = (vt.T / sv**2) @ vt * s2
-    return cov, dof
+    if data_cov is None:
+        return (vt.T / sv**2) @ vt * s2, dof
+    a = (vt.T / sv) @ u.T  # (JᵀJ)⁻¹Jᵀ
+    expected = float(np.trace(data_cov) - np.trace(u.T @ data_cov @ u))
+    factor = max(1.0, float(resid @ resid) / expected) if expected > 0 else 1.0
+    return a @ data_cov @ a.T * factor, dof
 
 
 def _correlation(cov: np.ndarray) -> np.ndarray:
@@ -386,6 +394,7 @@ def fit_free_bending(
     *,
     fix: Iterable[str] | Mapping[str, float] | None = None,
     initial: Mapping[str, float] | None = None,
+    data_covariance=None,
 ) -> FreeBendingFit:
     """Fit μ̄, μ_s and the prebend angle to free-bending data (paper eq. 8–12, section V-C).
 
@@ -408,6 +417,10 @@ def fit_free_bending(
         Names: ``shear_modulus_pa``, ``sensor_stiffness_nm_per_rad``, ``prebend_angle_rad``.
     initial : mapping, optional
         Start values overriding ``config.material``.
+    data_covariance : array_like, shape (n, n), optional
+        Covariance of the angles [rad²] (correlated errors, e.g. one calibration's for
+        every frame of a session); the parameters' covariance is then the sandwich
+        ``A Σ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``) scaled by ``max(1, RSS / tr((I − H) Σ))``.
 
     Returns
     -------
@@ -440,7 +453,7 @@ def fit_free_bending(
     x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, free)
     values = unpack(x)
     r = resid(x)
-    cov, dof = _covariance(jac(x) / scale, r)
+    cov, dof = _covariance(jac(x) / scale, r, _data_covariance(data_covariance, len(p)))
     stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
     if at_bound:
         ok = False
@@ -473,6 +486,16 @@ def _free_bending_data(pressure_pa, bending_angle_rad):
         if not np.all(np.isfinite(arr)):
             raise ArgumentError(f"{name}: must be finite")
     return p, y
+
+
+def _data_covariance(cov, n: int):
+    """``data_covariance`` of :func:`fit_free_bending` as a finite symmetric (n, n) array, or None."""
+    if cov is None:
+        return None
+    c = np.asarray(cov, dtype=float)
+    if c.shape != (n, n) or not np.all(np.isfinite(c)):
+        raise ArgumentError(f"data_covariance: expected a finite ({n}, {n}) array, got shape {c.shape}")
+    return 0.5 * (c + c.T)
 
 
 def _free_bending_start(material, initial) -> dict:
