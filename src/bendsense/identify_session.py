@@ -54,19 +54,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import ArgumentError, SessionError
+from bendsense.identify import StiffnessData, fit_free_bending
+from bendsense.identify_covariance import session_covariance
 
 __all__ = [
     "FREE_CHI2_2SIGMA",
     "FreeBendingSessionFit",
     "free_bending_angles",
     "fit_free_bending_session",
+    "fit_stiffness_session",
     "session_shapes",
     "stiffness_data_from_session",
 ]
 
 #: χ² with 2 degrees of freedom at the 2σ level (95.45 %): the free frames' force ellipse.
 FREE_CHI2_2SIGMA = -2.0 * math.log(1.0 - math.erf(2.0 / math.sqrt(2.0)))
-_FRAMES_PER_BLOCK = 64  # frames per block of the joint angle covariance (memory (2 · 64 · N)²)
 
 
 def _source(session) -> str:
@@ -169,51 +171,6 @@ def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
     angle = np.where(good, k0 * length, np.nan)
     weights = length * j / jj[:, None]
     return angle, weights
-
-
-def _angle_covariance(calibration, signals, weights, noise_std=None) -> np.ndarray:
-    """Joint covariance (K, K) [rad²] of K frames' free-bending angles from the calibration's errors.
-
-    The frames' shifts are stacked into one vector of K·N channels and
-    :func:`bendsense.shift_errors.shift_covariance` evaluates the calibration's error
-    model over it (the channel tables tiled, the offsets' covariance indexed per
-    channel): noise independent per frame, the coefficients', offsets' and misfit errors
-    correlated across frames. Blocks of frames keep the memory bounded.
-    """
-    from bendsense.shift_errors import shift_covariance
-
-    m = calibration.error_model(noise_std)
-    gap = float(calibration.strip_gap_m())
-    shifts = np.asarray(calibration.shifts_m(signals), dtype=float)
-    K, N = shifts.shape
-    wts = np.asarray(weights, dtype=float) / gap  # ∂θ/∂S
-    blocks = [np.arange(i, min(i + _FRAMES_PER_BLOCK, K)) for i in range(0, K, _FRAMES_PER_BLOCK)]
-    out = np.zeros((K, K))
-    for a, rows_a in enumerate(blocks):
-        for rows_b in blocks[a:]:
-            rows = np.concatenate([rows_a, rows_b]) if rows_b is not rows_a else rows_a
-            tiled = _tiled_model(m, len(rows), N)
-            S = shifts[rows].ravel()
-            cov = np.empty((S.size, S.size))
-            shift_covariance(tiled, S, cov, np.empty(S.size))
-            W = np.zeros((len(rows), S.size))
-            for r in range(len(rows)):
-                W[r, r * N:(r + 1) * N] = wts[rows[r]]
-            full = W @ cov @ W.T
-            out[np.ix_(rows, rows)] = full
-    return 0.5 * (out + out.T)
-
-
-def _tiled_model(m, frames: int, N: int):
-    """The error model of ``frames`` frames' shifts stacked into one vector (:func:`_angle_covariance`)."""
-    k = m.coef.shape[1]
-    coef = m.coef_cov.shape[0] == 2 * k + N
-    idx = np.concatenate([np.arange(2 * k), 2 * k + np.tile(np.arange(N), frames)])
-    return m._replace(
-        noise_std=np.tile(m.noise_std, frames), coef=np.tile(m.coef, (frames, 1)),
-        dcoef=np.tile(m.dcoef, (frames, 1)), odd=np.tile(m.odd, frames),
-        parity=np.tile(m.parity, (frames, frames)),
-        coef_cov=np.ascontiguousarray(m.coef_cov[np.ix_(idx, idx)]) if coef else m.coef_cov)
 
 
 @dataclass(frozen=True, eq=False)
@@ -371,7 +328,6 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     SessionError
         No pressure, channels that do not match, or too few free frames.
     """
-    from bendsense.identify import fit_free_bending
     from bendsense.pipeline import _inputs
 
     session, config, calibration, _ = _inputs(session, config, calibration, "")
@@ -395,7 +351,7 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
                                      "frames free; the first fit used all usable frames")
     current, fit, settled, done = config, None, False, 0
     for done in range(1, rounds + 1):
-        fit = _fit_frames(fit_free_bending, session, calibration, p, angle, weights, used, config, fix)
+        fit = _fit_frames(session, calibration, p, angle, weights, used, config, fix)
         current = fit.to_config(config)
         new_used, reason = _select(shape, p, usable, current, calibration, chi2_limit)
         settled = bool(np.array_equal(new_used, used))
@@ -403,18 +359,20 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
         if settled:
             break
     if not settled:  # the final fit is on the final selection
-        fit = _fit_frames(fit_free_bending, session, calibration, p, angle, weights, used, config, fix)
+        fit = _fit_frames(session, calibration, p, angle, weights, used, config, fix)
     return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
                                  reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note)
 
 
-def _fit_frames(fit_free_bending, session, calibration, p, angle, weights, used, config, fix):
+def _fit_frames(session, calibration, p, angle, weights, used, config, fix):
     """:func:`fit_free_bending` on the ``used`` frames, with their angles' joint covariance."""
     rows = np.flatnonzero(used)
     if rows.size < 4:
         raise SessionError(f"{_source(session)}: {rows.size} free frame(s) found (status ok and the force inside "
                            "its 2-sigma ellipse); need at least 4 over the pressure range: record a free sweep")
-    cov = _angle_covariance(calibration, np.asarray(session.signals)[rows], weights[rows])
+    gap = float(calibration.strip_gap_m(config.sensor))
+    cov = session_covariance(calibration, np.asarray(session.signals)[rows], weights[rows] / gap,
+                             np.arange(rows.size), rows.size)
     return fit_free_bending(p[rows], angle[rows], config, fix=fix, data_covariance=cov)
 
 
@@ -441,10 +399,14 @@ def stiffness_data_from_session(session, calibration, config=None):
     SessionError
         No pressure, no load columns, or no usable loaded frame.
     """
-    from bendsense.identify import StiffnessData
     from bendsense.pipeline import _inputs
 
     session, config, calibration, _ = _inputs(session, config, calibration, "")
+    return _stiffness_rows(session, calibration, config)[0]
+
+
+def _stiffness_rows(session, calibration, config):
+    """The stiffness data of the session's loaded frames, and their frame indices."""
     force = _known_force(session, config)
     shape, usable = session_shapes(session, calibration, config)
     loaded = usable & np.all(np.isfinite(force), axis=-1) & (np.hypot(force[:, 0], force[:, 1]) > 0)
@@ -454,7 +416,68 @@ def stiffness_data_from_session(session, calibration, config=None):
                            "(in the calibrated range, its pressure in actuator.pressure_range_pa)")
     pos = np.asarray(shape.positions_m)[rows]
     s = np.broadcast_to(np.asarray(shape.s_m), (rows.size, pos.shape[1]))
-    return StiffnessData(np.asarray(session.pressure_pa, dtype=float)[rows], force[rows], s, pos)
+    return StiffnessData(np.asarray(session.pressure_pa, dtype=float)[rows], force[rows], s, pos), rows
+
+
+def fit_stiffness_session(session, calibration, config=None, **options):
+    """Fit EI(P) to the hanging-weight frames of a session (module docstring).
+
+    :func:`stiffness_data_from_session` gives the rows; :func:`bendsense.identify.fit_stiffness`
+    fits them, with the levels' covariance from the calibration's errors over all rows
+    (:func:`bendsense.identify_covariance.session_covariance` through the reconstructed
+    points' sensitivity to the shifts): the calibration error is common to every frame
+    and does not average down over them.
+
+    Parameters
+    ----------
+    session : Session or path
+        The recording (pressure and known tip force of every frame).
+    calibration : Calibration or path
+        The sensor's calibration.
+    config : Config or path, optional
+        With the free-bending model identified first; default the paper's.
+    **options
+        ``fix``, ``pressure_tolerance_pa``, ``weighted``, ``method`` of
+        :func:`~bendsense.identify.fit_stiffness`.
+
+    Returns
+    -------
+    StiffnessFit
+    """
+    from bendsense.identify import fit_stiffness
+    from bendsense.pipeline import _inputs
+
+    session, config, calibration, _ = _inputs(session, config, calibration, "")
+    data, rows = _stiffness_rows(session, calibration, config)
+    signals = np.asarray(session.signals, dtype=float)[rows]
+    dpos_ds = _points_shift_jacobian(calibration.shifts_m(signals), calibration.strip_gap_m(config.sensor),
+                                     config)
+
+    def level_covariance(sensitivity, level, n_levels):
+        weights = np.einsum("nmc,nmcj->nj", sensitivity, dpos_ds)
+        return session_covariance(calibration, signals, weights, level, n_levels)
+
+    return fit_stiffness(data, config, level_covariance=level_covariance, **options)
+
+
+def _points_shift_jacobian(shifts_m, gap_m: float, config, h: float = 1e-5) -> np.ndarray:
+    """∂(PCC points at the coils)/∂S (n, N, 2, N) [m/m], by central differences in the curvatures."""
+    from bendsense.pcc import Shape
+
+    lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
+    coils = np.cumsum(lengths)
+    n, N = shifts_m.shape
+    delta = np.diff(np.asarray(shifts_m, dtype=float), axis=-1, prepend=0.0)
+    kappa = delta / (gap_m * lengths)
+    bumped = np.repeat(kappa[:, None, :], 2 * N, axis=1)
+    eye = np.eye(N) * h
+    bumped[:, :N] += eye
+    bumped[:, N:] -= eye
+    pos = np.asarray(Shape.from_curvatures(bumped, lengths, s_m=coils).positions_m)  # (n, 2N, M, 2)
+    dpos_dk = np.moveaxis((pos[:, :N] - pos[:, N:]) / (2 * h), 1, -1)  # (n, M, 2, N)
+    # κ_i = (S_i − S_{i−1}) / (d l_i)
+    dk_ds = (np.eye(N) - np.eye(N, k=-1)) / (gap_m * lengths)[:, None]
+    return dpos_dk @ dk_ds
 
 
 def _known_force(session, config) -> np.ndarray:

@@ -155,16 +155,12 @@ def identify(
                 pressure, angle = read_free_bending_csv(data)
                 fit = fit_free_bending(pressure, angle, config, fix=fix)
             else:
-                table = (read_stiffness_csv(data, config.actuator.length_m) if session_path is None
-                         else _stiffness_session(session_path, calibration_path, config))
-                fit = fit_stiffness(
-                    table,
-                    config,
-                    fix=fix,
-                    pressure_tolerance_pa=pressure_tolerance_kpa * 1e3,
-                    weighted=not unweighted,
-                    method=method,
-                )
+                options = {"fix": fix, "pressure_tolerance_pa": pressure_tolerance_kpa * 1e3,
+                           "weighted": not unweighted, "method": method}
+                if session_path is None:
+                    fit = fit_stiffness(read_stiffness_csv(data, config.actuator.length_m), config, **options)
+                else:
+                    fit = _stiffness_session(session_path, calibration_path, config, options)
             new_config = fit.to_config(config)
         except BendsenseError as err:
             raise click.ClickException(f"{source}: {err}" if str(source) not in str(err) else str(err)) from None
@@ -217,12 +213,12 @@ def _free_bending_session(session_path, calibration_path, config, fix):
     return fit_free_bending_session(session, calibration, config, fix=fix)
 
 
-def _stiffness_session(session_path, calibration_path, config):
-    """The hanging-weight frames of a session as stiffness data."""
-    from bendsense.identify_session import stiffness_data_from_session
+def _stiffness_session(session_path, calibration_path, config, options):
+    """The stiffness fit of a session of hanging weights."""
+    from bendsense.identify_session import fit_stiffness_session
 
     session, calibration = _read_inputs(session_path, calibration_path)
-    return stiffness_data_from_session(session, calibration, config)
+    return fit_stiffness_session(session, calibration, config, **options)
 
 
 COMMANDS = [identify]
