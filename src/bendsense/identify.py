@@ -686,11 +686,12 @@ def fit_stiffness(
     method : str
         Beam solver, ``fast`` or ``shooting`` (the paper's method).
     level_covariance : callable, optional
-        ``level_covariance(sensitivity, level, n_levels)`` → (levels, levels) covariance
+        ``level_covariance(sensitivity, level, level_ei_nm2)`` → (levels, levels) covariance
         [N²·m⁴] of the levels' EI from errors the residuals do not show (a calibration
         common to all rows, :func:`bendsense.identify_session.fit_stiffness_session`);
         ``sensitivity`` (n, M, 2) is ∂EI of each row's level / ∂ its measured points
-        [N·m²/m]. It adds to the levels' own variances; the line's covariance is then
+        [N·m²/m], ``level`` (n,) each row's level, ``level_ei_nm2`` the levels' fitted EI.
+        It adds to the levels' own variances; the line's covariance is then
         the sandwich of the regression over it.
 
     Returns
@@ -728,7 +729,7 @@ def fit_stiffness(
                                                             method)
     level_cov = None
     if level_covariance is not None:
-        level_cov = np.asarray(level_covariance(sens, level, n_levels), dtype=float)
+        level_cov = np.asarray(level_covariance(sens, level, lei), dtype=float)
         level_cov = level_cov + np.diag(np.where(np.isfinite(lse), lse, 0.0) ** 2)
         lse = np.sqrt(np.diag(level_cov))
     values, residuals, cov, use_weights = _regress_levels(lp, lei, lse, free, fixed, weighted, level_cov)

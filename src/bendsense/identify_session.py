@@ -53,6 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, SessionError
 from bendsense.identify import StiffnessData, fit_free_bending
 from bendsense.identify_covariance import session_covariance
@@ -140,6 +141,9 @@ def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
         θ = K0 L [rad] (NaN where the beam solve failed).
     weights : ndarray, shape (frames, N)
         ∂θ/∂φ_i: θ's linear response to the measured coil angles [rad/rad].
+    slope_ei : ndarray, shape (frames,)
+        ∂θ/∂EI at the frame's pressure [rad/(N·m²)]: how the angle moves with the
+        stiffness the gravity correction assumes.
     """
     from bendsense.beam import solve_beam
 
@@ -151,7 +155,7 @@ def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
     ei = config.stiffness.ei_nm2(p)
     w = config.weight_per_length_n_per_m
 
-    def model(k0):
+    def model(k0, ei=ei):
         sol = solve_beam(length, ei, k0, (0.0, 0.0), w, s_m=coils, warn=False)
         return np.asarray(sol.angle_rad), np.asarray(sol.success)
 
@@ -167,10 +171,14 @@ def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
         if np.all(np.abs(step) <= 1e-10 * np.maximum(1.0, np.abs(k0))):
             break
     mid, ok = model(k0)
-    good = ok & ok_lo & ok_hi & np.isfinite(k0)
+    dei = 1e-4 * ei
+    (ei_hi, ok_ei), (ei_lo, _) = model(k0, ei + dei), model(k0, ei - dei)
+    good = ok & ok_lo & ok_hi & ok_ei & np.isfinite(k0)
     angle = np.where(good, k0 * length, np.nan)
     weights = length * j / jj[:, None]
-    return angle, weights
+    # at the optimum K0 moves by −(jᵀ ∂φ/∂EI)/(jᵀj) per unit of EI
+    slope_ei = -np.einsum("bi,bi->b", weights, (ei_hi - ei_lo) / (2.0 * dei[:, None]))
+    return angle, weights, slope_ei
 
 
 @dataclass(frozen=True, eq=False)
@@ -337,9 +345,10 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     p = np.asarray(session.pressure_pa, dtype=float)
     angle = np.full(len(p), np.nan)
     weights = np.full((len(p), config.sensor.n_segments), np.nan)
+    slope_ei = np.full(len(p), np.nan)
     idx = np.flatnonzero(usable)
     if idx.size:
-        angle[idx], weights[idx] = free_bending_angles(_take(shape, idx), p[idx], config)
+        angle[idx], weights[idx], slope_ei[idx] = free_bending_angles(_take(shape, idx), p[idx], config)
     usable &= np.isfinite(angle)
     if not usable.any():
         raise SessionError(f"{_source(session)}: no frame with a usable shape (all outside the calibrated range, "
@@ -351,7 +360,7 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
                                      "frames free; the first fit used all usable frames")
     current, fit, settled, done = config, None, False, 0
     for done in range(1, rounds + 1):
-        fit = _fit_frames(session, calibration, p, angle, weights, used, config, fix)
+        fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
         current = fit.to_config(config)
         new_used, reason = _select(shape, p, usable, current, calibration, chi2_limit)
         settled = bool(np.array_equal(new_used, used))
@@ -359,13 +368,18 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
         if settled:
             break
     if not settled:  # the final fit is on the final selection
-        fit = _fit_frames(session, calibration, p, angle, weights, used, config, fix)
+        fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
     return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
                                  reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note)
 
 
-def _fit_frames(session, calibration, p, angle, weights, used, config, fix):
-    """:func:`fit_free_bending` on the ``used`` frames, with their angles' joint covariance."""
+def _fit_frames(session, calibration, p, angle, sensitivities, used, config, fix):
+    """:func:`fit_free_bending` on the ``used`` frames, with their angles' joint covariance.
+
+    The covariance: the calibration's errors over the frames (:func:`session_covariance`)
+    plus the config's stated uncertainty of EI(P) through the gravity correction.
+    """
+    weights, slope_ei = sensitivities
     rows = np.flatnonzero(used)
     if rows.size < 4:
         raise SessionError(f"{_source(session)}: {rows.size} free frame(s) found (status ok and the force inside "
@@ -373,7 +387,23 @@ def _fit_frames(session, calibration, p, angle, weights, used, config, fix):
     gap = float(calibration.strip_gap_m(config.sensor))
     cov = session_covariance(calibration, np.asarray(session.signals)[rows], weights[rows] / gap,
                              np.arange(rows.size), rows.size)
+    g = slope_ei[rows, None] * np.stack([np.ones(rows.size), p[rows]], axis=-1)  # ∂θ/∂(ei0, ei1)
+    cov = cov + g @ _block(config, STIFFNESS_PARAMETERS) @ g.T
     return fit_free_bending(p[rows], angle[rows], config, fix=fix, data_covariance=cov)
+
+
+def _block(config, names) -> np.ndarray:
+    """The covariance of ``names`` stated by ``config.parameter_covariance`` (zeros where it states none)."""
+    out = np.zeros((len(names), len(names)))
+    section = config.parameter_covariance
+    if section is None:
+        return out
+    idx = [section.parameters.index(n) if n in section.parameters else -1 for n in names]
+    for a, i in enumerate(idx):
+        for b, j in enumerate(idx):
+            if i >= 0 and j >= 0:
+                out[a, b] = section.matrix[i, j]
+    return out
 
 
 def stiffness_data_from_session(session, calibration, config=None):
@@ -453,11 +483,38 @@ def fit_stiffness_session(session, calibration, config=None, **options):
     dpos_ds = _points_shift_jacobian(calibration.shifts_m(signals), calibration.strip_gap_m(config.sensor),
                                      config)
 
-    def level_covariance(sensitivity, level, n_levels):
+    def level_covariance(sensitivity, level, level_ei):
         weights = np.einsum("nmc,nmcj->nj", sensitivity, dpos_ds)
-        return session_covariance(calibration, signals, weights, level, n_levels)
+        cov = session_covariance(calibration, signals, weights, level, len(level_ei))
+        g = _level_k0_jacobian(data, config, sensitivity, level, level_ei)
+        return cov + g @ _block(config, FREE_BENDING_PARAMETERS) @ g.T
 
     return fit_stiffness(data, config, level_covariance=level_covariance, **options)
+
+
+def _level_k0_jacobian(data, config, sensitivity, level, level_ei) -> np.ndarray:
+    """∂EI of each level / ∂(μ̄, μ_s, prebend) (levels, 3): through K0(P) of each row's model shape.
+
+    The level's EI minimises the distance of the model points to the measured ones; a
+    change δK0 of a row's natural curvature moves its model points by ∂r/∂K0 δK0 and
+    the fitted EI by −sensitivity · ∂r/∂K0 δK0 (∂r/∂K0 by a central difference).
+    """
+    from bendsense.actuator import FreeBendingModel, model_jacobian
+    from bendsense.beam import solve_beam
+
+    p = data.pressure_pa
+    k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(p)
+    grid = data.s_m[0]
+    ei = np.asarray(level_ei)[level]
+    h = 1e-4 * np.maximum(np.abs(k0), 1.0)
+    w = config.weight_per_length_n_per_m
+    hi, lo = (np.asarray(solve_beam(config.actuator.length_m, ei, k0 + sign * h, data.force_n, w, s_m=grid,
+                                    warn=False).positions_m) for sign in (1.0, -1.0))
+    dei_dk0 = -np.einsum("nmc,nmc->n", sensitivity, (hi - lo) / (2.0 * h[:, None, None]))
+    dk0 = model_jacobian(config, p, FREE_BENDING_PARAMETERS)[:, 0, :]  # (n, 3)
+    out = np.zeros((len(level_ei), dk0.shape[1]))
+    np.add.at(out, level, dei_dk0[:, None] * dk0)
+    return out
 
 
 def _points_shift_jacobian(shifts_m, gap_m: float, config, h: float = 1e-5) -> np.ndarray:
