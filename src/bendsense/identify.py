@@ -42,7 +42,9 @@ K0(P) from the free-bending model of the config (identify it first), gravity
 load still count: gravity bends them.
 
 The two CSVs are read and checked in :mod:`bendsense.identify_data`; its names are
-importable from here.
+importable from here. Sessions recorded with bendsense (a free pressure sweep, hanging
+weights) become these fits' data in :mod:`bendsense.identify_session`; the fits'
+covariances are computed in :mod:`bendsense.identify_covariance`.
 """
 
 from __future__ import annotations

@@ -358,8 +358,9 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     if used.sum() < 0.5 * usable.sum():
         used, note = usable.copy(), (f"the starting config found {int(used.sum())} of {int(usable.sum())} usable "
                                      "frames free; the first fit used all usable frames")
-    current, fit, settled, done = config, None, False, 0
-    for done in range(1, rounds + 1):
+    fit, settled, done = None, False, 0
+    while done < rounds:
+        done += 1
         fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
         current = fit.to_config(config)
         new_used, reason = _select(shape, p, usable, current, calibration, chi2_limit)

@@ -723,12 +723,13 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
         key = {"calibration": "frames_per_strip", "validation": "frames_per_strip",
                "time-varying": "duration_s", "free-sweep": "n_frames"}.get(name, "frames_per_config")
         per_frame = _BYTES_PER_FRAME[name]
+        per_what = "strip" if key == "frames_per_strip" else "configuration"
         per_unit = at_once / max(float(options.get(key, _OPTIONS[name][key])), 1e-300)
         most = int((available - _BASE_BYTES) / per_frame / per_unit) if available > _BASE_BYTES else 0
         raise ArgumentError(
             f"{field or key}: {name} would hold {at_once:,} frames in memory, about {_size(need)}; this machine "
             f"has {_size(available)} available (at most {max(most, 0):,} {'s' if key == 'duration_s' else 'frames'}"
-            f"{'' if key in ('duration_s', 'n_frames') else ' per ' + ('strip' if key == 'frames_per_strip' else 'configuration')})"
+            f"{'' if key in ('duration_s', 'n_frames') else ' per ' + per_what})"
         )
 
 
