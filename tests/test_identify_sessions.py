@@ -319,3 +319,26 @@ def test_library_errors_name_the_problem(lab):
     with pytest.raises(SessionError, match="give the load as fx_n, fy_n or as mass_kg, not both"):
         extra = {**s.extra, "mass_kg": np.zeros(len(s))}
         stiffness_data_from_session(bendsense.Session(s.t_s, s.signals, s.pressure_pa, extra=extra), lab["cal"])
+
+
+def test_a_native_session_directory_gives_the_same_fit(lab, tmp_path):
+    from bendsense.session.native import import_session_csv
+
+    native = tmp_path / "sweep.bsess"
+    import_session_csv(lab["sweep"], native)
+    a = fit_free_bending_session(lab["sweep"], lab["cal"], PRIOR)
+    b = fit_free_bending_session(native, lab["cal"], PRIOR)
+    assert np.array_equal(a.used, b.used)
+    for name in MODEL_PARAMETERS[:3]:
+        assert b.fit.params[name] == pytest.approx(a.fit.params[name], rel=1e-3, abs=1e-6)
+
+
+def test_long_sessions_are_thinned_evenly(lab):
+    fb = fit_free_bending_session(lab["sweep"], lab["cal"], PRIOR, max_frames=20)
+    considered = fb.reason != "thinned"
+    assert considered.sum() <= 20 + np.count_nonzero(fb.reason == "unusable")
+    assert np.count_nonzero(fb.reason == "thinned") >= 30
+    # spread over the whole sweep, up and down
+    p = fb.pressure_pa[fb.used]
+    assert p.max() > 80e3 and np.flatnonzero(fb.used).max() > 45
+    assert "thinned" in fb.report()

@@ -60,6 +60,7 @@ from bendsense.identify_covariance import session_covariance
 
 __all__ = [
     "FREE_CHI2_2SIGMA",
+    "MAX_FRAMES",
     "FreeBendingSessionFit",
     "free_bending_angles",
     "fit_free_bending_session",
@@ -70,6 +71,8 @@ __all__ = [
 
 #: χ² with 2 degrees of freedom at the 2σ level (95.45 %): the free frames' force ellipse.
 FREE_CHI2_2SIGMA = -2.0 * math.log(1.0 - math.erf(2.0 / math.sqrt(2.0)))
+#: Usable frames a free-bending fit considers at most (evenly spread over the session).
+MAX_FRAMES = 400
 
 
 def _source(session) -> str:
@@ -198,8 +201,9 @@ class FreeBendingSessionFit:
         The frames of the final fit.
     reason : ndarray of str, shape (frames,)
         ``used``, or why a frame was not: ``loaded`` (its force outside the 2σ ellipse),
-        its estimate's status (``model_misfit``, …) or ``unusable`` (no shape in the
-        calibrated range, or a pressure outside the working range).
+        its estimate's status (``model_misfit``, …), ``unusable`` (no shape in the
+        calibrated range, or a pressure outside the working range) or ``thinned`` (not
+        considered: beyond ``max_frames``).
     rounds : int
         Fit and re-selection rounds run.
     settled : bool
@@ -278,12 +282,12 @@ class FreeBendingSessionFit:
         return ax
 
 
-def _select(shape, pressure, usable, config, calibration, nsigma2):
+def _select(shape, pressure, usable, config, calibration, nsigma2, thinned):
     """Frames whose estimate is ``ok`` with the force inside its χ² ellipse; the reason for every frame."""
     from bendsense.estimation import estimate_force
     from bendsense.results import frame_status
 
-    reason = np.full(len(pressure), "unusable", dtype=object)
+    reason = np.where(thinned, "thinned", "unusable").astype(object)
     idx = np.flatnonzero(usable)
     part = _take(shape, idx)
     est = estimate_force(part, pressure[idx], config, calibration=calibration)
@@ -307,7 +311,8 @@ def _take(shape, idx):
 
 
 def fit_free_bending_session(session, calibration, config=None, *, fix=None, rounds: int = 5,
-                             chi2_limit: float = FREE_CHI2_2SIGMA) -> FreeBendingSessionFit:
+                             chi2_limit: float = FREE_CHI2_2SIGMA, max_frames: int = MAX_FRAMES
+                             ) -> FreeBendingSessionFit:
     """Fit μ̄, μ_s and the prebend to the free frames of a recorded pressure sweep (module docstring).
 
     Parameters
@@ -326,6 +331,11 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
         At most this many fit and re-selection rounds.
     chi2_limit : float
         A frame is free when ``Fᵀ C⁻¹ F`` is at most this (default the 2σ level of χ²₂).
+    max_frames : int
+        Consider at most this many usable frames, evenly spread over the session (a
+        sweep recorded at 2 kHz has tens of thousands; the calibration's error, common
+        to all, bounds what more frames could add); the others have the reason
+        ``thinned``.
 
     Returns
     -------
@@ -341,7 +351,15 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     session, config, calibration, _ = _inputs(session, config, calibration, "")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise ArgumentError(f"rounds: expected an integer >= 1, got {rounds!r}")
+    if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 4:
+        raise ArgumentError(f"max_frames: expected an integer >= 4, got {max_frames!r}")
     shape, usable = session_shapes(session, calibration, config)
+    thinned = usable.copy()
+    candidates = np.flatnonzero(usable)
+    usable[:] = False
+    usable[candidates[np.unique(np.linspace(0, candidates.size - 1, min(candidates.size, max_frames)).round()
+                                .astype(int))] if candidates.size else candidates] = True
+    thinned &= ~usable
     p = np.asarray(session.pressure_pa, dtype=float)
     angle = np.full(len(p), np.nan)
     weights = np.full((len(p), config.sensor.n_segments), np.nan)
@@ -353,7 +371,7 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     if not usable.any():
         raise SessionError(f"{_source(session)}: no frame with a usable shape (all outside the calibrated range, "
                            "or their pressure outside actuator.pressure_range_pa)")
-    used, reason = _select(shape, p, usable, config, calibration, chi2_limit)
+    used, reason = _select(shape, p, usable, config, calibration, chi2_limit, thinned)
     note = "the first selection by the starting config"
     if used.sum() < 0.5 * usable.sum():
         used, note = usable.copy(), (f"the starting config found {int(used.sum())} of {int(usable.sum())} usable "
@@ -363,7 +381,7 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
         done += 1
         fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
         current = fit.to_config(config)
-        new_used, reason = _select(shape, p, usable, current, calibration, chi2_limit)
+        new_used, reason = _select(shape, p, usable, current, calibration, chi2_limit, thinned)
         settled = bool(np.array_equal(new_used, used))
         used = new_used
         if settled:
