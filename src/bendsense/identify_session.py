@@ -107,7 +107,10 @@ def session_shapes(session, calibration, config, *, need_pressure: bool = True):
         raise SessionError(f"{_source(session)}: no frames")
     check_channels(session, calibration, config.sensor)
     p = np.asarray(session.pressure_pa, dtype=float)
-    if need_pressure and (p.ndim != 1 or not np.all(np.isfinite(p))):
+    if p.ndim != 1:
+        raise SessionError(f"{_source(session)}: pressure of {p.shape[-1]} lines per frame; identification takes "
+                           "one actuator on one pressure line (export that finger's frames to a session CSV)")
+    if need_pressure and not np.all(np.isfinite(p)):
         missing = int(np.count_nonzero(~np.isfinite(p)))
         raise SessionError(f"{_source(session)}: {missing} of {len(session)} frames have no pressure reading; "
                            "identification needs the pressure of every frame (a pressure_pa or pressure_kpa column)")
