@@ -342,3 +342,9 @@ def test_long_sessions_are_thinned_evenly(lab):
     p = fb.pressure_pa[fb.used]
     assert p.max() > 80e3 and np.flatnonzero(fb.used).max() > 45
     assert "thinned" in fb.report()
+
+
+def test_report_says_when_ei_is_taken_as_exact(lab):
+    without = fit_free_bending_session(lab["sweep"], lab["cal"], PAPER)
+    assert "takes its EI(P) as exact" in without.report()
+    assert "as exact" not in lab["fits"][-1][0].report()

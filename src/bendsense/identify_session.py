@@ -213,6 +213,8 @@ class FreeBendingSessionFit:
         The selection repeated in the last round.
     note : str
         How the first fit's frames were chosen.
+    caveats : tuple of str
+        What the fit takes as exact that may not be (printed by :meth:`report`).
     """
 
     fit: object
@@ -223,6 +225,7 @@ class FreeBendingSessionFit:
     rounds: int
     settled: bool
     note: str
+    caveats: tuple = ()
 
     def to_config(self, config):
         """A copy of ``config`` with the fitted values and covariance (:meth:`FreeBendingFit.to_config`).
@@ -243,6 +246,7 @@ class FreeBendingSessionFit:
             f"free frames: {int(self.used.sum())} of {n} used (status ok, force inside its 2-sigma ellipse); "
             f"rejected: {rejected}",
             f"  selection: {self.rounds} round(s), {'settled' if self.settled else 'NOT settled'}; {self.note}",
+            *(f"  note: {c}" for c in self.caveats),
             self.fit.report(),
         ]
         if not self.settled:
@@ -391,8 +395,13 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
             break
     if not settled:  # the final fit is on the final selection
         fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
+    caveats = ()
+    if not np.any(_block(config, STIFFNESS_PARAMETERS)):
+        caveats = ("the config states no covariance of ei0_nm2, ei1_nm2_per_pa: the gravity correction takes its "
+                   "EI(P) as exact; identify stiffness, then free bending again with that config",)
     return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
-                                 reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note)
+                                 reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note,
+                                 caveats=caveats)
 
 
 def _fit_frames(session, calibration, p, angle, sensitivities, used, config, fix):
