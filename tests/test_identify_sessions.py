@@ -348,3 +348,54 @@ def test_report_says_when_ei_is_taken_as_exact(lab):
     without = fit_free_bending_session(lab["sweep"], lab["cal"], PAPER)
     assert "takes its EI(P) as exact" in without.report()
     assert "as exact" not in lab["fits"][-1][0].report()
+
+
+# --------------------------------------------------------------------------- against the independent forward model
+
+TRUE_MATERIAL = {"shear_modulus_pa": 1.6e5, "sensor_stiffness_nm_per_rad": 1.2e-3, "prebend_angle_rad": 0.03}
+TRUE_STIFFNESS = {"ei0_nm2": 1.15 * PAPER.stiffness.ei0_nm2, "ei1_nm2_per_pa": 1.15 * PAPER.stiffness.ei1_nm2_per_pa}
+
+
+@pytest.fixture(scope="module")
+def independent(tmp_path_factory):
+    """Sessions made by tests/forward_model.py (scipy's solve_bvp, its own eq. 8–12, a non-polynomial sensor)."""
+    from forward_model import HiddenSensor, forward
+
+    root = tmp_path_factory.mktemp("independent")
+    sensor = HiddenSensor(noise_counts=1.5, seed=3)
+    cal = bendsense.Calibration.fit(sensor.write_calibration(root / "cal", PAPER, frames=30, flat_frames=60))
+    rng = np.random.default_rng(11)
+
+    def session(pressures, forces, name, extra=None):
+        shifts = np.array([forward(PAPER, p, f, material=TRUE_MATERIAL, stiffness=TRUE_STIFFNESS).shifts_m
+                           for p, f in zip(pressures, forces, strict=True)])
+        s = bendsense.Session(np.arange(len(pressures)) / 35.0, sensor.signals(shifts, rng), np.asarray(pressures),
+                              extra=extra or {})
+        bendsense.write_session_csv(s, root / name)
+        return root / name
+
+    up = np.linspace(2e3, 110e3, 14)
+    p_sweep = np.concatenate([up, up[::-1]])
+    sweep = session(p_sweep, np.zeros((p_sweep.size, 2)), "sweep.csv")
+    # weights over the whole range of the sweep: EI(P) extrapolated beyond its levels is poorly known, and the
+    # sweep's gravity correction needs it everywhere
+    p_loads = np.repeat([20e3, 40e3, 60e3, 80e3, 100e3], 2)
+    f_loads = np.tile([[0.0, -0.1], [0.0, -0.25]], (5, 1))
+    loads = session(p_loads, f_loads, "loads.csv", {"fx_n": f_loads[:, 0], "fy_n": f_loads[:, 1]})
+    config, _ = _identify(cal, sweep, loads, PRIOR)
+    return config
+
+
+def test_independent_forward_model_k0_and_ei_within_sigma(independent):
+    from forward_model import free_bending_k0
+
+    k0_true = np.array([free_bending_k0(PAPER, p, TRUE_MATERIAL) for p in P_CHECK[:-1]])
+    ei_true = TRUE_STIFFNESS["ei0_nm2"] + TRUE_STIFFNESS["ei1_nm2_per_pa"] * P_CHECK[:-1]
+    k0 = FreeBendingModel.from_config(independent).tip_curvature_per_m(P_CHECK[:-1])
+    ei = independent.stiffness.ei_nm2(P_CHECK[:-1])
+    s_k0, s_ei = _sigma(independent, 0)[:-1], _sigma(independent, 1)[:-1]
+    assert np.all(np.abs(k0 - k0_true) <= 2 * s_k0), (k0 - k0_true) / s_k0
+    assert np.all(np.abs(ei - ei_true) <= 2 * s_ei), (ei - ei_true) / s_ei
+    # closer than the paper's values
+    assert np.all(np.abs(k0 - k0_true) < np.abs(_k0(PAPER)[:-1] - k0_true))
+    assert np.all(np.abs(ei - ei_true) < np.abs(PAPER.stiffness.ei_nm2(P_CHECK[:-1]) - ei_true))

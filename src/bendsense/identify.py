@@ -312,6 +312,7 @@ def fit_free_bending(
     fix: Iterable[str] | Mapping[str, float] | None = None,
     initial: Mapping[str, float] | None = None,
     data_covariance=None,
+    systematic_covariance=None,
 ) -> FreeBendingFit:
     """Fit μ̄, μ_s and the prebend angle to free-bending data (paper eq. 8–12, section V-C).
 
@@ -338,6 +339,10 @@ def fit_free_bending(
         Covariance of the angles [rad²] (correlated errors, e.g. one calibration's for
         every frame of a session); the parameters' covariance is then the sandwich
         ``A Σ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``) scaled by ``max(1, RSS / tr((I − H) Σ))``.
+    systematic_covariance : array_like, shape (n, n), optional
+        With ``data_covariance``: a further error common to the angles that the
+        residuals cannot show (e.g. from another fit's parameters) [rad²]; added to the
+        sandwich unscaled.
 
     Returns
     -------
@@ -370,7 +375,8 @@ def fit_free_bending(
     x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, free)
     values = unpack(x)
     r = resid(x)
-    cov, dof = _covariance(jac(x) / scale, r, _data_covariance(data_covariance, len(p)))
+    cov, dof = _covariance(jac(x) / scale, r, _data_covariance(data_covariance, len(p)),
+                           _data_covariance(systematic_covariance, len(p), "systematic_covariance"))
     stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
     if at_bound:
         ok = False
@@ -405,13 +411,13 @@ def _free_bending_data(pressure_pa, bending_angle_rad):
     return p, y
 
 
-def _data_covariance(cov, n: int):
-    """``data_covariance`` of :func:`fit_free_bending` as a finite symmetric (n, n) array, or None."""
+def _data_covariance(cov, n: int, name: str = "data_covariance"):
+    """A covariance argument of :func:`fit_free_bending` as a finite symmetric (n, n) array, or None."""
     if cov is None:
         return None
     c = np.asarray(cov, dtype=float)
     if c.shape != (n, n) or not np.all(np.isfinite(c)):
-        raise ArgumentError(f"data_covariance: expected a finite ({n}, {n}) array, got shape {c.shape}")
+        raise ArgumentError(f"{name}: expected a finite ({n}, {n}) array, got shape {c.shape}")
     return 0.5 * (c + c.T)
 
 
@@ -688,9 +694,10 @@ def fit_stiffness(
     method : str
         Beam solver, ``fast`` or ``shooting`` (the paper's method).
     level_covariance : callable, optional
-        ``level_covariance(sensitivity, level, level_ei_nm2)`` → (levels, levels) covariance
-        [N²·m⁴] of the levels' EI from errors the residuals do not show (a calibration
-        common to all rows, :func:`bendsense.identify_session.fit_stiffness_session`);
+        ``level_covariance(sensitivity, level, level_ei_nm2)`` → two (levels, levels)
+        covariances [N²·m⁴] of the levels' EI: from the measured points' errors (a
+        calibration common to all rows, :func:`bendsense.identify_session.fit_stiffness_session`)
+        and a systematic part the residuals cannot show (from K0's uncertainty);
         ``sensitivity`` (n, M, 2) is ∂EI of each row's level / ∂ its measured points
         [N·m²/m], ``level`` (n,) each row's level, ``level_ei_nm2`` the levels' fitted EI.
         It adds to the levels' own variances; the line's covariance is then
@@ -731,9 +738,10 @@ def fit_stiffness(
                                                             method)
     level_cov = None
     if level_covariance is not None:
-        level_cov = np.asarray(level_covariance(sens, level, lei), dtype=float)
-        level_cov = level_cov + np.diag(np.where(np.isfinite(lse), lse, 0.0) ** 2)
-        lse = np.sqrt(np.diag(level_cov))
+        data_cov, sys_cov = (np.asarray(c, dtype=float) for c in level_covariance(sens, level, lei))
+        data_cov = data_cov + np.diag(np.where(np.isfinite(lse), lse, 0.0) ** 2)
+        level_cov = (data_cov, sys_cov)
+        lse = np.sqrt(np.diag(data_cov + sys_cov))
     values, residuals, cov, use_weights = _regress_levels(lp, lei, lse, free, fixed, weighted, level_cov)
     message = "converged"
     stderr = _stderr(cov, free, STIFFNESS_PARAMS)
@@ -795,8 +803,9 @@ def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool, level_cov=N
 
     Weighted by 1/σ_EI² when ``weighted`` and every level has a finite standard error;
     the covariance scaled up by χ²/(levels − k) when the levels scatter more than their
-    errors say. With the levels' covariance Σ (correlated errors): the sandwich
-    ``A Σ Aᵀ`` (A the regression's linear map) times ``max(1, χ² / E[χ²])``. Returns
+    errors say. With the levels' covariances (Σ, Σ_sys) (correlated errors): the
+    sandwich ``A (f Σ + Σ_sys) Aᵀ`` (A the regression's linear map), ``f = max(1,
+    χ² / E[χ²])`` with E[χ²] from Σ. Returns
     the parameters' values, the levels' residuals [N m²], the free parameters'
     covariance and whether the weights were used.
     """
@@ -820,9 +829,10 @@ def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool, level_cov=N
     if free and level_cov is not None:
         a = np.linalg.pinv((X * weights[:, None]).T @ X) @ (X * weights[:, None]).T
         resid_map = np.eye(n_levels) - X @ a
-        expected = float(np.trace(weights[:, None] * (resid_map @ level_cov @ resid_map.T)))
+        data_cov, sys_cov = level_cov
+        expected = float(np.trace(weights[:, None] * (resid_map @ data_cov @ resid_map.T)))
         chi2 = float(np.sum(weights * residuals**2))
-        cov = a @ level_cov @ a.T * (max(1.0, chi2 / expected) if expected > 0 else 1.0)
+        cov = a @ (data_cov * (max(1.0, chi2 / expected) if expected > 0 else 1.0) + sys_cov) @ a.T
     elif free:
         xtwx_inv = np.linalg.pinv((X * weights[:, None]).T @ X)
         chi2 = float(np.sum(weights * residuals**2))

@@ -20,11 +20,14 @@ __all__ = ["session_covariance"]
 _FRAMES_PER_BLOCK = 64  # frames per block of the joint covariance (memory (2 · 64 · N)² floats)
 
 
-def _covariance(jac: np.ndarray, resid: np.ndarray, data_cov: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+def _covariance(jac: np.ndarray, resid: np.ndarray, data_cov: np.ndarray | None = None,
+                systematic_cov: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """s² (JᵀJ)⁻¹ with s² = RSS / (n − k); inf where the parameters are not identifiable.
 
-    With the data's covariance Σ (n, n): the sandwich ``A Σ Aᵀ``, ``A = (JᵀJ)⁻¹Jᵀ``,
-    times ``max(1, RSS / E[RSS])`` with ``E[RSS] = tr((I − H) Σ)`` (H the hat matrix).
+    With the data's covariance Σ (n, n): the sandwich ``A (f Σ + Σ_sys) Aᵀ``,
+    ``A = (JᵀJ)⁻¹Jᵀ``, ``f = max(1, RSS / E[RSS])`` with ``E[RSS] = tr((I − H) Σ)``
+    (H the hat matrix): residuals that scatter more than Σ says scale Σ up, not the
+    systematic part ``Σ_sys`` (an error common to the data that the residuals cannot show).
     """
     n, k = jac.shape
     dof = n - k
@@ -40,7 +43,8 @@ def _covariance(jac: np.ndarray, resid: np.ndarray, data_cov: np.ndarray | None 
     a = (vt.T / sv) @ u.T  # (JᵀJ)⁻¹Jᵀ
     expected = float(np.trace(data_cov) - np.trace(u.T @ data_cov @ u))
     factor = max(1.0, float(resid @ resid) / expected) if expected > 0 else 1.0
-    return a @ data_cov @ a.T * factor, dof
+    total = data_cov * factor + (0.0 if systematic_cov is None else systematic_cov)
+    return a @ total @ a.T, dof
 
 
 def _correlation(cov: np.ndarray) -> np.ndarray:

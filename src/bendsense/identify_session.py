@@ -383,22 +383,27 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     if used.sum() < 0.5 * usable.sum():
         used, note = usable.copy(), (f"the starting config found {int(used.sum())} of {int(usable.sum())} usable "
                                      "frames free; the first fit used all usable frames")
-    fit, settled, done = None, False, 0
+    fit, settled, done, caveats = None, False, 0, ()
     while done < rounds:
         done += 1
         fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
         current = fit.to_config(config)
-        new_used, reason = _select(shape, p, usable, current, calibration, chi2_limit, thinned)
+        new_used, new_reason = _select(shape, p, usable, current, calibration, chi2_limit, thinned)
+        if new_used.sum() < 0.5 * used.sum():  # the fitted model describes few of its own frames: keep them
+            caveats = (f"the fitted config finds only {int(new_used.sum())} of the {int(used.sum())} frames it was "
+                       "fitted to free: the model does not describe the free sweep to within its sigma (is EI(P) "
+                       "right? identify stiffness, then this again); the fit keeps those frames",)
+            reason = np.where(used, "used", reason)
+            break
         settled = bool(np.array_equal(new_used, used))
-        used = new_used
+        used, reason = new_used, new_reason
         if settled:
             break
-    if not settled:  # the final fit is on the final selection
+    if not settled and not caveats:  # the final fit is on the final selection
         fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
-    caveats = ()
     if not np.any(_block(config, STIFFNESS_PARAMETERS)):
-        caveats = ("the config states no covariance of ei0_nm2, ei1_nm2_per_pa: the gravity correction takes its "
-                   "EI(P) as exact; identify stiffness, then free bending again with that config",)
+        caveats += ("the config states no covariance of ei0_nm2, ei1_nm2_per_pa: the gravity correction takes its "
+                    "EI(P) as exact; identify stiffness, then free bending again with that config",)
     return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
                                  reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note,
                                  caveats=caveats)
@@ -419,8 +424,8 @@ def _fit_frames(session, calibration, p, angle, sensitivities, used, config, fix
     cov = session_covariance(calibration, np.asarray(session.signals)[rows], weights[rows] / gap,
                              np.arange(rows.size), rows.size)
     g = slope_ei[rows, None] * np.stack([np.ones(rows.size), p[rows]], axis=-1)  # ∂θ/∂(ei0, ei1)
-    cov = cov + g @ _block(config, STIFFNESS_PARAMETERS) @ g.T
-    return fit_free_bending(p[rows], angle[rows], config, fix=fix, data_covariance=cov)
+    return fit_free_bending(p[rows], angle[rows], config, fix=fix, data_covariance=cov,
+                            systematic_covariance=g @ _block(config, STIFFNESS_PARAMETERS) @ g.T)
 
 
 def _block(config, names) -> np.ndarray:
@@ -518,7 +523,7 @@ def fit_stiffness_session(session, calibration, config=None, **options):
         weights = np.einsum("nmc,nmcj->nj", sensitivity, dpos_ds)
         cov = session_covariance(calibration, signals, weights, level, len(level_ei))
         g = _level_k0_jacobian(data, config, sensitivity, level, level_ei)
-        return cov + g @ _block(config, FREE_BENDING_PARAMETERS) @ g.T
+        return cov, g @ _block(config, FREE_BENDING_PARAMETERS) @ g.T
 
     return fit_stiffness(data, config, level_covariance=level_covariance, **options)
 
