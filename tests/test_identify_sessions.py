@@ -399,3 +399,24 @@ def test_independent_forward_model_k0_and_ei_within_sigma(independent):
     # closer than the paper's values
     assert np.all(np.abs(k0 - k0_true) < np.abs(_k0(PAPER)[:-1] - k0_true))
     assert np.all(np.abs(ei - ei_true) < np.abs(PAPER.stiffness.ei_nm2(P_CHECK[:-1]) - ei_true))
+
+
+def test_systematic_part_is_not_scaled_by_the_residuals():
+    # residuals scattering beyond the stated data covariance scale that covariance up, not the
+    # systematic part (an error common to all points, e.g. from EI through the gravity correction)
+    p = np.linspace(5e3, 110e3, 30)
+    theta = FreeBendingModel.from_config(PAPER).bending_angle_rad(p)
+    data = np.eye(p.size) * math.radians(0.05) ** 2
+    shape = theta / theta.max()
+    systematic = np.outer(shape, shape) * math.radians(1.0) ** 2
+    rng = np.random.default_rng(2)
+    added = []
+    for noise_deg in (0.2, 1.0):
+        y = theta + math.radians(noise_deg) * rng.normal(size=p.size)
+        fix = ["sensor_stiffness_nm_per_rad"]  # μ̄ and μ_s nearly collinear: their covariance moves with the fit
+        with_sys = fit_free_bending(p, y, PAPER, data_covariance=data, systematic_covariance=systematic, fix=fix)
+        without = fit_free_bending(p, y, PAPER, data_covariance=data, fix=fix)
+        added.append(with_sys.covariance - without.covariance)
+    # the same systematic part adds the same covariance whatever the residual scatter (25x apart in variance)
+    np.testing.assert_allclose(added[1], added[0], rtol=0.1, atol=1e-3 * np.abs(added[0]).max())
+    assert added[0][0, 0] > 0 and added[0][2, 2] > 0 and np.all(added[0][1] == 0)  # μ_s held: no variance
