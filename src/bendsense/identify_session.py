@@ -239,12 +239,13 @@ class FreeBendingSessionFit:
 
     def report(self) -> str:
         """The fit's report with the frame selection."""
-        n = len(self.used)
         counts = {r: int(np.count_nonzero(self.reason == r)) for r in dict.fromkeys(self.reason.tolist())}
+        thinned = counts.pop("thinned", 0)
         rejected = ", ".join(f"{c} {r}" for r, c in counts.items() if r != "used") or "none"
+        more = f"; {thinned} more frames thinned out (not considered)" if thinned else ""
         lines = [
-            f"free frames: {int(self.used.sum())} of {n} used (status ok, force inside its 2-sigma ellipse); "
-            f"rejected: {rejected}",
+            f"free frames: {int(self.used.sum())} of {len(self.used) - thinned} used (status ok, force inside its "
+            f"2-sigma ellipse); rejected: {rejected}{more}",
             f"  selection: {self.rounds} round(s), {'settled' if self.settled else 'NOT settled'}; {self.note}",
             *(f"  note: {c}" for c in self.caveats),
             self.fit.report(),
@@ -274,7 +275,7 @@ class FreeBendingSessionFit:
         p_kpa = self.pressure_pa / 1e3
         deg = np.degrees(self.bending_angle_rad)
         ax.plot(p_kpa[self.used], deg[self.used], ".", color="C0", label=f"used ({int(self.used.sum())})")
-        for i, reason in enumerate(r for r in dict.fromkeys(self.reason.tolist()) if r != "used"):
+        for i, reason in enumerate(r for r in dict.fromkeys(self.reason.tolist()) if r not in ("used", "thinned")):
             sel = self.reason == reason
             ax.plot(p_kpa[sel], deg[sel], "x", color=f"C{3 + i}", label=f"rejected: {reason} ({int(sel.sum())})")
         grid = np.linspace(0.0, max(float(np.nanmax(self.pressure_pa)), 1.0), 200)
