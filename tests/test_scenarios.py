@@ -238,3 +238,20 @@ def test_cli_existing_output_untouched(tmp_path):
     assert [p.name for p in out.iterdir()] == ["keep.txt"]
     assert (out / "keep.txt").read_text() == "mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["v"]
+
+
+def test_cli_free_sweep(tmp_path):
+    out = tmp_path / "sweep"
+    r = CliRunner().invoke(main, ["simulate", "free-sweep", "-o", str(out), "--frames", "11",
+                                  "--max-pressure-kpa", "80", "--contact-n", "0.1", "--k0-error", "0.05"])
+    assert r.exit_code == 0, r.output
+    s = bendsense.read_session(out / "free_sweep.csv")
+    np.testing.assert_allclose(s.pressure_pa, 80e3 * (1 - np.abs(np.linspace(-1, 1, 11))), atol=1e-6)
+    assert np.flatnonzero(s.extra["fc_n"]).tolist() == [7]
+    doc = yaml.safe_load((out / "scenario.yaml").read_text())
+    assert doc["options"]["k0_error"] == 0.05 and doc["options"]["n_frames"] == 11
+    # options of other scenarios are refused, naming the flag
+    r = CliRunner().invoke(main, ["simulate", "tip-loads", "-o", str(tmp_path / "x"), "--max-pressure-kpa", "80"])
+    assert r.exit_code != 0 and "--max-pressure-kpa" in r.output and "Traceback" not in r.output
+    with pytest.raises(ConfigError, match="n_frames"):
+        simulate("free-sweep", tmp_path / "y", n_frames=0)

@@ -42,7 +42,9 @@ K0(P) from the free-bending model of the config (identify it first), gravity
 load still count: gravity bends them.
 
 The two CSVs are read and checked in :mod:`bendsense.identify_data`; its names are
-importable from here.
+importable from here. Sessions recorded with bendsense (a free pressure sweep, hanging
+weights) become these fits' data in :mod:`bendsense.identify_session`; the fits'
+covariances are computed in :mod:`bendsense.identify_covariance`.
 """
 
 from __future__ import annotations
@@ -58,6 +60,14 @@ from bendsense._blas import one_thread
 from bendsense.actuator import elastic_moment, elastic_moment_slope, solve_bending_angle
 from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, ConfigError
+from bendsense.identify_covariance import (
+    _correlation,
+    _covariance,
+    _covariance_note,
+    _full_covariance,
+    _stderr,
+    _with_covariance,
+)
 from bendsense.identify_data import (
     _PRESSURE,
     StiffnessData,
@@ -164,97 +174,6 @@ def check_fixed(values: Mapping, config, field: str = "fix") -> None:
     for name, value in values.items():
         if value is not None and name in bounds:
             bounds[name].check(f"{field} {name}", float(value), error=ArgumentError)
-
-
-def _covariance(jac: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, int]:
-    """s² (JᵀJ)⁻¹ with s² = RSS / (n − k); inf where the parameters are not identifiable."""
-    n, k = jac.shape
-    dof = n - k
-    if k == 0:
-        return np.zeros((0, 0)), dof
-    # SVD keeps the inverse honest when μ̄ and μ_s are nearly collinear
-    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
-    s2 = float(resid @ resid) / dof if dof > 0 else math.nan
-    if sv[0] == 0 or sv[-1] <= sv[0] * np.finfo(float).eps * max(n, k):
-        return np.full((k, k), np.inf), dof
-    cov = (vt.T / sv**2) @ vt * s2
-    return cov, dof
-
-
-def _correlation(cov: np.ndarray) -> np.ndarray:
-    sd = np.sqrt(np.diag(cov))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return cov / np.outer(sd, sd)
-
-
-def _stderr(cov: np.ndarray, free, names: tuple[str, ...]) -> dict:
-    """Standard errors by name: sqrt(diag(cov)) for the ``free`` parameters, 0 for the fixed ones."""
-    stderr = dict.fromkeys(names, 0.0)
-    stderr.update({n: float(s) for n, s in zip(free, np.sqrt(np.diag(cov)), strict=True)})
-    return stderr
-
-
-def _full_covariance(cov: np.ndarray, free, names: tuple[str, ...]) -> np.ndarray:
-    """The fit's covariance over all its ``names``: ``cov`` for the free ones, 0 for the fixed ones."""
-    out = np.zeros((len(names), len(names)))
-    idx = [names.index(n) for n in free]
-    out[np.ix_(idx, idx)] = cov
-    return out
-
-
-def _with_covariance(config, names: tuple[str, ...], block: np.ndarray, what: str):
-    """``config`` with this fit's block in ``parameter_covariance``, other fits' blocks kept.
-
-    The fits are separate least-squares problems, so the matrix is block diagonal:
-    the covariance between the parameters of different fits is taken as zero (the
-    stiffness fit uses K0(P) from the free-bending parameters, whose uncertainty it
-    does not carry over). A block that is not finite (parameters not identifiable)
-    is not written, and an older block of the same parameters is removed.
-    """
-    from bendsense.config import MODEL_PARAMETERS, ParameterCovarianceConfig
-
-    blocks, kept, prior = [], [], ""
-    old = config.parameter_covariance
-    if old is not None:
-        keep = [i for i, n in enumerate(old.parameters) if n not in names]
-        if keep:
-            kept = [old.parameters[i] for i in keep]
-            blocks.append((kept, old.matrix[np.ix_(keep, keep)]))
-            if not old.source.startswith("identify "):  # e.g. the shipped config's prior: not a fit
-                prior = f"; {', '.join(kept)} kept from the config's prior ({old.source or 'no source given'})"
-    if np.all(np.isfinite(block)):
-        blocks.append((list(names), 0.5 * (block + block.T)))
-    if not blocks:
-        return config.replace(parameter_covariance=None)
-    fits = []
-    listed = [n for b, _ in blocks for n in b]
-    fitted = [n for n in listed if not (prior and n in kept)]
-    if any(n in fitted for n in FREE_BENDING_PARAMETERS):
-        fits.append("identify free-bending")
-    if any(n in fitted for n in STIFFNESS_PARAMETERS):
-        fits.append("identify stiffness")
-    source = " and ".join(fits) or "none identified"
-    if len(fits) > 1:
-        source += ", fitted separately: block diagonal (cross-covariances between the fits taken as zero)"
-    elif prior and fits:
-        source += ", block diagonal (no covariance with the prior's parameters)"
-    source += f"; last: {what}; fixed parameters have variance 0{prior}"
-    # list the parameters in the canonical order
-    order = sorted(range(len(listed)), key=lambda i: MODEL_PARAMETERS.index(listed[i]))
-    full = ParameterCovarianceConfig.from_blocks(blocks, source=source)
-    matrix = full.matrix[np.ix_(order, order)]
-    section = ParameterCovarianceConfig(
-        parameters=tuple(listed[i] for i in order),
-        covariance=tuple(tuple(float(v) for v in row) for row in matrix),
-        source=source,
-    )
-    return config.replace(parameter_covariance=section)
-
-
-def _covariance_note(cov) -> str:
-    if cov is not None and np.all(np.isfinite(cov)):
-        return "  covariance written to the config's parameter_covariance section"
-    return "  covariance NOT written (parameters not identifiable, or no degrees of freedom)"
 
 
 def _geometry(actuator) -> dict:
@@ -392,6 +311,8 @@ def fit_free_bending(
     *,
     fix: Iterable[str] | Mapping[str, float] | None = None,
     initial: Mapping[str, float] | None = None,
+    data_covariance=None,
+    systematic_covariance=None,
 ) -> FreeBendingFit:
     """Fit μ̄, μ_s and the prebend angle to free-bending data (paper eq. 8–12, section V-C).
 
@@ -414,6 +335,14 @@ def fit_free_bending(
         Names: ``shear_modulus_pa``, ``sensor_stiffness_nm_per_rad``, ``prebend_angle_rad``.
     initial : mapping, optional
         Start values overriding ``config.material``.
+    data_covariance : array_like, shape (n, n), optional
+        Covariance of the angles [rad²] (correlated errors, e.g. one calibration's for
+        every frame of a session); the parameters' covariance is then the sandwich
+        ``A Σ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``) scaled by ``max(1, RSS / tr((I − H) Σ))``.
+    systematic_covariance : array_like, shape (n, n), optional
+        With ``data_covariance``: a further error common to the angles that the
+        residuals cannot show (e.g. from another fit's parameters) [rad²]; added to the
+        sandwich unscaled.
 
     Returns
     -------
@@ -446,7 +375,8 @@ def fit_free_bending(
     x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, free)
     values = unpack(x)
     r = resid(x)
-    cov, dof = _covariance(jac(x) / scale, r)
+    cov, dof = _covariance(jac(x) / scale, r, _data_covariance(data_covariance, len(p)),
+                           _data_covariance(systematic_covariance, len(p), "systematic_covariance"))
     stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
     if at_bound:
         ok = False
@@ -479,6 +409,16 @@ def _free_bending_data(pressure_pa, bending_angle_rad):
         if not np.all(np.isfinite(arr)):
             raise ArgumentError(f"{name}: must be finite")
     return p, y
+
+
+def _data_covariance(cov, n: int, name: str = "data_covariance"):
+    """A covariance argument of :func:`fit_free_bending` as a finite symmetric (n, n) array, or None."""
+    if cov is None:
+        return None
+    c = np.asarray(cov, dtype=float)
+    if c.shape != (n, n) or not np.all(np.isfinite(c)):
+        raise ArgumentError(f"{name}: expected a finite ({n}, {n}) array, got shape {c.shape}")
+    return 0.5 * (c + c.T)
 
 
 def _free_bending_start(material, initial) -> dict:
@@ -710,8 +650,11 @@ def _fit_level(data: StiffnessData, rows, k0, w, length_m, ei_start, method):
     se = ei * math.sqrt(cov[0, 0]) if dof > 0 else math.inf  # delta method from log EI
     full = np.full(measured.shape, np.nan)
     full[obs] = (pos - measured)[obs]
+    # ∂EI/∂(measured points): x̂ moves by (jᵀj)⁻¹jᵀ δ(measured), EI = exp(x̂)
+    sens = np.zeros(measured.shape)
+    sens[obs] = (ei * jac[:, 0] / float(jac[:, 0] @ jac[:, 0])).reshape(-1, 2)
     success = bool(sol.success) and bool(np.all(ok)) and math.isfinite(se)
-    return ei, se, float(np.sqrt(np.mean(r**2))), full, success
+    return ei, se, float(np.sqrt(np.mean(r**2))), full, success, sens
 
 
 @one_thread
@@ -723,6 +666,7 @@ def fit_stiffness(
     pressure_tolerance_pa: float = 1e3,
     weighted: bool = True,
     method: str = "fast",
+    level_covariance=None,
 ) -> StiffnessFit:
     """Fit EI per pressure level from loaded shapes, then EI(P) = ei0 + ei1·P (paper eq. 15, V-C).
 
@@ -750,6 +694,15 @@ def fit_stiffness(
         Weight the regression by the per-level standard errors.
     method : str
         Beam solver, ``fast`` or ``shooting`` (the paper's method).
+    level_covariance : callable, optional
+        ``level_covariance(sensitivity, level, level_ei_nm2)`` → two (levels, levels)
+        covariances [N²·m⁴] of the levels' EI: from the measured points' errors (a
+        calibration common to all rows, :func:`bendsense.identify_session.fit_stiffness_session`)
+        and a systematic part the residuals cannot show (from K0's uncertainty);
+        ``sensitivity`` (n, M, 2) is ∂EI of each row's level / ∂ its measured points
+        [N·m²/m], ``level`` (n,) each row's level, ``level_ei_nm2`` the levels' fitted EI.
+        It adds to the levels' own variances; the line's covariance is then
+        the sandwich of the regression over it.
 
     Returns
     -------
@@ -782,8 +735,15 @@ def fit_stiffness(
             f"stiffness data: {n_levels} pressure level(s) cannot determine {len(free)} parameters "
             f"({', '.join(free)}); measure more pressures or fix one"
         )
-    lp, lei, lse, lrms, pos_res, failed = _fit_levels(data, level, n_levels, config.stiffness, k0, w, length, method)
-    values, residuals, cov, use_weights = _regress_levels(lp, lei, lse, free, fixed, weighted)
+    lp, lei, lse, lrms, pos_res, failed, sens = _fit_levels(data, level, n_levels, config.stiffness, k0, w, length,
+                                                            method)
+    level_cov = None
+    if level_covariance is not None:
+        data_cov, sys_cov = (np.asarray(c, dtype=float) for c in level_covariance(sens, level, lei))
+        data_cov = data_cov + np.diag(np.where(np.isfinite(lse), lse, 0.0) ** 2)
+        level_cov = (data_cov, sys_cov)
+        lse = np.sqrt(np.diag(data_cov + sys_cov))
+    values, residuals, cov, use_weights = _regress_levels(lp, lei, lse, free, fixed, weighted, level_cov)
     message = "converged"
     stderr = _stderr(cov, free, STIFFNESS_PARAMS)
     success = not failed
@@ -816,12 +776,13 @@ def _fit_levels(data: StiffnessData, level, n_levels: int, stiffness, k0, w, len
     """EI at every pressure level (:func:`_fit_level`), started from ``stiffness``'s line.
 
     Returns the levels' mean pressures [Pa], EI [N m²], its standard errors, the RMS
-    position residuals [m], the position residuals per row and point [m] and the
-    levels whose fit failed (as "40 kPa").
+    position residuals [m], the position residuals per row and point [m], the levels
+    whose fit failed (as "40 kPa") and ∂EI/∂(measured points) per row [N m²/m].
     """
     lp, lei, lse, lrms = (np.empty(n_levels) for _ in range(4))
     counts = np.zeros(n_levels, dtype=int)
     pos_res = np.full(data.positions_m.shape, np.nan)
+    sens = np.zeros(data.positions_m.shape)
     failed = []
     for j in range(n_levels):
         rows = np.flatnonzero(level == j)
@@ -832,10 +793,11 @@ def _fit_levels(data: StiffnessData, level, n_levels: int, stiffness, k0, w, len
         ei_start = float(stiffness.ei_nm2(lp[j]))
         if not ei_start > 0:
             ei_start = stiffness.ei0_nm2
-        lei[j], lse[j], lrms[j], pos_res[rows], ok = _fit_level(data, rows, k0, w, length_m, ei_start, method)
+        lei[j], lse[j], lrms[j], pos_res[rows], ok, sens[rows] = _fit_level(data, rows, k0, w, length_m, ei_start,
+                                                                            method)
         if not ok:
             failed.append(f"{lp[j] / 1e3:.3g} kPa")
-    return lp, lei, _pooled_errors(lse, lrms, counts), lrms, pos_res, failed
+    return lp, lei, _pooled_errors(lse, lrms, counts), lrms, pos_res, failed, sens
 
 
 def _pooled_errors(lse, lrms, counts):
@@ -860,13 +822,16 @@ def _pooled_errors(lse, lrms, counts):
     return out
 
 
-def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool):
+def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool, level_cov=None):
     """Linear regression EI_j = ei0 + ei1 P_j over the levels (paper eq. 15).
 
     Weighted by 1/σ_EI² when ``weighted`` and every level has a finite standard error;
     the covariance scaled up by χ²/(levels − k) when the levels scatter more than their
-    errors say. Returns the parameters' values, the levels' residuals [N m²], the free
-    parameters' covariance and whether the weights were used.
+    errors say. With the levels' covariances (Σ, Σ_sys) (correlated errors): the
+    sandwich ``A (f Σ + Σ_sys) Aᵀ`` (A the regression's linear map), ``f = max(1,
+    χ² / E[χ²])`` with E[χ²] from Σ. Returns
+    the parameters' values, the levels' residuals [N m²], the free parameters'
+    covariance and whether the weights were used.
     """
     n_levels = len(lp)
     design = {"ei0_nm2": np.ones(n_levels), "ei1_nm2_per_pa": lp}
@@ -885,7 +850,14 @@ def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool):
     line = values["ei0_nm2"] + values["ei1_nm2_per_pa"] * lp
     residuals = lei - line
     dof = n_levels - len(free)
-    if free:
+    if free and level_cov is not None:
+        a = np.linalg.pinv((X * weights[:, None]).T @ X) @ (X * weights[:, None]).T
+        resid_map = np.eye(n_levels) - X @ a
+        data_cov, sys_cov = level_cov
+        expected = float(np.trace(weights[:, None] * (resid_map @ data_cov @ resid_map.T)))
+        chi2 = float(np.sum(weights * residuals**2))
+        cov = a @ (data_cov * (max(1.0, chi2 / expected) if expected > 0 else 1.0) + sys_cov) @ a.T
+    elif free:
         xtwx_inv = np.linalg.pinv((X * weights[:, None]).T @ X)
         chi2 = float(np.sum(weights * residuals**2))
         if use_weights:

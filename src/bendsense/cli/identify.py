@@ -52,7 +52,22 @@ def _parse_fix(kind: str, items) -> dict:
 
 @click.command("identify", cls=InterspersedCommand)
 @click.argument("kind", type=click.Choice(KINDS))
-@click.argument("data", metavar="DATA.csv", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("data", metavar="[DATA.csv]", required=False,
+                type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "--session",
+    "session_path",
+    type=click.Path(exists=True, path_type=Path),
+    help="Identify from a session recorded with bendsense (native directory or session CSV) instead of "
+    "DATA.csv: free-bending from a free pressure sweep, stiffness from hanging weights (columns fx_n, fy_n "
+    "or mass_kg). Needs --calibration.",
+)
+@click.option(
+    "--calibration",
+    "calibration_path",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="With --session: the sensor's calibration YAML (bendsense calibrate).",
+)
 @config_option
 @click.option(
     "-o",
@@ -87,12 +102,15 @@ def _parse_fix(kind: str, items) -> dict:
     show_default=True,
     help="stiffness: beam solver ('shooting' is the paper's method).",
 )
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path), help="Save a plot of the fit.")
+@click.option("--plot", "--figure", "plot_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Save a figure of the fit (with --session, free-bending: the frames used and rejected, "
+              "the fitted and the prior model).")
 @overwrite_option
 def identify(
-    kind, data, config_path, output, fix_items, pressure_tolerance_kpa, unweighted, method, plot_path, overwrite
+    kind, data, session_path, calibration_path, config_path, output, fix_items, pressure_tolerance_kpa, unweighted,
+    method, plot_path, overwrite
 ):
-    """Fit the free-bending or stiffness model to DATA.csv (paper section V-C).
+    """Fit the free-bending or stiffness model to DATA.csv or a session (paper section V-C).
 
     free-bending: DATA.csv has the columns pressure_pa (or pressure_kpa) and
     bending_angle_rad (or bending_angle_deg); fits shear_modulus_pa,
@@ -103,10 +121,19 @@ def identify(
     pressure level, then ei0_nm2 and ei1_nm2_per_pa. Identify free bending first: the
     stiffness fit uses K0(P) of the config's free-bending model.
 
-    Writes the config (--config, or the paper's) with the fitted values to OUTPUT.
+    --session S --calibration C (instead of DATA.csv): free-bending from a free
+    pressure sweep recorded with bendsense (the frames with no contact are chosen by
+    the force estimator: status ok and the force inside its 2-sigma ellipse, iterated
+    with the fit); stiffness from hanging weights (known tip force in the columns
+    fx_n, fy_n, or mass_kg hanging under gravity).
+
+    Writes the config (--config, or the paper's) with the fitted values and their
+    covariance to OUTPUT.
     """
     fix = _parse_fix(kind, fix_items)
     check_figure_suffix(plot_path, "--plot")
+    _check_sources(data, session_path, calibration_path)
+    source = data if data is not None else session_path
 
     def step(state):
         from bendsense.config import load_config, save_config
@@ -122,22 +149,21 @@ def identify(
         # a held value no actuator of this geometry can have: named before any data is read
         check_fixed(fix, config, field="--fix")
         try:
-            if kind == "free-bending":
+            if kind == "free-bending" and session_path is not None:
+                fit = _free_bending_session(session_path, calibration_path, config, fix)
+            elif kind == "free-bending":
                 pressure, angle = read_free_bending_csv(data)
                 fit = fit_free_bending(pressure, angle, config, fix=fix)
             else:
-                table = read_stiffness_csv(data, config.actuator.length_m)
-                fit = fit_stiffness(
-                    table,
-                    config,
-                    fix=fix,
-                    pressure_tolerance_pa=pressure_tolerance_kpa * 1e3,
-                    weighted=not unweighted,
-                    method=method,
-                )
+                options = {"fix": fix, "pressure_tolerance_pa": pressure_tolerance_kpa * 1e3,
+                           "weighted": not unweighted, "method": method}
+                if session_path is None:
+                    fit = fit_stiffness(read_stiffness_csv(data, config.actuator.length_m), config, **options)
+                else:
+                    fit = _stiffness_session(session_path, calibration_path, config, options)
             new_config = fit.to_config(config)
         except BendsenseError as err:
-            raise click.ClickException(f"{data}: {err}" if str(data) not in str(err) else str(err)) from None
+            raise click.ClickException(f"{source}: {err}" if str(source) not in str(err) else str(err)) from None
         say(fit.report())
         ax = None
         if plot_path is not None:  # drawn before anything is written: a failure leaves no config
@@ -155,7 +181,44 @@ def identify(
     targets = [outputs.file(output, overwrite=overwrite, suffixes=outputs.YAML)]
     if plot_path is not None:
         targets.append(outputs.file(plot_path, overwrite=overwrite, suffixes=outputs.FIGURE))
-    return step_io(step, outputs=targets, inputs=[data, config_path])
+    return step_io(step, outputs=targets, inputs=[source, calibration_path, config_path])
+
+
+def _check_sources(data, session_path, calibration_path) -> None:
+    """DATA.csv, or --session with --calibration: one of them, named when wrong."""
+    if data is not None and session_path is not None:
+        raise click.BadParameter("give DATA.csv or --session, not both", param_hint="--session")
+    if data is None and session_path is None:
+        raise click.UsageError("give DATA.csv, or --session SESSION with --calibration CAL.yaml")
+    if session_path is not None and calibration_path is None:
+        raise click.BadParameter("required with --session (the sensor's calibration YAML, from bendsense calibrate)",
+                                 param_hint="--calibration")
+    if session_path is None and calibration_path is not None:
+        raise click.BadParameter("only with --session (DATA.csv holds measured angles or shapes already)",
+                                 param_hint="--calibration")
+
+
+def _read_inputs(session_path, calibration_path):
+    from bendsense.calibration import Calibration
+    from bendsense.session import read_session
+
+    return read_session(session_path), Calibration.load(calibration_path)
+
+
+def _free_bending_session(session_path, calibration_path, config, fix):
+    """The free-bending fit of a free sweep (:func:`bendsense.identify_session.fit_free_bending_session`)."""
+    from bendsense.identify_session import fit_free_bending_session
+
+    session, calibration = _read_inputs(session_path, calibration_path)
+    return fit_free_bending_session(session, calibration, config, fix=fix)
+
+
+def _stiffness_session(session_path, calibration_path, config, options):
+    """The stiffness fit of a session of hanging weights."""
+    from bendsense.identify_session import fit_stiffness_session
+
+    session, calibration = _read_inputs(session_path, calibration_path)
+    return fit_stiffness_session(session, calibration, config, **options)
 
 
 COMMANDS = [identify]

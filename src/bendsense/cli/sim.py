@@ -20,7 +20,7 @@ from bendsense.cli._common import (
 )
 
 # kept in sync with bendsense.sim.scenarios.SCENARIOS (imported lazily for a fast --help)
-_SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "all")
+_SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "free-sweep", "all")
 
 
 @click.command("simulate", cls=InterspersedCommand)
@@ -37,13 +37,18 @@ _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying
 @config_option
 @click.option("--noise-counts", type=Finite(min=0), help="Sensor noise std [counts] (default 1.5).")
 @click.option("--frames", type=click.IntRange(min=1),
-              help="Frames per strip or configuration (default 50 / 5). A scenario is simulated in memory, "
+              help="Frames per strip or configuration (default 50 / 5; free-sweep: frames of the sweep, "
+                   "default 200). A scenario is simulated in memory, "
                    "one recording at a time (tip-loads: 44 configurations, ~10 kB a frame): a number whose "
                    "frames would not fit the free memory is refused before any work.")
 @click.option("--ei-error", type=Relative(), help="Model mismatch: relative error of the true EI.")
 @click.option("--k0-error", type=Relative(), help="Model mismatch: relative error of the true K0.")
 @click.option("--base-rotation", type=Relative(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
 @click.option("--hysteresis-kpa", type=PressureKpa(min=0), help="Model mismatch: pressure play [kPa].")
+@click.option("--max-pressure-kpa", type=PressureKpa(min=0), help="free-sweep: peak pressure [kPa] (default 120).")
+@click.option("--contact-n", type=Finite(min=0),
+              help="free-sweep: a contact force [N] over the middle fifth of the way down (default 0); "
+                   "time-varying: the contact force while on (default 0.15).")
 @overwrite_option
 def simulate(
     scenario,
@@ -56,6 +61,8 @@ def simulate(
     k0_error,
     base_rotation,
     hysteresis_kpa,
+    max_pressure_kpa,
+    contact_n,
     overwrite,
 ):
     """Write SCENARIO as simulated session CSVs with ground-truth columns.
@@ -63,7 +70,8 @@ def simulate(
     SCENARIO is one of the paper's experiments: calibration (flat + strips, with a
     manifest for 'bendsense calibrate'), validation (strips of known curvature),
     tip-loads (20-120 kPa x 0-0.3 N), contact (12 random normal contact forces),
-    time-varying (10 s at 100 Hz), or all.
+    time-varying (10 s at 100 Hz), free-sweep (a free pressure ramp 0 -> max -> 0, for
+    'bendsense identify free-bending --session'), or all.
     """
     options = {
         "noise_counts": noise_counts,
@@ -71,12 +79,20 @@ def simulate(
         "k0_error": k0_error,
         "base_rotation_rad_per_rad": base_rotation,
         "hysteresis_pa": None if hysteresis_kpa is None else hysteresis_kpa * 1e3,
+        "pressure_max_pa": None if max_pressure_kpa is None else max_pressure_kpa * 1e3,
+        "contact_n": contact_n,
     }
+    for flag, value, allowed in (("--max-pressure-kpa", max_pressure_kpa, ("free-sweep", "all")),
+                                 ("--contact-n", contact_n, ("free-sweep", "time-varying", "all"))):
+        if value is not None and scenario not in allowed:
+            raise click.BadParameter(f"applies to {', '.join(allowed[:-1])} only, not {scenario}", param_hint=flag)
     if frames is not None:
         if scenario in ("calibration", "validation", "all"):
             options["frames_per_strip"] = frames
         if scenario in ("tip-loads", "contact", "all"):
             options["frames_per_config"] = frames
+        if scenario in ("free-sweep", "all"):
+            options["n_frames"] = max(frames, 2)
     options = {k: v for k, v in options.items() if v is not None}
     if frames is not None:
         from bendsense.sim.scenarios import check_memory

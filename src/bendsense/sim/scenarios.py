@@ -41,6 +41,16 @@ to a hidden sibling first and swapped in at the end (:func:`bendsense.output.wri
     Truth columns: ``fx_n``, ``fy_n``, ``fc_n``, ``tip_x_m``, ``tip_y_m``,
     ``tip_angle_rad``, ``effective_pressure_pa``; ``truth.npz`` likewise. The same frames
     stream from :func:`time_varying_frames`, which the simulated device uses.
+``free-sweep``
+    ``free_sweep.csv``: a free pressure sweep, the recording ``bendsense identify
+    free-bending --session`` identifies the free-bending model from: ``n_frames``
+    frames at ``rate_hz`` while the pressure ramps linearly from 0 to
+    ``pressure_max_pa`` and back (a time series: ``hysteresis_pa`` acts), no load but
+    gravity. With ``contact_n`` > 0 a contact force of that size, normal to the tip and
+    pushing against the bending, acts over the middle fifth of the way down (someone
+    touched the actuator: frames the identification must reject). Truth columns as for
+    ``tip-loads`` plus ``fc_n``, ``effective_pressure_pa``, ``k0_true_per_m`` (the true
+    natural curvature K0) and ``ei_true_nm2``; ``truth.npz`` likewise.
 
 Frames whose beam solve fails (``success=False``) are left out of the recordings and
 counted in ``scenario.yaml`` and in the CSV's ``# excluded_frames:`` metadata line.
@@ -78,9 +88,10 @@ __all__ = [
     "simulate",
     "time_varying_profile",
     "time_varying_frames",
+    "free_sweep_profile",
 ]
 
-SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying")
+SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying", "free-sweep")
 #: Calibration strip radii R [m] (paper section V-B).
 CALIBRATION_RADII_M = (0.040, 0.050, 0.060, 0.070, 0.080, 0.090, 0.100, 0.200, 0.300, 0.400)
 #: Validation strip radii R_val = R + c [m], at the sensor layer (paper Table I).
@@ -115,6 +126,7 @@ _OPTIONS = {
         "min_tip_angle_deg": 15.0,
     },
     "time-varying": {"rate_hz": 100.0, "duration_s": 10.0, "contact_n": 0.15},
+    "free-sweep": {"n_frames": 200, "rate_hz": 35.0, "pressure_max_pa": 120e3, "contact_n": 0.0},
 }
 
 
@@ -513,12 +525,56 @@ def _time_varying(sim, rng, out, seed, *, rate_hz, duration_s, contact_n):
     return {"frames": len(rows), "excluded_frames": excluded, "files": ["session.csv", "truth.npz"]}
 
 
+def free_sweep_profile(n_frames: int, pressure_max_pa: float, contact_n: float = 0.0):
+    """Pressure and contact force of the ``free-sweep`` scenario, frame by frame.
+
+    The pressure ramps linearly from 0 to ``pressure_max_pa`` over the first half of the
+    frames and back to 0 over the second; the contact force is ``contact_n`` over the
+    middle fifth of the way down (frames in [0.7, 0.8) of the sweep), else 0.
+
+    Parameters
+    ----------
+    n_frames : int
+        Frames of the sweep (>= 2).
+    pressure_max_pa : float
+        Peak pressure [Pa].
+    contact_n : float
+        Contact force magnitude while touched [N].
+
+    Returns
+    -------
+    pressure_pa, contact_n : ndarray, shape (n_frames,)
+        [Pa], [N].
+    """
+    n = _count_option("n_frames", n_frames)
+    if n < 2:
+        raise ConfigError(f"n_frames: a sweep needs at least 2 frames, got {n_frames!r}")
+    top = _positive_option("pressure_max_pa", pressure_max_pa)
+    if isinstance(contact_n, bool) or not isinstance(contact_n, (int, float)) or not (
+            math.isfinite(contact_n) and contact_n >= 0):
+        raise ConfigError(f"contact_n: must be a finite number >= 0, got {contact_n!r}")
+    x = np.arange(n) / (n - 1)  # 0 … 1 over the sweep
+    pressure = top * (1.0 - np.abs(2.0 * x - 1.0))
+    touched = (x >= 0.7) & (x < 0.8)
+    return pressure, np.where(touched, float(contact_n), 0.0)
+
+
+def _free_sweep(sim, rng, out, seed, *, n_frames, rate_hz, pressure_max_pa, contact_n):
+    rate = _positive_option("rate_hz", rate_hz)
+    pressure, fc = free_sweep_profile(n_frames, pressure_max_pa, contact_n)
+    frames = sim.frames(pressure, contact_n=fc if np.any(fc > 0) else None, time_series=True, noise=False)
+    first = {"effective_pressure_pa": frames.effective_pressure_pa, "k0_true_per_m": frames.tip_curvature_per_m,
+             "ei_true_nm2": frames.ei_nm2}
+    return _write_frames(sim, rng, out, "free_sweep.csv", frames, rate, "free-sweep", seed, first, fc)
+
+
 _WRITERS = {
     "calibration": _calibration,
     "validation": _validation,
     "tip-loads": _tip_loads,
     "contact": _contact,
     "time-varying": _time_varying,
+    "free-sweep": _free_sweep,
 }
 
 
@@ -548,7 +604,8 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
         ``radii_m`` (calibration, validation), ``frames_per_config`` (tip-loads,
         contact), ``pressures_pa``, ``loads_n`` (tip-loads), ``n_configs``,
         ``pressure_range_pa``, ``force_range_n``, ``min_tip_angle_deg`` (contact),
-        ``duration_s``, ``contact_n`` (time-varying), ``rate_hz`` (all). With ``"all"``
+        ``duration_s``, ``contact_n`` (time-varying), ``n_frames``, ``pressure_max_pa``,
+        ``contact_n`` (free-sweep), ``rate_hz`` (all). With ``"all"``
         each scenario takes the options it knows.
 
     Returns
@@ -577,7 +634,7 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
 # scenarios with a beam solve and truth shapes (tip-loads 10.1 KB, contact 9.5 KB), well
 # under 1 KB for the strip recordings (written one strip at a time); rounded up.
 _BYTES_PER_FRAME = {"calibration": 2_000, "validation": 2_000, "tip-loads": 12_000, "contact": 12_000,
-                    "time-varying": 12_000}
+                    "time-varying": 12_000, "free-sweep": 12_000}
 _BASE_BYTES = 300e6  # the process before the first frame: numpy, scipy, numba and the kernels
 
 
@@ -600,6 +657,9 @@ def frames_in_memory(name: str, options: dict) -> tuple[int, int]:
         return n, n
     if name == "contact":
         n = int(opts["frames_per_config"]) * int(opts["n_configs"])
+        return n, n
+    if name == "free-sweep":
+        n = int(opts["n_frames"])
         return n, n
     n = int(math.ceil(float(opts["rate_hz"]) * float(opts["duration_s"])))
     return n, n
@@ -661,14 +721,15 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
         if need <= available:
             continue
         key = {"calibration": "frames_per_strip", "validation": "frames_per_strip",
-               "time-varying": "duration_s"}.get(name, "frames_per_config")
+               "time-varying": "duration_s", "free-sweep": "n_frames"}.get(name, "frames_per_config")
         per_frame = _BYTES_PER_FRAME[name]
+        per_what = "strip" if key == "frames_per_strip" else "configuration"
         per_unit = at_once / max(float(options.get(key, _OPTIONS[name][key])), 1e-300)
         most = int((available - _BASE_BYTES) / per_frame / per_unit) if available > _BASE_BYTES else 0
         raise ArgumentError(
             f"{field or key}: {name} would hold {at_once:,} frames in memory, about {_size(need)}; this machine "
             f"has {_size(available)} available (at most {max(most, 0):,} {'s' if key == 'duration_s' else 'frames'}"
-            f"{'' if key == 'duration_s' else ' per ' + ('strip' if key == 'frames_per_strip' else 'configuration')})"
+            f"{'' if key in ('duration_s', 'n_frames') else ' per ' + per_what})"
         )
 
 

@@ -1,0 +1,594 @@
+"""Identification from sessions recorded with bendsense: a free pressure sweep, hanging weights.
+
+The fits are those of :mod:`bendsense.identify`; this module turns a recorded session
+into their data.
+
+**Free bending** (:func:`fit_free_bending_session`). A session of the actuator moving
+freely through its pressure range (``bendsense simulate free-sweep`` makes one). Each
+frame's shape is reconstructed with the calibration; its free-bending angle
+``θ = K0 L`` is the natural curvature K0 that, in the beam model with gravity
+(``config.weight_per_length_n_per_m``, EI(P) of the config) and no tip load, fits the
+measured coil angles ``φ(L_i) = S_i / d`` best (least squares over the coils,
+:func:`free_bending_angles`): gravity is taken out, so the free-bending model (which
+has none) is fitted to what it describes. :func:`bendsense.identify.fit_free_bending`
+then fits μ̄, μ_s and the prebend to these angles over pressure.
+
+Which frames are free is decided by the force estimator itself
+(:func:`bendsense.estimate_force` with the calibration): a frame is used when its
+status is ``ok`` and its force lies inside the 2σ ellipse of zero,
+``Fᵀ C⁻¹ F ≤ χ²₂(0.9545) = 6.18`` with C its covariance. With wrong free-bending
+parameters the free frames look loaded (a K0 error of 8 % is a force of tens of mN), so
+the selection is iterated: fit, re-estimate with the fitted config (and the fit's
+covariance, which widens C by what the fit does not know), re-select, refit, until the
+selection repeats (at most ``rounds`` times). If fewer than half of the usable frames
+pass with the starting config, the first fit uses all usable frames (a free sweep is
+mostly free; a touch in a minority of frames is then rejected in the next round).
+Usable frames: a reconstructed shape inside the calibrated range (status not
+``extrapolated``) and a pressure inside ``actuator.pressure_range_pa``.
+
+The covariance of the fit is not the residual scatter's ``s² (JᵀJ)⁻¹``: the calibration
+error is one error common to all frames of a session (the same polynomials map every
+frame), so it does not average down over the frames. The angles' joint covariance over
+all used frames comes from the calibration's error model
+(:func:`bendsense.shift_errors.shift_covariance` over the frames' shifts stacked into
+one vector: noise independent per frame, coefficient and misfit errors correlated
+across frames as across channels), through each frame's angle weights; the fit's
+covariance is the sandwich ``A Σ_θ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``), scaled up when the
+residuals scatter more than Σ_θ says (:func:`bendsense.identify.fit_free_bending`,
+``data_covariance``).
+
+**Stiffness** (:func:`stiffness_data_from_session`). A session of hanging weights: the
+known tip force of each frame in the columns ``fx_n, fy_n`` (base frame, as ``bendsense
+simulate tip-loads`` writes them) or ``mass_kg`` (``F = m g ĝ`` with ``g`` and ``ĝ`` of
+the config's gravity). The frames with a load (``|F| > 0``) and a usable shape become
+rows of :class:`~bendsense.identify.StiffnessData` whose measured points are the
+reconstructed shape at the coils (arc lengths ``L_i``); :func:`bendsense.identify.fit_stiffness`
+fits EI per pressure level and the line EI(P).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
+from bendsense.errors import ArgumentError, SessionError
+from bendsense.identify import StiffnessData, fit_free_bending
+from bendsense.identify_covariance import session_covariance
+
+__all__ = [
+    "FREE_CHI2_2SIGMA",
+    "MAX_FRAMES",
+    "FreeBendingSessionFit",
+    "free_bending_angles",
+    "fit_free_bending_session",
+    "fit_stiffness_session",
+    "session_shapes",
+    "stiffness_data_from_session",
+]
+
+#: χ² with 2 degrees of freedom at the 2σ level (95.45 %): the free frames' force ellipse.
+FREE_CHI2_2SIGMA = -2.0 * math.log(1.0 - math.erf(2.0 / math.sqrt(2.0)))
+#: Usable frames a free-bending fit considers at most (evenly spread over the session).
+MAX_FRAMES = 400
+
+
+def _source(session) -> str:
+    return session.source or "session"
+
+
+def session_shapes(session, calibration, config, *, need_pressure: bool = True):
+    """The session's shapes at the coils and its usable frames (module docstring).
+
+    Parameters
+    ----------
+    session : Session
+        The recording (:func:`bendsense.read_session`).
+    calibration : Calibration
+        Signal → shift calibration of its sensor.
+    config : Config
+        Sensor and actuator.
+    need_pressure : bool
+        Refuse a session whose frames lack a pressure reading.
+
+    Returns
+    -------
+    shape : Shape
+        Reconstructed at the coils (``s_m`` = the cumulative segment lengths).
+    usable : ndarray of bool, shape (frames,)
+        Inside the calibrated range, a finite shape and a pressure in the working range.
+    """
+    from bendsense.pcc import reconstruct
+    from bendsense.plausibility import check_channels
+
+    if len(session) == 0:
+        raise SessionError(f"{_source(session)}: no frames")
+    check_channels(session, calibration, config.sensor)
+    p = np.asarray(session.pressure_pa, dtype=float)
+    if p.ndim != 1:
+        raise SessionError(f"{_source(session)}: pressure of {p.shape[-1]} lines per frame; identification takes "
+                           "one actuator on one pressure line (export that finger's frames to a session CSV)")
+    if need_pressure and not np.all(np.isfinite(p)):
+        missing = int(np.count_nonzero(~np.isfinite(p)))
+        raise SessionError(f"{_source(session)}: {missing} of {len(session)} frames have no pressure reading; "
+                           "identification needs the pressure of every frame (a pressure_pa or pressure_kpa column)")
+    coils = np.cumsum(config.sensor.segment_lengths_m)
+    shape = reconstruct(session.signals, calibration, config.sensor, s_m=coils)
+    lo, hi = config.actuator.pressure_range_pa
+    usable = ~np.asarray(shape.extrapolated, dtype=bool) & np.all(np.isfinite(shape.curvature_per_m), axis=-1)
+    usable &= (p >= lo) & (p <= hi)
+    return shape, usable
+
+
+def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
+    """The free-bending angle θ = K0 L of each frame, gravity taken out, and its weights.
+
+    K0 minimises ``Σ_i (φ_i − φ_model(L_i; K0))²`` over the coils, with ``φ_i`` the
+    measured coil angles of ``shape`` and ``φ_model`` the beam (:func:`bendsense.solve_beam`)
+    with EI(P) of the config, its gravity load and no tip force; Gauss–Newton from the
+    tip angle over the sensor length, the derivative by a central difference.
+
+    Parameters
+    ----------
+    shape : Shape
+        Reconstructed shapes (frames,) on ``config.sensor``.
+    pressure_pa : array_like, shape (frames,)
+        Pressure of each frame [Pa].
+    config : Config
+        Actuator, stiffness and gravity.
+    max_iter : int
+        Gauss–Newton steps.
+
+    Returns
+    -------
+    angle_rad : ndarray, shape (frames,)
+        θ = K0 L [rad] (NaN where the beam solve failed).
+    weights : ndarray, shape (frames, N)
+        ∂θ/∂φ_i: θ's linear response to the measured coil angles [rad/rad].
+    slope_ei : ndarray, shape (frames,)
+        ∂θ/∂EI at the frame's pressure [rad/(N·m²)]: how the angle moves with the
+        stiffness the gravity correction assumes.
+    """
+    from bendsense.beam import solve_beam
+
+    lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
+    coils = np.cumsum(lengths)
+    phi = np.cumsum(np.asarray(shape.curvature_per_m, dtype=float) * lengths, axis=-1)
+    p = np.asarray(pressure_pa, dtype=float)
+    length = float(config.actuator.length_m)
+    ei = config.stiffness.ei_nm2(p)
+    w = config.weight_per_length_n_per_m
+
+    def model(k0, ei=ei):
+        sol = solve_beam(length, ei, k0, (0.0, 0.0), w, s_m=coils, warn=False)
+        return np.asarray(sol.angle_rad), np.asarray(sol.success)
+
+    k0 = phi[:, -1] / coils[-1]
+    h = 1e-3
+    for _ in range(max_iter):
+        (lo, ok_lo), (hi, ok_hi) = model(k0 - h), model(k0 + h)
+        mid, ok = model(k0)
+        j = (hi - lo) / (2.0 * h)
+        jj = np.einsum("bi,bi->b", j, j)
+        step = np.einsum("bi,bi->b", j, phi - mid) / jj
+        k0 = k0 + step
+        if np.all(np.abs(step) <= 1e-10 * np.maximum(1.0, np.abs(k0))):
+            break
+    mid, ok = model(k0)
+    dei = 1e-4 * ei
+    (ei_hi, ok_ei), (ei_lo, _) = model(k0, ei + dei), model(k0, ei - dei)
+    good = ok & ok_lo & ok_hi & ok_ei & np.isfinite(k0)
+    angle = np.where(good, k0 * length, np.nan)
+    weights = length * j / jj[:, None]
+    # at the optimum K0 moves by −(jᵀ ∂φ/∂EI)/(jᵀj) per unit of EI
+    slope_ei = -np.einsum("bi,bi->b", weights, (ei_hi - ei_lo) / (2.0 * dei[:, None]))
+    return angle, weights, slope_ei
+
+
+@dataclass(frozen=True, eq=False)
+class FreeBendingSessionFit:
+    """Result of :func:`fit_free_bending_session`: the fit and the frames behind it.
+
+    Attributes
+    ----------
+    fit : FreeBendingFit
+        The free-bending fit on the used frames (:func:`bendsense.identify.fit_free_bending`).
+    pressure_pa : ndarray, shape (frames,)
+        Every frame's pressure [Pa].
+    bending_angle_rad : ndarray, shape (frames,)
+        Every frame's free-bending angle θ = K0 L, gravity taken out [rad]; NaN where
+        the shape is not usable.
+    used : ndarray of bool, shape (frames,)
+        The frames of the final fit.
+    reason : ndarray of str, shape (frames,)
+        ``used``, or why a frame was not: ``loaded`` (its force outside the 2σ ellipse),
+        its estimate's status (``model_misfit``, …), ``unusable`` (no shape in the
+        calibrated range, or a pressure outside the working range) or ``thinned`` (not
+        considered: beyond ``max_frames``).
+    rounds : int
+        Fit and re-selection rounds run.
+    settled : bool
+        The selection repeated in the last round.
+    note : str
+        How the first fit's frames were chosen.
+    caveats : tuple of str
+        What the fit takes as exact that may not be (printed by :meth:`report`).
+    """
+
+    fit: object
+    pressure_pa: np.ndarray
+    bending_angle_rad: np.ndarray
+    used: np.ndarray
+    reason: np.ndarray
+    rounds: int
+    settled: bool
+    note: str
+    caveats: tuple = ()
+
+    def to_config(self, config):
+        """A copy of ``config`` with the fitted values and covariance (:meth:`FreeBendingFit.to_config`).
+
+        Parameters
+        ----------
+        config : Config
+            The config to copy.
+        """
+        return self.fit.to_config(config)
+
+    def report(self) -> str:
+        """The fit's report with the frame selection."""
+        counts = {r: int(np.count_nonzero(self.reason == r)) for r in dict.fromkeys(self.reason.tolist())}
+        thinned = counts.pop("thinned", 0)
+        rejected = ", ".join(f"{c} {r}" for r, c in counts.items() if r != "used") or "none"
+        more = f"; {thinned} more frames thinned out (not considered)" if thinned else ""
+        lines = [
+            f"free frames: {int(self.used.sum())} of {len(self.used) - thinned} used (status ok, force inside its "
+            f"2-sigma ellipse); rejected: {rejected}{more}",
+            f"  selection: {self.rounds} round(s), {'settled' if self.settled else 'NOT settled'}; {self.note}",
+            *(f"  note: {c}" for c in self.caveats),
+            self.fit.report(),
+        ]
+        if not self.settled:
+            lines.append("  WARNING: the frame selection changed in the last round; check the figure")
+        return "\n".join(lines)
+
+    def plot(self, ax=None, config=None):
+        """Free-bending angle over pressure: used and rejected frames, the fitted and the prior model.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; None makes a new figure.
+        config : Config, optional
+            The starting (prior) config, drawn as the prior model; default the paper's.
+        """
+        import matplotlib.pyplot as plt
+
+        from bendsense.actuator import FreeBendingModel
+        from bendsense.config import load_config
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(7, 4.5))
+        prior = config if config is not None else load_config()
+        p_kpa = self.pressure_pa / 1e3
+        deg = np.degrees(self.bending_angle_rad)
+        ax.plot(p_kpa[self.used], deg[self.used], ".", color="C0", label=f"used ({int(self.used.sum())})")
+        for i, reason in enumerate(r for r in dict.fromkeys(self.reason.tolist()) if r not in ("used", "thinned")):
+            sel = self.reason == reason
+            ax.plot(p_kpa[sel], deg[sel], "x", color=f"C{3 + i}", label=f"rejected: {reason} ({int(sel.sum())})")
+        grid = np.linspace(0.0, max(float(np.nanmax(self.pressure_pa)), 1.0), 200)
+        fitted = FreeBendingModel.from_config(self.to_config(prior)).bending_angle_rad(grid)
+        ax.plot(grid / 1e3, np.degrees(FreeBendingModel.from_config(prior).bending_angle_rad(grid)), "--",
+                color="0.5", label="prior model (the starting config)")
+        ax.plot(grid / 1e3, np.degrees(fitted), "-", color="C1", label="fitted model")
+        ax.set_xlabel("pressure [kPa]")
+        ax.set_ylabel("free-bending angle K0 L [deg]")
+        ax.set_title("free-bending fit from a session (gravity taken out)")
+        ax.legend(fontsize="small")
+        return ax
+
+
+def _select(shape, pressure, usable, config, calibration, nsigma2, thinned):
+    """Frames whose estimate is ``ok`` with the force inside its χ² ellipse; the reason for every frame."""
+    from bendsense.estimation import estimate_force
+    from bendsense.results import frame_status
+
+    reason = np.where(thinned, "thinned", "unusable").astype(object)
+    idx = np.flatnonzero(usable)
+    part = _take(shape, idx)
+    est = estimate_force(part, pressure[idx], config, calibration=calibration)
+    status = frame_status(part, est)
+    F = np.asarray(est.force_n)
+    C = np.asarray(est.covariance_n2)
+    finite = np.all(np.isfinite(C), axis=(-2, -1)) & np.all(np.isfinite(F), axis=-1)
+    d2 = np.full(len(idx), np.inf)
+    if finite.any():
+        d2[finite] = np.einsum("bi,bij,bj->b", F[finite], np.linalg.pinv(C[finite]), F[finite])
+    free = (status == "ok") & (d2 <= nsigma2)
+    reason[idx] = np.where(free, "used", np.where(status == "ok", "loaded", status))
+    return reason == "used", reason
+
+
+def _take(shape, idx):
+    from bendsense.pcc import Shape
+
+    return Shape.from_curvatures(np.asarray(shape.curvature_per_m)[idx], shape.lengths_m, s_m=shape.s_m,
+                                 extrapolated=np.asarray(shape.extrapolated)[idx])
+
+
+def fit_free_bending_session(session, calibration, config=None, *, fix=None, rounds: int = 5,
+                             chi2_limit: float = FREE_CHI2_2SIGMA, max_frames: int = MAX_FRAMES
+                             ) -> FreeBendingSessionFit:
+    """Fit μ̄, μ_s and the prebend to the free frames of a recorded pressure sweep (module docstring).
+
+    Parameters
+    ----------
+    session : Session or path
+        A free pressure sweep (:func:`bendsense.read_session`), with the pressure of
+        every frame.
+    calibration : Calibration or path
+        The sensor's calibration (``bendsense calibrate``).
+    config : Config or path, optional
+        The starting config (its free-bending parameters start the fit and the first
+        selection); default the paper's.
+    fix : iterable of str or mapping, optional
+        Parameters to hold (:func:`bendsense.identify.fit_free_bending`).
+    rounds : int
+        At most this many fit and re-selection rounds.
+    chi2_limit : float
+        A frame is free when ``Fᵀ C⁻¹ F`` is at most this (default the 2σ level of χ²₂).
+    max_frames : int
+        Consider at most this many usable frames, evenly spread over the session (a
+        sweep recorded at 2 kHz has tens of thousands; the calibration's error, common
+        to all, bounds what more frames could add); the others have the reason
+        ``thinned``.
+
+    Returns
+    -------
+    FreeBendingSessionFit
+
+    Raises
+    ------
+    SessionError
+        No pressure, channels that do not match, or too few free frames.
+    """
+    from bendsense.pipeline import _inputs
+
+    session, config, calibration, _ = _inputs(session, config, calibration, "")
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
+        raise ArgumentError(f"rounds: expected an integer >= 1, got {rounds!r}")
+    if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 4:
+        raise ArgumentError(f"max_frames: expected an integer >= 4, got {max_frames!r}")
+    shape, usable = session_shapes(session, calibration, config)
+    thinned = usable.copy()
+    candidates = np.flatnonzero(usable)
+    usable[:] = False
+    usable[candidates[np.unique(np.linspace(0, candidates.size - 1, min(candidates.size, max_frames)).round()
+                                .astype(int))] if candidates.size else candidates] = True
+    thinned &= ~usable
+    p = np.asarray(session.pressure_pa, dtype=float)
+    angle = np.full(len(p), np.nan)
+    weights = np.full((len(p), config.sensor.n_segments), np.nan)
+    slope_ei = np.full(len(p), np.nan)
+    idx = np.flatnonzero(usable)
+    if idx.size:
+        angle[idx], weights[idx], slope_ei[idx] = free_bending_angles(_take(shape, idx), p[idx], config)
+    usable &= np.isfinite(angle)
+    if not usable.any():
+        raise SessionError(f"{_source(session)}: no frame with a usable shape (all outside the calibrated range, "
+                           "or their pressure outside actuator.pressure_range_pa)")
+    used, reason = _select(shape, p, usable, config, calibration, chi2_limit, thinned)
+    note = "the first selection by the starting config"
+    if used.sum() < 0.5 * usable.sum():
+        used, note = usable.copy(), (f"the starting config found {int(used.sum())} of {int(usable.sum())} usable "
+                                     "frames free; the first fit used all usable frames")
+    fit, settled, done, caveats = None, False, 0, ()
+    while done < rounds:
+        done += 1
+        fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
+        current = fit.to_config(config)
+        new_used, new_reason = _select(shape, p, usable, current, calibration, chi2_limit, thinned)
+        if new_used.sum() < 0.5 * used.sum():  # the fitted model describes few of its own frames: keep them
+            caveats = (f"the fitted config finds only {int(new_used.sum())} of the {int(used.sum())} frames it was "
+                       "fitted to free: the model does not describe the free sweep to within its sigma (is EI(P) "
+                       "right? identify stiffness, then this again); the fit keeps those frames",)
+            reason = np.where(used, "used", reason)
+            break
+        settled = bool(np.array_equal(new_used, used))
+        used, reason = new_used, new_reason
+        if settled:
+            break
+    if not settled and not caveats:  # the final fit is on the final selection
+        fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
+    if not np.any(_block(config, STIFFNESS_PARAMETERS)):
+        caveats += ("the config states no covariance of ei0_nm2, ei1_nm2_per_pa: the gravity correction takes its "
+                    "EI(P) as exact; identify stiffness, then free bending again with that config",)
+    return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
+                                 reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note,
+                                 caveats=caveats)
+
+
+def _fit_frames(session, calibration, p, angle, sensitivities, used, config, fix):
+    """:func:`fit_free_bending` on the ``used`` frames, with their angles' joint covariance.
+
+    The covariance: the calibration's errors over the frames (:func:`session_covariance`)
+    plus the config's stated uncertainty of EI(P) through the gravity correction.
+    """
+    weights, slope_ei = sensitivities
+    rows = np.flatnonzero(used)
+    if rows.size < 4:
+        raise SessionError(f"{_source(session)}: {rows.size} free frame(s) found (status ok and the force inside "
+                           "its 2-sigma ellipse); need at least 4 over the pressure range: record a free sweep")
+    gap = float(calibration.strip_gap_m(config.sensor))
+    cov = session_covariance(calibration, np.asarray(session.signals)[rows], weights[rows] / gap,
+                             np.arange(rows.size), rows.size)
+    g = slope_ei[rows, None] * np.stack([np.ones(rows.size), p[rows]], axis=-1)  # ∂θ/∂(ei0, ei1)
+    return fit_free_bending(p[rows], angle[rows], config, fix=fix, data_covariance=cov,
+                            systematic_covariance=g @ _block(config, STIFFNESS_PARAMETERS) @ g.T)
+
+
+def _block(config, names) -> np.ndarray:
+    """The covariance of ``names`` stated by ``config.parameter_covariance`` (zeros where it states none)."""
+    out = np.zeros((len(names), len(names)))
+    section = config.parameter_covariance
+    if section is None:
+        return out
+    idx = [section.parameters.index(n) if n in section.parameters else -1 for n in names]
+    for a, i in enumerate(idx):
+        for b, j in enumerate(idx):
+            if i >= 0 and j >= 0:
+                out[a, b] = section.matrix[i, j]
+    return out
+
+
+def stiffness_data_from_session(session, calibration, config=None):
+    """The loaded frames of a hanging-weight session as stiffness data (module docstring).
+
+    Parameters
+    ----------
+    session : Session or path
+        The recording, with the pressure of every frame and the known tip force in the
+        columns ``fx_n, fy_n`` [N] or ``mass_kg`` [kg].
+    calibration : Calibration or path
+        The sensor's calibration.
+    config : Config or path, optional
+        Sensor, actuator and gravity; default the paper's.
+
+    Returns
+    -------
+    StiffnessData
+        One row per usable loaded frame, the reconstructed points at the coils.
+
+    Raises
+    ------
+    SessionError
+        No pressure, no load columns, or no usable loaded frame.
+    """
+    from bendsense.pipeline import _inputs
+
+    session, config, calibration, _ = _inputs(session, config, calibration, "")
+    return _stiffness_rows(session, calibration, config)[0]
+
+
+def _stiffness_rows(session, calibration, config):
+    """The stiffness data of the session's loaded frames, and their frame indices."""
+    force = _known_force(session, config)
+    shape, usable = session_shapes(session, calibration, config)
+    loaded = usable & np.all(np.isfinite(force), axis=-1) & (np.hypot(force[:, 0], force[:, 1]) > 0)
+    rows = np.flatnonzero(loaded)
+    if rows.size == 0:
+        raise SessionError(f"{_source(session)}: no frame with a known nonzero load and a usable shape "
+                           "(in the calibrated range, its pressure in actuator.pressure_range_pa)")
+    pos = np.asarray(shape.positions_m)[rows]
+    s = np.broadcast_to(np.asarray(shape.s_m), (rows.size, pos.shape[1]))
+    return StiffnessData(np.asarray(session.pressure_pa, dtype=float)[rows], force[rows], s, pos), rows
+
+
+def fit_stiffness_session(session, calibration, config=None, **options):
+    """Fit EI(P) to the hanging-weight frames of a session (module docstring).
+
+    :func:`stiffness_data_from_session` gives the rows; :func:`bendsense.identify.fit_stiffness`
+    fits them, with the levels' covariance from the calibration's errors over all rows
+    (:func:`bendsense.identify_covariance.session_covariance` through the reconstructed
+    points' sensitivity to the shifts): the calibration error is common to every frame
+    and does not average down over them.
+
+    Parameters
+    ----------
+    session : Session or path
+        The recording (pressure and known tip force of every frame).
+    calibration : Calibration or path
+        The sensor's calibration.
+    config : Config or path, optional
+        With the free-bending model identified first; default the paper's.
+    **options
+        ``fix``, ``pressure_tolerance_pa``, ``weighted``, ``method`` of
+        :func:`~bendsense.identify.fit_stiffness`.
+
+    Returns
+    -------
+    StiffnessFit
+    """
+    from bendsense.identify import fit_stiffness
+    from bendsense.pipeline import _inputs
+
+    session, config, calibration, _ = _inputs(session, config, calibration, "")
+    data, rows = _stiffness_rows(session, calibration, config)
+    signals = np.asarray(session.signals, dtype=float)[rows]
+    dpos_ds = _points_shift_jacobian(calibration.shifts_m(signals), calibration.strip_gap_m(config.sensor),
+                                     config)
+
+    def level_covariance(sensitivity, level, level_ei):
+        weights = np.einsum("nmc,nmcj->nj", sensitivity, dpos_ds)
+        cov = session_covariance(calibration, signals, weights, level, len(level_ei))
+        g = _level_k0_jacobian(data, config, sensitivity, level, level_ei)
+        return cov, g @ _block(config, FREE_BENDING_PARAMETERS) @ g.T
+
+    return fit_stiffness(data, config, level_covariance=level_covariance, **options)
+
+
+def _level_k0_jacobian(data, config, sensitivity, level, level_ei) -> np.ndarray:
+    """∂EI of each level / ∂(μ̄, μ_s, prebend) (levels, 3): through K0(P) of each row's model shape.
+
+    The level's EI minimises the distance of the model points to the measured ones; a
+    change δK0 of a row's natural curvature moves its model points by ∂r/∂K0 δK0 and
+    the fitted EI by −sensitivity · ∂r/∂K0 δK0 (∂r/∂K0 by a central difference).
+    """
+    from bendsense.actuator import FreeBendingModel, model_jacobian
+    from bendsense.beam import solve_beam
+
+    p = data.pressure_pa
+    k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(p)
+    grid = data.s_m[0]
+    ei = np.asarray(level_ei)[level]
+    h = 1e-4 * np.maximum(np.abs(k0), 1.0)
+    w = config.weight_per_length_n_per_m
+    hi, lo = (np.asarray(solve_beam(config.actuator.length_m, ei, k0 + sign * h, data.force_n, w, s_m=grid,
+                                    warn=False).positions_m) for sign in (1.0, -1.0))
+    dei_dk0 = -np.einsum("nmc,nmc->n", sensitivity, (hi - lo) / (2.0 * h[:, None, None]))
+    dk0 = model_jacobian(config, p, FREE_BENDING_PARAMETERS)[:, 0, :]  # (n, 3)
+    out = np.zeros((len(level_ei), dk0.shape[1]))
+    np.add.at(out, level, dei_dk0[:, None] * dk0)
+    return out
+
+
+def _points_shift_jacobian(shifts_m, gap_m: float, config, h: float = 1e-5) -> np.ndarray:
+    """∂(PCC points at the coils)/∂S (n, N, 2, N) [m/m], by central differences in the curvatures."""
+    from bendsense.pcc import Shape
+
+    lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
+    coils = np.cumsum(lengths)
+    n, N = shifts_m.shape
+    delta = np.diff(np.asarray(shifts_m, dtype=float), axis=-1, prepend=0.0)
+    kappa = delta / (gap_m * lengths)
+    bumped = np.repeat(kappa[:, None, :], 2 * N, axis=1)
+    eye = np.eye(N) * h
+    bumped[:, :N] += eye
+    bumped[:, N:] -= eye
+    pos = np.asarray(Shape.from_curvatures(bumped, lengths, s_m=coils).positions_m)  # (n, 2N, M, 2)
+    dpos_dk = np.moveaxis((pos[:, :N] - pos[:, N:]) / (2 * h), 1, -1)  # (n, M, 2, N)
+    # κ_i = (S_i − S_{i−1}) / (d l_i)
+    dk_ds = (np.eye(N) - np.eye(N, k=-1)) / (gap_m * lengths)[:, None]
+    return dpos_dk @ dk_ds
+
+
+def _known_force(session, config) -> np.ndarray:
+    """The tip force (frames, 2) [N] of the session's truth columns ``fx_n, fy_n`` or ``mass_kg``."""
+    extra = session.extra
+    has_f = [n for n in ("fx_n", "fy_n") if n in extra]
+    if has_f and "mass_kg" in extra:
+        raise SessionError(f"{_source(session)}: give the load as fx_n, fy_n or as mass_kg, not both")
+    if len(has_f) == 1:
+        other = "fy_n" if has_f == ["fx_n"] else "fx_n"
+        raise SessionError(f"{_source(session)}: missing column {other} (the tip force needs fx_n and fy_n)")
+    if has_f:
+        return np.stack([np.asarray(extra["fx_n"], dtype=float), np.asarray(extra["fy_n"], dtype=float)], axis=-1)
+    if "mass_kg" in extra:
+        m = np.asarray(extra["mass_kg"], dtype=float)
+        if np.any(m[np.isfinite(m)] < 0):
+            raise SessionError(f"{_source(session)}: column mass_kg: a hanging mass cannot be negative")
+        return m[:, None] * config.gravity.g_m_per_s2 * np.asarray(config.gravity.direction, dtype=float)
+    raise SessionError(f"{_source(session)}: no load columns: give the known tip force as fx_n, fy_n [N] "
+                       "or the hanging mass as mass_kg")
