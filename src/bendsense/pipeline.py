@@ -144,7 +144,10 @@ class Processed(Results):
     shape : Shape
         Reconstructed shapes, batch axis over the session's frames.
     estimate : ForceEstimate or None
-        Tip forces of the same frames; None when not estimated.
+        Tip forces of the same frames, window-checked (:func:`bendsense.check_windows`);
+        None when not estimated.
+    track : Track or None
+        Tracked forces of the same frames (:func:`bendsense.track`); None when not tracked.
     config : Config
         The config used.
     reconstruct_s, estimate_s : float
@@ -154,6 +157,7 @@ class Processed(Results):
     session: object = None
     shape: object = None
     estimate: object = None
+    track: object = None
     config: object = dataclasses.field(default=None, repr=False)
     reconstruct_s: float = 0.0
     estimate_s: float = 0.0
@@ -209,6 +213,7 @@ def warn_pressure_fallback(session, name: str = "pressure_pa") -> None:
 def process(session, config=None, calibration=None, *, constraint=None, objective=None, method=None,
             pressure_pa=None, estimate: bool = True, points: int | None = None, shape=None,
             push_only: bool | None = None, tip_angle_source: str | None = None, calibration_source: str = "",
+            window_s: float = 0.05, track: str | None = None, bandwidth_hz: float | None = None,
             **options) -> Processed:
     """Reconstruct the shapes and estimate the tip forces of every frame of a session.
 
@@ -243,6 +248,13 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         Tip angle of the ``normal`` and ``follower`` constraints (default the config's).
     calibration_source : str
         Where the calibration came from (its file), named in messages.
+    window_s : float, default 0.05
+        Window of the model check over frames (:func:`bendsense.check_windows`, run on
+        every estimate) and of the track's [s].
+    track : {"smooth", "filter"}, optional
+        Track the forces over time (:func:`bendsense.track`, that mode); None: no track.
+    bandwidth_hz : float, optional
+        Bandwidth of the track [Hz]; None: chosen from the session (:func:`bendsense.track`).
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``max_iter``, ...).
 
@@ -297,10 +309,27 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         est = estimate_force(shape, session.pressure_pa, config, constraint=constraint, method=method,
                              objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
                              calibration=calibration, **options)  # its noise model gives std_n
+        est, tracked = _over_time(est, session, window_s, track, bandwidth_hz)
         estimate_s = time.perf_counter() - t0
-    results = Results.from_state(session, shape, est)
+    elif track is not None:
+        raise ArgumentError("track: needs the force estimate (estimate=True)")
+    else:
+        tracked = None
+    results = Results.from_state(session, shape, est, tracked)
     return Processed(**{f.name: getattr(results, f.name) for f in dataclasses.fields(Results)}, session=session,
-                     shape=shape, estimate=est, config=config, reconstruct_s=reconstruct_s, estimate_s=estimate_s)
+                     shape=shape, estimate=est, track=tracked, config=config, reconstruct_s=reconstruct_s,
+                     estimate_s=estimate_s)
+
+
+def _over_time(est, session, window_s, mode, bandwidth_hz):
+    """The estimate window-checked (:func:`bendsense.check_windows`), and its track (None without ``mode``)."""
+    from bendsense.tracking import check_windows, track
+
+    est = check_windows(est, session.t_s, window_s=window_s, pressure_pa=session.pressure_pa)
+    if mode is None:
+        return est, None
+    return est, track(est, session.t_s, mode=mode, bandwidth_hz=bandwidth_hz, window_s=window_s,
+                      pressure_pa=session.pressure_pa)
 
 
 def _inputs(session, config, calibration, calibration_source):
@@ -356,6 +385,9 @@ class LiveFrame:
         Wall time of reconstruction and estimation of its block, per frame [s].
     status : str
         The frame's ``status`` in ``results.csv``.
+    track_force_n, track_std_n : ndarray, shape (2,) or None
+        The causally tracked force and its standard deviation [N] (``fx_track_n``, ...);
+        None when the processor does not track.
     """
 
     seq: int
@@ -367,6 +399,8 @@ class LiveFrame:
     estimate: object
     process_s: float
     status: str = "ok"
+    track_force_n: np.ndarray | None = None
+    track_std_n: np.ndarray | None = None
 
     @property
     def force_n(self) -> np.ndarray:
@@ -455,6 +489,12 @@ class LiveBlock:
         Wall time of the block's reconstruction and estimation [s].
     offset : ndarray, shape (N,)
         The calibration's offsets A0 (for ΔA).
+    track : Track or None
+        The causally tracked forces of the block (:class:`bendsense.Tracker`); None when
+        the processor does not track or no frame of the block has a force estimate.
+    tracked : bool
+        Whether the processor tracks the forces (the tracked columns are then present,
+        NaN where there is no track).
     extra : dict of str to ndarray, shape (n,)
         Per-frame columns the recorded session has beside its own (``Session.extra``:
         ``host_s``, ``status``, ``tx_drops`` of a recording), written after ``status``
@@ -471,10 +511,26 @@ class LiveBlock:
     estimated: bool
     process_s: float
     offset: np.ndarray = dataclasses.field(default=None, repr=False)
+    track: object = None
+    tracked: bool = False
     extra: dict = dataclasses.field(default_factory=dict, repr=False)
 
     def __len__(self) -> int:
         return self.t_s.size
+
+    @property
+    def track_force_n(self) -> np.ndarray:
+        """Tracked tip forces (n, 2) [N]; NaN where not tracked."""
+        if self.track is None:
+            return np.full((len(self), 2), np.nan)
+        return np.asarray(self.track.force_n, dtype=float).reshape(len(self), 2)
+
+    @property
+    def track_std_n(self) -> np.ndarray:
+        """Standard deviations of the tracked forces (n, 2) [N]; NaN where not tracked."""
+        if self.track is None:
+            return np.full((len(self), 2), np.nan)
+        return np.asarray(self.track.std_n, dtype=float).reshape(len(self), 2)
 
     @property
     def force_n(self) -> np.ndarray:
@@ -506,20 +562,26 @@ class LiveBlock:
 
     def columns(self) -> dict:
         """The columns of ``results.csv`` for these frames (those of ``bendsense ... save``)."""
-        from bendsense.results import Results
+        from bendsense.results import TRACK_COLUMNS, WINDOW_COLUMN, Results, tracked_columns
         from bendsense.session import Session
 
         session = Session(self.t_s, self.signals, self.pressure_pa, extra=self.extra)
-        results = Results.from_state(session, self.shape, self.estimate)
+        results = Results.from_state(session, self.shape, self.estimate, self.track)
         columns = results.columns
+        status = self.status
         if self.estimated and self.estimate is None:  # no frame with pressure: NaN forces, in save's order
             extra = {name: columns.pop(name) for name in results.extra_names}
             columns.pop("status")
             nan = np.full(len(self), np.nan)
             columns.update({name: nan for name in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m")})
             columns["status"] = None
+            if self.tracked:
+                columns.update({name: nan for name in TRACK_COLUMNS[:4]})
+                columns.update({"track_status": status, WINDOW_COLUMN: nan})
             columns.update(extra)
-        columns["status"] = self.status
+        elif self.track is not None:  # the frames without pressure: that status, not the estimate's
+            columns.update(tracked_columns(len(self), self.estimate, self.track, status))
+        columns["status"] = status
         return columns
 
     def frame(self, i: int = -1) -> LiveFrame:
@@ -545,6 +607,8 @@ class LiveBlock:
             estimate=est,
             process_s=self.process_s / n,
             status=str(self.status[i]),
+            track_force_n=self.track_force_n[i] if self.tracked else None,
+            track_std_n=self.track_std_n[i] if self.tracked else None,
         )
 
 
@@ -572,6 +636,13 @@ class LiveProcessor:
         Points of each shape along the sensor.
     estimate : bool
         Estimate the force (False: shapes only).
+    track : bool, default True
+        Track the forces causally (:class:`bendsense.Tracker`, a Kalman filter over the
+        per-frame estimates, its state kept across blocks): :attr:`LiveBlock.track`.
+    bandwidth_hz : float, optional
+        Bandwidth of the track [Hz]; None: the tracker's default.
+    window_s : float, default 0.05
+        Window of the streaming model check [s].
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``push_only``,
         ``tip_angle_source``, ...). ``max_iter`` defaults to :data:`LIVE_MAX_ITER`.
@@ -589,7 +660,7 @@ class LiveProcessor:
     """
 
     def __init__(self, calibration, config=None, *, constraint=None, method=None, objective=None, pressure_pa=None,
-                 n_points=41, estimate=True, **options):
+                 n_points=41, estimate=True, track=True, bandwidth_hz=None, window_s=0.05, **options):
         from bendsense.config import load_config
 
         self.config = load_config() if config is None else config
@@ -605,6 +676,9 @@ class LiveProcessor:
         self._fallback_told = False
         self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
         self.estimate = bool(estimate)
+        self.track = self.estimate and bool(track)
+        self._track_options = {"bandwidth_hz": bandwidth_hz, "window_s": window_s}
+        self.tracker = self._new_tracker()
         self.options = {"max_iter": LIVE_MAX_ITER, **options}
         self.frames = 0
         self.failures = 0
@@ -614,10 +688,18 @@ class LiveProcessor:
         self._t0_us = None
         self._host0_ns = None
 
+    def _new_tracker(self):
+        if not self.track:
+            return None
+        from bendsense.tracking import Tracker
+
+        return Tracker(mode="filter", **self._track_options)
+
     def reset(self) -> None:
-        """Forget the warm start and the time origin (e.g. after a reconnect)."""
+        """Forget the warm start, the track and the time origin (e.g. after a reconnect)."""
         self._previous = None
         self._t0_us = None
+        self.tracker = self._new_tracker()
 
     def warm_up(self) -> None:
         """Compile or load the kernels before the first frame arrives, then forget the frames used.
@@ -631,7 +713,7 @@ class LiveProcessor:
         lo, hi = self.config.actuator.pressure_range_pa
         flat = np.asarray(self.calibration.offset, dtype=float)
         for n in (1, 2):
-            self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)))
+            self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)), t_s=np.arange(n) * 1e-3)
         self.reset()
         self.frames = self.failures = self.estimated = 0
         self.status_counts = {}
@@ -699,11 +781,16 @@ class LiveProcessor:
             self.estimated += int(has_p.sum())
             if not has_p.all():
                 est = _expand(est, has_p)
+        t_s = np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float)
+        host_ns = np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None else np.asarray(host_ns,
+                                                                                                     dtype=np.int64)
+        track = None
+        if self.tracker is not None and est is not None:  # frames without a device time: the host's
+            track = self.tracker.update(est, np.where(np.isfinite(t_s), t_s, host_ns * 1e-9), p)
         block = LiveBlock(
-            t_s=np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float),
+            t_s=t_s,
             seq=np.full(n, -1, dtype=np.int64) if seq is None else np.asarray(seq, dtype=np.int64),
-            host_ns=np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None
-            else np.asarray(host_ns, dtype=np.int64),
+            host_ns=host_ns,
             pressure_pa=p,
             signals=a,
             shape=shape,
@@ -711,6 +798,8 @@ class LiveProcessor:
             estimated=self.estimate,
             process_s=time.perf_counter() - t_start,
             offset=np.asarray(self.calibration.offset, dtype=float),
+            track=track,
+            tracked=self.track,
             extra={} if extra is None else {k: np.asarray(v) for k, v in extra.items()},
         )
         self.frames += n
