@@ -3,9 +3,10 @@
 The data flow, module by module: ``frames`` (device bytes) → ``session`` (recordings)
 → ``calibration`` (signals → shifts) → ``pcc`` (shifts → curvatures → shape) →
 ``actuator`` (free bending, stiffness) → ``beam`` (curved cantilever under load) →
-``estimation`` (tip force), with ``pipeline`` running a session or a live stream through
-the chain. ``sim`` runs the chain backwards; ``plots``, ``device``, ``apps`` (the live
-view, the demo, the paper's evaluation) and ``cli`` sit at the edges.
+``estimation`` (tip force) → ``tracking`` (the force over time, model checks over
+windows), with ``pipeline`` running a session or a live stream through the chain.
+``sim`` runs the chain backwards; ``plots``, ``device``, ``apps`` (the live view, the
+demo, the paper's evaluation) and ``cli`` sit at the edges.
 """
 
 from importlib import import_module
@@ -38,6 +39,10 @@ _LAZY = {
     "solve_beam": "bendsense.beam",
     "ForceEstimate": "bendsense.estimation",
     "estimate_force": "bendsense.estimation",
+    "track": "bendsense.tracking",
+    "Track": "bendsense.tracking",
+    "Tracker": "bendsense.tracking",
+    "check_windows": "bendsense.tracking",
 }
 
 __all__ = [

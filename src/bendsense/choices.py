@@ -7,7 +7,7 @@ estimator dispatches on them (:mod:`bendsense.estimation`) and the CLI's ``--con
 """
 
 __all__ = ["ANGLE_SOURCES", "BEAM_METHODS", "CALIBRATION_DEGREES", "CALIBRATION_WEIGHTINGS", "CONSTRAINTS", "METHODS",
-           "OBJECTIVES"]
+           "OBJECTIVES", "TRACK_MODES"]
 
 #: Force constraints ``F = F_fixed + D u`` (:func:`bendsense.estimation.constraint_basis`).
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
@@ -22,3 +22,5 @@ CALIBRATION_DEGREES = (1, 2, 3, 4, 5)
 CALIBRATION_WEIGHTINGS = ("none", "shift")
 #: Beam solvers of ``identify``: the spectral collocation, or the paper's shooting.
 BEAM_METHODS = ("fast", "shooting")
+#: Tracking over time (:func:`bendsense.track`): the RTS smoother (offline) or the causal Kalman filter.
+TRACK_MODES = ("smooth", "filter")

@@ -130,6 +130,8 @@ def _mark(result, outside, p, lo, hi):
         p_value=None if result.p_value is None else np.where(mask, np.nan, result.p_value),
         covariance_parts_n2=None if result.covariance_parts_n2 is None else np.where(
             mask[..., None, None, None], np.nan, result.covariance_parts_n2),
+        # no window test on a frame the model was not made for
+        residual_rad=None if result.residual_rad is None else np.where(mask[..., None], np.nan, result.residual_rad),
     )
 
 

@@ -39,7 +39,7 @@ IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
 FLAGGED = ((EXTRAPOLATED, "extrapolated"), (NOT_CONVERGED, "not converged"), (MODEL_MISFIT, "misfit"),
            (NOT_IDENTIFIABLE, "not identifiable"), (IMPLAUSIBLE_FORCE, "implausible force"))
 
-__all__ = ["Results", "write_results", "read_results", "frame_status", "tracked_columns"]
+__all__ = ["Results", "write_results", "read_results", "frame_status", "estimate_status", "tracked_columns"]
 
 _KAPPA = re.compile(r"kappa[0-9]+$")
 FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
@@ -193,6 +193,33 @@ def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict
     return columns
 
 
+def estimate_status(estimate, n: int) -> np.ndarray:
+    """Per-frame status strings (n,) of a force estimate alone: ``ok`` or the estimate's reason.
+
+    ``not_converged``, ``not_identifiable``, ``pressure_out_of_range``, ``model_misfit``,
+    ``implausible_force`` or ``no_force`` (:func:`frame_status`, which adds the shape's).
+
+    Parameters
+    ----------
+    estimate : ForceEstimate
+        Force estimates of ``n`` frames.
+    n : int
+        The number of frames.
+    """
+    status = np.full(n, OK, dtype=object)
+    failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
+    status[failed] = NOT_CONVERGED
+    message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
+    status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
+    status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
+    status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
+    status[failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)] = IMPLAUSIBLE_FORCE
+    # a NaN force is never ok, whatever the solver said
+    force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
+    status[(status == OK) & ~np.isfinite(force).all(axis=1)] = NO_FORCE
+    return status
+
+
 def frame_status(shape, estimate=None) -> np.ndarray:
     """Per-frame status strings: ``ok`` or a short reason.
 
@@ -220,16 +247,10 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float).reshape(n, -1)
     status[~np.isfinite(kappa).all(axis=1)] = NO_SHAPE
     if estimate is not None:
+        own = estimate_status(estimate, n)
         failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
-        status[failed] = NOT_CONVERGED
-        message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
-        status[~failed & (status == OK) & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
-        status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
-        status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
-        status[failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)] = IMPLAUSIBLE_FORCE
-        # a NaN force is never ok, whatever the solver said
-        force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
-        status[(status == OK) & ~np.isfinite(force).all(axis=1)] = NO_FORCE
+        status[failed] = own[failed]
+        status[(status == OK) & (own != OK)] = own[(status == OK) & (own != OK)]
     # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
     tip = np.broadcast_to(np.asarray(shape.tip_angle_rad, dtype=float), (n,))
     status[np.abs(tip) > 2.0 * np.pi] = IMPLAUSIBLE

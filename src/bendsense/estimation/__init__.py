@@ -239,8 +239,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     n = N_NODES
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
            np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2)), np.empty((B, n)), np.empty((B, 2)),
-           np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)), np.empty(B, dtype=bool))
-    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out
+           np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)), np.empty(B, dtype=bool),
+           *_payload_buffers(B, pb))
+    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out[:14]
     if method == "fast":
         _run_fast(B, chain, use_guess, tuple(fr), plain_pb, plain_err, start, out)
     else:
@@ -261,7 +262,22 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
             else messages(status, residual, chi2, p_value, blocked_dir, method))
     if strict and not success.all():
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
+    return _result(out, batch, text, time.perf_counter() - t_start, method, constraint, uncertainty, objective,
+                   pb, plain_err)
+
+
+def _payload_buffers(B, pb):
+    """The kernels' outputs of the window test's payload (:func:`~bendsense.estimation.kernels.payload`)."""
+    R, N = pb.coils.size, pb.lengths.size
+    return np.empty((B, R)), np.empty((B, R, 2)), np.empty((B, R, 2)), np.empty((B, N))
+
+
+def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, objective, pb, err):
+    """The :class:`ForceEstimate` of the kernels' outputs ``out``, shaped to the frames' ``batch``."""
+    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out[:14]
     b2, b22 = batch + (2,), batch + (2, 2)
+    window = method == "fast" and objective == "angles" and pb.pcc  # what a window test needs, or None
+    resid, jac, mfac, shifts = (a.reshape(batch + a.shape[1:]) for a in out[14:])
     return ForceEstimate(
         force_n=force.reshape(b2),
         std_n=std.reshape(b2),
@@ -270,17 +286,24 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         success=success.reshape(batch),
         message=text.reshape(batch) if batch else str(text[0]),
         iterations=iters.reshape(batch),
-        wall_time_s=time.perf_counter() - t_start,
+        wall_time_s=wall_time_s,
         method=method,
         constraint=constraint,
         uncertainty=uncertainty,
         tip_position_m=tip.reshape(b2),
-        state=state.reshape(batch + (n,)),
+        state=state.reshape(batch + (state.shape[1],)),
         guess_n=guess_n.reshape(b2),
         chi2_per_dof=chi2.reshape(batch),
         p_value=p_value.reshape(batch),
         objective=objective,
         covariance_parts_n2=parts.reshape(batch + (3, 2, 2)),
+        residual_rad=resid if window else None,
+        jacobian_rad_per_n=jac if window else None,
+        model_factor_rad=mfac if window else None,
+        shifts_m=shifts if pb.pcc else None,
+        shift_errors=tuple(err) if window else None,
+        coils=tuple(int(c) for c in pb.coils) if window else None,
+        strip_gap_m=float(pb.gap),
     )
 
 

@@ -97,6 +97,30 @@ class ForceEstimate:
     p_value : ndarray, shape (...) or None
         Probability of a χ² at least as large as the frame's under the stated covariance;
         below 0.001 a converged frame is ``model_misfit``. NaN where χ² is.
+    residual_rad : ndarray, shape (..., R) or None
+        Measured − model coil angle at the optimum [rad], at the R coils on the actuator
+        (``coils``); NaN for a frame without a force. What a window test
+        (:func:`bendsense.check_windows`) needs, with the next four fields: None unless
+        the fast method fitted the coil angles of a PCC shape (``objective="angles"``),
+        so that a window test is not available (``window_p_value`` NaN).
+    jacobian_rad_per_n : ndarray, shape (..., R, 2) or None
+        ∂(model angle)/∂u [rad/N] of the constraint's parameters u (``F = F_fixed + D u``);
+        the columns beyond the constraint's k are 0.
+    model_factor_rad : ndarray, shape (..., R, 2) or None
+        ∂(model angle)/∂(K0, EI) · chol(Σ_(K0,EI)) [rad]: its outer product is the angles'
+        covariance from the model parameters (zeros without ``parameter_covariance``).
+    shifts_m : ndarray, shape (..., N) or None
+        The measured shifts S of the frame [m] (a PCC shape only).
+    shift_errors : tuple or None
+        The shift error model the estimate used, as a plain tuple of
+        :class:`~bendsense.shift_errors.ShiftErrorModel` (``ShiftErrorModel(*shift_errors)``).
+    coils : tuple of int or None
+        The channels (0-based) whose coils lie on the actuator: the rows of ``residual_rad``.
+    strip_gap_m : float
+        The sensor's strip gap d [m]: a coil angle is S / d.
+    window_p_value : ndarray, shape (...) or None
+        The p-value of the frame's window test (:func:`bendsense.check_windows`); None
+        until a window test ran, NaN where none is available.
     """
 
     force_n: np.ndarray
@@ -117,6 +141,14 @@ class ForceEstimate:
     p_value: np.ndarray | None = None
     objective: str = "angles"
     covariance_parts_n2: np.ndarray | None = field(default=None, repr=False)
+    residual_rad: np.ndarray | None = field(default=None, repr=False)
+    jacobian_rad_per_n: np.ndarray | None = field(default=None, repr=False)
+    model_factor_rad: np.ndarray | None = field(default=None, repr=False)
+    shifts_m: np.ndarray | None = field(default=None, repr=False)
+    shift_errors: tuple | None = field(default=None, repr=False)
+    coils: tuple | None = field(default=None, repr=False)
+    strip_gap_m: float = field(default=float("nan"), repr=False)
+    window_p_value: np.ndarray | None = None
 
     @property
     def budget(self) -> dict:
@@ -153,6 +185,7 @@ class ForceEstimate:
             "objective": self.objective,
             "chi2_per_dof": None if self.chi2_per_dof is None else np.asarray(self.chi2_per_dof).tolist(),
             "p_value": None if self.p_value is None else np.asarray(self.p_value).tolist(),
+            "window_p_value": None if self.window_p_value is None else np.asarray(self.window_p_value).tolist(),
         }
 
     def plot(self, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float = 100.0):

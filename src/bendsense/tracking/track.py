@@ -1,0 +1,366 @@
+"""Tracking the force over time: :func:`track` (offline, filter or smoother) and :class:`Tracker` (streaming).
+
+The per-frame estimates are the measurements of a Kalman filter whose state is the force
+(:mod:`bendsense.tracking.kalman`). Only each frame's **sensor-noise** covariance enters
+the filter; the calibration and model-parameter parts of the frame's covariance are one
+bias shared by neighbouring frames, which no averaging removes: they are added back whole
+to the filtered or smoothed covariance, so that a tracked σ is never below that floor
+(docs/theory.md, "Time: tracking and window checks").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bendsense import _jit
+from bendsense.choices import TRACK_MODES
+from bendsense.errors import ArgumentError
+from bendsense.estimation.kernels import MISFIT_P
+from bendsense.results import MODEL_MISFIT, OK, estimate_status
+from bendsense.tracking import kalman as _kalman
+from bendsense.tracking import windows as _windows
+from bendsense.validation import short
+
+__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "BANDWIDTH_GRID_PER_DECADE", "TRACK_COLUMNS"]
+
+#: Bandwidth of the causal filter when none is given and none can be chosen from the data (live) [Hz].
+DEFAULT_BANDWIDTH_HZ = 5.0
+#: Points per decade of the log grid searched for the maximum-likelihood bandwidth.
+BANDWIDTH_GRID_PER_DECADE = 5
+LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
+#: The results.csv columns of a track (:meth:`Track.to_columns`).
+TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """The force tracked over a time series of frames (B,).
+
+    Attributes
+    ----------
+    force_n : ndarray, shape (B, 2)
+        Tracked force (Fx, Fy) in the base frame [N]; NaN for a component no frame of
+        its segment has observed (yet, for the filter).
+    std_n : ndarray, shape (B, 2)
+        Its standard deviation [N]: the filtered or smoothed noise part plus the frame's
+        calibration and parameter parts, whole (never below them); inf where unobserved.
+    covariance_n2 : ndarray, shape (B, 2, 2)
+        Covariance of ``force_n`` [N²].
+    window_p_value : ndarray, shape (B,)
+        The window test's p-value (:func:`bendsense.check_windows`): the frame's window
+        (offline), or the latest completed window when the frame arrived (:class:`Tracker`);
+        NaN where no test is available.
+    status : ndarray of str, shape (B,)
+        ``ok``, ``model_misfit`` (a window test below 0.001) or the frame's own reason
+        (``not_converged``, ``not_identifiable``, ...): never ``ok`` for a frame whose own
+        status is not.
+    bandwidth_hz : float
+        The bandwidth of the filter used [Hz] (module :mod:`~bendsense.tracking.kalman`).
+    mode : str
+        ``"smooth"`` (RTS smoother) or ``"filter"`` (causal Kalman filter).
+    t_s : ndarray, shape (B,)
+        Time of each frame [s].
+    frame_force_n : ndarray, shape (B, 2)
+        The per-frame estimates tracked [N].
+    """
+
+    force_n: np.ndarray
+    std_n: np.ndarray
+    covariance_n2: np.ndarray
+    window_p_value: np.ndarray
+    status: np.ndarray
+    bandwidth_hz: float
+    mode: str
+    t_s: np.ndarray | None = field(default=None, repr=False)
+    frame_force_n: np.ndarray | None = field(default=None, repr=False)
+
+    def to_columns(self) -> dict:
+        """The results.csv columns ``fx_track_n, fy_track_n, fx_track_std_n, fy_track_std_n, track_status``."""
+        f, s = np.asarray(self.force_n), np.asarray(self.std_n)
+        return dict(zip(TRACK_COLUMNS, (f[:, 0], f[:, 1], s[:, 0], s[:, 1], np.asarray(self.status))))
+
+    def plot(self, ax=None):
+        """Fx and Fy against time: the tracked force with its ±2σ band over the per-frame points; returns the axes.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Where to draw (default: a new figure).
+        """
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(7, 3.5))
+        t = np.arange(len(self.force_n)) if self.t_s is None else np.asarray(self.t_s)
+        f, s = np.asarray(self.force_n), np.asarray(self.std_n)
+        for c, (name, colour) in enumerate((("Fx", "C0"), ("Fy", "C1"))):
+            if self.frame_force_n is not None:
+                ax.plot(t, np.asarray(self.frame_force_n)[:, c], ".", ms=2, color=colour, alpha=0.3)
+            band = np.where(np.isfinite(s[:, c]), 2.0 * s[:, c], np.nan)
+            ax.fill_between(t, f[:, c] - band, f[:, c] + band, color=colour, alpha=0.25, lw=0)
+            ax.plot(t, f[:, c], color=colour, lw=1.2, label=f"{name} tracked ({self.mode}, {self.bandwidth_hz:.3g} Hz)")
+        ax.set_xlabel("t [s]" if self.t_s is not None else "frame")
+        ax.set_ylabel("force [N]")
+        ax.legend(loc="best", fontsize="small")
+        return ax
+
+
+def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = None, window_s: float = 0.05,
+          pressure_pa=None) -> Track:
+    """The force tracked over a time series: Kalman filter (causal) or Rauch–Tung–Striebel smoother (offline).
+
+    Runs the window model check first (:func:`bendsense.check_windows`), then the filter
+    over the per-frame estimates with only their sensor-noise covariance; the frames'
+    calibration and parameter parts are added back whole. A gap or a pressure step
+    restarts the state (diffuse prior); a failed frame (NaN force) is predicted only; a
+    ``not_identifiable`` component (σ inf) is not observed, the other one is.
+
+    Parameters
+    ----------
+    estimate : ForceEstimate
+        Per-frame estimates (B,) of a time series (``estimate_force``).
+    t_s : array_like, shape (B,)
+        Time of each frame [s], not decreasing.
+    mode : {"smooth", "filter"}
+        RTS smoother (each frame uses the whole session) or the causal filter.
+    bandwidth_hz : float, optional
+        −3 dB bandwidth of the steady-state filter at each frame's noise [Hz]; None: the
+        maximum likelihood of the innovations over a log grid from 0.01 Hz to a quarter
+        of the frame rate.
+    window_s : float
+        Window of the model check and the longest interval inside a segment [s].
+    pressure_pa : array_like, shape (B,), optional
+        Pressure of each frame [Pa]: a step over 1 kPa restarts the state.
+
+    Returns
+    -------
+    Track
+    """
+    if not isinstance(mode, str) or mode not in TRACK_MODES:
+        raise ArgumentError(f"mode: must be one of {', '.join(TRACK_MODES)}, got {short(mode)}")
+    bandwidth_hz = _check_bandwidth(bandwidth_hz, allow_none=True)
+    t, P, window_s = _windows.series_inputs(estimate, t_s, window_s, pressure_pa)
+    starts = _windows.segment_starts(t, P, window_s, _windows.reference_interval(t))
+    bounds = _windows.window_bounds(t, starts, window_s)
+    p, n = _windows.window_p_values(estimate, bounds)
+    checked = _windows.flag(estimate, bounds, p, n, window_s)
+    z, Rn, floor = measurements(checked)
+    dt = np.diff(t, prepend=t[0])
+    if bandwidth_hz is None:
+        bandwidth_hz = ml_bandwidth(z, Rn, dt, starts, _windows.reference_interval(t))
+    B = t.size
+    state = new_state()
+    xp, Pp, xf, Pf = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
+    _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, float(bandwidth_hz), state, xp, Pp, xf, Pf)
+    if mode == "smooth":
+        xs, Ps = np.empty((B, 2)), np.empty((B, 2, 2))
+        _jit.call(_kalman.rts_smoother, starts, xp, Pp, xf, Pf, xs, Ps)
+        floor = fill_floor(floor, starts, backward=True)
+    else:
+        xs, Ps = xf, Pf
+        floor = fill_floor(floor, starts, backward=False)
+    own = estimate_status(checked, B)
+    return result(xs, Ps, floor, checked.window_p_value, own, float(bandwidth_hz), mode, t, z)
+
+
+def measurements(estimate):
+    """The filter's measurements of an estimate: the force (B, 2), its noise covariance (B, 2, 2) and the floor.
+
+    A component with an infinite σ (``not_identifiable``) gets a NaN force (not observed);
+    the floor (B, 2, 2) is the covariance's calibration and parameter parts.
+    """
+    z = np.array(estimate.force_n, dtype=float).reshape(-1, 2)
+    parts = estimate.covariance_parts_n2
+    if parts is None:
+        nan = np.full((z.shape[0], 2, 2), np.nan)
+        return np.full_like(z, np.nan), nan, nan
+    parts = np.asarray(parts, dtype=float).reshape(-1, 3, 2, 2)
+    std = np.asarray(estimate.std_n, dtype=float).reshape(-1, 2)
+    z[~np.isfinite(std)] = np.nan
+    return np.ascontiguousarray(z), np.ascontiguousarray(parts[:, 0]), parts[:, 1] + parts[:, 2]
+
+
+def fill_floor(floor, starts, backward):
+    """The floor (B, 2, 2) of a frame without one: the last one of its segment (and the next, ``backward``)."""
+    ok = np.isfinite(floor).all(axis=(1, 2))
+    idx = np.arange(floor.shape[0])
+    seg_first = np.maximum.accumulate(np.where(starts, idx, 0))
+    last = np.maximum.accumulate(np.where(ok, idx, -1))
+    take = np.where(ok, idx, np.where(last >= seg_first, last, -1))
+    if backward:
+        seg = np.cumsum(starts)
+        nxt = np.flip(np.minimum.accumulate(np.flip(np.where(ok, idx, floor.shape[0]))))
+        same = (nxt < floor.shape[0]) & (seg[np.minimum(nxt, floor.shape[0] - 1)] == seg)
+        take = np.where(take >= 0, take, np.where(same, nxt, -1))
+    out = np.full_like(floor, np.nan)
+    out[take >= 0] = floor[take[take >= 0]]
+    return out
+
+
+def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
+    """The maximum-likelihood bandwidth [Hz] of the innovations over a log grid, refined by a parabola in log B."""
+    top = 0.25 / dt_ref_s if math.isfinite(dt_ref_s) and dt_ref_s > 0 else 1.0
+    decades = max(math.log10(top / LOWEST_BANDWIDTH_HZ), 0.5)
+    grid = np.logspace(math.log10(LOWEST_BANDWIDTH_HZ), math.log10(top), int(decades * BANDWIDTH_GRID_PER_DECADE) + 1)
+    ll = np.empty(grid.size)
+    _jit.call(_kalman.log_likelihoods, z, Rn, dt, starts, grid, ll)
+    if not np.isfinite(ll).any() or np.ptp(ll[np.isfinite(ll)]) == 0.0:
+        return DEFAULT_BANDWIDTH_HZ  # nothing to choose from (no observations): the documented default
+    i = int(np.nanargmax(ll))
+    if 0 < i < grid.size - 1:
+        a, b, c = ll[i - 1], ll[i], ll[i + 1]
+        den = a - 2.0 * b + c
+        step = np.log(grid[1] / grid[0])
+        if den < 0:
+            return float(grid[i] * math.exp(0.5 * (a - c) / den * step))
+    return float(grid[i])
+
+
+def result(x, P, floor, window_p, own, bandwidth_hz, mode, t, z):
+    """The :class:`Track` of the states ``x`` (B, 2), ``P`` (B, 2, 2) with the floor added back."""
+    seen = np.diagonal(P, axis1=1, axis2=2) < 0.5 * _kalman.DIFFUSE
+    cov = P + np.where(np.isfinite(floor), floor, 0.0)
+    unseen = ~seen[:, :, None] | ~seen[:, None, :]
+    cov = np.where(unseen, np.inf, cov)
+    force = np.where(seen, x, np.nan)
+    std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    status = np.array(own, dtype=object)
+    misfit = (np.asarray(window_p) < MISFIT_P) & (status == OK)
+    status[misfit] = MODEL_MISFIT
+    return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=np.asarray(window_p, dtype=float),
+                 status=status.astype(str), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t, frame_force_n=z)
+
+
+def new_state():
+    """A filter's state before its first frame: x (2,), P (2, 2), the latest noise covariance, [has one]."""
+    return np.zeros(2), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(1)
+
+
+def _check_bandwidth(value, allow_none):
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not (
+            math.isfinite(value) and value > 0):
+        raise ArgumentError(f"bandwidth_hz: expected a frequency > 0 [Hz], got {short(value)}")
+    return float(value)
+
+
+class Tracker:
+    """The causal filter over blocks of frames as they arrive (``record --estimate``, ``live``).
+
+    ``update`` gives the same numbers block by block as :func:`track` with
+    ``mode="filter"`` on the whole series (the same kernel, its state kept across blocks;
+    the gaps are judged against the median interval of the first frames seen). The window
+    check runs as windows close: each frame reports its filtered force at once and the
+    p-value of the latest completed window (a window closes when a frame of the next one
+    arrives, or at a gap or pressure step); while that p is below 0.001 the frames are
+    ``model_misfit``.
+
+    Parameters
+    ----------
+    mode : {"filter"}
+        Only the causal filter streams.
+    bandwidth_hz : float, optional
+        Bandwidth [Hz]; default :data:`DEFAULT_BANDWIDTH_HZ`.
+    window_s : float
+        Window of the model check and the longest interval inside a segment [s].
+    """
+
+    def __init__(self, mode: str = "filter", bandwidth_hz: float | None = None, window_s: float = 0.05):
+        if mode != "filter":
+            raise ArgumentError(f"mode: a Tracker filters causally: only 'filter', got {short(mode)}")
+        self.bandwidth_hz = _check_bandwidth(DEFAULT_BANDWIDTH_HZ if bandwidth_hz is None else bandwidth_hz, False)
+        if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
+                math.isfinite(window_s) and window_s > 0):
+            raise ArgumentError(f"window_s: expected a duration > 0 [s], got {short(window_s)}")
+        self.window_s = float(window_s)
+        self.mode = mode
+        self._state = new_state()
+        self._last = None  # (t, pressure) of the latest frame
+        self._dt_ref = None  # the median interval of the first frames
+        self._floor = np.full((2, 2), np.nan)
+        self._open = None  # the open window: (its frames' payload, segment start time, window index)
+        self._p = np.nan  # the latest completed window's p-value
+
+    def update(self, estimate_block, t_s_block, pressure_pa_block=None) -> Track:
+        """Filter a block of frames; returns their :class:`Track`.
+
+        Parameters
+        ----------
+        estimate_block : ForceEstimate
+            The block's per-frame estimates (b,).
+        t_s_block : array_like, shape (b,)
+            Their times [s], after the previous block's.
+        pressure_pa_block : array_like, shape (b,), optional
+            Their pressures [Pa].
+        """
+        t, P, _ = _windows.series_inputs(estimate_block, t_s_block, self.window_s, pressure_pa_block)
+        if self._last is not None and t[0] < self._last[0]:
+            raise ArgumentError(f"t_s_block: must not decrease, got {t[0]!r} s after the previous block's "
+                                f"{self._last[0]!r} s")
+        tt = t if self._last is None else np.concatenate(([self._last[0]], t))
+        if self._dt_ref is None and tt.size > 1:
+            self._dt_ref = _windows.reference_interval(tt)
+        PP = None if P is None else (P if self._last is None else np.concatenate(([self._last[1]], P)))
+        starts = _windows.segment_starts(tt, PP, self.window_s, self._dt_ref if self._dt_ref else np.inf)
+        if self._last is not None:
+            starts = starts[1:]
+        dt = np.diff(tt, prepend=tt[0])[-t.size:]
+        z, Rn, floor = measurements(estimate_block)
+        B = t.size
+        xf, Pf, xp, Pp = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
+        _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, self.bandwidth_hz, self._state, xp, Pp, xf, Pf)
+        floor = self._fill(floor, starts)
+        window_p = self._windows(estimate_block, t, starts)
+        own = estimate_status(estimate_block, B)
+        self._last = (float(t[-1]), np.nan if P is None else float(P[-1]))
+        return result(xf, Pf, floor, window_p, own, self.bandwidth_hz, self.mode, t, z)
+
+    def _fill(self, floor, starts):
+        """The floor carried forward within a segment, across blocks."""
+        out = np.empty_like(floor)
+        last = self._floor
+        for i in range(floor.shape[0]):
+            if starts[i]:
+                last = np.full((2, 2), np.nan)
+            if np.isfinite(floor[i]).all():
+                last = floor[i]
+            out[i] = last
+        self._floor = last
+        return out
+
+    def _windows(self, est, t, starts):
+        """The latest completed window's p-value at each frame of the block; the open window kept for the next."""
+        payload = tuple(getattr(est, name) for name in _windows.PAYLOAD)
+        if any(a is None for a in payload) or est.shift_errors is None:
+            return np.full(t.size, np.nan)
+        if self._open is not None:
+            prev, t0, j0, t_prev = self._open
+            payload = tuple(np.concatenate((a, b)) for a, b in zip(prev, payload))
+            tt = np.concatenate((t_prev, t))
+            st = np.concatenate((np.zeros(t_prev.size, dtype=bool), starts))
+            seg, j, firsts = _windows.window_index(tt, st, self.window_s, t0)
+        else:
+            tt, st = t, starts
+            seg, j, firsts = _windows.window_index(tt, st, self.window_s)
+        key_change = np.flatnonzero((seg[1:] != seg[:-1]) | (j[1:] != j[:-1])) + 1
+        bounds = np.concatenate(([0], key_change)).astype(np.int64)  # the starts of the windows; the last is open
+        done = bounds.size - 1
+        p = np.full(done, np.nan)
+        if done:
+            p, _ = _windows.window_p_values(est, bounds, payload)
+        # each frame of the block: the latest window completed by its arrival (a window completes at the next one's first)
+        offset = tt.size - t.size
+        frame_p = np.empty(t.size)
+        latest = self._p
+        closes = {int(b): p[w - 1] for w, b in enumerate(bounds) if w >= 1}
+        for i in range(t.size):
+            latest = closes.get(offset + i, latest)
+            frame_p[i] = latest
+        self._p = latest
+        lo = int(bounds[-1])
+        self._open = (tuple(a[lo:] for a in payload), firsts[seg[lo]], j[lo], tt[lo:])
+        return frame_p

@@ -1,0 +1,326 @@
+"""The model check over windows of frames: the test of a window's mean residual (docs/theory.md, "Time").
+
+A frame's χ² has little power against a persistent model error at realistic noise: the
+error is a fraction of a noise σ per frame. Over a window of n frames the noise of the
+mean residual falls as 1/√n while a persistent error stays, so a test of the mean
+residual against its covariance gains power as n (its statistic grows as n × the error²);
+a sum of the frames' χ² gains it only as √n. Per window of frames ``a:b``, over its usable
+frames (a finite residual):
+
+- the means r̄ (R,) of the residuals (measured − model coil angle), Ā (R, 2) of the
+  Jacobians by the fitted parameters u, M̄ (R, 2) of the model factors, S̄ of the shifts;
+- ``Σ_θ = Σ_S(S̄)_(coils) / d²`` (:func:`bendsense.shift_errors.shift_covariance`) with its
+  noise diagonal ``nv``: ``Σ_cal = Σ_θ − diag(nv)`` is the calibration's part;
+- ``C = P̄ (diag(nv)/n + Σ_cal + M̄ M̄ᵀ) P̄ᵀ``, ``P̄ = I − Ā (ĀᵀWĀ)⁺ ĀᵀW``, ``W = Σ_θ⁻¹``
+  (the estimator's own weights): the noise averages down, the calibration and parameter
+  parts are one bias shared by the window's frames and count whole;
+- ``T = r̄ᵀ C⁺ r̄`` with rank(C) = R − k degrees of freedom: whitened by the Cholesky
+  factor of Σ_θ, the fitted directions projected out by an orthonormal complement of the
+  whitened Ā, then solved; ``p = P(χ²_(R−k) > T)``.
+
+:func:`window_tests` is the compiled kernel over windows (~1 µs per frame, most of it
+the window's means; benchmarks/bench_track.py).
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+from numba import njit
+
+from bendsense import _jit
+from bendsense.errors import ArgumentError
+from bendsense.estimation import uncertainty as unc
+from bendsense.estimation.kernels import MISFIT_P
+from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
+from bendsense.shift_errors import ShiftErrorModel, shift_covariance
+from bendsense.validation import short
+
+__all__ = ["check_windows", "WINDOW_S", "PRESSURE_STEP_PA", "MIN_FRAMES"]
+
+MIN_FRAMES = 5  # fewer usable frames in a window: no test (p NaN)
+WINDOW_S = 0.05  # default window [s]: 100 frames at 2 kHz
+GAP_FACTOR = 3.0  # an interval over this many times the median one is a gap
+PRESSURE_STEP_PA = 1000.0  # a pressure change between two frames beyond this is a step [Pa]
+
+
+@njit(cache=True)
+def complement(A):
+    """An orthonormal basis (R, R − rank) of the complement of the column space of ``A`` (R, k).
+
+    Modified Gram–Schmidt over the columns of A, then of the identity; a column left
+    with less than 1e-8 of its norm is dependent and dropped.
+    """
+    R, k = A.shape
+    basis = np.zeros((R, R))
+    m = 0
+    rank = 0
+    for src in range(k + R):
+        v = np.empty(R)
+        for i in range(R):
+            v[i] = A[i, src] if src < k else (1.0 if i == src - k else 0.0)
+        n0 = 0.0
+        for i in range(R):
+            n0 += v[i] * v[i]
+        n0 = math.sqrt(n0)
+        if n0 == 0.0:
+            continue
+        for _ in range(2):  # twice: Gram–Schmidt keeps orthogonality to round-off
+            for j in range(m):
+                d = 0.0
+                for i in range(R):
+                    d += basis[i, j] * v[i]
+                for i in range(R):
+                    v[i] -= d * basis[i, j]
+        nv = 0.0
+        for i in range(R):
+            nv += v[i] * v[i]
+        nv = math.sqrt(nv)
+        if nv <= 1e-8 * n0 or m == R:
+            continue
+        for i in range(R):
+            basis[i, m] = v[i] / nv
+        m += 1
+        if src < k:
+            rank += 1
+    return basis[:, rank:m].copy()
+
+
+@njit(cache=True)
+def window_test(lo, hi, resid, jac, mfac, shifts, err, coils, gap):
+    """The p-value and the usable frames of the window test over frames ``lo:hi`` (module docstring)."""
+    R = resid.shape[1]
+    N = shifts.shape[1]
+    rbar = np.zeros(R)
+    A = np.zeros((R, 2))
+    M = np.zeros((R, 2))
+    S = np.zeros(N)
+    n = 0
+    for f in range(lo, hi):
+        ok = True
+        for i in range(R):
+            ok = ok and math.isfinite(resid[f, i]) and math.isfinite(jac[f, i, 0] + jac[f, i, 1])
+            ok = ok and math.isfinite(mfac[f, i, 0] + mfac[f, i, 1])
+        for j in range(N):
+            ok = ok and math.isfinite(shifts[f, j])
+        if not ok:
+            continue
+        n += 1
+        for i in range(R):
+            rbar[i] += resid[f, i]
+            for c in range(2):
+                A[i, c] += jac[f, i, c]
+                M[i, c] += mfac[f, i, c]
+        for j in range(N):
+            S[j] += shifts[f, j]
+    if n < MIN_FRAMES:
+        return np.nan, n
+    rbar /= n
+    A /= n
+    M /= n
+    S /= n
+    cov_s = np.zeros((N, N))
+    nv_s = np.zeros(N)
+    shift_covariance(err, S, cov_s, nv_s)
+    inv_d2 = 1.0 / (gap * gap)
+    Lc = np.empty((R, R))
+    C = np.empty((R, R))
+    for a in range(R):
+        for b in range(R):
+            Lc[a, b] = cov_s[coils[a], coils[b]] * inv_d2  # Σ_θ = diag(nv) + Σ_cal
+            C[a, b] = Lc[a, b] + M[a, 0] * M[b, 0] + M[a, 1] * M[b, 1]
+        C[a, a] -= (1.0 - 1.0 / n) * nv_s[coils[a]] * inv_d2  # the noise averages down
+    if unc.cholesky(Lc) == 0:
+        return np.nan, n
+    unc.forward(Lc, A)  # whitened: Ã, r̃, G = Lc⁻¹ C Lc⁻ᵀ
+    r = rbar.reshape(R, 1).copy()
+    unc.forward(Lc, r)
+    unc.forward(Lc, C)
+    G = C.T.copy()
+    unc.forward(Lc, G)
+    Q = complement(A)
+    y = unc.mm(Q.T.copy(), r)
+    Cy = unc.mm(unc.mm(Q.T.copy(), G), Q)
+    dof = unc.cholesky(Cy)
+    if dof == 0:
+        return np.nan, n
+    unc.forward(Cy, y)
+    t = 0.0
+    for i in range(y.shape[0]):
+        t += y[i, 0] * y[i, 0]
+    return unc.chi2_sf(t, dof), n
+
+
+@njit(cache=True)
+def window_tests(bounds, resid, jac, mfac, shifts, err, coils, gap, p_out, n_out):
+    """The window test of every window ``bounds[w]:bounds[w + 1]`` into ``p_out``, its usable frames into ``n_out``.
+
+    ``resid`` (B, R), ``jac`` (B, R, 2), ``mfac`` (B, R, 2), ``shifts`` (B, N): the
+    frames' payload (:class:`~bendsense.estimation.ForceEstimate`); ``err`` the shift error
+    model as a plain tuple; ``coils`` (R,) the channels of the rows; ``gap`` d [m].
+    """
+    model = ShiftErrorModel(*err)
+    for w in range(bounds.size - 1):
+        p_out[w], n_out[w] = window_test(bounds[w], bounds[w + 1], resid, jac, mfac, shifts, model, coils, gap)
+
+
+def segment_starts(t_s, pressure_pa, window_s, dt_ref_s):
+    """Whether each frame (B,) starts a segment: the first, and after a gap or a pressure step.
+
+    A gap is an interval over ``GAP_FACTOR`` × ``dt_ref_s`` (the median interval) or over
+    ``window_s``; a step is a pressure change over ``PRESSURE_STEP_PA`` between two frames.
+    """
+    starts = np.ones(t_s.size, dtype=bool)
+    dt = np.diff(t_s)
+    brk = (dt > GAP_FACTOR * dt_ref_s) | (dt > window_s)
+    if pressure_pa is not None:
+        brk |= np.abs(np.diff(pressure_pa)) > PRESSURE_STEP_PA
+    starts[1:] = brk
+    return starts
+
+
+def window_index(t_s, starts, window_s, t0_s=None):
+    """The window of each frame within its segment: ``floor((t − t_segment) / window_s)``; and the segment's start times.
+
+    ``t0_s``: the start time of the segment the first frame continues (streaming), if it starts none.
+    """
+    seg = np.cumsum(starts) - 1
+    first = np.flatnonzero(starts)
+    t_first = t_s[first]
+    if not starts[0]:  # frames before the first start continue an open segment (streaming)
+        seg = seg + 1
+        t_first = np.concatenate(([t0_s], t_first))
+    t_seg = t_first[seg]
+    return seg, np.floor((t_s - t_seg) / window_s + 1e-9).astype(np.int64), t_first
+
+
+def window_bounds(t_s, starts, window_s):
+    """Boundaries (W + 1,) of consecutive windows of ``window_s`` within the segments ``starts``.
+
+    A segment's last window shorter than half a window joins the previous one of its segment.
+    """
+    seg, j, t_first = window_index(t_s, starts, window_s)
+    new = np.ones(t_s.size, dtype=bool)
+    new[1:] = (seg[1:] != seg[:-1]) | (j[1:] != j[:-1])
+    bounds = np.flatnonzero(new)
+    ends = np.append(bounds[1:], t_s.size)
+    last = ~starts[bounds] & np.append(seg[bounds[1:]] != seg[bounds[:-1]], True)  # a segment's last, not its first
+    short_ = last & (t_s[ends - 1] - (t_first[seg[bounds]] + j[bounds] * window_s) < 0.5 * window_s)
+    return np.append(bounds[~short_], t_s.size).astype(np.int64)
+
+
+PAYLOAD = ("residual_rad", "jacobian_rad_per_n", "model_factor_rad", "shifts_m")  # a window test's per-frame inputs
+
+
+def window_p_values(estimate, bounds, payload=None):
+    """The p-value (W,) and the usable frames (W,) of the window test over ``bounds`` of a 1-D estimate.
+
+    ``payload``: the frames' :data:`PAYLOAD` arrays, if not the estimate's own (streaming).
+    """
+    W = bounds.size - 1
+    p = np.full(W, np.nan)
+    n = np.zeros(W, dtype=np.int64)
+    payload = tuple(getattr(estimate, name) for name in PAYLOAD) if payload is None else payload
+    if any(a is None for a in payload) or estimate.shift_errors is None or estimate.uncertainty != "propagated" or W < 1:
+        return p, n
+    c = np.ascontiguousarray
+    _jit.call(window_tests, c(bounds, dtype=np.int64), *(c(a, dtype=float) for a in payload),
+              tuple(estimate.shift_errors), np.asarray(estimate.coils, dtype=np.int64), float(estimate.strip_gap_m), p, n)
+    return p, n
+
+
+def check_windows(estimate, t_s, *, window_s: float = WINDOW_S, pressure_pa=None) -> ForceEstimate:
+    """The model check over windows of frames: ``estimate`` with ``window_p_value`` and the misfits flagged.
+
+    The frames are cut into segments at gaps (an interval over 3× the median one or over
+    ``window_s``) and at pressure steps (over 1 kPa between two frames), then into
+    consecutive windows of ``window_s`` (a remainder shorter than half a window joins the
+    previous one). Each window's mean residual is tested against its covariance (the
+    sensor noise divided by the frames, the calibration and parameter parts whole; module
+    docstring). Where p < 0.001 (:data:`~bendsense.estimation.kernels.MISFIT_P`), the
+    window's converged frames become ``model_misfit`` (``success=False``, the force kept,
+    a message naming the window test).
+
+    Parameters
+    ----------
+    estimate : ForceEstimate
+        Per-frame estimates (B,) of a time series, from ``estimate_force`` with the fast
+        method fitting the coil angles (``objective="angles"``) and a noise model; else
+        no test is available and ``window_p_value`` is NaN.
+    t_s : array_like, shape (B,)
+        Time of each frame [s], not decreasing.
+    window_s : float
+        Window length [s] (default 0.05).
+    pressure_pa : array_like, shape (B,), optional
+        Pressure of each frame [Pa]: a step starts a new segment.
+
+    Returns
+    -------
+    ForceEstimate
+        The same estimate with ``window_p_value`` (B,) (NaN for frames in a window of
+        fewer than 5 usable frames) and the flagged frames' ``success`` and ``message``.
+    """
+    t, P, window_s = series_inputs(estimate, t_s, window_s, pressure_pa)
+    starts = segment_starts(t, P, window_s, reference_interval(t))
+    bounds = window_bounds(t, starts, window_s)
+    p, n = window_p_values(estimate, bounds)
+    return flag(estimate, bounds, p, n, window_s)
+
+
+def flag(estimate, bounds, p, n, window_s):
+    """``estimate`` with the windows' p-values per frame and the converged frames of windows with p < MISFIT_P flagged."""
+    B = estimate.batch_shape[0]
+    counts = np.diff(bounds)
+    frame_p = np.repeat(p, counts)
+    frame_n = np.repeat(n, counts)
+    message = np.array(np.broadcast_to(np.asarray(estimate.message, dtype=object), (B,)), dtype=object)
+    bad = (frame_p < MISFIT_P) & (message == OK_MESSAGE) & np.asarray(estimate.success, dtype=bool)
+    for i in np.flatnonzero(bad):
+        message[i] = (f"model_misfit: window test over {window_s * 1e3:g} ms ({frame_n[i]} frames): p = "
+                      f"{frame_p[i]:.2g} < {MISFIT_P:g}: the model does not explain the window's mean residual within "
+                      "the stated noise, calibration and parameter errors (a load not at the tip, contact along the "
+                      "body, or a mis-identified actuator)")
+    return dataclasses.replace(estimate, window_p_value=frame_p, success=np.where(bad, False, estimate.success),
+                               message=message.astype(str))
+
+
+def reference_interval(t_s):
+    """The median interval between frames [s] (inf for fewer than two frames)."""
+    return float(np.median(np.diff(t_s))) if t_s.size > 1 else np.inf
+
+
+def series_inputs(estimate, t_s, window_s, pressure_pa):
+    """The checked time series inputs of :func:`check_windows` and :func:`bendsense.track`: (t (B,), P (B,) or None, W)."""
+    if not isinstance(estimate, ForceEstimate):
+        raise ArgumentError(f"estimate: expected a ForceEstimate (estimate_force), got {type(estimate).__name__}")
+    if len(estimate.batch_shape) != 1:
+        raise ArgumentError(f"estimate: expected the estimates of a time series (one batch axis of frames), got batch "
+                            f"shape {estimate.batch_shape}")
+    B = estimate.batch_shape[0]
+    try:
+        t = np.asarray(t_s, dtype=float)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"t_s: expected times [s], got {short(t_s)}") from None
+    if t.shape != (B,):
+        raise ArgumentError(f"t_s: expected {B} times (one per frame), got shape {t.shape}")
+    if not np.isfinite(t).all():
+        raise ArgumentError(f"t_s: must be finite, got {short(t[~np.isfinite(t)][0])} at frame "
+                            f"{int(np.flatnonzero(~np.isfinite(t))[0])}")
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        raise ArgumentError(f"t_s: must not decrease, got {t[back[0] + 1]!r} s after {t[back[0]]!r} s at frame "
+                            f"{int(back[0]) + 1}")
+    if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
+            math.isfinite(window_s) and window_s > 0):
+        raise ArgumentError(f"window_s: expected a duration > 0 [s], got {short(window_s)}")
+    P = None
+    if pressure_pa is not None:
+        try:
+            P = np.array(np.broadcast_to(np.asarray(pressure_pa, dtype=float), (B,)))
+        except (TypeError, ValueError):
+            raise ArgumentError(f"pressure_pa: expected {B} pressures [Pa] (one per frame), got "
+                                f"{short(pressure_pa)}") from None
+    return t, P, float(window_s)
+
+
+_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once
