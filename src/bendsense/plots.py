@@ -482,21 +482,29 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
     tracked force and its σ, each (frames, 2)), the band is the tracked force's and the
     per-frame forces are points under it.
     """
+    from matplotlib.legend_handler import HandlerTuple
+
     ax.set_ylabel("tip force [N]")
-    handles, labels = [], []
+    handles, labels, dots = [], [], []
     for i, (color, label) in enumerate((("C0", "F_x"), ("C3", "F_y"))):
         f, band = np.where(np.isinf(std[:, i]), np.nan, force[:, i]), 2.0 * std[:, i]
-        if tracked is not None:
-            (points,) = ax.plot(t, f, ".", color=color, markersize=2.5, alpha=0.45, markeredgewidth=0)
-            handles.append(points)
-            labels.append(f"{label} per frame")
+        points = None
+        if tracked is not None:  # over the band, under the tracked line
+            (points,) = ax.plot(t, f, ".", color=color, markersize=2.5, alpha=0.5, markeredgewidth=0, zorder=2.2,
+                                label=f"{label} per frame")
             f = np.where(np.isinf(tracked[1][:, i]), np.nan, tracked[0][:, i])
             band = 2.0 * tracked[1][:, i]
             label += " tracked"
-        (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label)
+        (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label, zorder=2.4)
         fill = ax.fill_between(t, f - band, f + band, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
         handles.append((line, fill))
         labels.append(f"{label} ± 2σ")
+        if points is not None:
+            dots.append(points)
+    if dots:  # one legend entry for the points of both components, side by side
+        dots = tuple(dots)
+        handles.append(dots)
+        labels.append("per frame")
     if status is not None and np.any(status != "ok"):
         bad = status != "ok"
         (ticks,) = ax.plot(t[bad], np.zeros(bad.sum()), "|", color="0.5", transform=ax.get_xaxis_transform(),
@@ -517,7 +525,8 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
         labels.append("pressure (right axis)")
     # above the panel, where it covers no data
     ax.legend(handles, labels, fontsize="small", ncols=2, loc="lower right", bbox_to_anchor=(1.0, 1.0),
-              frameon=False, borderaxespad=0.2)
+              frameon=False, borderaxespad=0.2, markerscale=3,
+              handler_map={dots: HandlerTuple(ndivide=None)} if dots else None)
 
 
 def plot_calibration(calibration, data=None, ax=None):

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from bendsense import output
+from bendsense.choices import TRACK_MODES
 from bendsense.cli._common import (
     CONSTRAINTS,
     METHODS,
@@ -70,7 +71,7 @@ def _dask_executor(address: str):
 @click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")
 @click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
 @window_option
-@click.option("--track", "track_mode", type=click.Choice(["smooth", "filter"]),
+@click.option("--track", "track_mode", type=click.Choice(TRACK_MODES),
               help="Track each session's force over time, as the chain's 'track' step: 'smooth' (offline, RTS "
                    "smoother) or 'filter' (causal, Kalman filter); default: no track.")
 @bandwidth_option
