@@ -210,9 +210,8 @@ class LiveView:
             band = PolyCollection([np.zeros((0, 2))], facecolors=color, alpha=0.2, linewidths=0, animated=True)
             tx.add_collection(band, autolim=False)
             style = dict(linestyle="none", marker=".", markersize=2.5, alpha=0.5) if self.tracked else {}
-            (line,) = tx.plot([], [], "-", color=color, linewidth=1.4, label=label + (" per frame" if self.tracked
-                                                                                        else ""), animated=True,
-                              **style)
+            (line,) = tx.plot([], [], color=color, linewidth=1.4, animated=True, **style,
+                              label=label + (" per frame" if self.tracked else ""))
             self.bands.append(band)
             self.force_lines.append(line)
             if self.tracked:
