@@ -5,13 +5,16 @@ frame's estimate ``z_k = x_k + v_k`` with ``v_k ~ N(0, R_k)``, ``R_k`` only the 
 part of the frame's covariance (its calibration and parameter parts are a bias common to
 neighbouring frames and are added back whole by the caller, never averaged down).
 
-Process noise from the bandwidth B [Hz]: ``Q_k = ρ(B, Δt_k) R̄`` with ``R̄`` the latest
-frame's noise covariance and ``ρ = K² / (1 − K)``, ``K`` the steady-state gain of the
-filter whose −3 dB frequency is B at the frame interval Δt_k (:func:`gain_for_bandwidth`):
-for a random walk observed in noise of variance R, the steady-state filter is
-``x̂_k = x̂_(k−1) + K (z_k − x̂_(k−1))``, ``|H(e^(iω))|² = K² / (1 − 2(1−K) cos ω + (1−K)²)``,
-and its Riccati equation gives ``Q/R = K²/(1 − K)``. So B is the bandwidth along every
-direction of the force at the frame's own noise.
+Process noise from the bandwidth B [Hz]: ``Q_k = ρ(B, Δt_k) diag(R̄)`` with ``R̄`` the
+latest frame's noise variances (Fx, Fy) and ``ρ = K² / (1 − K)``, ``K`` the steady-state
+gain of the filter whose −3 dB frequency is B at the frame interval Δt_k
+(:func:`gain_for_bandwidth`): for a random walk observed in noise of variance R, the
+steady-state filter is ``x̂_k = x̂_(k−1) + K (z_k − x̂_(k−1))``,
+``|H(e^(iω))|² = K² / (1 − 2(1−K) cos ω + (1−K)²)``, and its Riccati equation gives
+``Q/R = K²/(1 − K)``. So B is the bandwidth of each component's filter at the frame's own
+noise (exactly so where the components' noise is uncorrelated; the filter uses the
+correlation, which the process noise does not follow: a force moves in any direction,
+whatever the shape of the noise).
 
 Explicit cases: a frame flagged ``restart`` (a gap, a pressure step, the first frame)
 starts from a diffuse prior (variance :data:`DIFFUSE`); a component the frame's estimate
@@ -157,8 +160,9 @@ def kalman_filter(z, Rn, dt, restart, bandwidth_hz, state, x_pred, P_pred, x_fil
         P_pred[k] = P
         use0 = observed(z[k], Rn[k], 0)
         use1 = observed(z[k], Rn[k], 1)
-        if use0 and use1:
-            Rbar[:, :] = Rn[k]
+        if use0 and use1:  # the process noise follows each component's noise variance, not their correlation
+            Rbar[0, 0] = Rn[k, 0, 0]
+            Rbar[1, 1] = Rn[k, 1, 1]
             has[0] = 1.0
         if use0 or use1:
             loglik += update(x, P, z[k], Rn[k], use0, use1, w)
