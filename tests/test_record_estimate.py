@@ -132,7 +132,7 @@ def test_processor_block_equals_frames_one_by_one(calibration_path):
                                "track_status", "window_p_value"] and len(cols["fx_n"]) == 40
     # a frame without pressure gets a shape and the status "no_pressure"
     pressure[5] = np.nan
-    b2 = LiveProcessor(cal, constraint="normal").process_block(signals, pressure)
+    b2 = LiveProcessor(cal, constraint="normal").process_block(signals, pressure, t_s=np.arange(40) / 100)
     assert b2.status[5] == "no_pressure" and np.isnan(b2.force_n[5]).all() and np.isfinite(b2.force_n[6]).all()
     assert b2.frame(5).estimate is None and b2.frame(6).estimate is not None
 

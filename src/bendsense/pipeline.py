@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense.batched import expand_frames, put_frames, take_frames
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.results import NOT_IDENTIFIABLE, Results
@@ -417,51 +418,6 @@ class LiveFrame:
         return np.asarray(self.estimate.std_n, dtype=float)
 
 
-def _take(obj, index, n: int):
-    """The frames ``index`` of a batched result object (every field with leading axis ``n``)."""
-    changes = {}
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
-            changes[f.name] = value[index]
-    return dataclasses.replace(obj, **changes)
-
-
-def _put(obj, index, part, n: int):
-    """``obj`` (batch axis ``n``) with the frames ``index`` replaced by those of ``part``."""
-    changes = {}
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
-            new = np.array(value, dtype=object if value.dtype.kind in "US" else value.dtype)
-            new[index] = getattr(part, f.name)
-            changes[f.name] = new
-    return dataclasses.replace(obj, **changes)
-
-
-def _expand(est, mask: np.ndarray):
-    """A ForceEstimate for all frames of ``mask`` from one for the frames where it is True.
-
-    The other frames get NaN forces, ``success=False`` and the message "no pressure reading".
-    """
-    n, m = mask.size, int(mask.sum())
-    changes = {}
-    for f in dataclasses.fields(est):
-        value = getattr(est, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == m:
-            if value.dtype.kind == "b":
-                full = np.zeros((n, *value.shape[1:]), dtype=bool)
-            elif value.dtype.kind in "US":
-                full = np.full((n, *value.shape[1:]), "no pressure reading", dtype=object)
-            elif value.dtype.kind in "iu":
-                full = np.zeros((n, *value.shape[1:]), dtype=value.dtype)
-            else:
-                full = np.full((n, *value.shape[1:]), np.nan, dtype=value.dtype if value.dtype.kind == "f" else object)
-            full[mask] = value
-            changes[f.name] = full
-    return dataclasses.replace(est, **changes)
-
-
 @dataclass(frozen=True, eq=False)
 class LiveBlock:
     """Shapes and force estimates of a block of consecutive frames.
@@ -596,14 +552,14 @@ class LiveBlock:
         i = range(n)[i]
         est = None
         if self.estimate is not None and np.isfinite(self.pressure_pa[i]):
-            est = _take(self.estimate, i, n)
+            est = take_frames(self.estimate, i, n)
         return LiveFrame(
             seq=int(self.seq[i]),
             t_s=float(self.t_s[i]),
             host_ns=int(self.host_ns[i]),
             pressure_pa=float(self.pressure_pa[i]),
             delta_a=self.signals[i] - self.offset,
-            shape=_take(self.shape, i, n),
+            shape=take_frames(self.shape, i, n),
             estimate=est,
             process_s=self.process_s / n,
             status=str(self.status[i]),
@@ -656,7 +612,9 @@ class LiveProcessor:
     estimated : int
         Frames whose force was estimated (those with a pressure).
     status_counts : dict of str to int
-        Frames per status (``ok``, ``extrapolated``, ``not_converged``, ...).
+        Frames per status (``ok``, ``extrapolated``, ``not_converged``, ...), and
+        ``window_misfit``: frames tracked while the latest completed window failed the
+        window test (``window_p_value`` < 0.001).
     """
 
     def __init__(self, calibration, config=None, *, constraint=None, method=None, objective=None, pressure_pa=None,
@@ -763,7 +721,7 @@ class LiveProcessor:
         if self.estimate and has_p.any():
             prev = self._previous
             warm = {"initial": prev} if prev is not None else {}
-            sub = shape if has_p.all() else _take(shape, has_p, n)
+            sub = shape if has_p.all() else take_frames(shape, has_p, n)
             kwargs = {"constraint": self.constraint, "method": self.method, "objective": self.objective,
                       "calibration": self.calibration, **self.options}
             est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
@@ -772,15 +730,15 @@ class LiveProcessor:
             if warm and failed.size:
                 # a start far from a frame (a block over a fast change) can fail where the
                 # frame's own moment-balance start converges: retry those cold
-                retry = estimate_force(_take(sub, failed, m), p[has_p][failed], self.config, **kwargs)
-                est = _put(est, failed, retry, m)
+                retry = estimate_force(take_frames(sub, failed, m), p[has_p][failed], self.config, **kwargs)
+                est = put_frames(est, failed, retry, m)
             ok = np.flatnonzero(np.asarray(est.success).reshape(-1))
             if ok.size:  # a failed frame has NaN forces: it cannot seed the next block
-                self._previous = _take(est, int(ok[-1]), m)
+                self._previous = take_frames(est, int(ok[-1]), m)
             self.failures += int(np.count_nonzero(~np.asarray(est.success)))
             self.estimated += int(has_p.sum())
             if not has_p.all():
-                est = _expand(est, has_p)
+                est = expand_frames(est, has_p)
         t_s = np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float)
         host_ns = np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None else np.asarray(host_ns,
                                                                                                      dtype=np.int64)
@@ -805,6 +763,12 @@ class LiveProcessor:
         self.frames += n
         for status in block.status:
             self.status_counts[status] = self.status_counts.get(status, 0) + 1
+        if track is not None:
+            from bendsense.estimation.kernels import MISFIT_P
+            from bendsense.results import WINDOW_MISFIT
+
+            misfits = int(np.count_nonzero(np.asarray(track.window_p_value) < MISFIT_P))
+            self.status_counts[WINDOW_MISFIT] = self.status_counts.get(WINDOW_MISFIT, 0) + misfits
         return block
 
     def process_readings(self, readings) -> LiveBlock:

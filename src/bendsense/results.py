@@ -35,9 +35,11 @@ NOT_IDENTIFIABLE = "not_identifiable"  # the shape does not determine the load a
 MODEL_MISFIT = "model_misfit"
 NO_FORCE = "no_force"  # a NaN force is never ok
 IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
+WINDOW_MISFIT = "window_misfit"  # a count, not a status: frames whose latest window failed the window test
 #: the flagged statuses that the status lines of ``record`` and ``live`` count, with their labels
 FLAGGED = ((EXTRAPOLATED, "extrapolated"), (NOT_CONVERGED, "not converged"), (MODEL_MISFIT, "misfit"),
-           (NOT_IDENTIFIABLE, "not identifiable"), (IMPLAUSIBLE_FORCE, "implausible force"))
+           (WINDOW_MISFIT, "window misfit"), (NOT_IDENTIFIABLE, "not identifiable"),
+           (IMPLAUSIBLE_FORCE, "implausible force"))
 
 __all__ = ["Results", "write_results", "read_results", "frame_status", "estimate_status", "tracked_columns"]
 

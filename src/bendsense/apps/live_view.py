@@ -220,7 +220,7 @@ class LiveView:
         (self.pressure_line,) = px.plot([], [], "-", color="0.45", linewidth=1.0, label="pressure", animated=True)
         tx.fill_between([], [], [], color="0.6", alpha=0.3, label="±2σ")
         handles = [*tx.get_legend_handles_labels()[0], self.pressure_line]
-        tx.legend(handles=handles, loc="upper left", fontsize="small", ncols=4)
+        tx.legend(handles=handles, loc="upper left", fontsize="small", ncols=4, markerscale=3)
         self.series_artists = [*self.bands, *self.force_lines, *self.track_lines, self.pressure_line]
 
     def _bar_verts(self, values, half_width=0.25):
