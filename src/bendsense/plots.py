@@ -486,6 +486,7 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
 
     ax.set_ylabel("tip force [N]")
     handles, labels, dots = [], [], []
+    drawn, bands = [force], []
     for i, (color, label) in enumerate((("C0", "F_x"), ("C3", "F_y"))):
         f, band = np.where(np.isinf(std[:, i]), np.nan, force[:, i]), 2.0 * std[:, i]
         points = None
@@ -495,14 +496,19 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
             f = np.where(np.isinf(tracked[1][:, i]), np.nan, tracked[0][:, i])
             band = 2.0 * tracked[1][:, i]
             label += " tracked"
+        drawn.append(f)
+        bands.append(band)
         (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label, zorder=2.4)
         fill = ax.fill_between(t, f - band, f + band, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
         handles.append((line, fill))
         labels.append(f"{label} ± 2σ")
         if points is not None:
             dots.append(points)
-    if dots:  # one legend entry for the points of both components, side by side
-        dots = tuple(dots)
+    if dots:  # one legend entry for the points of both components, side by side, large enough to see
+        from matplotlib.lines import Line2D
+
+        dots = tuple(Line2D([], [], linestyle="none", marker=".", markersize=8, color=d.get_color(), alpha=0.6)
+                     for d in dots)
         handles.append(dots)
         labels.append("per frame")
     if status is not None and np.any(status != "ok"):
@@ -513,6 +519,12 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
         labels.append("status not ok")
     ax.axhline(0.0, color="k", linewidth=0.5)
     ax.grid(True, alpha=0.3)
+    values = np.concatenate([np.ravel(v) for v in drawn])
+    values, bands = values[np.isfinite(values)], np.concatenate(bands)
+    bands = bands[np.isfinite(bands)]
+    if values.size:  # the forces set the limits: a band far wider than them (a barely determined component) is cut
+        pad = max(0.1 * float(np.ptp(values)), float(np.median(bands)) if bands.size else 0.0, 1e-3)
+        ax.set_ylim(float(values.min()) - pad, float(values.max()) + pad)
     if pressure_kpa is not None and np.any(np.isfinite(pressure_kpa)):
         px = ax.twinx()
         (pline,) = px.plot(t, pressure_kpa, color="0.45", linewidth=1.0, label="pressure")
@@ -525,7 +537,7 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
         labels.append("pressure (right axis)")
     # above the panel, where it covers no data
     ax.legend(handles, labels, fontsize="small", ncols=2, loc="lower right", bbox_to_anchor=(1.0, 1.0),
-              frameon=False, borderaxespad=0.2, markerscale=3,
+              frameon=False, borderaxespad=0.2,
               handler_map={dots: HandlerTuple(ndivide=None)} if dots else None)
 
 
