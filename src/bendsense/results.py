@@ -210,8 +210,10 @@ def estimate_status(estimate, n: int) -> np.ndarray:
     """
     status = np.full(n, OK, dtype=object)
     failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
-    status[failed] = NOT_CONVERGED
     message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
+    if not failed.any() and (message == "converged").all() and np.isfinite(estimate.force_n).all():
+        return status  # every frame ok (the live path's usual block): nothing to look up
+    status[failed] = NOT_CONVERGED
     status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
     status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
     status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT

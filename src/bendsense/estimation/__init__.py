@@ -268,8 +268,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
 
 def _payload_buffers(B, pb):
     """The kernels' outputs of the window test's payload (:func:`~bendsense.estimation.kernels.payload`)."""
-    R, N = pb.coils.size, pb.lengths.size
-    return np.empty((B, R)), np.empty((B, R, 2)), np.empty((B, R, 2)), np.empty((B, N))
+    return np.empty((B, pb.coils.size, 5)), np.empty((B, pb.lengths.size))
 
 
 def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, objective, pb, err):
@@ -277,7 +276,9 @@ def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, obje
     force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out[:14]
     b2, b22 = batch + (2,), batch + (2, 2)
     window = method == "fast" and objective == "angles" and pb.pcc  # what a window test needs, or None
-    resid, jac, mfac, shifts = (a.reshape(batch + a.shape[1:]) for a in out[14:])
+    pay, shifts = out[14:]
+    if len(batch) != 1:
+        pay, shifts = pay.reshape(batch + pay.shape[1:]), shifts.reshape(batch + shifts.shape[1:])
     return ForceEstimate(
         force_n=force.reshape(b2),
         std_n=std.reshape(b2),
@@ -297,14 +298,28 @@ def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, obje
         p_value=p_value.reshape(batch),
         objective=objective,
         covariance_parts_n2=parts.reshape(batch + (3, 2, 2)),
-        residual_rad=resid if window else None,
-        jacobian_rad_per_n=jac if window else None,
-        model_factor_rad=mfac if window else None,
+        residual_rad=pay[..., 0] if window else None,
+        jacobian_rad_per_n=pay[..., 1:3] if window else None,
+        model_factor_rad=pay[..., 3:] if window else None,
         shifts_m=shifts if pb.pcc else None,
-        shift_errors=tuple(err) if window else None,
-        coils=tuple(int(c) for c in pb.coils) if window else None,
-        strip_gap_m=float(pb.gap),
+        shift_errors=err if window else None,
+        coils=_coils(pb) if window else None,
+        strip_gap_m=pb.gap,
     )
+
+
+def _coils(pb):
+    """The coils of the angles objective as a tuple of int (cached on the problem, which is cached per inputs)."""
+    coils = _COILS.get(id(pb.coils))
+    if coils is None or coils[0] is not pb.coils:
+        if len(_COILS) >= 64:  # bounded, as the problems are
+            _COILS.clear()
+        coils = (pb.coils, tuple(int(c) for c in pb.coils))
+        _COILS[id(pb.coils)] = coils
+    return coils[1]
+
+
+_COILS: dict = {}  # id(coils array) -> (the array, its tuple): a tuple of 16 ints costs ~2 µs a frame
 
 
 def _whole(value) -> bool:

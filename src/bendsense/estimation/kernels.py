@@ -496,9 +496,8 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
 
     A converged fit is ``model_misfit`` (force kept) when its model shape stays over
     ``BOUNDARY_MISFIT`` of the length from the measured one, or when its χ² is beyond
-    chance under the stated covariance (p < ``MISFIT_P``). ``pay``: the frame's rows of
-    the window test's payload (:func:`payload`), NaN unless the fit of the coil angles
-    has a force.
+    chance under the stated covariance (p < ``MISFIT_P``). ``pay`` (R, 5): the frame's
+    window test payload (:func:`payload`), NaN unless the fit of the coil angles has a force.
     """
     pos, L, w = ws[0], pb.L, pb.w
     if pb.objective == ANGLES:  # the positions at the comparison nodes, for the residual (no sensitivities)
@@ -514,14 +513,12 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
     ratio = np.nan
     p = np.nan
     parts[:, :, :] = np.nan
-    pay[0][:] = np.nan
-    pay[1][:, :] = np.nan
-    pay[2][:, :] = np.nan
+    pay[:, :] = np.nan
     if status == _OK or status == _NOT_IDENTIFIABLE:
         # a covariance with a zero diagonal is zero: no parameter term (the config has no parameter_covariance)
         dym = model_response(pb, ws) if model_cov[0, 0] > 0.0 or model_cov[1, 1] > 0.0 else np.zeros((ws[5].size, 2))
         if pb.objective == ANGLES:
-            payload(tg, ws, D, dym, model_cov, pay[0], pay[1], pay[2])
+            payload(tg, ws, D, dym, model_cov, pay)
             ratio, p = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
                                              pb.gap, pb.dphi_ds, ws[6], cov, noise_var, dym, model_cov, parts)
         else:
@@ -550,22 +547,20 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
         force[:] = np.nan
         cov[:, :] = np.nan
         parts[:, :, :] = np.nan
-        pay[0][:] = np.nan
-        pay[1][:, :] = np.nan
-        pay[2][:, :] = np.nan
+        pay[:, :] = np.nan
         ratio = np.nan
         p = np.nan
     return status, residual, ratio, p
 
 
 @njit(cache=True)
-def payload(tg, ws, D, dym, model_cov, resid, jac, mfac):
-    """What a window test needs of a frame fitted to the coil angles, in raw angle units [rad].
+def payload(tg, ws, D, dym, model_cov, pay):
+    """What a window test needs of a frame fitted to the coil angles, in raw angle units [rad], into ``pay`` (R, 5).
 
-    ``resid`` (R,) = measured − model angle at the optimum; ``jac`` (R, 2) = ∂(model
-    angle)/∂u = (∂y/∂F) D, its unused columns 0 (k < 2); ``mfac`` (R, 2) = ∂y/∂(K0, EI) ·
-    chol(Σ_m), so that ``mfac mfacᵀ`` is the angles' covariance from the model
-    parameters (zero without a parameter covariance). Copies of what the fit has.
+    Column 0: measured − model angle at the optimum; 1–2: ∂(model angle)/∂u = (∂y/∂F) D,
+    its unused columns 0 (k < 2); 3–4: ∂y/∂(K0, EI) · chol(Σ_m), whose outer product is
+    the angles' covariance from the model parameters (zero without a parameter
+    covariance). Copies of what the fit has.
     """
     y, dy, y0 = ws[5], ws[6], tg[0]
     k = D.shape[1]
@@ -573,11 +568,11 @@ def payload(tg, ws, D, dym, model_cov, resid, jac, mfac):
     l10 = model_cov[1, 0] / l00 if l00 > 0.0 else 0.0
     l11 = math.sqrt(max(model_cov[1, 1] - l10 * l10, 0.0))
     for i in range(y.size):
-        resid[i] = y0[i] - y[i]
+        pay[i, 0] = y0[i] - y[i]
         for c in range(2):
-            jac[i, c] = dy[i, 0] * D[0, c] + dy[i, 1] * D[1, c] if c < k else 0.0
-        mfac[i, 0] = dym[i, 0] * l00 + dym[i, 1] * l10
-        mfac[i, 1] = dym[i, 1] * l11
+            pay[i, 1 + c] = dy[i, 0] * D[0, c] + dy[i, 1] * D[1, c] if c < k else 0.0
+        pay[i, 3] = dym[i, 0] * l00 + dym[i, 1] * l10
+        pay[i, 4] = dym[i, 1] * l11
 
 
 @njit(cache=True)
@@ -709,7 +704,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
     """
     fr, pb, err, ops = typed(fr, pb, err, ops)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out[:14]
-    resid, jac, mfac, shifts = out[14:]
+    pay, shifts = out[14:]
     k = pb.lower.size
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
@@ -746,7 +741,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
         direction[i, :] = 0.0
         status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s,
                                                           noise_var, fr.model_cov[i], kappa, force[i], cov[i],
-                                                          parts[i], direction[i], (resid[i], jac[i], mfac[i]))
+                                                          parts[i], direction[i], pay[i])
         if pb.pcc:
             shifts[i] = buf[11]
         else:
@@ -773,8 +768,8 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
     solver's operators. ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
     its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable direction of a boundary
     stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2), success (B,) (converged or not
-    identifiable), and the window test's payload (:func:`payload`): the residual (B, R), the
-    Jacobian by u (B, R, 2), the model factor (B, R, 2) and the measured shifts (B, N).
+    identifiable), and the window test's payload (:func:`payload`): residual, Jacobian by u and
+    model factor (B, R, 5), and the measured shifts (B, N).
     """
     B = prob.Frames(*fr).ei.size
     nblocks = (B + block - 1) // block
@@ -788,7 +783,7 @@ def evaluate_frames(fr, pb, err, ops, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
     fr, pb, err, ops = typed(fr, pb, err, ops)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out[:14]
-    resid, jac, mfac, shifts = out[14:]
+    pay, shifts = out[14:]
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
     F = np.empty(2)
@@ -800,7 +795,7 @@ def evaluate_frames(fr, pb, err, ops, u, run_status, out):
         st = run_status[i] if ok else _BEAM_FAILED
         status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u[i], ws, blocked, frame_cov, cov_s,
                                                           noise_var, fr.model_cov[i], kappa, force[i], cov[i],
-                                                          parts[i], direction[i], (resid[i], jac[i], mfac[i]))
+                                                          parts[i], direction[i], pay[i])
         if pb.pcc:
             shifts[i] = buf[11]
         else:

@@ -145,6 +145,8 @@ def kalman_filter(z, Rn, dt, restart, bandwidth_hz, state, x_pred, P_pred, x_fil
     x, P, Rbar, has = state
     w = np.empty((6, 2, 2))
     loglik = 0.0
+    last_dt = -1.0
+    rho = 0.0
     for k in range(z.shape[0]):
         if restart[k]:
             x[:] = 0.0
@@ -152,7 +154,9 @@ def kalman_filter(z, Rn, dt, restart, bandwidth_hz, state, x_pred, P_pred, x_fil
             P[0, 0] = DIFFUSE
             P[1, 1] = DIFFUSE
         elif has[0] > 0.0:
-            rho = process_ratio(bandwidth_hz, dt[k])
+            if dt[k] != last_dt:  # the same interval as the last frame's (a steady rate): the same ratio
+                rho = process_ratio(bandwidth_hz, dt[k])
+                last_dt = dt[k]
             for a in range(2):
                 for b in range(2):
                     P[a, b] += rho * Rbar[a, b]

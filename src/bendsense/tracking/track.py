@@ -24,12 +24,12 @@ from bendsense.tracking import kalman as _kalman
 from bendsense.tracking import windows as _windows
 from bendsense.validation import short
 
-__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "BANDWIDTH_GRID_PER_DECADE", "TRACK_COLUMNS"]
+__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_GOLDEN_STEPS", "TRACK_COLUMNS"]
 
 #: Bandwidth of the causal filter when none is given and none can be chosen from the data (live) [Hz].
 DEFAULT_BANDWIDTH_HZ = 5.0
-#: Points per decade of the log grid searched for the maximum-likelihood bandwidth.
-BANDWIDTH_GRID_PER_DECADE = 5
+#: Golden-section steps of the maximum-likelihood bandwidth after its grid (one point per decade): to ~5 %.
+ML_GOLDEN_STEPS = 8
 LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
 #: The results.csv columns of a track (:meth:`Track.to_columns`).
 TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
@@ -201,22 +201,40 @@ def fill_floor(floor, starts, backward):
 
 
 def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
-    """The maximum-likelihood bandwidth [Hz] of the innovations over a log grid, refined by a parabola in log B."""
+    """The maximum-likelihood bandwidth [Hz] of the innovations: a grid of one point per decade, then golden sections.
+
+    The grid runs from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the frame rate; the
+    golden-section search refines log B between the best grid point's neighbours to
+    within 5 % (:data:`ML_GOLDEN_STEPS` filter passes).
+    """
     top = 0.25 / dt_ref_s if math.isfinite(dt_ref_s) and dt_ref_s > 0 else 1.0
-    decades = max(math.log10(top / LOWEST_BANDWIDTH_HZ), 0.5)
-    grid = np.logspace(math.log10(LOWEST_BANDWIDTH_HZ), math.log10(top), int(decades * BANDWIDTH_GRID_PER_DECADE) + 1)
-    ll = np.empty(grid.size)
-    _jit.call(_kalman.log_likelihoods, z, Rn, dt, starts, grid, ll)
+    lo_log, hi_log = math.log10(LOWEST_BANDWIDTH_HZ), max(math.log10(top), math.log10(LOWEST_BANDWIDTH_HZ) + 0.5)
+    grid = np.logspace(lo_log, hi_log, int(math.ceil(hi_log - lo_log)) + 1)
+    ll = _log_likelihoods(z, Rn, dt, starts, grid)
     if not np.isfinite(ll).any() or np.ptp(ll[np.isfinite(ll)]) == 0.0:
         return DEFAULT_BANDWIDTH_HZ  # nothing to choose from (no observations): the documented default
     i = int(np.nanargmax(ll))
-    if 0 < i < grid.size - 1:
-        a, b, c = ll[i - 1], ll[i], ll[i + 1]
-        den = a - 2.0 * b + c
-        step = np.log(grid[1] / grid[0])
-        if den < 0:
-            return float(grid[i] * math.exp(0.5 * (a - c) / den * step))
-    return float(grid[i])
+    a, b = math.log10(grid[max(i - 1, 0)]), math.log10(grid[min(i + 1, grid.size - 1)])
+    ratio = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** c, 10.0 ** d]))
+    for _ in range(ML_GOLDEN_STEPS):
+        if fc >= fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** c]))[0]
+        else:
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** d]))[0]
+    best = c if fc >= fd else d
+    return float(10.0 ** best) if max(fc, fd) >= ll[i] else float(grid[i])
+
+
+def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz):
+    out = np.empty(bandwidths_hz.size)
+    _jit.call(_kalman.log_likelihoods, z, Rn, dt, starts, np.ascontiguousarray(bandwidths_hz, dtype=float), out)
+    return out
 
 
 def result(x, P, floor, window_p, own, bandwidth_hz, mode, t, z):
@@ -320,16 +338,10 @@ class Tracker:
         return result(xf, Pf, floor, window_p, own, self.bandwidth_hz, self.mode, t, z)
 
     def _fill(self, floor, starts):
-        """The floor carried forward within a segment, across blocks."""
-        out = np.empty_like(floor)
-        last = self._floor
-        for i in range(floor.shape[0]):
-            if starts[i]:
-                last = np.full((2, 2), np.nan)
-            if np.isfinite(floor[i]).all():
-                last = floor[i]
-            out[i] = last
-        self._floor = last
+        """The floor carried forward within a segment, across blocks (:func:`fill_floor` with the last one carried in)."""
+        carried = np.concatenate((self._floor[None], floor))
+        out = fill_floor(carried, np.concatenate(([True], starts)), backward=False)[1:]
+        self._floor = out[-1]
         return out
 
     def _windows(self, est, t, starts):

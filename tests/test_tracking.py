@@ -1,0 +1,315 @@
+"""Tracking the force over time (issue 22): the filter and smoother against a dense least-squares solution,
+the bandwidth against its definition, the floor, the explicit cases, streaming, and accuracy on a ramp-and-hold.
+
+The independent references are written here: the smoothed states are the generalised
+least-squares solution of all frames at once (a dense solve of the random walk's
+information matrix), the filtered state at frame k the same solution over frames ≤ k;
+the process noise of a bandwidth B comes from iterating the scalar Riccati equation and
+a root search on the −3 dB condition (not from the library's closed form).
+"""
+
+import dataclasses
+import functools
+
+import numpy as np
+import pytest
+from forward_model import HiddenSensor, forward
+from scipy.optimize import brentq
+
+import bendsense
+from bendsense import Track, Tracker, estimate_force, reconstruct, track
+from bendsense.calibration import Calibration
+from bendsense.errors import ArgumentError
+from bendsense.estimation import ForceEstimate
+from bendsense.tracking.kalman import DIFFUSE
+
+CFG = dataclasses.replace(bendsense.load_config(), parameter_covariance=None)
+SENSOR = CFG.sensor
+RATE_HZ = 2000.0
+
+
+@functools.lru_cache(maxsize=64)
+def riccati_ratio(bandwidth_hz, dt_s):
+    """Q/R of the random walk whose steady-state filter is −3 dB at ``bandwidth_hz``: Riccati iteration + root search."""
+    w = 2 * np.pi * bandwidth_hz * dt_s
+
+    def gain(rho):
+        p = 1.0
+        for _ in range(100000):
+            prior = p + rho
+            k = prior / (prior + 1.0)
+            new = (1 - k) * prior
+            if abs(new - p) < 1e-15 * p:
+                break
+            p = new
+        return k
+
+    def excess(log_rho):
+        k = gain(np.exp(log_rho))
+        return abs(k / (1 - (1 - k) * np.exp(-1j * w))) ** 2 - 0.5
+
+    return float(np.exp(brentq(excess, -30, np.log(3.99), xtol=1e-13)))
+
+
+def synthetic(n, rng, *, floor=1e-8):
+    """A ForceEstimate of ``n`` frames by hand: forces, noise covariances (correlated), a floor, all ok."""
+    a = rng.uniform(0.5e-3, 3e-3, (n, 2))
+    c = rng.uniform(-0.8, 0.8, n)
+    R = np.empty((n, 2, 2))
+    R[:, 0, 0], R[:, 1, 1] = a[:, 0] ** 2, a[:, 1] ** 2
+    R[:, 0, 1] = R[:, 1, 0] = c * a[:, 0] * a[:, 1]
+    parts = np.zeros((n, 3, 2, 2))
+    parts[:, 0] = R
+    parts[:, 1] = np.eye(2) * floor
+    parts[:, 2] = np.array([[2.0, 0.5], [0.5, 1.0]]) * floor
+    truth = np.cumsum(rng.normal(0, 2e-3, (n, 2)), axis=0)
+    z = truth + np.einsum("nij,nj->ni", np.linalg.cholesky(R), rng.standard_normal((n, 2)))
+    return _estimate(z, parts), truth
+
+
+def _estimate(z, parts, success=None, message=None):
+    n = z.shape[0]
+    cov = parts.sum(axis=1)
+    return ForceEstimate(
+        force_n=z, std_n=np.sqrt(np.diagonal(cov, axis1=1, axis2=2)), covariance_n2=cov, residual_m=np.zeros(n),
+        success=np.ones(n, bool) if success is None else success,
+        message=np.full(n, "converged") if message is None else message, iterations=np.ones(n, int),
+        wall_time_s=0.0, method="fast", constraint="none", covariance_parts_n2=parts)
+
+
+def _cut(est, lo, hi):
+    """Frames lo:hi of a ForceEstimate."""
+    B = est.batch_shape[0]
+    return dataclasses.replace(est, **{
+        f.name: getattr(est, f.name)[lo:hi] for f in dataclasses.fields(est)
+        if isinstance(getattr(est, f.name), np.ndarray) and getattr(est, f.name).ndim
+        and getattr(est, f.name).shape[0] == B})
+
+
+def gls(z, R, use, Q, restart):
+    """Dense generalised least squares of the random walk: smoothed means and covariances (B, 2), (B, 2, 2).
+
+    Unknowns x_0..x_(B−1); rows: z_k = H_k x_k + v_k (observed components), x_k − x_(k−1)
+    ~ N(0, Q_k) unless k restarts, x at a restart ~ N(0, DIFFUSE I) (the filter's prior).
+    """
+    B = z.shape[0]
+    A = np.zeros((2 * B, 2 * B))
+    b = np.zeros(2 * B)
+    for k in range(B):
+        s = slice(2 * k, 2 * k + 2)
+        obs = np.flatnonzero(use[k])
+        if obs.size:
+            Ri = np.linalg.inv(R[k][np.ix_(obs, obs)])
+            H = np.eye(2)[obs]
+            A[s, s] += H.T @ Ri @ H
+            b[s] += H.T @ Ri @ z[k, obs]
+        if restart[k]:
+            A[s, s] += np.eye(2) / DIFFUSE
+        else:
+            Qi = np.linalg.inv(Q[k])
+            p = slice(2 * k - 2, 2 * k)
+            A[s, s] += Qi
+            A[p, p] += Qi
+            A[s, p] -= Qi
+            A[p, s] -= Qi
+    C = np.linalg.inv(A)
+    x = C @ b
+    return x.reshape(B, 2), np.array([C[2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(B)])
+
+
+def _reference_q(est, bandwidth_hz, t):
+    """The process noise of the design: ρ(B, Δt_k) diag(R̄), R̄ the latest fully observed frame's noise variances."""
+    R = est.covariance_parts_n2[:, 0]
+    z = np.asarray(est.force_n)
+    use = np.isfinite(z) & np.isfinite(est.std_n)
+    Q = np.zeros_like(R)
+    ref = None
+    dt = np.diff(t, prepend=t[0])
+    for k in range(z.shape[0]):
+        if ref is not None:
+            Q[k] = riccati_ratio(bandwidth_hz, round(float(dt[k]), 15)) * ref
+        if use[k].all():
+            ref = np.diag(np.diag(R[k]))
+    return z, R, use, Q
+
+
+@pytest.fixture(scope="module")
+def cases():
+    """A series with a failed frame, a frame observed along y only, a gap and a pressure step."""
+    rng = np.random.default_rng(3)
+    est, truth = synthetic(60, rng)
+    z = est.force_n.copy()
+    std = est.std_n.copy()
+    success = est.success.copy()
+    message = est.message.astype(object)
+    z[10] = np.nan  # failed
+    success[10] = False
+    message[10] = "no convergence in the iteration limit"
+    std[25, 0] = np.inf  # not identifiable along x
+    message[25] = "not identifiable along (1.000, 0.000): ..."
+    est = dataclasses.replace(est, force_n=z, std_n=std, success=success, message=message.astype(str))
+    t = np.arange(60) / RATE_HZ
+    t[40:] += 0.1  # a gap
+    pressure = np.full(60, 40e3)
+    pressure[50:] = 45e3  # a pressure step
+    return est, t, pressure
+
+
+@pytest.mark.parametrize("mode", ["smooth", "filter"])
+def test_the_tracker_equals_a_dense_least_squares_solution(cases, mode):
+    est, t, pressure = cases
+    B = 30.0
+    tr = track(est, t, mode=mode, bandwidth_hz=B, pressure_pa=pressure)
+    z, R, use, Q = _reference_q(est, B, t)
+    restart = np.zeros(60, bool)
+    restart[[0, 40, 50]] = True
+    floor = est.covariance_parts_n2[:, 1] + est.covariance_parts_n2[:, 2]
+    floor[10] = floor[9]  # a failed frame carries the floor of its neighbour
+    if mode == "smooth":
+        x, P = gls(z, R, use, Q, restart)
+    else:  # the filtered state: the same solution over the frames up to k
+        x, P = np.empty((60, 2)), np.empty((60, 2, 2))
+        for k in range(60):
+            xs, Ps = gls(z[:k + 1], R, use, Q, restart)
+            x[k], P[k] = xs[k], Ps[k]
+    np.testing.assert_allclose(tr.force_n, x, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(tr.covariance_n2, P + floor, rtol=1e-6, atol=1e-14)
+    assert tr.bandwidth_hz == B and tr.mode == mode
+    assert tr.status[10] == "not_converged" and tr.status[25] == "not_identifiable" and tr.status[0] == "ok"
+
+
+def test_a_restart_forgets_the_past_and_the_floor_is_never_averaged_down(cases):
+    est, t, pressure = cases
+    tr = track(est, t, mode="filter", bandwidth_hz=5.0, pressure_pa=pressure)
+    parts = est.covariance_parts_n2
+    for k in (40, 50):  # after a gap and a pressure step: the frame's own estimate and covariance
+        np.testing.assert_allclose(tr.force_n[k], est.force_n[k], rtol=1e-9)
+        np.testing.assert_allclose(tr.covariance_n2[k], parts[k].sum(axis=0), rtol=1e-6)
+    floor = np.diagonal(parts[:, 1] + parts[:, 2], axis1=1, axis2=2)
+    ok = np.isfinite(floor).all(axis=1)
+    assert np.all(tr.std_n[ok] ** 2 >= floor[ok])
+    # a frame without a force is predicted only: the state moves by nothing
+    np.testing.assert_array_equal(tr.force_n[10], tr.force_n[9])
+    # x is not observed at frame 25: its filtered x changes only through its correlation with y
+    assert np.isfinite(tr.force_n[25]).all()
+
+
+def test_the_bandwidth_is_the_minus_3_db_frequency_of_the_steady_state_filter():
+    """A sinusoid at B through the filter comes out at 1/√2 of its amplitude (uncorrelated noise, constant R)."""
+    n = 8000
+    t = np.arange(n) / RATE_HZ
+    for B in (2.0, 20.0, 200.0):
+        z = np.stack([np.sin(2 * np.pi * B * t), 0.5 * np.cos(2 * np.pi * B * t)], axis=1)
+        parts = np.zeros((n, 3, 2, 2))
+        parts[:, 0] = np.diag([1e-6, 4e-6])
+        tr = track(_estimate(z, parts), t, mode="filter", bandwidth_hz=B)
+        late = t > t[-1] / 2
+        basis = np.stack([np.sin(2 * np.pi * B * t[late]), np.cos(2 * np.pi * B * t[late])], axis=1)
+        for c, amplitude in ((0, 1.0), (1, 0.5)):
+            coef = np.linalg.lstsq(basis, tr.force_n[late, c], rcond=None)[0]
+            assert np.hypot(*coef) / amplitude == pytest.approx(2 ** -0.5, rel=2e-3)
+
+
+def test_the_maximum_likelihood_bandwidth_finds_the_random_walk():
+    """A random walk of known intensity observed in noise: the chosen B is the one whose Q/R it has."""
+    rng = np.random.default_rng(5)
+    n, dt = 20000, 1 / RATE_HZ
+    for B_true in (3.0, 40.0):
+        rho = riccati_ratio(B_true, dt)
+        R = np.diag([1e-6, 2.25e-6])
+        truth = np.cumsum(rng.standard_normal((n, 2)) * np.sqrt(rho * np.diag(R)), axis=0)
+        z = truth + rng.standard_normal((n, 2)) * np.sqrt(np.diag(R))
+        parts = np.zeros((n, 3, 2, 2))
+        parts[:, 0] = R
+        tr = track(_estimate(z, parts), np.arange(n) * dt)
+        assert tr.bandwidth_hz == pytest.approx(B_true, rel=0.25)
+
+
+def test_streaming_block_by_block_gives_the_filter_of_the_whole_series(cases):
+    est, t, pressure = cases
+    whole = track(est, t, mode="filter", bandwidth_hz=12.0, pressure_pa=pressure)
+    tracker = Tracker(bandwidth_hz=12.0)
+    cuts = [0, 1, 7, 8, 30, 41, 59, 60]
+    blocks = [tracker.update(_cut(est, lo, hi), t[lo:hi], pressure[lo:hi]) for lo, hi in zip(cuts[:-1], cuts[1:])]
+    for name in ("force_n", "std_n", "covariance_n2"):
+        np.testing.assert_array_equal(np.concatenate([getattr(b, name) for b in blocks]), getattr(whole, name))
+    np.testing.assert_array_equal(np.concatenate([b.status for b in blocks]), whole.status)
+    with pytest.raises(ArgumentError, match="t_s_block: must not decrease"):
+        tracker.update(_cut(est, 0, 2), t[:2], pressure[:2])
+
+
+def test_bad_arguments_are_named(cases):
+    est, t, _ = cases
+    with pytest.raises(ArgumentError, match="mode: must be one of smooth, filter"):
+        track(est, t, mode="kalman")
+    with pytest.raises(ArgumentError, match="bandwidth_hz: expected a frequency > 0"):
+        track(est, t, bandwidth_hz=-1.0)
+    with pytest.raises(ArgumentError, match="mode: a Tracker filters causally"):
+        Tracker(mode="smooth")
+    with pytest.raises(ArgumentError, match="estimate: expected the estimates of a time series"):
+        track(dataclasses.replace(est, force_n=np.zeros((2, 30, 2))), t)
+
+
+def test_columns_and_plot(cases):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    est, t, pressure = cases
+    tr = track(est, t, bandwidth_hz=5.0, pressure_pa=pressure)
+    assert isinstance(tr, Track)
+    cols = tr.to_columns()
+    assert list(cols) == ["fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status"]
+    np.testing.assert_array_equal(cols["fy_track_std_n"], tr.std_n[:, 1])
+    assert tr.plot().get_xlabel() == "t [s]"
+
+
+# --------------------------------------------------------------------------- a ramp-and-hold on real sensors
+
+
+@pytest.fixture(scope="module")
+def ramp_and_hold(tmp_path_factory):
+    """Five hidden sensors (1.5 counts, degree-5 calibrations), one 2 s ramp-and-hold series each at 2 kHz.
+
+    Two holds at different loads joined by 0.3 s ramps, 30 kPa; the forward model's
+    shifts exact at 51 points along the path, linear between (≪ the noise).
+    """
+    t = np.arange(4000) / RATE_HZ
+    knots_t = [0, 0.3, 0.9, 1.2, 1.8, 2.0]
+    knots_f = np.array([[0, 0], [0.06, -0.08], [0.06, -0.08], [-0.03, -0.1], [-0.03, -0.1], [0, 0]])
+    truth = np.stack([np.interp(t, knots_t, knots_f[:, c]) for c in range(2)], axis=1)
+    s_path = np.concatenate([np.linspace(a, b, 11)[:-1] for a, b in zip(knots_t[:-1], knots_t[1:])] + [[2.0]])
+    f_path = np.stack([np.interp(s_path, knots_t, knots_f[:, c]) for c in range(2)], axis=1)
+    exact = np.array([forward(CFG, 30e3, f).shifts_m for f in f_path])
+    shifts = np.stack([np.interp(t, s_path, exact[:, j]) for j in range(exact.shape[1])], axis=1)
+    runs = []
+    for seed in range(1, 6):
+        rng = np.random.default_rng(100 + seed)
+        hidden = HiddenSensor(noise_counts=1.5, seed=seed)
+        cal = Calibration.fit(hidden.write_calibration(tmp_path_factory.mktemp(f"r{seed}"), CFG, frames=1000),
+                              degree=5)
+        est = estimate_force(reconstruct(hidden.signals(shifts, rng), cal, SENSOR), 30e3, CFG, calibration=cal)
+        runs.append((est, track(est, t), track(est, t, mode="filter")))
+    return truth, runs
+
+
+def test_the_smoother_cuts_the_error_and_covers_the_truth_over_several_sensors(ramp_and_hold):
+    truth, runs = ramp_and_hold
+    per_frame = np.concatenate([est.force_n - truth for est, _, _ in runs])
+    smooth = np.concatenate([tr.force_n - truth for _, tr, _ in runs])
+    inside = np.concatenate([np.abs(tr.force_n - truth) <= 2 * tr.std_n for _, tr, _ in runs])
+    ratio = np.sqrt(np.mean(smooth ** 2) / np.mean(per_frame ** 2))
+    assert ratio <= 0.45
+    assert 0.85 <= inside[:, 0].mean() <= 0.99 and 0.85 <= inside[:, 1].mean() <= 0.99
+    assert all((tr.status == "ok").mean() > 0.99 for _, tr, _ in runs)
+
+
+def test_the_causal_filter_cuts_the_error_too(ramp_and_hold):
+    """The filter lags on the ramps (a random walk has no velocity): smaller gains, stated as measured."""
+    truth, runs = ramp_and_hold
+    per_frame = np.concatenate([est.force_n - truth for est, _, _ in runs])
+    filtered = np.concatenate([tr.force_n - truth for _, _, tr in runs])
+    assert np.sqrt(np.mean(filtered ** 2) / np.mean(per_frame ** 2)) <= 0.8
+    t = np.arange(4000) / RATE_HZ
+    holds = np.tile(((t > 0.4) & (t < 0.9)) | ((t > 1.3) & (t < 1.8)), len(runs))  # 0.1 s after each ramp
+    inside = np.concatenate([np.abs(tr.force_n - truth) <= 2 * tr.std_n for _, _, tr in runs])[holds]
+    assert inside.mean() >= 0.85  # on the holds, where it does not lag
