@@ -13,6 +13,7 @@ import yaml
 from click.testing import CliRunner
 
 import bendsense
+from bendsense.batched import take_frames
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.device.simdevice import SimulatedDevice, default_source
@@ -200,3 +201,25 @@ def test_record_estimate_of_no_frames_writes_no_results(calibration_path, tmp_pa
     saved = CliRunner().invoke(main, ["load", str(out), "--calibration", str(calibration_path), "reconstruct",
                                       "estimate", "save", str(tmp_path / "saved")])
     assert saved.exit_code != 0 and "no frames" in saved.output and not (tmp_path / "saved").exists()
+
+
+def test_a_clock_that_jumps_back_restarts_the_live_track(calibration_path):
+    """A device reset mid-block (its clock jumps back): the causal track restarts there, each stretch the filter
+    of its own frames; nothing fails."""
+    frames = [next(src) for src in [default_source(rate_hz=100, seed=SEED)] for _ in range(160)][100:]
+    signals = np.array([c for _, c in frames], dtype=float)
+    pressure = np.array([p for p, _ in frames])
+    t = np.concatenate([np.arange(30), np.arange(30)]) / 100  # the clock back to 0 at frame 30
+    cal = Calibration.load(calibration_path)
+    proc = LiveProcessor(cal, constraint="normal")
+    first = proc.process_block(signals[:40], pressure[:40], t_s=t[:40])  # the jump inside a block
+    second = proc.process_block(signals[40:], pressure[40:], t_s=t[40:])
+    tracked = np.concatenate([first.track_force_n, second.track_force_n])
+    config = bendsense.load_config()
+    shape = bendsense.reconstruct(signals, cal, config.sensor, s_m=proc.s_m)
+    cold = bendsense.estimate_force(shape, pressure, config, constraint="normal", calibration=cal)
+    for part in (slice(0, 30), slice(30, 60)):
+        offline = bendsense.track(take_frames(cold, part, 60), t[part], mode="filter",
+                                  bandwidth_hz=DEFAULT_BANDWIDTH_HZ, pressure_pa=pressure[part])
+        np.testing.assert_allclose(tracked[part], offline.force_n, atol=1e-5)
+    assert np.isfinite(tracked).all()

@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["take_frames", "put_frames", "expand_frames"]
+__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames"]
 
 
 def take_frames(obj, index, n: int):
@@ -87,3 +87,21 @@ def expand_frames(est, mask: np.ndarray):
             full[mask] = value
             changes[f.name] = full
     return dataclasses.replace(est, **changes)
+
+
+def concat_frames(parts):
+    """One result of the frames of ``parts`` in order (every field with a leading frame axis joined).
+
+    Parameters
+    ----------
+    parts : sequence of dataclass
+        Results of the same kind (``Track``), each batched over its own frames (the length
+        of its ``force_n``); the other fields are those of the first.
+    """
+    counts = [np.shape(part.force_n)[0] for part in parts]
+    changes = {}
+    for f in dataclasses.fields(parts[0]):
+        values = [getattr(part, f.name) for part in parts]
+        if all(isinstance(v, np.ndarray) and v.ndim and v.shape[0] == k for v, k in zip(values, counts)):
+            changes[f.name] = np.concatenate(values)
+    return dataclasses.replace(parts[0], **changes)

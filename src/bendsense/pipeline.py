@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bendsense.batched import expand_frames, put_frames, take_frames
+from bendsense.batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.results import NOT_IDENTIFIABLE, Results
@@ -637,6 +637,7 @@ class LiveProcessor:
         self.track = self.estimate and bool(track)
         self._track_options = {"bandwidth_hz": bandwidth_hz, "window_s": window_s}
         self.tracker = self._new_tracker()
+        self._track_t = -math.inf  # the latest frame time tracked [s]
         self.options = {"max_iter": LIVE_MAX_ITER, **options}
         self.frames = 0
         self.failures = 0
@@ -658,6 +659,25 @@ class LiveProcessor:
         self._previous = None
         self._t0_us = None
         self.tracker = self._new_tracker()
+        self._track_t = -math.inf
+
+    def _track(self, est, t, p):
+        """The block's causal track; a clock that jumps back (a device reset) restarts the track there."""
+        n = t.size
+        back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
+        if not back.size:
+            self._track_t = float(t[-1])
+            return self.tracker.update(est, t, p)
+        parts = []
+        for lo, hi in zip(np.concatenate(([0], back)), np.concatenate((back, [n]))):
+            if lo in back:
+                log.info("the frame clock went back %.6g s: the track restarts", (t[lo - 1] if lo else
+                                                                                  self._track_t) - t[lo])
+                self.tracker = self._new_tracker()
+            if hi > lo:
+                parts.append(self.tracker.update(take_frames(est, slice(lo, hi), n), t[lo:hi], p[lo:hi]))
+        self._track_t = float(t[-1])
+        return parts[0] if len(parts) == 1 else concat_frames(parts)
 
     def warm_up(self) -> None:
         """Compile or load the kernels before the first frame arrives, then forget the frames used.
@@ -744,7 +764,7 @@ class LiveProcessor:
                                                                                                      dtype=np.int64)
         track = None
         if self.tracker is not None and est is not None:  # frames without a device time: the host's
-            track = self.tracker.update(est, np.where(np.isfinite(t_s), t_s, host_ns * 1e-9), p)
+            track = self._track(est, np.where(np.isfinite(t_s), t_s, host_ns * 1e-9), p)
         block = LiveBlock(
             t_s=t_s,
             seq=np.full(n, -1, dtype=np.int64) if seq is None else np.asarray(seq, dtype=np.int64),
