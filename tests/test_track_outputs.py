@@ -204,3 +204,40 @@ def test_track_needs_an_estimate_and_bad_options_are_one_line(workdir):
     assert res.exit_code == 2 and res.output.strip().splitlines() == [
         "Error: --bandwidth-hz is the bandwidth of the track: give --track smooth|filter"]
     assert not (workdir / "never").exists()
+
+
+def test_window_of_the_model_check_is_an_option(workdir):
+    """'estimate --window-s 0.2': one p-value per 0.2 s window (2.1 s of frames: 10 windows, the remainder joined);
+    the default is the library's 50 ms."""
+    from bendsense.cli.pipeline import DEFAULT_WINDOW_S
+    from bendsense.tracking import WINDOW_S
+
+    assert DEFAULT_WINDOW_S == WINDOW_S == 0.05
+    res = CliRunner().invoke(main, ["load", str(workdir / "control.csv"), "--calibration", str(workdir / "cal.yaml"),
+                                    "reconstruct", "estimate", "--window-s", "0.2", "save", str(workdir / "w200")])
+    assert res.exit_code == 0, res.output
+    for out, windows in (("w200", 10), ("control-estimate", 42)):
+        p = read_results(workdir / out)["window_p_value"]
+        runs = 1 + np.count_nonzero(p[1:] != p[:-1])  # consecutive frames of one window share its p
+        assert runs == windows, (out, runs)
+
+
+def test_track_without_a_noise_model_says_so(tmp_path, caplog):
+    """A calibration without its flat-recording noise gives no σ: the track has nothing to weigh, and says so."""
+    from helpers import linear_calibration, loaded_curvatures, signals_for
+
+    cal = linear_calibration(noise_std=None)
+    cal.save(tmp_path / "cal.yaml")
+    n = 20
+    pressure = np.full(n, 60e3)
+    signals = signals_for(loaded_curvatures(pressure, np.tile([0.05, 0.0], (n, 1))), cal)
+    write_session_csv(Session(np.arange(n) * 0.01, signals, pressure), tmp_path / "s.csv")
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, ["load", str(tmp_path / "s.csv"), "--calibration", str(tmp_path / "cal.yaml"),
+                                        "reconstruct", "estimate", "track", "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert any(r.getMessage().startswith("no tracked force: no frame has a force with a noise covariance")
+               for r in caplog.records)
+    results = read_results(tmp_path / "out")
+    assert np.isfinite(results["fx_n"]).all() and np.isnan(results["fx_track_n"]).all()
+    assert np.isnan(results["fx_std_n"]).all()

@@ -301,6 +301,8 @@ def track(smooth, bandwidth_hz, window_s):
     """
 
     def step(state):
+        import numpy as np
+
         from bendsense.tracking import track as track_forces
 
         est = _require(state, "estimate", "track", "'estimate'")
@@ -309,6 +311,9 @@ def track(smooth, bandwidth_hz, window_s):
         tracked = track_forces(est, session.t_s, mode="smooth" if smooth else "filter", bandwidth_hz=bandwidth_hz,
                                window_s=window, pressure_pa=session.pressure_pa)
         log.info("tracked %d frames (%s, bandwidth %.3g Hz)", len(session), tracked.mode, tracked.bandwidth_hz)
+        if not np.isfinite(tracked.force_n).any():  # a track of nothing must not pass silently
+            log.warning("no tracked force: no frame has a force with a noise covariance (a calibration without "
+                        "its flat-recording noise gives no σ, and a track weighs frames by it)")
         state["track"] = tracked
         return state
 
