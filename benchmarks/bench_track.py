@@ -13,8 +13,9 @@ its cost is the same for both: both are printed. Rows:
   frames (live: the call's fixed cost, ~0.1 ms of numpy, is shared by the block's frames);
 - the first call of each in this process (numba compile or cache load), apart;
 - the tracked force error against the per-frame one (RMS) and the ±2σ coverage, on this
-  series (the estimator's own beam; the independent forward model's figures are in
-  tests/test_tracking.py).
+  series (the estimator's own beam, no calibration error in the data while σ states one,
+  so the coverage is over-full; the independent forward model's figures, with fitted
+  calibrations, are in tests/test_tracking.py).
 
     python benchmarks/bench_track.py [--seconds 10] [--quick]
 """
@@ -116,8 +117,8 @@ def main():
             "Tracker.update, blocks of 20 frames (live)": lambda: stream(est, t),
             "Tracker.update, blocks of 200 frames (live)": lambda: stream(est, t, 200),
         }
-        rows.append((f"per-frame estimates, {label} ({B:,} frames, one thread, wall)", f"{per_frame_us:.1f} µs/frame",
-                     ""))
+        rows.append((f"per-frame estimates, {label} ({B:,} frames, one batch call, wall)",
+                     f"{per_frame_us:.1f} µs/frame", ""))
         for name, fn in runs.items():
             first, best, out = timed(fn, args.repeat)
             rows.append((f"{name}, {label}", f"{best / B * 1e6:.2f} µs/frame CPU (first call {first:.2f} s)",
@@ -130,7 +131,9 @@ def main():
             rows.append((f"tracked error / per-frame (RMS), {name}, {label}",
                          f"{np.sqrt(np.nanmean(e ** 2) / np.nanmean(err ** 2)):.2f} ({np.sqrt(np.nanmean(e ** 2)) * 1e3:.2f}"
                          f" / {np.sqrt(np.nanmean(err ** 2)) * 1e3:.2f} mN), B = {tr.bandwidth_hz:.3g} Hz", "≤ 0.45"))
-            rows.append((f"±2σ coverage (Fx, Fy), {name}, {label}", f"{cover[0]:.1f} / {cover[1]:.1f} %", "85–99 %"))
+            # the data have no calibration error while σ states the calibration's: over-full here by design
+            # (the independent forward model's figures, with fitted calibrations: tests/test_tracking.py)
+            rows.append((f"±2σ coverage (Fx, Fy), {name}, {label} *", f"{cover[0]:.1f} / {cover[1]:.1f} %", "85–99 %"))
         p = check_windows(est, t).window_p_value[::100]
         rows.append((f"windows flagged on correct data, {label}", f"{np.mean(p < 1e-3) * 100:.1f} % of {p.size}",
                      "≤ 5 %"))
@@ -138,6 +141,8 @@ def main():
     print(f"{'what':<{width}}{'measured':<60}target")
     for what, measured, target in rows:
         print(f"{what:<{width}}{measured:<60}{target}")
+    print("* exact shifts through no calibration, a σ that states the calibration's error: coverage over-full by "
+          "design; with fitted calibrations of an independent model see tests/test_tracking.py")
 
 
 if __name__ == "__main__":

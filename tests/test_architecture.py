@@ -25,7 +25,7 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src"
 
 CORE = ("frames", "session", "calibration", "pcc", "actuator", "beam", "beam_kernels", "shift_errors",
-        "estimation", "pipeline")
+        "estimation", "tracking", "pipeline")
 # the CLI, the plots, the device layer and the applications (the paper's evaluation, the demo)
 EDGES = ("cli", "plots", "device", "apps", "sim.reproduce")
 

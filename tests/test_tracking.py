@@ -313,3 +313,33 @@ def test_the_causal_filter_cuts_the_error_too(ramp_and_hold):
     holds = np.tile(((t > 0.4) & (t < 0.9)) | ((t > 1.3) & (t < 1.8)), len(runs))  # 0.1 s after each ramp
     inside = np.concatenate([np.abs(tr.force_n - truth) <= 2 * tr.std_n for _, _, tr in runs])[holds]
     assert inside.mean() >= 0.85  # on the holds, where it does not lag
+
+
+def test_streaming_windows_report_the_latest_completed_window(ramp_and_hold):
+    """A frame's streamed window p is that of the window completed when it arrived (offline: its own window's)."""
+    from bendsense import check_windows
+
+    est = ramp_and_hold[1][0][0]
+    t = np.arange(4000) / RATE_HZ
+    offline = check_windows(est, t).window_p_value
+    tracker = Tracker(bandwidth_hz=10.0)
+    cuts = list(range(0, 4000, 37)) + [4000]
+    streamed = np.concatenate([tracker.update(_cut(est, lo, hi), t[lo:hi]).window_p_value
+                               for lo, hi in zip(cuts[:-1], cuts[1:])])
+    assert np.isnan(streamed[:100]).all()  # no window has completed yet
+    np.testing.assert_array_equal(streamed[100:], offline[:-100])
+    assert np.isfinite(offline).all() and np.unique(offline).size == 40
+
+
+def test_a_tracker_takes_single_frames(cases):
+    """The live path estimates one frame at a time (batch shape ()): the same numbers as blocks."""
+    est, t, pressure = cases
+    whole = Tracker(bandwidth_hz=12.0).update(est, t, pressure)
+    tracker = Tracker(bandwidth_hz=12.0)
+    one = [tracker.update(dataclasses.replace(
+        _cut(est, k, k + 1), **{name: getattr(_cut(est, k, k + 1), name)[0] for name in
+                                ("force_n", "std_n", "covariance_n2", "residual_m", "success", "iterations",
+                                 "covariance_parts_n2")}, message=str(est.message[k])), t[k], pressure[k])
+        for k in range(60)]
+    np.testing.assert_array_equal(np.concatenate([o.force_n for o in one]), whole.force_n)
+    np.testing.assert_array_equal(np.concatenate([o.status for o in one]), whole.status)

@@ -121,7 +121,9 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     Parameters
     ----------
     estimate : ForceEstimate
-        Per-frame estimates (B,) of a time series (``estimate_force``).
+        Per-frame estimates (B,) of a time series (``estimate_force``). Without a noise
+        model (``uncertainty="none"``: no noise covariance) nothing is observed and the
+        tracked force is NaN.
     t_s : array_like, shape (B,)
         Time of each frame [s], not decreasing.
     mode : {"smooth", "filter"}
@@ -309,13 +311,15 @@ class Tracker:
         Parameters
         ----------
         estimate_block : ForceEstimate
-            The block's per-frame estimates (b,).
+            The block's per-frame estimates (b,), or one frame's (batch shape ``()``).
         t_s_block : array_like, shape (b,)
             Their times [s], after the previous block's.
         pressure_pa_block : array_like, shape (b,), optional
             Their pressures [Pa].
         """
-        t, P, _ = _windows.series_inputs(estimate_block, t_s_block, self.window_s, pressure_pa_block)
+        estimate_block = _windows.as_series(estimate_block)  # one frame (the live path) is a block of one
+        t, P, _ = _windows.series_inputs(estimate_block, np.atleast_1d(t_s_block), self.window_s,
+                                         None if pressure_pa_block is None else np.atleast_1d(pressure_pa_block))
         if self._last is not None and t[0] < self._last[0]:
             raise ArgumentError(f"t_s_block: must not decrease, got {t[0]!r} s after the previous block's "
                                 f"{self._last[0]!r} s")

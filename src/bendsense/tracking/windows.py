@@ -289,8 +289,20 @@ def reference_interval(t_s):
     return float(np.median(np.diff(t_s))) if t_s.size > 1 else np.inf
 
 
+def as_series(estimate):
+    """A one-frame estimate (batch shape ``()``) as a series of one frame (1,); any other estimate as it is."""
+    if not isinstance(estimate, ForceEstimate) or estimate.batch_shape != ():
+        return estimate
+    changes = {f.name: getattr(estimate, f.name)[None] for f in dataclasses.fields(estimate)
+               if isinstance(getattr(estimate, f.name), np.ndarray)}
+    return dataclasses.replace(estimate, message=np.array([str(estimate.message)]), **changes)
+
+
 def series_inputs(estimate, t_s, window_s, pressure_pa):
-    """The checked time series inputs of :func:`check_windows` and :func:`bendsense.track`: (t (B,), P (B,) or None, W)."""
+    """The checked time series inputs of :func:`check_windows` and :func:`bendsense.track`: (t (B,), P (B,) or None, W).
+
+    ``estimate`` must be a series (one batch axis; :func:`as_series` makes one of a single frame).
+    """
     if not isinstance(estimate, ForceEstimate):
         raise ArgumentError(f"estimate: expected a ForceEstimate (estimate_force), got {type(estimate).__name__}")
     if len(estimate.batch_shape) != 1:
