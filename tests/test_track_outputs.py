@@ -241,3 +241,13 @@ def test_track_without_a_noise_model_says_so(tmp_path, caplog):
     results = read_results(tmp_path / "out")
     assert np.isfinite(results["fx_n"]).all() and np.isnan(results["fx_track_n"]).all()
     assert np.isnan(results["fx_std_n"]).all()
+
+
+def test_live_bandwidth_default_is_the_trackers():
+    """The --help of record and live states the tracker's default bandwidth (kept in step with the library)."""
+    from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
+
+    for command in ("record", "live"):
+        res = CliRunner().invoke(main, [command, "--help"], terminal_width=200)
+        assert f"default: {DEFAULT_BANDWIDTH_HZ:g} Hz (bendsense.tracking.DEFAULT_BANDWIDTH_HZ)" in " ".join(
+            res.output.split()), command

@@ -23,6 +23,8 @@ __all__ = [
     "objective_option",
     "window_option",
     "bandwidth_option",
+    "live_bandwidth_option",
+    "make_bandwidth_option",
     "quiet",
     "refuse_existing",
     "save_figure",
@@ -157,10 +159,16 @@ window_option = click.option(
     "--window-s", type=Finite(min=0, min_open=True), default=None,
     help="Window of the model check over frames [s] (a mean residual per window tested against its covariance; "
          "p < 0.001 flags its frames model_misfit); default 0.05.")
-bandwidth_option = click.option(
-    "--bandwidth-hz", type=Finite(min=0, min_open=True), default=None,
-    help="Bandwidth of the tracked force [Hz]: the -3 dB bandwidth of the steady-state filter; default: chosen "
-         "from the session by maximum likelihood (live: a fixed default).")
+def make_bandwidth_option(default_text: str):
+    """``--bandwidth-hz`` of the tracked force, with its default told in ``default_text``."""
+    return click.option("--bandwidth-hz", type=Finite(min=0, min_open=True), default=None,
+                        help=f"Bandwidth of the tracked force [Hz]: the -3 dB bandwidth of the steady-state filter; "
+                             f"default: {default_text}.")
+
+
+bandwidth_option = make_bandwidth_option("chosen from the session by maximum likelihood")
+#: ``--bandwidth-hz`` of ``record --estimate`` and ``live``, which cannot look ahead to choose one
+live_bandwidth_option = make_bandwidth_option("5 Hz (bendsense.tracking.DEFAULT_BANDWIDTH_HZ)")
 
 
 def refuse_existing(path: Path, overwrite: bool) -> None:

@@ -20,7 +20,7 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
-    bandwidth_option,
+    live_bandwidth_option,
     make_config_option,
     make_overwrite_option,
     objective_option,
@@ -173,7 +173,7 @@ def _sigterm_as_interrupt():
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @objective_option
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
-@bandwidth_option
+@live_bandwidth_option
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",

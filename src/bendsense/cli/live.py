@@ -14,9 +14,9 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
-    bandwidth_option,
     check_figure_suffix,
     config_option,
+    live_bandwidth_option,
     objective_option,
     overwrite_option,
     quiet,
@@ -53,7 +53,7 @@ _NO_CALIBRATION = (
     help="Run time [s] (default: until the window is closed; 3 s with --save).",
 )
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
-@bandwidth_option
+@live_bandwidth_option
 @click.option(
     "--scale",
     "scale_mm_per_n",

@@ -20,6 +20,7 @@ from bendsense.cli._common import (
     ANGLE_SOURCES,
     CONSTRAINTS,
     METHODS,
+    Finite,
     InterspersedCommand,
     PressureKpa,
     bandwidth_option,
@@ -287,7 +288,8 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
               help="Rauch-Tung-Striebel smoother (offline: every frame uses the whole session) or Kalman filter "
                    "(causal: the frame and those before, as 'record --estimate' and 'live').")
 @bandwidth_option
-@window_option
+@click.option("--window-s", type=Finite(min=0, min_open=True), default=None,
+              help="Window of the model check over frames [s]; default: that of 'estimate' (0.05).")
 def track(smooth, bandwidth_hz, window_s):
     """Track the tip force over time: a filter or smoother over the per-frame estimates.
 
