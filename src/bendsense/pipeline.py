@@ -276,7 +276,6 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         For a bad option or an argument of the wrong type (the message names it).
     """
     from bendsense import validation as check
-    from bendsense.pcc import reconstruct
     from bendsense.plausibility import check_channels, check_time_column
 
     session, config, calibration, calibration_source = _inputs(session, config, calibration, calibration_source)
@@ -292,16 +291,10 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
         raise SessionError(f"{_source(session)}: {missing} of {len(session)} frames have no pressure reading "
                            "(give pressure_pa, or --pressure-kpa on the command line)")
-    reconstruct_s = 0.0
-    if shape is None:
-        s_m = None if points is None else np.linspace(0.0, config.sensor.length_m, int(points))
-        t0 = time.perf_counter()
-        shape = reconstruct(session.signals, calibration, config.sensor, s_m=s_m)
-        reconstruct_s = time.perf_counter() - t0
-    elif np.shape(shape.tip_angle_rad)[:1] != (len(session),):
-        raise ArgumentError(f"shape: expected the shapes of the session's {len(session)} frames, got batch shape "
-                            f"{np.shape(shape.tip_angle_rad)}")
-    est, estimate_s = None, 0.0
+    shape, reconstruct_s = _shapes(session, config, calibration, points, shape)
+    est, tracked, estimate_s = None, None, 0.0
+    if track is not None and not estimate:
+        raise ArgumentError("track: needs the force estimate (estimate=True)")
     if estimate:
         from bendsense.estimation import estimate_force
 
@@ -312,14 +305,25 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
                              calibration=calibration, **options)  # its noise model gives std_n
         est, tracked = _over_time(est, session, window_s, track, bandwidth_hz)
         estimate_s = time.perf_counter() - t0
-    elif track is not None:
-        raise ArgumentError("track: needs the force estimate (estimate=True)")
-    else:
-        tracked = None
     results = Results.from_state(session, shape, est, tracked)
     return Processed(**{f.name: getattr(results, f.name) for f in dataclasses.fields(Results)}, session=session,
                      shape=shape, estimate=est, track=tracked, config=config, reconstruct_s=reconstruct_s,
                      estimate_s=estimate_s)
+
+
+def _shapes(session, config, calibration, points, shape):
+    """The session's shapes (those given, checked, else reconstructed) and the time spent [s]."""
+    from bendsense.pcc import reconstruct
+
+    if shape is not None:
+        if np.shape(shape.tip_angle_rad)[:1] != (len(session),):
+            raise ArgumentError(f"shape: expected the shapes of the session's {len(session)} frames, got batch "
+                                f"shape {np.shape(shape.tip_angle_rad)}")
+        return shape, 0.0
+    s_m = None if points is None else np.linspace(0.0, config.sensor.length_m, int(points))
+    t0 = time.perf_counter()
+    shape = reconstruct(session.signals, calibration, config.sensor, s_m=s_m)
+    return shape, time.perf_counter() - t0
 
 
 def _over_time(est, session, window_s, mode, bandwidth_hz):
