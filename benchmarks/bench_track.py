@@ -34,7 +34,7 @@ from pathlib import Path  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
-from bench_cold import CFG, L, MODEL, SENSOR, calibration  # noqa: E402
+from bench_cold import CFG, MODEL, SENSOR, L, calibration  # noqa: E402
 
 from bendsense import Tracker, check_windows, track  # noqa: E402
 from bendsense.beam import solve_beam  # noqa: E402
@@ -110,12 +110,12 @@ def main():
         est = estimate_force(kappa, PRESSURE_PA, CFG, calibration=cal, warm_start=warm)
         per_frame_us = (time.perf_counter() - t0) / B * 1e6
         runs = {
-            "check_windows (50 ms windows)": lambda: check_windows(est, t),
-            "track, smoother, ML bandwidth (default)": lambda: track(est, t),
-            "track, smoother, bandwidth 10 Hz": lambda: track(est, t, bandwidth_hz=10.0),
-            "track, filter, bandwidth 10 Hz": lambda: track(est, t, mode="filter", bandwidth_hz=10.0),
-            "Tracker.update, blocks of 20 frames (live)": lambda: stream(est, t),
-            "Tracker.update, blocks of 200 frames (live)": lambda: stream(est, t, 200),
+            "check_windows (50 ms windows)": lambda est=est: check_windows(est, t),
+            "track, smoother, ML bandwidth (default)": lambda est=est: track(est, t),
+            "track, smoother, bandwidth 10 Hz": lambda est=est: track(est, t, bandwidth_hz=10.0),
+            "track, filter, bandwidth 10 Hz": lambda est=est: track(est, t, mode="filter", bandwidth_hz=10.0),
+            "Tracker.update, blocks of 20 frames (live)": lambda est=est: stream(est, t),
+            "Tracker.update, blocks of 200 frames (live)": lambda est=est: stream(est, t, 200),
         }
         rows.append((f"per-frame estimates, {label} ({B:,} frames, one batch call, wall)",
                      f"{per_frame_us:.1f} µs/frame", ""))
@@ -129,8 +129,9 @@ def main():
             e = tr.force_n - truth
             cover = np.mean(np.abs(e) <= 2 * tr.std_n, axis=0) * 100
             rows.append((f"tracked error / per-frame (RMS), {name}, {label}",
-                         f"{np.sqrt(np.nanmean(e ** 2) / np.nanmean(err ** 2)):.2f} ({np.sqrt(np.nanmean(e ** 2)) * 1e3:.2f}"
-                         f" / {np.sqrt(np.nanmean(err ** 2)) * 1e3:.2f} mN), B = {tr.bandwidth_hz:.3g} Hz", "≤ 0.45"))
+                         f"{np.sqrt(np.nanmean(e ** 2) / np.nanmean(err ** 2)):.2f} "
+                         f"({np.sqrt(np.nanmean(e ** 2)) * 1e3:.2f} / {np.sqrt(np.nanmean(err ** 2)) * 1e3:.2f} mN), "
+                         f"B = {tr.bandwidth_hz:.3g} Hz", "≤ 0.45"))
             # the data have no calibration error while σ states the calibration's: over-full here by design
             # (the independent forward model's figures, with fitted calibrations: tests/test_tracking.py)
             rows.append((f"±2σ coverage (Fx, Fy), {name}, {label} *", f"{cover[0]:.1f} / {cover[1]:.1f} %", "85–99 %"))

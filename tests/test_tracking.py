@@ -30,7 +30,7 @@ RATE_HZ = 2000.0
 
 @functools.lru_cache(maxsize=64)
 def riccati_ratio(bandwidth_hz, dt_s):
-    """Q/R of the random walk whose steady-state filter is −3 dB at ``bandwidth_hz``: Riccati iteration + root search."""
+    """Q/R of the random walk whose steady filter is −3 dB at ``bandwidth_hz``: Riccati iteration, root search."""
     w = 2 * np.pi * bandwidth_hz * dt_s
 
     def gain(rho):
@@ -301,6 +301,10 @@ def test_the_smoother_cuts_the_error_and_covers_the_truth_over_several_sensors(r
     assert ratio <= 0.45
     assert 0.85 <= inside[:, 0].mean() <= 0.99 and 0.85 <= inside[:, 1].mean() <= 0.99
     assert all((tr.status == "ok").mean() > 0.99 for _, tr, _ in runs)
+    for est, smooth, filtered in runs:  # never below the frame's calibration and parameter parts
+        floor = np.diagonal(est.covariance_parts_n2[:, 1] + est.covariance_parts_n2[:, 2], axis1=1, axis2=2)
+        assert np.all(smooth.std_n ** 2 >= floor) and np.all(filtered.std_n ** 2 >= floor)
+        assert np.all(smooth.std_n < est.std_n)  # and below the frame's own σ, where the noise averages down
 
 
 def test_the_causal_filter_cuts_the_error_too(ramp_and_hold):

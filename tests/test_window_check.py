@@ -103,7 +103,7 @@ def _window_p(est, pressure):
 
 def test_the_payload_is_the_residual_and_the_sensitivities_of_the_coil_angles():
     """residual = S/d − φ_model(L_i) at the estimate, Jacobian and model factor by finite differences of solve_beam."""
-    cov = np.array([[4e-4, 1e-7], [1e-7, 1e-8]])  # of (K0 [1/m], EI [N m²]): a covariance stated directly on the beam inputs
+    cov = np.array([[4e-4, 1e-7], [1e-7, 1e-8]])  # of (K0 [1/m], EI [N m²]), stated directly on the beam inputs
     cal = linear_calibration(noise_std=1.5)
     pressure = 45e3
     kappa = curvatures_for(shifts_for(loaded_curvatures(pressure, (0.05, -0.04))) + 1e-7 * np.sin(np.arange(16)))
@@ -296,3 +296,20 @@ def test_a_persistent_model_error_is_caught_in_nine_windows_of_ten(forward_windo
     assert np.mean(p < 1e-3) >= 0.9
     # far more than a frame's own χ² catches
     assert np.mean(p < 1e-3) >= np.mean(forward_windows[f"frames_{error}"])
+
+
+def test_a_one_parameter_constraint_leaves_r_minus_one_degrees_of_freedom():
+    """Vertical tip loads fitted with ``constraint="vertical"`` (k = 1): p uniform under the estimator's assumptions."""
+    rng = np.random.default_rng(9)
+    p = rng.uniform(30e3, 80e3, 150)
+    forces = np.stack([np.zeros(150), rng.uniform(-0.15, -0.03, 150)], axis=1)
+    exact = np.array([shifts_for(np.ravel(loaded_curvatures(pi, fi))) for pi, fi in zip(p, forces)])
+    shifts = np.repeat(exact, PER_WINDOW, axis=0)
+    shifts = shifts + rng.normal(0.0, 1.5 * GAIN, shifts.shape)
+    pressure = np.repeat(p, PER_WINDOW)
+    est = estimate_force(curvatures_for(shifts), pressure, CFG, calibration=linear_calibration(noise_std=1.5),
+                         constraint="vertical")
+    assert np.all(est.jacobian_rad_per_n[..., 1] == 0.0)  # the second column pads k = 1
+    window_p = _window_p(est, pressure)[0]
+    assert np.isfinite(window_p).all() and np.mean(window_p < 1e-3) <= 0.01
+    assert stats.kstest(window_p, "uniform").pvalue > 1e-3

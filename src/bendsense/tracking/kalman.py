@@ -22,7 +22,9 @@ does not give (NaN force, infinite σ: failed or ``not_identifiable``) is not ob
 other one is; a frame without any is predicted only. The innovations' log-likelihood
 (the diffuse first observations left out) chooses B offline (:mod:`bendsense.tracking.track`).
 
-Speed: ~0.05 µs per frame and filter pass, ~0.1 µs with the smoother (benchmarks/bench_track.py).
+Speed, measured on the shared 2-core machine: 0.1–0.2 µs per frame and filter pass, 0.02 µs
+for the smoother's backward pass; ``track`` as a whole ~0.9 µs per frame with a given
+bandwidth, ~3 µs with the maximum-likelihood choice (16 passes) (benchmarks/bench_track.py).
 """
 
 import math
@@ -59,7 +61,7 @@ def process_ratio(bandwidth_hz, dt_s):
 
 @njit(cache=True)
 def _mul(A, B, out):
-    """out = A B of 2×2 matrices."""
+    """Out = A B of 2×2 matrices."""
     for a in range(2):
         for b in range(2):
             out[a, b] = A[a, 0] * B[0, b] + A[a, 1] * B[1, b]
@@ -67,7 +69,7 @@ def _mul(A, B, out):
 
 @njit(cache=True)
 def _mul_t(A, B, out):
-    """out = A B Aᵀ of 2×2 matrices."""
+    """Out = A B Aᵀ of 2×2 matrices."""
     for a in range(2):
         for b in range(2):
             acc = 0.0
@@ -196,7 +198,8 @@ def rts_smoother(restart, x_pred, P_pred, x_filt, P_filt, x_out, P_out):
             x_out[k] = x_filt[k]
             P_out[k] = P_filt[k]
             continue
-        Pinv[0, 0], Pinv[1, 1], Pinv[0, 1], Pinv[1, 0] = Pn[1, 1] / det, Pn[0, 0] / det, -Pn[0, 1] / det, -Pn[1, 0] / det
+        Pinv[0, 0], Pinv[1, 1] = Pn[1, 1] / det, Pn[0, 0] / det
+        Pinv[0, 1], Pinv[1, 0] = -Pn[0, 1] / det, -Pn[1, 0] / det
         _mul(P_filt[k], Pinv, G)
         d0 = x_out[k + 1, 0] - x_pred[k + 1, 0]
         d1 = x_out[k + 1, 1] - x_pred[k + 1, 1]

@@ -342,7 +342,7 @@ class Tracker:
         return result(xf, Pf, floor, window_p, own, self.bandwidth_hz, self.mode, t, z)
 
     def _fill(self, floor, starts):
-        """The floor carried forward within a segment, across blocks (:func:`fill_floor` with the last one carried in)."""
+        """The floor carried forward within a segment, across blocks (:func:`fill_floor`, the last one carried in)."""
         carried = np.concatenate((self._floor[None], floor))
         out = fill_floor(carried, np.concatenate(([True], starts)), backward=False)[1:]
         self._floor = out[-1]
@@ -368,7 +368,7 @@ class Tracker:
         p = np.full(done, np.nan)
         if done:
             p, _ = _windows.window_p_values(est, bounds, payload)
-        # each frame of the block: the latest window completed by its arrival (a window completes at the next one's first)
+        # each frame of the block: the latest window completed by its arrival (at the next window's first frame)
         offset = tt.size - t.size
         frame_p = np.empty(t.size)
         latest = self._p

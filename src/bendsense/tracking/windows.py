@@ -18,8 +18,8 @@ frames (a finite residual):
   factor of Σ_θ, the fitted directions projected out by an orthonormal complement of the
   whitened Ā, then solved; ``p = P(χ²_(R−k) > T)``.
 
-:func:`window_tests` is the compiled kernel over windows (~1 µs per frame, most of it
-the window's means; benchmarks/bench_track.py).
+:func:`window_tests` is the compiled kernel over windows; ``check_windows`` costs ~0.5 µs
+per frame in all (benchmarks/bench_track.py).
 """
 
 import dataclasses
@@ -180,7 +180,7 @@ def segment_starts(t_s, pressure_pa, window_s, dt_ref_s):
 
 
 def window_index(t_s, starts, window_s, t0_s=None):
-    """The window of each frame within its segment: ``floor((t − t_segment) / window_s)``; and the segment's start times.
+    """Each frame's segment and window ``floor((t − t_segment) / window_s)`` in it; and the segments' start times.
 
     ``t0_s``: the start time of the segment the first frame continues (streaming), if it starts none.
     """
@@ -221,11 +221,13 @@ def window_p_values(estimate, bounds, payload=None):
     p = np.full(W, np.nan)
     n = np.zeros(W, dtype=np.int64)
     payload = tuple(getattr(estimate, name) for name in PAYLOAD) if payload is None else payload
-    if any(a is None for a in payload) or estimate.shift_errors is None or estimate.uncertainty != "propagated" or W < 1:
+    if any(a is None for a in payload) or estimate.shift_errors is None or estimate.uncertainty != "propagated" \
+            or W < 1:
         return p, n
     c = np.ascontiguousarray
     _jit.call(window_tests, c(bounds, dtype=np.int64), *(c(a, dtype=float) for a in payload),
-              tuple(estimate.shift_errors), np.asarray(estimate.coils, dtype=np.int64), float(estimate.strip_gap_m), p, n)
+              tuple(estimate.shift_errors), np.asarray(estimate.coils, dtype=np.int64), float(estimate.strip_gap_m), p,
+              n)
     return p, n
 
 
@@ -268,7 +270,7 @@ def check_windows(estimate, t_s, *, window_s: float = WINDOW_S, pressure_pa=None
 
 
 def flag(estimate, bounds, p, n, window_s):
-    """``estimate`` with the windows' p-values per frame and the converged frames of windows with p < MISFIT_P flagged."""
+    """``estimate`` with its windows' p-values per frame, the converged frames of a window with p < MISFIT_P flagged."""
     B = estimate.batch_shape[0]
     counts = np.diff(bounds)
     frame_p = np.repeat(p, counts)
