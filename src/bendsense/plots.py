@@ -670,7 +670,8 @@ def plot_results(
     if title is None:
         name = Path(source).name if source is not None else "results"
         if results.has_forces:
-            what = "shapes and tip forces" + (f" ({estimated})" if estimated else "")
+            what = ("shapes and tip forces, tracked" if results.has_track else "shapes and tip forces") + (
+                f" ({estimated})" if estimated else "")
         else:
             what = "shapes only (no force estimate)"
         title = f"{name}: {what} of {frames} frames"
