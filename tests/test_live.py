@@ -210,6 +210,7 @@ def test_view_shows_the_force_history_with_its_band_and_the_status_counts(calibr
     status = view.status_text.get_text()
     assert "estimated 123 frames/s" in status and "backlog 5" in status and "not converged 0" in status
     assert "extrapolated" in status and "misfit" in status
+    assert f"window misfit {proc.status_counts.get('window_misfit', 0)}" in status
     png = tmp_path / "live-view.png"
     view.save(png)
     image = matplotlib.image.imread(png)
