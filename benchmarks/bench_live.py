@@ -49,7 +49,7 @@ def calibration(root: Path) -> Calibration:
 def model_and_view(cal, constraint, n=300):
     frames = list(itertools.islice(time_varying_frames(None, 100.0, SEED), n))
     proc = LiveProcessor(cal, constraint=constraint)
-    done = [proc.process_signals(c, p) for p, c in frames]
+    done = [proc.process_signals(c, p, t_s=k / 100.0) for k, (p, c) in enumerate(frames)]
     process = np.array([f.process_s for f in done[10:]]) * 1e3
     view = LiveView(proc, headless=True)
     view.update(done[0])

@@ -42,14 +42,16 @@ SEED = 0
 def processor_rates(cal, frames, constraint, sizes=(1, 10, 50, 200, 500)):
     signals = np.array([c for _, c in frames], dtype=float)
     pressure = np.array([p for p, _ in frames], dtype=float)
+    t_s = np.arange(len(frames)) / RATE_HZ  # the board's clock: the processor tracks the force over it
     rows = []
     for size in sizes:
         proc = LiveProcessor(cal, constraint=constraint)
-        proc.process_block(signals[:size], pressure[:size])  # compile and warm up
+        proc.process_block(signals[:size], pressure[:size], t_s=t_s[:size])  # compile and warm up
+        proc.reset()
         n = min(len(frames), max(200, 40 * size))
         t = time.perf_counter()
         for i in range(0, n, size):
-            proc.process_block(signals[i:i + size], pressure[i:i + size])
+            proc.process_block(signals[i:i + size], pressure[i:i + size], t_s=t_s[i:i + size])
         dt = time.perf_counter() - t
         rows.append((size, n / dt, proc.failures))
     return rows
@@ -57,7 +59,7 @@ def processor_rates(cal, frames, constraint, sizes=(1, 10, 50, 200, 500)):
 
 def end_to_end(cal, frames, seconds, constraint, root):
     proc = LiveProcessor(cal, constraint=constraint)
-    proc.process_block(np.array([frames[0][1]], float), [frames[0][0]])  # compile outside the timing
+    proc.process_block(np.array([frames[0][1]], float), [frames[0][0]], t_s=[0.0])  # compile outside the timing
     proc = LiveProcessor(cal, constraint=constraint)
     backlog = []
     with SimulatedDevice(frames, rate_hz=RATE_HZ) as dev, Driver(dev.port) as drv:

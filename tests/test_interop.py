@@ -203,14 +203,19 @@ def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_
                     proc.kill()
                     proc.wait()
             assert proc.returncode == 0, (tmp_path / "stderr.txt").read_text()
-    assert (info.type(), info.channel_count(), info.nominal_srate()) == ("Force", 4, 1000.0)
+    assert (info.type(), info.channel_count(), info.nominal_srate()) == ("Force", 8, 1000.0)
     ch = info.desc().child("channels").child("channel")
     labels, units = [], []
     while not ch.empty():
         labels.append(ch.child_value("label"))
         units.append(ch.child_value("unit"))
         ch = ch.next_sibling()
-    assert labels == ["fx_n", "fy_n", "fx_std_n", "fy_std_n"] and units == ["N"] * 4
+    # the per-frame force, then the causally tracked one
+    assert labels == ["fx_n", "fy_n", "fx_std_n", "fy_std_n", "fx_track_n", "fy_track_n", "fx_track_std_n",
+                      "fy_track_std_n"] and units == ["N"] * 8
+    from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
+
+    assert info.desc().child_value("track") == f"filter, bandwidth {DEFAULT_BANDWIDTH_HZ:g} Hz"
     assert sinfo.type() == "Shape" and sinfo.channel_count() == 16 + 3
     header, rows = None, None
     with open(out / "results.csv", newline="") as fh:
@@ -222,8 +227,11 @@ def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_
     assert len(force) >= 0.99 * n
     # the samples are the results, in order (the first ones sent are the first recorded)
     m = min(len(force), n)
-    want = np.column_stack([results[c][:m].astype(float) for c in ("fx_n", "fy_n", "fx_std_n", "fy_std_n")])
+    want = np.column_stack([results[c][:m].astype(float) for c in ("fx_n", "fy_n", "fx_std_n", "fy_std_n",
+                                                                     "fx_track_n", "fy_track_n", "fx_track_std_n",
+                                                                     "fy_track_std_n")])
     np.testing.assert_allclose(force[:m], want, rtol=0, atol=1e-12, equal_nan=True)
+    assert np.isfinite(force[:m, 4:]).all(axis=1).mean() > 0.9
     np.testing.assert_allclose(shape[:m, -3], results["tip_x_m"][:m].astype(float), atol=1e-15)
     # time stamps: arrival times on the LSL clock, in order, about 1 ms apart
     assert np.all(np.diff(stamps) >= 0)

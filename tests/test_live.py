@@ -17,6 +17,7 @@ from bendsense.errors import ConfigError
 from bendsense.estimation import estimate_force
 from bendsense.pipeline import LiveFrame, LiveProcessor
 from bendsense.sim.scenarios import time_varying_frames
+from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
 
 SEED = 0
 RATE_HZ = 100.0
@@ -177,7 +178,8 @@ def test_every_received_frame_is_estimated(calibration_path, stream):
 
 
 def test_view_shows_the_force_history_with_its_band_and_the_status_counts(calibration_path, stream, tmp_path):
-    """Blocks of frames → the scrolling Fx, Fy (±2σ) and pressure plot and the status line; rendered to a PNG."""
+    """Blocks of frames → the scrolling tracked Fx, Fy (±2σ) over the per-frame points, the pressure and the
+    status line; rendered to a PNG."""
     from bendsense.apps.live_view import status_line
 
     proc = LiveProcessor(Calibration.load(calibration_path), constraint="normal")
@@ -188,29 +190,42 @@ def test_view_shows_the_force_history_with_its_band_and_the_status_counts(calibr
     for i in range(0, len(stream), 30):
         block = proc.process_block(signals[i:i + 30], pressure[i:i + 30], t_s=t[i:i + 30], seq=np.arange(i, i + 30))
         view.update_block(block, status_line(block, proc, 123.0, 30.0, lost=2, backlog=5))
-    # the curves hold the last 1.5 s, newest at 0, with the forces of those frames
+    # the curves hold the last 1.5 s, newest at 0, with the forces of those frames: points per frame, and the
+    # causal track (the filter over the same frames offline, at the live default bandwidth) with its band
     x, fx = view.force_lines[0].get_data()
     shown = t >= t[-1] - 1.5
     np.testing.assert_allclose(x, t[shown] - t[-1], atol=1e-12)
-    np.testing.assert_allclose(fx, block_forces(proc, signals, pressure)[shown, 0], atol=1e-6)
+    cold = block_estimate(proc, signals, pressure)
+    np.testing.assert_allclose(fx, cold.force_n[shown, 0], atol=1e-6)
+    assert view.force_lines[0].get_linestyle() == "None" and view.force_lines[0].get_marker() == "."
+    tx, track_x = view.track_lines[0].get_data()
+    np.testing.assert_allclose(tx, x, atol=0)
+    offline = bendsense.track(cold, t, mode="filter", bandwidth_hz=DEFAULT_BANDWIDTH_HZ, pressure_pa=pressure)
+    np.testing.assert_allclose(track_x, offline.force_n[shown, 0], atol=1e-5, equal_nan=True)
     _, p = view.pressure_line.get_data()
     np.testing.assert_allclose(p, pressure[shown] * 1e-3)
-    band = view.bands[0].get_paths()[0].vertices
-    assert band[:, 1].min() < fx.min() and band[:, 1].max() > fx.max()
+    band = np.concatenate([path.vertices for path in view.bands[0].get_paths()])
+    finite = track_x[np.isfinite(track_x)]
+    assert band[:, 1].min() < finite.min() and band[:, 1].max() > finite.max()
     status = view.status_text.get_text()
     assert "estimated 123 frames/s" in status and "backlog 5" in status and "not converged 0" in status
     assert "extrapolated" in status and "misfit" in status
+    assert f"window misfit {proc.status_counts.get('window_misfit', 0)}" in status
     png = tmp_path / "live-view.png"
     view.save(png)
     image = matplotlib.image.imread(png)
     assert image.shape[1] > image.shape[0] > 500
 
 
+def block_estimate(proc, signals, pressure):
+    """The estimates of the frames as one cold batch (an independent path)."""
+    shape = bendsense.reconstruct(signals, proc.calibration, proc.config.sensor, s_m=proc.s_m)
+    return estimate_force(shape, pressure, proc.config, constraint="normal", calibration=proc.calibration)
+
+
 def block_forces(proc, signals, pressure):
     """The forces of the frames as one cold batch (an independent path)."""
-    shape = bendsense.reconstruct(signals, proc.calibration, proc.config.sensor, s_m=proc.s_m)
-    est = estimate_force(shape, pressure, proc.config, constraint="normal", calibration=proc.calibration)
-    return est.force_n
+    return block_estimate(proc, signals, pressure).force_n
 
 
 def test_live_and_offline_give_each_frame_the_same_status_near_the_identifiability_limit(calibration_path):

@@ -1,6 +1,7 @@
 """Every frame live: ``record --estimate`` writes results.csv as frames arrive (crash-safe), ``--lsl`` streams."""
 
 import csv
+import dataclasses
 import os
 import signal
 import subprocess
@@ -13,11 +14,13 @@ import yaml
 from click.testing import CliRunner
 
 import bendsense
+from bendsense.batched import take_frames
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.device.simdevice import SimulatedDevice, default_source
 from bendsense.pipeline import LiveProcessor
 from bendsense.sim.scenarios import time_varying_frames
+from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 SEED = 0
@@ -42,9 +45,11 @@ def test_record_estimate_every_frame_of_a_2khz_board(calibration_path, tmp_path)
     session = bendsense.read_session(out)
     assert len(session) > 3000 and session.meta["stats"]["queue_drops"] == 0
     header, rows = read_rows(out / "results.csv")
-    # DESIGN section 3: the result columns end with status, then the session's extra columns
-    assert header[:2] == ["t_s", "pressure_pa"] and header[-10:] == [
+    # DESIGN section 3: the result columns end with status, the tracked force, the window p-value, then the
+    # session's extra columns
+    assert header[:2] == ["t_s", "pressure_pa"] and header[-16:] == [
         "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status",
+        "fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status", "window_p_value",
         "host_s", "input_status", "tx_drops"]
     assert len(rows) == len(session)  # every recorded frame has a result
     cols = {h: np.array([r[i] for r in rows]) for i, h in enumerate(header)}
@@ -61,6 +66,19 @@ def test_record_estimate_every_frame_of_a_2khz_board(calibration_path, tmp_path)
     np.testing.assert_allclose(force[ok], batch.force_n[ok], atol=1e-4)
     np.testing.assert_allclose(cols["tip_x_m"].astype(float), shape.tip_position_m[:, 0], atol=1e-12)
     assert "estimated" in res.output and "backlog" in res.output
+    # the causal track of the recording, block by block as frames arrived, is the filter over the whole session
+    # (a frame the live warm start could not estimate is not a measurement of the live filter either)
+    live_failed = ~np.isfinite(force).all(axis=1)
+    batch = dataclasses.replace(batch, force_n=np.where(live_failed[:, None], np.nan, batch.force_n))
+    offline = bendsense.track(batch, session.t_s, mode="filter", bandwidth_hz=DEFAULT_BANDWIDTH_HZ,
+                              pressure_pa=session.pressure_pa)
+    tracked = np.column_stack([cols["fx_track_n"], cols["fy_track_n"]]).astype(float)
+    tracked_std = np.column_stack([cols["fx_track_std_n"], cols["fy_track_std_n"]]).astype(float)
+    assert np.isfinite(tracked).all(axis=1).mean() > 0.99
+    np.testing.assert_allclose(tracked, offline.force_n, atol=1e-4, equal_nan=True)
+    np.testing.assert_allclose(tracked_std, offline.std_n, rtol=1e-3, equal_nan=True)
+    # the frames' own verdicts are kept: never ok where the frame is not
+    assert not np.any((cols["track_status"] == "ok") & (cols["status"] != "ok"))
 
 
 def test_killed_recording_keeps_its_results(calibration_path, tmp_path):
@@ -100,28 +118,33 @@ def test_record_estimate_needs_a_calibration(tmp_path):
 
 
 def test_processor_block_equals_frames_one_by_one(calibration_path):
-    """A block and the same frames one at a time (blocks of one) give the same shapes and forces."""
+    """A block and the same frames one at a time (blocks of one) give the same shapes, forces and tracked forces."""
     frames = [next(src) for src in [default_source(rate_hz=100, seed=SEED)] for _ in range(40)]
     signals = np.array([c for _, c in frames], dtype=float)
     pressure = np.array([p for p, _ in frames])
     cal = Calibration.load(calibration_path)
     block = LiveProcessor(cal, constraint="normal").process_block(signals, pressure, t_s=np.arange(40) / 100)
     proc = LiveProcessor(cal, constraint="normal")
-    one = [proc.process_signals(a, p) for a, p in zip(signals, pressure)]
+    one = [proc.process_signals(a, p, t_s=k / 100) for k, (a, p) in enumerate(zip(signals, pressure))]
     np.testing.assert_allclose(block.force_n, [f.force_n for f in one], atol=1e-6)
     np.testing.assert_allclose(block.shape.positions_m, [f.shape.positions_m for f in one], atol=1e-12)
+    # the causal track, its state kept from block to block
+    assert np.isfinite(block.track_force_n).all(axis=1).mean() > 0.9
+    np.testing.assert_allclose(block.track_force_n, [f.track_force_n for f in one], atol=1e-6)
+    np.testing.assert_allclose(block.track_std_n, [f.track_std_n for f in one], rtol=1e-6)
     cols = block.columns()
-    assert list(cols)[-1] == "status" and len(cols["fx_n"]) == 40
+    assert list(cols)[-7:] == ["status", "fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n",
+                               "track_status", "window_p_value"] and len(cols["fx_n"]) == 40
     # a frame without pressure gets a shape and the status "no_pressure"
     pressure[5] = np.nan
-    b2 = LiveProcessor(cal, constraint="normal").process_block(signals, pressure)
+    b2 = LiveProcessor(cal, constraint="normal").process_block(signals, pressure, t_s=np.arange(40) / 100)
     assert b2.status[5] == "no_pressure" and np.isnan(b2.force_n[5]).all() and np.isfinite(b2.force_n[6]).all()
     assert b2.frame(5).estimate is None and b2.frame(6).estimate is not None
 
 
 def test_record_estimate_writes_the_columns_of_save(calibration_path, tmp_path):
-    """The live results.csv has the header of 'load SESSION reconstruct estimate save' of the same session,
-    and its pass-through columns equal those the saved results read from frames.bin."""
+    """The live results.csv has the header of 'load SESSION reconstruct estimate track --filter save' of the same
+    session, and its pass-through columns equal those the saved results read from frames.bin."""
     out = tmp_path / "s"
     with SimulatedDevice(default_source(rate_hz=500, seed=SEED), rate_hz=500, drop=0.05, seed=SEED) as dev:
         res = CliRunner().invoke(main, ["record", dev.port, "-o", str(out), "--seconds", "1",
@@ -129,12 +152,13 @@ def test_record_estimate_writes_the_columns_of_save(calibration_path, tmp_path):
     assert res.exit_code == 0, res.output
     saved = tmp_path / "saved"
     res = CliRunner().invoke(main, ["load", str(out), "--calibration", str(calibration_path), "reconstruct",
-                                    "estimate", "save", str(saved)])
+                                    "estimate", "track", "--filter", "save", str(saved)])
     assert res.exit_code == 0, res.output
     live_header, live_rows = read_rows(out / "results.csv")
     save_header, save_rows = read_rows(saved / "results.csv")
     assert live_header == save_header
-    assert live_header[-4:] == ["status", "host_s", "input_status", "tx_drops"]
+    assert live_header[-10:] == ["status", "fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n",
+                                 "track_status", "window_p_value", "host_s", "input_status", "tx_drops"]
     assert len(live_rows) == len(save_rows) == len(bendsense.read_session(out)) > 300
     for name in ("t_s", "host_s", "input_status", "tx_drops"):
         i = live_header.index(name)
@@ -160,8 +184,10 @@ def test_block_without_pressure_keeps_the_column_order(calibration_path):
     with_p = LiveProcessor(cal).process_block(signals, [p for p, _ in frames], extra=extra).columns()
     without = LiveProcessor(cal).process_block(signals, None, extra=extra).columns()
     assert list(without) == list(with_p)
-    assert list(with_p)[-3:] == ["status", "host_s", "input_status"]
-    assert list(without["status"]) == ["no_pressure"] * 5
+    assert list(with_p)[-9:] == ["status", "fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n",
+                                 "track_status", "window_p_value", "host_s", "input_status"]
+    assert list(without["status"]) == list(without["track_status"]) == ["no_pressure"] * 5
+    assert np.isnan(without["fx_track_n"]).all()
 
 
 def test_record_estimate_of_no_frames_writes_no_results(calibration_path, tmp_path):
@@ -179,3 +205,25 @@ def test_record_estimate_of_no_frames_writes_no_results(calibration_path, tmp_pa
     saved = CliRunner().invoke(main, ["load", str(out), "--calibration", str(calibration_path), "reconstruct",
                                       "estimate", "save", str(tmp_path / "saved")])
     assert saved.exit_code != 0 and "no frames" in saved.output and not (tmp_path / "saved").exists()
+
+
+def test_a_clock_that_jumps_back_restarts_the_live_track(calibration_path):
+    """A device reset mid-block (its clock jumps back): the causal track restarts there, each stretch the filter
+    of its own frames; nothing fails."""
+    frames = [next(src) for src in [default_source(rate_hz=100, seed=SEED)] for _ in range(160)][100:]
+    signals = np.array([c for _, c in frames], dtype=float)
+    pressure = np.array([p for p, _ in frames])
+    t = np.concatenate([np.arange(30), np.arange(30)]) / 100  # the clock back to 0 at frame 30
+    cal = Calibration.load(calibration_path)
+    proc = LiveProcessor(cal, constraint="normal")
+    first = proc.process_block(signals[:40], pressure[:40], t_s=t[:40])  # the jump inside a block
+    second = proc.process_block(signals[40:], pressure[40:], t_s=t[40:])
+    tracked = np.concatenate([first.track_force_n, second.track_force_n])
+    config = bendsense.load_config()
+    shape = bendsense.reconstruct(signals, cal, config.sensor, s_m=proc.s_m)
+    cold = bendsense.estimate_force(shape, pressure, config, constraint="normal", calibration=cal)
+    for part in (slice(0, 30), slice(30, 60)):
+        offline = bendsense.track(take_frames(cold, part, 60), t[part], mode="filter",
+                                  bandwidth_hz=DEFAULT_BANDWIDTH_HZ, pressure_pa=pressure[part])
+        np.testing.assert_allclose(tracked[part], offline.force_n, atol=1e-5)
+    assert np.isfinite(tracked).all()

@@ -335,6 +335,9 @@ def process_session(
     estimate: bool = True,
     overwrite: bool = False,
     name: str | None = None,
+    track: str | None = None,
+    bandwidth_hz: float | None = None,
+    window_s: float = 0.05,
 ) -> SessionOutcome:
     """Process one session and write its results; never raises for a bad session.
 
@@ -365,6 +368,9 @@ def process_session(
         Replace a previous bendsense output in ``out_dir``.
     name : str, optional
         Name of the session in the outcome (default: the file or directory name).
+    track, bandwidth_hz, window_s
+        Track the forces over time (``"smooth"`` or ``"filter"``; None: not), its
+        bandwidth [Hz] and the window of the model check [s] (:func:`bendsense.pipeline.process`).
 
     Returns
     -------
@@ -391,7 +397,8 @@ def process_session(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             counts, lost, tx_drops, pressure_ignored = _run(
-                path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite
+                path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
+                {"track": track, "bandwidth_hz": bandwidth_hz, "window_s": window_s},
             )
     except (BendsenseError, OSError) as err:
         if isinstance(err, OutputError) and err.errno in _FATAL_ERRNOS:
@@ -431,7 +438,8 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row) -> SessionO
     )
 
 
-def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite):
+def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
+         over_time):
     import numpy as np
 
     from bendsense.pipeline import process
@@ -442,7 +450,7 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
     # (a worker's log line would be lost in the console: the session's report row says it)
     ignored = pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
     processed = process(session, config, calibration, constraint=constraint, method=method,
-                        objective=objective, pressure_pa=pressure_pa, estimate=estimate)
+                        objective=objective, pressure_pa=pressure_pa, estimate=estimate, **over_time)
     session = processed.session
     processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made
     return (processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)),
@@ -566,7 +574,8 @@ def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
-def warm_up(config, calibration, *, constraint=None, method=None, objective=None, estimate: bool = True) -> None:
+def warm_up(config, calibration, *, constraint=None, method=None, objective=None, estimate: bool = True,
+            track: str | None = None) -> None:
     """Compile or load the kernels a batch uses, in one worker, before the others start.
 
     :func:`process_sessions` runs it as the first task and waits for it: on a cold cache
@@ -574,7 +583,8 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     stderr, and writes numba's cache; the other workers then only load it. Without this
     every worker would compile the same kernels at the same time. Runs
     :func:`bendsense.pipeline.process` on a session of 100 flat frames (a worker's
-    per-frame kernel) at the middle of the pressure range, with the batch's options.
+    per-frame kernel) at the middle of the pressure range, with the batch's options
+    (``track``: the tracker's kernels too).
     """
     import numpy as np
 
@@ -589,7 +599,7 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
         warnings.simplefilter("ignore")
         try:
             process(session, config, calibration, constraint=constraint, method=method, objective=objective,
-                    estimate=estimate)
+                    estimate=estimate, track=track if estimate else None)
         except (BendsenseError, ValueError) as err:  # a mismatch every session reports itself, under its name
             log.debug("warm-up skipped: %s", err)
 
@@ -610,6 +620,9 @@ def process_sessions(
     estimate: bool = True,
     recursive: bool = False,
     progress: bool = True,
+    track: str | None = None,
+    bandwidth_hz: float | None = None,
+    window_s: float = 0.05,
 ) -> BatchReport:
     """Process many sessions in parallel and write one results directory per session.
 
@@ -648,6 +661,12 @@ def process_sessions(
         Search directories at any depth.
     progress : bool
         Show a tqdm progress bar (on stderr).
+    track : {"smooth", "filter"}, optional
+        Track each session's forces over time (:func:`bendsense.track`); None: not.
+    bandwidth_hz : float, optional
+        Bandwidth of the track [Hz]; None: chosen per session.
+    window_s : float, default 0.05
+        Window of the model check over frames (:func:`bendsense.check_windows`) [s].
 
     Returns
     -------
@@ -676,12 +695,12 @@ def process_sessions(
     with output.reserve([output.collection(out_dir)], inputs):
         return _process(given, out_dir, start, config=config, calibration=calibration, executor=executor,
                         workers=workers, constraint=constraint, method=method, objective=objective,
-                        overwrite=overwrite,
-                        pressure_pa=pressure_pa, estimate=estimate, recursive=recursive, progress=progress)
+                        overwrite=overwrite, pressure_pa=pressure_pa, estimate=estimate, recursive=recursive,
+                        progress=progress, track=track, bandwidth_hz=bandwidth_hz, window_s=window_s)
 
 
 def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
-             overwrite, pressure_pa, estimate, recursive, progress) -> BatchReport:
+             overwrite, pressure_pa, estimate, recursive, progress, track, bandwidth_hz, window_s) -> BatchReport:
     from bendsense.calibration import Calibration
     from bendsense.config import Config, load_config
 
@@ -709,6 +728,9 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         pressure_pa=pressure_pa,
         estimate=estimate,
         overwrite=overwrite,
+        track=track,
+        bandwidth_hz=bandwidth_hz,
+        window_s=window_s,
     )
     created = not out_dir.exists()
     try:
@@ -802,7 +824,8 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
                 with quietly():
                     first = executor.submit(warm_up, options["config"], options["calibration"],
                                             constraint=options["constraint"], method=options["method"],
-                                            objective=options["objective"], estimate=options["estimate"])
+                                            objective=options["objective"], estimate=options["estimate"],
+                                            track=options["track"])
                 first.result()
             with quietly():
                 for i, path, name in tasks:

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense.batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.results import NOT_IDENTIFIABLE, Results
@@ -144,7 +145,10 @@ class Processed(Results):
     shape : Shape
         Reconstructed shapes, batch axis over the session's frames.
     estimate : ForceEstimate or None
-        Tip forces of the same frames; None when not estimated.
+        Tip forces of the same frames, window-checked (:func:`bendsense.check_windows`);
+        None when not estimated.
+    track : Track or None
+        Tracked forces of the same frames (:func:`bendsense.track`); None when not tracked.
     config : Config
         The config used.
     reconstruct_s, estimate_s : float
@@ -154,6 +158,7 @@ class Processed(Results):
     session: object = None
     shape: object = None
     estimate: object = None
+    track: object = None
     config: object = dataclasses.field(default=None, repr=False)
     reconstruct_s: float = 0.0
     estimate_s: float = 0.0
@@ -209,6 +214,7 @@ def warn_pressure_fallback(session, name: str = "pressure_pa") -> None:
 def process(session, config=None, calibration=None, *, constraint=None, objective=None, method=None,
             pressure_pa=None, estimate: bool = True, points: int | None = None, shape=None,
             push_only: bool | None = None, tip_angle_source: str | None = None, calibration_source: str = "",
+            window_s: float = 0.05, track: str | None = None, bandwidth_hz: float | None = None,
             **options) -> Processed:
     """Reconstruct the shapes and estimate the tip forces of every frame of a session.
 
@@ -243,6 +249,13 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         Tip angle of the ``normal`` and ``follower`` constraints (default the config's).
     calibration_source : str
         Where the calibration came from (its file), named in messages.
+    window_s : float, default 0.05
+        Window of the model check over frames (:func:`bendsense.check_windows`, run on
+        every estimate) and of the track's [s].
+    track : {"smooth", "filter"}, optional
+        Track the forces over time (:func:`bendsense.track`, that mode); None: no track.
+    bandwidth_hz : float, optional
+        Bandwidth of the track [Hz]; None: chosen from the session (:func:`bendsense.track`).
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``max_iter``, ...).
 
@@ -263,7 +276,6 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         For a bad option or an argument of the wrong type (the message names it).
     """
     from bendsense import validation as check
-    from bendsense.pcc import reconstruct
     from bendsense.plausibility import check_channels, check_time_column
 
     session, config, calibration, calibration_source = _inputs(session, config, calibration, calibration_source)
@@ -279,16 +291,10 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
         raise SessionError(f"{_source(session)}: {missing} of {len(session)} frames have no pressure reading "
                            "(give pressure_pa, or --pressure-kpa on the command line)")
-    reconstruct_s = 0.0
-    if shape is None:
-        s_m = None if points is None else np.linspace(0.0, config.sensor.length_m, int(points))
-        t0 = time.perf_counter()
-        shape = reconstruct(session.signals, calibration, config.sensor, s_m=s_m)
-        reconstruct_s = time.perf_counter() - t0
-    elif np.shape(shape.tip_angle_rad)[:1] != (len(session),):
-        raise ArgumentError(f"shape: expected the shapes of the session's {len(session)} frames, got batch shape "
-                            f"{np.shape(shape.tip_angle_rad)}")
-    est, estimate_s = None, 0.0
+    shape, reconstruct_s = _shapes(session, config, calibration, points, shape)
+    est, tracked, estimate_s = None, None, 0.0
+    if track is not None and not estimate:
+        raise ArgumentError("track: needs the force estimate (estimate=True)")
     if estimate:
         from bendsense.estimation import estimate_force
 
@@ -297,10 +303,38 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         est = estimate_force(shape, session.pressure_pa, config, constraint=constraint, method=method,
                              objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
                              calibration=calibration, **options)  # its noise model gives std_n
+        est, tracked = _over_time(est, session, window_s, track, bandwidth_hz)
         estimate_s = time.perf_counter() - t0
-    results = Results.from_state(session, shape, est)
+    results = Results.from_state(session, shape, est, tracked)
     return Processed(**{f.name: getattr(results, f.name) for f in dataclasses.fields(Results)}, session=session,
-                     shape=shape, estimate=est, config=config, reconstruct_s=reconstruct_s, estimate_s=estimate_s)
+                     shape=shape, estimate=est, track=tracked, config=config, reconstruct_s=reconstruct_s,
+                     estimate_s=estimate_s)
+
+
+def _shapes(session, config, calibration, points, shape):
+    """The session's shapes (those given, checked, else reconstructed) and the time spent [s]."""
+    from bendsense.pcc import reconstruct
+
+    if shape is not None:
+        if np.shape(shape.tip_angle_rad)[:1] != (len(session),):
+            raise ArgumentError(f"shape: expected the shapes of the session's {len(session)} frames, got batch "
+                                f"shape {np.shape(shape.tip_angle_rad)}")
+        return shape, 0.0
+    s_m = None if points is None else np.linspace(0.0, config.sensor.length_m, int(points))
+    t0 = time.perf_counter()
+    shape = reconstruct(session.signals, calibration, config.sensor, s_m=s_m)
+    return shape, time.perf_counter() - t0
+
+
+def _over_time(est, session, window_s, mode, bandwidth_hz):
+    """The estimate window-checked (:func:`bendsense.check_windows`), and its track (None without ``mode``)."""
+    from bendsense.tracking import check_windows, track
+
+    est = check_windows(est, session.t_s, window_s=window_s, pressure_pa=session.pressure_pa)
+    if mode is None:
+        return est, None
+    return est, track(est, session.t_s, mode=mode, bandwidth_hz=bandwidth_hz, window_s=window_s,
+                      pressure_pa=session.pressure_pa)
 
 
 def _inputs(session, config, calibration, calibration_source):
@@ -356,6 +390,9 @@ class LiveFrame:
         Wall time of reconstruction and estimation of its block, per frame [s].
     status : str
         The frame's ``status`` in ``results.csv``.
+    track_force_n, track_std_n : ndarray, shape (2,) or None
+        The causally tracked force and its standard deviation [N] (``fx_track_n``, ...);
+        None when the processor does not track.
     """
 
     seq: int
@@ -367,6 +404,8 @@ class LiveFrame:
     estimate: object
     process_s: float
     status: str = "ok"
+    track_force_n: np.ndarray | None = None
+    track_std_n: np.ndarray | None = None
 
     @property
     def force_n(self) -> np.ndarray:
@@ -381,51 +420,6 @@ class LiveFrame:
         if self.estimate is None:
             return np.full(2, np.nan)
         return np.asarray(self.estimate.std_n, dtype=float)
-
-
-def _take(obj, index, n: int):
-    """The frames ``index`` of a batched result object (every field with leading axis ``n``)."""
-    changes = {}
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
-            changes[f.name] = value[index]
-    return dataclasses.replace(obj, **changes)
-
-
-def _put(obj, index, part, n: int):
-    """``obj`` (batch axis ``n``) with the frames ``index`` replaced by those of ``part``."""
-    changes = {}
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
-            new = np.array(value, dtype=object if value.dtype.kind in "US" else value.dtype)
-            new[index] = getattr(part, f.name)
-            changes[f.name] = new
-    return dataclasses.replace(obj, **changes)
-
-
-def _expand(est, mask: np.ndarray):
-    """A ForceEstimate for all frames of ``mask`` from one for the frames where it is True.
-
-    The other frames get NaN forces, ``success=False`` and the message "no pressure reading".
-    """
-    n, m = mask.size, int(mask.sum())
-    changes = {}
-    for f in dataclasses.fields(est):
-        value = getattr(est, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == m:
-            if value.dtype.kind == "b":
-                full = np.zeros((n, *value.shape[1:]), dtype=bool)
-            elif value.dtype.kind in "US":
-                full = np.full((n, *value.shape[1:]), "no pressure reading", dtype=object)
-            elif value.dtype.kind in "iu":
-                full = np.zeros((n, *value.shape[1:]), dtype=value.dtype)
-            else:
-                full = np.full((n, *value.shape[1:]), np.nan, dtype=value.dtype if value.dtype.kind == "f" else object)
-            full[mask] = value
-            changes[f.name] = full
-    return dataclasses.replace(est, **changes)
 
 
 @dataclass(frozen=True, eq=False)
@@ -455,6 +449,12 @@ class LiveBlock:
         Wall time of the block's reconstruction and estimation [s].
     offset : ndarray, shape (N,)
         The calibration's offsets A0 (for ΔA).
+    track : Track or None
+        The causally tracked forces of the block (:class:`bendsense.Tracker`); None when
+        the processor does not track or no frame of the block has a force estimate.
+    tracked : bool
+        Whether the processor tracks the forces (the tracked columns are then present,
+        NaN where there is no track).
     extra : dict of str to ndarray, shape (n,)
         Per-frame columns the recorded session has beside its own (``Session.extra``:
         ``host_s``, ``status``, ``tx_drops`` of a recording), written after ``status``
@@ -471,10 +471,26 @@ class LiveBlock:
     estimated: bool
     process_s: float
     offset: np.ndarray = dataclasses.field(default=None, repr=False)
+    track: object = None
+    tracked: bool = False
     extra: dict = dataclasses.field(default_factory=dict, repr=False)
 
     def __len__(self) -> int:
         return self.t_s.size
+
+    @property
+    def track_force_n(self) -> np.ndarray:
+        """Tracked tip forces (n, 2) [N]; NaN where not tracked."""
+        if self.track is None:
+            return np.full((len(self), 2), np.nan)
+        return np.asarray(self.track.force_n, dtype=float).reshape(len(self), 2)
+
+    @property
+    def track_std_n(self) -> np.ndarray:
+        """Standard deviations of the tracked forces (n, 2) [N]; NaN where not tracked."""
+        if self.track is None:
+            return np.full((len(self), 2), np.nan)
+        return np.asarray(self.track.std_n, dtype=float).reshape(len(self), 2)
 
     @property
     def force_n(self) -> np.ndarray:
@@ -506,20 +522,26 @@ class LiveBlock:
 
     def columns(self) -> dict:
         """The columns of ``results.csv`` for these frames (those of ``bendsense ... save``)."""
-        from bendsense.results import Results
+        from bendsense.results import TRACK_COLUMNS, WINDOW_COLUMN, Results, tracked_columns
         from bendsense.session import Session
 
         session = Session(self.t_s, self.signals, self.pressure_pa, extra=self.extra)
-        results = Results.from_state(session, self.shape, self.estimate)
+        results = Results.from_state(session, self.shape, self.estimate, self.track)
         columns = results.columns
+        status = self.status
         if self.estimated and self.estimate is None:  # no frame with pressure: NaN forces, in save's order
             extra = {name: columns.pop(name) for name in results.extra_names}
             columns.pop("status")
             nan = np.full(len(self), np.nan)
             columns.update({name: nan for name in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m")})
             columns["status"] = None
+            if self.tracked:
+                columns.update({name: nan for name in TRACK_COLUMNS[:4]})
+                columns.update({"track_status": status, WINDOW_COLUMN: nan})
             columns.update(extra)
-        columns["status"] = self.status
+        elif self.track is not None:  # the frames without pressure: that status, not the estimate's
+            columns.update(tracked_columns(len(self), self.estimate, self.track, status))
+        columns["status"] = status
         return columns
 
     def frame(self, i: int = -1) -> LiveFrame:
@@ -534,17 +556,19 @@ class LiveBlock:
         i = range(n)[i]
         est = None
         if self.estimate is not None and np.isfinite(self.pressure_pa[i]):
-            est = _take(self.estimate, i, n)
+            est = take_frames(self.estimate, i, n)
         return LiveFrame(
             seq=int(self.seq[i]),
             t_s=float(self.t_s[i]),
             host_ns=int(self.host_ns[i]),
             pressure_pa=float(self.pressure_pa[i]),
             delta_a=self.signals[i] - self.offset,
-            shape=_take(self.shape, i, n),
+            shape=take_frames(self.shape, i, n),
             estimate=est,
             process_s=self.process_s / n,
             status=str(self.status[i]),
+            track_force_n=self.track_force_n[i] if self.tracked else None,
+            track_std_n=self.track_std_n[i] if self.tracked else None,
         )
 
 
@@ -572,6 +596,13 @@ class LiveProcessor:
         Points of each shape along the sensor.
     estimate : bool
         Estimate the force (False: shapes only).
+    track : bool, default True
+        Track the forces causally (:class:`bendsense.Tracker`, a Kalman filter over the
+        per-frame estimates, its state kept across blocks): :attr:`LiveBlock.track`.
+    bandwidth_hz : float, optional
+        Bandwidth of the track [Hz]; None: the tracker's default.
+    window_s : float, default 0.05
+        Window of the streaming model check [s].
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``push_only``,
         ``tip_angle_source``, ...). ``max_iter`` defaults to :data:`LIVE_MAX_ITER`.
@@ -585,11 +616,13 @@ class LiveProcessor:
     estimated : int
         Frames whose force was estimated (those with a pressure).
     status_counts : dict of str to int
-        Frames per status (``ok``, ``extrapolated``, ``not_converged``, ...).
+        Frames per status (``ok``, ``extrapolated``, ``not_converged``, ...), and
+        ``window_misfit``: frames tracked while the latest completed window failed the
+        window test (``window_p_value`` < 0.001).
     """
 
     def __init__(self, calibration, config=None, *, constraint=None, method=None, objective=None, pressure_pa=None,
-                 n_points=41, estimate=True, **options):
+                 n_points=41, estimate=True, track=True, bandwidth_hz=None, window_s=0.05, **options):
         from bendsense.config import load_config
 
         self.config = load_config() if config is None else config
@@ -605,6 +638,10 @@ class LiveProcessor:
         self._fallback_told = False
         self.s_m = np.linspace(0.0, sensor.length_m, int(n_points))
         self.estimate = bool(estimate)
+        self.track = self.estimate and bool(track)
+        self._track_options = {"bandwidth_hz": bandwidth_hz, "window_s": window_s}
+        self.tracker = self._new_tracker()
+        self._track_t = -math.inf  # the latest frame time tracked [s]
         self.options = {"max_iter": LIVE_MAX_ITER, **options}
         self.frames = 0
         self.failures = 0
@@ -614,10 +651,37 @@ class LiveProcessor:
         self._t0_us = None
         self._host0_ns = None
 
+    def _new_tracker(self):
+        if not self.track:
+            return None
+        from bendsense.tracking import Tracker
+
+        return Tracker(mode="filter", **self._track_options)
+
     def reset(self) -> None:
-        """Forget the warm start and the time origin (e.g. after a reconnect)."""
+        """Forget the warm start, the track and the time origin (e.g. after a reconnect)."""
         self._previous = None
         self._t0_us = None
+        self.tracker = self._new_tracker()
+        self._track_t = -math.inf
+
+    def _track(self, est, t, p):
+        """The block's causal track; a clock that jumps back (a device reset) restarts the track there."""
+        n = t.size
+        back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
+        if not back.size:
+            self._track_t = float(t[-1])
+            return self.tracker.update(est, t, p)
+        parts = []
+        for lo, hi in zip(np.concatenate(([0], back)), np.concatenate((back, [n]))):
+            if lo in back:
+                log.info("the frame clock went back %.6g s: the track restarts", (t[lo - 1] if lo else
+                                                                                  self._track_t) - t[lo])
+                self.tracker = self._new_tracker()
+            if hi > lo:
+                parts.append(self.tracker.update(take_frames(est, slice(lo, hi), n), t[lo:hi], p[lo:hi]))
+        self._track_t = float(t[-1])
+        return parts[0] if len(parts) == 1 else concat_frames(parts)
 
     def warm_up(self) -> None:
         """Compile or load the kernels before the first frame arrives, then forget the frames used.
@@ -631,7 +695,7 @@ class LiveProcessor:
         lo, hi = self.config.actuator.pressure_range_pa
         flat = np.asarray(self.calibration.offset, dtype=float)
         for n in (1, 2):
-            self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)))
+            self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)), t_s=np.arange(n) * 1e-3)
         self.reset()
         self.frames = self.failures = self.estimated = 0
         self.status_counts = {}
@@ -681,7 +745,7 @@ class LiveProcessor:
         if self.estimate and has_p.any():
             prev = self._previous
             warm = {"initial": prev} if prev is not None else {}
-            sub = shape if has_p.all() else _take(shape, has_p, n)
+            sub = shape if has_p.all() else take_frames(shape, has_p, n)
             kwargs = {"constraint": self.constraint, "method": self.method, "objective": self.objective,
                       "calibration": self.calibration, **self.options}
             est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
@@ -690,20 +754,25 @@ class LiveProcessor:
             if warm and failed.size:
                 # a start far from a frame (a block over a fast change) can fail where the
                 # frame's own moment-balance start converges: retry those cold
-                retry = estimate_force(_take(sub, failed, m), p[has_p][failed], self.config, **kwargs)
-                est = _put(est, failed, retry, m)
+                retry = estimate_force(take_frames(sub, failed, m), p[has_p][failed], self.config, **kwargs)
+                est = put_frames(est, failed, retry, m)
             ok = np.flatnonzero(np.asarray(est.success).reshape(-1))
             if ok.size:  # a failed frame has NaN forces: it cannot seed the next block
-                self._previous = _take(est, int(ok[-1]), m)
+                self._previous = take_frames(est, int(ok[-1]), m)
             self.failures += int(np.count_nonzero(~np.asarray(est.success)))
             self.estimated += int(has_p.sum())
             if not has_p.all():
-                est = _expand(est, has_p)
+                est = expand_frames(est, has_p)
+        t_s = np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float)
+        host_ns = np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None else np.asarray(host_ns,
+                                                                                                     dtype=np.int64)
+        track = None
+        if self.tracker is not None and est is not None:  # frames without a device time: the host's
+            track = self._track(est, np.where(np.isfinite(t_s), t_s, host_ns * 1e-9), p)
         block = LiveBlock(
-            t_s=np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float),
+            t_s=t_s,
             seq=np.full(n, -1, dtype=np.int64) if seq is None else np.asarray(seq, dtype=np.int64),
-            host_ns=np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None
-            else np.asarray(host_ns, dtype=np.int64),
+            host_ns=host_ns,
             pressure_pa=p,
             signals=a,
             shape=shape,
@@ -711,11 +780,19 @@ class LiveProcessor:
             estimated=self.estimate,
             process_s=time.perf_counter() - t_start,
             offset=np.asarray(self.calibration.offset, dtype=float),
+            track=track,
+            tracked=self.track,
             extra={} if extra is None else {k: np.asarray(v) for k, v in extra.items()},
         )
         self.frames += n
         for status in block.status:
             self.status_counts[status] = self.status_counts.get(status, 0) + 1
+        if track is not None:
+            from bendsense.estimation.kernels import MISFIT_P
+            from bendsense.results import WINDOW_MISFIT
+
+            misfits = int(np.count_nonzero(np.asarray(track.window_p_value) < MISFIT_P))
+            self.status_counts[WINDOW_MISFIT] = self.status_counts.get(WINDOW_MISFIT, 0) + misfits
         return block
 
     def process_readings(self, readings) -> LiveBlock:

@@ -418,7 +418,9 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
     -----
     The force panel's legend sits above it, where it covers no data.
     Frames whose status is not ``ok`` (``extrapolated``, ``not converged``) are marked
-    with grey ticks at the bottom of the force panel.
+    with grey ticks at the bottom of the force panel. Results with a tracked force
+    (``fx_track_n``, ...) show it as lines with their ±2σ bands over the per-frame
+    forces drawn as points, and tick the frames whose ``track_status`` is not ``ok``.
     """
     import matplotlib as mpl
 
@@ -443,7 +445,12 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
         status = np.asarray(results["status"]) if "status" in results.columns else None
         kpa = (np.asarray(results["pressure_pa"], dtype=float) * 1e-3
                if pressure and "pressure_pa" in results.columns else None)
-        _force_panel(ax_f, t, force, std, status=status, pressure_kpa=kpa)
+        tracked = None
+        if getattr(results, "has_track", False):
+            tracked = tuple(np.stack([np.asarray(results[f"f{c}_track{s}_n"], dtype=float) for c in "xy"], axis=-1)
+                            for s in ("", "_std"))
+            status = np.asarray(results["track_status"])
+        _force_panel(ax_f, t, force, std, status=status, pressure_kpa=kpa, tracked=tracked)
     else:
         ax_f.set_ylabel("tip force [N]")
         ax_f.text(0.5, 0.5, "no force estimate", transform=ax_f.transAxes, ha="center", va="center", color="0.4")
@@ -467,20 +474,43 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
     return fig
 
 
-def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None):
+def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=None):
     """Fx, Fy (frames, 2) [N] against ``t`` with their ±2σ bands; frames not ``ok`` ticked; pressure on the right.
 
     A component with an infinite σ (not identifiable: the shape does not determine it)
-    is left out, not drawn at the value where the fit stopped.
+    is left out, not drawn at the value where the fit stopped. With ``tracked`` (the
+    tracked force and its σ, each (frames, 2)), the band is the tracked force's and the
+    per-frame forces are points under it.
     """
+    from matplotlib.legend_handler import HandlerTuple
+
     ax.set_ylabel("tip force [N]")
-    handles = []
+    handles, labels, dots = [], [], []
+    drawn, bands = [force], []
     for i, (color, label) in enumerate((("C0", "F_x"), ("C3", "F_y"))):
         f, band = np.where(np.isinf(std[:, i]), np.nan, force[:, i]), 2.0 * std[:, i]
-        (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label)
+        points = None
+        if tracked is not None:  # over the band, under the tracked line
+            (points,) = ax.plot(t, f, ".", color=color, markersize=2.5, alpha=0.5, markeredgewidth=0, zorder=2.2,
+                                label=f"{label} per frame")
+            f = np.where(np.isinf(tracked[1][:, i]), np.nan, tracked[0][:, i])
+            band = 2.0 * tracked[1][:, i]
+            label += " tracked"
+        drawn.append(f)
+        bands.append(band)
+        (line,) = ax.plot(t, f, color=color, linewidth=1.4, label=label, zorder=2.4)
         fill = ax.fill_between(t, f - band, f + band, color=color, alpha=0.2, linewidth=0, label=f"{label} ± 2σ")
         handles.append((line, fill))
-    labels = ["F_x ± 2σ", "F_y ± 2σ"]
+        labels.append(f"{label} ± 2σ")
+        if points is not None:
+            dots.append(points)
+    if dots:  # one legend entry for the points of both components, side by side, large enough to see
+        from matplotlib.lines import Line2D
+
+        dots = tuple(Line2D([], [], linestyle="none", marker=".", markersize=8, color=d.get_color(), alpha=0.6)
+                     for d in dots)
+        handles.append(dots)
+        labels.append("per frame")
     if status is not None and np.any(status != "ok"):
         bad = status != "ok"
         (ticks,) = ax.plot(t[bad], np.zeros(bad.sum()), "|", color="0.5", transform=ax.get_xaxis_transform(),
@@ -489,6 +519,12 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None):
         labels.append("status not ok")
     ax.axhline(0.0, color="k", linewidth=0.5)
     ax.grid(True, alpha=0.3)
+    values = np.concatenate([np.ravel(v) for v in drawn])
+    values, bands = values[np.isfinite(values)], np.concatenate(bands)
+    bands = bands[np.isfinite(bands)]
+    if values.size:  # the forces set the limits: a band far wider than them (a barely determined component) is cut
+        pad = max(0.1 * float(np.ptp(values)), float(np.median(bands)) if bands.size else 0.0, 1e-3)
+        ax.set_ylim(float(values.min()) - pad, float(values.max()) + pad)
     if pressure_kpa is not None and np.any(np.isfinite(pressure_kpa)):
         px = ax.twinx()
         (pline,) = px.plot(t, pressure_kpa, color="0.45", linewidth=1.0, label="pressure")
@@ -501,7 +537,8 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None):
         labels.append("pressure (right axis)")
     # above the panel, where it covers no data
     ax.legend(handles, labels, fontsize="small", ncols=2, loc="lower right", bbox_to_anchor=(1.0, 1.0),
-              frameon=False, borderaxespad=0.2)
+              frameon=False, borderaxespad=0.2,
+              handler_map={dots: HandlerTuple(ndivide=None)} if dots else None)
 
 
 def plot_calibration(calibration, data=None, ax=None):
@@ -542,7 +579,7 @@ def plot_calibration(calibration, data=None, ax=None):
     return fig
 
 
-def results_from_state(session, shape, estimate=None):
+def results_from_state(session, shape, estimate=None, track=None):
     """In-memory :class:`~bendsense.results.Results` of a pipeline state (for plots).
 
     Parameters
@@ -553,10 +590,12 @@ def results_from_state(session, shape, estimate=None):
         Its reconstructed shapes.
     estimate : ForceEstimate, optional
         Its force estimates.
+    track : Track, optional
+        Its tracked forces (:func:`bendsense.track`).
     """
     from bendsense.results import Results
 
-    return Results.from_state(session, shape, estimate)
+    return Results.from_state(session, shape, estimate, track)
 
 
 def plot_results(
@@ -631,7 +670,8 @@ def plot_results(
     if title is None:
         name = Path(source).name if source is not None else "results"
         if results.has_forces:
-            what = "shapes and tip forces" + (f" ({estimated})" if estimated else "")
+            what = ("shapes and tip forces, tracked" if results.has_track else "shapes and tip forces") + (
+                f" ({estimated})" if estimated else "")
         else:
             what = "shapes only (no force estimate)"
         title = f"{name}: {what} of {frames} frames"

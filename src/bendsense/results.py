@@ -2,11 +2,13 @@
 
 ``results.csv`` has a row per frame: ``t_s``, ``pressure_pa``, ``kappa1..kappaN``
 [1/m], ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, after estimation ``fx_n``,
-``fy_n``, ``fx_std_n``, ``fy_std_n``, ``residual_m``, ``status``; then the input's
-extra columns unchanged (one whose name is a result column's, such as a
-ground-truth ``fx_n``, is written as ``input_fx_n``, also when there is no estimate,
-so that it never poses as one). ``shape.npz`` holds ``s_m``
-(M,) and ``positions_m`` (frames, M, 2).
+``fy_n``, ``fx_std_n``, ``fy_std_n``, ``residual_m``, ``status``; after tracking
+(:func:`bendsense.track`) ``fx_track_n``, ``fy_track_n``, ``fx_track_std_n``,
+``fy_track_std_n``, ``track_status``; then ``window_p_value`` when a window model check
+ran (:func:`bendsense.check_windows`); then the input's extra columns unchanged (one
+whose name is a result column's, such as a ground-truth ``fx_n``, is written as
+``input_fx_n``, also when there is no estimate, so that it never poses as one).
+``shape.npz`` holds ``s_m`` (M,) and ``positions_m`` (frames, M, 2).
 """
 
 from __future__ import annotations
@@ -33,15 +35,24 @@ NOT_IDENTIFIABLE = "not_identifiable"  # the shape does not determine the load a
 MODEL_MISFIT = "model_misfit"
 NO_FORCE = "no_force"  # a NaN force is never ok
 IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
+WINDOW_MISFIT = "window_misfit"  # a count, not a status: frames whose latest window failed the window test
 #: the flagged statuses that the status lines of ``record`` and ``live`` count, with their labels
 FLAGGED = ((EXTRAPOLATED, "extrapolated"), (NOT_CONVERGED, "not converged"), (MODEL_MISFIT, "misfit"),
-           (NOT_IDENTIFIABLE, "not identifiable"), (IMPLAUSIBLE_FORCE, "implausible force"))
+           (WINDOW_MISFIT, "window misfit"), (NOT_IDENTIFIABLE, "not identifiable"),
+           (IMPLAUSIBLE_FORCE, "implausible force"))
 
-__all__ = ["Results", "write_results", "read_results", "frame_status", "estimate_status"]
+__all__ = ["Results", "write_results", "read_results", "frame_status", "estimate_status", "tracked_columns"]
 
 _KAPPA = re.compile(r"kappa[0-9]+$")
 FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
-RESULT_COLUMNS = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS)
+#: the tracked force (:meth:`bendsense.Track.to_columns`), after ``status``
+TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
+#: the p-value of the window model check of each frame's window, after the tracked columns
+WINDOW_COLUMN = "window_p_value"
+RESULT_COLUMNS = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS, *TRACK_COLUMNS,
+                  WINDOW_COLUMN)
+_NUMERIC = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n",
+            "residual_m", *TRACK_COLUMNS[:4], WINDOW_COLUMN)
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,7 +65,7 @@ class Results:
     extra_names: tuple = field(default_factory=tuple)
 
     @classmethod
-    def from_state(cls, session, shape, estimate=None) -> Results:
+    def from_state(cls, session, shape, estimate=None, track=None) -> Results:
         """The results of a processed session in memory: the columns of ``results.csv``.
 
         Parameters
@@ -65,6 +76,9 @@ class Results:
             Its reconstructed shapes.
         estimate : ForceEstimate, optional
             Its force estimates.
+        track : Track, optional
+            Its tracked forces (:func:`bendsense.track`): the columns
+            :data:`TRACK_COLUMNS` after ``status``, and the track's ``window_p_value``.
         """
         frames = len(session)
         kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
@@ -88,6 +102,7 @@ class Results:
                 residual_m=np.asarray(estimate.residual_m).reshape(frames),
             )
         columns["status"] = frame_status(shape, estimate)
+        columns.update(tracked_columns(frames, estimate, track, columns["status"]))
         extra_names = []
         for name, values in session.extra.items():
             # an input column named like a result (e.g. ground truth fx_n) is kept as
@@ -138,6 +153,46 @@ class Results:
     def has_forces(self) -> bool:
         """True when the results include a force estimate."""
         return "fx_n" in self.columns
+
+    @property
+    def has_track(self) -> bool:
+        """True when the results include a tracked force (:data:`TRACK_COLUMNS`)."""
+        return "fx_track_n" in self.columns
+
+
+def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict:
+    """The columns after ``status``: the tracked force and the window p-value, where known.
+
+    Parameters
+    ----------
+    frames : int
+        Frames of the results.
+    estimate : ForceEstimate, optional
+        Its ``window_p_value`` (:func:`bendsense.check_windows`) is the column
+        ``window_p_value`` when there is no track.
+    track : Track, optional
+        The tracked force: the columns :data:`TRACK_COLUMNS`, and its ``window_p_value``.
+    status : ndarray of str, shape (frames,), optional
+        The frames' own ``status``: a frame that is not ``ok`` has that reason as its
+        ``track_status`` too (the track's value stays, a prediction where the frame has
+        no force), never ``ok``.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (frames,)
+        Empty without a track and without a window check.
+    """
+    columns = {}
+    window = getattr(estimate, WINDOW_COLUMN, None)
+    if track is not None:
+        columns.update({name: np.asarray(values).reshape(frames) for name, values in track.to_columns().items()})
+        if status is not None:
+            own = np.asarray(status, dtype=object).reshape(frames)
+            columns["track_status"] = np.where(own != OK, own, np.asarray(columns["track_status"], dtype=object))
+        window = track.window_p_value
+    if window is not None:
+        columns[WINDOW_COLUMN] = np.asarray(window, dtype=float).reshape(frames)
+    return columns
 
 
 def estimate_status(estimate, n: int) -> np.ndarray:
@@ -219,7 +274,7 @@ def flagged_counts(counts: dict, sep: str = "  ") -> str:
     return sep.join(f"{label} {counts.get(status, 0)}" for status, label in FLAGGED)
 
 
-def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = False, inputs=()) -> Path:
+def write_results(out_dir, session, shape, estimate=None, *, track=None, overwrite: bool = False, inputs=()) -> Path:
     """Write ``results.csv`` and ``shape.npz`` of a processed session into ``out_dir``.
 
     The directory is written complete or not at all (:func:`bendsense.output.write_dir`):
@@ -237,6 +292,10 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
         Reconstructed shapes, batch axis over the session's frames.
     estimate : ForceEstimate, optional
         Force estimates for the same frames.
+    track : Track, optional
+        Tracked forces of the same frames (:func:`bendsense.track`).
+    overwrite : bool, default False
+        Replace a previous bendsense output in ``out_dir``.
     inputs : iterable of paths
         Inputs never to be written over (the session's source is always one).
 
@@ -247,7 +306,7 @@ def write_results(out_dir, session, shape, estimate=None, *, overwrite: bool = F
     """
     source = getattr(session, "source", None)
     inputs = [*inputs, *([source] if source and Path(source).exists() else [])]
-    return Results.from_state(session, shape, estimate).write(out_dir, overwrite=overwrite, inputs=inputs)
+    return Results.from_state(session, shape, estimate, track).write(out_dir, overwrite=overwrite, inputs=inputs)
 
 
 def read_results(out_dir) -> Results:
@@ -271,9 +330,7 @@ def read_results(out_dir) -> Results:
             raise SessionError(f"{path}: line {line}: {len(row)} cells, expected {len(header)} (one per column)")
     cells = list(zip(*body)) if body else [[] for _ in header]
     columns = {h: parse_column(list(c)) for h, c in zip(header, cells)}
-    numeric = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n",
-               "residual_m")
-    for h in (*numeric, *(h for h in header if _KAPPA.match(h))):
+    for h in (*_NUMERIC, *(h for h in header if _KAPPA.match(h))):
         if h in columns:
             try:
                 columns[h] = columns[h].astype(float)
@@ -300,7 +357,7 @@ def read_results(out_dir) -> Results:
     if positions.ndim != 3 or positions.shape[0] != frames or positions.shape[1:] != (s_m.size, 2):
         raise SessionError(f"{npz_path}: positions_m has shape {positions.shape}, expected ({frames}, {s_m.size}, 2) "
                            "for the frames of results.csv")
-    known = {"t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS}
+    known = set(RESULT_COLUMNS)
     extra = tuple(h for h in header if h not in known and not _KAPPA.match(h))
     return Results(columns=columns, s_m=s_m, positions_m=positions, extra_names=extra)
 

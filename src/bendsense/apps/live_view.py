@@ -6,7 +6,9 @@ tested without a display:
 - the model, :class:`bendsense.pipeline.LiveProcessor`: every frame received, in
   blocks, → shapes (paper eq. 1–7) and warm-started tip forces (eq. 18 and 21);
 - the view, :class:`LiveView`: the shape with the force arrow, the channel levels, and
-  Fx, Fy with their ±2σ bands and the pressure over the last seconds; matplotlib
+  Fx, Fy with their ±2σ bands and the pressure over the last seconds (when the
+  processor tracks the force, the tracked Fx, Fy with their ±2σ bands over the
+  per-frame forces drawn as points, and the arrow shows the tracked force); matplotlib
   artists updated in place and redrawn with blitting (``copy_from_bbox`` /
   ``restore_region`` / ``draw_artist`` / ``blit``), so a frame costs a few artists, not
   a full figure draw. The status line shows the estimation rate, the backlog and the
@@ -85,7 +87,8 @@ class LiveView:
         self.force_range_n = float(force_range_n)
         self.pressure_range_kpa = float(pressure_range_kpa)
         self.max_points = int(max_points)
-        self._history = []  # blocks of (t_s, fx, fy, sx, sy, p_kpa), oldest first
+        self._history = []  # blocks of (t_s, fx, fy, sx, sy, p_kpa, tracked fx, fy, sx, sy), oldest first
+        self.tracked = bool(getattr(processor, "track", False))
         self.scale_m_per_n = float(scale_m_per_n)
         self.text_interval_s = float(text_interval_s)
         self._text_regions = {}
@@ -192,26 +195,33 @@ class LiveView:
         tx.set_ylim(-self.force_range_n, self.force_range_n)
         tx.set_xlabel("time [s] (0 = newest frame)")
         tx.set_ylabel("tip force [N]")
-        tx.set_title("force (±2σ band) and pressure", fontsize="medium")
+        tx.set_title("tracked force (±2σ band) over the per-frame points, and pressure" if self.tracked
+                     else "force (±2σ band) and pressure", fontsize="medium")
         tx.axhline(0.0, color="k", linewidth=0.6)
         tx.grid(True, alpha=0.3)
         px = self.ax_pressure = tx.twinx()
         px.set_ylim(0.0, self.pressure_range_kpa)
         px.set_ylabel("pressure [kPa]", color="0.35")
         px.tick_params(axis="y", colors="0.35")
-        self.bands = []
-        self.force_lines = []
+        self.bands = []  # of the tracked force when tracked, else of the per-frame one
+        self.force_lines = []  # the per-frame forces: points under a track, else lines
+        self.track_lines = []
         for color, label in (("C0", "Fx"), ("C3", "Fy")):
             band = PolyCollection([np.zeros((0, 2))], facecolors=color, alpha=0.2, linewidths=0, animated=True)
             tx.add_collection(band, autolim=False)
-            (line,) = tx.plot([], [], "-", color=color, linewidth=1.4, label=label, animated=True)
+            style = dict(linestyle="none", marker=".", markersize=2.5, alpha=0.5) if self.tracked else {}
+            (line,) = tx.plot([], [], color=color, linewidth=1.4, animated=True, **style,
+                              label=label + (" per frame" if self.tracked else ""))
             self.bands.append(band)
             self.force_lines.append(line)
+            if self.tracked:
+                (tline,) = tx.plot([], [], "-", color=color, linewidth=1.6, label=f"{label} tracked", animated=True)
+                self.track_lines.append(tline)
         (self.pressure_line,) = px.plot([], [], "-", color="0.45", linewidth=1.0, label="pressure", animated=True)
         tx.fill_between([], [], [], color="0.6", alpha=0.3, label="±2σ")
         handles = [*tx.get_legend_handles_labels()[0], self.pressure_line]
-        tx.legend(handles=handles, loc="upper left", fontsize="small", ncols=4)
-        self.series_artists = [*self.bands, *self.force_lines, self.pressure_line]
+        tx.legend(handles=handles, loc="upper left", fontsize="small", ncols=4, markerscale=3)
+        self.series_artists = [*self.bands, *self.force_lines, *self.track_lines, self.pressure_line]
 
     def _bar_verts(self, values, half_width=0.25):
         x = self._bar_x[:, None]
@@ -259,7 +269,8 @@ class LiveView:
         """
         t = np.where(np.isfinite(block.t_s), block.t_s, np.asarray(block.host_ns) * 1e-9)
         f, sd = block.force_n, block.std_n
-        self._history.append(np.column_stack([t, f, sd, block.pressure_pa * 1e-3]))
+        self._history.append(np.column_stack([t, f, sd, block.pressure_pa * 1e-3, block.track_force_n,
+                                              block.track_std_n]))
         newest = t[-1]
         while len(self._history) > 1 and self._history[0][-1, 0] < newest - self.window_s:
             self._history.pop(0)
@@ -277,6 +288,9 @@ class LiveView:
         for j, (line, band) in enumerate(zip(self.force_lines, self.bands)):
             f, sd = h[:, 1 + j], h[:, 3 + j]
             line.set_data(x, f)
+            if self.tracked:  # the band is the tracked force's
+                f, sd = h[:, 6 + j], h[:, 8 + j]
+                self.track_lines[j].set_data(x, f)
             ok = np.isfinite(f) & np.isfinite(sd)
             lo, hi = f - 2 * sd, f + 2 * sd
             # one polygon per run of finite values (a gap where there is no estimate)
@@ -318,15 +332,21 @@ class LiveView:
         tip = pos[-1]
         self.tip_marker.set_data([tip[0]], [tip[1]])
         force, std = frame.force_n, frame.std_n
-        if np.all(np.isfinite(force)):
-            end = tip + force * self.scale_m_per_n * MM
+        tracked = frame.track_force_n is not None and np.all(np.isfinite(frame.track_force_n))
+        if np.all(np.isfinite(force)) or tracked:
+            shown = frame.track_force_n if tracked else force  # the arrow: the tracked force
+            end = tip + shown * self.scale_m_per_n * MM
             self.arrow.set_positions(tuple(tip), tuple(end))
             self.arrow.set_visible(True)
             text = (
                 f"F  = ({force[0]:+.3f}, {force[1]:+.3f}) N\n"
                 f"±σ = ({std[0]:.3f}, {std[1]:.3f}) N\n"
                 f"|F| = {math.hypot(*force):.3f} N"
-            )
+            ) if np.all(np.isfinite(force)) else "F: no estimate of this frame"
+            if tracked:
+                ts = frame.track_std_n
+                text += (f"\ntracked F = ({shown[0]:+.3f}, {shown[1]:+.3f}) N\n"
+                         f"       ±σ = ({ts[0]:.3f}, {ts[1]:.3f}) N")
         else:
             self.arrow.set_visible(False)
             if frame.estimate is None:

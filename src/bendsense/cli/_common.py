@@ -21,6 +21,10 @@ __all__ = [
     "make_overwrite_option",
     "overwrite_option",
     "objective_option",
+    "window_option",
+    "bandwidth_option",
+    "live_bandwidth_option",
+    "make_bandwidth_option",
     "quiet",
     "refuse_existing",
     "save_figure",
@@ -150,6 +154,21 @@ objective_option = click.option(
     "--objective", type=click.Choice(OBJECTIVES),
     help="Fit the coil angles S/d the sensor measures ('angles') or the PCC positions of paper eq. 18 "
          "('positions'); default: from the config (angles).")
+
+window_option = click.option(
+    "--window-s", type=Finite(min=0, min_open=True), default=None,
+    help="Window of the model check over frames [s] (a mean residual per window tested against its covariance; "
+         "p < 0.001 flags its frames model_misfit); default 0.05.")
+def make_bandwidth_option(default_text: str):
+    """``--bandwidth-hz`` of the tracked force, with its default told in ``default_text``."""
+    return click.option("--bandwidth-hz", type=Finite(min=0, min_open=True), default=None,
+                        help=f"Bandwidth of the tracked force [Hz]: the -3 dB bandwidth of the steady-state filter; "
+                             f"default: {default_text}.")
+
+
+bandwidth_option = make_bandwidth_option("chosen from the session by maximum likelihood")
+#: ``--bandwidth-hz`` of ``record --estimate`` and ``live``, which cannot look ahead to choose one
+live_bandwidth_option = make_bandwidth_option("5 Hz (bendsense.tracking.DEFAULT_BANDWIDTH_HZ)")
 
 
 def refuse_existing(path: Path, overwrite: bool) -> None:

@@ -14,11 +14,13 @@ from pathlib import Path
 import click
 
 from bendsense import output
+from bendsense.choices import TRACK_MODES
 from bendsense.cli._common import (
     CONSTRAINTS,
     METHODS,
     InterspersedCommand,
     PressureKpa,
+    bandwidth_option,
     check_figure_suffix,
     config_option,
     log_no_parameter_covariance,
@@ -27,6 +29,7 @@ from bendsense.cli._common import (
     quiet,
     say,
     step_io,
+    window_option,
 )
 
 log = logging.getLogger("bendsense")
@@ -68,11 +71,16 @@ def _dask_executor(address: str):
 @objective_option
 @click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")
 @click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
+@window_option
+@click.option("--track", "track_mode", type=click.Choice(TRACK_MODES),
+              help="Track each session's force over time, as the chain's 'track' step: 'smooth' (offline, RTS "
+                   "smoother) or 'filter' (causal, Kalman filter); default: no track.")
+@bandwidth_option
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
 @overwrite_option
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, objective,
-            pressure_kpa, no_estimate, recursive, overwrite, no_progress):
+            pressure_kpa, no_estimate, window_s, track_mode, bandwidth_hz, recursive, overwrite, no_progress):
     """Process many sessions in parallel: reconstruct, estimate and save each one.
 
     Every SESSION_OR_DIR is a session CSV, a native session directory, or a
@@ -80,7 +88,9 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
     deep; with --recursive at any depth). Session NAME goes to OUT/NAME/results.csv
     and shape.npz; existing outputs are skipped unless --overwrite. A session that
     fails is reported with its reason while the others finish; the exit code is 1
-    if any failed. Prints a summary table at the end.
+    if any failed. Prints a summary table at the end. Each session's frames are
+    model-checked in windows (--window-s, as the chain's 'estimate'); --track adds
+    the tracked force (as the chain's 'track' step).
 
     Ctrl-C or SIGTERM stops the run at once and its workers with it: each session
     finished so far is complete, the others have no output, one line says how many
@@ -100,6 +110,10 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
 
         if scheduler and workers is not None:
             raise click.UsageError("give --workers or --scheduler, not both")
+        if no_estimate and (track_mode or bandwidth_hz is not None):
+            raise click.UsageError("--track and --bandwidth-hz need the force estimate: not with --no-estimate")
+        if bandwidth_hz is not None and not track_mode:
+            raise click.UsageError("--bandwidth-hz is the bandwidth of the track: give --track smooth|filter")
         if not no_estimate and config_path is not None:  # the workers' warnings are silenced: say it here, once
             from bendsense.config import load_config
             from bendsense.errors import BendsenseError
@@ -127,6 +141,9 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
                 estimate=not no_estimate,
                 recursive=recursive,
                 progress=not no_progress and not quiet(),
+                track=track_mode,
+                bandwidth_hz=bandwidth_hz,
+                window_s=0.05 if window_s is None else window_s,
             )
         except KeyboardInterrupt:
             if client is not None:  # its connections close under the cluster's feet: no tracebacks of theirs
@@ -192,11 +209,14 @@ def plot(target, figure_path, shapes, dpi, overwrite):
                 raise click.BadParameter(f"{target}: not a results directory", param_hint="RESULTS_DIR")
             source, out = target, figure_path
         elif state.get("shape") is not None:
-            source = results_from_state(state["session"], state["shape"], state.get("estimate"))
+            source = results_from_state(state["session"], state["shape"], state.get("estimate"), state.get("track"))
             out = target
             est = state.get("estimate")
             if est is not None:
                 estimated = f"constraint {est.constraint}, method {est.method}, objective {est.objective}"
+            if state.get("track") is not None:
+                tracked = state["track"]
+                estimated += f"; tracked: {tracked.mode}, {tracked.bandwidth_hz:.3g} Hz"
         elif target.is_dir():
             raise click.UsageError(f"give the figure file: 'plot {target} -o FIG.png'")
         else:

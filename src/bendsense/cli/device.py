@@ -20,6 +20,7 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
+    live_bandwidth_option,
     log_no_parameter_covariance,
     make_config_option,
     make_overwrite_option,
@@ -52,7 +53,7 @@ def _status_line(stats, est=None) -> str:
     return line
 
 
-def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True):
+def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True, bandwidth_hz=None):
     """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``, its kernels ready.
 
     The kernels compile (first run after an install) or load here, before a port opens
@@ -69,7 +70,10 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     pressure_kpa : float or None
         Constant pressure for a board without a pressure reading [kPa].
     estimate : bool, default True
-        Estimate the tip forces; False reconstructs shapes only.
+        Estimate the tip forces (and track them causally, :class:`bendsense.Tracker`);
+        False reconstructs shapes only.
+    bandwidth_hz : float or None
+        Bandwidth of the track [Hz]; None: the tracker's default.
     """
     from bendsense.calibration import Calibration
     from bendsense.pipeline import LiveProcessor
@@ -81,6 +85,7 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         objective=objective,
         pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
         estimate=estimate,
+        bandwidth_hz=bandwidth_hz,
     )
     import warnings
 
@@ -127,12 +132,11 @@ def make_outlets(processor, driver, port):
     from bendsense.interop.lsl import LslOutlets
 
     rate = 0.0 if driver.hello is None else float(driver.hello.rate_hz)
-    return LslOutlets(
-        processor.config.sensor.n_segments,
-        rate,
-        source_id=f"bendsense {port}",
-        meta={"constraint": processor.constraint, "method": processor.method, "objective": processor.objective},
-    )
+    meta = {"constraint": processor.constraint, "method": processor.method, "objective": processor.objective}
+    if processor.tracker is not None:
+        meta["track"] = f"filter, bandwidth {processor.tracker.bandwidth_hz:g} Hz"
+    return LslOutlets(processor.config.sensor.n_segments, rate, source_id=f"bendsense {port}", meta=meta,
+                      tracked=processor.track)
 
 
 @contextlib.contextmanager
@@ -179,6 +183,7 @@ def _sigterm_as_interrupt():
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @objective_option
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
+@live_bandwidth_option
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",
@@ -206,6 +211,7 @@ def record(
     constraint,
     objective,
     pressure_kpa,
+    bandwidth_hz,
     lsl,
     lsl_wait,
     quiet_status,
@@ -222,8 +228,10 @@ def record(
 
     With --estimate (and --calibration), every frame is reconstructed and its force
     estimated as it arrives, in blocks on a background thread, and appended to
-    SESSION/results.csv (the columns of 'save'; synced at least every 0.5 s, so a
-    killed recording keeps its results up to the last second). The status line adds
+    SESSION/results.csv (the columns of 'estimate track --filter save'; synced at least
+    every 0.5 s, so a killed recording keeps its results up to the last second). The
+    force is tracked causally (a Kalman filter, --bandwidth-hz), frame by frame as in
+    'track --filter'. The status line adds
     the estimation rate and backlog. --lsl publishes the shapes and forces on Lab
     Streaming Layer (waiting up to --lsl-wait seconds for a consumer before the board
     starts, so that LabRecorder gets every frame).
@@ -260,7 +268,8 @@ def record(
                 from bendsense.errors import require_extra
 
                 require_extra("pylsl", "lsl", "--lsl")
-            processor = make_processor(config or load_config(), calibration_path, constraint, objective, pressure_kpa)
+            processor = make_processor(config or load_config(), calibration_path, constraint, objective, pressure_kpa,
+                                       bandwidth_hz=bandwidth_hz)
         driver = Driver(
             port,
             baudrate=baud or DEFAULT_BAUDRATE,

@@ -16,6 +16,7 @@ from bendsense.cli._common import (
     PressureKpa,
     check_figure_suffix,
     config_option,
+    live_bandwidth_option,
     objective_option,
     overwrite_option,
     quiet,
@@ -52,6 +53,7 @@ _NO_CALIBRATION = (
     help="Run time [s] (default: until the window is closed; 3 s with --save).",
 )
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
+@live_bandwidth_option
 @click.option(
     "--scale",
     "scale_mm_per_n",
@@ -88,6 +90,7 @@ def live(
     save_path,
     seconds,
     pressure_kpa,
+    bandwidth_hz,
     scale_mm_per_n,
     max_fps,
     baud,
@@ -100,9 +103,10 @@ def live(
 
     PORT is a serial port (/dev/ttyACM0, COM3), a pseudo-terminal path (from
     'bendsense sim-device') or a pyserial URL. Every frame received is reconstructed
-    and its force estimated (in blocks, warm-started from the previous block); the
-    newest is drawn, with Fx, Fy (±2σ) and the pressure of the last 10 s, the
-    estimation rate and the counts of extrapolated, not converged and misfit frames.
+    and its force estimated (in blocks, warm-started from the previous block) and
+    tracked causally (a Kalman filter, --bandwidth-hz); the newest is drawn, with the
+    tracked Fx, Fy (±2σ) over the per-frame points and the pressure of the last 10 s,
+    the estimation rate and the counts of extrapolated, not converged and misfit frames.
     --lsl publishes every frame on Lab Streaming Layer. At the end, the achieved frame
     rate and the end-to-end latency per frame (bytes read to artists drawn) are printed.
     Ctrl-C or SIGTERM stops it with one line and exit status 130 or 143 (no --save image
@@ -133,7 +137,7 @@ def live(
 
         require_extra("pylsl", "lsl", "--lsl")
     config = load_config(config_path)
-    processor = make_processor(config, calibration_path, constraint, objective, pressure_kpa)
+    processor = make_processor(config, calibration_path, constraint, objective, pressure_kpa, bandwidth_hz=bandwidth_hz)
     if save_path is not None:
         view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:

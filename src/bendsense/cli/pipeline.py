@@ -1,9 +1,9 @@
-"""Chained processing steps: ``load``, ``reconstruct``, ``estimate``, ``save``, ``mcap``, ``plot``, ``export``.
+"""Chained processing steps: ``load``, ``reconstruct``, ``estimate``, ``track``, ``save``, ``mcap``, ``export``.
 
 Each step returns a function of the pipeline state; the group runs them in the
 order given on the command line::
 
-    bendsense load run.csv --calibration cal.yaml reconstruct estimate --constraint normal save out/
+    bendsense load run.csv --calibration cal.yaml reconstruct estimate --constraint normal track save out/
 """
 
 from __future__ import annotations
@@ -20,20 +20,24 @@ from bendsense.cli._common import (
     ANGLE_SOURCES,
     CONSTRAINTS,
     METHODS,
+    Finite,
     InterspersedCommand,
     PressureKpa,
+    bandwidth_option,
     config_option,
     log_no_parameter_covariance,
     objective_option,
     overwrite_option,
     say,
     step_io,
+    window_option,
 )
 from bendsense.errors import BendsenseError, SessionError
 
 log = logging.getLogger("bendsense")
 
 RESULTS_FILES = ("results.csv", "shape.npz")  # what 'save' writes into its directory
+DEFAULT_WINDOW_S = 0.05  # the window of the model check over frames (bendsense.check_windows) [s]
 
 
 class _Interrupted(click.ClickException):
@@ -223,8 +227,14 @@ def reconstruct(points):
 @click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
 @click.option("--tip-angle-source", type=click.Choice(ANGLE_SOURCES),
               help="Tip angle of the normal/follower constraints (default: from the config).")
-def estimate(constraint, method, objective, push_only, tip_angle_source):
-    """Estimate the tip force of every frame from its shape and pressure."""
+@window_option
+def estimate(constraint, method, objective, push_only, tip_angle_source, window_s):
+    """Estimate the tip force of every frame from its shape and pressure.
+
+    The frames are then checked in windows of --window-s (default 50 ms): a window
+    whose mean residual its covariance does not explain (p < 0.001) makes its frames
+    'model_misfit' (force kept; column window_p_value of results.csv).
+    """
 
     def step(state):
         import warnings
@@ -238,12 +248,13 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
         config = state["config"]
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
+        window = DEFAULT_WINDOW_S if window_s is None else window_s
         with warnings.catch_warnings():  # said below as one WARNING line per chain, not as a Python warning
             warnings.simplefilter("ignore", NoParameterCovarianceWarning)
             processed = process(session, config, state["calibration"], shape=shape, constraint=constraint,
                                 method=method, objective=objective, push_only=push_only,
                                 tip_angle_source=tip_angle_source,
-                                calibration_source=str(state.get("calibration_path") or ""))
+                                calibration_source=str(state.get("calibration_path") or ""), window_s=window)
         if processed.estimate.uncertainty != "none":
             log_no_parameter_covariance(config)
         counts = processed.counts()
@@ -255,8 +266,8 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
             log.warning("%d of %d frames did not converge (status 'not_converged')", counts.not_converged,
                         len(session))
         if counts.model_misfit:
-            log.warning("%d of %d frames: the model does not explain the shape (status 'model_misfit', force kept)",
-                        counts.model_misfit, len(session))
+            log.warning("%d of %d frames: the model does not explain the shape, per frame or over its %g ms window "
+                        "(status 'model_misfit', force kept)", counts.model_misfit, len(session), window * 1e3)
         if counts.implausible_force:
             log.warning("%d of %d frames: a force beyond what the actuator can carry (status 'implausible_force', "
                         "force kept): check the units of the config's stiffness and the calibration",
@@ -265,7 +276,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
             log.warning("%d of %d frames: the shape does not determine the load along one direction (status "
                         "'not_identifiable', σ inf along it; e.g. an axial load on a nearly straight actuator)",
                         counts.not_identifiable, len(session))
-        state["estimate"] = processed.estimate
+        state.update(estimate=processed.estimate, window_s=window, track=None)
         return state
 
     def precheck(state):
@@ -281,6 +292,45 @@ def estimate(constraint, method, objective, push_only, tip_angle_source):
     return step
 
 
+@click.command("track", cls=InterspersedCommand)
+@click.option("--smooth/--filter", "smooth", default=True, show_default=True,
+              help="Rauch-Tung-Striebel smoother (offline: every frame uses the whole session) or Kalman filter "
+                   "(causal: the frame and those before, as 'record --estimate' and 'live').")
+@bandwidth_option
+@click.option("--window-s", type=Finite(min=0, min_open=True), default=None,
+              help="Window of the model check over frames [s]; default: that of 'estimate' (0.05).")
+def track(smooth, bandwidth_hz, window_s):
+    """Track the tip force over time: a filter or smoother over the per-frame estimates.
+
+    Only the sensor-noise part of each frame's covariance averages down; the
+    calibration and model-parameter parts are a bias shared by neighbouring frames
+    and are carried through whole, so the tracked σ never falls below them. Frames
+    without a force are predicted over; gaps and pressure steps restart the track.
+    Adds fx_track_n, fy_track_n, fx_track_std_n, fy_track_std_n and track_status to
+    results.csv (after status), the tracked force to the summary figure and
+    /bendsense/wrench_tracked to the MCAP file.
+    """
+
+    def step(state):
+        import numpy as np
+
+        from bendsense.tracking import track as track_forces
+
+        est = _require(state, "estimate", "track", "'estimate'")
+        session = state["session"]
+        window = state.get("window_s", DEFAULT_WINDOW_S) if window_s is None else window_s
+        tracked = track_forces(est, session.t_s, mode="smooth" if smooth else "filter", bandwidth_hz=bandwidth_hz,
+                               window_s=window, pressure_pa=session.pressure_pa)
+        log.info("tracked %d frames (%s, bandwidth %.3g Hz)", len(session), tracked.mode, tracked.bandwidth_hz)
+        if not np.isfinite(tracked.force_n).any():  # a track of nothing must not pass silently
+            log.warning("no tracked force: no frame has a force with a noise covariance (a calibration without "
+                        "its flat-recording noise gives no σ, and a track weighs frames by it)")
+        state["track"] = tracked
+        return state
+
+    return step
+
+
 @click.command("save", cls=InterspersedCommand)
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
 @overwrite_option
@@ -291,7 +341,8 @@ def save(out_dir, overwrite):
         from bendsense.results import write_results
 
         shape = _require(state, "shape", "save", "'reconstruct'")
-        write_results(out_dir, state["session"], shape, state.get("estimate"), overwrite=overwrite)
+        write_results(out_dir, state["session"], shape, state.get("estimate"), track=state.get("track"),
+                      overwrite=overwrite)
         state["out_dir"] = out_dir
         say(f"wrote {out_dir}/results.csv and shape.npz ({len(state['session'])} frames)")
         return state
@@ -306,7 +357,8 @@ def mcap(mcap_path, overwrite):
     """Write the session and its results as ROS 2 messages to FILE.mcap (extra 'ros').
 
     Topics /bendsense/wrench (geometry_msgs/msg/WrenchStamped, after 'estimate'),
-    /bendsense/force_std, /bendsense/status, /bendsense/shape (nav_msgs/msg/Path) and
+    /bendsense/force_std, /bendsense/wrench_tracked and /bendsense/force_tracked_std
+    (after 'track'), /bendsense/status, /bendsense/shape (nav_msgs/msg/Path) and
     /bendsense/pressure (sensor_msgs/msg/FluidPressure), stamped with the session's time.
     """
     from bendsense.interop.ros2 import require_ros, write_mcap
@@ -316,7 +368,8 @@ def mcap(mcap_path, overwrite):
     def step(state):
 
         shape = _require(state, "shape", "mcap", "'reconstruct'")
-        write_mcap(mcap_path, state["session"], shape, state.get("estimate"), overwrite=overwrite)
+        write_mcap(mcap_path, state["session"], shape, state.get("estimate"), track=state.get("track"),
+                   overwrite=overwrite)
         say(f"wrote {mcap_path} ({len(state['session'])} frames)")
         return state
 
@@ -340,4 +393,4 @@ def export(csv_path, overwrite):
     return step_io(step, outputs=[output.file(csv_path, overwrite=overwrite, suffixes=output.CSV)])
 
 
-COMMANDS = [load, reconstruct, estimate, save, mcap, export]
+COMMANDS = [load, reconstruct, estimate, track, save, mcap, export]

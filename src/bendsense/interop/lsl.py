@@ -3,7 +3,10 @@
 :class:`LslOutlets` publishes two streams, one sample per frame:
 
 - ``bendsense-force``, type ``Force``: ``fx_n, fy_n, fx_std_n, fy_std_n`` [N] (NaN where a
-  frame has no estimate);
+  frame has no estimate), then, when the processor tracks the force (the default of
+  ``record --estimate`` and ``live``), the causally tracked force ``fx_track_n,
+  fy_track_n, fx_track_std_n, fy_track_std_n`` [N] (:class:`bendsense.Tracker`: a
+  Kalman filter, so each sample's tracked value uses that frame and the frames before);
 - ``bendsense-shape``, type ``Shape``: ``kappa1 … kappaN`` [1/m], ``tip_x_m``, ``tip_y_m``
   [m], ``tip_angle_rad`` [rad].
 
@@ -23,9 +26,11 @@ import numpy as np
 
 from bendsense.errors import require_extra
 
-__all__ = ["LslOutlets", "FORCE_CHANNELS", "shape_channels"]
+__all__ = ["LslOutlets", "FORCE_CHANNELS", "TRACK_CHANNELS", "shape_channels"]
 
 FORCE_CHANNELS = (("fx_n", "N"), ("fy_n", "N"), ("fx_std_n", "N"), ("fy_std_n", "N"))
+#: the tracked force after the per-frame one (the columns of results.csv of the same names)
+TRACK_CHANNELS = (("fx_track_n", "N"), ("fy_track_n", "N"), ("fx_track_std_n", "N"), ("fy_track_std_n", "N"))
 
 
 def shape_channels(n_segments: int) -> list:
@@ -68,6 +73,9 @@ class LslOutlets:
         LSL source id (e.g. the port), so that a restarted run is recognised.
     meta : dict, optional
         Further ``key: value`` pairs for both streams' description (constraint, ...).
+    tracked : bool, default False
+        The force stream also carries the tracked force (:data:`TRACK_CHANNELS`, after
+        :data:`FORCE_CHANNELS`); the blocks pushed then have a ``track``.
 
     Raises
     ------
@@ -75,11 +83,14 @@ class LslOutlets:
         If pylsl is not installed (extra ``lsl``).
     """
 
-    def __init__(self, n_segments: int, rate_hz: float, source_id: str = "bendsense", meta: dict | None = None):
+    def __init__(self, n_segments: int, rate_hz: float, source_id: str = "bendsense", meta: dict | None = None,
+                 tracked: bool = False):
         pylsl = require_extra("pylsl", "lsl", "--lsl")
         meta = {"frame": "bendsense_base (+y along the actuator at its base, +x toward the centre of curvature)",
                 **(meta or {})}
-        self.force = pylsl.StreamOutlet(_info(pylsl, "bendsense-force", "Force", FORCE_CHANNELS, rate_hz,
+        self.tracked = bool(tracked)
+        channels = FORCE_CHANNELS + (TRACK_CHANNELS if self.tracked else ())
+        self.force = pylsl.StreamOutlet(_info(pylsl, "bendsense-force", "Force", channels, rate_hz,
                                               f"{source_id}-force", meta))
         self.shape = pylsl.StreamOutlet(_info(pylsl, "bendsense-shape", "Shape", shape_channels(n_segments),
                                               rate_hz, f"{source_id}-shape", meta))
@@ -99,7 +110,8 @@ class LslOutlets:
         if not n:
             return
         stamps = (np.asarray(block.host_ns, dtype=float) * 1e-9 + self._offset_s).tolist()
-        force = np.column_stack([block.force_n, block.std_n])
+        force = np.column_stack([block.force_n, block.std_n, *((block.track_force_n, block.track_std_n)
+                                                                if self.tracked else ())])
         shape = block.shape
         kappa = np.asarray(shape.curvature_per_m, dtype=float).reshape(n, -1)
         tip = np.asarray(shape.tip_position_m, dtype=float).reshape(n, 2)

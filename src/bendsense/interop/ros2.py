@@ -4,26 +4,35 @@ One message per frame on each topic, all in the frame ``bendsense_base`` (DESIGN
 section 2: base at the origin, ``+y`` along the actuator at its base, ``+x`` toward the
 centre of curvature; SI units, metres and newtons):
 
-=============================== =================================== ===========================================
-topic                           type                                content
-=============================== =================================== ===========================================
-``/bendsense/wrench``           ``geometry_msgs/msg/WrenchStamped`` tip force ``(fx_n, fy_n, 0)`` [N], torque 0
-``/bendsense/force_std``        ``geometry_msgs/msg/Vector3Stamped`` its standard deviation ``(fx_std_n,
-                                                                    fy_std_n, 0)`` [N] (NaN: no noise model)
-``/bendsense/status``           ``diagnostic_msgs/msg/DiagnosticArray`` one ``DiagnosticStatus`` named
-                                                                    ``bendsense/force``: level OK (``ok``), WARN
-                                                                    (``extrapolated``, ``model_misfit``) or ERROR
-                                                                    (``not converged``); message = the status of
-                                                                    ``results.csv``; values ``fx_std_n``,
-                                                                    ``fy_std_n``, ``residual_m``, ``status``
-``/bendsense/shape``            ``nav_msgs/msg/Path``               the reconstructed shape: one pose per arc-length
-                                                                    sample, position ``(x, y, 0)`` [m], orientation
-                                                                    the tangent (a rotation about ``z``)
-``/bendsense/pressure``         ``sensor_msgs/msg/FluidPressure``   actuation pressure [Pa], variance 0 (unknown);
-                                                                    frames without a reading are not written
-=============================== =================================== ===========================================
+================================ ======================================= ==============================================
+topic                            type                                    content
+================================ ======================================= ==============================================
+``/bendsense/wrench``            ``geometry_msgs/msg/WrenchStamped``     tip force ``(fx_n, fy_n, 0)`` [N], torque 0
+``/bendsense/force_std``         ``geometry_msgs/msg/Vector3Stamped``    its standard deviation ``(fx_std_n, fy_std_n,
+                                                                         0)`` [N] (NaN: no noise model)
+``/bendsense/wrench_tracked``    ``geometry_msgs/msg/WrenchStamped``     the tracked tip force ``(fx_track_n,
+                                                                         fy_track_n, 0)`` [N] (``track`` step,
+                                                                         :func:`bendsense.track`), torque 0
+``/bendsense/force_tracked_std`` ``geometry_msgs/msg/Vector3Stamped``    its standard deviation ``(fx_track_std_n,
+                                                                         fy_track_std_n, 0)`` [N]
+``/bendsense/status``            ``diagnostic_msgs/msg/DiagnosticArray`` one ``DiagnosticStatus`` named
+                                                                         ``bendsense/force``: level OK (``ok``), WARN
+                                                                         (``extrapolated``, ``model_misfit``) or ERROR
+                                                                         (``not converged``); message = the status of
+                                                                         ``results.csv``; values ``fx_std_n``,
+                                                                         ``fy_std_n``, ``residual_m``, ``status``, and
+                                                                         ``track_status``, ``window_p_value`` where
+                                                                         results.csv has them
+``/bendsense/shape``             ``nav_msgs/msg/Path``                   the reconstructed shape: one pose per
+                                                                         arc-length sample, position ``(x, y, 0)`` [m],
+                                                                         orientation the tangent (a rotation about
+                                                                         ``z``)
+``/bendsense/pressure``          ``sensor_msgs/msg/FluidPressure``       actuation pressure [Pa], variance 0 (unknown);
+                                                                         frames without a reading are not written
+================================ ======================================= ==============================================
 
-The force topics are written when the results hold a force estimate. Time stamps (the
+The force topics are written when the results hold a force estimate, the tracked ones
+when they hold a track (a ``track`` step earlier in the chain). Time stamps (the
 header stamp and the MCAP log time) are the session's: ``meta["start_time_utc"]`` of a
 recorded session plus the frame's time ``t_s`` from the first frame; a session CSV without
 that key is stamped with ``t_s`` itself (seconds after 1970-01-01, which viewers show as
@@ -51,6 +60,8 @@ MCAP = (".mcap",)
 TOPICS = {
     "wrench": "/bendsense/wrench",
     "force_std": "/bendsense/force_std",
+    "wrench_tracked": "/bendsense/wrench_tracked",
+    "force_tracked_std": "/bendsense/force_tracked_std",
     "status": "/bendsense/status",
     "shape": "/bendsense/shape",
     "pressure": "/bendsense/pressure",
@@ -179,7 +190,7 @@ def _tangent_quaternions(positions_m: np.ndarray) -> np.ndarray:
     return q
 
 
-def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) -> Path:
+def write_mcap(path, session, shape, estimate=None, *, track=None, overwrite: bool = False) -> Path:
     """Write a processed session as ROS 2 messages to an MCAP file.
 
     Parameters
@@ -192,6 +203,9 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
         Reconstructed shapes, batch axis over the session's frames.
     estimate : ForceEstimate, optional
         Force estimates of the same frames; without it no force topics are written.
+    track : Track, optional
+        Tracked forces of the same frames (:func:`bendsense.track`); without it no
+        tracked topics are written.
     overwrite : bool
         Replace an existing file; otherwise :class:`~bendsense.errors.OutputExistsError`.
 
@@ -209,7 +223,7 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
     from bendsense.results import Results
 
     path = Path(path)
-    results = Results.from_state(session, shape, estimate)
+    results = Results.from_state(session, shape, estimate, track)
     cols = results.columns
     stamps = frame_stamps_ns(session)
     positions = results.positions_m
@@ -233,10 +247,20 @@ def write_mcap(path, session, shape, estimate=None, *, overwrite: bool = False) 
                                                     "torque": _vec(0.0, 0.0)}})
                 write("force_std", "geometry_msgs/msg/Vector3Stamped",
                       {"header": header, "vector": _vec(cols["fx_std_n"][k], cols["fy_std_n"][k])})
+            if results.has_track:
+                write("wrench_tracked", "geometry_msgs/msg/WrenchStamped",
+                      {"header": header, "wrench": {"force": _vec(cols["fx_track_n"][k], cols["fy_track_n"][k]),
+                                                    "torque": _vec(0.0, 0.0)}})
+                write("force_tracked_std", "geometry_msgs/msg/Vector3Stamped",
+                      {"header": header, "vector": _vec(cols["fx_track_std_n"][k], cols["fy_track_std_n"][k])})
             status = str(cols["status"][k])
             values = {"status": status}
             if results.has_forces:
                 values.update({name: repr(float(cols[name][k])) for name in ("fx_std_n", "fy_std_n", "residual_m")})
+            if results.has_track:
+                values["track_status"] = str(cols["track_status"][k])
+            if "window_p_value" in cols:
+                values["window_p_value"] = repr(float(cols["window_p_value"][k]))
             write("status", "diagnostic_msgs/msg/DiagnosticArray", {"header": header, "status": [{
                 "level": _LEVEL.get(status, 1), "name": "bendsense/force", "message": status,
                 "hardware_id": hardware_id,

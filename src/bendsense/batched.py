@@ -1,0 +1,107 @@
+"""Frames of batched result objects: take some, put some back, expand to a larger batch.
+
+The live processor (:class:`bendsense.pipeline.LiveProcessor`) estimates the frames of a
+block that have a pressure, retries those that failed, and keeps one frame as the next
+block's warm start: these helpers cut and join the frozen result dataclasses
+(``Shape``, ``ForceEstimate``) along their leading frame axis, field by field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames"]
+
+
+def take_frames(obj, index, n: int):
+    """The frames ``index`` of a batched result object (every field with leading axis ``n``).
+
+    Parameters
+    ----------
+    obj : dataclass
+        A result batched over ``n`` frames (``Shape``, ``ForceEstimate``, ``Track``).
+    index : int, slice, array of int or bool
+        The frames.
+    n : int
+        The batch size: the fields whose leading axis has this length are cut.
+    """
+    changes = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
+            changes[f.name] = value[index]
+    return dataclasses.replace(obj, **changes)
+
+
+def put_frames(obj, index, part, n: int):
+    """``obj`` (batch axis ``n``) with the frames ``index`` replaced by those of ``part``.
+
+    Parameters
+    ----------
+    obj : dataclass
+        A result batched over ``n`` frames.
+    index : array of int
+        The frames to replace.
+    part : dataclass
+        The same kind of result for those frames.
+    n : int
+        The batch size of ``obj``.
+    """
+    changes = {}
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
+            new = np.array(value, dtype=object if value.dtype.kind in "US" else value.dtype)
+            new[index] = getattr(part, f.name)
+            changes[f.name] = new
+    return dataclasses.replace(obj, **changes)
+
+
+def expand_frames(est, mask: np.ndarray):
+    """A ForceEstimate for all frames of ``mask`` from one for the frames where it is True.
+
+    The other frames get NaN forces, ``success=False`` and the message "no pressure reading".
+
+    Parameters
+    ----------
+    est : ForceEstimate
+        The estimates of the frames where ``mask`` is True.
+    mask : ndarray of bool, shape (n,)
+        The frames that have an estimate.
+    """
+    n, m = mask.size, int(mask.sum())
+    changes = {}
+    for f in dataclasses.fields(est):
+        value = getattr(est, f.name)
+        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == m:
+            if value.dtype.kind == "b":
+                full = np.zeros((n, *value.shape[1:]), dtype=bool)
+            elif value.dtype.kind in "US":
+                full = np.full((n, *value.shape[1:]), "no pressure reading", dtype=object)
+            elif value.dtype.kind in "iu":
+                full = np.zeros((n, *value.shape[1:]), dtype=value.dtype)
+            else:
+                full = np.full((n, *value.shape[1:]), np.nan, dtype=value.dtype if value.dtype.kind == "f" else object)
+            full[mask] = value
+            changes[f.name] = full
+    return dataclasses.replace(est, **changes)
+
+
+def concat_frames(parts):
+    """One result of the frames of ``parts`` in order (every field with a leading frame axis joined).
+
+    Parameters
+    ----------
+    parts : sequence of dataclass
+        Results of the same kind (``Track``), each batched over its own frames (the length
+        of its ``force_n``); the other fields are those of the first.
+    """
+    counts = [np.shape(part.force_n)[0] for part in parts]
+    changes = {}
+    for f in dataclasses.fields(parts[0]):
+        values = [getattr(part, f.name) for part in parts]
+        if all(isinstance(v, np.ndarray) and v.ndim and v.shape[0] == k for v, k in zip(values, counts)):
+            changes[f.name] = np.concatenate(values)
+    return dataclasses.replace(parts[0], **changes)
