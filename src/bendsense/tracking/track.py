@@ -24,12 +24,12 @@ from bendsense.tracking import kalman as _kalman
 from bendsense.tracking import windows as _windows
 from bendsense.validation import short
 
-__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_GOLDEN_STEPS", "TRACK_COLUMNS"]
+__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_XATOL_DECADES", "TRACK_COLUMNS"]
 
 #: Bandwidth of the causal filter when none is given and none can be chosen from the data (live) [Hz].
 DEFAULT_BANDWIDTH_HZ = 5.0
-#: Golden-section steps of the maximum-likelihood bandwidth after its grid (one point per decade): to ~5 %.
-ML_GOLDEN_STEPS = 8
+#: Precision of the maximum-likelihood bandwidth after its grid (one point per decade), in decades: ~1 %.
+ML_XATOL_DECADES = 0.004
 LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
 #: The results.csv columns of a track (:meth:`Track.to_columns`).
 TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
@@ -151,21 +151,32 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     checked = _windows.flag(estimate, bounds, p, n, window_s)
     z, Rn, floor = measurements(checked)
     dt = np.diff(t, prepend=t[0])
+    dt_ref = _windows.reference_interval(t)
     if bandwidth_hz is None:
-        bandwidth_hz = ml_bandwidth(z, Rn, dt, starts, _windows.reference_interval(t))
+        bandwidth_hz = ml_bandwidth(z, Rn, dt, starts, dt_ref)
     B = t.size
-    state = new_state()
-    xp, Pp, xf, Pf = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
-    _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, float(bandwidth_hz), state, xp, Pp, xf, Pf)
+    xp, Pp, xf, Pf = np.empty((B, 4)), np.empty((B, 4, 4)), np.empty((B, 4)), np.empty((B, 4, 4))
+    _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, intensity(bandwidth_hz, dt_ref), new_state(), xp, Pp, xf, Pf,
+              True)
     if mode == "smooth":
-        xs, Ps = np.empty((B, 2)), np.empty((B, 2, 2))
-        _jit.call(_kalman.rts_smoother, starts, xp, Pp, xf, Pf, xs, Ps)
+        xs, Ps = np.empty((B, 4)), np.empty((B, 4, 4))
+        _jit.call(_kalman.rts_smoother, dt, starts, xp, Pp, xf, Pf, xs, Ps)
         floor = fill_floor(floor, starts, backward=True)
     else:
         xs, Ps = xf, Pf
         floor = fill_floor(floor, starts, backward=False)
     own = estimate_status(checked, B)
     return result(xs, Ps, floor, checked.window_p_value, own, float(bandwidth_hz), mode, t, z)
+
+
+def intensity(bandwidth_hz, dt_ref_s):
+    """The process intensity q [1/s³] of a bandwidth at the reference interval; 0 without one.
+
+    :func:`bendsense.tracking.kalman.process_intensity`.
+    """
+    if not (math.isfinite(dt_ref_s) and dt_ref_s > 0):
+        return 0.0  # fewer than two frames: nothing moves between them
+    return float(_jit.call(_kalman.process_intensity, float(bandwidth_hz), float(dt_ref_s)))
 
 
 def measurements(estimate):
@@ -203,44 +214,41 @@ def fill_floor(floor, starts, backward):
 
 
 def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
-    """The maximum-likelihood bandwidth [Hz] of the innovations: a grid of one point per decade, then golden sections.
+    """The maximum-likelihood bandwidth [Hz] of the innovations: a grid of one point per decade, then Brent's method.
 
-    The grid runs from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the frame rate; the
-    golden-section search refines log B between the best grid point's neighbours to
-    within 5 % (:data:`ML_GOLDEN_STEPS` filter passes).
+    The grid runs from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the frame rate;
+    Brent's bounded search (parabolic steps, golden sections where they fail) refines
+    log B between the best grid point's neighbours to :data:`ML_XATOL_DECADES`.
     """
     top = 0.25 / dt_ref_s if math.isfinite(dt_ref_s) and dt_ref_s > 0 else 1.0
     lo_log, hi_log = math.log10(LOWEST_BANDWIDTH_HZ), max(math.log10(top), math.log10(LOWEST_BANDWIDTH_HZ) + 0.5)
-    grid = np.logspace(lo_log, hi_log, int(math.ceil(hi_log - lo_log)) + 1)
-    ll = _log_likelihoods(z, Rn, dt, starts, grid)
+    grid = np.linspace(lo_log, hi_log, int(math.ceil(hi_log - lo_log)) + 1)
+    ll = _log_likelihoods(z, Rn, dt, starts, 10.0 ** grid, dt_ref_s)
     if not np.isfinite(ll).any() or np.ptp(ll[np.isfinite(ll)]) == 0.0:
         return DEFAULT_BANDWIDTH_HZ  # nothing to choose from (no observations): the documented default
+    from scipy.optimize import minimize_scalar
+
     i = int(np.nanargmax(ll))
-    a, b = math.log10(grid[max(i - 1, 0)]), math.log10(grid[min(i + 1, grid.size - 1)])
-    ratio = (math.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - ratio * (b - a), a + ratio * (b - a)
-    fc, fd = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** c, 10.0 ** d]))
-    for _ in range(ML_GOLDEN_STEPS):
-        if fc >= fd:
-            b, d, fd = d, c, fc
-            c = b - ratio * (b - a)
-            fc = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** c]))[0]
-        else:
-            a, c, fc = c, d, fd
-            d = a + ratio * (b - a)
-            fd = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** d]))[0]
-    best = c if fc >= fd else d
-    return float(10.0 ** best) if max(fc, fd) >= ll[i] else float(grid[i])
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+
+    def cost(x):
+        f = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** x]), dt_ref_s)[0]
+        return -f if math.isfinite(f) else np.inf
+
+    best = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": ML_XATOL_DECADES})
+    return float(10.0 ** best.x) if best.fun <= -ll[i] else float(grid[i])
 
 
-def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz):
-    out = np.empty(bandwidths_hz.size)
-    _jit.call(_kalman.log_likelihoods, z, Rn, dt, starts, np.ascontiguousarray(bandwidths_hz, dtype=float), out)
+def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz, dt_ref_s):
+    q = np.array([intensity(b, dt_ref_s) for b in bandwidths_hz])
+    out = np.empty(q.size)
+    _jit.call(_kalman.log_likelihoods, z, Rn, dt, starts, q, out)
     return out
 
 
 def result(x, P, floor, window_p, own, bandwidth_hz, mode, t, z):
-    """The :class:`Track` of the states ``x`` (B, 2), ``P`` (B, 2, 2) with the floor added back."""
+    """The :class:`Track` of the states ``x`` (B, 4), ``P`` (B, 4, 4) (force and rate) with the floor added back."""
+    x, P = x[:, :2], P[:, :2, :2]
     seen = np.diagonal(P, axis1=1, axis2=2) < 0.5 * _kalman.DIFFUSE
     cov = P + np.where(np.isfinite(floor), floor, 0.0)
     unseen = ~seen[:, :, None] | ~seen[:, None, :]
@@ -255,8 +263,8 @@ def result(x, P, floor, window_p, own, bandwidth_hz, mode, t, z):
 
 
 def new_state():
-    """A filter's state before its first frame: x (2,), P (2, 2), the latest noise covariance, [has one]."""
-    return np.zeros(2), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(1)
+    """A filter's state before its first frame: x (4,), P (4, 4), the latest noise covariance, [has it, Fx, Fy seen]."""
+    return np.zeros(4), np.zeros((4, 4)), np.zeros((2, 2)), np.zeros(3)
 
 
 def _check_bandwidth(value, allow_none):
@@ -301,6 +309,7 @@ class Tracker:
         self._state = new_state()
         self._last = None  # (t, pressure) of the latest frame
         self._dt_ref = None  # the median interval of the first frames
+        self._q = None  # the process intensity of the bandwidth at that interval [1/s³]
         self._floor = np.full((2, 2), np.nan)
         self._open = None  # the open window: (its frames' payload, segment start time, window index)
         self._p = np.nan  # the latest completed window's p-value
@@ -333,8 +342,10 @@ class Tracker:
         dt = np.diff(tt, prepend=tt[0])[-t.size:]
         z, Rn, floor = measurements(estimate_block)
         B = t.size
-        xf, Pf, xp, Pp = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
-        _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, self.bandwidth_hz, self._state, xp, Pp, xf, Pf)
+        if self._q is None and self._dt_ref:  # the bandwidth's intensity at the first frames' interval, once
+            self._q = intensity(self.bandwidth_hz, self._dt_ref)
+        xf, Pf, xp, Pp = np.empty((B, 4)), np.empty((B, 4, 4)), np.empty((B, 4)), np.empty((B, 4, 4))
+        _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, self._q or 0.0, self._state, xp, Pp, xf, Pf, True)
         floor = self._fill(floor, starts)
         window_p = self._windows(estimate_block, t, starts)
         own = estimate_status(estimate_block, B)
