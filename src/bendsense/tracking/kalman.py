@@ -205,6 +205,45 @@ def predict(x, P, h, q, Rbar):
 
 
 @njit(cache=True)
+def filter_step(x, P, Rbar, has, z, Rn, dt, restart, q, S, K, T, xp, Pp, store):
+    """One frame of the filter (:func:`kalman_filter`): restart or predict, then update; returns its log-likelihood.
+
+    The first two observations of a component after a restart fix its force and rate:
+    they count 0. ``S``, ``K``, ``T`` are :func:`update`'s scratch; with ``store`` the
+    prediction (the state before the update) goes to ``xp`` (4,), ``Pp`` (4, 4).
+    """
+    if restart:
+        x[:] = 0.0
+        P[:, :] = 0.0
+        P[0, 0] = DIFFUSE
+        P[1, 1] = DIFFUSE
+        P[2, 2] = DIFFUSE_RATE
+        P[3, 3] = DIFFUSE_RATE
+        has[1] = 0.0
+        has[2] = 0.0
+    else:  # before any fully observed frame R̄ is 0: the state moves by its rate only
+        predict(x, P, dt, q, Rbar)
+    if store:
+        xp[:] = x
+        Pp[:, :] = P
+    use0 = observed(z, Rn, 0)
+    use1 = observed(z, Rn, 1)
+    if use0 and use1:  # the process noise follows each component's noise variance, not their correlation
+        Rbar[0, 0] = Rn[0, 0]
+        Rbar[1, 1] = Rn[1, 1]
+        has[0] = 1.0
+    if not (use0 or use1):
+        return 0.0
+    known = (not use0 or has[1] >= 2.0) and (not use1 or has[2] >= 2.0)
+    ll = update(x, P, z, Rn, use0, use1, S, K, T)
+    if use0:
+        has[1] += 1.0
+    if use1:
+        has[2] += 1.0
+    return ll if known else 0.0
+
+
+@njit(cache=True)
 def kalman_filter(z, Rn, dt, restart, q, state, x_pred, P_pred, x_filt, P_filt, store):
     """The Kalman filter over frames (B,); returns the innovations' log-likelihood.
 
@@ -213,46 +252,45 @@ def kalman_filter(z, Rn, dt, restart, q, state, x_pred, P_pred, x_filt, P_filt, 
     ``q`` the process intensity per unit noise variance [1/s³] (:func:`process_intensity`).
     ``state`` = (x (4,), P (4, 4), R̄ (2, 2), [has R̄, observations of Fx, of Fy since the
     restart]) carried from the previous call (streaming) and updated in place. With
-    ``store`` writes the predictions (B, 4), (B, 4, 4) and the filtered states.
+    ``store`` writes the predictions (B, 4), (B, 4, 4) and the filtered states (else those
+    arrays need only one row: scratch).
     """
     x, P, Rbar, has = state
     S, K, T = np.empty((2, 2)), np.empty((4, 2)), np.empty((4, 4))
     loglik = 0.0
     for k in range(z.shape[0]):
-        if restart[k]:
-            x[:] = 0.0
-            P[:, :] = 0.0
-            P[0, 0] = DIFFUSE
-            P[1, 1] = DIFFUSE
-            P[2, 2] = DIFFUSE_RATE
-            P[3, 3] = DIFFUSE_RATE
-            has[1] = 0.0
-            has[2] = 0.0
-        else:  # before any fully observed frame R̄ is 0: the state moves by its rate only
-            predict(x, P, dt[k], q, Rbar)
-        if store:
-            x_pred[k] = x
-            P_pred[k] = P
-        use0 = observed(z[k], Rn[k], 0)
-        use1 = observed(z[k], Rn[k], 1)
-        if use0 and use1:  # the process noise follows each component's noise variance, not their correlation
-            Rbar[0, 0] = Rn[k, 0, 0]
-            Rbar[1, 1] = Rn[k, 1, 1]
-            has[0] = 1.0
-        if use0 or use1:
-            # the first two observations of a component after a restart fix its force and rate: no likelihood
-            known = (not use0 or has[1] >= 2.0) and (not use1 or has[2] >= 2.0)
-            ll = update(x, P, z[k], Rn[k], use0, use1, S, K, T)
-            if known:
-                loglik += ll
-            if use0:
-                has[1] += 1.0
-            if use1:
-                has[2] += 1.0
+        j = k if store else 0
+        loglik += filter_step(x, P, Rbar, has, z[k], Rn[k], dt[k], restart[k], q, S, K, T, x_pred[j], P_pred[j],
+                              store)
         if store:
             x_filt[k] = x
             P_filt[k] = P
     return loglik
+
+
+@njit(cache=True)
+def finish_frame(x, P, floor, force, std, cov):
+    """A frame's tracked force (2,), σ (2,), covariance (2, 2): the state's force block plus the floor, whole.
+
+    A component not observed since the restart (variance over half :data:`DIFFUSE`) is NaN
+    with σ and its covariance row infinite; a floor that is not finite adds nothing.
+    """
+    for a in range(2):
+        seen_a = P[a, a] < _SEEN
+        force[a] = x[a] if seen_a else np.nan
+        for b in range(2):
+            if seen_a and P[b, b] < _SEEN:
+                cov[a, b] = P[a, b] + (floor[a, b] if math.isfinite(floor[a, b]) else 0.0)
+            else:
+                cov[a, b] = np.inf
+        std[a] = math.sqrt(cov[a, a])
+
+
+@njit(cache=True)
+def finish(x, P, floor, force, std, cov):
+    """:func:`finish_frame` over frames (B,)."""
+    for k in range(x.shape[0]):
+        finish_frame(x[k], P[k], floor[k], force[k], std[k], cov[k])
 
 
 @njit(cache=True)
@@ -337,8 +375,8 @@ def rts_smoother(dt, restart, x_pred, P_pred, x_filt, P_filt, x_out, P_out):
 @njit(cache=True)
 def log_likelihoods(z, Rn, dt, restart, intensities, out):
     """The innovations' log-likelihood of the filter at each process intensity of ``intensities`` into ``out``."""
-    none = np.empty((0, 4))
-    none3 = np.empty((0, 4, 4))
+    none = np.empty((1, 4))
+    none3 = np.empty((1, 4, 4))
     for i in range(intensities.size):
         state = (np.zeros(4), np.zeros((4, 4)), np.zeros((2, 2)), np.zeros(3))
         out[i] = kalman_filter(z, Rn, dt, restart, intensities[i], state, none, none3, none, none3, False)

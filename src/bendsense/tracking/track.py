@@ -19,8 +19,10 @@ from bendsense import _jit
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError
 from bendsense.estimation.kernels import MISFIT_P
+from bendsense.estimation.result import ForceEstimate
 from bendsense.results import MODEL_MISFIT, OK, estimate_status
 from bendsense.tracking import kalman as _kalman
+from bendsense.tracking import stream as _stream
 from bendsense.tracking import windows as _windows
 from bendsense.validation import short
 
@@ -183,17 +185,16 @@ def measurements(estimate):
     """The filter's measurements of an estimate: the force (B, 2), its noise covariance (B, 2, 2) and the floor.
 
     A component with an infinite σ (``not_identifiable``) gets a NaN force (not observed);
-    the floor (B, 2, 2) is the covariance's calibration and parameter parts.
+    the floor (B, 2, 2) is the covariance's calibration and parameter parts
+    (:func:`bendsense.tracking.stream.measure`).
     """
-    z = np.array(estimate.force_n, dtype=float).reshape(-1, 2)
+    force = np.asarray(estimate.force_n, dtype=float).reshape(-1, 2)
+    B = force.shape[0]
+    z, Rn, floor = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2, 2))
     parts = estimate.covariance_parts_n2
-    if parts is None:
-        nan = np.full((z.shape[0], 2, 2), np.nan)
-        return np.full_like(z, np.nan), nan, nan
-    parts = np.asarray(parts, dtype=float).reshape(-1, 3, 2, 2)
-    std = np.asarray(estimate.std_n, dtype=float).reshape(-1, 2)
-    z[~np.isfinite(std)] = np.nan
-    return np.ascontiguousarray(z), np.ascontiguousarray(parts[:, 0]), parts[:, 1] + parts[:, 2]
+    parts = np.full((B, 3, 2, 2), np.nan) if parts is None else np.asarray(parts, dtype=float).reshape(B, 3, 2, 2)
+    _jit.call(_stream.measure, force, np.asarray(estimate.std_n, dtype=float).reshape(B, 2), parts, z, Rn, floor)
+    return z, Rn, floor
 
 
 def fill_floor(floor, starts, backward):
@@ -248,16 +249,11 @@ def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz, dt_ref_s):
 
 def result(x, P, floor, window_p, own, bandwidth_hz, mode, t, z):
     """The :class:`Track` of the states ``x`` (B, 4), ``P`` (B, 4, 4) (force and rate) with the floor added back."""
-    x, P = x[:, :2], P[:, :2, :2]
-    seen = np.diagonal(P, axis1=1, axis2=2) < 0.5 * _kalman.DIFFUSE
-    cov = P + np.where(np.isfinite(floor), floor, 0.0)
-    unseen = ~seen[:, :, None] | ~seen[:, None, :]
-    cov = np.where(unseen, np.inf, cov)
-    force = np.where(seen, x, np.nan)
-    std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
-    status = np.array(own, dtype=object)
-    misfit = (np.asarray(window_p) < MISFIT_P) & (status == OK)
-    status[misfit] = MODEL_MISFIT
+    B = x.shape[0]
+    force, std, cov = np.empty((B, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
+    _jit.call(_kalman.finish, x, P, np.ascontiguousarray(floor), force, std, cov)
+    status = own
+    status[(np.asarray(window_p) < MISFIT_P) & (status == OK)] = MODEL_MISFIT
     return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=np.asarray(window_p, dtype=float),
                  status=status.astype(str), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t, frame_force_n=z)
 
@@ -307,12 +303,12 @@ class Tracker:
         self.window_s = float(window_s)
         self.mode = mode
         self._state = new_state()
-        self._last = None  # (t, pressure) of the latest frame
         self._dt_ref = None  # the median interval of the first frames
         self._q = None  # the process intensity of the bandwidth at that interval [1/s³]
-        self._floor = np.full((2, 2), np.nan)
-        self._open = None  # the open window: (its frames' payload, segment start time, window index)
-        self._p = np.nan  # the latest completed window's p-value
+        self._fs = np.zeros(_stream.N_SCALARS)  # the carried scalars of the stream kernels
+        self._fs[_stream.LATEST_P] = np.nan
+        self._carry = np.full((2, 2), np.nan)  # the segment's latest floor
+        self._sums = None  # the open window's sums (r, A, M, shifts)
 
     def update(self, estimate_block, t_s_block, pressure_pa_block=None) -> Track:
         """Filter a block of frames; returns their :class:`Track`.
@@ -326,68 +322,71 @@ class Tracker:
         pressure_pa_block : array_like, shape (b,), optional
             Their pressures [Pa].
         """
-        estimate_block = _windows.as_series(estimate_block)  # one frame (the live path) is a block of one
-        t, P, _ = _windows.series_inputs(estimate_block, np.atleast_1d(t_s_block), self.window_s,
-                                         None if pressure_pa_block is None else np.atleast_1d(pressure_pa_block))
-        if self._last is not None and t[0] < self._last[0]:
-            raise ArgumentError(f"t_s_block: must not decrease, got {t[0]!r} s after the previous block's "
-                                f"{self._last[0]!r} s")
-        tt = t if self._last is None else np.concatenate(([self._last[0]], t))
-        if self._dt_ref is None and tt.size > 1:
-            self._dt_ref = _windows.reference_interval(tt)
-        PP = None if P is None else (P if self._last is None else np.concatenate(([self._last[1]], P)))
-        starts = _windows.segment_starts(tt, PP, self.window_s, self._dt_ref if self._dt_ref else np.inf)
-        if self._last is not None:
-            starts = starts[1:]
-        dt = np.diff(tt, prepend=tt[0])[-t.size:]
-        z, Rn, floor = measurements(estimate_block)
-        B = t.size
-        if self._q is None and self._dt_ref:  # the bandwidth's intensity at the first frames' interval, once
-            self._q = intensity(self.bandwidth_hz, self._dt_ref)
-        xf, Pf, xp, Pp = np.empty((B, 4)), np.empty((B, 4, 4)), np.empty((B, 4)), np.empty((B, 4, 4))
-        _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, self._q or 0.0, self._state, xp, Pp, xf, Pf, True)
-        floor = self._fill(floor, starts)
-        window_p = self._windows(estimate_block, t, starts)
-        own = estimate_status(estimate_block, B)
-        self._last = (float(t[-1]), np.nan if P is None else float(P[-1]))
-        return result(xf, Pf, floor, window_p, own, self.bandwidth_hz, self.mode, t, z)
+        est, t, P = self._inputs(estimate_block, t_s_block, pressure_pa_block)
+        b = t.size
+        fs = self._fs
+        if self._dt_ref is None:  # the median interval of the first frames seen
+            tt = t if fs[_stream.HAS_LAST] == 0.0 else np.concatenate(([fs[_stream.LAST_T]], t))
+            if tt.size > 1:
+                self._dt_ref = _windows.reference_interval(tt)
+                self._q = intensity(self.bandwidth_hz, self._dt_ref)
+        force, std, cov = np.empty((b, 2)), np.empty((b, 2)), np.empty((b, 2, 2))
+        starts = np.empty(b, dtype=np.bool_)
+        parts = est.covariance_parts_n2
+        parts = np.full((b, 3, 2, 2), np.nan) if parts is None else np.asarray(parts, dtype=float).reshape(b, 3, 2, 2)
+        x, Pk, Rbar, has = self._state
+        _jit.call(_stream.stream_filter, t, P, np.asarray(est.force_n, dtype=float).reshape(b, 2),
+                  np.asarray(est.std_n, dtype=float).reshape(b, 2), parts, self._q or 0.0, self.window_s,
+                  self._dt_ref or np.inf, _windows.GAP_FACTOR, _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has,
+                  self._carry, starts, force, std, cov)
+        window_p = self._windows(est, t, starts, b)
+        status = estimate_status(est, b)
+        status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
+        z = np.asarray(est.force_n, dtype=float).reshape(b, 2)
+        return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p, status=status.astype(str),
+                     bandwidth_hz=self.bandwidth_hz, mode=self.mode, t_s=t, frame_force_n=z)
 
-    def _fill(self, floor, starts):
-        """The floor carried forward within a segment, across blocks (:func:`fill_floor`, the last one carried in)."""
-        carried = np.concatenate((self._floor[None], floor))
-        out = fill_floor(carried, np.concatenate(([True], starts)), backward=False)[1:]
-        self._floor = out[-1]
-        return out
+    def _inputs(self, est, t_s, pressure_pa):
+        """The checked block: (estimate, t (b,), pressure (b,) NaN where not given)."""
+        if not isinstance(est, ForceEstimate):
+            raise ArgumentError(f"estimate_block: expected a ForceEstimate (estimate_force), got {type(est).__name__}")
+        shape = est.batch_shape
+        if len(shape) > 1:
+            raise ArgumentError(f"estimate_block: expected the estimates of a block of frames (one batch axis), got "
+                                f"batch shape {shape}")
+        b = shape[0] if shape else 1
+        try:
+            t = np.asarray(t_s, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ArgumentError(f"t_s_block: expected times [s], got {short(t_s)}") from None
+        if t.size != b or not np.isfinite(t).all():
+            raise ArgumentError(f"t_s_block: expected {b} finite times (one per frame), got {short(t_s)}")
+        last = self._fs[_stream.LAST_T] if self._fs[_stream.HAS_LAST] > 0.0 else -np.inf
+        if t[0] < last or (b > 1 and (np.diff(t) < 0).any()):
+            bad = t[0] if t[0] < last else t[1:][np.diff(t) < 0][0]
+            raise ArgumentError(f"t_s_block: must not decrease, got {bad!r} s after {last!r} s")
+        if pressure_pa is None:
+            return est, t, np.full(b, np.nan)
+        try:
+            P = np.array(np.broadcast_to(np.asarray(pressure_pa, dtype=float).reshape(-1), (b,)))
+        except (TypeError, ValueError):
+            raise ArgumentError(f"pressure_pa_block: expected {b} pressures [Pa] (one per frame), got "
+                                f"{short(pressure_pa)}") from None
+        return est, t, P
 
-    def _windows(self, est, t, starts):
-        """The latest completed window's p-value at each frame of the block; the open window kept for the next."""
+    def _windows(self, est, t, starts, b):
+        """The latest completed window's p-value at each frame of the block (:func:`.stream.stream_windows`)."""
         payload = tuple(getattr(est, name) for name in _windows.PAYLOAD)
-        if any(a is None for a in payload) or est.shift_errors is None:
-            return np.full(t.size, np.nan)
-        if self._open is not None:
-            prev, t0, j0, t_prev = self._open
-            payload = tuple(np.concatenate((a, b)) for a, b in zip(prev, payload))
-            tt = np.concatenate((t_prev, t))
-            st = np.concatenate((np.zeros(t_prev.size, dtype=bool), starts))
-            seg, j, firsts = _windows.window_index(tt, st, self.window_s, t0)
-        else:
-            tt, st = t, starts
-            seg, j, firsts = _windows.window_index(tt, st, self.window_s)
-        key_change = np.flatnonzero((seg[1:] != seg[:-1]) | (j[1:] != j[:-1])) + 1
-        bounds = np.concatenate(([0], key_change)).astype(np.int64)  # the starts of the windows; the last is open
-        done = bounds.size - 1
-        p = np.full(done, np.nan)
-        if done:
-            p, _ = _windows.window_p_values(est, bounds, payload)
-        # each frame of the block: the latest window completed by its arrival (at the next window's first frame)
-        offset = tt.size - t.size
-        frame_p = np.empty(t.size)
-        latest = self._p
-        closes = {int(b): p[w - 1] for w, b in enumerate(bounds) if w >= 1}
-        for i in range(t.size):
-            latest = closes.get(offset + i, latest)
-            frame_p[i] = latest
-        self._p = latest
-        lo = int(bounds[-1])
-        self._open = (tuple(a[lo:] for a in payload), firsts[seg[lo]], j[lo], tt[lo:])
-        return frame_p
+        p = np.full(b, np.nan)
+        if any(a is None for a in payload) or est.shift_errors is None or est.uncertainty != "propagated":
+            return p
+        resid, jac, mfac, shifts = (np.ascontiguousarray(a, dtype=float) for a in payload)
+        R, N = resid.shape[-1], shifts.shape[-1]
+        resid, jac, mfac = resid.reshape(b, R), jac.reshape(b, R, 2), mfac.reshape(b, R, 2)
+        shifts = shifts.reshape(b, N)
+        if self._sums is None:
+            self._sums = (np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N))
+        _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, tuple(est.shift_errors),
+                  np.asarray(est.coils, dtype=np.int64), float(est.strip_gap_m), self.window_s, self._fs,
+                  *self._sums, p)
+        return p
