@@ -123,48 +123,52 @@ def process_intensity(bandwidth_hz, dt_s):
 
 
 @njit(cache=True)
-def update(x, P, z, Rn, use0, use1, S, K, T):
+def update(x, P, z0, z1, r00, r01, r11, use0, use1, S, K, T):
     """Kalman update of ``x`` (4,), ``P`` (4, 4) in place by ``z`` along the observed force components; returns log L.
 
     With O the observed components and ``S = P_OO + R_OO``: ``x += P_(:,O) S⁻¹ ν``; the
     observed rows ``P⁺_(O,:) = R_OO S⁻¹ P_(O,:)`` (exact after a diffuse prior, where
     ``P − P S⁻¹ P`` would cancel), the others ``P_(i,:) − P_(i,O) S⁻¹ P_(O,:)``,
-    symmetrised. ``S`` (2, 2), ``K`` (4, 2), ``T`` (4, 4) are scratch.
+    symmetrised. ``z0, z1`` the force, ``r00, r01, r11`` its noise covariance (scalars: no
+    array views per frame); ``S`` (2, 2), ``K`` (4, 2), ``T`` (4, 4) are scratch.
     """
     o0 = 0 if use0 else 1
     m = 2 if (use0 and use1) else 1
     if m == 2:
-        s00, s01, s11 = P[0, 0] + Rn[0, 0], P[0, 1] + Rn[0, 1], P[1, 1] + Rn[1, 1]
+        s00, s01, s11 = P[0, 0] + r00, P[0, 1] + r01, P[1, 1] + r11
         det = s00 * s11 - s01 * s01
         S[0, 0], S[1, 1], S[0, 1], S[1, 0] = s11 / det, s00 / det, -s01 / det, -s01 / det
+        nu0, nu1 = z0 - x[0], z1 - x[1]
     else:
-        det = P[o0, o0] + Rn[o0, o0]
+        roo = r00 if use0 else r11
+        det = P[o0, o0] + roo
         S[0, 0] = 1.0 / det
-    nu0 = z[o0] - x[o0]
-    nu1 = z[1] - x[1] if m == 2 else 0.0
-    for i in range(4):
-        for b in range(m):
-            acc = 0.0
-            for c in range(m):
-                acc += P[i, o0 + c] * S[c, b]
-            K[i, b] = acc
-    for i in range(4):
-        x[i] += K[i, 0] * nu0 + (K[i, 1] * nu1 if m == 2 else 0.0)
-    for i in range(4):
-        inside = i - o0 if (i >= o0 and i < o0 + m) else -1
+        nu0, nu1 = (z0 if use0 else z1) - x[o0], 0.0
+    if m == 2:
+        for i in range(4):
+            K[i, 0] = P[i, 0] * S[0, 0] + P[i, 1] * S[1, 0]
+            K[i, 1] = P[i, 0] * S[0, 1] + P[i, 1] * S[1, 1]
+            x[i] += K[i, 0] * nu0 + K[i, 1] * nu1
+    else:
+        for i in range(4):
+            K[i, 0] = P[i, o0] * S[0, 0]
+            x[i] += K[i, 0] * nu0
+    if m == 2:  # both observed (the usual frame): rows 0, 1 = R S⁻¹ P_(O,:), rows 2, 3 = P − K P_(O,:)
+        rs00 = r00 * S[0, 0] + r01 * S[1, 0]
+        rs01 = r00 * S[0, 1] + r01 * S[1, 1]
+        rs10 = r01 * S[0, 0] + r11 * S[1, 0]
+        rs11 = r01 * S[0, 1] + r11 * S[1, 1]
         for j in range(4):
-            acc = 0.0
-            if inside >= 0:  # R_OO S⁻¹ P_(O,:)
-                for b in range(m):
-                    rs = 0.0
-                    for c in range(m):
-                        rs += Rn[o0 + inside, o0 + c] * S[c, b]
-                    acc += rs * P[o0 + b, j]
-            else:
-                acc = P[i, j]
-                for b in range(m):
-                    acc -= K[i, b] * P[o0 + b, j]
-            T[i, j] = acc
+            T[0, j] = rs00 * P[0, j] + rs01 * P[1, j]
+            T[1, j] = rs10 * P[0, j] + rs11 * P[1, j]
+        for i in range(2, 4):
+            for j in range(4):
+                T[i, j] = P[i, j] - K[i, 0] * P[0, j] - K[i, 1] * P[1, j]
+    else:
+        rs = roo * S[0, 0]
+        for i in range(4):
+            for j in range(4):
+                T[i, j] = rs * P[o0, j] if i == o0 else P[i, j] - K[i, 0] * P[o0, j]
     for i in range(4):
         for j in range(i, 4):
             v = 0.5 * (T[i, j] + T[j, i])
@@ -180,9 +184,9 @@ def update(x, P, z, Rn, use0, use1, S, K, T):
 
 
 @njit(cache=True)
-def observed(z, Rn, c):
-    """Whether component ``c`` of the frame's estimate can be used: a finite force and noise variance."""
-    return math.isfinite(z[c]) and math.isfinite(Rn[c, c]) and Rn[c, c] > 0.0
+def observed(zc, rcc):
+    """Whether a component of the frame's estimate can be used: a finite force ``zc`` and noise variance ``rcc``."""
+    return math.isfinite(zc) and math.isfinite(rcc) and rcc > 0.0
 
 
 @njit(cache=True)
@@ -205,13 +209,8 @@ def predict(x, P, h, q, Rbar):
 
 
 @njit(cache=True)
-def filter_step(x, P, Rbar, has, z, Rn, dt, restart, q, S, K, T, xp, Pp, store):
-    """One frame of the filter (:func:`kalman_filter`): restart or predict, then update; returns its log-likelihood.
-
-    The first two observations of a component after a restart fix its force and rate:
-    they count 0. ``S``, ``K``, ``T`` are :func:`update`'s scratch; with ``store`` the
-    prediction (the state before the update) goes to ``xp`` (4,), ``Pp`` (4, 4).
-    """
+def advance(x, P, Rbar, has, dt, restart, q):
+    """A frame's prior: the diffuse one at a restart, else the prediction over ``dt`` (:func:`predict`)."""
     if restart:
         x[:] = 0.0
         P[:, :] = 0.0
@@ -223,19 +222,27 @@ def filter_step(x, P, Rbar, has, z, Rn, dt, restart, q, S, K, T, xp, Pp, store):
         has[2] = 0.0
     else:  # before any fully observed frame R̄ is 0: the state moves by its rate only
         predict(x, P, dt, q, Rbar)
-    if store:
-        xp[:] = x
-        Pp[:, :] = P
-    use0 = observed(z, Rn, 0)
-    use1 = observed(z, Rn, 1)
-    if use0 and use1:  # the process noise follows each component's noise variance, not their correlation
-        Rbar[0, 0] = Rn[0, 0]
-        Rbar[1, 1] = Rn[1, 1]
+
+
+@njit(cache=True)
+def observe(x, P, Rbar, has, Rn, k, z0, z1, S, K, T):
+    """A frame's update by its estimate ``z0, z1`` and noise covariance ``Rn[k]``; returns its log-likelihood.
+
+    The first two observations of a component after a restart fix its force and rate:
+    they count 0. The process noise follows each component's noise variance (R̄, of the
+    latest fully observed frame), not their correlation.
+    """
+    r00, r01, r11 = Rn[k, 0, 0], Rn[k, 0, 1], Rn[k, 1, 1]
+    use0 = observed(z0, r00)
+    use1 = observed(z1, r11)
+    if use0 and use1:
+        Rbar[0, 0] = r00
+        Rbar[1, 1] = r11
         has[0] = 1.0
     if not (use0 or use1):
         return 0.0
     known = (not use0 or has[1] >= 2.0) and (not use1 or has[2] >= 2.0)
-    ll = update(x, P, z, Rn, use0, use1, S, K, T)
+    ll = update(x, P, z0, z1, r00, r01, r11, use0, use1, S, K, T)
     if use0:
         has[1] += 1.0
     if use1:
@@ -252,16 +259,17 @@ def kalman_filter(z, Rn, dt, restart, q, state, x_pred, P_pred, x_filt, P_filt, 
     ``q`` the process intensity per unit noise variance [1/s³] (:func:`process_intensity`).
     ``state`` = (x (4,), P (4, 4), R̄ (2, 2), [has R̄, observations of Fx, of Fy since the
     restart]) carried from the previous call (streaming) and updated in place. With
-    ``store`` writes the predictions (B, 4), (B, 4, 4) and the filtered states (else those
-    arrays need only one row: scratch).
+    ``store`` writes the predictions (B, 4), (B, 4, 4) and the filtered states.
     """
     x, P, Rbar, has = state
     S, K, T = np.empty((2, 2)), np.empty((4, 2)), np.empty((4, 4))
     loglik = 0.0
     for k in range(z.shape[0]):
-        j = k if store else 0
-        loglik += filter_step(x, P, Rbar, has, z[k], Rn[k], dt[k], restart[k], q, S, K, T, x_pred[j], P_pred[j],
-                              store)
+        advance(x, P, Rbar, has, dt[k], restart[k], q)
+        if store:
+            x_pred[k] = x
+            P_pred[k] = P
+        loglik += observe(x, P, Rbar, has, Rn, k, z[k, 0], z[k, 1], S, K, T)
         if store:
             x_filt[k] = x
             P_filt[k] = P

@@ -1,7 +1,7 @@
 """The compiled kernels of the streaming tracker (:class:`bendsense.Tracker`): a block of frames in one call each.
 
 :func:`stream_filter` cuts the segments (a gap, a pressure step), runs the filter's
-frames (:func:`bendsense.tracking.kalman.filter_step`, the kernel of ``track``), carries
+frames (:func:`bendsense.tracking.kalman.advance` and ``observe``, the steps of ``track``'s filter), carries
 the calibration and parameter floor within a segment and writes the tracked force;
 :func:`stream_windows` keeps the open window's sums across blocks and reports, at each
 frame, the p-value of the latest completed window
@@ -52,8 +52,7 @@ def stream_filter(t, pressure, force_in, std_in, parts, q, window_s, dt_ref, gap
     pressure change over ``step_pa``. ``carry`` (2, 2) is the segment's latest finite floor.
     """
     S, Kg, T = np.empty((2, 2)), np.empty((4, 2)), np.empty((4, 4))
-    xp, Pp = np.empty(4), np.empty((4, 4))
-    z, Rn, floor = np.empty(2), np.empty((2, 2)), np.empty((2, 2))
+    z, Rn, floor = np.empty(2), np.empty((1, 2, 2)), np.empty((2, 2))
     for i in range(t.size):
         if fs[HAS_LAST] > 0.0:
             dt = t[i] - fs[LAST_T]
@@ -61,8 +60,9 @@ def stream_filter(t, pressure, force_in, std_in, parts, q, window_s, dt_ref, gap
         else:
             dt, brk = 0.0, True
         starts[i] = brk
-        measure_frame(force_in[i], std_in[i], parts[i], z, Rn, floor)
-        K.filter_step(x, P, Rbar, has, z, Rn, dt, brk, q, S, Kg, T, xp, Pp, False)
+        measure_frame(force_in[i], std_in[i], parts[i], z, Rn[0], floor)
+        K.advance(x, P, Rbar, has, dt, brk, q)
+        K.observe(x, P, Rbar, has, Rn, 0, z[0], z[1], S, Kg, T)
         full = math.isfinite(floor[0, 0] + floor[0, 1] + floor[1, 0] + floor[1, 1])
         if full:
             carry[:, :] = floor

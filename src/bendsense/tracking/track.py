@@ -32,6 +32,10 @@ __all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_XATOL_DECADE
 DEFAULT_BANDWIDTH_HZ = 5.0
 #: Precision of the maximum-likelihood bandwidth after its grid (one point per decade), in decades: ~1 %.
 ML_XATOL_DECADES = 0.004
+#: Longer series: the search runs on about this many frames (every m-th), then refines on the whole series.
+ML_SUBSAMPLE_FRAMES = 2000
+ML_STEP_DECADES = 0.05  # the whole-series parabola's half-width in log10 B (12 %)
+ML_REFINE_PASSES = 6  # at most this many more passes over the whole series after its first three
 LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
 #: The results.csv columns of a track (:meth:`Track.to_columns`).
 TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
@@ -167,8 +171,7 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     else:
         xs, Ps = xf, Pf
         floor = fill_floor(floor, starts, backward=False)
-    own = estimate_status(checked, B)
-    return result(xs, Ps, floor, checked.window_p_value, own, float(bandwidth_hz), mode, t, z)
+    return result(xs, Ps, floor, checked.window_p_value, checked, float(bandwidth_hz), mode, t, z)
 
 
 def intensity(bandwidth_hz, dt_ref_s):
@@ -215,29 +218,83 @@ def fill_floor(floor, starts, backward):
 
 
 def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
-    """The maximum-likelihood bandwidth [Hz] of the innovations: a grid of one point per decade, then Brent's method.
+    """The maximum-likelihood bandwidth [Hz] of the innovations.
 
-    The grid runs from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the frame rate;
-    Brent's bounded search (parabolic steps, golden sections where they fail) refines
-    log B between the best grid point's neighbours to :data:`ML_XATOL_DECADES`.
+    A grid of one point per decade from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the
+    frame rate, then Brent's bounded search (parabolic steps, golden sections where they
+    fail) between the best grid point's neighbours, to :data:`ML_XATOL_DECADES`: on the
+    whole series up to twice :data:`ML_SUBSAMPLE_FRAMES` frames; on a longer one, that
+    search runs on every m-th frame (~ML_SUBSAMPLE_FRAMES of them: the force-and-rate
+    model sampled at m Δt is the same model with Q(m Δt), so this is the exact likelihood
+    of those frames, spread over the whole series), then a parabola through the whole
+    series' likelihood at that B and ± :data:`ML_STEP_DECADES` (Newton steps while an end
+    is the best) gives B: ~5 passes over the series instead of ~13.
     """
+    B = z.shape[0]
+    if B > 2 * ML_SUBSAMPLE_FRAMES:
+        m = B // ML_SUBSAMPLE_FRAMES
+        idx = np.arange(0, B, m)
+        cs, cdt = np.cumsum(starts), np.cumsum(dt)
+        sub_starts = np.ones(idx.size, dtype=bool)
+        sub_starts[1:] = np.diff(cs[idx]) > 0  # a restart between two kept frames restarts the kept one
+        sub_dt = np.diff(cdt[idx], prepend=0.0)
+        x = _ml_search(np.ascontiguousarray(z[idx]), np.ascontiguousarray(Rn[idx]), sub_dt, sub_starts, dt_ref_s)
+        if x is not None:
+            return _ml_refine(z, Rn, dt, starts, dt_ref_s, x)
+    x = _ml_search(z, Rn, dt, starts, dt_ref_s)
+    return DEFAULT_BANDWIDTH_HZ if x is None else float(10.0 ** x)
+
+
+def _ml_search(z, Rn, dt, starts, dt_ref_s):
+    """log10 of the maximum-likelihood bandwidth: the grid, then Brent's method; None without observations."""
+    from scipy.optimize import minimize_scalar
+
     top = 0.25 / dt_ref_s if math.isfinite(dt_ref_s) and dt_ref_s > 0 else 1.0
     lo_log, hi_log = math.log10(LOWEST_BANDWIDTH_HZ), max(math.log10(top), math.log10(LOWEST_BANDWIDTH_HZ) + 0.5)
     grid = np.linspace(lo_log, hi_log, int(math.ceil(hi_log - lo_log)) + 1)
     ll = _log_likelihoods(z, Rn, dt, starts, 10.0 ** grid, dt_ref_s)
     if not np.isfinite(ll).any() or np.ptp(ll[np.isfinite(ll)]) == 0.0:
-        return DEFAULT_BANDWIDTH_HZ  # nothing to choose from (no observations): the documented default
-    from scipy.optimize import minimize_scalar
-
+        return None  # nothing to choose from (no observations)
     i = int(np.nanargmax(ll))
-    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
 
     def cost(x):
         f = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** x]), dt_ref_s)[0]
         return -f if math.isfinite(f) else np.inf
 
-    best = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": ML_XATOL_DECADES})
-    return float(10.0 ** best.x) if best.fun <= -ll[i] else float(grid[i])
+    best = minimize_scalar(cost, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]), method="bounded",
+                           options={"xatol": ML_XATOL_DECADES})
+    return float(best.x) if best.fun <= -ll[i] else float(grid[i])
+
+
+def _ml_refine(z, Rn, dt, starts, dt_ref_s, x):
+    """B [Hz] at the vertex of a parabola in log B through the whole series' likelihood around ``x`` (log10 B).
+
+    Three points x, x ± h; while the best is at an end, a Newton step of the parabola
+    through the end's three points (at least h, at most 8h beyond it); while the best's
+    neighbours are more than 2.5h apart, the vertex is evaluated; then the vertex.
+    """
+    h = ML_STEP_DECADES
+    xs = [x - h, x, x + h]
+    fs = [f if math.isfinite(f) else -np.inf for f in _log_likelihoods(z, Rn, dt, starts, 10.0 ** np.array(xs),
+                                                                        dt_ref_s)]
+    for _ in range(ML_REFINE_PASSES):
+        j = int(np.argmax(fs))
+        k = min(max(j, 1), len(xs) - 2)
+        (x0, x1, x2), (f0, f1, f2) = xs[k - 1:k + 2], fs[k - 1:k + 2]
+        den = (x1 - x0) * (f1 - f2) - (x1 - x2) * (f1 - f0)
+        v = x1 - 0.5 * ((x1 - x0) ** 2 * (f1 - f2) - (x1 - x2) ** 2 * (f1 - f0)) / den if den > 0.0 else np.nan
+        if j == 0 or j == len(xs) - 1:  # at an end: beyond it
+            end, sign = (xs[0], -1.0) if j == 0 else (xs[-1], 1.0)
+            v = end + sign * min(max(sign * (v - end), h), 8 * h) if math.isfinite(v) else end + sign * 4 * h
+        elif not math.isfinite(v) or not x0 < v < x2:
+            return float(10.0 ** xs[j])
+        elif x2 - x0 <= 2.5 * h or min(abs(v - x0), abs(v - x1), abs(v - x2)) < 0.1 * h:
+            return float(10.0 ** v)
+        f = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** v]), dt_ref_s)[0]
+        i = int(np.searchsorted(xs, v))
+        xs.insert(i, v)
+        fs.insert(i, f if math.isfinite(f) else -np.inf)
+    return float(10.0 ** xs[int(np.argmax(fs))])
 
 
 def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz, dt_ref_s):
@@ -247,15 +304,16 @@ def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz, dt_ref_s):
     return out
 
 
-def result(x, P, floor, window_p, own, bandwidth_hz, mode, t, z):
+def result(x, P, floor, window_p, est, bandwidth_hz, mode, t, z):
     """The :class:`Track` of the states ``x`` (B, 4), ``P`` (B, 4, 4) (force and rate) with the floor added back."""
     B = x.shape[0]
+    frame_z = np.asarray(est.force_n, dtype=float).reshape(B, 2)
     force, std, cov = np.empty((B, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
     _jit.call(_kalman.finish, x, P, np.ascontiguousarray(floor), force, std, cov)
-    status = own
-    status[(np.asarray(window_p) < MISFIT_P) & (status == OK)] = MODEL_MISFIT
-    return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=np.asarray(window_p, dtype=float),
-                 status=status.astype(str), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t, frame_force_n=z)
+    window_p = np.asarray(window_p, dtype=float)
+    return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
+                 status=track_status(est, frame_z, window_p), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t,
+                 frame_force_n=z)
 
 
 def new_state():
@@ -309,6 +367,7 @@ class Tracker:
         self._fs[_stream.LATEST_P] = np.nan
         self._carry = np.full((2, 2), np.nan)  # the segment's latest floor
         self._sums = None  # the open window's sums (r, A, M, shifts)
+        self._model = None  # (the shift error model, as a plain tuple, the coils) of the latest block
 
     def update(self, estimate_block, t_s_block, pressure_pa_block=None) -> Track:
         """Filter a block of frames; returns their :class:`Track`.
@@ -340,11 +399,10 @@ class Tracker:
                   self._dt_ref or np.inf, _windows.GAP_FACTOR, _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has,
                   self._carry, starts, force, std, cov)
         window_p = self._windows(est, t, starts, b)
-        status = estimate_status(est, b)
-        status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
         z = np.asarray(est.force_n, dtype=float).reshape(b, 2)
-        return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p, status=status.astype(str),
-                     bandwidth_hz=self.bandwidth_hz, mode=self.mode, t_s=t, frame_force_n=z)
+        return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
+                     status=track_status(est, z, window_p), bandwidth_hz=self.bandwidth_hz, mode=self.mode, t_s=t,
+                     frame_force_n=z)
 
     def _inputs(self, est, t_s, pressure_pa):
         """The checked block: (estimate, t (b,), pressure (b,) NaN where not given)."""
@@ -359,7 +417,7 @@ class Tracker:
             t = np.asarray(t_s, dtype=float).reshape(-1)
         except (TypeError, ValueError):
             raise ArgumentError(f"t_s_block: expected times [s], got {short(t_s)}") from None
-        if t.size != b or not np.isfinite(t).all():
+        if t.size != b or not (math.isfinite(t[0]) if b == 1 else np.isfinite(t).all()):
             raise ArgumentError(f"t_s_block: expected {b} finite times (one per frame), got {short(t_s)}")
         last = self._fs[_stream.LAST_T] if self._fs[_stream.HAS_LAST] > 0.0 else -np.inf
         if t[0] < last or (b > 1 and (np.diff(t) < 0).any()):
@@ -376,17 +434,33 @@ class Tracker:
 
     def _windows(self, est, t, starts, b):
         """The latest completed window's p-value at each frame of the block (:func:`.stream.stream_windows`)."""
-        payload = tuple(getattr(est, name) for name in _windows.PAYLOAD)
+        resid, jac, mfac, shifts = (est.residual_rad, est.jacobian_rad_per_n, est.model_factor_rad, est.shifts_m)
         p = np.full(b, np.nan)
-        if any(a is None for a in payload) or est.shift_errors is None or est.uncertainty != "propagated":
+        if resid is None or jac is None or mfac is None or shifts is None or est.shift_errors is None \
+                or est.uncertainty != "propagated":
             return p
-        resid, jac, mfac, shifts = (np.ascontiguousarray(a, dtype=float) for a in payload)
         R, N = resid.shape[-1], shifts.shape[-1]
-        resid, jac, mfac = resid.reshape(b, R), jac.reshape(b, R, 2), mfac.reshape(b, R, 2)
-        shifts = shifts.reshape(b, N)
+        resid, shifts = resid.reshape(b, R), shifts.reshape(b, N)
+        jac, mfac = jac.reshape(b, R, 2), mfac.reshape(b, R, 2)
         if self._sums is None:
             self._sums = (np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N))
-        _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, tuple(est.shift_errors),
-                  np.asarray(est.coils, dtype=np.int64), float(est.strip_gap_m), self.window_s, self._fs,
-                  *self._sums, p)
+        if self._model is None or self._model[0] is not est.shift_errors:  # the same calibration: converted once
+            self._model = (est.shift_errors, tuple(est.shift_errors), np.asarray(est.coils, dtype=np.int64))
+        _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, self._model[1], self._model[2],
+                  float(est.strip_gap_m), self.window_s, self._fs, *self._sums, p)
         return p
+
+
+def track_status(est, z, window_p):
+    """The tracked status (b,): the frame's own, ``model_misfit`` where its window's p < MISFIT_P and it was ``ok``.
+
+    The frame's own: :func:`bendsense.results.estimate_status`, looked up only where a frame is not ok.
+    """
+    b = z.shape[0]
+    success, message = est.success, est.message
+    if (np.all(success) and np.all(message == "converged") and np.isfinite(z).all()
+            and not (window_p < MISFIT_P).any()):
+        return np.full(b, OK)  # every frame ok (the live path's usual block): nothing to look up
+    status = estimate_status(est, b)
+    status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
+    return status.astype(str)
