@@ -26,15 +26,14 @@ from bendsense.tracking import stream as _stream
 from bendsense.tracking import windows as _windows
 from bendsense.validation import short
 
-__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_XATOL_DECADES", "TRACK_COLUMNS"]
+__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_STEP_DECADES", "TRACK_COLUMNS"]
 
 #: Bandwidth of the causal filter when none is given and none can be chosen from the data (live) [Hz].
 DEFAULT_BANDWIDTH_HZ = 5.0
-#: Precision of the maximum-likelihood bandwidth after its grid (one point per decade), in decades: ~1 %.
-ML_XATOL_DECADES = 0.004
 #: Longer series: the search runs on about this many frames (every m-th), then refines on the whole series.
 ML_SUBSAMPLE_FRAMES = 2000
-ML_STEP_DECADES = 0.05  # the whole-series parabola's half-width in log10 B (12 %)
+#: The half-width of the maximum-likelihood bandwidth's parabolas in log10 B (12 %).
+ML_STEP_DECADES = 0.05
 ML_REFINE_PASSES = 6  # at most this many more passes over the whole series after its first three
 LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
 #: The results.csv columns of a track (:meth:`Track.to_columns`).
@@ -221,14 +220,12 @@ def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
     """The maximum-likelihood bandwidth [Hz] of the innovations.
 
     A grid of one point per decade from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the
-    frame rate, then Brent's bounded search (parabolic steps, golden sections where they
-    fail) between the best grid point's neighbours, to :data:`ML_XATOL_DECADES`: on the
+    frame rate, then parabolas in log B from its best point (:func:`_ml_refine`): on the
     whole series up to twice :data:`ML_SUBSAMPLE_FRAMES` frames; on a longer one, that
     search runs on every m-th frame (~ML_SUBSAMPLE_FRAMES of them: the force-and-rate
     model sampled at m Δt is the same model with Q(m Δt), so this is the exact likelihood
-    of those frames, spread over the whole series), then a parabola through the whole
-    series' likelihood at that B and ± :data:`ML_STEP_DECADES` (Newton steps while an end
-    is the best) gives B: ~5 passes over the series instead of ~13.
+    of those frames, spread over the whole series), then :func:`_ml_refine` on the whole
+    series from there: ~6 passes over the series in all.
     """
     B = z.shape[0]
     if B > 2 * ML_SUBSAMPLE_FRAMES:
@@ -246,9 +243,7 @@ def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
 
 
 def _ml_search(z, Rn, dt, starts, dt_ref_s):
-    """log10 of the maximum-likelihood bandwidth: the grid, then Brent's method; None without observations."""
-    from scipy.optimize import minimize_scalar
-
+    """log10 of the maximum-likelihood bandwidth: the grid, then :func:`_ml_refine` from its best; None without data."""
     top = 0.25 / dt_ref_s if math.isfinite(dt_ref_s) and dt_ref_s > 0 else 1.0
     lo_log, hi_log = math.log10(LOWEST_BANDWIDTH_HZ), max(math.log10(top), math.log10(LOWEST_BANDWIDTH_HZ) + 0.5)
     grid = np.linspace(lo_log, hi_log, int(math.ceil(hi_log - lo_log)) + 1)
@@ -256,22 +251,16 @@ def _ml_search(z, Rn, dt, starts, dt_ref_s):
     if not np.isfinite(ll).any() or np.ptp(ll[np.isfinite(ll)]) == 0.0:
         return None  # nothing to choose from (no observations)
     i = int(np.nanargmax(ll))
-
-    def cost(x):
-        f = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** x]), dt_ref_s)[0]
-        return -f if math.isfinite(f) else np.inf
-
-    best = minimize_scalar(cost, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]), method="bounded",
-                           options={"xatol": ML_XATOL_DECADES})
-    return float(best.x) if best.fun <= -ll[i] else float(grid[i])
+    return math.log10(_ml_refine(z, Rn, dt, starts, dt_ref_s, float(grid[i]), (grid[0], grid[-1])))
 
 
-def _ml_refine(z, Rn, dt, starts, dt_ref_s, x):
+def _ml_refine(z, Rn, dt, starts, dt_ref_s, x, bounds=(-np.inf, np.inf)):
     """B [Hz] at the vertex of a parabola in log B through the whole series' likelihood around ``x`` (log10 B).
 
     Three points x, x ± h; while the best is at an end, a Newton step of the parabola
-    through the end's three points (at least h, at most 8h beyond it); while the best's
-    neighbours are more than 2.5h apart, the vertex is evaluated; then the vertex.
+    through the end's three points (at least h, at most 8h beyond it; not beyond
+    ``bounds``, log10 B); while the best's neighbours are more than 2.5h apart, the vertex
+    is evaluated; then the vertex.
     """
     h = ML_STEP_DECADES
     xs = [x - h, x, x + h]
@@ -286,6 +275,8 @@ def _ml_refine(z, Rn, dt, starts, dt_ref_s, x):
         if j == 0 or j == len(xs) - 1:  # at an end: beyond it
             end, sign = (xs[0], -1.0) if j == 0 else (xs[-1], 1.0)
             v = end + sign * min(max(sign * (v - end), h), 8 * h) if math.isfinite(v) else end + sign * 4 * h
+            if not bounds[0] <= v <= bounds[1]:
+                return float(10.0 ** xs[j])  # the best is at an end of the search range: that end
         elif not math.isfinite(v) or not x0 < v < x2:
             return float(10.0 ** xs[j])
         elif x2 - x0 <= 2.5 * h or min(abs(v - x0), abs(v - x1), abs(v - x2)) < 0.1 * h:
