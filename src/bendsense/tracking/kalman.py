@@ -266,13 +266,17 @@ def kalman_filter(z, Rn, dt, restart, q, state, x_pred, P_pred, x_filt, P_filt, 
     loglik = 0.0
     for k in range(z.shape[0]):
         advance(x, P, Rbar, has, dt[k], restart[k], q)
-        if store:
-            x_pred[k] = x
-            P_pred[k] = P
+        if store:  # element by element: no array views per frame
+            for a in range(4):
+                x_pred[k, a] = x[a]
+                for b in range(4):
+                    P_pred[k, a, b] = P[a, b]
         loglik += observe(x, P, Rbar, has, Rn, k, z[k, 0], z[k, 1], S, K, T)
         if store:
-            x_filt[k] = x
-            P_filt[k] = P
+            for a in range(4):
+                x_filt[k, a] = x[a]
+                for b in range(4):
+                    P_filt[k, a, b] = P[a, b]
     return loglik
 
 
@@ -302,18 +306,18 @@ def finish(x, P, floor, force, std, cov):
 
 
 @njit(cache=True)
-def _cholesky_solve(A, B, L, out):
-    """``out = A⁻¹ B`` for A (4, 4) symmetric positive definite, B (4, 4); False when A is not (L scratch)."""
+def _cholesky_solve(A, m, B, L, out):
+    """``out = A[m]⁻¹ B`` for A[m] (4, 4) symmetric positive definite, B (4, 4); False when it is not (L scratch)."""
     n = 4
     for j in range(n):
-        d = A[j, j]
+        d = A[m, j, j]
         for c in range(j):
             d -= L[j, c] * L[j, c]
         if not d > 0.0:
             return False
         L[j, j] = math.sqrt(d)
         for i in range(j + 1, n):
-            s = A[i, j]
+            s = A[m, i, j]
             for c in range(j):
                 s -= L[i, c] * L[j, c]
             L[i, j] = s / L[j, j]
@@ -332,6 +336,15 @@ def _cholesky_solve(A, B, L, out):
 
 
 @njit(cache=True)
+def _fp(P_filt, k, h, FP):
+    """``F P_k`` into FP (4, 4) (P_k symmetric: the smoother's gain is ``Gᵀ = P⁻⁻¹ F P_k``); returns FP."""
+    for a in range(4):
+        for b in range(4):
+            FP[a, b] = P_filt[k, a, b] + (h * P_filt[k, a + 2, b] if a < 2 else 0.0)
+    return FP
+
+
+@njit(cache=True)
 def rts_smoother(dt, restart, x_pred, P_pred, x_filt, P_filt, x_out, P_out):
     """The Rauch–Tung–Striebel smoother: ``x_out``, ``P_out`` from the filter's outputs (:func:`kalman_filter`).
 
@@ -343,17 +356,11 @@ def rts_smoother(dt, restart, x_pred, P_pred, x_filt, P_filt, x_out, P_out):
     FP, Gt, L, D, GD = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
     d = np.empty(4)
     for k in range(B - 1, -1, -1):
-        if k == B - 1 or restart[k + 1]:
-            x_out[k] = x_filt[k]
-            P_out[k] = P_filt[k]
-            continue
-        h = dt[k + 1]
-        for a in range(4):  # F P_k (P_k symmetric): Gᵀ = P⁻⁻¹ F P_k
-            for b in range(4):
-                FP[a, b] = P_filt[k, a, b] + (h * P_filt[k, a + 2, b] if a < 2 else 0.0)
-        if not _cholesky_solve(P_pred[k + 1], FP, L, Gt):  # no process noise and nothing learnt
-            x_out[k] = x_filt[k]
-            P_out[k] = P_filt[k]
+        if k == B - 1 or restart[k + 1] or not _cholesky_solve(P_pred, k + 1, _fp(P_filt, k, dt[k + 1], FP), L, Gt):
+            for a in range(4):  # the last frame, a restart next, or no process noise and nothing learnt: filtered
+                x_out[k, a] = x_filt[k, a]
+                for b in range(4):
+                    P_out[k, a, b] = P_filt[k, a, b]
             continue
         for a in range(4):
             d[a] = x_out[k + 1, a] - x_pred[k + 1, a]

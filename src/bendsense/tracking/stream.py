@@ -43,6 +43,37 @@ def measure(force, std, parts, z, Rn, floor):
 
 
 @njit(cache=True)
+def fill_floor(floor, starts, backward, out):
+    """The floor (B, 2, 2) of a frame without a finite one: the latest of its segment (else the next, ``backward``).
+
+    A frame whose floor no frame of its segment gives (before it, or after it with
+    ``backward``) gets NaN: nothing is added to its covariance.
+    """
+    B = floor.shape[0]
+    take = np.empty(B, dtype=np.int64)
+    last = -1
+    for k in range(B):
+        if starts[k]:
+            last = -1
+        if math.isfinite(floor[k, 0, 0] + floor[k, 0, 1] + floor[k, 1, 0] + floor[k, 1, 1]):
+            last = k
+        take[k] = last
+    if backward:
+        nxt = -1
+        for k in range(B - 1, -1, -1):
+            if math.isfinite(floor[k, 0, 0] + floor[k, 0, 1] + floor[k, 1, 0] + floor[k, 1, 1]):
+                nxt = k
+            if take[k] < 0:
+                take[k] = nxt
+            if starts[k]:
+                nxt = -1
+    for k in range(B):
+        for a in range(2):
+            for b in range(2):
+                out[k, a, b] = floor[take[k], a, b] if take[k] >= 0 else np.nan
+
+
+@njit(cache=True)
 def stream_filter(t, pressure, force_in, std_in, parts, q, window_s, dt_ref, gap_factor, step_pa, fs, x, P, Rbar,
                   has, carry, starts, force, std, cov):
     """The causal filter over a block (b,), its state carried in ``fs``, ``x``, ``P``, ``R̄``, ``has``, ``carry``.

@@ -200,19 +200,12 @@ def measurements(estimate):
 
 
 def fill_floor(floor, starts, backward):
-    """The floor (B, 2, 2) of a frame without one: the last one of its segment (and the next, ``backward``)."""
-    ok = np.isfinite(floor).all(axis=(1, 2))
-    idx = np.arange(floor.shape[0])
-    seg_first = np.maximum.accumulate(np.where(starts, idx, 0))
-    last = np.maximum.accumulate(np.where(ok, idx, -1))
-    take = np.where(ok, idx, np.where(last >= seg_first, last, -1))
-    if backward:
-        seg = np.cumsum(starts)
-        nxt = np.flip(np.minimum.accumulate(np.flip(np.where(ok, idx, floor.shape[0]))))
-        same = (nxt < floor.shape[0]) & (seg[np.minimum(nxt, floor.shape[0] - 1)] == seg)
-        take = np.where(take >= 0, take, np.where(same, nxt, -1))
-    out = np.full_like(floor, np.nan)
-    out[take >= 0] = floor[take[take >= 0]]
+    """The floor (B, 2, 2) of a frame without one: the last one of its segment (and the next, ``backward``).
+
+    :func:`bendsense.tracking.stream.fill_floor`.
+    """
+    out = np.empty_like(floor)
+    _jit.call(_stream.fill_floor, np.ascontiguousarray(floor), starts, backward, out)
     return out
 
 
