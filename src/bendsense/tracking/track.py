@@ -404,7 +404,7 @@ class Tracker:
         if t.size != b or not (math.isfinite(t[0]) if b == 1 else np.isfinite(t).all()):
             raise ArgumentError(f"t_s_block: expected {b} finite times (one per frame), got {short(t_s)}")
         last = self._fs[_stream.LAST_T] if self._fs[_stream.HAS_LAST] > 0.0 else -np.inf
-        if t[0] < last or (b > 1 and (np.diff(t) < 0).any()):
+        if b and (t[0] < last or (b > 1 and (np.diff(t) < 0).any())):
             bad = t[0] if t[0] < last else t[1:][np.diff(t) < 0][0]
             raise ArgumentError(f"t_s_block: must not decrease, got {bad!r} s after {last!r} s")
         if pressure_pa is None:
