@@ -19,7 +19,7 @@ from bendsense import _jit
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError
 from bendsense.estimation.kernels import MISFIT_P
-from bendsense.estimation.result import ForceEstimate
+from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
 from bendsense.results import MODEL_MISFIT, OK, estimate_status
 from bendsense.tracking import kalman as _kalman
 from bendsense.tracking import stream as _stream
@@ -442,8 +442,13 @@ def track_status(est, z, window_p):
     """
     b = z.shape[0]
     success, message = est.success, est.message
-    if (np.all(success) and np.all(message == "converged") and np.isfinite(z).all()
-            and not (window_p < MISFIT_P).any()):
+    if b == 1:  # one frame (the live path): scalar tests, no array reductions
+        ok = bool(np.asarray(success).reshape(-1)[0]) and str(np.asarray(message).reshape(-1)[0]) == OK_MESSAGE
+        ok = ok and math.isfinite(z[0, 0]) and math.isfinite(z[0, 1]) and not window_p[0] < MISFIT_P
+    else:
+        ok = (np.all(success) and np.all(message == OK_MESSAGE) and np.isfinite(z).all()
+              and not (window_p < MISFIT_P).any())
+    if ok:
         return np.full(b, OK)  # every frame ok (the live path's usual block): nothing to look up
     status = estimate_status(est, b)
     status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
