@@ -295,6 +295,13 @@ def test_bad_arguments_are_named(cases):
         Tracker(mode="smooth")
     with pytest.raises(ArgumentError, match="estimate: expected the estimates of a time series"):
         track(dataclasses.replace(est, force_n=np.zeros((2, 30, 2))), t)
+    tracker = Tracker()
+    with pytest.raises(ArgumentError, match="t_s_block: expected finite times"):
+        tracker.update(_cut(est, 0, 2), [0.0, np.nan])
+    with pytest.raises(ArgumentError, match="t_s_block: must not decrease, got -1.0 s after 0.0 s"):
+        tracker.update(_cut(est, 0, 2), [0.0, -1.0])
+    np.testing.assert_array_equal(tracker.update(_cut(est, 0, 2), t[:2]).force_n,  # a refused block changed nothing
+                                  Tracker().update(_cut(est, 0, 2), t[:2]).force_n)
 
 
 def test_columns_and_plot(cases):

@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
+from bendsense.estimation.kernels import MISFIT_P
 from bendsense.shift_errors import ShiftErrorModel
 from bendsense.tracking import kalman as K
 from bendsense.tracking import windows as W
@@ -82,7 +83,16 @@ def stream_filter(t, pressure, force_in, std_in, parts, q, window_s, dt_ref, gap
     ``pressure`` (b,) NaN where unknown; a frame starts a segment (``starts``) when it is the
     first ever, or after an interval over ``gap_factor × dt_ref`` or ``window_s``, or a
     pressure change over ``step_pa``. ``carry`` (2, 2) is the segment's latest finite floor.
+
+    Returns the number of frames whose force is not finite (0: every frame has one), or,
+    before touching the state, ``−1 − i`` when frame i's time is not finite or goes back.
     """
+    last = fs[LAST_T] if fs[HAS_LAST] > 0.0 else -np.inf
+    for i in range(t.size):
+        if not (math.isfinite(t[i]) and t[i] >= last):
+            return -1 - i
+        last = t[i]
+    missing = 0
     S, Kg, T = np.empty((2, 2)), np.empty((4, 2)), np.empty((4, 4))
     z, Rn, floor = np.empty(2), np.empty((1, 2, 2)), np.empty((2, 2))
     for i in range(t.size):
@@ -93,6 +103,8 @@ def stream_filter(t, pressure, force_in, std_in, parts, q, window_s, dt_ref, gap
             dt, brk = 0.0, True
         starts[i] = brk
         measure_frame(force_in[i], std_in[i], parts[i], z, Rn[0], floor)
+        if not (math.isfinite(force_in[i, 0]) and math.isfinite(force_in[i, 1])):
+            missing += 1
         K.advance(x, P, Rbar, has, dt, brk, q)
         K.observe(x, P, Rbar, has, Rn, 0, z[0], z[1], S, Kg, T)
         full = math.isfinite(floor[0, 0] + floor[0, 1] + floor[1, 0] + floor[1, 1])
@@ -102,6 +114,7 @@ def stream_filter(t, pressure, force_in, std_in, parts, q, window_s, dt_ref, gap
             carry[:, :] = np.nan
         K.finish_frame(x, P, carry, force[i], std[i], cov[i])
         fs[HAS_LAST], fs[LAST_T], fs[LAST_P] = 1.0, t[i], pressure[i]
+    return missing
 
 
 @njit(cache=True)
@@ -110,9 +123,10 @@ def stream_windows(t, starts, resid, jac, mfac, shifts, err, coils, gap, window_
 
     A window ``floor((t − t_segment) / window_s)`` closes when a frame of the next one or
     of a new segment arrives; its p-value (NaN under MIN_FRAMES usable frames) holds from
-    that frame on.
+    that frame on. Returns whether any frame's p is below MISFIT_P.
     """
     model = ShiftErrorModel(*err)
+    misfit = False
     for i in range(t.size):
         if starts[i]:
             fs[SEG_T0] = t[i]
@@ -128,6 +142,8 @@ def stream_windows(t, starts, resid, jac, mfac, shifts, err, coils, gap, window_
         fs[WIN_J] = j
         fs[HAS_OPEN] = 1.0
         p_out[i] = fs[LATEST_P]
+        misfit = misfit or p_out[i] < MISFIT_P
+    return misfit
 
 
 _jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

@@ -378,15 +378,20 @@ class Tracker:
         parts = est.covariance_parts_n2
         parts = np.full((b, 3, 2, 2), np.nan) if parts is None else np.asarray(parts, dtype=float).reshape(b, 3, 2, 2)
         x, Pk, Rbar, has = self._state
-        _jit.call(_stream.stream_filter, t, P, np.asarray(est.force_n, dtype=float).reshape(b, 2),
-                  np.asarray(est.std_n, dtype=float).reshape(b, 2), parts, self._q or 0.0, self.window_s,
-                  self._dt_ref or np.inf, _windows.GAP_FACTOR, _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has,
-                  self._carry, starts, force, std, cov)
-        window_p = self._windows(est, t, starts, b)
         z = np.asarray(est.force_n, dtype=float).reshape(b, 2)
+        missing = _jit.call(_stream.stream_filter, t, P, z, np.asarray(est.std_n, dtype=float).reshape(b, 2), parts,
+                            self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR,
+                            _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has, self._carry, starts, force, std, cov)
+        if missing < 0:  # nothing filtered: the times are checked first
+            i = -1 - missing
+            before = float(t[i - 1] if i else fs[_stream.LAST_T])
+            raise ArgumentError(f"t_s_block: expected finite times [s], got {float(t[i])!r} at frame {i}" if not
+                                math.isfinite(t[i]) else f"t_s_block: must not decrease, got {float(t[i])!r} s "
+                                f"after {before!r} s")
+        window_p, misfit = self._windows(est, t, starts, b)
         return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
-                     status=track_status(est, z, window_p), bandwidth_hz=self.bandwidth_hz, mode=self.mode, t_s=t,
-                     frame_force_n=z)
+                     status=track_status(est, z, window_p, missing > 0 or misfit), bandwidth_hz=self.bandwidth_hz,
+                     mode=self.mode, t_s=t, frame_force_n=z)
 
     def _inputs(self, est, t_s, pressure_pa):
         """The checked block: (estimate, t (b,), pressure (b,) NaN where not given)."""
@@ -401,12 +406,8 @@ class Tracker:
             t = np.asarray(t_s, dtype=float).reshape(-1)
         except (TypeError, ValueError):
             raise ArgumentError(f"t_s_block: expected times [s], got {short(t_s)}") from None
-        if t.size != b or not (math.isfinite(t[0]) if b == 1 else np.isfinite(t).all()):
-            raise ArgumentError(f"t_s_block: expected {b} finite times (one per frame), got {short(t_s)}")
-        last = self._fs[_stream.LAST_T] if self._fs[_stream.HAS_LAST] > 0.0 else -np.inf
-        if b and (t[0] < last or (b > 1 and (np.diff(t) < 0).any())):
-            bad = t[0] if t[0] < last else t[1:][np.diff(t) < 0][0]
-            raise ArgumentError(f"t_s_block: must not decrease, got {bad!r} s after {last!r} s")
+        if t.size != b:
+            raise ArgumentError(f"t_s_block: expected {b} times (one per frame), got {short(t_s)}")
         if pressure_pa is None:
             return est, t, np.full(b, np.nan)
         try:
@@ -417,12 +418,12 @@ class Tracker:
         return est, t, P
 
     def _windows(self, est, t, starts, b):
-        """The latest completed window's p-value at each frame of the block (:func:`.stream.stream_windows`)."""
+        """The latest completed window's p at each frame (b,), and whether any is below MISFIT_P (:mod:`.stream`)."""
         resid, jac, mfac, shifts = (est.residual_rad, est.jacobian_rad_per_n, est.model_factor_rad, est.shifts_m)
         p = np.full(b, np.nan)
         if resid is None or jac is None or mfac is None or shifts is None or est.shift_errors is None \
                 or est.uncertainty != "propagated":
-            return p
+            return p, False
         R, N = resid.shape[-1], shifts.shape[-1]
         resid, shifts = resid.reshape(b, R), shifts.reshape(b, N)
         jac, mfac = jac.reshape(b, R, 2), mfac.reshape(b, R, 2)
@@ -430,24 +431,27 @@ class Tracker:
             self._sums = (np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N))
         if self._model is None or self._model[0] is not est.shift_errors:  # the same calibration: converted once
             self._model = (est.shift_errors, tuple(est.shift_errors), np.asarray(est.coils, dtype=np.int64))
-        _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, self._model[1], self._model[2],
-                  float(est.strip_gap_m), self.window_s, self._fs, *self._sums, p)
-        return p
+        misfit = _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, self._model[1],
+                           self._model[2], float(est.strip_gap_m), self.window_s, self._fs, *self._sums, p)
+        return p, misfit
 
 
-def track_status(est, z, window_p):
+def track_status(est, z, window_p, flagged=None):
     """The tracked status (b,): the frame's own, ``model_misfit`` where its window's p < MISFIT_P and it was ``ok``.
 
-    The frame's own: :func:`bendsense.results.estimate_status`, looked up only where a frame is not ok.
+    The frame's own: :func:`bendsense.results.estimate_status`, looked up only where a frame
+    is not ok. ``flagged``: whether any frame's force is missing or its window p below
+    MISFIT_P, when the caller knows (the stream kernels count them).
     """
     b = z.shape[0]
     success, message = est.success, est.message
+    if flagged is None:
+        flagged = not np.isfinite(z).all() or (window_p < MISFIT_P).any()
     if b == 1:  # one frame (the live path): scalar tests, no array reductions
         ok = bool(np.asarray(success).reshape(-1)[0]) and str(np.asarray(message).reshape(-1)[0]) == OK_MESSAGE
-        ok = ok and math.isfinite(z[0, 0]) and math.isfinite(z[0, 1]) and not window_p[0] < MISFIT_P
     else:
-        ok = (np.all(success) and np.all(message == OK_MESSAGE) and np.isfinite(z).all()
-              and not (window_p < MISFIT_P).any())
+        ok = bool(np.all(success)) and bool(np.all(message == OK_MESSAGE))
+    ok = ok and not flagged
     if ok:
         return np.full(b, OK)  # every frame ok (the live path's usual block): nothing to look up
     status = estimate_status(est, b)
