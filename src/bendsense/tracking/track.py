@@ -368,7 +368,8 @@ class Tracker:
         est, t, P = self._inputs(estimate_block, t_s_block, pressure_pa_block)
         b = t.size
         fs = self._fs
-        if self._dt_ref is None:  # the median interval of the first frames seen
+        learning = self._dt_ref is None
+        if learning:  # the median interval of the first frames seen
             tt = t if fs[_stream.HAS_LAST] == 0.0 else np.concatenate(([fs[_stream.LAST_T]], t))
             if tt.size > 1:
                 self._dt_ref = _windows.reference_interval(tt)
@@ -383,6 +384,8 @@ class Tracker:
                             self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR,
                             _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has, self._carry, starts, force, std, cov)
         if missing < 0:  # nothing filtered: the times are checked first
+            if learning:
+                self._dt_ref = self._q = None  # nor the interval learnt from these times kept
             i = -1 - missing
             before = float(t[i - 1] if i else fs[_stream.LAST_T])
             raise ArgumentError(f"t_s_block: expected finite times [s], got {float(t[i])!r} at frame {i}" if not
