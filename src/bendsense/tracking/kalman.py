@@ -34,7 +34,7 @@ offline (:mod:`bendsense.tracking.track`).
 Speed, measured on the shared 2-core machine (benchmarks/bench_track.py, 20,000 frames):
 one filter pass 0.13 µs per frame (no array views per frame: the steps take indices and
 scalars); ``track`` ~0.9 µs per frame with a given bandwidth (the window check ~0.5 of
-it), ~1.9 µs with the maximum-likelihood choice (~6 passes).
+it), ~1.9 µs with the maximum-likelihood choice (4–6 passes).
 """
 
 import math

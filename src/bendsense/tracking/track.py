@@ -31,7 +31,7 @@ __all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_STEP_DECADES
 #: Bandwidth of the causal filter when none is given and none can be chosen from the data (live) [Hz].
 DEFAULT_BANDWIDTH_HZ = 5.0
 #: Longer series: the search runs on about this many frames (every m-th), then refines on the whole series.
-ML_SUBSAMPLE_FRAMES = 2000
+ML_SUBSAMPLE_FRAMES = 1000
 #: The half-width of the maximum-likelihood bandwidth's parabolas in log10 B (12 %).
 ML_STEP_DECADES = 0.05
 ML_REFINE_PASSES = 6  # at most this many more passes over the whole series after its first three
@@ -218,7 +218,7 @@ def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
     search runs on every m-th frame (~ML_SUBSAMPLE_FRAMES of them: the force-and-rate
     model sampled at m Δt is the same model with Q(m Δt), so this is the exact likelihood
     of those frames, spread over the whole series), then :func:`_ml_refine` on the whole
-    series from there: ~6 passes over the series in all.
+    series from there: 4–6 passes over the series in all.
     """
     B = z.shape[0]
     if B > 2 * ML_SUBSAMPLE_FRAMES:
