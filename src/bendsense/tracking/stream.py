@@ -7,8 +7,8 @@ the calibration and parameter floor within a segment and writes the tracked forc
 frame, the p-value of the latest completed window
 (:func:`bendsense.tracking.windows.window_statistic`, the statistic of ``check_windows``).
 Their state lives in arrays the Tracker owns, so a call costs the frames and one
-dispatch each, not a chain of numpy calls: ``Tracker.update`` ~16 µs for a single frame,
-~1.9 µs per frame in blocks of 20 (benchmarks/bench_track.py).
+dispatch each, not a chain of numpy calls: ``Tracker.update`` ~17 µs for a single frame,
+~1.5 µs per frame in blocks of 20 (benchmarks/bench_track.py).
 """
 
 import math
