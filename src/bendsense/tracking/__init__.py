@@ -2,7 +2,9 @@
 
 - :mod:`~bendsense.tracking.windows`: the window test of the mean residual
   (:func:`check_windows`), a compiled kernel over windows;
-- :mod:`~bendsense.tracking.kalman`: the compiled filter and smoother over the frames;
+- :mod:`~bendsense.tracking.kalman`: the compiled filter and smoother over the frames
+  (the force and its rate);
+- :mod:`~bendsense.tracking.stream`: the compiled kernels of the streaming tracker;
 - :mod:`~bendsense.tracking.track`: :func:`track` (offline), :class:`Tracker`
   (streaming) and their result :class:`Track`.
 

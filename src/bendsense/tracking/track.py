@@ -19,17 +19,22 @@ from bendsense import _jit
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError
 from bendsense.estimation.kernels import MISFIT_P
+from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
 from bendsense.results import MODEL_MISFIT, OK, estimate_status
 from bendsense.tracking import kalman as _kalman
+from bendsense.tracking import stream as _stream
 from bendsense.tracking import windows as _windows
 from bendsense.validation import short
 
-__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_GOLDEN_STEPS", "TRACK_COLUMNS"]
+__all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_STEP_DECADES", "TRACK_COLUMNS"]
 
 #: Bandwidth of the causal filter when none is given and none can be chosen from the data (live) [Hz].
 DEFAULT_BANDWIDTH_HZ = 5.0
-#: Golden-section steps of the maximum-likelihood bandwidth after its grid (one point per decade): to ~5 %.
-ML_GOLDEN_STEPS = 8
+#: Longer series: the search runs on about this many frames (every m-th), then refines on the whole series.
+ML_SUBSAMPLE_FRAMES = 1000
+#: The half-width of the maximum-likelihood bandwidth's parabolas in log10 B (12 %).
+ML_STEP_DECADES = 0.05
+ML_REFINE_PASSES = 6  # at most this many more passes over the whole series after its first three
 LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
 #: The results.csv columns of a track (:meth:`Track.to_columns`).
 TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
@@ -151,112 +156,153 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     checked = _windows.flag(estimate, bounds, p, n, window_s)
     z, Rn, floor = measurements(checked)
     dt = np.diff(t, prepend=t[0])
+    dt_ref = _windows.reference_interval(t)
     if bandwidth_hz is None:
-        bandwidth_hz = ml_bandwidth(z, Rn, dt, starts, _windows.reference_interval(t))
+        bandwidth_hz = ml_bandwidth(z, Rn, dt, starts, dt_ref)
     B = t.size
-    state = new_state()
-    xp, Pp, xf, Pf = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
-    _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, float(bandwidth_hz), state, xp, Pp, xf, Pf)
+    xp, Pp, xf, Pf = np.empty((B, 4)), np.empty((B, 4, 4)), np.empty((B, 4)), np.empty((B, 4, 4))
+    _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, intensity(bandwidth_hz, dt_ref), new_state(), xp, Pp, xf, Pf,
+              True)
     if mode == "smooth":
-        xs, Ps = np.empty((B, 2)), np.empty((B, 2, 2))
-        _jit.call(_kalman.rts_smoother, starts, xp, Pp, xf, Pf, xs, Ps)
+        xs, Ps = np.empty((B, 4)), np.empty((B, 4, 4))
+        _jit.call(_kalman.rts_smoother, dt, starts, xp, Pp, xf, Pf, xs, Ps)
         floor = fill_floor(floor, starts, backward=True)
     else:
         xs, Ps = xf, Pf
         floor = fill_floor(floor, starts, backward=False)
-    own = estimate_status(checked, B)
-    return result(xs, Ps, floor, checked.window_p_value, own, float(bandwidth_hz), mode, t, z)
+    return result(xs, Ps, floor, checked.window_p_value, checked, float(bandwidth_hz), mode, t, z)
+
+
+def intensity(bandwidth_hz, dt_ref_s):
+    """The process intensity q [1/s³] of a bandwidth at the reference interval; 0 without one.
+
+    :func:`bendsense.tracking.kalman.process_intensity`.
+    """
+    if not (math.isfinite(dt_ref_s) and dt_ref_s > 0):
+        return 0.0  # fewer than two frames: nothing moves between them
+    return float(_jit.call(_kalman.process_intensity, float(bandwidth_hz), float(dt_ref_s)))
 
 
 def measurements(estimate):
     """The filter's measurements of an estimate: the force (B, 2), its noise covariance (B, 2, 2) and the floor.
 
     A component with an infinite σ (``not_identifiable``) gets a NaN force (not observed);
-    the floor (B, 2, 2) is the covariance's calibration and parameter parts.
+    the floor (B, 2, 2) is the covariance's calibration and parameter parts
+    (:func:`bendsense.tracking.stream.measure`).
     """
-    z = np.array(estimate.force_n, dtype=float).reshape(-1, 2)
+    force = np.asarray(estimate.force_n, dtype=float).reshape(-1, 2)
+    B = force.shape[0]
+    z, Rn, floor = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2, 2))
     parts = estimate.covariance_parts_n2
-    if parts is None:
-        nan = np.full((z.shape[0], 2, 2), np.nan)
-        return np.full_like(z, np.nan), nan, nan
-    parts = np.asarray(parts, dtype=float).reshape(-1, 3, 2, 2)
-    std = np.asarray(estimate.std_n, dtype=float).reshape(-1, 2)
-    z[~np.isfinite(std)] = np.nan
-    return np.ascontiguousarray(z), np.ascontiguousarray(parts[:, 0]), parts[:, 1] + parts[:, 2]
+    parts = np.full((B, 3, 2, 2), np.nan) if parts is None else np.asarray(parts, dtype=float).reshape(B, 3, 2, 2)
+    _jit.call(_stream.measure, force, np.asarray(estimate.std_n, dtype=float).reshape(B, 2), parts, z, Rn, floor)
+    return z, Rn, floor
 
 
 def fill_floor(floor, starts, backward):
-    """The floor (B, 2, 2) of a frame without one: the last one of its segment (and the next, ``backward``)."""
-    ok = np.isfinite(floor).all(axis=(1, 2))
-    idx = np.arange(floor.shape[0])
-    seg_first = np.maximum.accumulate(np.where(starts, idx, 0))
-    last = np.maximum.accumulate(np.where(ok, idx, -1))
-    take = np.where(ok, idx, np.where(last >= seg_first, last, -1))
-    if backward:
-        seg = np.cumsum(starts)
-        nxt = np.flip(np.minimum.accumulate(np.flip(np.where(ok, idx, floor.shape[0]))))
-        same = (nxt < floor.shape[0]) & (seg[np.minimum(nxt, floor.shape[0] - 1)] == seg)
-        take = np.where(take >= 0, take, np.where(same, nxt, -1))
-    out = np.full_like(floor, np.nan)
-    out[take >= 0] = floor[take[take >= 0]]
+    """The floor (B, 2, 2) of a frame without one: the last one of its segment (and the next, ``backward``).
+
+    :func:`bendsense.tracking.stream.fill_floor`.
+    """
+    out = np.empty_like(floor)
+    _jit.call(_stream.fill_floor, np.ascontiguousarray(floor), starts, backward, out)
     return out
 
 
 def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
-    """The maximum-likelihood bandwidth [Hz] of the innovations: a grid of one point per decade, then golden sections.
+    """The maximum-likelihood bandwidth [Hz] of the innovations.
 
-    The grid runs from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the frame rate; the
-    golden-section search refines log B between the best grid point's neighbours to
-    within 5 % (:data:`ML_GOLDEN_STEPS` filter passes).
+    A grid of one point per decade from :data:`LOWEST_BANDWIDTH_HZ` to a quarter of the
+    frame rate, then parabolas in log B from its best point (:func:`_ml_refine`): on the
+    whole series up to twice :data:`ML_SUBSAMPLE_FRAMES` frames; on a longer one, that
+    search runs on every m-th frame (~ML_SUBSAMPLE_FRAMES of them: the force-and-rate
+    model sampled at m Δt is the same model with Q(m Δt), so this is the exact likelihood
+    of those frames, spread over the whole series), then :func:`_ml_refine` on the whole
+    series from there: 4–6 passes over the series in all.
     """
+    B = z.shape[0]
+    if B > 2 * ML_SUBSAMPLE_FRAMES:
+        m = B // ML_SUBSAMPLE_FRAMES
+        idx = np.arange(0, B, m)
+        cs, cdt = np.cumsum(starts), np.cumsum(dt)
+        sub_starts = np.ones(idx.size, dtype=bool)
+        sub_starts[1:] = np.diff(cs[idx]) > 0  # a restart between two kept frames restarts the kept one
+        sub_dt = np.diff(cdt[idx], prepend=0.0)
+        x = _ml_search(np.ascontiguousarray(z[idx]), np.ascontiguousarray(Rn[idx]), sub_dt, sub_starts, dt_ref_s)
+        if x is not None:
+            return _ml_refine(z, Rn, dt, starts, dt_ref_s, x)
+    x = _ml_search(z, Rn, dt, starts, dt_ref_s)
+    return DEFAULT_BANDWIDTH_HZ if x is None else float(10.0 ** x)
+
+
+def _ml_search(z, Rn, dt, starts, dt_ref_s):
+    """log10 of the maximum-likelihood bandwidth: the grid, then :func:`_ml_refine` from its best; None without data."""
     top = 0.25 / dt_ref_s if math.isfinite(dt_ref_s) and dt_ref_s > 0 else 1.0
     lo_log, hi_log = math.log10(LOWEST_BANDWIDTH_HZ), max(math.log10(top), math.log10(LOWEST_BANDWIDTH_HZ) + 0.5)
-    grid = np.logspace(lo_log, hi_log, int(math.ceil(hi_log - lo_log)) + 1)
-    ll = _log_likelihoods(z, Rn, dt, starts, grid)
+    grid = np.linspace(lo_log, hi_log, int(math.ceil(hi_log - lo_log)) + 1)
+    ll = _log_likelihoods(z, Rn, dt, starts, 10.0 ** grid, dt_ref_s)
     if not np.isfinite(ll).any() or np.ptp(ll[np.isfinite(ll)]) == 0.0:
-        return DEFAULT_BANDWIDTH_HZ  # nothing to choose from (no observations): the documented default
+        return None  # nothing to choose from (no observations)
     i = int(np.nanargmax(ll))
-    a, b = math.log10(grid[max(i - 1, 0)]), math.log10(grid[min(i + 1, grid.size - 1)])
-    ratio = (math.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - ratio * (b - a), a + ratio * (b - a)
-    fc, fd = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** c, 10.0 ** d]))
-    for _ in range(ML_GOLDEN_STEPS):
-        if fc >= fd:
-            b, d, fd = d, c, fc
-            c = b - ratio * (b - a)
-            fc = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** c]))[0]
-        else:
-            a, c, fc = c, d, fd
-            d = a + ratio * (b - a)
-            fd = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** d]))[0]
-    best = c if fc >= fd else d
-    return float(10.0 ** best) if max(fc, fd) >= ll[i] else float(grid[i])
+    return math.log10(_ml_refine(z, Rn, dt, starts, dt_ref_s, float(grid[i]), (grid[0], grid[-1])))
 
 
-def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz):
-    out = np.empty(bandwidths_hz.size)
-    _jit.call(_kalman.log_likelihoods, z, Rn, dt, starts, np.ascontiguousarray(bandwidths_hz, dtype=float), out)
+def _ml_refine(z, Rn, dt, starts, dt_ref_s, x, bounds=(-np.inf, np.inf)):
+    """B [Hz] at the vertex of a parabola in log B through the whole series' likelihood around ``x`` (log10 B).
+
+    Three points x, x ± h; while the best is at an end, a Newton step of the parabola
+    through the end's three points (at least h, at most 8h beyond it; not beyond
+    ``bounds``, log10 B); while the best's neighbours are more than 2.5h apart, the vertex
+    is evaluated; then the vertex.
+    """
+    h = ML_STEP_DECADES
+    xs = [x - h, x, x + h]
+    fs = [f if math.isfinite(f) else -np.inf for f in _log_likelihoods(z, Rn, dt, starts, 10.0 ** np.array(xs),
+                                                                        dt_ref_s)]
+    for _ in range(ML_REFINE_PASSES):
+        j = int(np.argmax(fs))
+        k = min(max(j, 1), len(xs) - 2)
+        (x0, x1, x2), (f0, f1, f2) = xs[k - 1:k + 2], fs[k - 1:k + 2]
+        den = (x1 - x0) * (f1 - f2) - (x1 - x2) * (f1 - f0)
+        v = x1 - 0.5 * ((x1 - x0) ** 2 * (f1 - f2) - (x1 - x2) ** 2 * (f1 - f0)) / den if den > 0.0 else np.nan
+        if j == 0 or j == len(xs) - 1:  # at an end: beyond it
+            end, sign = (xs[0], -1.0) if j == 0 else (xs[-1], 1.0)
+            v = end + sign * min(max(sign * (v - end), h), 8 * h) if math.isfinite(v) else end + sign * 4 * h
+            if not bounds[0] <= v <= bounds[1]:
+                return float(10.0 ** xs[j])  # the best is at an end of the search range: that end
+        elif not math.isfinite(v) or not x0 < v < x2:
+            return float(10.0 ** xs[j])
+        elif x2 - x0 <= 2.5 * h or min(abs(v - x0), abs(v - x1), abs(v - x2)) < 0.1 * h:
+            return float(10.0 ** v)
+        f = _log_likelihoods(z, Rn, dt, starts, np.array([10.0 ** v]), dt_ref_s)[0]
+        i = int(np.searchsorted(xs, v))
+        xs.insert(i, v)
+        fs.insert(i, f if math.isfinite(f) else -np.inf)
+    return float(10.0 ** xs[int(np.argmax(fs))])
+
+
+def _log_likelihoods(z, Rn, dt, starts, bandwidths_hz, dt_ref_s):
+    q = np.array([intensity(b, dt_ref_s) for b in bandwidths_hz])
+    out = np.empty(q.size)
+    _jit.call(_kalman.log_likelihoods, z, Rn, dt, starts, q, out)
     return out
 
 
-def result(x, P, floor, window_p, own, bandwidth_hz, mode, t, z):
-    """The :class:`Track` of the states ``x`` (B, 2), ``P`` (B, 2, 2) with the floor added back."""
-    seen = np.diagonal(P, axis1=1, axis2=2) < 0.5 * _kalman.DIFFUSE
-    cov = P + np.where(np.isfinite(floor), floor, 0.0)
-    unseen = ~seen[:, :, None] | ~seen[:, None, :]
-    cov = np.where(unseen, np.inf, cov)
-    force = np.where(seen, x, np.nan)
-    std = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
-    status = np.array(own, dtype=object)
-    misfit = (np.asarray(window_p) < MISFIT_P) & (status == OK)
-    status[misfit] = MODEL_MISFIT
-    return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=np.asarray(window_p, dtype=float),
-                 status=status.astype(str), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t, frame_force_n=z)
+def result(x, P, floor, window_p, est, bandwidth_hz, mode, t, z):
+    """The :class:`Track` of the states ``x`` (B, 4), ``P`` (B, 4, 4) (force and rate) with the floor added back."""
+    B = x.shape[0]
+    frame_z = np.asarray(est.force_n, dtype=float).reshape(B, 2)
+    force, std, cov = np.empty((B, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
+    _jit.call(_kalman.finish, x, P, np.ascontiguousarray(floor), force, std, cov)
+    window_p = np.asarray(window_p, dtype=float)
+    return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
+                 status=track_status(est, frame_z, window_p), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t,
+                 frame_force_n=z)
 
 
 def new_state():
-    """A filter's state before its first frame: x (2,), P (2, 2), the latest noise covariance, [has one]."""
-    return np.zeros(2), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros(1)
+    """A filter's state before its first frame: x (4,), P (4, 4), the latest noise covariance, [has it, Fx, Fy seen]."""
+    return np.zeros(4), np.zeros((4, 4)), np.zeros((2, 2)), np.zeros(3)
 
 
 def _check_bandwidth(value, allow_none):
@@ -299,11 +345,13 @@ class Tracker:
         self.window_s = float(window_s)
         self.mode = mode
         self._state = new_state()
-        self._last = None  # (t, pressure) of the latest frame
         self._dt_ref = None  # the median interval of the first frames
-        self._floor = np.full((2, 2), np.nan)
-        self._open = None  # the open window: (its frames' payload, segment start time, window index)
-        self._p = np.nan  # the latest completed window's p-value
+        self._q = None  # the process intensity of the bandwidth at that interval [1/s³]
+        self._fs = np.zeros(_stream.N_SCALARS)  # the carried scalars of the stream kernels
+        self._fs[_stream.LATEST_P] = np.nan
+        self._carry = np.full((2, 2), np.nan)  # the segment's latest floor
+        self._sums = None  # the open window's sums (r, A, M, shifts)
+        self._model = None  # (the shift error model, as a plain tuple, the coils) of the latest block
 
     def update(self, estimate_block, t_s_block, pressure_pa_block=None) -> Track:
         """Filter a block of frames; returns their :class:`Track`.
@@ -317,66 +365,98 @@ class Tracker:
         pressure_pa_block : array_like, shape (b,), optional
             Their pressures [Pa].
         """
-        estimate_block = _windows.as_series(estimate_block)  # one frame (the live path) is a block of one
-        t, P, _ = _windows.series_inputs(estimate_block, np.atleast_1d(t_s_block), self.window_s,
-                                         None if pressure_pa_block is None else np.atleast_1d(pressure_pa_block))
-        if self._last is not None and t[0] < self._last[0]:
-            raise ArgumentError(f"t_s_block: must not decrease, got {t[0]!r} s after the previous block's "
-                                f"{self._last[0]!r} s")
-        tt = t if self._last is None else np.concatenate(([self._last[0]], t))
-        if self._dt_ref is None and tt.size > 1:
-            self._dt_ref = _windows.reference_interval(tt)
-        PP = None if P is None else (P if self._last is None else np.concatenate(([self._last[1]], P)))
-        starts = _windows.segment_starts(tt, PP, self.window_s, self._dt_ref if self._dt_ref else np.inf)
-        if self._last is not None:
-            starts = starts[1:]
-        dt = np.diff(tt, prepend=tt[0])[-t.size:]
-        z, Rn, floor = measurements(estimate_block)
-        B = t.size
-        xf, Pf, xp, Pp = np.empty((B, 2)), np.empty((B, 2, 2)), np.empty((B, 2)), np.empty((B, 2, 2))
-        _jit.call(_kalman.kalman_filter, z, Rn, dt, starts, self.bandwidth_hz, self._state, xp, Pp, xf, Pf)
-        floor = self._fill(floor, starts)
-        window_p = self._windows(estimate_block, t, starts)
-        own = estimate_status(estimate_block, B)
-        self._last = (float(t[-1]), np.nan if P is None else float(P[-1]))
-        return result(xf, Pf, floor, window_p, own, self.bandwidth_hz, self.mode, t, z)
+        est, t, P = self._inputs(estimate_block, t_s_block, pressure_pa_block)
+        b = t.size
+        fs = self._fs
+        learning = self._dt_ref is None
+        if learning:  # the median interval of the first frames seen
+            tt = t if fs[_stream.HAS_LAST] == 0.0 else np.concatenate(([fs[_stream.LAST_T]], t))
+            if tt.size > 1:
+                self._dt_ref = _windows.reference_interval(tt)
+                self._q = intensity(self.bandwidth_hz, self._dt_ref)
+        force, std, cov = np.empty((b, 2)), np.empty((b, 2)), np.empty((b, 2, 2))
+        starts = np.empty(b, dtype=np.bool_)
+        parts = est.covariance_parts_n2
+        parts = np.full((b, 3, 2, 2), np.nan) if parts is None else np.asarray(parts, dtype=float).reshape(b, 3, 2, 2)
+        x, Pk, Rbar, has = self._state
+        z = np.asarray(est.force_n, dtype=float).reshape(b, 2)
+        missing = _jit.call(_stream.stream_filter, t, P, z, np.asarray(est.std_n, dtype=float).reshape(b, 2), parts,
+                            self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR,
+                            _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has, self._carry, starts, force, std, cov)
+        if missing < 0:  # nothing filtered: the times are checked first
+            if learning:
+                self._dt_ref = self._q = None  # nor the interval learnt from these times kept
+            i = -1 - missing
+            before = float(t[i - 1] if i else fs[_stream.LAST_T])
+            raise ArgumentError(f"t_s_block: expected finite times [s], got {float(t[i])!r} at frame {i}" if not
+                                math.isfinite(t[i]) else f"t_s_block: must not decrease, got {float(t[i])!r} s "
+                                f"after {before!r} s")
+        window_p, misfit = self._windows(est, t, starts, b)
+        return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
+                     status=track_status(est, z, window_p, missing > 0 or misfit), bandwidth_hz=self.bandwidth_hz,
+                     mode=self.mode, t_s=t, frame_force_n=z)
 
-    def _fill(self, floor, starts):
-        """The floor carried forward within a segment, across blocks (:func:`fill_floor`, the last one carried in)."""
-        carried = np.concatenate((self._floor[None], floor))
-        out = fill_floor(carried, np.concatenate(([True], starts)), backward=False)[1:]
-        self._floor = out[-1]
-        return out
+    def _inputs(self, est, t_s, pressure_pa):
+        """The checked block: (estimate, t (b,), pressure (b,) NaN where not given)."""
+        if not isinstance(est, ForceEstimate):
+            raise ArgumentError(f"estimate_block: expected a ForceEstimate (estimate_force), got {type(est).__name__}")
+        shape = est.batch_shape
+        if len(shape) > 1:
+            raise ArgumentError(f"estimate_block: expected the estimates of a block of frames (one batch axis), got "
+                                f"batch shape {shape}")
+        b = shape[0] if shape else 1
+        try:
+            t = np.asarray(t_s, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ArgumentError(f"t_s_block: expected times [s], got {short(t_s)}") from None
+        if t.size != b:
+            raise ArgumentError(f"t_s_block: expected {b} times (one per frame), got {short(t_s)}")
+        if pressure_pa is None:
+            return est, t, np.full(b, np.nan)
+        try:
+            P = np.array(np.broadcast_to(np.asarray(pressure_pa, dtype=float).reshape(-1), (b,)))
+        except (TypeError, ValueError):
+            raise ArgumentError(f"pressure_pa_block: expected {b} pressures [Pa] (one per frame), got "
+                                f"{short(pressure_pa)}") from None
+        return est, t, P
 
-    def _windows(self, est, t, starts):
-        """The latest completed window's p-value at each frame of the block; the open window kept for the next."""
-        payload = tuple(getattr(est, name) for name in _windows.PAYLOAD)
-        if any(a is None for a in payload) or est.shift_errors is None:
-            return np.full(t.size, np.nan)
-        if self._open is not None:
-            prev, t0, j0, t_prev = self._open
-            payload = tuple(np.concatenate((a, b)) for a, b in zip(prev, payload))
-            tt = np.concatenate((t_prev, t))
-            st = np.concatenate((np.zeros(t_prev.size, dtype=bool), starts))
-            seg, j, firsts = _windows.window_index(tt, st, self.window_s, t0)
-        else:
-            tt, st = t, starts
-            seg, j, firsts = _windows.window_index(tt, st, self.window_s)
-        key_change = np.flatnonzero((seg[1:] != seg[:-1]) | (j[1:] != j[:-1])) + 1
-        bounds = np.concatenate(([0], key_change)).astype(np.int64)  # the starts of the windows; the last is open
-        done = bounds.size - 1
-        p = np.full(done, np.nan)
-        if done:
-            p, _ = _windows.window_p_values(est, bounds, payload)
-        # each frame of the block: the latest window completed by its arrival (at the next window's first frame)
-        offset = tt.size - t.size
-        frame_p = np.empty(t.size)
-        latest = self._p
-        closes = {int(b): p[w - 1] for w, b in enumerate(bounds) if w >= 1}
-        for i in range(t.size):
-            latest = closes.get(offset + i, latest)
-            frame_p[i] = latest
-        self._p = latest
-        lo = int(bounds[-1])
-        self._open = (tuple(a[lo:] for a in payload), firsts[seg[lo]], j[lo], tt[lo:])
-        return frame_p
+    def _windows(self, est, t, starts, b):
+        """The latest completed window's p at each frame (b,), and whether any is below MISFIT_P (:mod:`.stream`)."""
+        resid, jac, mfac, shifts = (est.residual_rad, est.jacobian_rad_per_n, est.model_factor_rad, est.shifts_m)
+        p = np.full(b, np.nan)
+        if resid is None or jac is None or mfac is None or shifts is None or est.shift_errors is None \
+                or est.uncertainty != "propagated":
+            return p, False
+        R, N = resid.shape[-1], shifts.shape[-1]
+        resid, shifts = resid.reshape(b, R), shifts.reshape(b, N)
+        jac, mfac = jac.reshape(b, R, 2), mfac.reshape(b, R, 2)
+        if self._sums is None:
+            self._sums = (np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N))
+        if self._model is None or self._model[0] is not est.shift_errors:  # the same calibration: converted once
+            self._model = (est.shift_errors, tuple(est.shift_errors), np.asarray(est.coils, dtype=np.int64))
+        misfit = _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, self._model[1],
+                           self._model[2], float(est.strip_gap_m), self.window_s, self._fs, *self._sums, p)
+        return p, misfit
+
+
+def track_status(est, z, window_p, flagged=None):
+    """The tracked status (b,): the frame's own, ``model_misfit`` where its window's p < MISFIT_P and it was ``ok``.
+
+    The frame's own: :func:`bendsense.results.estimate_status`, looked up only where a frame
+    is not ok. ``flagged``: whether any frame's force is missing or its window p below
+    MISFIT_P, when the caller knows (the stream kernels count them).
+    """
+    b = z.shape[0]
+    success, message = est.success, est.message
+    if flagged is None:
+        flagged = not np.isfinite(z).all() or (window_p < MISFIT_P).any()
+    if b == 1:  # one frame (the live path): scalar tests, no array reductions
+        ok = bool(np.asarray(success).reshape(-1)[0]) and str(np.asarray(message).reshape(-1)[0]) == OK_MESSAGE
+    else:
+        ok = bool(np.all(success)) and bool(np.all(message == OK_MESSAGE))
+    ok = ok and not flagged
+    if ok:
+        return np.full(b, OK)  # every frame ok (the live path's usual block): nothing to look up
+    status = estimate_status(est, b)
+    status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
+    return status.astype(str)

@@ -87,14 +87,10 @@ def complement(A):
 
 
 @njit(cache=True)
-def window_test(lo, hi, resid, jac, mfac, shifts, err, coils, gap):
-    """The p-value and the usable frames of the window test over frames ``lo:hi`` (module docstring)."""
+def window_sums(lo, hi, resid, jac, mfac, shifts, rsum, Asum, Msum, Ssum):
+    """Add the usable frames ``lo:hi`` (a finite payload) to the sums of r, A, M and the shifts; returns how many."""
     R = resid.shape[1]
     N = shifts.shape[1]
-    rbar = np.zeros(R)
-    A = np.zeros((R, 2))
-    M = np.zeros((R, 2))
-    S = np.zeros(N)
     n = 0
     for f in range(lo, hi):
         ok = True
@@ -107,18 +103,33 @@ def window_test(lo, hi, resid, jac, mfac, shifts, err, coils, gap):
             continue
         n += 1
         for i in range(R):
-            rbar[i] += resid[f, i]
+            rsum[i] += resid[f, i]
             for c in range(2):
-                A[i, c] += jac[f, i, c]
-                M[i, c] += mfac[f, i, c]
+                Asum[i, c] += jac[f, i, c]
+                Msum[i, c] += mfac[f, i, c]
         for j in range(N):
-            S[j] += shifts[f, j]
+            Ssum[j] += shifts[f, j]
+    return n
+
+
+@njit(cache=True)
+def window_test(lo, hi, resid, jac, mfac, shifts, err, coils, gap):
+    """The p-value and the usable frames of the window test over frames ``lo:hi`` (module docstring)."""
+    R = resid.shape[1]
+    N = shifts.shape[1]
+    rbar, A, M, S = np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N)
+    n = window_sums(lo, hi, resid, jac, mfac, shifts, rbar, A, M, S)
+    return window_statistic(rbar, A, M, S, n, err, coils, gap), n
+
+
+@njit(cache=True)
+def window_statistic(rsum, Asum, Msum, Ssum, n, err, coils, gap):
+    """The p-value of a window from the sums of its ``n`` usable frames (:func:`window_sums`); NaN below MIN_FRAMES."""
     if n < MIN_FRAMES:
-        return np.nan, n
-    rbar /= n
-    A /= n
-    M /= n
-    S /= n
+        return np.nan
+    R = rsum.shape[0]
+    N = Ssum.shape[0]
+    rbar, A, M, S = rsum / n, Asum / n, Msum / n, Ssum / n
     cov_s = np.zeros((N, N))
     nv_s = np.zeros(N)
     shift_covariance(err, S, cov_s, nv_s)
@@ -131,7 +142,7 @@ def window_test(lo, hi, resid, jac, mfac, shifts, err, coils, gap):
             C[a, b] = Lc[a, b] + M[a, 0] * M[b, 0] + M[a, 1] * M[b, 1]
         C[a, a] -= (1.0 - 1.0 / n) * nv_s[coils[a]] * inv_d2  # the noise averages down
     if unc.cholesky(Lc) == 0:
-        return np.nan, n
+        return np.nan
     unc.forward(Lc, A)  # whitened: Ã, r̃, G = Lc⁻¹ C Lc⁻ᵀ
     r = rbar.reshape(R, 1).copy()
     unc.forward(Lc, r)
@@ -143,12 +154,12 @@ def window_test(lo, hi, resid, jac, mfac, shifts, err, coils, gap):
     Cy = unc.mm(unc.mm(Q.T.copy(), G), Q)
     dof = unc.cholesky(Cy)
     if dof == 0:
-        return np.nan, n
+        return np.nan
     unc.forward(Cy, y)
     t = 0.0
     for i in range(y.shape[0]):
         t += y[i, 0] * y[i, 0]
-    return unc.chi2_sf(t, dof), n
+    return unc.chi2_sf(t, dof)
 
 
 @njit(cache=True)
