@@ -256,6 +256,10 @@ _KERNEL_NAMES = {
     "bendsense.shift_errors": "shift error model",
     "bendsense.estimation.problem": "estimation set-up",
     "bendsense.estimation.uncertainty": "uncertainty kernels",
+    "bendsense.tracking.kalman": "tracking kernels",
+    "bendsense.tracking.stream": "live tracking kernels",
+    "bendsense.tracking.windows": "window check",
+    "bendsense.tracking.track": "tracking kernels",
 }
 
 
