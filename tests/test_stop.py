@@ -373,7 +373,8 @@ def test_live_stops_without_an_image(tmp_path):
 
     linear_calibration().save(tmp_path / "cal.yaml")
     with SimulatedDevice(default_source(rate_hz=200, seed=0), rate_hz=200) as dev:
-        line = run_and_stop(["live", dev.port, "--calibration", "cal.yaml", "--save", "fig.png", "--seconds", "60"],
+        # --seconds far beyond the wait for the board: a live start slowed by a busy machine must still be stopped
+        line = run_and_stop(["live", dev.port, "--calibration", "cal.yaml", "--save", "fig.png", "--seconds", "600"],
                             tmp_path, signal.SIGTERM, whole_group=False, ready=lambda: dev.stats.sent > 400)
     assert line == "Interrupted (SIGTERM): no figure saved (fig.png is written when --seconds ends)"
     assert no_output(tmp_path, "fig.png")
