@@ -47,7 +47,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-COPIED = ("configs", "examples", "benchmarks")
+COPIED = ("configs", "examples", "benchmarks", "tools")
+# and the independent forward model that tools/model_error.py (so benchmarks/bench_model_error.py) builds on
+COPIED_FILES = ("tests/forward_model.py",)
 HARDWARE = re.compile(r"^\s*#\s*needs hardware\b", re.IGNORECASE)
 FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[\w+-]*)[^\n]*\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
 TIMEOUT_S = 300
@@ -318,6 +320,9 @@ def test_page_runs(page: Path, tmp_path: Path):
     for name in COPIED:
         if (ROOT / name).is_dir():
             shutil.copytree(ROOT / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__"))
+    for name in COPIED_FILES:
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ROOT / name, tmp_path / name)
     # single-threaded BLAS as the CLI sets it (troubleshooting.md): the python blocks'
     # many small matrices crawl when threaded BLAS competes for the cores
     env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
