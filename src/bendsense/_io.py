@@ -34,6 +34,22 @@ def _not_regular(path, kind: str, what: str, error):
     return error(f"{path}: {kind}, not a {what}; give a regular file")
 
 
+def _checked(path, error):
+    """The reader's ``path`` (a checked path) and ``error`` class (default :class:`~bendsense.errors.ConfigError`)."""
+    from bendsense.errors import ConfigError
+    from bendsense.validation import path as _path
+
+    error = error or ConfigError
+    return _path("path", path, error=error), error
+
+
+def _cannot_read(path, what: str, err: OSError, error):
+    """The one-line error for a file the system refuses to stat or open."""
+    if isinstance(err, FileNotFoundError):
+        return error(f"{path}: cannot read {what}: no such file")
+    return error(f"{path}: cannot read {what}: {err.strerror or err}")
+
+
 def check_regular_file(path: str | os.PathLike, what: str, error=None) -> os.stat_result:
     """``os.stat`` of ``path``, refusing anything but a regular file with one line naming what it is.
 
@@ -51,17 +67,11 @@ def check_regular_file(path: str | os.PathLike, what: str, error=None) -> os.sta
     error : type, optional
         The exception class (default :class:`~bendsense.errors.ConfigError`).
     """
-    from bendsense.errors import ConfigError
-    from bendsense.validation import path as _path
-
-    error = error or ConfigError
-    path = _path("path", path, error=error)
+    path, error = _checked(path, error)
     try:
         st = os.stat(path)
-    except FileNotFoundError:
-        raise error(f"{path}: cannot read {what}: no such file") from None
     except OSError as err:
-        raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
+        raise _cannot_read(path, what, err, error) from None
     kind = file_kind(st.st_mode)
     if kind is not None:
         raise _not_regular(path, kind, what, error)
@@ -88,19 +98,13 @@ def open_regular(path: str | os.PathLike, what: str, error=None):
     file object
         Binary, buffered; the caller closes it.
     """
-    from bendsense.errors import ConfigError
-    from bendsense.validation import path as _path
-
-    error = error or ConfigError
-    path = _path("path", path, error=error)
+    path, error = _checked(path, error)
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    except FileNotFoundError:
-        raise error(f"{path}: cannot read {what}: no such file") from None
     except IsADirectoryError:  # (platforms that cannot open a directory)
         raise _not_regular(path, "a directory", what, error) from None
     except OSError as err:
-        raise error(f"{path}: cannot read {what}: {err.strerror or err}") from None
+        raise _cannot_read(path, what, err, error) from None
     try:
         kind = file_kind(os.fstat(fd).st_mode)
         if kind is not None:

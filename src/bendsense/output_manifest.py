@@ -31,6 +31,16 @@ def _litter(name: str) -> bool:
     return name.startswith(".") and (name.endswith(_LOCK_SUFFIX) or _TMP_MARK in name or _OLD_MARK in name)
 
 
+def _entries(d: str | os.PathLike, rel: str):
+    """``(entry, relative name)`` of directory ``d`` in name order, without its manifest and litter.
+
+    ``rel`` is ``d``'s path relative to the output directory (``""`` at its top, where
+    the manifest lies; else ending in ``/``).
+    """
+    for entry in sorted(os.scandir(d), key=lambda e: e.name):
+        if not ((not rel and entry.name == MANIFEST_NAME) or _litter(entry.name)):
+            yield entry, rel + entry.name
+
 
 def _umask() -> int:
     try:
@@ -95,10 +105,7 @@ def foreign_entries(path) -> list[str]:
     foreign: list[str] = []
 
     def walk(d: Path, rel: str) -> None:
-        for entry in sorted(os.scandir(d), key=lambda e: e.name):
-            name, relname = entry.name, rel + entry.name
-            if (not rel and name == MANIFEST_NAME) or _litter(name):
-                continue
+        for entry, relname in _entries(d, rel):
             if entry.is_dir(follow_symlinks=False):
                 if relname + "/" in listed:
                     foreign.extend(relname + "/" + f for f in foreign_entries(entry.path))
@@ -118,10 +125,7 @@ def _listing(root: Path) -> list[str]:
     files: list[str] = []
 
     def walk(d: Path, rel: str) -> None:
-        for entry in sorted(os.scandir(d), key=lambda e: e.name):
-            name, relname = entry.name, rel + entry.name
-            if (not rel and name == MANIFEST_NAME) or _litter(name):
-                continue
+        for entry, relname in _entries(d, rel):
             if entry.is_dir(follow_symlinks=False):
                 if (Path(entry.path) / MANIFEST_NAME).exists():
                     files.append(relname + "/")
