@@ -33,6 +33,7 @@ NO_SHAPE = "no_shape"  # non-finite signals
 NOT_CONVERGED = "not_converged"  # the force estimate failed
 NOT_IDENTIFIABLE = "not_identifiable"  # the shape does not determine the load along one direction (σ inf)
 MODEL_MISFIT = "model_misfit"
+CONTACT_UNRESOLVED = "contact_unresolved"  # load="contact": the location is not resolved (contact_std_m inf)
 NO_FORCE = "no_force"  # a NaN force is never ok
 IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
 WINDOW_MISFIT = "window_misfit"  # a count, not a status: frames whose latest window failed the window test

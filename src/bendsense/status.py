@@ -34,3 +34,6 @@ class Status(IntEnum):
     #: the length): the shape is no bending of this actuator (wrong units, calibration or
     #: config); the force is reported, not ok
     MODEL_MISFIT = 9
+    #: estimate (load="contact", location estimated): the force is reported, but the data cannot place the
+    #: contact (its σ beyond one segment length, or the force nearly along the tangent there): contact_std_m inf
+    CONTACT_UNRESOLVED = 10

@@ -307,6 +307,8 @@ def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, obje
         shift_errors=err if window else None,
         coils=_coils(pb) if window else None,
         strip_gap_m=pb.gap,
+        contact_s_m=np.full(batch, np.nan),
+        contact_std_m=np.full(batch, np.nan),
     )
 
 

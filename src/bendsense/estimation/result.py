@@ -122,6 +122,14 @@ class ForceEstimate:
     window_p_value : ndarray, shape (...) or None
         The p-value of the frame's window test (:func:`bendsense.check_windows`); None
         until a window test ran, NaN where none is available.
+    load : str
+        The load model: ``"tip"`` (the paper's tip force) or ``"contact"`` (one point
+        force at arc length ``contact_s_m``; DESIGN section 2b).
+    contact_s_m : ndarray, shape (...) or None
+        Arc length of the contact [m]; NaN for ``load="tip"``.
+    contact_std_m : ndarray, shape (...) or None
+        Standard deviation of ``contact_s_m`` [m]: 0 for a known location, ``inf`` where
+        the data cannot resolve it (status ``contact_unresolved``), NaN for ``load="tip"``.
     """
 
     force_n: np.ndarray
@@ -150,6 +158,9 @@ class ForceEstimate:
     coils: tuple | None = field(default=None, repr=False)
     strip_gap_m: float = field(default=float("nan"), repr=False)
     window_p_value: np.ndarray | None = None
+    load: str = "tip"
+    contact_s_m: np.ndarray | None = None
+    contact_std_m: np.ndarray | None = None
 
     @property
     def budget(self) -> dict:
@@ -187,6 +198,9 @@ class ForceEstimate:
             "chi2_per_dof": None if self.chi2_per_dof is None else np.asarray(self.chi2_per_dof).tolist(),
             "p_value": None if self.p_value is None else np.asarray(self.p_value).tolist(),
             "window_p_value": None if self.window_p_value is None else np.asarray(self.window_p_value).tolist(),
+            "load": self.load,
+            "contact_s_m": None if self.contact_s_m is None else np.asarray(self.contact_s_m).tolist(),
+            "contact_std_m": None if self.contact_std_m is None else np.asarray(self.contact_std_m).tolist(),
         }
 
     def plot(self, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float = 100.0):
