@@ -58,6 +58,23 @@ class Finite(click.ParamType):
         return number
 
 
+class ContactLocation(Finite):
+    """An arc length along the actuator [m] (> 0), or ``along-body`` where a scenario takes a sequence of touches."""
+
+    name = "s_c"
+
+    def __init__(self, named: bool = True):
+        super().__init__(min=0, min_open=True)
+        self.named = named
+
+    def convert(self, value, param, ctx):
+        """Parse and check one value."""
+        if self.named and value == "along-body":
+            return value
+        return super().convert(value, param, ctx)
+
+
+
 class PressureKpa(Finite):
     """A gauge pressure option in kPa: finite, from ``min`` (default vacuum) to 1 MPa.
 

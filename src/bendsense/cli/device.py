@@ -17,6 +17,7 @@ from bendsense.cli import _signals
 from bendsense.cli._common import (
     CONSTRAINTS,
     SEED,
+    ContactLocation,
     Finite,
     InterspersedCommand,
     PressureKpa,
@@ -361,8 +362,12 @@ def record(
 @click.option("--speed", type=Finite(min=0, min_open=True), default=1.0, show_default=True,
               help="Replay speed (2: twice as fast).")
 @click.option("--loop", is_flag=True, help="Replay: start over after the last frame, until stopped.")
+@click.option("--contact-s-m", "contact_s_m", type=ContactLocation(),
+              help="sensor: where the simulated touches land: an arc length s_c [m] along the body (0 < s_c <= L), "
+                   "or 'along-body' (each touch somewhere else: 0.5, 0.7, 0.85, 1.0, 0.6, 0.9 L); default the tip.")
 def sim_device(
-    rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop
+    rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop,
+    contact_s_m,
 ):
     """Run a simulated sensor board on a pseudo-terminal and print its port path.
 
@@ -382,7 +387,7 @@ def sim_device(
 
         ctx = click.get_current_context()
         for name, flag in (("rate_hz", "--rate"), ("channels", "--channels"), ("adc_bits", "--adc-bits"),
-                           ("source", "--source")):
+                           ("source", "--source"), ("contact_s_m", "--contact-s-m")):
             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
                 raise click.UsageError(f"{flag} does not apply to --replay: the recording gives it "
                                        "(--speed changes the pace)")
@@ -404,9 +409,12 @@ def sim_device(
         raise click.BadParameter(f"expected at most {max_rate_hz(channels):,} Hz (what a USB full-speed link carries "
                                  f"for {channels} channels), got {rate_hz:g}", param_hint="--rate")
     if source == "ramp":
+        if contact_s_m is not None:
+            raise click.BadParameter("applies to --source sensor only, not ramp", param_hint="--contact-s-m")
         src = ramp_source(channels, adc_bits)
     else:
-        src = default_source(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
+        src = default_source(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed,
+                             contact_s_m=contact_s_m)
     dev = SimulatedDevice(
         src,
         rate_hz=rate_hz,

@@ -9,6 +9,7 @@ import click
 from bendsense import output
 from bendsense.cli._common import (
     SEED,
+    ContactLocation,
     Finite,
     InterspersedCommand,
     PressureKpa,
@@ -49,6 +50,12 @@ _SCENARIOS = ("calibration", "validation", "tip-loads", "contact", "time-varying
 @click.option("--contact-n", type=Finite(min=0),
               help="free-sweep: a contact force [N] over the middle fifth of the way down (default 0); "
                    "time-varying: the contact force while on (default 0.15).")
+@click.option("--contact-s-m", "contact_s_m", type=ContactLocation(),
+              help="contact, time-varying: the contact force acts at this arc length s_c [m] along the body "
+                   "(0 < s_c <= L), normal to the loaded tangent there; truth column contact_s_m. time-varying "
+                   "also takes 'along-body': each touch lands somewhere else along the body.")
+@click.option("--rate", "rate_hz", type=Finite(min=0, min_open=True),
+              help="Frame rate [Hz] of the recordings (default 35; time-varying 100).")
 @overwrite_option
 def simulate(
     scenario,
@@ -63,13 +70,16 @@ def simulate(
     hysteresis_kpa,
     max_pressure_kpa,
     contact_n,
+    contact_s_m,
+    rate_hz,
     overwrite,
 ):
     """Write SCENARIO as simulated session CSVs with ground-truth columns.
 
     SCENARIO is one of the paper's experiments: calibration (flat + strips, with a
     manifest for 'bendsense calibrate'), validation (strips of known curvature),
-    tip-loads (20-120 kPa x 0-0.3 N), contact (12 random normal contact forces),
+    tip-loads (20-120 kPa x 0-0.3 N), contact (12 random normal contact forces, at the
+    tip or, with --contact-s-m, along the body),
     time-varying (10 s at 100 Hz), free-sweep (a free pressure ramp 0 -> max -> 0, for
     'bendsense identify free-bending --session'), or all.
     """
@@ -81,11 +91,17 @@ def simulate(
         "hysteresis_pa": None if hysteresis_kpa is None else hysteresis_kpa * 1e3,
         "pressure_max_pa": None if max_pressure_kpa is None else max_pressure_kpa * 1e3,
         "contact_n": contact_n,
+        "contact_s_m": contact_s_m,
+        "rate_hz": rate_hz,
     }
     for flag, value, allowed in (("--max-pressure-kpa", max_pressure_kpa, ("free-sweep", "all")),
-                                 ("--contact-n", contact_n, ("free-sweep", "time-varying", "all"))):
+                                 ("--contact-n", contact_n, ("free-sweep", "time-varying", "all")),
+                                 ("--contact-s-m", contact_s_m, ("contact", "time-varying", "all"))):
         if value is not None and scenario not in allowed:
             raise click.BadParameter(f"applies to {', '.join(allowed[:-1])} only, not {scenario}", param_hint=flag)
+    if contact_s_m == "along-body" and scenario != "time-varying":
+        raise click.BadParameter(f"'along-body' applies to time-varying only, not {scenario}; give s_c [m]",
+                                 param_hint="--contact-s-m")
     if frames is not None:
         if scenario in ("calibration", "validation", "all"):
             options["frames_per_strip"] = frames

@@ -90,7 +90,9 @@ class ActuatorFrames:
     effective_pressure_pa : ndarray, shape (...)
         Pressure that bends the actuator, after hysteresis [Pa].
     force_n : ndarray, shape (..., 2)
-        Tip force in the base frame [N].
+        Point force in the base frame [N], at the tip or at ``contact_s_m``.
+    contact_s_m : float
+        Arc length s_c where the force acts [m] (the actuator length L for a tip load).
     tip_curvature_per_m : ndarray, shape (...)
         True natural curvature K0 [1/m].
     ei_nm2 : ndarray, shape (...)
@@ -136,6 +138,7 @@ class ActuatorFrames:
     counts: np.ndarray
     saturated: np.ndarray
     valid: np.ndarray
+    contact_s_m: float = math.nan
 
     @property
     def n_invalid(self) -> int:
@@ -150,9 +153,9 @@ class ActuatorFrames:
         index : slice, array_like of bool or of int
             The frames to keep.
         """
-        s_m = self.s_m
-        values = {name: getattr(self, name)[index] for name in self.__dataclass_fields__ if name != "s_m"}
-        return ActuatorFrames(s_m=s_m, **values)
+        whole = ("s_m", "contact_s_m")
+        values = {name: getattr(self, name)[index] for name in self.__dataclass_fields__ if name not in whole}
+        return ActuatorFrames(s_m=self.s_m, contact_s_m=self.contact_s_m, **values)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -314,7 +317,24 @@ class SimulatedActuator:
         """
         return play_operator(pressure_pa, self.hysteresis_pa, initial_pa)
 
-    def solve(self, pressure_pa, force_n=(0.0, 0.0), *, initial=None, sensitivities=False):
+    def contact_location(self, contact_s_m) -> float | None:
+        """Check a contact location: None (the tip) or a number in ``(0, L]`` [m]; return it as a float.
+
+        Parameters
+        ----------
+        contact_s_m : float or None
+            Arc length s_c of the point force [m].
+        """
+        if contact_s_m is None:
+            return None
+        length = self.config.actuator.length_m
+        ok = not isinstance(contact_s_m, bool) and isinstance(contact_s_m, (int, float, np.floating, np.integer))
+        if not ok or not (math.isfinite(contact_s_m) and 0.0 < contact_s_m <= length):
+            raise ConfigError(f"contact_s_m: must be a number in (0, L = {length:g} m], got {contact_s_m!r}")
+        return float(contact_s_m)
+
+    def solve(self, pressure_pa, force_n=(0.0, 0.0), *, initial=None, sensitivities=False, contact_s_m=None,
+              s_m=None):
         """Solve the true beam (over the actuator length) for the pressures acting on it.
 
         Parameters
@@ -322,20 +342,28 @@ class SimulatedActuator:
         pressure_pa : array_like, shape (...)
             Pressure acting on the actuator [Pa] (after any hysteresis).
         force_n : array_like, shape (..., 2)
-            Tip force in the base frame [N].
+            Point force in the base frame [N], at the tip or at ``contact_s_m``.
         initial : BeamSolution, optional
             Warm start.
         sensitivities : bool
-            Also compute ∂φ/∂F and ∂r/∂F.
+            Also compute ∂φ/∂F and ∂r/∂F (and ∂φ/∂s_c, ∂r/∂s_c with a contact location).
+        contact_s_m : float, optional
+            Arc length s_c of the point force [m] (:meth:`contact_location`); None: the tip.
+            Beyond s_c the actuator bends freely under its weight.
+        s_m : array_like, shape (M,), optional
+            Output arc lengths [m]; default the true-shape grid on ``[0, L_sensor]``
+            followed by the tip ``L``.
 
         Returns
         -------
         bendsense.beam.BeamSolution
-            Output points ``s_m`` on ``[0, L_sensor]`` followed by the tip ``L``.
+            At ``s_m``: by default the points on ``[0, L_sensor]`` followed by the tip ``L``.
         """
         from bendsense.beam import solve_beam
 
         p = np.asarray(pressure_pa, dtype=float)
+        sc = self.contact_location(contact_s_m)
+        extra = {} if sc is None else {"contact_s_m": sc}
         return solve_beam(
             self.config.actuator.length_m,
             self.ei_nm2(p),
@@ -349,16 +377,19 @@ class SimulatedActuator:
             sensitivities=sensitivities,
         )
 
-    def solve_contact(self, pressure_pa, contact_n, force_n=(0.0, 0.0), *, ramp_steps=4, tol_rad=1e-10, max_iter=20):
-        """Solve for a tip contact force normal to the true loaded tip tangent (paper eq. 21).
+    def solve_contact(self, pressure_pa, contact_n, force_n=(0.0, 0.0), *, contact_s_m=None, ramp_steps=4,
+                      tol_rad=1e-10, max_iter=20):
+        """Solve for a contact force normal to the true loaded tangent at the contact point (paper eq. 21).
 
-        The contact force ``F_c = f_c (−cos φ_c, sin φ_c)`` is normal to the tip tangent
-        ``t = (sin φ_c, cos φ_c)`` and pushes against the bending (toward ``−x`` for a
-        straight tip, ``+y`` for a horizontal one: the paper's fingertip, Fig. 7(d)).
-        Since ``φ_c`` must equal the tip angle of the loaded beam, Newton's method solves
-        ``φ_L(F_fixed + F_c(φ_c)) = φ_c`` per frame, with ∂φ_L/∂F from the beam solver.
-        ``f_c`` is ramped up from 0 in ``ramp_steps`` steps (quasi-static loading), so the
-        answer is the equilibrium connected to the unloaded shape.
+        The contact force ``F_c = f_c (−cos φ_c, sin φ_c)`` is normal to the tangent
+        ``t = (sin φ_c, cos φ_c)`` at the contact point ``s_c`` (the tip by default) and
+        pushes against the bending (toward ``−x`` for a straight finger, ``+y`` for a
+        horizontal one: the paper's fingertip, Fig. 7(d); an object touching the finger's
+        body with ``contact_s_m``: a frictionless contact). Since ``φ_c`` must equal the
+        angle of the loaded beam at ``s_c``, Newton's method solves ``φ(s_c; F_fixed +
+        F_c(φ_c)) = φ_c`` per frame, with ∂φ(s_c)/∂F from the beam solver. ``f_c`` is
+        ramped up from 0 in ``ramp_steps`` steps (quasi-static loading), so the answer is
+        the equilibrium connected to the unloaded shape.
 
         Parameters
         ----------
@@ -367,18 +398,20 @@ class SimulatedActuator:
         contact_n : array_like, shape (...)
             Contact force magnitude f_c >= 0 [N].
         force_n : array_like, shape (..., 2)
-            Further, fixed tip force [N].
+            Further, fixed force at the same point [N].
+        contact_s_m : float, optional
+            Arc length s_c of the contact [m] (:meth:`contact_location`); None: the tip.
         ramp_steps : int
             Load steps of the ramp of f_c.
         tol_rad : float
-            Newton stops when |φ_L − φ_c| < ``tol_rad`` [rad].
+            Newton stops when |φ(s_c) − φ_c| < ``tol_rad`` [rad].
         max_iter : int
             Newton iterations per load step.
 
         Returns
         -------
         force_n : ndarray, shape (..., 2)
-            Total tip force F_fixed + F_c [N].
+            Total force F_fixed + F_c at s_c [N].
         solution : BeamSolution
             The beam under that force; ``success`` is also false where Newton did not
             converge.
@@ -388,6 +421,7 @@ class SimulatedActuator:
         p = np.asarray(pressure_pa, dtype=float)
         fc = np.asarray(contact_n, dtype=float)
         fixed = np.asarray(force_n, dtype=float)
+        sc = self.contact_location(contact_s_m)
         if not np.all(fc >= 0):
             raise ConfigError(f"contact_n: must be >= 0, got {contact_n!r}")
         shape = np.broadcast_shapes(p.shape, fc.shape, fixed.shape[:-1])
@@ -395,12 +429,18 @@ class SimulatedActuator:
         p = np.broadcast_to(p, shape).reshape(B)
         fc = np.broadcast_to(fc, shape).reshape(B)
         fixed = np.broadcast_to(fixed, (*shape, 2)).reshape(B, 2)
+        # the contact point rides along as one more output point (the last)
+        grid = np.append(self._s_beam, self.config.actuator.length_m if sc is None else sc)
 
-        sol = self.solve(p, fixed)
+        def solve(pp, f, **kw):
+            return self.solve(pp, f, contact_s_m=sc, s_m=grid, **kw)
+
+        sol = solve(p, fixed)
         angle = np.array(sol.angle_rad)
         positions = np.array(sol.positions_m)
         tip = np.array(sol.tip_position_m)
-        phi = np.array(sol.tip_angle_rad)
+        tip_angle = np.array(sol.tip_angle_rad)
+        phi = angle[:, -1].copy()
         state = np.array(sol.state)
         ok = np.array(sol.success)
         force = fixed.copy()
@@ -416,27 +456,28 @@ class SimulatedActuator:
                 mag = fraction * fc[todo]
                 c, s_ = np.cos(phi[todo]), np.sin(phi[todo])
                 f = fixed[todo] + mag[:, None] * np.stack([-c, s_], axis=-1)
-                sub = self.solve(p[todo], f, initial=state[todo], sensitivities=True)
-                residual = sub.tip_angle_rad - phi[todo]
+                sub = solve(p[todo], f, initial=state[todo], sensitivities=True)
+                residual = sub.angle_rad[:, -1] - phi[todo]
                 done = np.abs(residual) < tol
                 angle[todo], positions[todo], tip[todo] = sub.angle_rad, sub.positions_m, sub.tip_position_m
-                state[todo], force[todo] = sub.state, f
+                tip_angle[todo], state[todo], force[todo] = sub.tip_angle_rad, sub.state, f
                 lost = ~np.asarray(sub.success)
                 ok[todo[lost]] = False
                 slope = np.sum(sub.dangle_dforce[:, -1, :] * (mag[:, None] * np.stack([s_, c], axis=-1)), axis=-1)
-                phi[todo] = np.where(done, sub.tip_angle_rad, phi[todo] - residual / (slope - 1.0))
+                phi[todo] = np.where(done, sub.angle_rad[:, -1], phi[todo] - residual / (slope - 1.0))
                 todo = todo[~done & ~lost]
                 if todo.size == 0:
                     break
             ok[todo] = False
             active = active[ok[active]]
-        message = np.where(ok, "converged", "contact: no stable equilibrium normal to the tip found").reshape(shape)
+        where = "the tip" if sc is None else f"s_c = {sc:g} m"
+        message = np.where(ok, "converged", f"contact: no stable equilibrium normal to {where} found").reshape(shape)
         solution = BeamSolution(
-            s_m=sol.s_m,
-            angle_rad=angle.reshape(*shape, -1),
-            positions_m=positions.reshape(*shape, -1, 2),
+            s_m=sol.s_m[:-1],
+            angle_rad=angle[:, :-1].reshape(*shape, -1),
+            positions_m=positions[:, :-1].reshape(*shape, -1, 2),
             tip_position_m=tip.reshape(*shape, 2),
-            tip_angle_rad=angle[:, -1].reshape(shape),
+            tip_angle_rad=tip_angle.reshape(shape),
             success=ok.reshape(shape),
             message=message if shape else str(message),
             iterations=np.zeros(shape, dtype=int),
@@ -451,6 +492,7 @@ class SimulatedActuator:
         force_n=(0.0, 0.0),
         *,
         contact_n=None,
+        contact_s_m=None,
         time_series: bool = False,
         initial_pa=None,
         noise: bool = True,
@@ -464,10 +506,15 @@ class SimulatedActuator:
         pressure_pa : array_like, shape (...)
             Pressure readings [Pa].
         force_n : array_like, shape (..., 2)
-            Tip force in the base frame [N]; broadcasts against ``pressure_pa``.
+            Point force in the base frame [N], at the tip or at ``contact_s_m``;
+            broadcasts against ``pressure_pa``.
         contact_n : array_like, shape (...), optional
-            Magnitude of a contact force normal to the true loaded tip tangent, added
-            to ``force_n`` [N] (:meth:`solve_contact`); ``frames.force_n`` is the total.
+            Magnitude of a contact force normal to the true loaded tangent at the
+            contact point, added to ``force_n`` [N] (:meth:`solve_contact`);
+            ``frames.force_n`` is the total.
+        contact_s_m : float, optional
+            Arc length s_c where the force acts [m]; None: the tip. Beyond s_c the
+            actuator bends freely under its weight.
         time_series : bool
             The first axis is time: apply the pressure hysteresis along it.
         initial_pa : float, optional
@@ -495,9 +542,9 @@ class SimulatedActuator:
         if solution is not None:
             sol = solution
         elif fc is None:
-            sol = self.solve(p_eff, F)
+            sol = self.solve(p_eff, F, contact_s_m=contact_s_m)
         else:
-            F, sol = self.solve_contact(p_eff, fc, F)
+            F, sol = self.solve_contact(p_eff, fc, F, contact_s_m=contact_s_m)
         M = self.n_points
         angle = sol.angle_rad[..., :M]
         lengths = np.asarray(self.sensor.lengths_m, dtype=float)
@@ -523,4 +570,5 @@ class SimulatedActuator:
             counts=reading.counts,
             saturated=reading.saturated,
             valid=np.broadcast_to(sol.success, shape).copy(),
+            contact_s_m=self.config.actuator.length_m if contact_s_m is None else float(contact_s_m),
         )

@@ -33,13 +33,20 @@ to a hidden sibling first and swapped in at the end (:func:`bendsense.output.wri
     pushing against the bending (the fingertip of Fig. 7(d)): ``F · t_tip = 0``
     (paper eq. 21). Configurations in which the loaded tip bends less than
     ``min_tip_angle_deg`` (the finger would not be touched) are redrawn. Truth columns
-    as for ``tip-loads`` plus ``config`` and ``fc_n``; ``truth.npz`` likewise.
+    as for ``tip-loads`` plus ``config`` and ``fc_n``; ``truth.npz`` likewise. With
+    ``contact_s_m`` the force acts at that arc length along the body instead, normal to
+    the true loaded tangent there (a frictionless contact, ``F · t(s_c) = 0``; beyond
+    ``s_c`` the finger bends freely under its weight), and the truth columns gain
+    ``contact_s_m`` after ``fy_n``.
 ``time-varying``
     ``session.csv``: a run at ``rate_hz`` (100 Hz) for ``duration_s`` (10 s): the pressure
     ramps smoothly between 0 and 100 kPa and back with a period of 5 s while a contact
     force normal to the tip switches on and off smoothly (:func:`time_varying_profile`).
-    Truth columns: ``fx_n``, ``fy_n``, ``fc_n``, ``tip_x_m``, ``tip_y_m``,
-    ``tip_angle_rad``, ``effective_pressure_pa``; ``truth.npz`` likewise. The same frames
+    With ``contact_s_m`` (an arc length, or ``"along-body"``: each touch somewhere else,
+    :func:`touch_locations`) the touches land along the body, normal to the loaded
+    tangent there. Truth columns: ``fx_n``, ``fy_n``, (``contact_s_m`` with that option),
+    ``fc_n``, ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, ``effective_pressure_pa``;
+    ``truth.npz`` likewise. The same frames
     stream from :func:`time_varying_frames`, which the simulated device uses.
 ``free-sweep``
     ``free_sweep.csv``: a free pressure sweep, the recording ``bendsense identify
@@ -88,6 +95,8 @@ __all__ = [
     "simulate",
     "time_varying_profile",
     "time_varying_frames",
+    "touch_locations",
+    "ALONG_BODY_FRACTIONS",
     "free_sweep_profile",
 ]
 
@@ -100,6 +109,9 @@ VALIDATION_RADII_M = (0.04575, 0.05575, 0.06575, 0.07575, 0.08575, 0.09575, 0.15
 TIP_LOAD_PRESSURES_PA = tuple(float(p) for p in np.arange(20e3, 120e3 + 1.0, 10e3))
 #: Vertical downward tip loads [N] (paper section V-C); ``F = (0, −load)`` here.
 TIP_LOADS_N = (0.0, 0.1, 0.2, 0.3)
+#: Where the touches of ``contact_s_m="along-body"`` land, as fractions of the actuator
+#: length L, one touch after the other (two touches per 10 s, so the cycle repeats every 30 s).
+ALONG_BODY_FRACTIONS = (0.5, 0.7, 0.85, 1.0, 0.6, 0.9)
 
 _FORMAT = "bendsense-sim-scenario"
 _FORMAT_VERSION = 1
@@ -124,8 +136,9 @@ _OPTIONS = {
         "pressure_range_pa": (40e3, 120e3),
         "force_range_n": (0.0, 0.4),
         "min_tip_angle_deg": 15.0,
+        "contact_s_m": None,
     },
-    "time-varying": {"rate_hz": 100.0, "duration_s": 10.0, "contact_n": 0.15},
+    "time-varying": {"rate_hz": 100.0, "duration_s": 10.0, "contact_n": 0.15, "contact_s_m": None},
     "free-sweep": {"n_frames": 200, "rate_hz": 35.0, "pressure_max_pa": 120e3, "contact_n": 0.0},
 }
 
@@ -168,6 +181,43 @@ def time_varying_profile(t_s, *, pressure_max_pa=100e3, period_s=5.0, contact_n=
     return pressure, contact_n * 0.5 * (1.0 - np.cos(np.pi * on))
 
 
+def touch_locations(t_s, length_m: float, contact_s_m=None) -> np.ndarray:
+    """Where the contact force of the ``time-varying`` scenario acts at times ``t_s`` [m].
+
+    ``None``: at the tip (``L``); a number: always there; ``"along-body"``: each touch
+    (the two on-periods of every 10 s, :func:`time_varying_profile`) at the next of
+    :data:`ALONG_BODY_FRACTIONS` ``· L``. The location changes only at ``t = 5 s`` and
+    ``10 s`` of every cycle, while the contact force is off.
+
+    Parameters
+    ----------
+    t_s : array_like
+        Times [s].
+    length_m : float
+        Actuator length L [m].
+    contact_s_m : None, float or "along-body"
+        The location, or the name of the sequence of locations.
+
+    Returns
+    -------
+    ndarray
+        Same shape as ``t_s`` [m].
+    """
+    t = np.asarray(t_s, dtype=float)
+    if contact_s_m is None:
+        return np.full(t.shape, float(length_m))
+    if isinstance(contact_s_m, str):
+        if contact_s_m != "along-body":
+            raise ConfigError(f"contact_s_m: must be a number in (0, L] or 'along-body', got {contact_s_m!r}")
+        touch = (2 * np.floor(t / 10.0) + (np.mod(t, 10.0) >= 5.0)).astype(np.int64)
+        return np.asarray(ALONG_BODY_FRACTIONS)[touch % len(ALONG_BODY_FRACTIONS)] * float(length_m)
+    ok = not isinstance(contact_s_m, bool) and isinstance(contact_s_m, (int, float, np.floating, np.integer))
+    if not ok or not (math.isfinite(contact_s_m) and 0.0 < contact_s_m <= length_m):
+        raise ConfigError(f"contact_s_m: must be a number in (0, L = {length_m:g} m] or 'along-body', "
+                          f"got {contact_s_m!r}")
+    return np.full(t.shape, float(contact_s_m))
+
+
 def time_varying_frames(
     config: Config | None = None,
     rate_hz: float = 100.0,
@@ -177,6 +227,7 @@ def time_varying_frames(
     duration_s: float | None = None,
     block_s: float = 0.1,
     contact_n: float = 0.15,
+    contact_s_m=None,
     noise_counts: float = 1.5,
     sensor: VirtualSensor | None = None,
     **mismatch,
@@ -206,6 +257,10 @@ def time_varying_frames(
         Frames simulated per batch [s].
     contact_n : float
         Contact force magnitude while on [N].
+    contact_s_m : None, float or "along-body"
+        Where the contact force acts (:func:`touch_locations`): the tip (default), an arc
+        length s_c [m] along the body, or a sequence of touches along the body. The force
+        is normal to the true loaded tangent at s_c.
     noise_counts : float
         Sensor noise [counts] (when ``sensor`` is not given).
     sensor : VirtualSensor, optional
@@ -222,26 +277,32 @@ def time_varying_frames(
         ADC counts.
     truth : dict
         Only with ``truth=True``: ``t_s``, ``effective_pressure_pa``, ``fx_n``, ``fy_n``,
-        ``fc_n``, ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, ``valid``, ``angle_rad``
+        ``contact_s_m``, ``fc_n``, ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, ``valid``, ``angle_rad``
         (M,), ``positions_m`` (M, 2), ``s_m`` (M,).
     """
     rate = _positive_option("rate_hz", rate_hz)
     block = max(1, round(rate * _positive_option("block_s", block_s)))
     total = None if duration_s is None else round(rate * _positive_option("duration_s", duration_s))
     sim = _actuator(config, seed, sensor=sensor, noise_counts=noise_counts, **mismatch)
+    touch_locations(0.0, sim.config.actuator.length_m, contact_s_m)  # a bad location fails here, not mid-stream
     rng = _stream(seed, "time-varying")
-    return _stream_frames(sim, rate, block, total, float(contact_n), rng, truth)
+    return _stream_frames(sim, rate, block, total, float(contact_n), rng, truth, contact_s_m)
 
 
-def _stream_frames(sim, rate, block, total, contact_n, rng, truth):
+def _stream_frames(sim, rate, block, total, contact_n, rng, truth, where=None):
     k0 = 0
     state = None
     last_valid = None
+    length = sim.config.actuator.length_m
     while total is None or k0 < total:
         n = block if total is None else min(block, total - k0)
         t = (k0 + np.arange(n)) / rate
+        location = touch_locations(t, length, where)
+        n = int(np.argmax(location != location[0])) or n  # one location per block: the block ends where it moves
+        t, sc = t[:n], float(location[0])
         pressure, contact = time_varying_profile(t, contact_n=contact_n)
-        frames = sim.frames(pressure, contact_n=contact, time_series=True, initial_pa=state, noise=False)
+        frames = sim.frames(pressure, contact_n=contact, contact_s_m=None if where is None else sc,
+                            time_series=True, initial_pa=state, noise=False)
         state = frames.effective_pressure_pa[-1]
         shifts = frames.shifts_m.copy()
         valid = frames.valid
@@ -263,6 +324,7 @@ def _stream_frames(sim, rate, block, total, contact_n, rng, truth):
                     "effective_pressure_pa": float(frames.effective_pressure_pa[i]),
                     "fx_n": float(frames.force_n[i, 0]),
                     "fy_n": float(frames.force_n[i, 1]),
+                    "contact_s_m": sc,
                     "fc_n": float(contact[i]),
                     "tip_x_m": float(frames.tip_position_m[i, 0]),
                     "tip_y_m": float(frames.tip_position_m[i, 1]),
@@ -326,11 +388,13 @@ def _meta(scenario, seed, **more) -> dict:
     return meta
 
 
-def _truth_columns(frames, fc=None) -> dict:
+def _truth_columns(frames, fc=None, contact=False) -> dict:
     extra = {
         "fx_n": frames.force_n[:, 0],
         "fy_n": frames.force_n[:, 1],
     }
+    if contact:
+        extra["contact_s_m"] = np.full(len(frames.valid), frames.contact_s_m)
     if fc is not None:
         extra["fc_n"] = fc
     extra.update(
@@ -425,7 +489,7 @@ def _validation(sim, rng, out, seed, *, frames_per_strip, rate_hz, radii_m):
     return {"frames": n * len(radii), "excluded_frames": 0, "files": [*names, "validation.yaml"]}
 
 
-def _write_frames(sim, rng, out, name, frames, rate_hz, scenario, seed, extra_first, fc=None):
+def _write_frames(sim, rng, out, name, frames, rate_hz, scenario, seed, extra_first, fc=None, contact=False):
     """Measure (with noise) and write the valid ones of ``frames`` with their truth."""
     keep = np.asarray(frames.valid)
     excluded = int(keep.size - keep.sum())
@@ -434,7 +498,7 @@ def _write_frames(sim, rng, out, name, frames, rate_hz, scenario, seed, extra_fi
     fc = None if fc is None else np.asarray(fc)[keep]
     counts = sim.sensor.measure(frames.shifts_m, rng=rng).counts
     meta = _meta(scenario, seed, rate_hz=rate_hz, excluded_frames=excluded)
-    extra = {**extra_first, **_truth_columns(frames, fc)}
+    extra = {**extra_first, **_truth_columns(frames, fc, contact)}
     write_session_csv(_session(counts, frames.pressure_pa, rate_hz, meta, extra), out / name)
     _save_truth(out / "truth.npz", frames)
     return {"frames": int(keep.sum()), "excluded_frames": excluded, "files": [name, "truth.npz"]}
@@ -454,9 +518,11 @@ def _tip_loads(sim, rng, out, seed, *, frames_per_config, rate_hz, pressures_pa,
 
 
 def _contact(
-    sim, rng, out, seed, *, n_configs, frames_per_config, rate_hz, pressure_range_pa, force_range_n, min_tip_angle_deg
+    sim, rng, out, seed, *, n_configs, frames_per_config, rate_hz, pressure_range_pa, force_range_n, min_tip_angle_deg,
+    contact_s_m
 ):
     count = _count_option("n_configs", n_configs)
+    sc = sim.contact_location(contact_s_m)
     n = _count_option("frames_per_config", frames_per_config)
     rate = _positive_option("rate_hz", rate_hz)
     (p_lo, p_hi), (f_lo, f_hi) = pressure_range_pa, force_range_n
@@ -470,7 +536,7 @@ def _contact(
     for _ in range(20):
         p = rng.uniform(p_lo, p_hi, 2 * count)
         fc = rng.uniform(f_lo, f_hi, 2 * count)
-        frames = sim.frames(p, contact_n=fc, noise=False)
+        frames = sim.frames(p, contact_n=fc, contact_s_m=sc, noise=False)
         good = np.flatnonzero(frames.valid & (frames.tip_angle_rad >= min_angle))
         chosen.extend((frames.select(slice(i, i + 1)), fc[i]) for i in good)
         if len(chosen) >= count:
@@ -487,25 +553,29 @@ def _contact(
     fc = np.repeat([c for _, c in chosen], n)
     frames = _repeat(picked, n)
     return _write_frames(
-        sim, rng, out, "contact.csv", frames, rate, "contact", seed, {"config": np.repeat(np.arange(count), n)}, fc
+        sim, rng, out, "contact.csv", frames, rate, "contact", seed, {"config": np.repeat(np.arange(count), n)}, fc,
+        contact=sc is not None,
     )
 
 
 def _concat(a, b):
     from bendsense.sim.actuator import ActuatorFrames
 
-    fields = {k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in a.__dataclass_fields__ if k != "s_m"}
-    return ActuatorFrames(s_m=a.s_m, **fields)
+    whole = ("s_m", "contact_s_m")
+    fields = {k: np.concatenate([getattr(a, k), getattr(b, k)]) for k in a.__dataclass_fields__ if k not in whole}
+    return ActuatorFrames(s_m=a.s_m, contact_s_m=a.contact_s_m, **fields)
 
 
-def _time_varying(sim, rng, out, seed, *, rate_hz, duration_s, contact_n):
+def _time_varying(sim, rng, out, seed, *, rate_hz, duration_s, contact_n, contact_s_m):
     rate = _positive_option("rate_hz", rate_hz)
     total = round(rate * _positive_option("duration_s", duration_s))
-    rows = list(_stream_frames(sim, rate, max(1, round(rate * 0.1)), total, float(contact_n), rng, True))
+    touch_locations(0.0, sim.config.actuator.length_m, contact_s_m)
+    rows = list(_stream_frames(sim, rate, max(1, round(rate * 0.1)), total, float(contact_n), rng, True, contact_s_m))
     keep = np.array([truth["valid"] for _, _, truth in rows])
     excluded = int(keep.size - keep.sum())
     rows = [r for r, k in zip(rows, keep, strict=True) if k]
-    truth_keys = ("effective_pressure_pa", "fx_n", "fy_n", "fc_n", "tip_x_m", "tip_y_m", "tip_angle_rad")
+    truth_keys = ("effective_pressure_pa", "fx_n", "fy_n", *(() if contact_s_m is None else ("contact_s_m",)),
+                  "fc_n", "tip_x_m", "tip_y_m", "tip_angle_rad")
     extra = {k: np.array([t[k] for _, _, t in rows]) for k in truth_keys}
     session = Session(
         np.array([t["t_s"] for _, _, t in rows]),
@@ -603,8 +673,8 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
         :mod:`bendsense.sim.actuator`); per scenario: ``frames_per_strip``,
         ``radii_m`` (calibration, validation), ``frames_per_config`` (tip-loads,
         contact), ``pressures_pa``, ``loads_n`` (tip-loads), ``n_configs``,
-        ``pressure_range_pa``, ``force_range_n``, ``min_tip_angle_deg`` (contact),
-        ``duration_s``, ``contact_n`` (time-varying), ``n_frames``, ``pressure_max_pa``,
+        ``pressure_range_pa``, ``force_range_n``, ``min_tip_angle_deg``, ``contact_s_m`` (contact),
+        ``duration_s``, ``contact_n``, ``contact_s_m`` (time-varying), ``n_frames``, ``pressure_max_pa``,
         ``contact_n`` (free-sweep), ``rate_hz`` (all). With ``"all"``
         each scenario takes the options it knows.
 
