@@ -43,6 +43,8 @@ _LAZY = {
     "Track": "bendsense.tracking",
     "Tracker": "bendsense.tracking",
     "check_windows": "bendsense.tracking",
+    "contact_bound": "bendsense.cramer_rao",
+    "ContactBound": "bendsense.cramer_rao",
 }
 
 __all__ = [

@@ -371,10 +371,11 @@ class SimulatedActuator:
             force_n,
             self.config.weight_per_length_n_per_m,
             self.base_angle_rad(p),
-            s_m=self._s_beam,
+            s_m=self._s_beam if s_m is None else s_m,
             warn=False,
             initial=initial,
             sensitivities=sensitivities,
+            **extra,
         )
 
     def solve_contact(self, pressure_pa, contact_n, force_n=(0.0, 0.0), *, contact_s_m=None, ramp_steps=4,

@@ -1,0 +1,211 @@
+"""Contact along the finger (issue 23): the contact rows of DESIGN.md section 5 as one table, measured in one run.
+
+- **a known-location frame vs a tip frame, cold**: ``estimate_force(load="contact",
+  contact_s_m=X)`` against ``estimate_force()`` (tip) on the same number of independent
+  frames (random pressures 30–110 kPa, normal contacts of 0.05–0.3 N at 0.5–1 L from the
+  simulator, and tip loads for the tip row), one call per frame, no ``initial``: median
+  and 99th percentile latency; target ≤ 2× the tip frame;
+- **a known location, noise-free**: the largest force error on exact shifts (target
+  ≤ 1 mN), and the ±2σ coverage of each force component over independent simulated
+  sensors, each with its own fitted calibration (``bendsense simulate calibration`` →
+  ``Calibration.fit``), 1.5 counts (target 88–99 %);
+- **a 100-frame window** of ``estimate_contact`` (50 ms at 2 kHz, location unknown):
+  median wall time (target ≤ 20 ms);
+- **the location over 50 ms windows** (s_c ≥ 0.6 L, normal force ≥ 0.1 N, 1.5 counts):
+  median |s_c error|, ±2σ coverage of s_c and of the force, contacts chosen, tip windows
+  kept, from ``tools/contact_eval.py`` (the independent forward model with hidden
+  sensors; its ``--quick`` sample with ``--quick``);
+- **the Cramér–Rao bound** (``bendsense.contact_bound``) at 0.8 L, 0.2 N, for scale.
+
+    python benchmarks/bench_contact.py [--frames 400] [--sensors 4] [--quick]
+"""
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import bendsense  # noqa: E402
+from bendsense.pcc import shifts_to_curvatures  # noqa: E402
+from bendsense.sim.actuator import SimulatedActuator  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CFG = bendsense.load_config()
+L = CFG.actuator.length_m
+SENSOR = CFG.sensor
+LOCATIONS = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0)  # s_c / L of the known-location frames
+
+
+def contact_frames(n, seed=0, sim=None, noise=False):
+    """Curvatures (n, N), pressures, true forces and s_c of independent normal contacts from the simulator."""
+    sim = SimulatedActuator.from_config(CFG, noise_counts=0.0, seed=seed) if sim is None else sim
+    rng = np.random.default_rng(seed)
+    sc = rng.choice(LOCATIONS, n) * L
+    p = rng.uniform(30e3, 110e3, n)
+    f = rng.uniform(0.05, 0.3, n)
+    counts, shifts, force = np.zeros((n, SENSOR.n_segments)), np.zeros((n, SENSOR.n_segments)), np.zeros((n, 2))
+    ok = np.zeros(n, dtype=bool)
+    for value in np.unique(sc):
+        idx = np.flatnonzero(sc == value)
+        fr = sim.frames(p[idx], contact_n=f[idx], contact_s_m=float(value), noise=noise)
+        shifts[idx], force[idx], ok[idx], counts[idx] = fr.shifts_m, fr.force_n, fr.valid, fr.counts
+    kappa = shifts_to_curvatures(shifts, SENSOR.lengths_m, SENSOR.strip_gap_m)
+    return kappa[ok], p[ok], force[ok], sc[ok], counts[ok]
+
+
+def tip_frames(n, seed=1):
+    sim = SimulatedActuator.from_config(CFG, noise_counts=0.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(30e3, 110e3, n)
+    a = rng.uniform(0.0, 2.0 * np.pi, n)
+    r = 0.25 * np.sqrt(rng.uniform(0.0, 1.0, n))
+    fr = sim.frames(p, np.stack([r * np.cos(a), r * np.sin(a)], -1), noise=False)
+    kappa = shifts_to_curvatures(fr.shifts_m, SENSOR.lengths_m, SENSOR.strip_gap_m)
+    return kappa[fr.valid], p[fr.valid]
+
+
+def latencies(kappa, p, noise, **kw):
+    times = np.empty(len(p))
+    for i in range(len(p)):
+        t0 = time.perf_counter()
+        bendsense.estimate_force(kappa[i], p[i], CFG, noise_std=noise, **kw)
+        times[i] = time.perf_counter() - t0
+    return times
+
+
+def bench_latency(table, n):
+    """Known-location frame vs tip frame, cold, one call per frame."""
+    kappa_c, p_c, _, sc, _ = contact_frames(n)
+    kappa_t, p_t = tip_frames(n)
+    noise = 1e-6  # shift noise [m] without a calibration: σ is propagated as in real use
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bendsense.estimate_force(kappa_t[:1], p_t[:1], CFG, noise_std=noise)
+        bendsense.estimate_force(kappa_c[:1], p_c[:1], CFG, noise_std=noise, load="contact", contact_s_m=sc[0])
+        first = time.perf_counter() - t0
+        tip = latencies(kappa_t, p_t, noise)
+        contact = np.empty(len(p_c))
+        for i in range(len(p_c)):
+            t1 = time.perf_counter()
+            bendsense.estimate_force(kappa_c[i], p_c[i], CFG, noise_std=noise, load="contact", contact_s_m=sc[i])
+            contact[i] = time.perf_counter() - t1
+    table.append(("tip frame, cold (force + σ)", f"median {1e6 * np.median(tip):.0f} µs, p99 "
+                  f"{1e6 * np.percentile(tip, 99):.0f} µs", "≤ 50 µs / ≤ 500 µs"))
+    ratio = np.median(contact) / np.median(tip)
+    table.append(("known-location frame, cold (force + σ)", f"median {1e6 * np.median(contact):.0f} µs, p99 "
+                  f"{1e6 * np.percentile(contact, 99):.0f} µs: {ratio:.2f}× the tip frame", "≤ 2× a tip frame"))
+    table.append(("  first call (compile or cache load)", f"{first:.1f} s", "—"))
+
+
+def bench_known_accuracy(table, n, sensors):
+    """Noise-free error at a known location, and ±2σ coverage over independent sensors with fitted calibrations."""
+    kappa, p, force, sc, _ = contact_frames(n, seed=3)
+    err = np.zeros(len(p))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for value in np.unique(sc):
+            idx = np.flatnonzero(sc == value)
+            est = bendsense.estimate_force(kappa[idx], p[idx], CFG, load="contact", contact_s_m=float(value))
+            err[idx] = np.abs(est.force_n - force[idx]).max(axis=-1)
+    table.append(("known location, noise-free: largest |F error|", f"{1e3 * err.max():.3g} mN over {len(p)} frames",
+                  "≤ 1 mN"))
+    inside = []
+    for seed in range(sensors):
+        inside.append(_coverage_one_sensor(seed, max(n // sensors, 20)))
+    inside = np.concatenate(inside)
+    cover = 100 * inside.mean(axis=0)
+    table.append(("known location, ±2σ coverage Fx / Fy (1.5 counts, fitted calibrations)",
+                  f"{cover[0]:.0f} / {cover[1]:.0f} % over {len(inside)} frames of {sensors} sensors", "88–99 %"))
+
+
+def _coverage_one_sensor(seed, n):
+    from bendsense.sim.scenarios import simulate
+
+    with tempfile.TemporaryDirectory() as tmp:
+        simulate("calibration", Path(tmp) / "cal", seed=seed, frames_per_strip=50)
+        cal = bendsense.Calibration.fit(Path(tmp) / "cal" / "manifest.yaml", SENSOR, degree="auto")
+    sim = SimulatedActuator.from_config(CFG, noise_counts=1.5, seed=seed)
+    _, p, force, sc, counts = contact_frames(n, seed=100 + seed, sim=sim, noise=True)
+    inside = np.zeros((len(p), 2), dtype=bool)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        shape = bendsense.reconstruct(counts.astype(float), cal, SENSOR)
+        for value in np.unique(sc):
+            idx = np.flatnonzero(sc == value)
+            est = bendsense.estimate_force(shape.curvature_per_m[idx], p[idx], CFG, calibration=cal, load="contact",
+                                           contact_s_m=float(value))
+            inside[idx] = np.abs(est.force_n - force[idx]) <= 2 * est.std_n
+    return inside
+
+
+def bench_window(table, repeats):
+    """One 100-frame window of estimate_contact (location unknown), wall time."""
+    sim = SimulatedActuator.from_config(CFG, noise_counts=1.5, seed=5)
+    fr = sim.frames(np.full(100, 70e3), contact_n=0.2, contact_s_m=0.8 * L)
+    kappa = shifts_to_curvatures(fr.shifts_m, SENSOR.lengths_m, SENSOR.strip_gap_m)
+    t = np.arange(100) / 2000.0
+    noise = 1e-6
+    times = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(repeats + 1):
+            t0 = time.perf_counter()
+            bendsense.estimate_contact(kappa, fr.pressure_pa, CFG, t_s=t, noise_std=noise)
+            times.append(time.perf_counter() - t0)
+    table.append(("100-frame window, location unknown (estimate_contact)",
+                  f"median {1e3 * np.median(times[1:]):.1f} ms", "≤ 20 ms"))
+
+
+def bench_location(table, quick):
+    """The tools/contact_eval.py rows: location and force over 50 ms windows on the independent forward model."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import contact_eval
+
+    seeds, holds = (3, 4) if quick else (8, 8)
+    scores, _ = contact_eval.run(CFG, seeds, holds)
+    for line in contact_eval.table(scores, None).splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 3 and cells[0] not in ("what", "---") and not set(cells[0]) <= {"-"}:
+            table.append((cells[0], cells[1], cells[2]))
+
+
+def bench_bound(table):
+    b1 = bendsense.contact_bound(CFG, contact_s_m=0.8 * L, force_n=0.2, pressure_pa=60e3, constraint="none")
+    table.append(("Cramér–Rao σ(s_c) at 0.8 L, 0.2 N, 60 kPa, simulated sensor at 1.5 counts",
+                  f"{1e3 * b1.contact_std_m:.1f} mm one frame, {1e3 * b1.contact_std_m / 10:.2f} mm over 100 frames",
+                  "—"))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=400, help="cold frames timed one by one (each kind)")
+    ap.add_argument("--sensors", type=int, default=4, help="independent sensors of the coverage row")
+    ap.add_argument("--repeats", type=int, default=20, help="100-frame windows timed")
+    ap.add_argument("--quick", action="store_true", help="small sizes, for the docs test")
+    args = ap.parse_args()
+    if args.quick:
+        args.frames, args.sensors, args.repeats = 60, 2, 5
+    table = []
+    bench_latency(table, args.frames)
+    bench_known_accuracy(table, args.frames, args.sensors)
+    bench_window(table, args.repeats)
+    bench_location(table, args.quick)
+    bench_bound(table)
+    width = max(len(r[0]) for r in table)
+    print(f"{'what':<{width}}  {'measured':<60}  target")
+    for what, value, target in table:
+        print(f"{what:<{width}}  {value:<60}  {target}")
+
+
+if __name__ == "__main__":
+    main()
