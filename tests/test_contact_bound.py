@@ -36,7 +36,7 @@ def normal_contact(pressure, f, sc):
     return force
 
 
-def reference(pressure, f, sc, h=2e-4):
+def reference(pressure, f, sc, h=2e-4, hidden=None):
     force = normal_contact(pressure, f, sc)
     truth = forward(CONFIG, pressure, force, contact_s_m=sc)
     x0 = np.array([force[0], force[1], sc])
@@ -48,9 +48,12 @@ def reference(pressure, f, sc, h=2e-4):
         down[k] -= step
         J[:, k] = (forward(CONFIG, pressure, up[:2], contact_s_m=up[2]).angles_rad
                    - forward(CONFIG, pressure, down[:2], contact_s_m=down[2]).angles_rad) / (2 * step)
-    sensor = VirtualSensor.from_config(CONFIG, noise_counts=0.0, seed=0)
     e = 1e-8
-    slope = (sensor.signal(truth.shifts_m + e) - sensor.signal(truth.shifts_m - e)) / (2 * e)  # channel i: S_i only
+    if hidden is None:
+        sensor = VirtualSensor.from_config(CONFIG, noise_counts=0.0, seed=0)
+        slope = (sensor.signal(truth.shifts_m + e) - sensor.signal(truth.shifts_m - e)) / (2 * e)  # channel i: S_i
+    else:
+        slope = (hidden.delta(truth.shifts_m + e) - hidden.delta(truth.shifts_m - e)) / (2 * e)
     sigma_theta = NOISE / np.abs(slope) / CONFIG.sensor.strip_gap_m
     info = J.T @ (J / sigma_theta[:, None] ** 2)
     n = force / np.linalg.norm(force)
@@ -77,6 +80,25 @@ def test_bound_matches_the_forward_models_fisher_matrix(fraction, f):
         np.testing.assert_allclose(b.contact_std_m, sd_sc, rtol=0.01)
         np.testing.assert_allclose(b.force_std_n, sd_f, rtol=0.01)
         np.testing.assert_allclose(b.force_std_known_n, sd_known, rtol=0.01)
+
+
+def test_with_a_calibration_the_noise_goes_through_its_slopes(tmp_path):
+    """A hidden sensor's fitted calibration: its slopes are the sensor's own to the fit's accuracy."""
+    from forward_model import HiddenSensor
+
+    from bendsense.calibration import Calibration
+
+    hidden = HiddenSensor(noise_counts=NOISE, seed=3)
+    cal = Calibration.fit(hidden.write_calibration(tmp_path, CONFIG))
+    sc, f, pressure = 0.75 * L, 0.15, 80e3
+    ref = reference(pressure, f, sc, hidden=hidden)
+    b = contact_bound(CONFIG, cal, contact_s_m=sc, force_n=f, pressure_pa=pressure, noise_std=NOISE,
+                      constraint="none")
+    np.testing.assert_allclose(b.contact_std_m, ref["none"][0], rtol=0.05)
+    np.testing.assert_allclose(b.force_std_known_n, ref["none"][2], rtol=0.05)
+    # the calibration's own noise estimate (its flat recording) is the default
+    default = contact_bound(CONFIG, cal, contact_s_m=sc, force_n=f, pressure_pa=pressure, constraint="none")
+    np.testing.assert_allclose(default.contact_std_m, b.contact_std_m, rtol=0.15)
 
 
 def test_frames_average_the_noise_down_and_arrays_broadcast():

@@ -3,6 +3,7 @@
 Run from the repository root::
 
     python tools/contact_bound_figure.py [--out docs/img/contact-bound.png] [--pressure-kpa 60]
+    python tools/contact_bound_figure.py --hidden-sensor 0    # the table for a hidden sensor of the tests
 
 Draws ``bendsense.contact_bound`` (the bound of the paper's prototype with the simulated
 sensor at 1.5 counts) as σ(s_c) over s_c / L for several contact forces, one frame and a
@@ -25,7 +26,7 @@ TABLE_FORCES_N = (0.05, 0.2)
 WINDOW_FRAMES = 100  # 50 ms at 2 kHz
 
 
-def table(config, pressure_pa, noise_counts):
+def table(config, pressure_pa, noise_counts, calibration=None):
     """Rows (s_c / L, |F|, σ(s_c) one frame and window [mm], σ(F) known / unknown s_c, one frame [mN]) per constraint."""
     from bendsense import contact_bound
 
@@ -33,8 +34,8 @@ def table(config, pressure_pa, noise_counts):
     sc = np.asarray(TABLE_FRACTIONS)[:, None] * length
     rows = []
     for constraint in ("none", "normal"):
-        b = contact_bound(config, contact_s_m=sc, force_n=np.asarray(TABLE_FORCES_N), pressure_pa=pressure_pa,
-                          noise_std=noise_counts, constraint=constraint)
+        b = contact_bound(config, calibration, contact_s_m=sc, force_n=np.asarray(TABLE_FORCES_N),
+                          pressure_pa=pressure_pa, noise_std=noise_counts, constraint=constraint)
         force_known = b.force_std_known_n if constraint == "normal" else np.hypot(*np.moveaxis(b.force_std_known_n, -1, 0))
         force = b.force_std_n if constraint == "normal" else np.hypot(*np.moveaxis(b.force_std_n, -1, 0))
         for i, fr in enumerate(TABLE_FRACTIONS):
@@ -54,9 +55,12 @@ def figure(config, pressure_pa, noise_counts, out):
     from bendsense import contact_bound
 
     length = config.actuator.length_m
-    segment = float(np.max(config.sensor.lengths_m))
+    lengths = np.asarray(config.sensor.lengths_m, dtype=float)
     fractions = np.linspace(0.2, 1.0, 33)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), sharey=True)
+    fine = np.linspace(0.2, 1.0, 801)
+    ends = np.cumsum(lengths)
+    segment = lengths[np.minimum(np.searchsorted(ends, fine * length), lengths.size - 1)]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.8), sharey=True)
     colors = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(FORCES_N)))
     for constraint, style in (("none", "-"), ("normal", "--")):
         b = contact_bound(config, contact_s_m=fractions[:, None] * length, force_n=np.asarray(FORCES_N),
@@ -67,22 +71,21 @@ def figure(config, pressure_pa, noise_counts, out):
                 ax.semilogy(fractions, 1e3 * b.contact_std_m[:, j] / np.sqrt(frames), style, color=c, label=label)
             ax.set_title(title)
     for ax in axes:
-        ax.axhline(1e3 * segment, color="0.4", lw=0.8)
-        ax.text(0.21, 1e3 * segment * 1.1, "one segment: contact_unresolved above", fontsize=8, color="0.3")
-        ax.axhline(8.0 / 2, color="tab:red", lw=0.8, ls=":")
+        ax.plot(fine, 1e3 * segment, color="tab:red", lw=1.0)
+        ax.text(0.6, 1e3 * segment[0] * 1.15, "the segment at s_c: contact_unresolved above", fontsize=8,
+                color="tab:red", ha="center")
         ax.set_xlabel("contact location s_c / L")
         ax.grid(True, which="both", alpha=0.3)
-    axes[1].text(0.21, 4.4, "8 mm target at ±2σ", fontsize=8, color="tab:red")
     axes[0].set_ylabel("Cramér–Rao σ(s_c) [mm]")
     handles, labels = axes[0].get_legend_handles_labels()
     from matplotlib.lines import Line2D
 
     handles += [Line2D([], [], color="k", ls="-"), Line2D([], [], color="k", ls="--")]
     labels += ["force components free (none)", "force along the normal (normal)"]
-    axes[0].legend(handles, labels, fontsize=8, loc="upper right")
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=3)
     fig.suptitle(f"What the sensor can tell about a contact: paper prototype at {pressure_pa / 1e3:g} kPa, "
                  f"simulated sensor, {noise_counts:g} counts", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
     plt.close(fig)
@@ -97,13 +100,26 @@ def main(argv=None):
     ap.add_argument("--pressure-kpa", type=float, default=60.0)
     ap.add_argument("--noise-counts", type=float, default=1.5)
     ap.add_argument("--no-figure", action="store_true", help="Only print the table.")
+    ap.add_argument("--hidden-sensor", type=int, metavar="SEED",
+                    help="Only the table, for the hidden sensor SEED of tests/forward_model.py through its fitted "
+                         "calibration (tools/model_error.py's sensors, which tools/contact_eval.py scores on)")
     args = ap.parse_args(argv)
     config = load_config()
     p = args.pressure_kpa * 1e3
+    cal = None
+    if args.hidden_sensor is not None:
+        import sys
+
+        sys.path.insert(0, str(ROOT / "tests"))
+        sys.path.insert(0, str(ROOT / "tools"))
+        from model_error import calibration
+
+        cal = calibration(config, args.hidden_sensor, args.noise_counts)[1]
+        args.no_figure = True
     print("| force model | s_c / L | \\|F\\| [N] | σ(s_c) one frame [mm] | σ(s_c) 50 ms [mm] | σ(F) known s_c [mN] "
           "| σ(F) unknown s_c [mN] |")
     print("|---|---|---|---|---|---|---|")
-    for constraint, fr, f, one, window, known, unknown in table(config, p, args.noise_counts):
+    for constraint, fr, f, one, window, known, unknown in table(config, p, args.noise_counts, cal):
         print(f"| {constraint} | {fr:g} | {f:g} | {one:.1f} | {window:.2f} | {known:.1f} | {unknown:.1f} |")
     if not args.no_figure:
         figure(config, p, args.noise_counts, args.out)
