@@ -121,3 +121,16 @@ def test_cli_bad_location_one_line(tmp_path, args, text):
 def test_sim_device_refuses_a_location_for_the_ramp():
     r = CliRunner().invoke(main, ["sim-device", "--source", "ramp", "--contact-s-m", "0.1", "--seconds", "0.1"])
     assert r.exit_code != 0 and "--contact-s-m" in r.output and "Traceback" not in r.output
+
+
+def test_sim_device_source_touches_along_the_body():
+    from bendsense.device.simdevice import default_source
+
+    fixed = list(itertools.islice(default_source(rate_hz=20.0, seed=2, contact_s_m=0.08, duration_s=3.0), 60))
+    tip = list(itertools.islice(default_source(rate_hz=20.0, seed=2, duration_s=3.0), 60))
+    assert len(fixed) == len(tip) == 60
+    # before the first touch (t < 1.5 s) the frames are the same; during it (t = 2.5 s) they differ
+    np.testing.assert_array_equal(np.array([c for _, c in fixed[:25]]), np.array([c for _, c in tip[:25]]))
+    assert np.abs(fixed[50][1].astype(int) - tip[50][1].astype(int)).max() > 20
+    with pytest.raises(ConfigError, match="^contact_s_m: "):
+        default_source(rate_hz=20.0, contact_s_m=0.5)
