@@ -127,8 +127,25 @@ def window_statistic(rsum, Asum, Msum, Ssum, n, err, coils, gap):
     """The p-value of a window from the sums of its ``n`` usable frames (:func:`window_sums`); NaN below MIN_FRAMES."""
     if n < MIN_FRAMES:
         return np.nan
+    t, dof, _, _, _ = window_metric(rsum, Asum, Msum, Ssum, n, err, coils, gap, np.zeros((rsum.shape[0], 0)))
+    return np.nan if dof == 0 else unc.chi2_sf(t, dof)
+
+
+@njit(cache=True)
+def window_metric(rsum, Asum, Msum, Ssum, n, err, coils, gap, extra):
+    """The statistic of the window test and the metric it defines, from the sums of ``n`` frames (n ≥ 1).
+
+    ``T = r̄ᵀ Ω r̄`` with ``Ω`` the pseudo-inverse of the mean residual's covariance ``C`` on
+    the complement of the fitted directions Ā (module docstring: ``Ω Ā = 0``, ``Ω C Ω =
+    Ω``). Returns ``T``, its degrees of freedom (0: no test, T NaN), ``eᵀ Ω r̄`` (m,) and
+    ``eᵀ Ω e`` (m, m) for the columns of ``extra`` (R, m) (directions of further
+    parameters, e.g. the contact location's), and ``e₀ᵀ Ω C_p Ω e₀`` (3,) for the first
+    column and the three parts ``C_p`` of ``C``: sensor noise / n, calibration, model
+    parameters.
+    """
     R = rsum.shape[0]
     N = Ssum.shape[0]
+    m = extra.shape[1]
     rbar, A, M, S = rsum / n, Asum / n, Msum / n, Ssum / n
     cov_s = np.zeros((N, N))
     nv_s = np.zeros(N)
@@ -136,30 +153,63 @@ def window_statistic(rsum, Asum, Msum, Ssum, n, err, coils, gap):
     inv_d2 = 1.0 / (gap * gap)
     Lc = np.empty((R, R))
     C = np.empty((R, R))
+    parts = np.zeros((3, R, R))
     for a in range(R):
         for b in range(R):
             Lc[a, b] = cov_s[coils[a], coils[b]] * inv_d2  # Σ_θ = diag(nv) + Σ_cal
-            C[a, b] = Lc[a, b] + M[a, 0] * M[b, 0] + M[a, 1] * M[b, 1]
+            parts[1, a, b] = Lc[a, b]
+            parts[2, a, b] = M[a, 0] * M[b, 0] + M[a, 1] * M[b, 1]
+            C[a, b] = Lc[a, b] + parts[2, a, b]
         C[a, a] -= (1.0 - 1.0 / n) * nv_s[coils[a]] * inv_d2  # the noise averages down
+        parts[0, a, a] = nv_s[coils[a]] * inv_d2 / n
+        parts[1, a, a] -= nv_s[coils[a]] * inv_d2
+    er, ee, var_parts = np.full(m, np.nan), np.full((m, m), np.nan), np.full(3, np.nan)
     if unc.cholesky(Lc) == 0:
-        return np.nan
-    unc.forward(Lc, A)  # whitened: Ã, r̃, G = Lc⁻¹ C Lc⁻ᵀ
+        return np.nan, 0, er, ee, var_parts
+    unc.forward(Lc, A)  # whitened: Ã, r̃, ẽ, G = Lc⁻¹ C Lc⁻ᵀ
     r = rbar.reshape(R, 1).copy()
     unc.forward(Lc, r)
+    e = extra.copy()
+    unc.forward(Lc, e)
     unc.forward(Lc, C)
     G = C.T.copy()
     unc.forward(Lc, G)
     Q = complement(A)
     y = unc.mm(Q.T.copy(), r)
+    ye = unc.mm(Q.T.copy(), e)
     Cy = unc.mm(unc.mm(Q.T.copy(), G), Q)
     dof = unc.cholesky(Cy)
     if dof == 0:
-        return np.nan
+        return np.nan, 0, er, ee, var_parts
     unc.forward(Cy, y)
+    unc.forward(Cy, ye)
     t = 0.0
     for i in range(y.shape[0]):
         t += y[i, 0] * y[i, 0]
-    return unc.chi2_sf(t, dof)
+    for a in range(m):
+        er[a] = 0.0
+        for i in range(y.shape[0]):
+            er[a] += ye[i, a] * y[i, 0]
+        for b in range(m):
+            ee[a, b] = 0.0
+            for i in range(y.shape[0]):
+                ee[a, b] += ye[i, a] * ye[i, b]
+    if m > 0:  # e₀ᵀ Ω C_p Ω e₀ = ỹᵀ (Ly⁻¹ Qᵀ Lc⁻¹ C_p Lc⁻ᵀ Q Ly⁻ᵀ) ỹ, ỹ = Ly⁻¹ Qᵀ Lc⁻¹ e₀ (Cy = Ly Lyᵀ)
+        for p in range(3):
+            X = parts[p].copy()
+            unc.forward(Lc, X)
+            X = X.T.copy()
+            unc.forward(Lc, X)
+            Z = unc.mm(unc.mm(Q.T.copy(), X), Q)
+            unc.forward(Cy, Z)
+            Z = Z.T.copy()
+            unc.forward(Cy, Z)
+            acc = 0.0
+            for i in range(Z.shape[0]):
+                for j in range(Z.shape[0]):
+                    acc += ye[i, 0] * Z[i, j] * ye[j, 0]
+            var_parts[p] = acc
+    return t, dof, er, ee, var_parts
 
 
 @njit(cache=True)
