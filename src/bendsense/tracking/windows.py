@@ -225,6 +225,24 @@ def window_tests(bounds, resid, jac, mfac, shifts, err, coils, gap, p_out, n_out
         p_out[w], n_out[w] = window_test(bounds[w], bounds[w + 1], resid, jac, mfac, shifts, model, coils, gap)
 
 
+@njit(cache=True)
+def window_metrics(resid, jac, mfac, shifts, extra, n, err, coils, gap, t_out, er_out, ee_out, parts_out):
+    """:func:`window_metric` of rows of means: ``resid`` (K, R), ``jac``/``mfac`` (K, R, 2), ``shifts`` (K, N),
+    ``extra`` (K, R) one further direction per row, ``n`` (K,) the frames each mean is over; into the outputs
+    (K,) and (K, 3). ``err`` the shift error model as a plain tuple."""
+    model = ShiftErrorModel(*err)
+    for k in range(resid.shape[0]):
+        if n[k] < 1:
+            t_out[k] = er_out[k] = ee_out[k] = np.nan
+            parts_out[k, :] = np.nan
+            continue
+        t, dof, er, ee, parts = window_metric(resid[k] * n[k], jac[k] * n[k], mfac[k] * n[k], shifts[k] * n[k], n[k],
+                                              model, coils, gap, extra[k].reshape(-1, 1).copy())
+        t_out[k] = t if dof > 0 else np.nan
+        er_out[k], ee_out[k] = er[0], ee[0, 0]
+        parts_out[k, :] = parts
+
+
 def segment_starts(t_s, pressure_pa, window_s, dt_ref_s):
     """Whether each frame (B,) starts a segment: the first, and after a gap or a pressure step.
 
@@ -371,7 +389,11 @@ def series_inputs(estimate, t_s, window_s, pressure_pa):
     if len(estimate.batch_shape) != 1:
         raise ArgumentError(f"estimate: expected the estimates of a time series (one batch axis of frames), got batch "
                             f"shape {estimate.batch_shape}")
-    B = estimate.batch_shape[0]
+    return time_inputs(estimate.batch_shape[0], t_s, window_s, pressure_pa)
+
+
+def time_inputs(B, t_s, window_s, pressure_pa):
+    """The checked times (B,), pressures (B,) or None and window length of a series of ``B`` frames."""
     try:
         t = np.asarray(t_s, dtype=float)
     except (TypeError, ValueError):
