@@ -21,7 +21,7 @@ from numba import njit, prange
 
 from bendsense import _jit
 from bendsense import beam_kernels as bk
-from bendsense.beam import _KernelOperators
+from bendsense.beam_kernels import _KernelOperators
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
 from bendsense.shift_errors import ShiftErrorModel, shift_covariance
@@ -157,7 +157,7 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
     """
     pos, dpos, st, tip, dst, y, dy = ws
     n = st.size
-    extra = np.empty((n - 1, 4))
+    extra = np.empty((n - 1, 5))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
                                   NEWTON_TOL, int(NEWTON_MAX_ITER), bool(YES), allow_continuation, st, extra)
     bk.node_sensitivity(extra, L, ei, dst)
@@ -167,7 +167,7 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
     dst[0, 3] = 0.0
     for i in range(n - 1):
         dst[i + 1, 2] = extra[i, 0] * L
-        dst[i + 1, 3] = -extra[i, 3] / ei
+        dst[i + 1, 3] = -extra[i, 4] / ei
     bk.sample(st, dst, L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
     if pb.objective == ANGLES:
         for i in range(y.size):
@@ -257,7 +257,7 @@ def convex_start(L, ei, wload, D, ffix, lower, u, out):
         for c in range(k):
             ut[c] = max(u[c] * t, lower[c])
         force_of(D, ffix, ut, F)
-        if bk.load_ratio(F[0] * scale, F[1] * scale, wload[0] * L * scale, wload[1] * L * scale) < 0.9:
+        if bk.load_ratio(F[0] * scale, F[1] * scale, wload[0] * L * scale, wload[1] * L * scale, 0.0) < 0.9:
             best = t
     for c in range(k):
         out[c] = max(u[c] * best, lower[c])
@@ -279,7 +279,7 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, tr
     force_of(D, ffix, u, F)
     scale = L * L / ei
     wx, wy = wload[0] * L, wload[1] * L
-    unique = bk.load_ratio(F[0] * scale, F[1] * scale, wx * scale, wy * scale) < 1.0
+    unique = bk.load_ratio(F[0] * scale, F[1] * scale, wx * scale, wy * scale, 0.0) < 1.0
     convex = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wx, F[1] + wy)) * scale < 0.9 * bk.STABLE_BOUND
     iters = 1
     ok = beam_eval(L, ei, k0, F, wload, state0, unique, bool(YES), ops, pb, ws)
