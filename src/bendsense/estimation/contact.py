@@ -155,6 +155,49 @@ def estimate_contact(shape, pressure_pa, config=None, *, calibration=None, t_s=N
     return est if batch else _one(est)
 
 
+def estimate_frames(shape, pressure_pa, config, options, threshold=LR_THRESHOLD):
+    """``estimate_force(load="contact", contact_s_m=None)``: every frame its own window (a mean of one frame).
+
+    Parameters
+    ----------
+    shape : Shape or array_like, shape (..., N)
+        Shapes or segment curvatures [1/m]; leading axes are frames.
+    pressure_pa : array_like
+        Pressure of each frame [Pa]; broadcasts against the frames.
+    config : Config or None
+        The actuator (None: the paper's prototype).
+    options : dict
+        ``estimate_force``'s options (``constraint``, ``calibration``, ``noise_std``...).
+    threshold : float
+        The model choice's threshold (:data:`LR_THRESHOLD`).
+    """
+    t_start = time.perf_counter()
+    config, kappa, own = _inputs(shape, config)
+    P = float_array("pressure_pa", pressure_pa)
+    try:
+        batch = np.broadcast_shapes(own, P.shape)
+    except ValueError:
+        raise ArgumentError(f"pressure_pa: shape {P.shape} does not broadcast against the shape's frames "
+                            f"{batch}") from None
+    B = int(np.prod(batch)) if batch else 1
+    N = kappa.shape[-1]
+    kappa = np.ascontiguousarray(np.broadcast_to(kappa.reshape(*own, N), (*batch, N)).reshape(B, N))
+    P = np.ascontiguousarray(np.broadcast_to(P, batch).reshape(B))
+    est = locate(kappa, P, np.arange(B + 1, dtype=np.int64), config, options, threshold)
+    est = dataclasses.replace(est, wall_time_s=time.perf_counter() - t_start)
+    return _reshape(est, B, batch)
+
+
+def _reshape(est, B, batch):
+    """An estimate of ``B`` flat frames shaped to ``batch``."""
+    if not batch:
+        return _one(est)
+    changes = {f.name: getattr(est, f.name).reshape(*batch, *getattr(est, f.name).shape[1:])
+               for f in dataclasses.fields(est)
+               if isinstance(getattr(est, f.name), np.ndarray) and getattr(est, f.name).shape[:1] == (B,)}
+    return dataclasses.replace(est, **changes)
+
+
 def _inputs(shape, config):
     """The config, the curvatures (B, N) and the frames' batch shape of ``shape``."""
     if config is None:
