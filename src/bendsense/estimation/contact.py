@@ -245,7 +245,7 @@ def locate(kappa, P, bounds, config, options, threshold):
 
     def fit(rows, s):  # the known-location estimate at the windows' means ``rows`` and the metric there
         e = estimate_force(kbar[rows], Pbar[rows], config, load="contact", contact_s_m=s, warm_start=False, **options)
-        return e, _metric(e, n[rows])
+        return e, _metric(e, n[rows])[:4]
 
     rows = np.repeat(np.arange(W), G)
     e0, (T, er, ee, parts) = fit(rows, np.tile(grid, W))
@@ -279,11 +279,12 @@ def locate(kappa, P, bounds, config, options, threshold):
     contact = np.isfinite(T_hat) & (T_tip - T_hat > threshold) & (s_hat < L)
     var_s = np.where(ee_hat > 0, 1.0 / ee_hat, np.inf)
     var_parts = parts_hat / np.where(ee_hat > 0, ee_hat * ee_hat, np.nan)[:, None]
-    g = _force_slope(fit, w[contact], s_hat[contact], grid[0], L)
+    g, cross = _force_slope(fit, lambda e: _metric(e, np.tile(n[contact], 3)), w[contact], s_hat[contact],
+                            grid[0], L)
     why = _unresolved(config, s_hat, var_s, force_hat, shifts_hat)
     s_frames = np.repeat(np.where(contact, s_hat, L), counts)
     est = estimate_force(kappa, P, config, load="contact", contact_s_m=s_frames, **options)
-    return _finish(est, bounds, contact, s_hat, var_s, var_parts, g, why, grid[0], L)
+    return _finish(est, bounds, contact, s_hat, var_s, var_parts, (g, cross), why, grid[0], L)
 
 
 def _means(kappa, P, bounds):
@@ -301,9 +302,10 @@ def _means(kappa, P, bounds):
 
 
 def _metric(est, n):
-    """T, aᵀΩr̄, aᵀΩa and the parts (K, 3) of an estimate of K windows' means over ``n`` (K,) frames each."""
+    """T, aᵀΩr̄, aᵀΩa, the parts (K, 3) and X (K, 2, 5) of an estimate of K windows' means over ``n`` (K,) frames
+    each (:func:`~bendsense.tracking.windows.window_metric`)."""
     K = n.size
-    out = (np.empty(K), np.empty(K), np.empty(K), np.empty((K, 3)))
+    out = (np.empty(K), np.empty(K), np.empty(K), np.empty((K, 3)), np.empty((K, 2, 5)))
     if est.residual_rad is None or est.shift_errors is None or est.uncertainty != "propagated":
         return tuple(np.full_like(a, np.nan) for a in out)
     pay = est.residual_rad, est.jacobian_rad_per_n, est.model_factor_rad, est.shifts_m, est.contact_jacobian_rad_per_m
@@ -314,14 +316,28 @@ def _metric(est, n):
     return out
 
 
-def _force_slope(fit, rows, s, lo, hi):
-    """∂F/∂s_c (K, 2) at the means of ``rows`` by a central difference (one-sided at the ends of [lo, hi])."""
-    if rows.size == 0:
-        return np.zeros((0, 2))
+def _force_slope(fit, metric, rows, s, lo, hi):
+    """∂F/∂s_c (K, 2) at the means of ``rows`` by a central difference (one-sided at the ends of [lo, hi]), and
+    the covariance parts (K, 3, 2) of the frames' force (at a known location) with ŝ.
+
+    The cross term ``Cov(δF, δŝ)_p = D (ĀᵀWĀ)⁺ ĀᵀW C_p Ω a / aᵀΩa`` (X of
+    :func:`~bendsense.tracking.windows.window_metric`) for a 2-D force (D = I); a 1-D
+    constraint's force direction is not in the payload: its cross term is left out.
+    """
+    K = rows.size
+    if K == 0:
+        return np.zeros((0, 2)), np.zeros((0, 3, 2))
     a, b = np.maximum(s - FD_STEP_M, lo), np.minimum(s + FD_STEP_M, hi)
-    e, _ = fit(np.concatenate([rows, rows]), np.concatenate([a, b]))
-    F = e.force_n.reshape(2, rows.size, 2)
-    return (F[1] - F[0]) / (b - a)[:, None]
+    e, _ = fit(np.concatenate([rows, rows, rows]), np.concatenate([a, b, s]))
+    F = e.force_n.reshape(3, K, 2)
+    g = (F[1] - F[0]) / (b - a)[:, None]
+    X = metric(e)[4][2 * K:]
+    cross = np.zeros((K, 3, 2))
+    two = np.any(np.asarray(e.jacobian_rad_per_n)[2 * K:, :, 1] != 0.0, axis=1)
+    ee = metric(e)[2][2 * K:]
+    for i in np.flatnonzero(two & np.isfinite(X).all(axis=(1, 2)) & (ee > 0)):
+        cross[i] = (np.linalg.pinv(X[i, :, 3:]) @ X[i, :, :3]).T / ee[i]
+    return g, cross
 
 
 def _unresolved(config, s_hat, var_s, force, shifts):
@@ -347,21 +363,29 @@ def _unresolved(config, s_hat, var_s, force, shifts):
     return why
 
 
-def _finish(est, bounds, contact, s_hat, var_s, var_parts, g, why, lo, L):
-    """``est`` (the frames at their windows' locations) with the location, its σ, its part of the force's σ."""
+def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, lo, L):
+    """``est`` (the frames at their windows' locations) with the location, its σ, its part of the force's σ.
+
+    Per part p of the budget: ``g gᵀ σ_p(s_c)² + c_p gᵀ + g c_pᵀ`` with ``g = ∂F/∂s_c`` and
+    ``c_p`` the frames' force covariance with ŝ (:func:`_force_slope`).
+    """
     counts = np.diff(bounds)
     B = int(bounds[-1])
     rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731 (per window → per frame)
     var_cap = np.minimum(var_s, (L - lo) ** 2 / 12.0)  # the force's part: at most a location uniform over the span
+    capped = ~(var_s <= var_cap)
     parts_w = np.where(np.isfinite(var_parts), var_parts, 0.0)
     parts_w *= (var_cap / np.maximum(parts_w.sum(axis=1), 1e-300))[:, None]
-    gw = np.zeros((contact.size, 2))
-    gw[contact] = g
-    gg = gw[:, :, None] * gw[:, None, :]  # (W, 2, 2)
-    add_parts = rep(gg[:, None] * parts_w[:, :, None, None])  # (B, 3, 2, 2)
+    gw, cw = np.zeros((contact.size, 2)), np.zeros((contact.size, 3, 2))
+    gw[contact], cw[contact] = slope
+    cw[capped] = 0.0
+    gc = gw[:, None, :, None] * cw[:, :, None, :]  # (W, 3, 2, 2): g c_pᵀ
+    add_w = gw[:, None, :, None] * gw[:, None, None, :] * parts_w[:, :, None, None] + gc + np.swapaxes(gc, -1, -2)
+    add_parts = rep(add_w)  # (B, 3, 2, 2)
     cov_parts = est.covariance_parts_n2 + add_parts
     cov = est.covariance_n2 + add_parts.sum(axis=1)
-    std = np.sqrt(est.std_n ** 2 + np.diagonal(add_parts.sum(axis=1), axis1=-2, axis2=-1))  # inf stays inf
+    var = est.std_n ** 2 + np.diagonal(add_parts.sum(axis=1), axis1=-2, axis2=-1)
+    std = np.sqrt(np.maximum(var, 0.0))  # inf stays inf
     unres = contact & (why != "")
     s_m = np.where(contact, s_hat, np.nan)
     std_m = np.where(unres, np.inf, np.where(contact, np.sqrt(var_s), np.nan))
