@@ -199,8 +199,8 @@ def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict
 def estimate_status(estimate, n: int) -> np.ndarray:
     """Per-frame status strings (n,) of a force estimate alone: ``ok`` or the estimate's reason.
 
-    ``not_converged``, ``not_identifiable``, ``pressure_out_of_range``, ``model_misfit``,
-    ``implausible_force`` or ``no_force`` (:func:`frame_status`, which adds the shape's).
+    ``not_converged``, ``not_identifiable``, ``contact_unresolved``, ``pressure_out_of_range``,
+    ``model_misfit``, ``implausible_force`` or ``no_force`` (:func:`frame_status`, which adds the shape's).
 
     Parameters
     ----------
@@ -216,6 +216,7 @@ def estimate_status(estimate, n: int) -> np.ndarray:
         return status  # every frame ok (the live path's usual block): nothing to look up
     status[failed] = NOT_CONVERGED
     status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
+    status[~failed & np.char.startswith(message, CONTACT_UNRESOLVED)] = CONTACT_UNRESOLVED
     status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
     status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
     status[failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)] = IMPLAUSIBLE_FORCE
