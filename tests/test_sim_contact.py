@@ -108,6 +108,7 @@ def test_cli_simulate_contact_along_the_body(tmp_path):
     (["contact", "--contact-s-m", "0.5"], "contact_s_m"),
     (["contact", "--contact-s-m", "-1"], "--contact-s-m"),
     (["contact", "--contact-s-m", "along-body"], "--contact-s-m"),
+    (["time-varying", "--contact-s-m", "middle"], "--contact-s-m"),
     (["tip-loads", "--contact-s-m", "0.1"], "--contact-s-m"),
 ])
 def test_cli_bad_location_one_line(tmp_path, args, text):

@@ -71,6 +71,11 @@ class ContactLocation(Finite):
         """Parse and check one value."""
         if self.named and value == "along-body":
             return value
+        try:
+            float(value)
+        except (TypeError, ValueError):
+            self.fail(f"expected an arc length s_c [m]{' or along-body' if self.named else ''}, got {value!r}",
+                      param, ctx)
         return super().convert(value, param, ctx)
 
 
