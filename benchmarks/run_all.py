@@ -23,7 +23,11 @@ command, and writes it as Markdown with ``--markdown FILE``. The rows:
 - issue 22 (``bench_model_error``): tracking and the window check added per frame (cold
   and warm), the tracked error and coverage on a 2 kHz ramp-and-hold, the windows flagged
   under an off-tip load, K0 +5 % and none, coverage with the shipped prior, on data from
-  the independent forward model (tools/model_error.py).
+  the independent forward model (tools/model_error.py);
+- issue 23 (``bench_contact``): a known-location contact frame against a tip frame
+  (cold), the force at a known location (noise-free, coverage), the contact location and
+  force over 50 ms windows with the location unknown and one window's cost
+  (tools/contact_eval.py), the Cramér–Rao bound for scale.
 
 "pass?" judges CPU time of the measuring processes (on a shared machine the fairer
 number) and wall time: ``yes`` when both meet the target, ``CPU only`` when the wall
@@ -269,6 +273,14 @@ def bench_model_error(table, quick):
         table.value(what, "—", target, f"{text} ({note})" if what.startswith("tracked RMS") else text, ok)
 
 
+def bench_contact(table, quick):
+    """The issue-23 rows (bench_contact.py): a known-location frame vs a tip frame, the location over windows."""
+    from bench_contact import rows
+
+    for what, target, text, ok in rows(quick):
+        table.value(what, "—", target, text, ok)
+
+
 def cpu_model():
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
@@ -320,6 +332,7 @@ def main(argv=None):
     bench_elastica(table)
     bench_decoder(table, args.quick)
     bench_model_error(table, args.quick)
+    bench_contact(table, args.quick)
     w1, c1 = clocks()
 
     header = [
