@@ -27,7 +27,7 @@ WINDOW_FRAMES = 100  # 50 ms at 2 kHz
 
 
 def table(config, pressure_pa, noise_counts, calibration=None):
-    """Rows (s_c / L, |F|, σ(s_c) one frame and window [mm], σ(F) known / unknown s_c, one frame [mN]) per constraint."""
+    """Rows (s_c / L, |F|, σ(s_c) one frame and window [mm], σ(F) known / unknown s_c [mN]) per constraint."""
     from bendsense import contact_bound
 
     length = config.actuator.length_m
@@ -36,8 +36,8 @@ def table(config, pressure_pa, noise_counts, calibration=None):
     for constraint in ("none", "normal"):
         b = contact_bound(config, calibration, contact_s_m=sc, force_n=np.asarray(TABLE_FORCES_N),
                           pressure_pa=pressure_pa, noise_std=noise_counts, constraint=constraint)
-        force_known = b.force_std_known_n if constraint == "normal" else np.hypot(*np.moveaxis(b.force_std_known_n, -1, 0))
-        force = b.force_std_n if constraint == "normal" else np.hypot(*np.moveaxis(b.force_std_n, -1, 0))
+        combined = (lambda a: a) if constraint == "normal" else (lambda a: np.hypot(*np.moveaxis(a, -1, 0)))
+        force_known, force = combined(b.force_std_known_n), combined(b.force_std_n)
         for i, fr in enumerate(TABLE_FRACTIONS):
             for j, f in enumerate(TABLE_FORCES_N):
                 one = b.contact_std_m[i, j]
@@ -47,6 +47,7 @@ def table(config, pressure_pa, noise_counts, calibration=None):
 
 
 def figure(config, pressure_pa, noise_counts, out):
+    """Draw σ(s_c) over s_c / L for the forces of FORCES_N, one frame and a 50 ms window, into ``out``."""
     import matplotlib
 
     matplotlib.use("Agg")
