@@ -115,22 +115,36 @@ def test_force_along_the_tangent_is_unresolved():
         assert "tangent" in str(est.message[0]) or "σ(s_c)" in str(est.message[0])
 
 
-def test_one_frame_at_realistic_noise_is_mostly_unresolved():
-    """``estimate_force(load="contact", contact_s_m=None)``: the window of one frame, honestly."""
+@pytest.mark.parametrize("counts", [1.5, 15.0])
+def test_one_frame_never_a_confident_wrong_location(counts):
+    """``estimate_force(load="contact", contact_s_m=None)``: the window of one frame, honestly.
+
+    At the hidden sensors' 1.5 counts one frame places a 0.15 N contact to ~1 mm (the
+    Cramér–Rao bound below is ~0.5–1.3 mm); at 15 counts (~1 1/m per segment, the noise
+    the issue's bound assumed) σ(s_c) exceeds a segment: mostly ``contact_unresolved``.
+    """
     sensor, cal = ce.calibration(CFG, 0, 1.5)
+    noisy = HiddenSensor(noise_counts=counts, seed=0)  # the same sensor, more noise
     rng = np.random.default_rng(3)
     P = rng.uniform(40e3, 100e3, 40)
     sc = rng.uniform(0.6, 0.9, 40) * L
     angles = np.array([forward(CFG, p, _normal_force(p, s, 0.15), contact_s_m=s).angles_rad for p, s in zip(P, sc)])
-    shape = reconstruct(sensor.signals(GAP * angles, rng), cal, CFG.sensor)
-    est = _quiet(bendsense.estimate_force, shape, P, BARE, load="contact", calibration=cal)
+    shape = reconstruct(noisy.signals(GAP * angles, rng), cal, CFG.sensor)
+    est = _quiet(bendsense.estimate_force, shape, P, BARE, load="contact", calibration=cal, noise_std=counts)
     assert est.load == "contact" and est.contact_s_m.shape == (40,)
     located = np.isfinite(est.contact_std_m)
-    # never a confident wrong location: a located frame's error within 3 σ
-    assert np.all(np.abs(est.contact_s_m - sc)[located] <= 3 * est.contact_std_m[located])
-    assert np.mean(located) < 0.5
-    one = _quiet(bendsense.estimate_force, shape.curvature_per_m[0], P[0], BARE, load="contact", calibration=cal)
+    z = np.abs(est.contact_s_m - sc)[located] / est.contact_std_m[located]
+    assert np.all(z <= 3.5) and np.mean(z <= 2.0) >= 0.85, np.sort(z)
+    unresolved = estimate_status(est, 40) == CONTACT_UNRESOLVED
+    assert np.array_equal(unresolved, np.isinf(est.contact_std_m))
+    if counts > 10:
+        assert np.mean(located) < 0.5, np.mean(located)
+    else:
+        assert np.mean(located) > 0.9, np.mean(located)
+    one = _quiet(bendsense.estimate_force, shape.curvature_per_m[0], P[0], BARE, load="contact", calibration=cal,
+                 noise_std=counts)
     assert one.batch_shape == () and one.load == "contact"
+    assert one.contact_s_m == est.contact_s_m[0]
 
 
 def test_bad_arguments_name_the_argument():
@@ -191,7 +205,7 @@ def _sigma_unclipped(kappa, P, cal, frames):
 
     est = bendsense.estimate_force(kappa[:1], P, BARE, load="contact", contact_s_m=np.array([0.85 * L]),
                                    calibration=cal)
-    T, er, ee, parts = contact._metric(est, np.array([frames]))
+    T, er, ee, parts, _ = contact._metric(est, np.array([frames]))
     return float(1.0 / np.sqrt(ee[0]))
 
 
@@ -200,14 +214,14 @@ def _sigma_unclipped(kappa, P, cal, frames):
 
 @pytest.fixture(scope="module")
 def evaluation():
-    scores, _ = ce.run(CFG, range(3), 4)
+    scores, _ = ce.run(CFG, range(16), 8, use_cache=False)  # 64 contact holds (256 windows), 64 tip holds
     return scores
 
 
 def test_contact_targets_on_a_small_sample(evaluation):
     """The section 5 rows (tools/contact_eval.py prints them on a larger sample)."""
     s = evaluation
-    assert s["contact_windows"] >= 20 and s["tip_windows"] >= 20
+    assert s["contact_windows"] >= 200 and s["tip_windows"] >= 200
     assert s["median_error_m"] <= 8e-3, s
     assert s["s_coverage"] >= 0.85, s
     assert np.all(s["force_coverage"] >= 0.85), s
