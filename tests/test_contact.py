@@ -241,3 +241,23 @@ def test_threshold_is_the_stated_mixture_quantile():
     from scipy import stats
 
     assert abs(0.5 * stats.chi2.sf(LR_THRESHOLD, 1) - 0.01) < 1e-4
+
+
+def test_budget_on_exact_shapes_with_gaussian_noise():
+    """Shift noise only (no calibration, no parameters): σ(s_c) and the force's σ (with the location's part and its
+    covariance with ŝ) are the spread of the errors over independent windows."""
+    rng = np.random.default_rng(0)
+    sigma_m, n = 2e-6, 100
+    zs, zf = [], []
+    for P, frac in [(90e3, 0.8), (50e3, 0.7), (70e3, 0.9)]:
+        sc = frac * L
+        F = _normal_force(P, sc, 0.2)
+        truth = forward(BARE, P, F, contact_s_m=sc)
+        W = 40
+        kappa = _kappa(BARE, truth.angles_rad + sigma_m / GAP * rng.standard_normal((W * n, 16)))
+        est = _quiet(bendsense.estimate_contact, kappa, P, BARE, noise_std=sigma_m, t_s=np.arange(W * n) / 2000.0)
+        zs.append((est.contact_s_m[::n] - sc) / est.contact_std_m[::n])
+        zf.append((est.force_n - F) / est.std_n)
+    zs, zf = np.concatenate(zs), np.concatenate(zf)
+    assert 0.8 <= np.std(zs) <= 1.2, np.std(zs)
+    assert np.all((0.8 <= np.std(zf, axis=0)) & (np.std(zf, axis=0) <= 1.2)), np.std(zf, axis=0)
