@@ -154,6 +154,10 @@ def test_bad_arguments_name_the_argument():
         bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, t_s=[0, 1])
     with pytest.raises(ArgumentError, match="^threshold"):
         bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, threshold=-1)
+    with pytest.raises(ArgumentError, match="^contact_s_m: not an option"):
+        bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, contact_s_m=0.1)
+    with pytest.raises(ArgumentError, match="^noise_std"):  # no noise model: no location
+        _quiet(bendsense.estimate_contact, np.full((3, 16), 5.0), 50e3, BARE, noise_std=0.0)
     with pytest.raises(ArgumentError, match="^window_s"):
         bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, t_s=[0, 1, 2], window_s=0)
 

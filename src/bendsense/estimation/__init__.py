@@ -360,6 +360,10 @@ def estimate_contact(shape, pressure_pa, config=None, *, calibration=None, t_s=N
     ArgumentError
         For a bad argument (the message names it), or without a noise model.
     """
+    other = sorted(set(options) - set(_FRAME_OPTIONS))
+    if other:
+        raise ArgumentError(f"{other[0]}: not an option of estimate_contact (it takes "
+                            f"{', '.join(n for n in _FRAME_OPTIONS if n not in ('calibration', 'noise_std'))})")
     contact = _contact()
     threshold = contact.LR_THRESHOLD if threshold is None else threshold
     return contact.estimate_windows(estimate_force, shape, pressure_pa, config, calibration, t_s, window_s,
