@@ -67,8 +67,8 @@ def known_location_rows(n_frames, cal):
     tip, contact = tip * 1e6, contact * 1e6
     ratio = np.median(contact) / np.median(tip)
     return [
-        ("one frame, cold, tip load (force + σ)", f"median {np.median(tip):.0f} µs, p99 {np.percentile(tip, 99):.0f} µs",
-         "≤ 50 µs, ≤ 500 µs"),
+        ("one frame, cold, tip load (force + σ)",
+         f"median {np.median(tip):.0f} µs, p99 {np.percentile(tip, 99):.0f} µs", "≤ 50 µs, ≤ 500 µs"),
         ("one frame, cold, known contact 0.5–1 L (force + σ)",
          f"median {np.median(contact):.0f} µs, p99 {np.percentile(contact, 99):.0f} µs", ""),
         ("known contact / tip load, cold (medians)", f"{ratio:.2f}×", "≤ 2×"),

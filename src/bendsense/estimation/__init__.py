@@ -497,7 +497,7 @@ def _flat(a, batch, B, tail=(), dtype=float):
 
 
 def _frames(ref, P, batch, B, config, contact) -> Frames:
-    """The per-frame inputs of the kernels: the shape's, the pressure's (K0, EI, the free tip angle), the contact's σ_c."""
+    """The per-frame inputs of the kernels: the shape's, the pressure's (K0, EI, the free tip angle), the σ_c."""
     model = _models(config)
     if B == 1:  # one frame (the live path): plain floats, as numpy costs ~1 µs a call on one value
         Pf = P.reshape(1)
