@@ -124,7 +124,6 @@ def test_one_shape_at_many_contact_points_broadcasts(truths):
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"load": "contact"}, "contact_s_m: load='contact' needs the known contact point .* use bendsense.estimate_contact"),
     ({"load": "tip", "contact_s_m": 0.1}, "contact_s_m: only with load='contact'"),
     ({"load": "side"}, "load: must be one of tip, contact, got 'side'"),
     ({"load": "contact", "contact_s_m": 0.0}, "contact_s_m: expected 0 < s_c <= length_m"),
@@ -166,3 +165,16 @@ def test_two_sigma_covers_the_force_at_a_known_contact(tmp_path):
     assert np.all((cover >= 0.88) & (cover <= 0.99)), cover
     z = np.concatenate(zs)[np.concatenate(inside_all)]
     assert np.all(np.abs(np.sqrt(np.mean(z**2, axis=0)) - 1.0) < 0.25)
+
+
+def test_a_shape_given_by_points_at_a_known_contact():
+    """The forward model's own points (no PCC): the positions objective finds the force at s_c."""
+    p, sc, force = 70e3, 0.75 * L, np.array([0.08, -0.12])
+    t = forward(CFG, p, force, contact_s_m=sc, s_m=np.linspace(0.0, L, 61))
+    shape = t.shape
+    est = estimate_force(shape.positions_m, p, KNOWN, s_m=shape.s_m, load="contact", contact_s_m=sc)
+    assert est.success and est.objective == "positions"
+    np.testing.assert_allclose(est.force_n, force, atol=1e-3)
+    with pytest.raises(ArgumentError, match="tip_angle_source: 'shape' at a contact needs a PCC shape"):
+        estimate_force(shape.positions_m, p, KNOWN, "normal", s_m=shape.s_m, load="contact", contact_s_m=sc,
+                       tip_angle_source="shape")

@@ -324,8 +324,8 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
             pstep = max(pstep, abs(d))
         start = pred.copy()
         last = lt >= 1.0
-        conv, it = newton(pred, lt, k0n, gi, f, ops, tol if last else 1e-6, max_iter if last else min(STEP_ITER, max_iter),
-                          sens, bool(YES), x)
+        conv, it = newton(pred, lt, k0n, gi, f, ops, tol if last else 1e-6,
+                          max_iter if last else min(STEP_ITER, max_iter), sens, bool(YES), x)
         iters += it
         move = 0.0
         for i in range(n):

@@ -164,9 +164,10 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
 
     ``ops``: the frame's beam operators, of its contact point (the force acts there;
     :func:`bendsense.beam_kernels.contact_grid`), ``pb`` its problem
-    (:func:`~bendsense.estimation.problem.contact_problem`). The positions objective samples the positions at the comparison nodes (rows of
-    ``pb.PQ_fit``), the angles objective interpolates the tangent angle at the coils
-    (rows of ``pb.PA``): ``φ(L_i)``, what the sensor measures as ``S_i / d``.
+    (:func:`~bendsense.estimation.problem.contact_problem`). The positions objective
+    samples the positions at the comparison nodes (rows of ``pb.PQ_fit``), the angles
+    objective interpolates the tangent angle at the coils (rows of ``pb.PA``): ``φ(L_i)``,
+    what the sensor measures as ``S_i / d``.
     """
     pos, dpos, st, tip, dst, y, dy = ws
     n = st.size

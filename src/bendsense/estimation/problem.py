@@ -306,7 +306,7 @@ def contact_problem(pb, sc, ref):
 
 @njit(cache=True)
 def contact_state(state0, tip_sigma, sigma, out):
-    """A Newton start on a contact's nodes ``sigma`` (n,): ``state0`` on the tip grid's ``tip_sigma``, interpolated linearly."""
+    """A Newton start on a contact's nodes ``sigma`` (n,): ``state0`` on the tip grid's ``tip_sigma``, interpolated."""
     j = 0
     for i in range(sigma.size):
         while j < tip_sigma.size - 2 and tip_sigma[j + 1] < sigma[i]:
