@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 from pathlib import Path
 
 import click
@@ -71,9 +73,8 @@ class ContactLocation(Finite):
         """Parse and check one value."""
         if self.named and value == "along-body":
             return value
-        try:
-            float(value)
-        except (TypeError, ValueError):
+        number = r"\s*[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?\s*|\s*[+-]?(nan|inf|infinity)\s*"
+        if isinstance(value, str) and not re.fullmatch(number, value, re.IGNORECASE):
             self.fail(f"expected an arc length s_c [m]{' or along-body' if self.named else ''}, got {value!r}",
                       param, ctx)
         return super().convert(value, param, ctx)
