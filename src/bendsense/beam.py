@@ -100,7 +100,8 @@ class BeamSolution:
         ``"fast"`` or ``"shooting"``.
     state : ndarray, shape (..., n_nodes) or None
         φ at the Chebyshev nodes (fast method); pass the solution back as
-        ``initial=`` to warm-start a nearby solve.
+        ``initial=`` to warm-start a nearby solve (at the same ``contact_s_m``: a
+        contact's nodes are those of its two domains, split at s_c).
     dpositions_dforce : ndarray, shape (..., M, 2, 2) or None
         ∂r_a(s_j)/∂F_b [m/N], with ``sensitivities=True``.
     dangle_dforce : ndarray, shape (..., M, 2) or None

@@ -215,26 +215,28 @@ def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
     it = 0
     while it < limit:
         for i in range(m):
-            s = math.sin(p[i + 1])
-            c = math.cos(p[i + 1])
-            h = h2[i]
-            gx = gi[i, 0] * lam
-            gy = gi[i, 1] * lam
             acc = 0.0
             for j in range(n):
                 acc += C[i, j] * p[j]
+            for j in range(m):
+                J[i, j] = J0[i, j]
+            for c_ in range(1, ncol):
+                rhs[i, c_] = 0.0
+            h = h2[i]
+            if h == 0.0:  # the interface and tip rows: linear, no load term
+                rhs[i, 0] = -acc
+                continue
+            s = math.sin(p[i + 1])
+            c = math.cos(p[i + 1])
+            gx = gi[i, 0] * lam
+            gy = gi[i, 1] * lam
             rhs[i, 0] = h * (s * gy - c * gx) - acc
-            rhs[i, 1] = 0.0
             if sens > 0:
                 hf = h * on[i]
                 rhs[i, 2] = -c * lam * hf
                 rhs[i, 3] = s * lam * hf
-            if sens > 1:
-                rhs[i, 4] = 0.0
             if tangent:
                 rhs[i, ncol - 1] = h * (s * gi[i, 1] - c * gi[i, 0])
-            for j in range(m):
-                J[i, j] = J0[i, j]
             J[i, i] -= h * (c * gy + s * gx)
         rhs[m - 1, 0] += ops.kscale * k0n
         rhs[m - 1, 1] = ops.kscale
@@ -287,6 +289,8 @@ def arc_tangent(phi, gi, ops, out):
     for r in range(m):
         out[r] = 0.0
     for i in range(m):
+        if ops.h2[i] == 0.0:
+            continue
         v = ops.h2[i] * (math.sin(phi[i + 1]) * gi[i, 1] - math.cos(phi[i + 1]) * gi[i, 0])
         for r in range(m):
             out[r] += J0inv[r, i] * v

@@ -82,7 +82,9 @@ class ForceEstimate:
     state : ndarray, shape (..., n_nodes) or None
         Beam state at the estimate: the tangent angle [rad] at the
         :data:`~bendsense.estimation.problem.N_NODES` Chebyshev–Lobatto nodes
-        (:func:`~bendsense.estimation.chebyshev_nodes_m`).
+        (:func:`~bendsense.estimation.chebyshev_nodes_m`); for ``load="contact"`` at
+        s_c < L, the nodes of the two domains split at s_c
+        (:func:`bendsense.beam_kernels.contact_grid`).
     guess_n : ndarray, shape (..., 2) or None
         The moment-balance starting force; with ``force_n`` it corrects the start of
         the next frame (``initial=`` of the next call).
