@@ -676,7 +676,7 @@ def process_sessions(
         Window of the model check over frames (:func:`bendsense.check_windows`) [s].
     load, contact_s_m : str, float, optional
         The load model (``"tip"``, ``"contact"``) and a known contact location [m]
-        (:func:`bendsense.contact_output.estimate_load`).
+        (:func:`bendsense.load_models.estimate_load`).
 
     Returns
     -------

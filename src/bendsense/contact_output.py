@@ -3,11 +3,9 @@
 A force estimate with ``load="contact"`` (DESIGN.md section 2b) carries the contact's
 arc length ``contact_s_m`` and its standard deviation ``contact_std_m`` (0 for a known
 location, ``inf`` where the data cannot resolve it: status ``contact_unresolved``).
-This module is what the outputs share about it:
+This module is what the outputs share about it (the estimate of a load model for the
+chain, ``process`` and the live path: :func:`bendsense.load_models.estimate_load`):
 
-- :func:`estimate_load`: the per-frame estimate of the chain, of ``process`` and of the
-  live path for a load model (the tip, a contact at a known location, or a contact
-  located by :func:`bendsense.estimate_contact` over quasi-static windows);
 - :func:`contact_columns`: the columns ``contact_s_m, contact_std_m`` of ``results.csv``
   (after ``fy_std_n``; absent for a tip load, so tip outputs stay as they were);
 - :func:`point_on_shape` and :func:`arc_on_shape`: the contact point and its ±2σ arc on a
@@ -18,13 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from bendsense.errors import ArgumentError
+__all__ = ["CONTACT_COLUMNS", "contact_columns", "is_contact", "point_on_shape", "arc_on_shape", "resolved"]
 
-__all__ = ["CONTACT_COLUMNS", "LOADS", "contact_columns", "is_contact", "check_contact_s_m", "estimate_load",
-           "point_on_shape", "arc_on_shape", "resolved"]
-
-#: the load models of ``estimate --load`` (:func:`bendsense.estimate_force`'s ``load``)
-LOADS = ("tip", "contact")
 #: the columns of ``results.csv`` after ``fy_std_n`` for a contact load
 CONTACT_COLUMNS = ("contact_s_m", "contact_std_m")
 
@@ -75,84 +68,6 @@ def resolved(contact_s_m, contact_std_m) -> np.ndarray:
     """
     s, std = np.asarray(contact_s_m, dtype=float), np.asarray(contact_std_m, dtype=float)
     return np.isfinite(s) & np.isfinite(std)
-
-
-def check_contact_s_m(value, config, name: str = "contact_s_m") -> float:
-    """A known contact location: a finite number with 0 < s_c <= L (``config.actuator.length_m``).
-
-    Parameters
-    ----------
-    value : object
-        The location given [m].
-    config : Config
-        The actuator's length L bounds it.
-    name : str, default "contact_s_m"
-        The argument or option, for the message (``"--contact-s-m"``).
-
-    Raises
-    ------
-    ArgumentError
-        Naming ``name``, for anything else.
-    """
-    from bendsense import validation as check
-
-    s = check.number(name, value)
-    length = float(config.actuator.length_m)
-    if not 0.0 < s <= length:
-        raise ArgumentError(f"{name}: expected 0 < s_c <= L = {length:g} m (actuator.length_m, arc length from the "
-                            f"base), got {s:g}")
-    return s
-
-
-def estimate_load(shape, pressure_pa, config, *, load: str = "tip", contact_s_m=None, t_s=None,
-                  window_s: float = 0.05, **options):
-    """The force estimate of a load model: at the tip, at a known contact, or at a contact located per window.
-
-    Parameters
-    ----------
-    shape : Shape
-        Reconstructed shapes, batch axis over frames.
-    pressure_pa : array_like
-        Pressure of each frame [Pa].
-    config : Config
-        Sensor, actuator and estimation settings.
-    load : {"tip", "contact"}, default "tip"
-        The load model (DESIGN.md section 2b).
-    contact_s_m : float, optional
-        A known contact location [m] (0 < s_c <= L), with ``load="contact"``: every
-        frame's force at it (:func:`bendsense.estimate_force`). None with
-        ``load="contact"``: the location is estimated, one per quasi-static window of
-        ``window_s`` (:func:`bendsense.estimate_contact`), which needs ``t_s``.
-    t_s : array_like, shape (frames,), optional
-        Frame times [s] (the windows of an unknown location).
-    window_s : float, default 0.05
-        The window of an unknown location [s].
-    **options
-        Further options of :func:`bendsense.estimate_force` (``constraint``, ``method``,
-        ``calibration``, ...).
-
-    Returns
-    -------
-    ForceEstimate
-        With ``load``; for a contact ``contact_s_m`` and ``contact_std_m`` per frame.
-    """
-    from bendsense.estimation import estimate_force
-
-    if load not in LOADS:
-        raise ArgumentError(f"load: expected one of {', '.join(LOADS)}, got {load!r}")
-    if load == "tip":
-        if contact_s_m is not None:
-            raise ArgumentError("contact_s_m: a contact location needs load='contact' (a tip load acts at s = L)")
-        return estimate_force(shape, pressure_pa, config, **options)
-    if contact_s_m is not None:
-        s_c = check_contact_s_m(contact_s_m, config)
-        return estimate_force(shape, pressure_pa, config, load="contact", contact_s_m=s_c, **options)
-    import bendsense
-
-    if t_s is None:
-        raise ArgumentError("t_s: an unknown contact location is estimated over windows of frames: give the frame "
-                            "times (or a known contact_s_m)")
-    return bendsense.estimate_contact(shape, pressure_pa, config, t_s=t_s, window_s=window_s, **options)
 
 
 def point_on_shape(s_m, positions_m, at_s_m) -> np.ndarray:

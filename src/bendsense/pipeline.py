@@ -263,7 +263,7 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         Bandwidth of the track [Hz]; None: chosen from the session (:func:`bendsense.track`).
     load, contact_s_m : {"tip", "contact"}, float, optional
         The load model (default ``"tip"``); ``"contact"`` with ``contact_s_m`` a known location [m], without it
-        one located per window of ``window_s`` (:func:`bendsense.contact_output.estimate_load`).
+        one located per window of ``window_s`` (:func:`bendsense.load_models.estimate_load`).
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``max_iter``, ...).
 
@@ -304,7 +304,7 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     if track is not None and not estimate:
         raise ArgumentError("track: needs the force estimate (estimate=True)")
     if estimate:
-        from bendsense.contact_output import estimate_load
+        from bendsense.load_models import estimate_load
 
         constraint, method, objective = estimation_options(config, constraint, method, objective)
         t0 = time.perf_counter()

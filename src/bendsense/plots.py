@@ -607,6 +607,7 @@ def plot_results(
     title: str | None = None,
     overwrite: bool = True,
     estimated: str | None = None,
+    length_m: float | None = None,
 ):
     """Summary figure of processed frames: shapes and tip path, tip forces, curvatures over time.
 
@@ -630,12 +631,17 @@ def plot_results(
         normal, method fast"``).
     overwrite : bool
         Replace an existing file at ``path`` (False: :class:`~bendsense.errors.OutputExistsError`).
+    length_m : float, optional
+        The actuator's length L, marked in the contact panel (results of a contact load).
 
     Returns
     -------
     matplotlib.figure.Figure
         Left: shapes of ``max_shapes`` frames and the tip path (grey); right: tip force
-        with ±2σ band (top) and segment curvatures (bottom) over time.
+        with ±2σ band (top) and segment curvatures (bottom) over time. Results of a
+        contact load (``contact_s_m``) add the contact point with its ±2σ arc on each
+        drawn shape and a panel of s_c over time with its ±2σ band
+        (:mod:`bendsense.plots_contact`).
     """
     source = results if isinstance(results, (str, os.PathLike)) else None
     results = _as_results(results)
@@ -652,25 +658,42 @@ def plot_results(
         import matplotlib.pyplot as plt
 
         fig = plt.figure(figsize=(12, 6.5), layout="constrained")
-    grid = fig.add_gridspec(2, 3, width_ratios=(1, 1.6, 0.04))
+    contact = results.has_contact
+    if contact:
+        fig.set_size_inches(12, 8.5)
+    grid = fig.add_gridspec(3 if contact else 2, 3, width_ratios=(1, 1.6, 0.04),
+                            height_ratios=(1, 0.7, 1) if contact else None)
     ax_s = fig.add_subplot(grid[:, 0])
     ax_f = fig.add_subplot(grid[0, 1])
-    ax_k = fig.add_subplot(grid[1, 1], sharex=ax_f)
-    cax = fig.add_subplot(grid[1, 2])
+    ax_k = fig.add_subplot(grid[-1, 1], sharex=ax_f)
+    cax = fig.add_subplot(grid[-1, 2])
     tip = np.column_stack([results["tip_x_m"], results["tip_y_m"]]).astype(float) * MM
     ax_s.plot(tip[:, 0], tip[:, 1], color="0.6", linewidth=0.8, zorder=0, label="tip path")
     plot_shapes(results, ax_s, max_frames=max_shapes, legend=False)
+    if contact:
+        from bendsense.plots_contact import draw_contacts, plot_contact_series
+
+        idx = _pick(len(results.positions_m), None, max_shapes)
+        draw_contacts(ax_s, results.s_m, results.positions_m[idx], results["contact_s_m"][idx],
+                      results["contact_std_m"][idx], _colors(len(idx)))
+        ax_c = fig.add_subplot(grid[1, 1], sharex=ax_f)
+        plot_contact_series(ax_c, results["t_s"], results["contact_s_m"], results["contact_std_m"],
+                            length_m=length_m, sensor_end_m=float(results.s_m[-1]))
+        ax_c.tick_params(labelbottom=False)
     # below the panel, where it covers no shape
     ax_s.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.09), ncols=2, frameon=False)
     ax_s.set_title("shapes", fontsize="medium")
     plot_time_series(results, (ax_f, ax_k), cax=cax)
-    ax_f.set_title("tip force (base frame)", fontsize="medium", loc="left")
+    ax_f.set_title("contact force (base frame)" if contact else "tip force (base frame)", fontsize="medium", loc="left")
+    if contact:
+        ax_f.set_ylabel("contact force [N]")
     ax_f.tick_params(labelbottom=False)
     frames = len(results["t_s"])
     if title is None:
         name = Path(source).name if source is not None else "results"
         if results.has_forces:
-            what = ("shapes and tip forces, tracked" if results.has_track else "shapes and tip forces") + (
+            forces = "contact forces and locations" if contact else "tip forces"
+            what = (f"shapes and {forces}, tracked" if results.has_track else f"shapes and {forces}") + (
                 f" ({estimated})" if estimated else "")
         else:
             what = "shapes only (no force estimate)"

@@ -184,7 +184,7 @@ def check_load(load: str, contact_s_m, config) -> None:
     config : Config
         The actuator's length bounds it.
     """
-    from bendsense.contact_output import check_contact_s_m
+    from bendsense.load_models import check_contact_s_m
     from bendsense.errors import BendsenseError
 
     if contact_s_m is not None:
@@ -214,7 +214,7 @@ def live_contact(load: str, contact_s_m, config) -> dict:
         ``{}`` for a tip load, else ``{"load": "contact", "contact_s_m": s_c}`` (the
         options of :class:`~bendsense.pipeline.LiveProcessor`).
     """
-    from bendsense.contact_output import check_contact_s_m
+    from bendsense.load_models import check_contact_s_m
     from bendsense.errors import ArgumentError
 
     if load == "tip":

@@ -228,6 +228,8 @@ def plot(target, figure_path, shapes, dpi, overwrite):
             est = state.get("estimate")
             if est is not None:
                 estimated = f"constraint {est.constraint}, method {est.method}, objective {est.objective}"
+                if getattr(est, "load", "tip") == "contact":
+                    estimated = f"contact load, {estimated}"
             if state.get("track") is not None:
                 tracked = state["track"]
                 estimated += f"; tracked: {tracked.mode}, {tracked.bandwidth_hz:.3g} Hz"
@@ -238,7 +240,9 @@ def plot(target, figure_path, shapes, dpi, overwrite):
                 "'plot FIG' needs 'reconstruct' earlier in the chain; "
                 "to plot a results directory use 'plot RESULTS_DIR -o FIG.png'"
             )
-        plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite, estimated=estimated)
+        config = state.get("config")
+        plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite, estimated=estimated,
+                     length_m=None if config is None else config.actuator.length_m)
         say(f"wrote {out}")
         return state
 
