@@ -257,3 +257,54 @@ def test_a_location_without_a_contact_load_is_refused(work):
                                     str(root / "cal.yaml"), "--estimate", "--load", "contact"])
     assert res.exit_code == 2 and "needs the known location --contact-s-m" in res.output, res.output
     assert not (root / "rec").exists()
+
+
+def test_summary_figure_draws_the_contact_on_the_shapes_and_over_time(work, tmp_path):
+    from bendsense.plots import plot_results
+
+    processed, contact = work["processed"], work["contact"]
+    results = Results.from_state(processed.session, processed.shape, contact)
+    fig = plot_results(results, tmp_path / "c.png", max_shapes=6, length_m=L)
+    assert (tmp_path / "c.png").stat().st_size > 10_000
+    by_label = {ax.get_ylabel(): ax for ax in fig.axes}
+    ax_c, ax_s = by_label["contact s_c [mm]"], by_label["y [mm]"]
+    assert "contact force [N]" in by_label
+    # s_c over time: the line is the location in mm where it is resolved, a gap where it is not
+    line = next(a for a in ax_c.get_lines() if a.get_label() == "contact s_c")
+    y = np.asarray(line.get_ydata(), dtype=float)
+    np.testing.assert_allclose(y[:10], contact.contact_s_m[:10] * 1e3)
+    assert np.isnan(y[10:15]).all() and np.isnan(y[20])
+    # on the shapes: one diamond per drawn frame at the shape's point at s_c (frames 0, 30, 60, ... of 150)
+    idx = np.unique(np.linspace(0, len(results["t_s"]) - 1, 6).round().astype(int))
+    diamonds = [a for a in ax_s.get_lines() if a.get_marker() == "D"]
+    assert len(diamonds) == len(idx)
+    got = np.array([[a.get_xdata()[0], a.get_ydata()[0]] for a in diamonds])
+    want = point_on_shape(processed.shape.s_m, processed.shape.positions_m[idx], contact.contact_s_m[idx]) * 1e3
+    np.testing.assert_allclose(got, want)
+    # a tip load: no contact panel
+    tip = plot_results(Results.from_state(processed.session, processed.shape, processed.estimate),
+                       tmp_path / "t.png")
+    assert "contact s_c [mm]" not in {ax.get_ylabel() for ax in tip.axes}
+
+
+def test_live_view_draws_the_contact_point_and_its_arc(work, tmp_path):
+    from bendsense.apps.live_view import LiveView
+    from bendsense.pipeline import LiveProcessor
+
+    processed, contact = work["processed"], work["contact"]
+    proc = LiveProcessor(Calibration.load(work["root"] / "cal.yaml"), load="contact", contact_s_m=0.1)
+    view = LiveView(proc, headless=True)
+    block = _block(processed, contact, 30, 40, "contact")
+    view.update_block(block)
+    frame = block.frame(-1)
+    s_c, sd = contact.contact_s_m[39], contact.contact_std_m[39]
+    want = point_on_shape(frame.shape.s_m, frame.shape.positions_m, s_c) * 1e3
+    np.testing.assert_allclose([view.contact_marker.get_xdata()[0], view.contact_marker.get_ydata()[0]], want)
+    np.testing.assert_allclose(view.arrow._posA_posB[0], want)  # the arrow starts at the contact (no public getter)
+    arc = np.column_stack([view.contact_arc.get_xdata(), view.contact_arc.get_ydata()])
+    np.testing.assert_allclose(arc[0], point_on_shape(frame.shape.s_m, frame.shape.positions_m, s_c - 2 * sd) * 1e3)
+    assert f"s_c = {s_c * 1e3:.1f} mm (± {sd * 1e3:.1f} mm)" in view.force_text.get_text()
+    view.update_block(_block(processed, contact, 10, 15, "contact"))  # unresolved: a hollow point, no arc
+    assert view.contact_marker.get_markerfacecolor() == "none" and len(view.contact_arc.get_xdata()) == 0
+    assert "unresolved" in view.force_text.get_text()
+    view.save(tmp_path / "live.png")
