@@ -308,3 +308,16 @@ def test_live_view_draws_the_contact_point_and_its_arc(work, tmp_path):
     assert view.contact_marker.get_markerfacecolor() == "none" and len(view.contact_arc.get_xdata()) == 0
     assert "unresolved" in view.force_text.get_text()
     view.save(tmp_path / "live.png")
+
+
+def test_process_checks_the_load_options_before_any_work(work, tmp_path):
+    root = work["root"]
+    base = ["process", str(root / "tv.csv"), "--calibration", str(root / "cal.yaml"), "-o", str(tmp_path / "out"),
+            "--workers", "0", "--no-progress"]
+    res = CliRunner().invoke(main, [*base, "--load", "contact", "--contact-s-m", "0.5"])
+    assert res.exit_code == 2 and res.output.strip() == (
+        "Error: Invalid value for '--contact-s-m': expected 0 < s_c <= L = 0.134 m (actuator.length_m, arc length "
+        "from the base), got 0.5")
+    res = CliRunner().invoke(main, [*base, "--no-estimate", "--load", "contact"])
+    assert res.exit_code == 2 and "--load and --contact-s-m are options of the force estimate" in res.output
+    assert not (tmp_path / "out").exists()
