@@ -162,7 +162,8 @@ objective_option = click.option(
 window_option = click.option(
     "--window-s", type=Finite(min=0, min_open=True), default=None,
     help="Window of the model check over frames [s] (a mean residual per window tested against its covariance; "
-         "p < 0.001 flags its frames model_misfit); default 0.05.")
+         "p < 0.001 flags its frames model_misfit), and of an unknown contact location (--load contact without "
+         "--contact-s-m: one s_c per window); default 0.05.")
 load_option = click.option(
     "--load", type=click.Choice(("tip", "contact")), default="tip", show_default=True,
     help="Load model: a force at the tip, or one point force at arc length s_c along the actuator (contact).")
