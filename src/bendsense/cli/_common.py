@@ -185,8 +185,8 @@ def check_load(load: str, contact_s_m, config) -> None:
     config : Config
         The actuator's length bounds it.
     """
-    from bendsense.load_models import check_contact_s_m
     from bendsense.errors import BendsenseError
+    from bendsense.load_models import check_contact_s_m
 
     if contact_s_m is not None:
         if load != "contact":
@@ -215,8 +215,8 @@ def live_contact(load: str, contact_s_m, config) -> dict:
         ``{}`` for a tip load, else ``{"load": "contact", "contact_s_m": s_c}`` (the
         options of :class:`~bendsense.pipeline.LiveProcessor`).
     """
-    from bendsense.load_models import check_contact_s_m
     from bendsense.errors import ArgumentError
+    from bendsense.load_models import check_contact_s_m
 
     if load == "tip":
         if contact_s_m is not None:
