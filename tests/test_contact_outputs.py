@@ -321,3 +321,18 @@ def test_process_checks_the_load_options_before_any_work(work, tmp_path):
     res = CliRunner().invoke(main, [*base, "--no-estimate", "--load", "contact"])
     assert res.exit_code == 2 and "--load and --contact-s-m are options of the force estimate" in res.output
     assert not (tmp_path / "out").exists()
+
+
+def test_one_frame_of_a_contact_draws_its_arrow_at_the_contact(work):
+    from bendsense.batched import take_frames
+
+    processed, contact = work["processed"], work["contact"]
+    n = len(processed.session)
+    shape, est = take_frames(processed.shape, 40, n), take_frames(contact, 40, n)
+    ax = est.plot(shape=shape)
+    s_c, sd = contact.contact_s_m[40], contact.contact_std_m[40]
+    assert ax.get_title().endswith(f"at s_c = {s_c * 1e3:.1f} ± {sd * 1e3:.1f} mm")
+    start = np.asarray(ax.texts[0].xyann if hasattr(ax.texts[0], "xyann") else ax.texts[0].xytext, dtype=float)
+    np.testing.assert_allclose(start, point_on_shape(shape.s_m, shape.positions_m, s_c) * 1e3)
+    tip_ax = take_frames(processed.estimate, 40, n).plot(shape=shape)
+    assert "s_c" not in tip_ax.get_title()

@@ -248,7 +248,9 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
     -------
     matplotlib.axes.Axes
         One frame: the force as an arrow at the model's tip, in mm, titled with its
-        value and σ. A batch: Fx and Fy against time with their ±2σ bands.
+        value and σ; a contact load (``load="contact"``) with ``shape`` given: the arrow at
+        the shape's point at ``contact_s_m``, drawn with its ±2σ arc, and s_c in the title.
+        A batch: Fx and Fy against time with their ±2σ bands.
     """
     force = np.asarray(estimate.force_n, dtype=float)
     if force.ndim == 1:
@@ -257,6 +259,16 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
             p = _positions(shape)[0] * MM
             ax.plot(p[:, 0], p[:, 1], "-", color="0.4")
         tip = np.zeros(2) if estimate.tip_position_m is None else np.asarray(estimate.tip_position_m) * MM
+        contact = getattr(estimate, "load", "tip") == "contact" and estimate.contact_s_m is not None
+        s_c = float(np.asarray(estimate.contact_s_m)) if contact else float("nan")
+        if shape is not None and np.isfinite(s_c):  # the force acts at the contact: the arrow starts there
+            from bendsense.plots_contact import draw_contacts
+
+            p = _positions(shape)[:1]
+            draw_contacts(ax, np.asarray(shape.s_m), p, [s_c], [float(np.asarray(estimate.contact_std_m))])
+            from bendsense.contact_output import point_on_shape
+
+            tip = point_on_shape(shape.s_m, p[0], s_c) * MM
         head = tip + scale_mm_per_n * force
         ax.annotate("", xy=head, xytext=tip, arrowprops={"arrowstyle": "->", "color": "C3"})
         ax.plot([0.0, tip[0], head[0]], [0.0, tip[1], head[1]], alpha=0.0)  # the arrow inside the limits
@@ -264,7 +276,12 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
         _shape_axes(ax)
         std = np.asarray(estimate.std_n, dtype=float)
         parts = [f"{f:.3g}" + (f" ± {s:.2g}" if np.isfinite(s) else "") for f, s in zip(force, std, strict=True)]
-        ax.set_title(f"F = ({parts[0]}, {parts[1]}) N", fontsize="medium")
+        title = f"F = ({parts[0]}, {parts[1]}) N"
+        if np.isfinite(s_c):
+            sd = float(np.asarray(estimate.contact_std_m))
+            title += f" at s_c = {s_c * MM:.1f}" + (f" ± {sd * MM:.1f} mm" if 0 < sd < np.inf else
+                                                     " mm (unresolved)" if sd == np.inf else " mm")
+        ax.set_title(title, fontsize="medium")
         return ax
     ax = _new_axes(ax, figsize=(7, 4))
     force = force.reshape(-1, 2)
