@@ -40,8 +40,6 @@ import functools
 import math
 import warnings
 from dataclasses import dataclass
-from typing import NamedTuple
-
 import numpy as np
 
 from bendsense import _jit
@@ -108,6 +106,16 @@ class BeamSolution:
         ∂φ(s_j)/∂F_b [rad/N], with ``sensitivities=True``.
     dtip_position_dforce : ndarray, shape (..., 2, 2) or None
         ∂r_a(L)/∂F_b [m/N], with ``sensitivities=True``.
+    contact_s_m : ndarray, shape (...) or None
+        Arc length s_c where the force acts [m]; None for a tip force (``contact_s_m=None``).
+    dpositions_dcontact : ndarray, shape (..., M, 2) or None
+        ∂r_a(s_j)/∂s_c [m/m] at fixed s_j, with ``sensitivities=True`` (fast method): how
+        the shape changes when the force's point moves along the beam. At s_c = L (a
+        tip force) the one-sided derivative, toward the base.
+    dangle_dcontact : ndarray, shape (..., M) or None
+        ∂φ(s_j)/∂s_c [rad/m] at fixed s_j, with ``sensitivities=True``.
+    dtip_position_dcontact : ndarray, shape (..., 2) or None
+        ∂r_a(L)/∂s_c [m/m], with ``sensitivities=True``.
     """
 
     s_m: np.ndarray
@@ -123,6 +131,10 @@ class BeamSolution:
     dpositions_dforce: np.ndarray | None = None
     dangle_dforce: np.ndarray | None = None
     dtip_position_dforce: np.ndarray | None = None
+    contact_s_m: np.ndarray | None = None
+    dpositions_dcontact: np.ndarray | None = None
+    dangle_dcontact: np.ndarray | None = None
+    dtip_position_dcontact: np.ndarray | None = None
 
     @property
     def length_m(self) -> float:
@@ -153,16 +165,7 @@ class BeamSolution:
 # --------------------------------------------------------------------------- operators
 
 
-class _KernelOperators(NamedTuple):
-    """The collocation operators as the compiled kernels take them."""
-
-    sigma: np.ndarray  # nodes on [0, 1], sigma[0] = 0 (base), sigma[-1] = 1 (tip)
-    D2i: np.ndarray  # rows 1..n-2 of d²/dσ², all columns
-    Dtip: np.ndarray  # last row of d/dσ
-    D0: np.ndarray  # first row of d/dσ without its first column: ψ'(0) when ψ(0) = 0
-    J0: np.ndarray  # Jacobian at zero load, (n-1, n-1); unknowns are φ_1..φ_{n-1}
-    J0inv: np.ndarray
-    tail: np.ndarray  # 1 − σ at the interior nodes
+_KernelOperators = _k._KernelOperators
 
 
 @dataclass(frozen=True)
@@ -174,7 +177,7 @@ class _Operators:
     kernel: _KernelOperators
 
 
-@functools.lru_cache(maxsize=16)
+@functools.lru_cache(maxsize=64)
 def _operators(n: int) -> _Operators:
     N = n - 1
     x = np.cos(np.pi * np.arange(n) / N)
@@ -194,10 +197,25 @@ def _operators(n: int) -> _Operators:
     anti = np.polynomial.chebyshev.chebint(coeffs, lbnd=1.0, axis=0)
     Q = -0.5 * np.polynomial.chebyshev.chebvander(x, N + 1) @ anti
     Q[0] = 0.0
-    J0 = np.vstack([D2[1:-1, 1:], D[-1:, 1:]])
-    kernel = _KernelOperators(sigma, D2[1:-1].copy(), D[-1].copy(), D[0, 1:].copy(), J0, np.linalg.inv(J0),
-                              1.0 - sigma[1:-1])
+    # one domain: collocation rows at the interior nodes (h = 1), the tip row φ'(1) = K0 L
+    C = np.vstack([D2[1:-1], D[-1:]])
+    m = n - 1
+    h2 = np.ones(m)
+    h2[-1] = 0.0
+    J0 = np.ascontiguousarray(C[:, 1:])
+    kernel = _KernelOperators(sigma, C, h2, np.ones(m), 1.0 - sigma[1:], J0, np.linalg.inv(J0), D[0, 1:].copy(), 1.0,
+                              m - 1, 1.0)
     return _Operators(n, sigma, D, Q, kernel)
+
+
+@functools.lru_cache(maxsize=16)
+def _split_operators(n: int) -> _k._SplitOperators:
+    """The reference operators of the domains of a contact (:func:`bendsense.beam_kernels.contact_grid`)."""
+    sig, D, D2, Q = np.zeros((n + 1, n)), np.zeros((n + 1, n, n)), np.zeros((n + 1, n, n)), np.zeros((n + 1, n, n))
+    for k in range(min(_k.MIN_DOMAIN, n), n + 1):
+        ops = _operators(k)
+        sig[k, :k], D[k, :k, :k], D2[k, :k, :k], Q[k, :k, :k] = ops.sigma, ops.D, ops.D @ ops.D, ops.Q
+    return _k._SplitOperators(sig, D, D2, Q)
 
 
 @functools.lru_cache(maxsize=64)
@@ -216,7 +234,7 @@ def _sampling(n: int, sigma_m_bytes: bytes):
     P[hit] = exact[hit].astype(float)
     P[~hit] /= P[~hit].sum(axis=1, keepdims=True)
     PQ = P @ ops.Q
-    return P, PQ
+    return np.ascontiguousarray(P), np.ascontiguousarray(PQ)
 
 
 # --------------------------------------------------------------------------- inputs
@@ -292,6 +310,21 @@ def free_arc(length_m, tip_curvature_per_m, base_angle_rad=0.0, s_m=None):
     return phi, np.stack([chord_x, chord_y], axis=-1)
 
 
+def _contact_sigma(contact_s_m, length_m: float) -> np.ndarray:
+    """σ_c = s_c / L of ``contact_s_m`` (validated: 0 < s_c ≤ L); within 1e-9 L of the tip: the tip, σ_c = 1.
+
+    So close to the tip the second domain would be too short to resolve its φ' (its
+    rows scale with its length); the force moves by at most 1e-9 L.
+    """
+    sc = _as_float("contact_s_m", contact_s_m)
+    tol = 1e-12 * length_m
+    if not np.all((sc > 0.0) & (sc <= length_m + tol)):
+        bad = sc[~((sc > 0.0) & (sc <= length_m + tol))].ravel()[0]
+        raise ArgumentError(f"contact_s_m: expected 0 < s_c <= length_m = {length_m:g} m, got {bad:g}")
+    sigma = sc / length_m
+    return np.where(sigma >= 1.0 - 1e-9, 1.0, sigma)
+
+
 # --------------------------------------------------------------------------- fast core
 
 
@@ -310,6 +343,7 @@ def solve(
     tol: float = NEWTON_TOL,
     max_iter: int = NEWTON_MAX_ITER,
     continuation: bool = True,
+    contact_s_m=None,
 ) -> BeamSolution:
     """Fast spectral solver on already validated arrays (the compiled kernels of :mod:`bendsense.beam_kernels`).
 
@@ -340,6 +374,8 @@ def solve(
         (``success=False``) instead of re-solving it by load continuation from the
         unloaded arc. Frames that converged to a stable equilibrium far from the
         start, or did not converge, are still continued.
+    contact_s_m : ndarray, shape (...), optional
+        Arc length s_c of the force's point, 0 < s_c ≤ L [m]; None: the tip.
 
     Returns
     -------
@@ -361,7 +397,8 @@ def solve(
         state = np.asarray(state, dtype=float)
         if state.ndim == 0 or state.shape[-1] != n:
             raise ArgumentError(f"initial: expected a state of shape (..., {n}) for n_nodes={n}, got {state.shape}")
-    shape = np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1])
+    sc = np.ones(()) if contact_s_m is None else _contact_sigma(contact_s_m, L)
+    shape = np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1], sc.shape)
     B = math.prod(shape)
 
     def flat(a, tail=()):  # C-contiguous and writable: the one array type the kernels are compiled for
@@ -379,11 +416,12 @@ def solve(
     iters = np.empty(B, dtype=np.int64)
     angle = np.empty((B, M))
     pos = np.empty((B, M, 2))
-    dpos = np.empty((B, M, 2, 2) if sensitivities else (B, 1, 2, 2))
-    dang = np.empty((B, M, 2) if sensitivities else (B, 1, 2))
-    tip = np.empty((B, 6))
-    _jit.call(_k.solve_frames, L, flat(ei), flat(k0), flat(base), flat(F, (2,)), flat(w, (2,)), st, has_state,
-              ops.kernel, float(tol), int(max_iter), bool(sensitivities), bool(continuation), P, PQ, q,
+    dpos = np.empty((B, M, 2, 3) if sensitivities else (B, 1, 2, 3))
+    dang = np.empty((B, M, 3) if sensitivities else (B, 1, 3))
+    tip = np.empty((B, 8))
+    _jit.call(_k.solve_frames, L, flat(ei), flat(k0), flat(base), flat(F, (2,)), flat(w, (2,)), flat(sc), st,
+              has_state, ops.kernel, _split_operators(n), float(tol), int(max_iter), bool(sensitivities),
+              bool(continuation), np.ascontiguousarray(sigma_m), P, PQ, q,
               (phi, status, where, iters, angle, pos, dpos, dang, tip))
     success = status == int(Status.OK)
     if success.all():
@@ -402,9 +440,14 @@ def solve(
         iterations=iters.reshape(shape),
         method="fast",
         state=phi.reshape(*shape, n),
-        dpositions_dforce=dpos.reshape(*shape, M, 2, 2) if sensitivities else None,
-        dangle_dforce=dang.reshape(*shape, M, 2) if sensitivities else None,
-        dtip_position_dforce=tip[:, 2:].reshape(*shape, 2, 2) if sensitivities else None,
+        dpositions_dforce=dpos[..., :2].reshape(*shape, M, 2, 2) if sensitivities else None,
+        dangle_dforce=dang[..., :2].reshape(*shape, M, 2) if sensitivities else None,
+        dtip_position_dforce=tip[:, 2:].reshape(B, 2, 3)[..., :2].reshape(*shape, 2, 2) if sensitivities else None,
+        contact_s_m=np.broadcast_to(np.asarray(contact_s_m, dtype=float), shape).copy() if contact_s_m is not None
+        else None,
+        dpositions_dcontact=dpos[..., 2].reshape(*shape, M, 2) if sensitivities else None,
+        dangle_dcontact=dang[..., 2].reshape(*shape, M) if sensitivities else None,
+        dtip_position_dcontact=tip[:, 2:].reshape(B, 2, 3)[..., 2].reshape(*shape, 2) if sensitivities else None,
     )
 
 
@@ -438,7 +481,7 @@ def _shoot_one(L, ei, k0, base, F, w, s_m, rtol, atol, max_newton):
     f = np.asarray(F) * L * L / ei
     wn = np.asarray(w) * L**3 / ei
     k0n = k0 * L
-    ratio = _k.load_ratio(f[0], f[1], wn[0], wn[1])
+    ratio = _k.load_ratio(f[0], f[1], wn[0], wn[1], 0.0)
 
     # state: φ, φ', ψ = ∂φ/∂φ'(0), ψ', χ = ∂φ/∂λ, χ', x/L, y/L
     def rhs(sig, y, lam):
@@ -577,13 +620,15 @@ def solve_beam(
     max_iter: int = 30,
     rtol: float = 1e-12,
     atol: float = 1e-12,
+    contact_s_m=None,
 ) -> BeamSolution:
-    """Shape of a naturally curved cantilever under a tip force and a distributed load.
+    """Shape of a naturally curved cantilever under a point force and a distributed load.
 
-    Solves ``EI φ'' = sin φ G_y − cos φ G_x``, ``G(s) = F + w (L − s)``, ``φ(0) = φ_base``,
-    ``φ'(L) = K0`` and integrates ``r(s) = ∫ (sin φ, cos φ) ds`` (paper eq. 13–17 in the
-    base frame of DESIGN section 2). All inputs except ``length_m`` and ``s_m`` broadcast
-    over leading batch axes ``...``.
+    Solves ``EI φ'' = sin φ G_y − cos φ G_x``, ``G(s) = F [s < s_c] + w (L − s)``,
+    ``φ(0) = φ_base``, ``φ'(L) = K0`` and integrates ``r(s) = ∫ (sin φ, cos φ) ds`` (paper
+    eq. 13–17 in the base frame of DESIGN section 2; the force at the tip, ``s_c = L``,
+    unless ``contact_s_m`` says otherwise). All inputs except ``length_m`` and ``s_m``
+    broadcast over leading batch axes ``...``.
 
     Parameters
     ----------
@@ -618,6 +663,12 @@ def solve_beam(
         Fast method: Chebyshev nodes, Newton step tolerance [rad], Newton iterations.
     rtol, atol : float
         Shooting method: tolerances of ``solve_ivp``.
+    contact_s_m : array_like, shape (...), optional
+        Arc length s_c where the force acts, 0 < s_c ≤ L [m] (a contact along the body;
+        DESIGN section 2b); None: the tip. Beyond s_c the beam bends under its weight
+        only. The fast method splits its Chebyshev grid at s_c (φ'' jumps there); within
+        1e-9 L of the tip the force is at the tip. With ``sensitivities``, the solution
+        carries ∂/∂s_c too (``dangle_dcontact``, ...). Fast method only.
 
     Returns
     -------
@@ -654,9 +705,22 @@ def solve_beam(
             "ei_nm2, tip_curvature_per_m, base_angle_rad, force_n[..., :], distributed_load_n_per_m[..., :]: "
             f"batch shapes {ei.shape}, {k0.shape}, {base.shape}, {F.shape[:-1]}, {w.shape[:-1]} do not broadcast"
         ) from None
+    if contact_s_m is not None:
+        sc = _contact_sigma(contact_s_m, L)
+        try:
+            np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1], sc.shape)
+        except ValueError:
+            raise ArgumentError(f"contact_s_m: shape {sc.shape} does not broadcast against the other inputs' batch "
+                                f"shape {np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1])}"
+                                ) from None
+        if method != "fast":
+            raise ArgumentError("contact_s_m: only available with method='fast'")
     if method == "fast":
         if isinstance(n_nodes, bool) or not isinstance(n_nodes, (int, np.integer)) or n_nodes < 4:
             raise ArgumentError(f"n_nodes: expected an integer >= 4, got {n_nodes!r}")
+        if contact_s_m is not None and n_nodes < 2 * _k.MIN_DOMAIN - 1:
+            raise ArgumentError(f"n_nodes: a force along the body (contact_s_m) needs >= {2 * _k.MIN_DOMAIN - 1} nodes, "
+                                f"got {n_nodes!r}")
         sol = solve(
             L,
             ei,
@@ -670,6 +734,7 @@ def solve_beam(
             sensitivities=sensitivities,
             tol=tol,
             max_iter=max_iter,
+            contact_s_m=contact_s_m,
         )
     elif method in ("shooting", "paper"):
         if sensitivities:

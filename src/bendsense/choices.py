@@ -6,11 +6,13 @@ estimator dispatches on them (:mod:`bendsense.estimation`) and the CLI's ``--con
 ``--method``, ``--objective`` and ``--tip-angle-source`` list them.
 """
 
-__all__ = ["ANGLE_SOURCES", "BEAM_METHODS", "CALIBRATION_DEGREES", "CALIBRATION_WEIGHTINGS", "CONSTRAINTS", "METHODS",
-           "OBJECTIVES", "TRACK_MODES"]
+__all__ = ["ANGLE_SOURCES", "BEAM_METHODS", "CALIBRATION_DEGREES", "CALIBRATION_WEIGHTINGS", "CONSTRAINTS", "LOADS",
+           "METHODS", "OBJECTIVES", "TRACK_MODES"]
 
 #: Force constraints ``F = F_fixed + D u`` (:func:`bendsense.estimation.constraint_basis`).
 CONSTRAINTS = ("none", "vertical", "horizontal", "direction", "normal", "follower")
+#: Load models: one force at the tip (the paper), or at arc length s_c along the body (DESIGN section 2b).
+LOADS = ("tip", "contact")
 #: Estimators: the compiled Gauss–Newton core, or the paper's shooting + Nelder–Mead / SLSQP.
 METHODS = ("fast", "paper")
 #: What the fit compares: the coil angles S/d the sensor measures, or the PCC positions (paper eq. 18).

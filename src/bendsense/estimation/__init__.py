@@ -36,7 +36,7 @@ from bendsense import _jit
 from bendsense import beam as _beam
 from bendsense.actuator import model_jacobian
 from bendsense.calibration import Calibration
-from bendsense.choices import ANGLE_SOURCES, METHODS, OBJECTIVES
+from bendsense.choices import ANGLE_SOURCES, LOADS, METHODS, OBJECTIVES
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import kernels as _kernels
 from bendsense.estimation.paper import paper_fit
@@ -85,6 +85,7 @@ _CHAIN = 32  # consecutive frames per warm-started block along a batch
 _PARALLEL_MIN = 2048  # frames from which a batch runs on numba's threads (below: ~0.1 s of work, not worth a compile)
 _PIECE = 4096  # frames per compiled call of a large batch (~0.2 s on 2 cores): signals are handled between calls
 _OPS = tuple(_beam._operators(N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
+_REF = tuple(_beam._split_operators(N_NODES))  # ... and the reference operators of a contact's two domains
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 _NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
 _NO_MODEL_COV = np.zeros((1, 2, 2))  # one frame's, without a parameter covariance (the kernels only read it)
@@ -121,8 +122,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                    direction=None, follower_angle_rad: float | None = None, initial_force_n=None,
                    initial: ForceEstimate | None = None, warm_start: bool = True, noise_std=None, calibration=None,
                    strict: bool = False, s_m=None, n_points: int | None = None, xtol_n: float = XTOL_N,
-                   max_iter: int = MAX_ITER) -> ForceEstimate:
-    """Tip force from a reconstructed shape and the pressure (paper eq. 18, 21).
+                   max_iter: int = MAX_ITER, load: str = "tip", contact_s_m=None) -> ForceEstimate:
+    """Tip force (or the force at a known contact point) from a reconstructed shape and the pressure (paper eq. 18, 21).
 
     Parameters
     ----------
@@ -169,6 +170,17 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         Quadrature nodes (default ``config.estimation.n_points``).
     xtol_n, max_iter : float, int
         Stopping rule of the Gauss–Newton iteration.
+    load : {"tip", "contact"}
+        The load model (:data:`~bendsense.choices.LOADS`, DESIGN section 2b): one force at
+        the tip (the paper), or at the arc length ``contact_s_m`` along the body, beyond
+        which the actuator bends under its weight only. The constraints then apply at
+        s_c: ``normal`` is F · t(s_c) = 0, ``follower`` at its angle to t(s_c), t from
+        the free shape or the reconstructed one as ``tip_angle_source`` says.
+    contact_s_m : float or array_like, shape (...), optional
+        The known contact point 0 < s_c ≤ L [m] of ``load="contact"`` (a jig, a known
+        object); broadcasts against the frames (an array of locations for one shape
+        gives one estimate each). An unknown location is estimated over windows by
+        :func:`bendsense.estimate_contact`.
 
     Returns
     -------
@@ -179,6 +191,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         (:func:`bendsense.plausibility.pressure_range_step`). Frames whose force is beyond
         what the actuator can carry keep it, with ``success=False`` and the message
         ``"implausible_force: ..."`` (:func:`bendsense.plausibility.force_bound_step`).
+        With ``load="contact"``: ``contact_s_m`` the given location, ``contact_std_m`` 0
+        and ``contact_jacobian_rad_per_m`` ∂(model coil angle)/∂s_c at the optimum.
 
     Raises
     ------
@@ -205,6 +219,15 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
             raise ArgumentError(f"{name}: must be one of {', '.join(allowed)}, got {short(value)}")
     if method == "paper" and objective not in (None, "positions"):
         raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
+    if not isinstance(load, str) or load not in LOADS:
+        raise ArgumentError(f"load: must be one of {', '.join(LOADS)}, got {short(load)}")
+    if load == "tip" and contact_s_m is not None:
+        raise ArgumentError("contact_s_m: only with load='contact' (a tip load acts at the tip)")
+    if load == "contact" and contact_s_m is None:
+        raise ArgumentError("contact_s_m: load='contact' needs the known contact point [m]; an unknown one is "
+                            "estimated over windows: use bendsense.estimate_contact")
+    if load == "contact" and method == "paper":
+        raise ArgumentError("load: method='paper' estimates the paper's tip load, got load='contact'")
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     L = float(config.actuator.length_m)
@@ -220,6 +243,11 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
     ref = reference(shape, config, s_m, n_points, L)
+    contact = np.ones(()) if contact_s_m is None else _beam._contact_sigma(contact_s_m, L)  # σ_c, 1 at the tip
+    if contact_s_m is not None and ref.kappa is None and (tip_angle_source or est.tip_angle_source) == "shape" \
+            and constraint in ("normal", "follower"):
+        raise ArgumentError("tip_angle_source: 'shape' at a contact needs a PCC shape (curvatures or a Shape), "
+                            "not a shape given by points")
     if objective is None:  # the paper's method fits the positions (paper eq. 18), and so must a shape of points
         objective = "positions" if method == "paper" or ref.kappa is None else est.objective
     options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
@@ -230,10 +258,16 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if not (math.isfinite(P.item()) if P.size == 1 else np.isfinite(P).all()):
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
     batch = _batch(ref.batch_shape, P.shape)
+    if contact.shape != () and contact.shape != batch:
+        try:
+            batch = np.broadcast_shapes(batch, contact.shape)
+        except ValueError:
+            raise ArgumentError(f"contact_s_m: shape {contact.shape} does not broadcast against the frames "
+                                f"{batch}") from None
     B = math.prod(batch)
     if B == 0:
         raise ArgumentError(f"shape: no frames to estimate (batch shape {batch})")
-    fr = _frames(ref if method == "fast" else points(ref), P, batch, B, config)
+    fr = _frames(ref if method == "fast" else points(ref), P, batch, B, config, contact)
     k = pb.lower.size
     start, use_guess, chain = _starts(initial, initial_force_n, B, batch, warm_start)
     n = N_NODES
@@ -253,8 +287,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         u, run_status, iters = paper_fit(L, pb.s, pb.w, ref.Lc, pb.wload, fr.p0, fr.ei, fr.k0, D,
                                          np.broadcast_to(pb.ffix, (B, 2)), pb.lower,
                                          np.maximum(np.zeros((B, k)), pb.lower))
-        _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _c(u), _c(run_status, np.int64),
-                  out)
+        _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _REF, _c(u),
+                  _c(run_status, np.int64), out)
     if uncertainty == "none":  # stacklevel 4: the caller of the public wrappers (pressure_range_step, force_bound_step)
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
                       "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=4)
@@ -265,16 +299,17 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if strict and not success.all():
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
     return _result(out, batch, text, time.perf_counter() - t_start, method, constraint, uncertainty, objective,
-                   pb, plain_err)
+                   pb, plain_err, load, contact_s_m)
 
 
 def _payload_buffers(B, pb):
     """The kernels' outputs of the window test's payload (:func:`~bendsense.estimation.kernels.payload`)."""
-    return np.empty((B, pb.coils.size, 5)), np.empty((B, pb.lengths.size))
+    return np.empty((B, pb.coils.size, 6)), np.empty((B, pb.lengths.size))
 
 
-def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, objective, pb, err):
+def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, objective, pb, err, load, contact_s_m):
     """The :class:`ForceEstimate` of the kernels' outputs ``out``, shaped to the frames' ``batch``."""
+    contact = load == "contact"
     force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out[:14]
     b2, b22 = batch + (2,), batch + (2, 2)
     window = method == "fast" and objective == "angles" and pb.pcc  # what a window test needs, or None
@@ -302,13 +337,16 @@ def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, obje
         covariance_parts_n2=parts.reshape(batch + (3, 2, 2)),
         residual_rad=pay[..., 0] if window else None,
         jacobian_rad_per_n=pay[..., 1:3] if window else None,
-        model_factor_rad=pay[..., 3:] if window else None,
+        model_factor_rad=pay[..., 3:5] if window else None,
         shifts_m=shifts if pb.pcc else None,
         shift_errors=err if window else None,
         coils=_coils(pb) if window else None,
         strip_gap_m=pb.gap,
-        contact_s_m=np.full(batch, np.nan),
-        contact_std_m=np.full(batch, np.nan),
+        load=load,
+        contact_s_m=np.broadcast_to(np.asarray(contact_s_m, dtype=float), batch).copy() if contact
+        else np.full(batch, np.nan),
+        contact_std_m=np.zeros(batch) if contact else np.full(batch, np.nan),
+        contact_jacobian_rad_per_m=pay[..., 5] if window and contact else None,
     )
 
 
@@ -346,16 +384,16 @@ def _run_fast(B, chain, use_guess, fr, pb, err, start, out):
     if B < _PARALLEL_MIN or numba.get_num_threads() == 1:
         step = block if block > 1 else _PIECE
         for lo in range(0, B, step):
-            _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, pb, err, _OPS, start,
-                      out)
+            _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, pb, err, _OPS, _REF,
+                      start, out)
         return
     step = max(block, _PIECE // block * block)
     for lo in range(0, B, step):
         def piece(a, lo=lo):
             return a[lo:lo + step] if a.shape[:1] == (B,) else a
 
-        _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), pb, err, _OPS, piece(start),
-                  tuple(map(piece, out)))
+        _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), pb, err, _OPS, _REF,
+                  piece(start), tuple(map(piece, out)))
 
 
 def _batch(shape_batch, pressure_shape):
@@ -378,8 +416,8 @@ def _flat(a, batch, B, tail=(), dtype=float):
     return _c(a, dtype)
 
 
-def _frames(ref, P, batch, B, config) -> Frames:
-    """The per-frame inputs of the kernels: the shape's and the pressure's (K0, EI, the free tip angle)."""
+def _frames(ref, P, batch, B, config, contact) -> Frames:
+    """The per-frame inputs of the kernels: the shape's, the pressure's (K0, EI, the free tip angle), the contact's σ_c."""
     model = _models(config)
     if B == 1:  # one frame (the live path): plain floats, as numpy costs ~1 µs a call on one value
         Pf = P.reshape(1)
@@ -399,7 +437,8 @@ def _frames(ref, P, batch, B, config) -> Frames:
         M, n = ref.s.size, N_NODES
         given = (_flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B), _flat(ref.kappa_s, batch, B, (M,)),
                  _flat(ref.state, batch, B, (n,)), _flat(ref.tip_shape, batch, B))
-    return Frames(kappa, *given, ei, k0, theta, _model_cov(config, Pf))
+    sc = contact.reshape(1) if B == 1 else _flat(contact, batch, B)
+    return Frames(kappa, *given, ei, k0, theta, _model_cov(config, Pf), _c(sc.reshape(B)))
 
 
 def _model_cov(config, pressure_pa):

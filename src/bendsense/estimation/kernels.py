@@ -21,7 +21,7 @@ from numba import njit, prange
 
 from bendsense import _jit
 from bendsense import beam_kernels as bk
-from bendsense.beam import _KernelOperators
+from bendsense.beam_kernels import _KernelOperators
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
 from bendsense.shift_errors import ShiftErrorModel, shift_covariance
@@ -61,11 +61,12 @@ def force_of(D, ffix, u, out):
 
 
 @njit(cache=True)
-def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, group, u):
+def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, group, s_c, u):
     """Starting force from the moment balance ``EI (κ(s) − K0) = −M_z(s)`` (linear in F).
 
-    With the reference shape's curvature and points, the moment of the tip force about
-    ``r(s)``, ``(r_L − r(s)) × F``, and of the distributed load are known: a small
+    With the reference shape's curvature and points, the moment of the force at ``s_c``
+    (the tip: L) about ``r(s)``, ``(r(s_c) − r(s)) × F`` for s < s_c, and of the
+    distributed load are known: a small
     weighted linear least-squares problem in ``u``. The balance is integrated over each
     group of comparison nodes (``group`` (M,), ascending): over a PCC segment, where the
     sensor measures the integral of the curvature ``κ_i l_i`` exactly and not its course,
@@ -75,8 +76,17 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, g
     """
     M = s.size
     k = u.size
-    tx = p0[M - 1, 0] + (L - s[M - 1]) * math.sin(phi_end)
-    ty = p0[M - 1, 1] + (L - s[M - 1]) * math.cos(phi_end)
+    if s_c >= s[M - 1]:  # beyond the last point: along its tangent
+        tx = p0[M - 1, 0] + (s_c - s[M - 1]) * math.sin(phi_end)
+        ty = p0[M - 1, 1] + (s_c - s[M - 1]) * math.cos(phi_end)
+    else:  # between two points (the base and the first): the chord
+        j = 0
+        while s[j] <= s_c:
+            j += 1
+        s0, x0, y0 = (s[j - 1], p0[j - 1, 0], p0[j - 1, 1]) if j > 0 else (0.0, 0.0, 0.0)
+        t = (s_c - s0) / (s[j] - s0)
+        tx = x0 + t * (p0[j, 0] - x0)
+        ty = y0 + t * (p0[j, 1] - y0)
     H = np.zeros((k, k))
     g = np.zeros(k)
     A = np.zeros(k)  # the group's ∫ (moment arm · D) ds, ∫ (the known moments) ds and length
@@ -92,8 +102,8 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, g
         nx, ny, ns = p0[j, 0], p0[j, 1], s[j]
         arm_x = tail_x - (L - s[j]) * p0[j, 0]
         arm_y = tail_y - (L - s[j]) * p0[j, 1]
-        ax = -(ty - p0[j, 1])  # M_F = a · F
-        ay = tx - p0[j, 0]
+        ax = -(ty - p0[j, 1]) if s[j] < s_c else 0.0  # M_F = a · F
+        ay = tx - p0[j, 0] if s[j] < s_c else 0.0
         c = ei * (kappa_s[j] - k0) + arm_x * wload[1] - arm_y * wload[0] + ax * ffix[0] + ay * ffix[1]
         for q in range(k):
             A[q] += w[j] * (ax * D[0, q] + ay * D[1, q])
@@ -128,10 +138,10 @@ def workspace(M, n, R):
     """Buffers of one beam evaluation.
 
     Positions (M, 2) and ∂p/∂F (M, 2, 2) at the comparison nodes, the state (n,), the tip
-    (+ ∂tip/∂F) (6,), ∂φ_nodes/∂(Fx, Fy, K0, EI) (n, 4), and the fitted response y (R,)
+    (+ ∂tip/∂F) (6,), ∂φ_nodes/∂(Fx, Fy, K0, EI, s_c) (n, 5), and the fitted response y (R,)
     with ∂y/∂F (R, 2): the positions flattened, or the tangent angles at the coils.
     """
-    return (np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 4)), np.empty(R),
+    return (np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 5)), np.empty(R),
             np.empty((R, 2)))
 
 
@@ -151,23 +161,27 @@ def copy_workspace(src, dst):
 def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb, ws):
     """The beam at force ``F`` and its fitted response with ∂y/∂F, into the workspace ``ws``; True if stable.
 
-    The positions objective samples the positions at the comparison nodes (rows of
+    ``ops``: the frame's beam operators, of its contact point (the force acts there;
+    :func:`bendsense.beam_kernels.contact_grid`), ``pb`` its problem
+    (:func:`~bendsense.estimation.problem.contact_problem`). The positions objective samples the positions at the comparison nodes (rows of
     ``pb.PQ_fit``), the angles objective interpolates the tangent angle at the coils
     (rows of ``pb.PA``): ``φ(L_i)``, what the sensor measures as ``S_i / d``.
     """
     pos, dpos, st, tip, dst, y, dy = ws
     n = st.size
-    extra = np.empty((n - 1, 4))
+    extra = np.empty((n - 1, 5))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
                                   NEWTON_TOL, int(NEWTON_MAX_ITER), bool(YES), allow_continuation, st, extra)
     bk.node_sensitivity(extra, L, ei, dst)
     # the model inputs: ∂φ/∂K0 = L ψ (ψ = ∂φ/∂(K0 L), the Jacobi field); EI scales the
-    # load factor, λ ∝ 1/EI: ∂φ/∂EI = −(dφ/dλ)/EI at λ = 1
+    # load factor, λ ∝ 1/EI: ∂φ/∂EI = −(dφ/dλ)/EI at λ = 1; the contact: ∂φ/∂s_c = ∂φ/∂σ_c / L
     dst[0, 2] = 0.0
     dst[0, 3] = 0.0
+    dst[0, 4] = 0.0
     for i in range(n - 1):
         dst[i + 1, 2] = extra[i, 0] * L
-        dst[i + 1, 3] = -extra[i, 3] / ei
+        dst[i + 1, 3] = -extra[i, 4] / ei
+        dst[i + 1, 4] = extra[i, 3] / L
     bk.sample(st, dst, L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
     if pb.objective == ANGLES:
         for i in range(y.size):
@@ -246,7 +260,7 @@ def project(D, gF, GF, g, H):
 
 
 @njit(cache=True)
-def convex_start(L, ei, wload, D, ffix, lower, u, out):
+def convex_start(L, ei, wload, D, ffix, lower, beyond, u, out):
     """``u`` scaled toward the fixed force (1, 0.8, …, 0) while the load stays provably convex (ρ < 0.9)."""
     scale = L * L / ei
     k = u.size
@@ -257,7 +271,7 @@ def convex_start(L, ei, wload, D, ffix, lower, u, out):
         for c in range(k):
             ut[c] = max(u[c] * t, lower[c])
         force_of(D, ffix, ut, F)
-        if bk.load_ratio(F[0] * scale, F[1] * scale, wload[0] * L * scale, wload[1] * L * scale) < 0.9:
+        if bk.load_ratio(F[0] * scale, F[1] * scale, wload[0] * L * scale, wload[1] * L * scale, beyond) < 0.9:
             best = t
     for c in range(k):
         out[c] = max(u[c] * best, lower[c])
@@ -279,8 +293,11 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, tr
     force_of(D, ffix, u, F)
     scale = L * L / ei
     wx, wy = wload[0] * L, wload[1] * L
-    unique = bk.load_ratio(F[0] * scale, F[1] * scale, wx * scale, wy * scale) < 1.0
-    convex = max(math.hypot(F[0], F[1]), math.hypot(F[0] + wx, F[1] + wy)) * scale < 0.9 * bk.STABLE_BOUND
+    beyond = ops.tail[ops.jrow]  # 1 − σ_c: the weight beyond the contact point
+    unique = bk.load_ratio(F[0] * scale, F[1] * scale, wx * scale, wy * scale, beyond) < 1.0
+    gmax = max(math.hypot(F[0] + wx * beyond, F[1] + wy * beyond), math.hypot(F[0] + wx, F[1] + wy),
+               math.hypot(wx, wy) * beyond)
+    convex = gmax * scale < 0.9 * bk.STABLE_BOUND
     iters = 1
     ok = beam_eval(L, ei, k0, F, wload, state0, unique, bool(YES), ops, pb, ws)
     if not ok:
@@ -295,7 +312,7 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, tr
         gF = np.empty(2)
         GF = np.empty((2, 2))
         uc = np.empty(k)
-        convex_start(L, ei, wload, D, ffix, lower, u, uc)
+        convex_start(L, ei, wload, D, ffix, lower, beyond, u, uc)
         moved = False
         for c in range(k):
             moved |= uc[c] != u[c]
@@ -518,7 +535,7 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
         # a covariance with a zero diagonal is zero: no parameter term (the config has no parameter_covariance)
         dym = model_response(pb, ws) if model_cov[0, 0] > 0.0 or model_cov[1, 1] > 0.0 else np.zeros((ws[5].size, 2))
         if pb.objective == ANGLES:
-            payload(tg, ws, D, dym, model_cov, pay)
+            payload(pb, tg, ws, D, dym, model_cov, pay)
             ratio, p = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
                                              pb.gap, pb.dphi_ds, ws[6], cov, noise_var, dym, model_cov, parts)
         else:
@@ -554,15 +571,17 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
 
 
 @njit(cache=True)
-def payload(tg, ws, D, dym, model_cov, pay):
-    """What a window test needs of a frame fitted to the coil angles, in raw angle units [rad], into ``pay`` (R, 5).
+def payload(pb, tg, ws, D, dym, model_cov, pay):
+    """What a window test needs of a frame fitted to the coil angles, in raw angle units [rad], into ``pay`` (R, 6).
 
     Column 0: measured − model angle at the optimum; 1–2: ∂(model angle)/∂u = (∂y/∂F) D,
     its unused columns 0 (k < 2); 3–4: ∂y/∂(K0, EI) · chol(Σ_m), whose outer product is
     the angles' covariance from the model parameters (zero without a parameter
-    covariance). Copies of what the fit has.
+    covariance); 5: ∂y/∂s_c [rad/m] (the force's point moving toward the tip). Copies of
+    what the fit has.
     """
     y, dy, y0 = ws[5], ws[6], tg[0]
+    dst = ws[4]
     k = D.shape[1]
     l00 = math.sqrt(max(model_cov[0, 0], 0.0))
     l10 = model_cov[1, 0] / l00 if l00 > 0.0 else 0.0
@@ -573,12 +592,16 @@ def payload(tg, ws, D, dym, model_cov, pay):
             pay[i, 1 + c] = dy[i, 0] * D[0, c] + dy[i, 1] * D[1, c] if c < k else 0.0
         pay[i, 3] = dym[i, 0] * l00 + dym[i, 1] * l10
         pay[i, 4] = dym[i, 1] * l11
+        acc = 0.0
+        for j in range(dst.shape[0]):
+            acc += pb.PA[i, j] * dst[j, 4]
+        pay[i, 5] = acc
 
 
 @njit(cache=True)
 def model_response(pb, ws):
     """∂y/∂(K0, EI) (R, 2) of the fitted response at the beam in ``ws`` (:func:`beam_eval`)."""
-    dphi = ws[4][:, 2:].copy()
+    dphi = ws[4][:, 2:4].copy()
     R = ws[5].size
     out = np.empty((R, 2))
     if pb.objective == ANGLES:
@@ -637,7 +660,8 @@ def setup(i, fr, pb, err, buf):
     else:
         tip = fr.tip_shape[i]
         p0, phi_end, kappa_s, state0, kappa = fr.p0[i], fr.phi_end[i], fr.kappa_s[i], fr.state[i], no_kappa
-    prob.basis(pb.kind, tip if pb.shape_angle else fr.theta[i], pb.direction, pb.follower_angle, D, dD)
+    # the constraints at the force's point: the shape's angle there (pb.tip_weights), or the free arc's, K0 s_c
+    prob.basis(pb.kind, tip if pb.shape_angle else fr.theta[i] * fr.contact[i], pb.direction, pb.follower_angle, D, dD)
     if pb.pcc:  # φ(L_j) = S_j / d = Σ_{i ≤ j} κ_i l_i (paper eq. 3–4), the angles objective's target
         acc = 0.0
         c = 0
@@ -675,14 +699,14 @@ def near(u0, prev_u0, prev_u):
 
 
 @njit(cache=True)
-def typed(fr, pb, err, ops):
+def typed(fr, pb, err, ops, ref):
     """The kernels' structures from the plain tuples they are called with.
 
     numba types a plain tuple of arrays in its compiled dispatcher, a named tuple in
     Python (~3 µs of a one-frame call): the entry points take plain tuples
     (:func:`plain`) and name their fields here.
     """
-    return prob.Frames(*fr), prob.Problem(*pb), ShiftErrorModel(*err), _KernelOperators(*ops)
+    return prob.Frames(*fr), prob.Problem(*pb), ShiftErrorModel(*err), _KernelOperators(*ops), bk._SplitOperators(*ref)
 
 
 def plain(*structures):
@@ -691,23 +715,35 @@ def plain(*structures):
     Parameters
     ----------
     *structures : NamedTuple
-        Frames, Problem, shift error model and beam operators, in any number.
+        Frames, Problem, shift error model, beam operators and a contact's, in any number.
     """
     return tuple(tuple(s) for s in structures)
 
 
 @njit(cache=True)
-def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
+def contact(sc, ops, ref, pb):
+    """The beam operators and the problem of a force at σ_c = ``sc`` (the tip's for σ_c ≥ 1), and a state buffer.
+
+    :func:`bendsense.beam_kernels.contact_grid` and
+    :func:`~bendsense.estimation.problem.contact_problem`: one code path for every load
+    point, a tip load (σ_c = 1) costs a comparison.
+    """
+    return bk.contact_grid(sc, ops, ref), prob.contact_problem(pb, sc, ref), np.empty(ops.sigma.size)
+
+
+@njit(cache=True)
+def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`).
 
-    ``fr``, ``pb``, ``err``, ``ops``: the plain tuples of :func:`plain`.
+    ``fr``, ``pb``, ``err``, ``ops``, ``ref``: the plain tuples of :func:`plain`.
     """
-    fr, pb, err, ops = typed(fr, pb, err, ops)
+    fr, pb0, err, ops0, ref = typed(fr, pb, err, ops, ref)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out[:14]
     pay, shifts = out[14:]
-    k = pb.lower.size
-    buf = buffers(pb, ops.sigma.size)
-    ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
+    k = pb0.lower.size
+    n = ops0.sigma.size
+    buf = buffers(pb0, n)
+    ws = workspace(pb0.s.size, n, pb0.sw.size)
     u = np.empty(k)
     u0 = np.empty(k)
     prev_u = np.empty(k)
@@ -716,9 +752,15 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
     g = np.empty(k)
     prev_ok = False
     for i in range(lo, hi):
-        p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
+        ops, pb, state0 = contact(fr.contact[i], ops0, ref, pb0)
+        p0, phi_end, kappa_s, ref_state, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
+        if fr.contact[i] < 1.0:  # the reference's angles on the contact's nodes
+            prob.contact_state(ref_state, ops0.sigma, ops.sigma, state0)
+        else:
+            state0 = ref_state
         ei, k0 = fr.ei[i], fr.k0[i]
-        moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, pb.seg, g)
+        moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, pb.seg,
+                     fr.contact[i] * pb.L, g)
         force_of(D, pb.ffix, g, guess_n[i])
         for c in range(k):
             if use_guess:  # the guess corrected by a previous estimate's offset from its own guess
@@ -756,16 +798,17 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, start, out):
 
 
 @njit(cache=True, parallel=True)
-def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
+def estimate_frames(block, use_guess, fr, pb, err, ops, ref, start, out):
     """The whole estimate of every frame (B,), in parallel over blocks of ``block`` consecutive frames.
 
     ``use_guess``: start at the moment-balance guess plus the force offset ``start`` (B, 2)
     (projected on the constraint), else at the force ``start``. Within a block (``block`` >
     1, a time series) a frame's start is corrected by the previous frame's offset from its
-    own guess when that converged. ``fr``, ``pb``, ``err``, ``ops``: the plain tuples
-    (:func:`plain`) of :class:`~bendsense.estimation.problem.Frames`,
-    :class:`~bendsense.estimation.problem.Problem`, the shift error model and the beam
-    solver's operators. ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
+    own guess when that converged. ``fr``, ``pb``, ``err``, ``ops``, ``ref``: the plain
+    tuples (:func:`plain`) of :class:`~bendsense.estimation.problem.Frames`,
+    :class:`~bendsense.estimation.problem.Problem`, the shift error model, the beam
+    solver's operators and a contact's reference operators (each frame's force acts at
+    its ``Frames.contact``, :func:`contact`). ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
     its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable direction of a boundary
     stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2), success (B,) (converged or not
     identifiable), and the window test's payload (:func:`payload`): residual, Jacobian by u and
@@ -775,13 +818,13 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, start, out):
     nblocks = (B + block - 1) // block
     for blk in prange(nblocks):
         lo = np.int64(blk) * block  # prange's index is unsigned: one compiled estimate_block for both callers
-        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, pb, err, ops, start, out)
+        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, pb, err, ops, ref, start, out)
 
 
 @njit(cache=True)
-def evaluate_frames(fr, pb, err, ops, u, run_status, out):
+def evaluate_frames(fr, pb, err, ops, ref, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
-    fr, pb, err, ops = typed(fr, pb, err, ops)
+    fr, pb, err, ops, ref = typed(fr, pb, err, ops, ref)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out[:14]
     pay, shifts = out[14:]
     buf = buffers(pb, ops.sigma.size)

@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit, pcc
+from bendsense import beam_kernels as bk
 from bendsense.choices import CONSTRAINTS
 from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
@@ -81,6 +82,7 @@ class Frames(NamedTuple):
     k0: np.ndarray  # (B,) K0(P) [1/m]
     theta: np.ndarray  # (B,) free-motion tip angle [rad]
     model_cov: np.ndarray  # (B, 2, 2) covariance of (K0, EI) from the identified parameters [1/m², N m³]
+    contact: np.ndarray  # (B,) σ_c = s_c / L of the force's point (1: the tip)
 
 
 class Problem(NamedTuple):
@@ -94,12 +96,12 @@ class Problem(NamedTuple):
     seg_fk: np.ndarray  # (M + n,) segment of the comparison and beam nodes (PCC)
     sigma_fk: np.ndarray  # (M + n,) their arc length within it [m]
     beyond: np.ndarray  # (n,) arc length of the beam's nodes beyond the sensor [m]
-    tip_weights: np.ndarray  # (N,) φ(L) = tip_weights · κ
+    tip_weights: np.ndarray  # (N,) φ(L) = tip_weights · κ (φ(s_c) for a contact's problem: contact_problem)
     lengths: np.ndarray  # (N,) segment lengths [m]
     gap: float  # strip gap d [m]
     seg: np.ndarray  # (M,) segment of each comparison node (a shape given by points: one per point)
     sigma: np.ndarray  # (M,) its arc length within it [m]
-    dphi_ds: np.ndarray  # (N,) ∂φ(L)/∂S
+    dphi_ds: np.ndarray  # (N,) ∂φ(L)/∂S (∂φ(s_c)/∂S for a contact)
     noise: bool  # a noise model is known (the shift covariance, bendsense.shift_errors)
     s: np.ndarray  # (M,) comparison arc lengths [m]
     w: np.ndarray  # (M,) their quadrature weights [m]
@@ -259,6 +261,57 @@ def constraint_basis(constraint: str, tip_angle_rad=0.0, *, direction=(0.0, -1.0
     _bases(kind, np.ascontiguousarray(phi.reshape(-1)), fixed, float(follower_angle_rad), D, dD)
     D, dD = D.reshape(*phi.shape, 2, k), dD.reshape(*phi.shape, 2, k)
     return D, (dD if kind in TIP_ANGLE_KINDS else None)
+
+
+@njit(cache=True)
+def contact_problem(pb, sc, ref):
+    """The frame's problem for a force at σ_c = s_c/L < 1: ``pb`` with the grid's sampling and the angle at s_c.
+
+    The sampling of the beam's nodes (``PA``, ``PQ``, ``PQ_fit``, ``q``) follows the
+    contact's two Chebyshev domains (:func:`bendsense.beam_kernels.contact_sampling`);
+    ``tip_weights`` and ``dphi_ds`` give the reconstructed shape's angle at s_c
+    (φ(s_c) = c · κ, the last curvature carried on beyond the sensor) and its gradient
+    by the shifts, for the constraints at s_c. ``pb`` itself for σ_c ≥ 1.
+    """
+    if sc >= 1.0:
+        return pb
+    n = pb.q.size
+    s_c = sc * pb.L
+    N = pb.lengths.size
+    c = np.zeros(N)
+    b = 0.0
+    for i in range(N):
+        c[i] = min(max(s_c - b, 0.0), pb.lengths[i]) if i < N - 1 else max(s_c - b, 0.0)
+        b += pb.lengths[i]
+    dphi = np.empty(N)
+    for i in range(N):
+        dphi[i] = c[i] / (pb.lengths[i] * pb.gap) - (c[i + 1] / (pb.lengths[i + 1] * pb.gap) if i + 1 < N else 0.0)
+    M = pb.s.size
+    PQ, P, q = np.empty((M, n)), np.empty((M, n)), np.empty(n)
+    bk.contact_sampling(sc, ref, pb.s / pb.L, P, PQ, q)
+    Nc = pb.coils.size
+    PA, PQc = np.empty((Nc, n)), np.empty((Nc, n))
+    ends = np.cumsum(pb.lengths) / pb.L
+    coil = np.empty(Nc)
+    for a in range(Nc):
+        coil[a] = ends[pb.coils[a]]
+    bk.contact_sampling(sc, ref, coil, PA, PQc, q)
+    PQ_fit = PQ if pb.PQ_fit.shape[0] > 0 else PQ[:0]
+    return Problem(pb.pcc, pb.kind, pb.direction, pb.follower_angle, pb.shape_angle, pb.seg_fk, pb.sigma_fk, pb.beyond,
+                   c, pb.lengths, pb.gap, pb.seg, pb.sigma, dphi, pb.noise, pb.s, pb.w, pb.L, pb.wload, pb.ffix,
+                   pb.lower, pb.xtol, pb.max_iter, PQ, q, pb.objective, np.ascontiguousarray(PQ_fit), pb.coils, PA,
+                   pb.sw, pb.jump_floor)
+
+
+@njit(cache=True)
+def contact_state(state0, tip_sigma, sigma, out):
+    """A Newton start on a contact's nodes ``sigma`` (n,): ``state0`` on the tip grid's ``tip_sigma``, interpolated linearly."""
+    j = 0
+    for i in range(sigma.size):
+        while j < tip_sigma.size - 2 and tip_sigma[j + 1] < sigma[i]:
+            j += 1
+        t = (sigma[i] - tip_sigma[j]) / (tip_sigma[j + 1] - tip_sigma[j])
+        out[i] = state0[j] * (1.0 - t) + state0[j + 1] * t
 
 
 @njit(cache=True)

@@ -130,6 +130,11 @@ class ForceEstimate:
     contact_std_m : ndarray, shape (...) or None
         Standard deviation of ``contact_s_m`` [m]: 0 for a known location, ``inf`` where
         the data cannot resolve it (status ``contact_unresolved``), NaN for ``load="tip"``.
+    contact_jacobian_rad_per_m : ndarray, shape (..., R) or None
+        ∂(model coil angle)/∂s_c [rad/m] at the optimum (force fixed), at the coils of
+        ``residual_rad``: how the fit's angles change when the contact point moves toward
+        the tip (at s_c = L the one-sided derivative). None for ``load="tip"`` and
+        where ``residual_rad`` is None; NaN for a frame without a force.
     """
 
     force_n: np.ndarray
@@ -161,6 +166,7 @@ class ForceEstimate:
     load: str = "tip"
     contact_s_m: np.ndarray | None = None
     contact_std_m: np.ndarray | None = None
+    contact_jacobian_rad_per_m: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def budget(self) -> dict:
