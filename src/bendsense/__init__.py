@@ -39,6 +39,7 @@ _LAZY = {
     "solve_beam": "bendsense.beam",
     "ForceEstimate": "bendsense.estimation",
     "estimate_force": "bendsense.estimation",
+    "estimate_contact": "bendsense.estimation.contact",
     "track": "bendsense.tracking",
     "Track": "bendsense.tracking",
     "Tracker": "bendsense.tracking",

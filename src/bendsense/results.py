@@ -210,8 +210,8 @@ def estimate_status(estimate, n: int) -> np.ndarray:
 
     ``not_converged``, ``not_identifiable``, ``pressure_out_of_range``, ``model_misfit``,
     ``implausible_force``, ``no_force`` or, for a contact load, ``contact_unresolved``
-    (a force whose location the data cannot place: ``contact_std_m`` infinite)
-    (:func:`frame_status`, which adds the shape's).
+    (a force whose location the data cannot place: its message says so, or
+    ``contact_std_m`` is infinite) (:func:`frame_status`, which adds the shape's).
 
     Parameters
     ----------
@@ -231,6 +231,7 @@ def estimate_status(estimate, n: int) -> np.ndarray:
         return status  # every frame ok (the live path's usual block): nothing to look up
     status[failed] = NOT_CONVERGED
     status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
+    status[~failed & np.char.startswith(message, CONTACT_UNRESOLVED)] = CONTACT_UNRESOLVED
     status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
     status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
     status[failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)] = IMPLAUSIBLE_FORCE

@@ -179,8 +179,10 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     contact_s_m : float or array_like, shape (...), optional
         The known contact point 0 < s_c ≤ L [m] of ``load="contact"`` (a jig, a known
         object); broadcasts against the frames (an array of locations for one shape
-        gives one estimate each). An unknown location is estimated over windows by
-        :func:`bendsense.estimate_contact`.
+        gives one estimate each). None with ``load="contact"``: the location is
+        estimated from each frame alone (a window of one frame,
+        :mod:`~bendsense.estimation.contact`): ``contact_std_m`` its σ, ``inf`` where
+        unresolved; over windows of a series, :func:`bendsense.estimate_contact`.
 
     Returns
     -------
@@ -223,11 +225,15 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ArgumentError(f"load: must be one of {', '.join(LOADS)}, got {short(load)}")
     if load == "tip" and contact_s_m is not None:
         raise ArgumentError("contact_s_m: only with load='contact' (a tip load acts at the tip)")
-    if load == "contact" and contact_s_m is None:
-        raise ArgumentError("contact_s_m: load='contact' needs the known contact point [m]; an unknown one is "
-                            "estimated over windows: use bendsense.estimate_contact")
     if load == "contact" and method == "paper":
         raise ArgumentError("load: method='paper' estimates the paper's tip load, got load='contact'")
+    if load == "contact" and contact_s_m is None:  # the location estimated, each frame its own window
+        from bendsense.estimation.contact import estimate_frames
+
+        return estimate_frames(shape, pressure_pa, config, dict(
+            constraint=constraint, objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
+            direction=direction, follower_angle_rad=follower_angle_rad, noise_std=noise_std, calibration=calibration,
+            strict=strict, n_points=n_points, xtol_n=xtol_n, max_iter=max_iter))
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     L = float(config.actuator.length_m)

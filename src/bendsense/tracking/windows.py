@@ -127,8 +127,27 @@ def window_statistic(rsum, Asum, Msum, Ssum, n, err, coils, gap):
     """The p-value of a window from the sums of its ``n`` usable frames (:func:`window_sums`); NaN below MIN_FRAMES."""
     if n < MIN_FRAMES:
         return np.nan
+    t, dof, _, _, _, _ = window_metric(rsum, Asum, Msum, Ssum, n, err, coils, gap, np.zeros((rsum.shape[0], 0)))
+    return np.nan if dof == 0 else unc.chi2_sf(t, dof)
+
+
+@njit(cache=True)
+def window_metric(rsum, Asum, Msum, Ssum, n, err, coils, gap, extra):
+    """The statistic of the window test and the metric it defines, from the sums of ``n`` frames (n ≥ 1).
+
+    ``T = r̄ᵀ Ω r̄`` with ``Ω`` the pseudo-inverse of the mean residual's covariance ``C`` on
+    the complement of the fitted directions Ā (module docstring: ``Ω Ā = 0``, ``Ω C Ω =
+    Ω``). Returns ``T``, its degrees of freedom (0: no test, T NaN), ``eᵀ Ω r̄`` (m,) and
+    ``eᵀ Ω e`` (m, m) for the columns of ``extra`` (R, m) (directions of further
+    parameters, e.g. the contact location's), and ``e₀ᵀ Ω C_p Ω e₀`` (3,) for the first
+    column and the three parts ``C_p`` of ``C``: sensor noise / n, calibration, model
+    parameters; and ``X`` (2, 5): ``Āᵀ W C_p Ω e₀`` (2,) per part and ``Āᵀ W Ā`` (2, 2),
+    ``W = Σ_θ⁻¹`` the per-frame estimator's weights (they make the covariance of a
+    frame's fitted parameters with the first extra parameter's estimate on the mean).
+    """
     R = rsum.shape[0]
     N = Ssum.shape[0]
+    m = extra.shape[1]
     rbar, A, M, S = rsum / n, Asum / n, Msum / n, Ssum / n
     cov_s = np.zeros((N, N))
     nv_s = np.zeros(N)
@@ -136,30 +155,75 @@ def window_statistic(rsum, Asum, Msum, Ssum, n, err, coils, gap):
     inv_d2 = 1.0 / (gap * gap)
     Lc = np.empty((R, R))
     C = np.empty((R, R))
+    parts = np.zeros((3, R, R))
     for a in range(R):
         for b in range(R):
             Lc[a, b] = cov_s[coils[a], coils[b]] * inv_d2  # Σ_θ = diag(nv) + Σ_cal
-            C[a, b] = Lc[a, b] + M[a, 0] * M[b, 0] + M[a, 1] * M[b, 1]
+            parts[1, a, b] = Lc[a, b]
+            parts[2, a, b] = M[a, 0] * M[b, 0] + M[a, 1] * M[b, 1]
+            C[a, b] = Lc[a, b] + parts[2, a, b]
         C[a, a] -= (1.0 - 1.0 / n) * nv_s[coils[a]] * inv_d2  # the noise averages down
+        parts[0, a, a] = nv_s[coils[a]] * inv_d2 / n
+        parts[1, a, a] -= nv_s[coils[a]] * inv_d2
+    er, ee, var_parts, X = np.full(m, np.nan), np.full((m, m), np.nan), np.full(3, np.nan), np.full((2, 5), np.nan)
     if unc.cholesky(Lc) == 0:
-        return np.nan
-    unc.forward(Lc, A)  # whitened: Ã, r̃, G = Lc⁻¹ C Lc⁻ᵀ
+        return np.nan, 0, er, ee, var_parts, X
+    unc.forward(Lc, A)  # whitened: Ã, r̃, ẽ, G = Lc⁻¹ C Lc⁻ᵀ
     r = rbar.reshape(R, 1).copy()
     unc.forward(Lc, r)
+    e = extra.copy()
+    unc.forward(Lc, e)
     unc.forward(Lc, C)
     G = C.T.copy()
     unc.forward(Lc, G)
     Q = complement(A)
     y = unc.mm(Q.T.copy(), r)
+    ye = unc.mm(Q.T.copy(), e)
     Cy = unc.mm(unc.mm(Q.T.copy(), G), Q)
     dof = unc.cholesky(Cy)
     if dof == 0:
-        return np.nan
+        return np.nan, 0, er, ee, var_parts, X
     unc.forward(Cy, y)
+    unc.forward(Cy, ye)
     t = 0.0
     for i in range(y.shape[0]):
         t += y[i, 0] * y[i, 0]
-    return unc.chi2_sf(t, dof)
+    for a in range(m):
+        er[a] = 0.0
+        for i in range(y.shape[0]):
+            er[a] += ye[i, a] * y[i, 0]
+        for b in range(m):
+            ee[a, b] = 0.0
+            for i in range(y.shape[0]):
+                ee[a, b] += ye[i, a] * ye[i, b]
+    x = np.zeros(0)
+    if m > 0:
+        x = back_substitute(Cy, ye[:, 0].copy())  # Cy⁻¹ Qᵀ ẽ₀ = Ly⁻ᵀ ỹ
+        for c in range(2):
+            for c2 in range(2):
+                X[c, 3 + c2] = 0.0
+                for i in range(R):
+                    X[c, 3 + c2] += A[i, c] * A[i, c2]  # Āᵀ W Ā = ÃᵀÃ
+    for p in range(3 if m > 0 else 0):  # e₀ᵀ Ω C_p Ω e₀ = ỹᵀ (Ly⁻¹ Qᵀ G_p Q Ly⁻ᵀ) ỹ, ỹ = Ly⁻¹ Qᵀ ẽ₀ (Cy = Ly Lyᵀ)
+        Gp = parts[p].copy()  # G_p = Lc⁻¹ C_p Lc⁻ᵀ
+        unc.forward(Lc, Gp)
+        Gp = Gp.T.copy()
+        unc.forward(Lc, Gp)
+        v = unc.mm(Gp, unc.mm(Q, x.reshape(-1, 1)))
+        for c in range(2):  # Āᵀ W C_p Ω e₀ = Ãᵀ G_p Q Cy⁻¹ Qᵀ ẽ₀
+            X[c, p] = 0.0
+            for i in range(R):
+                X[c, p] += A[i, c] * v[i, 0]
+        Z = unc.mm(unc.mm(Q.T.copy(), Gp), Q)
+        unc.forward(Cy, Z)
+        Z = Z.T.copy()
+        unc.forward(Cy, Z)
+        acc = 0.0
+        for i in range(Z.shape[0]):
+            for j in range(Z.shape[0]):
+                acc += ye[i, 0] * Z[i, j] * ye[j, 0]
+        var_parts[p] = acc
+    return t, dof, er, ee, var_parts, X
 
 
 @njit(cache=True)
@@ -173,6 +237,39 @@ def window_tests(bounds, resid, jac, mfac, shifts, err, coils, gap, p_out, n_out
     model = ShiftErrorModel(*err)
     for w in range(bounds.size - 1):
         p_out[w], n_out[w] = window_test(bounds[w], bounds[w + 1], resid, jac, mfac, shifts, model, coils, gap)
+
+
+@njit(cache=True)
+def back_substitute(Ly, b):
+    """``Ly⁻ᵀ b`` for a lower triangular ``Ly`` (its zero pivots give 0)."""
+    D = b.size
+    x = np.zeros(D)
+    for i in range(D - 1, -1, -1):
+        acc = b[i]
+        for j in range(i + 1, D):
+            acc -= Ly[j, i] * x[j]
+        x[i] = acc / Ly[i, i] if Ly[i, i] > 0.0 else 0.0
+    return x
+
+
+@njit(cache=True)
+def window_metrics(resid, jac, mfac, shifts, extra, n, err, coils, gap, t_out, er_out, ee_out, parts_out, x_out):
+    """:func:`window_metric` of rows of means: ``resid`` (K, R), ``jac``/``mfac`` (K, R, 2), ``shifts`` (K, N),
+    ``extra`` (K, R) one further direction per row, ``n`` (K,) the frames each mean is over; into the outputs
+    (K,), (K, 3) and (K, 2, 5). ``err`` the shift error model as a plain tuple."""
+    model = ShiftErrorModel(*err)
+    for k in range(resid.shape[0]):
+        if n[k] < 1:
+            t_out[k] = er_out[k] = ee_out[k] = np.nan
+            parts_out[k, :] = np.nan
+            x_out[k] = np.nan
+            continue
+        t, dof, er, ee, parts, X = window_metric(resid[k] * n[k], jac[k] * n[k], mfac[k] * n[k], shifts[k] * n[k], n[k],
+                                              model, coils, gap, extra[k].reshape(-1, 1).copy())
+        t_out[k] = t if dof > 0 else np.nan
+        er_out[k], ee_out[k] = er[0], ee[0, 0]
+        parts_out[k, :] = parts
+        x_out[k] = X
 
 
 def segment_starts(t_s, pressure_pa, window_s, dt_ref_s):
@@ -321,7 +418,11 @@ def series_inputs(estimate, t_s, window_s, pressure_pa):
     if len(estimate.batch_shape) != 1:
         raise ArgumentError(f"estimate: expected the estimates of a time series (one batch axis of frames), got batch "
                             f"shape {estimate.batch_shape}")
-    B = estimate.batch_shape[0]
+    return time_inputs(estimate.batch_shape[0], t_s, window_s, pressure_pa)
+
+
+def time_inputs(B, t_s, window_s, pressure_pa):
+    """The checked times (B,), pressures (B,) or None and window length of a series of ``B`` frames."""
     try:
         t = np.asarray(t_s, dtype=float)
     except (TypeError, ValueError):
