@@ -695,7 +695,8 @@ def plot_results(
                       results["contact_std_m"][idx], _colors(len(idx)))
         ax_c = fig.add_subplot(grid[1, 1], sharex=ax_f)
         plot_contact_series(ax_c, results["t_s"], results["contact_s_m"], results["contact_std_m"],
-                            length_m=length_m, sensor_end_m=float(results.s_m[-1]))
+                            length_m=length_m, sensor_end_m=float(results.s_m[-1]),
+                            force_n=np.column_stack([results["fx_n"], results["fy_n"]]))
         ax_c.tick_params(labelbottom=False)
     # below the panel, where it covers no shape
     ax_s.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.09), ncols=2, frameon=False)

@@ -70,8 +70,12 @@ def draw_contacts(ax, s_m, positions_m, contact_s_m, contact_std_m, colors=None,
 
 
 def plot_contact_series(ax, t, contact_s_m, contact_std_m, *, length_m: float | None = None,
-                        sensor_end_m: float | None = None):
+                        sensor_end_m: float | None = None, force_n=None):
     """The contact location over time [mm] with its ±2σ band; unresolved frames as hollow points.
+
+    Frames of a window that kept the tip model (a force, no location: ``contact_s_m``
+    NaN) are ticked grey at the top of the panel. The lines of the tip and of the
+    sensor's end are drawn when they fall within the locations' range.
 
     Parameters
     ----------
@@ -86,6 +90,8 @@ def plot_contact_series(ax, t, contact_s_m, contact_std_m, *, length_m: float | 
         The actuator's length L (a dashed line: the tip).
     sensor_end_m : float, optional
         The sensor's end (a dotted line: beyond it no coil sees the shape).
+    force_n : array_like, shape (frames, 2), optional
+        The frames' forces: a frame with a force and no location kept the tip model.
 
     Returns
     -------
@@ -98,23 +104,30 @@ def plot_contact_series(ax, t, contact_s_m, contact_std_m, *, length_m: float | 
     shown = np.where(ok, s, np.nan)
     ax.fill_between(t, shown - 2 * sd, shown + 2 * sd, color=CONTACT_COLOR, alpha=0.25, linewidth=0,
                     label="s_c ± 2σ")
-    ax.plot(t, shown, "-", color=CONTACT_COLOR, linewidth=1.4, label="contact s_c")
-    unresolved = np.isfinite(s) & ~np.isfinite(sd)
-    if unresolved.any():
+    known = bool(ok.any()) and bool((sd[ok] == 0).all())  # a location given, not estimated
+    ax.plot(t, shown, "-", color=CONTACT_COLOR, linewidth=1.4, label="contact s_c (known)" if known else "contact s_c")
+    unresolved = np.flatnonzero(np.isfinite(s) & ~np.isfinite(sd))
+    if unresolved.size:  # (thinned: hundreds of overlapping circles are one thick bar)
+        unresolved = unresolved[::-(-unresolved.size // 40)]
         ax.plot(t[unresolved], s[unresolved], "o", markerfacecolor="none", markeredgecolor=CONTACT_COLOR,
                 markersize=3.5, linestyle="none", label="unresolved (σ inf)")
-    top = None
-    if length_m is not None:
-        top = length_m * MM
-        ax.axhline(top, color="0.3", linestyle="--", linewidth=0.8, label="tip (L)")
-    if sensor_end_m is not None:
-        ax.axhline(sensor_end_m * MM, color="0.5", linestyle=":", linewidth=0.8, label="sensor end")
+    tip_kept = ~np.isfinite(s) & np.isfinite(sd) if force_n is None else (
+        ~np.isfinite(s) & np.isfinite(np.asarray(force_n, dtype=float)).all(axis=-1))
+    if tip_kept.any():
+        ax.plot(t[tip_kept], np.ones(int(tip_kept.sum())), "|", color="0.45", markersize=8,
+                transform=ax.get_xaxis_transform(), label="tip model kept")
     values = s[np.isfinite(s)]
+    lo, hi = (0.0, 1.05 * length_m * MM) if length_m is not None else (0.0, 1.0)
     if values.size:  # the locations set the limits (a band far wider than them is cut), within [0, L]
         band = sd[ok]
         pad = max(0.1 * float(np.ptp(values)), float(np.median(band)) if band.size else 0.0, 2.0)
-        lo, hi = float(values.min()) - pad, float(values.max()) + pad
-        ax.set_ylim(max(lo, 0.0), min(hi, 1.05 * top) if top is not None else hi)
+        lo, hi = max(float(values.min()) - pad, 0.0), float(values.max()) + pad
+        if length_m is not None:
+            hi = min(hi, 1.05 * length_m * MM)
+    ax.set_ylim(lo, hi)
+    for at, style, label in ((length_m, "--", "tip (L)"), (sensor_end_m, ":", "sensor end")):
+        if at is not None and lo <= at * MM <= hi:
+            ax.axhline(at * MM, color="0.4", linestyle=style, linewidth=0.8, label=label)
     ax.set_ylabel("contact s_c [mm]")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize="small", ncols=5, loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False,
