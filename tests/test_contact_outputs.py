@@ -336,3 +336,22 @@ def test_one_frame_of_a_contact_draws_its_arrow_at_the_contact(work):
     np.testing.assert_allclose(start, point_on_shape(shape.s_m, shape.positions_m, s_c) * 1e3)
     tip_ax = take_frames(processed.estimate, 40, n).plot(shape=shape)
     assert "s_c" not in tip_ax.get_title()
+
+
+def test_record_and_live_publish_the_contact_channels_of_a_contact_processor(work):
+    """``record --lsl``/``live --lsl`` make their outlets from the processor: a contact load adds its channels."""
+    import types
+
+    from bendsense.cli.device import make_outlets
+    from bendsense.pipeline import LiveProcessor
+
+    cal = Calibration.load(work["root"] / "cal.yaml")
+    board = types.SimpleNamespace(hello=None)
+    for options, contact in (({}, False), ({"load": "contact", "contact_s_m": 0.1}, True)):
+        outlets = make_outlets(LiveProcessor(cal, **options), board, f"test-{time.monotonic_ns()}")
+        try:
+            info = outlets.force.get_info()
+            assert outlets.contact is contact and info.channel_count() == 8 + 2 * contact
+            assert (info.desc().child_value("contact_s_m") == "0.1 (known)") is contact
+        finally:
+            outlets.close()
