@@ -24,6 +24,7 @@ __all__ = [
     "window_option",
     "load_option",
     "contact_option",
+    "live_contact_option",
     "live_contact",
     "check_load",
     "bandwidth_option",
@@ -171,6 +172,11 @@ contact_option = click.option(
     "--contact-s-m", type=Finite(min=0, min_open=True), default=None,
     help="With --load contact: the known contact location, arc length s_c from the base [m] (0 < s_c <= L); "
          "without it the location is estimated over windows of --window-s.")
+#: ``--contact-s-m`` of ``record --estimate`` and ``live``: frames arrive one by one, the location is given
+live_contact_option = click.option(
+    "--contact-s-m", type=Finite(min=0, min_open=True), default=None,
+    help="With --load contact (needed then): the known contact location, arc length s_c from the base [m] "
+         "(0 < s_c <= L).")
 
 
 def check_load(load: str, contact_s_m, config) -> None:

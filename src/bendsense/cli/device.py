@@ -20,9 +20,9 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
-    contact_option,
     live_bandwidth_option,
     live_contact,
+    live_contact_option,
     load_option,
     log_no_parameter_covariance,
     make_config_option,
@@ -196,7 +196,7 @@ def _sigterm_as_interrupt():
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
 @live_bandwidth_option
 @load_option
-@contact_option
+@live_contact_option
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",

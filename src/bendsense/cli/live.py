@@ -16,9 +16,9 @@ from bendsense.cli._common import (
     PressureKpa,
     check_figure_suffix,
     config_option,
-    contact_option,
     live_bandwidth_option,
     live_contact,
+    live_contact_option,
     load_option,
     objective_option,
     overwrite_option,
@@ -58,7 +58,7 @@ _NO_CALIBRATION = (
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
 @live_bandwidth_option
 @load_option
-@contact_option
+@live_contact_option
 @click.option(
     "--scale",
     "scale_mm_per_n",
