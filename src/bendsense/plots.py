@@ -710,7 +710,7 @@ def plot_results(
     if title is None:
         name = Path(source).name if source is not None else "results"
         if results.has_forces:
-            forces = "contact forces and locations" if contact else "tip forces"
+            forces = "contact forces" if contact else "tip forces"
             what = (f"shapes and {forces}, tracked" if results.has_track else f"shapes and {forces}") + (
                 f" ({estimated})" if estimated else "")
         else:

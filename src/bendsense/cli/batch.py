@@ -228,8 +228,6 @@ def plot(target, figure_path, shapes, dpi, overwrite):
             est = state.get("estimate")
             if est is not None:
                 estimated = f"constraint {est.constraint}, method {est.method}, objective {est.objective}"
-                if getattr(est, "load", "tip") == "contact":
-                    estimated = f"contact load, {estimated}"
             if state.get("track") is not None:
                 tracked = state["track"]
                 estimated += f"; tracked: {tracked.mode}, {tracked.bandwidth_hz:.3g} Hz"
