@@ -124,7 +124,8 @@ def test_one_shape_at_many_contact_points_broadcasts(truths):
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"load": "contact"}, "contact_s_m: load='contact' needs the known contact point .* use bendsense.estimate_contact"),
+    ({"load": "contact"}, "contact_s_m: load='contact' needs the known contact point .* "
+                          "use bendsense.estimate_contact"),
     ({"load": "tip", "contact_s_m": 0.1}, "contact_s_m: only with load='contact'"),
     ({"load": "side"}, "load: must be one of tip, contact, got 'side'"),
     ({"load": "contact", "contact_s_m": 0.0}, "contact_s_m: expected 0 < s_c <= length_m"),

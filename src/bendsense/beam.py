@@ -40,6 +40,7 @@ import functools
 import math
 import warnings
 from dataclasses import dataclass
+
 import numpy as np
 
 from bendsense import _jit
@@ -707,20 +708,20 @@ def solve_beam(
         ) from None
     if contact_s_m is not None:
         sc = _contact_sigma(contact_s_m, L)
+        others = np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1])
         try:
-            np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1], sc.shape)
+            np.broadcast_shapes(others, sc.shape)
         except ValueError:
             raise ArgumentError(f"contact_s_m: shape {sc.shape} does not broadcast against the other inputs' batch "
-                                f"shape {np.broadcast_shapes(ei.shape, k0.shape, base.shape, F.shape[:-1], w.shape[:-1])}"
-                                ) from None
+                                f"shape {others}") from None
         if method != "fast":
             raise ArgumentError("contact_s_m: only available with method='fast'")
     if method == "fast":
         if isinstance(n_nodes, bool) or not isinstance(n_nodes, (int, np.integer)) or n_nodes < 4:
             raise ArgumentError(f"n_nodes: expected an integer >= 4, got {n_nodes!r}")
         if contact_s_m is not None and n_nodes < 2 * _k.MIN_DOMAIN - 1:
-            raise ArgumentError(f"n_nodes: a force along the body (contact_s_m) needs >= {2 * _k.MIN_DOMAIN - 1} nodes, "
-                                f"got {n_nodes!r}")
+            raise ArgumentError(f"n_nodes: a force along the body (contact_s_m) needs >= {2 * _k.MIN_DOMAIN - 1} "
+                                f"nodes, got {n_nodes!r}")
         sol = solve(
             L,
             ei,

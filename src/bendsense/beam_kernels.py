@@ -197,15 +197,16 @@ def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
     Stops when the angle step is below ``tol`` or, in the quadratic regime, when the
     error left (~ step³/previous step²) is; at most ``limit`` iterations; steps longer
     than 1 rad are shortened to 1 rad. On convergence ``x`` (n-1, ncol-1) holds
-    J⁻¹ [e_tip kscale, -∂R/∂g_x, -∂R/∂g_y, -∂R/∂σ_c (sens), -∂R/∂λ (tangent)] at the last
-    iterate: column 0 is the discrete Jacobi field ψ = ∂φ/∂(K0 L); ∂φ/∂σ_c (at fixed σ)
-    has one source, the jump λ (sin φ_c f_y − cos φ_c f_x) of φ' at σ_c, in the interface
-    row (the tip row for a tip load: the one-sided derivative). Returns (converged, iterations).
+    J⁻¹ [e_tip kscale, -∂R/∂g_x, -∂R/∂g_y (sens ≥ 1), -∂R/∂σ_c (sens 2), -∂R/∂λ (tangent)]
+    at the last iterate: column 0 is the discrete Jacobi field ψ = ∂φ/∂(K0 L); ∂φ/∂σ_c (at
+    fixed σ) has one source, the jump λ (sin φ_c f_y − cos φ_c f_x) of φ' at σ_c, in the
+    interface row (the tip row for a tip load: the one-sided derivative). Returns
+    (converged, iterations).
     """
     n = p.size
     m = n - 1
-    ncol = 2 + 3 * sens + tangent
-    quad = QUAD_SENS if sens else QUAD
+    ncol = 2 + 2 * (sens > 0) + (sens > 1) + tangent
+    quad = QUAD_SENS if sens > 0 else QUAD
     C, h2, on, J0 = ops.C, ops.h2, ops.on, ops.J0
     J = np.empty((m, m))
     rhs = np.empty((m, ncol))
@@ -224,10 +225,11 @@ def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
                 acc += C[i, j] * p[j]
             rhs[i, 0] = h * (s * gy - c * gx) - acc
             rhs[i, 1] = 0.0
-            if sens:
+            if sens > 0:
                 hf = h * on[i]
                 rhs[i, 2] = -c * lam * hf
                 rhs[i, 3] = s * lam * hf
+            if sens > 1:
                 rhs[i, 4] = 0.0
             if tangent:
                 rhs[i, ncol - 1] = h * (s * gi[i, 1] - c * gi[i, 0])
@@ -236,7 +238,7 @@ def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
             J[i, i] -= h * (c * gy + s * gx)
         rhs[m - 1, 0] += ops.kscale * k0n
         rhs[m - 1, 1] = ops.kscale
-        if sens:
+        if sens > 1:
             r = ops.jrow
             rhs[r, 4] = -ops.jscale * lam * (math.sin(p[r + 1]) * f[1] - math.cos(p[r + 1]) * f[0])
         # the step now; the other columns (Jacobi field, sensitivities) only at the last iterate
@@ -302,7 +304,7 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
     """
     n = phi.size
     m = n - 1
-    ncol = 2 + 3 * sens + 1
+    ncol = 2 + 2 * (sens > 0) + (sens > 1) + 1
     lam = 0.0
     dlam = min(1.0, FIRST_STEP / max(ratio, 1e-300))
     status = _RUNNING
@@ -322,8 +324,8 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
             pstep = max(pstep, abs(d))
         start = pred.copy()
         last = lt >= 1.0
-        conv, it = newton(pred, lt, k0n, gi, f, ops, tol if last else 1e-6, max_iter if last else min(STEP_ITER, max_iter),
-                          sens, bool(YES), x)
+        conv, it = newton(pred, lt, k0n, gi, f, ops, tol if last else 1e-6,
+                          max_iter if last else min(STEP_ITER, max_iter), sens, bool(YES), x)
         iters += it
         move = 0.0
         for i in range(n):
@@ -357,6 +359,12 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
 
 
 @njit(cache=True)
+def extra_columns(sens):
+    """Columns of :func:`solve_frame`'s ``extra`` at a sensitivity level ``sens`` (0, 1 or 2)."""
+    return 1 + 3 * (sens > 0) + (sens > 1)
+
+
+@njit(cache=True)
 def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max_iter, sens, allow_continuation,
                 phi, extra):
     """One frame of the fast solver: φ at the nodes into ``phi`` (n,), J⁻¹ columns into ``extra``.
@@ -368,9 +376,10 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     state, convex loads start from the arc plus its first-order change. Everything else
     follows the branch from the unloaded arc (:func:`continuation`). ``ops``: the frame's
     operators, of its contact point σ_c (:func:`contact_grid`; the force ``(fx, fy)``
-    acts there). ``extra`` (n-1, 1 + 4 sens): the Jacobi field ψ = ∂φ/∂(K0 L) and, with
-    ``sens``, ∂φ/∂g (g = F L²/EI), ∂φ/∂σ_c at fixed σ and the load tangent dφ/dλ (= −EI
-    ∂φ/∂EI at λ = 1). Returns (status, load factor of a failure, Newton iterations).
+    acts there). ``sens`` 0, 1 or 2: ``extra`` (n-1, :func:`extra_columns`) holds the
+    Jacobi field ψ = ∂φ/∂(K0 L) and, with ``sens`` ≥ 1, ∂φ/∂g (g = F L²/EI), with ``sens``
+    2 ∂φ/∂σ_c at fixed σ, and last the load tangent dφ/dλ (= −EI ∂φ/∂EI at λ = 1). Returns
+    (status, load factor of a failure, Newton iterations).
     """
     n = phi.size
     m = n - 1
@@ -388,11 +397,11 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     convex = ratio < 1.0
     status = _RUNNING
     iters = 0
-    x = np.full((m, 1 + 4 * sens), np.nan)
+    x = np.full((m, extra_columns(sens)), np.nan)
     if has_state:
         phi[:] = state
         phi[0] = base
-        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens, x)
+        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, x)
         if conv:
             near = True
             for i in range(1, n):
@@ -410,7 +419,7 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
         arc_tangent(phi, gi, ops, tan)
         for i in range(m):
             phi[i + 1] += tan[i]
-        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens, x)
+        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, x)
         if conv:
             status = _OK
     where = 1.0
@@ -547,45 +556,58 @@ def contact_sampling(sc, ref, sig, P, PQ, q):
 def sample(phi, dphi, L, PQ, q, sens, pos, dpos, tip):
     """Positions r = L ∫ (sin φ, cos φ) dσ at the rows of ``PQ`` (and the tip, row ``q``).
 
-    With ``sens``, ∂r/∂p_c for the first k = ``dpos.shape[2]`` columns of ``dphi`` (n, ≥k)
-    = ∂φ/∂p_c at the nodes: ∂r/∂p = L ∫ (cos φ, −sin φ) ∂φ/∂p dσ, into ``dpos`` (M, 2, k)
-    and ``tip[2:]`` (2 × k, row-major).
+    With ``sens``, ∂r/∂p_c for the first k = ``dpos.shape[2]`` (2 or 3) columns of ``dphi``
+    (n, ≥k) = ∂φ/∂p_c at the nodes: ∂r/∂p = L ∫ (cos φ, −sin φ) ∂φ/∂p dσ, into ``dpos``
+    (M, 2, k) and ``tip[2:]`` (2 × k, row-major). Scalar accumulators: the estimate's
+    residual samples 41 rows a frame.
     """
     n = phi.size
     M = PQ.shape[0]
     k = dpos.shape[2]
+    third = k > 2
     sn = np.empty(n)
     cs = np.empty(n)
     for j in range(n):
         sn[j] = math.sin(phi[j])
         cs[j] = math.cos(phi[j])
-    a = np.empty((2, k))
     for r in range(M + 1):
         x = 0.0
         y = 0.0
-        a[:, :] = 0.0
+        a00 = a01 = a02 = a10 = a11 = a12 = 0.0
         for j in range(n):
             wgt = PQ[r, j] if r < M else q[j]
             x += wgt * sn[j]
             y += wgt * cs[j]
             if sens:
-                for c in range(k):
-                    a[0, c] += wgt * cs[j] * dphi[j, c]
-                    a[1, c] -= wgt * sn[j] * dphi[j, c]
+                a00 += wgt * cs[j] * dphi[j, 0]
+                a01 += wgt * cs[j] * dphi[j, 1]
+                a10 -= wgt * sn[j] * dphi[j, 0]
+                a11 -= wgt * sn[j] * dphi[j, 1]
+                if third:
+                    a02 += wgt * cs[j] * dphi[j, 2]
+                    a12 -= wgt * sn[j] * dphi[j, 2]
         if r < M:
             pos[r, 0] = L * x
             pos[r, 1] = L * y
             if sens:
-                for c in range(k):
-                    dpos[r, 0, c] = L * a[0, c]
-                    dpos[r, 1, c] = L * a[1, c]
+                dpos[r, 0, 0] = L * a00
+                dpos[r, 0, 1] = L * a01
+                dpos[r, 1, 0] = L * a10
+                dpos[r, 1, 1] = L * a11
+                if third:
+                    dpos[r, 0, 2] = L * a02
+                    dpos[r, 1, 2] = L * a12
         else:
             tip[0] = L * x
             tip[1] = L * y
             if sens:
-                for c in range(k):
-                    tip[2 + c] = L * a[0, c]
-                    tip[2 + k + c] = L * a[1, c]
+                tip[2] = L * a00
+                tip[3] = L * a01
+                tip[2 + k] = L * a10
+                tip[3 + k] = L * a11
+                if third:
+                    tip[4] = L * a02
+                    tip[4 + k] = L * a12
 
 
 @njit(cache=True)
@@ -610,9 +632,10 @@ def solve_sample(b, L, ei, k0, base, F, w, sc, state, has_state, ops, ref, tol, 
     if sc[b] < 1.0:  # the contact grid's sampling (the tip grid's is a constant)
         P, PQ, q = np.empty((M, n)), np.empty((M, n)), np.empty(n)
         contact_sampling(sc[b], ref, sig, P, PQ, q)
-    extra = np.empty((n - 1, 1 + 4 * sens))
+    level = 2 if sens else 0  # with the force's sensitivities, the contact point's
+    extra = np.empty((n - 1, extra_columns(level)))
     st, wh, it = solve_frame(L, ei[b], k0[b], base[b], F[b, 0], F[b, 1], w[b, 0], w[b, 1], state[b], has_state, grid,
-                             tol, max_iter, sens, allow_continuation, phi[b], extra)
+                             tol, max_iter, level, allow_continuation, phi[b], extra)
     status[b] = st
     where[b] = wh
     iters[b] = it

@@ -88,6 +88,7 @@ _OPS = tuple(_beam._operators(N_NODES).kernel)  # the beam solver's operators (r
 _REF = tuple(_beam._split_operators(N_NODES))  # ... and the reference operators of a contact's two domains
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 _NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
+_AT_TIP = np.ones(1)  # σ_c of a tip load, one frame (the kernels only read it)
 _NO_MODEL_COV = np.zeros((1, 2, 2))  # one frame's, without a parameter covariance (the kernels only read it)
 
 
@@ -249,7 +250,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
     ref = reference(shape, config, s_m, n_points, L)
-    contact = np.ones(()) if contact_s_m is None else _beam._contact_sigma(contact_s_m, L)  # σ_c, 1 at the tip
+    contact = _AT_TIP if contact_s_m is None else _beam._contact_sigma(contact_s_m, L)  # σ_c, 1 at the tip
     if contact_s_m is not None and ref.kappa is None and (tip_angle_source or est.tip_angle_source) == "shape" \
             and constraint in ("normal", "follower"):
         raise ArgumentError("tip_angle_source: 'shape' at a contact needs a PCC shape (curvatures or a Shape), "
@@ -258,13 +259,13 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         objective = "positions" if method == "paper" or ref.kappa is None else est.objective
     options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
         np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
-        None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes())
+        None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes(), load)
     pb, plain_pb, plain_err, uncertainty = _problem(config, calibration, ref, options, noise_std)
     P = np.asarray(pressure_pa, dtype=float)
     if not (math.isfinite(P.item()) if P.size == 1 else np.isfinite(P).all()):
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
     batch = _batch(ref.batch_shape, P.shape)
-    if contact.shape != () and contact.shape != batch:
+    if contact is not _AT_TIP and contact.shape != batch:
         try:
             batch = np.broadcast_shapes(batch, contact.shape)
         except ValueError:
@@ -423,7 +424,7 @@ def _flat(a, batch, B, tail=(), dtype=float):
 
 
 def _frames(ref, P, batch, B, config, contact) -> Frames:
-    """The per-frame inputs of the kernels: the shape's, the pressure's (K0, EI, the free tip angle), the contact's σ_c."""
+    """The per-frame inputs of the kernels: the shape's, the pressure's (K0, EI, the free tip angle), the σ_c."""
     model = _models(config)
     if B == 1:  # one frame (the live path): plain floats, as numpy costs ~1 µs a call on one value
         Pf = P.reshape(1)
@@ -443,8 +444,11 @@ def _frames(ref, P, batch, B, config, contact) -> Frames:
         M, n = ref.s.size, N_NODES
         given = (_flat(ref.p0, batch, B, (M, 2)), _flat(ref.phi[..., -1], batch, B), _flat(ref.kappa_s, batch, B, (M,)),
                  _flat(ref.state, batch, B, (n,)), _flat(ref.tip_shape, batch, B))
-    sc = contact.reshape(1) if B == 1 else _flat(contact, batch, B)
-    return Frames(kappa, *given, ei, k0, theta, _model_cov(config, Pf), _c(sc.reshape(B)))
+    if contact is _AT_TIP:
+        sc = _AT_TIP if B == 1 else np.ones(B)
+    else:
+        sc = _c(contact.reshape(B) if contact.size == B else np.broadcast_to(contact, batch).reshape(B))
+    return Frames(kappa, *given, ei, k0, theta, _model_cov(config, Pf), sc)
 
 
 def _model_cov(config, pressure_pa):
@@ -531,7 +535,7 @@ def _problem(config, calibration, ref, options, noise_opt):
 
 
 def _build_problem(config, calibration, ref, options, noise_opt):
-    constraint, objective, push_only, source, direction, follower, xtol_n, max_iter, _ = options
+    constraint, objective, push_only, source, direction, follower, xtol_n, max_iter, _, load = options
     est = config.estimation
     if constraint not in CONSTRAINTS:
         raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {constraint!r}")
@@ -598,7 +602,7 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         s=_c(ref.s), w=_c(ref.w), L=L, wload=_c(config.weight_per_length_n_per_m), ffix=np.zeros(2),
         lower=np.full(k, 0.0 if push_only else -np.inf), xtol=xtol_n, max_iter=max_iter,
         PQ=_c(PQ), q=_c(ops.Q[-1]), objective=ANGLES if angles else POSITIONS, PQ_fit=_c(PQ_fit),
-        coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor)
+        coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor, contact=load == "contact")
     err = err._replace(**{name: _c(a, a.dtype) for name, a in err._asdict().items() if isinstance(a, np.ndarray)})
     return pb, *_kernels.plain(pb, err), ("propagated" if noise else "none")
 

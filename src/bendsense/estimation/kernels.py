@@ -41,6 +41,7 @@ YES, NO = bk.YES, bk.NO
 
 POSITIONS, ANGLES = prob.POSITIONS, prob.ANGLES
 
+FORCE_SENS, CONTACT_SENS = 1, 2  # the beam's sensitivity levels (bendsense.beam_kernels.solve_frame)
 MAX_JUMPS = 8  # trial steps off the stable branch before stopping at the boundary
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a shape is no bending of the model actuator
 SIGMA_STEP = 1e-4  # a step below this many σ (a whitened cost) changes nothing a user can see: converged
@@ -163,25 +164,24 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
 
     ``ops``: the frame's beam operators, of its contact point (the force acts there;
     :func:`bendsense.beam_kernels.contact_grid`), ``pb`` its problem
-    (:func:`~bendsense.estimation.problem.contact_problem`). The positions objective samples the positions at the comparison nodes (rows of
-    ``pb.PQ_fit``), the angles objective interpolates the tangent angle at the coils
-    (rows of ``pb.PA``): ``φ(L_i)``, what the sensor measures as ``S_i / d``.
+    (:func:`~bendsense.estimation.problem.contact_problem`). The positions objective
+    samples the positions at the comparison nodes (rows of ``pb.PQ_fit``), the angles
+    objective interpolates the tangent angle at the coils (rows of ``pb.PA``): ``φ(L_i)``,
+    what the sensor measures as ``S_i / d``.
     """
     pos, dpos, st, tip, dst, y, dy = ws
     n = st.size
-    extra = np.empty((n - 1, 5))
+    extra = np.empty((n - 1, 4))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
-                                  NEWTON_TOL, int(NEWTON_MAX_ITER), bool(YES), allow_continuation, st, extra)
+                                  NEWTON_TOL, int(NEWTON_MAX_ITER), int(FORCE_SENS), allow_continuation, st, extra)
     bk.node_sensitivity(extra, L, ei, dst)
     # the model inputs: ∂φ/∂K0 = L ψ (ψ = ∂φ/∂(K0 L), the Jacobi field); EI scales the
-    # load factor, λ ∝ 1/EI: ∂φ/∂EI = −(dφ/dλ)/EI at λ = 1; the contact: ∂φ/∂s_c = ∂φ/∂σ_c / L
+    # load factor, λ ∝ 1/EI: ∂φ/∂EI = −(dφ/dλ)/EI at λ = 1 (∂φ/∂s_c: contact_jacobian)
     dst[0, 2] = 0.0
     dst[0, 3] = 0.0
-    dst[0, 4] = 0.0
     for i in range(n - 1):
         dst[i + 1, 2] = extra[i, 0] * L
-        dst[i + 1, 3] = -extra[i, 4] / ei
-        dst[i + 1, 4] = extra[i, 3] / L
+        dst[i + 1, 3] = -extra[i, 3] / ei
     bk.sample(st, dst, L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
     if pb.objective == ANGLES:
         for i in range(y.size):
@@ -535,7 +535,7 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
         # a covariance with a zero diagonal is zero: no parameter term (the config has no parameter_covariance)
         dym = model_response(pb, ws) if model_cov[0, 0] > 0.0 or model_cov[1, 1] > 0.0 else np.zeros((ws[5].size, 2))
         if pb.objective == ANGLES:
-            payload(pb, tg, ws, D, dym, model_cov, pay)
+            payload(tg, ws, D, dym, model_cov, pay)
             ratio, p = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
                                              pb.gap, pb.dphi_ds, ws[6], cov, noise_var, dym, model_cov, parts)
         else:
@@ -571,17 +571,16 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
 
 
 @njit(cache=True)
-def payload(pb, tg, ws, D, dym, model_cov, pay):
+def payload(tg, ws, D, dym, model_cov, pay):
     """What a window test needs of a frame fitted to the coil angles, in raw angle units [rad], into ``pay`` (R, 6).
 
     Column 0: measured − model angle at the optimum; 1–2: ∂(model angle)/∂u = (∂y/∂F) D,
     its unused columns 0 (k < 2); 3–4: ∂y/∂(K0, EI) · chol(Σ_m), whose outer product is
     the angles' covariance from the model parameters (zero without a parameter
-    covariance); 5: ∂y/∂s_c [rad/m] (the force's point moving toward the tip). Copies of
-    what the fit has.
+    covariance); 5: NaN, ∂y/∂s_c of a contact (:func:`contact_jacobian`). Copies of what
+    the fit has.
     """
     y, dy, y0 = ws[5], ws[6], tg[0]
-    dst = ws[4]
     k = D.shape[1]
     l00 = math.sqrt(max(model_cov[0, 0], 0.0))
     l10 = model_cov[1, 0] / l00 if l00 > 0.0 else 0.0
@@ -592,10 +591,27 @@ def payload(pb, tg, ws, D, dym, model_cov, pay):
             pay[i, 1 + c] = dy[i, 0] * D[0, c] + dy[i, 1] * D[1, c] if c < k else 0.0
         pay[i, 3] = dym[i, 0] * l00 + dym[i, 1] * l10
         pay[i, 4] = dym[i, 1] * l11
+        pay[i, 5] = np.nan
+
+
+@njit(cache=True)
+def contact_jacobian(L, ei, k0, F, wload, ops, pb, ws, out):
+    """∂y/∂s_c (R,) [rad/m] of the coil angles at the beam in ``ws``, the force ``F`` fixed, into ``out``.
+
+    The beam's Jacobian at the converged state with one more right-hand side, the jump
+    of φ' at s_c (:func:`bendsense.beam_kernels.newton`): a Newton iteration from the
+    solution. Only for a contact load (the tip load's frames are not slowed by it).
+    """
+    n = ws[2].size
+    st = ws[2].copy()
+    extra = np.empty((n - 1, bk.extra_columns(CONTACT_SENS)))
+    status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], ws[2], bool(YES), ops, NEWTON_TOL,
+                                  int(NEWTON_MAX_ITER), int(CONTACT_SENS), bool(NO), st, extra)
+    for a in range(out.size):
         acc = 0.0
-        for j in range(dst.shape[0]):
-            acc += pb.PA[i, j] * dst[j, 4]
-        pay[i, 5] = acc
+        for j in range(n - 1):
+            acc += pb.PA[a, j + 1] * extra[j, 3]
+        out[a] = acc / L if status == _OK else np.nan
 
 
 @njit(cache=True)
@@ -721,17 +737,6 @@ def plain(*structures):
 
 
 @njit(cache=True)
-def contact(sc, ops, ref, pb):
-    """The beam operators and the problem of a force at σ_c = ``sc`` (the tip's for σ_c ≥ 1), and a state buffer.
-
-    :func:`bendsense.beam_kernels.contact_grid` and
-    :func:`~bendsense.estimation.problem.contact_problem`: one code path for every load
-    point, a tip load (σ_c = 1) costs a comparison.
-    """
-    return bk.contact_grid(sc, ops, ref), prob.contact_problem(pb, sc, ref), np.empty(ops.sigma.size)
-
-
-@njit(cache=True)
 def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`).
 
@@ -744,6 +749,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
     n = ops0.sigma.size
     buf = buffers(pb0, n)
     ws = workspace(pb0.s.size, n, pb0.sw.size)
+    on_grid = np.empty(n)  # the reference's angles on a contact's nodes
     u = np.empty(k)
     u0 = np.empty(k)
     prev_u = np.empty(k)
@@ -752,12 +758,15 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
     g = np.empty(k)
     prev_ok = False
     for i in range(lo, hi):
-        ops, pb, state0 = contact(fr.contact[i], ops0, ref, pb0)
-        p0, phi_end, kappa_s, ref_state, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
-        if fr.contact[i] < 1.0:  # the reference's angles on the contact's nodes
-            prob.contact_state(ref_state, ops0.sigma, ops.sigma, state0)
-        else:
-            state0 = ref_state
+        # the beam's operators and the problem of the frame's force point: the tip's, or a contact's
+        # (bendsense.beam_kernels.contact_grid, problem.contact_problem: one code path for every point)
+        ops, pb = ops0, pb0
+        if fr.contact[i] < 1.0:
+            ops, pb = bk.contact_grid(fr.contact[i], ops0, ref), prob.contact_problem(pb0, fr.contact[i], ref)
+        p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
+        if fr.contact[i] < 1.0:
+            prob.contact_state(state0, ops0.sigma, ops.sigma, on_grid)
+            state0 = on_grid
         ei, k0 = fr.ei[i], fr.k0[i]
         moment_guess(p0, pb.s, pb.w, pb.L, ei, k0, pb.wload, D, pb.ffix, pb.lower, phi_end, kappa_s, pb.seg,
                      fr.contact[i] * pb.L, g)
@@ -784,6 +793,8 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
         status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s,
                                                           noise_var, fr.model_cov[i], kappa, force[i], cov[i],
                                                           parts[i], direction[i], pay[i])
+        if pb.contact and pb.objective == ANGLES and math.isfinite(pay[i, 0, 0]):
+            contact_jacobian(pb.L, ei, k0, force[i], pb.wload, ops, pb, ws, pay[i, :, 5])
         if pb.pcc:
             shifts[i] = buf[11]
         else:
@@ -808,7 +819,7 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, ref, start, out):
     tuples (:func:`plain`) of :class:`~bendsense.estimation.problem.Frames`,
     :class:`~bendsense.estimation.problem.Problem`, the shift error model, the beam
     solver's operators and a contact's reference operators (each frame's force acts at
-    its ``Frames.contact``, :func:`contact`). ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
+    its ``Frames.contact``). ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
     its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable direction of a boundary
     stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2), success (B,) (converged or not
     identifiable), and the window test's payload (:func:`payload`): residual, Jacobian by u and

@@ -119,6 +119,7 @@ class Problem(NamedTuple):
     PA: np.ndarray  # (Nc, n) the tangent angle at the coils from the nodes' angles
     sw: np.ndarray  # (R,) square root of each fitted row's weight: (2M,) positions, (Nc,) ones for angles
     jump_floor: float  # a trial response this far from its linear prediction is no branch jump [m or rad]
+    contact: bool  # load="contact": the window payload carries ∂y/∂s_c (kernels.contact_jacobian)
 
 
 @functools.lru_cache(maxsize=16)
@@ -300,12 +301,12 @@ def contact_problem(pb, sc, ref):
     return Problem(pb.pcc, pb.kind, pb.direction, pb.follower_angle, pb.shape_angle, pb.seg_fk, pb.sigma_fk, pb.beyond,
                    c, pb.lengths, pb.gap, pb.seg, pb.sigma, dphi, pb.noise, pb.s, pb.w, pb.L, pb.wload, pb.ffix,
                    pb.lower, pb.xtol, pb.max_iter, PQ, q, pb.objective, np.ascontiguousarray(PQ_fit), pb.coils, PA,
-                   pb.sw, pb.jump_floor)
+                   pb.sw, pb.jump_floor, pb.contact)
 
 
 @njit(cache=True)
 def contact_state(state0, tip_sigma, sigma, out):
-    """A Newton start on a contact's nodes ``sigma`` (n,): ``state0`` on the tip grid's ``tip_sigma``, interpolated linearly."""
+    """A Newton start on a contact's nodes ``sigma`` (n,): ``state0`` on the tip grid's ``tip_sigma``, interpolated."""
     j = 0
     for i in range(sigma.size):
         while j < tip_sigma.size - 2 and tip_sigma[j + 1] < sigma[i]:
