@@ -115,22 +115,36 @@ def test_force_along_the_tangent_is_unresolved():
         assert "tangent" in str(est.message[0]) or "σ(s_c)" in str(est.message[0])
 
 
-def test_one_frame_at_realistic_noise_is_mostly_unresolved():
-    """``estimate_force(load="contact", contact_s_m=None)``: the window of one frame, honestly."""
+@pytest.mark.parametrize("counts", [1.5, 15.0])
+def test_one_frame_never_a_confident_wrong_location(counts):
+    """``estimate_force(load="contact", contact_s_m=None)``: the window of one frame, honestly.
+
+    At the hidden sensors' 1.5 counts one frame places a 0.15 N contact to ~1 mm (the
+    Cramér–Rao bound below is ~0.5–1.3 mm); at 15 counts (~1 1/m per segment, the noise
+    the issue's bound assumed) σ(s_c) exceeds a segment: mostly ``contact_unresolved``.
+    """
     sensor, cal = ce.calibration(CFG, 0, 1.5)
+    noisy = HiddenSensor(noise_counts=counts, seed=0)  # the same sensor, more noise
     rng = np.random.default_rng(3)
     P = rng.uniform(40e3, 100e3, 40)
     sc = rng.uniform(0.6, 0.9, 40) * L
     angles = np.array([forward(CFG, p, _normal_force(p, s, 0.15), contact_s_m=s).angles_rad for p, s in zip(P, sc)])
-    shape = reconstruct(sensor.signals(GAP * angles, rng), cal, CFG.sensor)
-    est = _quiet(bendsense.estimate_force, shape, P, BARE, load="contact", calibration=cal)
+    shape = reconstruct(noisy.signals(GAP * angles, rng), cal, CFG.sensor)
+    est = _quiet(bendsense.estimate_force, shape, P, BARE, load="contact", calibration=cal, noise_std=counts)
     assert est.load == "contact" and est.contact_s_m.shape == (40,)
     located = np.isfinite(est.contact_std_m)
-    # never a confident wrong location: a located frame's error within 3 σ
-    assert np.all(np.abs(est.contact_s_m - sc)[located] <= 3 * est.contact_std_m[located])
-    assert np.mean(located) < 0.5
-    one = _quiet(bendsense.estimate_force, shape.curvature_per_m[0], P[0], BARE, load="contact", calibration=cal)
+    z = np.abs(est.contact_s_m - sc)[located] / est.contact_std_m[located]
+    assert np.all(z <= 3.5) and np.mean(z <= 2.0) >= 0.85, np.sort(z)
+    unresolved = estimate_status(est, 40) == CONTACT_UNRESOLVED
+    assert np.array_equal(unresolved, np.isinf(est.contact_std_m))
+    if counts > 10:
+        assert np.mean(located) < 0.5, np.mean(located)
+    else:
+        assert np.mean(located) > 0.9, np.mean(located)
+    one = _quiet(bendsense.estimate_force, shape.curvature_per_m[0], P[0], BARE, load="contact", calibration=cal,
+                 noise_std=counts)
     assert one.batch_shape == () and one.load == "contact"
+    assert one.contact_s_m == est.contact_s_m[0]
 
 
 def test_bad_arguments_name_the_argument():
@@ -140,6 +154,10 @@ def test_bad_arguments_name_the_argument():
         bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, t_s=[0, 1])
     with pytest.raises(ArgumentError, match="^threshold"):
         bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, threshold=-1)
+    with pytest.raises(ArgumentError, match="^contact_s_m: not an option"):
+        bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, contact_s_m=0.1)
+    with pytest.raises(ArgumentError, match="^noise_std"):  # no noise model: no location
+        _quiet(bendsense.estimate_contact, np.full((3, 16), 5.0), 50e3, BARE, noise_std=0.0)
     with pytest.raises(ArgumentError, match="^window_s"):
         bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, t_s=[0, 1, 2], window_s=0)
 
@@ -166,7 +184,8 @@ def _crb_s(sensor, P, F, sc, frames):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_sigma_of_the_location_against_the_cramer_rao_bound(seed):
-    """One frame (sensor noise dominates): σ(s_c) at the bound, never below it; a window: never below it."""
+    """σ(s_c)'s sensor-noise part is the Cramér–Rao bound of the hidden sensor's noise for one frame, and above it
+    over a window of 100; the whole σ never falls below the bound and keeps the calibration's floor."""
     sensor, cal = ce.calibration(CFG, seed, 1.5)
     rng = np.random.default_rng(10 + seed)
     P, sc = 70e3, 0.85 * L
@@ -178,21 +197,29 @@ def test_sigma_of_the_location_against_the_cramer_rao_bound(seed):
     one = _quiet(bendsense.estimate_force, kappa, P, BARE, load="contact", calibration=cal)
     crb1 = _crb_s(sensor, P, F, sc, 1)
     sigma1 = _quiet(_sigma_unclipped, kappa[None], P, cal, 1)
-    assert 0.9 * crb1 <= sigma1 <= 1.6 * crb1, (sigma1, crb1)
+    noise1 = _quiet(_sigma_unclipped, kappa[None], P, cal, 1, part=0)
+    # the sensor-noise part is the bound (up to the fitted calibration's slopes and its estimate of the noise)
+    assert 0.85 * crb1 <= noise1 <= 1.15 * crb1, (noise1, crb1)
+    # the whole σ adds the calibration's part (~0.3 mm here): above the bound, never below it
+    assert crb1 <= sigma1 <= 1.7 * crb1, (sigma1, crb1)
+    assert abs(float(one.contact_std_m) - sigma1) <= 0.05 * sigma1  # the estimate reports it (at its own ŝ)
     crb100 = _crb_s(sensor, P, F, sc, 100)
+    noise100 = _quiet(_sigma_unclipped, np.tile(kappa, (100, 1)), P, cal, 100, part=0)
     sigma100 = _quiet(_sigma_unclipped, np.tile(kappa, (100, 1)), P, cal, 100)
-    assert sigma100 >= 0.9 * crb100, (sigma100, crb100)
-    assert one.batch_shape == ()
+    # over a window the fit weighs the calibration's shared part too, so its noise part sits above the noise-only
+    # bound (the price of not trusting the calibration), never below it
+    assert 0.85 * crb100 <= noise100 < noise1 / 3, (noise100, crb100)
+    assert sigma100 >= 3 * crb100, (sigma100, crb100)  # the calibration's part does not: σ stays at its floor
 
 
-def _sigma_unclipped(kappa, P, cal, frames):
-    """σ(s_c) of the window's fit, whether or not it is beyond a segment (contact_unresolved shows inf)."""
+def _sigma_unclipped(kappa, P, cal, frames, part=None):
+    """σ(s_c) of the window's fit (or its sensor-noise part, ``part=0``), whether or not it is beyond a segment."""
     from bendsense.estimation import contact
 
     est = bendsense.estimate_force(kappa[:1], P, BARE, load="contact", contact_s_m=np.array([0.85 * L]),
                                    calibration=cal)
-    T, er, ee, parts = contact._metric(est, np.array([frames]))
-    return float(1.0 / np.sqrt(ee[0]))
+    T, er, ee, parts, _ = contact._metric(est, np.array([frames]))
+    return float(1.0 / np.sqrt(ee[0]) if part is None else np.sqrt(parts[0, part]) / ee[0])
 
 
 # --------------------------------------------------------------------------- DESIGN section 5, a small sample
@@ -200,14 +227,14 @@ def _sigma_unclipped(kappa, P, cal, frames):
 
 @pytest.fixture(scope="module")
 def evaluation():
-    scores, _ = ce.run(CFG, range(3), 4)
+    scores, _ = ce.run(CFG, range(16), 8, use_cache=False)  # 64 contact holds (256 windows), 64 tip holds
     return scores
 
 
 def test_contact_targets_on_a_small_sample(evaluation):
     """The section 5 rows (tools/contact_eval.py prints them on a larger sample)."""
     s = evaluation
-    assert s["contact_windows"] >= 20 and s["tip_windows"] >= 20
+    assert s["contact_windows"] >= 200 and s["tip_windows"] >= 200
     assert s["median_error_m"] <= 8e-3, s
     assert s["s_coverage"] >= 0.85, s
     assert np.all(s["force_coverage"] >= 0.85), s
@@ -218,3 +245,23 @@ def test_threshold_is_the_stated_mixture_quantile():
     from scipy import stats
 
     assert abs(0.5 * stats.chi2.sf(LR_THRESHOLD, 1) - 0.01) < 1e-4
+
+
+def test_budget_on_exact_shapes_with_gaussian_noise():
+    """Shift noise only (no calibration, no parameters): σ(s_c) and the force's σ (with the location's part and its
+    covariance with ŝ) are the spread of the errors over independent windows."""
+    rng = np.random.default_rng(0)
+    sigma_m, n = 2e-6, 100
+    zs, zf = [], []
+    for P, frac in [(90e3, 0.8), (50e3, 0.7), (70e3, 0.9)]:
+        sc = frac * L
+        F = _normal_force(P, sc, 0.2)
+        truth = forward(BARE, P, F, contact_s_m=sc)
+        W = 40
+        kappa = _kappa(BARE, truth.angles_rad + sigma_m / GAP * rng.standard_normal((W * n, 16)))
+        est = _quiet(bendsense.estimate_contact, kappa, P, BARE, noise_std=sigma_m, t_s=np.arange(W * n) / 2000.0)
+        zs.append((est.contact_s_m[::n] - sc) / est.contact_std_m[::n])
+        zf.append((est.force_n - F) / est.std_n)
+    zs, zf = np.concatenate(zs), np.concatenate(zf)
+    assert 0.8 <= np.std(zs) <= 1.2, np.std(zs)
+    assert np.all((0.8 <= np.std(zf, axis=0)) & (np.std(zf, axis=0) <= 1.2)), np.std(zf, axis=0)

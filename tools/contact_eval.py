@@ -7,7 +7,7 @@ the force (each component) over their frames, how often such a window is chosen 
 contact, and how often a tip-load window keeps the tip model. Run from the repository
 root::
 
-    python tools/contact_eval.py [--quick] [--seeds 8] [--holds 6] [--prior]
+    python tools/contact_eval.py [--quick] [--seeds 32] [--holds 8] [--prior]
 
 The data are made by the independent forward model of ``tests/forward_model.py`` (scipy
 ``solve_bvp`` split at s_c; never bendsense's beam), read through hidden nonlinear
@@ -70,17 +70,17 @@ class Hold:
     tip: bool
 
 
-def holds(config, seed, n_holds):
+def holds(config, seed, n_holds, s_range=S_RANGE, force_range_n=FORCE_RANGE_N):
     """The holds of sensor ``seed``: contact and tip holds alternating, contact first."""
-    rng = np.random.default_rng(2300 + seed)
+    rng = np.random.default_rng(2300 + seed + (0 if s_range == S_RANGE and force_range_n == FORCE_RANGE_N else 7919))
     L = config.actuator.length_m
     out = []
     for j in range(n_holds):
         p = float(rng.uniform(*PRESSURE_PA))
         if j % 2 == 0:
-            sc = float(rng.uniform(*S_RANGE) * L)
+            sc = float(rng.uniform(*s_range) * L)
             phi = free_bending_k0(config, p) * sc  # the free arc's tangent angle at s_c
-            mag = float(rng.uniform(*FORCE_RANGE_N))
+            mag = float(rng.uniform(*force_range_n))
             # outward normal: −(cos φ, −sin φ) (the inward one points to the centre of curvature)
             out.append(Hold(p, mag * np.array([-np.cos(phi), np.sin(phi)]), sc, False))
         else:
@@ -119,11 +119,11 @@ class Series:
     tip: np.ndarray  # (B,) bool: a tip hold
 
 
-def series(config, seed, n_holds, use_cache=True):
-    """The true series of sensor ``seed``: ``n_holds`` × 600 frames at 2 kHz."""
+def series(config, seed, n_holds, use_cache=True, **ranges):
+    """The true series of sensor ``seed``: ``n_holds`` × 600 frames at 2 kHz (``ranges``: of :func:`holds`)."""
     alpha = fractions()
     nodes = lobatto()
-    hs = holds(config, seed, n_holds)
+    hs = holds(config, seed, n_holds, **ranges)
     ang = [BarycentricInterpolator(nodes, ramp_angles(config, h, use_cache))(alpha) for h in hs]
     n = alpha.size
     B = n * len(hs)
@@ -163,6 +163,7 @@ def score(results, config):
     """The section 5 numbers from ``results``: a list of (truth, estimate, window boundaries)."""
     L = config.actuator.length_m
     err, cover, chosen, unresolved, tip_kept, f_cover, f_err, k_cover = [], [], [], [], [], [], [], []
+    resolved_cover = []
     for truth, est, bounds, known in results:
         s_hat = np.asarray(est.contact_s_m, dtype=float)
         s_std = np.asarray(est.contact_std_m, dtype=float)
@@ -177,7 +178,9 @@ def score(results, config):
             chosen.append(contact)
             unresolved.append(contact and np.isinf(s_std[a]))
             err.append(abs(e))
-            cover.append(contact and abs(e) <= 2.0 * s_std[a])
+            cover.append(contact and np.isfinite(s_std[a]) and abs(e) <= 2.0 * s_std[a])  # unresolved: not covered
+            if contact and np.isfinite(s_std[a]):
+                resolved_cover.append(abs(e) <= 2.0 * s_std[a])
             z = np.abs(est.force_n[a:b] - truth.force_n[a:b]) / est.std_n[a:b]
             f_cover.append(np.where(np.isfinite(z), z, np.inf) <= 2.0)
             zk = np.abs(known.force_n[a:b] - truth.force_n[a:b]) / known.std_n[a:b]
@@ -189,6 +192,7 @@ def score(results, config):
         "contact_windows": len(err),
         "median_error_m": float(np.median(err)) if err else np.nan,
         "s_coverage": float(np.mean(cover)) if cover else np.nan,
+        "s_coverage_resolved": float(np.mean(resolved_cover)) if resolved_cover else np.nan,
         "chosen_contact": float(np.mean(chosen)) if chosen else np.nan,
         "unresolved": float(np.mean(unresolved)) if unresolved else np.nan,
         "force_coverage": f_cover.mean(axis=0) if f_cover.size else np.full(2, np.nan),
@@ -199,12 +203,15 @@ def score(results, config):
     }
 
 
-def run(config, seeds, n_holds, *, prior=False, use_cache=True, noise_counts=NOISE_COUNTS):
-    """Estimate every sensor's series and score them: (scores, wall time per 100-frame window [s])."""
+def run(config, seeds, n_holds, *, prior=False, use_cache=True, noise_counts=NOISE_COUNTS, **ranges):
+    """Estimate every sensor's series and score them: (scores, wall time per 100-frame window [s]).
+
+    ``ranges``: ``s_range`` (s_c / L) and ``force_range_n`` of the contact holds (:func:`holds`).
+    """
     est_config = config if prior else config.replace(parameter_covariance=None)
     results, per_window = [], []
     for seed in seeds:
-        truth = series(config, seed, n_holds, use_cache)
+        truth = series(config, seed, n_holds, use_cache, **ranges)
         est, wall, known = estimate(truth, config, est_config, seed, noise_counts)
         results.append((truth, est, windows(truth), known))
         per_window.append(wall / (truth.t_s.size / (WINDOW_S * RATE_HZ)))
@@ -220,10 +227,12 @@ def window_time(config, repeats=20):
     shape = reconstruct(sensor.signals(config.sensor.strip_gap_m * truth.angles_rad[sl], rng), cal, config.sensor)
     cfg = config.replace(parameter_covariance=None)
     times = []
-    for _ in range(repeats + 1):
-        t0 = time.perf_counter()
-        bendsense.estimate_contact(shape, truth.pressure_pa[sl], cfg, calibration=cal, t_s=truth.t_s[sl])
-        times.append(time.perf_counter() - t0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for _ in range(repeats + 1):
+            t0 = time.perf_counter()
+            bendsense.estimate_contact(shape, truth.pressure_pa[sl], cfg, calibration=cal, t_s=truth.t_s[sl])
+            times.append(time.perf_counter() - t0)
     return float(np.median(times[1:]))
 
 
@@ -231,16 +240,17 @@ def table(scores, window_s_time):
     """The section 5 contact rows as a markdown table."""
     fc = scores["force_coverage"]
     rows = [
-        ("median |s_c error|, contact windows (s_c ≥ 0.6 L, ≥ 0.1 N)", "≤ 8 mm",
+        ("median absolute s_c error, contact windows (s_c ≥ 0.6 L, ≥ 0.1 N)", "≤ 8 mm",
          f"{1e3 * scores['median_error_m']:.1f} mm"),
-        ("±2σ coverage of s_c", "≥ 85 %", f"{100 * scores['s_coverage']:.0f} %"),
+        ("±2σ coverage of s_c (a window that kept the tip model or is unresolved: not covered)", "≥ 85 %",
+         f"{100 * scores['s_coverage']:.0f} %"),
         ("±2σ coverage of the force, Fx / Fy", "≥ 85 %", f"{100 * fc[0]:.0f} / {100 * fc[1]:.0f} %"),
         ("(reference) ±2σ coverage of the force at the true location, Fx / Fy", "88–99 %",
          f"{100 * scores['known_force_coverage'][0]:.0f} / {100 * scores['known_force_coverage'][1]:.0f} %"),
         ("contact windows chosen as contact", "—", f"{100 * scores['chosen_contact']:.0f} %"),
         ("contact windows contact_unresolved", "—", f"{100 * scores['unresolved']:.0f} %"),
         ("tip windows keeping the tip model", "≥ 90 %", f"{100 * scores['tip_kept']:.0f} %"),
-        ("median |force error|, contact frames", "—", f"{1e3 * scores['force_error_n']:.1f} mN"),
+        ("median force error magnitude, contact frames", "—", f"{1e3 * scores['force_error_n']:.1f} mN"),
         ("a 100-frame window (warm)", "≤ 20 ms", f"{1e3 * window_s_time:.1f} ms"),
     ]
     lines = ["| what | target | measured |", "|---|---|---|"]
@@ -248,17 +258,36 @@ def table(scores, window_s_time):
     return "\n".join(lines)
 
 
+HARD = {"s_range": (0.3, 0.6), "force_range_n": (0.02, 0.1)}  # beyond the targets: nearer the base, lighter
+
+
+def hard_table(scores):
+    """The same measures for contacts at 0.3–0.6 L of 0.02–0.1 N (no target: where the model choice fails)."""
+    fc = scores["force_coverage"]
+    return "\n".join([
+        "| contacts at 0.3–0.6 L, 0.02–0.1 N | measured |", "|---|---|",
+        f"| chosen as contact | {100 * scores['chosen_contact']:.0f} % |",
+        f"| contact_unresolved | {100 * scores['unresolved']:.0f} % |",
+        f"| median absolute s_c error (a window that kept the tip model counts at L) | "
+        f"{1e3 * scores['median_error_m']:.1f} mm |",
+        f"| ±2σ coverage of s_c, of the windows located (chosen as contact and resolved) | "
+        f"{100 * scores['s_coverage_resolved']:.0f} % |",
+        f"| ±2σ coverage of the force, Fx / Fy | {100 * fc[0]:.0f} / {100 * fc[1]:.0f} % |",
+        f"| tip windows keeping the tip model (same series) | {100 * scores['tip_kept']:.0f} % |",
+    ])
+
+
 def main(argv=None):
     """Print the table; return the scores."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="3 sensors × 4 holds instead of 8 × 8")
+    ap.add_argument("--quick", action="store_true", help="16 sensors × 8 holds (the test's sample) instead of 32 × 8")
     ap.add_argument("--seeds", type=int, default=None, help="number of independent sensors")
     ap.add_argument("--holds", type=int, default=None, help="holds per sensor (600 frames each; half contact)")
     ap.add_argument("--prior", action="store_true", help="keep the shipped parameter prior (not identified)")
     ap.add_argument("--no-cache", action="store_true", help="solve every forward problem again")
     args = ap.parse_args(argv)
-    n_seeds = args.seeds or (3 if args.quick else 8)
-    n_holds = args.holds or (4 if args.quick else 8)
+    n_seeds = args.seeds or (16 if args.quick else 32)
+    n_holds = args.holds or 8
     config = bendsense.load_config()
     start = time.perf_counter()
     scores, _ = run(config, range(n_seeds), n_holds, prior=args.prior, use_cache=not args.no_cache)
@@ -267,6 +296,9 @@ def main(argv=None):
           f"{NOISE_COUNTS} counts, {WINDOW_S * 1e3:g} ms windows, {'shipped prior' if args.prior else 'no prior'}; "
           f"{scores['contact_windows']} contact windows, {scores['tip_windows']} tip windows\n")
     print(table(scores, wt))
+    hard, _ = run(config, range(n_seeds), n_holds, prior=args.prior, use_cache=not args.no_cache, **HARD)
+    print(f"\n## Beyond the targets: {hard['contact_windows']} windows of contacts nearer the base and lighter\n")
+    print(hard_table(hard))
     print(f"\n{time.perf_counter() - start:.0f} s")
     return scores
 

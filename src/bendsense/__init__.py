@@ -39,7 +39,7 @@ _LAZY = {
     "solve_beam": "bendsense.beam",
     "ForceEstimate": "bendsense.estimation",
     "estimate_force": "bendsense.estimation",
-    "estimate_contact": "bendsense.estimation.contact",
+    "estimate_contact": "bendsense.estimation",
     "track": "bendsense.tracking",
     "Track": "bendsense.tracking",
     "Tracker": "bendsense.tracking",

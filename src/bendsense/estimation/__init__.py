@@ -68,6 +68,7 @@ _OK = int(Status.OK)
 __all__ = [
     "ForceEstimate",
     "estimate_force",
+    "estimate_contact",
     "constraint_basis",
     "quadrature",
     "chebyshev_nodes_m",
@@ -229,12 +230,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if load == "contact" and method == "paper":
         raise ArgumentError("load: method='paper' estimates the paper's tip load, got load='contact'")
     if load == "contact" and contact_s_m is None:  # the location estimated, each frame its own window
-        from bendsense.estimation.contact import estimate_frames
-
-        return estimate_frames(shape, pressure_pa, config, dict(
-            constraint=constraint, objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
-            direction=direction, follower_angle_rad=follower_angle_rad, noise_std=noise_std, calibration=calibration,
-            strict=strict, n_points=n_points, xtol_n=xtol_n, max_iter=max_iter))
+        return _contact().estimate_frames(estimate_force, shape, pressure_pa, config,
+                                          {k: v for k, v in locals().items() if k in _FRAME_OPTIONS})
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     L = float(config.actuator.length_m)
@@ -307,6 +304,82 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
     return _result(out, batch, text, time.perf_counter() - t_start, method, constraint, uncertainty, objective,
                    pb, plain_err, load, contact_s_m)
+
+
+def estimate_contact(shape, pressure_pa, config=None, *, calibration=None, t_s=None, window_s: float = 0.05,
+                     constraint: str | None = None, noise_std=None, threshold: float | None = None,
+                     **options) -> ForceEstimate:
+    """A point force at an unknown arc length ``s_c``: one location per quasi-static window, a force per frame.
+
+    The location is fitted on each window's mean shape with the full error budget (sensor
+    noise / n, calibration and model parameters whole); tip versus contact is chosen per
+    window by a likelihood ratio; every frame is then estimated at its window's location
+    (:mod:`~bendsense.estimation.contact`; docs/theory.md, "Contact at an unknown location").
+
+    Parameters
+    ----------
+    shape : Shape or array_like, shape (B, N) or (N,)
+        Reconstructed shapes (:func:`bendsense.reconstruct`) or segment curvatures [1/m]
+        of a time series of frames (one batch axis), or of one frame.
+    pressure_pa : array_like, shape (B,) or ()
+        Pressure of each frame [Pa].
+    config : Config, optional
+        ``None``: the paper's prototype.
+    calibration : Calibration, optional
+        The sensor's calibration: its noise and its error model make the budget.
+    t_s : array_like, shape (B,), optional
+        Time of each frame [s]: the frames are cut into windows as the window test
+        (:func:`bendsense.check_windows`) cuts them: at gaps, at pressure steps over 1 kPa,
+        and every ``window_s``. None: all frames are one window.
+    window_s : float
+        Window length [s] (default 0.05).
+    constraint : str, optional
+        The force's constraint at ``s_c`` (:func:`estimate_force`'s; None: the config's).
+    noise_std : float or array_like (N,), optional
+        Signal noise per channel (:func:`estimate_force`'s).
+    threshold : float, optional
+        The model choice's threshold on ``Δ = T_tip − T_contact``; default
+        :data:`~bendsense.estimation.contact.LR_THRESHOLD` (5.41: 1 % of tip-load windows
+        taken for contacts under the model).
+    **options
+        Further options of :func:`estimate_force` (``tip_angle_source``, ``direction``,
+        ``follower_angle_rad``, ``push_only``, ``n_points``...).
+
+    Returns
+    -------
+    ForceEstimate
+        ``load="contact"``; per frame ``contact_s_m`` and ``contact_std_m`` (its window's):
+        NaN for a window that kept the tip model (its frames carry the tip estimate), an
+        infinite ``contact_std_m`` and the message ``"contact_unresolved: ..."`` where the
+        data do not place the contact (σ beyond the segment it lies in, the force within
+        15° of the tangent there, or s_c beyond the last coil). The force's covariance
+        includes the location's part.
+
+    Raises
+    ------
+    ArgumentError
+        For a bad argument (the message names it), or without a noise model.
+    """
+    other = sorted(set(options) - set(_FRAME_OPTIONS))
+    if other:
+        raise ArgumentError(f"{other[0]}: not an option of estimate_contact (it takes "
+                            f"{', '.join(n for n in _FRAME_OPTIONS if n not in ('calibration', 'noise_std'))})")
+    contact = _contact()
+    threshold = contact.LR_THRESHOLD if threshold is None else threshold
+    return contact.estimate_windows(estimate_force, shape, pressure_pa, config, calibration, t_s, window_s,
+                                    dict(options, constraint=constraint, noise_std=noise_std), threshold)
+
+
+# what an estimate of an unknown location passes on to the known-location estimates it makes
+_FRAME_OPTIONS = ("constraint", "objective", "push_only", "tip_angle_source", "direction", "follower_angle_rad",
+                  "noise_std", "calibration", "strict", "n_points", "xtol_n", "max_iter")
+
+
+def _contact():
+    """The module of the unknown contact location (imported when first used)."""
+    from bendsense.estimation import contact
+
+    return contact
 
 
 def _payload_buffers(B, pb):

@@ -1,5 +1,8 @@
 """Contact at an unknown location: one s_c per quasi-static window, a force per frame (docs/theory.md, "Contact").
 
+:func:`bendsense.estimate_contact` and ``estimate_force(load="contact", contact_s_m=None)``
+run this module with ``estimate_force`` passed in.
+
 A load along the body moves the coil angles the way a tip load does, except beyond s_c,
 where the actuator bends freely: the location shows in the few coils past it, at a
 fraction of a noise σ per frame. Over a window of n frames of one hold the sensor noise
@@ -52,7 +55,7 @@ from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
 from bendsense.tracking import windows as _win
 from bendsense.validation import float_array, short
 
-__all__ = ["estimate_contact", "LR_THRESHOLD", "TANGENT_DEG", "contact_windows"]
+__all__ = ["LR_THRESHOLD", "TANGENT_DEG", "contact_windows"]
 
 #: Δ = T(L) − T(ŝ) above this chooses a contact: P(½χ²₀ + ½χ²₁ > 5.41) = 1 % (a tip load taken for a contact).
 LR_THRESHOLD = 5.41
@@ -86,54 +89,18 @@ def contact_windows(t_s, pressure_pa, window_s, B):
     return _win.window_bounds(t, starts, window_s)
 
 
-def estimate_contact(shape, pressure_pa, config=None, *, calibration=None, t_s=None, window_s: float = _win.WINDOW_S,
-                     constraint: str | None = None, noise_std=None, threshold: float = LR_THRESHOLD,
-                     **options) -> ForceEstimate:
-    """A point force at an unknown arc length ``s_c``: one location per quasi-static window, a force per frame.
-
-    The location is fitted on each window's mean shape with the full error budget, tip
-    versus contact is chosen per window by a likelihood ratio, and every frame is then
-    estimated at its window's location (module docstring; docs/theory.md, "Contact").
+def estimate_windows(estimate, shape, pressure_pa, config, calibration, t_s, window_s, options, threshold):
+    """:func:`bendsense.estimate_contact`: the location per window, the force per frame, by ``estimate``.
 
     Parameters
     ----------
-    shape : Shape or array_like, shape (B, N) or (N,)
-        Reconstructed shapes (:func:`bendsense.reconstruct`) or segment curvatures [1/m]
-        of a time series of frames (one batch axis), or of one frame.
-    pressure_pa : array_like, shape (B,) or ()
-        Pressure of each frame [Pa].
-    config : Config, optional
-        ``None``: the paper's prototype.
-    calibration : Calibration, optional
-        The sensor's calibration: its noise and its error model make the budget.
-    t_s : array_like, shape (B,), optional
-        Time of each frame [s]: the frames are cut into windows as the window test cuts
-        them (gaps, pressure steps over 1 kPa, ``window_s``). None: all frames are one
-        window.
-    window_s : float
-        Window length [s] (default 0.05).
-    constraint : str, optional
-        The force's constraint at ``s_c`` (``estimate_force``'s; None: the config's).
-    noise_std : float or array_like (N,), optional
-        Signal noise per channel (``estimate_force``'s).
-    threshold : float
-        The model choice's threshold on ``Δ = T_tip − T_contact`` (default
-        :data:`LR_THRESHOLD`, 1 % of tip windows taken for contacts under the model).
-    **options
-        Further options of :func:`bendsense.estimate_force` (``tip_angle_source``,
-        ``direction``, ``follower_angle_rad``, ``push_only``, ``n_points``...).
-
-    Returns
-    -------
-    ForceEstimate
-        ``load="contact"``; ``contact_s_m`` and ``contact_std_m`` per frame (its window's;
-        NaN for a window that kept the tip model, ``inf`` std for ``contact_unresolved``);
-        the force's covariance includes the location's part.
-
-    Raises
-    ------
-    ArgumentError
-        For a bad argument (the message names it), or without a noise model.
+    estimate : callable
+        :func:`bendsense.estimate_force` (passed in: this module does not import the
+        package that delegates to it).
+    shape, pressure_pa, config, calibration, t_s, window_s, threshold
+        As :func:`bendsense.estimate_contact` takes them.
+    options : dict
+        Further options of ``estimate`` (``constraint``, ``noise_std``...).
     """
     t_start = time.perf_counter()
     config, kappa, batch = _inputs(shape, config)
@@ -146,20 +113,22 @@ def estimate_contact(shape, pressure_pa, config=None, *, calibration=None, t_s=N
     if len(batch) > 1:
         raise ArgumentError(f"shape: expected the frames of a time series (B, N) or one frame (N,), got batch shape "
                             f"{batch}")
-    if not isinstance(threshold, (int, float, np.integer, np.floating)) or not threshold >= 0:
+    if isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.integer, np.floating)) \
+            or not threshold >= 0:
         raise ArgumentError(f"threshold: expected a Δχ² >= 0, got {short(threshold)}")
     bounds = contact_windows(t_s, P, window_s, B)
-    est = locate(kappa, P, bounds, config, dict(options, constraint=constraint, calibration=calibration,
-                                                 noise_std=noise_std), float(threshold))
+    est = locate(estimate, kappa, P, bounds, config, dict(options, calibration=calibration), float(threshold))
     est = dataclasses.replace(est, wall_time_s=time.perf_counter() - t_start)
     return est if batch else _one(est)
 
 
-def estimate_frames(shape, pressure_pa, config, options, threshold=LR_THRESHOLD):
+def estimate_frames(estimate, shape, pressure_pa, config, options, threshold=LR_THRESHOLD):
     """``estimate_force(load="contact", contact_s_m=None)``: every frame its own window (a mean of one frame).
 
     Parameters
     ----------
+    estimate : callable
+        :func:`bendsense.estimate_force`.
     shape : Shape or array_like, shape (..., N)
         Shapes or segment curvatures [1/m]; leading axes are frames.
     pressure_pa : array_like
@@ -183,7 +152,7 @@ def estimate_frames(shape, pressure_pa, config, options, threshold=LR_THRESHOLD)
     N = kappa.shape[-1]
     kappa = np.ascontiguousarray(np.broadcast_to(kappa.reshape(*own, N), (*batch, N)).reshape(B, N))
     P = np.ascontiguousarray(np.broadcast_to(P, batch).reshape(B))
-    est = locate(kappa, P, np.arange(B + 1, dtype=np.int64), config, options, threshold)
+    est = locate(estimate, kappa, P, np.arange(B + 1, dtype=np.int64), config, options, threshold)
     est = dataclasses.replace(est, wall_time_s=time.perf_counter() - t_start)
     return _reshape(est, B, batch)
 
@@ -232,10 +201,8 @@ def _grid(config):
     return np.append(ends, L)
 
 
-def locate(kappa, P, bounds, config, options, threshold):
+def locate(estimate_force, kappa, P, bounds, config, options, threshold):
     """The estimate of frames ``kappa`` (B, N) at pressures ``P`` (B,) with one location per window ``bounds``."""
-    from bendsense.estimation import estimate_force
-
     L = float(config.actuator.length_m)
     W = bounds.size - 1
     counts = np.diff(bounds)
