@@ -355,3 +355,12 @@ def test_record_and_live_publish_the_contact_channels_of_a_contact_processor(wor
             assert (info.desc().child_value("contact_s_m") == "0.1 (known)") is contact
         finally:
             outlets.close()
+
+
+def test_an_unknown_location_with_the_paper_method_is_one_line(work):
+    root = work["root"]
+    res = CliRunner().invoke(main, ["load", str(root / "tv.csv"), "--calibration", str(root / "cal.yaml"),
+                                    "reconstruct", "estimate", "--load", "contact", "--method", "paper"])
+    assert res.exit_code == 1 and res.output.strip() == (
+        "Error: method: an unknown contact location is estimated with method 'fast' only, got 'paper' (with a "
+        "known contact_s_m any method)")

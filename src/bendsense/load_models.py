@@ -69,7 +69,7 @@ def estimate_load(shape, pressure_pa, config, *, load: str = "tip", contact_s_m=
         The window of an unknown location [s].
     **options
         Further options of :func:`bendsense.estimate_force` (``constraint``, ``method``,
-        ``calibration``, ...).
+        ``calibration``, ...); an unknown location takes ``method="fast"`` only.
 
     Returns
     -------
@@ -92,4 +92,8 @@ def estimate_load(shape, pressure_pa, config, *, load: str = "tip", contact_s_m=
     if t_s is None:
         raise ArgumentError("t_s: an unknown contact location is estimated over windows of frames: give the frame "
                             "times (or a known contact_s_m)")
+    method = options.pop("method", None)
+    if method not in (None, "fast"):  # the location's fit needs the fast estimator's sensitivities
+        raise ArgumentError(f"method: an unknown contact location is estimated with method 'fast' only, got "
+                            f"{method!r} (with a known contact_s_m any method)")
     return bendsense.estimate_contact(shape, pressure_pa, config, t_s=t_s, window_s=window_s, **options)
