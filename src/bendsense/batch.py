@@ -338,6 +338,8 @@ def process_session(
     track: str | None = None,
     bandwidth_hz: float | None = None,
     window_s: float = 0.05,
+    load: str = "tip",
+    contact_s_m: float | None = None,
 ) -> SessionOutcome:
     """Process one session and write its results; never raises for a bad session.
 
@@ -371,6 +373,8 @@ def process_session(
     track, bandwidth_hz, window_s
         Track the forces over time (``"smooth"`` or ``"filter"``; None: not), its
         bandwidth [Hz] and the window of the model check [s] (:func:`bendsense.pipeline.process`).
+    load, contact_s_m : str, float, optional
+        The load model and a known contact location [m] (:func:`bendsense.pipeline.process`).
 
     Returns
     -------
@@ -398,7 +402,8 @@ def process_session(
             warnings.simplefilter("ignore")
             counts, lost, tx_drops, pressure_ignored = _run(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
-                {"track": track, "bandwidth_hz": bandwidth_hz, "window_s": window_s},
+                {"track": track, "bandwidth_hz": bandwidth_hz, "window_s": window_s, "load": load,
+                 "contact_s_m": contact_s_m},
             )
     except (BendsenseError, OSError) as err:
         if isinstance(err, OutputError) and err.errno in _FATAL_ERRNOS:
@@ -416,7 +421,7 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row) -> SessionO
     notes = [f"{n} of {frames} frames {what}" for n, what in (
         (counts.extrapolated, "extrapolated"), (counts.not_converged, "not converged"),
         (counts.model_misfit, "model_misfit"), (counts.not_identifiable, "not identifiable"),
-        (counts.implausible_force, "implausible_force"),
+        (counts.implausible_force, "implausible_force"), (counts.contact_unresolved, "contact_unresolved"),
         (counts.out_of_range, "pressure out of range")) if n]
     if lost or tx_drops:
         notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")
@@ -623,6 +628,8 @@ def process_sessions(
     track: str | None = None,
     bandwidth_hz: float | None = None,
     window_s: float = 0.05,
+    load: str = "tip",
+    contact_s_m: float | None = None,
 ) -> BatchReport:
     """Process many sessions in parallel and write one results directory per session.
 
@@ -667,6 +674,9 @@ def process_sessions(
         Bandwidth of the track [Hz]; None: chosen per session.
     window_s : float, default 0.05
         Window of the model check over frames (:func:`bendsense.check_windows`) [s].
+    load, contact_s_m : str, float, optional
+        The load model (``"tip"``, ``"contact"``) and a known contact location [m]
+        (:func:`bendsense.load_models.estimate_load`).
 
     Returns
     -------
@@ -696,11 +706,13 @@ def process_sessions(
         return _process(given, out_dir, start, config=config, calibration=calibration, executor=executor,
                         workers=workers, constraint=constraint, method=method, objective=objective,
                         overwrite=overwrite, pressure_pa=pressure_pa, estimate=estimate, recursive=recursive,
-                        progress=progress, track=track, bandwidth_hz=bandwidth_hz, window_s=window_s)
+                        progress=progress, track=track, bandwidth_hz=bandwidth_hz, window_s=window_s, load=load,
+                        contact_s_m=contact_s_m)
 
 
 def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
-             overwrite, pressure_pa, estimate, recursive, progress, track, bandwidth_hz, window_s) -> BatchReport:
+             overwrite, pressure_pa, estimate, recursive, progress, track, bandwidth_hz, window_s, load,
+             contact_s_m) -> BatchReport:
     from bendsense.calibration import Calibration
     from bendsense.config import Config, load_config
 
@@ -719,19 +731,9 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         # the calibration's error model (a maximum-likelihood fit of its misfit, ~0.3 s) is
         # made once here and travels with the pickled calibration, not once per session
         calibration.error_model()
-    options = dict(
-        config=config,
-        calibration=calibration,
-        constraint=constraint,
-        method=method,
-        objective=objective,
-        pressure_pa=pressure_pa,
-        estimate=estimate,
-        overwrite=overwrite,
-        track=track,
-        bandwidth_hz=bandwidth_hz,
-        window_s=window_s,
-    )
+    options = dict(config=config, calibration=calibration, constraint=constraint, method=method, objective=objective,
+                   pressure_pa=pressure_pa, estimate=estimate, overwrite=overwrite, track=track,
+                   bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m)
     created = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)

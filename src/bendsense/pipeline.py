@@ -38,7 +38,7 @@ import numpy as np
 from bendsense.batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, SessionError
-from bendsense.results import NOT_IDENTIFIABLE, Results
+from bendsense.results import CONTACT_UNRESOLVED, NOT_IDENTIFIABLE, Results
 
 log = logging.getLogger("bendsense")
 
@@ -121,6 +121,9 @@ class FrameCounts:
     implausible_force : int
         Frames whose force is beyond what the actuator can carry (status
         ``implausible_force``, force kept).
+    contact_unresolved : int
+        Frames of a contact load whose location the data cannot place (status
+        ``contact_unresolved``, force kept, ``contact_std_m`` inf).
     """
 
     frames: int
@@ -130,6 +133,7 @@ class FrameCounts:
     model_misfit: int = 0
     not_identifiable: int = 0
     implausible_force: int = 0
+    contact_unresolved: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,7 +184,8 @@ class Processed(Results):
         return FrameCounts(frames=n, extrapolated=extrapolated, out_of_range=int(outside.sum()),
                            not_converged=int(np.count_nonzero(failed & ~misfit & ~implausible)),
                            model_misfit=int(misfit.sum()), implausible_force=int(implausible.sum()),
-                           not_identifiable=int(np.count_nonzero(self.columns["status"] == NOT_IDENTIFIABLE)))
+                           not_identifiable=int(np.count_nonzero(self.columns["status"] == NOT_IDENTIFIABLE)),
+                           contact_unresolved=int(np.count_nonzero(self.columns["status"] == CONTACT_UNRESOLVED)))
 
 
 def _source(session) -> str:
@@ -215,7 +220,7 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
             pressure_pa=None, estimate: bool = True, points: int | None = None, shape=None,
             push_only: bool | None = None, tip_angle_source: str | None = None, calibration_source: str = "",
             window_s: float = 0.05, track: str | None = None, bandwidth_hz: float | None = None,
-            **options) -> Processed:
+            load: str = "tip", contact_s_m: float | None = None, **options) -> Processed:
     """Reconstruct the shapes and estimate the tip forces of every frame of a session.
 
     Parameters
@@ -256,6 +261,9 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         Track the forces over time (:func:`bendsense.track`, that mode); None: no track.
     bandwidth_hz : float, optional
         Bandwidth of the track [Hz]; None: chosen from the session (:func:`bendsense.track`).
+    load, contact_s_m : {"tip", "contact"}, float, optional
+        The load model (default ``"tip"``); ``"contact"`` with ``contact_s_m`` a known location [m], without it
+        one located per window of ``window_s`` (:func:`bendsense.load_models.estimate_load`).
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``max_iter``, ...).
 
@@ -296,13 +304,14 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     if track is not None and not estimate:
         raise ArgumentError("track: needs the force estimate (estimate=True)")
     if estimate:
-        from bendsense.estimation import estimate_force
+        from bendsense.load_models import estimate_load
 
         constraint, method, objective = estimation_options(config, constraint, method, objective)
         t0 = time.perf_counter()
-        est = estimate_force(shape, session.pressure_pa, config, constraint=constraint, method=method,
-                             objective=objective, push_only=push_only, tip_angle_source=tip_angle_source,
-                             calibration=calibration, **options)  # its noise model gives std_n
+        est = estimate_load(shape, session.pressure_pa, config, load=load, contact_s_m=contact_s_m, t_s=session.t_s,
+                            window_s=window_s, constraint=constraint, method=method, objective=objective,
+                            push_only=push_only, tip_angle_source=tip_angle_source,
+                            calibration=calibration, **options)  # its noise model gives std_n
         est, tracked = _over_time(est, session, window_s, track, bandwidth_hz)
         estimate_s = time.perf_counter() - t0
     results = Results.from_state(session, shape, est, tracked)
@@ -455,6 +464,8 @@ class LiveBlock:
     tracked : bool
         Whether the processor tracks the forces (the tracked columns are then present,
         NaN where there is no track).
+    load : str
+        The processor's load model (``"contact"``: the columns ``contact_s_m, contact_std_m``).
     extra : dict of str to ndarray, shape (n,)
         Per-frame columns the recorded session has beside its own (``Session.extra``:
         ``host_s``, ``status``, ``tx_drops`` of a recording), written after ``status``
@@ -473,6 +484,7 @@ class LiveBlock:
     offset: np.ndarray = dataclasses.field(default=None, repr=False)
     track: object = None
     tracked: bool = False
+    load: str = "tip"
     extra: dict = dataclasses.field(default_factory=dict, repr=False)
 
     def __len__(self) -> int:
@@ -522,6 +534,7 @@ class LiveBlock:
 
     def columns(self) -> dict:
         """The columns of ``results.csv`` for these frames (those of ``bendsense ... save``)."""
+        from bendsense.contact_output import CONTACT_COLUMNS
         from bendsense.results import TRACK_COLUMNS, WINDOW_COLUMN, Results, tracked_columns
         from bendsense.session import Session
 
@@ -533,7 +546,8 @@ class LiveBlock:
             extra = {name: columns.pop(name) for name in results.extra_names}
             columns.pop("status")
             nan = np.full(len(self), np.nan)
-            columns.update({name: nan for name in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m")})
+            contact = CONTACT_COLUMNS if self.load == "contact" else ()
+            columns.update({name: nan for name in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", *contact, "residual_m")})
             columns["status"] = None
             if self.tracked:
                 columns.update({name: nan for name in TRACK_COLUMNS[:4]})
@@ -782,6 +796,7 @@ class LiveProcessor:
             offset=np.asarray(self.calibration.offset, dtype=float),
             track=track,
             tracked=self.track,
+            load=self.options.get("load", "tip"),
             extra={} if extra is None else {k: np.asarray(v) for k, v in extra.items()},
         )
         self.frames += n

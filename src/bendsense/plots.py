@@ -248,7 +248,9 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
     -------
     matplotlib.axes.Axes
         One frame: the force as an arrow at the model's tip, in mm, titled with its
-        value and σ. A batch: Fx and Fy against time with their ±2σ bands.
+        value and σ; a contact load (``load="contact"``) with ``shape`` given: the arrow at
+        the shape's point at ``contact_s_m``, drawn with its ±2σ arc, and s_c in the title.
+        A batch: Fx and Fy against time with their ±2σ bands.
     """
     force = np.asarray(estimate.force_n, dtype=float)
     if force.ndim == 1:
@@ -257,6 +259,16 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
             p = _positions(shape)[0] * MM
             ax.plot(p[:, 0], p[:, 1], "-", color="0.4")
         tip = np.zeros(2) if estimate.tip_position_m is None else np.asarray(estimate.tip_position_m) * MM
+        contact = getattr(estimate, "load", "tip") == "contact" and estimate.contact_s_m is not None
+        s_c = float(np.asarray(estimate.contact_s_m)) if contact else float("nan")
+        if shape is not None and np.isfinite(s_c):  # the force acts at the contact: the arrow starts there
+            from bendsense.plots_contact import draw_contacts
+
+            p = _positions(shape)[:1]
+            draw_contacts(ax, np.asarray(shape.s_m), p, [s_c], [float(np.asarray(estimate.contact_std_m))])
+            from bendsense.contact_output import point_on_shape
+
+            tip = point_on_shape(shape.s_m, p[0], s_c) * MM
         head = tip + scale_mm_per_n * force
         ax.annotate("", xy=head, xytext=tip, arrowprops={"arrowstyle": "->", "color": "C3"})
         ax.plot([0.0, tip[0], head[0]], [0.0, tip[1], head[1]], alpha=0.0)  # the arrow inside the limits
@@ -264,7 +276,12 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
         _shape_axes(ax)
         std = np.asarray(estimate.std_n, dtype=float)
         parts = [f"{f:.3g}" + (f" ± {s:.2g}" if np.isfinite(s) else "") for f, s in zip(force, std, strict=True)]
-        ax.set_title(f"F = ({parts[0]}, {parts[1]}) N", fontsize="medium")
+        title = f"F = ({parts[0]}, {parts[1]}) N"
+        if np.isfinite(s_c):
+            sd = float(np.asarray(estimate.contact_std_m))
+            title += f" at s_c = {s_c * MM:.1f}" + (f" ± {sd * MM:.1f} mm" if 0 < sd < np.inf else
+                                                     " mm (unresolved)" if sd == np.inf else " mm")
+        ax.set_title(title, fontsize="medium")
         return ax
     ax = _new_axes(ax, figsize=(7, 4))
     force = force.reshape(-1, 2)
@@ -607,6 +624,7 @@ def plot_results(
     title: str | None = None,
     overwrite: bool = True,
     estimated: str | None = None,
+    length_m: float | None = None,
 ):
     """Summary figure of processed frames: shapes and tip path, tip forces, curvatures over time.
 
@@ -630,12 +648,17 @@ def plot_results(
         normal, method fast"``).
     overwrite : bool
         Replace an existing file at ``path`` (False: :class:`~bendsense.errors.OutputExistsError`).
+    length_m : float, optional
+        The actuator's length L, marked in the contact panel (results of a contact load).
 
     Returns
     -------
     matplotlib.figure.Figure
         Left: shapes of ``max_shapes`` frames and the tip path (grey); right: tip force
-        with ±2σ band (top) and segment curvatures (bottom) over time.
+        with ±2σ band (top) and segment curvatures (bottom) over time. Results of a
+        contact load (``contact_s_m``) add the contact point with its ±2σ arc on each
+        drawn shape and a panel of s_c over time with its ±2σ band
+        (:mod:`bendsense.plots_contact`).
     """
     source = results if isinstance(results, (str, os.PathLike)) else None
     results = _as_results(results)
@@ -652,25 +675,43 @@ def plot_results(
         import matplotlib.pyplot as plt
 
         fig = plt.figure(figsize=(12, 6.5), layout="constrained")
-    grid = fig.add_gridspec(2, 3, width_ratios=(1, 1.6, 0.04))
+    contact = results.has_contact
+    if contact:
+        fig.set_size_inches(12, 8.5)
+    grid = fig.add_gridspec(3 if contact else 2, 3, width_ratios=(1, 1.6, 0.04),
+                            height_ratios=(1, 0.7, 1) if contact else None)
     ax_s = fig.add_subplot(grid[:, 0])
     ax_f = fig.add_subplot(grid[0, 1])
-    ax_k = fig.add_subplot(grid[1, 1], sharex=ax_f)
-    cax = fig.add_subplot(grid[1, 2])
+    ax_k = fig.add_subplot(grid[-1, 1], sharex=ax_f)
+    cax = fig.add_subplot(grid[-1, 2])
     tip = np.column_stack([results["tip_x_m"], results["tip_y_m"]]).astype(float) * MM
     ax_s.plot(tip[:, 0], tip[:, 1], color="0.6", linewidth=0.8, zorder=0, label="tip path")
     plot_shapes(results, ax_s, max_frames=max_shapes, legend=False)
+    if contact:
+        from bendsense.plots_contact import draw_contacts, plot_contact_series
+
+        idx = _pick(len(results.positions_m), None, max_shapes)
+        draw_contacts(ax_s, results.s_m, results.positions_m[idx], results["contact_s_m"][idx],
+                      results["contact_std_m"][idx], _colors(len(idx)))
+        ax_c = fig.add_subplot(grid[1, 1], sharex=ax_f)
+        plot_contact_series(ax_c, results["t_s"], results["contact_s_m"], results["contact_std_m"],
+                            length_m=length_m, sensor_end_m=float(results.s_m[-1]),
+                            force_n=np.column_stack([results["fx_n"], results["fy_n"]]))
+        ax_c.tick_params(labelbottom=False)
     # below the panel, where it covers no shape
     ax_s.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.09), ncols=2, frameon=False)
     ax_s.set_title("shapes", fontsize="medium")
     plot_time_series(results, (ax_f, ax_k), cax=cax)
-    ax_f.set_title("tip force (base frame)", fontsize="medium", loc="left")
+    ax_f.set_title("contact force (base frame)" if contact else "tip force (base frame)", fontsize="medium", loc="left")
+    if contact:
+        ax_f.set_ylabel("contact force [N]")
     ax_f.tick_params(labelbottom=False)
     frames = len(results["t_s"])
     if title is None:
         name = Path(source).name if source is not None else "results"
         if results.has_forces:
-            what = ("shapes and tip forces, tracked" if results.has_track else "shapes and tip forces") + (
+            forces = "contact forces" if contact else "tip forces"
+            what = (f"shapes and {forces}, tracked" if results.has_track else f"shapes and {forces}") + (
                 f" ({estimated})" if estimated else "")
         else:
             what = "shapes only (no force estimate)"

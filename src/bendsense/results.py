@@ -2,7 +2,8 @@
 
 ``results.csv`` has a row per frame: ``t_s``, ``pressure_pa``, ``kappa1..kappaN``
 [1/m], ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, after estimation ``fx_n``,
-``fy_n``, ``fx_std_n``, ``fy_std_n``, ``residual_m``, ``status``; after tracking
+``fy_n``, ``fx_std_n``, ``fy_std_n``, for a contact load (``load="contact"``)
+``contact_s_m``, ``contact_std_m`` [m], then ``residual_m``, ``status``; after tracking
 (:func:`bendsense.track`) ``fx_track_n``, ``fy_track_n``, ``fx_track_std_n``,
 ``fy_track_std_n``, ``track_status``; then ``window_p_value`` when a window model check
 ran (:func:`bendsense.check_windows`); then the input's extra columns unchanged (one
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from bendsense._io import open_regular, read_text
+from bendsense.contact_output import CONTACT_COLUMNS, contact_columns
 from bendsense.errors import SessionError
 from bendsense.plausibility import IMPLAUSIBLE_FORCE, OUT_OF_RANGE
 from bendsense.session.cells import parse_column, write_columns
@@ -50,10 +52,10 @@ FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
 TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
 #: the p-value of the window model check of each frame's window, after the tracked columns
 WINDOW_COLUMN = "window_p_value"
-RESULT_COLUMNS = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS, *TRACK_COLUMNS,
-                  WINDOW_COLUMN)
+RESULT_COLUMNS = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS, *CONTACT_COLUMNS,
+                  *TRACK_COLUMNS, WINDOW_COLUMN)
 _NUMERIC = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n",
-            "residual_m", *TRACK_COLUMNS[:4], WINDOW_COLUMN)
+            *CONTACT_COLUMNS, "residual_m", *TRACK_COLUMNS[:4], WINDOW_COLUMN)
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +78,8 @@ class Results:
         shape : Shape
             Its reconstructed shapes.
         estimate : ForceEstimate, optional
-            Its force estimates.
+            Its force estimates; of a contact load (``load="contact"``) also the columns
+            ``contact_s_m, contact_std_m`` after ``fy_std_n``.
         track : Track, optional
             Its tracked forces (:func:`bendsense.track`): the columns
             :data:`TRACK_COLUMNS` after ``status``, and the track's ``window_p_value``.
@@ -100,6 +103,7 @@ class Results:
                 fy_n=force[:, 1],
                 fx_std_n=std[:, 0],
                 fy_std_n=std[:, 1],
+                **contact_columns(frames, estimate),
                 residual_m=np.asarray(estimate.residual_m).reshape(frames),
             )
         columns["status"] = frame_status(shape, estimate)
@@ -156,6 +160,11 @@ class Results:
         return "fx_n" in self.columns
 
     @property
+    def has_contact(self) -> bool:
+        """True when the results hold a contact location (:data:`~bendsense.contact_output.CONTACT_COLUMNS`)."""
+        return "contact_s_m" in self.columns
+
+    @property
     def has_track(self) -> bool:
         """True when the results include a tracked force (:data:`TRACK_COLUMNS`)."""
         return "fx_track_n" in self.columns
@@ -199,8 +208,10 @@ def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict
 def estimate_status(estimate, n: int) -> np.ndarray:
     """Per-frame status strings (n,) of a force estimate alone: ``ok`` or the estimate's reason.
 
-    ``not_converged``, ``not_identifiable``, ``contact_unresolved``, ``pressure_out_of_range``,
-    ``model_misfit``, ``implausible_force`` or ``no_force`` (:func:`frame_status`, which adds the shape's).
+    ``not_converged``, ``not_identifiable``, ``pressure_out_of_range``, ``model_misfit``,
+    ``implausible_force``, ``no_force`` or, for a contact load, ``contact_unresolved``
+    (a force whose location the data cannot place: its message says so, or
+    ``contact_std_m`` is infinite) (:func:`frame_status`, which adds the shape's).
 
     Parameters
     ----------
@@ -212,7 +223,11 @@ def estimate_status(estimate, n: int) -> np.ndarray:
     status = np.full(n, OK, dtype=object)
     failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
     message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
-    if not failed.any() and (message == "converged").all() and np.isfinite(estimate.force_n).all():
+    unresolved = np.zeros(n, dtype=bool)
+    if getattr(estimate, "load", "tip") == "contact" and estimate.contact_std_m is not None:
+        unresolved = np.broadcast_to(np.isinf(np.asarray(estimate.contact_std_m, dtype=float)), (n,))
+    if not failed.any() and (message == "converged").all() and np.isfinite(estimate.force_n).all() \
+            and not unresolved.any():
         return status  # every frame ok (the live path's usual block): nothing to look up
     status[failed] = NOT_CONVERGED
     status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
@@ -223,6 +238,7 @@ def estimate_status(estimate, n: int) -> np.ndarray:
     # a NaN force is never ok, whatever the solver said
     force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
     status[(status == OK) & ~np.isfinite(force).all(axis=1)] = NO_FORCE
+    status[(status == OK) & unresolved] = CONTACT_UNRESOLVED  # the force reported, never ok
     return status
 
 
@@ -233,7 +249,8 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     signals), ``not_converged``, ``not_identifiable`` (the shape does not determine the
     load along one direction: σ is infinite there), ``pressure_out_of_range``,
     ``model_misfit`` (the model shape stays over 5 % of the length from the measured one,
-    or a χ² beyond chance), ``implausible_force`` (a force beyond what the actuator can
+    or a χ² beyond chance), ``contact_unresolved`` (a contact load whose location the
+    data cannot place: ``contact_std_m`` inf, force kept), ``implausible_force`` (a force beyond what the actuator can
     carry, :func:`bendsense.plausibility.force_bound_n`: a unit or calibration mistake;
     force kept), ``no_force``, and ``implausible_shape`` (a tip angle beyond a full
     turn: a unit or calibration mistake).

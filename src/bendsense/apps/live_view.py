@@ -12,7 +12,9 @@ tested without a display:
   artists updated in place and redrawn with blitting (``copy_from_bbox`` /
   ``restore_region`` / ``draw_artist`` / ``blit``), so a frame costs a few artists, not
   a full figure draw. The status line shows the estimation rate, the backlog and the
-  counts of frames per status (extrapolated, not converged, misfit).
+  counts of frames per status (extrapolated, not converged, misfit). A contact load
+  (``--load contact --contact-s-m X``) draws the contact point on the shape with its ±2σ
+  arc along the body, the arrow from it, and s_c in the force text.
 
 :func:`run_live` ties them to a :class:`~bendsense.device.driver.Driver`: it takes every
 reading from the driver's queue, processes what arrived as one block (and publishes it on
@@ -89,6 +91,7 @@ class LiveView:
         self.max_points = int(max_points)
         self._history = []  # blocks of (t_s, fx, fy, sx, sy, p_kpa, tracked fx, fy, sx, sy), oldest first
         self.tracked = bool(getattr(processor, "track", False))
+        self.contact = getattr(processor, "options", {}).get("load") == "contact"
         self.scale_m_per_n = float(scale_m_per_n)
         self.text_interval_s = float(text_interval_s)
         self._text_regions = {}
@@ -131,7 +134,8 @@ class LiveView:
         ax.set_ylabel("y [mm]")
         ax.grid(True, alpha=0.3)
         ax.plot([0.0], [0.0], "ks", markersize=7, label="base")
-        ax.set_title("shape and tip force (base frame)", fontsize="medium")
+        ax.set_title("shape and contact force (base frame)" if self.contact else "shape and tip force (base frame)",
+                     fontsize="medium")
         (self.shape_line,) = ax.plot(
             [], [], "-", color="C0", linewidth=2.5, label="reconstructed shape (dashed: extrapolated)", animated=True
         )
@@ -140,7 +144,13 @@ class LiveView:
             (0, 0), (0, 0), arrowstyle="-|>", mutation_scale=18, color="C3", linewidth=2, animated=True
         )
         ax.add_patch(self.arrow)
-        ax.plot([], [], "-", color="C3", linewidth=2, label=f"tip force ({self.scale_m_per_n * MM:g} mm per N)")
+        what = "contact force" if self.contact else "tip force"
+        ax.plot([], [], "-", color="C3", linewidth=2, label=f"{what} ({self.scale_m_per_n * MM:g} mm per N)")
+        # the contact point and its ±2σ arc along the body (a contact load only; empty otherwise)
+        (self.contact_arc,) = ax.plot([], [], "-", color="C1", linewidth=7, alpha=0.35, solid_capstyle="butt",
+                                      animated=True)
+        (self.contact_marker,) = ax.plot([], [], "D", color="C1", markeredgecolor="k", markersize=7, animated=True,
+                                         label="contact ± 2σ along the body" if self.contact else None)
         ax.legend(loc="lower right", fontsize="small")
         self.force_text = ax.text(
             0.02,
@@ -183,7 +193,8 @@ class LiveView:
         self._build_series(grid[1, 1])
         self.status_text = fig.text(0.5, 0.975, "", ha="center", va="top", fontsize="medium", animated=True)
         self.texts = [self.force_text, self.status_text]
-        self.artists = [*self.texts, self.bars, self.shape_line, self.tip_marker, self.arrow, *self.series_artists]
+        self.artists = [*self.texts, self.bars, self.shape_line, self.contact_arc, self.tip_marker, self.contact_marker,
+                        self.arrow, *self.series_artists]
 
     def _build_series(self, cell) -> None:
         """Fx, Fy with their ±2σ bands and the pressure over the last ``window_s`` (now at 0)."""
@@ -331,12 +342,13 @@ class LiveView:
         self.shape_line.set_linestyle("--" if bool(np.any(shape.extrapolated)) else "-")
         tip = pos[-1]
         self.tip_marker.set_data([tip[0]], [tip[1]])
+        at, contact_text = self._set_contact(frame, tip)  # where the force acts
         force, std = frame.force_n, frame.std_n
         tracked = frame.track_force_n is not None and np.all(np.isfinite(frame.track_force_n))
         if np.all(np.isfinite(force)) or tracked:
             shown = frame.track_force_n if tracked else force  # the arrow: the tracked force
-            end = tip + shown * self.scale_m_per_n * MM
-            self.arrow.set_positions(tuple(tip), tuple(end))
+            end = at + shown * self.scale_m_per_n * MM
+            self.arrow.set_positions(tuple(at), tuple(end))
             self.arrow.set_visible(True)
             text = (
                 f"F  = ({force[0]:+.3f}, {force[1]:+.3f}) N\n"
@@ -355,6 +367,7 @@ class LiveView:
                 text = "F: pressure out of range"
             else:
                 text = "F: not converged"
+        text += contact_text
         p = frame.pressure_pa
         text += f"\nP  = {p * 1e-3:.1f} kPa" if math.isfinite(p) else "\nP  = —"
         self.force_text.set_text(text)
@@ -366,6 +379,26 @@ class LiveView:
             self.bars.set_facecolors(np.where(outside[:, None], _RED, _BLUE))
             self._bar_outside = outside
         self.status_text.set_text(status)
+
+    def _set_contact(self, frame: LiveFrame, tip):
+        """The contact point and its ±2σ arc of a contact load (mm); the point where the arrow starts, and a text."""
+        est = frame.estimate
+        s_c = float(np.asarray(est.contact_s_m)) if self.contact and est is not None else math.nan
+        if not math.isfinite(s_c):
+            self.contact_marker.set_data([], [])
+            self.contact_arc.set_data([], [])
+            return tip, ""
+        from bendsense.contact_output import arc_on_shape, point_on_shape
+
+        shape = frame.shape
+        sd = float(np.asarray(est.contact_std_m))
+        point = point_on_shape(shape.s_m, shape.positions_m, s_c) * MM
+        arc = arc_on_shape(shape.s_m, shape.positions_m, s_c - 2 * sd, s_c + 2 * sd) * MM
+        self.contact_marker.set_data([point[0]], [point[1]])
+        self.contact_marker.set_markerfacecolor("C1" if math.isfinite(sd) else "none")
+        self.contact_arc.set_data(arc[:, 0], arc[:, 1])
+        spread = "known" if sd == 0 else (f"± {sd * MM:.1f} mm" if math.isfinite(sd) else "unresolved")
+        return point, f"\ns_c = {s_c * MM:.1f} mm ({spread})"
 
     def update(self, frame: LiveFrame, status: str = "") -> None:
         """Show a frame: update the artists and blit them over the saved background.

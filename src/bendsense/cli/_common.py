@@ -23,6 +23,11 @@ __all__ = [
     "overwrite_option",
     "objective_option",
     "window_option",
+    "load_option",
+    "contact_option",
+    "live_contact_option",
+    "live_contact",
+    "check_load",
     "bandwidth_option",
     "live_bandwidth_option",
     "make_bandwidth_option",
@@ -180,7 +185,81 @@ objective_option = click.option(
 window_option = click.option(
     "--window-s", type=Finite(min=0, min_open=True), default=None,
     help="Window of the model check over frames [s] (a mean residual per window tested against its covariance; "
-         "p < 0.001 flags its frames model_misfit); default 0.05.")
+         "p < 0.001 flags its frames model_misfit), and of an unknown contact location (--load contact without "
+         "--contact-s-m: one s_c per window); default 0.05.")
+load_option = click.option(
+    "--load", type=click.Choice(("tip", "contact")), default="tip", show_default=True,
+    help="Load model: a force at the tip, or one point force at arc length s_c along the actuator (contact).")
+contact_option = click.option(
+    "--contact-s-m", type=Finite(min=0, min_open=True), default=None,
+    help="With --load contact: the known contact location, arc length s_c from the base [m] (0 < s_c <= L); "
+         "without it the location is estimated over windows of --window-s.")
+#: ``--contact-s-m`` of ``record --estimate`` and ``live``: frames arrive one by one, the location is given
+live_contact_option = click.option(
+    "--contact-s-m", type=Finite(min=0, min_open=True), default=None,
+    help="With --load contact (needed then): the known contact location, arc length s_c from the base [m] "
+         "(0 < s_c <= L).")
+
+
+def check_load(load: str, contact_s_m, config) -> None:
+    """``--load``/``--contact-s-m`` of ``estimate`` and ``process``: a location only with a contact, within L.
+
+    Parameters
+    ----------
+    load : str
+        ``--load``.
+    contact_s_m : float or None
+        ``--contact-s-m`` [m].
+    config : Config
+        The actuator's length bounds it.
+    """
+    from bendsense.errors import BendsenseError
+    from bendsense.load_models import check_contact_s_m
+
+    if contact_s_m is not None:
+        if load != "contact":
+            raise click.BadParameter("a contact location needs --load contact", param_hint="'--contact-s-m'")
+        try:
+            check_contact_s_m(contact_s_m, config, "--contact-s-m")
+        except BendsenseError as err:
+            raise click.BadParameter(str(err).removeprefix("--contact-s-m: "), param_hint="'--contact-s-m'") from None
+
+
+def live_contact(load: str, contact_s_m, config) -> dict:
+    """The load options of ``record --estimate`` and ``live``: a known location only (frames arrive one by one).
+
+    Parameters
+    ----------
+    load : str
+        ``--load``.
+    contact_s_m : float or None
+        ``--contact-s-m`` [m].
+    config : Config
+        The actuator's length bounds it.
+
+    Returns
+    -------
+    dict
+        ``{}`` for a tip load, else ``{"load": "contact", "contact_s_m": s_c}`` (the
+        options of :class:`~bendsense.pipeline.LiveProcessor`).
+    """
+    from bendsense.errors import ArgumentError
+    from bendsense.load_models import check_contact_s_m
+
+    if load == "tip":
+        if contact_s_m is not None:
+            raise click.BadParameter("a contact location needs --load contact", param_hint="'--contact-s-m'")
+        return {}
+    if contact_s_m is None:
+        raise click.BadParameter("--load contact as frames arrive needs the known location --contact-s-m (a location "
+                                 "estimated over windows is offline: 'estimate --load contact')",
+                                 param_hint="'--contact-s-m'")
+    try:
+        return {"load": "contact", "contact_s_m": check_contact_s_m(contact_s_m, config, "--contact-s-m")}
+    except ArgumentError as err:
+        raise click.BadParameter(str(err).removeprefix("--contact-s-m: "), param_hint="'--contact-s-m'") from None
+
+
 def make_bandwidth_option(default_text: str):
     """``--bandwidth-hz`` of the tracked force, with its default told in ``default_text``."""
     return click.option("--bandwidth-hz", type=Finite(min=0, min_open=True), default=None,

@@ -22,7 +22,10 @@ from bendsense.cli._common import (
     PressureKpa,
     bandwidth_option,
     check_figure_suffix,
+    check_load,
     config_option,
+    contact_option,
+    load_option,
     log_no_parameter_covariance,
     objective_option,
     overwrite_option,
@@ -76,11 +79,14 @@ def _dask_executor(address: str):
               help="Track each session's force over time, as the chain's 'track' step: 'smooth' (offline, RTS "
                    "smoother) or 'filter' (causal, Kalman filter); default: no track.")
 @bandwidth_option
+@load_option
+@contact_option
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
 @overwrite_option
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, objective,
-            pressure_kpa, no_estimate, window_s, track_mode, bandwidth_hz, recursive, overwrite, no_progress):
+            pressure_kpa, no_estimate, window_s, track_mode, bandwidth_hz, load, contact_s_m, recursive, overwrite,
+            no_progress):
     """Process many sessions in parallel: reconstruct, estimate and save each one.
 
     Every SESSION_OR_DIR is a session CSV, a native session directory, or a
@@ -114,6 +120,12 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
             raise click.UsageError("--track and --bandwidth-hz need the force estimate: not with --no-estimate")
         if bandwidth_hz is not None and not track_mode:
             raise click.UsageError("--bandwidth-hz is the bandwidth of the track: give --track smooth|filter")
+        if no_estimate and (load != "tip" or contact_s_m is not None):
+            raise click.UsageError("--load and --contact-s-m are options of the force estimate: not with --no-estimate")
+        if contact_s_m is not None:  # a location beyond the actuator is refused here, not once per session
+            from bendsense.config import load_config
+
+            check_load(load, contact_s_m, load_config(config_path))
         if not no_estimate and config_path is not None:  # the workers' warnings are silenced: say it here, once
             from bendsense.config import load_config
             from bendsense.errors import BendsenseError
@@ -144,6 +156,8 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
                 track=track_mode,
                 bandwidth_hz=bandwidth_hz,
                 window_s=0.05 if window_s is None else window_s,
+                load=load,
+                contact_s_m=contact_s_m,
             )
         except KeyboardInterrupt:
             if client is not None:  # its connections close under the cluster's feet: no tracebacks of theirs
@@ -224,7 +238,9 @@ def plot(target, figure_path, shapes, dpi, overwrite):
                 "'plot FIG' needs 'reconstruct' earlier in the chain; "
                 "to plot a results directory use 'plot RESULTS_DIR -o FIG.png'"
             )
-        plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite, estimated=estimated)
+        config = state.get("config")
+        plot_results(source, out, max_shapes=shapes, dpi=dpi, overwrite=overwrite, estimated=estimated,
+                     length_m=None if config is None else config.actuator.length_m)
         say(f"wrote {out}")
         return state
 

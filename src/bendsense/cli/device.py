@@ -22,6 +22,9 @@ from bendsense.cli._common import (
     InterspersedCommand,
     PressureKpa,
     live_bandwidth_option,
+    live_contact,
+    live_contact_option,
+    load_option,
     log_no_parameter_covariance,
     make_config_option,
     make_overwrite_option,
@@ -54,7 +57,8 @@ def _status_line(stats, est=None) -> str:
     return line
 
 
-def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True, bandwidth_hz=None):
+def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True, bandwidth_hz=None,
+                   load=None):
     """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``, its kernels ready.
 
     The kernels compile (first run after an install) or load here, before a port opens
@@ -75,6 +79,9 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         False reconstructs shapes only.
     bandwidth_hz : float or None
         Bandwidth of the track [Hz]; None: the tracker's default.
+    load : dict, optional
+        The load options (:func:`~bendsense.cli._common.live_contact`): a contact at a
+        known location; None or empty: the tip.
     """
     from bendsense.calibration import Calibration
     from bendsense.pipeline import LiveProcessor
@@ -87,6 +94,7 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         pressure_pa=None if pressure_kpa is None else pressure_kpa * 1e3,
         estimate=estimate,
         bandwidth_hz=bandwidth_hz,
+        **(load or {}),
     )
     import warnings
 
@@ -134,10 +142,13 @@ def make_outlets(processor, driver, port):
 
     rate = 0.0 if driver.hello is None else float(driver.hello.rate_hz)
     meta = {"constraint": processor.constraint, "method": processor.method, "objective": processor.objective}
+    contact = processor.options.get("load") == "contact"
+    if contact:
+        meta.update(load="contact", contact_s_m=f"{processor.options['contact_s_m']:g} (known)")
     if processor.tracker is not None:
         meta["track"] = f"filter, bandwidth {processor.tracker.bandwidth_hz:g} Hz"
     return LslOutlets(processor.config.sensor.n_segments, rate, source_id=f"bendsense {port}", meta=meta,
-                      tracked=processor.track)
+                      tracked=processor.track, contact=contact)
 
 
 @contextlib.contextmanager
@@ -185,6 +196,8 @@ def _sigterm_as_interrupt():
 @objective_option
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
 @live_bandwidth_option
+@load_option
+@live_contact_option
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",
@@ -213,6 +226,8 @@ def record(
     objective,
     pressure_kpa,
     bandwidth_hz,
+    load,
+    contact_s_m,
     lsl,
     lsl_wait,
     quiet_status,
@@ -232,7 +247,8 @@ def record(
     SESSION/results.csv (the columns of 'estimate track --filter save'; synced at least
     every 0.5 s, so a killed recording keeps its results up to the last second). The
     force is tracked causally (a Kalman filter, --bandwidth-hz), frame by frame as in
-    'track --filter'. The status line adds
+    'track --filter'. --load contact --contact-s-m X estimates the force of a contact
+    at the known arc length X (results.csv adds contact_s_m, contact_std_m). The status line adds
     the estimation rate and backlog. --lsl publishes the shapes and forces on Lab
     Streaming Layer (waiting up to --lsl-wait seconds for a consumer before the board
     starts, so that LabRecorder gets every frame).
@@ -248,6 +264,9 @@ def record(
         raise click.BadParameter(
             f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml", param_hint="--calibration"
         )
+    if (load != "tip" or contact_s_m is not None) and not (estimate or lsl):
+        raise click.BadParameter("a load model needs --estimate (or --lsl)",
+                                 param_hint="'--load'" if load != "tip" else "'--contact-s-m'")
     results_path = output / "results.csv"
     cols = [c.strip() for c in columns.split(",")] if columns else None
     show = not quiet_status and not quiet()
@@ -269,8 +288,9 @@ def record(
                 from bendsense.errors import require_extra
 
                 require_extra("pylsl", "lsl", "--lsl")
-            processor = make_processor(config or load_config(), calibration_path, constraint, objective, pressure_kpa,
-                                       bandwidth_hz=bandwidth_hz)
+            est_config = config or load_config()
+            processor = make_processor(est_config, calibration_path, constraint, objective, pressure_kpa,
+                                       bandwidth_hz=bandwidth_hz, load=live_contact(load, contact_s_m, est_config))
         driver = Driver(
             port,
             baudrate=baud or DEFAULT_BAUDRATE,

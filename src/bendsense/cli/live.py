@@ -17,6 +17,9 @@ from bendsense.cli._common import (
     check_figure_suffix,
     config_option,
     live_bandwidth_option,
+    live_contact,
+    live_contact_option,
+    load_option,
     objective_option,
     overwrite_option,
     quiet,
@@ -54,6 +57,8 @@ _NO_CALIBRATION = (
 )
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
 @live_bandwidth_option
+@load_option
+@live_contact_option
 @click.option(
     "--scale",
     "scale_mm_per_n",
@@ -91,6 +96,8 @@ def live(
     seconds,
     pressure_kpa,
     bandwidth_hz,
+    load,
+    contact_s_m,
     scale_mm_per_n,
     max_fps,
     baud,
@@ -109,6 +116,8 @@ def live(
     the estimation rate and the counts of extrapolated, not converged and misfit frames.
     --lsl publishes every frame on Lab Streaming Layer. At the end, the achieved frame
     rate and the end-to-end latency per frame (bytes read to artists drawn) are printed.
+    --load contact --contact-s-m X estimates the force of a contact at the known arc
+    length X, drawn there on the shape.
     Ctrl-C or SIGTERM stops it with one line and exit status 130 or 143 (no --save image
     then).
     """
@@ -137,7 +146,8 @@ def live(
 
         require_extra("pylsl", "lsl", "--lsl")
     config = load_config(config_path)
-    processor = make_processor(config, calibration_path, constraint, objective, pressure_kpa, bandwidth_hz=bandwidth_hz)
+    processor = make_processor(config, calibration_path, constraint, objective, pressure_kpa, bandwidth_hz=bandwidth_hz,
+                               load=live_contact(load, contact_s_m, config))
     if save_path is not None:
         view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:

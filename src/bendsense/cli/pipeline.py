@@ -24,7 +24,10 @@ from bendsense.cli._common import (
     InterspersedCommand,
     PressureKpa,
     bandwidth_option,
+    check_load,
     config_option,
+    contact_option,
+    load_option,
     log_no_parameter_covariance,
     objective_option,
     overwrite_option,
@@ -228,12 +231,20 @@ def reconstruct(points):
 @click.option("--tip-angle-source", type=click.Choice(ANGLE_SOURCES),
               help="Tip angle of the normal/follower constraints (default: from the config).")
 @window_option
-def estimate(constraint, method, objective, push_only, tip_angle_source, window_s):
+@load_option
+@contact_option
+def estimate(constraint, method, objective, push_only, tip_angle_source, window_s, load, contact_s_m):
     """Estimate the tip force of every frame from its shape and pressure.
 
     The frames are then checked in windows of --window-s (default 50 ms): a window
     whose mean residual its covariance does not explain (p < 0.001) makes its frames
     'model_misfit' (force kept; column window_p_value of results.csv).
+
+    --load contact: one point force at arc length s_c along the actuator. With
+    --contact-s-m X the force of every frame at the known location X; without it the
+    location is estimated, one per quasi-static window of --window-s, with its σ
+    (bendsense.estimate_contact; 'contact_unresolved' where the data cannot place it).
+    results.csv adds contact_s_m and contact_std_m after fy_std_n.
     """
 
     def step(state):
@@ -246,6 +257,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         shape = _require(state, "shape", "estimate", "'reconstruct'")
         session = state["session"]
         config = state["config"]
+        check_load(load, contact_s_m, config)
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
         window = DEFAULT_WINDOW_S if window_s is None else window_s
@@ -253,7 +265,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
             warnings.simplefilter("ignore", NoParameterCovarianceWarning)
             processed = process(session, config, state["calibration"], shape=shape, constraint=constraint,
                                 method=method, objective=objective, push_only=push_only,
-                                tip_angle_source=tip_angle_source,
+                                tip_angle_source=tip_angle_source, load=load, contact_s_m=contact_s_m,
                                 calibration_source=str(state.get("calibration_path") or ""), window_s=window)
         if processed.estimate.uncertainty != "none":
             log_no_parameter_covariance(config)
@@ -276,12 +288,17 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
             log.warning("%d of %d frames: the shape does not determine the load along one direction (status "
                         "'not_identifiable', σ inf along it; e.g. an axial load on a nearly straight actuator)",
                         counts.not_identifiable, len(session))
+        if counts.contact_unresolved:
+            log.warning("%d of %d frames: the data cannot place the contact (status 'contact_unresolved', "
+                        "contact_std_m inf, force kept)", counts.contact_unresolved, len(session))
         state.update(estimate=processed.estimate, window_s=window, track=None)
         return state
 
     def precheck(state):
         import numpy as np
 
+        if state.get("config") is not None:  # a bad location stops the chain before any work
+            check_load(load, contact_s_m, state["config"])
         session = state.get("session")
         if session is not None and not session.has_pressure:
             missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))

@@ -6,7 +6,9 @@
   frame has no estimate), then, when the processor tracks the force (the default of
   ``record --estimate`` and ``live``), the causally tracked force ``fx_track_n,
   fy_track_n, fx_track_std_n, fy_track_std_n`` [N] (:class:`bendsense.Tracker`: a
-  Kalman filter, so each sample's tracked value uses that frame and the frames before);
+  Kalman filter, so each sample's tracked value uses that frame and the frames before),
+  then, for a contact load (``record --estimate --load contact --contact-s-m X``), the
+  contact's arc length and its standard deviation ``contact_s_m, contact_std_m`` [m];
 - ``bendsense-shape``, type ``Shape``: ``kappa1 … kappaN`` [1/m], ``tip_x_m``, ``tip_y_m``
   [m], ``tip_angle_rad`` [rad].
 
@@ -26,11 +28,13 @@ import numpy as np
 
 from bendsense.errors import require_extra
 
-__all__ = ["LslOutlets", "FORCE_CHANNELS", "TRACK_CHANNELS", "shape_channels"]
+__all__ = ["LslOutlets", "FORCE_CHANNELS", "TRACK_CHANNELS", "CONTACT_CHANNELS", "shape_channels"]
 
 FORCE_CHANNELS = (("fx_n", "N"), ("fy_n", "N"), ("fx_std_n", "N"), ("fy_std_n", "N"))
 #: the tracked force after the per-frame one (the columns of results.csv of the same names)
 TRACK_CHANNELS = (("fx_track_n", "N"), ("fy_track_n", "N"), ("fx_track_std_n", "N"), ("fy_track_std_n", "N"))
+#: a contact load's location after the force channels (the columns of results.csv of the same names)
+CONTACT_CHANNELS = (("contact_s_m", "m"), ("contact_std_m", "m"))
 
 
 def shape_channels(n_segments: int) -> list:
@@ -76,6 +80,9 @@ class LslOutlets:
     tracked : bool, default False
         The force stream also carries the tracked force (:data:`TRACK_CHANNELS`, after
         :data:`FORCE_CHANNELS`); the blocks pushed then have a ``track``.
+    contact : bool, default False
+        The force stream also carries the contact location (:data:`CONTACT_CHANNELS`,
+        after the others): the processor estimates a contact load.
 
     Raises
     ------
@@ -84,12 +91,12 @@ class LslOutlets:
     """
 
     def __init__(self, n_segments: int, rate_hz: float, source_id: str = "bendsense", meta: dict | None = None,
-                 tracked: bool = False):
+                 tracked: bool = False, contact: bool = False):
         pylsl = require_extra("pylsl", "lsl", "--lsl")
         meta = {"frame": "bendsense_base (+y along the actuator at its base, +x toward the centre of curvature)",
                 **(meta or {})}
-        self.tracked = bool(tracked)
-        channels = FORCE_CHANNELS + (TRACK_CHANNELS if self.tracked else ())
+        self.tracked, self.contact = bool(tracked), bool(contact)
+        channels = FORCE_CHANNELS + (TRACK_CHANNELS if self.tracked else ()) + (CONTACT_CHANNELS if contact else ())
         self.force = pylsl.StreamOutlet(_info(pylsl, "bendsense-force", "Force", channels, rate_hz,
                                               f"{source_id}-force", meta))
         self.shape = pylsl.StreamOutlet(_info(pylsl, "bendsense-shape", "Shape", shape_channels(n_segments),
@@ -112,6 +119,11 @@ class LslOutlets:
         stamps = (np.asarray(block.host_ns, dtype=float) * 1e-9 + self._offset_s).tolist()
         force = np.column_stack([block.force_n, block.std_n, *((block.track_force_n, block.track_std_n)
                                                                 if self.tracked else ())])
+        if self.contact:  # NaN where a frame has no estimate
+            from bendsense.contact_output import contact_columns
+
+            where = contact_columns(n, block.estimate) or {name: np.full(n, np.nan) for name, _ in CONTACT_CHANNELS}
+            force = np.column_stack([force, *(where[name] for name, _ in CONTACT_CHANNELS)])
         shape = block.shape
         kappa = np.asarray(shape.curvature_per_m, dtype=float).reshape(n, -1)
         tip = np.asarray(shape.tip_position_m, dtype=float).reshape(n, 2)

@@ -21,8 +21,15 @@ topic                            type                                    content
                                                                          (``not converged``); message = the status of
                                                                          ``results.csv``; values ``fx_std_n``,
                                                                          ``fy_std_n``, ``residual_m``, ``status``, and
+                                                                         ``contact_s_m``, ``contact_std_m``,
                                                                          ``track_status``, ``window_p_value`` where
                                                                          results.csv has them
+``/bendsense/contact``           ``geometry_msgs/msg/PointStamped``      a contact load's point (``load="contact"``):
+                                                                         the reconstructed shape's point at
+                                                                         ``contact_s_m``, ``(x, y, 0)`` [m]; a frame
+                                                                         whose contact is not resolved
+                                                                         (``contact_std_m`` inf, or no location) is
+                                                                         not written
 ``/bendsense/shape``             ``nav_msgs/msg/Path``                   the reconstructed shape: one pose per
                                                                          arc-length sample, position ``(x, y, 0)`` [m],
                                                                          orientation the tangent (a rotation about
@@ -32,7 +39,9 @@ topic                            type                                    content
 ================================ ======================================= ==============================================
 
 The force topics are written when the results hold a force estimate, the tracked ones
-when they hold a track (a ``track`` step earlier in the chain). Time stamps (the
+when they hold a track (a ``track`` step earlier in the chain), the contact point when the
+estimate is of a contact load (``estimate --load contact``; its schema is registered only
+then). Time stamps (the
 header stamp and the MCAP log time) are the session's: ``meta["start_time_utc"]`` of a
 recorded session plus the frame's time ``t_s`` from the first frame; a session CSV without
 that key is stamped with ``t_s`` itself (seconds after 1970-01-01, which viewers show as
@@ -51,7 +60,7 @@ import numpy as np
 
 from bendsense import output
 from bendsense.errors import SessionError, require_extra
-from bendsense.results import EXTRAPOLATED, MODEL_MISFIT, NOT_CONVERGED, NOT_IDENTIFIABLE, OK
+from bendsense.results import CONTACT_UNRESOLVED, EXTRAPOLATED, MODEL_MISFIT, NOT_CONVERGED, NOT_IDENTIFIABLE, OK
 
 __all__ = ["write_mcap", "require_ros", "FRAME_ID", "TOPICS"]
 
@@ -63,6 +72,7 @@ TOPICS = {
     "wrench_tracked": "/bendsense/wrench_tracked",
     "force_tracked_std": "/bendsense/force_tracked_std",
     "status": "/bendsense/status",
+    "contact": "/bendsense/contact",
     "shape": "/bendsense/shape",
     "pressure": "/bendsense/pressure",
 }
@@ -71,6 +81,8 @@ _SEP = "=" * 80 + "\n"
 _TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
 _HEADER = "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
 _VECTOR3 = "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+_POINT = "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n"
+POINT_STAMPED = "geometry_msgs/msg/PointStamped"  # the contact point: registered only for a contact load
 
 
 def _definition(fields: str, *dependencies: str) -> str:
@@ -103,14 +115,16 @@ SCHEMAS = {
         _TIME,
         "MSG: geometry_msgs/PoseStamped\nstd_msgs/Header header\ngeometry_msgs/Pose pose\n",
         "MSG: geometry_msgs/Pose\ngeometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",
-        "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n",
+        _POINT,
         "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
     ),
     "sensor_msgs/msg/FluidPressure": _definition(
         "std_msgs/Header header\nfloat64 fluid_pressure\nfloat64 variance\n", _HEADER, _TIME
     ),
+    POINT_STAMPED: _definition("std_msgs/Header header\ngeometry_msgs/Point point\n", _HEADER, _TIME, _POINT),
 }
-_LEVEL = {OK: 0, EXTRAPOLATED: 1, MODEL_MISFIT: 1, NOT_IDENTIFIABLE: 1, NOT_CONVERGED: 2}  # diagnostic levels
+_LEVEL = {OK: 0, EXTRAPOLATED: 1, MODEL_MISFIT: 1, NOT_IDENTIFIABLE: 1, CONTACT_UNRESOLVED: 1,
+          NOT_CONVERGED: 2}  # diagnostic levels
 
 
 def require_ros():
@@ -202,7 +216,8 @@ def write_mcap(path, session, shape, estimate=None, *, track=None, overwrite: bo
     shape : Shape
         Reconstructed shapes, batch axis over the session's frames.
     estimate : ForceEstimate, optional
-        Force estimates of the same frames; without it no force topics are written.
+        Force estimates of the same frames; without it no force topics are written. Of a
+        contact load: the contact point on ``/bendsense/contact`` too.
     track : Track, optional
         Tracked forces of the same frames (:func:`bendsense.track`); without it no
         tracked topics are written.
@@ -220,6 +235,7 @@ def write_mcap(path, session, shape, estimate=None, *, track=None, overwrite: bo
         If ``mcap`` or ``mcap-ros2-support`` is not installed (extra ``ros``).
     """
     writer_mod = require_ros()
+    from bendsense.contact_output import point_on_shape, resolved
     from bendsense.results import Results
 
     path = Path(path)
@@ -227,13 +243,18 @@ def write_mcap(path, session, shape, estimate=None, *, track=None, overwrite: bo
     cols = results.columns
     stamps = frame_stamps_ns(session)
     positions = results.positions_m
+    contact = None
+    if results.has_contact:  # the point at s_c on the drawn shape; a frame without a resolved location: none
+        contact = point_on_shape(results.s_m, positions, cols["contact_s_m"])
+        contact[~resolved(cols["contact_s_m"], cols["contact_std_m"])] = np.nan
     device = session.meta.get("device")
     hardware_id = str(device.get("firmware", "")) if isinstance(device, dict) else ""
     with output.write_file(path, overwrite=overwrite, suffixes=MCAP, writer="bendsense mcap") as tmp, \
             open(tmp, "wb") as fh:
         writer = writer_mod.Writer(fh)
         writer._writer.add_metadata("bendsense", {"written_by": "bendsense mcap"})  # the mark (output.MARK)
-        schemas = {name: writer.register_msgdef(name, text) for name, text in SCHEMAS.items()}
+        schemas = {name: writer.register_msgdef(name, text) for name, text in SCHEMAS.items()
+                   if name != POINT_STAMPED or contact is not None}
         for k, stamp in enumerate(stamps.tolist()):
             header = _header(stamp)
 
@@ -257,6 +278,10 @@ def write_mcap(path, session, shape, estimate=None, *, track=None, overwrite: bo
             values = {"status": status}
             if results.has_forces:
                 values.update({name: repr(float(cols[name][k])) for name in ("fx_std_n", "fy_std_n", "residual_m")})
+            if contact is not None:
+                values.update({name: repr(float(cols[name][k])) for name in ("contact_s_m", "contact_std_m")})
+                if np.isfinite(contact[k]).all():
+                    write("contact", POINT_STAMPED, {"header": header, "point": _vec(*contact[k])})
             if results.has_track:
                 values["track_status"] = str(cols["track_status"][k])
             if "window_p_value" in cols:
