@@ -187,7 +187,6 @@ def test_sigma_of_the_location_against_the_cramer_rao_bound(seed):
     """σ(s_c)'s sensor-noise part is the Cramér–Rao bound of the hidden sensor's noise for one frame, and above it
     over a window of 100; the whole σ never falls below the bound and keeps the calibration's floor."""
     sensor, cal = ce.calibration(CFG, seed, 1.5)
-    rng = np.random.default_rng(10 + seed)
     P, sc = 70e3, 0.85 * L
     F = _normal_force(P, sc, 0.25)
     truth = forward(CFG, P, F, contact_s_m=sc)

@@ -135,8 +135,11 @@ def series(config, seed, n_holds, use_cache=True, **ranges):
 
 
 def estimate(truth, config, est_config, seed, noise_counts=NOISE_COUNTS):
-    """The series through the hidden sensor ``seed``, reconstructed and ``estimate_contact``-ed; its wall time; and the
-    estimate at the true location (``estimate_force(load="contact", contact_s_m=truth)``) for reference."""
+    """The series through the hidden sensor ``seed``, reconstructed and ``estimate_contact``-ed.
+
+    Also its wall time and, for reference, the estimate at the true location
+    (``estimate_force(load="contact", contact_s_m=truth)``).
+    """
     sensor, cal = calibration(config, seed, noise_counts)
     rng = np.random.default_rng([seed, int(noise_counts * 100), 23])
     signals = sensor.signals(config.sensor.strip_gap_m * truth.angles_rad, rng)

@@ -177,7 +177,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         the tip (the paper), or at the arc length ``contact_s_m`` along the body, beyond
         which the actuator bends under its weight only. The constraints then apply at
         s_c: ``normal`` is F · t(s_c) = 0, ``follower`` at its angle to t(s_c), t from
-        the free shape or the reconstructed one as ``tip_angle_source`` says.
+        the free shape or the reconstructed one as ``tip_angle_source`` says (default for
+        a contact and a PCC shape: ``"shape"``, the loaded tangent; the free shape's
+        tangent at s_c is off by the load's own bending, tens of mN at 0.75 L).
     contact_s_m : float or array_like, shape (...), optional
         The known contact point 0 < s_c ≤ L [m] of ``load="contact"`` (a jig, a known
         object); broadcasts against the frames (an array of locations for one shape
@@ -248,6 +250,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                             f"{type(calibration).__name__}")
     ref = reference(shape, config, s_m, n_points, L)
     contact = _AT_TIP if contact_s_m is None else _beam._contact_sigma(contact_s_m, L)  # σ_c, 1 at the tip
+    if load == "contact" and tip_angle_source is None and ref.kappa is not None:
+        tip_angle_source = "shape"  # the loaded tangent at s_c; the free shape's is off by the load's own bending
     if contact_s_m is not None and ref.kappa is None and (tip_angle_source or est.tip_angle_source) == "shape" \
             and constraint in ("normal", "follower"):
         raise ArgumentError("tip_angle_source: 'shape' at a contact needs a PCC shape (curvatures or a Shape), "

@@ -51,7 +51,7 @@ import numpy as np
 
 from bendsense import _jit
 from bendsense.errors import ArgumentError
-from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
+from bendsense.estimation.result import OK_MESSAGE
 from bendsense.tracking import windows as _win
 from bendsense.validation import float_array, short
 
@@ -217,9 +217,9 @@ def locate(estimate_force, kappa, P, bounds, config, options, threshold):
     rows = np.repeat(np.arange(W), G)
     e0, (T, er, ee, parts) = fit(rows, np.tile(grid, W))
     if e0.uncertainty == "none" or e0.residual_rad is None:
-        raise ArgumentError("noise_std: estimate_contact weighs the location by the noise model (a calibration with its "
-                            "flat-recording noise, or noise_std > 0) and fits the coil angles (objective='angles'); "
-                            "got none")
+        raise ArgumentError("noise_std: estimate_contact weighs the location by the noise model (a calibration with "
+                            "its flat-recording noise, or noise_std > 0) and fits the coil angles "
+                            "(objective='angles'); got none")
     T, er, ee, parts = (a.reshape(W, G, *a.shape[1:]) for a in (T, er, ee, parts))
     Tg = np.where(np.isfinite(T), T, np.inf)
     best = np.argmin(Tg, axis=1)
@@ -269,8 +269,10 @@ def _means(kappa, P, bounds):
 
 
 def _metric(est, n):
-    """T, aᵀΩr̄, aᵀΩa, the parts (K, 3) and X (K, 2, 5) of an estimate of K windows' means over ``n`` (K,) frames
-    each (:func:`~bendsense.tracking.windows.window_metric`)."""
+    """T, aᵀΩr̄, aᵀΩa, the parts (K, 3) and X (K, 2, 5) of an estimate of K windows' means.
+
+    Each mean is over ``n`` (K,) frames (:func:`~bendsense.tracking.windows.window_metric`).
+    """
     K = n.size
     out = (np.empty(K), np.empty(K), np.empty(K), np.empty((K, 3)), np.empty((K, 2, 5)))
     if est.residual_rad is None or est.shift_errors is None or est.uncertainty != "propagated":
@@ -284,8 +286,9 @@ def _metric(est, n):
 
 
 def _force_slope(fit, metric, rows, s, lo, hi):
-    """∂F/∂s_c (K, 2) at the means of ``rows`` by a central difference (one-sided at the ends of [lo, hi]), and
-    the covariance parts (K, 3, 2) of the frames' force (at a known location) with ŝ.
+    """∂F/∂s_c (K, 2) at the means of ``rows``, and the covariance parts (K, 3, 2) of the frames' force with ŝ.
+
+    ∂F/∂s_c by a central difference (one-sided at the ends of [lo, hi]); the force is at a known location.
 
     The cross term ``Cov(δF, δŝ)_p = D (ĀᵀWĀ)⁺ ĀᵀW C_p Ω a / aᵀΩa`` (X of
     :func:`~bendsense.tracking.windows.window_metric`) for a 2-D force (D = I); a 1-D

@@ -254,9 +254,12 @@ def back_substitute(Ly, b):
 
 @njit(cache=True)
 def window_metrics(resid, jac, mfac, shifts, extra, n, err, coils, gap, t_out, er_out, ee_out, parts_out, x_out):
-    """:func:`window_metric` of rows of means: ``resid`` (K, R), ``jac``/``mfac`` (K, R, 2), ``shifts`` (K, N),
+    """:func:`window_metric` of K rows of means.
+
+    ``resid`` (K, R), ``jac``/``mfac`` (K, R, 2), ``shifts`` (K, N),
     ``extra`` (K, R) one further direction per row, ``n`` (K,) the frames each mean is over; into the outputs
-    (K,), (K, 3) and (K, 2, 5). ``err`` the shift error model as a plain tuple."""
+    (K,), (K, 3) and (K, 2, 5). ``err`` the shift error model as a plain tuple.
+    """
     model = ShiftErrorModel(*err)
     for k in range(resid.shape[0]):
         if n[k] < 1:
