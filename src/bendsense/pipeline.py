@@ -304,20 +304,26 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     if track is not None and not estimate:
         raise ArgumentError("track: needs the force estimate (estimate=True)")
     if estimate:
-        from bendsense.load_models import estimate_load
-
-        constraint, method, objective = estimation_options(config, constraint, method, objective)
         t0 = time.perf_counter()
-        est = estimate_load(shape, session.pressure_pa, config, load=load, contact_s_m=contact_s_m, t_s=session.t_s,
-                            window_s=window_s, constraint=constraint, method=method, objective=objective,
-                            push_only=push_only, tip_angle_source=tip_angle_source,
-                            calibration=calibration, **options)  # its noise model gives std_n
+        est = _estimate(session, shape, config, calibration, window_s, dict(
+            options, constraint=constraint, method=method, objective=objective, push_only=push_only,
+            tip_angle_source=tip_angle_source, load=load, contact_s_m=contact_s_m))
         est, tracked = _over_time(est, session, window_s, track, bandwidth_hz)
         estimate_s = time.perf_counter() - t0
     results = Results.from_state(session, shape, est, tracked)
     return Processed(**{f.name: getattr(results, f.name) for f in dataclasses.fields(Results)}, session=session,
                      shape=shape, estimate=est, track=tracked, config=config, reconstruct_s=reconstruct_s,
                      estimate_s=estimate_s)
+
+
+def _estimate(session, shape, config, calibration, window_s, options):
+    """The force estimate of the session's frames under the load model of ``options`` (its noise model gives std_n)."""
+    from bendsense.load_models import estimate_load
+
+    options["constraint"], options["method"], options["objective"] = estimation_options(
+        config, options["constraint"], options["method"], options["objective"])
+    return estimate_load(shape, session.pressure_pa, config, t_s=session.t_s, window_s=window_s,
+                         calibration=calibration, **options)
 
 
 def _shapes(session, config, calibration, points, shape):

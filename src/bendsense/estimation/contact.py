@@ -30,8 +30,9 @@ window's mean:
    is taken for a contact with probability 1 % under the model);
 6. every frame of a contact window is estimated at ŝ; its force covariance gains
    ``g gᵀ σ(s_c)²`` (each part its own), ``g = ∂F/∂s_c`` by central differences at the
-   window's mean. The covariance between the frame's own error and ŝ's is neglected
-   (tools/contact_eval.py measures the coverage this gives).
+   window's mean, and the covariance between the frame's own error and ŝ's (for a 2-D
+   force; a 1-D constraint's is left out, :func:`_force_slope`); tools/contact_eval.py
+   measures the coverage this gives.
 
 A location the data cannot resolve — ``σ(s_c)`` beyond the length of the segment it
 lies in, the force within ``TANGENT_DEG`` of the tangent at ŝ (the reconstructed
