@@ -225,12 +225,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
             raise ArgumentError(f"{name}: must be one of {', '.join(allowed)}, got {short(value)}")
     if method == "paper" and objective not in (None, "positions"):
         raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
-    if not isinstance(load, str) or load not in LOADS:
-        raise ArgumentError(f"load: must be one of {', '.join(LOADS)}, got {short(load)}")
-    if load == "tip" and contact_s_m is not None:
-        raise ArgumentError("contact_s_m: only with load='contact' (a tip load acts at the tip)")
-    if load == "contact" and method == "paper":
-        raise ArgumentError("load: method='paper' estimates the paper's tip load, got load='contact'")
+    _check_load(load, contact_s_m, method)
     if load == "contact" and contact_s_m is None:  # the location estimated, each frame its own window
         return _contact().estimate_frames(estimate_force, shape, pressure_pa, config,
                                           {k: v for k, v in locals().items() if k in _FRAME_OPTIONS})
@@ -308,6 +303,16 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
     return _result(out, batch, text, time.perf_counter() - t_start, method, constraint, uncertainty, objective,
                    pb, plain_err, load, contact_s_m)
+
+
+def _check_load(load, contact_s_m, method):
+    """The load model's arguments of :func:`estimate_force`, or an ArgumentError naming the wrong one."""
+    if not isinstance(load, str) or load not in LOADS:
+        raise ArgumentError(f"load: must be one of {', '.join(LOADS)}, got {short(load)}")
+    if load == "tip" and contact_s_m is not None:
+        raise ArgumentError("contact_s_m: only with load='contact' (a tip load acts at the tip)")
+    if load == "contact" and method == "paper":
+        raise ArgumentError("load: method='paper' estimates the paper's tip load, got load='contact'")
 
 
 def estimate_contact(shape, pressure_pa, config=None, *, calibration=None, t_s=None, window_s: float = 0.05,
