@@ -243,21 +243,12 @@ def live_contact(load: str, contact_s_m, config) -> dict:
         ``{}`` for a tip load, else ``{"load": "contact", "contact_s_m": s_c}`` (the
         options of :class:`~bendsense.pipeline.LiveProcessor`).
     """
-    from bendsense.errors import ArgumentError
-    from bendsense.load_models import check_contact_s_m
-
-    if load == "tip":
-        if contact_s_m is not None:
-            raise click.BadParameter("a contact location needs --load contact", param_hint="'--contact-s-m'")
-        return {}
-    if contact_s_m is None:
+    if load == "contact" and contact_s_m is None:
         raise click.BadParameter("--load contact as frames arrive needs the known location --contact-s-m (a location "
                                  "estimated over windows is offline: 'estimate --load contact')",
                                  param_hint="'--contact-s-m'")
-    try:
-        return {"load": "contact", "contact_s_m": check_contact_s_m(contact_s_m, config, "--contact-s-m")}
-    except ArgumentError as err:
-        raise click.BadParameter(str(err).removeprefix("--contact-s-m: "), param_hint="'--contact-s-m'") from None
+    check_load(load, contact_s_m, config)
+    return {} if load == "tip" else {"load": "contact", "contact_s_m": float(contact_s_m)}
 
 
 def make_bandwidth_option(default_text: str):
