@@ -302,10 +302,9 @@ def _force_slope(fit, metric, rows, s, lo, hi):
     e, _ = fit(np.concatenate([rows, rows, rows]), np.concatenate([a, b, s]))
     F = e.force_n.reshape(3, K, 2)
     g = (F[1] - F[0]) / (b - a)[:, None]
-    X = metric(e)[4][2 * K:]
+    _, _, ee, _, X = (m[2 * K:] for m in metric(e))
     cross = np.zeros((K, 3, 2))
     two = np.any(np.asarray(e.jacobian_rad_per_n)[2 * K:, :, 1] != 0.0, axis=1)
-    ee = metric(e)[2][2 * K:]
     for i in np.flatnonzero(two & np.isfinite(X).all(axis=(1, 2)) & (ee > 0)):
         cross[i] = (np.linalg.pinv(X[i, :, 3:]) @ X[i, :, :3]).T / ee[i]
     return g, cross
