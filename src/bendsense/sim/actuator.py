@@ -79,6 +79,25 @@ def play_operator(pressure_pa, width_pa: float, initial_pa: float | None = None)
     return y
 
 
+def contact_number(contact_s_m, length_m: float, alternatives: str = "") -> float:
+    """A contact location given as a number: finite, in ``(0, L]`` [m]; else a ConfigError naming it.
+
+    Parameters
+    ----------
+    contact_s_m : object
+        The location given [m].
+    length_m : float
+        The actuator length L [m].
+    alternatives : str
+        What else the caller accepts, for the message (``" or 'along-body'"``).
+    """
+    ok = not isinstance(contact_s_m, bool) and isinstance(contact_s_m, (int, float, np.floating, np.integer))
+    if not ok or not (math.isfinite(contact_s_m) and 0.0 < contact_s_m <= length_m):
+        raise ConfigError(f"contact_s_m: must be a number in (0, L = {length_m:g} m]{alternatives}, "
+                          f"got {contact_s_m!r}")
+    return float(contact_s_m)
+
+
 @dataclass(frozen=True, eq=False)
 class ActuatorFrames:
     """True shapes and sensor readings of simulated frames, batched over leading axes ``...``.
@@ -325,13 +344,7 @@ class SimulatedActuator:
         contact_s_m : float or None
             Arc length s_c of the point force [m].
         """
-        if contact_s_m is None:
-            return None
-        length = self.config.actuator.length_m
-        ok = not isinstance(contact_s_m, bool) and isinstance(contact_s_m, (int, float, np.floating, np.integer))
-        if not ok or not (math.isfinite(contact_s_m) and 0.0 < contact_s_m <= length):
-            raise ConfigError(f"contact_s_m: must be a number in (0, L = {length:g} m], got {contact_s_m!r}")
-        return float(contact_s_m)
+        return None if contact_s_m is None else contact_number(contact_s_m, self.config.actuator.length_m)
 
     def solve(self, pressure_pa, force_n=(0.0, 0.0), *, initial=None, sensitivities=False, contact_s_m=None,
               s_m=None):

@@ -83,7 +83,7 @@ from bendsense.calibration import strip_shifts
 from bendsense.config import Config
 from bendsense.errors import ArgumentError, ConfigError
 from bendsense.session import Session, write_session_csv
-from bendsense.sim.actuator import SimulatedActuator
+from bendsense.sim.actuator import SimulatedActuator, contact_number
 from bendsense.sim.sensor import VirtualSensor, calibration_shifts
 
 __all__ = [
@@ -211,11 +211,7 @@ def touch_locations(t_s, length_m: float, contact_s_m=None) -> np.ndarray:
             raise ConfigError(f"contact_s_m: must be a number in (0, L] or 'along-body', got {contact_s_m!r}")
         touch = (2 * np.floor(t / 10.0) + (np.mod(t, 10.0) >= 5.0)).astype(np.int64)
         return np.asarray(ALONG_BODY_FRACTIONS)[touch % len(ALONG_BODY_FRACTIONS)] * float(length_m)
-    ok = not isinstance(contact_s_m, bool) and isinstance(contact_s_m, (int, float, np.floating, np.integer))
-    if not ok or not (math.isfinite(contact_s_m) and 0.0 < contact_s_m <= length_m):
-        raise ConfigError(f"contact_s_m: must be a number in (0, L = {length_m:g} m] or 'along-body', "
-                          f"got {contact_s_m!r}")
-    return np.full(t.shape, float(contact_s_m))
+    return np.full(t.shape, contact_number(contact_s_m, float(length_m), " or 'along-body'"))
 
 
 def time_varying_frames(
