@@ -190,6 +190,20 @@ class Recorder:
         if self.on_records is not None:
             self.on_records(keep)
 
+    def write(self, readings) -> None:
+        """Append driver readings to the session: what :meth:`run` does with each batch it drains.
+
+        For a caller that drains the driver itself (:func:`bendsense.control.run`); the
+        session is created with the first readings if the channel count was not known.
+
+        Parameters
+        ----------
+        readings : list of Reading
+            The readings, oldest first.
+        """
+        if readings:
+            self._write(readings)
+
     # ------------------------------------------------------------------ running
 
     def run(self, duration_s: float | None = None, *, on_progress=None, progress_interval_s: float = 0.5):

@@ -1,0 +1,33 @@
+"""Force control in the loop: a finger holds an object with a set contact force (DESIGN.md section 2b, "Control").
+
+- :func:`run` (:mod:`~bendsense.control.loop`): per block of frames from the board,
+  process, call a controller, clip its set-points to the pressure limit and send them
+  (SETPOINT frames); set-point 0 on every line whatever ends the loop;
+- :class:`PIController` and :class:`Grasp` (:mod:`~bendsense.control.pi`): a PI loop with
+  anti-windup on a finger's contact normal force, one per finger;
+- :func:`normal_force` (:mod:`~bendsense.control.force`): the controlled quantity, F · n at
+  the contact, from the tracked force and the estimated shape;
+- :class:`Safety`, :class:`ControlStop` (:mod:`~bendsense.control.safety`): the loop's own
+  stops (lost frames, silence, a model flag on a controlled finger);
+- :class:`ControlRecording` (:mod:`~bendsense.control.record`): the session on disk.
+
+A controller is any callable ``controller(block) -> {line: pressure_pa}`` (python-control's
+habit: plain callables, their state in a small object). docs/grasping.md walks through a
+grasp on the simulated board.
+"""
+
+from bendsense.control.force import NormalForce, contact_normal, normal_force
+from bendsense.control.loop import ControlResult, run
+from bendsense.control.pi import (
+    DEFAULT_KI_PA_PER_N_S,
+    DEFAULT_KP_PA_PER_N,
+    DEFAULT_MAX_RATE_PA_PER_S,
+    Grasp,
+    PIController,
+)
+from bendsense.control.record import CONTROL_LOG, ControlRecording
+from bendsense.control.safety import ControlStop, Safety
+
+__all__ = ["run", "ControlResult", "PIController", "Grasp", "normal_force", "contact_normal", "NormalForce",
+           "Safety", "ControlStop", "ControlRecording", "CONTROL_LOG", "DEFAULT_KP_PA_PER_N",
+           "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S"]

@@ -1,0 +1,123 @@
+"""The controlled quantity: the contact normal force F · n at the contact, from a processed block.
+
+A finger pressed against an object feels the object's push, normal to its body at the
+contact ``s_c`` (frictionless): ``F = N n`` with the unit normal
+
+    n(s_c) = (−cos φ_c, sin φ_c),   φ_c = φ(s_c),
+
+the tangent ``t = (sin φ, cos φ)`` turned by −90°: it points away from the centre of
+curvature, i.e. out of the object into the finger (``−x`` for a straight finger). A
+finger that closes on an object bends toward ``+x`` and is held back by it, so the
+object's push has ``N = F · n > 0`` while the finger presses; ``N < 0`` would be a pull
+(an object pulling the finger closed), which a frictionless contact cannot give. This is
+the convention of the simulator's contact (:meth:`bendsense.sim.SimulatedActuator.solve_contact`,
+``F_c = f_c (−cos φ_c, sin φ_c)`` with ``f_c ≥ 0``). φ_c is the estimated shape's tangent
+angle at ``s_c`` (the PCC reconstruction; for ``s_c`` beyond the sensor, the sensor's tip
+angle: the last segment carries on straight), ``s_c`` the estimate's contact location
+(``load="contact"``) or the tip ``L``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["NormalForce", "contact_normal", "normal_force"]
+
+
+def contact_normal(angle_rad) -> np.ndarray:
+    """The unit normal n = (−cos φ, sin φ) of a finger at tangent angle φ: the object's push direction.
+
+    Parameters
+    ----------
+    angle_rad : array_like, shape (...)
+        Tangent angle φ at the contact, from ``+y`` toward ``+x`` [rad].
+
+    Returns
+    -------
+    ndarray, shape (..., 2)
+        The unit normal in the base frame.
+    """
+    phi = np.asarray(angle_rad, dtype=float)
+    return np.stack((-np.cos(phi), np.sin(phi)), axis=-1)
+
+
+@dataclass(frozen=True)
+class NormalForce:
+    """The contact normal force of the frames of a block.
+
+    Attributes
+    ----------
+    force_n : ndarray, shape (n,)
+        N = F · n [N] (positive: the finger presses the object); NaN where the frame has
+        no force.
+    std_n : ndarray, shape (n,)
+        Its standard deviation sqrt(nᵀ C n) [N] (C the force's covariance).
+    contact_s_m : ndarray, shape (n,)
+        The contact location used [m].
+    angle_rad : ndarray, shape (n,)
+        The tangent angle φ_c there [rad].
+    status : ndarray of str, shape (n,)
+        The frame's status (the tracked one where the force is tracked).
+    """
+
+    force_n: np.ndarray
+    std_n: np.ndarray
+    contact_s_m: np.ndarray
+    angle_rad: np.ndarray
+    status: np.ndarray
+
+
+def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -> NormalForce:
+    """The contact normal force N = F · n of every frame of a processed block (module docstring).
+
+    Parameters
+    ----------
+    block : LiveBlock
+        A block of one finger (:meth:`bendsense.pipeline.LiveProcessor.process_readings`).
+    tracked : bool, default True
+        Use the tracked force (the causal filter) where the block has one; False (or a
+        processor that does not track): the per-frame estimate.
+    tip_s_m : float, optional
+        The contact location reported for a tip load [m]: the actuator's length ``L``
+        (default: the end of the shape's grid, the sensor's length).
+
+    Returns
+    -------
+    NormalForce
+    """
+    n = len(block)
+    shape = block.shape
+    est = block.estimate
+    length = float(shape.s_m[-1])
+    s_c = np.full(n, np.nan)
+    if est is not None and getattr(est, "load", "tip") == "contact" and est.contact_s_m is not None:
+        s_c[:] = np.broadcast_to(np.asarray(est.contact_s_m, dtype=float), (n,))
+    # a tip load, or a frame without a location: the end of the body (the sensor's tip angle holds beyond it)
+    s_c = np.where(np.isfinite(s_c), s_c, np.inf)
+    angle = np.asarray(shape.angle_rad, dtype=float).reshape(n, -1)
+    s_grid = np.asarray(shape.s_m, dtype=float)
+    at = np.minimum(s_c, length)
+    # the angle is piecewise linear on the PCC grid between its samples (linear within a segment)
+    j = np.clip(np.searchsorted(s_grid, at, side="right") - 1, 0, s_grid.size - 2)
+    w = (at - s_grid[j]) / (s_grid[j + 1] - s_grid[j])
+    rows = np.arange(n)
+    phi = (1.0 - w) * angle[rows, j] + w * angle[rows, j + 1]
+    normal = contact_normal(phi)
+    use_track = tracked and block.track is not None
+    if use_track:
+        force = block.track_force_n
+        cov = np.asarray(block.track.covariance_n2, dtype=float).reshape(n, 2, 2)
+        status = np.asarray(block.track.status, dtype=object).reshape(n)
+    else:
+        force = block.force_n
+        cov = (np.full((n, 2, 2), np.nan) if est is None
+               else np.asarray(est.covariance_n2, dtype=float).reshape(n, 2, 2))
+        status = np.asarray(block.status, dtype=object)
+    value = np.einsum("ij,ij->i", force, normal)
+    var = np.einsum("ij,ijk,ik->i", normal, cov, normal)
+    s_out = np.where(np.isfinite(s_c), s_c, length if tip_s_m is None else float(tip_s_m))
+    return NormalForce(force_n=value, std_n=np.sqrt(np.maximum(var, 0.0)), contact_s_m=s_out, angle_rad=phi,
+                       status=status)
+

@@ -1,0 +1,261 @@
+"""The control loop: per block of frames, process, control, clip, send; and let go whatever happens.
+
+:func:`run` drains the driver's queue (every frame, in order, as a block of what has
+arrived since the previous one: one frame per block while the loop keeps up with the
+board, more when it falls behind), processes the block (a
+:class:`~bendsense.pipeline.LiveProcessor`, or a gripper's processor: tracking in filter
+mode), checks it (:class:`~bendsense.control.safety.Guard`), calls the controller, clips
+its set-points to ``[0, max_pressure_pa]`` and sends them
+(:meth:`~bendsense.device.driver.Driver.send_setpoint`), then records the block if asked.
+Whatever ends the loop — its time, a stop event, Ctrl-C, SIGTERM, a safety stop, an
+error in the controller or the processor, a failing device — set-point 0 goes to every
+line first, before anything else is closed, and the time from the stop to the last zero
+written is measured (:attr:`ControlResult.zero_latency_s`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import signal
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from bendsense.control.safety import ControlStop, Guard, Safety
+from bendsense.errors import ArgumentError, DeviceError
+
+__all__ = ["run", "ControlResult"]
+
+log = logging.getLogger("bendsense.control")
+
+
+@dataclass(frozen=True)
+class ControlResult:
+    """What a control session did.
+
+    Attributes
+    ----------
+    frames : int
+        Frames processed.
+    blocks : int
+        Blocks (controller calls).
+    outcome : str
+        How it ended: ``duration reached``, ``stopped``, ``interrupted``, or the reason
+        of a safety stop or an error.
+    lines : tuple of int
+        The pressure lines set to 0 at the end.
+    max_setpoint_pa : float
+        The highest set-point sent [Pa].
+    clipped : int
+        Set-points the controller asked beyond ``[0, max_pressure_pa]`` (sent clipped).
+    zero_latency_s : float
+        From the stop (noticed by the loop) to the last zero set-point written [s]; NaN
+        when the zeros could not be sent.
+    loop_s : ndarray, shape (blocks,)
+        Wall time of each block: process, check, control, send [s] (recording excluded).
+    block_frames : ndarray of int, shape (blocks,)
+        Frames of each block.
+    """
+
+    frames: int
+    blocks: int
+    outcome: str
+    lines: tuple
+    max_setpoint_pa: float
+    clipped: int
+    zero_latency_s: float
+    loop_s: np.ndarray
+    block_frames: np.ndarray
+
+    @property
+    def per_frame_s(self) -> float:
+        """Mean loop time per frame [s]."""
+        return float(np.sum(self.loop_s) / max(self.frames, 1))
+
+
+@contextlib.contextmanager
+def _sigterm_stops():
+    """SIGTERM raises KeyboardInterrupt in the loop (main thread, unless someone already handles it)."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+        yield
+        return
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _lines(processor, n_lines) -> tuple:
+    if n_lines is None:
+        gripper = getattr(processor, "gripper", None)
+        n_lines = 1 if gripper is None else gripper.n_lines
+    if isinstance(n_lines, bool) or not isinstance(n_lines, (int, np.integer)) or not 1 <= n_lines <= 255:
+        raise ArgumentError(f"n_lines: expected 1..255 pressure lines, got {n_lines!r}")
+    return tuple(range(int(n_lines)))
+
+
+def _clip(setpoints, lines, max_pressure_pa):
+    """The set-points to send, each in [0, max]; raises ControlStop for a line or value that is no set-point."""
+    if not isinstance(setpoints, dict):
+        raise ControlStop(f"the controller returned {type(setpoints).__name__}, not a dict line -> pressure_pa")
+    out, clipped = {}, 0
+    for line, value in setpoints.items():
+        if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or int(line) not in lines:
+            raise ControlStop(f"the controller set line {line!r}: the board has lines {lines[0]}..{lines[-1]}")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            v = math.nan
+        if not math.isfinite(v):
+            raise ControlStop(f"the controller returned {value!r} for line {line}: not a pressure")
+        c = min(max(v, 0.0), max_pressure_pa)
+        clipped += c != v
+        out[int(line)] = c
+    return out, clipped
+
+
+def _zero(driver, lines) -> float:
+    """Send set-point 0 on every line; returns when the last was written (perf_counter), NaN if one failed."""
+    ok = True
+    for line in lines:
+        try:
+            driver.send_setpoint(line, 0.0)
+        except (DeviceError, OSError) as err:
+            ok = False
+            log.error("set-point 0 on line %d could not be sent: %s", line, err)
+    return time.perf_counter() if ok else math.nan
+
+
+def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=None, safety=None, n_lines=None,
+        recording=None, on_block=None) -> ControlResult:
+    """Close the loop: per block of frames, process, control, clip and send set-points; zero them at the end.
+
+    Parameters
+    ----------
+    driver : Driver
+        An open, streaming board (with a queue) that takes set-points
+        (:meth:`~bendsense.device.driver.Driver.send_setpoint`).
+    processor : LiveProcessor or gripper processor
+        Its ``process_readings(readings)`` makes the block the controller gets.
+    controller : callable
+        ``controller(block) -> {line: pressure_pa}``; its ``fingers`` attribute (if any)
+        names the fingers whose model status the safety checks watch (default: every
+        finger of the block).
+    max_pressure_pa : float
+        Highest set-point ever sent [Pa]: every set-point is clipped to
+        ``[0, max_pressure_pa]``.
+    seconds : float, optional
+        Run this long [s]; None: until ``stop``, Ctrl-C, SIGTERM or a safety stop.
+    stop : threading.Event, optional
+        Set it (from another thread) to end the loop.
+    safety : Safety, optional
+        The limits of the loop's own stops (default :class:`~bendsense.control.Safety()`).
+    n_lines : int, optional
+        The board's pressure lines, all set to 0 at the end (default: the processor's
+        gripper's, else 1).
+    recording : ControlRecording, optional
+        Where to record the session (readings, control log, results).
+    on_block : callable, optional
+        Called as ``on_block(block, setpoints)`` after each block's set-points were sent.
+
+    Returns
+    -------
+    ControlResult
+
+    Raises
+    ------
+    ControlStop
+        A safety stop (lost frames, silence, a model flag on a controlled finger, a
+        controller's answer that is no set-point), after every line was set to 0; its
+        ``result`` holds the counters.
+    KeyboardInterrupt
+        Ctrl-C or SIGTERM, after every line was set to 0.
+    """
+    if isinstance(max_pressure_pa, bool) or not isinstance(max_pressure_pa, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(max_pressure_pa) and max_pressure_pa > 0):
+        raise ArgumentError(f"max_pressure_pa: expected a pressure > 0 [Pa], got {max_pressure_pa!r}")
+    if seconds is not None and not (isinstance(seconds, (int, float)) and seconds > 0):
+        raise ArgumentError(f"seconds: expected a time > 0 [s] or None, got {seconds!r}")
+    lines = _lines(processor, n_lines)
+    safety = Safety() if safety is None else safety
+    guard = Guard(safety, getattr(controller, "fingers", None) or _fingers(processor))
+    state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "sizes": [], "current": {}}
+    outcome, stopped_at, zero_at, error = "stopped", math.nan, math.nan, None
+    try:
+        with _sigterm_stops():
+            outcome = _loop(driver, processor, controller, float(max_pressure_pa), seconds, stop, guard, lines,
+                            recording, on_block, state)
+        stopped_at = time.perf_counter()
+    except BaseException as err:
+        stopped_at = time.perf_counter()
+        error = err
+        outcome = "interrupted" if isinstance(err, KeyboardInterrupt) else f"{type(err).__name__}: {err}"
+        if isinstance(err, ControlStop):
+            outcome = f"safety stop: {err.reason}"
+        raise
+    finally:
+        zero_at = _zero(driver, lines)  # first, before anything is closed
+        result = ControlResult(
+            frames=state["frames"], blocks=len(state["loop"]), outcome=outcome, lines=lines,
+            max_setpoint_pa=state["max"], clipped=state["clipped"], zero_latency_s=zero_at - stopped_at,
+            loop_s=np.asarray(state["loop"]), block_frames=np.asarray(state["sizes"], dtype=np.int64))
+        if isinstance(error, ControlStop):
+            error.result = result
+        if recording is not None:
+            recording.close(outcome)
+    return result
+
+
+def _fingers(processor) -> tuple:
+    gripper = getattr(processor, "gripper", None)
+    return (None,) if gripper is None else tuple(gripper.names)
+
+
+def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, recording, on_block, state) -> str:
+    """The loop of :func:`run` until its time or a stop; returns the outcome."""
+    t0 = time.monotonic()
+    last_frame = t0
+    silence = guard.safety.silence_s
+    while True:
+        now = time.monotonic()
+        if stop is not None and stop.is_set():
+            return "stopped"
+        if seconds is not None and now - t0 >= seconds:
+            return "duration reached"
+        wait = silence if seconds is None else min(silence, max(t0 + seconds - now, 0.0))
+        readings = driver.get_batch(timeout=max(wait, 1e-4))
+        now = time.monotonic()
+        if not readings:
+            guard.silent(now - last_frame)
+            continue
+        last_frame = now
+        tic = time.perf_counter()
+        guard.lost(driver.stats, now)
+        block = processor.process_readings(readings)
+        guard.flags(block)
+        setpoints, clipped = _clip(controller(block), lines, pmax)
+        for line, value in setpoints.items():
+            driver.send_setpoint(line, value)
+        state["loop"].append(time.perf_counter() - tic)
+        state["sizes"].append(len(readings))
+        state["frames"] += len(readings)
+        state["clipped"] += clipped
+        if setpoints:
+            state["max"] = max(state["max"], max(setpoints.values()))
+            state["current"].update(setpoints)
+        if recording is not None:
+            recording.write_readings(readings)
+            recording.write_block(readings, block, state["current"], lines, controller)
+        if on_block is not None:
+            on_block(block, setpoints)
+
