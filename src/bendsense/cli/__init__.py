@@ -1,7 +1,7 @@
 """The ``bendsense`` command line: a thin shell over the library.
 
 Commands live in one module per area (``pipeline``, ``batch``, ``calibrate``,
-``identify``, ``sim``, ``reproduce``, ``device``, ``live``); each exposes ``COMMANDS``,
+``identify``, ``sim``, ``reproduce``, ``device``, ``live``, ``control``); each exposes ``COMMANDS``,
 a list of click commands added here.
 Heavy imports happen inside the commands, so ``bendsense --help`` is fast.
 """
@@ -20,7 +20,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import click  # noqa: E402 (after the BLAS settings above)
 
 from bendsense import __version__  # noqa: E402
-from bendsense.cli import batch, calibrate, device, identify, live, pipeline, reproduce, sim  # noqa: E402
+from bendsense.cli import batch, calibrate, control, device, identify, live, pipeline, reproduce, sim  # noqa: E402
 
 
 @click.group(
@@ -50,6 +50,6 @@ def _run_pipeline(steps, **_options) -> None:
     pipeline.run_steps(steps)
 
 
-for _module in (pipeline, batch, calibrate, identify, sim, reproduce, device, live):
+for _module in (pipeline, batch, calibrate, identify, sim, reproduce, device, live, control):
     for _command in _module.COMMANDS:
         main.add_command(_command)

@@ -1,0 +1,208 @@
+"""The ``control`` command: hold a contact force with a PI loop on the tracked estimate (bendsense.control)."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+import click
+
+from bendsense import output as outputs
+from bendsense.cli import _signals
+from bendsense.cli._common import (
+    CONSTRAINTS,
+    Finite,
+    InterspersedCommand,
+    PressureKpa,
+    live_contact,
+    live_contact_option,
+    load_option,
+    make_bandwidth_option,
+    make_config_option,
+    make_overwrite_option,
+    quiet,
+)
+
+log = logging.getLogger("bendsense")
+
+#: bandwidth of the tracked force the loop closes on [Hz]: faster than live's 5 Hz, so the loop can be
+CONTROL_BANDWIDTH_HZ = 20.0
+#: default pressure limit [Pa] (lowered to the config's pressure range when that ends below)
+DEFAULT_MAX_PRESSURE_PA = 100e3
+
+
+def _controllers(config, finger, target, max_pressure_pa, gains):
+    """The PI controller(s): one per controlled finger, on its line (a single actuator: line 0)."""
+    from bendsense.config import GripperConfig
+    from bendsense.control import Grasp, PIController
+    from bendsense.errors import BendsenseError
+
+    if not isinstance(config, GripperConfig):
+        if finger is not None:
+            raise click.BadParameter("names a finger of a gripper config (--config with fingers:); this config is "
+                                     "a single actuator", param_hint="'--finger'")
+        return PIController(target, max_pressure_pa=max_pressure_pa, tip_s_m=config.actuator.length_m, **gains)
+    try:
+        chosen = config.fingers if finger is None else (config.finger(finger),)
+    except BendsenseError as err:
+        raise click.BadParameter(str(err), param_hint="'--finger'") from None
+    pis = [PIController(target, line=f.pressure_line, finger=f.name, max_pressure_pa=max_pressure_pa,
+                        tip_s_m=f.config.actuator.length_m, **gains) for f in chosen]
+    try:
+        return Grasp(pis)
+    except BendsenseError as err:
+        raise click.BadParameter(f"{str(err).removeprefix('controllers: ')} with --finger NAME",
+                                 param_hint="'--finger'") from None
+
+
+def _processor(config, calibrations, constraint, bandwidth_hz, load):
+    """The live processor (a gripper's, one LiveProcessor per finger), its kernels ready."""
+    from bendsense.cli.device import make_processor
+    from bendsense.config import GripperConfig
+
+    if isinstance(config, GripperConfig):
+        from bendsense.cli.live import make_gripper_processor
+
+        return make_gripper_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz,
+                                      load=load)
+    return make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load)
+
+
+def _limit(config, max_pressure_kpa):
+    """The pressure limit [Pa]: given, else 100 kPa or the end of the config's pressure range if lower."""
+    from bendsense.config import GripperConfig
+
+    if max_pressure_kpa is not None:
+        return max_pressure_kpa * 1e3
+    configs = [f.config for f in config.fingers] if isinstance(config, GripperConfig) else [config]
+    return min([DEFAULT_MAX_PRESSURE_PA, *(c.actuator.pressure_range_pa[1] for c in configs)])
+
+
+def _summary(result, controller) -> str:
+    """What the loop did, in one paragraph for stderr."""
+    from bendsense.control import Grasp
+
+    pis = controller.controllers if isinstance(controller, Grasp) else (controller,)
+    parts = []
+    for pi in pis:
+        nf = pi.last
+        force = "no force" if nf is None else f"N = {nf.force_n[-1] * 1e3:.1f} ± {nf.std_n[-1] * 1e3:.1f} mN"
+        name = "" if pi.finger is None else f"{pi.finger}: "
+        parts.append(f"{name}{force} (target {pi.target_force_n * 1e3:.4g} mN, set-point {pi.output_pa / 1e3:.1f} kPa)")
+    lines = ", ".join(str(k) for k in result.lines)
+    return (f"{result.frames} frames in {result.blocks} blocks ({result.per_frame_s * 1e6:.0f} µs per frame); "
+            + "; ".join(parts) + f"; highest set-point {result.max_setpoint_pa / 1e3:.1f} kPa; "
+            f"set-point 0 sent on line(s) {lines} {result.zero_latency_s * 1e3:.2f} ms after the stop")
+
+
+@click.command("control", cls=InterspersedCommand)
+@click.argument("port")
+@click.option("--calibration", "calibration_path", required=True,
+              type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Calibration YAML.")
+@click.option("--target-force-n", required=True, type=Finite(min=0),
+              help="Contact normal force to hold [N] (F · n at the contact; positive: the finger presses).")
+@click.option("--finger", help="A gripper's finger to control (default: every finger, each on its own line).")
+@click.option("--max-pressure-kpa", type=PressureKpa(min=0), default=None,
+              help="Highest set-point ever sent [kPa] (default 100, or the end of the config's pressure range "
+                   "if lower).")
+@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path),
+              help="Record the session here: the board's native session, control.csv and the results.")
+@make_overwrite_option("Replace an existing session.")
+@make_config_option("Config YAML (a gripper: with fingers:; default: the paper's prototype).")
+@click.option("--seconds", type=Finite(min=0, min_open=True), help="Run time [s] (default: until Ctrl-C).")
+@load_option
+@live_contact_option
+@click.option("--constraint", type=click.Choice(CONSTRAINTS), default="normal", show_default=True,
+              help="Force constraint: normal (a frictionless contact: F along n) or any other of 'estimate'.")
+@click.option("--kp-kpa-per-n", type=Finite(min=0), default=None,
+              help="Proportional gain [kPa/N] (default 20: bendsense.control.DEFAULT_KP_PA_PER_N).")
+@click.option("--ki-kpa-per-n-s", type=Finite(min=0), default=None,
+              help="Integral gain [kPa/(N s)] (default 3000: bendsense.control.DEFAULT_KI_PA_PER_N_S).")
+@click.option("--max-rate-kpa-per-s", type=Finite(min=0, min_open=True), default=None,
+              help="Slew limit of the set-point [kPa/s] (default 500).")
+@make_bandwidth_option(f"{CONTROL_BANDWIDTH_HZ:g} Hz (the loop needs a faster track than live's 5 Hz)")
+@click.option("--baud", type=click.IntRange(50, 12_000_000), default=None,
+              help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
+@click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
+              help="HELLO wait [s].")
+def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, output, overwrite, config_path, seconds,
+            load, contact_s_m, constraint, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s, bandwidth_hz, baud,
+            hello_timeout):
+    """Hold a contact force: a PI loop on the tracked contact normal force, at the board's frame rate.
+
+    Every frame from the board on PORT is reconstructed, its force estimated and tracked
+    (a causal Kalman filter, --bandwidth-hz), and the contact normal force N = F · n (n the
+    finger's normal at the contact, from the estimated shape; --load contact
+    --contact-s-m X: a contact at the known arc length X, else the tip) drives a PI
+    controller with anti-windup whose output, clipped to [0, --max-pressure-kpa], goes to
+    the board as a SETPOINT. With a gripper config every finger is controlled on its own
+    pressure line (--finger NAME: only that one).
+
+    Set-point 0 goes to every pressure line when the loop ends, whatever ends it: --seconds,
+    Ctrl-C or SIGTERM (exit 130 / 143), an error, more than 10 frames lost within 1 s, no
+    frame for 0.1 s, or a controlled finger model_misfit / not_identifiable for 10 ms
+    (a safety stop: one line, exit 1). -o SESSION records everything (docs/formats.md,
+    "Control session"). docs/grasping.md walks through a grasp on the simulated board.
+    """
+    from bendsense.config import load_config
+    from bendsense.control import DEFAULT_KI_PA_PER_N_S, DEFAULT_KP_PA_PER_N, DEFAULT_MAX_RATE_PA_PER_S
+    from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
+
+    ctx = click.get_current_context()
+    if output is not None:  # checked and locked before anything opens, until the command ends
+        ctx.with_resource(outputs.reserve([outputs.recording(output, overwrite=overwrite)],
+                                          [config_path, calibration_path]))
+    config = load_config(config_path)
+    pmax = _limit(config, max_pressure_kpa)
+    gains = {"kp_pa_per_n": DEFAULT_KP_PA_PER_N if kp_kpa_per_n is None else kp_kpa_per_n * 1e3,
+             "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,
+             "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
+    controller = _controllers(config, finger, target_force_n, pmax, gains)
+    load_options = live_contact(load, contact_s_m, _any_finger(config))
+    processor = _processor(config, calibration_path, constraint, bandwidth_hz or CONTROL_BANDWIDTH_HZ, load_options)
+    meta = {"command": "bendsense control",
+            "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
+                        "fingers": [f for f in controller.fingers if f is not None], "load": load,
+                        "constraint": constraint,
+                        "contact_s_m": contact_s_m, "bandwidth_hz": bandwidth_hz or CONTROL_BANDWIDTH_HZ}}
+    with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
+        _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta)
+
+
+def _any_finger(config):
+    """The config the load options are checked against (a gripper's first finger's)."""
+    fingers = getattr(config, "fingers", None)
+    return config if fingers is None else fingers[0].config
+
+
+def _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta):
+    """Record (with -o), start the board, run the loop; one line for how it ended."""
+    from bendsense.control import ControlRecording, ControlStop, run
+
+    fingers = getattr(config, "names", None)
+    recording = None if output is None else ControlRecording(driver, output, overwrite=overwrite, config=config,
+                                                             meta=meta, fingers=fingers)
+    n_lines = getattr(config, "n_lines", 1)
+    if not quiet():
+        click.echo(f"holding {controller.target_force_n * 1e3:.4g} mN (pressure limit {pmax / 1e3:g} kPa); "
+                   "Ctrl-C stops", err=True)
+    driver.start()
+    try:
+        result = run(driver, processor, controller, max_pressure_pa=pmax, seconds=seconds, n_lines=n_lines,
+                     recording=recording)
+    except KeyboardInterrupt as err:
+        kept = f"; the session is in {output}" if output is not None else ""
+        _signals.note(err, f"set-point 0 sent on every pressure line{kept}")
+        raise
+    except ControlStop as err:
+        sys.stderr.flush()
+        raise click.ClickException(f"control stopped: {err.reason}; set-point 0 sent on every pressure line"
+                                   + (f" (the session is in {output})" if output is not None else "")) from None
+    if not quiet():
+        click.echo(_summary(result, controller), err=True)
+        if output is not None:
+            click.echo(f"session written to {output}", err=True)
+
+
+COMMANDS = [control]
