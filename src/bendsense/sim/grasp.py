@@ -210,7 +210,7 @@ class FingerGrasp:
         return np.where(np.asarray(sol.success), d - f * inv_k, np.nan)
 
     def _root(self, p, d0, k, max_iter: int = 60) -> np.ndarray:
-        """f > 0 with g(f) = d(P, f) − f/k = 0, bracketed from g(0) = d0 > 0 (Illinois steps).
+        """The force f > 0 with g(f) = d(P, f) − f/k = 0, bracketed from g(0) = d0 > 0 (Illinois steps).
 
         A failed beam solve counts as beyond the root (the force was too large): the
         bracket's upper end moves down to it.

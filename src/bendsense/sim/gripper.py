@@ -229,7 +229,7 @@ class GraspBoard:
         for f in self._fingers:
             force, signal = f.grasp.lookup(p[f.line])
             values[f.index] = signal
-            truth[f.keys[0]], truth[f.keys[1]] = float(force[0]), float(force[1])
+            truth[f.keys[0]], truth[f.keys[1]] = float(force[0]) + 0.0, float(force[1]) + 0.0  # no -0.0
             truth[f.keys[2]] = f.grasp.contact_s_m
         for (set_key, p_key), sp, pp in zip(self._line_keys, self.regulators.setpoint_pa, p, strict=True):
             truth[set_key], truth[p_key] = float(sp), float(pp)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-__all__ = ["TruthWriter", "truth_columns"]
+__all__ = ["TruthWriter", "scenario_truth", "truth_columns"]
 
 _PER_FINGER = ("fx_n", "fy_n", "contact_s_m")
 _PER_LINE = ("setpoint_pa", "pressure_pa")
@@ -93,3 +93,24 @@ class TruthWriter:
         if not self._fh.closed:
             self._fh.flush()
             self._fh.close()
+
+
+def scenario_truth(frames):
+    """The single actuator's time-varying stream with its truth as the truth file's columns.
+
+    Parameters
+    ----------
+    frames : iterator
+        Of ``(pressure_pa, counts, truth)`` from
+        :func:`~bendsense.sim.scenarios.time_varying_frames` with ``truth=True``.
+
+    Yields
+    ------
+    tuple
+        ``(pressure_pa, counts, row)``: ``row`` holds ``fx_n, fy_n, contact_s_m`` and the
+        scenario's pressure as both ``setpoint_pa`` and ``pressure_pa`` (it has no regulator).
+    """
+    for pressure, counts, truth in frames:
+        row = {"fx_n": truth["fx_n"], "fy_n": truth["fy_n"], "contact_s_m": truth["contact_s_m"],
+               "setpoint_pa": pressure, "pressure_pa": pressure}
+        yield pressure, counts, row
