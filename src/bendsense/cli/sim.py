@@ -1,4 +1,8 @@
-"""Commands of the sim area: ``simulate`` writes the paper's experiments as simulated recordings."""
+"""Commands of the sim area: ``simulate`` writes the paper's experiments as simulated recordings.
+
+Also the options of ``sim-device``'s simulated grasp (``--fingers``, ``--object...``, the
+regulators) and the board they build (:func:`grasp_board`).
+"""
 
 from __future__ import annotations
 
@@ -128,6 +132,113 @@ def simulate(
         return state
 
     return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)], inputs=[config_path])
+
+
+class _Numbers(Finite):
+    """One number or a comma-separated list of them (one per finger), each checked as :class:`Finite`."""
+
+    name = "number[,number...]"
+
+    def convert(self, value, param, ctx):
+        """Parse and check each value."""
+        if isinstance(value, tuple):
+            return value
+        return tuple(super(_Numbers, self).convert(v.strip(), param, ctx) for v in str(value).split(","))
+
+
+_GRASP_OPTIONS = [
+    click.option("--fingers", type=click.IntRange(1, 4),
+                 help="Simulate a gripper of 1..4 paper fingers (thumb, index, middle, ring; finger i on channels "
+                      "16 i + 1..16 i + 16 and pressure line i; 'bendsense.sim.gripper_config(K)'), closing on an "
+                      "object; SAMPLE version 2, one pressure line per finger."),
+    click.option("--object", "object_kind", type=click.Choice(["rigid", "compliant"]),
+                 help="The object the fingers press (default rigid with --fingers); without --fingers the single "
+                      "actuator presses it (version-1 frames, SETPOINT line 0)."),
+    click.option("--object-stiffness", type=Finite(min=0, min_open=True),
+                 help=f"Compliant object: contact stiffness [N/m] (default {20:g})."),
+    click.option("--object-s-m", type=_Numbers(min=0, min_open=True),
+                 help="Where the object touches each finger: s_c [m] along the body, one value or one per finger "
+                      "(default 0.10, 0.11, 0.095, 0.12)."),
+    click.option("--object-touch-kpa", type=_Numbers(min=0),
+                 help="The pressure at which each free finger reaches the object [kPa], one value or one per "
+                      "finger (default 40, 45, 35, 50)."),
+    click.option("--close-kpa", type=PressureKpa(min=0),
+                 help="The scenario's set-point while the fingers close (every 8 s: close over 2 s, hold 3 s, open "
+                      "over 1 s, rest 2 s) [kPa] (default 70); a SETPOINT hands its line to the host for good."),
+    click.option("--max-pressure-kpa", type=PressureKpa(min=0),
+                 help="The regulators' limit: set-points and pressures stay in [0, P] [kPa] (default 120)."),
+    click.option("--tau-ms", type=Finite(min=0, min_open=True),
+                 help="The regulators' time constant [ms] (default 25): a first-order lag."),
+]
+
+
+def grasp_options(command):
+    """Add the simulated grasp's options to ``sim-device``."""
+    for option in reversed(_GRASP_OPTIONS):
+        command = option(command)
+    return command
+
+
+def grasp_board(options: dict, *, rate_hz: float, seed, adc_bits: int):
+    """The simulated grasp's board from ``sim-device``'s options, or None without ``--fingers``/``--object``.
+
+    Parameters
+    ----------
+    options : dict
+        The values of the grasp options (by parameter name).
+    rate_hz, seed, adc_bits
+        The board's frame rate [Hz], seed and ADC resolution.
+
+    Returns
+    -------
+    GraspBoard or None
+    """
+    import math
+
+    fingers, kind = options["fingers"], options["object_kind"]
+    if fingers is None and kind is None:
+        for name in ("object_stiffness", "object_s_m", "object_touch_kpa", "close_kpa", "max_pressure_kpa", "tau_ms"):
+            if options[name] is not None:
+                flag = "--" + name.replace("_", "-")
+                raise click.BadParameter("applies to a simulated grasp only: give --fingers K or --object",
+                                         param_hint=flag)
+        return None
+    kind = kind or "rigid"
+    if kind == "rigid" and options["object_stiffness"] is not None:
+        raise click.BadParameter("applies to --object compliant only", param_hint="--object-stiffness")
+    from bendsense.config import load_config
+    from bendsense.sim.gripper import (
+        DEFAULT_COMPLIANT_N_PER_M,
+        DEFAULT_TOUCH_PRESSURE_PA,
+        GraspBoard,
+        default_objects,
+        gripper_config,
+    )
+    from bendsense.sim.regulator import DEFAULT_MAX_PRESSURE_PA, DEFAULT_TAU_S
+
+    paper = load_config()
+    k = 1 if fingers is None else fingers
+    max_pa = DEFAULT_MAX_PRESSURE_PA if options["max_pressure_kpa"] is None else options["max_pressure_kpa"] * 1e3
+    s_c, touch = options["object_s_m"], options["object_touch_kpa"]
+    length = paper.actuator.length_m
+    for flag, values in (("--object-s-m", s_c), ("--object-touch-kpa", touch)):
+        if values is not None and len(values) not in (1, k):
+            raise click.BadParameter(f"expected one value or one per finger ({k}), got {len(values)}", param_hint=flag)
+    if s_c is not None and max(s_c) > length:
+        raise click.BadParameter(f"expected s_c in (0, L = {length:g} m], got {max(s_c):g}", param_hint="--object-s-m")
+    touch_pa = DEFAULT_TOUCH_PRESSURE_PA[:k] if touch is None else tuple(v * 1e3 for v in touch)
+    for flag, value in (("--object-touch-kpa", max(touch_pa)),
+                        ("--close-kpa", None if options["close_kpa"] is None else options["close_kpa"] * 1e3)):
+        if value is not None and value > max_pa:
+            raise click.BadParameter(f"expected at most the regulators' limit {max_pa / 1e3:g} kPa, got "
+                                     f"{value / 1e3:g}", param_hint=flag)
+    stiffness = math.inf if kind == "rigid" else (options["object_stiffness"] or DEFAULT_COMPLIANT_N_PER_M)
+    objects = default_objects(k, stiffness, s_c, touch_pa)
+    extra = {} if options["close_kpa"] is None else {"close_pa": options["close_kpa"] * 1e3}
+    tau_s = DEFAULT_TAU_S if options["tau_ms"] is None else options["tau_ms"] / 1e3
+    config = paper if fingers is None else gripper_config(k, paper)
+    return GraspBoard(config, objects, rate_hz=rate_hz, seed=seed, tau_s=tau_s, max_pressure_pa=max_pa,
+                      adc_bits=adc_bits, **extra)
 
 
 COMMANDS = [simulate]
