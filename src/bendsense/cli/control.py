@@ -26,8 +26,6 @@ from bendsense.cli._common import (
 
 log = logging.getLogger("bendsense")
 
-#: bandwidth of the tracked force the loop closes on [Hz]: faster than live's 5 Hz, so the loop can be
-CONTROL_BANDWIDTH_HZ = 20.0
 #: default pressure limit [Pa] (lowered to the config's pressure range when that ends below)
 DEFAULT_MAX_PRESSURE_PA = 100e3
 
@@ -116,12 +114,12 @@ def _summary(result, controller) -> str:
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), default="normal", show_default=True,
               help="Force constraint: normal (a frictionless contact: F along n) or any other of 'estimate'.")
 @click.option("--kp-kpa-per-n", type=Finite(min=0), default=None,
-              help="Proportional gain [kPa/N] (default 20: bendsense.control.DEFAULT_KP_PA_PER_N).")
+              help="Proportional gain [kPa/N] (default 50: bendsense.control.DEFAULT_KP_PA_PER_N).")
 @click.option("--ki-kpa-per-n-s", type=Finite(min=0), default=None,
               help="Integral gain [kPa/(N s)] (default 3000: bendsense.control.DEFAULT_KI_PA_PER_N_S).")
 @click.option("--max-rate-kpa-per-s", type=Finite(min=0, min_open=True), default=None,
               help="Slew limit of the set-point [kPa/s] (default 500).")
-@make_bandwidth_option(f"{CONTROL_BANDWIDTH_HZ:g} Hz (the loop needs a faster track than live's 5 Hz)")
+@make_bandwidth_option("30 Hz (bendsense.control.TRACK_BANDWIDTH_HZ: the loop needs a faster track than live's 5 Hz)")
 @click.option("--baud", type=click.IntRange(50, 12_000_000), default=None,
               help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
@@ -146,7 +144,12 @@ def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, ou
     "Control session"). docs/grasping.md walks through a grasp on the simulated board.
     """
     from bendsense.config import load_config
-    from bendsense.control import DEFAULT_KI_PA_PER_N_S, DEFAULT_KP_PA_PER_N, DEFAULT_MAX_RATE_PA_PER_S
+    from bendsense.control import (
+        DEFAULT_KI_PA_PER_N_S,
+        DEFAULT_KP_PA_PER_N,
+        DEFAULT_MAX_RATE_PA_PER_S,
+        TRACK_BANDWIDTH_HZ,
+    )
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
 
     ctx = click.get_current_context()
@@ -160,12 +163,12 @@ def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, ou
              "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
     controller = _controllers(config, finger, target_force_n, pmax, gains)
     load_options = live_contact(load, contact_s_m, _any_finger(config))
-    processor = _processor(config, calibration_path, constraint, bandwidth_hz or CONTROL_BANDWIDTH_HZ, load_options)
+    processor = _processor(config, calibration_path, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options)
     meta = {"command": "bendsense control",
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
                         "fingers": [f for f in controller.fingers if f is not None], "load": load,
                         "constraint": constraint,
-                        "contact_s_m": contact_s_m, "bandwidth_hz": bandwidth_hz or CONTROL_BANDWIDTH_HZ}}
+                        "contact_s_m": contact_s_m, "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
         _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta)
 

@@ -22,6 +22,7 @@ from bendsense.control.pi import (
     DEFAULT_KI_PA_PER_N_S,
     DEFAULT_KP_PA_PER_N,
     DEFAULT_MAX_RATE_PA_PER_S,
+    TRACK_BANDWIDTH_HZ,
     Grasp,
     PIController,
 )
@@ -30,4 +31,4 @@ from bendsense.control.safety import ControlStop, Safety
 
 __all__ = ["run", "ControlResult", "PIController", "Grasp", "normal_force", "contact_normal", "NormalForce",
            "Safety", "ControlStop", "ControlRecording", "CONTROL_LOG", "DEFAULT_KP_PA_PER_N",
-           "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S"]
+           "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S", "TRACK_BANDWIDTH_HZ"]

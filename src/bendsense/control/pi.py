@@ -20,11 +20,14 @@ between frames below what the tracker takes for a pressure step (1 kPa per frame
 ``bendsense.tracking.windows.PRESSURE_STEP_PA``, which would restart its filter). A
 frame without a force (NaN) holds the integral.
 
-Default gains: against a rigid object the paper's finger gains ~6 mN per kPa
-(dN/dP ≈ 1.5 EI dK0/dP / L at its tip); K_i = 2e6 Pa/(N s) puts the loop's crossover
-near 2 Hz·2π·… ≈ 12 rad/s (K_i · dN/dP), fast enough for a 0.3 s step, slow beside
-the pressure regulator (τ ≈ 25 ms) and the 20 Hz tracked force; K_p = 2e4 Pa/N adds a
-phase lead without passing the force noise (~1 mN tracked) to the pressure beyond ~20 Pa.
+Default gains, tuned on the simulated board (``benchmarks/bench_control.py``): against a
+rigid object the paper's finger gains dN/dP ≈ 7 mN per kPa beyond first touch (contact
+at 0.1 m), so K_i = 3e6 Pa/(N s) puts the loop's crossover near K_i · dN/dP ≈ 20 rad/s,
+fast enough for a 0.3 s step and slow beside the regulator (τ = 25 ms); K_p = 5e4 Pa/N
+damps the approach (no overshoot past 2 mN at touch pressures 35–50 kPa) while passing
+the tracked force's noise (~0.1 mN at 1 kHz, 30 Hz bandwidth) to the pressure as ~5 Pa.
+Before touch the force is 0 and the integral ramps the pressure at K_i N* (450 kPa/s for
+0.15 N) up to the slew limit.
 """
 
 from __future__ import annotations
@@ -37,14 +40,17 @@ from bendsense.control.force import normal_force
 from bendsense.errors import ArgumentError
 
 __all__ = ["PIController", "Grasp", "DEFAULT_KP_PA_PER_N", "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S",
-           "finger_block"]
+           "TRACK_BANDWIDTH_HZ", "finger_block"]
 
 #: proportional gain [Pa/N]
-DEFAULT_KP_PA_PER_N = 2.0e4
+DEFAULT_KP_PA_PER_N = 5.0e4
 #: integral gain [Pa/(N s)]
 DEFAULT_KI_PA_PER_N_S = 3.0e6
 #: slew limit of the set-point [Pa/s]: 0.5 kPa per frame at 1 kHz
 DEFAULT_MAX_RATE_PA_PER_S = 5.0e5
+#: bandwidth of the tracked force the loop closes on [Hz] (the processor's ``bandwidth_hz``): faster than the
+#: live view's 5 Hz, whose lag the loop would have to wait out
+TRACK_BANDWIDTH_HZ = 30.0
 #: longest interval integrated at once [s]: a gap longer than this counts as this
 MAX_DT_S = 0.05
 
