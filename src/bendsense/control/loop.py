@@ -125,11 +125,20 @@ def _clip(setpoints, lines, max_pressure_pa):
 
 
 def _zero(driver, lines) -> float:
-    """Send set-point 0 on every line; returns when the last was written (perf_counter), NaN if one failed."""
+    """Send set-point 0 on every line; returns when the last was written (perf_counter), NaN if one failed.
+
+    The lines are the loop's and every line the board reports (a single actuator's loop
+    on a gripper's board zeroes them all); a line the board turns out not to have is skipped.
+    """
+    latest = getattr(driver, "latest", lambda: None)()
+    board = 0 if latest is None else len(getattr(latest.sample, "pressures_pa", ()) or ())
     ok = True
-    for line in lines:
+    for line in sorted(set(lines) | set(range(board))):
         try:
             driver.send_setpoint(line, 0.0)
+        except ArgumentError:
+            if line < board:
+                ok = False
         except (DeviceError, OSError) as err:
             ok = False
             log.error("set-point 0 on line %d could not be sent: %s", line, err)

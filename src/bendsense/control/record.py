@@ -9,7 +9,9 @@
 - ``control.csv``: a row per frame (module :mod:`bendsense.control.record`, columns in
   docs/formats.md, "Control log"): ``t_s, seq, host_s``, per controlled finger the normal
   force, its σ, the contact location, the target and the status, then per pressure line
-  the set-point sent after the frame's block and the line's measured pressure;
+  the set-point sent after the frame's block and the line's measured pressure
+  (``line<k>_setpoint_pa, line<k>_pressure_pa``; a single actuator: ``setpoint_pa,
+  pressure_pa`` and no finger prefixes, as the simulator's truth file);
 - the force results of every frame, as ``record --estimate`` writes them:
   ``results.csv`` (one actuator) or ``<finger>/results.csv`` (a gripper).
 
@@ -126,9 +128,11 @@ class ControlRecording:
         if own is not None:
             cols.update(own())
         measured = line_pressures(readings, lines)
+        single = self.fingers is None and tuple(lines) == (0,)  # one actuator: no prefixes (as the truth file)
         for k in lines:
-            cols[f"line{k}_setpoint_pa"] = np.full(n, setpoints.get(k, np.nan))
-            cols[f"line{k}_pressure_pa"] = measured[k]
+            prefix = "" if single else f"line{k}_"
+            cols[f"{prefix}setpoint_pa"] = np.full(n, setpoints.get(k, np.nan))
+            cols[f"{prefix}pressure_pa"] = measured[k]
         self.log.write(_Rows(cols, n))
         for name, appender in self.results.items():
             if name is not None:
