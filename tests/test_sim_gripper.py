@@ -17,7 +17,14 @@ from bendsense.cli import main
 from bendsense.config import load_config
 from bendsense.device import SimulatedDevice, ramp_source
 from bendsense.frames import Decoder, FrameType, Sample, Text, encode_command, encode_setpoint
-from bendsense.sim.gripper import DEFAULT_TOUCH_PRESSURE_PA, GraspBoard, default_objects, gripper_config
+from bendsense.sim.gripper import (
+    DEFAULT_CLOSE_PA,
+    DEFAULT_TOUCH_PRESSURE_PA,
+    GraspBoard,
+    default_objects,
+    gripper_config,
+)
+from bendsense.sim.regulator import closing_profile
 from bendsense.sim.truth import TruthWriter, truth_columns
 
 RATE = 1000.0
@@ -85,16 +92,19 @@ def test_gripper_board_streams_v2_and_answers_setpoints(board, tmp_path):
         for k in range(3):
             assert s.pressures_pa[k] == round(float(row[f"line{k}_pressure_pa"]))
     # line 1 is the host's from the SETPOINT on; its pressure follows the first-order lag exactly
-    seqs = sorted(by_seq)
-    first = next(q for q in seqs if float(by_seq[q]["line1_setpoint_pa"]) == 60_000)
-    assert all(float(by_seq[q]["line1_setpoint_pa"]) == 60_000 for q in seqs if q >= first)
-    p0 = float(by_seq[first - 1]["line1_pressure_pa"])
-    later = [q for q in seqs if q >= first][:200]
-    p = np.array([float(by_seq[q]["line1_pressure_pa"]) for q in later])
-    n = np.array(later) - first + 1
+    seqs = sorted(by_seq)  # TEXT frames take sequence numbers too: frames are counted by row
+    first = next(i for i, q in enumerate(seqs) if float(by_seq[q]["line1_setpoint_pa"]) == 60_000)
+    assert all(float(by_seq[q]["line1_setpoint_pa"]) == 60_000 for q in seqs[first:])
+    p0 = float(by_seq[seqs[first - 1]]["line1_pressure_pa"])
+    p = np.array([float(by_seq[q]["line1_pressure_pa"]) for q in seqs[first:first + 200]])
+    n = np.arange(1, p.size + 1)
     assert p == pytest.approx(60e3 + (p0 - 60e3) * np.exp(-n / (RATE * TAU)), rel=1e-9, abs=1e-6)
     # lines 0 and 2 still follow the closing profile (a ramp from 0: below the touch, no force)
-    assert all(float(by_seq[q]["line0_setpoint_pa"]) < 10e3 for q in seqs)
+    t = np.array([int(by_seq[q]["t_us"]) for q in seqs]) / 1e6
+    for line in (0, 2):
+        setpoints = np.array([float(by_seq[q][f"line{line}_setpoint_pa"]) for q in seqs])
+        assert setpoints == pytest.approx(closing_profile(t, close_pa=DEFAULT_CLOSE_PA), abs=1e-6)
+    assert max(float(by_seq[q]["line0_pressure_pa"]) for q in seqs) < DEFAULT_TOUCH_PRESSURE_PA[0]
     assert all(float(by_seq[q]["thumb_fx_n"]) == 0.0 for q in seqs)
     touching = [q for q in seqs if float(by_seq[q]["line1_pressure_pa"]) > DEFAULT_TOUCH_PRESSURE_PA[1] + 1e3]
     assert touching and all(float(by_seq[q]["index_fx_n"]) < 0 < float(by_seq[q]["index_fy_n"]) for q in touching)
@@ -161,9 +171,9 @@ def test_sim_device_fingers_truth_is_readable_after_a_kill(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-c", "from bendsense.cli import main; main()", "sim-device", "--fingers", "2",
          "--autostart", "--rate", "1000", "--truth", str(target)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
     )
-    try:
+    with proc:
         port = proc.stdout.readline().strip()
         fd = os.open(port, os.O_RDWR | os.O_NOCTTY)
         decoder, samples, end = Decoder(), [], time.monotonic() + 0.5
@@ -173,9 +183,6 @@ def test_sim_device_fingers_truth_is_readable_after_a_kill(tmp_path):
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         os.close(fd)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
     rows = _truth_rows(target)
     assert list(rows[0])[:5] == ["seq", "t_us", "thumb_fx_n", "thumb_fy_n", "thumb_contact_s_m"]
     assert list(rows[0])[-2:] == ["line1_setpoint_pa", "line1_pressure_pa"]
