@@ -232,7 +232,13 @@ _GRASP_OPTIONS = [
 
 
 def grasp_options(command):
-    """Add the simulated grasp's options to ``sim-device``."""
+    """Add the simulated grasp's options to ``sim-device``.
+
+    Parameters
+    ----------
+    command : callable
+        The command function being decorated.
+    """
     for option in reversed(_GRASP_OPTIONS):
         command = option(command)
     return command
