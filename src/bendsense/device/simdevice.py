@@ -461,9 +461,9 @@ class SimulatedDevice:
                         break
                     self._produce(k, *values)
                     k += 1
-            self._flush()
-            if self._truth is not None:
+            if self._truth is not None:  # the rows of a burst reach the file before its frames the port
                 self._truth.flush()
+            self._flush()
             if self._exhausted and not self.finished.is_set():
                 self._flush(wait_s=1.0)
                 self._wait_read(1.0)

@@ -156,6 +156,9 @@ class GraspBoard:
     truth_fingers : list of str or None
         The fingers' names for the truth columns; None for a single actuator.
     regulators : PressureRegulators
+        The lines' regulators (replaced by :meth:`reset`).
+    profile : object
+        The scenario's set-point profile: ``profile(t_s)`` [Pa], ``close_pa``, ``period_s``.
     fingers : dict
         Name → :class:`~bendsense.sim.grasp.FingerGrasp`.
     """
@@ -178,9 +181,10 @@ class GraspBoard:
         self.n_lines = max(m[3] for m in members) + 1
         self.single = single
         self.rate_hz = float(rate_hz)
-        profile = _Profile(float(close_pa), float(period_s))
-        self.regulators = PressureRegulators(self.n_lines, rate_hz, tau_s=tau_s, max_pressure_pa=max_pressure_pa,
-                                             profile=profile)
+        profile = self.profile = _Profile(float(close_pa), float(period_s))
+        self._seed = seed
+        self._regulator_options = {"tau_s": tau_s, "max_pressure_pa": max_pressure_pa, "profile": profile}
+        self.reset()  # checks the regulators' options before the slow tables
         self._fingers = []
         sensors = {}
         for (name, cfg, channels, line), obj in zip(members, objects, strict=True):
@@ -195,9 +199,13 @@ class GraspBoard:
         self.fingers = {f.name: f.grasp for f in self._fingers}
         self.noise_counts = float(noise_counts)
         self._full_scale = 2 ** int(adc_bits) - 1
-        self._rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_NOISE_KEY,)))
         self._line_keys = [("setpoint_pa", "pressure_pa")] if single else [
             (f"line{k}_setpoint_pa", f"line{k}_pressure_pa") for k in range(self.n_lines)]
+
+    def reset(self) -> None:
+        """Start over: regulators at 0 Pa following the scenario, the noise stream from its seed (tables kept)."""
+        self.regulators = PressureRegulators(self.n_lines, self.rate_hz, **self._regulator_options)
+        self._rng = np.random.default_rng(np.random.SeedSequence(self._seed, spawn_key=(_NOISE_KEY,)))
 
     def setpoint(self, line: int, pressure_pa: float) -> bool:
         """Take a SETPOINT: the line's regulator follows ``pressure_pa`` from the next frame on.
