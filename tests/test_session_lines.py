@@ -276,3 +276,9 @@ def test_recorder_skips_samples_with_other_lines_and_says_so(tmp_path):
     s = read_session(tmp_path / "s")
     np.testing.assert_array_equal(s.pressure_pa, [[1001, 2001], [1002, 2002], [1003, 2003], [1006, 2006]])
     assert "sample(s) with a number of pressure lines other than 2" in (tmp_path / "s" / "events.log").read_text()
+
+
+def test_replay_refuses_more_lines_than_a_sample_carries():
+    s = Session([0.0], [[1.0]], np.full((1, 256), 1e4), source="wide.csv")
+    with pytest.raises(SessionError, match=r"wide\.csv: 256 pressure lines; a SAMPLE carries at most 255"):
+        replay_frames(s)
