@@ -27,6 +27,8 @@ _LAZY = {
     "Config": "bendsense.config",
     "load_config": "bendsense.config",
     "save_config": "bendsense.config",
+    "Finger": "bendsense.config",
+    "GripperConfig": "bendsense.config",
     "Session": "bendsense.session",
     "read_session": "bendsense.session",
     "read_session_csv": "bendsense.session",

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import ArgumentError
+from bendsense.validation import instance
 
 __all__ = ["ContactBound", "contact_bound", "BOUND_CONSTRAINTS"]
 
@@ -168,8 +169,7 @@ def contact_bound(config=None, calibration=None, *, contact_s_m, force_n, pressu
     from bendsense.sim.actuator import SimulatedActuator
 
     config = load_config() if config is None else config
-    if not isinstance(config, Config):
-        raise ArgumentError(f"config: expected a Config, got {type(config).__name__}")
+    instance("config", config, Config)
     if constraint not in BOUND_CONSTRAINTS:
         raise ArgumentError(f"constraint: must be one of {', '.join(BOUND_CONSTRAINTS)}, got {constraint!r}")
     if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1:

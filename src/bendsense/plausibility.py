@@ -26,7 +26,7 @@ import numpy as np
 
 from bendsense.bounds import max_curvature_per_m
 from bendsense.errors import ArgumentError, SessionError
-from bendsense.validation import float_array
+from bendsense.validation import float_array, instance
 
 __all__ = [
     "OUT_OF_RANGE",
@@ -88,9 +88,8 @@ def pressure_range_step(estimate):
     def estimate_force(shape, pressure_pa, config=None, *args, **options):
         if config is None:
             config = load_config()
-        elif not isinstance(config, Config):
-            raise ArgumentError(f"config: expected a Config (bendsense.load_config(path)), got "
-                                f"{type(config).__name__}")
+        else:
+            instance("config", config, Config, "bendsense.load_config(path)")
         outside = pressure_outside(pressure_pa, config)
         if not outside.any():
             return estimate(shape, pressure_pa, config, *args, **options)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bendsense.errors import ArgumentError
+from bendsense.errors import ArgumentError, ConfigError
 
 __all__ = [
     "short",
@@ -332,8 +332,8 @@ def instance(field: str, value, cls: type, how: str = "", *, error=ArgumentError
         The argument, for the message.
     value : object
         The value to check.
-    cls : type
-        The class expected.
+    cls : type or tuple of type
+        The class (or classes) expected.
     how : str, optional
         How to get one, for the message (``"bendsense.read_session(path)"``).
     error : type, default ArgumentError
@@ -341,8 +341,11 @@ def instance(field: str, value, cls: type, how: str = "", *, error=ArgumentError
     """
     if isinstance(value, cls):
         return value
+    names = " or ".join(c.__name__ for c in cls) if isinstance(cls, tuple) else cls.__name__
+    if names == "Config" and hasattr(type(value), "single_message"):  # a gripper where one actuator belongs
+        raise ConfigError(value.single_message(field))
     hint = f" ({how})" if how else ""
-    raise fail(field, f"a {cls.__name__}{hint}", _type(value), error, raw=True)
+    raise fail(field, f"a {names}{hint}", _type(value), error, raw=True)
 
 
 def _type(value) -> str:

@@ -1,4 +1,4 @@
-"""Configuration: the sensor, the actuator, its material and stiffness, gravity and estimation options.
+"""Configuration sections: the sensor, the actuator, its material and stiffness, gravity and estimation options.
 
 Every section is a frozen, keyword-only dataclass with SI units in its field names
 and its checks in ``__post_init__``. ``Config.from_dict`` / ``Config.to_dict``
@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from dataclasses import dataclass, field
-from importlib import resources
 from typing import Any, ClassVar
 
 import numpy as np
-import yaml
 
 from bendsense import bounds
 from bendsense import validation as check
@@ -33,8 +30,6 @@ __all__ = [
     "EstimationConfig",
     "ParameterCovarianceConfig",
     "Config",
-    "load_config",
-    "save_config",
     "PAPER_CONFIG",
     "MODEL_PARAMETERS",
     "FREE_BENDING_PARAMETERS",
@@ -610,49 +605,3 @@ class Config:
         """Gravity as a distributed load w = (m g / L) ĝ in the base frame [N/m]."""
         q = self.actuator.mass_kg * self.gravity.g_m_per_s2 / self.actuator.length_m
         return q * np.asarray(self.gravity.direction)
-
-
-def load_config(path: str | os.PathLike | None = None) -> Config:
-    """Load a config YAML; ``None`` loads the paper's prototype shipped with the package.
-
-    Parameters
-    ----------
-    path : str or path-like, optional
-        Config YAML file; None loads the paper's prototype shipped with bendsense.
-
-    Raises
-    ------
-    ConfigError
-        If the file cannot be read or parsed, or a value is invalid.
-    """
-    from bendsense._io import load_yaml, parse_yaml
-
-    if path is None:
-        text = resources.files("bendsense.data").joinpath(PAPER_CONFIG).read_text(encoding="utf-8")
-        return parse_yaml(text, "paper.yaml (built in)", Config.from_dict)
-    return load_yaml(path, "config", Config.from_dict)
-
-
-def save_config(config: Config, path: str | os.PathLike, *, overwrite: bool = True) -> None:
-    """Write ``config`` as YAML atomically (:func:`bendsense.output.write_text`).
-
-    ``overwrite=False`` refuses an existing file (:class:`~bendsense.errors.OutputExistsError`).
-
-    Parameters
-    ----------
-    config : Config
-        The configuration to write.
-    path : str or path-like
-        Output YAML file.
-    overwrite : bool, default True
-        Replace an existing file; False refuses one.
-    """
-    from bendsense import output
-    from bendsense.validation import instance
-    from bendsense.validation import path as _path
-
-    instance("config", config, Config, "bendsense.load_config(path)")
-    path = _path("path", path)
-    text = "# bendsense config (actuator, sensor and model parameters; docs/formats.md)\n"
-    output.write_text(path, text + yaml.safe_dump(config.to_dict(), sort_keys=False), overwrite=overwrite,
-                      writer="bendsense identify")

@@ -1,0 +1,168 @@
+"""A gripper's board, finger by finger: each finger's channels, pressure line and calibration.
+
+A gripper is its fingers (DESIGN section 2b): a board session or a live block of
+readings is split into one single-actuator session (or block) per finger, which the
+existing single-actuator code then processes unchanged. A finger's part of the board:
+
+- its signals: the board's columns ``channels − 1``, in the finger's order;
+- its pressure: its ``pressure_line`` of the board's lines (``pressure_pa`` of shape
+  ``(frames, n_lines)``), or the one pressure of a one-line board (line 0);
+- the same ``t_s``, ``seq`` and ``meta``;
+- the extra columns shared by the board (those without a finger's prefix) and its own
+  truth columns, with the ``<finger>_`` prefix removed (``thumb_fx_n`` → ``fx_n``; its
+  own column wins over a shared one of the same name); other fingers' columns are
+  left out.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bendsense import validation as check
+from bendsense.config import Finger, GripperConfig
+from bendsense.errors import ArgumentError, SessionError
+from bendsense.session import Session
+
+__all__ = ["split_session", "split_signals", "split_extra", "finger_columns"]
+
+
+def _gripper(gripper) -> GripperConfig:
+    return check.instance("gripper", gripper, GripperConfig, "bendsense.load_config(path) of a config with fingers:")
+
+
+def _lines(pressure: np.ndarray) -> int:
+    """The number of pressure lines of a ``(frames,)`` or ``(frames, n_lines)`` pressure array."""
+    return 1 if pressure.ndim == 1 else pressure.shape[1]
+
+
+def _line(pressure: np.ndarray, finger: Finger) -> np.ndarray:
+    """The finger's pressure, 1-D (frames,)."""
+    return pressure if pressure.ndim == 1 else pressure[:, finger.pressure_line]
+
+
+def _check_board(n_channels: int, n_lines: int, gripper: GripperConfig, source: str, error) -> None:
+    """A board of ``n_channels`` and ``n_lines`` holds every finger's channels and line, or one clear error."""
+    for i, finger in enumerate(gripper.fingers):
+        high = max(finger.channels)
+        if high > n_channels:
+            raise error(f"{source}: {n_channels} channel{'s' if n_channels != 1 else ''}, but finger {finger.name} "
+                        f"reads channel {high} (fingers[{i}].channels of the config)")
+    for i, finger in enumerate(gripper.fingers):
+        if finger.pressure_line >= n_lines:
+            raise error(f"{source}: {n_lines} pressure line{'s' if n_lines != 1 else ''}, but finger {finger.name} "
+                        f"is on line {finger.pressure_line} (fingers[{i}].pressure_line of the config, 0-based)")
+
+
+def finger_columns(columns, gripper: GripperConfig) -> dict:
+    """``{column: finger name or None}``: which finger an extra column belongs to (None: shared by the board).
+
+    A column ``<finger>_<rest>`` belongs to that finger (the longest matching finger name
+    wins, so ``index_fx_n`` is finger ``index``'s even beside a finger ``in``).
+
+    Parameters
+    ----------
+    columns : iterable of str
+        Column names.
+    gripper : GripperConfig
+        The fingers.
+    """
+    names = sorted(_gripper(gripper).names, key=len, reverse=True)
+    out = {}
+    for column in columns:
+        out[column] = next((n for n in names if column.startswith(n + "_") and len(column) > len(n) + 1), None)
+    return out
+
+
+def split_extra(extra: dict, gripper: GripperConfig) -> dict:
+    """Each finger's extra columns: the shared ones and its own, its prefix removed.
+
+    Parameters
+    ----------
+    extra : dict of str to ndarray
+        The board's extra columns (``Session.extra``), in file order.
+    gripper : GripperConfig
+        The fingers.
+
+    Returns
+    -------
+    dict
+        ``{finger name: {column: values}}``.
+    """
+    owners = finger_columns(extra, gripper)
+    out = {}
+    for name in gripper.names:
+        columns = {c: v for c, v in extra.items() if owners[c] is None}
+        own = {c[len(name) + 1:]: v for c, v in extra.items() if owners[c] == name}
+        out[name] = {**columns, **own}
+    return out
+
+
+def split_session(session: Session, gripper: GripperConfig) -> dict:
+    """The board session ``session`` as one single-actuator session per finger.
+
+    Parameters
+    ----------
+    session : Session
+        The whole board: ``signals`` (frames, N_board), ``pressure_pa`` (frames,) for one
+        line or (frames, n_lines).
+    gripper : GripperConfig
+        The fingers: channels and pressure line of each.
+
+    Returns
+    -------
+    dict
+        ``{finger name: Session}`` in the gripper's order; each session has the
+        finger's channels (``signals[:, channels − 1]``), its line's pressure (1-D),
+        the same ``t_s``, ``seq`` and ``meta``, and its extra columns
+        (:func:`split_extra`).
+
+    Raises
+    ------
+    SessionError
+        The session has fewer channels than a finger reads, or fewer pressure lines
+        than a finger's line; the message names the finger, the channel or line and
+        the session's source.
+    """
+    gripper = _gripper(gripper)
+    check.instance("session", session, Session, "bendsense.read_session(path)")
+    pressure = np.asarray(session.pressure_pa)
+    _check_board(session.n_channels, _lines(pressure), gripper, session.source or "session", SessionError)
+    extras = split_extra(session.extra, gripper)
+    out = {}
+    for finger in gripper.fingers:
+        out[finger.name] = Session(
+            session.t_s, session.signals[:, finger.index], _line(pressure, finger).copy(),
+            None if session.seq is None else session.seq.copy(), dict(session.meta), extras[finger.name],
+            session.source,
+        )
+    return out
+
+
+def split_signals(signals, pressure_pa, gripper: GripperConfig) -> dict:
+    """A live block of the board's readings as each finger's ``(signals, pressure_pa)``.
+
+    Parameters
+    ----------
+    signals : array_like, shape (frames, N_board)
+        The board's signals.
+    pressure_pa : array_like, shape (frames,) or (frames, n_lines)
+        The pressure of each frame: one line (every finger on line 0) or each line's [Pa].
+    gripper : GripperConfig
+        The fingers.
+
+    Returns
+    -------
+    dict
+        ``{finger name: (signals (frames, n_segments), pressure_pa (frames,))}``.
+    """
+    gripper = _gripper(gripper)
+    signals = check.float_array("signals", signals)
+    pressure = check.float_array("pressure_pa", pressure_pa)
+    if signals.ndim != 2:
+        raise ArgumentError(f"signals: expected shape (frames, N_board), got {signals.shape}")
+    frames = signals.shape[0]
+    if pressure.ndim not in (1, 2) or pressure.shape[0] != frames:
+        raise ArgumentError(f"pressure_pa: expected shape ({frames},) or ({frames}, n_lines) (frames of signals), "
+                            f"got {pressure.shape}")
+    _check_board(signals.shape[1], _lines(pressure), gripper, "signals", ArgumentError)
+    return {f.name: (signals[:, f.index], _line(pressure, f)) for f in gripper.fingers}
