@@ -830,26 +830,14 @@ class LiveProcessor:
         readings : list of Reading
             Driver readings, oldest first.
         """
-        from bendsense.session.native import record_dtype, records_extra, sample_records
+        from bendsense.readings import reading_columns
 
         readings = list(readings)
         if self._t0_us is None and readings:
             self._t0_us = readings[0].device_us
             self._host0_ns = readings[0].host_ns
-        t0 = 0 if self._t0_us is None else self._t0_us
-        signals = np.array([r.sample.adc for r in readings], dtype=float).reshape(len(readings), -1)
-        host_ns = [r.host_ns for r in readings]
-        # the records the recorder writes of these readings, for the same extra columns
-        records = sample_records(record_dtype(max(signals.shape[1], 1), "<f8"), [r.sample for r in readings],
-                                 host_ns, [max(r.device_us, 0) for r in readings])
-        return self.process_block(
-            signals,
-            np.array([np.nan if r.sample.pressure_pa is None else r.sample.pressure_pa for r in readings], float),
-            t_s=(np.array([r.device_us for r in readings], dtype=np.int64) - t0) * 1e-6,
-            seq=[r.sample.seq for r in readings],
-            host_ns=host_ns,
-            extra=records_extra(records, self._host0_ns),
-        )
+        c = reading_columns(readings, 0 if self._t0_us is None else self._t0_us, self._host0_ns)
+        return self.process_block(c.signals, c.pressure_pa, t_s=c.t_s, seq=c.seq, host_ns=c.host_ns, extra=c.extra)
 
     def process_signals(self, signals, pressure_pa=None, *, seq=-1, t_s=math.nan, host_ns=None) -> LiveFrame:
         """Process one frame given as raw signals A (N,) and the pressure [Pa] (a block of one).

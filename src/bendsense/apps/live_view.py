@@ -21,6 +21,11 @@ reading from the driver's queue, processes what arrived as one block (and publis
 LSL if asked), draws the newest frame at most ``max_fps`` times a second, and measures
 the end-to-end latency per drawn frame (bytes read by the driver → shape and force →
 artists drawn) and the rates.
+
+A gripper (:class:`~bendsense.gripper_live.GripperProcessor`) is shown by
+:class:`GripperView`: one :class:`LiveView` per finger, each in its own panel (a
+matplotlib subfigure) of one figure, with the finger's name on its status line;
+:func:`run_live` takes either processor.
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ import numpy as np
 from bendsense.pipeline import LiveFrame, LiveProcessor
 from bendsense.results import flagged_counts
 
-__all__ = ["LiveView", "LiveStats", "run_live", "status_line"]
+__all__ = ["LiveView", "GripperView", "LiveStats", "run_live", "status_line"]
 
 MM = 1e3
 _BLUE = (0.122, 0.467, 0.706, 1.0)  # matplotlib's C0 and C3
@@ -255,7 +260,7 @@ class LiveView:
         self._draw_artists()
 
     def _draw_artists(self) -> None:
-        fig, canvas = self.figure, self.canvas
+        fig, canvas = self.figure.figure, self.canvas  # the root figure draws (also a gripper's finger panel's)
         now = time.monotonic()
         refresh = now >= self._next_text or len(self._text_regions) != len(self.texts)
         # texts first: restoring their saved pixels must not cover the shape drawn later
@@ -464,6 +469,105 @@ class LiveView:
             self._background = None
 
 
+class GripperView:
+    """The live figure of a gripper: a :class:`LiveView` panel per finger, stacked in one figure.
+
+    Parameters
+    ----------
+    processor : GripperProcessor
+        Gives the fingers and each finger's processor.
+    figure : matplotlib.figure.Figure, optional
+        Draw into this figure; default a new one (through pyplot unless ``headless``).
+    headless : bool
+        A figure on the Agg canvas without pyplot (no window; for ``--save``).
+    **options
+        Options of each finger's :class:`LiveView` (``scale_m_per_n``, ``window_s``, ...).
+
+    Attributes
+    ----------
+    views : dict of str to LiveView
+        Each finger's panel.
+    """
+
+    def __init__(self, processor, figure=None, *, headless=False, **options):
+        k = len(processor.fingers)
+        if figure is None:
+            size = (12, 4.6 * k)
+            if headless:
+                from matplotlib.backends.backend_agg import FigureCanvasAgg
+                from matplotlib.figure import Figure
+
+                figure = Figure(figsize=size)
+                FigureCanvasAgg(figure)
+            else:
+                import matplotlib.pyplot as plt
+
+                figure = plt.figure(figsize=size)
+        self.figure = figure
+        panels = figure.subfigures(k, 1, squeeze=False)[:, 0]
+        self.views = {name: LiveView(processor.processors[name], panel, **options)
+                      for name, panel in zip(processor.fingers, panels)}
+
+    @property
+    def canvas(self):
+        """The figure's canvas."""
+        return self.figure.canvas
+
+    def add_block(self, blocks) -> None:
+        """Append each finger's frames to its panel's history.
+
+        Parameters
+        ----------
+        blocks : dict of str to LiveBlock
+            The newly processed frames per finger.
+        """
+        for name, block in blocks.items():
+            self.views[name].add_block(block)
+
+    def update(self, frames, status=None) -> None:
+        """Show each finger's frame in its panel.
+
+        Parameters
+        ----------
+        frames : dict of str to LiveFrame
+            The frame to show per finger.
+        status : dict of str to str, optional
+            Each panel's status line.
+        """
+        for name, frame in frames.items():
+            self.views[name].update(frame, (status or {}).get(name, name))
+
+    def save(self, path, dpi: int = 120, overwrite: bool = True) -> None:
+        """Write the figure with every finger's current frame (atomically; :func:`bendsense.output.write_file`).
+
+        Parameters
+        ----------
+        path : path
+            Figure file; its suffix gives the format.
+        dpi : int, default 120
+            Resolution of a raster figure [dots per inch].
+        overwrite : bool, default True
+            Replace an existing figure bendsense wrote.
+        """
+        from pathlib import Path
+
+        from bendsense import output
+
+        path = Path(path)
+        fmt = path.suffix[1:].lower() or "png"
+        artists = [a for view in self.views.values() for a in view.artists]
+        for artist in artists:  # animated artists are left out of a normal draw; show them for the file
+            artist.set_animated(False)
+        try:
+            with output.write_file(path, overwrite=overwrite, writer="bendsense live") as tmp:
+                self.figure.savefig(tmp, format=fmt, dpi=dpi, metadata=output.figure_metadata(fmt))
+        finally:
+            for artist in artists:
+                artist.set_animated(True)
+            for view in self.views.values():
+                view._background = None
+
+
 # --------------------------------------------------------------------------- loop
 
 
@@ -543,8 +647,8 @@ def status_line(block, processor, rate_hz: float, fps: float, lost: int, backlog
 
 def run_live(
     driver,
-    processor: LiveProcessor,
-    view: LiveView | None = None,
+    processor,
+    view=None,
     *,
     duration_s=None,
     max_fps=60.0,
@@ -559,8 +663,9 @@ def run_live(
     ----------
     driver : Driver
         An open, streaming driver with a queue (:meth:`~bendsense.device.driver.Driver.get_batch`).
-    processor : LiveProcessor
-    view : LiveView, optional
+    processor : LiveProcessor or GripperProcessor
+        The model (a gripper's: a block per finger).
+    view : LiveView or GripperView, optional
         None: process only (for benchmarks of the model alone).
     duration_s : float, optional
         Run time [s]; None: until ``is_open()`` turns false.
@@ -570,8 +675,9 @@ def run_live(
     is_open : callable, optional
         Returns False when the window was closed.
     on_frame : callable, optional
-        Called with the newest :class:`LiveFrame` after each redraw.
-    outlets : LslOutlets, optional
+        Called with the newest :class:`LiveFrame` after each redraw (a gripper: a dict
+        of the fingers' newest frames).
+    outlets : LslOutlets or GripperOutlets, optional
         Publish every processed block on LSL.
     max_block : int
         Most frames processed in one block.
@@ -606,11 +712,12 @@ def run_live(
             raise DeviceError(driver.error)
         readings = driver.get_batch(timeout=0.005, max_items=max_block)
         if readings:
-            block = processor.process_readings(readings)
+            block = processor.process_readings(readings)  # a gripper's: a block per finger
             if outlets is not None:
                 outlets.push(block)
-            process.append(block.process_s / len(block))
-            recent.append((time.monotonic(), len(block)))
+            parts = list(block.values()) if isinstance(block, dict) else [block]
+            process.append(sum(b.process_s for b in parts) / len(readings))
+            recent.append((time.monotonic(), len(readings)))
             if view is not None:
                 view.add_block(block)
             pending = block
@@ -619,16 +726,21 @@ def run_live(
         if pending is None or time.monotonic() < next_draw:
             continue
         t_draw = time.perf_counter()
-        frame = pending.frame(-1)
+        frame = pending.frame(-1) if not isinstance(pending, dict) else {k: b.frame(-1) for k, b in pending.items()}
         if view is not None:
             t_now = time.monotonic()
             recent = [(t, n) for t, n in recent if t >= t_now - 1.0]
             fps = len(latencies) / (t_now - start) if t_now > start else 0.0
-            view.update(frame, status_line(pending, processor, sum(n for _, n in recent), fps,
-                                           driver.stats.lost, driver.queued))
+            rate, lost, backlog = sum(n for _, n in recent), driver.stats.lost, driver.queued
+            if isinstance(pending, dict):  # a status line per finger panel, with its own counts
+                view.update(frame, {k: f"{k}   " + status_line(b, processor.processors[k], rate, fps, lost, backlog)
+                                    for k, b in pending.items()})
+            else:
+                view.update(frame, status_line(pending, processor, rate, fps, lost, backlog))
         done_ns = time.monotonic_ns()
         draw.append(time.perf_counter() - t_draw)
-        latencies.append((done_ns - frame.host_ns) * 1e-6)
+        latencies.append((done_ns - (frame if not isinstance(frame, dict) else next(iter(frame.values()))).host_ns)
+                         * 1e-6)
         if on_frame is not None:
             on_frame(frame)
         pending = None

@@ -63,14 +63,16 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``, its kernels ready.
 
     The kernels compile (first run after an install) or load here, before a port opens
-    (:meth:`~bendsense.pipeline.LiveProcessor.warm_up`).
+    (:meth:`~bendsense.pipeline.LiveProcessor.warm_up`). A gripper config gives a
+    :class:`~bendsense.gripper_live.GripperProcessor` (a processor per finger).
 
     Parameters
     ----------
-    config : Config
-        Sensor and actuator configuration.
-    calibration_path : path
-        Calibration YAML.
+    config : Config or GripperConfig
+        Sensor and actuator configuration (a gripper's: its fingers').
+    calibration_path : path, or what :func:`bendsense.fingers.calibrations` takes
+        Calibration YAML (a gripper: one for every finger, or a mapping finger name →
+        calibration).
     constraint, objective : str or None
         Force estimate options; None takes the config's.
     pressure_kpa : float or None
@@ -85,10 +87,13 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         known location; None or empty: the tip.
     """
     from bendsense.calibration import Calibration
+    from bendsense.config import GripperConfig
+    from bendsense.gripper_live import GripperProcessor
     from bendsense.pipeline import LiveProcessor
 
-    processor = LiveProcessor(
-        Calibration.load(calibration_path),
+    gripper = isinstance(config, GripperConfig)
+    processor = (GripperProcessor if gripper else LiveProcessor)(
+        calibration_path if gripper else Calibration.load(calibration_path),
         config,
         constraint=constraint,
         objective=objective,
@@ -105,9 +110,48 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NoParameterCovarianceWarning)
         processor.warm_up()
-    if estimate:
-        log_no_parameter_covariance(config)
+    if estimate:  # a gripper: said once, of the first finger that declares none
+        log_no_parameter_covariance(next((f.config for f in config.fingers if f.config.parameter_covariance is None),
+                                         None) if gripper else config)
     return processor
+
+
+def live_load(load: str, contact_s_m, config) -> dict:
+    """The load options of ``record --estimate`` and ``live`` (:func:`~bendsense.cli._common.live_contact`).
+
+    A gripper's location is checked against every finger (each must reach it).
+
+    Parameters
+    ----------
+    load : str
+        ``--load``.
+    contact_s_m : float or None
+        ``--contact-s-m`` [m].
+    config : Config or GripperConfig
+        The actuator (or the fingers) whose length bounds it.
+    """
+    from bendsense.config import GripperConfig
+
+    if not isinstance(config, GripperConfig):
+        return live_contact(load, contact_s_m, config)
+    return [live_contact(load, contact_s_m, f.config) for f in config.fingers][0]
+
+
+def results_paths(output: Path, config):
+    """Where ``record --estimate`` writes: ``SESSION/results.csv``, a gripper's ``SESSION/<finger>/results.csv``.
+
+    Parameters
+    ----------
+    output : Path
+        The session directory.
+    config : Config, GripperConfig or None
+        The config estimated with.
+    """
+    from bendsense.config import GripperConfig
+
+    if isinstance(config, GripperConfig):
+        return {name: output / name / "results.csv" for name in config.names}
+    return output / "results.csv"
 
 
 def wait_for_consumer(outlets, timeout_s: float) -> None:
@@ -122,7 +166,9 @@ def wait_for_consumer(outlets, timeout_s: float) -> None:
     """
     end = time.monotonic() + max(0.0, timeout_s)
     if not quiet() and timeout_s > 0:
-        click.echo(f"waiting up to {timeout_s:g} s for an LSL consumer of bendsense-force ...", err=True)
+        names = [f"bendsense-force-{name}" for name in outlets.outlets] if hasattr(outlets, "outlets") else []
+        click.echo(f"waiting up to {timeout_s:g} s for an LSL consumer of {', '.join(names) or 'bendsense-force'} ...",
+                   err=True)
     while time.monotonic() < end and not outlets.have_consumers():
         time.sleep(0.05)
 
@@ -132,22 +178,28 @@ def make_outlets(processor, driver, port):
 
     Parameters
     ----------
-    processor : LiveProcessor
-        Gives the channel count and the estimate options for the streams' metadata.
+    processor : LiveProcessor or GripperProcessor
+        Gives the channel count and the estimate options for the streams' metadata (a
+        gripper: :class:`~bendsense.interop.lsl.GripperOutlets`, two streams per finger).
     driver : Driver
         The board's driver (its HELLO gives the nominal rate).
     port : str
         The board's port, part of the streams' source id.
     """
-    from bendsense.interop.lsl import LslOutlets
+    from bendsense.interop.lsl import GripperOutlets, LslOutlets
 
     rate = 0.0 if driver.hello is None else float(driver.hello.rate_hz)
-    meta = {"constraint": processor.constraint, "method": processor.method, "objective": processor.objective}
-    contact = processor.options.get("load") == "contact"
+    fingers = getattr(processor, "processors", None)  # a gripper's: the fingers share the options
+    first = processor if fingers is None else next(iter(fingers.values()))
+    meta = {"constraint": first.constraint, "method": first.method, "objective": first.objective}
+    contact = first.options.get("load") == "contact"
     if contact:
-        meta.update(load="contact", contact_s_m=f"{processor.options['contact_s_m']:g} (known)")
-    if processor.tracker is not None:
-        meta["track"] = f"filter, bandwidth {processor.tracker.bandwidth_hz:g} Hz"
+        meta.update(load="contact", contact_s_m=f"{first.options['contact_s_m']:g} (known)")
+    if first.tracker is not None:
+        meta["track"] = f"filter, bandwidth {first.tracker.bandwidth_hz:g} Hz"
+    if fingers is not None:
+        return GripperOutlets({name: p.config.sensor.n_segments for name, p in fingers.items()}, rate,
+                              source_id=f"bendsense {port}", meta=meta, tracked=first.track, contact=contact)
     return LslOutlets(processor.config.sensor.n_segments, rate, source_id=f"bendsense {port}", meta=meta,
                       tracked=processor.track, contact=contact)
 
@@ -253,6 +305,10 @@ def record(
     the estimation rate and backlog. --lsl publishes the shapes and forces on Lab
     Streaming Layer (waiting up to --lsl-wait seconds for a consumer before the board
     starts, so that LabRecorder gets every frame).
+
+    With a gripper config (--config with fingers:), each finger's frames go to
+    SESSION/<finger>/results.csv and its streams are bendsense-force-<finger> and
+    bendsense-shape-<finger>; --calibration gives every finger's calibration.
     """
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
@@ -268,7 +324,6 @@ def record(
     if (load != "tip" or contact_s_m is not None) and not (estimate or lsl):
         raise click.BadParameter("a load model needs --estimate (or --lsl)",
                                  param_hint="'--load'" if load != "tip" else "'--contact-s-m'")
-    results_path = output / "results.csv"
     cols = [c.strip() for c in columns.split(",")] if columns else None
     show = not quiet_status and not quiet()
     # the session directory is checked and locked before the port is opened, until the command ends
@@ -283,6 +338,7 @@ def record(
 
     try:
         config = load_config(config_path) if config_path else None
+        results_path = results_paths(output, config)
         processor = None
         if estimate or lsl:
             if lsl:  # a missing extra is a one-line error before anything is opened
@@ -291,7 +347,7 @@ def record(
                 require_extra("pylsl", "lsl", "--lsl")
             est_config = config or load_config()
             processor = make_processor(est_config, calibration_path, constraint, objective, pressure_kpa,
-                                       bandwidth_hz=bandwidth_hz, load=live_contact(load, contact_s_m, est_config))
+                                       bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, est_config))
         driver = Driver(
             port,
             baudrate=baud or DEFAULT_BAUDRATE,
@@ -318,7 +374,7 @@ def record(
                 config=config,
                 meta={"command": "bendsense record"},
                 on_records=None if estimator is None else estimator.put,
-                extra_files=[results_path.name] if estimate else [],
+                extra_files=_manifest_names(results_path, output) if estimate else [],
             )
             if not no_start:
                 driver.start()
@@ -336,14 +392,16 @@ def record(
     if show:
         sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
     losses = f"; {stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else ""
+    where = results_path if isinstance(results_path, Path) else f"{output / '<finger>' / 'results.csv'} " \
+        f"(fingers {', '.join(results_path)})"
     if estimate and est_stats.frames:
-        estimated = f"{est_stats.frames} frames estimated to {results_path}"
+        estimated = f"{est_stats.frames} frames estimated to {where}"
     elif estimate:  # as 'save' and 'process', which refuse a session without frames
-        estimated = f"no frames to estimate: no {results_path.name} written"
+        estimated = "no frames to estimate: no results.csv written"
     if interrupted is not None:  # one line, by the group: what was kept, exit 130 / 143
         kept = f"kept {stats.records} frames in {output} (synced to disk, session marked finished){losses}"
         if estimate:  # the frames still queued are in frames.bin, not estimated
-            kept += f"; {est_stats.frames} of them estimated to {results_path}"
+            kept += f"; {est_stats.frames} of them estimated to {where}"
         _signals.note(interrupted, kept)
         raise interrupted
     click.echo(f"done: {stats.records} frames written to {output}{losses}", err=True)
@@ -352,6 +410,12 @@ def record(
                     port, output)
     if estimate:
         click.echo(estimated, err=True)
+
+
+def _manifest_names(results_path, output: Path) -> list:
+    """The results files of ``record --estimate`` as the session's manifest lists them (relative POSIX paths)."""
+    paths = [results_path] if isinstance(results_path, Path) else list(results_path.values())
+    return [p.relative_to(output).as_posix() for p in paths]
 
 
 @click.command("sim-device", cls=InterspersedCommand)

@@ -17,7 +17,6 @@ from bendsense.cli._common import (
     check_figure_suffix,
     config_option,
     live_bandwidth_option,
-    live_contact,
     live_contact_option,
     load_option,
     objective_option,
@@ -117,7 +116,8 @@ def live(
     --lsl publishes every frame on Lab Streaming Layer. At the end, the achieved frame
     rate and the end-to-end latency per frame (bytes read to artists drawn) are printed.
     --load contact --contact-s-m X estimates the force of a contact at the known arc
-    length X, drawn there on the shape.
+    length X, drawn there on the shape. A gripper config (--config with fingers:) shows
+    a panel per finger (its streams: bendsense-force-<finger>, bendsense-shape-<finger>).
     Ctrl-C or SIGTERM stops it with one line and exit status 130 or 143 (no --save image
     then).
     """
@@ -135,8 +135,8 @@ def live(
         matplotlib.use("Agg")
         if seconds is None:
             seconds = 3.0
-    from bendsense.apps.live_view import LiveView, run_live
-    from bendsense.cli.device import make_outlets, make_processor, wait_for_consumer
+    from bendsense.apps.live_view import run_live
+    from bendsense.cli.device import live_load, make_outlets, make_processor, wait_for_consumer
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
 
@@ -147,9 +147,9 @@ def live(
         require_extra("pylsl", "lsl", "--lsl")
     config = load_config(config_path)
     processor = make_processor(config, calibration_path, constraint, objective, pressure_kpa, bandwidth_hz=bandwidth_hz,
-                               load=live_contact(load, contact_s_m, config))
+                               load=live_load(load, contact_s_m, config))
     if save_path is not None:
-        view, is_open = LiveView(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
+        view, is_open = _view_class(processor)(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:
         view, is_open = _window(processor, scale_mm_per_n * 1e-3)
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE) as driver:
@@ -179,19 +179,24 @@ def live(
         say(f"wrote {save_path}")
 
 
+def _view_class(processor):
+    """The live view of a processor: :class:`LiveView`, a gripper's :class:`GripperView` (a panel per finger)."""
+    from bendsense.apps.live_view import GripperView, LiveView
+
+    return GripperView if hasattr(processor, "processors") else LiveView
+
+
 def _window(processor, scale_m_per_n):
     """An interactive window, or a one-line error when there is no display."""
     import matplotlib
     import matplotlib.pyplot as plt
-
-    from bendsense.apps.live_view import LiveView
 
     backend = matplotlib.get_backend().lower()
     if backend in ("agg", "pdf", "ps", "svg", "cairo", "template") or backend.startswith("module://matplotlib_inline"):
         raise click.ClickException(
             f"no interactive matplotlib backend (got {backend!r}, no display?): use --save FILE.png"
         )
-    view = LiveView(processor, scale_m_per_n=scale_m_per_n)
+    view = _view_class(processor)(processor, scale_m_per_n=scale_m_per_n)
     plt.show(block=False)
     plt.pause(0.05)
     number = view.figure.number

@@ -6,6 +6,10 @@ blocking the recording), processes whatever has queued up as one block with
 appends the block's rows to ``results.csv`` (:class:`ResultsAppender`) and publishes it
 on LSL (:class:`~bendsense.interop.lsl.LslOutlets`), if asked. The backlog (frames
 queued, not yet processed) and the processing rate are in :attr:`LiveEstimator.stats`.
+
+A gripper's processor (:class:`~bendsense.gripper_live.GripperProcessor`) gives a block
+per finger: each goes to its finger's ``results.csv`` (``SESSION/<finger>/results.csv``)
+and its finger's streams (:class:`~bendsense.interop.lsl.GripperOutlets`).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import os
 import queue
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -78,6 +83,7 @@ class ResultsAppender:
         data = memoryview(("\n".join(text) + "\n").encode("utf-8"))
         try:
             if self._fd is None:
+                self.path.parent.mkdir(exist_ok=True)  # a gripper's finger directory, inside the session
                 self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
                 self._size = 0
             while data:
@@ -148,25 +154,32 @@ class LiveEstimator:
 
     Parameters
     ----------
-    processor : LiveProcessor
-        Shapes and forces of a block of frames.
-    results_path : path, optional
-        ``results.csv`` to append every processed block to (created at the first block).
-    outlets : LslOutlets, optional
+    processor : LiveProcessor or GripperProcessor
+        Shapes and forces of a block of frames (a gripper's: a block per finger).
+    results_path : path or mapping of str to path, optional
+        ``results.csv`` to append every processed block to (created at the first block);
+        for a gripper, one per finger name (its directory is made when the file is).
+    outlets : LslOutlets or GripperOutlets, optional
         Publish every block on LSL.
     max_block : int
         Most frames processed in one block.
     fsync_interval_s : float
         Longest time between ``fsync`` calls of ``results.csv`` [s].
     on_block : callable, optional
-        Called with each :class:`~bendsense.pipeline.LiveBlock` (on the thread).
+        Called with each :class:`~bendsense.pipeline.LiveBlock` (on the thread; a
+        gripper's: the dict of its fingers' blocks).
     """
 
     def __init__(self, processor, *, results_path=None, outlets=None, max_block=512, fsync_interval_s=0.5,
                  on_block=None):
         self.processor = processor
-        self.writer = None if results_path is None else ResultsAppender(results_path,
-                                                                        fsync_interval_s=fsync_interval_s)
+        if results_path is None:
+            self.writers = {}
+        elif isinstance(results_path, Mapping):  # a gripper: a results.csv per finger
+            self.writers = {name: ResultsAppender(path, fsync_interval_s=fsync_interval_s)
+                            for name, path in results_path.items()}
+        else:
+            self.writers = {None: ResultsAppender(results_path, fsync_interval_s=fsync_interval_s)}
         self.outlets = outlets
         self.max_block = int(max_block)
         self.on_block = on_block
@@ -235,8 +248,9 @@ class LiveEstimator:
                     return
                 readings, pending = pending[: self.max_block], pending[self.max_block:]
                 block = self.processor.process_readings(readings)
-                if self.writer is not None:
-                    self.writer.write(block)
+                for name, part in (block.items() if isinstance(block, dict) else ((None, block),)):
+                    if name in self.writers:
+                        self.writers[name].write(part)
                 if self.outlets is not None:
                     self.outlets.push(block)
                 if self.on_block is not None:
@@ -264,8 +278,8 @@ class LiveEstimator:
         if self._thread.is_alive():
             self._abandon.set()
             self._thread.join()
-        if self.writer is not None:
-            self.writer.close()
+        for writer in self.writers.values():
+            writer.close()
         if self.outlets is not None:
             self.outlets.close()
         if self.error is not None:

@@ -18,6 +18,11 @@ each channel's ``label``, ``unit`` and ``type`` are in the stream's XML descript
 options beside them. A sample's time stamp is the frame's arrival at the host (when its
 bytes were read), on the LSL clock (``pylsl.local_clock()``), so streams of other
 devices recorded with LabRecorder line up with it.
+
+A gripper (a config with ``fingers:``) has the two streams per finger,
+``bendsense-force-<finger>`` and ``bendsense-shape-<finger>``, with the channels of the
+single streams (the finger's own ``kappa1 … kappaN``) and the finger's name in the
+description (:class:`GripperOutlets`).
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import numpy as np
 
 from bendsense.errors import require_extra
 
-__all__ = ["LslOutlets", "FORCE_CHANNELS", "TRACK_CHANNELS", "CONTACT_CHANNELS", "shape_channels"]
+__all__ = ["LslOutlets", "GripperOutlets", "FORCE_CHANNELS", "TRACK_CHANNELS", "CONTACT_CHANNELS", "shape_channels"]
 
 FORCE_CHANNELS = (("fx_n", "N"), ("fy_n", "N"), ("fx_std_n", "N"), ("fy_std_n", "N"))
 #: the tracked force after the per-frame one (the columns of results.csv of the same names)
@@ -83,6 +88,10 @@ class LslOutlets:
     contact : bool, default False
         The force stream also carries the contact location (:data:`CONTACT_CHANNELS`,
         after the others): the processor estimates a contact load.
+    finger : str, optional
+        A gripper's finger: the streams are ``bendsense-force-<finger>`` and
+        ``bendsense-shape-<finger>`` (source ids ``<source_id>-force-<finger>``, ...), and
+        the description names the finger.
 
     Raises
     ------
@@ -91,16 +100,17 @@ class LslOutlets:
     """
 
     def __init__(self, n_segments: int, rate_hz: float, source_id: str = "bendsense", meta: dict | None = None,
-                 tracked: bool = False, contact: bool = False):
+                 tracked: bool = False, contact: bool = False, finger: str | None = None):
         pylsl = require_extra("pylsl", "lsl", "--lsl")
         meta = {"frame": "bendsense_base (+y along the actuator at its base, +x toward the centre of curvature)",
-                **(meta or {})}
+                **({} if finger is None else {"finger": finger}), **(meta or {})}
         self.tracked, self.contact = bool(tracked), bool(contact)
         channels = FORCE_CHANNELS + (TRACK_CHANNELS if self.tracked else ()) + (CONTACT_CHANNELS if contact else ())
-        self.force = pylsl.StreamOutlet(_info(pylsl, "bendsense-force", "Force", channels, rate_hz,
-                                              f"{source_id}-force", meta))
-        self.shape = pylsl.StreamOutlet(_info(pylsl, "bendsense-shape", "Shape", shape_channels(n_segments),
-                                              rate_hz, f"{source_id}-shape", meta))
+        tail = "" if finger is None else f"-{finger}"
+        self.force = pylsl.StreamOutlet(_info(pylsl, f"bendsense-force{tail}", "Force", channels, rate_hz,
+                                              f"{source_id}-force{tail}", meta))
+        self.shape = pylsl.StreamOutlet(_info(pylsl, f"bendsense-shape{tail}", "Shape", shape_channels(n_segments),
+                                              rate_hz, f"{source_id}-shape{tail}", meta))
         # time.monotonic_ns() (the arrival time of a frame) on the LSL clock
         self._offset_s = pylsl.local_clock() - time.monotonic()
         self.pushed = 0
@@ -139,3 +149,57 @@ class LslOutlets:
     def have_consumers(self) -> bool:
         """True when an inlet is connected to the force stream."""
         return self.force is not None and self.force.have_consumers()
+
+
+class GripperOutlets:
+    """The LSL outlets of a gripper: ``bendsense-force-<finger>`` and ``bendsense-shape-<finger>`` per finger.
+
+    Parameters
+    ----------
+    n_segments : mapping of str to int
+        Each finger's sensor segments N, in the fingers' order.
+    rate_hz : float
+        Nominal rate [Hz]: the board's frame rate (0: irregular).
+    source_id : str
+        LSL source id of the board (e.g. the port).
+    meta : dict, optional
+        Further ``key: value`` pairs for every stream's description.
+    tracked, contact : bool, default False
+        As :class:`LslOutlets`, for every finger.
+
+    Attributes
+    ----------
+    outlets : dict of str to LslOutlets
+        Each finger's outlets.
+    """
+
+    def __init__(self, n_segments, rate_hz: float, source_id: str = "bendsense", meta: dict | None = None,
+                 tracked: bool = False, contact: bool = False):
+        self.outlets = {name: LslOutlets(n, rate_hz, source_id=source_id, meta=meta, tracked=tracked,
+                                         contact=contact, finger=name)
+                        for name, n in n_segments.items()}
+
+    @property
+    def pushed(self) -> int:
+        """Board frames published (those of the first finger)."""
+        return next(iter(self.outlets.values())).pushed if self.outlets else 0
+
+    def push(self, blocks) -> None:
+        """Publish each finger's :class:`~bendsense.pipeline.LiveBlock` on its streams.
+
+        Parameters
+        ----------
+        blocks : dict of str to LiveBlock
+            The processed frames per finger (:meth:`bendsense.gripper_live.GripperProcessor.process_readings`).
+        """
+        for name, block in blocks.items():
+            self.outlets[name].push(block)
+
+    def close(self) -> None:
+        """Drop every outlet."""
+        for outlet in self.outlets.values():
+            outlet.close()
+
+    def have_consumers(self) -> bool:
+        """True when every finger's force stream has an inlet connected."""
+        return all(outlet.have_consumers() for outlet in self.outlets.values())

@@ -1,0 +1,203 @@
+"""A gripper live (issue 24): a processor per finger over the board's readings, its outputs per finger.
+
+The reference of every test is the single-actuator code run on each finger's own part of
+the board, cut here by hand (the finger's channels, its line's pressure), never numbers the
+gripper code printed.
+"""
+
+import itertools
+import time
+
+import numpy as np
+import pytest
+
+from bendsense.calibration import Calibration
+from bendsense.config import Finger, GripperConfig
+from bendsense.device.driver import Reading
+from bendsense.frames import decode_frame, encode_sample
+from bendsense.gripper_live import GripperProcessor
+from bendsense.pipeline import LiveProcessor
+from bendsense.sim.scenarios import time_varying_frames
+
+# the board: index on channels 1..16 (line 0), thumb on 33..48 in reverse board order (line 1), middle on
+# 17..32 sharing the thumb's line; 48 channels, two lines
+MAP = {"index": (list(range(1, 17)), 0), "thumb": (list(range(48, 32, -1)), 1), "middle": (list(range(17, 33)), 1)}
+RATE_HZ = 1000.0
+N_FRAMES = 120
+
+
+@pytest.fixture(scope="module")
+def gripper(config):
+    return GripperConfig(name="test-gripper", fingers=tuple(
+        Finger(name=name, channels=tuple(ch), pressure_line=line, config=config) for name, (ch, line) in MAP.items()))
+
+
+@pytest.fixture(scope="module")
+def board():
+    """Each finger's frames of the virtual sensor (another seed each), and the board's readings of them (SAMPLE v2)."""
+    own = {name: list(itertools.islice(time_varying_frames(None, RATE_HZ, seed), N_FRAMES))
+           for seed, name in enumerate(MAP)}
+    readings = []
+    for k in range(N_FRAMES):
+        adc = np.zeros(48, dtype=int)
+        lines = [np.nan, np.nan]
+        for name, (channels, line) in MAP.items():
+            p, counts = own[name][k]
+            adc[np.array(channels) - 1] = counts
+            if name != "middle":  # the middle finger reads the thumb's line
+                lines[line] = p
+        if k == 5:
+            lines[1] = None  # a frame without a reading of line 1
+        wire = encode_sample(k, 1_000_000 + 1000 * k, adc.tolist(), lines[0], pressures_pa=lines)
+        sample = decode_frame(wire)
+        readings.append(Reading(host_ns=10**12 + 10**6 * k, device_us=1_000_000 + 1000 * k, sample=sample))
+    return readings
+
+
+def finger_readings(readings, name):
+    """The readings a board holding only this finger would send: its channels, its line as the pressure."""
+    channels, line = MAP[name]
+    out = []
+    for r in readings:
+        s = r.sample
+        adc = [s.adc[c - 1] for c in channels]
+        p = s.pressures_pa[line]
+        sample = decode_frame(encode_sample(s.seq, s.t_us, adc, p, status=s.status, tx_drops=s.tx_drops))
+        out.append(Reading(host_ns=r.host_ns, device_us=r.device_us, sample=sample))
+    return out
+
+
+def assert_same_block(got, want):
+    a, b = got.columns(), want.columns()
+    assert list(a) == list(b)
+    for name in a:
+        np.testing.assert_array_equal(np.asarray(a[name]), np.asarray(b[name]), err_msg=name)
+
+
+def test_each_finger_block_equals_a_single_processor_on_its_split_readings(calibration_path, gripper, board):
+    cal = Calibration.load(calibration_path)
+    proc = GripperProcessor(cal, gripper, constraint="normal")
+    assert proc.fingers == ("index", "thumb", "middle") and set(proc.processors) == set(MAP)
+    single = {name: LiveProcessor(cal, gripper.finger(name).config, constraint="normal") for name in MAP}
+    parts = {name: finger_readings(board, name) for name in MAP}
+    cuts = [0, 1, 8, 38, 39, 90, N_FRAMES]  # blocks of 1, 7, 30, 1, 51 and 30 frames: warm starts, track across
+    for lo, hi in itertools.pairwise(cuts):
+        blocks = proc.process_readings(board[lo:hi])
+        assert list(blocks) == ["index", "thumb", "middle"]
+        for name in MAP:
+            want = single[name].process_readings(parts[name][lo:hi])
+            assert_same_block(blocks[name], want)
+            # the finger's channels of the board, in the sensor's order (an independent cut)
+            np.testing.assert_array_equal(blocks[name].signals,
+                                          [[r.sample.adc[c - 1] for c in MAP[name][0]] for r in board[lo:hi]])
+    assert proc.frames == N_FRAMES
+    assert proc.estimated == sum(p.estimated for p in single.values())
+    assert proc.status_counts == {s: sum(p.status_counts.get(s, 0) for p in single.values())
+                                  for s in set().union(*(p.status_counts for p in single.values()))}
+    assert proc.status_counts.get("ok", 0) > 0.9 * 3 * N_FRAMES  # not a comparison of two failures
+    # the shared line: the middle finger is estimated at the thumb's pressure, frame 5 has none for both
+    np.testing.assert_array_equal(blocks["middle"].pressure_pa, blocks["thumb"].pressure_pa)
+    first = proc.processors["thumb"]
+    assert first.frames == N_FRAMES
+
+
+def test_reset_and_warm_up_start_every_finger_over(calibration_path, gripper, board):
+    cal = Calibration.load(calibration_path)
+    proc = GripperProcessor(cal, gripper)
+    proc.warm_up()
+    assert proc.frames == 0 and proc.estimated == 0 and proc.status_counts == {}
+    first = proc.process_readings(board[:20])
+    proc.process_readings(board[20:40])
+    proc.reset()
+    again = proc.process_readings(board[:20])  # the same frames, from the same time origin, cold again
+    for name in MAP:
+        assert_same_block(again[name], first[name])
+
+
+def test_a_line_the_board_does_not_send(calibration_path, gripper, board):
+    cal = Calibration.load(calibration_path)
+    one_line = [Reading(r.host_ns, r.device_us, decode_frame(encode_sample(r.sample.seq, r.sample.t_us,
+                                                                           list(r.sample.adc), 80e3)))
+                for r in board[:4]]  # version-1 frames: line 0 only
+    with pytest.raises(Exception, match="line 1") as err:
+        GripperProcessor(cal, gripper).process_readings(one_line)
+    assert "thumb" in str(err.value) or "middle" in str(err.value)
+    # with a fallback pressure, the missing line's frames take it; line 0 keeps its reading
+    blocks = GripperProcessor(cal, gripper, pressure_pa=50e3).process_readings(one_line)
+    np.testing.assert_array_equal(blocks["index"].pressure_pa, 80e3)
+    np.testing.assert_array_equal(blocks["thumb"].pressure_pa, 50e3)
+
+
+def test_finger_options_and_calibrations_per_finger(calibration_path, gripper, board):
+    cal = Calibration.load(calibration_path)
+    proc = GripperProcessor({name: calibration_path for name in MAP}, gripper, constraint="normal",
+                            finger_options={"thumb": {"constraint": "none"}})
+    assert [proc.processors[n].constraint for n in MAP] == ["normal", "none", "normal"]
+    np.testing.assert_array_equal(proc.processors["middle"].calibration.offset, cal.offset)
+    with pytest.raises(Exception, match="finger_options: unknown finger pinky"):
+        GripperProcessor(cal, gripper, finger_options={"pinky": {}})
+
+
+def test_lsl_streams_per_finger_reach_an_inlet(calibration_path, gripper, board):
+    pylsl = pytest.importorskip("pylsl")
+    import uuid
+
+    from bendsense.interop.lsl import GripperOutlets
+
+    cal = Calibration.load(calibration_path)
+    proc = GripperProcessor(cal, gripper)
+    source = f"test-{uuid.uuid4().hex[:8]}"
+    outlets = GripperOutlets({name: 16 for name in proc.fingers}, RATE_HZ, source_id=source, tracked=True)
+    inlets = {}
+    for name in MAP:
+        for kind in ("force", "shape"):
+            found = pylsl.resolve_bypred(f"name='bendsense-{kind}-{name}' and source_id='{source}-{kind}-{name}'",
+                                         1, 10.0)
+            assert found, f"no bendsense-{kind}-{name} stream"
+            inlets[kind, name] = pylsl.StreamInlet(found[0], max_buflen=60)
+            inlets[kind, name].open_stream(timeout=10)
+    info = inlets["force", "thumb"].info(timeout=10)
+    assert (info.type(), info.channel_count(), info.desc().child_value("finger")) == ("Force", 8, "thumb")
+    assert inlets["shape", "index"].info(timeout=10).channel_count() == 16 + 3
+    blocks = [proc.process_readings(board[lo:hi]) for lo, hi in ((0, 30), (30, 60))]
+    for b in blocks:
+        outlets.push(b)
+    for name in MAP:
+        want = {k: np.concatenate([np.asarray(b[name].columns()[k], dtype=float) for b in blocks])
+                for k in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "fx_track_n", "fy_track_n", "fx_track_std_n",
+                          "fy_track_std_n", "kappa1", "tip_angle_rad")}
+        got = {}
+        for kind in ("force", "shape"):
+            rows = []
+            end = time.monotonic() + 10
+            while len(rows) < 60 and time.monotonic() < end:
+                chunk, _ = inlets[kind, name].pull_chunk(timeout=0.2)
+                rows += chunk
+            got[kind] = np.array(rows)
+        np.testing.assert_array_equal(got["force"], np.column_stack([want[k] for k in list(want)[:8]]))
+        np.testing.assert_array_equal(got["shape"][:, 0], want["kappa1"])
+        np.testing.assert_array_equal(got["shape"][:, -1], want["tip_angle_rad"])
+    outlets.close()
+
+
+def test_live_view_draws_a_panel_per_finger(calibration_path, gripper, board, tmp_path):
+    from bendsense.apps.live_view import GripperView
+
+    cal = Calibration.load(calibration_path)
+    proc = GripperProcessor(cal, gripper, constraint="normal")
+    view = GripperView(proc, headless=True)
+    for lo, hi in ((0, 60), (60, N_FRAMES)):
+        blocks = proc.process_readings(board[lo:hi])
+        view.add_block(blocks)
+        view.update({k: b.frame(-1) for k, b in blocks.items()}, {k: f"{k} status" for k in blocks})
+    for name, panel in view.views.items():
+        want = np.asarray(blocks[name].shape.positions_m)[-1] * 1e3
+        np.testing.assert_allclose(np.column_stack(panel.shape_line.get_data()), want)
+        np.testing.assert_allclose(panel.bar_heights, blocks[name].signals[-1] - cal.offset)
+        assert panel.status_text.get_text() == f"{name} status"
+        assert panel.figure.figure is view.figure  # one figure, a panel each
+    view.save(tmp_path / "gripper.png")
+    import matplotlib.image
+
+    image = matplotlib.image.imread(tmp_path / "gripper.png")
+    assert image.shape[0] > image.shape[1]  # three panels stacked (12 x 13.8 in)
