@@ -15,7 +15,6 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
-    live_contact,
     live_contact_option,
     load_option,
     make_bandwidth_option,
@@ -55,15 +54,9 @@ def _controllers(config, finger, target, max_pressure_pa, gains):
 
 
 def _processor(config, calibrations, constraint, bandwidth_hz, load):
-    """The live processor (a gripper's, one LiveProcessor per finger), its kernels ready."""
+    """The live processor (a gripper's: one LiveProcessor per finger), its kernels ready."""
     from bendsense.cli.device import make_processor
-    from bendsense.config import GripperConfig
 
-    if isinstance(config, GripperConfig):
-        from bendsense.cli.live import make_gripper_processor
-
-        return make_gripper_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz,
-                                      load=load)
     return make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load)
 
 
@@ -143,6 +136,7 @@ def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, ou
     (a safety stop: one line, exit 1). -o SESSION records everything (docs/formats.md,
     "Control session"). docs/grasping.md walks through a grasp on the simulated board.
     """
+    from bendsense.cli.device import live_load
     from bendsense.config import load_config
     from bendsense.control import (
         DEFAULT_KI_PA_PER_N_S,
@@ -162,7 +156,7 @@ def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, ou
              "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,
              "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
     controller = _controllers(config, finger, target_force_n, pmax, gains)
-    load_options = live_contact(load, contact_s_m, _any_finger(config))
+    load_options = live_load(load, contact_s_m, config)
     processor = _processor(config, calibration_path, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options)
     meta = {"command": "bendsense control",
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
@@ -171,12 +165,6 @@ def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, ou
                         "contact_s_m": contact_s_m, "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
         _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta)
-
-
-def _any_finger(config):
-    """The config the load options are checked against (a gripper's first finger's)."""
-    fingers = getattr(config, "fingers", None)
-    return config if fingers is None else fingers[0].config
 
 
 def _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta):

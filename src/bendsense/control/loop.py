@@ -55,6 +55,8 @@ class ControlResult:
     zero_latency_s : float
         From the stop (noticed by the loop) to the last zero set-point written [s]; NaN
         when the zeros could not be sent.
+    stopped_at_s : float
+        When the loop noticed the stop (``time.perf_counter()``) [s].
     loop_s : ndarray, shape (blocks,)
         Wall time of each block: process, check, control, send [s] (recording excluded).
     block_frames : ndarray of int, shape (blocks,)
@@ -68,6 +70,7 @@ class ControlResult:
     max_setpoint_pa: float
     clipped: int
     zero_latency_s: float
+    stopped_at_s: float
     loop_s: np.ndarray
     block_frames: np.ndarray
 
@@ -189,6 +192,11 @@ def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=No
         ``result`` holds the counters.
     KeyboardInterrupt
         Ctrl-C or SIGTERM, after every line was set to 0.
+
+    Notes
+    -----
+    Whatever the loop raises carries the counters as its ``result`` attribute (a
+    :class:`ControlResult`), so that a stopped session still says what it did.
     """
     if isinstance(max_pressure_pa, bool) or not isinstance(max_pressure_pa, (int, float, np.integer, np.floating)) \
             or not (math.isfinite(max_pressure_pa) and max_pressure_pa > 0):
@@ -217,9 +225,11 @@ def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=No
         result = ControlResult(
             frames=state["frames"], blocks=len(state["loop"]), outcome=outcome, lines=lines,
             max_setpoint_pa=state["max"], clipped=state["clipped"], zero_latency_s=zero_at - stopped_at,
-            loop_s=np.asarray(state["loop"]), block_frames=np.asarray(state["sizes"], dtype=np.int64))
-        if isinstance(error, ControlStop):
-            error.result = result
+            stopped_at_s=stopped_at, loop_s=np.asarray(state["loop"]),
+            block_frames=np.asarray(state["sizes"], dtype=np.int64))
+        if error is not None:
+            with contextlib.suppress(AttributeError, TypeError):  # a user's exception may not take attributes
+                error.result = result
         if recording is not None:
             recording.close(outcome)
     return result
