@@ -27,7 +27,10 @@ command, and writes it as Markdown with ``--markdown FILE``. The rows:
 - issue 23 (``bench_contact``): a known-location contact frame against a tip frame
   (cold), the force at a known location (noise-free, coverage), the contact location and
   force over 50 ms windows with the location unknown and one window's cost
-  (tools/contact_eval.py), the Cramér–Rao bound for scale.
+  (tools/contact_eval.py), the Cramér–Rao bound for scale;
+- issue 24 (``bench_control``): a contact-force step to 0.15 N on the simulated grasp
+  board at 1 kHz (one finger and three), scored against the simulator's truth: settling,
+  steady error, peak pressure, set-point 0 after Ctrl-C, the loop's cost per frame.
 
 "pass?" judges CPU time of the measuring processes (on a shared machine the fairer
 number) and wall time: ``yes`` when both meet the target, ``CPU only`` when the wall
@@ -281,6 +284,14 @@ def bench_contact(table, quick):
         table.value(what, "—", target, text, ok)
 
 
+def bench_control(table, quick):
+    """The issue-24 rows (bench_control.py): the force step on the simulated grasp board, the stop, the loop."""
+    from bench_control import rows
+
+    for what, target, text, ok in rows(quick):
+        table.value(what, "—", target, text, ok)
+
+
 def cpu_model():
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
@@ -333,6 +344,7 @@ def main(argv=None):
     bench_decoder(table, args.quick)
     bench_model_error(table, args.quick)
     bench_contact(table, args.quick)
+    bench_control(table, args.quick)
     w1, c1 = clocks()
 
     header = [

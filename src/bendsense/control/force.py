@@ -115,8 +115,9 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
         cov = (np.full((n, 2, 2), np.nan) if est is None
                else np.asarray(est.covariance_n2, dtype=float).reshape(n, 2, 2))
         status = np.asarray(block.status, dtype=object)
-    value = np.einsum("ij,ij->i", force, normal)
-    var = np.einsum("ij,ijk,ik->i", normal, cov, normal)
+    nx, ny = normal[:, 0], normal[:, 1]
+    value = force[:, 0] * nx + force[:, 1] * ny
+    var = cov[:, 0, 0] * nx * nx + (cov[:, 0, 1] + cov[:, 1, 0]) * nx * ny + cov[:, 1, 1] * ny * ny
     s_out = np.where(np.isfinite(s_c), s_c, length if tip_s_m is None else float(tip_s_m))
     return NormalForce(force_n=value, std_n=np.sqrt(np.maximum(var, 0.0)), contact_s_m=s_out, angle_rad=phi,
                        status=status)

@@ -1,0 +1,197 @@
+"""Force control on the simulated grasp board: a contact-force step to 0.15 N, scored against the simulator's truth.
+
+    python benchmarks/bench_control.py [--fingers 1 3] [--seconds 1.5] [--quick]
+
+The board (:class:`bendsense.sim.gripper.GraspBoard`: one first-order regulator per line,
+τ = 25 ms, 0..120 kPa; a rigid object each finger touches at s_c = 0.10 m from 40, 45, 35 kPa
+on) streams at 1 kHz over a pseudo-terminal (in this process, as in the tests) and writes
+its truth of every frame with the host time it made the frame. The loop
+(:func:`bendsense.control.run`: the driver, the processor — one
+:class:`~bendsense.pipeline.LiveProcessor` per finger, contact at the known s_c, normal
+constraint, 30 Hz track — and a :class:`~bendsense.control.PIController` per finger at its
+defaults) starts with the fingers open and the target 0.15 N, and is stopped after
+``--seconds`` by SIGINT sent to it at a known time (Ctrl-C). Printed per finger count:
+
+- rise time: from the first set-point to the first frame whose true force is within
+  10 mN of 0.15 N; settling: to the last frame outside that band (DESIGN.md section 5:
+  within 0.3 s);
+- steady error: the mean true force over the last 0.5 s minus 0.15 N (and its RMS
+  ripple), and the tracked estimate's error against the truth there (target ≤ 10 mN);
+- peak pressure and set-point against the limit (100 kPa; no pressure above it);
+- the stop: host time from the signal to the last zero set-point written, and on the
+  board's side, frames generated after the signal still holding a non-zero set-point
+  and the time to the first frame with set-point 0 (target: within one frame period);
+- the loop's cost: wall time per frame (process, check, control, send; mean and p99 per
+  block) and the frames per block (1: the loop keeps up frame by frame).
+"""
+
+import argparse
+import math
+import os
+import signal
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bendsense import load_config
+from bendsense.calibration import Calibration
+from bendsense.control import Grasp, PIController, run
+from bendsense.device.driver import Driver
+from bendsense.device.simdevice import SimulatedDevice
+from bendsense.pipeline import LiveProcessor
+from bendsense.sim.grasp import GraspObject
+from bendsense.sim.gripper import GraspBoard, gripper_config
+from bendsense.sim.scenarios import simulate
+
+TARGET_N, BAND_N, LIMIT_PA, RATE_HZ, S_C = 0.15, 0.010, 100e3, 1000.0, 0.10
+TOUCH_PA = (40e3, 45e3, 35e3, 50e3)
+
+
+class Truth:
+    """The board's truth rows with the host time each frame was made (``time.perf_counter()``)."""
+
+    def __init__(self):
+        self.rows = []
+
+    def write(self, seq, t_us, truth):
+        self.rows.append((time.perf_counter(), seq, truth))
+
+    def flush(self):
+        pass
+
+    def column(self, name):
+        return np.array([r[2][name] for r in self.rows])
+
+
+def processor(cal, k):
+    """One LiveProcessor for the single actuator, a gripper processor of k fingers otherwise."""
+    options = {"load": "contact", "contact_s_m": S_C, "constraint": "normal", "bandwidth_hz": 30.0}
+    if k == 1:
+        proc = LiveProcessor(cal, load_config(), **options)
+    else:
+        from bendsense.gripper_live import GripperProcessor
+
+        proc = GripperProcessor(cal, gripper_config(k), **options)
+    proc.warm_up()
+    return proc
+
+
+def controller(k):
+    if k == 1:
+        return PIController(TARGET_N, max_pressure_pa=LIMIT_PA)
+    gripper = gripper_config(k)
+    return Grasp([PIController(TARGET_N, line=f.pressure_line, finger=f.name, max_pressure_pa=LIMIT_PA)
+                  for f in gripper.fingers])
+
+
+def session(cal, k, seconds):
+    """One step session; returns the truth, the loop's result and the signal's time."""
+    config = load_config() if k == 1 else gripper_config(k)
+    board = GraspBoard(config, [GraspObject(S_C, TOUCH_PA[i]) for i in range(k)], rate_hz=RATE_HZ, seed=0)
+    proc, ctl = processor(cal, k), controller(k)
+    truth = Truth()
+    sent = {}
+
+    def interrupt():
+        sent["t"] = time.perf_counter()
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+
+    with SimulatedDevice(board, rate_hz=RATE_HZ, truth=truth) as dev, Driver(dev.port) as driver:
+        driver.start()
+        timer = threading.Timer(seconds, interrupt)
+        timer.start()
+        try:
+            run(driver, proc, ctl, max_pressure_pa=LIMIT_PA, n_lines=board.n_lines)
+            raise RuntimeError("the loop ended before the signal")
+        except KeyboardInterrupt as err:
+            result = err.result
+        time.sleep(0.05)  # frames after the stop
+    return truth, result, sent["t"], board
+
+
+def score(truth, result, t_signal, board, k):
+    """The step's figures per finger, and the stop's and the loop's."""
+    host = np.array([r[0] for r in truth.rows])
+    names = [None] if board.truth_fingers is None else board.truth_fingers
+    out = []
+    for i, name in enumerate(names):
+        p = "" if name is None else f"{name}_"
+        lp = "" if name is None else f"line{i}_"
+        force = np.hypot(truth.column(f"{p}fx_n"), truth.column(f"{p}fy_n"))
+        setpoint, pressure = truth.column(f"{lp}setpoint_pa"), truth.column(f"{lp}pressure_pa")
+        t = host - host[np.flatnonzero(setpoint > 0)[0]]
+        running = (t >= 0) & (host < t_signal)
+        inside = np.abs(force - TARGET_N) <= BAND_N
+        rise = t[np.flatnonzero(running & inside)[0]] if np.any(running & inside) else math.nan
+        outside = np.flatnonzero(running & ~inside)
+        settle = t[outside[-1] + 1] if outside.size else 0.0
+        steady = running & (host >= t_signal - 0.5)
+        after = (host > t_signal) & (setpoint > 0)
+        zero = np.flatnonzero((host > t_signal) & (setpoint == 0))
+        out.append({"finger": name or "(one actuator)", "rise_s": rise, "settle_s": settle,
+                    "steady_error_n": float(np.mean(force[steady]) - TARGET_N),
+                    "ripple_n": float(np.std(force[steady])), "peak_pressure_pa": float(pressure.max()),
+                    "peak_setpoint_pa": float(setpoint.max()), "frames_after_stop": int(after.sum()),
+                    "board_zero_s": float(host[zero[0]] - t_signal) if zero.size else math.nan})
+    loop = {"per_frame_s": result.per_frame_s,
+            "p99_block_per_frame_s": float(np.percentile(result.loop_s / np.maximum(result.block_frames, 1), 99)),
+            "frames_per_block": float(np.mean(result.block_frames)),
+            "host_zero_s": result.stopped_at_s + result.zero_latency_s - t_signal, "frames": result.frames}
+    return out, loop
+
+
+
+
+def rows(quick=False, fingers=(1, 3), seconds=1.5):
+    """(what, target, measured, pass) rows for run_all.py's table."""
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        simulate("calibration", root / "cal", seed=0, frames_per_strip=20 if quick else 50)
+        cal = Calibration.fit(root / "cal" / "manifest.yaml")
+    table = []
+    for k in fingers:
+        truth, result, t_signal, board = session(cal, k, seconds)
+        per, loop = score(truth, result, t_signal, board, k)
+        worst = max(per, key=lambda r: r["settle_s"])
+        label = f"control, {k} finger{'s' if k > 1 else ''} at 1 kHz"
+        table.append((f"{label}: step to 0.15 N, settled (rise)", "<= 0.3 s",
+                      f"{worst['settle_s']:.3f} s ({max(r['rise_s'] for r in per):.3f} s), worst finger",
+                      worst["settle_s"] <= 0.3))
+        err = max(abs(r["steady_error_n"]) for r in per)
+        table.append((f"{label}: steady error vs the simulator's truth", "<= 10 mN",
+                      f"{err * 1e3:.2f} mN (ripple {max(r['ripple_n'] for r in per) * 1e3:.2f} mN RMS)", err <= 0.01))
+        peak = max(r["peak_pressure_pa"] for r in per)
+        table.append((f"{label}: peak pressure / set-point (limit 100 kPa)", "<= limit",
+                      f"{peak / 1e3:.1f} / {max(r['peak_setpoint_pa'] for r in per) / 1e3:.1f} kPa",
+                      peak <= LIMIT_PA and max(r["peak_setpoint_pa"] for r in per) <= LIMIT_PA))
+        board_zero = max(r["board_zero_s"] for r in per)
+        table.append((f"{label}: set-point 0 after Ctrl-C (host write; board)", "<= 1 frame (1 ms)",
+                      f"{loop['host_zero_s'] * 1e3:.3f} ms; board's first zero frame {board_zero * 1e3:.2f} ms, "
+                      f"{max(r['frames_after_stop'] for r in per)} frame(s) after the signal still set",
+                      max(r["frames_after_stop"] for r in per) <= 1))
+        table.append((f"{label}: loop per frame (process, check, control, send)", "keeps up (< 1 ms)",
+                      f"{loop['per_frame_s'] * 1e6:.0f} µs mean, p99 {loop['p99_block_per_frame_s'] * 1e6:.0f} µs; "
+                      f"{loop['frames_per_block']:.2f} frames per block", loop["per_frame_s"] < 1.0 / RATE_HZ))
+    return table
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--fingers", type=int, nargs="+", default=[1, 3], help="finger counts to run (1..4)")
+    ap.add_argument("--seconds", type=float, default=1.5, help="run time of each session before Ctrl-C [s]")
+    ap.add_argument("--quick", action="store_true", help="a smaller calibration")
+    args = ap.parse_args()
+    table = rows(args.quick, args.fingers, args.seconds)
+    width = max(len(r[0]) for r in table)
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; Python {sys.version.split()[0]}")
+    print(f"{'what':<{width}}  {'target':<18}  {'measured':<70}  pass?")
+    for what, target, value, ok in table:
+        print(f"{what:<{width}}  {target:<18}  {value:<70}  {'yes' if ok else 'NO'}")
+
+
+if __name__ == "__main__":
+    main()
