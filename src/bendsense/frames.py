@@ -346,6 +346,10 @@ def _wire_pressure(name: str, value) -> int:
     return p
 
 
+def _is_lines(value) -> bool:
+    return value is not None and not isinstance(value, (numbers.Real, str, bytes)) and hasattr(value, "__iter__")
+
+
 def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0, pressures_pa=None) -> bytes:
     """Encode a SAMPLE as a whole wire frame.
 
@@ -357,9 +361,11 @@ def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0, pressu
         Device clock [us]; taken modulo 2**32.
     adc : sequence of int, length 1..64
         Raw counts, 0..65535.
-    pressure_pa : float or None
+    pressure_pa : float, None or sequence
         Pressure [Pa], rounded to an integer; None (or NaN) sends "no reading". With
-        ``pressures_pa`` it may be left None (line 0 is sent) or must equal line 0.
+        ``pressures_pa`` it may be left None (line 0 is sent) or must equal line 0. A
+        sequence (tuple, list, array) is taken as ``pressures_pa``: a frame source that
+        gives one pressure per line gets version 2 from any caller.
     status, tx_drops : int
         Status bits (0..255) and cumulative transmit drops (taken modulo 65536).
     pressures_pa : sequence of (float or None), length 1..255, optional
@@ -378,6 +384,8 @@ def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0, pressu
         raise FrameError(f"adc: expected 1..{MAX_CHANNELS} channels, got {n}")
     if min(counts) < 0 or max(counts) > 0xFFFF:
         raise FrameError(f"adc: counts must be in 0..65535, got {min(counts)}..{max(counts)}")
+    if pressures_pa is None and _is_lines(pressure_pa):
+        pressure_pa, pressures_pa = None, pressure_pa
     p = _wire_pressure("pressure_pa", pressure_pa)
     status = _check_int("status", status, 0, 255)
     version, tail = VERSION, b""
@@ -666,7 +674,9 @@ class Decoder(_StreamDecoder):
         from the first HELLO when not given.
     max_frame_bytes : int
         Longest run without a delimiter that is kept; a longer run is dropped (and
-        counted in ``overruns`` and ``malformed``), so memory stays bounded.
+        counted in ``overruns`` and ``malformed``), so memory stays bounded. The default
+        holds the longest legal frame (a version-2 SAMPLE of 64 channels and 255 lines,
+        under 1,200 bytes stuffed).
 
     Attributes
     ----------
@@ -693,7 +703,7 @@ class Decoder(_StreamDecoder):
         The most recent sequence gaps (bounded).
     """
 
-    def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 1024):
+    def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 2048):
         super().__init__()
         self.adc_bits = adc_bits
         self._adc_bits_from_hello = adc_bits is None
