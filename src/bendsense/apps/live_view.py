@@ -492,7 +492,7 @@ class GripperView:
     def __init__(self, processor, figure=None, *, headless=False, **options):
         k = len(processor.fingers)
         if figure is None:
-            size = (12, 4.6 * k)
+            size = (12, 5.4 * k)
             if headless:
                 from matplotlib.backends.backend_agg import FigureCanvasAgg
                 from matplotlib.figure import Figure
@@ -731,22 +731,26 @@ def run_live(
             t_now = time.monotonic()
             recent = [(t, n) for t, n in recent if t >= t_now - 1.0]
             fps = len(latencies) / (t_now - start) if t_now > start else 0.0
-            rate, lost, backlog = sum(n for _, n in recent), driver.stats.lost, driver.queued
-            if isinstance(pending, dict):  # a status line per finger panel, with its own counts
-                view.update(frame, {k: f"{k}   " + status_line(b, processor.processors[k], rate, fps, lost, backlog)
-                                    for k, b in pending.items()})
-            else:
-                view.update(frame, status_line(pending, processor, rate, fps, lost, backlog))
+            view.update(frame, _status(pending, processor, sum(n for _, n in recent), fps, driver))
         done_ns = time.monotonic_ns()
         draw.append(time.perf_counter() - t_draw)
-        latencies.append((done_ns - (frame if not isinstance(frame, dict) else next(iter(frame.values()))).host_ns)
-                         * 1e-6)
+        newest = frame if not isinstance(frame, dict) else next(iter(frame.values()))
+        latencies.append((done_ns - newest.host_ns) * 1e-6)
         if on_frame is not None:
             on_frame(frame)
         pending = None
         next_draw = time.monotonic() + min_period
     return _stats(time.monotonic() - start, latencies, process, draw, driver.stats.samples - samples0,
                   processor.frames - frames0, processor.failures)
+
+
+def _status(pending, processor, rate_hz, fps, driver):
+    """The status line of the view; a gripper's: one per finger panel, with the finger's own counts."""
+    lost, backlog = driver.stats.lost, driver.queued
+    if isinstance(pending, dict):
+        return {k: f"{k}   " + status_line(b, processor.processors[k], rate_hz, fps, lost, backlog)
+                for k, b in pending.items()}
+    return status_line(pending, processor, rate_hz, fps, lost, backlog)
 
 
 def _stats(elapsed, latencies, process, draw, received, estimated, failures) -> LiveStats:
