@@ -18,10 +18,12 @@ from bendsense.cli._common import (
     live_contact_option,
     load_option,
     make_bandwidth_option,
+    make_calibration_option,
     make_config_option,
     make_overwrite_option,
     quiet,
 )
+from bendsense.cli._common import calibration_paths as calibration_paths_of
 
 log = logging.getLogger("bendsense")
 
@@ -57,6 +59,9 @@ def _processor(config, calibrations, constraint, bandwidth_hz, load):
     """The live processor (a gripper's: one LiveProcessor per finger), its kernels ready."""
     from bendsense.cli.device import make_processor
 
+    if isinstance(calibrations, dict):  # a gripper: every finger by name (None: the fingers not named)
+        calibrations = {name: calibrations.get(name, calibrations.get(None)) for name in config.names}
+
     return make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load)
 
 
@@ -89,8 +94,7 @@ def _summary(result, controller) -> str:
 
 @click.command("control", cls=InterspersedCommand)
 @click.argument("port")
-@click.option("--calibration", "calibration_path", required=True,
-              type=click.Path(exists=True, dir_okay=False, path_type=Path), help="Calibration YAML.")
+@make_calibration_option("Calibration YAML written by 'bendsense calibrate'", required=True)
 @click.option("--target-force-n", required=True, type=Finite(min=0),
               help="Contact normal force to hold [N] (F · n at the contact; positive: the finger presses).")
 @click.option("--finger", help="A gripper's finger to control (default: every finger, each on its own line).")
@@ -117,7 +121,7 @@ def _summary(result, controller) -> str:
               help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
               help="HELLO wait [s].")
-def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, output, overwrite, config_path, seconds,
+def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, output, overwrite, config_path, seconds,
             load, contact_s_m, constraint, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s, bandwidth_hz, baud,
             hello_timeout):
     """Hold a contact force: a PI loop on the tracked contact normal force, at the board's frame rate.
@@ -149,15 +153,16 @@ def control(port, calibration_path, target_force_n, finger, max_pressure_kpa, ou
     ctx = click.get_current_context()
     if output is not None:  # checked and locked before anything opens, until the command ends
         ctx.with_resource(outputs.reserve([outputs.recording(output, overwrite=overwrite)],
-                                          [config_path, calibration_path]))
+                                          [config_path, *(p for _, p in calibration_paths)]))
     config = load_config(config_path)
+    calibrations = calibration_paths_of(calibration_paths, config)
     pmax = _limit(config, max_pressure_kpa)
     gains = {"kp_pa_per_n": DEFAULT_KP_PA_PER_N if kp_kpa_per_n is None else kp_kpa_per_n * 1e3,
              "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,
              "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
     controller = _controllers(config, finger, target_force_n, pmax, gains)
     load_options = live_load(load, contact_s_m, config)
-    processor = _processor(config, calibration_path, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options)
+    processor = _processor(config, calibrations, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options)
     meta = {"command": "bendsense control",
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
                         "fingers": [f for f in controller.fingers if f is not None], "load": load,
