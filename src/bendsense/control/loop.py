@@ -19,6 +19,7 @@ import contextlib
 import logging
 import math
 import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -78,6 +79,22 @@ class ControlResult:
     def per_frame_s(self) -> float:
         """Mean loop time per frame [s]."""
         return float(np.sum(self.loop_s) / max(self.frames, 1))
+
+
+#: the interpreter's thread switch interval while the loop runs [s] (Python's default is 5 ms): a stop
+#: noticed while the board's reader thread holds the GIL must not wait that long for it
+SWITCH_INTERVAL_S = 2e-4
+
+
+@contextlib.contextmanager
+def _prompt_threads():
+    """Switch threads every :data:`SWITCH_INTERVAL_S` while the loop runs (the previous interval after)."""
+    previous = sys.getswitchinterval()
+    sys.setswitchinterval(min(previous, SWITCH_INTERVAL_S))
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(previous)
 
 
 @contextlib.contextmanager
@@ -209,7 +226,7 @@ def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=No
     state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "sizes": [], "current": {}}
     outcome, stopped_at, zero_at, error = "stopped", math.nan, math.nan, None
     try:
-        with _sigterm_stops():
+        with _sigterm_stops(), _prompt_threads():
             outcome = _loop(driver, processor, controller, float(max_pressure_pa), seconds, stop, guard, lines,
                             recording, on_block, state)
         stopped_at = time.perf_counter()
