@@ -15,7 +15,15 @@ Hägglund, *Advanced PID Control*, 2006, sec. 3.5): the integral grows only unti
 unbounded output reaches ``[0, p_max]``'s bound in the direction the error pushes it,
 and never beyond ``p_max`` itself, so the output leaves the limit as soon as the error
 changes sign. The slew limit bounds the output only (a slewing output reaches its
-target within ``p_max / r``, 0.24 s at the defaults). The slew limit keeps the pressure changes
+target within ``p_max / r``, 0.24 s at the defaults).
+
+**A loop that falls behind acts gently.** The set-point reaches the board only after the
+whole block was processed: a block of many frames (the loop fell behind the board, on a
+loaded machine) is a delay in the loop, and a PI tuned for a prompt loop overshoots
+behind one. A block spanning more than :data:`MAX_BLOCK_S` (5 ms) therefore integrates
+and slews as if only 5 ms had passed: the integral gain and the slew rate fall with the
+delay, so a late loop approaches the object more slowly instead of overshooting. A loop
+that keeps up (one or two frames per block at 1 kHz) is not affected. The slew limit keeps the pressure changes
 between frames below what the tracker takes for a pressure step (1 kPa per frame,
 ``bendsense.tracking.windows.PRESSURE_STEP_PA``, which would restart its filter). A
 frame without a force (NaN) holds the integral.
@@ -40,7 +48,7 @@ from bendsense.control.force import normal_force
 from bendsense.errors import ArgumentError
 
 __all__ = ["PIController", "Grasp", "DEFAULT_KP_PA_PER_N", "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S",
-           "TRACK_BANDWIDTH_HZ", "finger_block"]
+           "TRACK_BANDWIDTH_HZ", "MAX_BLOCK_S", "finger_block"]
 
 #: proportional gain [Pa/N]
 DEFAULT_KP_PA_PER_N = 5.0e4
@@ -53,6 +61,9 @@ DEFAULT_MAX_RATE_PA_PER_S = 5.0e5
 TRACK_BANDWIDTH_HZ = 30.0
 #: longest interval integrated at once [s]: a gap longer than this counts as this
 MAX_DT_S = 0.05
+#: a block spanning more than this [s] (the loop fell behind the board) integrates and slews as if only this had
+#: passed: a loop that acts late acts gently (its gains fall with its delay)
+MAX_BLOCK_S = 0.005
 
 
 def _positive(name, value, *, zero=False):
@@ -162,9 +173,12 @@ class PIController:
         kp, ki, ff, pmax, rate = self.kp, self.ki, self.feedforward_pa, self.max_pressure_pa, self.max_rate
         target = self.target_force_n
         integral, out, last_t = self.integral_pa, self.output_pa, self._t
-        for t, f in zip(np.asarray(t_s, dtype=float).tolist(), np.asarray(force_n, dtype=float).tolist()):
+        times = np.asarray(t_s, dtype=float).tolist()
+        span = times[-1] - last_t if times and math.isfinite(last_t) else 0.0
+        scale = MAX_BLOCK_S / span if span > MAX_BLOCK_S else 1.0  # a late block acts as a short one
+        for t, f in zip(times, np.asarray(force_n, dtype=float).tolist()):
             dt = t - last_t
-            dt = min(dt, MAX_DT_S) if dt > 0 else 0.0  # the first frame, or a clock going back: no time passes
+            dt = scale * min(dt, MAX_DT_S) if dt > 0 else 0.0  # the first frame, or a clock going back: no time
             if math.isfinite(t):
                 last_t = t
             lo, hi = max(0.0, out - rate * dt), min(pmax, out + rate * dt)
