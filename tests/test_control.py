@@ -184,6 +184,19 @@ def test_pi_holds_its_integral_without_a_force():
     assert out == pytest.approx(held, abs=1e-9)
 
 
+def test_pi_a_late_block_acts_as_a_short_one():
+    # a block of 100 frames (the loop 100 ms behind) integrates and slews over 20 ms, not 100 ms
+    pi = pi_of()
+    pi.step([0.0], [0.0])
+    out = pi.step(np.arange(1, 101) * 1e-3, np.zeros(100))
+    assert pi.integral_pa == pytest.approx(pi.ki * 0.15 * 0.02)
+    assert out == pytest.approx(pi.max_rate * 0.02)  # K_p e + I = 16.5 kPa, slewed to 10 kPa
+    # a prompt block (2 frames) is not scaled
+    before = pi.integral_pa
+    pi.step([0.101, 0.102], [0.0, 0.0])
+    assert pi.integral_pa - before == pytest.approx(pi.ki * 0.15 * 0.002)
+
+
 @pytest.mark.parametrize(("kw", "match"), [({"kp_pa_per_n": -1.0}, "kp_pa_per_n"),
                                            ({"max_pressure_pa": 0.0}, "max_pressure_pa"),
                                            ({"line": 300}, "line"), ({"max_rate_pa_per_s": math.nan}, "max_rate")])

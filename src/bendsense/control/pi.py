@@ -17,22 +17,24 @@ and never beyond ``p_max`` itself, so the output leaves the limit as soon as the
 changes sign. The slew limit bounds the output only (a slewing output reaches its
 target within ``p_max / r``, 0.24 s at the defaults).
 
+The slew limit keeps the pressure changes between frames below what the tracker takes
+for a pressure step (1 kPa per frame, ``bendsense.tracking.windows.PRESSURE_STEP_PA``,
+which would restart its filter). A frame without a force (NaN) holds the integral.
+
 **A loop that falls behind acts gently.** The set-point reaches the board only after the
 whole block was processed: a block of many frames (the loop fell behind the board, on a
 loaded machine) is a delay in the loop, and a PI tuned for a prompt loop overshoots
-behind one. A block spanning more than :data:`MAX_BLOCK_S` (5 ms) therefore integrates
-and slews as if only 5 ms had passed: the integral gain and the slew rate fall with the
+behind one. A block spanning more than :data:`MAX_BLOCK_S` (20 ms) therefore integrates
+and slews as if only 20 ms had passed: the integral gain and the slew rate fall with the
 delay, so a late loop approaches the object more slowly instead of overshooting. A loop
-that keeps up (one or two frames per block at 1 kHz) is not affected. The slew limit keeps the pressure changes
-between frames below what the tracker takes for a pressure step (1 kPa per frame,
-``bendsense.tracking.windows.PRESSURE_STEP_PA``, which would restart its filter). A
-frame without a force (NaN) holds the integral.
+that keeps up (up to 20 frames per block at 1 kHz) is not affected.
 
 Default gains, tuned on the simulated board (``benchmarks/bench_control.py``): against a
 rigid object the paper's finger gains dN/dP ≈ 7 mN per kPa beyond first touch (contact
 at 0.1 m), so K_i = 3e6 Pa/(N s) puts the loop's crossover near K_i · dN/dP ≈ 20 rad/s,
 fast enough for a 0.3 s step and slow beside the regulator (τ = 25 ms); K_p = 5e4 Pa/N
-damps the approach (no overshoot past 2 mN at touch pressures 35–50 kPa) while passing
+damps the approach (a loop that keeps up overshoots by under 2 mN at touch pressures
+35–50 kPa) while passing
 the tracked force's noise (~0.1 mN at 1 kHz, 30 Hz bandwidth) to the pressure as ~5 Pa.
 Before touch the force is 0 and the integral ramps the pressure at K_i N* (450 kPa/s for
 0.15 N) up to the slew limit.
@@ -63,7 +65,7 @@ TRACK_BANDWIDTH_HZ = 30.0
 MAX_DT_S = 0.05
 #: a block spanning more than this [s] (the loop fell behind the board) integrates and slews as if only this had
 #: passed: a loop that acts late acts gently (its gains fall with its delay)
-MAX_BLOCK_S = 0.005
+MAX_BLOCK_S = 0.02
 
 
 def _positive(name, value, *, zero=False):
