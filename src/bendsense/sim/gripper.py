@@ -72,7 +72,8 @@ def gripper_config(k: int = 3, config=None):
         raise ConfigError(f"fingers: must be an integer in 1..{len(FINGER_NAMES)}, got {k!r}")
     config = load_config() if config is None else config
     fingers = tuple(
-        Finger(name=FINGER_NAMES[i], channels=tuple(range(16 * i + 1, 16 * i + 17)), pressure_line=i, config=config)
+        Finger(name=FINGER_NAMES[i], channels=tuple(range(16 * i + 1, 16 * i + 17)), pressure_line=i,
+               config=config.replace(name=FINGER_NAMES[i]))  # a finger's config is named after it (as loaded)
         for i in range(int(k))
     )
     return GripperConfig(name=f"simulated gripper ({int(k)} fingers)", fingers=fingers)
