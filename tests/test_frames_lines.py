@@ -224,3 +224,20 @@ def test_decoder_never_raises_on_damaged_v2(cut, noise):
     assert len(out) + d.malformed == 1
     if out and isinstance(out[0], Sample) and out[0].pressures_pa:  # a v2 that decodes agrees with itself
         assert out[0].pressures_pa[0] == out[0].pressure_pa
+
+
+def test_longest_legal_frame_fits_the_default_decoder():
+    lines = [(-1) ** k * 1000 * k for k in range(255)]
+    frame = wire(v2_payload(9, 9, [4095] * 64, lines))
+    assert len(frame) > 1024  # longer than a version-1 frame can be
+    out = Decoder().feed(frame)
+    assert len(out) == 1 and out[0].pressures_pa == tuple(lines) and out[0].adc == (4095,) * 64
+
+
+def test_a_sequence_as_pressure_pa_sends_version_2():
+    # a frame source that gives one pressure per line (e.g. a replayed gripper session) gets version 2 from any
+    # caller of encode_sample, NaN meaning no reading
+    import numpy as np
+
+    assert encode_sample(1, 2, [5], np.array([20_000.0, np.nan])) == wire(v2_payload(1, 2, [5], [20_000, NO_PRESSURE]))
+    assert encode_sample(1, 2, [5], (7, 8)) == encode_sample(1, 2, [5], pressures_pa=[7, 8])

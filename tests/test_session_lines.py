@@ -276,3 +276,42 @@ def test_recorder_skips_samples_with_other_lines_and_says_so(tmp_path):
     s = read_session(tmp_path / "s")
     np.testing.assert_array_equal(s.pressure_pa, [[1001, 2001], [1002, 2002], [1003, 2003], [1006, 2006]])
     assert "sample(s) with a number of pressure lines other than 2" in (tmp_path / "s" / "events.log").read_text()
+
+
+def test_replay_refuses_more_lines_than_a_sample_carries():
+    s = Session([0.0], [[1.0]], np.full((1, 256), 1e4), source="wide.csv")
+    with pytest.raises(SessionError, match=r"wide\.csv: 256 pressure lines; a SAMPLE carries at most 255"):
+        replay_frames(s)
+
+
+@pty_only
+def test_cli_replay_of_a_gripper_session_then_record(tmp_path):
+    """The commands a user runs: 'sim-device --replay' of a three-line session CSV, 'record' of its port."""
+    import signal
+    import subprocess
+    import sys
+
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+
+    s = lines_session(n=80, n_ch=4, k=3)
+    write_session_csv(s, tmp_path / "g.csv")
+    proc = subprocess.Popen([sys.executable, "-c", "from bendsense.cli import main; main()", "sim-device", "--replay",
+                             str(tmp_path / "g.csv")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        res = CliRunner().invoke(main, ["record", port, "-o", str(tmp_path / "again"), "--seconds", "1",
+                                        "--quiet-status"])
+        assert res.exit_code == 0, res.output
+        assert "done: 80 frames written" in res.output
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+        assert proc.returncode == 0 and "Traceback" not in err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    again = read_session(tmp_path / "again")
+    np.testing.assert_array_equal(again.pressure_pa, s.pressure_pa)
+    assert again.meta["n_lines"] == 3

@@ -674,7 +674,9 @@ class Decoder(_StreamDecoder):
         from the first HELLO when not given.
     max_frame_bytes : int
         Longest run without a delimiter that is kept; a longer run is dropped (and
-        counted in ``overruns`` and ``malformed``), so memory stays bounded.
+        counted in ``overruns`` and ``malformed``), so memory stays bounded. The default
+        holds the longest legal frame (a version-2 SAMPLE of 64 channels and 255 lines,
+        under 1,200 bytes stuffed).
 
     Attributes
     ----------
@@ -701,7 +703,7 @@ class Decoder(_StreamDecoder):
         The most recent sequence gaps (bounded).
     """
 
-    def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 1024):
+    def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 2048):
         super().__init__()
         self.adc_bits = adc_bits
         self._adc_bits_from_hello = adc_bits is None

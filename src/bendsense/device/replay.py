@@ -21,6 +21,7 @@ import numpy as np
 
 from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
 from bendsense.errors import SessionError
+from bendsense.frames import MAX_LINES
 
 __all__ = ["ReplayDevice", "replay_frames"]
 
@@ -44,8 +45,8 @@ def replay_frames(session) -> dict:
     Raises
     ------
     SessionError
-        If the session is empty, has signals that are not counts, or a clock that runs
-        backwards.
+        If the session is empty, has signals that are not counts, a pressure beyond the
+        wire's i32 or more than 255 pressure lines, or a clock that runs backwards.
     """
     n = len(session)
     where = session.source or "session"
@@ -62,6 +63,8 @@ def replay_frames(session) -> dict:
     if not 1 <= session.n_channels <= 64:
         raise SessionError(f"{where}: expected 1..64 channels to replay, got {session.n_channels}")
     p = session.pressure_pa
+    if session.n_lines > MAX_LINES:
+        raise SessionError(f"{where}: {session.n_lines} pressure lines; a SAMPLE carries at most {MAX_LINES}")
     wide = np.isfinite(p) & ~((p >= -(2**31)) & (p < 2**31 - 1))  # the wire's i32, 0x7FFFFFFF: no reading
     if wide.any():
         at = tuple(int(i) for i in np.argwhere(wide)[0])
