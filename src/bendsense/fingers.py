@@ -20,10 +20,10 @@ import numpy as np
 
 from bendsense import validation as check
 from bendsense.config import Finger, GripperConfig
-from bendsense.errors import ArgumentError, SessionError
+from bendsense.errors import ArgumentError, ConfigError, SessionError
 from bendsense.session import Session
 
-__all__ = ["split_session", "split_signals", "split_extra", "finger_columns"]
+__all__ = ["split_session", "split_signals", "split_extra", "finger_columns", "calibrations", "check_calibration"]
 
 
 def _gripper(gripper) -> GripperConfig:
@@ -166,3 +166,78 @@ def split_signals(signals, pressure_pa, gripper: GripperConfig) -> dict:
                             f"got {pressure.shape}")
     _check_board(signals.shape[1], _lines(pressure), gripper, "signals", ArgumentError)
     return {f.name: (signals[:, f.index], _line(pressure, f)) for f in gripper.fingers}
+
+
+def check_calibration(calibration, finger: Finger, source: str = "") -> None:
+    """``calibration`` fits ``finger``: the same channel count, and fitted for it or for any actuator.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        The calibration.
+    finger : Finger
+        The finger it is meant for.
+    source : str, optional
+        Where it came from (a file), for the message.
+    """
+    where = f"calibration {source}" if source else "calibration"
+    if calibration.finger is not None and calibration.finger != finger.name:
+        raise ConfigError(f"{where}: fitted for finger {calibration.finger}, given for finger {finger.name} (each "
+                          f"finger's channels need their own calibration: --calibration {finger.name}=CAL.yaml)")
+    n = finger.config.sensor.n_segments
+    if calibration.n_channels != n:
+        raise ConfigError(f"{where}: {calibration.n_channels} channels, finger {finger.name}'s sensor has {n} "
+                          f"segments")
+
+
+def calibrations(gripper: GripperConfig, given) -> dict:
+    """Each finger's calibration, from one for every finger or one per finger.
+
+    Parameters
+    ----------
+    gripper : GripperConfig
+        The fingers.
+    given : Calibration, path or dict
+        One calibration (or its YAML file) for every finger (they share one sensor
+        design), or ``{finger name: Calibration or path}``; in a mapping, the key
+        ``None`` gives the calibration of every finger not named.
+
+    Returns
+    -------
+    dict
+        ``{finger name: Calibration}`` in the gripper's order.
+
+    Raises
+    ------
+    ConfigError
+        An unknown finger name, a finger without a calibration, a calibration fitted
+        for another finger or with another channel count (each one clear line).
+    """
+    from bendsense.calibration import Calibration
+
+    gripper = _gripper(gripper)
+    mapping = dict(given) if isinstance(given, dict) else {None: given}
+    unknown = [str(n) for n in mapping if n is not None and n not in gripper.names]
+    if unknown:
+        raise ConfigError(f"calibration for finger {', '.join(unknown)}: not a finger of this gripper; its fingers: "
+                          f"{', '.join(gripper.names)}")
+    missing = [n for n in gripper.names if n not in mapping and None not in mapping]
+    if missing:
+        raise ConfigError(f"no calibration for finger{'s' if len(missing) > 1 else ''} {', '.join(missing)} (give "
+                          f"{' '.join(f'--calibration {n}=CAL.yaml' for n in missing)}, or one --calibration CAL.yaml "
+                          f"for every finger)")
+    loaded, out = {}, {}
+    for finger in gripper.fingers:
+        key = finger.name if finger.name in mapping else None
+        if key not in loaded:
+            value = mapping[key]
+            if isinstance(value, Calibration):
+                loaded[key] = (value, "")
+            else:
+                path = check.path(f"calibration of finger {finger.name}" if key else "calibration", value,
+                                  error=ConfigError)
+                loaded[key] = (Calibration.load(path), str(path))
+        calibration, source = loaded[key]
+        check_calibration(calibration, finger, source)
+        out[finger.name] = calibration
+    return out

@@ -136,14 +136,28 @@ class Results:
 
         out_dir = Path(out_dir)
         output.check([output.directory(out_dir, overwrite=overwrite)], inputs)
-        columns = self.columns
         with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
-            with open(tmp / "results.csv", "w", encoding="utf-8", newline="") as fh:
-                write_columns(fh, list(columns), list(columns.values()))
-            # stored, not deflated: positions of noisy shapes deflate by ~10 % at ~35 ms per
-            # 1,000 frames, the largest cost of writing; np.load reads either
-            np.savez(tmp / "shape.npz", s_m=self.s_m, positions_m=self.positions_m)
+            self.write_files(tmp)
         return out_dir
+
+    def write_files(self, directory) -> None:
+        """Write ``results.csv`` and ``shape.npz`` into ``directory`` (existing; no manifest, no checks).
+
+        The writer inside :meth:`write` (and inside a gripper's output directory, one
+        directory per finger: :func:`bendsense.gripper_results.write_gripper_results`).
+
+        Parameters
+        ----------
+        directory : path
+            An existing directory, being written (e.g. by :func:`bendsense.output.write_dir`).
+        """
+        directory = Path(directory)
+        columns = self.columns
+        with open(directory / "results.csv", "w", encoding="utf-8", newline="") as fh:
+            write_columns(fh, list(columns), list(columns.values()))
+        # stored, not deflated: positions of noisy shapes deflate by ~10 % at ~35 ms per
+        # 1,000 frames, the largest cost of writing; np.load reads either
+        np.savez(directory / "shape.npz", s_m=self.s_m, positions_m=self.positions_m)
 
     def __getitem__(self, name):
         return self.columns[name]

@@ -76,7 +76,7 @@ class StripResidual:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
-def load_recordings(manifest_path: str | os.PathLike, sensor=None) -> dict:
+def load_recordings(manifest_path: str | os.PathLike, sensor=None, channels=None) -> dict:
     """The recordings a manifest names, checked against the sensor, as :func:`fit_fields` takes them.
 
     Parameters
@@ -85,6 +85,10 @@ def load_recordings(manifest_path: str | os.PathLike, sensor=None) -> dict:
         Calibration manifest YAML; recording paths are relative to it.
     sensor : SensorConfig or Config, optional
         ``None``: the paper's sensor (``bendsense.load_config().sensor``).
+    channels : sequence of int, optional
+        The 1-based board channels of the sensor's segments (a gripper's finger): the
+        recordings hold the whole board and these columns are taken; None: the
+        recordings hold the sensor's channels alone.
 
     Returns
     -------
@@ -108,6 +112,13 @@ def load_recordings(manifest_path: str | os.PathLike, sensor=None) -> dict:
 
     def load(where, path):
         session = read_session_csv(path)
+        if channels is not None:
+            if session.n_channels < max(channels):
+                raise ConfigError(f"{manifest.source}: {where} ({path.name}): the finger reads board channels "
+                                  f"{min(channels)}..{max(channels)}, the recording has {session.n_channels}")
+            if len(session) == 0:
+                raise SessionError(f"{path}: no frames")
+            return session.signals[:, [c - 1 for c in channels]]
         if session.n_channels != n:
             raise ConfigError(
                 f"{manifest.source}: {where} ({path.name}): expected {n} channels "

@@ -125,6 +125,8 @@ def to_dict(cal) -> dict:
         "fit_shifts_m": None if cal.fit_shifts_m is None else cal.fit_shifts_m.tolist(),
         "meta": dict(cal.meta),
     }
+    if cal.finger is not None:  # a gripper finger's calibration (a single actuator's file is unchanged)
+        out["finger"] = cal.finger
     return out
 
 
@@ -170,7 +172,7 @@ def fields_from_dict(data: Any) -> dict:
     allowed = [
         "format", "version", "n_channels", "degree", "offset", "coefficients_odd", "coefficients_even",
         "delta_a_range_odd", "delta_a_range_even", "noise_std", "weighting", "sleeve", "strip_residuals",
-        "cv_errors_m", "sensor", "fit_delta_a", "fit_shifts_m", "meta",
+        "cv_errors_m", "sensor", "fit_delta_a", "fit_shifts_m", "meta", "finger",
     ]  # fmt: skip
     unknown = [str(k) for k in data if k not in allowed]
     if unknown:
@@ -237,4 +239,5 @@ def fields_from_dict(data: Any) -> dict:
         "fit_delta_a": fit.get("fit_delta_a"),
         "fit_shifts_m": fit.get("fit_shifts_m"),
         "meta": meta,
+        "finger": data.get("finger"),
     }

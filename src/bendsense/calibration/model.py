@@ -12,6 +12,7 @@ methods call.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -64,6 +65,9 @@ class Calibration:
         The fitted data (flat first, then one row per strip), for plots.
     meta : dict
         Free-form metadata (creation time, manifest).
+    finger : str or None
+        The gripper finger it was fitted for (``calibrate --config G --finger NAME``);
+        using it for another finger is an error naming both. None: any actuator.
     """
 
     offset: np.ndarray
@@ -81,9 +85,16 @@ class Calibration:
     fit_delta_a: np.ndarray | None = None
     fit_shifts_m: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    finger: str | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__
+        if self.finger is not None:
+            from bendsense.config.gripper import FINGER_NAME
+
+            if not isinstance(self.finger, str) or not re.fullmatch(FINGER_NAME, self.finger):
+                raise ConfigError(f"finger: expected a finger's name matching {FINGER_NAME}, got "
+                                  f"{check.short(self.finger)}")
         offset = _array("offset", self.offset)
         n = offset.size
         if n == 0:
@@ -585,6 +596,7 @@ class Calibration:
         degree: int | str = 3,
         weighting: str = "none",
         sleeve: bool | None = None,
+        finger=None,
     ) -> Calibration:
         """Fit a calibration from a manifest of session CSV recordings (DESIGN.md section 3).
 
@@ -600,6 +612,10 @@ class Calibration:
             ``"none"`` (the paper's) or ``"shift"``.
         sleeve : bool, optional
             Override ``sensor.calibration_adds_sleeve`` (κ_cal = 1/(R + c)).
+        finger : Finger, optional
+            A gripper's finger (``gripper.finger(name)``): the recordings are the whole
+            board's; its channels are fitted, with its sensor (``sensor`` must be None),
+            and the calibration records its name (``finger``).
 
         Raises
         ------
@@ -610,8 +626,16 @@ class Calibration:
             For a malformed recording (line and column in the message).
         """
         manifest_path = check.path("manifest_path", manifest_path)
-        return cls.from_data(**load_recordings(manifest_path, sensor), degree=degree, weighting=weighting,
-                             sleeve=sleeve)
+        if finger is None:
+            return cls.from_data(**load_recordings(manifest_path, sensor), degree=degree, weighting=weighting,
+                                 sleeve=sleeve)
+        from bendsense.config import Finger
+
+        check.instance("finger", finger, Finger, "gripper.finger(name)")
+        if sensor is not None:
+            raise ConfigError("sensor: give the finger or the sensor, not both (a finger's sensor is its own)")
+        data = load_recordings(manifest_path, finger.config.sensor, channels=finger.channels)
+        return cls(**fit_fields(**data, degree=degree, weighting=weighting, sleeve=sleeve), finger=finger.name)
 
     @classmethod
     def from_data(

@@ -17,6 +17,9 @@ __all__ = [
     "METHODS",
     "InterspersedCommand",
     "check_figure_suffix",
+    "CalibrationSpec",
+    "make_calibration_option",
+    "calibration_paths",
     "config_option",
     "make_config_option",
     "make_overwrite_option",
@@ -168,6 +171,89 @@ def make_config_option(help_text: str):
         type=click.Path(exists=True, dir_okay=False, path_type=Path),
         help=help_text,
     )
+
+
+class CalibrationSpec(click.ParamType):
+    """``--calibration [NAME=]CAL.yaml``: an existing calibration file, for one finger (``NAME=``) or every one.
+
+    The value is ``(name or None, Path)``. A value that is an existing file is a path
+    even if it holds ``=``; ``NAME=`` is a finger's name (``[A-Za-z][A-Za-z0-9_-]*``).
+    """
+
+    name = "[NAME=]CAL.yaml"
+    _file = click.Path(exists=True, dir_okay=False, path_type=Path)
+
+    def convert(self, value, param, ctx):
+        """Parse and check one value."""
+        from bendsense.config.gripper import FINGER_NAME
+
+        if isinstance(value, tuple):  # already converted (a default)
+            return value
+        found = re.fullmatch(rf"({FINGER_NAME})=(.+)", value)
+        if found and not Path(value).exists():
+            return found.group(1), self._file.convert(found.group(2), param, ctx)
+        return None, self._file.convert(value, param, ctx)
+
+
+def make_calibration_option(help_text: str = "Calibration YAML written by 'bendsense calibrate'", *,
+                            required: bool = False):
+    """``--calibration [NAME=]CAL.yaml`` (repeatable, passed as ``calibration_paths``), with the command's help.
+
+    One plain ``--calibration CAL.yaml`` calibrates a single actuator, or every finger of
+    a gripper; ``--calibration NAME=CAL.yaml`` (repeated) one finger each.
+    :func:`calibration_paths` turns the values into what the config needs.
+
+    Parameters
+    ----------
+    help_text : str
+        The option's help, before the part on fingers.
+    required : bool, default False
+        Whether the command needs one.
+    """
+    return click.option(
+        "--calibration", "calibration_paths", type=CalibrationSpec(), multiple=True, required=required,
+        help=f"{help_text.rstrip('.')}. A gripper (config with fingers:): NAME=CAL.yaml per finger (repeatable), or "
+             f"one CAL.yaml for every finger.")
+
+
+def calibration_paths(values, config, option: str = "--calibration"):
+    """The calibration file(s) of ``--calibration`` for ``config``: one path, or ``{finger or None: path}``.
+
+    Parameters
+    ----------
+    values : tuple of (str or None, Path)
+        The option's values (:class:`CalibrationSpec`).
+    config : Config or GripperConfig
+        A single actuator takes one plain path (or none: None); a gripper a mapping
+        from finger name (None: every finger not named) to path, checked by
+        :func:`bendsense.fingers.calibrations`.
+    option : str
+        The option, for messages.
+
+    Returns
+    -------
+    Path or None or dict
+    """
+    from bendsense.config import GripperConfig
+
+    values = list(values or ())
+    if not isinstance(config, GripperConfig):
+        named = [f"{n}={p}" for n, p in values if n is not None]
+        if named:
+            raise click.BadParameter(f"{named[0]} names a finger, but the config is a single actuator (no fingers:); "
+                                     f"give {option} CAL.yaml", param_hint=f"'{option}'")
+        if len(values) > 1:
+            raise click.BadParameter(f"given {len(values)} times; a single actuator takes one calibration",
+                                     param_hint=f"'{option}'")
+        return values[0][1] if values else None
+    out = {}
+    for name, path in values:
+        if name in out:
+            which = f"finger {name}" if name is not None else "every finger (a plain CAL.yaml)"
+            raise click.BadParameter(f"two calibrations for {which}: {out[name]} and {path}",
+                                     param_hint=f"'{option}'")
+        out[name] = path
+    return out
 
 
 def make_overwrite_option(help_text: str):

@@ -62,9 +62,12 @@ def _degree(ctx, param, value):
     default=None,
     help="kappa_cal = 1/(R + c) (strip radius without the sleeve) or 1/R; default: from the config.",
 )
+@click.option("--finger", metavar="NAME",
+              help="With a gripper's config (fingers:): fit this finger's sensor from board recordings (its "
+                   "channels); the calibration records the finger.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path), help="Save a fit plot.")
 @make_overwrite_option("Replace an existing output file.")
-def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_path, overwrite):
+def calibrate(manifest, output, config_path, degree, weighting, sleeve, finger, plot_path, overwrite):
     """Fit the signal-to-shift calibration (paper eq. 1-2) from MANIFEST.yaml.
 
     The manifest names the flat recording and one session CSV per calibration strip
@@ -75,15 +78,28 @@ def calibrate(manifest, output, config_path, degree, weighting, sleeve, plot_pat
         strips:
           - {radius_m: 0.040, recording: r040.csv}
           - {radius_mm: 50, recording: r050.csv}
+
+    A gripper (--config G.yaml with fingers:): --finger NAME fits that finger's
+    sensor from recordings of the whole board (its channels are taken).
     """  # noqa: D301 (click's \b keeps the example's line breaks)
     check_figure_suffix(plot_path, "--plot")
 
     def step(state):
         from bendsense.calibration import Calibration
-        from bendsense.config import load_config
+        from bendsense.config import GripperConfig, load_config
 
-        sensor = load_config(config_path).sensor
-        cal = Calibration.fit(manifest, sensor, degree=degree, weighting=weighting, sleeve=sleeve)
+        config = load_config(config_path)
+        options = {"degree": degree, "weighting": weighting, "sleeve": sleeve}
+        if isinstance(config, GripperConfig):
+            if finger is None:
+                raise click.UsageError(f"{config_path} is a gripper config (fingers {', '.join(config.names)}): "
+                                       f"give --finger NAME, the finger to calibrate")
+            cal = Calibration.fit(manifest, finger=config.finger(finger), **options)
+        else:
+            if finger is not None:
+                raise click.BadParameter("a finger needs a gripper's config (--config G.yaml with fingers:)",
+                                         param_hint="'--finger'")
+            cal = Calibration.fit(manifest, config.sensor, **options)
         figure = None
         if plot_path is not None:  # drawn before anything is written: a failure leaves no calibration
             import matplotlib

@@ -29,12 +29,14 @@ from bendsense.cli._common import (
     contact_option,
     load_option,
     log_no_parameter_covariance,
+    make_calibration_option,
     objective_option,
     overwrite_option,
     say,
     step_io,
     window_option,
 )
+from bendsense.cli.gripper import finger_parts, is_gripper, per_finger
 from bendsense.errors import BendsenseError, SessionError
 
 log = logging.getLogger("bendsense")
@@ -164,19 +166,22 @@ def run_steps(steps) -> dict:
 @click.command("load", cls=InterspersedCommand)
 @click.argument("session_path", metavar="SESSION", type=click.Path(exists=True, path_type=Path))
 @config_option
-@click.option(
-    "--calibration",
-    "calibration_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Calibration YAML written by 'bendsense calibrate'.",
-)
+@make_calibration_option()
 @click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")
-def load(session_path, config_path, calibration_path, pressure_kpa):
-    """Load a session (session CSV or native session directory)."""
+def load(session_path, config_path, calibration_paths, pressure_kpa):
+    """Load a session (session CSV or native session directory).
+
+    With a gripper's config (fingers:), the session is the whole board: each later
+    step runs on every finger's part (its channels and pressure line), 'save OUT'
+    writes OUT/<finger>/results.csv and shape.npz, 'mcap' the topics
+    /bendsense/<finger>/..., 'plot' a panel per finger and the grasp.
+    """
+    given = [p for _, p in calibration_paths]
 
     def step(state):
         from bendsense.calibration import Calibration
-        from bendsense.config import load_config
+        from bendsense.cli._common import calibration_paths as calibration_paths_for
+        from bendsense.config import GripperConfig, load_config
         from bendsense.pipeline import warn_pressure_fallback
         from bendsense.session import read_session
 
@@ -186,9 +191,15 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
         if pressure_kpa is not None:
             warn_pressure_fallback(session, "--pressure-kpa")
             session = session.with_pressure(pressure_kpa * 1e3)
+        config = load_config(config_path)
+        calibration_path = calibration_paths_for(calibration_paths, config)
+        if isinstance(config, GripperConfig):
+            from bendsense.cli.gripper import load_fingers
+
+            return load_fingers(state, session, config, calibration_path, session_path.stem)
         state.update(
             session=session,
-            config=load_config(config_path),
+            config=config,
             calibration=Calibration.load(calibration_path) if calibration_path else None,
             calibration_path=calibration_path,
             name=session_path.stem,
@@ -197,7 +208,7 @@ def load(session_path, config_path, calibration_path, pressure_kpa):
         return state
 
     step.loads = session_path
-    return step_io(step, inputs=[session_path, config_path, calibration_path])
+    return step_io(step, inputs=[session_path, config_path, *given])
 
 
 @click.command("reconstruct", cls=InterspersedCommand)
@@ -220,7 +231,7 @@ def reconstruct(points):
         state["shape"] = processed.shape
         return state
 
-    return step
+    return per_finger(step)
 
 
 @click.command("estimate", cls=InterspersedCommand)
@@ -306,7 +317,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
                                    "pressure: give 'load ... --pressure-kpa P'")
 
     step.precheck = precheck
-    return step
+    return per_finger(step)
 
 
 @click.command("track", cls=InterspersedCommand)
@@ -345,18 +356,26 @@ def track(smooth, bandwidth_hz, window_s):
         state["track"] = tracked
         return state
 
-    return step
+    return per_finger(step)
 
 
 @click.command("save", cls=InterspersedCommand)
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
 @overwrite_option
 def save(out_dir, overwrite):
-    """Write results.csv and shape.npz into OUT_DIR."""
+    """Write results.csv and shape.npz into OUT_DIR (a gripper: OUT_DIR/<finger>/ for each finger)."""
 
     def step(state):
         from bendsense.results import write_results
 
+        if is_gripper(state):  # OUT/<finger>/results.csv and shape.npz, one manifest
+            from bendsense.gripper_results import write_gripper_results
+
+            write_gripper_results(out_dir, finger_parts(state, "save"), overwrite=overwrite)
+            state["out_dir"] = out_dir
+            say(f"wrote {out_dir}/<finger>/results.csv and shape.npz for fingers {', '.join(state['fingers'])} "
+                f"({len(state['session'])} frames)")
+            return state
         shape = _require(state, "shape", "save", "'reconstruct'")
         write_results(out_dir, state["session"], shape, state.get("estimate"), track=state.get("track"),
                       overwrite=overwrite)
@@ -377,13 +396,19 @@ def mcap(mcap_path, overwrite):
     /bendsense/force_std, /bendsense/wrench_tracked and /bendsense/force_tracked_std
     (after 'track'), /bendsense/status, /bendsense/shape (nav_msgs/msg/Path) and
     /bendsense/pressure (sensor_msgs/msg/FluidPressure), stamped with the session's time.
+    A gripper: the same topics per finger, /bendsense/<finger>/wrench, ... .
     """
     from bendsense.interop.ros2 import require_ros, write_mcap
 
     require_ros()  # a missing extra stops the command line before any step ran
 
     def step(state):
+        if is_gripper(state):  # one file, topics /bendsense/<finger>/...
+            from bendsense.interop.ros2 import write_mcap_fingers
 
+            write_mcap_fingers(mcap_path, finger_parts(state, "mcap"), overwrite=overwrite)
+            say(f"wrote {mcap_path} ({len(state['session'])} frames, fingers {', '.join(state['fingers'])})")
+            return state
         shape = _require(state, "shape", "mcap", "'reconstruct'")
         write_mcap(mcap_path, state["session"], shape, state.get("estimate"), track=state.get("track"),
                    overwrite=overwrite)

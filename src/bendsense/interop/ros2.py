@@ -62,7 +62,7 @@ from bendsense import output
 from bendsense.errors import SessionError, require_extra
 from bendsense.results import CONTACT_UNRESOLVED, EXTRAPOLATED, MODEL_MISFIT, NOT_CONVERGED, NOT_IDENTIFIABLE, OK
 
-__all__ = ["write_mcap", "require_ros", "FRAME_ID", "TOPICS"]
+__all__ = ["write_mcap", "write_mcap_fingers", "finger_topic", "require_ros", "FRAME_ID", "TOPICS"]
 
 FRAME_ID = "bendsense_base"
 MCAP = (".mcap",)
@@ -234,73 +234,129 @@ def write_mcap(path, session, shape, estimate=None, *, track=None, overwrite: bo
     MissingExtraError
         If ``mcap`` or ``mcap-ros2-support`` is not installed (extra ``ros``).
     """
+    return write_mcap_fingers(path, {None: (session, shape, estimate, track)}, overwrite=overwrite)
+
+
+def finger_topic(finger: str | None, topic: str) -> str:
+    """The topic ``topic`` (a key of :data:`TOPICS`) of ``finger``: ``/bendsense/<finger>/<topic>`` (None: TOPICS).
+
+    Parameters
+    ----------
+    finger : str or None
+        A gripper finger's name, or None for a single actuator.
+    topic : str
+        ``wrench``, ``shape``, ``pressure``, ``contact``, ...
+    """
+    return TOPICS[topic] if finger is None else f"/bendsense/{finger}/{topic}"
+
+
+class _Part:
+    """One actuator's messages: its results, topics and contact points."""
+
+    def __init__(self, finger, session, shape, estimate, track):
+        from bendsense.contact_output import point_on_shape, resolved
+        from bendsense.results import Results
+
+        self.results = Results.from_state(session, shape, estimate, track)
+        self.cols = self.results.columns
+        self.positions = self.results.positions_m
+        self.topics = {key: finger_topic(finger, key) for key in TOPICS}
+        self.status_name = "bendsense/force" if finger is None else f"bendsense/{finger}/force"
+        self.contact = None
+        if self.results.has_contact:  # the point at s_c on the drawn shape; a frame without a resolved location: none
+            cols = self.cols
+            self.contact = point_on_shape(self.results.s_m, self.positions, cols["contact_s_m"])
+            self.contact[~resolved(cols["contact_s_m"], cols["contact_std_m"])] = np.nan
+
+
+def write_mcap_fingers(path, parts: dict, *, overwrite: bool = False) -> Path:
+    """Write several actuators of one board (a gripper's fingers) as ROS 2 messages to one MCAP file.
+
+    Each finger's messages go to its own topics, ``/bendsense/<finger>/wrench``,
+    ``/bendsense/<finger>/shape``, ``/bendsense/<finger>/pressure``,
+    ``/bendsense/<finger>/contact``, ... (the topics of :data:`TOPICS` under the
+    finger's name), with the same messages as :func:`write_mcap` writes for one
+    actuator; the key ``None`` writes the single actuator's topics.
+
+    Parameters
+    ----------
+    path : path
+        Output ``.mcap`` file; written atomically.
+    parts : dict
+        ``{finger name or None: (session, shape, estimate or None, track or None)}``;
+        the sessions share their frames (one board).
+    overwrite : bool
+        Replace an existing file.
+    """
     writer_mod = require_ros()
-    from bendsense.contact_output import point_on_shape, resolved
-    from bendsense.results import Results
 
     path = Path(path)
-    results = Results.from_state(session, shape, estimate, track)
-    cols = results.columns
+    items = [_Part(finger, *part) for finger, part in parts.items()]
+    session = next(iter(parts.values()))[0]
     stamps = frame_stamps_ns(session)
-    positions = results.positions_m
-    contact = None
-    if results.has_contact:  # the point at s_c on the drawn shape; a frame without a resolved location: none
-        contact = point_on_shape(results.s_m, positions, cols["contact_s_m"])
-        contact[~resolved(cols["contact_s_m"], cols["contact_std_m"])] = np.nan
     device = session.meta.get("device")
     hardware_id = str(device.get("firmware", "")) if isinstance(device, dict) else ""
     with output.write_file(path, overwrite=overwrite, suffixes=MCAP, writer="bendsense mcap") as tmp, \
             open(tmp, "wb") as fh:
         writer = writer_mod.Writer(fh)
         writer._writer.add_metadata("bendsense", {"written_by": "bendsense mcap"})  # the mark (output.MARK)
+        contact = any(item.contact is not None for item in items)
         schemas = {name: writer.register_msgdef(name, text) for name, text in SCHEMAS.items()
-                   if name != POINT_STAMPED or contact is not None}
+                   if name != POINT_STAMPED or contact}
         for k, stamp in enumerate(stamps.tolist()):
-            header = _header(stamp)
-
-            def write(topic, schema, message, k=k, stamp=stamp):
-                writer.write_message(TOPICS[topic], schemas[schema], message, log_time=stamp, publish_time=stamp,
-                                     sequence=k)
-
-            if results.has_forces:
-                write("wrench", "geometry_msgs/msg/WrenchStamped",
-                      {"header": header, "wrench": {"force": _vec(cols["fx_n"][k], cols["fy_n"][k]),
-                                                    "torque": _vec(0.0, 0.0)}})
-                write("force_std", "geometry_msgs/msg/Vector3Stamped",
-                      {"header": header, "vector": _vec(cols["fx_std_n"][k], cols["fy_std_n"][k])})
-            if results.has_track:
-                write("wrench_tracked", "geometry_msgs/msg/WrenchStamped",
-                      {"header": header, "wrench": {"force": _vec(cols["fx_track_n"][k], cols["fy_track_n"][k]),
-                                                    "torque": _vec(0.0, 0.0)}})
-                write("force_tracked_std", "geometry_msgs/msg/Vector3Stamped",
-                      {"header": header, "vector": _vec(cols["fx_track_std_n"][k], cols["fy_track_std_n"][k])})
-            status = str(cols["status"][k])
-            values = {"status": status}
-            if results.has_forces:
-                values.update({name: repr(float(cols[name][k])) for name in ("fx_std_n", "fy_std_n", "residual_m")})
-            if contact is not None:
-                values.update({name: repr(float(cols[name][k])) for name in ("contact_s_m", "contact_std_m")})
-                if np.isfinite(contact[k]).all():
-                    write("contact", POINT_STAMPED, {"header": header, "point": _vec(*contact[k])})
-            if results.has_track:
-                values["track_status"] = str(cols["track_status"][k])
-            if "window_p_value" in cols:
-                values["window_p_value"] = repr(float(cols["window_p_value"][k]))
-            write("status", "diagnostic_msgs/msg/DiagnosticArray", {"header": header, "status": [{
-                "level": _LEVEL.get(status, 1), "name": "bendsense/force", "message": status,
-                "hardware_id": hardware_id,
-                "values": [{"key": key, "value": value} for key, value in values.items()],
-            }]})
-            q = _tangent_quaternions(positions[k])
-            poses = [
-                {"header": header, "pose": {"position": _vec(x, y),
-                                            "orientation": {"x": 0.0, "y": 0.0, "z": qz, "w": qw}}}
-                for (x, y), qz, qw in zip(positions[k].tolist(), q[:, 2].tolist(), q[:, 3].tolist())
-            ]
-            write("shape", "nav_msgs/msg/Path", {"header": header, "poses": poses})
-            p = float(cols["pressure_pa"][k])
-            if math.isfinite(p):
-                write("pressure", "sensor_msgs/msg/FluidPressure",
-                      {"header": header, "fluid_pressure": p, "variance": 0.0})
+            for item in items:
+                _write_frame(writer, schemas, item, k, stamp, hardware_id)
         writer.finish()
     return path
+
+
+def _write_frame(writer, schemas, item: _Part, k: int, stamp: int, hardware_id: str) -> None:
+    """Frame ``k``'s messages of one actuator."""
+    header = _header(stamp)
+    results, cols, contact = item.results, item.cols, item.contact
+
+    def write(topic, schema, message):
+        writer.write_message(item.topics[topic], schemas[schema], message, log_time=stamp, publish_time=stamp,
+                             sequence=k)
+
+    if results.has_forces:
+        write("wrench", "geometry_msgs/msg/WrenchStamped",
+              {"header": header, "wrench": {"force": _vec(cols["fx_n"][k], cols["fy_n"][k]),
+                                            "torque": _vec(0.0, 0.0)}})
+        write("force_std", "geometry_msgs/msg/Vector3Stamped",
+              {"header": header, "vector": _vec(cols["fx_std_n"][k], cols["fy_std_n"][k])})
+    if results.has_track:
+        write("wrench_tracked", "geometry_msgs/msg/WrenchStamped",
+              {"header": header, "wrench": {"force": _vec(cols["fx_track_n"][k], cols["fy_track_n"][k]),
+                                            "torque": _vec(0.0, 0.0)}})
+        write("force_tracked_std", "geometry_msgs/msg/Vector3Stamped",
+              {"header": header, "vector": _vec(cols["fx_track_std_n"][k], cols["fy_track_std_n"][k])})
+    status = str(cols["status"][k])
+    values = {"status": status}
+    if results.has_forces:
+        values.update({name: repr(float(cols[name][k])) for name in ("fx_std_n", "fy_std_n", "residual_m")})
+    if contact is not None:
+        values.update({name: repr(float(cols[name][k])) for name in ("contact_s_m", "contact_std_m")})
+        if np.isfinite(contact[k]).all():
+            write("contact", POINT_STAMPED, {"header": header, "point": _vec(*contact[k])})
+    if results.has_track:
+        values["track_status"] = str(cols["track_status"][k])
+    if "window_p_value" in cols:
+        values["window_p_value"] = repr(float(cols["window_p_value"][k]))
+    write("status", "diagnostic_msgs/msg/DiagnosticArray", {"header": header, "status": [{
+        "level": _LEVEL.get(status, 1), "name": item.status_name, "message": status,
+        "hardware_id": hardware_id,
+        "values": [{"key": key, "value": value} for key, value in values.items()],
+    }]})
+    positions = item.positions
+    q = _tangent_quaternions(positions[k])
+    poses = [
+        {"header": header, "pose": {"position": _vec(x, y),
+                                    "orientation": {"x": 0.0, "y": 0.0, "z": qz, "w": qw}}}
+        for (x, y), qz, qw in zip(positions[k].tolist(), q[:, 2].tolist(), q[:, 3].tolist())
+    ]
+    write("shape", "nav_msgs/msg/Path", {"header": header, "poses": poses})
+    p = float(cols["pressure_pa"][k])
+    if math.isfinite(p):
+        write("pressure", "sensor_msgs/msg/FluidPressure",
+              {"header": header, "fluid_pressure": p, "variance": 0.0})

@@ -1,0 +1,147 @@
+"""The chain for a gripper: every step runs on each finger's part of the board.
+
+``load`` with a gripper's config (``fingers:``) splits the board session
+(:func:`bendsense.fingers.split_session`) and keeps one single-actuator state per
+finger in ``state["fingers"]``; :func:`per_finger` runs a step of the single-actuator
+chain on each of them in turn (its warnings and errors name the finger). The board's
+own state keeps ``session`` (the whole board), ``config`` and ``gripper`` (the
+:class:`~bendsense.config.GripperConfig`), for the steps that write the whole gripper
+(``save``, ``mcap``, ``plot``) and for ``export``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+
+import click
+
+from bendsense.errors import BendsenseError
+
+__all__ = ["load_fingers", "per_finger", "finger_context", "is_gripper", "finger_parts"]
+
+
+def is_gripper(state: dict) -> bool:
+    """Whether the chain's ``state`` holds a gripper (``load`` with a config with fingers:).
+
+    Parameters
+    ----------
+    state : dict
+        The chain's state.
+    """
+    return state.get("gripper") is not None
+
+
+def load_fingers(state: dict, session, gripper, calibration_paths, name: str) -> dict:
+    """The state of ``load`` for a gripper: the board, and each finger's single-actuator state.
+
+    Parameters
+    ----------
+    state : dict
+        The chain's state (updated and returned).
+    session : Session
+        The whole board's session.
+    gripper : GripperConfig
+        The fingers.
+    calibration_paths : dict or None
+        ``{finger or None: path}`` (:func:`bendsense.cli._common.calibration_paths`);
+        empty or None: no calibration (a chain that only exports).
+    name : str
+        The session's name (its file stem).
+    """
+    from bendsense.fingers import calibrations, split_session
+
+    parts = split_session(session, gripper)
+    cals = calibrations(gripper, calibration_paths) if calibration_paths else {}
+    fingers = {}
+    for finger in gripper.fingers:
+        path = None
+        if calibration_paths:
+            path = calibration_paths.get(finger.name, calibration_paths.get(None))
+        fingers[finger.name] = {"session": parts[finger.name], "config": finger.config,
+                                "calibration": cals.get(finger.name), "calibration_path": path, "name": name,
+                                "finger": finger.name}
+    state.update(session=session, config=gripper, gripper=gripper, calibration=None, calibration_path=None,
+                 name=name, fingers=fingers)
+    logging.getLogger("bendsense").info("loaded a gripper's board: %d frames, fingers %s", len(session),
+                                        ", ".join(gripper.names))
+    return state
+
+
+@contextlib.contextmanager
+def finger_context(name: str):
+    """Within the block, bendsense's log lines and errors start with ``finger NAME: ``.
+
+    Parameters
+    ----------
+    name : str
+        The finger's name.
+    """
+    factory = logging.getLogRecordFactory()
+
+    def named(*args, **kwargs):
+        record = factory(*args, **kwargs)
+        if record.name == "bendsense" or record.name.startswith("bendsense."):
+            record.msg = f"finger {name}: {record.msg}"
+        return record
+
+    logging.setLogRecordFactory(named)
+    try:
+        yield
+    except BendsenseError as err:
+        raise click.ClickException(f"finger {name}: {err}") from None
+    finally:
+        logging.setLogRecordFactory(factory)
+
+
+def per_finger(step):
+    """The chain step ``step`` (a function of the state), run on each finger's state for a gripper.
+
+    A single actuator's state goes to ``step`` unchanged; the step's ``precheck`` (if
+    any) is run per finger in the same way.
+
+    Parameters
+    ----------
+    step : callable
+        A step of the single-actuator chain.
+    """
+    @functools.wraps(step)
+    def run(state):
+        if not is_gripper(state):
+            return step(state)
+        for name, sub in state["fingers"].items():
+            with finger_context(name):
+                state["fingers"][name] = step(sub) or sub
+        return state
+
+    if hasattr(step, "precheck"):
+        check = step.precheck
+
+        def precheck(state):
+            if not is_gripper(state):
+                return check(state)
+            for name, sub in state["fingers"].items():
+                with finger_context(name):
+                    check(sub)
+
+        run.precheck = precheck
+    return run
+
+
+def finger_parts(state: dict, step: str) -> dict:
+    """``{finger: (session, shape, estimate, track)}`` of a gripper's state, for the steps that write it.
+
+    Parameters
+    ----------
+    state : dict
+        The chain's state, of a gripper.
+    step : str
+        The step, for the message when no finger has a shape yet.
+    """
+    parts = {}
+    for name, sub in state["fingers"].items():
+        if sub.get("shape") is None:
+            raise click.UsageError(f"'{step}' needs 'reconstruct' earlier in the chain")
+        parts[name] = (sub["session"], sub["shape"], sub.get("estimate"), sub.get("track"))
+    return parts

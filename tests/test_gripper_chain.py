@@ -1,0 +1,226 @@
+"""A gripper's board through the chain: each finger as a single actuator (issue 24).
+
+The board session is made here: each finger simulated on its own
+(:class:`bendsense.sim.actuator.SimulatedActuator`, the virtual sensor of seed 0 whose
+calibration is the ``calibration_path`` fixture) and the channels concatenated, with
+per-finger truth columns ``<finger>_fx_n`` and ``<finger>_fy_n``.
+"""
+
+import copy
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from bendsense import load_config, save_config
+from bendsense.calibration import Calibration
+from bendsense.cli import main
+from bendsense.config import Finger, GripperConfig
+from bendsense.fingers import calibrations, split_session
+from bendsense.gripper_results import read_gripper_results
+from bendsense.results import read_results
+from bendsense.session import Session, read_session, write_session_csv
+from bendsense.sim.actuator import SimulatedActuator
+
+PAPER = load_config()
+N = PAPER.sensor.n_segments
+NAMES = ("thumb", "index", "middle")
+FRAMES = 40
+NOISE = False  # noise-free counts: the force error is the calibration's and the model's alone
+# each finger's tip force [N] (the index pushes up, the others are pressed down and sideways)
+FORCES = {"thumb": (0.05, -0.10), "index": (-0.04, 0.08), "middle": (0.0, -0.15)}
+
+
+def gripper_config() -> GripperConfig:
+    """Three fingers on channels 1-16, 17-32, 33-48 and pressure line 0; the index a stiffer finger."""
+    stiffer = PAPER.replace(stiffness=PAPER.stiffness.__class__(ei0_nm2=0.0030, ei1_nm2_per_pa=1.25e-8))
+    configs = {"thumb": PAPER, "index": stiffer, "middle": PAPER}
+    return GripperConfig(name="three fingers", fingers=tuple(
+        Finger(name=n, channels=tuple(range(N * i + 1, N * i + N + 1)), pressure_line=0,
+               config=configs[n].replace(name=n)) for i, n in enumerate(NAMES)))
+
+
+@pytest.fixture(scope="module")
+def board(tmp_path_factory, calibration_path):
+    """The gripper's config file, the board session CSV and the shared calibration."""
+    root = tmp_path_factory.mktemp("gripper")
+    gripper = gripper_config()
+    save_config(gripper, root / "gripper.yaml")
+    t = np.arange(FRAMES) * 1e-3
+    pressure = np.linspace(30e3, 90e3, FRAMES)
+    counts, extra = [], {"label": np.arange(FRAMES) % 3}
+    for finger in gripper.fingers:
+        sim = SimulatedActuator.from_config(finger.config, seed=0, noise_counts=1.5)
+        frames = sim.frames(pressure, FORCES[finger.name], noise=NOISE)
+        assert frames.valid.all()
+        counts.append(frames.counts)
+        extra[f"{finger.name}_fx_n"] = frames.force_n[:, 0]
+        extra[f"{finger.name}_fy_n"] = frames.force_n[:, 1]
+    session = Session(t, np.hstack(counts).astype(float), pressure, np.arange(FRAMES), {}, extra)
+    write_session_csv(session, root / "board.csv")
+    return root, gripper, calibration_path
+
+
+def run(*args):
+    res = CliRunner().invoke(main, [str(a) for a in args])
+    return res
+
+
+@pytest.fixture(scope="module")
+def chain(board):
+    """The whole chain over the board: save, mcap and plot."""
+    root, gripper, cal = board
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "--calibration", cal,
+              "reconstruct", "estimate", "track", "save", root / "out", "plot", root / "fig.png")
+    assert res.exit_code == 0, res.output
+    return root / "out"
+
+
+def test_each_finger_is_a_single_actuator_run_of_its_part(board, chain):
+    root, gripper, cal = board
+    parts = split_session(read_session(root / "board.csv"), gripper)
+    for finger in gripper.fingers:
+        save_config(finger.config, root / f"{finger.name}.yaml")
+        write_session_csv(parts[finger.name], root / f"{finger.name}.csv")
+        res = run("load", root / f"{finger.name}.csv", "--config", root / f"{finger.name}.yaml", "--calibration", cal,
+                  "reconstruct", "estimate", "track", "save", root / f"single-{finger.name}")
+        assert res.exit_code == 0, res.output
+        for name in ("results.csv", "shape.npz"):
+            assert (chain / finger.name / name).read_bytes() == (root / f"single-{finger.name}" / name).read_bytes()
+    from bendsense.output_manifest import read_manifest
+
+    assert sorted(p.name for p in chain.iterdir() if not p.name.startswith(".")) == sorted(NAMES)
+    listed = read_manifest(chain)["files"]
+    assert sorted(listed) == sorted(f"{n}/{f}" for n in NAMES for f in ("results.csv", "shape.npz"))
+
+
+def test_forces_match_the_truth(chain):
+    results = read_gripper_results(chain)
+    assert list(results) == sorted(NAMES)
+    for name, r in results.items():
+        assert set(r["status"]) == {"ok"}, (name, r["status"])
+        for k, axis in enumerate(("fx", "fy")):
+            err = r[f"{axis}_n"] - FORCES[name][k]
+            # noise-free counts: within the σ (calibration and model parts) and a few tens of mN of the truth
+            assert np.all(np.abs(err) <= 2 * r[f"{axis}_std_n"]), (name, axis)
+            assert np.all(np.abs(err) < 0.05), (name, axis, np.abs(err).max())
+            assert np.all(np.abs(err[-FRAMES // 4:]) < 0.03), (name, axis)
+        # the board's shared column came through; the finger's own truth without its prefix
+        np.testing.assert_array_equal(r["label"], np.arange(FRAMES) % 3)
+        np.testing.assert_array_equal(r["input_fx_n"], np.full(FRAMES, FORCES[name][0]))
+        np.testing.assert_array_equal(r["input_fy_n"], np.full(FRAMES, FORCES[name][1]))
+        assert not any(c.startswith(("thumb_", "index_", "middle_")) for c in r.columns)
+
+
+def test_each_finger_used_its_own_config(board, chain):
+    """The index (a stiffer finger) run with the thumb's config gives other forces than the chain's."""
+    root, gripper, cal = board
+    part = split_session(read_session(root / "board.csv"), gripper)["index"]
+    write_session_csv(part, root / "index-part.csv")
+    save_config(gripper.finger("thumb").config, root / "thumb-config.yaml")
+    res = run("load", root / "index-part.csv", "--config", root / "thumb-config.yaml", "--calibration", cal,
+              "reconstruct", "estimate", "save", root / "index-as-thumb")
+    assert res.exit_code == 0, res.output
+    wrong = read_results(root / "index-as-thumb")["fy_n"]
+    right = read_gripper_results(chain)["index"]["fy_n"]
+    assert np.abs(wrong - right).max() > 0.015
+
+
+def test_plot_has_a_panel_per_finger(board, chain):
+    root = board[0]
+    assert (root / "fig.png").stat().st_size > 10_000
+    res = run("plot", chain, "-o", root / "fig2.png")
+    assert res.exit_code == 0, res.output
+    assert (root / "fig2.png").stat().st_size > 10_000
+
+
+def test_mcap_has_topics_per_finger(board, chain):
+    pytest.importorskip("mcap_ros2")
+    from mcap_ros2.reader import read_ros2_messages
+
+    root, gripper, cal = board
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "--calibration", cal,
+              "reconstruct", "estimate", "mcap", root / "g.mcap")
+    assert res.exit_code == 0, res.output
+    topics = {}
+    with open(root / "g.mcap", "rb") as fh:
+        for msg in read_ros2_messages(fh):
+            topics.setdefault(msg.channel.topic, []).append(msg.ros_msg)
+    for name in NAMES:
+        for topic in ("wrench", "shape", "pressure", "status"):
+            assert len(topics[f"/bendsense/{name}/{topic}"]) == FRAMES
+    assert "/bendsense/wrench" not in topics
+    fx = [m.wrench.force.x for m in topics["/bendsense/middle/wrench"]]
+    np.testing.assert_allclose(fx, read_gripper_results(chain)["middle"]["fx_n"], rtol=0, atol=1e-3)
+    assert topics["/bendsense/index/status"][0].status[0].name == "bendsense/index/force"
+
+
+def test_calibrations_library(board):
+    root, gripper, cal_path = board
+    cal = Calibration.load(cal_path)
+    got = calibrations(gripper, cal_path)
+    assert list(got) == list(NAMES) and all(np.array_equal(c.offset, cal.offset) for c in got.values())
+    other = copy.copy(cal)
+    object.__setattr__(other, "finger", "thumb")
+    got = calibrations(gripper, {"thumb": other, None: cal})
+    assert got["thumb"] is other and got["index"] is cal
+    with pytest.raises(Exception, match=r"fitted for finger thumb, given for finger index"):
+        calibrations(gripper, {"index": other, None: cal})
+    with pytest.raises(Exception, match=r"no calibration for fingers index, middle \(give --calibration index="):
+        calibrations(gripper, {"thumb": cal})
+    with pytest.raises(Exception, match=r"calibration for finger pinky: not a finger of this gripper; its fingers: "
+                                        r"thumb, index, middle"):
+        calibrations(gripper, {"pinky": cal, None: cal})
+
+
+def test_calibration_options_on_the_command_line(board):
+    root, gripper, cal = board
+    base = ["load", root / "board.csv", "--config", root / "gripper.yaml"]
+    res = run(*base, "--calibration", f"thumb={cal}", "reconstruct")
+    assert res.exit_code == 1 and "Error: no calibration for fingers index, middle" in res.output
+    res = run(*base, "--calibration", f"pinky={cal}", "--calibration", cal, "reconstruct")
+    assert res.exit_code == 1 and "calibration for finger pinky: not a finger of this gripper" in res.output
+    res = run(*base, "--calibration", f"thumb={cal}", "--calibration", f"thumb={cal}", "reconstruct")
+    assert res.exit_code == 2 and "two calibrations for finger thumb" in res.output
+    # a single actuator: a NAME= form is an error, one plain path as ever
+    res = run("load", root / "board.csv", "--calibration", f"thumb={cal}", "reconstruct")
+    assert res.exit_code == 2 and f"thumb={cal} names a finger, but the config is a single actuator" in res.output
+    assert len(res.output.strip().splitlines()) == 1
+    res = run("load", root / "board.csv", "--calibration", "thumb=missing.yaml", "reconstruct")
+    assert res.exit_code == 2 and "'missing.yaml' does not exist" in res.output
+
+
+def test_calibrate_a_finger_from_board_recordings(tmp_path, board):
+    """--finger takes the finger's channels of whole-board recordings; the result records the finger."""
+    from bendsense.sim.scenarios import simulate
+
+    root, gripper, _ = board
+    simulate("calibration", tmp_path / "cal", seed=0, frames_per_strip=5)
+    manifest = yaml.safe_load((tmp_path / "cal" / "manifest.yaml").read_text())
+    board_dir = tmp_path / "board"
+    board_dir.mkdir()
+    names = [manifest["flat"], *(s["recording"] for s in manifest["strips"])]
+    for name in names:  # the sensor's channels on the index's board channels (17-32), noise elsewhere
+        s = read_session(tmp_path / "cal" / name)
+        rng = np.random.default_rng(1)
+        signals = rng.normal(2000, 50, size=(len(s), 3 * N))
+        signals[:, N:2 * N] = s.signals
+        write_session_csv(Session(s.t_s, signals, s.pressure_pa, None, {}, {}), board_dir / name)
+    (board_dir / "manifest.yaml").write_text(yaml.safe_dump(manifest))
+    res = run("calibrate", board_dir / "manifest.yaml", "--config", root / "gripper.yaml", "--finger", "index",
+              "-o", tmp_path / "index.yaml")
+    assert res.exit_code == 0, res.output
+    fitted = Calibration.load(tmp_path / "index.yaml")
+    direct = Calibration.fit(tmp_path / "cal" / "manifest.yaml")
+    assert fitted.finger == "index" and direct.finger is None
+    np.testing.assert_array_equal(fitted.coefficients_odd, direct.coefficients_odd)
+    np.testing.assert_array_equal(fitted.offset, direct.offset)
+    assert "finger: index" in (tmp_path / "index.yaml").read_text()
+    assert "finger:" not in yaml.safe_dump(direct.to_dict())
+    # the index's calibration for every finger: refused, naming both
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "--calibration", tmp_path / "index.yaml",
+              "reconstruct")
+    assert res.exit_code == 1 and "fitted for finger index, given for finger thumb" in res.output
+    res = run("calibrate", board_dir / "manifest.yaml", "--config", root / "gripper.yaml", "-o", tmp_path / "x.yaml")
+    assert res.exit_code == 2 and "give --finger NAME" in res.output and not (tmp_path / "x.yaml").exists()
