@@ -252,3 +252,18 @@ def test_sim_device_truth_of_the_single_actuator_scenario(tmp_path):
         assert float(row["fx_n"]) == truth["fx_n"] and float(row["fy_n"]) == truth["fy_n"]
         assert float(row["setpoint_pa"]) == float(row["pressure_pa"]) == pressure
         assert int(row["t_us"]) == round(int(row["seq"]) * 1e6 / 100.0)
+
+
+def test_gripper_config_maps_fingers_to_channels_and_lines():
+    import bendsense.sim
+    from bendsense.errors import ConfigError
+
+    gripper = bendsense.sim.gripper_config(4)
+    assert gripper.names == ("thumb", "index", "middle", "ring")
+    assert gripper.n_channels == 64 and gripper.n_lines == 4
+    for i, finger in enumerate(gripper.fingers):
+        assert finger.channels == tuple(range(16 * i + 1, 16 * i + 17)) and finger.pressure_line == i
+        assert finger.config.sensor == load_config().sensor
+    for bad in (0, 5, 2.0, True):
+        with pytest.raises(ConfigError, match="fingers: must be an integer in 1..4"):
+            bendsense.sim.gripper_config(bad)
