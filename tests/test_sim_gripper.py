@@ -151,6 +151,8 @@ def test_a_scenario_board_answers_setpoint_with_a_text_line():
         (["--fingers", "5"], "--fingers", "1<=x<=4"),
         (["--source", "ramp", "--truth", "x.csv"], "--truth", "not ramp"),
         (["--object", "rigid", "--contact-s-m", "0.1"], "--contact-s-m", "--object-s-m"),
+        (["--replay", ".", "--fingers", "2"], "--fingers", "played back, not simulated"),
+        (["--replay", ".", "--truth", "t.csv"], "--truth", "played back, not simulated"),
     ],
 )
 def test_sim_device_grasp_options_are_checked(args, hint, words):
