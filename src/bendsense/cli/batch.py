@@ -218,6 +218,8 @@ def plot(target, figure_path, shapes, dpi, overwrite):
         from bendsense.plots import plot_results, results_from_state
 
         estimated = None
+        if _plot_gripper(state, target, figure_path, shapes, dpi, overwrite):
+            return state
         if figure_path is not None:
             if not target.is_dir():
                 raise click.BadParameter(f"{target}: not a results directory", param_hint="RESULTS_DIR")
@@ -251,6 +253,27 @@ def plot(target, figure_path, shapes, dpi, overwrite):
     if target_is_dir:  # not a figure: the step says how to plot a results directory
         return step
     return step_io(step, outputs=[output.file(target, overwrite=overwrite, suffixes=output.FIGURE)])
+
+
+def _plot_gripper(state, target, figure_path, shapes, dpi, overwrite) -> bool:
+    """``plot`` of a gripper (a panel per finger and the grasp): its chain, or its results directory."""
+    from bendsense.cli.gripper import finger_parts, is_gripper
+    from bendsense.gripper_results import is_gripper_results
+    from bendsense.plots_gripper import plot_gripper
+
+    if figure_path is not None and is_gripper_results(target):
+        plot_gripper(target, figure_path, max_shapes=shapes, dpi=dpi, overwrite=overwrite)
+        say(f"wrote {figure_path}")
+        return True
+    if figure_path is not None or not is_gripper(state):
+        return False
+    from bendsense.plots import results_from_state
+
+    results = {name: results_from_state(*part) for name, part in finger_parts(state, "plot").items()}
+    lengths = {f.name: f.config.actuator.length_m for f in state["gripper"].fingers}
+    plot_gripper(results, target, max_shapes=shapes, dpi=dpi, overwrite=overwrite, lengths_m=lengths)
+    say(f"wrote {target}")
+    return True
 
 
 COMMANDS = [process, plot]

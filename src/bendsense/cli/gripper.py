@@ -23,7 +23,13 @@ __all__ = ["load_fingers", "per_finger", "finger_context", "is_gripper", "finger
 
 
 def is_gripper(state: dict) -> bool:
-    """Whether the chain's ``state`` holds a gripper (``load`` with a config with fingers:)."""
+    """Whether the chain's ``state`` holds a gripper (``load`` with a config with fingers:).
+
+    Parameters
+    ----------
+    state : dict
+        The chain's state.
+    """
     return state.get("gripper") is not None
 
 

@@ -31,6 +31,7 @@ force starts.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -140,6 +141,11 @@ class FingerGrasp:
         Contact force at the nodes [N].
     table_signal_counts : ndarray, shape (G, N)
         The sensor's noise-free, unquantised readings at the nodes [counts].
+
+    Raises
+    ------
+    ConfigError
+        If the equilibrium is not found at some pressure of the table.
     """
 
     def __init__(self, actuator: SimulatedActuator, obj: GraspObject, *, max_pressure_pa: float = 120e3,
@@ -160,11 +166,21 @@ class FingerGrasp:
         n = max(2, math.ceil(max_pressure_pa / step_pa) + 1)
         nodes = np.union1d(np.linspace(0.0, max_pressure_pa, n), [obj.touch_pressure_pa])
         state = self.solve(nodes)
+        if not state.valid.all():  # never a table with holes: a force that drops to 0 would be a lie
+            bad = nodes[~state.valid]
+            raise ConfigError(f"object: no equilibrium of the finger on the object (s_c = {self.contact_s_m:g} m, "
+                              f"touch at {obj.touch_pressure_pa / 1e3:g} kPa) at {bad.size} pressures from "
+                              f"{bad[0] / 1e3:g} kPa; lower the pressure limit or move the object")
         self.table_pressure_pa = nodes
         self.table_force_n = state.force_n
         self.table_valid = state.valid
         frames = actuator.frames(nodes, state.force_n, solution=state.solution, noise=False)
         self.table_signal_counts = actuator.sensor.signal(frames.shifts_m)
+        # per-frame lookups of one pressure (the board's): plain floats and slopes, no array bookkeeping
+        self._nodes = nodes.tolist()
+        self._force_rows = [(float(fx), float(fy)) for fx, fy in self.table_force_n]
+        self._force_slopes = [(float(a), float(b)) for a, b in np.diff(self.table_force_n, axis=0)]
+        self._signal_slopes = np.diff(self.table_signal_counts, axis=0)
 
     # ------------------------------------------------------------------ exact
 
@@ -258,6 +274,28 @@ class FingerGrasp:
         return f
 
     # ------------------------------------------------------------------ table
+
+    def lookup_one(self, pressure_pa: float):
+        """Interpolate the table at one pressure (:meth:`lookup` for the board's per-frame path).
+
+        Parameters
+        ----------
+        pressure_pa : float
+            Pressure [Pa], clipped to the table's range.
+
+        Returns
+        -------
+        fx_n, fy_n : float
+            Contact force [N].
+        signal_counts : ndarray, shape (N,)
+            The sensor's noise-free readings [counts].
+        """
+        nodes = self._nodes
+        x = min(max(float(pressure_pa), nodes[0]), nodes[-1])
+        i = min(max(bisect.bisect_right(nodes, x) - 1, 0), len(nodes) - 2)
+        w = (x - nodes[i]) / (nodes[i + 1] - nodes[i])
+        (fx, fy), (dx, dy) = self._force_rows[i], self._force_slopes[i]
+        return fx + w * dx, fy + w * dy, self.table_signal_counts[i] + w * self._signal_slopes[i]
 
     def lookup(self, pressure_pa):
         """Interpolate the table at these pressures.
