@@ -146,13 +146,15 @@ def test_finger_options_and_calibrations_per_finger(calibration_path, gripper, b
 def test_lsl_streams_per_finger_reach_an_inlet(calibration_path, gripper, board):
     pylsl = pytest.importorskip("pylsl")
     import uuid
+    from types import SimpleNamespace
 
-    from bendsense.interop.lsl import GripperOutlets
+    from bendsense.cli.device import make_outlets
 
     cal = Calibration.load(calibration_path)
     proc = GripperProcessor(cal, gripper)
-    source = f"test-{uuid.uuid4().hex[:8]}"
-    outlets = GripperOutlets({name: 16 for name in proc.fingers}, RATE_HZ, source_id=source, tracked=True)
+    port = f"test-{uuid.uuid4().hex[:8]}"  # the streams' source id: bendsense <port>-force-<finger>, ...
+    source = f"bendsense {port}"
+    outlets = make_outlets(proc, SimpleNamespace(hello=SimpleNamespace(rate_hz=RATE_HZ)), port)
     inlets = {}
     for name in MAP:
         for kind in ("force", "shape"):
@@ -163,6 +165,7 @@ def test_lsl_streams_per_finger_reach_an_inlet(calibration_path, gripper, board)
             inlets[kind, name].open_stream(timeout=10)
     info = inlets["force", "thumb"].info(timeout=10)
     assert (info.type(), info.channel_count(), info.desc().child_value("finger")) == ("Force", 8, "thumb")
+    assert (info.nominal_srate(), info.desc().child_value("constraint")) == (RATE_HZ, proc.constraint)
     assert inlets["shape", "index"].info(timeout=10).channel_count() == 16 + 3
     blocks = [proc.process_readings(board[lo:hi]) for lo, hi in ((0, 30), (30, 60))]
     for b in blocks:
@@ -301,7 +304,7 @@ def test_live_save_shows_a_panel_per_finger_of_the_simulated_gripper(calibration
     with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
         res = CliRunner().invoke(main, [str(a) for a in (
             "live", dev.port, "--config", root / "gripper.yaml", "--calibration", f"thumb={calibration_path}",
-            "--calibration", calibration_path, "--save", tmp_path / "live.png", "--seconds", 1.2)])
+            "--calibration", calibration_path, "--save", tmp_path / "live.png", "--seconds", 0.8)])
     assert res.exit_code == 0, res.output
     assert f"wrote {tmp_path / 'live.png'}" in res.output
     import matplotlib.image
