@@ -316,9 +316,8 @@ def record(
     if dialect == "line" and channels is None and columns is None:
         raise click.BadParameter("the line dialect needs --channels or --columns", param_hint="--channels")
     if (estimate or lsl) and not calibration_paths:
-        raise click.BadParameter(
-            f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml", param_hint="--calibration"
-        )
+        raise click.BadParameter(f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml",
+                                 param_hint="--calibration")
     if (load != "tip" or contact_s_m is not None) and not (estimate or lsl):
         raise click.BadParameter("a load model needs --estimate (or --lsl)",
                                  param_hint="'--load'" if load != "tip" else "'--contact-s-m'")
@@ -391,8 +390,7 @@ def record(
     if show:
         sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
     losses = f"; {stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else ""
-    where = results_path if isinstance(results_path, Path) else f"{output / '<finger>' / 'results.csv'} " \
-        f"(fingers {', '.join(results_path)})"
+    where = _results_where(results_path, output)
     if estimate and est_stats.frames:
         estimated = f"{est_stats.frames} frames estimated to {where}"
     elif estimate:  # as 'save' and 'process', which refuse a session without frames
@@ -409,6 +407,13 @@ def record(
                     port, output)
     if estimate:
         click.echo(estimated, err=True)
+
+
+def _results_where(results_path, output: Path) -> str:
+    """``SESSION/results.csv``, or a gripper's ``SESSION/<finger>/results.csv (fingers a, b)``, for messages."""
+    if isinstance(results_path, Path):
+        return str(results_path)
+    return f"{output / '<finger>' / 'results.csv'} (fingers {', '.join(results_path)})"
 
 
 def _manifest_names(results_path, output: Path) -> list:
