@@ -482,7 +482,9 @@ class GripperView:
     headless : bool
         A figure on the Agg canvas without pyplot (no window; for ``--save``).
     **options
-        Options of each finger's :class:`LiveView` (``scale_m_per_n``, ``window_s``, ...).
+        Options of each finger's :class:`LiveView` (``scale_m_per_n``, ``window_s``, ...);
+        ``text_interval_s`` defaults to 0.1 s per finger (the texts' glyphs are the
+        expensive part of a redraw: three panels redrawn at ~45 fps, not ~15).
 
     Attributes
     ----------
@@ -492,6 +494,7 @@ class GripperView:
 
     def __init__(self, processor, figure=None, *, headless=False, **options):
         k = len(processor.fingers)
+        options.setdefault("text_interval_s", 0.1 * k)
         if figure is None:
             size = (12, 5.4 * k)
             if headless:
