@@ -14,6 +14,26 @@ Prints one table:
   frame's bytes until its artists were drawn; the view always shows the newest frame.
 
 Target (issue 6): >= 20 displayed frames per second with a shape and a force on each.
+
+The gripper rows (issue 24): three fingers of the simulated gripper
+(:func:`bendsense.sim.gripper_config`, closing on a rigid object at s_c = 0.1 m) on one
+board at 1 kHz, estimated with a known contact location (``--load contact
+--contact-s-m 0.1``, constraint ``normal``) and tracked:
+
+- the model alone (:class:`bendsense.gripper_live.GripperProcessor`, a processor per
+  finger): wall time per board frame (three fingers) in blocks of 10 board frames (what
+  arrives in 10 ms), and how many times real time that is at 1 kHz;
+- ``live`` with a panel per finger (headless), the board in another process: frames
+  received and estimated, displayed frames per second, latency and the cost per drawn
+  frame;
+- the whole path of ``record --estimate``: the board in another process (``sim-device
+  --fingers 3 --rate 1000``) → pseudo-terminal → driver → recorder (frames.bin) →
+  background estimator (``SESSION/<finger>/results.csv``): frames recorded, rows per
+  finger, the backlog (frames received, not yet estimated) sampled every 0.1 s (median and
+  largest), the time to work it off after the recording ended. Zero backlog: the
+  estimator keeps up, the backlog stays at what arrives between two blocks.
+
+    python benchmarks/bench_live.py --gripper-only [--seconds 5]
 """
 
 import argparse
@@ -39,6 +59,8 @@ from bendsense.pipeline import LiveProcessor  # noqa: E402
 from bendsense.sim.scenarios import simulate, time_varying_frames  # noqa: E402
 
 SEED = 0
+GRIPPER_RATE_HZ = 1000.0
+CONTACT_S_M = 0.1
 
 
 def calibration(root: Path) -> Calibration:
@@ -86,9 +108,113 @@ def end_to_end(cal, rate_hz, seconds, where, constraint="normal"):
         return run_live(drv, proc, view, duration_s=seconds)
 
 
+def gripper_processor(cal, gripper):
+    from bendsense.gripper_live import GripperProcessor
+
+    proc = GripperProcessor(cal, gripper, constraint="normal", load="contact", contact_s_m=CONTACT_S_M)
+    proc.warm_up()
+    return proc
+
+
+def gripper_model(cal, seconds, block=10):
+    """Wall time per board frame of the gripper's processor over the simulated board's frames (computed ahead)."""
+    from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+
+    gripper = gripper_config(3)
+    board = GraspBoard(gripper, default_objects(3, contact_s_m=CONTACT_S_M), rate_hz=GRIPPER_RATE_HZ, seed=SEED,
+                       period_s=4.0)
+    n = int(seconds * GRIPPER_RATE_HZ)
+    frames = [board(k) for k in range(n)]
+    signals = np.array([c for _, c, _ in frames], dtype=float)
+    pressure = np.array([p for p, _, _ in frames], dtype=float)
+    t_s = np.arange(n) / GRIPPER_RATE_HZ
+    proc = gripper_processor(cal, gripper)
+    t = time.perf_counter()
+    for i in range(0, n, block):
+        proc.process_block(signals[i:i + block], pressure[i:i + block], t_s=t_s[i:i + block])
+    per_frame = (time.perf_counter() - t) / n
+    return per_frame, proc.failures, proc.status_counts.get("ok", 0) / (3 * n)
+
+
+def gripper_board_process(seconds):
+    """The simulated 3-finger board at 1 kHz in its own process; returns (process, port)."""
+    cmd = [sys.executable, "-c", "from bendsense.cli import main; main()", "sim-device", "--fingers", "3",
+           "--object-s-m", str(CONTACT_S_M), "--rate", str(GRIPPER_RATE_HZ), "--seconds", str(seconds + 120)]
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    return child, child.stdout.readline().strip()
+
+
+def gripper_live_view(cal, seconds):
+    """``live`` of the simulated 3-finger board at 1 kHz: every frame processed, a panel per finger drawn."""
+    from bendsense.apps.live_view import GripperView
+    from bendsense.sim.gripper import gripper_config
+
+    proc = gripper_processor(cal, gripper_config(3))
+    view = GripperView(proc, headless=True)
+    child, port = gripper_board_process(seconds)
+    try:
+        with Driver(port, hello_timeout_s=60.0) as drv:
+            drv.start()
+            return run_live(drv, proc, view, duration_s=seconds)
+    finally:
+        child.terminate()
+        child.wait()
+
+
+def gripper_end_to_end(cal, seconds, root):
+    """``record --estimate`` of the simulated 3-finger board at 1 kHz (board in another process)."""
+    from bendsense.device.estimator import LiveEstimator
+    from bendsense.device.recorder import Recorder
+    from bendsense.sim.gripper import gripper_config
+
+    gripper = gripper_config(3)
+    proc = gripper_processor(cal, gripper)
+    child, port = gripper_board_process(seconds)
+    backlog = []
+    out = root / "gripper-session"
+    paths = {name: out / name / "results.csv" for name in gripper.names}
+    try:
+        with Driver(port, hello_timeout_s=60.0) as drv:
+            est = LiveEstimator(proc, results_path=paths)
+            rec = Recorder(drv, out, on_records=est.put, extra_files=[f"{n}/results.csv" for n in gripper.names])
+            drv.start()
+            stats = rec.run(seconds, on_progress=lambda s: backlog.append(est.stats.backlog),
+                            progress_interval_s=0.1)
+            t = time.perf_counter()
+            est.close()
+            drain = time.perf_counter() - t
+    finally:
+        child.terminate()
+        child.wait()
+    rows = {name: sum(1 for _ in open(path)) - 1 for name, path in paths.items()}
+    return stats, rows, backlog, drain
+
+
+def gripper_rows(cal, seconds, root):
+    per_frame, failures, ok = gripper_model(cal, min(seconds, 4.0))
+    print(f"gripper: 3 fingers on one board at {GRIPPER_RATE_HZ:.0f} Hz (load contact at {CONTACT_S_M} m, "
+          "constraint normal, tracked)")
+    print(f"{'model: GripperProcessor, blocks of 10 board frames':<58} {per_frame * 1e6:9.0f} µs per board frame "
+          f"({per_frame * 1e6 / 3:.0f} µs per finger frame; {1 / (per_frame * GRIPPER_RATE_HZ):.1f}x real time; "
+          f"{ok:.1%} ok, {failures} not converged)")
+    stats, rows, backlog, drain = gripper_end_to_end(cal, seconds, root)
+    b = np.array(backlog or [0])
+    print(f"{'record --estimate, board in another process':<58} {stats.records} frames recorded in "
+          f"{stats.elapsed_s:.1f} s (lost {stats.lost}, queue drops {stats.queue_drops}); rows per finger "
+          f"{', '.join(f'{k} {v}' for k, v in rows.items())}; backlog median {np.median(b):.0f}, max {b.max():.0f} "
+          f"frames; worked off {drain:.2f} s after the end")
+    s = gripper_live_view(cal, seconds)
+    print(f"{'live, a panel per finger (headless), board in another process':<58} {s.received} frames received, "
+          f"{s.estimated} estimated ({s.estimate_hz:.0f}/s); {s.fps:.1f} fps, latency median {s.latency_ms[0]:.0f} ms "
+          f"(p95 {s.latency_ms[1]:.0f} ms), draw {s.draw_ms:.1f} ms, process {s.process_ms * 1e3:.0f} µs per board "
+          "frame")
+    print("target: every frame of every finger estimated and tracked, zero backlog (bounded, worked off at once)")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="run time of each end-to-end case [s]")
+    parser.add_argument("--gripper-only", action="store_true", help="only the gripper rows")
     args = parser.parse_args()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(
@@ -97,6 +223,10 @@ def main():
     )
     with tempfile.TemporaryDirectory() as tmp:
         cal = calibration(Path(tmp))
+        print()
+        gripper_rows(cal, args.seconds, Path(tmp))
+    if args.gripper_only:
+        return
     print()
     print(f"{'case':<66} {'median':>9} {'p95':>9}")
     for constraint in ("normal", "none"):

@@ -23,6 +23,7 @@ from bendsense.sim.scenarios import time_varying_frames
 # 17..32 sharing the thumb's line; 48 channels, two lines
 MAP = {"index": (list(range(1, 17)), 0), "thumb": (list(range(48, 32, -1)), 1), "middle": (list(range(17, 33)), 1)}
 RATE_HZ = 1000.0
+CONTACT_S_M = 0.1  # where the simulated object touches every finger
 N_FRAMES = 120
 
 
@@ -145,13 +146,15 @@ def test_finger_options_and_calibrations_per_finger(calibration_path, gripper, b
 def test_lsl_streams_per_finger_reach_an_inlet(calibration_path, gripper, board):
     pylsl = pytest.importorskip("pylsl")
     import uuid
+    from types import SimpleNamespace
 
-    from bendsense.interop.lsl import GripperOutlets
+    from bendsense.cli.device import make_outlets
 
     cal = Calibration.load(calibration_path)
     proc = GripperProcessor(cal, gripper)
-    source = f"test-{uuid.uuid4().hex[:8]}"
-    outlets = GripperOutlets({name: 16 for name in proc.fingers}, RATE_HZ, source_id=source, tracked=True)
+    port = f"test-{uuid.uuid4().hex[:8]}"  # the streams' source id: bendsense <port>-force-<finger>, ...
+    source = f"bendsense {port}"
+    outlets = make_outlets(proc, SimpleNamespace(hello=SimpleNamespace(rate_hz=RATE_HZ)), port)
     inlets = {}
     for name in MAP:
         for kind in ("force", "shape"):
@@ -162,6 +165,7 @@ def test_lsl_streams_per_finger_reach_an_inlet(calibration_path, gripper, board)
             inlets[kind, name].open_stream(timeout=10)
     info = inlets["force", "thumb"].info(timeout=10)
     assert (info.type(), info.channel_count(), info.desc().child_value("finger")) == ("Force", 8, "thumb")
+    assert (info.nominal_srate(), info.desc().child_value("constraint")) == (RATE_HZ, proc.constraint)
     assert inlets["shape", "index"].info(timeout=10).channel_count() == 16 + 3
     blocks = [proc.process_readings(board[lo:hi]) for lo, hi in ((0, 30), (30, 60))]
     for b in blocks:
@@ -198,10 +202,118 @@ def test_live_view_draws_a_panel_per_finger(calibration_path, gripper, board, tm
         want = np.asarray(blocks[name].shape.positions_m)[-1] * 1e3
         np.testing.assert_allclose(np.column_stack(panel.shape_line.get_data()), want)
         np.testing.assert_allclose(panel.bar_heights, blocks[name].signals[-1] - cal.offset)
-        assert panel.status_text.get_text() == f"{name} status"
+        assert panel.status_text.get_text() == f"{name} status" and panel.ax_shape.get_title().startswith(name)
         assert panel.figure.figure is view.figure  # one figure, a panel each
     view.save(tmp_path / "gripper.png")
     import matplotlib.image
 
     image = matplotlib.image.imread(tmp_path / "gripper.png")
     assert image.shape[0] > image.shape[1]  # three panels stacked (12 x 16.2 in)
+
+
+@pytest.fixture(scope="module")
+def grasp(tmp_path_factory):
+    """The simulated gripper (3 fingers closing on a rigid object) and its config file."""
+    from bendsense.config import save_config
+    from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+
+    root = tmp_path_factory.mktemp("grasp")
+    gripper = gripper_config(3)
+    save_config(gripper, root / "gripper.yaml")
+    # coarse tables (2 kPa) keep the build short; a fast close reaches the object within the recording
+    board = GraspBoard(gripper, default_objects(3, contact_s_m=CONTACT_S_M), rate_hz=RATE_HZ, seed=0, step_pa=2000.0,
+                       period_s=0.8)
+    return root, gripper, board
+
+
+def test_record_estimate_writes_every_finger_for_every_frame(calibration_path, grasp, tmp_path):
+    from click.testing import CliRunner
+
+    import bendsense
+    from bendsense.cli import main
+    from bendsense.device import SimulatedDevice
+    from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
+
+    root, gripper, board = grasp
+    board.reset()
+    out = tmp_path / "s"
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        res = CliRunner().invoke(main, [str(a) for a in (
+            "record", dev.port, "-o", out, "--seconds", 1, "--config", root / "gripper.yaml", "--calibration",
+            calibration_path, "--estimate", "--constraint", "normal", "--bandwidth-hz", DEFAULT_BANDWIDTH_HZ,
+            "--load", "contact", "--contact-s-m", CONTACT_S_M)])
+    assert res.exit_code == 0, res.output
+    assert f"estimated to {out / '<finger>' / 'results.csv'} (fingers thumb, index, middle)" in res.output
+    session = bendsense.read_session(out)
+    n = len(session)
+    assert n > 500 and session.pressure_pa.shape == (n, 3) and session.meta["stats"]["queue_drops"] == 0
+    # the recorded session through the offline chain, per finger (split, estimate, the causal filter, save)
+    chain = CliRunner().invoke(main, [str(a) for a in (
+        "load", out, "--config", root / "gripper.yaml", "--calibration", calibration_path, "reconstruct", "estimate",
+        "--constraint", "normal", "--load", "contact", "--contact-s-m", CONTACT_S_M, "track", "--filter",
+        "--bandwidth-hz", DEFAULT_BANDWIDTH_HZ, "save", tmp_path / "off")])
+    assert chain.exit_code == 0, chain.output
+    touched = 0
+    for finger in gripper.fingers:
+        live = read_csv(out / finger.name / "results.csv")
+        offline = read_csv(tmp_path / "off" / finger.name / "results.csv")
+        assert list(live) == list(offline)  # the columns of 'save'
+        assert len(live["t_s"]) == n  # every recorded frame has a row
+        np.testing.assert_array_equal(live["t_s"], session.t_s)
+        np.testing.assert_array_equal(live["pressure_pa"], session.pressure_pa[:, finger.pressure_line])
+        np.testing.assert_array_equal(live["tip_x_m"], offline["tip_x_m"])
+        ok = (live["status"] == "ok") & (offline["status"] == "ok")
+        assert ok.mean() > 0.9, (finger.name, np.unique(live["status"], return_counts=True))
+        assert np.mean(live["status"] == offline["status"]) > 0.98
+        np.testing.assert_array_equal(live["contact_s_m"][ok], CONTACT_S_M)
+        for c in ("fx_n", "fy_n"):
+            np.testing.assert_allclose(live[c][ok], offline[c][ok], atol=1e-4)
+            np.testing.assert_allclose(live[c.replace("_n", "_track_n")][ok], offline[c.replace("_n", "_track_n")][ok],
+                                       atol=1e-4)
+        touched += np.abs(live["fx_n"][ok]).max() > 0.05  # the fingers closed on the object: forces, not zeros
+    assert touched == 3
+    from bendsense.output_manifest import read_manifest
+
+    assert {f"{f}/results.csv" for f in gripper.names} <= set(read_manifest(out)["files"])
+
+
+def read_csv(path):
+    """A results.csv as columns: floats where every cell is a number, else strings."""
+    import csv
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    out = {}
+    for i, name in enumerate(rows[0]):
+        cells = [r[i] for r in rows[1:]]
+        try:
+            out[name] = np.array(cells, dtype=float)
+        except ValueError:
+            out[name] = np.array(cells)
+    return out
+
+
+def test_live_save_shows_a_panel_per_finger_of_the_simulated_gripper(calibration_path, grasp, tmp_path):
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+    from bendsense.device import SimulatedDevice
+
+    root, gripper, board = grasp
+    board.reset()
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        res = CliRunner().invoke(main, [str(a) for a in (
+            "live", dev.port, "--config", root / "gripper.yaml", "--calibration", f"thumb={calibration_path}",
+            "--calibration", calibration_path, "--save", tmp_path / "live.png", "--seconds", 0.8)])
+    assert res.exit_code == 0, res.output
+    assert f"wrote {tmp_path / 'live.png'}" in res.output
+    import matplotlib.image
+
+    image = matplotlib.image.imread(tmp_path / "live.png")
+    assert image.shape[0] > image.shape[1]  # three panels stacked
+    # a calibration for a finger the gripper does not have: one line, nothing written
+    res = CliRunner().invoke(main, [str(a) for a in (
+        "live", "/dev/null", "--config", root / "gripper.yaml", "--calibration", f"pinky={calibration_path}",
+        "--calibration", calibration_path, "--save", tmp_path / "no.png")])
+    assert res.exit_code == 1 and "pinky" in res.output and not (tmp_path / "no.png").exists()
+    assert "Traceback" not in res.output

@@ -24,28 +24,6 @@ from bendsense.errors import ArgumentError
 __all__ = ["GripperProcessor"]
 
 
-def _calibrations(gripper, given) -> dict:
-    """Each finger's calibration: one for all, or a mapping finger name → Calibration or path."""
-    from collections.abc import Mapping
-    from pathlib import Path
-
-    from bendsense.calibration import Calibration
-
-    def load(value):
-        return Calibration.load(value) if isinstance(value, (str, Path)) else value
-
-    if not isinstance(given, Mapping):
-        return {name: load(given) for name in gripper.names}
-    missing = [name for name in gripper.names if name not in given]
-    unknown = sorted(set(given) - set(gripper.names))
-    if missing or unknown:
-        raise ArgumentError(f"calibrations: {'no calibration for finger ' + ', '.join(missing) if missing else ''}"
-                            f"{'; ' if missing and unknown else ''}"
-                            f"{'unknown finger ' + ', '.join(unknown) if unknown else ''} "
-                            f"(fingers {', '.join(gripper.names)})")
-    return {name: load(given[name]) for name in gripper.names}
-
-
 class GripperProcessor:
     """Shapes and forces of every finger of a gripper, a block of board frames at a time.
 
@@ -78,6 +56,7 @@ class GripperProcessor:
     """
 
     def __init__(self, calibrations, gripper, *, pressure_pa=None, finger_options=None, **options):
+        from bendsense.fingers import calibrations as finger_calibrations
         from bendsense.pipeline import LiveProcessor
 
         self.gripper = gripper
@@ -86,7 +65,7 @@ class GripperProcessor:
         if unknown:
             raise ArgumentError(f"finger_options: unknown finger {', '.join(unknown)} (fingers "
                                 f"{', '.join(self.fingers)})")
-        cals = _calibrations(gripper, calibrations)
+        cals = finger_calibrations(gripper, calibrations)
         self.pressure_pa = None if pressure_pa is None else float(pressure_pa)
         self.processors = {
             f.name: LiveProcessor(cals[f.name], f.config, pressure_pa=pressure_pa,

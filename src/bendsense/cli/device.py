@@ -26,6 +26,7 @@ from bendsense.cli._common import (
     live_contact_option,
     load_option,
     log_no_parameter_covariance,
+    make_calibration_option,
     make_config_option,
     make_overwrite_option,
     objective_option,
@@ -238,12 +239,7 @@ def _sigterm_as_interrupt():
 @click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
               help="HELLO wait [s].")
 @make_config_option("Config YAML to snapshot into meta.yaml (and to estimate with).")
-@click.option(
-    "--calibration",
-    "calibration_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Calibration YAML (needed by --estimate and --lsl).",
-)
+@make_calibration_option("Calibration YAML (needed by --estimate and --lsl).")
 @click.option("--estimate", is_flag=True, help="Shape and force of every frame as it arrives, to SESSION/results.csv.")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @objective_option
@@ -273,7 +269,7 @@ def record(
     no_start,
     hello_timeout,
     config_path,
-    calibration_path,
+    calibration_paths,
     estimate,
     constraint,
     objective,
@@ -308,8 +304,10 @@ def record(
 
     With a gripper config (--config with fingers:), each finger's frames go to
     SESSION/<finger>/results.csv and its streams are bendsense-force-<finger> and
-    bendsense-shape-<finger>; --calibration gives every finger's calibration.
+    bendsense-shape-<finger>; --calibration NAME=CAL.yaml (repeated) gives each finger's
+    calibration, a plain --calibration CAL.yaml every finger's.
     """
+    from bendsense.cli._common import calibration_paths as resolve_calibrations
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
     from bendsense.device.recorder import Recorder
@@ -317,10 +315,9 @@ def record(
 
     if dialect == "line" and channels is None and columns is None:
         raise click.BadParameter("the line dialect needs --channels or --columns", param_hint="--channels")
-    if (estimate or lsl) and calibration_path is None:
-        raise click.BadParameter(
-            f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml", param_hint="--calibration"
-        )
+    if (estimate or lsl) and not calibration_paths:
+        raise click.BadParameter(f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml",
+                                 param_hint="--calibration")
     if (load != "tip" or contact_s_m is not None) and not (estimate or lsl):
         raise click.BadParameter("a load model needs --estimate (or --lsl)",
                                  param_hint="'--load'" if load != "tip" else "'--contact-s-m'")
@@ -346,7 +343,8 @@ def record(
 
                 require_extra("pylsl", "lsl", "--lsl")
             est_config = config or load_config()
-            processor = make_processor(est_config, calibration_path, constraint, objective, pressure_kpa,
+            calibration = resolve_calibrations(calibration_paths, est_config)
+            processor = make_processor(est_config, calibration, constraint, objective, pressure_kpa,
                                        bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, est_config))
         driver = Driver(
             port,
@@ -392,8 +390,7 @@ def record(
     if show:
         sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
     losses = f"; {stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else ""
-    where = results_path if isinstance(results_path, Path) else f"{output / '<finger>' / 'results.csv'} " \
-        f"(fingers {', '.join(results_path)})"
+    where = _results_where(results_path, output)
     if estimate and est_stats.frames:
         estimated = f"{est_stats.frames} frames estimated to {where}"
     elif estimate:  # as 'save' and 'process', which refuse a session without frames
@@ -410,6 +407,13 @@ def record(
                     port, output)
     if estimate:
         click.echo(estimated, err=True)
+
+
+def _results_where(results_path, output: Path) -> str:
+    """``SESSION/results.csv``, or a gripper's ``SESSION/<finger>/results.csv (fingers a, b)``, for messages."""
+    if isinstance(results_path, Path):
+        return str(results_path)
+    return f"{output / '<finger>' / 'results.csv'} (fingers {', '.join(results_path)})"
 
 
 def _manifest_names(results_path, output: Path) -> list:

@@ -19,6 +19,7 @@ from bendsense.cli._common import (
     live_bandwidth_option,
     live_contact_option,
     load_option,
+    make_calibration_option,
     objective_option,
     overwrite_option,
     quiet,
@@ -35,12 +36,7 @@ _NO_CALIBRATION = (
 @click.command("live", cls=InterspersedCommand)
 @click.argument("port")
 @config_option
-@click.option(
-    "--calibration",
-    "calibration_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Calibration YAML written by 'bendsense calibrate' (required).",
-)
+@make_calibration_option("Calibration YAML written by 'bendsense calibrate' (required).")
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @objective_option
 @click.option(
@@ -88,7 +84,7 @@ _NO_CALIBRATION = (
 def live(
     port,
     config_path,
-    calibration_path,
+    calibration_paths,
     constraint,
     objective,
     save_path,
@@ -121,7 +117,7 @@ def live(
     Ctrl-C or SIGTERM stops it with one line and exit status 130 or 143 (no --save image
     then).
     """
-    if calibration_path is None:
+    if not calibration_paths:
         raise click.ClickException(_NO_CALIBRATION)
     check_figure_suffix(save_path, "--save")
     if save_path is not None:
@@ -129,13 +125,15 @@ def live(
 
         # the image is checked (suffix, existing file, --overwrite) and locked before the port is opened
         target = output.file(save_path, overwrite=overwrite, suffixes=output.FIGURE)
-        click.get_current_context().with_resource(output.reserve([target], [calibration_path, config_path]))
+        inputs = [*(p for _, p in calibration_paths), config_path]
+        click.get_current_context().with_resource(output.reserve([target], inputs))
         import matplotlib
 
         matplotlib.use("Agg")
         if seconds is None:
             seconds = 3.0
     from bendsense.apps.live_view import run_live
+    from bendsense.cli._common import calibration_paths as resolve_calibrations
     from bendsense.cli.device import live_load, make_outlets, make_processor, wait_for_consumer
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
@@ -146,8 +144,8 @@ def live(
 
         require_extra("pylsl", "lsl", "--lsl")
     config = load_config(config_path)
-    processor = make_processor(config, calibration_path, constraint, objective, pressure_kpa, bandwidth_hz=bandwidth_hz,
-                               load=live_load(load, contact_s_m, config))
+    processor = make_processor(config, resolve_calibrations(calibration_paths, config), constraint, objective,
+                               pressure_kpa, bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, config))
     if save_path is not None:
         view, is_open = _view_class(processor)(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:
