@@ -1,18 +1,23 @@
-"""Wire protocol of the sensor board: framing, CRC, payloads and incremental decoders.
+"""Wire protocol of the sensor board: payloads and incremental decoders.
 
 Pure functions and classes, no IO. The binary protocol is DESIGN.md section 3: each
 frame on the wire is ``0x00, COBS(body), 0x00`` with ``body = payload + CRC16`` (CRC-16/
-CCITT-FALSE of the payload, little-endian). Payload, little-endian::
+CCITT-FALSE of the payload, little-endian; :mod:`bendsense.framing`, re-exported here).
+Payload, little-endian::
 
-    0  u8   version = 1
-    1  u8   type: 1 SAMPLE, 2 HELLO, 3 TEXT; host->device 16 START, 17 STOP, 18 HELLO_REQUEST
+    0  u8   version = 1 (2: a SAMPLE with several pressure lines)
+    1  u8   type: 1 SAMPLE, 2 HELLO, 3 TEXT; host->device 16 START, 17 STOP, 18 HELLO_REQUEST,
+            19 SETPOINT
     2  u16  seq: +1 per device frame of any type, wraps at 65536
     4  u32  t_us: device clock [us], wraps
     SAMPLE 8: u8 n_channels (1..64), u8 status, u16 tx_drops, i32 pressure_pa
               (0x7FFFFFFF = no reading), u16[n] adc; what a recording keeps of it:
               SAMPLE_FIELDS
+              version 2 then: u8 n_lines (1..255), i32 pressure_pa[n_lines]; the i32 at
+              offset 12 repeats line 0, so a version-1 reader still finds a pressure
     HELLO  8: u8 n_channels, u8 adc_bits, u16 rate_hz, u16 vref_mv, <= 32 B firmware (ASCII)
     TEXT   8: UTF-8 log line
+    SETPOINT 8: u8 line (0..254), i32 pressure_pa (the line's target; not 0x7FFFFFFF)
 
 :class:`Decoder` turns a byte stream, cut into chunks anywhere, into frame objects; it
 resynchronises at the next ``0x00`` after any bad frame, counts what it rejects and never
@@ -25,15 +30,26 @@ from __future__ import annotations
 import binascii
 import enum
 import functools
+import math
+import numbers
 import struct
-from collections import deque
 from dataclasses import dataclass
 from typing import NamedTuple
 
 from bendsense.errors import FrameError
+from bendsense.framing import (
+    _cobs_decode,
+    _StreamDecoder,
+    cobs_decode,
+    cobs_encode,
+    crc16_ccitt_false,
+    frame_bytes,
+)
 
 __all__ = [
     "VERSION",
+    "VERSION_LINES",
+    "MAX_LINES",
     "NO_PRESSURE",
     "FrameType",
     "StatusBits",
@@ -43,6 +59,7 @@ __all__ = [
     "Hello",
     "Text",
     "Command",
+    "Setpoint",
     "crc16_ccitt_false",
     "cobs_encode",
     "cobs_decode",
@@ -51,6 +68,7 @@ __all__ = [
     "encode_hello",
     "encode_text",
     "encode_command",
+    "encode_setpoint",
     "encode_frame",
     "decode_body",
     "decode_frame",
@@ -59,10 +77,14 @@ __all__ = [
 ]
 
 VERSION = 1
+VERSION_LINES = 2
+"""Version byte of a SAMPLE that carries several pressure lines (``n_lines``, ``pressure_pa[n_lines]``)."""
 NO_PRESSURE = 0x7FFFFFFF
 """``pressure_pa`` on the wire when the board has no pressure reading."""
 MAX_CHANNELS = 64
 MAX_FIRMWARE_BYTES = 32
+MAX_LINES = 255
+"""Most pressure lines a SAMPLE carries (line indices 0..254)."""
 
 
 class FrameType(enum.IntEnum):
@@ -74,6 +96,7 @@ class FrameType(enum.IntEnum):
     START = 16
     STOP = 17
     HELLO_REQUEST = 18
+    SETPOINT = 19
 
 
 class StatusBits(enum.IntFlag):
@@ -85,12 +108,18 @@ class StatusBits(enum.IntFlag):
     TX_OVERFLOW = 8
 
 
-@dataclass(slots=True)
-class Sample:
+class _Lines:
+    __slots__ = ("pressures_pa",)
+
+
+@dataclass(slots=True, init=False, eq=False)
+class Sample(_Lines):
     """One SAMPLE frame.
 
     Frame classes are slotted dataclasses, not frozen ones, because building a frozen
     instance costs ~5x more and the decoder makes one per frame; treat them as read-only.
+    ``pressures_pa`` is an attribute but not a dataclass field: the fields are the
+    scalar values a recording keeps (:data:`SAMPLE_FIELDS`), ``n_channels`` and ``adc``.
 
     Attributes
     ----------
@@ -105,9 +134,12 @@ class Sample:
     tx_drops : int
         Cumulative frames the firmware could not send.
     pressure_pa : int, float or None
-        Actuation pressure [Pa]; None for "no reading".
+        Actuation pressure [Pa] (of line 0 when the board has several); None for "no reading".
     adc : tuple of int
         Raw ADC counts, one per channel (floats only from a line dialect that sends them).
+    pressures_pa : tuple
+        One pressure [Pa] per pressure line (None: no reading) from a version-2 SAMPLE;
+        ``()`` from a version-1 one (one line: ``pressure_pa``).
     """
 
     seq: int
@@ -117,6 +149,29 @@ class Sample:
     tx_drops: int
     pressure_pa: int | float | None
     adc: tuple
+
+    def __init__(self, seq, t_us, n_channels, status, tx_drops, pressure_pa, adc, pressures_pa=()):
+        self.seq = seq
+        self.t_us = t_us
+        self.n_channels = n_channels
+        self.status = status
+        self.tx_drops = tx_drops
+        self.pressure_pa = pressure_pa
+        self.adc = adc
+        self.pressures_pa = pressures_pa
+
+    def __eq__(self, other):
+        if type(other) is not Sample:
+            return NotImplemented
+        return (self.seq, self.t_us, self.n_channels, self.status, self.tx_drops, self.pressure_pa, self.adc,
+                tuple(self.pressures_pa)) == (other.seq, other.t_us, other.n_channels, other.status,
+                                              other.tx_drops, other.pressure_pa, other.adc, tuple(other.pressures_pa))
+
+    def __repr__(self):
+        lines = f", pressures_pa={self.pressures_pa!r}" if self.pressures_pa else ""
+        return (f"Sample(seq={self.seq!r}, t_us={self.t_us!r}, n_channels={self.n_channels!r}, "
+                f"status={self.status!r}, tx_drops={self.tx_drops!r}, pressure_pa={self.pressure_pa!r}, "
+                f"adc={self.adc!r}{lines})")
 
 
 class SampleField(NamedTuple):
@@ -226,108 +281,26 @@ class Command:
     t_us: int = 0
 
 
-# --------------------------------------------------------------------------- primitives
+@dataclass(slots=True)
+class Setpoint:
+    """SETPOINT frame (host to device): the target pressure of one pressure line.
 
-
-def crc16_ccitt_false(data: bytes) -> int:
-    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor).
-
-    The check value, ``crc16_ccitt_false(b"123456789")``, is 0x29B1.
-
-    Parameters
+    Attributes
     ----------
-    data : bytes
-        The bytes to check (a frame's payload).
+    seq : int
+        Sequence number (the host's; the device does not check it).
+    t_us : int
+        Host clock [us]; the firmware may ignore it.
+    line : int
+        Pressure line, 0-based (0..254).
+    pressure_pa : int
+        Target pressure [Pa].
     """
-    return binascii.crc_hqx(data, 0xFFFF)
 
-
-def cobs_encode(data: bytes) -> bytes:
-    """Consistent Overhead Byte Stuffing: ``data`` without any zero byte, overhead 1 + len/254.
-
-    Parameters
-    ----------
-    data : bytes
-        The bytes to stuff.
-    """
-    out = bytearray()
-    for part in bytes(data).split(b"\x00"):
-        while len(part) >= 254:
-            out.append(0xFF)
-            out += part[:254]
-            part = part[254:]
-        out.append(len(part) + 1)
-        out += part
-    return bytes(out)
-
-
-def cobs_decode(data: bytes) -> bytes:
-    """Inverse of :func:`cobs_encode`.
-
-    Parameters
-    ----------
-    data : bytes
-        Stuffed bytes, without delimiters.
-
-    Raises
-    ------
-    FrameError
-        If ``data`` contains a zero byte or a block runs past its end.
-    """
-    data = bytes(data)
-    out = None if 0 in data else _cobs_decode(data)
-    if out is None:
-        raise FrameError(f"COBS: invalid encoding of {len(data)} bytes (zero byte or block past the end)")
-    return out
-
-
-def _cobs_decode(data: bytes) -> bytes | None:
-    # Hot path, called on segments already split at 0x00: no exceptions, None if invalid.
-    # Every block but the last is followed by a zero, so joining the blocks with b"\x00"
-    # decodes; 0xFF blocks (runs of 254 non-zero bytes, rare) take the general loop.
-    n = len(data)
-    parts = []
-    i = 0
-    while i < n:
-        code = data[i]
-        if code == 0xFF:
-            return _cobs_decode_general(data)
-        end = i + code
-        if end > n or code == 0:
-            return None
-        parts.append(data[i + 1 : end])
-        i = end
-    return b"\x00".join(parts) if parts else None
-
-
-def _cobs_decode_general(data: bytes) -> bytes | None:
-    n = len(data)
-    if n == 0 or 0 in data:
-        return None
-    out = bytearray()
-    i = 0
-    while i < n:
-        code = data[i]
-        end = i + code
-        if end > n:
-            return None
-        out += data[i + 1 : end]
-        i = end
-        if code != 0xFF and i < n:
-            out.append(0)
-    return bytes(out)
-
-
-def frame_bytes(payload: bytes) -> bytes:
-    """Wire frame of ``payload``: ``0x00, COBS(payload + CRC16 LE), 0x00``.
-
-    Parameters
-    ----------
-    payload : bytes
-        The frame's payload (DESIGN.md section 3).
-    """
-    body = payload + crc16_ccitt_false(payload).to_bytes(2, "little")
-    return b"\x00" + cobs_encode(body) + b"\x00"
+    seq: int
+    t_us: int
+    line: int
+    pressure_pa: int
 
 
 # --------------------------------------------------------------------------- encoding
@@ -335,11 +308,18 @@ def frame_bytes(payload: bytes) -> bytes:
 _HEADER = struct.Struct("<BBHI")
 _SAMPLE_HEAD = struct.Struct("<BBHIBBHi")
 _HELLO_HEAD = struct.Struct("<BBHIBBHH")
+_SETPOINT_TAIL = struct.Struct("<Bi")
+_SETPOINT = struct.Struct("<BBHIBi")
 
 
 @functools.cache
 def _adc_struct(n: int) -> struct.Struct:
     return struct.Struct(f"<{n}H")
+
+
+@functools.cache
+def _lines_struct(n: int) -> struct.Struct:
+    return struct.Struct(f"<{n}i")
 
 
 @functools.cache
@@ -354,7 +334,23 @@ def _check_int(name: str, value, lo: int, hi: int) -> int:
     return v
 
 
-def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0) -> bytes:
+def _wire_pressure(name: str, value) -> int:
+    if value is None or value != value:
+        return NO_PRESSURE
+    try:
+        p = round(value)
+    except (TypeError, ValueError, OverflowError):
+        raise FrameError(f"{name}: expected a pressure [Pa] (a number or None), got {value!r}") from None
+    if not -(2**31) <= p < NO_PRESSURE:
+        raise FrameError(f"{name}: expected -2**31 <= p < 2**31-1 [Pa], got {value!r}")
+    return p
+
+
+def _is_lines(value) -> bool:
+    return value is not None and not isinstance(value, (numbers.Real, str, bytes)) and hasattr(value, "__iter__")
+
+
+def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0, pressures_pa=None) -> bytes:
     """Encode a SAMPLE as a whole wire frame.
 
     Parameters
@@ -365,10 +361,17 @@ def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0) -> byt
         Device clock [us]; taken modulo 2**32.
     adc : sequence of int, length 1..64
         Raw counts, 0..65535.
-    pressure_pa : float or None
-        Pressure [Pa], rounded to an integer; None (or NaN) sends "no reading".
+    pressure_pa : float, None or sequence
+        Pressure [Pa], rounded to an integer; None (or NaN) sends "no reading". With
+        ``pressures_pa`` it may be left None (line 0 is sent) or must equal line 0. A
+        sequence (tuple, list, array) is taken as ``pressures_pa``: a frame source that
+        gives one pressure per line gets version 2 from any caller.
     status, tx_drops : int
         Status bits (0..255) and cumulative transmit drops (taken modulo 65536).
+    pressures_pa : sequence of (float or None), length 1..255, optional
+        One pressure [Pa] per pressure line: the frame is a version-2 SAMPLE
+        (``n_lines``, ``pressure_pa[n_lines]`` after the ADC counts; offset 12 repeats
+        line 0). None (default) sends version 1.
 
     Returns
     -------
@@ -381,17 +384,23 @@ def encode_sample(seq, t_us, adc, pressure_pa=None, status=0, tx_drops=0) -> byt
         raise FrameError(f"adc: expected 1..{MAX_CHANNELS} channels, got {n}")
     if min(counts) < 0 or max(counts) > 0xFFFF:
         raise FrameError(f"adc: counts must be in 0..65535, got {min(counts)}..{max(counts)}")
-    if pressure_pa is None or pressure_pa != pressure_pa:
-        p = NO_PRESSURE
-    else:
-        p = round(pressure_pa)
-        if not -(2**31) <= p < NO_PRESSURE:
-            raise FrameError(f"pressure_pa: expected -2**31 <= p < 2**31-1 [Pa], got {pressure_pa!r}")
+    if pressures_pa is None and _is_lines(pressure_pa):
+        pressure_pa, pressures_pa = None, pressure_pa
+    p = _wire_pressure("pressure_pa", pressure_pa)
     status = _check_int("status", status, 0, 255)
+    version, tail = VERSION, b""
+    if pressures_pa is not None:
+        lines = [_wire_pressure(f"pressures_pa[{k}]", v) for k, v in enumerate(pressures_pa)]
+        if not 1 <= len(lines) <= MAX_LINES:
+            raise FrameError(f"pressures_pa: expected 1..{MAX_LINES} pressure lines, got {len(lines)}")
+        if pressure_pa is not None and p != lines[0]:
+            raise FrameError(f"pressure_pa: {pressure_pa!r} differs from line 0 of pressures_pa ({pressures_pa[0]!r})")
+        version, p = VERSION_LINES, lines[0]
+        tail = struct.pack(f"<B{len(lines)}i", len(lines), *lines)
     payload = _SAMPLE_HEAD.pack(
-        VERSION, FrameType.SAMPLE, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF, n, status, int(tx_drops) & 0xFFFF, p
+        version, FrameType.SAMPLE, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF, n, status, int(tx_drops) & 0xFFFF, p
     ) + _adc_struct(n).pack(*counts)
-    return frame_bytes(payload)
+    return frame_bytes(payload + tail)
 
 
 def encode_hello(seq, t_us, n_channels, adc_bits, rate_hz, vref_mv, firmware="") -> bytes:
@@ -479,16 +488,45 @@ def encode_command(kind, seq: int = 0, t_us: int = 0) -> bytes:
     return frame_bytes(_HEADER.pack(VERSION, k, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF))
 
 
-def encode_frame(frame) -> bytes:
-    """Encode any frame object (:class:`Sample`, :class:`Hello`, :class:`Text`, :class:`Command`).
+def encode_setpoint(line, pressure_pa, seq: int = 0, t_us: int = 0) -> bytes:
+    """Encode a SETPOINT (host to device: a pressure line's target) as a whole wire frame.
 
     Parameters
     ----------
-    frame : Sample, Hello, Text or Command
-        The frame to encode.
+    line : int
+        Pressure line, 0-based (0..254).
+    pressure_pa : float
+        Target pressure [Pa], finite; rounded to an integer.
+    seq : int, default 0
+        Sequence number (0..65535, taken modulo 65536).
+    t_us : int, default 0
+        Host clock [µs] (taken modulo 2**32); the firmware may ignore it.
+
+    Raises
+    ------
+    FrameError
+        A line outside 0..254 or a pressure that is not a finite number within the i32 range.
+    """
+    if isinstance(line, bool) or not isinstance(line, numbers.Integral) or not 0 <= line < MAX_LINES:
+        raise FrameError(f"line: expected a pressure line 0..{MAX_LINES - 1}, got {line!r}")
+    if pressure_pa is None or not isinstance(pressure_pa, numbers.Real) or not math.isfinite(pressure_pa):
+        raise FrameError(f"pressure_pa: expected a finite set-point [Pa], got {pressure_pa!r}")
+    p = _wire_pressure("pressure_pa", pressure_pa)
+    head = _HEADER.pack(VERSION, FrameType.SETPOINT, int(seq) & 0xFFFF, int(t_us) & 0xFFFFFFFF)
+    return frame_bytes(head + _SETPOINT_TAIL.pack(int(line), p))
+
+
+def encode_frame(frame) -> bytes:
+    """Encode any frame object (:class:`Sample`, :class:`Hello`, :class:`Text`, :class:`Command`, :class:`Setpoint`).
+
+    Parameters
+    ----------
+    frame : Sample, Hello, Text, Command or Setpoint
+        The frame to encode (a Sample with ``pressures_pa`` as version 2).
     """
     if isinstance(frame, Sample):
-        return encode_sample(frame.seq, frame.t_us or 0, frame.adc, frame.pressure_pa, frame.status, frame.tx_drops)
+        return encode_sample(frame.seq, frame.t_us or 0, frame.adc, frame.pressure_pa, frame.status, frame.tx_drops,
+                             frame.pressures_pa or None)
     if isinstance(frame, Hello):
         return encode_hello(
             frame.seq, frame.t_us, frame.n_channels, frame.adc_bits, frame.rate_hz, frame.vref_mv, frame.firmware
@@ -497,7 +535,9 @@ def encode_frame(frame) -> bytes:
         return encode_text(frame.seq, frame.t_us, frame.text)
     if isinstance(frame, Command):
         return encode_command(frame.kind, frame.seq, frame.t_us)
-    raise FrameError(f"frame: expected Sample, Hello, Text or Command, got {type(frame).__name__}")
+    if isinstance(frame, Setpoint):
+        return encode_setpoint(frame.line, frame.pressure_pa, frame.seq, frame.t_us)
+    raise FrameError(f"frame: expected Sample, Hello, Text, Command or Setpoint, got {type(frame).__name__}")
 
 
 # --------------------------------------------------------------------------- decoding
@@ -513,10 +553,11 @@ def _parse_body(body: bytes, adc_bits: int | None):
         return _MALFORMED
     if binascii.crc_hqx(body[:-2], 0xFFFF) != body[-2] | (body[-1] << 8):
         return _CRC_ERROR
-    if body[0] != VERSION:
-        return _MALFORMED
+    version = body[0]
     ftype = body[1]
     plen = n - 2
+    if version != VERSION:
+        return _parse_lines(body, adc_bits) if version == VERSION_LINES and ftype == 1 else _MALFORMED
     if ftype == 1:
         if plen < 18:
             return _MALFORMED
@@ -545,7 +586,37 @@ def _parse_body(body: bytes, adc_bits: int | None):
             return _MALFORMED
         _, _, seq, t_us = _HEADER.unpack_from(body)
         return Command(FrameType(ftype), seq, t_us)
+    if ftype == 19:
+        if plen != _SETPOINT.size:
+            return _MALFORMED
+        _, _, seq, t_us, line, p = _SETPOINT.unpack_from(body)
+        if line >= MAX_LINES or p == NO_PRESSURE:
+            return _MALFORMED
+        return Setpoint(seq, t_us, line, p)
     return _MALFORMED
+
+
+def _parse_lines(body: bytes, adc_bits: int | None):
+    """A version-2 SAMPLE (CRC already checked), or ``_MALFORMED``. Never raises."""
+    plen = len(body) - 2
+    if plen < 16 + 2 + 1 + 4:
+        return _MALFORMED
+    nch = body[8]
+    if not 1 <= nch <= MAX_CHANNELS or plen < 16 + 2 * nch + 1:
+        return _MALFORMED
+    n_lines = body[16 + 2 * nch]
+    if not 1 <= n_lines <= MAX_LINES or plen != 16 + 2 * nch + 1 + 4 * n_lines:
+        return _MALFORMED
+    v = _sample_struct(nch).unpack_from(body)
+    adc = v[8:]
+    if adc_bits is not None and max(adc) >> adc_bits:
+        return _MALFORMED
+    lines = _lines_struct(n_lines).unpack_from(body, 17 + 2 * nch)
+    p = v[7]
+    if p != lines[0]:  # offset 12 repeats line 0: a frame that disagrees with itself is corrupt
+        return _MALFORMED
+    lines = tuple(None if x == NO_PRESSURE else x for x in lines)
+    return Sample(v[2], v[3], nch, v[5], v[6], lines[0], adc, lines)
 
 
 def decode_body(body: bytes, adc_bits: int | None = None):
@@ -585,87 +656,7 @@ def decode_frame(data: bytes, adc_bits: int | None = None):
     return decode_body(cobs_decode(bytes(data).strip(b"\x00")), adc_bits)
 
 
-class _StreamDecoder:
-    """Counters, bounded segment buffer and sequence-gap accounting of both decoders.
-
-    Subclasses split their stream with :meth:`_segments` and parse each segment.
-    """
-
-    def __init__(self):
-        self._buf = b""
-        self._discarding = False
-        self._last_seq = None
-        self.frames = 0
-        self.crc_errors = 0
-        self.malformed = 0
-        self.overruns = 0
-        self.lost = 0
-        self.bytes = 0
-        self.hello = None
-        self.gaps = deque(maxlen=1000)
-
-    @property
-    def errors(self) -> int:
-        """``crc_errors + malformed``."""
-        return self.crc_errors + self.malformed
-
-    def reset(self) -> None:
-        """Forget a partial frame (e.g. after a reconnect); counters and sequence are kept."""
-        self._buf = b""
-        self._discarding = False
-
-    def reset_sequence(self) -> None:
-        """Forget the last sequence number (the next frame starts a new sequence)."""
-        self._last_seq = None
-
-    def _segments(self, data: bytes, delimiter: bytes, max_bytes: int) -> list:
-        """The complete, non-empty segments that ``data`` ends, after what came before.
-
-        The incomplete tail is kept for the next call. A segment (or a run without a
-        delimiter) longer than ``max_bytes`` is dropped and counted in ``overruns`` and
-        ``malformed``, so memory stays bounded.
-        """
-        self.bytes += len(data)
-        if delimiter not in data:
-            if not self._discarding:
-                self._buf += data
-                if len(self._buf) > max_bytes:
-                    self._overrun()
-            return []
-        parts = data.split(delimiter)
-        tail = parts.pop()
-        if self._discarding:
-            parts[0] = b""  # the end of an over-long run
-            self._discarding = False
-        elif self._buf:
-            parts[0] = self._buf + parts[0]
-        self._buf = tail
-        if len(tail) > max_bytes:
-            self._overrun()
-        segments = []
-        for seg in parts:
-            if len(seg) > max_bytes:
-                self.overruns += 1
-                self.malformed += 1
-            elif seg:
-                segments.append(seg)
-        return segments
-
-    def _overrun(self) -> None:
-        self._buf = b""
-        self._discarding = True
-        self.overruns += 1
-        self.malformed += 1
-
-    def _count_sequence(self, seq: int) -> None:
-        """Add the frames missing between the last sequence number and ``seq`` to ``lost``."""
-        last = self._last_seq
-        if last is not None:
-            gap = (seq - last - 1) & 0xFFFF
-            if gap:
-                self.lost += gap
-                self.gaps.append((seq, gap))
-        self._last_seq = seq
+_HOST_FRAMES = (Command, Setpoint)
 
 
 class Decoder(_StreamDecoder):
@@ -683,7 +674,9 @@ class Decoder(_StreamDecoder):
         from the first HELLO when not given.
     max_frame_bytes : int
         Longest run without a delimiter that is kept; a longer run is dropped (and
-        counted in ``overruns`` and ``malformed``), so memory stays bounded.
+        counted in ``overruns`` and ``malformed``), so memory stays bounded. The default
+        holds the longest legal frame (a version-2 SAMPLE of 64 channels and 255 lines,
+        under 1,200 bytes stuffed).
 
     Attributes
     ----------
@@ -693,12 +686,15 @@ class Decoder(_StreamDecoder):
         Segments whose CRC did not match.
     malformed : int
         Segments with bad COBS, bad length, unknown version or type, channel count
-        outside 1..64, or an ADC value out of range; includes over-long runs.
+        outside 1..64, an ADC value out of range, a version-2 SAMPLE whose ``n_lines``
+        is 0 or disagrees with its length or whose line 0 differs from offset 12, or a
+        SETPOINT with a line above 254 or the no-reading pressure; includes over-long runs.
     overruns : int
         Over-long runs without a delimiter that were dropped.
     lost : int
         Frames missing from the device sequence: ``sum((seq - last - 1) mod 65536)``
-        over consecutive valid device frames (SAMPLE, HELLO, TEXT).
+        over consecutive valid device frames (SAMPLE, HELLO, TEXT; not the host's
+        START, STOP, HELLO_REQUEST, SETPOINT).
     bytes : int
         Bytes fed.
     hello : Hello or None
@@ -707,7 +703,7 @@ class Decoder(_StreamDecoder):
         The most recent sequence gaps (bounded).
     """
 
-    def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 1024):
+    def __init__(self, adc_bits: int | None = None, max_frame_bytes: int = 2048):
         super().__init__()
         self.adc_bits = adc_bits
         self._adc_bits_from_hello = adc_bits is None
@@ -738,7 +734,7 @@ class Decoder(_StreamDecoder):
                 self.malformed += 1
                 continue
             self.frames += 1
-            if type(frame) is not Command:
+            if type(frame) not in _HOST_FRAMES:
                 self._count_sequence(frame.seq)
                 if type(frame) is Hello:
                     self.hello = frame

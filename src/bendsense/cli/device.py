@@ -31,6 +31,7 @@ from bendsense.cli._common import (
     objective_option,
     quiet,
 )
+from bendsense.cli.sim import grasp_options
 
 log = logging.getLogger("bendsense")
 
@@ -385,9 +386,15 @@ def record(
 @click.option("--contact-s-m", "contact_s_m", type=ContactLocation(),
               help="sensor: where the simulated touches land: an arc length s_c [m] along the body (0 < s_c <= L), "
                    "or 'along-body' (each touch somewhere else: 0.5, 0.7, 0.85, 1.0, 0.6, 0.9 L); default the tip.")
+@grasp_options
+@click.option("--truth", "truth_path", metavar="FILE.csv", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the simulator's truth of every frame as it is sent: seq, t_us, then per finger "
+                   "<finger>_fx_n, <finger>_fy_n, <finger>_contact_s_m and per line line<k>_setpoint_pa, "
+                   "line<k>_pressure_pa (one actuator: fx_n, fy_n, contact_s_m, setpoint_pa, pressure_pa).")
+@click.option("--overwrite", is_flag=True, help="Replace an existing --truth file that bendsense wrote.")
 def sim_device(
     rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop,
-    contact_s_m,
+    contact_s_m, truth_path, overwrite, **grasp,
 ):
     """Run a simulated sensor board on a pseudo-terminal and print its port path.
 
@@ -397,9 +404,12 @@ def sim_device(
     at their recorded times; after the last one (unless --loop) it says so on stderr
     and keeps the port open and silent, like BrainFlow's playback board, so that a
     client ends its recording when it chooses instead of seeing the board unplugged.
-    """
-    from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
 
+    With --fingers K the board is a simulated gripper whose fingers close on an object
+    (--object rigid or compliant): one pressure regulator per finger (a first-order lag
+    with limits) follows the scenario's closing profile until the host sends that line a
+    SETPOINT. --object without --fingers: the single actuator presses the object.
+    """
     if not speed > 0:
         raise click.BadParameter(f"expected > 0, got {speed:g}", param_hint="--speed")
     if replay_path is not None:
@@ -407,7 +417,9 @@ def sim_device(
 
         ctx = click.get_current_context()
         for name, flag in (("rate_hz", "--rate"), ("channels", "--channels"), ("adc_bits", "--adc-bits"),
-                           ("source", "--source"), ("contact_s_m", "--contact-s-m")):
+                           ("source", "--source"), ("contact_s_m", "--contact-s-m"), ("truth_path", "--truth"),
+                           *((g, "--" + g.replace("_", "-")) for g in grasp if g != "object_kind"),
+                           ("object_kind", "--object")):
             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
                 raise click.UsageError(f"{flag} does not apply to --replay: the recording gives it "
                                        "(--speed changes the pace)")
@@ -425,16 +437,56 @@ def sim_device(
         raise click.BadParameter(f"expected 1..16, got {adc_bits}", param_hint="--adc-bits")
     from bendsense.device.simdevice import max_rate_hz
 
-    if rate_hz > max_rate_hz(channels):
-        raise click.BadParameter(f"expected at most {max_rate_hz(channels):,} Hz (what a USB full-speed link carries "
-                                 f"for {channels} channels), got {rate_hz:g}", param_hint="--rate")
+    wide = channels if grasp["fingers"] is None else 16 * grasp["fingers"]
+    lines = grasp["fingers"] or 0
+    if rate_hz > max_rate_hz(wide, lines):
+        raise click.BadParameter(f"expected at most {max_rate_hz(wide, lines):,} Hz (what a USB full-speed link "
+                                 f"carries for {wide} channels), got {rate_hz:g}", param_hint="--rate")
     if source == "ramp":
-        if contact_s_m is not None:
-            raise click.BadParameter("applies to --source sensor only, not ramp", param_hint="--contact-s-m")
+        for flag, value in (("--contact-s-m", contact_s_m), ("--truth", truth_path),
+                            ("--fingers/--object", grasp["fingers"] or grasp["object_kind"])):
+            if value is not None:
+                raise click.BadParameter("applies to --source sensor only, not ramp", param_hint=flag)
+    _check_grasp_flags(grasp, contact_s_m, channels)
+    targets = [] if truth_path is None else [outputs.file(truth_path, overwrite=overwrite)]
+    with outputs.reserve(targets):  # checked before any work, locked while the board runs
+        _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart,
+                   contact_s_m, truth_path, grasp)
+
+
+def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
+    """Refuse the single actuator's options that a simulated grasp does not take."""
+    if grasp["fingers"] is None and grasp["object_kind"] is None:
+        return
+    ctx = click.get_current_context()
+    if contact_s_m is not None:
+        raise click.BadParameter("applies to the time-varying scenario; give the object's contact with "
+                                 "--object-s-m", param_hint="--contact-s-m")
+    if grasp["fingers"] is not None and ctx.get_parameter_source("channels") is click.core.ParameterSource.COMMANDLINE:
+        raise click.BadParameter("does not apply to --fingers: each finger has 16 channels", param_hint="--channels")
+    if grasp["fingers"] is None and channels != 16:
+        raise click.BadParameter(f"--object simulates the paper's 16-channel sensor, got {channels}",
+                                 param_hint="--channels")
+
+
+def _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, contact_s_m,
+               truth_path, grasp) -> None:
+    """Build the simulated board's source (and truth file) and serve it."""
+    from bendsense.cli.sim import grasp_board
+    from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
+    from bendsense.sim.truth import TruthWriter, scenario_truth, truth_columns
+
+    board = grasp_board(grasp, rate_hz=rate_hz, seed=seed, adc_bits=adc_bits)
+    if board is not None:
+        src, channels = board, board.n_channels
+        columns = truth_columns(board.truth_fingers, board.n_lines)
+    elif source == "ramp":
         src = ramp_source(channels, adc_bits)
     else:
         src = default_source(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed,
-                             contact_s_m=contact_s_m)
+                             contact_s_m=contact_s_m, **({} if truth_path is None else {"truth": True}))
+        src, columns = (src, None) if truth_path is None else (scenario_truth(src), truth_columns())
+    truth = None if truth_path is None else TruthWriter(truth_path, columns)
     dev = SimulatedDevice(
         src,
         rate_hz=rate_hz,
@@ -445,8 +497,13 @@ def sim_device(
         truncate=truncate,
         seed=seed,
         autostart=autostart,
+        truth=truth,
     )
-    _serve(dev, seconds)
+    try:
+        _serve(dev, seconds)
+    finally:
+        if truth is not None:
+            truth.close()
 
 
 def _serve(dev, seconds, *, replay: bool = False) -> None:
@@ -477,7 +534,7 @@ def _serve(dev, seconds, *, replay: bool = False) -> None:
     s = dev.stats
     click.echo(
         f"generated {s.generated}  sent {s.sent}  dropped {s.dropped}  corrupted {s.corrupted}  "
-        f"truncated {s.truncated}  tx overflow {s.tx_overflow}",
+        f"truncated {s.truncated}  tx overflow {s.tx_overflow}" + (f"  setpoints {s.setpoints}" if s.setpoints else ""),
         err=True,
     )
 

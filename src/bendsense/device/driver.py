@@ -27,8 +27,19 @@ import time
 from collections import deque
 from dataclasses import dataclass
 
-from bendsense.errors import DeviceError
-from bendsense.frames import Command, Decoder, Hello, LineDecoder, Sample, Text, encode_command
+from bendsense.errors import ArgumentError, DeviceError, FrameError
+from bendsense.frames import (
+    MAX_LINES,
+    Command,
+    Decoder,
+    Hello,
+    LineDecoder,
+    Sample,
+    Setpoint,
+    Text,
+    encode_command,
+    encode_setpoint,
+)
 
 __all__ = ["Reading", "Event", "DeviceStats", "Driver", "DEFAULT_BAUDRATE"]
 
@@ -312,6 +323,47 @@ class Driver:
         self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
         self.write(encode_command(kind, seq=self._cmd_seq))
 
+    def send_setpoint(self, line: int, pressure_pa: float) -> None:
+        """Send a SETPOINT: the target pressure of one of the board's pressure lines.
+
+        Thread-safe (writes are serialised with the commands). The pressure is rounded
+        to a whole pascal. Once the board has sent a SAMPLE, ``line`` must be one of its
+        lines (``len(sample.pressures_pa)``, or line 0 of a version-1 board).
+
+        Parameters
+        ----------
+        line : int
+            Pressure line, 0-based (0..254).
+        pressure_pa : float
+            Target pressure [Pa]: a finite number below 2**31 - 1 in magnitude.
+
+        Raises
+        ------
+        ArgumentError
+            A line that is not an integer in range, or not a line the board has; a
+            pressure that is not finite or beyond the wire's range.
+        DeviceError
+            The port is closed (or was never opened), the write fails, or the driver
+            speaks the line dialect (which has no host-to-device frames).
+        """
+        if isinstance(line, bool) or not isinstance(line, numbers.Integral) or not 0 <= line < MAX_LINES:
+            raise ArgumentError(f"line: expected a pressure line 0..{MAX_LINES - 1}, got {line!r}")
+        latest = self._latest
+        if latest is not None:
+            n_lines = len(latest.sample.pressures_pa) or 1
+            if line >= n_lines:
+                raise ArgumentError(f"line: {line} is not a pressure line of the board on {self.port} "
+                                    f"(it sends {n_lines} line{'s' if n_lines > 1 else ''}, 0..{n_lines - 1})")
+        try:
+            data = encode_setpoint(int(line), pressure_pa, seq=(self._cmd_seq + 1) & 0xFFFF)
+        except FrameError as err:
+            raise ArgumentError(str(err)) from None
+        if self.dialect != "binary":
+            raise DeviceError(f"{self.port}: the line dialect has no set-points (SETPOINT needs the binary protocol)")
+        with self._write_lock:
+            self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
+        self.write(data)
+
     def start(self) -> None:
         """Ask the board to stream SAMPLE frames."""
         self.send("start")
@@ -554,7 +606,7 @@ class Driver:
             elif type(f) is Text:
                 self._unwrap(f.t_us, host_ns)
                 self._emit("text", f"firmware: {f.text}")
-            elif type(f) is Command:
+            elif type(f) is Command or type(f) is Setpoint:
                 pass  # our own commands echoed back (loop://)
         if drops:
             self._queue_drops += drops

@@ -36,7 +36,8 @@ class RecorderStats:
     records : int
         Frames written to ``frames.bin``.
     skipped : int
-        Samples not written because their channel count differed from the session's.
+        Samples not written because their channel count, or their number of pressure
+        lines, differed from the session's (the first SAMPLE fixes both).
     lost, crc_errors, malformed, queue_drops, reconnects : int
         The driver's counters (see :class:`bendsense.device.driver.DeviceStats`).
     tx_drops : int
@@ -55,6 +56,11 @@ class RecorderStats:
     reconnects: int
     elapsed_s: float
     tx_drops: int = 0
+
+
+def _n_lines(sample) -> int:
+    """Pressure lines of a SAMPLE: those of a version-2 frame, else one."""
+    return len(getattr(sample, "pressures_pa", ())) or 1
 
 
 class Recorder:
@@ -84,7 +90,9 @@ class Recorder:
     Notes
     -----
     The session is created as soon as the channel count is known (from the HELLO, the
-    line layout or the first sample). Use :meth:`run` in the current thread, or
+    line layout or the first sample). The first sample gives the number of pressure
+    lines: a board that sends SAMPLE version 2 with several lines is recorded with all
+    of them (``meta.yaml`` ``n_lines``, see :mod:`bendsense.session.records`). Use :meth:`run` in the current thread, or
     :meth:`start` / :meth:`stop` for a background thread.
     """
 
@@ -104,6 +112,7 @@ class Recorder:
         self._early_events = list(driver.events)  # e.g. the HELLO of the handshake
         self._lock = threading.Lock()
         self._skipped = 0
+        self._lines_known = False
         self._tx_last = None  # the firmware's cumulative tx_drops counter at the last sample
         self._tx_drops = 0
         self._t0 = time.monotonic()
@@ -169,12 +178,20 @@ class Recorder:
 
     def _write(self, batch) -> None:
         writer = self._writer or self._ensure_writer(batch[0].sample.n_channels)
-        n = writer.n_channels
-        keep = [r for r in batch if r.sample.n_channels == n]
+        if writer.n_records == 0 and not self._lines_known:  # the board's pressure lines, from its first SAMPLE
+            writer.set_lines(_n_lines(batch[0].sample))
+            self._lines_known = True
+        n, n_lines = writer.n_channels, writer.n_lines
+        keep = [r for r in batch if r.sample.n_channels == n and _n_lines(r.sample) == n_lines]
         if len(keep) != len(batch):
             bad = len(batch) - len(keep)
             self._skipped += bad
-            writer.event(f"skipped: {bad} sample(s) with a channel count other than {n}")
+            channels = sum(r.sample.n_channels != n for r in batch)
+            if channels:
+                writer.event(f"skipped: {channels} sample(s) with a channel count other than {n}")
+            if bad - channels:
+                writer.event(f"skipped: {bad - channels} sample(s) with a number of pressure lines other than "
+                             f"{n_lines}")
         if not keep:
             return
         rec = sample_records(

@@ -5,7 +5,9 @@ frames come from a :class:`~bendsense.session.Session` (a native session directo
 session CSV): each SAMPLE carries the recorded counts, pressure, status bits, sequence
 number and device clock, and is sent at the recorded time (divided by ``speed``). A
 replayed session recorded again with ``bendsense record`` therefore has the same frames:
-signals, pressure, status, ``seq`` (with the original gaps) and ``t_s``. With ``loop``,
+signals, pressure, status, ``seq`` (with the original gaps) and ``t_s`` (a session with
+several pressure lines, a gripper's board, is sent as SAMPLE version 2, one pressure per
+line, and records again with all its lines). With ``loop``,
 the recording starts over after its last frame, the clock and the sequence numbers going
 on from where they ended (a board that never stops); without it, the board sends nothing
 after the last frame but keeps the port open (:attr:`~SimulatedDevice.finished` is set),
@@ -19,6 +21,7 @@ import numpy as np
 
 from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
 from bendsense.errors import SessionError
+from bendsense.frames import MAX_LINES
 
 __all__ = ["ReplayDevice", "replay_frames"]
 
@@ -34,15 +37,16 @@ def replay_frames(session) -> dict:
     Returns
     -------
     dict
-        ``adc`` (frames, N) int, ``pressure_pa`` (frames,) float (NaN: no reading),
+        ``adc`` (frames, N) int, ``pressure_pa`` (frames,) or (frames, n_lines) float
+        (NaN: no reading),
         ``t_us`` (frames,) int (device clock from 0 [us]), ``seq`` (frames,) int
         (unwrapped), ``status`` (frames,) int.
 
     Raises
     ------
     SessionError
-        If the session is empty, has signals that are not counts, or a clock that runs
-        backwards.
+        If the session is empty, has signals that are not counts, a pressure beyond the
+        wire's i32 or more than 255 pressure lines, or a clock that runs backwards.
     """
     n = len(session)
     where = session.source or "session"
@@ -59,10 +63,13 @@ def replay_frames(session) -> dict:
     if not 1 <= session.n_channels <= 64:
         raise SessionError(f"{where}: expected 1..64 channels to replay, got {session.n_channels}")
     p = session.pressure_pa
+    if session.n_lines > MAX_LINES:
+        raise SessionError(f"{where}: {session.n_lines} pressure lines; a SAMPLE carries at most {MAX_LINES}")
     wide = np.isfinite(p) & ~((p >= -(2**31)) & (p < 2**31 - 1))  # the wire's i32, 0x7FFFFFFF: no reading
     if wide.any():
-        frame = int(np.flatnonzero(wide)[0])
-        raise SessionError(f"{where}: frame {frame}, pressure_pa: {p[frame]:g} Pa does not fit the wire format's "
+        at = tuple(int(i) for i in np.argwhere(wide)[0])
+        name = f"line {at[1]} pressure_pa" if len(at) == 2 else "pressure_pa"
+        raise SessionError(f"{where}: frame {at[0]}, {name}: {p[at]:g} Pa does not fit the wire format's "
                            "32-bit pressure field")
     t_us = np.round((session.t_s - session.t_s[0]) * 1e6).astype(np.int64)
     back = np.flatnonzero(np.diff(t_us) < 0)
@@ -143,6 +150,8 @@ class ReplayDevice(SimulatedDevice):
     def _source(self, k: int):
         i = k % self.n_frames
         p = self._frames["pressure_pa"][i]
+        if p.ndim:  # several lines: a tuple, which encode_sample sends as SAMPLE version 2
+            return tuple(None if not np.isfinite(v) else float(v) for v in p), self._frames["adc"][i]
         return (None if not np.isfinite(p) else float(p)), self._frames["adc"][i]
 
     def _t_us(self, k: int) -> int:

@@ -2,7 +2,8 @@
 
 :class:`SimulatedDevice` opens a pseudo-terminal pair and plays the firmware on the
 master side: it answers HELLO_REQUEST with HELLO, streams SAMPLE frames at ``rate_hz``
-after START (or at once with ``autostart=True``), stops on STOP, and can misbehave on
+after START (or at once with ``autostart=True``), stops on STOP, passes SETPOINT frames to
+its source (a simulated gripper's pressure regulators), and can misbehave on
 purpose: drop a frame (its ``seq`` is skipped), corrupt one (one bit flipped), truncate
 one (cut short, no trailing delimiter), or disconnect (close the master) after a given
 number of frames. Every injection is counted exactly in :attr:`SimulatedDevice.stats`,
@@ -29,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import DeviceError
-from bendsense.frames import Command, Decoder, FrameType, encode_hello, encode_sample, encode_text
+from bendsense.frames import Command, Decoder, FrameType, Setpoint, encode_hello, encode_sample, encode_text
 
 __all__ = ["SimulatedDevice", "SimStats", "default_source", "ramp_source"]
 
@@ -39,19 +40,22 @@ USB_FULL_SPEED_BYTES_PER_S = 1_216_000
 """Most a USB full-speed CDC link carries: 19 bulk packets of 64 bytes per 1 ms USB frame [bytes/s]."""
 
 
-def max_rate_hz(n_channels: int = 16) -> int:
+def max_rate_hz(n_channels: int = 16, n_lines: int = 0) -> int:
     """Highest frame rate a board of ``n_channels`` can send over a USB full-speed link [Hz].
 
-    A SAMPLE frame on the wire is its payload (16 + 2 N bytes), the CRC (2), COBS's
-    overhead (1 byte per 254) and two delimiters: 53 bytes for 16 channels, so at
-    most ~22,900 frames/s; and the HELLO's ``rate_hz`` field is a u16 (65535).
+    A SAMPLE frame on the wire is its payload (16 + 2 N bytes; a version-2 SAMPLE 1 + 4
+    n_lines more), the CRC (2), COBS's overhead (1 byte per 254) and two delimiters: 53
+    bytes for 16 channels, so at most ~22,900 frames/s; and the HELLO's ``rate_hz``
+    field is a u16 (65535).
 
     Parameters
     ----------
     n_channels : int, default 16
         Channels per SAMPLE.
+    n_lines : int, default 0
+        Pressure lines of a version-2 SAMPLE (0: version 1).
     """
-    body = 16 + 2 * int(n_channels) + 2
+    body = 16 + 2 * int(n_channels) + 2 + (1 + 4 * int(n_lines) if n_lines else 0)
     wire = body + 1 + body // 254 + 2
     return int(min(USB_FULL_SPEED_BYTES_PER_S // wire, 0xFFFF))
 
@@ -171,9 +175,11 @@ class SimStats:
     hellos, texts : int
         HELLO and TEXT frames sent (they consume ``seq`` too).
     commands : int
-        Commands received.
+        Commands received (SETPOINTs included).
     disconnected : bool
         The master was closed on purpose.
+    setpoints : int
+        SETPOINT frames the source took (a line it has, a finite value).
     """
 
     generated: int
@@ -186,6 +192,7 @@ class SimStats:
     texts: int
     commands: int
     disconnected: bool
+    setpoints: int = 0
 
 
 class SimulatedDevice:
@@ -194,9 +201,13 @@ class SimulatedDevice:
     Parameters
     ----------
     source : iterable, callable or None
-        Per frame ``(pressure_pa or None, adc_counts)``: an iterable (streaming ends when
-        it is exhausted) or a callable ``source(k)`` of the frame index ``k``. None:
-        :func:`default_source`, the virtual sensor.
+        Per frame ``(pressure_pa or None, adc_counts)``, or ``(pressures, adc_counts,
+        truth)``: an iterable (streaming ends when it is exhausted) or a callable
+        ``source(k)`` of the frame index ``k``. A tuple of pressures (one per line) is
+        sent as a version-2 SAMPLE; ``truth`` (a dict) goes to ``truth``. A source with
+        a method ``setpoint(line, pressure_pa) -> bool`` takes the SETPOINT frames (a
+        :class:`~bendsense.sim.gripper.GraspBoard`); other sources answer them with a
+        TEXT line. None: :func:`default_source`, the virtual sensor.
     rate_hz : float
         Frame rate [Hz].
     n_channels, adc_bits : int
@@ -218,6 +229,10 @@ class SimulatedDevice:
         First sequence number and device clock (to exercise wrapping).
     burst : int
         Most frames written in one go when the sender is behind.
+    truth : TruthWriter, optional
+        Gets ``write(seq, t_us, truth)`` for every SAMPLE frame generated (dropped ones
+        too: match rows by ``seq``) and ``flush()`` after every burst
+        (:class:`bendsense.sim.truth.TruthWriter`).
 
     Notes
     -----
@@ -245,6 +260,7 @@ class SimulatedDevice:
         start_seq: int = 0,
         start_t_us: int = 0,
         burst: int = 64,
+        truth=None,
     ):
         if not rate_hz > 0:
             raise DeviceError(f"rate_hz: expected > 0, got {rate_hz!r}")
@@ -261,6 +277,8 @@ class SimulatedDevice:
             source = default_source(n_channels=n_channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
         self._source_fn = source if callable(source) and not hasattr(source, "__next__") else None
         self._source_it = None if self._source_fn is not None else iter(source)
+        self._on_setpoint = getattr(source, "setpoint", None)
+        self._truth = truth
         self.rate_hz = float(rate_hz)
         self.n_channels = int(n_channels)
         self.adc_bits = int(adc_bits)
@@ -277,7 +295,8 @@ class SimulatedDevice:
         self._mask = (1 << self.adc_bits) - 1
         self._lock = threading.Lock()
         self._counts = dict.fromkeys(
-            ("generated", "sent", "dropped", "corrupted", "truncated", "tx_overflow", "hellos", "texts", "commands"), 0
+            ("generated", "sent", "dropped", "corrupted", "truncated", "tx_overflow", "hellos", "texts", "commands",
+             "setpoints"), 0
         )
         self._disconnected = False
         self._stop = threading.Event()
@@ -410,6 +429,8 @@ class SimulatedDevice:
             for f in self._decoder.feed(data):
                 if type(f) is Command:
                     self._on_command(f.kind, k)
+                elif type(f) is Setpoint:
+                    self._setpoint(f)
             with self._lock:
                 texts, self._texts = self._texts, []
             for text in texts:
@@ -434,12 +455,14 @@ class SimulatedDevice:
                         self._close_fds(disconnected=True)
                         return
                     try:
-                        pressure, adc = self._frame_values(k)
+                        values = self._frame_values(k)
                     except StopIteration:
                         self._exhausted = True
                         break
-                    self._produce(k, pressure, adc)
+                    self._produce(k, *values)
                     k += 1
+            if self._truth is not None:  # the rows of a burst reach the file before its frames the port
+                self._truth.flush()
             self._flush()
             if self._exhausted and not self.finished.is_set():
                 self._flush(wait_s=1.0)
@@ -478,9 +501,26 @@ class SimulatedDevice:
         elif kind == FrameType.STOP:
             self._streaming = False
 
-    def _produce(self, k: int, pressure, adc) -> None:
+    def _setpoint(self, frame) -> None:
+        """A SETPOINT: to the source's regulators, or a TEXT line saying why not."""
+        with self._lock:
+            self._counts["commands"] += 1
+        if self._on_setpoint is None:
+            why = "this board's pressure follows its scenario (sim-device --object or --fingers simulates regulators)"
+        elif self._on_setpoint(frame.line, frame.pressure_pa):
+            with self._lock:
+                self._counts["setpoints"] += 1
+            return
+        else:
+            why = "no such pressure line"
+        with self._lock:
+            self._texts.append(f"SETPOINT line {frame.line} {frame.pressure_pa} Pa ignored: {why}")
+
+    def _produce(self, k: int, pressure, adc, truth=None) -> None:
         seq, t_us, status = self._sample_header(k)
         counts = np.asarray(adc, dtype=np.int64) & self._mask
+        if self._truth is not None:
+            self._truth.write(seq, t_us & 0xFFFFFFFF, {} if truth is None else truth)
         r = self._rng.random()
         with self._lock:
             self._counts["generated"] += 1
@@ -490,7 +530,10 @@ class SimulatedDevice:
             return
         # a dropped frame is one the firmware could not send: it counts it in tx_drops
         tx_drops = (self._counts["dropped"] + self._counts["tx_overflow"]) & 0xFFFF
-        frame = encode_sample(seq, t_us, counts.tolist(), pressure_pa=pressure, status=status, tx_drops=tx_drops)
+        if isinstance(pressure, tuple):  # one per line: a version-2 SAMPLE
+            frame = encode_sample(seq, t_us, counts.tolist(), status=status, tx_drops=tx_drops, pressures_pa=pressure)
+        else:
+            frame = encode_sample(seq, t_us, counts.tolist(), pressure_pa=pressure, status=status, tx_drops=tx_drops)
         kind = "sent"
         if r < self.drop + self.corrupt:
             frame = self._flip_one_bit(frame)

@@ -27,8 +27,11 @@ class Session:
         Time of each frame [s].
     signals : ndarray, shape (frames, N)
         Signal value of each receiver channel (ADC counts or volts, as recorded).
-    pressure_pa : ndarray, shape (frames,)
-        Actuation (gauge) pressure [Pa]; NaN where there is no reading.
+    pressure_pa : ndarray, shape (frames,) or (frames, n_lines)
+        Actuation (gauge) pressure [Pa]; NaN where there is no reading. A board with
+        several pressure lines (a gripper) gives one column per line, ``(frames,
+        n_lines)`` with ``n_lines > 1``; one line is always ``(frames,)`` (a
+        ``(frames, 1)`` array is taken as that).
     seq : ndarray of int, shape (frames,), optional
         Device sequence number, unwrapped, where known.
     meta : dict
@@ -56,10 +59,13 @@ class Session:
         if sig.ndim != 2 or sig.shape[0] != t.size:
             raise SessionError(f"signals: expected shape ({t.size}, N) (frames of t_s, channels), got {sig.shape}")
         p = float_array("pressure_pa", self.pressure_pa, error=SessionError)
-        if p.shape not in ((), (1,), t.shape):
-            raise SessionError(f"pressure_pa: expected one number or shape ({t.size},) (frames of t_s), got shape "
-                               f"{p.shape}")
-        p = np.broadcast_to(p, t.shape).copy()
+        if p.ndim == 2 and p.shape[0] == t.size and p.shape[1] >= 1:
+            p = p[:, 0].copy() if p.shape[1] == 1 else p.copy()  # one column per pressure line
+        elif p.shape not in ((), (1,), t.shape):
+            raise SessionError(f"pressure_pa: expected one number, shape ({t.size},) (frames of t_s) or "
+                               f"({t.size}, n_lines) (a pressure per line), got shape {p.shape}")
+        else:
+            p = np.broadcast_to(p, t.shape).copy()
         object.__setattr__(self, "t_s", t)
         object.__setattr__(self, "signals", sig)
         object.__setattr__(self, "pressure_pa", p)
@@ -89,6 +95,25 @@ class Session:
     def n_channels(self) -> int:
         """Number of signal channels N."""
         return self.signals.shape[1]
+
+    @property
+    def n_lines(self) -> int:
+        """Number of pressure lines: 1, or the columns of a ``(frames, n_lines)`` ``pressure_pa``."""
+        return 1 if self.pressure_pa.ndim == 1 else self.pressure_pa.shape[1]
+
+    def line_pressure_pa(self, line: int) -> np.ndarray:
+        """The pressure of one line [Pa], shape (frames,) (line 0 of a one-line session is ``pressure_pa``).
+
+        Parameters
+        ----------
+        line : int
+            Pressure line, 0-based, below :attr:`n_lines`.
+        """
+        if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not 0 <= line < self.n_lines:
+            lines = "line 0" if self.n_lines == 1 else f"lines 0..{self.n_lines - 1}"
+            raise SessionError(f"line: {short(line)} is not a pressure line of {self.source or 'the session'} "
+                               f"(it has {lines})")
+        return self.pressure_pa if self.pressure_pa.ndim == 1 else self.pressure_pa[:, line]
 
     @property
     def has_pressure(self) -> bool:
@@ -124,8 +149,10 @@ class Session:
                                f"below {len(self)}, got {short(index)} ({err})") from None
         seq = None if self.seq is None else self.seq[index]
         extra = {k: v[index] for k, v in self.extra.items()}
+        p = self.pressure_pa[index]
+        p = np.atleast_1d(p) if self.pressure_pa.ndim == 1 else p.reshape(-1, self.n_lines)
         return Session(
             np.atleast_1d(t_s), self.signals[index].reshape(-1, self.n_channels),
-            np.atleast_1d(self.pressure_pa[index]), None if seq is None else np.atleast_1d(seq), dict(self.meta),
+            p, None if seq is None else np.atleast_1d(seq), dict(self.meta),
             {k: np.atleast_1d(v) for k, v in extra.items()}, self.source,
         )

@@ -2,7 +2,10 @@
 
 A header row with ``t_s``, an optional pressure column (``pressure_pa`` or
 ``pressure_kpa``) and the signal columns ``ch1..chN``; ``#`` lines before the header
-are metadata; any other column is kept and passed through.
+are metadata; any other column is kept and passed through. A board with several
+pressure lines has ``line0_pressure_pa``, ``line1_pressure_pa``, ... (each may be
+``_kpa`` instead) in place of ``pressure_pa``: ``Session.pressure_pa`` is then
+``(frames, n_lines)``.
 """
 
 from __future__ import annotations
@@ -22,16 +25,22 @@ from bendsense.errors import SessionError
 from bendsense.plausibility import check_pressure_column, check_time_column
 from bendsense.session.base import Session
 from bendsense.session.cells import parse_column, write_columns
+from bendsense.session.records import check_line_pressure
 from bendsense.validation import key as _name
 from bendsense.validation import short
 
 __all__ = ["read_session_csv", "write_session_csv"]
 
 _CHANNEL = re.compile(r"ch([1-9][0-9]*)$")
+_LINE = re.compile(r"line(0|[1-9][0-9]*)_pressure_(pa|kpa)$")
+
+
+def _is_pressure(column: str) -> bool:
+    return column.startswith("pressure") or _LINE.match(column) is not None
 
 
 def _parse_float(text: str, line: int, column: str) -> float:
-    if not text and column.startswith("pressure"):
+    if not text and _is_pressure(column):
         return math.nan  # an empty pressure cell: no reading (docs/formats.md)
     try:
         value = float(text)
@@ -88,6 +97,7 @@ def _parse_session_csv(text: str, source: str) -> Session:
         raise SessionError(f"line {header_line}: missing required column t_s")
     if "pressure_pa" in seen and "pressure_kpa" in seen:
         raise SessionError(f"line {header_line}: give pressure_pa or pressure_kpa, not both")
+    line_cols = _line_columns(header, header_line)
     zero = [h for h in header if re.fullmatch(r"ch0[0-9]*", h)]
     if zero:
         raise SessionError(f"line {header_line}, column {zero[0]}: signal columns are numbered from 1 "
@@ -126,7 +136,7 @@ def _parse_session_csv(text: str, source: str) -> Session:
         raise SessionError("no data rows")
     cells = dict(zip(header, zip(*data)))
 
-    numeric = {"t_s", "pressure_pa", "pressure_kpa", *(h for _, h in channels)}
+    numeric = {"t_s", "pressure_pa", "pressure_kpa", *line_cols, *(h for _, h in channels)}
     values = {}
     for h in numeric & seen:
         try:
@@ -135,26 +145,60 @@ def _parse_session_csv(text: str, source: str) -> Session:
         except ValueError:
             arr = np.array([_parse_float(c.strip(), row_lines[i], h) for i, c in enumerate(cells[h])])
         # a missing pressure reading may be NaN (never ±inf); time and signals must be finite
-        wrong = np.isinf(arr) if h.startswith("pressure") else ~np.isfinite(arr)
+        wrong = np.isinf(arr) if _is_pressure(h) else ~np.isfinite(arr)
         if wrong.any():
             bad = int(np.flatnonzero(wrong)[0])
             raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {short(cells[h][bad].strip())}")
         values[h] = arr
     t = values["t_s"]
-    for name in ("pressure_pa", "pressure_kpa"):
-        if name in values:
-            check_pressure_column(name, values[name], header_line)
+    pressure = _pressure(values, line_cols, header_line, t.shape)
     check_time_column(t, source, row_lines)
-    if "pressure_pa" in values:
-        pressure = values["pressure_pa"]
-    elif "pressure_kpa" in values:
-        pressure = values["pressure_kpa"] * 1e3
-    else:
-        pressure = np.full(t.shape, np.nan)
     signals = np.column_stack([values[h] for _, h in channels])
     extra = {h: parse_column([c.strip() for c in cells[h]]) for h in header if h not in numeric}
     seq = extra.pop("seq").astype(np.int64) if "seq" in extra and extra["seq"].dtype.kind in "iu" else None
     return Session(t, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
+
+
+def _line_columns(header: list, header_line: int) -> list:
+    """The ``line<k>_pressure_pa|kpa`` columns of ``header`` in line order, checked (none: [])."""
+    found = {}
+    for h in header:
+        m = _LINE.match(h)
+        if m:
+            k = int(m.group(1))
+            if k in found:
+                raise SessionError(f"line {header_line}: pressure line {k} given twice ({found[k]} and {h})")
+            found[k] = h
+    if not found:
+        return []
+    given = [h for h in ("pressure_pa", "pressure_kpa") if h in header]
+    if given:
+        raise SessionError(f"line {header_line}: give {given[0]} (one pressure line) or line<k>_pressure_pa columns "
+                           f"(several), not both ({given[0]} and {found[min(found)]})")
+    missing = sorted(set(range(max(found) + 1)) - set(found))
+    if missing:
+        raise SessionError(f"line {header_line}: pressure line columns must be line0..line{max(found)}; missing "
+                           f"line{missing[0]}_pressure_pa")
+    return [found[k] for k in range(len(found))]
+
+
+def _pressure(values: dict, lines: list, header_line: int, shape: tuple) -> np.ndarray:
+    """The session's pressure [Pa] from its pressure column or line columns, checked for their unit."""
+    for name in ("pressure_pa", "pressure_kpa"):
+        if name in values:
+            check_pressure_column(name, values[name], header_line)
+    if lines:
+        cols = []
+        for h in lines:
+            unit = "pressure_kpa" if h.endswith("_kpa") else "pressure_pa"
+            check_line_pressure(h, unit, values[h], header_line)
+            cols.append(values[h] * (1e3 if unit == "pressure_kpa" else 1.0))
+        return np.column_stack(cols)
+    if "pressure_pa" in values:
+        return values["pressure_pa"]
+    if "pressure_kpa" in values:
+        return values["pressure_kpa"] * 1e3
+    return np.full(shape, np.nan)
 
 
 def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: bool = True) -> None:
@@ -162,7 +206,8 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
 
     Floats are written with ``repr`` so that reading the file back gives the same
     numbers bit for bit. Pressure is written as ``pressure_pa`` when any frame has
-    a reading.
+    a reading; several pressure lines as ``line0_pressure_pa, line1_pressure_pa, ...``
+    (always, ``nan`` where a line has no reading).
 
     Parameters
     ----------
@@ -181,7 +226,10 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
     output.check([output.file(path, overwrite=overwrite)], [source])
     header = ["t_s"]
     cols = [session.t_s]
-    if np.any(np.isfinite(session.pressure_pa)):
+    if session.pressure_pa.ndim == 2:
+        header += [f"line{k}_pressure_pa" for k in range(session.n_lines)]
+        cols += list(session.pressure_pa.T)
+    elif np.any(np.isfinite(session.pressure_pa)):
         header.append("pressure_pa")
         cols.append(session.pressure_pa)
     header += [f"ch{i + 1}" for i in range(session.n_channels)]

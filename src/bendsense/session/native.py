@@ -19,6 +19,9 @@ The record (:func:`record_dtype`) is ``host_ns``, the SAMPLE's fields of
                           (version 2; wraps at 65536)
     pressure_pa  <i4      pressure [Pa]; 0x7FFFFFFF = no reading
     adc          (N,)<u2  raw counts (a line-dialect or imported session may use <f8)
+    pressures_pa (K,)<i4  several pressure lines only (meta.yaml n_lines = K > 1): each
+                          line's pressure, NO_PRESSURE = no reading; pressure_pa is line 0
+                          (bendsense.session.records)
 
 ``meta.yaml`` lists the dtype as ``[name, numpy dtype string]`` pairs, so a reader never
 guesses the layout; further fields (from an imported CSV) follow the standard ones and
@@ -69,10 +72,14 @@ import yaml
 from bendsense import validation as check
 from bendsense._io import check_regular_file, load_yaml, open_regular
 from bendsense.errors import OutputError, SessionError
-from bendsense.frames import NO_PRESSURE, SAMPLE_FIELDS
-from bendsense.plausibility import check_pressure_column, check_time_column
-from bendsense.session.base import Session
+from bendsense.frames import MAX_LINES, NO_PRESSURE, SAMPLE_FIELDS
 from bendsense.session.csvfile import read_session_csv, write_session_csv
+from bendsense.session.records import (
+    LINES_FIELD,
+    SESSION_COLUMNS,
+    records_extra,
+    records_to_session,
+)
 from bendsense.validation import short
 
 __all__ = [
@@ -105,9 +112,6 @@ FRAMES = "frames.bin"
 EVENTS = "events.log"
 HOST_FIELD = ("host_ns", "<i8")  # the host's clock when it read the frame: first in every record
 ADC_TYPES = ("<u2", "<f4", "<f8")
-# record fields that become the Session's own columns (t_s, seq, pressure_pa, signals) or
-# host_s and status; every other field goes to Session.extra under its own name
-SESSION_COLUMNS = ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")
 
 
 def _field_types() -> dict:
@@ -132,11 +136,11 @@ def utc_now_iso(t: float | None = None) -> str:
     return _dt.datetime.fromtimestamp(t, _dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
-def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=()) -> np.dtype:
+def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=(), n_lines: int = 1) -> np.dtype:
     """Structured dtype of one ``frames.bin`` record (packed, little-endian).
 
-    ``host_ns``, the fields of :data:`bendsense.frames.SAMPLE_FIELDS`, ``adc``, then
-    ``extra_fields``.
+    ``host_ns``, the fields of :data:`bendsense.frames.SAMPLE_FIELDS`, ``adc``, with
+    several pressure lines ``pressures_pa`` (``(n_lines,)<i4``), then ``extra_fields``.
 
     Parameters
     ----------
@@ -147,14 +151,21 @@ def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=()) -> np
         sessions whose signals are not raw counts.
     extra_fields : sequence of (name, dtype str)
         Further per-frame columns appended after the standard ones.
+    n_lines : int, default 1
+        Pressure lines of the board (1..255); more than one adds ``pressures_pa``
+        (``pressure_pa`` then holds line 0). One line gives today's record, unchanged.
     """
     n = int(n_channels)
     if not 1 <= n <= 64:
         raise SessionError(f"n_channels: expected 1..64, got {n_channels!r}")
+    if isinstance(n_lines, bool) or not isinstance(n_lines, (int, np.integer)) or not 1 <= n_lines <= MAX_LINES:
+        raise SessionError(f"n_lines: expected 1..{MAX_LINES} pressure lines, got {n_lines!r}")
+    lines = [(LINES_FIELD, np.dtype("<i4"), (int(n_lines),))] if n_lines > 1 else []
     fields = [
         HOST_FIELD,
         *((f.name, f.dtype) for f in SAMPLE_FIELDS),
         ("adc", np.dtype(adc_dtype).newbyteorder("<"), (n,)),
+        *lines,
         *[(str(name), np.dtype(dt).newbyteorder("<")) for name, dt in extra_fields],
     ]
     return np.dtype(fields)
@@ -167,7 +178,10 @@ def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
     the same name, except two: ``t_us`` is the device clock given here, unwrapped, and
     ``pressure_pa`` is rounded to whole pascals, with :data:`NO_PRESSURE` for None (no
     reading). Further fields of ``dtype`` are left zero, and so is a field the sample has no
-    attribute for (a reading made up by hand, without ``status`` or ``tx_drops``).
+    attribute for (a reading made up by hand, without ``status`` or ``tx_drops``). A
+    ``dtype`` with several pressure lines takes each sample's ``pressures_pa`` (a sample
+    without them, or with fewer, gives its ``pressure_pa`` as line 0 and no reading for
+    the others; a sample with more lines than the session has is refused).
 
     Parameters
     ----------
@@ -193,7 +207,22 @@ def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
             rec[f.name] = [getattr(s, f.name, 0) for s in samples]
     rec["pressure_pa"] = [NO_PRESSURE if s.pressure_pa is None else round(s.pressure_pa) for s in samples]
     rec["adc"] = np.array([s.adc for s in samples])
+    if LINES_FIELD in dtype.names:
+        rec[LINES_FIELD] = _line_records(dtype, samples)
+        rec["pressure_pa"] = rec[LINES_FIELD][:, 0]
     return rec
+
+
+def _line_records(dtype: np.dtype, samples) -> np.ndarray:
+    """The ``pressures_pa`` field of ``samples`` (NO_PRESSURE for no reading)."""
+    n_lines = dtype.fields[LINES_FIELD][0].shape[0]
+    out = np.full((len(samples), n_lines), NO_PRESSURE, dtype=np.int64)
+    for i, s in enumerate(samples):
+        lines = getattr(s, "pressures_pa", ()) or (s.pressure_pa,)
+        if len(lines) > n_lines:
+            raise SessionError(f"samples: sample {i} has {len(lines)} pressure lines, the session {n_lines}")
+        out[i, : len(lines)] = [NO_PRESSURE if v is None else round(v) for v in lines]
+    return out
 
 
 def dtype_to_list(dtype: np.dtype) -> list:
@@ -254,6 +283,12 @@ def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | N
         raise SessionError(f"{where}: field adc: expected (N,) of {', '.join(ADC_TYPES)}, got {short(got)}")
     if n_channels is not None and shape[0] != n_channels:
         raise SessionError(f"{where}: field adc: expected {n_channels} values (n_channels), got {shape[0]}")
+    if LINES_FIELD in dt.names:
+        lines = dt.fields[LINES_FIELD][0]
+        if lines.subdtype is None or lines.subdtype[0].str != "<i4" or len(lines.shape) != 1 \
+                or not 2 <= lines.shape[0] <= MAX_LINES:
+            raise SessionError(f"{where}: field {LINES_FIELD}: expected (n_lines,)<i4 with 2..{MAX_LINES} lines, got "
+                               f"{short(dict((str(k), v) for k, v in pairs).get(LINES_FIELD))}")
     return dt
 
 
@@ -322,6 +357,10 @@ class SessionWriter:
     extra_files : sequence of str
         Further files written into the session directory by others (e.g. the
         ``results.csv`` of ``record --estimate``), listed in the manifest as bendsense's.
+    n_lines : int, default 1
+        Pressure lines of the board (1..255; see :func:`record_dtype`); more than one is
+        recorded in ``meta.yaml`` as ``n_lines``. :meth:`set_lines` changes it before
+        the first record.
 
     Notes
     -----
@@ -344,12 +383,15 @@ class SessionWriter:
         inputs=(),
         writer: str = "bendsense record",
         extra_files=(),
+        n_lines: int = 1,
     ):
         from bendsense import output
 
         self.path = Path(path)
-        self.dtype = record_dtype(n_channels, adc_dtype, extra_fields)
+        self.dtype = record_dtype(n_channels, adc_dtype, extra_fields, n_lines)
+        self._layout = (adc_dtype, tuple(extra_fields))
         self.n_channels = int(n_channels)
+        self.n_lines = int(n_lines)
         self.fsync_interval_s = float(fsync_interval_s)
         # written in place (a recording must survive being killed): the output layer checks
         # and locks the directory, removes an earlier session there (only what bendsense
@@ -390,6 +432,7 @@ class SessionWriter:
             "start_host_ns": now_ns,
             "n_channels": self.n_channels,
             "adc_bits": adc_bits,
+            **({"n_lines": self.n_lines} if self.n_lines > 1 else {}),
             "record_dtype": dtype_to_list(self.dtype),
             "record_size": self.dtype.itemsize,
             "finished": False,  # true once close() ran: a clean stop
@@ -453,6 +496,34 @@ class SessionWriter:
         self.failed = output.write_error(
             self.path / FRAMES, err, f"recording stopped; {self.n_records:,} frames kept (the session is readable)")
         return self.failed
+
+    def set_lines(self, n_lines: int) -> None:
+        """Record ``n_lines`` pressure lines: the record dtype and ``meta.yaml`` change; only before the first record.
+
+        A recorder learns a board's lines from its first SAMPLE, after the session was
+        created from the HELLO.
+
+        Parameters
+        ----------
+        n_lines : int
+            Pressure lines (1..255).
+        """
+        if n_lines == self.n_lines:
+            return
+        dtype = record_dtype(self.n_channels, self._layout[0], self._layout[1], n_lines)
+        with self._lock:
+            if self.n_records:
+                raise SessionError(f"{self.path}: n_lines: the session already holds {self.n_records} records of "
+                                   f"{self.n_lines} pressure line(s)")
+            self.dtype, self.n_lines = dtype, int(n_lines)
+            meta = {k: v for k, v in self.meta.items() if k != "n_lines"}
+            self.meta = {}
+            for key, value in meta.items():
+                if key == "record_dtype" and self.n_lines > 1:
+                    self.meta["n_lines"] = self.n_lines
+                self.meta[key] = value
+            self.meta.update(record_dtype=dtype_to_list(dtype), record_size=dtype.itemsize)
+            self._write_meta()
 
     def empty(self, n: int) -> np.ndarray:
         """``n`` zeroed records of this session's dtype (pressure set to "no reading").
@@ -600,7 +671,8 @@ def read_session_meta(path) -> dict:
     if not isinstance(meta["record_dtype"], list):
         raise SessionError(f"{where}: record_dtype: expected a list of [name, dtype] pairs, "
                            f"got {short(meta['record_dtype'])}")
-    checks = {"n_channels": (1, 64), "adc_bits": (1, 16), "record_size": (1, None), "n_records": (0, None)}
+    checks = {"n_channels": (1, 64), "adc_bits": (1, 16), "record_size": (1, None), "n_records": (0, None),
+              "n_lines": (1, MAX_LINES)}
     try:
         for key, (lo, hi) in checks.items():
             if meta.get(key) is not None:
@@ -639,6 +711,10 @@ def read_records(path) -> tuple[np.ndarray, dict]:
         dtype = dtype_from_list(meta["record_dtype"], version=version, n_channels=meta.get("n_channels"))
     except SessionError as err:
         raise SessionError(f"{path}: {err}") from None
+    lines = dtype.fields[LINES_FIELD][0].shape[0] if LINES_FIELD in dtype.names else 1
+    if meta.get("n_lines", 1) != lines:
+        raise SessionError(f"{where}: n_lines is {meta.get('n_lines', 1)}, but record_dtype holds {lines} pressure "
+                           "line(s) (an edited meta.yaml?)")
     size = dtype.itemsize
     if meta.get("record_size") is not None and meta["record_size"] != size:
         raise SessionError(f"{where}: record_size is {meta['record_size']} bytes, but record_dtype gives "
@@ -685,120 +761,6 @@ def read_records(path) -> tuple[np.ndarray, dict]:
     return records, meta
 
 
-def _unwrap16(seq: np.ndarray) -> np.ndarray:
-    seq = seq.astype(np.int64)
-    if seq.size == 0:
-        return seq
-    steps = np.diff(seq) % 65536
-    return seq[0] + np.concatenate([[0], np.cumsum(steps)])
-
-
-def records_extra(records: np.ndarray, host0_ns: int | None = None) -> dict:
-    """The ``Session.extra`` columns of native records, in order.
-
-    ``host_s`` (host clock relative to ``host0_ns`` [s]), ``status`` (the status bits)
-    and every record field without a column of its own (``tx_drops``, ...), under its
-    name. :func:`records_to_session` gives a recording these; ``record --estimate``
-    gives its live ``results.csv`` the same, so that its columns are those of ``save``.
-
-    Parameters
-    ----------
-    records : ndarray
-        Structured records (:func:`record_dtype`).
-    host0_ns : int, optional
-        Host clock of the session's first frame [ns]; default: that of the first record.
-    """
-    host = records["host_ns"]
-    if host0_ns is None:
-        host0_ns = host[0] if host.size else 0
-    extra = {
-        "host_s": (host - host0_ns) * 1e-9,
-        "status": records["status"].astype(np.int64),
-    }
-    for name in records.dtype.names:
-        if name not in SESSION_COLUMNS:
-            extra[name] = np.array(records[name])
-    return extra
-
-
-def device_time_us(records: np.ndarray, source: str = "session") -> np.ndarray:
-    """The device clock of ``records`` [us], with resets bridged by the host clock (and a warning).
-
-    The driver removes the u32 wraps of ``t_us`` as it records (a wrap every 71.6 min
-    is normal), but a board that resets or reconnects restarts its clock: ``t_us``
-    jumps back or stands still. Such a recording is legitimate, so it is kept: at
-    each step that does not advance, the interval is taken from the host clock
-    (``host_ns``, monotonic; the typical device step when the host's is 0, as for
-    frames read in one burst), and the device clock goes on from there. The warning
-    names the frames (0-based) where it happened.
-
-    Parameters
-    ----------
-    records : ndarray
-        Structured records with ``t_us`` and ``host_ns``.
-    source : str, default "session"
-        The session, for the warning.
-    """
-    t_us = records["t_us"].astype(np.int64)
-    if t_us.size < 2:
-        return t_us
-    step = np.diff(t_us)
-    bad = np.flatnonzero(step <= 0)
-    if not bad.size:
-        return t_us
-    forward = step[step > 0]
-    typical = int(np.median(forward)) if forward.size else 1
-    host_us = np.diff(records["host_ns"].astype(np.int64)) // 1000
-    bridged = step.copy()
-    bridged[bad] = np.where(host_us[bad] > 0, host_us[bad], typical)
-    first = int(bad[0]) + 1
-    frames = ", ".join(str(int(k) + 1) for k in bad[:5]) + (", ..." if bad.size > 5 else "")
-    log.warning("%s: the device clock (t_us) goes back or stands still at %d frame(s) (frame %s: %d us after %d us; a "
-                "board reset?); time from there on continues from the host clock (frames %s)", source, bad.size,
-                first, int(t_us[first]), int(t_us[first - 1]), frames)
-    return t_us[0] + np.concatenate([[0], np.cumsum(bridged)])
-
-
-def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
-    """Build a :class:`~bendsense.session.Session` from raw records.
-
-    ``t_s`` is the unwrapped device clock relative to the first frame (plus
-    ``meta["t_offset_s"]`` of an imported CSV), with clock resets bridged by the host
-    clock (:func:`device_time_us`); ``extra`` holds ``host_s`` (host clock
-    relative to the first frame [s]), ``status`` and any further record fields
-    (``tx_drops``: the firmware's cumulative counter; any field of
-    :data:`bendsense.frames.SAMPLE_FIELDS` beyond ``SESSION_COLUMNS`` under its own name,
-    as recorded). ``meta["frames_lost"]`` counts
-    the sequence gaps and ``meta["tx_drops"]`` the frames the firmware could not send
-    during the session (0 for version 1, which has no counter).
-
-    Parameters
-    ----------
-    records : ndarray
-        Structured records of ``frames.bin``.
-    meta : dict
-        The session's metadata (:func:`read_records`).
-    source : str, default ""
-        Where the records came from, kept as ``Session.source``.
-    """
-    n_ch = records.dtype.fields["adc"][0].shape[0]
-    t_us = device_time_us(records, source or "session")
-    t0 = float(meta.get("t_offset_s") or 0.0)
-    t_s = t0 + (t_us - (t_us[0] if t_us.size else 0)) * 1e-6
-    p = records["pressure_pa"]
-    pressure = np.where(p == NO_PRESSURE, np.nan, p.astype(float))
-    extra = records_extra(records)
-    signals = np.array(records["adc"], dtype=float).reshape(len(records), n_ch)
-    seq = _unwrap16(records["seq"])
-    meta = dict(meta)
-    meta["frames_lost"] = int(np.maximum(np.diff(seq) - 1, 0).sum())  # the gaps; a repeated seq is no loss
-    drops = _unwrap16(records["tx_drops"]) if "tx_drops" in records.dtype.names else np.zeros(0, np.int64)
-    meta["tx_drops"] = int(drops[-1] - drops[0]) if drops.size else 0
-    check_pressure_column("pressure_pa", pressure, f"{source or 'session'}/{FRAMES}")
-    check_time_column(t_s, f"{source or 'session'}/{FRAMES}")
-    return Session(t_s, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
-
-
 def read_session_dir(path):
     """Read a native session directory into a :class:`~bendsense.session.Session`.
 
@@ -836,7 +798,8 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
 
     Time is stored in whole microseconds (``t_s[0]`` kept as ``meta["t_offset_s"]``) and
     pressure in whole pascals; signals are stored as ``<u2`` when they are all counts
-    in 0..65535, else as ``<f8``. Numeric extra columns become further record fields;
+    in 0..65535, else as ``<f8``. Several pressure lines (``line<k>_pressure_pa``
+    columns) are stored as ``pressures_pa`` with ``n_lines``. Numeric extra columns become further record fields;
     text columns are dropped (and logged). Columns named after a field of
     :data:`bendsense.frames.SAMPLE_FIELDS` (an exported native session's ``status``,
     ``tx_drops``) go back into that field.
@@ -873,6 +836,7 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
         overwrite=overwrite,
         inputs=[csv_path],
         writer="bendsense import",
+        n_lines=s.n_lines,
     )
     try:
         rec = writer.empty(n)
@@ -891,7 +855,11 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
             if f.name not in SESSION_COLUMNS and values is not None and values.dtype.kind in "iu":
                 rec[f.name] = values.astype(np.int64).astype(f.dtype)
         p = s.pressure_pa
-        rec["pressure_pa"] = np.where(np.isfinite(p), np.round(np.nan_to_num(p)), NO_PRESSURE).astype(np.int64)
+        p = np.where(np.isfinite(p), np.round(np.nan_to_num(p)), NO_PRESSURE).astype(np.int64)
+        if p.ndim == 2:  # several pressure lines: pressure_pa holds line 0, as on the wire
+            rec[LINES_FIELD] = p
+            p = p[:, 0]
+        rec["pressure_pa"] = p
         rec["adc"] = sig
         for name, (values, _) in extra_cols.items():
             rec[name] = values

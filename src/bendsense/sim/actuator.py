@@ -392,7 +392,7 @@ class SimulatedActuator:
         )
 
     def solve_contact(self, pressure_pa, contact_n, force_n=(0.0, 0.0), *, contact_s_m=None, ramp_steps=4,
-                      tol_rad=1e-10, max_iter=20):
+                      tol_rad=1e-10, max_iter=20, s_m=None):
         """Solve for a contact force normal to the true loaded tangent at the contact point (paper eq. 21).
 
         The contact force ``F_c = f_c (−cos φ_c, sin φ_c)`` is normal to the tangent
@@ -421,6 +421,9 @@ class SimulatedActuator:
             Newton stops when |φ(s_c) − φ_c| < ``tol_rad`` [rad].
         max_iter : int
             Newton iterations per load step.
+        s_m : array_like, shape (M,), optional
+            Output arc lengths of the solution [m]; default the true-shape grid on
+            ``[0, L_sensor]`` followed by the tip ``L`` (as :meth:`solve`).
 
         Returns
         -------
@@ -444,7 +447,8 @@ class SimulatedActuator:
         fc = np.broadcast_to(fc, shape).reshape(B)
         fixed = np.broadcast_to(fixed, (*shape, 2)).reshape(B, 2)
         # the contact point rides along as one more output point (the last)
-        grid = np.append(self._s_beam, self.config.actuator.length_m if sc is None else sc)
+        grid = np.append(self._s_beam if s_m is None else np.asarray(s_m, dtype=float),
+                         self.config.actuator.length_m if sc is None else sc)
 
         def solve(pp, f, **kw):
             return self.solve(pp, f, contact_s_m=sc, s_m=grid, **kw)

@@ -1,12 +1,19 @@
 """Write the frozen format fixtures that tests/test_formats_frozen.py loads.
 
-    python tests/data/formats/make.py
+    python tests/data/formats/make.py          # stream_v1.bin, session_v2/
+    python tests/data/formats/make.py lines    # stream_v2_lines.bin, session_v2_lines/
 
 One run of the simulated board (wire protocol version 1), read by the driver and
 recorded by the recorder as ``bendsense record`` does:
 
 - ``stream_v1.bin``: every byte the driver read from the board, in order;
 - ``session_v2/``: the native session (format version 2) the recorder wrote from them.
+
+And one run of a gripper's board (SAMPLE version 2, three pressure lines: a replayed
+session), written by ``main_lines``:
+
+- ``stream_v2_lines.bin``: every byte the driver read;
+- ``session_v2_lines/``: the native session (format version 2 with ``n_lines: 3``).
 
 The board starts shortly before the wraps of its sequence number and its u32 clock,
 drops and corrupts a few frames, sends a TEXT and, every 37th frame, no pressure, so
@@ -76,5 +83,40 @@ def main():
     print(f"{STREAM.name}: {STREAM.stat().st_size} bytes; {SESSION.name}: {rec.stats.records} records; {sim.stats}")
 
 
+STREAM_LINES = HERE / "stream_v2_lines.bin"
+SESSION_LINES = HERE / "session_v2_lines"
+FRAMES_LINES = 150
+
+
+def main_lines():
+    import numpy as np
+
+    from bendsense.device.replay import ReplayDevice
+    from bendsense.session import Session
+
+    k = np.arange(FRAMES_LINES)
+    pressure = np.column_stack([20_000.0 + 100.0 * k, 30_000.0 + 50.0 * k, 40_000.0 - 20.0 * k])
+    pressure[k % 23 == 4, 2] = np.nan  # line 2 without a reading now and then
+    pressure[k % 41 == 7, 0] = np.nan  # and line 0 (offset 12 says "no reading" too)
+    counts = (k[:, None] * 13 + 211 * np.arange(8)[None, :]) % 4096
+    seq = (65536 - 60 + k) % 65536  # the sequence wraps
+    session = Session(k * 1e-3, counts.astype(float), pressure, seq=seq, extra={"status": (k % 5 == 0) * 2})
+    shutil.rmtree(SESSION_LINES, ignore_errors=True)
+    dev = ReplayDevice(session, adc_bits=12, drop=0.02, corrupt=0.02, seed=5)
+    with dev, CapturingDriver(dev.port) as drv:
+        rec = Recorder(drv, SESSION_LINES, meta={"fixture": "tests/data/formats/make.py"})
+        drv.start()
+        rec.start()
+        wait_for(dev.finished.is_set)
+        wait_for(lambda: drv.queued == 0 and rec.stats.records == drv.stats.samples)
+        rec.stop()
+    STREAM_LINES.write_bytes(b"".join(drv.captured))
+    print(f"{STREAM_LINES.name}: {STREAM_LINES.stat().st_size} bytes; {SESSION_LINES.name}: {rec.stats.records} "
+          f"records; {dev.stats}")
+
+
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:] == ["lines"]:
+        main_lines()
+    else:
+        main()
