@@ -253,3 +253,21 @@ def test_process_over_gripper_sessions(board):
     res = run("process", root / "board.csv", "--config", root / "gripper.yaml", "--calibration", f"thumb={cal}",
               "-o", root / "batch2", "--workers", "0", "--no-progress")
     assert res.exit_code == 1 and "no calibration for fingers index, middle" in res.output
+
+
+def test_export_one_finger(board):
+    root, gripper, cal = board
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "export", "--finger", "middle",
+              root / "middle.csv", "export", root / "board-copy.csv")
+    assert res.exit_code == 0, res.output
+    middle = read_session(root / "middle.csv")
+    board_session = read_session(root / "board.csv")
+    np.testing.assert_array_equal(middle.signals, board_session.signals[:, 2 * N:])
+    np.testing.assert_array_equal(middle.extra["fy_n"], board_session.extra["middle_fy_n"])
+    assert read_session(root / "board-copy.csv").n_channels == 3 * N
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "export", "--finger", "pinky",
+              root / "pinky.csv")
+    assert res.exit_code == 1 and "finger 'pinky': not a finger of this gripper" in res.output
+    assert not (root / "pinky.csv").exists()
+    res = run("load", root / "board.csv", "export", "--finger", "thumb", root / "thumb.csv")
+    assert res.exit_code == 2 and "a finger needs a gripper's config" in res.output

@@ -1,6 +1,7 @@
 """Gripper configs (``fingers:``) and the board split per finger (issue 24, DESIGN section 2b)."""
 
 import copy
+import pickle
 
 import numpy as np
 import pytest
@@ -115,6 +116,7 @@ def test_unknown_finger_and_single_actuator_functions_refuse_a_gripper(tmp_path)
     with pytest.raises(AttributeError):
         g.no_such_attribute  # noqa: B018 (other attributes stay plain AttributeErrors)
     assert copy.deepcopy(g) == g
+    assert pickle.loads(pickle.dumps(g)) == g  # (batch workers get it pickled)
 
 
 def board(k=3, frames=5, lines=None):
