@@ -62,6 +62,19 @@ def board(tmp_path_factory, calibration_path):
     return root, gripper, calibration_path
 
 
+def same_output(a, b, rtol=0.0):
+    """results.csv byte for byte, and shape.npz array for array (a zip records its write time).
+
+    ``rtol``: the chain's ``reconstruct --points`` and ``process`` space the arc lengths of
+    shape.npz apart by an ulp (as for a single actuator).
+    """
+    assert (a / "results.csv").read_bytes() == (b / "results.csv").read_bytes()
+    with np.load(a / "shape.npz") as x, np.load(b / "shape.npz") as y:
+        assert sorted(x.files) == sorted(y.files) == ["positions_m", "s_m"]
+        for key in x.files:
+            np.testing.assert_allclose(x[key], y[key], rtol=rtol, atol=0)
+
+
 def run(*args):
     res = CliRunner().invoke(main, [str(a) for a in args])
     return res
@@ -86,8 +99,7 @@ def test_each_finger_is_a_single_actuator_run_of_its_part(board, chain):
         res = run("load", root / f"{finger.name}.csv", "--config", root / f"{finger.name}.yaml", "--calibration", cal,
                   "reconstruct", "estimate", "track", "save", root / f"single-{finger.name}")
         assert res.exit_code == 0, res.output
-        for name in ("results.csv", "shape.npz"):
-            assert (chain / finger.name / name).read_bytes() == (root / f"single-{finger.name}" / name).read_bytes()
+        same_output(chain / finger.name, root / f"single-{finger.name}")
     from bendsense.output_manifest import read_manifest
 
     assert sorted(p.name for p in chain.iterdir() if not p.name.startswith(".")) == sorted(NAMES)
@@ -224,3 +236,38 @@ def test_calibrate_a_finger_from_board_recordings(tmp_path, board):
     assert res.exit_code == 1 and "fitted for finger index, given for finger thumb" in res.output
     res = run("calibrate", board_dir / "manifest.yaml", "--config", root / "gripper.yaml", "-o", tmp_path / "x.yaml")
     assert res.exit_code == 2 and "give --finger NAME" in res.output and not (tmp_path / "x.yaml").exists()
+
+
+def test_process_over_gripper_sessions(board):
+    """``process`` writes OUT/<session>/<finger>/, each finger as the chain writes it."""
+    root, gripper, cal = board
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "--calibration", cal,
+              "reconstruct", "estimate", "save", root / "chain-estimate")
+    assert res.exit_code == 0, res.output
+    res = run("process", root / "board.csv", "--config", root / "gripper.yaml", "--calibration", f"thumb={cal}",
+              "--calibration", cal, "-o", root / "batch", "--workers", "0", "--no-progress")
+    assert res.exit_code == 0, res.output
+    for name in NAMES:
+        same_output(root / "batch" / "board" / name, root / "chain-estimate" / name, rtol=1e-14)
+    assert "board" in res.output and " 40 " in res.output.replace("|", " ")
+    res = run("process", root / "board.csv", "--config", root / "gripper.yaml", "--calibration", f"thumb={cal}",
+              "-o", root / "batch2", "--workers", "0", "--no-progress")
+    assert res.exit_code == 1 and "no calibration for fingers index, middle" in res.output
+
+
+def test_export_one_finger(board):
+    root, gripper, cal = board
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "export", "--finger", "middle",
+              root / "middle.csv", "export", root / "board-copy.csv")
+    assert res.exit_code == 0, res.output
+    middle = read_session(root / "middle.csv")
+    board_session = read_session(root / "board.csv")
+    np.testing.assert_array_equal(middle.signals, board_session.signals[:, 2 * N:])
+    np.testing.assert_array_equal(middle.extra["fy_n"], board_session.extra["middle_fy_n"])
+    assert read_session(root / "board-copy.csv").n_channels == 3 * N
+    res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "export", "--finger", "pinky",
+              root / "pinky.csv")
+    assert res.exit_code == 1 and "finger 'pinky': not a finger of this gripper" in res.output
+    assert not (root / "pinky.csv").exists()
+    res = run("load", root / "board.csv", "export", "--finger", "thumb", root / "thumb.csv")
+    assert res.exit_code == 2 and "a finger needs a gripper's config" in res.output

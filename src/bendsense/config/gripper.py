@@ -242,8 +242,8 @@ class GripperConfig:
         """
         name = f" {self.name!r}" if self.name else ""
         return (f"{what}: the config{name} is a gripper config (fingers {', '.join(self.names)}); this takes one "
-                f"actuator: pass one finger's config (gripper.finger(NAME).config) or, on the command line, the "
-                f"gripper's steps")
+                f"actuator's config: one finger's (gripper.finger(NAME).config in Python; on the command line a "
+                f"config without fingers:)")
 
     @property
     def names(self) -> tuple:
