@@ -103,7 +103,8 @@ def session(template, proc, ctl, seconds):
         sent["t"] = time.perf_counter()
         signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
-    with SimulatedDevice(board, rate_hz=RATE_HZ, truth=truth) as dev, Driver(dev.port) as driver:
+    with SimulatedDevice(board, rate_hz=RATE_HZ, truth=truth, n_channels=board.n_channels) as dev, \
+            Driver(dev.port) as driver:
         driver.start()
         timer = threading.Timer(seconds, interrupt)
         timer.start()

@@ -367,3 +367,33 @@ def test_run_refuses_bad_arguments():
         run(FakeBoard(), FakeProcessor(), lambda b: {}, max_pressure_pa=-1.0)
     with pytest.raises(ArgumentError, match="silence_s"):
         Safety(silence_s=0.0)
+
+
+# --------------------------------------------------------------------------- the command's checks
+
+
+@pytest.mark.parametrize(("extra", "gripper", "match"), [
+    (["--finger", "thumb"], False, "'--finger': names a finger of a gripper config"),
+    (["--finger", "pinky"], True, "finger 'pinky': not a finger of this gripper; its fingers: thumb, index"),
+    ([], "shared", "'--finger': fingers thumb and index both drive pressure line 0: control one of them with --finger"),
+    (["--max-pressure-kpa", "0"], False, "'--max-pressure-kpa': expected a pressure limit > 0 kPa, got 0"),
+])
+def test_control_refuses_what_it_cannot_do(tmp_path, extra, gripper, match):
+    from click.testing import CliRunner
+
+    from bendsense import save_config
+    from bendsense.cli import main
+    from bendsense.sim import gripper_config
+
+    cal = tmp_path / "cal.yaml"
+    linear_calibration().save(cal)
+    args = ["control", "/dev/null", "--calibration", str(cal), "--target-force-n", "0.15", *extra]
+    if gripper:
+        config = gripper_config(2).to_dict()
+        if gripper == "shared":
+            config["fingers"][1]["pressure_line"] = 0
+        save_config(type(gripper_config(2)).from_dict(config), tmp_path / "g.yaml")
+        args += ["--config", str(tmp_path / "g.yaml")]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2, res.output
+    assert match in " ".join(res.output.split())

@@ -213,3 +213,40 @@ def test_sigterm_ends_the_command_with_every_line_at_zero(board, calibration_pat
     assert "Interrupted (SIGTERM): set-point 0 sent on every pressure line" in err
     assert truth.column("setpoint_pa").max() > 50e3 and truth.column("setpoint_pa")[-1] == 0.0
     assert len(bendsense.read_session(out)) > 100 and (out / CONTROL_LOG).is_file()
+
+
+def test_a_gripper_holds_with_two_fingers_and_lets_go_of_every_line(calibration_path, tmp_path):
+    from bendsense.control import Grasp
+    from bendsense.gripper_live import GripperProcessor
+    from bendsense.sim import gripper_config
+
+    gripper = gripper_config(3)
+    board = GraspBoard(gripper, [GraspObject(S_C, p) for p in (40e3, 45e3, 35e3)], rate_hz=RATE, seed=0)
+    proc = GripperProcessor(Calibration.load(calibration_path), gripper, load="contact", contact_s_m=S_C,
+                            constraint="normal", bandwidth_hz=30.0)
+    proc.warm_up()
+    grasp = Grasp([PIController(0.15, line=f.pressure_line, finger=f.name, max_pressure_pa=LIMIT_PA)
+                   for f in gripper.fingers[:2]])  # the middle finger is left to the board's own profile
+    truth, out = Truth(), tmp_path / "grip"
+    with SimulatedDevice(board, rate_hz=RATE, truth=truth, n_channels=board.n_channels) as dev, \
+            Driver(dev.port) as driver:
+        rec = ControlRecording(driver, out, config=gripper, fingers=gripper.names)
+        driver.start()
+        result = run(driver, proc, grasp, max_pressure_pa=LIMIT_PA, seconds=1.0, recording=rec)
+        time.sleep(0.03)
+    assert result.lines == (0, 1, 2)
+    for k, name in enumerate(gripper.names):
+        setpoint = truth.column(f"line{k}_setpoint_pa")
+        assert setpoint[-1] == 0.0  # every line of the board let go, the uncontrolled one too
+        if k < 2:
+            force = np.hypot(truth.column(f"{name}_fx_n"), truth.column(f"{name}_fy_n"))
+            held = np.flatnonzero(setpoint > 0)[-1]
+            assert np.all(np.abs(force[held - 150:held] - 0.15) <= 0.01)
+    with open(out / CONTROL_LOG, newline="") as fh:
+        header = next(csv.reader(fh))
+    assert header == ["t_s", "seq", "host_s",
+                      *(f"{n}_{c}" for n in ("thumb", "index") for c in ("normal_force_n", "normal_force_std_n",
+                                                                         "contact_s_m", "target_force_n", "status")),
+                      *(f"line{k}_{c}" for k in range(3) for c in ("setpoint_pa", "pressure_pa"))]
+    assert all((out / name / "results.csv").is_file() for name in gripper.names)
+    assert len(bendsense.read_session(out)) == result.frames

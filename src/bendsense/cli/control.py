@@ -70,6 +70,9 @@ def _limit(config, max_pressure_kpa):
     from bendsense.config import GripperConfig
 
     if max_pressure_kpa is not None:
+        if not max_pressure_kpa > 0:
+            raise click.BadParameter(f"expected a pressure limit > 0 kPa, got {max_pressure_kpa:g}",
+                                     param_hint="'--max-pressure-kpa'")
         return max_pressure_kpa * 1e3
     configs = [f.config for f in config.fingers] if isinstance(config, GripperConfig) else [config]
     return min([DEFAULT_MAX_PRESSURE_PA, *(c.actuator.pressure_range_pa[1] for c in configs)])
