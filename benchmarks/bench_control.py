@@ -70,6 +70,66 @@ class Truth:
         return np.array([r[2][name] for r in self.rows])
 
 
+#: the simulated board in its own process (as a real board is: its frame synthesis does not compete with the loop
+#: for the GIL); its truth rows carry the host time each frame was made (time.perf_counter: CLOCK_MONOTONIC,
+#: the same clock in both processes on Linux)
+CHILD = r"""
+import json, sys, time
+from bench_control import board_of
+from bendsense.device.simdevice import SimulatedDevice
+
+k, path = int(sys.argv[1]), sys.argv[2]
+board = board_of(k)
+
+
+class Truth:
+    def __init__(self, fh):
+        self.fh = fh
+
+    def write(self, seq, t_us, truth):
+        self.fh.write(f"{time.perf_counter()!r}\t{seq}\t{json.dumps(truth)}\n")
+
+    def flush(self):
+        self.fh.flush()
+
+
+with open(path, "w") as fh, SimulatedDevice(board, rate_hz=1000.0, truth=Truth(fh), n_channels=board.n_channels) as dev:
+    print(dev.port, board.n_lines, " ".join(board.truth_fingers or []), flush=True)
+    sys.stdin.read()  # until the parent closes it
+"""
+
+
+class Board:
+    """A board of k fingers in a child process (:data:`CHILD`); ``truth(since)`` reads its rows after a host time."""
+
+    def __init__(self, k, root: Path):
+        import subprocess
+
+        self.path = root / f"truth{k}.tsv"
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parent),
+                                                            os.environ.get("PYTHONPATH", "")]))
+        self.proc = subprocess.Popen([sys.executable, "-c", CHILD, str(k), str(self.path)], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True, env=env)
+        port, n_lines, *fingers = self.proc.stdout.readline().split(" ")
+        self.port, self.n_lines = port, int(n_lines)
+        self.truth_fingers = [f.strip() for f in fingers if f.strip()] or None
+
+    def truth(self, since_s):
+        import json
+
+        out = Truth()
+        with open(self.path, encoding="utf-8") as fh:
+            for line in fh:
+                parts = line.rstrip("\n").split("\t")
+                if len(parts) == 3 and float(parts[0]) >= since_s:
+                    out.rows.append((float(parts[0]), int(parts[1]), json.loads(parts[2])))
+        return out
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait(timeout=30)
+
+
 def processor(cal, k):
     """One LiveProcessor for the single actuator, a gripper processor of k fingers otherwise."""
     options = {"load": "contact", "contact_s_m": S_C, "constraint": "normal", "bandwidth_hz": 30.0}
@@ -91,20 +151,20 @@ def controller(k):
                   for f in gripper.fingers])
 
 
-def session(template, proc, ctl, seconds):
-    """A session on a fresh copy of the board: (truth, the loop's result, the signal's time, the board)."""
-    board = copy.deepcopy(template)  # the regulators and the noise from the start; the tables made once
+def session(board, proc, ctl, seconds):
+    """A session on the board (a :class:`Board` in its own process, or a GraspBoard here, copied fresh).
+
+    Returns (truth, the loop's result, the signal's time, the board).
+    """
     proc.reset()
     ctl.reset()
-    truth = Truth()
     sent = {}
 
     def interrupt():
         sent["t"] = time.perf_counter()
         signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
-    with SimulatedDevice(board, rate_hz=RATE_HZ, truth=truth, n_channels=board.n_channels) as dev, \
-            Driver(dev.port) as driver:
+    def loop(driver):
         driver.start()
         timer = threading.Timer(seconds, interrupt)
         timer.start()
@@ -114,6 +174,19 @@ def session(template, proc, ctl, seconds):
         except KeyboardInterrupt as err:
             result = err.result
         time.sleep(0.05)  # frames after the stop
+        return result
+
+    t0 = time.perf_counter()
+    if isinstance(board, Board):
+        with Driver(board.port) as driver:
+            result = loop(driver)
+        time.sleep(0.3)  # the regulators let the pressure down before the next session
+        return board.truth(t0), result, sent["t"], board
+    board = copy.deepcopy(board)  # the regulators and the noise from the start; the tables made once
+    truth = Truth()
+    with SimulatedDevice(board, rate_hz=RATE_HZ, truth=truth, n_channels=board.n_channels) as dev, \
+            Driver(dev.port) as driver:
+        result = loop(driver)
     return truth, result, sent["t"], board
 
 
@@ -149,48 +222,61 @@ def score(truth, result, t_signal, board, k):
     loop = {"per_frame_s": result.per_frame_s,
             "p99_block_per_frame_s": float(np.percentile(result.loop_s / np.maximum(result.block_frames, 1), 99)),
             "frames_per_block": float(np.mean(result.block_frames)),
+            "own_per_frame_s": float(np.sum(result.loop_s - result.process_s) / max(result.frames, 1)),
             "host_zero_s": result.stopped_at_s + result.zero_latency_s - t_signal, "frames": result.frames}
     return out, loop
 
 
 
 
-def rows(quick=False, fingers=(1, 3), seconds=1.5, stop_repeats=None):
+def rows(quick=False, fingers=(1, 3), seconds=1.5, stop_repeats=None, in_process=False):
     """(what, target, measured, pass) rows for run_all.py's table."""
     stop_repeats = (4 if quick else 9) if stop_repeats is None else stop_repeats
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         simulate("calibration", root / "cal", seed=0, frames_per_strip=20 if quick else 50)
         cal = Calibration.fit(root / "cal" / "manifest.yaml")
+        table = []
+        for k in fingers:
+            template = board_of(k) if in_process else Board(k, root)
+            try:
+                table += _rows_of(k, template, processor(cal, k), controller(k), seconds, stop_repeats)
+            finally:
+                if not in_process:
+                    template.close()
+    return table
+
+
+def _rows_of(k, template, proc, ctl, seconds, stop_repeats):
+    """The rows of k fingers: the step session, then the stops."""
     table = []
-    for k in fingers:
-        template, proc, ctl = board_of(k), processor(cal, k), controller(k)
-        truth, result, t_signal, board = session(template, proc, ctl, seconds)
-        per, loop = score(truth, result, t_signal, board, k)
-        stops = [score(*session(template, proc, ctl, 0.3), k) for _ in range(stop_repeats)]
-        host_zero = np.array([loop["host_zero_s"], *(s[1]["host_zero_s"] for s in stops)])
-        board_zero = np.array([max(r["board_zero_s"] for r in p) for p, _ in [(per, loop), *stops]])
-        late = np.array([max(r["frames_after_stop"] for r in p) for p, _ in [(per, loop), *stops]])
-        worst = max(per, key=lambda r: r["settle_s"])
-        label = f"control, {k} finger{'s' if k > 1 else ''} at 1 kHz"
-        table.append((f"{label}: step to 0.15 N, settled (rise)", "<= 0.3 s",
-                      f"{worst['settle_s']:.3f} s ({max(r['rise_s'] for r in per):.3f} s), worst finger",
-                      worst["settle_s"] <= 0.3))
-        err = max(abs(r["steady_error_n"]) for r in per)
-        table.append((f"{label}: steady error vs the simulator's truth", "<= 10 mN",
-                      f"{err * 1e3:.2f} mN (ripple {max(r['ripple_n'] for r in per) * 1e3:.2f} mN RMS)", err <= 0.01))
-        peak = max(r["peak_pressure_pa"] for r in per)
-        table.append((f"{label}: peak pressure / set-point (limit 100 kPa)", "<= limit",
-                      f"{peak / 1e3:.1f} / {max(r['peak_setpoint_pa'] for r in per) / 1e3:.1f} kPa",
-                      peak <= LIMIT_PA and max(r["peak_setpoint_pa"] for r in per) <= LIMIT_PA))
-        table.append((f"{label}: set-point 0 after Ctrl-C, {host_zero.size} stops (host write; board)",
-                      "<= 1 frame (1 ms)",
-                      f"host median {np.median(host_zero) * 1e3:.2f} ms, max {host_zero.max() * 1e3:.2f} ms; board's "
-                      f"first zero frame median {np.median(board_zero) * 1e3:.2f} ms; frames still set after the "
-                      f"signal: median {np.median(late):.0f}, max {late.max()}", np.median(host_zero) <= 1e-3))
-        table.append((f"{label}: loop per frame (process, check, control, send)", "keeps up (< 1 ms)",
-                      f"{loop['per_frame_s'] * 1e6:.0f} µs mean, p99 {loop['p99_block_per_frame_s'] * 1e6:.0f} µs; "
-                      f"{loop['frames_per_block']:.2f} frames per block", loop["per_frame_s"] < 1.0 / RATE_HZ))
+    truth, result, t_signal, board = session(template, proc, ctl, seconds)
+    per, loop = score(truth, result, t_signal, board, k)
+    stops = [score(*session(template, proc, ctl, 0.3), k) for _ in range(stop_repeats)]
+    host_zero = np.array([loop["host_zero_s"], *(s[1]["host_zero_s"] for s in stops)])
+    board_zero = np.array([max(r["board_zero_s"] for r in p) for p, _ in [(per, loop), *stops]])
+    late = np.array([max(r["frames_after_stop"] for r in p) for p, _ in [(per, loop), *stops]])
+    worst = max(per, key=lambda r: r["settle_s"])
+    label = f"control, {k} finger{'s' if k > 1 else ''} at 1 kHz"
+    table.append((f"{label}: step to 0.15 N, settled (rise)", "<= 0.3 s",
+                  f"{worst['settle_s']:.3f} s ({max(r['rise_s'] for r in per):.3f} s), worst finger",
+                  worst["settle_s"] <= 0.3))
+    err = max(abs(r["steady_error_n"]) for r in per)
+    table.append((f"{label}: steady error vs the simulator's truth", "<= 10 mN",
+                  f"{err * 1e3:.2f} mN (ripple {max(r['ripple_n'] for r in per) * 1e3:.2f} mN RMS)", err <= 0.01))
+    peak = max(r["peak_pressure_pa"] for r in per)
+    table.append((f"{label}: peak pressure / set-point (limit 100 kPa)", "<= limit",
+                  f"{peak / 1e3:.1f} / {max(r['peak_setpoint_pa'] for r in per) / 1e3:.1f} kPa",
+                  peak <= LIMIT_PA and max(r["peak_setpoint_pa"] for r in per) <= LIMIT_PA))
+    table.append((f"{label}: set-point 0 after Ctrl-C, {host_zero.size} stops (host write; board)",
+                  "<= 1 frame (1 ms)",
+                  f"host median {np.median(host_zero) * 1e3:.2f} ms, max {host_zero.max() * 1e3:.2f} ms; board's "
+                  f"first zero frame median {np.median(board_zero) * 1e3:.2f} ms; frames still set after the "
+                  f"signal: median {np.median(late):.0f}, max {late.max()}", np.median(host_zero) <= 1e-3))
+    table.append((f"{label}: loop per frame (process, check, control, send)", "keeps up (< 1 ms)",
+                  f"{loop['per_frame_s'] * 1e6:.0f} µs mean, p99 {loop['p99_block_per_frame_s'] * 1e6:.0f} µs; "
+                  f"{loop['frames_per_block']:.2f} frames per block; the processor's part: all but "
+                  f"{loop['own_per_frame_s'] * 1e6:.0f} µs", loop["per_frame_s"] < 1.0 / RATE_HZ))
     return table
 
 
@@ -201,8 +287,10 @@ def main():
     ap.add_argument("--stops", type=int, default=None, help="further short sessions stopped by Ctrl-C (default 9; "
                     "4 with --quick)")
     ap.add_argument("--quick", action="store_true", help="a smaller calibration, fewer stops")
+    ap.add_argument("--in-process", action="store_true",
+                    help="the simulated board in this process (as in the tests) instead of its own")
     args = ap.parse_args()
-    table = rows(args.quick, args.fingers, args.seconds, args.stops)
+    table = rows(args.quick, args.fingers, args.seconds, args.stops, args.in_process)
     width = max(len(r[0]) for r in table)
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; Python {sys.version.split()[0]}")
     print(f"{'what':<{width}}  {'target':<18}  {'measured':<70}  pass?")

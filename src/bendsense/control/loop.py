@@ -60,6 +60,8 @@ class ControlResult:
         When the loop noticed the stop (``time.perf_counter()``) [s].
     loop_s : ndarray, shape (blocks,)
         Wall time of each block: process, check, control, send [s] (recording excluded).
+    process_s : ndarray, shape (blocks,)
+        Of that, the processor's (``process_readings``) [s]: the rest is the loop's own.
     block_frames : ndarray of int, shape (blocks,)
         Frames of each block.
     """
@@ -73,6 +75,7 @@ class ControlResult:
     zero_latency_s: float
     stopped_at_s: float
     loop_s: np.ndarray
+    process_s: np.ndarray
     block_frames: np.ndarray
 
     @property
@@ -223,7 +226,7 @@ def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=No
     lines = _lines(processor, n_lines)
     safety = Safety() if safety is None else safety
     guard = Guard(safety, getattr(controller, "fingers", None) or _fingers(processor))
-    state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "sizes": [], "current": {}}
+    state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {}}
     outcome, stopped_at, zero_at, error = "stopped", math.nan, math.nan, None
     try:
         with _sigterm_stops(), _prompt_threads():
@@ -242,7 +245,7 @@ def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=No
         result = ControlResult(
             frames=state["frames"], blocks=len(state["loop"]), outcome=outcome, lines=lines,
             max_setpoint_pa=state["max"], clipped=state["clipped"], zero_latency_s=zero_at - stopped_at,
-            stopped_at_s=stopped_at, loop_s=np.asarray(state["loop"]),
+            stopped_at_s=stopped_at, loop_s=np.asarray(state["loop"]), process_s=np.asarray(state["process"]),
             block_frames=np.asarray(state["sizes"], dtype=np.int64))
         if error is not None:
             with contextlib.suppress(AttributeError, TypeError):  # a user's exception may not take attributes
@@ -278,11 +281,13 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
         tic = time.perf_counter()
         guard.lost(driver.stats, now)
         block = processor.process_readings(readings)
+        processed = time.perf_counter()
         guard.flags(block)
         setpoints, clipped = _clip(controller(block), lines, pmax)
         for line, value in setpoints.items():
             driver.send_setpoint(line, value)
         state["loop"].append(time.perf_counter() - tic)
+        state["process"].append(processed - tic)
         state["sizes"].append(len(readings))
         state["frames"] += len(readings)
         state["clipped"] += clipped
