@@ -62,13 +62,14 @@ class FakeBlock:
 class FakeProcessor:
     """Turns the fake board's readings into blocks: the force rides in the first ADC count (µN)."""
 
-    def __init__(self, flagged=()):
-        self.flagged = set(flagged)  # frame indices reported model_misfit
+    def __init__(self, flagged=(), status="model_misfit"):
+        self.flagged = set(flagged)  # frame indices reported with ``status``
+        self.flag = status
 
     def process_readings(self, readings):
         t = np.array([r.device_us for r in readings]) * 1e-6
         f = np.array([r.sample.adc[0] for r in readings]) * 1e-6
-        status = np.array(["model_misfit" if r.sample.seq in self.flagged else "ok" for r in readings], dtype=object)
+        status = np.array([self.flag if r.sample.seq in self.flagged else "ok" for r in readings], dtype=object)
         return FakeBlock(t, f, status)
 
 
@@ -348,17 +349,20 @@ def test_run_stops_when_the_board_falls_silent():
     assert zeros_at_end(board)
 
 
-def test_run_stops_on_a_run_of_flags_not_on_a_chance_one():
-    # isolated model_misfit frames (a frame's χ² beyond chance) do not stop the loop ...
+@pytest.mark.parametrize("flag", ["model_misfit", "not_identifiable"])
+def test_run_stops_on_a_run_of_flags_not_on_a_chance_one(flag):
+    # isolated flagged frames (a frame's χ² beyond chance) do not stop the loop ...
     board = FakeBoard()
-    run(board, FakeProcessor(flagged={50, 120, 121, 300}), as_controller(pi_of()), max_pressure_pa=P_MAX_PA,
-        seconds=0.5, safety=Safety(flagged_s=0.01))
+    stop = threading.Event()
+    run(board, FakeProcessor(flagged={50, 120, 121, 300}, status=flag), as_controller(pi_of()),
+        max_pressure_pa=P_MAX_PA, stop=stop, on_block=lambda b, s: b.t_s[-1] >= 0.4 and stop.set(),
+        safety=Safety(flagged_s=0.01))
     assert board.k >= 400
     # ... a run of them for 10 ms does, at its 11th frame
     board = FakeBoard(per_batch=3)
-    with pytest.raises(ControlStop, match=r"model_misfit for 10 ms .* at t = 0.21\d s"):
-        run(board, FakeProcessor(flagged=range(200, 260)), as_controller(pi_of()), max_pressure_pa=P_MAX_PA,
-            seconds=5.0, safety=Safety(flagged_s=0.01))
+    with pytest.raises(ControlStop, match=rf"{flag} for 10 ms .* at t = 0.21\d s"):
+        run(board, FakeProcessor(flagged=range(200, 260), status=flag), as_controller(pi_of()),
+            max_pressure_pa=P_MAX_PA, seconds=5.0, safety=Safety(flagged_s=0.01))
     assert zeros_at_end(board) and board.k <= 213
 
 

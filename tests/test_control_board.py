@@ -155,6 +155,32 @@ def test_lost_frames_stop_the_loop(board, processor):
     assert truth.column("setpoint_pa")[-1] == 0.0 and truth.t_s[-1] < 2.0
 
 
+class Listening:
+    """The board, keeping every SETPOINT it receives (also after it stopped streaming)."""
+
+    def __init__(self, board):
+        self.board, self.received = board, []
+
+    def setpoint(self, line, pressure_pa):
+        self.received.append((line, pressure_pa))
+        return self.board.setpoint(line, pressure_pa)
+
+    def __call__(self, k):
+        return self.board(k)
+
+
+def test_a_board_that_falls_silent_stops_the_loop(board, processor):
+    pi = PIController(0.15, max_pressure_pa=LIMIT_PA)
+    processor.reset()
+    source = Listening(board)
+    with SimulatedDevice(source, rate_hz=RATE, max_frames=300) as dev, Driver(dev.port) as driver:
+        driver.start()
+        with pytest.raises(ControlStop, match="no frame from the board for"):
+            run(driver, processor, pi, max_pressure_pa=LIMIT_PA, seconds=5.0, safety=Safety(silence_s=0.05))
+        time.sleep(0.05)
+    assert max(p for _, p in source.received) > 0 and source.received[-1] == (0, 0.0)
+
+
 class Bent:
     """The board with one channel off by 400 counts from frame 300 on: a shape no beam makes (a persistent misfit)."""
 
