@@ -263,7 +263,7 @@ def _fingers(processor) -> tuple:
 def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, recording, on_block, state) -> str:
     """The loop of :func:`run` until its time or a stop; returns the outcome."""
     t0 = time.monotonic()
-    last_frame = t0
+    last_frame, started = t0, False
     silence = guard.safety.silence_s
     while True:
         now = time.monotonic()
@@ -275,9 +275,9 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
         readings = driver.get_batch(timeout=max(wait, 1e-4))
         now = time.monotonic()
         if not readings:
-            guard.silent(now - last_frame)
+            guard.silent(now - last_frame, started)
             continue
-        last_frame = now
+        last_frame, started = now, True
         tic = time.perf_counter()
         guard.lost(driver.stats, now)
         block = processor.process_readings(readings)

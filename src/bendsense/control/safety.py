@@ -7,7 +7,8 @@ on every line before anything else):
 
 - **lost frames**: more than ``max_lost_frames`` frames lost (sequence gaps, the
   driver's queue drops) within ``lost_window_s``: the loop no longer sees every frame;
-- **silence**: no frame for ``silence_s`` (a board that stopped streaming);
+- **silence**: no frame for ``silence_s`` (a board that stopped streaming), or none within
+  ``first_frame_s`` of the start (a board that never starts: nothing was sent yet);
 - **the model**: a controlled finger ``model_misfit`` or ``not_identifiable`` for
   ``flagged_s`` in a row. A frame's own χ² is beyond chance in 0.1 % of frames by
   design (``MISFIT_P``), once a second at 1 kHz: one such frame does not stop a grasp;
@@ -78,19 +79,23 @@ class Safety:
     flagged_s : float, default 0.01
         Longest run of a controlled finger's ``model_misfit`` / ``not_identifiable``
         frames [s] (by the frames' clock).
+    first_frame_s : float, default 2.0
+        Longest wait for the first frame after the loop starts [s].
     """
 
     max_lost_frames: int = 10
     lost_window_s: float = 1.0
     silence_s: float = 0.1
     flagged_s: float = 0.01
+    first_frame_s: float = 2.0
 
     def __post_init__(self):
         _number("max_lost_frames", self.max_lost_frames, integer=True)
-        for name in ("lost_window_s", "silence_s", "flagged_s"):
+        for name in ("lost_window_s", "silence_s", "flagged_s", "first_frame_s"):
             _number(name, getattr(self, name))
-        if not self.silence_s > 0:
-            raise ArgumentError(f"silence_s: expected a time > 0 [s], got {self.silence_s!r}")
+        for name in ("silence_s", "first_frame_s"):
+            if not getattr(self, name) > 0:
+                raise ArgumentError(f"{name}: expected a time > 0 [s], got {getattr(self, name)!r}")
 
 
 class Guard:
@@ -135,14 +140,21 @@ class Guard:
             raise ControlStop(f"{count} frames lost within {self.safety.lost_window_s:g} s (limit "
                               f"{self.safety.max_lost_frames}): the loop no longer sees every frame")
 
-    def silent(self, since_s: float) -> None:
-        """Stop when no frame arrived for longer than ``silence_s``.
+    def silent(self, since_s: float, started: bool = True) -> None:
+        """Stop when no frame arrived for longer than ``silence_s`` (before the first: ``first_frame_s``).
 
         Parameters
         ----------
         since_s : float
-            Time since the latest frame [s].
+            Time since the latest frame (since the start, before the first frame) [s].
+        started : bool, default True
+            Whether a frame has arrived yet.
         """
+        if not started:
+            if since_s > self.safety.first_frame_s:
+                raise ControlStop(f"no frame from the board within {self.safety.first_frame_s:g} s of the start "
+                                  "(is it streaming?)")
+            return
         if since_s > self.safety.silence_s:
             raise ControlStop(f"no frame from the board for {since_s:.3g} s (limit {self.safety.silence_s:g} s)")
 
