@@ -349,7 +349,6 @@ def test_run_stops_when_the_board_falls_silent():
     assert zeros_at_end(board)
 
 
-@pytest.mark.parametrize("flag", ["model_misfit", "not_identifiable"])
 def test_run_waits_for_the_first_frame_then_stops():
     board = FakeBoard(silent_after=0)
     with pytest.raises(ControlStop, match="no frame from the board within 0.05 s of the start"):
@@ -358,6 +357,7 @@ def test_run_waits_for_the_first_frame_then_stops():
     assert board.sent == [(0, 0, 0.0)]  # nothing but the zero
 
 
+@pytest.mark.parametrize("flag", ["model_misfit", "not_identifiable"])
 def test_run_stops_on_a_run_of_flags_not_on_a_chance_one(flag):
     # isolated flagged frames (a frame's χ² beyond chance) do not stop the loop ...
     board = FakeBoard()
