@@ -112,6 +112,7 @@ class Board:
                                      stdout=subprocess.PIPE, text=True, env=env)
         port, n_lines, *fingers = self.proc.stdout.readline().split(" ")
         self.port, self.n_lines = port, int(n_lines)
+        self._read = 0  # bytes of the truth file read so far
         self.truth_fingers = [f.strip() for f in fingers if f.strip()] or None
 
     def truth(self, since_s):
@@ -119,7 +120,11 @@ class Board:
 
         out = Truth()
         with open(self.path, encoding="utf-8") as fh:
+            fh.seek(self._read)  # the rows after the previous session's
             for line in fh:
+                if not line.endswith("\n"):
+                    break
+                self._read += len(line.encode("utf-8"))
                 parts = line.rstrip("\n").split("\t")
                 if len(parts) == 3 and float(parts[0]) >= since_s:
                     out.rows.append((float(parts[0]), int(parts[1]), json.loads(parts[2])))
