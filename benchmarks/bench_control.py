@@ -113,6 +113,7 @@ class Board:
         port, n_lines, *fingers = self.proc.stdout.readline().split(" ")
         self.port, self.n_lines = port, int(n_lines)
         self._read = 0  # bytes of the truth file read so far
+        self.driver = Driver(self.port).open()
         self.truth_fingers = [f.strip() for f in fingers if f.strip()] or None
 
     def truth(self, since_s):
@@ -131,6 +132,7 @@ class Board:
         return out
 
     def close(self):
+        self.driver.close()
         self.proc.stdin.close()
         self.proc.wait(timeout=30)
 
@@ -182,10 +184,12 @@ def session(board, proc, ctl, seconds):
         return result
 
     t0 = time.perf_counter()
-    if isinstance(board, Board):
-        with Driver(board.port) as driver:
-            result = loop(driver)
+    if isinstance(board, Board):  # one port for all its sessions (a simulated board closes when its port does)
+        result = loop(board.driver)
+        board.driver.stop()
         time.sleep(0.3)  # the regulators let the pressure down before the next session
+        while board.driver.get_batch(timeout=0.05):
+            pass  # the frames sent after the stop, before the next session
         return board.truth(t0), result, sent["t"], board
     board = copy.deepcopy(board)  # the regulators and the noise from the start; the tables made once
     truth = Truth()
