@@ -42,7 +42,7 @@ import numpy as np
 
 from bendsense import load_config
 from bendsense.calibration import Calibration
-from bendsense.control import Grasp, PIController, run
+from bendsense.control import Grasp, PIController, Safety, run
 from bendsense.device.driver import Driver
 from bendsense.device.simdevice import SimulatedDevice
 from bendsense.pipeline import LiveProcessor
@@ -176,7 +176,8 @@ def session(board, proc, ctl, seconds):
         timer = threading.Timer(seconds, interrupt)
         timer.start()
         try:
-            run(driver, proc, ctl, max_pressure_pa=LIMIT_PA, n_lines=board.n_lines)
+            # a loaded machine may hold the board's process back for 0.1 s: not what this measures
+            run(driver, proc, ctl, max_pressure_pa=LIMIT_PA, n_lines=board.n_lines, safety=Safety(silence_s=1.0))
             raise RuntimeError("the loop ended before the signal")
         except KeyboardInterrupt as err:
             result = err.result

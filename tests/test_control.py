@@ -409,3 +409,11 @@ def test_control_refuses_what_it_cannot_do(tmp_path, extra, gripper, match):
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 2, res.output
     assert match in " ".join(res.output.split())
+
+
+def test_the_silence_limit_follows_a_slow_board():
+    from bendsense.control.safety import Guard
+
+    assert Guard(Safety(), (None,), rate_hz=1000.0).silence_s == 0.1
+    assert Guard(Safety(), (None,), rate_hz=35.0).silence_s == pytest.approx(10 / 35)  # the paper's 35 Hz board
+    assert Guard(Safety(silence_s=0.5), (None,), rate_hz=35.0).silence_s == 0.5

@@ -120,13 +120,16 @@ def _summary(result, controller) -> str:
 @click.option("--max-rate-kpa-per-s", type=Finite(min=0, min_open=True), default=None,
               help="Slew limit of the set-point [kPa/s] (default 500).")
 @make_bandwidth_option("30 Hz (bendsense.control.TRACK_BANDWIDTH_HZ: the loop needs a faster track than live's 5 Hz)")
+@click.option("--silence-s", type=Finite(min=0, min_open=True), default=None,
+              help="Stop when no frame arrives for this long [s] (default 0.1, or 10 frame periods of a slower "
+                   "board).")
 @click.option("--baud", type=click.IntRange(50, 12_000_000), default=None,
               help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
               help="HELLO wait [s].")
 def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, output, overwrite, config_path, seconds,
-            load, contact_s_m, constraint, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s, bandwidth_hz, baud,
-            hello_timeout):
+            load, contact_s_m, constraint, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s, bandwidth_hz, silence_s,
+            baud, hello_timeout):
     """Hold a contact force: a PI loop on the tracked contact normal force, at the board's frame rate.
 
     Every frame from the board on PORT is reconstructed, its force estimated and tracked
@@ -139,7 +142,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
 
     Set-point 0 goes to every pressure line when the loop ends, whatever ends it: --seconds,
     Ctrl-C or SIGTERM (exit 130 / 143), an error, more than 10 frames lost within 1 s, no
-    frame for 0.1 s, or a controlled finger model_misfit / not_identifiable for 10 ms
+    frame for 0.1 s (--silence-s), or a controlled finger model_misfit / not_identifiable for 10 ms
     (a safety stop: one line, exit 1). -o SESSION records everything (docs/formats.md,
     "Control session"). docs/grasping.md walks through a grasp on the simulated board.
     """
@@ -172,12 +175,12 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
                         "constraint": constraint,
                         "contact_s_m": contact_s_m, "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
-        _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta)
+        _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s)
 
 
-def _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta):
+def _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s):
     """Record (with -o), start the board, run the loop; one line for how it ended."""
-    from bendsense.control import ControlRecording, ControlStop, run
+    from bendsense.control import ControlRecording, ControlStop, Safety, run
 
     fingers = getattr(config, "names", None)
     recording = None if output is None else ControlRecording(driver, output, overwrite=overwrite, config=config,
@@ -189,7 +192,7 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
     driver.start()
     try:
         result = run(driver, processor, controller, max_pressure_pa=pmax, seconds=seconds, n_lines=n_lines,
-                     recording=recording)
+                     recording=recording, safety=Safety(silence_s=silence_s))
     except KeyboardInterrupt as err:
         kept = f"; the session is in {output}" if output is not None else ""
         _signals.note(err, f"set-point 0 sent on every pressure line{kept}")

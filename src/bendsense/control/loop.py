@@ -225,7 +225,9 @@ def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=No
         raise ArgumentError(f"seconds: expected a time > 0 [s] or None, got {seconds!r}")
     lines = _lines(processor, n_lines)
     safety = Safety() if safety is None else safety
-    guard = Guard(safety, getattr(controller, "fingers", None) or _fingers(processor))
+    hello = getattr(driver, "hello", None)
+    guard = Guard(safety, getattr(controller, "fingers", None) or _fingers(processor),
+                  rate_hz=getattr(hello, "rate_hz", None) or None)
     state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {}}
     outcome, stopped_at, zero_at, error = "stopped", math.nan, math.nan, None
     try:
@@ -264,7 +266,7 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
     """The loop of :func:`run` until its time or a stop; returns the outcome."""
     t0 = time.monotonic()
     last_frame, started = t0, False
-    silence = guard.safety.silence_s
+    silence = guard.silence_s
     while True:
         now = time.monotonic()
         if stop is not None and stop.is_set():

@@ -7,7 +7,8 @@ on every line before anything else):
 
 - **lost frames**: more than ``max_lost_frames`` frames lost (sequence gaps, the
   driver's queue drops) within ``lost_window_s``: the loop no longer sees every frame;
-- **silence**: no frame for ``silence_s`` (a board that stopped streaming), or none within
+- **silence**: no frame for ``silence_s`` (a board that stopped streaming; by default 0.1 s
+  or 10 frame periods, whichever is longer), or none within
   ``first_frame_s`` of the start (a board that never starts: nothing was sent yet);
 - **the model**: a controlled finger ``model_misfit`` or ``not_identifiable`` for
   ``flagged_s`` in a row. A frame's own χ² is beyond chance in 0.1 % of frames by
@@ -33,6 +34,8 @@ from bendsense.results import MODEL_MISFIT, NOT_IDENTIFIABLE
 
 __all__ = ["Safety", "Guard", "ControlStop", "STOP_STATUSES"]
 
+#: the shortest silence limit [s] (a faster board's default; a slower one's is 10 frame periods)
+DEFAULT_SILENCE_S = 0.1
 #: a controlled finger's statuses that stop the loop when they last ``flagged_s``
 STOP_STATUSES = (MODEL_MISFIT, NOT_IDENTIFIABLE)
 
@@ -74,8 +77,9 @@ class Safety:
         Frames that may be lost within ``lost_window_s`` (more: stop).
     lost_window_s : float, default 1.0
         The window of the lost-frame count [s].
-    silence_s : float, default 0.1
-        Longest time without a frame [s].
+    silence_s : float, optional
+        Longest time without a frame [s]; None (default): 0.1 s or 10 frame periods of the
+        board (its HELLO's rate), whichever is longer.
     flagged_s : float, default 0.01
         Longest run of a controlled finger's ``model_misfit`` / ``not_identifiable``
         frames [s] (by the frames' clock).
@@ -85,16 +89,17 @@ class Safety:
 
     max_lost_frames: int = 10
     lost_window_s: float = 1.0
-    silence_s: float = 0.1
+    silence_s: float | None = None
     flagged_s: float = 0.01
     first_frame_s: float = 2.0
 
     def __post_init__(self):
         _number("max_lost_frames", self.max_lost_frames, integer=True)
         for name in ("lost_window_s", "silence_s", "flagged_s", "first_frame_s"):
-            _number(name, getattr(self, name))
+            if getattr(self, name) is not None or name != "silence_s":
+                _number(name, getattr(self, name))
         for name in ("silence_s", "first_frame_s"):
-            if not getattr(self, name) > 0:
+            if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ArgumentError(f"{name}: expected a time > 0 [s], got {getattr(self, name)!r}")
 
 
@@ -107,11 +112,20 @@ class Guard:
         The limits.
     fingers : sequence of str or None
         The controlled fingers (None: a single actuator).
+    rate_hz : float, optional
+        The board's frame rate [Hz] (for the default silence).
+
+    Attributes
+    ----------
+    silence_s : float
+        The silence limit in force [s].
     """
 
-    def __init__(self, safety: Safety, fingers):
+    def __init__(self, safety: Safety, fingers, rate_hz=None):
         self.safety = safety
         self.fingers = tuple(fingers)
+        default = max(DEFAULT_SILENCE_S, 10.0 / rate_hz) if rate_hz else DEFAULT_SILENCE_S
+        self.silence_s = default if safety.silence_s is None else float(safety.silence_s)
         self._lost = collections.deque()  # (host time [s], frames lost since the previous block)
         self._lost_total = None
         self._flag_start = {f: math.nan for f in self.fingers}
@@ -155,8 +169,8 @@ class Guard:
                 raise ControlStop(f"no frame from the board within {self.safety.first_frame_s:g} s of the start "
                                   "(is it streaming?)")
             return
-        if since_s > self.safety.silence_s:
-            raise ControlStop(f"no frame from the board for {since_s:.3g} s (limit {self.safety.silence_s:g} s)")
+        if since_s > self.silence_s:
+            raise ControlStop(f"no frame from the board for {since_s:.3g} s (limit {self.silence_s:g} s)")
 
     def flags(self, block) -> None:
         """Stop when a controlled finger has been ``model_misfit`` / ``not_identifiable`` for ``flagged_s``.
