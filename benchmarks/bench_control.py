@@ -189,7 +189,8 @@ def session(board, proc, ctl, seconds):
         result = loop(board.driver)
         board.driver.stop()
         time.sleep(0.3)  # the regulators let the pressure down before the next session
-        while board.driver.get_batch(timeout=0.05):
+        end = time.monotonic() + 1.0
+        while board.driver.get_batch(timeout=0.05) and time.monotonic() < end:
             pass  # the frames sent after the stop, before the next session
         return board.truth(t0), result, sent["t"], board
     board = copy.deepcopy(board)  # the regulators and the noise from the start; the tables made once
