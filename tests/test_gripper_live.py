@@ -141,6 +141,8 @@ def test_finger_options_and_calibrations_per_finger(calibration_path, gripper, b
     np.testing.assert_array_equal(proc.processors["middle"].calibration.offset, cal.offset)
     with pytest.raises(Exception, match="finger_options: unknown finger pinky"):
         GripperProcessor(cal, gripper, finger_options={"pinky": {}})
+    with pytest.raises(ValueError, match="gripper: expected a GripperConfig .* got Config"):
+        GripperProcessor(cal, gripper.finger("thumb").config)
 
 
 def test_lsl_streams_per_finger_reach_an_inlet(calibration_path, gripper, board):
