@@ -319,3 +319,26 @@ def test_live_save_shows_a_panel_per_finger_of_the_simulated_gripper(calibration
         "--calibration", calibration_path, "--save", tmp_path / "no.png")])
     assert res.exit_code == 1 and "pinky" in res.output and not (tmp_path / "no.png").exists()
     assert "Traceback" not in res.output
+
+
+def test_blocks_as_long_as_the_segments_or_the_shape_points(calibration_path, config):
+    """A block of 16 frames (the sensor's segments) or 41 (the shape's points) is cut frame by frame, never the
+    shape's segment lengths or points along the body (a live board delivers blocks of any length)."""
+    cal = Calibration.load(calibration_path)
+    frames = list(itertools.islice(time_varying_frames(None, RATE_HZ, 0), 41))
+    signals = np.array([c for _, c in frames], dtype=float)
+    pressure = np.array([p for p, _ in frames], dtype=float)
+    pressure[3] = np.nan  # a frame without a reading: the others are estimated as a sub-block
+    t_s = np.arange(41) / RATE_HZ
+    keep = np.isfinite(pressure[:16])
+    block = LiveProcessor(cal, config, constraint="normal").process_block(signals[:16], pressure[:16], t_s=t_s[:16])
+    without = LiveProcessor(cal, config, constraint="normal").process_block(signals[:16][keep], pressure[:16][keep],
+                                                                            t_s=t_s[:16][keep])
+    np.testing.assert_array_equal(block.force_n[keep], without.force_n)
+    assert block.status[3] == "no_pressure" and np.all(block.status[keep] == without.status)
+    proc = LiveProcessor(cal, config, constraint="normal", load="contact", contact_s_m=CONTACT_S_M)
+    block = proc.process_block(signals, np.nan_to_num(pressure, nan=pressure[2]), t_s=t_s)
+    frame = block.frame(-1)
+    np.testing.assert_array_equal(frame.shape.s_m, proc.s_m)
+    np.testing.assert_array_equal(frame.shape.lengths_m, config.sensor.segment_lengths_m)
+    np.testing.assert_array_equal(frame.shape.positions_m, block.shape.positions_m[-1])
