@@ -277,6 +277,21 @@ def test_record_estimate_writes_every_finger_for_every_frame(calibration_path, g
     from bendsense.output_manifest import read_manifest
 
     assert {f"{f}/results.csv" for f in gripper.names} <= set(read_manifest(out)["files"])
+    # a new recording over it (--overwrite) replaces every finger's results, and only them
+    (out / "notes.txt").write_text("mine")
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        res = CliRunner().invoke(main, [str(a) for a in (
+            "record", dev.port, "-o", out, "--seconds", 0.3, "--config", root / "gripper.yaml", "--calibration",
+            calibration_path, "--estimate", "--overwrite")])
+    assert res.exit_code == 1 and "notes.txt" in res.output
+    (out / "notes.txt").unlink()
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        res = CliRunner().invoke(main, [str(a) for a in (
+            "record", dev.port, "-o", out, "--seconds", 0.3, "--config", root / "gripper.yaml", "--calibration",
+            calibration_path, "--estimate", "--overwrite")])
+    assert res.exit_code == 0, res.output
+    n = len(bendsense.read_session(out))
+    assert all(len(read_csv(out / f / "results.csv")["t_s"]) == n for f in gripper.names)
 
 
 def read_csv(path):
