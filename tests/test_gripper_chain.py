@@ -258,9 +258,9 @@ def test_process_over_gripper_sessions(board):
 def test_export_one_finger(board):
     root, gripper, cal = board
     res = run("load", root / "board.csv", "--config", root / "gripper.yaml", "export", "--finger", "middle",
-              root / "middle.csv", "export", root / "board-copy.csv")
+              root / "export-middle.csv", "export", root / "board-copy.csv")
     assert res.exit_code == 0, res.output
-    middle = read_session(root / "middle.csv")
+    middle = read_session(root / "export-middle.csv")
     board_session = read_session(root / "board.csv")
     np.testing.assert_array_equal(middle.signals, board_session.signals[:, 2 * N:])
     np.testing.assert_array_equal(middle.extra["fy_n"], board_session.extra["middle_fy_n"])
@@ -269,5 +269,5 @@ def test_export_one_finger(board):
               root / "pinky.csv")
     assert res.exit_code == 1 and "finger 'pinky': not a finger of this gripper" in res.output
     assert not (root / "pinky.csv").exists()
-    res = run("load", root / "board.csv", "export", "--finger", "thumb", root / "thumb.csv")
+    res = run("load", root / "board.csv", "export", "--finger", "thumb", root / "export-thumb.csv")
     assert res.exit_code == 2 and "a finger needs a gripper's config" in res.output
