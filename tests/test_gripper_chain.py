@@ -271,3 +271,30 @@ def test_export_one_finger(board):
     assert not (root / "pinky.csv").exists()
     res = run("load", root / "board.csv", "export", "--finger", "thumb", root / "export-thumb.csv")
     assert res.exit_code == 2 and "a finger needs a gripper's config" in res.output
+
+
+def test_identify_one_finger_of_a_board(board):
+    """identify --finger fits the finger's part of a board sweep, as identify on that part alone does."""
+    root, gripper, cal = board
+    pressure = np.linspace(10e3, 120e3, 30)
+    counts = [SimulatedActuator.from_config(f.config, seed=0, noise_counts=1.5).frames(pressure).counts
+              for f in gripper.fingers]
+    write_session_csv(Session(np.arange(30) * 0.05, np.hstack(counts).astype(float), pressure), root / "sweep.csv")
+    res = run("identify", "free-bending", "--session", root / "sweep.csv", "--calibration", f"index={cal}",
+              "--config", root / "gripper.yaml", "--finger", "index", "-o", root / "identified.yaml")
+    assert res.exit_code == 0, res.output
+    identified = load_config(root / "identified.yaml")
+    assert isinstance(identified, GripperConfig) and identified.names == gripper.names
+    assert identified.finger("thumb").config == gripper.finger("thumb").config
+    # the same fit as identify on the index's part alone, with the index's config
+    write_session_csv(split_session(read_session(root / "sweep.csv"), gripper)["index"], root / "sweep-index.csv")
+    save_config(gripper.finger("index").config, root / "index-config.yaml")
+    res = run("identify", "free-bending", "--session", root / "sweep-index.csv", "--calibration", cal,
+              "--config", root / "index-config.yaml", "-o", root / "identified-index.yaml")
+    assert res.exit_code == 0, res.output
+    alone = load_config(root / "identified-index.yaml")
+    assert identified.finger("index").config == alone
+    assert alone.material != gripper.finger("index").config.material  # something was fitted
+    res = run("identify", "free-bending", "--session", root / "sweep.csv", "--calibration", cal,
+              "--config", root / "gripper.yaml", "-o", root / "none.yaml")
+    assert res.exit_code == 2 and "give --finger NAME" in res.output and not (root / "none.yaml").exists()
