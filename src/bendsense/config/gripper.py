@@ -106,7 +106,7 @@ class Finger:
         _check_finger(self, "finger")
 
     @property
-    def index(self):
+    def columns(self) -> list:
         """The 0-based board columns of its channels (``channels − 1``), as a list."""
         return [c - 1 for c in self.channels]
 
