@@ -145,6 +145,23 @@ def test_plot_has_a_panel_per_finger(board, chain):
     res = run("plot", chain, "-o", root / "fig2.png")
     assert res.exit_code == 0, res.output
     assert (root / "fig2.png").stat().st_size > 10_000
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from bendsense.plots_gripper import grasp_force, plot_gripper
+
+    results = read_gripper_results(chain, names=NAMES)
+    fig = plot_gripper(results)
+    titles = [ax.get_title() for ax in fig.axes]
+    assert [t for t in titles if t in NAMES] == list(NAMES) and len(fig.axes) == 2 * len(NAMES) + 2
+    grasp = fig.axes[-2]
+    total = next(line for line in grasp.get_lines() if line.get_label() == "total").get_ydata()
+    # the total is the sum of the fingers' tracked force magnitudes, from results.csv
+    expected = sum(np.hypot(r["fx_track_n"], r["fy_track_n"]) for r in results.values())
+    np.testing.assert_allclose(total, expected, rtol=1e-12)
+    magnitude, std = grasp_force(results["thumb"])
+    assert np.all(std > 0) and np.all(std <= np.hypot(results["thumb"]["fx_track_std_n"],
+                                                      results["thumb"]["fy_track_std_n"]) * (1 + 1e-12))
 
 
 def test_mcap_has_topics_per_finger(board, chain):
