@@ -3,8 +3,10 @@
     python benchmarks/bench_frames.py
 
 Prints one table: decoder throughput (16-channel SAMPLE frames, binary and line
-dialects, several chunk sizes), and the end-to-end latency per frame from the moment a
-frame is written to the pseudo-terminal until the driver's latest-value slot holds it.
+dialects, several chunk sizes; a gripper's board: 48 channels and 3 pressure lines,
+SAMPLE version 2), the cost of a SETPOINT sent by the driver, and the end-to-end latency
+per frame from the moment a frame is written to the pseudo-terminal until the driver's
+latest-value slot holds it.
 Target (DESIGN.md section 5): decoder >= 20,000 frames/s.
 """
 
@@ -28,6 +30,37 @@ def stream(n=N_FRAMES):
     binary = b"".join(encode_sample(i, 2000 * i, counts[i].tolist(), 20_000) for i in range(n))
     lines = "".join(f"{i},{2000 * i},20000," + ",".join(map(str, counts[i])) + "\n" for i in range(n)).encode()
     return binary, lines
+
+
+def stream_gripper(n=N_FRAMES, n_ch=48, n_lines=3):
+    """A gripper's board: ``n_ch`` channels and ``n_lines`` pressure lines per SAMPLE (version 2)."""
+    rng = np.random.default_rng(1)
+    counts = rng.integers(0, 4096, size=(n, n_ch))
+    lines = 20_000 + rng.integers(0, 100_000, size=(n, n_lines))
+    return b"".join(encode_sample(i, 2000 * i, counts[i].tolist(), pressures_pa=lines[i].tolist()) for i in range(n))
+
+
+def setpoint_cost(n=5000):
+    """Time per Driver.send_setpoint (validate, encode, write to a pseudo-terminal) [us], median and p99."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+    times = []
+    try:
+        with Driver(os.ttyname(slave), handshake=False, queue_size=None) as drv:
+            for k in range(n):
+                t0 = time.perf_counter_ns()
+                drv.send_setpoint(k % 3, 50_000.0 + k)
+                times.append((time.perf_counter_ns() - t0) / 1e3)
+                if k % 100 == 99:
+                    try:
+                        os.read(master, 1 << 16)  # the board's side drains the line
+                    except BlockingIOError:
+                        pass
+    finally:
+        os.close(master)
+        os.close(slave)
+    return np.percentile(times, [50, 99])
 
 
 def throughput(make, data, chunk, repeat=3):
@@ -88,6 +121,10 @@ def main():
     for chunk in (64, 512, 4096, 65536):
         rows.append((f"binary decoder, {chunk} B chunks", throughput(Decoder, binary, chunk), "frames/s"))
     rows.append(("line decoder, 4096 B chunks", throughput(lambda: _line(), lines, 4096), "frames/s"))
+    rows.append(("binary decoder, gripper board (48 ch, 3 lines, v2), 4096 B chunks",
+                 throughput(Decoder, stream_gripper(), 4096), "frames/s"))
+    q = setpoint_cost()
+    rows.append(("Driver.send_setpoint (encode + pty write), median / p99", f"{q[0]:.1f} / {q[1]:.1f}", "us"))
     t = time.perf_counter()
     for i in range(10_000):
         encode_sample(i, i, range(N_CH), 20_000)
@@ -105,7 +142,7 @@ def main():
             (f"sim board -> driver queue at {rate} Hz", f"{fps:.0f} (lost {lost}, tx overflow {overflow})", "frames/s")
         )
 
-    print(f"bendsense frames benchmark ({N_CH} channels, {N_FRAMES} frames; target >= 20,000 frames/s)")
+    print(f"bendsense frames benchmark ({N_CH} channels unless said, {N_FRAMES} frames; target >= 20,000 frames/s)")
     width = max(len(r[0]) for r in rows)
     for name, value, unit in rows:
         value = f"{value:,.0f}" if isinstance(value, float) else value

@@ -127,3 +127,27 @@ def test_send_setpoint_on_a_closed_port_or_the_line_dialect(board):
     with Driver(board.port, dialect="line", n_channels=1) as line_drv, \
             pytest.raises(DeviceError, match="the line dialect has no set-points"):
         line_drv.send_setpoint(0, 1000)
+
+
+def test_bad_v2_frames_are_counted_and_the_good_ones_read(board):
+    import binascii
+    import struct
+
+    from bendsense.frames import cobs_encode
+
+    def wire(payload):
+        return b"\x00" + cobs_encode(payload + struct.pack("<H", binascii.crc_hqx(payload, 0xFFFF))) + b"\x00"
+
+    head = struct.pack("<BBHIBBHi", 2, 1, 5, 0, 1, 0, 0, 1000) + struct.pack("<H", 7)
+    bad = [wire(head + struct.pack("<B2i", 3, 1000, 2000)),  # n_lines says 3, the payload holds 2
+           wire(head + struct.pack("<B2i", 2, 1000, 2000)[:-2]),  # truncated in the last line
+           wire(head + struct.pack("<B2i", 2, 999, 2000))]  # line 0 is not offset 12
+    with Driver(board.port, handshake=False) as drv:
+        board.send(b"".join(bad) + encode_sample(6, 0, [8], pressures_pa=[1000, 2000]))
+        got = drv.get(timeout=5)
+        assert got.sample.seq == 6 and got.sample.pressures_pa == (1000, 2000)
+        deadline = time.monotonic() + 5
+        while not any(e.kind == "malformed" for e in drv.events):
+            assert time.monotonic() < deadline, "timed out"
+            time.sleep(0.01)
+        assert drv.stats.malformed == 3 and drv.stats.samples == 1

@@ -1,6 +1,7 @@
 """Gripper configs (``fingers:``) and the board split per finger (issue 24, DESIGN section 2b)."""
 
 import copy
+import pickle
 
 import numpy as np
 import pytest
@@ -115,6 +116,7 @@ def test_unknown_finger_and_single_actuator_functions_refuse_a_gripper(tmp_path)
     with pytest.raises(AttributeError):
         g.no_such_attribute  # noqa: B018 (other attributes stay plain AttributeErrors)
     assert copy.deepcopy(g) == g
+    assert pickle.loads(pickle.dumps(g)) == g  # (batch workers get it pickled)
 
 
 def board(k=3, frames=5, lines=None):
@@ -175,3 +177,24 @@ def test_split_signals_picks_lines(tmp_path):
         split_signals(signals, pressure[:, :2], g)
     with pytest.raises(ArgumentError, match=r"pressure_pa: expected shape \(4,\) or \(4, n_lines\)"):
         split_signals(signals, pressure[:3], g)
+
+
+def test_split_session_gives_each_finger_its_pressure_line(tmp_path):
+    """A board with several pressure lines: each finger gets its own line's pressure, 1-D."""
+    data = gripper_dict(3)
+    data["fingers"][2]["pressure_line"] = 1  # the middle shares the index's line
+    g = load_config(write(tmp_path, data))
+    session = board(3)
+    lines = np.column_stack([session.pressure_pa, session.pressure_pa + 5e3, session.pressure_pa + 9e3])
+    multi = Session(session.t_s, session.signals, lines, session.seq, session.meta, session.extra, session.source)
+    assert multi.pressure_pa.shape == (5, 3)
+    parts = split_session(multi, g)
+    np.testing.assert_array_equal(parts["thumb"].pressure_pa, lines[:, 0])
+    np.testing.assert_array_equal(parts["index"].pressure_pa, lines[:, 1])
+    np.testing.assert_array_equal(parts["middle"].pressure_pa, lines[:, 1])
+    assert all(p.pressure_pa.ndim == 1 for p in parts.values())
+    g4 = GripperConfig(name="", fingers=(*g.fingers[:2], Finger(name="ring", channels=g.fingers[2].channels,
+                                                                pressure_line=3, config=g.fingers[2].config)))
+    with pytest.raises(SessionError, match=r"board.csv: 3 pressure lines, but finger ring is on line 3 "
+                                           r"\(fingers\[2\].pressure_line of the config, 0-based\)"):
+        split_session(multi, g4)

@@ -109,6 +109,10 @@ def test_table_interpolates_the_exact_equilibrium(grasps):
     assert np.all(abs(force - exact.force_n) < 2e-3)  # 4 kPa nodes: within 2 mN (the device uses 0.5 kPa)
     frames = rigid.actuator.frames(p, exact.force_n, solution=exact.solution, noise=False)
     assert np.all(abs(signal - rigid.actuator.sensor.signal(frames.shifts_m)) < 2.0)  # counts
+    for pressure in [*p, -5.0, 150e3]:  # the board's one-pressure path: the same numbers
+        fx, fy, row = rigid.lookup_one(pressure)
+        f_all, s_all = rigid.lookup([pressure])
+        assert [fx, fy] == pytest.approx(f_all[0].tolist(), abs=1e-15) and row == pytest.approx(s_all[0], abs=1e-9)
 
 
 def test_object_arguments_are_checked(grasps):

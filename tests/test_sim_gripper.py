@@ -189,3 +189,66 @@ def test_sim_device_fingers_truth_is_readable_after_a_kill(tmp_path):
     complete = [r for r in rows if None not in r.values() and r["line1_pressure_pa"]]
     assert [int(r["seq"]) for r in complete] == list(range(len(complete)))
     assert len(complete) >= len(samples) - 1 > 200 and all(len(s.pressures_pa) == 2 for s in samples)
+
+
+def test_simulate_gripper_writes_config_calibration_and_a_board_session(board, tmp_path):
+    from bendsense import load_config as load
+    from bendsense.calibration import Calibration
+    from bendsense.fingers import split_session
+    from bendsense.session import read_session
+    from bendsense.sim.actuator import SimulatedActuator
+
+    out = tmp_path / "grip"
+    res = CliRunner().invoke(main, ["simulate", "gripper", "-o", str(out), "--fingers", "2", "--seconds", "3",
+                                    "--rate", "50"])
+    assert res.exit_code == 0, res.output
+    gripper = load(out / "gripper.yaml")
+    assert gripper.names == ("thumb", "index") and gripper == gripper_config(2)
+    session = read_session(out / "session.csv")
+    assert session.signals.shape == (150, 32) and session.pressure_pa.shape == (150, 2)
+    # the pressures follow the closing profile through the regulators: 0 -> 70 kPa over 2 s, then held
+    assert session.pressure_pa[0].tolist() == [0.0, 0.0] and session.pressure_pa[-1] == pytest.approx(70e3, rel=1e-3)
+    # the truth is the object's equilibrium at each row's pressure (exact solve; the session's table has 0.5 kPa)
+    exact = board.fingers["thumb"].solve(session.pressure_pa[::10, 0])
+    truth = np.stack([session.extra["thumb_fx_n"][::10], session.extra["thumb_fy_n"][::10]], axis=-1)
+    assert np.abs(truth - exact.force_n).max() < 1e-4 and np.abs(truth).max() > 0.1
+    assert set(session.extra["index_contact_s_m"]) == {0.11}
+    # the calibration is the simulated sensor's: its offset is the flat sensor's signal
+    cal = Calibration.load(out / "calibration.yaml")
+    flat = SimulatedActuator.from_config(load_config(), seed=0).sensor.signal(np.zeros(16))
+    assert np.abs(np.asarray(cal.offset) - flat).max() < 1.0
+    parts = split_session(session, gripper)
+    assert list(parts["index"].extra)[-3:] == ["fx_n", "fy_n", "contact_s_m"]
+
+
+@pytest.mark.parametrize(
+    "args, hint",
+    [
+        (["calibration", "--fingers", "2"], "--fingers"),
+        (["time-varying", "--object", "rigid"], "--object"),
+        (["gripper", "--frames", "3"], "--frames"),
+        (["gripper", "--object-s-m", "0.1,0.2,0.3,0.1"], "--object-s-m"),
+    ],
+)
+def test_simulate_gripper_options_are_checked(tmp_path, args, hint):
+    res = CliRunner().invoke(main, ["simulate", *args, "-o", str(tmp_path / "x")])
+    assert res.exit_code == 2 and hint in res.output and "Traceback" not in res.output, res.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_sim_device_truth_of_the_single_actuator_scenario(tmp_path):
+    from bendsense.sim.scenarios import time_varying_frames
+
+    target = tmp_path / "truth.csv"
+    res = CliRunner().invoke(main, ["sim-device", "--seconds", "0.3", "--rate", "100", "--autostart",
+                                    "--truth", str(target)])
+    assert res.exit_code == 0, res.output
+    rows = _truth_rows(target)
+    assert list(rows[0]) == ["seq", "t_us", "fx_n", "fy_n", "contact_s_m", "setpoint_pa", "pressure_pa"]
+    assert len(rows) >= 20 and [int(r["seq"]) for r in rows] == list(range(len(rows)))
+    # frame k is the time-varying scenario's frame k (seed 0): its truth, its pressure as set-point
+    expected = time_varying_frames(rate_hz=100.0, seed=0, truth=True, duration_s=len(rows) / 100.0)
+    for row, (pressure, _, truth) in zip(rows, expected, strict=True):
+        assert float(row["fx_n"]) == truth["fx_n"] and float(row["fy_n"]) == truth["fy_n"]
+        assert float(row["setpoint_pa"]) == float(row["pressure_pa"]) == pressure
+        assert int(row["t_us"]) == round(int(row["seq"]) * 1e6 / 100.0)

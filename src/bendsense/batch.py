@@ -450,6 +450,11 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
     from bendsense.pipeline import process
     from bendsense.session import read_session
 
+    if isinstance(calibration, dict):  # a gripper: each finger's part of the board (bendsense.batch_fingers)
+        from bendsense.batch_fingers import run_gripper
+
+        options = dict(constraint=constraint, method=method, objective=objective, estimate=estimate, **over_time)
+        return run_gripper(path, out_dir, config, calibration, options, overwrite, pressure_pa)
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
     session = read_session(path)
     # (a worker's log line would be lost in the console: the session's report row says it)
@@ -593,9 +598,11 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     """
     import numpy as np
 
+    from bendsense.batch_fingers import warm_up_finger
     from bendsense.pipeline import process
     from bendsense.session import Session
 
+    config, calibration = warm_up_finger(config, calibration)  # a gripper: its first finger's kernels
     lo, hi = config.actuator.pressure_range_pa
     frames = 100  # more than one warm-started block: the parallel batch kernels, as for any real session
     flat = np.tile(np.asarray(calibration.offset, dtype=float), (frames, 1))
@@ -643,10 +650,12 @@ def process_sessions(
         Root output directory; session ``name`` goes to ``out_dir / name``
         (``results.csv``, ``shape.npz``; DESIGN.md section 3). Names are the file stem or
         directory name, made unique (:func:`session_names`).
-    config : Config or path, optional
-        Sensor, actuator and estimation settings; default the paper's prototype.
-    calibration : Calibration or path
-        Sensor calibration (a ``Calibration`` or its YAML file).
+    config : Config, GripperConfig or path, optional
+        Sensor, actuator and estimation settings; default the paper's prototype. A gripper:
+        each board session's fingers go to ``out_dir / name / <finger>`` (:mod:`bendsense.batch_fingers`).
+    calibration : Calibration, path or dict
+        Sensor calibration (a ``Calibration`` or its YAML file); a gripper's as
+        :func:`bendsense.fingers.calibrations` takes it.
     executor : concurrent.futures.Executor, optional
         Where the sessions run, one task each: e.g. a ``ProcessPoolExecutor``, or a Dask
         cluster's ``Client(...).get_executor()``. It is not shut down. Default: a local
@@ -713,24 +722,18 @@ def process_sessions(
 def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
              overwrite, pressure_pa, estimate, recursive, progress, track, bandwidth_hz, window_s, load,
              contact_s_m) -> BatchReport:
-    from bendsense.calibration import Calibration
-    from bendsense.config import Config, load_config
+    from bendsense.batch_fingers import prepare
+    from bendsense.config import Config, GripperConfig, load_config
 
-    if not isinstance(config, Config):
+    if not isinstance(config, (Config, GripperConfig)):
         config = load_config(config)
-    if not isinstance(calibration, Calibration):
-        if calibration is None:
-            raise SessionError("calibration: a Calibration or a calibration YAML is required")
-        calibration = Calibration.load(calibration)
+    # one calibration, or a gripper's per finger; each with its error model made once when estimating
+    calibration = prepare(config, calibration, estimate)
     sessions = discover_sessions(paths, recursive=recursive, exclude=out_dir)
     if not sessions:
         raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, paths))}")
     names = session_names(sessions)
     rows, todo = _plan(sessions, names, out_dir, overwrite)
-    if estimate:
-        # the calibration's error model (a maximum-likelihood fit of its misfit, ~0.3 s) is
-        # made once here and travels with the pickled calibration, not once per session
-        calibration.error_model()
     options = dict(config=config, calibration=calibration, constraint=constraint, method=method, objective=objective,
                    pressure_pa=pressure_pa, estimate=estimate, overwrite=overwrite, track=track,
                    bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m)

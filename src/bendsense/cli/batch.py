@@ -27,6 +27,7 @@ from bendsense.cli._common import (
     contact_option,
     load_option,
     log_no_parameter_covariance,
+    make_calibration_option,
     objective_option,
     overwrite_option,
     quiet,
@@ -60,9 +61,7 @@ def _dask_executor(address: str):
 @click.command("process", cls=InterspersedCommand)
 @click.argument("paths", metavar="SESSION_OR_DIR...", nargs=-1, required=True,
                 type=click.Path(exists=True, path_type=Path))
-@click.option("--calibration", "calibration_path", required=True,
-              type=click.Path(exists=True, dir_okay=False, path_type=Path),
-              help="Calibration YAML written by 'bendsense calibrate'.")
+@make_calibration_option(required=True)
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Root output directory; each session's results go to OUT/<session name>/.")
 @config_option
@@ -84,7 +83,7 @@ def _dask_executor(address: str):
 @click.option("-r", "--recursive", is_flag=True, help="Search directories at any depth (default: one level).")
 @overwrite_option
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
-def process(paths, calibration_path, out_dir, config_path, workers, scheduler, constraint, method, objective,
+def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, constraint, method, objective,
             pressure_kpa, no_estimate, window_s, track_mode, bandwidth_hz, load, contact_s_m, recursive, overwrite,
             no_progress):
     """Process many sessions in parallel: reconstruct, estimate and save each one.
@@ -96,7 +95,10 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
     fails is reported with its reason while the others finish; the exit code is 1
     if any failed. Prints a summary table at the end. Each session's frames are
     model-checked in windows (--window-s, as the chain's 'estimate'); --track adds
-    the tracked force (as the chain's 'track' step).
+    the tracked force (as the chain's 'track' step). With a gripper's config
+    (fingers:) each session is a whole board: its fingers go to
+    OUT/NAME/<finger>/results.csv and shape.npz (--calibration NAME=CAL.yaml per
+    finger, or one for every finger).
 
     Ctrl-C or SIGTERM stops the run at once and its workers with it: each session
     finished so far is complete, the others have no output, one line says how many
@@ -110,9 +112,11 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
         bendsense process runs/ --calibration cal.yaml -o out/ --workers 2
         bendsense process runs/ --calibration cal.yaml -o out/ --scheduler tcp://10.0.0.5:8786
     """  # noqa: D301
+    calibration_paths_given = calibration_paths
 
     def step(state):
         from bendsense.batch import process_sessions
+        from bendsense.cli._common import calibration_paths
 
         if scheduler and workers is not None:
             raise click.UsageError("give --workers or --scheduler, not both")
@@ -122,18 +126,16 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
             raise click.UsageError("--bandwidth-hz is the bandwidth of the track: give --track smooth|filter")
         if no_estimate and (load != "tip" or contact_s_m is not None):
             raise click.UsageError("--load and --contact-s-m are options of the force estimate: not with --no-estimate")
+        from bendsense.config import load_config
+
+        config = load_config(config_path)  # (a gripper's config: each board session's fingers)
+        calibration = calibration_paths(calibration_paths_given, config)
+        actuators = [f.config for f in config.fingers] if hasattr(config, "fingers") else [config]
         if contact_s_m is not None:  # a location beyond the actuator is refused here, not once per session
-            from bendsense.config import load_config
-
-            check_load(load, contact_s_m, load_config(config_path))
+            for actuator in actuators:
+                check_load(load, contact_s_m, actuator)
         if not no_estimate and config_path is not None:  # the workers' warnings are silenced: say it here, once
-            from bendsense.config import load_config
-            from bendsense.errors import BendsenseError
-
-            try:
-                log_no_parameter_covariance(load_config(config_path))
-            except BendsenseError:
-                pass  # process_sessions reports a bad config as it does without this check
+            log_no_parameter_covariance(next((a for a in actuators if a.parameter_covariance is None), None))
         client = executor = None
         if scheduler:
             client, executor = _dask_executor(scheduler)
@@ -141,8 +143,8 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
             report = process_sessions(
                 paths,
                 out_dir,
-                config=config_path,
-                calibration=calibration_path,
+                config=config,
+                calibration=calibration,
                 executor=executor,
                 workers=workers,
                 constraint=constraint,
@@ -176,7 +178,8 @@ def process(paths, calibration_path, out_dir, config_path, workers, scheduler, c
             click.get_current_context().exit(1)
         return state
 
-    return step_io(step, outputs=[output.collection(out_dir)], inputs=[*paths, calibration_path, config_path])
+    return step_io(step, outputs=[output.collection(out_dir)],
+                   inputs=[*paths, *(p for _, p in calibration_paths), config_path])
 
 
 @click.command("plot", cls=InterspersedCommand)
@@ -218,6 +221,8 @@ def plot(target, figure_path, shapes, dpi, overwrite):
         from bendsense.plots import plot_results, results_from_state
 
         estimated = None
+        if _plot_gripper(state, target, figure_path, shapes, dpi, overwrite):
+            return state
         if figure_path is not None:
             if not target.is_dir():
                 raise click.BadParameter(f"{target}: not a results directory", param_hint="RESULTS_DIR")
@@ -251,6 +256,27 @@ def plot(target, figure_path, shapes, dpi, overwrite):
     if target_is_dir:  # not a figure: the step says how to plot a results directory
         return step
     return step_io(step, outputs=[output.file(target, overwrite=overwrite, suffixes=output.FIGURE)])
+
+
+def _plot_gripper(state, target, figure_path, shapes, dpi, overwrite) -> bool:
+    """``plot`` of a gripper (a panel per finger and the grasp): its chain, or its results directory."""
+    from bendsense.cli.gripper import finger_parts, is_gripper
+    from bendsense.gripper_results import is_gripper_results
+    from bendsense.plots_gripper import plot_gripper
+
+    if figure_path is not None and is_gripper_results(target):
+        plot_gripper(target, figure_path, max_shapes=shapes, dpi=dpi, overwrite=overwrite)
+        say(f"wrote {figure_path}")
+        return True
+    if figure_path is not None or not is_gripper(state):
+        return False
+    from bendsense.plots import results_from_state
+
+    results = {name: results_from_state(*part) for name, part in finger_parts(state, "plot").items()}
+    lengths = {f.name: f.config.actuator.length_m for f in state["gripper"].fingers}
+    plot_gripper(results, target, max_shapes=shapes, dpi=dpi, overwrite=overwrite, lengths_m=lengths)
+    say(f"wrote {target}")
+    return True
 
 
 COMMANDS = [process, plot]

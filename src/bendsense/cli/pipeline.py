@@ -420,14 +420,22 @@ def mcap(mcap_path, overwrite):
 
 @click.command("export", cls=InterspersedCommand)
 @click.argument("csv_path", metavar="FILE.csv", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--finger", metavar="NAME",
+              help="A gripper: export this finger's part of the board (its channels and pressure line) as a "
+                   "single actuator's session; default: the whole board.")
 @overwrite_option
-def export(csv_path, overwrite):
+def export(csv_path, finger, overwrite):
     """Export the loaded session as a session CSV."""
 
     def step(state):
         from bendsense.session import write_session_csv
 
         session = _require(state, "session", "export", "'load SESSION'")
+        if finger is not None:
+            if not is_gripper(state):
+                raise click.BadParameter("a finger needs a gripper's config ('load ... --config G.yaml' with "
+                                         "fingers:)", param_hint="'--finger'")
+            session = state["fingers"][state["gripper"].finger(finger).name]["session"]
         write_session_csv(session, csv_path, overwrite=overwrite)
         say(f"wrote {csv_path} ({len(session)} frames)")
         return state

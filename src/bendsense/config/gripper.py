@@ -106,7 +106,7 @@ class Finger:
         _check_finger(self, "finger")
 
     @property
-    def index(self):
+    def columns(self) -> list:
         """The 0-based board columns of its channels (``channels − 1``), as a list."""
         return [c - 1 for c in self.channels]
 
@@ -242,8 +242,8 @@ class GripperConfig:
         """
         name = f" {self.name!r}" if self.name else ""
         return (f"{what}: the config{name} is a gripper config (fingers {', '.join(self.names)}); this takes one "
-                f"actuator: pass one finger's config (gripper.finger(NAME).config) or, on the command line, the "
-                f"gripper's steps")
+                f"actuator's config: one finger's (gripper.finger(NAME).config in Python; on the command line a "
+                f"config without fingers:)")
 
     @property
     def names(self) -> tuple:
@@ -273,6 +273,21 @@ class GripperConfig:
                 return f
         raise ConfigError(f"finger {check.short(name)}: not a finger of this gripper; its fingers: "
                           f"{', '.join(self.names)}")
+
+    def with_finger_config(self, name: str, config: Config) -> GripperConfig:
+        """A copy whose finger ``name`` has the single-actuator config ``config`` (e.g. identified).
+
+        Parameters
+        ----------
+        name : str
+            The finger.
+        config : Config
+            Its new config (the same sensor segment count as its channels).
+        """
+        self.finger(name)  # an unknown name: the error listing the fingers
+        fingers = tuple(Finger(name=f.name, channels=f.channels, pressure_line=f.pressure_line,
+                               config=config if f.name == name else f.config) for f in self.fingers)
+        return GripperConfig(name=self.name, fingers=fingers)
 
     @classmethod
     def from_dict(cls, data: Any) -> GripperConfig:

@@ -31,6 +31,7 @@ force starts.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -165,6 +166,11 @@ class FingerGrasp:
         self.table_valid = state.valid
         frames = actuator.frames(nodes, state.force_n, solution=state.solution, noise=False)
         self.table_signal_counts = actuator.sensor.signal(frames.shifts_m)
+        # per-frame lookups of one pressure (the board's): plain floats and slopes, no array bookkeeping
+        self._nodes = nodes.tolist()
+        self._force_rows = [(float(fx), float(fy)) for fx, fy in self.table_force_n]
+        self._force_slopes = [(float(a), float(b)) for a, b in np.diff(self.table_force_n, axis=0)]
+        self._signal_slopes = np.diff(self.table_signal_counts, axis=0)
 
     # ------------------------------------------------------------------ exact
 
@@ -258,6 +264,28 @@ class FingerGrasp:
         return f
 
     # ------------------------------------------------------------------ table
+
+    def lookup_one(self, pressure_pa: float):
+        """Interpolate the table at one pressure (:meth:`lookup` for the board's per-frame path).
+
+        Parameters
+        ----------
+        pressure_pa : float
+            Pressure [Pa], clipped to the table's range.
+
+        Returns
+        -------
+        fx_n, fy_n : float
+            Contact force [N].
+        signal_counts : ndarray, shape (N,)
+            The sensor's noise-free readings [counts].
+        """
+        nodes = self._nodes
+        x = min(max(float(pressure_pa), nodes[0]), nodes[-1])
+        i = min(max(bisect.bisect_right(nodes, x) - 1, 0), len(nodes) - 2)
+        w = (x - nodes[i]) / (nodes[i + 1] - nodes[i])
+        (fx, fy), (dx, dy) = self._force_rows[i], self._force_slopes[i]
+        return fx + w * dx, fy + w * dy, self.table_signal_counts[i] + w * self._signal_slopes[i]
 
     def lookup(self, pressure_pa):
         """Interpolate the table at these pressures.

@@ -24,7 +24,7 @@ import numpy as np
 
 from bendsense.errors import ConfigError
 from bendsense.sim.grasp import FingerGrasp, GraspObject
-from bendsense.sim.regulator import DEFAULT_MAX_PRESSURE_PA, DEFAULT_TAU_S, PressureRegulators, closing_profile
+from bendsense.sim.regulator import DEFAULT_MAX_PRESSURE_PA, DEFAULT_TAU_S, PressureRegulators, _closing
 
 __all__ = [
     "FINGER_NAMES",
@@ -72,7 +72,8 @@ def gripper_config(k: int = 3, config=None):
         raise ConfigError(f"fingers: must be an integer in 1..{len(FINGER_NAMES)}, got {k!r}")
     config = load_config() if config is None else config
     fingers = tuple(
-        Finger(name=FINGER_NAMES[i], channels=tuple(range(16 * i + 1, 16 * i + 17)), pressure_line=i, config=config)
+        Finger(name=FINGER_NAMES[i], channels=tuple(range(16 * i + 1, 16 * i + 17)), pressure_line=i,
+               config=config.replace(name=FINGER_NAMES[i]))  # a finger's config is named after it (as loaded)
         for i in range(int(k))
     )
     return GripperConfig(name=f"simulated gripper ({int(k)} fingers)", fingers=fingers)
@@ -235,9 +236,8 @@ class GraspBoard:
         values = np.zeros(self.n_channels)
         truth = {}
         for f in self._fingers:
-            force, signal = f.grasp.lookup(p[f.line])
-            values[f.index] = signal
-            truth[f.keys[0]], truth[f.keys[1]] = float(force[0]) + 0.0, float(force[1]) + 0.0  # no -0.0
+            fx, fy, values[f.index] = f.grasp.lookup_one(p[f.line])
+            truth[f.keys[0]], truth[f.keys[1]] = fx + 0.0, fy + 0.0  # no -0.0
             truth[f.keys[2]] = f.grasp.contact_s_m
         for (set_key, p_key), sp, pp in zip(self._line_keys, self.regulators.setpoint_pa, p, strict=True):
             truth[set_key], truth[p_key] = float(sp), float(pp)
@@ -249,10 +249,10 @@ class GraspBoard:
 
 
 class _Profile:
-    """The closing profile with fixed options (picklable, unlike a lambda)."""
+    """The closing profile (:func:`~bendsense.sim.regulator.closing_profile`) with fixed options."""
 
     def __init__(self, close_pa, period_s):
         self.close_pa, self.period_s = close_pa, period_s
 
     def __call__(self, t_s):
-        return closing_profile(t_s, close_pa=self.close_pa, period_s=self.period_s)
+        return _closing(t_s, self.close_pa, self.period_s)

@@ -48,10 +48,18 @@ def closing_profile(t_s, *, close_pa: float = 90e3, period_s: float = 8.0):
     ndarray
         Set-points [Pa], the shape of ``t_s``.
     """
-    phase = np.mod(np.asarray(t_s, dtype=float), period_s) / period_s
-    up = np.clip(phase / 0.25, 0.0, 1.0)
-    down = np.clip((0.75 - phase) / 0.125, 0.0, 1.0)
-    return close_pa * np.where(phase < 0.625, up, down)
+    t = np.asarray(t_s, dtype=float)
+    if t.ndim:
+        return np.array([_closing(float(x), close_pa, period_s) for x in t.ravel()]).reshape(t.shape)
+    return np.asarray(_closing(float(t), close_pa, period_s))
+
+
+def _closing(t_s: float, close_pa: float, period_s: float) -> float:
+    """:func:`closing_profile` at one time, in plain floats (the board calls it every frame)."""
+    phase = (t_s % period_s) / period_s
+    if phase < 0.625:
+        return close_pa * min(phase / 0.25, 1.0)
+    return close_pa * min(max((0.75 - phase) / 0.125, 0.0), 1.0)
 
 
 def _number(name, value, *, low=0.0, open_low=True, high=math.inf) -> float:
@@ -156,6 +164,6 @@ class PressureRegulators:
         """
         scenario = min(max(float(self._profile(t_s)), 0.0), self.max_pressure_pa)
         np.copyto(self.setpoint_pa, np.where(self._host, self._host_setpoint, scenario))
+        # a convex combination of the pressure and a set-point in [0, p_max]: stays in [0, p_max]
         self.pressure_pa += self._alpha * (self.setpoint_pa - self.pressure_pa)
-        np.clip(self.pressure_pa, 0.0, self.max_pressure_pa, out=self.pressure_pa)
         return self.pressure_pa
