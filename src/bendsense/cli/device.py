@@ -485,12 +485,15 @@ def sim_device(
 
         ctx = click.get_current_context()
         for name, flag in (("rate_hz", "--rate"), ("channels", "--channels"), ("adc_bits", "--adc-bits"),
-                           ("source", "--source"), ("contact_s_m", "--contact-s-m"), ("truth_path", "--truth"),
-                           *((g, "--" + g.replace("_", "-")) for g in grasp if g != "object_kind"),
-                           ("object_kind", "--object")):
+                           ("source", "--source"), ("contact_s_m", "--contact-s-m")):
             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
                 raise click.UsageError(f"{flag} does not apply to --replay: the recording gives it "
                                        "(--speed changes the pace)")
+        for name in ("truth_path", *grasp):
+            if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
+                flag = {"truth_path": "--truth", "object_kind": "--object"}.get(name, "--" + name.replace("_", "-"))
+                raise click.UsageError(f"{flag} does not apply to --replay: a recording is played back, not "
+                                       "simulated")
 
         dev = ReplayDevice(
             replay_path, speed=speed, loop=loop, drop=drop, corrupt=corrupt, truncate=truncate, seed=seed,

@@ -5,7 +5,10 @@ inductances of filament loops and multi-turn spirals, the receiver signals versu
 shift); ``sensor`` turns shapes into strip shifts and shifts into the ADC counts of the
 paper's hardware; ``actuator`` is the simulated actuator under pressure and loads; and
 ``scenarios`` writes whole simulated experiments (calibration strips, tip loads, contact,
-a time-varying stream). Programs that use the simulator, such as the paper's evaluation
+a time-varying stream). The gripper: ``regulator`` (pressure regulators), ``grasp`` (the
+object a finger presses), ``gripper`` (the board: :func:`gripper_config`,
+:class:`GraspBoard`), ``gripper_scenario`` (``simulate gripper``) and ``truth`` (the
+board's truth file). Programs that use the simulator, such as the paper's evaluation
 (:mod:`bendsense.apps.evaluation`), are in :mod:`bendsense.apps`.
 """
 
@@ -16,6 +19,9 @@ from bendsense.sim.coils import (
     coil_mutual_inductance,
     loop_mutual_inductance,
 )
+from bendsense.sim.grasp import GraspObject
+from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+from bendsense.sim.regulator import PressureRegulators
 from bendsense.sim.sensor import (
     SensorReading,
     VirtualSensor,
@@ -28,11 +34,16 @@ from bendsense.sim.sensor import (
 __all__ = [
     "CoilArrayModel",
     "CoilGeometry",
+    "GraspBoard",
+    "GraspObject",
+    "PressureRegulators",
     "SensorReading",
     "VirtualSensor",
     "calibration_shifts",
     "coaxial_loop_mutual_inductance",
     "coil_mutual_inductance",
+    "default_objects",
+    "gripper_config",
     "loop_mutual_inductance",
     "shifts_from_angles",
     "shifts_from_curvatures",

@@ -141,6 +141,11 @@ class FingerGrasp:
         Contact force at the nodes [N].
     table_signal_counts : ndarray, shape (G, N)
         The sensor's noise-free, unquantised readings at the nodes [counts].
+
+    Raises
+    ------
+    ConfigError
+        If the equilibrium is not found at some pressure of the table.
     """
 
     def __init__(self, actuator: SimulatedActuator, obj: GraspObject, *, max_pressure_pa: float = 120e3,
@@ -161,6 +166,11 @@ class FingerGrasp:
         n = max(2, math.ceil(max_pressure_pa / step_pa) + 1)
         nodes = np.union1d(np.linspace(0.0, max_pressure_pa, n), [obj.touch_pressure_pa])
         state = self.solve(nodes)
+        if not state.valid.all():  # never a table with holes: a force that drops to 0 would be a lie
+            bad = nodes[~state.valid]
+            raise ConfigError(f"object: no equilibrium of the finger on the object (s_c = {self.contact_s_m:g} m, "
+                              f"touch at {obj.touch_pressure_pa / 1e3:g} kPa) at {bad.size} pressures from "
+                              f"{bad[0] / 1e3:g} kPa; lower the pressure limit or move the object")
         self.table_pressure_pa = nodes
         self.table_force_n = state.force_n
         self.table_valid = state.valid
