@@ -206,7 +206,7 @@ def test_live_view_draws_a_panel_per_finger(calibration_path, gripper, board, tm
         np.testing.assert_allclose(panel.bar_heights, blocks[name].signals[-1] - cal.offset)
         assert panel.status_text.get_text() == f"{name} status" and panel.ax_shape.get_title().startswith(name)
         assert panel.figure.figure is view.figure  # one figure, a panel each
-    view.save(tmp_path / "gripper.png")
+    view.save(tmp_path / "gripper.png", dpi=50)
     import matplotlib.image
 
     image = matplotlib.image.imread(tmp_path / "gripper.png")
