@@ -357,3 +357,50 @@ def test_blocks_as_long_as_the_segments_or_the_shape_points(calibration_path, co
     np.testing.assert_array_equal(frame.shape.s_m, proc.s_m)
     np.testing.assert_array_equal(frame.shape.lengths_m, config.sensor.segment_lengths_m)
     np.testing.assert_array_equal(frame.shape.positions_m, block.shape.positions_m[-1])
+
+
+def test_record_lsl_publishes_every_finger_of_the_board(calibration_path, grasp, tmp_path):
+    """``record --estimate --lsl`` with a gripper: each finger's force stream carries its results.csv, in order."""
+    pylsl = pytest.importorskip("pylsl")
+    import subprocess
+    import sys
+
+    from bendsense.device import SimulatedDevice
+
+    root, gripper, board = grasp
+    board.reset()
+    out = tmp_path / "s"
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        cmd = [sys.executable, "-c", "from bendsense.cli import main; main()", "-q", "record", dev.port, "-o",
+               str(out), "--seconds", "1", "--config", str(root / "gripper.yaml"), "--calibration",
+               str(calibration_path), "--estimate", "--lsl", "--lsl-wait", "30", "--quiet-status"]
+        with open(tmp_path / "stderr.txt", "wb") as err, subprocess.Popen(cmd, stdout=subprocess.DEVNULL,
+                                                                           stderr=err) as proc:
+            try:
+                inlets = {}
+                for name in gripper.names:  # this recording's streams: the port is in their source id
+                    found = pylsl.resolve_bypred(f"name='bendsense-force-{name}' and "
+                                                 f"source_id='bendsense {dev.port}-force-{name}'", 1, 30.0)
+                    assert found, (tmp_path / "stderr.txt").read_text()
+                    inlets[name] = pylsl.StreamInlet(found[0], max_buflen=60)
+                    inlets[name].open_stream(timeout=10)
+                got = {name: [] for name in gripper.names}
+                end = time.monotonic() + 60
+                while proc.poll() is None or any(inlet.samples_available() for inlet in inlets.values()):
+                    for name, inlet in inlets.items():
+                        got[name] += inlet.pull_chunk(timeout=0.05, max_samples=4096)[0]
+                    assert time.monotonic() < end
+                for name, inlet in inlets.items():  # what was still under way
+                    got[name] += inlet.pull_chunk(timeout=1.0, max_samples=4096)[0]
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+            assert proc.wait(30) == 0, (tmp_path / "stderr.txt").read_text()
+    for name in gripper.names:
+        rows = read_csv(out / name / "results.csv")
+        force = np.array(got[name])
+        assert len(force) >= 0.99 * len(rows["t_s"]) > 500
+        m = len(force)
+        want = np.column_stack([rows[c][:m] for c in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "fx_track_n",
+                                                        "fy_track_n", "fx_track_std_n", "fy_track_std_n")])
+        np.testing.assert_allclose(force, want, rtol=0, atol=1e-12, equal_nan=True)
