@@ -13,7 +13,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from bendsense import load_config, save_config
+from bendsense import ConfigError, load_config, save_config
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.config import Finger, GripperConfig
@@ -202,13 +202,17 @@ def test_calibrations_library(board):
     object.__setattr__(other, "finger", "thumb")
     got = calibrations(gripper, {"thumb": other, None: cal})
     assert got["thumb"] is other and got["index"] is cal
-    with pytest.raises(Exception, match=r"fitted for finger thumb, given for finger index"):
+    with pytest.raises(ConfigError, match=r"fitted for finger thumb, given for finger index"):
         calibrations(gripper, {"index": other, None: cal})
-    with pytest.raises(Exception, match=r"no calibration for fingers index, middle \(give --calibration index="):
+    with pytest.raises(ConfigError, match=r"no calibration for fingers index, middle \(give --calibration index="):
         calibrations(gripper, {"thumb": cal})
-    with pytest.raises(Exception, match=r"calibration for finger pinky: not a finger of this gripper; its fingers: "
+    with pytest.raises(ConfigError, match=r"calibration for finger pinky: not a finger of this gripper; its fingers: "
                                         r"thumb, index, middle"):
         calibrations(gripper, {"pinky": cal, None: cal})
+    eight = Calibration(offset=np.zeros(8), coefficients_odd=[0.0, 1e-6], coefficients_even=[0.0, -1e-6], degree=1,
+                        delta_a_range_odd=(-1e3, 1e3), delta_a_range_even=(-1e3, 1e3))
+    with pytest.raises(ConfigError, match=r"calibration: 8 channels, finger middle's sensor has 16 segments"):
+        calibrations(gripper, {"middle": eight, None: cal})
 
 
 def test_calibration_options_on_the_command_line(board):
