@@ -141,6 +141,8 @@ def test_finger_options_and_calibrations_per_finger(calibration_path, gripper, b
     np.testing.assert_array_equal(proc.processors["middle"].calibration.offset, cal.offset)
     with pytest.raises(Exception, match="finger_options: unknown finger pinky"):
         GripperProcessor(cal, gripper, finger_options={"pinky": {}})
+    with pytest.raises(ValueError, match="gripper: expected a GripperConfig .* got Config"):
+        GripperProcessor(cal, gripper.finger("thumb").config)
 
 
 def test_lsl_streams_per_finger_reach_an_inlet(calibration_path, gripper, board):
@@ -204,7 +206,7 @@ def test_live_view_draws_a_panel_per_finger(calibration_path, gripper, board, tm
         np.testing.assert_allclose(panel.bar_heights, blocks[name].signals[-1] - cal.offset)
         assert panel.status_text.get_text() == f"{name} status" and panel.ax_shape.get_title().startswith(name)
         assert panel.figure.figure is view.figure  # one figure, a panel each
-    view.save(tmp_path / "gripper.png")
+    view.save(tmp_path / "gripper.png", dpi=50)
     import matplotlib.image
 
     image = matplotlib.image.imread(tmp_path / "gripper.png")
@@ -275,6 +277,21 @@ def test_record_estimate_writes_every_finger_for_every_frame(calibration_path, g
     from bendsense.output_manifest import read_manifest
 
     assert {f"{f}/results.csv" for f in gripper.names} <= set(read_manifest(out)["files"])
+    # a new recording over it (--overwrite) replaces every finger's results, and only them
+    (out / "notes.txt").write_text("mine")
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        res = CliRunner().invoke(main, [str(a) for a in (
+            "record", dev.port, "-o", out, "--seconds", 0.3, "--config", root / "gripper.yaml", "--calibration",
+            calibration_path, "--estimate", "--overwrite")])
+    assert res.exit_code == 1 and "notes.txt" in res.output
+    (out / "notes.txt").unlink()
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        res = CliRunner().invoke(main, [str(a) for a in (
+            "record", dev.port, "-o", out, "--seconds", 0.3, "--config", root / "gripper.yaml", "--calibration",
+            calibration_path, "--estimate", "--overwrite")])
+    assert res.exit_code == 0, res.output
+    n = len(bendsense.read_session(out))
+    assert all(len(read_csv(out / f / "results.csv")["t_s"]) == n for f in gripper.names)
 
 
 def read_csv(path):
@@ -317,3 +334,73 @@ def test_live_save_shows_a_panel_per_finger_of_the_simulated_gripper(calibration
         "--calibration", calibration_path, "--save", tmp_path / "no.png")])
     assert res.exit_code == 1 and "pinky" in res.output and not (tmp_path / "no.png").exists()
     assert "Traceback" not in res.output
+
+
+def test_blocks_as_long_as_the_segments_or_the_shape_points(calibration_path, config):
+    """A block of 16 frames (the sensor's segments) or 41 (the shape's points) is cut frame by frame, never the
+    shape's segment lengths or points along the body (a live board delivers blocks of any length)."""
+    cal = Calibration.load(calibration_path)
+    frames = list(itertools.islice(time_varying_frames(None, RATE_HZ, 0), 41))
+    signals = np.array([c for _, c in frames], dtype=float)
+    pressure = np.array([p for p, _ in frames], dtype=float)
+    pressure[3] = np.nan  # a frame without a reading: the others are estimated as a sub-block
+    t_s = np.arange(41) / RATE_HZ
+    keep = np.isfinite(pressure[:16])
+    block = LiveProcessor(cal, config, constraint="normal").process_block(signals[:16], pressure[:16], t_s=t_s[:16])
+    without = LiveProcessor(cal, config, constraint="normal").process_block(signals[:16][keep], pressure[:16][keep],
+                                                                            t_s=t_s[:16][keep])
+    np.testing.assert_array_equal(block.force_n[keep], without.force_n)
+    assert block.status[3] == "no_pressure" and np.all(block.status[keep] == without.status)
+    proc = LiveProcessor(cal, config, constraint="normal", load="contact", contact_s_m=CONTACT_S_M)
+    block = proc.process_block(signals, np.nan_to_num(pressure, nan=pressure[2]), t_s=t_s)
+    frame = block.frame(-1)
+    np.testing.assert_array_equal(frame.shape.s_m, proc.s_m)
+    np.testing.assert_array_equal(frame.shape.lengths_m, config.sensor.segment_lengths_m)
+    np.testing.assert_array_equal(frame.shape.positions_m, block.shape.positions_m[-1])
+
+
+def test_record_lsl_publishes_every_finger_of_the_board(calibration_path, grasp, tmp_path):
+    """``record --estimate --lsl`` with a gripper: each finger's force stream carries its results.csv, in order."""
+    pylsl = pytest.importorskip("pylsl")
+    import subprocess
+    import sys
+
+    from bendsense.device import SimulatedDevice
+
+    root, gripper, board = grasp
+    board.reset()
+    out = tmp_path / "s"
+    with SimulatedDevice(board, rate_hz=RATE_HZ, n_channels=board.n_channels) as dev:
+        cmd = [sys.executable, "-c", "from bendsense.cli import main; main()", "-q", "record", dev.port, "-o",
+               str(out), "--seconds", "1", "--config", str(root / "gripper.yaml"), "--calibration",
+               str(calibration_path), "--estimate", "--lsl", "--lsl-wait", "30", "--quiet-status"]
+        with open(tmp_path / "stderr.txt", "wb") as err, subprocess.Popen(cmd, stdout=subprocess.DEVNULL,
+                                                                           stderr=err) as proc:
+            try:
+                inlets = {}
+                for name in gripper.names:  # this recording's streams: the port is in their source id
+                    found = pylsl.resolve_bypred(f"name='bendsense-force-{name}' and "
+                                                 f"source_id='bendsense {dev.port}-force-{name}'", 1, 30.0)
+                    assert found, (tmp_path / "stderr.txt").read_text()
+                    inlets[name] = pylsl.StreamInlet(found[0], max_buflen=60)
+                    inlets[name].open_stream(timeout=10)
+                got = {name: [] for name in gripper.names}
+                end = time.monotonic() + 60
+                while proc.poll() is None or any(inlet.samples_available() for inlet in inlets.values()):
+                    for name, inlet in inlets.items():
+                        got[name] += inlet.pull_chunk(timeout=0.05, max_samples=4096)[0]
+                    assert time.monotonic() < end
+                for name, inlet in inlets.items():  # what was still under way
+                    got[name] += inlet.pull_chunk(timeout=1.0, max_samples=4096)[0]
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+            assert proc.wait(30) == 0, (tmp_path / "stderr.txt").read_text()
+    for name in gripper.names:
+        rows = read_csv(out / name / "results.csv")
+        force = np.array(got[name])
+        assert len(force) >= 0.99 * len(rows["t_s"]) > 500
+        m = len(force)
+        want = np.column_stack([rows[c][:m] for c in ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "fx_track_n",
+                                                        "fy_track_n", "fx_track_std_n", "fy_track_std_n")])
+        np.testing.assert_allclose(force, want, rtol=0, atol=1e-12, equal_nan=True)

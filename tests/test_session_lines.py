@@ -58,9 +58,17 @@ def test_session_pressure_shapes():
 
 
 def test_session_pressure_errors():
-    with pytest.raises(SessionError, match=r"pressure_pa: expected one number, shape \(2,\) .* or \(2, n_lines\) "
-                                           r"\(a pressure per line\), got shape \(3, 2\)"):
+    with pytest.raises(SessionError, match=r"pressure_pa: expected one number or shape \(2,\) \(frames of t_s\), got "
+                                           r"shape \(3, 2\) \(several pressure lines: \(2, n_lines\)\)"):
         Session([0, 1e-3], [[1], [2]], np.zeros((3, 2)))
+    # as many lines as frames: which axis is which is said by meta n_lines (as every reader and Session sets it)
+    with pytest.raises(SessionError, match=r"got shape \(2, 2\); a pressure per line with as many lines as frames "
+                                           r"needs meta n_lines: 2"):
+        Session([0, 1e-3], [[1], [2]], [[1e4, 2e4], [1e4, 2e4]])
+    square = Session([0, 1e-3], [[1], [2]], [[1e4, 2e4], [1e4, 2e4]], meta={"n_lines": 2})
+    assert square.n_lines == 2
+    three = lines_session(n=6, k=3)
+    assert three.meta["n_lines"] == 3 and three.select(slice(0, 3)).pressure_pa.shape == (3, 3)
     with pytest.raises(SessionError, match=r"line: 3 is not a pressure line of g\.csv \(it has lines 0\.\.2\)"):
         lines_session(source="g.csv").line_pressure_pa(3)
     with pytest.raises(SessionError, match=r"line: 1 is not a pressure line of the session \(it has line 0\)"):
@@ -74,9 +82,10 @@ def test_session_csv_with_lines_round_trip(tmp_path):
     s = lines_session()
     write_session_csv(s, tmp_path / "g.csv")
     text = (tmp_path / "g.csv").read_text()
-    header = text.splitlines()[1]
-    assert header == "t_s,line0_pressure_pa,line1_pressure_pa,line2_pressure_pa,ch1,ch2,ch3,seq,fx_n"
-    assert text.splitlines()[3].split(",")[3] == "nan"
+    assert text.splitlines()[1] == "# n_lines: 3"
+    rows = [line for line in text.splitlines() if not line.startswith("#")]
+    assert rows[0] == "t_s,line0_pressure_pa,line1_pressure_pa,line2_pressure_pa,ch1,ch2,ch3,seq,fx_n"
+    assert rows[2].split(",")[3] == "nan"
     back = read_session_csv(tmp_path / "g.csv")
     np.testing.assert_array_equal(back.pressure_pa, s.pressure_pa)  # bit for bit, NaN where no reading
     np.testing.assert_array_equal(back.signals, s.signals)
@@ -254,7 +263,7 @@ def test_replay_of_a_gripper_session_sends_v2_and_records_every_line(tmp_path):
 
 
 def test_replay_refuses_a_line_beyond_the_wire_format():
-    s = Session([0.0, 0.001], [[1.0], [2.0]], [[5e4, 1e4], [5e4, 3e9]], source="big.csv")
+    s = Session([0.0, 0.001, 0.002], [[1.0], [2.0], [3.0]], [[5e4, 1e4], [5e4, 3e9], [5e4, 1e4]], source="big.csv")
     with pytest.raises(SessionError, match=r"big\.csv: frame 1, line 1 pressure_pa: 3e\+09 Pa does not fit"):
         replay_frames(s)
 

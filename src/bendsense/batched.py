@@ -12,7 +12,16 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames"]
+__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames", "STATIC_FIELDS"]
+
+#: Fields that are never per frame, whatever their length: a shape's points along the body
+#: and its segment lengths. A block of as many frames (41 points, 16 segments) must not cut them.
+STATIC_FIELDS = frozenset({"s_m", "lengths_m"})
+
+
+def _per_frame(name: str, value, n: int) -> bool:
+    """Whether field ``name`` holding ``value`` has the leading frame axis of ``n`` frames."""
+    return name not in STATIC_FIELDS and isinstance(value, np.ndarray) and value.ndim > 0 and value.shape[0] == n
 
 
 def take_frames(obj, index, n: int):
@@ -25,12 +34,13 @@ def take_frames(obj, index, n: int):
     index : int, slice, array of int or bool
         The frames.
     n : int
-        The batch size: the fields whose leading axis has this length are cut.
+        The batch size: the fields whose leading axis has this length are cut (never
+        those of :data:`STATIC_FIELDS`).
     """
     changes = {}
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
+        if _per_frame(f.name, value, n):
             changes[f.name] = value[index]
     return dataclasses.replace(obj, **changes)
 
@@ -52,7 +62,7 @@ def put_frames(obj, index, part, n: int):
     changes = {}
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
+        if _per_frame(f.name, value, n):
             new = np.array(value, dtype=object if value.dtype.kind in "US" else value.dtype)
             new[index] = getattr(part, f.name)
             changes[f.name] = new
@@ -75,7 +85,7 @@ def expand_frames(est, mask: np.ndarray):
     changes = {}
     for f in dataclasses.fields(est):
         value = getattr(est, f.name)
-        if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == m:
+        if _per_frame(f.name, value, m):
             if value.dtype.kind == "b":
                 full = np.zeros((n, *value.shape[1:]), dtype=bool)
             elif value.dtype.kind in "US":
@@ -102,6 +112,6 @@ def concat_frames(parts):
     changes = {}
     for f in dataclasses.fields(parts[0]):
         values = [getattr(part, f.name) for part in parts]
-        if all(isinstance(v, np.ndarray) and v.ndim and v.shape[0] == k for v, k in zip(values, counts)):
+        if all(_per_frame(f.name, v, k) for v, k in zip(values, counts)):
             changes[f.name] = np.concatenate(values)
     return dataclasses.replace(parts[0], **changes)

@@ -131,7 +131,7 @@ def split_session(session: Session, gripper: GripperConfig) -> dict:
     out = {}
     for finger in gripper.fingers:
         out[finger.name] = Session(
-            session.t_s, session.signals[:, finger.index], _line(pressure, finger).copy(),
+            session.t_s, session.signals[:, finger.columns], _line(pressure, finger).copy(),
             None if session.seq is None else session.seq.copy(), dict(session.meta), extras[finger.name],
             session.source,
         )
@@ -165,7 +165,7 @@ def split_signals(signals, pressure_pa, gripper: GripperConfig) -> dict:
         raise ArgumentError(f"pressure_pa: expected shape ({frames},) or ({frames}, n_lines) (frames of signals), "
                             f"got {pressure.shape}")
     _check_board(signals.shape[1], _lines(pressure), gripper, "signals", ArgumentError)
-    return {f.name: (signals[:, f.index], _line(pressure, f)) for f in gripper.fingers}
+    return {f.name: (signals[:, f.columns], _line(pressure, f)) for f in gripper.fingers}
 
 
 def check_calibration(calibration, finger: Finger, source: str = "") -> None:

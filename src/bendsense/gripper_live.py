@@ -56,9 +56,13 @@ class GripperProcessor:
     """
 
     def __init__(self, calibrations, gripper, *, pressure_pa=None, finger_options=None, **options):
+        from bendsense.config import GripperConfig
         from bendsense.fingers import calibrations as finger_calibrations
         from bendsense.pipeline import LiveProcessor
 
+        if not isinstance(gripper, GripperConfig):
+            raise ArgumentError(f"gripper: expected a GripperConfig (a config with fingers:), got "
+                                f"{type(gripper).__name__}; one actuator: bendsense.pipeline.LiveProcessor")
         self.gripper = gripper
         self.fingers = tuple(gripper.names)
         unknown = sorted(set(finger_options or {}) - set(self.fingers))

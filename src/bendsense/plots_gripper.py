@@ -70,7 +70,7 @@ def _grasp_panels(fig, grid, results: dict, lengths_m: dict):
     ax_g = fig.add_subplot(grid[2, :half])
     ax_c = fig.add_subplot(grid[2, half:])
     colors = _colors(len(results), "tab10")
-    total, total_var = None, None
+    total, total_var, located = None, None, False
     for color, (name, r) in zip(colors, results.items(), strict=True):
         t = np.asarray(r["t_s"], dtype=float)
         if r.has_forces:
@@ -80,16 +80,25 @@ def _grasp_panels(fig, grid, results: dict, lengths_m: dict):
             total_var = std**2 if total_var is None else total_var + std**2
         if r.has_contact:
             s_c, s_std = (np.asarray(r[k], dtype=float) for k in ("contact_s_m", "contact_std_m"))
-            shown = np.where(np.isfinite(s_std), s_c, np.nan) * MM
+            shown = np.where(np.isfinite(s_std), s_c, np.nan) * MM  # an unresolved location is no measurement
+            located |= bool(np.isfinite(shown).any())
             ax_c.plot(t, shown, color=color, label=f"{name} s_c")
             ax_c.fill_between(t, shown - 2 * s_std * MM, shown + 2 * s_std * MM, color=color, alpha=0.2, linewidth=0)
         else:  # a tip load: the contact is the tip
+            located = True
             length = lengths_m.get(name, float(r.s_m[-1]))
             ax_c.plot(t, np.full(t.shape, length * MM), color=color, linestyle=":", label=f"{name} (tip load)")
+    ax_c.set_xlim(float(t[0]), float(t[-1]) if t[-1] > t[0] else float(t[0]) + 1.0)
+    if not located:
+        ax_c.text(0.5, 0.5, "no contact located", ha="center", va="center", transform=ax_c.transAxes)
     if total is not None:
-        band = 2 * np.sqrt(total_var)
+        band = np.where(np.isfinite(total_var), 2 * np.sqrt(total_var), np.nan)
         ax_g.plot(t, total, color="k", linewidth=1.6, label="total")
         ax_g.fill_between(t, total - band, total + band, color="k", alpha=0.15, linewidth=0, label="total ± 2σ")
+        values, bands = total[np.isfinite(total)], band[np.isfinite(band)]
+        if values.size:  # the forces set the limits: a band far wider than them (a barely determined frame) is cut
+            pad = max(0.1 * float(np.ptp(values)), float(np.median(bands)) if bands.size else 0.0, 1e-3)
+            ax_g.set_ylim(min(0.0, float(values.min())) - pad, float(values.max()) + pad)
     else:
         ax_g.text(0.5, 0.5, "no force estimate", ha="center", va="center", transform=ax_g.transAxes)
     ax_g.set_title("grasp: force of each finger and total (sum of |F|)", fontsize="medium", loc="left")

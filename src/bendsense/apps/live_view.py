@@ -677,7 +677,9 @@ def run_live(
         Run time [s]; None: until ``is_open()`` turns false.
     max_fps : float
         Upper bound of the display rate [1/s]; frames arriving in between are processed
-        (and published) but only the newest is drawn.
+        (and published) but only the newest is drawn. A :class:`GripperView` of k
+        panels is redrawn at most ``max_fps / k`` times a second (a redraw costs k
+        panels' artists; the processing of every frame comes first).
     is_open : callable, optional
         Returns False when the window was closed.
     on_frame : callable, optional
@@ -700,6 +702,8 @@ def run_live(
     from bendsense.errors import DeviceError
 
     min_period = 1.0 / max_fps if max_fps else 0.0
+    if isinstance(view, GripperView):  # k panels per redraw: at most max_fps / k redraws, to keep up with the board
+        min_period *= len(view.views)
     latencies, process, draw = [], [], []
     samples0 = driver.stats.samples
     frames0 = processor.frames

@@ -212,6 +212,7 @@ def make_calibration_option(help_text: str = "Calibration YAML written by 'bends
     """
     return click.option(
         "--calibration", "calibration_paths", type=CalibrationSpec(), multiple=True, required=required,
+        metavar="[NAME=]CAL.yaml",
         help=f"{help_text.rstrip('.')}. A gripper (config with fingers:): NAME=CAL.yaml per finger (repeatable), or "
              f"one CAL.yaml for every finger.")
 

@@ -19,7 +19,7 @@ import click
 
 from bendsense.errors import BendsenseError
 
-__all__ = ["load_fingers", "per_finger", "finger_context", "is_gripper", "finger_parts"]
+__all__ = ["load_fingers", "per_finger", "finger_context", "is_gripper", "finger_parts", "identify_inputs"]
 
 
 def is_gripper(state: dict) -> bool:
@@ -145,3 +145,52 @@ def finger_parts(state: dict, step: str) -> dict:
             raise click.UsageError(f"'{step}' needs 'reconstruct' earlier in the chain")
         parts[name] = (sub["session"], sub["shape"], sub.get("estimate"), sub.get("track"))
     return parts
+
+
+def identify_inputs(config, finger, session_path, calibration_paths) -> tuple:
+    """What ``identify`` fits and writes: one actuator's config, or one finger of a gripper.
+
+    Parameters
+    ----------
+    config : Config or GripperConfig
+        ``--config``.
+    finger : str or None
+        ``--finger``: with a gripper, the finger identified.
+    session_path : Path or None
+        ``--session``: for a gripper the whole board's session (the finger's part is taken).
+    calibration_paths : tuple
+        ``--calibration`` values (:func:`bendsense.cli._common.calibration_paths`).
+
+    Returns
+    -------
+    tuple
+        ``(actuator config, inputs, written)``: the config the fit starts from, a function
+        returning ``(session, calibration)`` of ``--session``, and a function of the fitted
+        config returning the config to write (a gripper's: with the finger's fitted config).
+    """
+    from bendsense.calibration import Calibration
+    from bendsense.cli._common import calibration_paths as for_config
+    from bendsense.config import GripperConfig
+    from bendsense.session import read_session
+
+    paths = for_config(calibration_paths, config)
+    if not isinstance(config, GripperConfig):
+        if finger is not None:
+            raise click.BadParameter("a finger needs a gripper's config (--config G.yaml with fingers:)",
+                                     param_hint="'--finger'")
+        return config, lambda: (read_session(session_path), Calibration.load(paths)), lambda fitted: fitted
+    if finger is None:
+        raise click.UsageError(f"the config is a gripper (fingers {', '.join(config.names)}): give --finger NAME, "
+                               f"the finger to identify")
+    chosen = config.finger(finger)
+
+    def inputs():
+        from bendsense.fingers import calibrations, split_session
+
+        session = split_session(read_session(session_path), config)[chosen.name]
+        wanted = {k: v for k, v in paths.items() if k in (None, chosen.name)}
+        unknown = [k for k in paths if k is not None and k not in config.names]
+        return session, calibrations(GripperConfig(name=config.name, fingers=(chosen,)),
+                                     {**wanted, **{k: paths[k] for k in unknown}})[chosen.name]
+
+    return chosen.config, inputs, lambda fitted: config.with_finger_config(chosen.name, fitted)

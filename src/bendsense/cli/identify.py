@@ -13,6 +13,7 @@ from bendsense.cli._common import (
     PressureKpa,
     check_figure_suffix,
     config_option,
+    make_calibration_option,
     overwrite_option,
     save_figure,
     say,
@@ -62,13 +63,11 @@ def _parse_fix(kind: str, items) -> dict:
     "DATA.csv: free-bending from a free pressure sweep, stiffness from hanging weights (columns fx_n, fy_n "
     "or mass_kg). Needs --calibration.",
 )
-@click.option(
-    "--calibration",
-    "calibration_path",
-    type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="With --session: the sensor's calibration YAML (bendsense calibrate).",
-)
+@make_calibration_option("With --session: the sensor's calibration YAML (bendsense calibrate)")
 @config_option
+@click.option("--finger", metavar="NAME",
+              help="With a gripper's config (fingers:) and --session (a board session): identify this finger from "
+                   "its part of the board; OUTPUT is the gripper's config with the finger's fitted values.")
 @click.option(
     "-o",
     "--output",
@@ -107,8 +106,8 @@ def _parse_fix(kind: str, items) -> dict:
               "the fitted and the prior model).")
 @overwrite_option
 def identify(
-    kind, data, session_path, calibration_path, config_path, output, fix_items, pressure_tolerance_kpa, unweighted,
-    method, plot_path, overwrite
+    kind, data, session_path, calibration_paths, config_path, finger, output, fix_items, pressure_tolerance_kpa,
+    unweighted, method, plot_path, overwrite
 ):
     """Fit the free-bending or stiffness model to DATA.csv or a session (paper section V-C).
 
@@ -132,10 +131,11 @@ def identify(
     """
     fix = _parse_fix(kind, fix_items)
     check_figure_suffix(plot_path, "--plot")
-    _check_sources(data, session_path, calibration_path)
+    _check_sources(data, session_path, calibration_paths)
     source = data if data is not None else session_path
 
     def step(state):
+        from bendsense.cli.gripper import identify_inputs
         from bendsense.config import load_config, save_config
         from bendsense.identify import (
             check_fixed,
@@ -146,11 +146,13 @@ def identify(
         )
 
         config = load_config(config_path)  # (its errors name the config, not the data)
+        # the actuator identified, and how its fit becomes the config written (a gripper: one finger of it)
+        config, inputs, written = identify_inputs(config, finger, session_path, calibration_paths)
         # a held value no actuator of this geometry can have: named before any data is read
         check_fixed(fix, config, field="--fix")
         try:
             if kind == "free-bending" and session_path is not None:
-                fit = _free_bending_session(session_path, calibration_path, config, fix)
+                fit = _free_bending_session(inputs, config, fix)
             elif kind == "free-bending":
                 pressure, angle = read_free_bending_csv(data)
                 fit = fit_free_bending(pressure, angle, config, fix=fix)
@@ -160,8 +162,8 @@ def identify(
                 if session_path is None:
                     fit = fit_stiffness(read_stiffness_csv(data, config.actuator.length_m), config, **options)
                 else:
-                    fit = _stiffness_session(session_path, calibration_path, config, options)
-            new_config = fit.to_config(config)
+                    fit = _stiffness_session(inputs, config, options)
+            new_config = written(fit.to_config(config))
         except BendsenseError as err:
             raise click.ClickException(f"{source}: {err}" if str(source) not in str(err) else str(err)) from None
         say(fit.report())
@@ -181,43 +183,36 @@ def identify(
     targets = [outputs.file(output, overwrite=overwrite, suffixes=outputs.YAML)]
     if plot_path is not None:
         targets.append(outputs.file(plot_path, overwrite=overwrite, suffixes=outputs.FIGURE))
-    return step_io(step, outputs=targets, inputs=[source, calibration_path, config_path])
+    return step_io(step, outputs=targets, inputs=[source, *(p for _, p in calibration_paths), config_path])
 
 
-def _check_sources(data, session_path, calibration_path) -> None:
+def _check_sources(data, session_path, calibration_paths) -> None:
     """DATA.csv, or --session with --calibration: one of them, named when wrong."""
     if data is not None and session_path is not None:
         raise click.BadParameter("give DATA.csv or --session, not both", param_hint="--session")
     if data is None and session_path is None:
         raise click.UsageError("give DATA.csv, or --session SESSION with --calibration CAL.yaml")
-    if session_path is not None and calibration_path is None:
+    if session_path is not None and not calibration_paths:
         raise click.BadParameter("required with --session (the sensor's calibration YAML, from bendsense calibrate)",
                                  param_hint="--calibration")
-    if session_path is None and calibration_path is not None:
+    if session_path is None and calibration_paths:
         raise click.BadParameter("only with --session (DATA.csv holds measured angles or shapes already)",
                                  param_hint="--calibration")
 
 
-def _read_inputs(session_path, calibration_path):
-    from bendsense.calibration import Calibration
-    from bendsense.session import read_session
-
-    return read_session(session_path), Calibration.load(calibration_path)
-
-
-def _free_bending_session(session_path, calibration_path, config, fix):
+def _free_bending_session(inputs, config, fix):
     """The free-bending fit of a free sweep (:func:`bendsense.identify_session.fit_free_bending_session`)."""
     from bendsense.identify_session import fit_free_bending_session
 
-    session, calibration = _read_inputs(session_path, calibration_path)
+    session, calibration = inputs()
     return fit_free_bending_session(session, calibration, config, fix=fix)
 
 
-def _stiffness_session(session_path, calibration_path, config, options):
+def _stiffness_session(inputs, config, options):
     """The stiffness fit of a session of hanging weights."""
     from bendsense.identify_session import fit_stiffness_session
 
-    session, calibration = _read_inputs(session_path, calibration_path)
+    session, calibration = inputs()
     return fit_stiffness_session(session, calibration, config, **options)
 
 

@@ -106,7 +106,7 @@ class Finger:
         _check_finger(self, "finger")
 
     @property
-    def index(self):
+    def columns(self) -> list:
         """The 0-based board columns of its channels (``channels − 1``), as a list."""
         return [c - 1 for c in self.channels]
 
@@ -273,6 +273,21 @@ class GripperConfig:
                 return f
         raise ConfigError(f"finger {check.short(name)}: not a finger of this gripper; its fingers: "
                           f"{', '.join(self.names)}")
+
+    def with_finger_config(self, name: str, config: Config) -> GripperConfig:
+        """A copy whose finger ``name`` has the single-actuator config ``config`` (e.g. identified).
+
+        Parameters
+        ----------
+        name : str
+            The finger.
+        config : Config
+            Its new config (the same sensor segment count as its channels).
+        """
+        self.finger(name)  # an unknown name: the error listing the fingers
+        fingers = tuple(Finger(name=f.name, channels=f.channels, pressure_line=f.pressure_line,
+                               config=config if f.name == name else f.config) for f in self.fingers)
+        return GripperConfig(name=self.name, fingers=fingers)
 
     @classmethod
     def from_dict(cls, data: Any) -> GripperConfig:

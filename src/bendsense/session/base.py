@@ -30,8 +30,10 @@ class Session:
     pressure_pa : ndarray, shape (frames,) or (frames, n_lines)
         Actuation (gauge) pressure [Pa]; NaN where there is no reading. A board with
         several pressure lines (a gripper) gives one column per line, ``(frames,
-        n_lines)`` with ``n_lines > 1``; one line is always ``(frames,)`` (a
-        ``(frames, 1)`` array is taken as that).
+        n_lines)`` with ``n_lines > 1``, and ``meta["n_lines"]`` says how many (a
+        square array, as many lines as frames, is read as lines only when ``meta``
+        says so beforehand); one line is always ``(frames,)`` (a ``(frames, 1)`` array
+        is taken as that).
     seq : ndarray of int, shape (frames,), optional
         Device sequence number, unwrapped, where known.
     meta : dict
@@ -58,14 +60,9 @@ class Session:
             raise SessionError(f"t_s: expected shape (frames,), got {t.shape}")
         if sig.ndim != 2 or sig.shape[0] != t.size:
             raise SessionError(f"signals: expected shape ({t.size}, N) (frames of t_s, channels), got {sig.shape}")
-        p = float_array("pressure_pa", self.pressure_pa, error=SessionError)
-        if p.ndim == 2 and p.shape[0] == t.size and p.shape[1] >= 1:
-            p = p[:, 0].copy() if p.shape[1] == 1 else p.copy()  # one column per pressure line
-        elif p.shape not in ((), (1,), t.shape):
-            raise SessionError(f"pressure_pa: expected one number, shape ({t.size},) (frames of t_s) or "
-                               f"({t.size}, n_lines) (a pressure per line), got shape {p.shape}")
-        else:
-            p = np.broadcast_to(p, t.shape).copy()
+        p = _pressure(self.pressure_pa, t.size, self.meta)
+        if p.ndim == 2 and isinstance(self.meta, dict):  # several lines: meta says how many, as meta.yaml does
+            object.__setattr__(self, "meta", {**self.meta, "n_lines": p.shape[1]})
         object.__setattr__(self, "t_s", t)
         object.__setattr__(self, "signals", sig)
         object.__setattr__(self, "pressure_pa", p)
@@ -156,3 +153,23 @@ class Session:
             p, None if seq is None else np.atleast_1d(seq), dict(self.meta),
             {k: np.atleast_1d(v) for k, v in extra.items()}, self.source,
         )
+
+
+def _pressure(pressure_pa, frames: int, meta) -> np.ndarray:
+    """``pressure_pa`` as ``(frames,)``, or ``(frames, n_lines)`` for several lines; checked.
+
+    A square array (as many lines as frames) is ambiguous, and read as lines only when
+    ``meta["n_lines"]`` says so.
+    """
+    p = float_array("pressure_pa", pressure_pa, error=SessionError)
+    if p.ndim == 2 and p.shape[0] == frames and p.shape[1] == 1:
+        return p[:, 0].copy()
+    declared = p.ndim == 2 and isinstance(meta, dict) and str(meta.get("n_lines")) == str(p.shape[1])
+    if p.ndim == 2 and p.shape[0] == frames and (p.shape[1] != frames or declared):
+        return p.copy()  # one column per pressure line
+    if p.shape not in ((), (1,), (frames,)):
+        hint = (f"; a pressure per line with as many lines as frames needs meta n_lines: {p.shape[1]}"
+                if p.ndim == 2 and p.shape == (frames, frames) else f" (several pressure lines: ({frames}, n_lines))")
+        raise SessionError(f"pressure_pa: expected one number or shape ({frames},) (frames of t_s), got shape "
+                           f"{p.shape}{hint}")
+    return np.broadcast_to(p, (frames,)).copy()

@@ -156,6 +156,8 @@ def _parse_session_csv(text: str, source: str) -> Session:
     signals = np.column_stack([values[h] for _, h in channels])
     extra = {h: parse_column([c.strip() for c in cells[h]]) for h in header if h not in numeric}
     seq = extra.pop("seq").astype(np.int64) if "seq" in extra and extra["seq"].dtype.kind in "iu" else None
+    if pressure.ndim == 2:
+        meta["n_lines"] = pressure.shape[1]  # the columns say it, whatever a "# n_lines:" line said
     return Session(t, signals, pressure, seq=seq, meta=meta, extra=extra, source=source)
 
 
