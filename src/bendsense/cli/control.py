@@ -27,8 +27,6 @@ from bendsense.cli._common import calibration_paths as calibration_paths_of
 
 log = logging.getLogger("bendsense")
 
-#: default pressure limit [Pa] (lowered to the config's pressure range when that ends below)
-DEFAULT_MAX_PRESSURE_PA = 100e3
 
 
 def _controllers(config, finger, target, max_pressure_pa, gains):
@@ -75,6 +73,8 @@ def _limit(config, max_pressure_kpa):
                                      param_hint="'--max-pressure-kpa'")
         return max_pressure_kpa * 1e3
     configs = [f.config for f in config.fingers] if isinstance(config, GripperConfig) else [config]
+    from bendsense.control import DEFAULT_MAX_PRESSURE_PA
+
     return min([DEFAULT_MAX_PRESSURE_PA, *(c.actuator.pressure_range_pa[1] for c in configs)])
 
 

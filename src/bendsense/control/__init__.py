@@ -17,7 +17,7 @@ grasp on the simulated board.
 """
 
 from bendsense.control.force import NormalForce, contact_normal, normal_force
-from bendsense.control.loop import ControlResult, run
+from bendsense.control.loop import DEFAULT_MAX_PRESSURE_PA, ControlResult, run
 from bendsense.control.pi import (
     DEFAULT_KI_PA_PER_N_S,
     DEFAULT_KP_PA_PER_N,
@@ -31,4 +31,4 @@ from bendsense.control.safety import ControlStop, Safety
 
 __all__ = ["run", "ControlResult", "PIController", "Grasp", "normal_force", "contact_normal", "NormalForce",
            "Safety", "ControlStop", "ControlRecording", "CONTROL_LOG", "DEFAULT_KP_PA_PER_N",
-           "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S", "TRACK_BANDWIDTH_HZ"]
+           "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S", "TRACK_BANDWIDTH_HZ", "DEFAULT_MAX_PRESSURE_PA"]

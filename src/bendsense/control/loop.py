@@ -29,7 +29,7 @@ import numpy as np
 from bendsense.control.safety import ControlStop, Guard, Safety
 from bendsense.errors import ArgumentError, DeviceError
 
-__all__ = ["run", "ControlResult"]
+__all__ = ["run", "ControlResult", "DEFAULT_MAX_PRESSURE_PA"]
 
 log = logging.getLogger("bendsense.control")
 
@@ -168,8 +168,12 @@ def _zero(driver, lines) -> float:
     return time.perf_counter() if ok else math.nan
 
 
-def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=None, safety=None, n_lines=None,
-        recording=None, on_block=None) -> ControlResult:
+#: the default pressure limit of :func:`run` [Pa]
+DEFAULT_MAX_PRESSURE_PA = 100e3
+
+
+def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_PA, seconds=None, stop=None,
+        safety=None, n_lines=None, recording=None, on_block=None) -> ControlResult:
     """Close the loop: per block of frames, process, control, clip and send set-points; zero them at the end.
 
     Parameters
@@ -183,7 +187,7 @@ def run(driver, processor, controller, *, max_pressure_pa, seconds=None, stop=No
         ``controller(block) -> {line: pressure_pa}``; its ``fingers`` attribute (if any)
         names the fingers whose model status the safety checks watch (default: every
         finger of the block).
-    max_pressure_pa : float
+    max_pressure_pa : float, default :data:`DEFAULT_MAX_PRESSURE_PA` (100 kPa)
         Highest set-point ever sent [Pa]: every set-point is clipped to
         ``[0, max_pressure_pa]``.
     seconds : float, optional
