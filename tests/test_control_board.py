@@ -212,6 +212,16 @@ def test_a_model_misfit_on_the_controlled_finger_stops_the_loop(board, processor
     assert 0.3 < err.result.frames / RATE < 0.5  # stopped within the first windows after the fault
 
 
+def test_not_identifiable_on_the_controlled_finger_stops_the_loop(board, calibration_path):
+    # both force components free (constraint none): a straight finger does not determine the load along its
+    # axis, so the frames at rest are not_identifiable and the loop must not act on them
+    proc = LiveProcessor(Calibration.load(calibration_path), CONFIG, constraint="none", bandwidth_hz=30.0)
+    proc.warm_up()
+    err, truth = session(board, proc, PIController(0.15, max_pressure_pa=LIMIT_PA), seconds=5.0)
+    assert isinstance(err, ControlStop) and "not_identifiable for 10 ms" in err.reason
+    assert truth.column("setpoint_pa")[-1] == 0.0 and err.result.frames < 200
+
+
 def test_ctrl_c_sets_every_line_to_zero(board, processor):
     pi = PIController(0.15, max_pressure_pa=LIMIT_PA)
 
