@@ -293,3 +293,23 @@ def test_a_gripper_holds_with_two_fingers_and_lets_go_of_every_line(calibration_
                       *(f"line{k}_{c}" for k in range(3) for c in ("setpoint_pa", "pressure_pa"))]
     assert all((out / name / "results.csv").is_file() for name in gripper.names)
     assert len(bendsense.read_session(out)) == result.frames
+
+
+def test_a_safety_stop_is_one_line_and_exit_1(board, calibration_path, tmp_path):
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+
+    truth = Truth()
+    with SimulatedDevice(board, rate_hz=RATE, truth=truth, drop=0.05, seed=3) as dev:
+        res = CliRunner().invoke(main, ["control", dev.port, "--calibration", str(calibration_path),
+                                        "--target-force-n", "0.15", "--load", "contact", "--contact-s-m", str(S_C),
+                                        "--silence-s", "1", "-o", str(tmp_path / "s")])
+        time.sleep(0.03)
+    assert res.exit_code == 1, res.output
+    errors = [line for line in res.output.splitlines() if line.startswith("Error:")]
+    assert len(errors) == 1 and "Traceback" not in res.output
+    assert errors[0].startswith("Error: control stopped: ") and "frames lost within 1 s" in errors[0]
+    assert errors[0].endswith(f"set-point 0 sent on every pressure line (the session is in {tmp_path / 's'})")
+    assert truth.column("setpoint_pa")[-1] == 0.0
+    assert bendsense.read_session(tmp_path / "s").meta["outcome"].startswith("safety stop: ")
