@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import hashlib
 import sys
 import time
@@ -206,19 +207,26 @@ def score(results, config):
     }
 
 
-def run(config, seeds, n_holds, *, prior=False, use_cache=True, noise_counts=NOISE_COUNTS, **ranges):
+def _sensor(config, est_config, n_holds, use_cache, noise_counts, ranges, seed):
+    """One sensor's series, estimated.
+
+    Returns ((truth, estimate, window boundaries, known-location estimate), wall time per 100-frame window [s]).
+    """
+    truth = series(config, seed, n_holds, use_cache, **ranges)
+    est, wall, known = estimate(truth, config, est_config, seed, noise_counts)
+    return (truth, est, windows(truth), known), wall / (truth.t_s.size / (WINDOW_S * RATE_HZ))
+
+
+def run(config, seeds, n_holds, *, prior=False, use_cache=True, noise_counts=NOISE_COUNTS, executor=None, **ranges):
     """Estimate every sensor's series and score them: (scores, wall time per 100-frame window [s]).
 
     ``ranges``: ``s_range`` (s_c / L) and ``force_range_n`` of the contact holds (:func:`holds`).
+    ``executor``: a ``concurrent.futures.Executor`` to run the sensors on (default: one after another here).
     """
     est_config = config if prior else config.replace(parameter_covariance=None)
-    results, per_window = [], []
-    for seed in seeds:
-        truth = series(config, seed, n_holds, use_cache, **ranges)
-        est, wall, known = estimate(truth, config, est_config, seed, noise_counts)
-        results.append((truth, est, windows(truth), known))
-        per_window.append(wall / (truth.t_s.size / (WINDOW_S * RATE_HZ)))
-    return score(results, config), float(np.median(per_window))
+    one = functools.partial(_sensor, config, est_config, n_holds, use_cache, noise_counts, ranges)
+    done = list((map if executor is None else executor.map)(one, seeds))
+    return score([r for r, _ in done], config), float(np.median([w for _, w in done]))
 
 
 def window_time(config, repeats=20):
