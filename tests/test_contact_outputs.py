@@ -287,6 +287,15 @@ def test_summary_figure_draws_the_contact_on_the_shapes_and_over_time(work, tmp_
     assert "contact s_c [mm]" not in {ax.get_ylabel() for ax in tip.axes}
 
 
+def test_time_series_names_the_load(work):
+    from bendsense.plots import plot_time_series
+
+    processed, contact = work["processed"], work["contact"]
+    ylabel = {load: plot_time_series(Results.from_state(processed.session, processed.shape, est)).axes[0].get_ylabel()
+              for load, est in (("tip", processed.estimate), ("contact", contact))}
+    assert ylabel == {"tip": "tip force [N]", "contact": "contact force [N]"}
+
+
 def test_live_view_draws_the_contact_point_and_its_arc(work, tmp_path):
     from bendsense.apps.live_view import LiveView
     from bendsense.pipeline import LiveProcessor

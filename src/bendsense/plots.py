@@ -467,7 +467,8 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
             tracked = tuple(np.stack([np.asarray(results[f"f{c}_track{s}_n"], dtype=float) for c in "xy"], axis=-1)
                             for s in ("", "_std"))
             status = np.asarray(results["track_status"])
-        _force_panel(ax_f, t, force, std, status=status, pressure_kpa=kpa, tracked=tracked)
+        _force_panel(ax_f, t, force, std, status=status, pressure_kpa=kpa, tracked=tracked,
+                     contact="contact_s_m" in results.columns)
     else:
         ax_f.set_ylabel("tip force [N]")
         ax_f.text(0.5, 0.5, "no force estimate", transform=ax_f.transAxes, ha="center", va="center", color="0.4")
@@ -491,17 +492,17 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
     return fig
 
 
-def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=None):
+def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=None, contact=False):
     """Fx, Fy (frames, 2) [N] against ``t`` with their ±2σ bands; frames not ``ok`` ticked; pressure on the right.
 
     A component with an infinite σ (not identifiable: the shape does not determine it)
     is left out, not drawn at the value where the fit stopped. With ``tracked`` (the
     tracked force and its σ, each (frames, 2)), the band is the tracked force's and the
-    per-frame forces are points under it.
+    per-frame forces are points under it. ``contact``: the load is a contact along the body, not at the tip.
     """
     from matplotlib.legend_handler import HandlerTuple
 
-    ax.set_ylabel("tip force [N]")
+    ax.set_ylabel("contact force [N]" if contact else "tip force [N]")
     handles, labels, dots = [], [], []
     drawn, bands = [force], []
     for i, (color, label) in enumerate((("C0", "F_x"), ("C3", "F_y"))):

@@ -56,7 +56,8 @@ def _finger_column(fig, grid, col, name, results, max_shapes):
         if results.has_track:
             tracked = (np.column_stack([results["fx_track_n"], results["fy_track_n"]]).astype(float),
                        np.column_stack([results["fx_track_std_n"], results["fy_track_std_n"]]).astype(float))
-        _force_panel(ax_f, t, force, std, status=np.asarray(results["status"]), tracked=tracked)
+        _force_panel(ax_f, t, force, std, status=np.asarray(results["status"]), tracked=tracked,
+                     contact="contact_s_m" in results.columns)
         if col:  # the first finger's legend tells them all
             ax_f.get_legend().remove()
     else:
