@@ -140,3 +140,48 @@ def test_gripper_processor_takes_each_finger_its_location(board, calibration_pat
     proc = GripperProcessor({None: calibration_path}, gripper, estimate=False, **options)
     assert {n: p.options["contact_s_m"] for n, p in proc.processors.items()} == {"thumb": 0.1, "index": 0.11,
                                                                                 "middle": 0.1}
+
+
+def test_a_board_of_several_lines_with_one_actuator_config_is_one_line(board, calibration_path, tmp_path):
+    """16 channels (one finger's) but 2 pressure lines, read with the paper's single-actuator config."""
+    from bendsense.errors import SessionError
+    from bendsense.pipeline import process
+
+    _, _, session = board
+    two = Session(session.t_s, session.signals[:, :16], session.pressure_pa[:, :2], session.seq, {}, {})
+    write_session_csv(two, tmp_path / "two.csv")
+    want = (f"{tmp_path / 'two.csv'}: 2 pressure lines per frame (a gripper's board), but the config is a single "
+            f"actuator: give a gripper config (--config G.yaml with fingers:, each finger's channels and "
+            f"pressure_line)")
+    res = run("load", tmp_path / "two.csv", "--calibration", calibration_path, "reconstruct", "estimate",
+              "save", tmp_path / "out")
+    assert res.exit_code == 1 and res.output == f"Error: {want}\n", res.output
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(SessionError) as err:
+        process(tmp_path / "two.csv", None, calibration_path)
+    assert str(err.value) == want
+    res = run("process", tmp_path / "two.csv", "--calibration", calibration_path, "-o", tmp_path / "batch",
+              "--no-progress")
+    assert res.exit_code == 1 and "two.csv: 2 pressure lines per fram" in res.output, res.output
+
+
+@pytest.mark.parametrize("scenario", ["tip-loads", "calibration", "time-varying", "all"])
+def test_simulate_with_a_gripper_config_says_it_is_one(board, tmp_path, scenario):
+    root, gripper, _ = board
+    res = run("simulate", scenario, "--config", root / "gripper.yaml", "-o", tmp_path / "sim")
+    want = (f"Error: {root / 'gripper.yaml'}: the config {gripper.name!r} is a gripper config (fingers thumb, index, "
+            f"middle); this takes one actuator's config: one finger's (gripper.finger(NAME).config in Python; on the "
+            f"command line a config without fingers:)\n")
+    assert res.exit_code == 1 and res.output == want, res.output
+    assert not (tmp_path / "sim").exists()
+
+
+def test_simulate_given_a_gripper_object(board, tmp_path):
+    from bendsense.errors import ConfigError
+    from bendsense.sim.scenarios import simulate
+
+    _, gripper, _ = board
+    with pytest.raises(ConfigError, match=r"^config: the config .* is a gripper config \(fingers thumb, index, "
+                                          r"middle\)"):
+        simulate("tip-loads", tmp_path / "sim", config=gripper)
+    assert not (tmp_path / "sim").exists()

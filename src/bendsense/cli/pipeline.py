@@ -313,6 +313,13 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         if state.get("config") is not None:  # a bad location stops the chain before any work
             finger_contact(contact_s_m, state, load)
         session = state.get("session")
+        if session is not None and not is_gripper(state) and state.get("finger") is None:
+            from bendsense.plausibility import check_one_line
+
+            try:  # a board of several lines read with one actuator's config: before any work
+                check_one_line(session)
+            except SessionError as err:
+                raise click.ClickException(str(err)) from None
         if session is not None and not session.has_pressure:
             missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
             raise click.UsageError(f"{session.source or 'the session'}: {missing} of {len(session)} frames without "
