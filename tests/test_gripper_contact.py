@@ -185,3 +185,26 @@ def test_simulate_given_a_gripper_object(board, tmp_path):
                                           r"middle\)"):
         simulate("tip-loads", tmp_path / "sim", config=gripper)
     assert not (tmp_path / "sim").exists()
+
+
+def test_each_finger_stream_tells_its_own_location(monkeypatch, board, calibration_path):
+    from types import SimpleNamespace
+
+    import bendsense.interop.lsl as lsl
+    from bendsense.cli.device import live_load, make_outlets
+    from bendsense.gripper_live import GripperProcessor
+
+    _, gripper, _ = board
+    made = {}
+
+    class Outlets:  # what each finger's LslOutlets is made with (no LSL needed)
+        def __init__(self, n_segments, rate_hz, *, source_id, meta, tracked, contact, finger):
+            made[finger] = (meta, contact)
+
+    monkeypatch.setattr(lsl, "LslOutlets", Outlets)
+    proc = GripperProcessor({None: calibration_path}, gripper, estimate=False,
+                            **live_load("contact", ((None, 0.1), ("middle", 0.095)), gripper))
+    make_outlets(proc, SimpleNamespace(hello=None), "port")
+    assert {n: (m["contact_s_m"], m["load"], c) for n, (m, c) in made.items()} == {
+        "thumb": ("0.1 (known)", "contact", True), "index": ("0.1 (known)", "contact", True),
+        "middle": ("0.095 (known)", "contact", True)}
