@@ -3,11 +3,11 @@
     python benchmarks/bench_control.py [--fingers 1 3] [--seconds 1.5] [--quick]
 
 The board (:class:`bendsense.sim.gripper.GraspBoard`: one first-order regulator per line,
-τ = 25 ms, 0..120 kPa; a rigid object each finger touches at s_c = 0.10 m from 40, 45, 35 kPa
-on) streams at 1 kHz over a pseudo-terminal (in this process, as in the tests) and writes
+τ = 25 ms, 0..120 kPa; the default objects: rigid, each finger touched at its own s_c = 0.10, 0.11,
+0.095 m from 40, 45, 35 kPa on) streams at 1 kHz over a pseudo-terminal (in this process, as in the tests) and writes
 its truth of every frame with the host time it made the frame. The loop
 (:func:`bendsense.control.run`: the driver, the processor — one
-:class:`~bendsense.pipeline.LiveProcessor` per finger, contact at the known s_c, normal
+:class:`~bendsense.pipeline.LiveProcessor` per finger, contact at the finger's known s_c, normal
 constraint, 30 Hz track — and a :class:`~bendsense.control.PIController` per finger at its
 defaults) starts with the fingers open and the target 0.15 N, and is stopped after
 ``--seconds`` by SIGINT sent to it at a known time (Ctrl-C). Printed per finger count:
@@ -46,12 +46,11 @@ from bendsense.control import Grasp, PIController, Safety, run
 from bendsense.device.driver import Driver
 from bendsense.device.simdevice import SimulatedDevice
 from bendsense.pipeline import LiveProcessor
-from bendsense.sim.grasp import GraspObject
-from bendsense.sim.gripper import GraspBoard, gripper_config
+from bendsense.sim.gripper import DEFAULT_CONTACT_S_M, GraspBoard, default_objects, gripper_config
 from bendsense.sim.scenarios import simulate
 
-TARGET_N, BAND_N, LIMIT_PA, RATE_HZ, S_C = 0.15, 0.010, 100e3, 1000.0, 0.10
-TOUCH_PA = (40e3, 45e3, 35e3, 50e3)
+TARGET_N, BAND_N, LIMIT_PA, RATE_HZ = 0.15, 0.010, 100e3, 1000.0
+S_C = DEFAULT_CONTACT_S_M  # where the default objects touch each finger [m]
 
 
 class Truth:
@@ -139,13 +138,15 @@ class Board:
 
 def processor(cal, k):
     """One LiveProcessor for the single actuator, a gripper processor of k fingers otherwise."""
-    options = {"load": "contact", "contact_s_m": S_C, "constraint": "normal", "bandwidth_hz": 30.0}
+    options = {"load": "contact", "constraint": "normal", "bandwidth_hz": 30.0}
     if k == 1:
-        proc = LiveProcessor(cal, load_config(), **options)
+        proc = LiveProcessor(cal, load_config(), contact_s_m=S_C[0], **options)
     else:
         from bendsense.gripper_live import GripperProcessor
 
-        proc = GripperProcessor(cal, gripper_config(k), **options)
+        gripper = gripper_config(k)
+        proc = GripperProcessor(cal, gripper, **options,
+                                finger_options={f.name: {"contact_s_m": S_C[i]} for i, f in enumerate(gripper.fingers)})
     proc.warm_up()
     return proc
 
@@ -203,7 +204,7 @@ def session(board, proc, ctl, seconds):
 
 def board_of(k):
     config = load_config() if k == 1 else gripper_config(k)
-    return GraspBoard(config, [GraspObject(S_C, TOUCH_PA[i]) for i in range(k)], rate_hz=RATE_HZ, seed=0)
+    return GraspBoard(config, default_objects(k), rate_hz=RATE_HZ, seed=0)
 
 
 def score(truth, result, t_signal, board, k):

@@ -284,9 +284,10 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
         For a bad option or an argument of the wrong type (the message names it).
     """
     from bendsense import validation as check
-    from bendsense.plausibility import check_channels, check_time_column
+    from bendsense.plausibility import check_channels, check_one_line, check_time_column
 
     session, config, calibration, calibration_source = _inputs(session, config, calibration, calibration_source)
+    check_one_line(session)
     if len(session) == 0:
         raise SessionError(f"{_source(session)}: no frames")
     check_time_column(session.t_s, _source(session), error=ArgumentError if not session.source else SessionError)

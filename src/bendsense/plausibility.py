@@ -35,6 +35,7 @@ __all__ = [
     "check_pressure_column",
     "check_time_column",
     "check_channels",
+    "check_one_line",
     "IMPLAUSIBLE_FORCE",
     "force_bound_n",
     "force_bound_step",
@@ -236,6 +237,25 @@ def check_channels(session, calibration, sensor, *, calibration_source: str = ""
         where = session.source or "the session"
         raise SessionError(f"{where}: {session.n_channels} signal channels (ch1..ch{session.n_channels}), "
                            f"but {cal} has {calibration.n_channels}")
+
+
+def check_one_line(session) -> None:
+    """Refuse a board session of several pressure lines for a single actuator (one line naming it).
+
+    A single-actuator config reads one pressure per frame; a gripper's board records one
+    per line (``Session.pressure_pa`` of shape ``(frames, n_lines)``), split per finger by a
+    gripper config (:func:`bendsense.fingers.split_session`).
+
+    Parameters
+    ----------
+    session : Session
+        The session.
+    """
+    p = np.asarray(session.pressure_pa)
+    if p.ndim > 1:
+        raise SessionError(f"{session.source or 'the session'}: {p.shape[1]} pressure lines per frame (a gripper's "
+                           f"board), but the config is a single actuator: give a gripper config (--config G.yaml "
+                           f"with fingers:, each finger's channels and pressure_line)")
 
 
 # --- per frame: a force the actuator cannot carry -------------------------------------------

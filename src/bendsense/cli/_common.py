@@ -29,7 +29,11 @@ __all__ = [
     "load_option",
     "contact_option",
     "live_contact_option",
+    "chain_contact_option",
     "live_contact",
+    "ContactSpec",
+    "contact_locations",
+    "finger_contact",
     "check_load",
     "bandwidth_option",
     "live_bandwidth_option",
@@ -195,6 +199,30 @@ class CalibrationSpec(click.ParamType):
         return None, self._file.convert(value, param, ctx)
 
 
+class ContactSpec(click.ParamType):
+    """``--contact-s-m [NAME=]S_C``: a contact location [m] (> 0), for one finger (``NAME=``) or every one.
+
+    The value is ``(name or None, float)``; :func:`contact_locations` checks it against the config.
+    """
+
+    name = "[NAME=]S_C"
+    _number = Finite(min=0, min_open=True)
+
+    def convert(self, value, param, ctx):
+        """Parse and check one value."""
+        from bendsense.config.gripper import FINGER_NAME
+
+        if isinstance(value, tuple):  # already converted (a default)
+            return value
+        found = re.fullmatch(rf"({FINGER_NAME})=(.*)", str(value))
+        if found:
+            if not found.group(2).strip():
+                self.fail(f"{value}: no location after the finger's name (give {found.group(1)}=S_C, an arc length "
+                          f"[m])", param, ctx)
+            return found.group(1), self._number.convert(found.group(2), param, ctx)
+        return None, self._number.convert(value, param, ctx)
+
+
 def make_calibration_option(help_text: str = "Calibration YAML written by 'bendsense calibrate'", *,
                             required: bool = False):
     """``--calibration [NAME=]CAL.yaml`` (repeatable, passed as ``calibration_paths``), with the command's help.
@@ -281,11 +309,17 @@ contact_option = click.option(
     "--contact-s-m", type=Finite(min=0, min_open=True), default=None,
     help="With --load contact: the known contact location, arc length s_c from the base [m] (0 < s_c <= L); "
          "without it the location is estimated over windows of --window-s.")
-#: ``--contact-s-m`` of ``record --estimate`` and ``live``: frames arrive one by one, the location is given
+#: ``--contact-s-m`` of ``estimate``: a known location (a gripper: per finger, NAME=S_C), else estimated
+chain_contact_option = click.option(
+    "--contact-s-m", "contact_s_m", type=ContactSpec(), multiple=True, metavar="[NAME=]S_C",
+    help="With --load contact: the known contact location, arc length s_c from the base [m] (0 < s_c <= L); "
+         "without it the location is estimated over windows of --window-s. A gripper: NAME=S_C per finger "
+         "(repeatable), a plain S_C for every finger not named.")
+#: ``--contact-s-m`` of ``record --estimate``, ``live`` and ``control``: frames arrive one by one, the location is given
 live_contact_option = click.option(
-    "--contact-s-m", type=Finite(min=0, min_open=True), default=None,
+    "--contact-s-m", "contact_s_m", type=ContactSpec(), multiple=True, metavar="[NAME=]S_C",
     help="With --load contact (needed then): the known contact location, arc length s_c from the base [m] "
-         "(0 < s_c <= L).")
+         "(0 < s_c <= L). A gripper: NAME=S_C per finger (repeatable), a plain S_C for every finger not named.")
 
 
 def check_load(load: str, contact_s_m, config) -> None:
@@ -336,6 +370,87 @@ def live_contact(load: str, contact_s_m, config) -> dict:
                                  param_hint="'--contact-s-m'")
     check_load(load, contact_s_m, config)
     return {} if load == "tip" else {"load": "contact", "contact_s_m": float(contact_s_m)}
+
+
+def contact_locations(values, config, load: str, option: str = "--contact-s-m"):
+    """The locations of ``--contact-s-m [NAME=]S_C`` for ``config``: one, or one per finger.
+
+    Parameters
+    ----------
+    values : tuple of (str or None, float)
+        The option's values (:class:`ContactSpec`); a plain S_C applies to every finger
+        not named.
+    config : Config or GripperConfig
+        A single actuator takes one plain location; a gripper's fingers each one (or none).
+    load : str
+        ``--load``: a location needs ``contact``.
+    option : str
+        The option, for messages.
+
+    Returns
+    -------
+    float or None or dict
+        A single actuator's location (None: not given); a gripper's ``{finger: s_c or None}``,
+        each checked against its finger's length (:func:`check_load`).
+    """
+    from bendsense.config import GripperConfig
+
+    values = list(values or ())
+    hint = f"'{option}'"
+    if not isinstance(config, GripperConfig):
+        named = [f"{n}={s:g}" for n, s in values if n is not None]
+        if named:
+            raise click.BadParameter(f"{named[0]} names a finger, but the config is a single actuator (no fingers:); "
+                                     f"give {option} S_C", param_hint=hint)
+        if len(values) > 1:
+            raise click.BadParameter(f"given {len(values)} times; a single actuator takes one location",
+                                     param_hint=hint)
+        location = values[0][1] if values else None
+        check_load(load, location, config)
+        return location
+    given = {}
+    for name, location in values:
+        if name in given:
+            which = f"finger {name}" if name is not None else "every finger (a plain S_C)"
+            raise click.BadParameter(f"two locations for {which}: {given[name]:g} and {location:g}", param_hint=hint)
+        if name is not None and name not in config.names:
+            raise click.BadParameter(f"{name}={location:g}: {name} is not a finger of this gripper; its fingers: "
+                                     f"{', '.join(config.names)}", param_hint=hint)
+        given[name] = location
+    out = {}
+    for finger in config.fingers:
+        out[finger.name] = given.get(finger.name, given.get(None))
+        try:
+            check_load(load, out[finger.name], finger.config)
+        except click.BadParameter as err:
+            raise click.BadParameter(f"finger {finger.name}: {err.message}", param_hint=hint) from None
+    return out
+
+
+def finger_contact(values, state: dict, load: str):
+    """The known contact location of one state of the chain: a single actuator's, or one finger's.
+
+    Parameters
+    ----------
+    values : tuple of (str or None, float)
+        ``--contact-s-m`` (:class:`ContactSpec`).
+    state : dict
+        The chain's state of a single actuator, or of one finger of a gripper (its
+        ``finger`` key; the names were checked against the gripper by :func:`contact_locations`).
+    load : str
+        ``--load``.
+
+    Returns
+    -------
+    float or None
+    """
+    finger = state.get("finger")
+    if finger is None:
+        return contact_locations(values, state["config"], load)
+    given = dict(values or ())
+    location = given.get(finger, given.get(None))
+    check_load(load, location, state["config"])
+    return location
 
 
 def make_bandwidth_option(default_text: str):

@@ -57,10 +57,15 @@ def _processor(config, calibrations, constraint, bandwidth_hz, load):
     """The live processor (a gripper's: one LiveProcessor per finger), its kernels ready."""
     from bendsense.cli.device import make_processor
 
-    if isinstance(calibrations, dict):  # a gripper: every finger by name (None: the fingers not named)
-        calibrations = {name: calibrations.get(name, calibrations.get(None)) for name in config.names}
-
     return make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load)
+
+
+def _locations(load_options):
+    """The known contact location(s) of the load options, for the session's meta (a gripper's: per finger)."""
+    if "finger_options" in load_options:
+        locations = {name: o.get("contact_s_m") for name, o in load_options["finger_options"].items()}
+        return None if all(v is None for v in locations.values()) else locations
+    return load_options.get("contact_s_m")
 
 
 def _limit(config, max_pressure_kpa):
@@ -173,7 +178,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
                         "fingers": [f for f in controller.fingers if f is not None], "load": load,
                         "constraint": constraint,
-                        "contact_s_m": contact_s_m, "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
+                        "contact_s_m": _locations(load_options), "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
         _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s)
 

@@ -21,6 +21,7 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
+    contact_locations,
     live_bandwidth_option,
     live_contact,
     live_contact_option,
@@ -118,24 +119,40 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
 
 
 def live_load(load: str, contact_s_m, config) -> dict:
-    """The load options of ``record --estimate`` and ``live`` (:func:`~bendsense.cli._common.live_contact`).
+    """The load options of ``record --estimate``, ``live``, ``control`` (:func:`~bendsense.cli._common.live_contact`).
 
-    A gripper's location is checked against every finger (each must reach it).
+    A gripper's locations are per finger (``--contact-s-m NAME=S_C``, a plain S_C for every
+    finger not named; :func:`~bendsense.cli._common.contact_locations`), each checked
+    against its finger's length.
 
     Parameters
     ----------
     load : str
         ``--load``.
-    contact_s_m : float or None
-        ``--contact-s-m`` [m].
+    contact_s_m : tuple of (str or None, float)
+        ``--contact-s-m`` (:class:`~bendsense.cli._common.ContactSpec`).
     config : Config or GripperConfig
         The actuator (or the fingers) whose length bounds it.
+
+    Returns
+    -------
+    dict
+        A single actuator's options of :class:`~bendsense.pipeline.LiveProcessor`; a
+        gripper's ``{"finger_options": {finger: options}}`` of
+        :class:`~bendsense.gripper_live.GripperProcessor`.
     """
     from bendsense.config import GripperConfig
 
+    locations = contact_locations(contact_s_m, config, load)
     if not isinstance(config, GripperConfig):
-        return live_contact(load, contact_s_m, config)
-    return [live_contact(load, contact_s_m, f.config) for f in config.fingers][0]
+        return live_contact(load, locations, config)
+    options = {}
+    for finger in config.fingers:
+        try:
+            options[finger.name] = live_contact(load, locations[finger.name], finger.config)
+        except click.BadParameter as err:
+            raise click.BadParameter(f"finger {finger.name}: {err.message}", param_hint="'--contact-s-m'") from None
+    return {"finger_options": options}
 
 
 def results_paths(output: Path, config):
@@ -198,9 +215,11 @@ def make_outlets(processor, driver, port):
         meta.update(load="contact", contact_s_m=f"{first.options['contact_s_m']:g} (known)")
     if first.tracker is not None:
         meta["track"] = f"filter, bandwidth {first.tracker.bandwidth_hz:g} Hz"
-    if fingers is not None:
+    if fingers is not None:  # each finger's streams tell its own location
         return GripperOutlets({name: p.config.sensor.n_segments for name, p in fingers.items()}, rate,
-                              source_id=f"bendsense {port}", meta=meta, tracked=first.track, contact=contact)
+                              source_id=f"bendsense {port}", meta=meta, tracked=first.track, contact=contact,
+                              finger_meta={name: {"contact_s_m": f"{p.options['contact_s_m']:g} (known)"}
+                                           for name, p in fingers.items() if contact})
     return LslOutlets(processor.config.sensor.n_segments, rate, source_id=f"bendsense {port}", meta=meta,
                       tracked=processor.track, contact=contact)
 
@@ -318,7 +337,7 @@ def record(
     if (estimate or lsl) and not calibration_paths:
         raise click.BadParameter(f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml",
                                  param_hint="--calibration")
-    if (load != "tip" or contact_s_m is not None) and not (estimate or lsl):
+    if (load != "tip" or contact_s_m) and not (estimate or lsl):
         raise click.BadParameter("a load model needs --estimate (or --lsl)",
                                  param_hint="'--load'" if load != "tip" else "'--contact-s-m'")
     cols = [c.strip() for c in columns.split(",")] if columns else None

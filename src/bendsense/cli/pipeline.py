@@ -24,9 +24,10 @@ from bendsense.cli._common import (
     InterspersedCommand,
     PressureKpa,
     bandwidth_option,
-    check_load,
+    chain_contact_option,
     config_option,
-    contact_option,
+    contact_locations,
+    finger_contact,
     load_option,
     log_no_parameter_covariance,
     make_calibration_option,
@@ -243,7 +244,7 @@ def reconstruct(points):
               help="Tip angle of the normal/follower constraints (default: from the config).")
 @window_option
 @load_option
-@contact_option
+@chain_contact_option
 def estimate(constraint, method, objective, push_only, tip_angle_source, window_s, load, contact_s_m):
     """Estimate the tip force of every frame from its shape and pressure.
 
@@ -252,7 +253,8 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
     'model_misfit' (force kept; column window_p_value of results.csv).
 
     --load contact: one point force at arc length s_c along the actuator. With
-    --contact-s-m X the force of every frame at the known location X; without it the
+    --contact-s-m X the force of every frame at the known location X (a gripper: NAME=X per
+    finger, repeatable; a plain X for every finger not named); without it the
     location is estimated, one per quasi-static window of --window-s, with its σ
     (bendsense.estimate_contact; 'contact_unresolved' where the data cannot place it).
     results.csv adds contact_s_m and contact_std_m after fy_std_n.
@@ -268,7 +270,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         shape = _require(state, "shape", "estimate", "'reconstruct'")
         session = state["session"]
         config = state["config"]
-        check_load(load, contact_s_m, config)
+        where = finger_contact(contact_s_m, state, load)
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
         window = DEFAULT_WINDOW_S if window_s is None else window_s
@@ -276,7 +278,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
             warnings.simplefilter("ignore", NoParameterCovarianceWarning)
             processed = process(session, config, state["calibration"], shape=shape, constraint=constraint,
                                 method=method, objective=objective, push_only=push_only,
-                                tip_angle_source=tip_angle_source, load=load, contact_s_m=contact_s_m,
+                                tip_angle_source=tip_angle_source, load=load, contact_s_m=where,
                                 calibration_source=str(state.get("calibration_path") or ""), window_s=window)
         if processed.estimate.uncertainty != "none":
             log_no_parameter_covariance(config)
@@ -309,15 +311,33 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         import numpy as np
 
         if state.get("config") is not None:  # a bad location stops the chain before any work
-            check_load(load, contact_s_m, state["config"])
+            finger_contact(contact_s_m, state, load)
         session = state.get("session")
+        if session is not None and not is_gripper(state) and state.get("finger") is None:
+            from bendsense.plausibility import check_one_line
+
+            try:  # a board of several lines read with one actuator's config: before any work
+                check_one_line(session)
+            except SessionError as err:
+                raise click.ClickException(str(err)) from None
         if session is not None and not session.has_pressure:
             missing = int(np.count_nonzero(~np.isfinite(session.pressure_pa)))
             raise click.UsageError(f"{session.source or 'the session'}: {missing} of {len(session)} frames without "
                                    "pressure: give 'load ... --pressure-kpa P'")
 
     step.precheck = precheck
-    return per_finger(step)
+    fingers = per_finger(step)
+
+    def board(check):  # a gripper's locations (finger names, lengths) are checked on the board, then per finger
+        def run(state):
+            if is_gripper(state):
+                contact_locations(contact_s_m, state["gripper"], load)
+            return check(state)
+        return run
+
+    run = board(fingers)
+    run.precheck = board(fingers.precheck)
+    return run
 
 
 @click.command("track", cls=InterspersedCommand)

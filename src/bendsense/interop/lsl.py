@@ -166,6 +166,8 @@ class GripperOutlets:
         Further ``key: value`` pairs for every stream's description.
     tracked, contact : bool, default False
         As :class:`LslOutlets`, for every finger.
+    finger_meta : dict of str to dict, optional
+        A finger's own ``key: value`` pairs over ``meta`` (e.g. its known ``contact_s_m``).
 
     Attributes
     ----------
@@ -174,9 +176,10 @@ class GripperOutlets:
     """
 
     def __init__(self, n_segments, rate_hz: float, source_id: str = "bendsense", meta: dict | None = None,
-                 tracked: bool = False, contact: bool = False):
-        self.outlets = {name: LslOutlets(n, rate_hz, source_id=source_id, meta=meta, tracked=tracked,
-                                         contact=contact, finger=name)
+                 tracked: bool = False, contact: bool = False, finger_meta: dict | None = None):
+        self.outlets = {name: LslOutlets(n, rate_hz, source_id=source_id,
+                                         meta={**(meta or {}), **(finger_meta or {}).get(name, {})},
+                                         tracked=tracked, contact=contact, finger=name)
                         for name, n in n_segments.items()}
 
     @property

@@ -355,10 +355,13 @@ def _stream(seed, scenario) -> np.random.Generator:
 
 
 def _config(config) -> Config:
+    what = str(config) if isinstance(config, (str, os.PathLike)) else "config"
     if config is None or isinstance(config, (str, os.PathLike)):
         from bendsense.config import load_config
 
-        return load_config(config)
+        config = load_config(config)
+    if hasattr(type(config), "single_message"):  # a gripper: the scenarios simulate one actuator
+        raise ConfigError(config.single_message(what))
     if not isinstance(config, Config):
         raise ConfigError(f"config: expected a Config, a path or None, got {type(config).__name__}")
     return config
