@@ -34,6 +34,16 @@ board at 1 kHz, estimated with a known contact location (``--load contact
   estimator keeps up, the backlog stays at what arrives between two blocks.
 
     python benchmarks/bench_live.py --gripper-only [--seconds 5]
+
+The block rows (issue 24, the control loop's cost): a warm processor as
+``bendsense control`` runs it (contact at s_c = 0.1 m, constraint ``normal``, tracked at
+30 Hz, windowed model check) given the board's readings in blocks of 1, 2, 5 and 10
+frames (``process_readings``: what the loop calls per block), one finger
+(:class:`LiveProcessor`) and three (:class:`~bendsense.gripper_live.GripperProcessor`),
+the fingers closing on the object: median wall time per block and per frame. The
+readings are made ahead; the cold process (compilation, cache load) is excluded.
+
+    python benchmarks/bench_live.py --blocks-only
 """
 
 import argparse
@@ -211,10 +221,58 @@ def gripper_rows(cal, seconds, root):
     print("target: every frame of every finger estimated and tracked, zero backlog (bounded, worked off at once)")
 
 
+def board_readings(k, n):
+    """``n`` driver readings of the simulated board of ``k`` fingers closing on the object (1: the single actuator)."""
+    from bendsense import load_config
+    from bendsense.device.driver import Reading
+    from bendsense.frames import Sample
+    from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+
+    config = load_config() if k == 1 else gripper_config(k)
+    board = GraspBoard(config, default_objects(k, contact_s_m=CONTACT_S_M), rate_hz=GRIPPER_RATE_HZ, seed=SEED,
+                       period_s=4.0)
+    readings = []
+    for i in range(n):
+        p, counts, _ = board(i)
+        lines = () if k == 1 else tuple(int(round(x)) for x in p)
+        sample = Sample(i % 65536, i * 1000, len(counts), 0, 0, int(round(p if k == 1 else p[0])),
+                        tuple(int(c) for c in counts), lines)
+        readings.append(Reading(10**9 + i * 10**6, i * 1000, sample))
+    return readings
+
+
+def block_rows(cal, sizes=(1, 2, 5, 10), frames=1200, repeats=3):
+    """Median wall time of ``process_readings`` per block of each size, one finger and three; prints the rows."""
+    from bendsense import load_config
+    from bendsense.gripper_live import GripperProcessor
+    from bendsense.sim.gripper import gripper_config
+
+    options = {"load": "contact", "contact_s_m": CONTACT_S_M, "constraint": "normal", "bandwidth_hz": 30.0}
+    print("control loop's processor: process_readings per block (contact at 0.1 m, normal, 30 Hz track), warm")
+    print(f"{'fingers':<8} {'frames/block':>12} {'µs per block':>13} {'µs per frame':>13}")
+    for k in (1, 3):
+        proc = LiveProcessor(cal, load_config(), **options) if k == 1 else GripperProcessor(
+            cal, gripper_config(k), **options)
+        proc.warm_up()
+        readings = board_readings(k, 1000 + frames)[1000:]  # from the touch on: the force the loop controls
+        for size in sizes:
+            times = []
+            for _ in range(repeats):
+                proc.reset()
+                for i in range(0, frames - size + 1, size):
+                    block = readings[i:i + size]
+                    t = time.perf_counter()
+                    proc.process_readings(block)
+                    times.append(time.perf_counter() - t)
+            per_block = float(np.median(times))
+            print(f"{k:<8} {size:>12} {per_block * 1e6:13.0f} {per_block * 1e6 / size:13.0f}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="run time of each end-to-end case [s]")
     parser.add_argument("--gripper-only", action="store_true", help="only the gripper rows")
+    parser.add_argument("--blocks-only", action="store_true", help="only the block rows (the control loop's cost)")
     args = parser.parse_args()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(
@@ -223,6 +281,10 @@ def main():
     )
     with tempfile.TemporaryDirectory() as tmp:
         cal = calibration(Path(tmp))
+        print()
+        block_rows(cal)
+        if args.blocks_only:
+            return
         print()
         gripper_rows(cal, args.seconds, Path(tmp))
     if args.gripper_only:

@@ -32,6 +32,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -236,15 +237,29 @@ def frame_curvatures(signals, offset, coef, lo, hi, lengths, gap, kappa, theta):
     return extrapolated
 
 
+#: frames from which :func:`reconstruct` runs on numba's threads: below, waking the thread pool costs more than the
+#: frames (~2 µs each), and on a loaded machine far more (a live block of 5 frames waited ~1 ms for it)
+_PARALLEL_MIN = 256
+
+
+@njit(cache=True)
+def frames_reconstruct(first, last, signals, offset, coef, lo, hi, lengths, gap, base, seg, sigma, kappa, pos, ang,
+                       tip, tip_ang, extrapolated):
+    """Signals (B, N) → curvatures and PCC shape of frames ``first:last``, in order (:func:`frame_curvatures`)."""
+    theta = np.empty(lengths.size)
+    for b in range(first, last):
+        extrapolated[b] = frame_curvatures(signals[b], offset, coef, lo, hi, lengths, gap, kappa[b], theta)
+        tip_ang[b] = frame_kinematics(kappa[b], theta, base[b], seg, sigma, lengths, pos[b], ang[b], tip[b])
+
+
 @njit(cache=True, parallel=True)
 def _frames_reconstruct(signals, offset, coef, lo, hi, lengths, gap, base, seg, sigma, kappa, pos, ang, tip, tip_ang,
                         extrapolated):
-    """Signals (B, N) → curvatures and PCC shape of every frame in parallel (:func:`frame_curvatures`)."""
-    n = lengths.size
-    for b in prange(signals.shape[0]):
-        theta = np.empty(n)
-        extrapolated[b] = frame_curvatures(signals[b], offset, coef, lo, hi, lengths, gap, kappa[b], theta)
-        tip_ang[b] = frame_kinematics(kappa[b], theta, base[b], seg, sigma, lengths, pos[b], ang[b], tip[b])
+    """:func:`frames_reconstruct` of every frame (B, N) in parallel, in chunks of 64 frames."""
+    frames = signals.shape[0]
+    for c in prange((frames + 63) // 64):
+        frames_reconstruct(64 * c, min(frames, 64 * c + 64), signals, offset, coef, lo, hi, lengths, gap, base, seg,
+                           sigma, kappa, pos, ang, tip, tip_ang, extrapolated)
 
 
 def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
@@ -696,14 +711,11 @@ def reconstruct(
     pos, ang = np.empty((frames, m, 2)), np.empty((frames, m))
     tip, tip_ang = np.empty((frames, 2)), np.empty(frames)
     extrapolated = np.empty(frames, dtype=bool)
-    if frames == 1:
-        theta = np.empty(n)
-        extrapolated[0] = _jit.call(frame_curvatures, a2[0], *args, kappa[0], theta)
-        tip_ang[0] = _jit.call(frame_kinematics, kappa[0], theta, float(base_angle_rad), grid.seg, grid.sigma, lengths,
-                               pos[0], ang[0], tip[0])
+    out = (np.full(frames, float(base_angle_rad)), grid.seg, grid.sigma, kappa, pos, ang, tip, tip_ang, extrapolated)
+    if frames < _PARALLEL_MIN or numba.get_num_threads() == 1:  # a live block: in this thread
+        _jit.call(frames_reconstruct, 0, frames, a2, *args, *out)
     else:
-        _jit.call(_frames_reconstruct, a2, *args, np.full(frames, float(base_angle_rad)), grid.seg, grid.sigma, kappa,
-                  pos, ang, tip, tip_ang, extrapolated)
+        _jit.call(_frames_reconstruct, a2, *args, *out)
     return Shape(
         curvature_per_m=kappa.reshape(a.shape),
         s_m=grid.s,

@@ -689,10 +689,10 @@ class LiveProcessor:
     def _track(self, est, t, p):
         """The block's causal track; a clock that jumps back (a device reset) restarts the track there."""
         n = t.size
-        back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
-        if not back.size:
+        if not (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any())):  # the usual block: forward in time
             self._track_t = float(t[-1])
             return self.tracker.update(est, t, p)
+        back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
         parts = []
         for lo, hi in zip(np.concatenate(([0], back)), np.concatenate((back, [n]))):
             if lo in back:

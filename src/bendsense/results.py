@@ -219,6 +219,15 @@ def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict
     return columns
 
 
+def _all_ok(estimate) -> bool:
+    """Whether every frame of a force estimate is ok: converged, a finite force, a resolved contact."""
+    contact_std = getattr(estimate, "contact_std_m", None) if getattr(estimate, "load", "tip") == "contact" else None
+    message = np.asarray(getattr(estimate, "message", ""), dtype=str)
+    return bool(np.all(estimate.success)) and bool(np.all(message == "converged")) \
+        and bool(np.isfinite(estimate.force_n).all()) and not (contact_std is not None and bool(np.isinf(
+            np.asarray(contact_std, dtype=float)).any()))
+
+
 def estimate_status(estimate, n: int) -> np.ndarray:
     """Per-frame status strings (n,) of a force estimate alone: ``ok`` or the estimate's reason.
 
@@ -235,14 +244,13 @@ def estimate_status(estimate, n: int) -> np.ndarray:
         The number of frames.
     """
     status = np.full(n, OK, dtype=object)
+    if _all_ok(estimate):
+        return status  # every frame ok (the live path's usual block): nothing to look up
     failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
     message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
     unresolved = np.zeros(n, dtype=bool)
     if getattr(estimate, "load", "tip") == "contact" and estimate.contact_std_m is not None:
         unresolved = np.broadcast_to(np.isinf(np.asarray(estimate.contact_std_m, dtype=float)), (n,))
-    if not failed.any() and (message == "converged").all() and np.isfinite(estimate.force_n).all() \
-            and not unresolved.any():
-        return status  # every frame ok (the live path's usual block): nothing to look up
     status[failed] = NOT_CONVERGED
     status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
     status[~failed & np.char.startswith(message, CONTACT_UNRESOLVED)] = CONTACT_UNRESOLVED
@@ -278,11 +286,14 @@ def frame_status(shape, estimate=None) -> np.ndarray:
     """
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
     status = np.full(n, OK, dtype=object)
+    kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
+    if not np.any(getattr(shape, "extrapolated", False)) and np.isfinite(kappa).all() and (
+            estimate is None or _all_ok(estimate)) and not (np.abs(shape.tip_angle_rad) > 2.0 * np.pi).any():
+        return status  # every frame ok (the live path's usual block): nothing to look up
     extrapolated = np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))
     status[extrapolated] = EXTRAPOLATED
     # a shape from non-finite signals is never ok
-    kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float).reshape(n, -1)
-    status[~np.isfinite(kappa).all(axis=1)] = NO_SHAPE
+    status[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = NO_SHAPE
     if estimate is not None:
         own = estimate_status(estimate, n)
         failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
