@@ -238,8 +238,10 @@ def frame_curvatures(signals, offset, coef, lo, hi, lengths, gap, kappa, theta):
 
 
 #: frames from which :func:`reconstruct` runs on numba's threads: below, waking the thread pool costs more than the
-#: frames (~2 µs each), and on a loaded machine far more (a live block of 5 frames waited ~1 ms for it)
-_PARALLEL_MIN = 256
+#: frames (~2 µs each), and on a loaded machine far more (a live block of 5 frames waited ~1 ms for it). The
+#: estimate's threshold (``bendsense.estimation._PARALLEL_MIN``): a session below it compiles no parallel kernel,
+#: so the workers of a batch find every kernel its warm-up compiled (``bendsense.batch.warm_up``)
+_PARALLEL_MIN = 2048
 
 
 @njit(cache=True)
