@@ -452,22 +452,28 @@ class LiveView:
         overwrite : bool, default True
             Replace an existing figure bendsense wrote.
         """
-        from pathlib import Path
+        _save(self.figure, [self], path, dpi, overwrite)
 
-        from bendsense import output
 
-        path = Path(path)
-        fmt = path.suffix[1:].lower() or "png"
-        # animated artists are left out of a normal draw; show them for the file
-        for artist in self.artists:
-            artist.set_animated(False)
-        try:
-            with output.write_file(path, overwrite=overwrite, writer="bendsense live") as tmp:
-                self.figure.savefig(tmp, format=fmt, dpi=dpi, metadata=output.figure_metadata(fmt))
-        finally:
-            for artist in self.artists:
-                artist.set_animated(True)
-            self._background = None
+def _save(figure, views, path, dpi, overwrite) -> None:
+    """Write ``figure`` with the current frame of its ``views`` (atomically; :func:`bendsense.output.write_file`)."""
+    from pathlib import Path
+
+    from bendsense import output
+
+    path = Path(path)
+    fmt = path.suffix[1:].lower() or "png"
+    artists = [a for view in views for a in view.artists]
+    for artist in artists:  # animated artists are left out of a normal draw; show them for the file
+        artist.set_animated(False)
+    try:
+        with output.write_file(path, overwrite=overwrite, writer="bendsense live") as tmp:
+            figure.savefig(tmp, format=fmt, dpi=dpi, metadata=output.figure_metadata(fmt))
+    finally:
+        for artist in artists:
+            artist.set_animated(True)
+        for view in views:
+            view._background = None
 
 
 class GripperView:
@@ -555,23 +561,7 @@ class GripperView:
         overwrite : bool, default True
             Replace an existing figure bendsense wrote.
         """
-        from pathlib import Path
-
-        from bendsense import output
-
-        path = Path(path)
-        fmt = path.suffix[1:].lower() or "png"
-        artists = [a for view in self.views.values() for a in view.artists]
-        for artist in artists:  # animated artists are left out of a normal draw; show them for the file
-            artist.set_animated(False)
-        try:
-            with output.write_file(path, overwrite=overwrite, writer="bendsense live") as tmp:
-                self.figure.savefig(tmp, format=fmt, dpi=dpi, metadata=output.figure_metadata(fmt))
-        finally:
-            for artist in artists:
-                artist.set_animated(True)
-            for view in self.views.values():
-                view._background = None
+        _save(self.figure, list(self.views.values()), path, dpi, overwrite)
 
 
 # --------------------------------------------------------------------------- loop
