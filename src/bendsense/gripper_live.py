@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from bendsense.errors import ArgumentError
+from bendsense.readings import ReadingClock
 
 __all__ = ["GripperProcessor"]
 
@@ -77,8 +78,7 @@ class GripperProcessor:
             for f in gripper.fingers
         }
         self.frames = 0
-        self._t0_us = None
-        self._host0_ns = None
+        self._clock = ReadingClock()
 
     # the finger processors' shared options, for the outputs' metadata
     def _first(self):
@@ -132,8 +132,7 @@ class GripperProcessor:
         """Forget every finger's warm start and track, and the time origin (e.g. after a reconnect)."""
         for p in self.processors.values():
             p.reset()
-        self._t0_us = None
-        self._host0_ns = None
+        self._clock.reset()
 
     def warm_up(self) -> None:
         """Compile or load the kernels before the first frame arrives (every finger's), then forget the frames."""
@@ -202,11 +201,5 @@ class GripperProcessor:
         dict of str to LiveBlock
             Each finger's block, in the config's order.
         """
-        from bendsense.readings import reading_columns
-
-        readings = list(readings)
-        if self._t0_us is None and readings:
-            self._t0_us = readings[0].device_us
-            self._host0_ns = readings[0].host_ns
-        c = reading_columns(readings, 0 if self._t0_us is None else self._t0_us, self._host0_ns)
+        c = self._clock.columns(readings)
         return self.process_block(c.signals, c.pressures_pa, t_s=c.t_s, seq=c.seq, host_ns=c.host_ns, extra=c.extra)

@@ -38,6 +38,7 @@ import numpy as np
 from bendsense.batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, SessionError
+from bendsense.readings import ReadingClock
 from bendsense.results import CONTACT_UNRESOLVED, NOT_IDENTIFIABLE, Results
 
 log = logging.getLogger("bendsense")
@@ -669,8 +670,7 @@ class LiveProcessor:
         self.estimated = 0
         self.status_counts: dict[str, int] = {}
         self._previous = None
-        self._t0_us = None
-        self._host0_ns = None
+        self._clock = ReadingClock()
 
     def _new_tracker(self):
         if not self.track:
@@ -682,7 +682,7 @@ class LiveProcessor:
     def reset(self) -> None:
         """Forget the warm start, the track and the time origin (e.g. after a reconnect)."""
         self._previous = None
-        self._t0_us = None
+        self._clock.reset()
         self.tracker = self._new_tracker()
         self._track_t = -math.inf
 
@@ -720,7 +720,6 @@ class LiveProcessor:
         self.reset()
         self.frames = self.failures = self.estimated = 0
         self.status_counts = {}
-        self._host0_ns = None
 
     def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
                       extra=None) -> LiveBlock:
@@ -831,13 +830,7 @@ class LiveProcessor:
         readings : list of Reading
             Driver readings, oldest first.
         """
-        from bendsense.readings import reading_columns
-
-        readings = list(readings)
-        if self._t0_us is None and readings:
-            self._t0_us = readings[0].device_us
-            self._host0_ns = readings[0].host_ns
-        c = reading_columns(readings, 0 if self._t0_us is None else self._t0_us, self._host0_ns)
+        c = self._clock.columns(readings)
         return self.process_block(c.signals, c.pressure_pa, t_s=c.t_s, seq=c.seq, host_ns=c.host_ns, extra=c.extra)
 
     def process_signals(self, signals, pressure_pa=None, *, seq=-1, t_s=math.nan, host_ns=None) -> LiveFrame:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ReadingColumns", "reading_columns", "sample_lines"]
+__all__ = ["ReadingColumns", "ReadingClock", "reading_columns", "sample_lines"]
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,29 @@ def reading_columns(readings, t0_us: int, host0_ns: int | None) -> ReadingColumn
         host_ns=host_ns,
         extra=records_extra(records, host0_ns),
     )
+
+
+class ReadingClock:
+    """The time origin of a live processor's readings: the first reading it saw since it was made or reset."""
+
+    def __init__(self):
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the origin: the next block's first reading is ``t_s = 0``."""
+        self.t0_us = None
+        self.host0_ns = None
+
+    def columns(self, readings) -> ReadingColumns:
+        """:func:`reading_columns` of a block of readings, timed from the origin (set by the first block).
+
+        Parameters
+        ----------
+        readings : list of Reading
+            Driver readings, oldest first.
+        """
+        readings = list(readings)
+        if self.t0_us is None and readings:
+            self.t0_us = readings[0].device_us
+            self.host0_ns = readings[0].host_ns
+        return reading_columns(readings, 0 if self.t0_us is None else self.t0_us, self.host0_ns)
