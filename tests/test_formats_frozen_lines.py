@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from test_formats_frozen import cobs_decode  # the independent COBS decoder of the version-1 files
 
 from bendsense import read_session, read_session_csv
 from bendsense.frames import Decoder, Hello, Sample
@@ -24,19 +25,6 @@ DATA = Path(__file__).parent / "data" / "formats"
 NO_PRESSURE = 0x7FFFFFFF
 RECORD = [["host_ns", "<i8"], ["t_us", "<u8"], ["seq", "<u2"], ["status", "|u1"], ["tx_drops", "<u2"],
           ["pressure_pa", "<i4"], ["adc", "(8,)<u2"], ["pressures_pa", "(3,)<i4"]]
-
-
-def cobs_decode(block: bytes) -> bytes | None:
-    out, i = bytearray(), 0
-    while i < len(block):
-        code = block[i]
-        if code == 0 or i + code > len(block):
-            return None
-        out += block[i + 1 : i + code]
-        i += code
-        if code != 0xFF and i < len(block):
-            out.append(0)
-    return bytes(out)
 
 
 def v2_samples(data: bytes) -> list:
