@@ -150,6 +150,9 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     frame for 0.1 s (--silence-s), or a controlled finger model_misfit / not_identifiable for 10 ms
     (a safety stop: one line, exit 1). -o SESSION records everything (docs/formats.md,
     "Control session"). docs/grasping.md walks through a grasp on the simulated board.
+
+    While it runs it sends a HEARTBEAT every 50 ms, so that a board with a host-silence
+    watchdog (sim-device --watchdog-ms) lets go of every line when this command is killed.
     """
     from bendsense.cli.device import live_load
     from bendsense.config import load_config

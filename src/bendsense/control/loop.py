@@ -7,6 +7,9 @@ board, more when it falls behind), processes the block (a
 mode), checks it (:class:`~bendsense.control.safety.Guard`), calls the controller, clips
 its set-points to ``[0, max_pressure_pa]`` and sends them
 (:meth:`~bendsense.device.driver.Driver.send_setpoint`), then records the block if asked.
+While it runs it sends a HEARTBEAT at least every :data:`HEARTBEAT_S`, set-points or not,
+so that a board's host-silence watchdog lets go of every line only when the loop is gone
+(killed, hung, the cable pulled).
 Whatever ends the loop — its time, a stop event, Ctrl-C, SIGTERM, a safety stop, an
 error in the controller or the processor, a failing device — set-point 0 goes to every
 line first, before anything else is closed, and the time from the stop to the last zero
@@ -29,7 +32,7 @@ import numpy as np
 from bendsense.control.safety import ControlStop, Guard, Safety
 from bendsense.errors import ArgumentError, DeviceError
 
-__all__ = ["run", "ControlResult", "DEFAULT_MAX_PRESSURE_PA"]
+__all__ = ["run", "ControlResult", "DEFAULT_MAX_PRESSURE_PA", "HEARTBEAT_S"]
 
 log = logging.getLogger("bendsense.control")
 
@@ -87,6 +90,9 @@ class ControlResult:
 #: the interpreter's thread switch interval while the loop runs [s] (Python's default is 5 ms): a stop
 #: noticed while the board's reader thread holds the GIL must not wait that long for it
 SWITCH_INTERVAL_S = 2e-4
+#: the longest the loop waits without a HEARTBEAT to the board [s]: a twentieth of the simulated board's watchdog
+#: (:data:`bendsense.device.simdevice.DEFAULT_WATCHDOG_MS`); a block that takes longer delays the next one
+HEARTBEAT_S = 0.05
 
 
 @contextlib.contextmanager
@@ -180,7 +186,8 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     ----------
     driver : Driver
         An open, streaming board (with a queue) that takes set-points
-        (:meth:`~bendsense.device.driver.Driver.send_setpoint`).
+        (:meth:`~bendsense.device.driver.Driver.send_setpoint`) and heartbeats
+        (:meth:`~bendsense.device.driver.Driver.send_heartbeat`).
     processor : LiveProcessor or gripper processor
         Its ``process_readings(readings)`` makes the block the controller gets.
     controller : callable
@@ -271,14 +278,18 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
     t0 = time.monotonic()
     last_frame, started = t0, False
     silence = guard.silence_s
+    beat = -math.inf
     while True:
         now = time.monotonic()
+        if now - beat >= HEARTBEAT_S:  # the board's watchdog: the loop is alive, set-points or not
+            driver.send_heartbeat()
+            beat = now
         if stop is not None and stop.is_set():
             return "stopped"
         if seconds is not None and now - t0 >= seconds:
             return "duration reached"
         wait = silence if seconds is None else min(silence, max(t0 + seconds - now, 0.0))
-        readings = driver.get_batch(timeout=max(wait, 1e-4))
+        readings = driver.get_batch(timeout=max(min(wait, HEARTBEAT_S - (now - beat)), 1e-4))
         now = time.monotonic()
         if not readings:
             guard.silent(now - last_frame, started)
