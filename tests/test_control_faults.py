@@ -156,14 +156,17 @@ def test_a_line_the_board_stops_reporting_is_let_go_and_said_to_be_unconfirmed(g
                                        "(the board does not report its pressure)")
 
 
-def test_a_pressure_beyond_the_limit_on_an_uncontrolled_line_stops_the_loop(gripper_board, gripper_processor):
-    # the thumb is controlled; from frame 300 the board reads 900 kPa on line 2 (a failed sensor or a stuck valve)
-    board = Faulty(copy.deepcopy(gripper_board), FAULT_AT, lambda p: (p[0], p[1], 900e3))
+@pytest.mark.parametrize(("reading_pa", "why"), [
+    (900e3, "900 kPa at seq {seq}, beyond the pressure limit 100 kPa (+5 kPa for regulator ripple)"),
+    (-50e3, "-50 kPa at seq {seq}, below 0 (-5 kPa tolerance)")], ids=["900kPa", "negative"])
+def test_a_pressure_outside_the_limits_on_an_uncontrolled_line_stops_the_loop(gripper_board, gripper_processor,
+                                                                               reading_pa, why):
+    # the thumb is controlled; from frame 300 the board reads nonsense on line 2 (a failed sensor or a stuck valve)
+    board = Faulty(copy.deepcopy(gripper_board), FAULT_AT, lambda p: (p[0], p[1], reading_pa))
     truth = Truth()
     err, ran = gripper_run(board, gripper_processor, pis(("thumb",)), n_lines=3, truth=truth)
     assert isinstance(err, ControlStop), err
-    assert err.reason.startswith(f"line 2 reads 900 kPa at seq {truth.seq[FAULT_AT]}, beyond the pressure limit 100 kPa "
-                                 "(+5 kPa for regulator ripple)")
+    assert err.reason.startswith("line 2 reads " + why.format(seq=truth.seq[FAULT_AT])), err.reason
     assert err.result.frames <= FAULT_AT and ran < 1.5  # the frame is checked before it is processed
     assert board.last() == {0: 0.0, 1: 0.0, 2: 0.0}
     assert err.result.held == (1, 2)
@@ -234,15 +237,15 @@ def test_the_library_records_a_zero_it_could_not_send(single_board, calibration_
     assert board.received[-1][1] > 0
 
 
-def test_a_finger_subset_holds_the_other_lines_at_zero(gripper_board, files):
+def test_a_finger_subset_holds_the_other_lines_at_zero(gripper_board, files, tmp_path):
     # the board's own profile would close every finger (70 kPa); --finger thumb must hold the others at 0
     board = Faulty(copy.deepcopy(gripper_board))
-    truth = Truth()
+    truth, out = Truth(), tmp_path / "s"
     with SimulatedDevice(board, rate_hz=RATE, n_channels=GRIPPER_CHANNELS, truth=truth) as dev:
         res = CliRunner().invoke(main, ["control", dev.port, "--config", files["gripper"], "--calibration",
                                         files["calibration"], "--target-force-n", "0.15", "--finger", "thumb",
                                         "--load", "contact", "--contact-s-m", str(S_C), "--max-pressure-kpa", "60",
-                                        "--seconds", "1", "--silence-s", "1"])
+                                        "--seconds", "1", "--silence-s", "1", "-o", str(out)])
         time.sleep(0.03)
     assert res.exit_code == 0, res.output
     assert "lines 1, 2 not controlled: held at set-point 0" in res.output
@@ -254,6 +257,9 @@ def test_a_finger_subset_holds_the_other_lines_at_zero(gripper_board, files):
     for k in (1, 2):  # the board's profile reached 35 kPa by 1 s; the held lines stayed at rest
         assert truth.column(f"line{k}_pressure_pa").max() < 1e3
     assert truth.column("line0_pressure_pa").max() <= 60e3
+    # the recording reads back, the held lines at rest beside the driven one
+    pressure = bendsense.read_session(out).pressure_pa
+    assert pressure.shape[1] == 3 and pressure[:, 0].max() > 30e3 and pressure[:, 1:].max() < 1e3
 
 
 def test_a_target_beyond_the_finger_is_refused_before_the_board_is_driven(single_board, files):
