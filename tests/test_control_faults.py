@@ -259,7 +259,7 @@ def test_a_finger_subset_holds_the_other_lines_at_zero(gripper_board, files, tmp
     assert truth.column("line0_pressure_pa").max() <= 60e3
     # the recording reads back, the held lines at rest beside the driven one
     pressure = bendsense.read_session(out).pressure_pa
-    assert pressure.shape[1] == 3 and pressure[:, 0].max() > 30e3 and pressure[:, 1:].max() < 1e3
+    assert pressure.shape[1] == 3 and pressure[:, 0].max() > 10e3 and pressure[:, 1:].max() < 1e3
 
 
 def test_a_target_beyond_the_finger_is_refused_before_the_board_is_driven(single_board, files):
@@ -297,3 +297,36 @@ def test_a_pressure_limit_beyond_the_config_is_refused(files):
     assert res.exit_code == 2, res.output
     assert ("'--max-pressure-kpa': 300 kPa is beyond the config's actuator.pressure_range_pa (up to 200 kPa)"
             in " ".join(res.output.split()))
+
+
+def test_a_zero_that_could_not_be_sent_after_a_normal_end_exits_1(single_board, files):
+    # the board dies at 0.3 s; the run ends by its time (0.4 s, before the 1 s silence stop): its zero cannot go out
+    board = Faulty(copy.deepcopy(single_board))
+    with SimulatedDevice(board, rate_hz=RATE, disconnect_after=FAULT_AT) as dev:
+        res = control_cli(dev.port, files, "--seconds", "0.4", "--silence-s", "1")
+    assert res.exit_code == 1, res.output
+    line = one_error_line(res)
+    assert line.startswith("Error: control ended (duration reached) but set-point 0 could NOT be sent on line 0 (")
+    assert "sent on every" not in res.output and board.received[-1][1] > 0
+
+
+def test_a_pressure_outside_the_configs_range_leaves_the_finger_without_a_force(single_board, calibration_path):
+    # the config's actuator model ends at 30 kPa; the loop may drive to 100 kPa: past 30 kPa the finger has no force
+    import dataclasses
+
+    narrow = dataclasses.replace(CONFIG, actuator=dataclasses.replace(CONFIG.actuator, pressure_range_pa=(0.0, 30e3)))
+    proc = LiveProcessor(Calibration.load(calibration_path), narrow, load="contact", contact_s_m=S_C,
+                         constraint="normal", bandwidth_hz=30.0)
+    proc.warm_up()
+    board = Faulty(copy.deepcopy(single_board))
+    truth = Truth()
+    with SimulatedDevice(board, rate_hz=RATE, truth=truth) as dev, Driver(dev.port) as driver:
+        driver.start()
+        with pytest.raises(ControlStop, match=r"^no force \(pressure_out_of_range\) for 10 ms") as info:
+            run(driver, proc, PIController(0.15, max_pressure_pa=LIMIT_PA), max_pressure_pa=LIMIT_PA, seconds=2.0,
+                safety=Safety(silence_s=1.0))
+        time.sleep(0.03)
+    pressure = truth.column("pressure_pa")
+    first = int(np.flatnonzero(pressure > 30e3)[0])  # the board's first frame beyond the model's range
+    assert first <= info.value.result.frames <= first + 30  # stopped 10 ms (and a block) after it
+    assert board.received[-1] == (0, 0.0) and truth.column("setpoint_pa")[-1] == 0.0

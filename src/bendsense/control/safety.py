@@ -283,7 +283,7 @@ class Guard:
                     continue
                 if math.isnan(start):
                     start = t
-                if t - start >= self.safety.flagged_s:
+                if t - start >= self.safety.flagged_s - 1e-9:  # frame times are whole µs: 10 ms is 10 ms
                     name = "" if finger is None else f"finger {finger}: "
                     raise ControlStop(f"{name}{what} for {(t - start) * 1e3:.3g} ms (limit "
                                       f"{self.safety.flagged_s * 1e3:g} ms) at t = {t:.3f} s: the force cannot be "
