@@ -34,6 +34,7 @@ CONFIG = bendsense.load_config()
 GRIPPER = gripper_config(3)
 S_C, RATE, LIMIT_PA, FAULT_AT = 0.10, 1000.0, 100e3, 300
 GRIPPER_CHANNELS = 48
+STEP_PA = 2000.0  # the boards' pressure tables: coarse, to build them fast (the faults need no precise forces)
 
 
 class Faulty:
@@ -79,12 +80,13 @@ class Truth:
 
 @pytest.fixture(scope="module")
 def single_board():
-    return GraspBoard(CONFIG, [GraspObject(S_C, 40e3)], rate_hz=RATE, seed=0)
+    return GraspBoard(CONFIG, [GraspObject(S_C, 40e3)], rate_hz=RATE, seed=0, step_pa=STEP_PA)
 
 
 @pytest.fixture(scope="module")
 def gripper_board():
-    return GraspBoard(GRIPPER, [GraspObject(S_C, p) for p in (40e3, 45e3, 35e3)], rate_hz=RATE, seed=0)
+    return GraspBoard(GRIPPER, [GraspObject(S_C, p) for p in (40e3, 45e3, 35e3)], rate_hz=RATE, seed=0,
+                      step_pa=STEP_PA)
 
 
 @pytest.fixture(scope="module")
