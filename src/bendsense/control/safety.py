@@ -53,7 +53,9 @@ raises :class:`ControlStop`):
   finite number, a line outside the config's): checked by the loop itself.
 
 No-force and model frames make one run: a finger that cannot be trusted for
-``flagged_s``, whichever the reason of each frame, stops the loop.
+``flagged_s``, whichever the reason of each frame, stops the loop. A held line (no
+controller drives it) that stops reporting does not stop it: it was set to 0, nothing
+acts on its pressure, and it gets its zero again at the end.
 """
 
 from __future__ import annotations
