@@ -19,6 +19,7 @@ import errno
 import fcntl
 import itertools
 import logging
+import math
 import os
 import random
 import select
@@ -560,7 +561,7 @@ class SimulatedDevice:
         if silent_ms <= self.watchdog_ms:
             return
         self._release()
-        text = (f"watchdog: no frame from the host for {silent_ms:.0f} ms (limit {self.watchdog_ms:g} ms) while it "
+        text = (f"watchdog: no frame from the host for {math.ceil(silent_ms)} ms (limit {self.watchdog_ms:g} ms) while it "
                 f"held line{'s' if len(self._driven) > 1 else ''} {', '.join(map(str, sorted(self._driven)))} up: "
                 "set-point 0 on every pressure line")
         self._driven.clear()
