@@ -32,6 +32,7 @@ from bendsense.frames import (
     MAX_LINES,
     Command,
     Decoder,
+    FrameType,
     Hello,
     LineDecoder,
     Sample,
@@ -368,6 +369,27 @@ class Driver:
         with self._write_lock:
             self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
         self.write(data)
+
+    def send_heartbeat(self) -> None:
+        """Send a HEARTBEAT: the host is alive, and feeds the board's host-silence watchdog.
+
+        A board that was given a non-zero set-point sets every line to 0 by itself when no
+        frame from the host arrives for its watchdog time (docs/formats.md, "Firmware: the
+        host-silence watchdog"); a controlling host sends a heartbeat well within that time
+        whether or not it has set-points to send. Thread-safe, like :meth:`send_setpoint`.
+        The line dialect has no host-to-device frames (and its boards no watchdog): nothing
+        is sent, as with :meth:`send`.
+
+        Raises
+        ------
+        DeviceError
+            The port is closed (or was never opened) or the write fails.
+        """
+        if self.dialect != "binary":
+            return
+        with self._write_lock:
+            self._cmd_seq = seq = (self._cmd_seq + 1) & 0xFFFF
+        self.write(encode_command(FrameType.HEARTBEAT, seq=seq))
 
     def start(self) -> None:
         """Ask the board to stream SAMPLE frames."""
