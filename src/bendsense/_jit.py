@@ -41,6 +41,8 @@ if "NUMBA_THREADING_LAYER" not in os.environ:
 _OPT_LEVEL = 1
 _lock = threading.Lock()
 
+_ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)
+
 #: frames from which a batch runs on numba's threads (:func:`bendsense.pcc.reconstruct`,
 #: :func:`bendsense.estimation.estimate_force`): below, waking the thread pool costs more than the frames (~2 µs
 #: each in the reconstruction, and on a loaded machine far more: a live block of 5 frames waited ~1 ms for it), and
@@ -72,7 +74,6 @@ def serial(frames: int):
         yield
     finally:
         numba.set_num_threads(previous)
-_ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)
 
 
 def call(dispatcher, *args):

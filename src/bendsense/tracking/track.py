@@ -414,7 +414,7 @@ class Tracker:
         if pressure_pa is None:
             return est, t, np.full(b, np.nan)
         try:
-            P = _c(np.broadcast_to(np.asarray(pressure_pa, dtype=float).reshape(-1), (b,)), b)
+            P = np.array(np.broadcast_to(np.asarray(pressure_pa, dtype=float).reshape(-1), (b,)))
         except (TypeError, ValueError):
             raise ArgumentError(f"pressure_pa_block: expected {b} pressures [Pa] (one per frame), got "
                                 f"{short(pressure_pa)}") from None
@@ -439,13 +439,14 @@ class Tracker:
 
 
 def _c(a, shape):
-    """``a`` as the stream kernels take it: float64, C-contiguous, of ``shape``, writable.
+    """``a`` as the stream kernels take it: float64, C-contiguous, of ``shape`` (a copy only if it is not).
 
     One layout for every block, whatever view an estimate holds (a strided slice of the
     estimator's output, a copy after a frame was taken out or put back): numba compiles a
-    kernel once per layout, and a second layout met in a control loop compiled there.
+    kernel once per layout, and a second layout met in a control loop compiled there
+    (~1 µs a block for the copies).
     """
-    return np.require(np.asarray(a, dtype=float).reshape(shape), requirements=("C", "W"))
+    return np.ascontiguousarray(a, dtype=float).reshape(shape)
 
 
 def track_status(est, z, window_p, flagged=None):
