@@ -257,3 +257,54 @@ def test_live_bandwidth_default_is_the_trackers():
         res = CliRunner().invoke(main, [command, "--help"], terminal_width=200)
         assert f"default: {DEFAULT_BANDWIDTH_HZ:g} Hz (bendsense.tracking.DEFAULT_BANDWIDTH_HZ)" in " ".join(
             res.output.split()), command
+
+
+def test_a_normal_contact_constraint_tracks_the_documented_time_varying_run(tmp_path, calibration_path):
+    """getting-started's run with a track: 10 s at 100 Hz, a 20-frame degree-3 calibration, '--constraint normal'.
+
+    A normal constraint leaves one free direction: each frame's noise covariance has rank 1, and the filter's
+    prior learnt the same direction, so the maximum-likelihood search divided by zero. The track runs and is
+    no further from the simulator's truth than the frames.
+    """
+    frames = list(time_varying_frames(None, 100.0, SEED, truth=True, duration_s=10.0))
+    truth = np.array([[f[2]["fx_n"], f[2]["fy_n"]] for f in frames])
+    write_session_csv(Session(np.array([f[2]["t_s"] for f in frames]), np.array([f[1] for f in frames], dtype=float),
+                              np.array([f[0] for f in frames])), tmp_path / "tv.csv")
+    res = CliRunner().invoke(main, ["load", str(tmp_path / "tv.csv"), "--calibration", str(calibration_path),
+                                    "reconstruct", "estimate", "--constraint", "normal", "track",
+                                    "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    r = read_results(tmp_path / "out")
+    frame = np.stack([r["fx_n"], r["fy_n"]], axis=1) - truth
+    tracked = np.stack([r["fx_track_n"], r["fy_track_n"]], axis=1) - truth
+    assert np.isfinite(tracked).all()
+    assert np.sqrt(np.mean(tracked ** 2)) <= np.sqrt(np.mean(frame ** 2))
+
+
+def test_a_track_the_likelihood_cannot_choose_says_so_in_one_line(tmp_path, caplog):
+    """Frames a second apart: each starts its own segment, no innovation counts, the likelihood is flat; the
+    track falls back to the stated bandwidth and says so (a DataWarning in the library, one line in the CLI)."""
+    from helpers import linear_calibration, loaded_curvatures, signals_for
+
+    from bendsense.errors import DataWarning
+    from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
+
+    cal = linear_calibration()
+    cal.save(tmp_path / "cal.yaml")
+    n = 6
+    pressure = np.full(n, 60e3)
+    signals = signals_for(loaded_curvatures(pressure, np.tile([0.05, 0.0], (n, 1))), cal)
+    write_session_csv(Session(np.arange(n) * 1.0, signals, pressure), tmp_path / "s.csv")
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, ["load", str(tmp_path / "s.csv"), "--calibration", str(tmp_path / "cal.yaml"),
+                                        "reconstruct", "estimate", "track", "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    flat = [r.getMessage() for r in caplog.records if "likelihood is flat" in r.getMessage()]
+    assert flat == [f"track: the likelihood is flat over the bandwidth (no segment has three frames with a "
+                    f"force and a noise covariance): tracking at {DEFAULT_BANDWIDTH_HZ:g} Hz; give bandwidth_hz "
+                    f"(--bandwidth-hz) to choose"]
+    assert np.isfinite(read_results(tmp_path / "out")["fx_track_n"]).all()
+    est = bendsense.estimate_force(bendsense.reconstruct(signals, cal, bendsense.load_config().sensor), pressure,
+                                   bendsense.load_config(), calibration=cal)
+    with pytest.warns(DataWarning, match="likelihood is flat"):
+        assert bendsense.track(est, np.arange(n) * 1.0).bandwidth_hz == DEFAULT_BANDWIDTH_HZ

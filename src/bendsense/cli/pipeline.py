@@ -27,6 +27,7 @@ from bendsense.cli._common import (
     chain_contact_option,
     config_option,
     contact_locations,
+    data_warnings_logged,
     finger_contact,
     load_option,
     log_no_parameter_covariance,
@@ -367,8 +368,9 @@ def track(smooth, bandwidth_hz, window_s):
         est = _require(state, "estimate", "track", "'estimate'")
         session = state["session"]
         window = state.get("window_s", DEFAULT_WINDOW_S) if window_s is None else window_s
-        tracked = track_forces(est, session.t_s, mode="smooth" if smooth else "filter", bandwidth_hz=bandwidth_hz,
-                               window_s=window, pressure_pa=session.pressure_pa)
+        with data_warnings_logged():
+            tracked = track_forces(est, session.t_s, mode="smooth" if smooth else "filter",
+                                   bandwidth_hz=bandwidth_hz, window_s=window, pressure_pa=session.pressure_pa)
         log.info("tracked %d frames (%s, bandwidth %.3g Hz)", len(session), tracked.mode, tracked.bandwidth_hz)
         if not np.isfinite(tracked.force_n).any():  # a track of nothing must not pass silently
             log.warning("no tracked force: no frame has a force with a noise covariance (a calibration without "
