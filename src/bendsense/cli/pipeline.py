@@ -189,7 +189,11 @@ def load(session_path, config_path, calibration_paths, pressure_kpa):
 
         session = read_session(session_path)
         if len(session) == 0:
-            raise SessionError(f"{session_path}: no frames (an empty recording)")
+            stats = session.meta.get("stats")
+            skipped = stats.get("skipped") if isinstance(stats, dict) else None
+            why = (f": {skipped} samples were skipped at record time (another channel count or pressure lines than "
+                   f"meta.yaml's; see events.log)" if isinstance(skipped, int) and skipped > 0 else "")
+            raise SessionError(f"{session_path}: no frames (an empty recording){why}")
         if pressure_kpa is not None:
             warn_pressure_fallback(session, "--pressure-kpa")
             session = session.with_pressure(pressure_kpa * 1e3)
