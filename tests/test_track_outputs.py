@@ -306,5 +306,43 @@ def test_a_track_the_likelihood_cannot_choose_says_so_in_one_line(tmp_path, capl
     assert np.isfinite(read_results(tmp_path / "out")["fx_track_n"]).all()
     est = bendsense.estimate_force(bendsense.reconstruct(signals, cal, bendsense.load_config().sensor), pressure,
                                    bendsense.load_config(), calibration=cal)
-    with pytest.warns(DataWarning, match="likelihood is flat"):
+    with pytest.warns(DataWarning) as caught:
         assert bendsense.track(est, np.arange(n) * 1.0).bandwidth_hz == DEFAULT_BANDWIDTH_HZ
+    assert sorted(str(w.message)[:20] for w in caught) == ["track: the likelihoo", "window check: 50 ms "]
+
+
+def test_windows_too_short_for_the_frame_rate_are_said_once_with_the_window_that_would_test_them(
+        tmp_path, calibration_path, caplog):
+    """35 Hz: a 50 ms window holds one to three frames, no test runs; the chain says so once (estimate and track),
+    the library warns, and the window the message names tests every window."""
+    from bendsense.errors import DataWarning
+
+    frames = list(time_varying_frames(None, 35.0, SEED, truth=True, duration_s=3.0))
+    write_session_csv(Session(np.array([f[2]["t_s"] for f in frames]), np.array([f[1] for f in frames], dtype=float),
+                              np.array([f[0] for f in frames])), tmp_path / "s35.csv")
+    chain = ["load", str(tmp_path / "s35.csv"), "--calibration", str(calibration_path), "reconstruct", "estimate"]
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, [*chain, "track", "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    said = [r.getMessage() for r in caplog.records if r.getMessage().startswith("window check:")]
+    assert said == ["window check: 50 ms windows hold at most 3 frames at 35 Hz, fewer than the 5 a test needs: no "
+                    "window is tested (window_p_value NaN); window_s=0.172 (--window-s 0.172) holds 6 (frames between "
+                    "pressure steps over 1 kPa stay untested)"]
+    assert np.isnan(read_results(tmp_path / "out")["window_p_value"]).all()
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, [*chain, "--window-s", "0.172", "save", str(tmp_path / "out172")])
+    assert res.exit_code == 0, res.output
+    assert not [r for r in caplog.records if r.getMessage().startswith("window check:")]
+    tested = np.isfinite(read_results(tmp_path / "out172")["window_p_value"])
+    session = bendsense.read_session(tmp_path / "s35.csv")
+    steady = np.flatnonzero(np.abs(np.diff(session.pressure_pa)) <= 1e3)  # the holds at 0 and 100 kPa
+    runs = np.split(steady, np.flatnonzero(np.diff(steady) > 1) + 1)
+    middles = [r[len(r) // 2] for r in runs if len(r) >= 12]
+    assert len(middles) == 2 and tested[middles].all()
+    cal = Calibration.load(calibration_path)
+    config = bendsense.load_config()
+    est = bendsense.estimate_force(bendsense.reconstruct(session.signals, cal, config.sensor), session.pressure_pa,
+                                   config, calibration=cal)
+    with pytest.warns(DataWarning, match=r"^window check: 50 ms windows hold at most 3 frames at 35 Hz"):
+        bendsense.check_windows(est, session.t_s)

@@ -515,21 +515,21 @@ def say(text: str) -> None:
 
 
 @contextlib.contextmanager
-def data_warnings_logged():
+def data_warnings_logged(said=None):
     """The library's :class:`~bendsense.errors.DataWarning` inside the block as one ``WARNING:`` line each.
 
-    A Python warning prints its source line too; each distinct message is said once.
-    Other warnings pass on as they were.
+    A Python warning prints its source line too; each distinct message is said once (once per
+    chain with the chain's set ``said``). Other warnings pass on as they were.
     """
     import logging
     import warnings
 
     from bendsense.errors import DataWarning
 
+    said = set() if said is None else said
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", DataWarning)
         yield
-    said = set()
     for w in caught:
         if not issubclass(w.category, DataWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)

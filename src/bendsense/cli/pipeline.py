@@ -279,7 +279,8 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
         window = DEFAULT_WINDOW_S if window_s is None else window_s
-        with warnings.catch_warnings():  # said below as one WARNING line per chain, not as a Python warning
+        with warnings.catch_warnings(), data_warnings_logged(state.setdefault("said", set())):
+            # said below as one WARNING line per chain, not as a Python warning
             warnings.simplefilter("ignore", NoParameterCovarianceWarning)
             processed = process(session, config, state["calibration"], shape=shape, constraint=constraint,
                                 method=method, objective=objective, push_only=push_only,
@@ -372,7 +373,7 @@ def track(smooth, bandwidth_hz, window_s):
         est = _require(state, "estimate", "track", "'estimate'")
         session = state["session"]
         window = state.get("window_s", DEFAULT_WINDOW_S) if window_s is None else window_s
-        with data_warnings_logged():
+        with data_warnings_logged(state.setdefault("said", set())):
             tracked = track_forces(est, session.t_s, mode="smooth" if smooth else "filter",
                                    bandwidth_hz=bandwidth_hz, window_s=window, pressure_pa=session.pressure_pa)
         log.info("tracked %d frames (%s, bandwidth %.3g Hz)", len(session), tracked.mode, tracked.bandwidth_hz)

@@ -154,6 +154,8 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     starts = _windows.segment_starts(t, P, window_s, _windows.reference_interval(t))
     bounds = _windows.window_bounds(t, starts, window_s)
     p, n = _windows.window_p_values(estimate, bounds)
+    if estimate.window_p_value is None:  # check_windows has said it of a checked estimate
+        _windows.warn_untested(estimate, t, bounds, window_s, 3, P)
     checked = _windows.flag(estimate, bounds, p, n, window_s)
     z, Rn, floor = measurements(checked)
     dt = np.diff(t, prepend=t[0])
