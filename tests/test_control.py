@@ -102,7 +102,7 @@ class FakeBoard:
             out.append(Reading(time.monotonic_ns(), self.k * 1000, sample))
         return out
 
-    def send_setpoint(self, line, pressure_pa):
+    def send_setpoint(self, line, pressure_pa, *, check_line=True):
         self.sent.append((self.k, line, float(pressure_pa)))
         if line == 0:
             self.plant.setpoint_pa = float(pressure_pa)

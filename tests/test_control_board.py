@@ -252,7 +252,7 @@ def test_sigterm_ends_the_command_with_every_line_at_zero(board, calibration_pat
         _, err = proc.communicate(timeout=30)
         time.sleep(0.03)
     assert proc.returncode == 143, err
-    assert "Interrupted (SIGTERM): set-point 0 sent on every pressure line" in err
+    assert f"Interrupted (SIGTERM): set-point 0 sent on every pressure line (0); the session is in {out}" in err
     assert truth.column("setpoint_pa").max() > 50e3 and truth.column("setpoint_pa")[-1] == 0.0
     assert len(bendsense.read_session(out)) > 100 and (out / CONTROL_LOG).is_file()
 
@@ -268,7 +268,7 @@ def test_a_gripper_holds_with_two_fingers_and_lets_go_of_every_line(calibration_
                             constraint="normal", bandwidth_hz=30.0)
     proc.warm_up()
     grasp = Grasp([PIController(0.15, line=f.pressure_line, finger=f.name, max_pressure_pa=LIMIT_PA)
-                   for f in gripper.fingers[:2]])  # the middle finger is left to the board's own profile
+                   for f in gripper.fingers[:2]])  # the middle finger is not controlled: its line is held at 0
     truth, out = Truth(), tmp_path / "grip"
     with SimulatedDevice(board, rate_hz=RATE, truth=truth, n_channels=board.n_channels) as dev, \
             Driver(dev.port) as driver:
@@ -277,7 +277,8 @@ def test_a_gripper_holds_with_two_fingers_and_lets_go_of_every_line(calibration_
         result = run(driver, proc, grasp, max_pressure_pa=LIMIT_PA, seconds=1.0, recording=rec,
                      safety=Safety(silence_s=1.0))
         time.sleep(0.03)
-    assert result.lines == (0, 1, 2)
+    assert result.lines == (0, 1, 2) and result.held == (2,)
+    assert truth.column("line2_setpoint_pa").max() < 1e3  # held from the first block, not the board's profile
     for k, name in enumerate(gripper.names):
         setpoint = truth.column(f"line{k}_setpoint_pa")
         assert setpoint[-1] == 0.0  # every line of the board let go, the uncontrolled one too
@@ -310,6 +311,6 @@ def test_a_safety_stop_is_one_line_and_exit_1(board, calibration_path, tmp_path)
     errors = [line for line in res.output.splitlines() if line.startswith("Error:")]
     assert len(errors) == 1 and "Traceback" not in res.output
     assert errors[0].startswith("Error: control stopped: ") and "frames lost within 1 s" in errors[0]
-    assert errors[0].endswith(f"set-point 0 sent on every pressure line (the session is in {tmp_path / 's'})")
+    assert errors[0].endswith(f"set-point 0 sent on every pressure line (0); the session is in {tmp_path / 's'}")
     assert truth.column("setpoint_pa")[-1] == 0.0
     assert bendsense.read_session(tmp_path / "s").meta["outcome"].startswith("safety stop: ")

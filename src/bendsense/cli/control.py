@@ -29,23 +29,36 @@ log = logging.getLogger("bendsense")
 
 
 
-def _controllers(config, finger, target, max_pressure_pa, gains):
-    """The PI controller(s): one per controlled finger, on its line (a single actuator: line 0)."""
+def _controllers(config, finger, target, max_pressure_pa, gains, load_options):
+    """The PI controller(s): one per controlled finger, on its line (a single actuator: line 0).
+
+    A target beyond what a finger can press with at the pressure limit (at its known contact
+    location, else its tip: :func:`bendsense.control.force_limit_n`) is refused here, before
+    the board is driven.
+    """
     from bendsense.config import GripperConfig
-    from bendsense.control import Grasp, PIController
-    from bendsense.errors import BendsenseError
+    from bendsense.control import Grasp, PIController, force_limit_n
+    from bendsense.errors import ArgumentError, BendsenseError
+
+    def pi(cfg, options, **kw):
+        bound = force_limit_n(cfg, max_pressure_pa, options.get("contact_s_m"))
+        try:
+            return PIController(target, max_pressure_pa=max_pressure_pa, tip_s_m=cfg.actuator.length_m,
+                                max_force_n=bound, **kw, **gains)
+        except ArgumentError as err:
+            raise click.BadParameter(str(err).removeprefix("target_force_n: "),
+                                     param_hint="'--target-force-n'") from None
 
     if not isinstance(config, GripperConfig):
         if finger is not None:
             raise click.BadParameter("names a finger of a gripper config (--config with fingers:); this config is "
                                      "a single actuator", param_hint="'--finger'")
-        return PIController(target, max_pressure_pa=max_pressure_pa, tip_s_m=config.actuator.length_m, **gains)
+        return pi(config, load_options)
     try:
         chosen = config.fingers if finger is None else (config.finger(finger),)
     except BendsenseError as err:
         raise click.BadParameter(str(err), param_hint="'--finger'") from None
-    pis = [PIController(target, line=f.pressure_line, finger=f.name, max_pressure_pa=max_pressure_pa,
-                        tip_s_m=f.config.actuator.length_m, **gains) for f in chosen]
+    pis = [pi(f.config, load_options["finger_options"][f.name], line=f.pressure_line, finger=f.name) for f in chosen]
     try:
         return Grasp(pis)
     except BendsenseError as err:
@@ -69,23 +82,27 @@ def _locations(load_options):
 
 
 def _limit(config, max_pressure_kpa):
-    """The pressure limit [Pa]: given, else 100 kPa or the end of the config's pressure range if lower."""
+    """The pressure limit [Pa]: given (within the config's pressure range), else 100 kPa or the range's end if lower."""
     from bendsense.config import GripperConfig
-
-    if max_pressure_kpa is not None:
-        if not max_pressure_kpa > 0:
-            raise click.BadParameter(f"expected a pressure limit > 0 kPa, got {max_pressure_kpa:g}",
-                                     param_hint="'--max-pressure-kpa'")
-        return max_pressure_kpa * 1e3
-    configs = [f.config for f in config.fingers] if isinstance(config, GripperConfig) else [config]
     from bendsense.control import DEFAULT_MAX_PRESSURE_PA
 
-    return min([DEFAULT_MAX_PRESSURE_PA, *(c.actuator.pressure_range_pa[1] for c in configs)])
+    configs = [f.config for f in config.fingers] if isinstance(config, GripperConfig) else [config]
+    top = min(c.actuator.pressure_range_pa[1] for c in configs)
+    if max_pressure_kpa is None:
+        return min(DEFAULT_MAX_PRESSURE_PA, top)
+    if not max_pressure_kpa > 0:
+        raise click.BadParameter(f"expected a pressure limit > 0 kPa, got {max_pressure_kpa:g}",
+                                 param_hint="'--max-pressure-kpa'")
+    if max_pressure_kpa * 1e3 > top:
+        raise click.BadParameter(f"{max_pressure_kpa:g} kPa is beyond the config's actuator.pressure_range_pa (up to "
+                                 f"{top / 1e3:g} kPa), where the actuator model ends: the loop would stop at the "
+                                 "first reading beyond it", param_hint="'--max-pressure-kpa'")
+    return max_pressure_kpa * 1e3
 
 
 def _summary(result, controller) -> str:
     """What the loop did, in one paragraph for stderr."""
-    from bendsense.control import Grasp
+    from bendsense.control import Grasp, zero_report
 
     pis = controller.controllers if isinstance(controller, Grasp) else (controller,)
     parts = []
@@ -94,10 +111,13 @@ def _summary(result, controller) -> str:
         force = "no force" if nf is None else f"N = {nf.force_n[-1] * 1e3:.1f} ± {nf.std_n[-1] * 1e3:.1f} mN"
         name = "" if pi.finger is None else f"{pi.finger}: "
         parts.append(f"{name}{force} (target {pi.target_force_n * 1e3:.4g} mN, set-point {pi.output_pa / 1e3:.1f} kPa)")
-    lines = ", ".join(str(k) for k in result.lines)
+    held = ""
+    if result.held:
+        held = (f"; line{'s' if len(result.held) > 1 else ''} {', '.join(str(k) for k in result.held)} not "
+                "controlled: held at set-point 0")
     return (f"{result.frames} frames in {result.blocks} blocks ({result.per_frame_s * 1e6:.0f} µs per frame); "
-            + "; ".join(parts) + f"; highest set-point {result.max_setpoint_pa / 1e3:.1f} kPa; "
-            f"set-point 0 sent on line(s) {lines} {result.zero_latency_s * 1e3:.2f} ms after the stop")
+            + "; ".join(parts) + f"; highest set-point {result.max_setpoint_pa / 1e3:.1f} kPa{held}; "
+            f"{zero_report(result)} {result.zero_latency_s * 1e3:.2f} ms after the stop")
 
 
 @click.command("control", cls=InterspersedCommand)
@@ -143,13 +163,18 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     --contact-s-m X: a contact at the known arc length X, else the tip) drives a PI
     controller with anti-windup whose output, clipped to [0, --max-pressure-kpa], goes to
     the board as a SETPOINT. With a gripper config every finger is controlled on its own
-    pressure line (--finger NAME: only that one).
+    pressure line (--finger NAME: only that one; the other lines are held at set-point 0).
+    A target beyond what a finger can press with at the pressure limit is refused.
 
-    Set-point 0 goes to every pressure line when the loop ends, whatever ends it: --seconds,
-    Ctrl-C or SIGTERM (exit 130 / 143), an error, more than 10 frames lost within 1 s, no
-    frame for 0.1 s (--silence-s), or a controlled finger model_misfit / not_identifiable for 10 ms
-    (a safety stop: one line, exit 1). -o SESSION records everything (docs/formats.md,
-    "Control session"). docs/grasping.md walks through a grasp on the simulated board.
+    Set-point 0 goes to every pressure line (the config's, every line driven, every line
+    the board reported) when the loop ends, whatever ends it: --seconds, Ctrl-C or SIGTERM
+    (exit 130 / 143), an error, more than 10 frames lost within 1 s, no frame for 0.1 s
+    (--silence-s), a pressure on any line beyond --max-pressure-kpa (+5 kPa), or a
+    controlled finger without a force or model_misfit / not_identifiable for 10 ms (a
+    safety stop: one line, exit 1). The last line says line by line whether set-point 0
+    was sent; one that could not be sent exits 1. -o SESSION records everything
+    (docs/formats.md, "Control session"). docs/grasping.md walks through a grasp on the
+    simulated board and lists every stop.
     """
     from bendsense.cli.device import live_load
     from bendsense.config import load_config
@@ -171,8 +196,8 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     gains = {"kp_pa_per_n": DEFAULT_KP_PA_PER_N if kp_kpa_per_n is None else kp_kpa_per_n * 1e3,
              "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,
              "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
-    controller = _controllers(config, finger, target_force_n, pmax, gains)
     load_options = live_load(load, contact_s_m, config)
+    controller = _controllers(config, finger, target_force_n, pmax, gains, load_options)
     processor = _processor(config, calibrations, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options)
     meta = {"command": "bendsense control",
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
@@ -184,8 +209,13 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
 
 
 def _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s):
-    """Record (with -o), start the board, run the loop; one line for how it ended."""
-    from bendsense.control import ControlRecording, ControlStop, Safety, run
+    """Record (with -o), start the board, run the loop; one line for how it ended, saying what became of every line.
+
+    A safety stop, an error of the device or a set-point 0 that could not be sent is one
+    ``Error:`` line and exit 1; Ctrl-C / SIGTERM one ``Interrupted`` line (130 / 143).
+    """
+    from bendsense.control import ControlRecording, Safety, run, zero_report
+    from bendsense.errors import BendsenseError
 
     fingers = getattr(config, "names", None)
     recording = None if output is None else ControlRecording(driver, output, overwrite=overwrite, config=config,
@@ -194,22 +224,33 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
     if not quiet():
         click.echo(f"holding {controller.target_force_n * 1e3:.4g} mN (pressure limit {pmax / 1e3:g} kPa); "
                    "Ctrl-C stops", err=True)
+    where = "" if output is None else f"the session is in {output}"
     driver.start()
     try:
         result = run(driver, processor, controller, max_pressure_pa=pmax, seconds=seconds, n_lines=n_lines,
                      recording=recording, safety=Safety(silence_s=silence_s))
     except KeyboardInterrupt as err:
-        kept = f"; the session is in {output}" if output is not None else ""
-        _signals.note(err, f"set-point 0 sent on every pressure line{kept}")
+        _signals.note(err, "; ".join(filter(None, (_zeros_of(err), where))))
         raise
-    except ControlStop as err:
+    except BendsenseError as err:  # a safety stop (ControlStop) or the device failing under the loop
         sys.stderr.flush()
-        raise click.ClickException(f"control stopped: {err.reason}; set-point 0 sent on every pressure line"
-                                   + (f" (the session is in {output})" if output is not None else "")) from None
+        raise click.ClickException("; ".join(filter(None, (f"control stopped: {getattr(err, 'reason', err)}",
+                                                           _zeros_of(err), where)))) from None
+    if result.unsent:
+        raise click.ClickException("; ".join(filter(None, (f"control ended ({result.outcome}) but "
+                                                           f"{zero_report(result)}", where))))
     if not quiet():
         click.echo(_summary(result, controller), err=True)
         if output is not None:
             click.echo(f"session written to {output}", err=True)
+
+
+def _zeros_of(err) -> str:
+    """What became of every line's set-point 0, from the result the loop attached to ``err``."""
+    from bendsense.control import zero_report
+
+    result = getattr(err, "result", None)
+    return "set-point 0 was never sent (the loop did not start)" if result is None else zero_report(result)
 
 
 COMMANDS = [control]

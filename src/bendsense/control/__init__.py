@@ -2,13 +2,16 @@
 
 - :func:`run` (:mod:`~bendsense.control.loop`): per block of frames from the board,
   process, call a controller, clip its set-points to the pressure limit and send them
-  (SETPOINT frames); set-point 0 on every line whatever ends the loop;
+  (SETPOINT frames); set-point 0 on every line whatever ends the loop, recorded line by
+  line (:class:`LineZero`, :func:`zero_report`);
 - :class:`PIController` and :class:`Grasp` (:mod:`~bendsense.control.pi`): a PI loop with
   anti-windup on a finger's contact normal force, one per finger;
 - :func:`normal_force` (:mod:`~bendsense.control.force`): the controlled quantity, F · n at
-  the contact, from the tracked force and the estimated shape;
-- :class:`Safety`, :class:`ControlStop` (:mod:`~bendsense.control.safety`): the loop's own
-  stops (lost frames, silence, a model flag on a controlled finger);
+  the contact, from the tracked force and the estimated shape; :func:`force_limit_n` the
+  most a finger can press with at a pressure limit (a target beyond it is refused);
+- :class:`Safety`, :class:`ControlStop` (:mod:`~bendsense.control.safety`): the safety
+  model, the loop's own stops (lost frames, silence, a pressure beyond the limit, a
+  controlled finger without a force or flagged by the model);
 - :class:`ControlRecording` (:mod:`~bendsense.control.record`): the session on disk.
 
 A controller is any callable ``controller(block) -> {line: pressure_pa}`` (python-control's
@@ -16,8 +19,8 @@ habit: plain callables, their state in a small object). docs/grasping.md walks t
 grasp on the simulated board.
 """
 
-from bendsense.control.force import NormalForce, contact_normal, normal_force
-from bendsense.control.loop import DEFAULT_MAX_PRESSURE_PA, ControlResult, run
+from bendsense.control.force import NormalForce, contact_normal, force_limit_n, normal_force
+from bendsense.control.loop import DEFAULT_MAX_PRESSURE_PA, ControlResult, LineZero, run, zero_report
 from bendsense.control.pi import (
     DEFAULT_KI_PA_PER_N_S,
     DEFAULT_KP_PA_PER_N,
@@ -29,6 +32,7 @@ from bendsense.control.pi import (
 from bendsense.control.record import CONTROL_LOG, ControlRecording
 from bendsense.control.safety import ControlStop, Safety
 
-__all__ = ["run", "ControlResult", "PIController", "Grasp", "normal_force", "contact_normal", "NormalForce",
+__all__ = ["run", "ControlResult", "LineZero", "zero_report", "PIController", "Grasp", "normal_force",
+           "contact_normal", "force_limit_n", "NormalForce",
            "Safety", "ControlStop", "ControlRecording", "CONTROL_LOG", "DEFAULT_KP_PA_PER_N",
            "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S", "TRACK_BANDWIDTH_HZ", "DEFAULT_MAX_PRESSURE_PA"]

@@ -15,6 +15,10 @@ the convention of the simulator's contact (:meth:`bendsense.sim.SimulatedActuato
 angle at ``s_c`` (the PCC reconstruction; for ``s_c`` beyond the sensor, the sensor's tip
 angle: the last segment carries on straight), ``s_c`` the estimate's contact location
 (``load="contact"``) or the tip ``L``.
+
+:func:`force_limit_n` bounds what a finger can press with at a pressure limit: a target
+beyond it is no grasp this actuator makes (a force in mN given as N), refused before the
+board is driven.
 """
 
 from __future__ import annotations
@@ -23,7 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["NormalForce", "contact_normal", "normal_force"]
+__all__ = ["NormalForce", "contact_normal", "normal_force", "force_limit_n", "BLOCKED_FORCE_MARGIN"]
+
+#: :func:`force_limit_n` is this many blocked forces
+BLOCKED_FORCE_MARGIN = 2.0
 
 
 def contact_normal(angle_rad) -> np.ndarray:
@@ -122,3 +129,43 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
     return NormalForce(force_n=value, std_n=np.sqrt(np.maximum(var, 0.0)), contact_s_m=s_out, angle_rad=phi,
                        status=status)
 
+
+
+def force_limit_n(config, max_pressure_pa: float, contact_s_m: float | None = None) -> float:
+    """The most normal force a finger can press with at s_c, at pressures up to ``max_pressure_pa`` [N].
+
+    :data:`BLOCKED_FORCE_MARGIN` (2) times the finger's **blocked force** there: the force
+    normal to the finger at ``s_c`` that holds that point at its place at rest. Free, the
+    pressure curls the finger by ``ΔK0 = K0(P) − K0(0)`` (the free-bending model), which
+    moves the point at ``s_c`` by ``ΔK0 s_c² / 2``; a force ``F`` there moves it back by
+    ``F s_c³ / (3 EI(P))`` (a cantilever, DESIGN section 2), so
+
+        F_b(P) = 3 EI(P) ΔK0(P) / (2 s_c),
+
+    0.70 N at the tip and 1.05 N at 0.1 m for the paper's finger at 100 kPa. A finger
+    that touches its object already curled presses harder than one blocked straight (its
+    normal at ``s_c`` passes nearer the base): up to 1.25 ``F_b`` on the simulated board
+    (rigid objects at 15–134 mm touched at 2–60 kPa, pressures to 120 kPa); twice ``F_b``
+    leaves room beyond that. A target in mN given in N is a thousand times beyond.
+
+    Parameters
+    ----------
+    config : Config
+        The finger (its actuator, free-bending and stiffness sections).
+    max_pressure_pa : float
+        The pressure limit [Pa] (``F_b`` grows with the pressure).
+    contact_s_m : float, optional
+        Where the finger touches [m]; None: the tip ``L``.
+
+    Returns
+    -------
+    float
+        The bound [N].
+    """
+    from bendsense.actuator import FreeBendingModel
+
+    s_c = float(config.actuator.length_m if contact_s_m is None else contact_s_m)
+    p = float(max_pressure_pa)
+    k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(np.array([0.0, p]))
+    blocked = 3.0 * float(config.stiffness.ei_nm2(p)) * float(k0[1] - k0[0]) / (2.0 * s_c)
+    return BLOCKED_FORCE_MARGIN * blocked

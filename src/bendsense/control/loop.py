@@ -7,10 +7,14 @@ board, more when it falls behind), processes the block (a
 mode), checks it (:class:`~bendsense.control.safety.Guard`), calls the controller, clips
 its set-points to ``[0, max_pressure_pa]`` and sends them
 (:meth:`~bendsense.device.driver.Driver.send_setpoint`), then records the block if asked.
-Whatever ends the loop — its time, a stop event, Ctrl-C, SIGTERM, a safety stop, an
-error in the controller or the processor, a failing device — set-point 0 goes to every
-line first, before anything else is closed, and the time from the stop to the last zero
-written is measured (:attr:`ControlResult.zero_latency_s`).
+Lines the controller does not drive get set-point 0 with the first block and are held
+there. Whatever ends the loop — its time, a stop event, Ctrl-C, SIGTERM, a safety stop,
+an error in the controller or the processor, a failing device — set-point 0 goes first,
+before anything else is closed, to every line the config has, the loop drove or the board
+ever reported; each line's zero is recorded (:class:`LineZero`: sent, or why not) and the
+time from the stop to the last zero written is measured
+(:attr:`ControlResult.zero_latency_s`). The safety model in full is
+:mod:`bendsense.control.safety`'s.
 """
 
 from __future__ import annotations
@@ -27,11 +31,36 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.control.safety import ControlStop, Guard, Safety
-from bendsense.errors import ArgumentError, DeviceError
+from bendsense.errors import ArgumentError
+from bendsense.readings import sample_lines
 
-__all__ = ["run", "ControlResult", "DEFAULT_MAX_PRESSURE_PA"]
+__all__ = ["run", "ControlResult", "LineZero", "zero_report", "DEFAULT_MAX_PRESSURE_PA"]
 
 log = logging.getLogger("bendsense.control")
+
+
+@dataclass(frozen=True)
+class LineZero:
+    """What became of one line's set-point 0 at the end of a control session.
+
+    Attributes
+    ----------
+    line : int
+        The pressure line (0-based).
+    sent : bool
+        The SETPOINT 0 was written to the port.
+    error : str or None
+        Why it could not be sent (None when sent).
+    reported : bool
+        The board's latest frame reports this line's pressure, so a reader of the board
+        can confirm that it falls; False: the board does not report it (it stopped, or
+        never did) and nothing on the host can confirm it.
+    """
+
+    line: int
+    sent: bool
+    error: str | None
+    reported: bool
 
 
 @dataclass(frozen=True)
@@ -48,7 +77,8 @@ class ControlResult:
         How it ended: ``duration reached``, ``stopped``, ``interrupted``, or the reason
         of a safety stop or an error.
     lines : tuple of int
-        The pressure lines set to 0 at the end.
+        The pressure lines set-point 0 went to at the end (every line of the config, every
+        line the loop drove, every line the board reported).
     max_setpoint_pa : float
         The highest set-point sent [Pa].
     clipped : int
@@ -64,6 +94,10 @@ class ControlResult:
         Of that, the processor's (``process_readings``) [s]: the rest is the loop's own.
     block_frames : ndarray of int, shape (blocks,)
         Frames of each block.
+    zeros : tuple of LineZero
+        Each line's set-point 0 at the end, by line: sent, or why not.
+    held : tuple of int
+        Lines the controller never drove, held at set-point 0 from the first block.
     """
 
     frames: int
@@ -77,11 +111,49 @@ class ControlResult:
     loop_s: np.ndarray
     process_s: np.ndarray
     block_frames: np.ndarray
+    zeros: tuple = ()
+    held: tuple = ()
 
     @property
     def per_frame_s(self) -> float:
         """Mean loop time per frame [s]."""
         return float(np.sum(self.loop_s) / max(self.frames, 1))
+
+    @property
+    def unsent(self) -> tuple:
+        """The lines whose set-point 0 could not be sent."""
+        return tuple(z.line for z in self.zeros if not z.sent)
+
+
+def _names(lines) -> str:
+    return f"line{'s' if len(lines) > 1 else ''} {', '.join(str(k) for k in lines)}"
+
+
+def zero_report(result: ControlResult) -> str:
+    """What became of every line's set-point 0, in one clause for a message.
+
+    ``set-point 0 sent on every pressure line (0, 1, 2)`` when every write succeeded;
+    otherwise the lines sent and, apart, those whose zero could not be sent, with why;
+    lines whose pressure the board does not report are named as not confirmed.
+
+    Parameters
+    ----------
+    result : ControlResult
+        A finished session's result.
+    """
+    sent = [z.line for z in result.zeros if z.sent]
+    failed = [z for z in result.zeros if not z.sent]
+    if not failed:
+        text = f"set-point 0 sent on every pressure line ({', '.join(str(k) for k in sent)})"
+    else:
+        why = "; ".join(sorted({z.error for z in failed}))
+        text = (f"set-point 0 sent on {_names(sent)}; " if sent else "") + \
+            f"set-point 0 could NOT be sent on {_names([z.line for z in failed])} ({why}): it may still be pressurised"
+    unconfirmed = [z.line for z in result.zeros if z.sent and not z.reported]
+    if unconfirmed:
+        whose = "their" if len(unconfirmed) > 1 else "its"
+        text += f"; {_names(unconfirmed)} not confirmed (the board does not report {whose} pressure)"
+    return text
 
 
 #: the interpreter's thread switch interval while the loop runs [s] (Python's default is 5 ms): a stop
@@ -147,25 +219,26 @@ def _clip(setpoints, lines, max_pressure_pa):
     return out, clipped
 
 
-def _zero(driver, lines) -> float:
-    """Send set-point 0 on every line; returns when the last was written (perf_counter), NaN if one failed.
+def _zero(driver, lines, guard) -> tuple:
+    """Send set-point 0 on ``lines`` and every line the board reported; returns (the LineZero of each, when done).
 
-    The lines are the loop's and every line the board reports (a single actuator's loop
-    on a gripper's board zeroes them all); a line the board turns out not to have is skipped.
+    ``when done`` is the ``perf_counter`` after the last write, NaN if one failed. A line
+    the board stopped reporting gets its zero too (no check against the board's latest
+    frame); a write that fails does not keep the other lines from theirs.
     """
     latest = getattr(driver, "latest", lambda: None)()
-    board = 0 if latest is None else len(getattr(latest.sample, "pressures_pa", ()) or ())
-    ok = True
-    for line in sorted(set(lines) | set(range(board))):
+    board = set(guard.board_lines) | set(range(0 if latest is None else len(sample_lines(latest.sample))))
+    zeros = []
+    for line in sorted(set(lines) | board):
         try:
-            driver.send_setpoint(line, 0.0)
-        except ArgumentError:
-            if line < board:
-                ok = False
-        except (DeviceError, OSError) as err:
-            ok = False
+            driver.send_setpoint(line, 0.0, check_line=False)
+        except Exception as err:  # noqa: BLE001 - whatever one write raises, the other lines still get theirs
             log.error("set-point 0 on line %d could not be sent: %s", line, err)
-    return time.perf_counter() if ok else math.nan
+            zeros.append(LineZero(line, False, str(err) or type(err).__name__, line in guard.reporting))
+        else:
+            zeros.append(LineZero(line, True, None, line in guard.reporting))
+    done = time.perf_counter()
+    return tuple(zeros), (done if all(z.sent for z in zeros) else math.nan)
 
 
 #: the default pressure limit of :func:`run` [Pa]
@@ -197,8 +270,9 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     safety : Safety, optional
         The limits of the loop's own stops (default :class:`~bendsense.control.Safety()`).
     n_lines : int, optional
-        The board's pressure lines, all set to 0 at the end (default: the processor's
-        gripper's, else 1).
+        The config's pressure lines (default: the processor's gripper's, else 1): those
+        the controller does not drive are held at 0; all of them, every line the board
+        reported and every line driven get set-point 0 at the end.
     recording : ControlRecording, optional
         Where to record the session (readings, control log, results).
     on_block : callable, optional
@@ -211,16 +285,18 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     Raises
     ------
     ControlStop
-        A safety stop (lost frames, silence, a model flag on a controlled finger, a
-        controller's answer that is no set-point), after every line was set to 0; its
-        ``result`` holds the counters.
+        A safety stop (:mod:`bendsense.control.safety`: lost frames, silence, a pressure
+        beyond the limit on any line, a controlled finger without a force or flagged by
+        the model, a controller's answer that is no set-point), after set-point 0 went to
+        every line; its ``result`` holds the counters.
     KeyboardInterrupt
-        Ctrl-C or SIGTERM, after every line was set to 0.
+        Ctrl-C or SIGTERM, after set-point 0 went to every line.
 
     Notes
     -----
     Whatever the loop raises carries the counters as its ``result`` attribute (a
-    :class:`ControlResult`), so that a stopped session still says what it did.
+    :class:`ControlResult`), so that a stopped session still says what it did; its
+    ``zeros`` say line by line whether set-point 0 was sent (:func:`zero_report`).
     """
     if isinstance(max_pressure_pa, bool) or not isinstance(max_pressure_pa, (int, float, np.integer, np.floating)) \
             or not (math.isfinite(max_pressure_pa) and max_pressure_pa > 0):
@@ -231,8 +307,9 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     safety = Safety() if safety is None else safety
     hello = getattr(driver, "hello", None)
     guard = Guard(safety, getattr(controller, "fingers", None) or _fingers(processor),
-                  rate_hz=getattr(hello, "rate_hz", None) or None)
-    state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {}}
+                  rate_hz=getattr(hello, "rate_hz", None) or None, max_pressure_pa=float(max_pressure_pa))
+    state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {},
+             "driven": set(), "held": ()}
     outcome, stopped_at, zero_at, error = "stopped", math.nan, math.nan, None
     try:
         with _sigterm_stops(), _prompt_threads():
@@ -247,12 +324,13 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
             outcome = f"safety stop: {err.reason}"
         raise
     finally:
-        zero_at = _zero(driver, lines)  # first, before anything is closed
+        zeros, zero_at = _zero(driver, set(lines) | set(state["current"]), guard)  # first, before anything is closed
         result = ControlResult(
-            frames=state["frames"], blocks=len(state["loop"]), outcome=outcome, lines=lines,
+            frames=state["frames"], blocks=len(state["loop"]), outcome=outcome, lines=tuple(z.line for z in zeros),
             max_setpoint_pa=state["max"], clipped=state["clipped"], zero_latency_s=zero_at - stopped_at,
             stopped_at_s=stopped_at, loop_s=np.asarray(state["loop"]), process_s=np.asarray(state["process"]),
-            block_frames=np.asarray(state["sizes"], dtype=np.int64))
+            block_frames=np.asarray(state["sizes"], dtype=np.int64), zeros=zeros,
+            held=tuple(k for k in state["held"] if k not in state["driven"]))
         if error is not None:
             with contextlib.suppress(AttributeError, TypeError):  # a user's exception may not take attributes
                 error.result = result
@@ -286,12 +364,17 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
         last_frame, started = now, True
         tic = time.perf_counter()
         guard.lost(driver.stats, now)
+        guard.pressures(readings)
         block = processor.process_readings(readings)
         processed = time.perf_counter()
         guard.flags(block)
         setpoints, clipped = _clip(controller(block), lines, pmax)
+        state["driven"].update(setpoints)
+        if not state["loop"]:  # the first block: the lines the controller does not drive are held at 0
+            state["held"] = tuple(k for k in lines if k not in setpoints)
+            setpoints = {**dict.fromkeys(state["held"], 0.0), **setpoints}
         for line, value in setpoints.items():
-            driver.send_setpoint(line, value)
+            driver.send_setpoint(line, value, check_line=False)
         state["loop"].append(time.perf_counter() - tic)
         state["process"].append(processed - tic)
         state["sizes"].append(len(readings))

@@ -122,6 +122,10 @@ class PIController:
         Slew limit of the set-point [Pa/s].
     tip_s_m : float, optional
         The contact location logged for a tip load [m] (the actuator's length).
+    max_force_n : float, optional
+        The most force the finger can press with at ``max_pressure_pa`` [N]
+        (:func:`~bendsense.control.force_limit_n` of its config): a target beyond it is
+        refused (ArgumentError); None: no bound.
 
     Attributes
     ----------
@@ -135,8 +139,7 @@ class PIController:
 
     def __init__(self, target_force_n, *, line=0, finger=None, kp_pa_per_n=DEFAULT_KP_PA_PER_N,
                  ki_pa_per_n_s=DEFAULT_KI_PA_PER_N_S, max_pressure_pa, feedforward_pa=0.0,
-                 max_rate_pa_per_s=DEFAULT_MAX_RATE_PA_PER_S, tip_s_m=None):
-        self.target_force_n = _positive("target_force_n", target_force_n, zero=True)
+                 max_rate_pa_per_s=DEFAULT_MAX_RATE_PA_PER_S, tip_s_m=None, max_force_n=None):
         if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not 0 <= line <= 254:
             raise ArgumentError(f"line: expected a pressure line 0..254, got {line!r}")
         self.line = int(line)
@@ -147,7 +150,34 @@ class PIController:
         self.feedforward_pa = _positive("feedforward_pa", feedforward_pa, zero=True)
         self.max_rate = _positive("max_rate_pa_per_s", max_rate_pa_per_s)
         self.tip_s_m = tip_s_m
+        self.max_force_n = None if max_force_n is None else _positive("max_force_n", max_force_n)
+        self.target_force_n = target_force_n
         self.reset()
+
+    @property
+    def target_force_n(self) -> float:
+        """The normal force to hold, N* [N]; setting it checks it against ``max_force_n``."""
+        return self._target
+
+    @target_force_n.setter
+    def target_force_n(self, value) -> None:
+        self._target = self.checked_target(value)
+
+    def checked_target(self, value) -> float:
+        """``value`` as a target [N], or ArgumentError: not a number >= 0, or beyond ``max_force_n``.
+
+        Parameters
+        ----------
+        value : float
+            A target force [N].
+        """
+        target = _positive("target_force_n", value, zero=True)
+        if self.max_force_n is not None and target > self.max_force_n:
+            who = "the finger" if self.finger is None else f"finger {self.finger}"
+            raise ArgumentError(f"target_force_n: {target:g} N is beyond what {who} can press at the pressure limit "
+                                f"{self.max_pressure_pa / 1e3:g} kPa (at most {self.max_force_n:.3g} N: twice its "
+                                "blocked force, bendsense.control.force_limit_n); a force in mN is given in N")
+        return target
 
     @property
     def fingers(self) -> tuple:
@@ -259,8 +289,9 @@ class Grasp:
 
     @target_force_n.setter
     def target_force_n(self, value) -> None:
-        for c in self.controllers:
-            c.target_force_n = _positive("target_force_n", value, zero=True)
+        targets = [c.checked_target(value) for c in self.controllers]  # every finger's check before any changes
+        for c, target in zip(self.controllers, targets, strict=True):
+            c.target_force_n = target
 
     def reset(self) -> None:
         """Reset every controller."""

@@ -1,24 +1,61 @@
-"""When the loop stops by itself: the checks of :func:`bendsense.control.run` on every block.
+"""The control loop's safety model: when it stops by itself, and what it lets go.
 
-A force loop drives a pressure into a soft finger pressing a real object: whatever goes
-wrong, the loop must let go. :class:`Safety` holds the limits, :class:`Guard` checks
-each block against them and raises :class:`ControlStop` (the loop then sends set-point 0
-on every line before anything else):
+A force loop drives a pressure into a soft finger pressing a real object and may be left
+running unattended: whatever goes wrong, the loop must let go, and say truthfully what it
+did. The model, in full (docs/grasping.md, "Safety", lists every stop with the test that
+provokes it on a fake board):
+
+**Letting go.** Whatever ends :func:`bendsense.control.run` — its time, a stop event,
+Ctrl-C, SIGTERM, one of the stops below, an error in the controller or the processor, a
+failing device — set-point 0 goes first, before anything is closed, to the union of
+
+- every line of the config (``n_lines``: the processor's gripper's lines, else line 0),
+- every line the loop ever drove (the controller's set-points and the held lines below),
+- every line the board ever reported a pressure on, over the whole run (not only in its
+  latest frame): a line the board stopped reporting may still be pressurised, so its
+  zero is sent anyway (``Driver.send_setpoint(..., check_line=False)``).
+
+Each line's zero is recorded (:class:`~bendsense.control.loop.LineZero` in
+:attr:`ControlResult.zeros`): sent, or could not be sent (the write's error), and
+whether the board's latest frame reports that line's pressure at all (a line it does
+not report cannot be confirmed to fall). No message says "sent" of a line whose write
+failed; ``bendsense control`` exits non-zero when a zero could not be sent.
+
+**Holding.** Lines the controller does not drive (``--finger`` on a gripper: the other
+fingers' lines; a board's own scripted profile would drive them) get set-point 0 with
+the first block and are held there (:attr:`ControlResult.held`); every set-point sent on
+any line is clipped to ``[0, max_pressure_pa]`` whatever the controller returns.
+
+**Stopping** (:class:`Guard` checks each block against :class:`Safety`'s limits and
+raises :class:`ControlStop`):
 
 - **lost frames**: more than ``max_lost_frames`` frames lost (sequence gaps, the
   driver's queue drops) within ``lost_window_s``: the loop no longer sees every frame;
-- **silence**: no frame for ``silence_s`` (a board that stopped streaming; by default 0.1 s
-  or 10 frame periods, whichever is longer), or none within
+- **silence**: no frame for ``silence_s`` (a board that stopped streaming or died; by
+  default 0.1 s or 10 frame periods, whichever is longer), or none within
   ``first_frame_s`` of the start (a board that never starts: nothing was sent yet);
+- **pressure**: a pressure any line of the board reports above ``max_pressure_pa`` by
+  more than ``pressure_tolerance_pa`` (5 kPa: a proportional regulator's ripple and
+  accuracy, about ±1 % of a 200 kPa full scale, and a small overshoot after a step, with
+  room), or below ``-pressure_tolerance_pa`` (no gauge pressure a regulator makes): a
+  line the loop does not hold, a stuck regulator or a failed pressure sensor, stopped at
+  the first such frame;
+- **no force**: a controlled finger without a force of its own (NaN: no pressure
+  reading, a pressure outside the config's ``actuator.pressure_range_pa``, a shape with
+  no estimate) for ``flagged_s``: the loop would act blind;
 - **the model**: a controlled finger ``model_misfit`` or ``not_identifiable`` for
   ``flagged_s`` in a row. A frame's own χ² is beyond chance in 0.1 % of frames by
   design (``MISFIT_P``), once a second at 1 kHz: one such frame does not stop a grasp;
   a window test that fails (DESIGN.md section 2b: 50 ms, what catches a persistent model
   error) flags every frame until the next window closes, and a shape the model cannot
-  match flags every frame: both stop the loop within ``flagged_s``.
+  match flags every frame: both stop the loop within ``flagged_s``;
+- **a controller's answer** that is no set-point (not a dict, a value that is not a
+  finite number, a line outside the config's): checked by the loop itself.
 
-The pressure limit is not a check: :func:`~bendsense.control.run` clips every set-point
-to ``[0, max_pressure_pa]`` before it is sent, whatever the controller returns.
+No-force and model frames make one run: a finger that cannot be trusted for
+``flagged_s``, whichever the reason of each frame, stops the loop. A held line (no
+controller drives it) that stops reporting does not stop it: it was set to 0, nothing
+acts on its pressure, and it gets its zero again at the end.
 """
 
 from __future__ import annotations
@@ -30,6 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import ArgumentError, BendsenseError
+from bendsense.readings import sample_lines
 from bendsense.results import MODEL_MISFIT, NOT_IDENTIFIABLE
 
 __all__ = ["Safety", "Guard", "ControlStop", "STOP_STATUSES"]
@@ -41,7 +79,7 @@ STOP_STATUSES = (MODEL_MISFIT, NOT_IDENTIFIABLE)
 
 
 class ControlStop(BendsenseError, RuntimeError):
-    """The control loop stopped itself (a safety check); every line's set-point was set to 0.
+    """The control loop stopped itself (a safety check); set-point 0 went to every line (``result.zeros``).
 
     Attributes
     ----------
@@ -85,6 +123,9 @@ class Safety:
         frames [s] (by the frames' clock).
     first_frame_s : float, default 2.0
         Longest wait for the first frame after the loop starts [s].
+    pressure_tolerance_pa : float, default 5e3
+        How far a line's reported pressure may pass the pressure limit (or fall below 0)
+        before the loop stops [Pa] (module docstring).
     """
 
     max_lost_frames: int = 10
@@ -92,10 +133,11 @@ class Safety:
     silence_s: float | None = None
     flagged_s: float = 0.01
     first_frame_s: float = 2.0
+    pressure_tolerance_pa: float = 5e3
 
     def __post_init__(self):
         _number("max_lost_frames", self.max_lost_frames, integer=True)
-        for name in ("lost_window_s", "silence_s", "flagged_s", "first_frame_s"):
+        for name in ("lost_window_s", "silence_s", "flagged_s", "first_frame_s", "pressure_tolerance_pa"):
             if getattr(self, name) is not None or name != "silence_s":
                 _number(name, getattr(self, name))
         for name in ("silence_s", "first_frame_s"):
@@ -114,18 +156,30 @@ class Guard:
         The controlled fingers (None: a single actuator).
     rate_hz : float, optional
         The board's frame rate [Hz] (for the default silence).
+    max_pressure_pa : float, optional
+        The loop's pressure limit [Pa]; None: no pressure watch.
 
     Attributes
     ----------
     silence_s : float
         The silence limit in force [s].
+    board_lines : set of int
+        Every line the board reported a pressure on, over the whole session.
+    reporting : set of int
+        The lines with a pressure reading in the latest frame checked.
     """
 
-    def __init__(self, safety: Safety, fingers, rate_hz=None):
+    def __init__(self, safety: Safety, fingers, rate_hz=None, max_pressure_pa=None):
         self.safety = safety
         self.fingers = tuple(fingers)
         default = max(DEFAULT_SILENCE_S, 10.0 / rate_hz) if rate_hz else DEFAULT_SILENCE_S
         self.silence_s = default if safety.silence_s is None else float(safety.silence_s)
+        tol = safety.pressure_tolerance_pa
+        self._pressure_band = (-tol, math.inf if max_pressure_pa is None else max_pressure_pa + tol)
+        self.max_pressure_pa = max_pressure_pa
+        self.board_lines = set()
+        self.reporting = set()
+        self._reported = 0  # the most lines a frame carried so far
         self._lost = collections.deque()  # (host time [s], frames lost since the previous block)
         self._lost_total = None
         self._flag_start = {f: math.nan for f in self.fingers}
@@ -154,6 +208,33 @@ class Guard:
             raise ControlStop(f"{count} frames lost within {self.safety.lost_window_s:g} s (limit "
                               f"{self.safety.max_lost_frames}): the loop no longer sees every frame")
 
+    def pressures(self, readings) -> None:
+        """Note the lines the board reports and stop on a pressure outside ``[-tol, max_pressure_pa + tol]``.
+
+        Parameters
+        ----------
+        readings : list of Reading
+            The driver's readings of the block (every line of each SAMPLE).
+        """
+        lo, hi = self._pressure_band
+        for r in readings:
+            values = sample_lines(r.sample)
+            if len(values) > self._reported:
+                self._reported = len(values)
+                self.board_lines.update(range(len(values)))
+            for line, value in enumerate(values):
+                if value is not None and not lo <= value <= hi:
+                    tol = self.safety.pressure_tolerance_pa / 1e3
+                    if value > hi:
+                        why = (f"beyond the pressure limit {self.max_pressure_pa / 1e3:g} kPa (+{tol:g} kPa for "
+                               "regulator ripple): a line the loop does not hold, a stuck regulator or a failed "
+                               "pressure sensor")
+                    else:
+                        why = f"below 0 (-{tol:g} kPa tolerance), no gauge pressure a regulator makes: a failed sensor"
+                    raise ControlStop(f"line {line} reads {value / 1e3:.4g} kPa at seq {r.sample.seq}, {why}")
+        if readings:
+            self.reporting = {k for k, v in enumerate(sample_lines(readings[-1].sample)) if v is not None}
+
     def silent(self, since_s: float, started: bool = True) -> None:
         """Stop when no frame arrived for longer than ``silence_s`` (before the first: ``first_frame_s``).
 
@@ -173,7 +254,11 @@ class Guard:
             raise ControlStop(f"no frame from the board for {since_s:.3g} s (limit {self.silence_s:g} s)")
 
     def flags(self, block) -> None:
-        """Stop when a controlled finger has been ``model_misfit`` / ``not_identifiable`` for ``flagged_s``.
+        """Stop when a controlled finger has had no force, or been flagged by the model, for ``flagged_s``.
+
+        A frame counts when its own force is not a number (no pressure reading, a pressure
+        outside the config's range, no estimate) or its status is ``model_misfit`` /
+        ``not_identifiable``; a run of such frames for ``flagged_s`` stops the loop.
 
         Parameters
         ----------
@@ -185,7 +270,14 @@ class Guard:
         for finger in self.fingers:
             own = finger_block(block, finger)
             status = np.asarray(own.track.status if own.track is not None else own.status, dtype=object)
-            flagged = np.isin(status, STOP_STATUSES)
+            blind = ~np.isfinite(np.asarray(own.force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
+            flagged = np.isin(status, STOP_STATUSES) | blind
+            if not flagged.any():
+                self._flag_start[finger] = math.nan
+                continue
+            if blind.any():  # the frame's own status says why it has no force (no_pressure, out of range, ...)
+                own_status = np.asarray(own.status, dtype=object)
+                status = np.where(blind, [f"no force ({w})" for w in own_status.tolist()], status)
             start = self._flag_start[finger]
             for t, bad, what in zip(own.t_s.tolist(), flagged.tolist(), status.tolist()):
                 if not bad:
@@ -193,7 +285,7 @@ class Guard:
                     continue
                 if math.isnan(start):
                     start = t
-                if t - start >= self.safety.flagged_s:
+                if t - start >= self.safety.flagged_s - 1e-9:  # frame times are whole µs: 10 ms is 10 ms
                     name = "" if finger is None else f"finger {finger}: "
                     raise ControlStop(f"{name}{what} for {(t - start) * 1e3:.3g} ms (limit "
                                       f"{self.safety.flagged_s * 1e3:g} ms) at t = {t:.3f} s: the force cannot be "

@@ -323,12 +323,13 @@ class Driver:
         self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
         self.write(encode_command(kind, seq=self._cmd_seq))
 
-    def send_setpoint(self, line: int, pressure_pa: float) -> None:
+    def send_setpoint(self, line: int, pressure_pa: float, *, check_line: bool = True) -> None:
         """Send a SETPOINT: the target pressure of one of the board's pressure lines.
 
         Thread-safe (writes are serialised with the commands). The pressure is rounded
         to a whole pascal. Once the board has sent a SAMPLE, ``line`` must be one of its
-        lines (``len(sample.pressures_pa)``, or line 0 of a version-1 board).
+        lines (``len(sample.pressures_pa)``, or line 0 of a version-1 board), unless
+        ``check_line`` is False.
 
         Parameters
         ----------
@@ -336,12 +337,16 @@ class Driver:
             Pressure line, 0-based (0..254).
         pressure_pa : float
             Target pressure [Pa]: a finite number below 2**31 - 1 in magnitude.
+        check_line : bool, default True
+            Refuse a line the board's latest SAMPLE does not carry. The control loop
+            sends without this check: a line the board stopped reporting may still be
+            pressurised, and letting it go must not depend on the board's reports.
 
         Raises
         ------
         ArgumentError
-            A line that is not an integer in range, or not a line the board has; a
-            pressure that is not finite or beyond the wire's range.
+            A line that is not an integer in range, or (``check_line``) not a line the
+            board has; a pressure that is not finite or beyond the wire's range.
         DeviceError
             The port is closed (or was never opened), the write fails, or the driver
             speaks the line dialect (which has no host-to-device frames).
@@ -349,7 +354,7 @@ class Driver:
         if isinstance(line, bool) or not isinstance(line, numbers.Integral) or not 0 <= line < MAX_LINES:
             raise ArgumentError(f"line: expected a pressure line 0..{MAX_LINES - 1}, got {line!r}")
         latest = self._latest
-        if latest is not None:
+        if check_line and latest is not None:
             n_lines = len(latest.sample.pressures_pa) or 1
             if line >= n_lines:
                 raise ArgumentError(f"line: {line} is not a pressure line of the board on {self.port} "
