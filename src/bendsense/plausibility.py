@@ -120,7 +120,8 @@ def warn_kpa_as_pa(pressure_pa, config) -> None:
     Every finite pressure positive and below :data:`REST_PA` (the actuator hardly
     bends: at rest), but inside ``config.actuator.pressure_range_pa`` read as kPa: a
     session at rest reads zero or noise around it; kPa numbers of a working actuator
-    read 20–120. One frame (the live path) is not judged.
+    read 20–120. One frame, and a block of a live stream (:class:`bendsense.pipeline.LiveProcessor`,
+    which silences it), are not judged: a ramp from rest starts with a few pascals.
     """
     if isinstance(pressure_pa, float):
         return
