@@ -122,6 +122,13 @@ def warn_kpa_as_pa(pressure_pa, config) -> None:
     session at rest reads zero or noise around it; kPa numbers of a working actuator
     read 20–120. One frame, and a block of a live stream (:class:`bendsense.pipeline.LiveProcessor`,
     which silences it), are not judged: a ramp from rest starts with a few pascals.
+
+    Parameters
+    ----------
+    pressure_pa : float or array_like
+        The pressures given to ``estimate_force`` [Pa].
+    config : Config
+        Its ``actuator.pressure_range_pa`` is the working range [Pa].
     """
     if isinstance(pressure_pa, float):
         return
