@@ -304,6 +304,11 @@ def test_a_track_the_likelihood_cannot_choose_says_so_in_one_line(tmp_path, capl
                     f"force and a noise covariance): tracking at {DEFAULT_BANDWIDTH_HZ:g} Hz; give bandwidth_hz "
                     f"(--bandwidth-hz) to choose"]
     assert np.isfinite(read_results(tmp_path / "out")["fx_track_n"]).all()
+    from bendsense.batch import process_session
+
+    outcome = process_session(tmp_path / "s.csv", tmp_path / "batch", config=bendsense.load_config(), calibration=cal,
+                              track="smooth")
+    assert outcome.status == "ok" and "track: the likelihood is flat" in outcome.reason  # process's note
     est = bendsense.estimate_force(bendsense.reconstruct(signals, cal, bendsense.load_config().sensor), pressure,
                                    bendsense.load_config(), calibration=cal)
     with pytest.warns(DataWarning) as caught:
