@@ -540,6 +540,18 @@ def _pdeathsig() -> bool:
         return False
 
 
+def _check_workers(workers: int) -> None:
+    """Refuse more local workers than this machine's free memory holds, before any work (one line)."""
+    from bendsense.sim.scenarios import _BASE_BYTES, _size, available_memory_bytes
+
+    available = available_memory_bytes()
+    if available is not None and workers * _BASE_BYTES > available:
+        raise ArgumentError(f"workers (--workers): {workers:,} worker processes would need about "
+                            f"{_size(workers * _BASE_BYTES)} ({_size(_BASE_BYTES)} each: numpy, scipy, numba and the "
+                            f"kernels); this machine has {_size(available)} available (at most "
+                            f"{int(available // _BASE_BYTES):,} workers)")
+
+
 def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
     """A process pool whose workers use one BLAS thread and one numba thread each.
 
@@ -737,6 +749,8 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, paths))}")
     names = session_names(sessions)
     rows, todo = _plan(sessions, names, out_dir, overwrite)
+    if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
+        _check_workers(min(workers, len(todo)))
     options = dict(config=config, calibration=calibration, constraint=constraint, method=method, objective=objective,
                    pressure_pa=pressure_pa, estimate=estimate, overwrite=overwrite, track=track,
                    bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m)
