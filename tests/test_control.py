@@ -80,6 +80,7 @@ class FakeBoard:
         self.plant = Plant()
         self.k = 0
         self.sent = []  # (frame, line, pressure_pa)
+        self.beats = 0
         self.lost = 0
         self.lose_after = lose_after
         self.silent_after = silent_after
@@ -106,6 +107,9 @@ class FakeBoard:
         self.sent.append((self.k, line, float(pressure_pa)))
         if line == 0:
             self.plant.setpoint_pa = float(pressure_pa)
+
+    def send_heartbeat(self):
+        self.beats += 1
 
     @property
     def stats(self):

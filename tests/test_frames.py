@@ -126,7 +126,7 @@ def test_hello_text_command_layout():
     assert decode_frame(wire(payload)) == Hello(9, 1000, 16, 12, 500, 3300, "fw-1.2")
     payload = struct.pack("<BBHI", 1, 3, 10, 2000) + "température ok".encode()
     assert encode_text(10, 2000, "température ok") == wire(payload)
-    for kind, code in [("start", 16), ("stop", 17), ("hello_request", 18)]:
+    for kind, code in [("start", 16), ("stop", 17), ("hello_request", 18), ("heartbeat", 20)]:
         assert encode_command(kind) == wire(struct.pack("<BBHI", 1, code, 0, 0))
         assert decode_frame(encode_command(kind)) == Command(FrameType(code), 0, 0)
 
@@ -191,7 +191,8 @@ hellos = st.builds(
     st.text(alphabet=st.characters(min_codepoint=32, max_codepoint=126), max_size=32),
 )
 texts = st.builds(Text, seqs, times, st.text(max_size=80))
-commands = st.builds(Command, st.sampled_from([FrameType.START, FrameType.STOP, FrameType.HELLO_REQUEST]), seqs, times)
+commands = st.builds(Command, st.sampled_from([FrameType.START, FrameType.STOP, FrameType.HELLO_REQUEST,
+                                                FrameType.HEARTBEAT]), seqs, times)
 any_frame = st.one_of(samples(), samples(), hellos, texts, commands)
 
 

@@ -68,7 +68,8 @@ class _Port:
 def test_gripper_board_streams_v2_and_answers_setpoints(board, tmp_path):
     board.reset()
     truth = TruthWriter(tmp_path / "truth.csv", truth_columns(board.truth_fingers, board.n_lines))
-    with SimulatedDevice(board, rate_hz=RATE, n_channels=board.n_channels, truth=truth) as dev:
+    # this host holds line 1 for 0.25 s without a frame: no watchdog here (tests/test_watchdog.py has it)
+    with SimulatedDevice(board, rate_hz=RATE, n_channels=board.n_channels, truth=truth, watchdog_ms=0) as dev:
         port = _Port(dev)
         port.send(encode_command(FrameType.START))
         frames = port.read(0.15)
@@ -117,7 +118,8 @@ def test_single_actuator_board_sends_version_1_without_prefixes(tmp_path):
     board = GraspBoard(config, default_objects(1, 20.0, 0.1, 30e3), rate_hz=RATE, step_pa=4000.0)
     assert board.truth_fingers is None and board.n_channels == 16 and board.n_lines == 1
     truth = TruthWriter(tmp_path / "t.csv", truth_columns())
-    with SimulatedDevice(board, rate_hz=RATE, n_channels=16, truth=truth, autostart=True) as dev:
+    # this host holds line 0 for 0.3 s without a frame: no watchdog here (tests/test_watchdog.py has it)
+    with SimulatedDevice(board, rate_hz=RATE, n_channels=16, truth=truth, autostart=True, watchdog_ms=0) as dev:
         port = _Port(dev)
         port.send(encode_setpoint(0, 50_000))
         samples = [f for f in port.read(0.3) if isinstance(f, Sample)]

@@ -7,7 +7,7 @@ Payload, little-endian::
 
     0  u8   version = 1 (2: a SAMPLE with several pressure lines)
     1  u8   type: 1 SAMPLE, 2 HELLO, 3 TEXT; host->device 16 START, 17 STOP, 18 HELLO_REQUEST,
-            19 SETPOINT
+            19 SETPOINT, 20 HEARTBEAT
     2  u16  seq: +1 per device frame of any type, wraps at 65536
     4  u32  t_us: device clock [us], wraps
     SAMPLE 8: u8 n_channels (1..64), u8 status, u16 tx_drops, i32 pressure_pa
@@ -18,6 +18,8 @@ Payload, little-endian::
     HELLO  8: u8 n_channels, u8 adc_bits, u16 rate_hz, u16 vref_mv, <= 32 B firmware (ASCII)
     TEXT   8: UTF-8 log line
     SETPOINT 8: u8 line (0..254), i32 pressure_pa (the line's target; not 0x7FFFFFFF)
+    START, STOP, HELLO_REQUEST, HEARTBEAT: the header only (HEARTBEAT: "the host is alive",
+              which feeds the board's host-silence watchdog)
 
 :class:`Decoder` turns a byte stream, cut into chunks anywhere, into frame objects; it
 resynchronises at the next ``0x00`` after any bad frame, counts what it rejects and never
@@ -97,6 +99,7 @@ class FrameType(enum.IntEnum):
     STOP = 17
     HELLO_REQUEST = 18
     SETPOINT = 19
+    HEARTBEAT = 20
 
 
 class StatusBits(enum.IntFlag):
@@ -274,7 +277,7 @@ class Text:
 
 @dataclass(slots=True)
 class Command:
-    """Host-to-device frame (START, STOP, HELLO_REQUEST); carries no sequence gap accounting."""
+    """Host-to-device frame of the header only (START, STOP, HELLO_REQUEST, HEARTBEAT); no sequence gap accounting."""
 
     kind: FrameType
     seq: int = 0
@@ -455,7 +458,8 @@ def encode_text(seq, t_us, text: str) -> bytes:
     return frame_bytes(payload + str(text).encode("utf-8"))
 
 
-_COMMAND_NAMES = {"start": FrameType.START, "stop": FrameType.STOP, "hello_request": FrameType.HELLO_REQUEST}
+_COMMANDS = (FrameType.START, FrameType.STOP, FrameType.HELLO_REQUEST, FrameType.HEARTBEAT)
+_COMMAND_NAMES = {k.name.lower(): k for k in _COMMANDS}
 
 
 def _command_kind(kind) -> FrameType:
@@ -463,13 +467,14 @@ def _command_kind(kind) -> FrameType:
         k = _COMMAND_NAMES.get(kind.lower().replace("-", "_"))
         if k is not None:
             return k
-    elif kind in (FrameType.START, FrameType.STOP, FrameType.HELLO_REQUEST):
+    elif kind in _COMMANDS:
         return FrameType(kind)
-    raise FrameError(f"command kind: expected one of 'start', 'stop', 'hello_request' (or 16, 17, 18), got {kind!r}")
+    raise FrameError(f"command kind: expected one of {', '.join(map(repr, _COMMAND_NAMES))} "
+                     f"(or {', '.join(str(int(k)) for k in _COMMANDS)}), got {kind!r}")
 
 
 def encode_command(kind, seq: int = 0, t_us: int = 0) -> bytes:
-    """Encode a host-to-device command (START, STOP, HELLO_REQUEST) as a whole wire frame.
+    """Encode a host-to-device command (START, STOP, HELLO_REQUEST, HEARTBEAT) as a whole wire frame.
 
     The host has no sequence of its own that the device checks; the driver sends
     ``seq`` = a per-connection counter of commands and ``t_us`` = 0, both of which the
@@ -477,8 +482,9 @@ def encode_command(kind, seq: int = 0, t_us: int = 0) -> bytes:
 
     Parameters
     ----------
-    kind : FrameType or int
-        ``START``, ``STOP`` or ``HELLO_REQUEST``.
+    kind : FrameType, int or str
+        ``START``, ``STOP``, ``HELLO_REQUEST`` or ``HEARTBEAT`` (or its name in lower case,
+        e.g. ``"heartbeat"``).
     seq : int, default 0
         Sequence number (0..65535).
     t_us : int, default 0
@@ -581,7 +587,7 @@ def _parse_body(body: bytes, adc_bits: int | None):
     if ftype == 3:
         _, _, seq, t_us = _HEADER.unpack_from(body)
         return Text(seq, t_us, body[8:plen].decode("utf-8", errors="replace"))
-    if ftype in (16, 17, 18):
+    if ftype in _COMMANDS:
         if plen != 8:
             return _MALFORMED
         _, _, seq, t_us = _HEADER.unpack_from(body)
@@ -694,7 +700,7 @@ class Decoder(_StreamDecoder):
     lost : int
         Frames missing from the device sequence: ``sum((seq - last - 1) mod 65536)``
         over consecutive valid device frames (SAMPLE, HELLO, TEXT; not the host's
-        START, STOP, HELLO_REQUEST, SETPOINT).
+        START, STOP, HELLO_REQUEST, SETPOINT, HEARTBEAT).
     bytes : int
         Bytes fed.
     hello : Hello or None

@@ -175,6 +175,9 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     was sent; one that could not be sent exits 1. -o SESSION records everything
     (docs/formats.md, "Control session"). docs/grasping.md walks through a grasp on the
     simulated board and lists every stop.
+
+    While it runs it sends a HEARTBEAT every 50 ms, so that a board with a host-silence
+    watchdog (sim-device --watchdog-ms) lets go of every line when this command is killed.
     """
     from bendsense.cli.device import live_load
     from bendsense.config import load_config

@@ -486,10 +486,14 @@ def _manifest_names(results_path, output: Path) -> list:
               help="Write the simulator's truth of every frame as it is sent: seq, t_us, then per finger "
                    "<finger>_fx_n, <finger>_fy_n, <finger>_contact_s_m and per line line<k>_setpoint_pa, "
                    "line<k>_pressure_pa (one actuator: fx_n, fy_n, contact_s_m, setpoint_pa, pressure_pa).")
+@click.option("--watchdog-ms", type=Finite(min=0),
+              help="--fingers/--object: the host-silence watchdog [ms] (default 1000; 0: none). A host that holds a "
+                   "line at a non-zero set-point and then sends no frame (SETPOINT, HEARTBEAT, any) for this long "
+                   "gets set-point 0 on every line and a TEXT frame saying so; its next non-zero SETPOINT re-arms it.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --truth file that bendsense wrote.")
 def sim_device(
     rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop,
-    contact_s_m, truth_path, overwrite, **grasp,
+    contact_s_m, truth_path, watchdog_ms, overwrite, **grasp,
 ):
     """Run a simulated sensor board on a pseudo-terminal and print its port path.
 
@@ -504,6 +508,8 @@ def sim_device(
     (--object rigid or compliant): one pressure regulator per finger (a first-order lag
     with limits) follows the scenario's closing profile until the host sends that line a
     SETPOINT. --object without --fingers: the single actuator presses the object.
+    Its watchdog sets every line to 0 when a host that drove one falls silent for
+    --watchdog-ms ('bendsense control' sends a HEARTBEAT every 50 ms).
     """
     if not speed > 0:
         raise click.BadParameter(f"expected > 0, got {speed:g}", param_hint="--speed")
@@ -516,7 +522,7 @@ def sim_device(
             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
                 raise click.UsageError(f"{flag} does not apply to --replay: the recording gives it "
                                        "(--speed changes the pace)")
-        for name in ("truth_path", *grasp):
+        for name in ("truth_path", "watchdog_ms", *grasp):
             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
                 flag = {"truth_path": "--truth", "object_kind": "--object"}.get(name, "--" + name.replace("_", "-"))
                 raise click.UsageError(f"{flag} does not apply to --replay: a recording is played back, not "
@@ -546,10 +552,13 @@ def sim_device(
             if value is not None:
                 raise click.BadParameter("applies to --source sensor only, not ramp", param_hint=flag)
     _check_grasp_flags(grasp, contact_s_m, channels)
+    if watchdog_ms is not None and grasp["fingers"] is None and grasp["object_kind"] is None:
+        raise click.BadParameter("applies to a board with pressure regulators: give --fingers K or --object",
+                                 param_hint="--watchdog-ms")
     targets = [] if truth_path is None else [outputs.file(truth_path, overwrite=overwrite)]
     with outputs.reserve(targets):  # checked before any work, locked while the board runs
         _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart,
-                   contact_s_m, truth_path, grasp)
+                   contact_s_m, truth_path, watchdog_ms, grasp)
 
 
 def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
@@ -568,10 +577,10 @@ def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
 
 
 def _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, contact_s_m,
-               truth_path, grasp) -> None:
+               truth_path, watchdog_ms, grasp) -> None:
     """Build the simulated board's source (and truth file) and serve it."""
     from bendsense.cli.sim import grasp_board
-    from bendsense.device.simdevice import SimulatedDevice, default_source, ramp_source
+    from bendsense.device.simdevice import DEFAULT_WATCHDOG_MS, SimulatedDevice, default_source, ramp_source
     from bendsense.sim.truth import TruthWriter, scenario_truth, truth_columns
 
     board = grasp_board(grasp, rate_hz=rate_hz, seed=seed, adc_bits=adc_bits)
@@ -596,6 +605,7 @@ def _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bi
         seed=seed,
         autostart=autostart,
         truth=truth,
+        watchdog_ms=DEFAULT_WATCHDOG_MS if watchdog_ms is None else watchdog_ms,
     )
     try:
         _serve(dev, seconds)
@@ -632,7 +642,8 @@ def _serve(dev, seconds, *, replay: bool = False) -> None:
     s = dev.stats
     click.echo(
         f"generated {s.generated}  sent {s.sent}  dropped {s.dropped}  corrupted {s.corrupted}  "
-        f"truncated {s.truncated}  tx overflow {s.tx_overflow}" + (f"  setpoints {s.setpoints}" if s.setpoints else ""),
+        f"truncated {s.truncated}  tx overflow {s.tx_overflow}" + (f"  setpoints {s.setpoints}" if s.setpoints else "")
+        + (f"  watchdog trips {s.watchdog_trips}" if s.watchdog_trips else ""),
         err=True,
     )
 

@@ -13,8 +13,10 @@ an error in the controller or the processor, a failing device — set-point 0 go
 before anything else is closed, to every line the config has, the loop drove or the board
 ever reported; each line's zero is recorded (:class:`LineZero`: sent, or why not) and the
 time from the stop to the last zero written is measured
-(:attr:`ControlResult.zero_latency_s`). The safety model in full is
-:mod:`bendsense.control.safety`'s.
+(:attr:`ControlResult.zero_latency_s`). While it runs it sends a HEARTBEAT at least every
+:data:`HEARTBEAT_S`, set-points or not, so that a board's host-silence watchdog lets go of
+every line by itself only when the loop is gone (killed, hung, the cable pulled). The
+safety model in full is :mod:`bendsense.control.safety`'s.
 """
 
 from __future__ import annotations
@@ -31,10 +33,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.control.safety import ControlStop, Guard, Safety
-from bendsense.errors import ArgumentError
+from bendsense.errors import ArgumentError, DeviceError
 from bendsense.readings import sample_lines
 
-__all__ = ["run", "ControlResult", "LineZero", "zero_report", "DEFAULT_MAX_PRESSURE_PA"]
+__all__ = ["run", "ControlResult", "LineZero", "zero_report", "DEFAULT_MAX_PRESSURE_PA", "HEARTBEAT_S"]
 
 log = logging.getLogger("bendsense.control")
 
@@ -159,6 +161,9 @@ def zero_report(result: ControlResult) -> str:
 #: the interpreter's thread switch interval while the loop runs [s] (Python's default is 5 ms): a stop
 #: noticed while the board's reader thread holds the GIL must not wait that long for it
 SWITCH_INTERVAL_S = 2e-4
+#: the longest the loop waits without a HEARTBEAT to the board [s]: a twentieth of the simulated board's watchdog
+#: (:data:`bendsense.device.simdevice.DEFAULT_WATCHDOG_MS`); a block that takes longer delays the next one
+HEARTBEAT_S = 0.05
 
 
 @contextlib.contextmanager
@@ -253,7 +258,8 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     ----------
     driver : Driver
         An open, streaming board (with a queue) that takes set-points
-        (:meth:`~bendsense.device.driver.Driver.send_setpoint`).
+        (:meth:`~bendsense.device.driver.Driver.send_setpoint`) and heartbeats
+        (:meth:`~bendsense.device.driver.Driver.send_heartbeat`).
     processor : LiveProcessor or gripper processor
         Its ``process_readings(readings)`` makes the block the controller gets.
     controller : callable
@@ -349,14 +355,21 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
     t0 = time.monotonic()
     last_frame, started = t0, False
     silence = guard.silence_s
+    beat = -math.inf
     while True:
         now = time.monotonic()
+        if now - beat >= HEARTBEAT_S:  # the board's watchdog: the loop is alive, set-points or not
+            beat = now
+            try:
+                driver.send_heartbeat()
+            except DeviceError as err:  # a board that takes no frames: its silence or the next set-point stops the loop
+                log.warning("heartbeat not sent: %s", err)
         if stop is not None and stop.is_set():
             return "stopped"
         if seconds is not None and now - t0 >= seconds:
             return "duration reached"
         wait = silence if seconds is None else min(silence, max(t0 + seconds - now, 0.0))
-        readings = driver.get_batch(timeout=max(wait, 1e-4))
+        readings = driver.get_batch(timeout=max(min(wait, HEARTBEAT_S - (now - beat)), 1e-4))
         now = time.monotonic()
         if not readings:
             guard.silent(now - last_frame, started)

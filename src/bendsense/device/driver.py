@@ -32,6 +32,7 @@ from bendsense.frames import (
     MAX_LINES,
     Command,
     Decoder,
+    FrameType,
     Hello,
     LineDecoder,
     Sample,
@@ -214,6 +215,9 @@ class Driver:
             if getattr(err, "errno", None) != errno.EACCES:  # denied: that is the message, whatever the path is
                 _check_port_path(self.port)  # a directory or a regular file: say so, not pyserial's ioctl error
             text = " ".join(str(err).split())[:200]
+            if f"({errno.ENOTTY}," in text or getattr(err, "errno", None) == errno.ENOTTY:
+                raise DeviceError(f"{self.port}: a device that is no terminal, not a serial port (give the board's "
+                                  "port, e.g. /dev/ttyACM0; 'bendsense devices' lists them)") from None
             raise DeviceError(f"{self.port}: cannot open serial port ({text})") from None
 
     def open(self) -> Driver:
@@ -368,6 +372,27 @@ class Driver:
         with self._write_lock:
             self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
         self.write(data)
+
+    def send_heartbeat(self) -> None:
+        """Send a HEARTBEAT: the host is alive, and feeds the board's host-silence watchdog.
+
+        A board that was given a non-zero set-point sets every line to 0 by itself when no
+        frame from the host arrives for its watchdog time (docs/formats.md, "Firmware: the
+        host-silence watchdog"); a controlling host sends a heartbeat well within that time
+        whether or not it has set-points to send. Thread-safe, like :meth:`send_setpoint`.
+        The line dialect has no host-to-device frames (and its boards no watchdog): nothing
+        is sent, as with :meth:`send`.
+
+        Raises
+        ------
+        DeviceError
+            The port is closed (or was never opened) or the write fails.
+        """
+        if self.dialect != "binary":
+            return
+        with self._write_lock:
+            self._cmd_seq = seq = (self._cmd_seq + 1) & 0xFFFF
+        self.write(encode_command(FrameType.HEARTBEAT, seq=seq))
 
     def start(self) -> None:
         """Ask the board to stream SAMPLE frames."""
@@ -634,6 +659,8 @@ def _check_port_path(port: str) -> None:
     """Refuse a path that exists but is no terminal device (a directory, a regular file, a FIFO), naming what it is."""
     import stat
 
+    if not port.strip():
+        raise DeviceError("port: empty (give the board's port, e.g. /dev/ttyACM0; 'bendsense devices' lists them)")
     if "://" in port:
         return  # a pyserial URL (loop://, rfc2217://, socket://)
     try:

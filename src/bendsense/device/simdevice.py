@@ -3,7 +3,9 @@
 :class:`SimulatedDevice` opens a pseudo-terminal pair and plays the firmware on the
 master side: it answers HELLO_REQUEST with HELLO, streams SAMPLE frames at ``rate_hz``
 after START (or at once with ``autostart=True``), stops on STOP, passes SETPOINT frames to
-its source (a simulated gripper's pressure regulators), and can misbehave on
+its source (a simulated gripper's pressure regulators), keeps a host-silence watchdog
+over them (a host that drove a line and then sends nothing for ``watchdog_ms``: set-point
+0 on every line, said in a TEXT frame), and can misbehave on
 purpose: drop a frame (its ``seq`` is skipped), corrupt one (one bit flipped), truncate
 one (cut short, no trailing delimiter), or disconnect (close the master) after a given
 number of frames. Every injection is counted exactly in :attr:`SimulatedDevice.stats`,
@@ -17,6 +19,7 @@ import errno
 import fcntl
 import itertools
 import logging
+import math
 import os
 import random
 import select
@@ -32,7 +35,7 @@ import numpy as np
 from bendsense.errors import DeviceError
 from bendsense.frames import Command, Decoder, FrameType, Setpoint, encode_hello, encode_sample, encode_text
 
-__all__ = ["SimulatedDevice", "SimStats", "default_source", "ramp_source"]
+__all__ = ["SimulatedDevice", "SimStats", "default_source", "ramp_source", "DEFAULT_WATCHDOG_MS"]
 
 log = logging.getLogger("bendsense.device.sim")
 
@@ -59,6 +62,14 @@ def max_rate_hz(n_channels: int = 16, n_lines: int = 0) -> int:
     wire = body + 1 + body // 254 + 2
     return int(min(USB_FULL_SPEED_BYTES_PER_S // wire, 0xFFFF))
 
+
+DEFAULT_WATCHDOG_MS = 1000.0
+"""The board's host-silence watchdog [ms]: twenty heartbeat periods of ``bendsense control``
+(:data:`bendsense.control.loop.HEARTBEAT_S`). It is the backstop for a host that is gone,
+not a deadline for one that is slow: a Python loop on a shared machine stalls for hundreds
+of milliseconds (a 3-finger loop at 1 kHz took 0.83 s for one block on a 2-core machine at
+load 7), and the loop's own stops watch its timing. With the regulators' 25 ms lag a line
+is empty (below 1 %) about 1.1 s after the host's last frame."""
 
 _MAX_PENDING = 64 * 1024  # bytes queued for the pseudo-terminal before frames count as TX overflow
 
@@ -180,6 +191,8 @@ class SimStats:
         The master was closed on purpose.
     setpoints : int
         SETPOINT frames the source took (a line it has, a finite value).
+    watchdog_trips : int
+        Times the host-silence watchdog set every line to 0.
     """
 
     generated: int
@@ -193,6 +206,7 @@ class SimStats:
     commands: int
     disconnected: bool
     setpoints: int = 0
+    watchdog_trips: int = 0
 
 
 class SimulatedDevice:
@@ -207,7 +221,8 @@ class SimulatedDevice:
         sent as a version-2 SAMPLE; ``truth`` (a dict) goes to ``truth``. A source with
         a method ``setpoint(line, pressure_pa) -> bool`` takes the SETPOINT frames (a
         :class:`~bendsense.sim.gripper.GraspBoard`); other sources answer them with a
-        TEXT line. None: :func:`default_source`, the virtual sensor.
+        TEXT line. A source with a method ``release()`` (set-point 0 on every line) gets
+        the watchdog. None: :func:`default_source`, the virtual sensor.
     rate_hz : float
         Frame rate [Hz].
     n_channels, adc_bits : int
@@ -233,6 +248,12 @@ class SimulatedDevice:
         Gets ``write(seq, t_us, truth)`` for every SAMPLE frame generated (dropped ones
         too: match rows by ``seq``) and ``flush()`` after every burst
         (:class:`bendsense.sim.truth.TruthWriter`).
+    watchdog_ms : float, default :data:`DEFAULT_WATCHDOG_MS`
+        The host-silence watchdog [ms] (0: none). While the host holds a line at a
+        non-zero set-point, every frame it sends (any type) restarts the timer; when
+        none arrives for ``watchdog_ms`` the board calls the source's ``release()``,
+        sends a TEXT frame saying so and logs a warning. The next non-zero SETPOINT
+        arms it again. Only a source with ``release()`` has it.
 
     Notes
     -----
@@ -261,6 +282,7 @@ class SimulatedDevice:
         start_t_us: int = 0,
         burst: int = 64,
         truth=None,
+        watchdog_ms: float = DEFAULT_WATCHDOG_MS,
     ):
         if not rate_hz > 0:
             raise DeviceError(f"rate_hz: expected > 0, got {rate_hz!r}")
@@ -273,11 +295,18 @@ class SimulatedDevice:
                 raise DeviceError(f"{name}: expected a probability in [0, 1], got {p!r}")
         if drop + corrupt + truncate > 1.0:
             raise DeviceError(f"drop + corrupt + truncate: expected <= 1, got {drop + corrupt + truncate:g}")
+        if isinstance(watchdog_ms, bool) or not isinstance(watchdog_ms, (int, float)) \
+                or not 0 <= watchdog_ms < float("inf"):
+            raise DeviceError(f"watchdog_ms: expected a time >= 0 [ms] (0: no watchdog), got {watchdog_ms!r}")
         if source is None:
             source = default_source(n_channels=n_channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
         self._source_fn = source if callable(source) and not hasattr(source, "__next__") else None
         self._source_it = None if self._source_fn is not None else iter(source)
         self._on_setpoint = getattr(source, "setpoint", None)
+        self._release = getattr(source, "release", None)
+        self.watchdog_ms = float(watchdog_ms) if self._release is not None else 0.0
+        self._driven = set()  # lines the host holds at a non-zero set-point: what the watchdog guards
+        self._heard = 0.0  # when the last frame from the host was read (time.monotonic)
         self._truth = truth
         self.rate_hz = float(rate_hz)
         self.n_channels = int(n_channels)
@@ -296,7 +325,7 @@ class SimulatedDevice:
         self._lock = threading.Lock()
         self._counts = dict.fromkeys(
             ("generated", "sent", "dropped", "corrupted", "truncated", "tx_overflow", "hellos", "texts", "commands",
-             "setpoints"), 0
+             "setpoints", "watchdog_trips"), 0
         )
         self._disconnected = False
         self._stop = threading.Event()
@@ -426,11 +455,15 @@ class SimulatedDevice:
                     data = b""
                 else:
                     raise
-            for f in self._decoder.feed(data):
+            frames = self._decoder.feed(data)
+            if frames:
+                self._heard = time.monotonic()
+            for f in frames:
                 if type(f) is Command:
                     self._on_command(f.kind, k)
                 elif type(f) is Setpoint:
                     self._setpoint(f)
+            self._watch()
             with self._lock:
                 texts, self._texts = self._texts, []
             for text in texts:
@@ -510,11 +543,32 @@ class SimulatedDevice:
         elif self._on_setpoint(frame.line, frame.pressure_pa):
             with self._lock:
                 self._counts["setpoints"] += 1
+            if frame.pressure_pa > 0:
+                self._driven.add(frame.line)
+            else:
+                self._driven.discard(frame.line)
             return
         else:
             why = "no such pressure line"
         with self._lock:
             self._texts.append(f"SETPOINT line {frame.line} {frame.pressure_pa} Pa ignored: {why}")
+
+    def _watch(self) -> None:
+        """The host-silence watchdog: a host that holds a line up and falls silent gets every line set to 0."""
+        if not self._driven or not self.watchdog_ms:
+            return
+        silent_ms = (time.monotonic() - self._heard) * 1e3
+        if silent_ms <= self.watchdog_ms:
+            return
+        self._release()
+        text = (f"watchdog: no frame from the host for {math.ceil(silent_ms)} ms (limit {self.watchdog_ms:g} ms) while it "
+                f"held line{'s' if len(self._driven) > 1 else ''} {', '.join(map(str, sorted(self._driven)))} up: "
+                "set-point 0 on every pressure line")
+        self._driven.clear()
+        log.warning("%s: %s", self.port, text)
+        with self._lock:
+            self._counts["watchdog_trips"] += 1
+            self._texts.append(text)
 
     def _produce(self, k: int, pressure, adc, truth=None) -> None:
         seq, t_us, status = self._sample_header(k)

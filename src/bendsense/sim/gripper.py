@@ -127,7 +127,8 @@ class GraspBoard:
 
     Call it with the frame index ``k = 0, 1, 2, ...`` in order (each call advances the
     regulators one frame period); it returns the frame's pressures, counts and truth.
-    :meth:`setpoint` takes a host SETPOINT.
+    :meth:`setpoint` takes a host SETPOINT; :meth:`release` is the board's host-silence
+    watchdog letting go.
 
     Parameters
     ----------
@@ -224,6 +225,15 @@ class GraspBoard:
             False when the board has no such line.
         """
         return self.regulators.set(int(line), float(pressure_pa))
+
+    def release(self) -> None:
+        """Set-point 0 on every line from the next frame on, held until the host sets the line again.
+
+        :class:`~bendsense.device.simdevice.SimulatedDevice` calls it when the host that
+        drove a line falls silent (its watchdog;
+        :meth:`~bendsense.sim.regulator.PressureRegulators.release`).
+        """
+        self.regulators.release()
 
     def __call__(self, k: int):
         """Frame ``k``: ``(pressure, counts, truth)``.

@@ -9,7 +9,8 @@ whatever the frame rate.
 
 Each line follows the scenario's set-point profile (:func:`closing_profile`: the fingers
 close on the object, hold, open) until the host sends it a SETPOINT; from then on the host
-drives that line alone.
+drives that line alone. :meth:`PressureRegulators.release` (the board's host-silence
+watchdog) puts every line at set-point 0, where it stays until the host sets it again.
 """
 
 from __future__ import annotations
@@ -145,6 +146,15 @@ class PressureRegulators:
         self._host[line] = True
         self._host_setpoint[line] = min(max(float(pressure_pa), 0.0), self.max_pressure_pa)
         return True
+
+    def release(self) -> None:
+        """Set-point 0 on every line, held until the host sets the line again (the board's watchdog).
+
+        Lines that followed the profile stop following it: a board that lost its host
+        lets go of everything.
+        """
+        self._host[:] = True
+        self._host_setpoint[:] = 0.0
 
     def step(self, t_s: float) -> np.ndarray:
         """Advance one frame period, to the frame at time ``t_s``; return the pressures [Pa].
