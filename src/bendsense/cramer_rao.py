@@ -182,7 +182,14 @@ def contact_bound(config=None, calibration=None, *, contact_s_m, force_n, pressu
         noise_std = DEFAULT_NOISE_COUNTS
     if noise_std is not None:
         noise_std = _array("noise_std", noise_std, 0.0)
-    shape = np.broadcast_shapes(sc.shape, f.shape, p.shape)
+        if noise_std.ndim and noise_std.shape != (config.sensor.n_segments,):
+            raise ArgumentError(f"noise_std: expected one value or one per channel ({config.sensor.n_segments},), "
+                                f"got shape {noise_std.shape}")
+    try:
+        shape = np.broadcast_shapes(sc.shape, f.shape, p.shape)
+    except ValueError:
+        raise ArgumentError(f"contact_s_m, force_n, pressure_pa: shapes {sc.shape}, {f.shape}, {p.shape} do not "
+                            "broadcast to one") from None
     B = math.prod(shape)
     sc, f, p = (np.broadcast_to(a, shape).reshape(B) for a in (sc, f, p))
     sim = SimulatedActuator.from_config(config, noise_counts=0.0, seed=0)

@@ -104,6 +104,9 @@ class _Section:
     """Mixin: dict conversion with unknown/missing-key checks for a config section."""
 
     section: ClassVar[str]
+    #: Model parameters with a default in Python that a YAML section must still give: left out of a
+    #: partial section, the default would change the physics silently (``ei1_nm2_per_pa`` 0).
+    model_keys: ClassVar[tuple] = ()
 
     @classmethod
     def from_dict(cls, data: Any):
@@ -114,7 +117,7 @@ class _Section:
         required = [
             f.name
             for f in dataclasses.fields(cls)
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING or f.name in cls.model_keys
         ]
         unknown = sorted(set(data) - set(names), key=str)
         if unknown:
@@ -251,6 +254,7 @@ class MaterialConfig(_Section):
     """
 
     section: ClassVar[str] = "material"
+    model_keys: ClassVar[tuple] = ("prebend_angle_rad",)
     shear_modulus_pa: float
     sensor_stiffness_nm_per_rad: float
     prebend_angle_rad: float = 0.0
@@ -275,6 +279,7 @@ class StiffnessConfig(_Section):
     """Pressure-dependent flexural rigidity EI(P) = ei0 + ei1·P (paper eq. 15)."""
 
     section: ClassVar[str] = "stiffness"
+    model_keys: ClassVar[tuple] = ("ei1_nm2_per_pa",)
     ei0_nm2: float
     ei1_nm2_per_pa: float = 0.0
 

@@ -11,13 +11,14 @@ to the filtered or smoothed covariance, so that a tracked σ is never below that
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from bendsense import _jit
 from bendsense.choices import TRACK_MODES
-from bendsense.errors import ArgumentError
+from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation.kernels import MISFIT_P
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
 from bendsense.results import MODEL_MISFIT, OK, estimate_status
@@ -153,6 +154,8 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     starts = _windows.segment_starts(t, P, window_s, _windows.reference_interval(t))
     bounds = _windows.window_bounds(t, starts, window_s)
     p, n = _windows.window_p_values(estimate, bounds)
+    if estimate.window_p_value is None:  # check_windows has said it of a checked estimate
+        _windows.warn_untested(estimate, t, bounds, window_s, 3, P)
     checked = _windows.flag(estimate, bounds, p, n, window_s)
     z, Rn, floor = measurements(checked)
     dt = np.diff(t, prepend=t[0])
@@ -218,7 +221,9 @@ def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
     search runs on every m-th frame (~ML_SUBSAMPLE_FRAMES of them: the force-and-rate
     model sampled at m Δt is the same model with Q(m Δt), so this is the exact likelihood
     of those frames, spread over the whole series), then :func:`_ml_refine` on the whole
-    series from there: 4–6 passes over the series in all.
+    series from there: 4–6 passes over the series in all. A likelihood that does not
+    choose (flat: no segment with three observed frames) gives :data:`DEFAULT_BANDWIDTH_HZ`
+    and a :class:`~bendsense.errors.DataWarning` when any frame was observed.
     """
     B = z.shape[0]
     if B > 2 * ML_SUBSAMPLE_FRAMES:
@@ -232,7 +237,13 @@ def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
         if x is not None:
             return _ml_refine(z, Rn, dt, starts, dt_ref_s, x)
     x = _ml_search(z, Rn, dt, starts, dt_ref_s)
-    return DEFAULT_BANDWIDTH_HZ if x is None else float(10.0 ** x)
+    if x is not None:
+        return float(10.0 ** x)
+    if (np.isfinite(z) & np.isfinite(np.diagonal(Rn, axis1=1, axis2=2))).any():  # without any: nothing to track
+        warnings.warn(f"track: the likelihood is flat over the bandwidth (no segment has three frames with a force "
+                      f"and a noise covariance): tracking at {DEFAULT_BANDWIDTH_HZ:g} Hz; give bandwidth_hz "
+                      f"(--bandwidth-hz) to choose", DataWarning, stacklevel=3)
+    return DEFAULT_BANDWIDTH_HZ
 
 
 def _ml_search(z, Rn, dt, starts, dt_ref_s):
