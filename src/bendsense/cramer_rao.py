@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import ArgumentError
-from bendsense.validation import instance
+from bendsense.validation import instance, short
 
 __all__ = ["ContactBound", "contact_bound", "BOUND_CONSTRAINTS"]
 
@@ -96,7 +96,7 @@ def _array(name, value, low=None, low_open=False, high=None):
     if np.any(bad):
         span = "" if low is None else f" {'>' if low_open else '>='} {low:g}"
         span += "" if high is None else f" and <= {high:g}"
-        raise ArgumentError(f"{name}: must be finite{span}, got {np.ravel(a)[np.ravel(bad)][0]!r}")
+        raise ArgumentError(f"{name}: must be finite{span}, got {short(np.ravel(a)[np.ravel(bad)][0])}")
     return a
 
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from bendsense.bounds import max_curvature_per_m
 from bendsense.errors import ArgumentError, DataWarning, SessionError
-from bendsense.validation import float_array, instance
+from bendsense.validation import float_array, instance, short
 
 __all__ = [
     "OUT_OF_RANGE",
@@ -235,7 +235,7 @@ def check_time_column(t_s: np.ndarray, source: str, rows=None, error=SessionErro
     finite = np.isfinite(t)
     if not finite.all():
         k = int(np.flatnonzero(~finite)[0])
-        raise error(f"{where(k)}, column t_s: must be finite, got {t[k]!r}")
+        raise error(f"{where(k)}, column t_s: must be finite, got {short(t[k])}")
     if t.size < 2:
         return
     bad = np.flatnonzero(np.diff(t) <= 0) + 1

@@ -56,7 +56,8 @@ def _losses(stats) -> str:
 
 def _status_line(stats, est=None) -> str:
     line = (
-        f"{stats.records} frames  skipped {stats.skipped}  lost {stats.lost}  crc {stats.crc_errors}  malformed {stats.malformed}  "
+        f"{stats.records} frames  skipped {stats.skipped}  lost {stats.lost}  crc {stats.crc_errors}  "
+        f"malformed {stats.malformed}  "
         f"queue drops {stats.queue_drops}  firmware drops {stats.tx_drops}  reconnects {stats.reconnects}  "
         f"{stats.elapsed_s:.1f} s"
     )

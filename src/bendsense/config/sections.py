@@ -445,14 +445,15 @@ class ParameterCovarianceConfig(_Section):
         diag = np.diag(c)
         if np.any(diag < 0):
             i = int(np.argmin(diag))
-            raise _fail(f"{p}.covariance[{i}][{i}]", f"a variance must be >= 0, got {diag[i]!r}")
+            raise _fail(f"{p}.covariance[{i}][{i}]", f"a variance must be >= 0, got {check.short(diag[i])}")
         scale = np.sqrt(np.outer(diag, diag))
         tol = 1e-9 * scale + 1e-300
         asym = np.abs(c - c.T)
         if np.any(asym > tol):
             i, j = np.unravel_index(int(np.argmax(asym - tol)), c.shape)
             raise _fail(
-                f"{p}.covariance", f"must be symmetric, got [{i}][{j}] = {c[i, j]!r} and [{j}][{i}] = {c[j, i]!r}"
+                f"{p}.covariance",
+                f"must be symmetric, got [{i}][{j}] = {check.short(c[i, j])} and [{j}][{i}] = {check.short(c[j, i])}"
             )
         # positive semi-definite, judged on the correlation matrix (units differ by 1e20)
         sd = np.sqrt(diag)

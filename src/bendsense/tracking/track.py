@@ -21,7 +21,7 @@ from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation.kernels import MISFIT_P
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
-from bendsense.results import MODEL_MISFIT, OK, estimate_status
+from bendsense.results import MODEL_MISFIT, NO_FORCE, OK, estimate_status
 from bendsense.tracking import kalman as _kalman
 from bendsense.tracking import stream as _stream
 from bendsense.tracking import windows as _windows
@@ -307,7 +307,7 @@ def result(x, P, floor, window_p, est, bandwidth_hz, mode, t, z):
     _jit.call(_kalman.finish, x, P, np.ascontiguousarray(floor), force, std, cov)
     window_p = np.asarray(window_p, dtype=float)
     return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
-                 status=track_status(est, frame_z, window_p), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t,
+                 status=track_status(est, frame_z, window_p, force, std), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t,
                  frame_force_n=z)
 
 
@@ -404,7 +404,8 @@ class Tracker:
                                 f"after {before!r} s")
         window_p, misfit = self._windows(est, t, starts, b)
         return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
-                     status=track_status(est, z, window_p, missing > 0 or misfit), bandwidth_hz=self.bandwidth_hz,
+                     status=track_status(est, z, window_p, force, std, missing > 0 or misfit),
+                     bandwidth_hz=self.bandwidth_hz,
                      mode=self.mode, t_s=t, frame_force_n=z)
 
     def _inputs(self, est, t_s, pressure_pa):
@@ -450,17 +451,20 @@ class Tracker:
         return p, misfit
 
 
-def track_status(est, z, window_p, flagged=None):
+def track_status(est, z, window_p, force, std, flagged=None):
     """The tracked status (b,): the frame's own, ``model_misfit`` where its window's p < MISFIT_P and it was ``ok``.
 
     The frame's own: :func:`bendsense.results.estimate_status`, looked up only where a frame
-    is not ok. ``flagged``: whether any frame's force is missing or its window p below
-    MISFIT_P, when the caller knows (the stream kernels count them).
+    is not ok; ``no_force`` where it was ``ok`` but the tracked force or its σ is not finite
+    (an estimate without a noise model has nothing to weigh: a NaN track is never ok).
+    ``flagged``: whether any frame's force is missing or its window p below MISFIT_P, when
+    the caller knows (the stream kernels count them).
     """
     b = z.shape[0]
     success, message = est.success, est.message
     if flagged is None:
         flagged = not np.isfinite(z).all() or (window_p < MISFIT_P).any()
+    flagged = flagged or not (np.isfinite(force).all() and np.isfinite(std).all())
     if b == 1:  # one frame (the live path): scalar tests, no array reductions
         ok = bool(np.asarray(success).reshape(-1)[0]) and str(np.asarray(message).reshape(-1)[0]) == OK_MESSAGE
     else:
@@ -470,4 +474,5 @@ def track_status(est, z, window_p, flagged=None):
         return np.full(b, OK)  # every frame ok (the live path's usual block): nothing to look up
     status = estimate_status(est, b)
     status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
+    status[~(np.isfinite(force).all(axis=1) & np.isfinite(std).all(axis=1)) & (status == OK)] = NO_FORCE
     return status.astype(str)

@@ -464,8 +464,8 @@ def time_inputs(B, t_s, window_s, pressure_pa):
                             f"{int(np.flatnonzero(~np.isfinite(t))[0])}")
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
-        raise ArgumentError(f"t_s: must not decrease, got {t[back[0] + 1]!r} s after {t[back[0]]!r} s at frame "
-                            f"{int(back[0]) + 1}")
+        raise ArgumentError(f"t_s: must not decrease, got {short(t[back[0] + 1])} s after {short(t[back[0]])} s "
+                            f"at frame {int(back[0]) + 1}")
     if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
             math.isfinite(window_s) and window_s > 0):
         raise ArgumentError(f"window_s: expected a duration > 0 [s], got {short(window_s)}")
