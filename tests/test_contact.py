@@ -162,6 +162,8 @@ def test_bad_arguments_name_the_argument():
         _quiet(bendsense.estimate_contact, np.full((3, 16), 5.0), 50e3, BARE, noise_std=0.0)
     with pytest.raises(ArgumentError, match="^window_s"):
         bendsense.estimate_contact(np.zeros((3, 16)), 50e3, BARE, noise_std=NOISE_M, t_s=[0, 1, 2], window_s=0)
+    with pytest.raises(ArgumentError, match="^shape: no frames"):  # as estimate_force (an IndexError once)
+        bendsense.estimate_contact(np.zeros((0, 16)), np.zeros(0), BARE, noise_std=NOISE_M, t_s=np.zeros(0))
 
 
 # --------------------------------------------------------------------------- the Cramér–Rao bound

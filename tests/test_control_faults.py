@@ -200,8 +200,8 @@ def test_a_board_reading_900_kpa_stops_the_command(single_board, files):
         time.sleep(0.03)
     assert res.exit_code == 1, res.output
     line = one_error_line(res)
-    assert line.startswith(f"Error: control stopped: line 0 reads 900 kPa at seq {truth.seq[FAULT_AT]}, beyond the pressure "
-                           "limit 60 kPa (+5 kPa for regulator ripple)"), line
+    assert line.startswith(f"Error: control stopped: line 0 reads 900 kPa at seq {truth.seq[FAULT_AT]}, "
+                           "beyond the pressure limit 60 kPa (+5 kPa for regulator ripple)"), line
     assert line.endswith("; set-point 0 sent on every pressure line (0)")
     assert max(v for _, v in board.received) <= 60e3 and board.received[-1] == (0, 0.0)
     assert board.frames < FAULT_AT + 200

@@ -31,13 +31,14 @@ import dataclasses
 import logging
 import math
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from bendsense.batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.choices import OBJECTIVES
-from bendsense.errors import ArgumentError, ConfigError, SessionError
+from bendsense.errors import ArgumentError, ConfigError, DataWarning, SessionError
 from bendsense.readings import ReadingClock
 from bendsense.results import CONTACT_UNRESOLVED, NOT_IDENTIFIABLE, Results
 
@@ -733,7 +734,9 @@ class LiveProcessor:
         sub = shape if has_p.all() else take_frames(shape, has_p, n)
         kwargs = {"constraint": self.constraint, "method": self.method, "objective": self.objective,
                   "calibration": self.calibration, **self.options}
-        est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
+        with warnings.catch_warnings():  # a block of a stream is no session: its pressures are not judged
+            warnings.simplefilter("ignore", DataWarning)
+            est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
         m = int(has_p.sum())
         failed = np.flatnonzero(~np.asarray(est.success).reshape(-1))
         if warm and failed.size:

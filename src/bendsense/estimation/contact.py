@@ -106,6 +106,8 @@ def estimate_windows(estimate, shape, pressure_pa, config, calibration, t_s, win
     t_start = time.perf_counter()
     config, kappa, batch = _inputs(shape, config)
     B = kappa.shape[0]
+    if B == 0:  # as estimate_force says it
+        raise ArgumentError(f"shape: no frames to estimate (batch shape {batch})")
     try:
         P = np.array(np.broadcast_to(np.asarray(pressure_pa, dtype=float), (B,)))
     except (TypeError, ValueError):
