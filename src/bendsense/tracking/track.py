@@ -388,10 +388,10 @@ class Tracker:
         force, std, cov = np.empty((b, 2)), np.empty((b, 2)), np.empty((b, 2, 2))
         starts = np.empty(b, dtype=np.bool_)
         parts = est.covariance_parts_n2
-        parts = np.full((b, 3, 2, 2), np.nan) if parts is None else np.asarray(parts, dtype=float).reshape(b, 3, 2, 2)
+        parts = np.full((b, 3, 2, 2), np.nan) if parts is None else _c(parts, (b, 3, 2, 2))
         x, Pk, Rbar, has = self._state
-        z = np.asarray(est.force_n, dtype=float).reshape(b, 2)
-        missing = _jit.call(_stream.stream_filter, t, P, z, np.asarray(est.std_n, dtype=float).reshape(b, 2), parts,
+        z = _c(est.force_n, (b, 2))
+        missing = _jit.call(_stream.stream_filter, t, P, z, _c(est.std_n, (b, 2)), parts,
                             self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR,
                             _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has, self._carry, starts, force, std, cov)
         if missing < 0:  # nothing filtered: the times are checked first
@@ -418,7 +418,7 @@ class Tracker:
                                 f"batch shape {shape}")
         b = shape[0] if shape else 1
         try:
-            t = np.asarray(t_s, dtype=float).reshape(-1)
+            t = _c(t_s, -1)
         except (TypeError, ValueError):
             raise ArgumentError(f"t_s_block: expected times [s], got {short(t_s)}") from None
         if t.size != b:
@@ -440,8 +440,7 @@ class Tracker:
                 or est.uncertainty != "propagated":
             return p, False
         R, N = resid.shape[-1], shifts.shape[-1]
-        resid, shifts = resid.reshape(b, R), shifts.reshape(b, N)
-        jac, mfac = jac.reshape(b, R, 2), mfac.reshape(b, R, 2)
+        resid, shifts, jac, mfac = _c(resid, (b, R)), _c(shifts, (b, N)), _c(jac, (b, R, 2)), _c(mfac, (b, R, 2))
         if self._sums is None:
             self._sums = (np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N))
         if self._model is None or self._model[0] is not est.shift_errors:  # the same calibration: converted once
@@ -449,6 +448,17 @@ class Tracker:
         misfit = _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, self._model[1],
                            self._model[2], float(est.strip_gap_m), self.window_s, self._fs, *self._sums, p)
         return p, misfit
+
+
+def _c(a, shape):
+    """``a`` as the stream kernels take it: float64, C-contiguous, of ``shape`` (a copy only if it is not).
+
+    One layout for every block, whatever view an estimate holds (a strided slice of the
+    estimator's output, a copy after a frame was taken out or put back): numba compiles a
+    kernel once per layout, and a second layout met in a control loop compiled there
+    (~1 µs a block for the copies).
+    """
+    return np.ascontiguousarray(a, dtype=float).reshape(shape)
 
 
 def track_status(est, z, window_p, force, std, flagged=None):
