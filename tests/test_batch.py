@@ -3,6 +3,7 @@
 import concurrent.futures as cf
 import importlib.util
 import pickle
+import re
 import sys
 
 import numpy as np
@@ -387,3 +388,23 @@ def test_process_reports_lost_frames_and_firmware_drops(tmp_path):
     assert row.status == "ok" and row.frames_lost == 5 and row.tx_drops == 3
     assert "5 frames lost (3 dropped by the firmware)" in row.reason
     assert report.table().splitlines()[-1] == "5 frames lost in the recordings (3 dropped by the firmware)"
+
+
+def test_more_workers_than_the_memory_holds_are_refused_before_any_work(tmp_path):
+    """Each worker holds numpy, scipy, numba and the kernels (~300 MB): '--workers' for more sessions than the free
+    memory holds workers is one line naming the option and the cap; nothing is processed or written."""
+    from bendsense.sim.scenarios import available_memory_bytes
+
+    available = available_memory_bytes()
+    if available is None:
+        pytest.skip("no /proc/meminfo: the free memory is unknown")
+    n = 2 * int(available // 300e6) + 10  # twice what fits: the free memory moves while the test runs
+    for i in range(n):
+        (tmp_path / f"s{i:04d}.csv").write_text("t_s,pressure_kpa,ch1\n0,40,2000\n")
+    linear_calibration().save(tmp_path / "cal.yaml")
+    res = CliRunner().invoke(main, ["process", str(tmp_path), "--calibration", str(tmp_path / "cal.yaml"),
+                                    "-o", str(tmp_path / "out"), "--workers", str(n), "--no-estimate"])
+    assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1, res.output
+    assert re.search(rf"workers \(--workers\): {n:,} worker processes would need about .*; this machine has .* "
+                     r"available \(at most [\d,]+ workers\)", res.output), res.output
+    assert not (tmp_path / "out").exists()

@@ -46,7 +46,25 @@ def test_a_path_that_is_no_serial_port_is_named_as_what_it_is(tmp_path, kind):
         Driver(str(port)).open()
 
 
+@pytest.mark.parametrize("port, said", [("", "port: empty"), ("  ", "port: empty"),
+                                        ("/dev/null", "/dev/null: a device that is no terminal, not a serial port")])
+def test_an_empty_port_or_a_device_that_is_no_terminal_is_named(port, said):
+    with pytest.raises(DeviceError) as err:
+        Driver(port).open()
+    assert str(err.value).startswith(said) and "Errno" not in str(err.value) and "ioctl" not in str(err.value)
+
+
 def test_a_message_shows_numbers_not_numpys_repr():
     with pytest.raises(ArgumentError) as err:
         bendsense.solve_beam(0.13, 2.5e-3, 5.0, s_m=[0, 0.5, 1.0])
     assert "np.float64" not in str(err.value) and "got [0, 1]" in str(err.value)
+
+
+def test_times_and_bounds_show_numbers_not_numpys_repr():
+    with pytest.raises(ArgumentError) as err:
+        bendsense.contact_bound(contact_s_m=0.1, force_n=float("nan"), pressure_pa=5e4)
+    assert str(err.value).endswith("got nan")
+    est = bendsense.estimate_force(np.full((3, 16), 5.0), 5e4)
+    with pytest.raises(ArgumentError) as err:
+        bendsense.check_windows(est, np.array([0.0, 0.002, 0.001]))
+    assert "np.float64" not in str(err.value) and "got 0.001 s after 0.002 s" in str(err.value)

@@ -130,3 +130,12 @@ def test_bad_arguments_name_themselves(kwargs, name):
     args = {"contact_s_m": 0.1, "force_n": 0.1, "pressure_pa": 60e3, **kwargs}
     with pytest.raises(ArgumentError, match=f"^{name}: "):
         contact_bound(CONFIG, **args)
+
+
+def test_shapes_that_do_not_broadcast_name_the_arguments_and_their_shapes():
+    with pytest.raises(ArgumentError, match=r"^contact_s_m, force_n, pressure_pa: shapes \(2,\), \(3,\), \(\) do not "
+                                            r"broadcast to one$"):
+        contact_bound(CONFIG, contact_s_m=[0.05, 0.08], force_n=[0.1, 0.2, 0.3], pressure_pa=60e3)
+    with pytest.raises(ArgumentError, match=r"^noise_std: expected one value or one per channel \(16,\), got shape "
+                                            r"\(3,\)$"):
+        contact_bound(CONFIG, contact_s_m=0.08, force_n=0.1, pressure_pa=60e3, noise_std=[1.0, 1.5, 2.0])

@@ -203,8 +203,8 @@ def test_a_board_reading_900_kpa_stops_the_command(single_board, files):
         time.sleep(0.03)
     assert res.exit_code == 1, res.output
     line = one_error_line(res)
-    assert line.startswith(f"Error: control stopped: line 0 reads 900 kPa at seq {truth.seq[FAULT_AT]}, beyond the pressure "
-                           "limit 60 kPa (+5 kPa for regulator ripple)"), line
+    assert line.startswith(f"Error: control stopped: line 0 reads 900 kPa at seq {truth.seq[FAULT_AT]}, "
+                           "beyond the pressure limit 60 kPa (+5 kPa for regulator ripple)"), line
     # its regulator let go (the board's own record), but its sensor still reads 900 kPa: said, not called confirmed
     assert re.search(r"; set-point 0 sent on every pressure line \(0\); line 0 did not fall: 900 kPa after 0\.5\d* s$",
                      line), line
@@ -409,8 +409,8 @@ def test_a_board_that_ignores_its_setpoints_is_said_to_keep_its_pressure(files):
     assert stats.setpoints == 0 and stats.commands > 10  # the board's own counters: it applied none of them
     assert res.exit_code == 1, res.output
     line = one_error_line(res)
-    found = re.fullmatch(r"Error: control ended \(duration reached\) but set-point 0 sent on every pressure line \(0\); "
-                         r"line 0 did not fall: ([\d.]+) kPa after 0\.5\d* s", line)
+    found = re.fullmatch(r"Error: control ended \(duration reached\) but set-point 0 sent on every pressure line "
+                         r"\(0\); line 0 did not fall: ([\d.]+) kPa after 0\.5\d* s", line)
     assert found, line
     assert 5 < float(found.group(1)) < 100  # the scenario's ramp, 1 s in (the run, then the watch)
 
@@ -429,8 +429,8 @@ def test_a_board_that_holds_a_line_above_its_setpoints_stops_the_loop(single_boa
     with SimulatedDevice(board, rate_hz=RATE, truth=truth) as dev, Driver(dev.port) as driver:
         driver.start()
         t0 = time.monotonic()
-        with pytest.raises(ControlStop, match=r"^line 0 reads 60 kPa at seq (\d+), above every set-point sent to it for "
-                                              r"0\.25 s \(at most 20 kPa, \+5 kPa\): the board does not follow its "
+        with pytest.raises(ControlStop, match=r"^line 0 reads 60 kPa at seq (\d+), above every set-point sent to it "
+                                              r"for 0\.25 s \(at most 20 kPa, \+5 kPa\): the board does not follow its "
                                               "set-points") as info:
             run(driver, proc, hold_20_kpa, max_pressure_pa=LIMIT_PA, seconds=2.0, safety=Safety(silence_s=1.0))
         ran = time.monotonic() - t0

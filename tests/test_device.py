@@ -350,3 +350,29 @@ def test_recorder_background_thread_with_concurrent_reader(tmp_path):
         t.join()
     s = read_session(tmp_path / "s")
     assert len(s) == 400 and seen and max(seen) == 400
+
+
+def test_a_board_whose_hello_lies_about_its_channels_is_one_line_and_counted(tmp_path, caplog):
+    """HELLO announces 8 channels, the SAMPLEs carry 16: one line at record time naming both counts, the last line
+    counts the skipped and malformed frames as the board's own counters have them, and 'load' is one line."""
+    import logging
+
+    with SimulatedDevice(ramp_source(N_CH), n_channels=8, rate_hz=1000, max_frames=200, truncate=0.1,
+                         seed=4) as sim:
+        with caplog.at_level(logging.WARNING, logger="bendsense"):
+            res = CliRunner().invoke(main, ["record", sim.port, "-o", str(tmp_path / "s"), "--seconds", "0.6",
+                                            "--quiet-status"])
+        assert res.exit_code == 0, res.output
+        sent, truncated = sim.stats.sent, sim.stats.truncated
+    said = [r.getMessage() for r in caplog.records if "HELLO" in r.getMessage()]
+    assert said == [f"{sim.port}: the board's HELLO announces 8 channels, but its samples carry 16: they are "
+                    "skipped, not recorded (count in the summary)"]
+    assert not any("no sample frames arrived" in r.getMessage() for r in caplog.records)
+    assert sent == 200 - truncated and 0 < truncated < sent
+    assert res.output.strip().splitlines()[-1] == (
+        f"done: 0 frames written to {tmp_path / 's'}; {sent} skipped (another channel count or pressure lines than "
+        f"the session's); {truncated} malformed; {truncated} lost (0 dropped by the firmware)")
+    res = CliRunner().invoke(main, ["load", str(tmp_path / "s"), "export", str(tmp_path / "s.csv")])
+    assert res.exit_code == 1 and res.output.strip().splitlines() == [
+        f"Error: {tmp_path / 's'}: no frames (an empty recording): {sent} samples were skipped at record "
+        "time (another channel count or pressure lines than meta.yaml's; see events.log)"]

@@ -138,11 +138,11 @@ def calibration_too_many_nodes(tmp):
     return bendsense(tmp, "load", "run.csv", "--calibration", "cal.yaml", "reconstruct")
 
 
-@provokes(r"run\.csv: line \d+, column pressure_pa: every reading is below 1 kPa")
+@provokes(r"WARNING: pressure_pa: every pressure is below 1 kPa \(largest 120 Pa\)")
 def pressure_pa_holds_kpa(tmp):
     flat_run(tmp, pressure=np.linspace(20, 120, 10), pressure_column="pressure_pa")
     cal(tmp)
-    return bendsense(tmp, "load", "run.csv", "--calibration", "cal.yaml", "reconstruct")
+    return bendsense(tmp, "load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "estimate", ok=True)
 
 
 @provokes(r"run\.csv: line \d+, column pressure_kpa: readings up to")

@@ -2,7 +2,7 @@
 
 And what keeps a first call fast beside other work: bendsense's own linear algebra on
 one BLAS thread, and only the kernels a command needs compiled (a live block, a
-worker of a process pool and a batch below ``_PARALLEL_MIN`` frames never compile the
+worker of a process pool and a batch below ``_jit.PARALLEL_MIN`` frames never compile the
 batch kernel).
 """
 
@@ -18,7 +18,7 @@ import scipy.linalg  # noqa: F401 (loads scipy's BLAS before the limits are read
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import bendsense
-from bendsense import _blas
+from bendsense import _blas, _jit
 from bendsense import estimation as est
 
 KERNEL = textwrap.dedent('''
@@ -143,14 +143,14 @@ def test_a_calibration_fit_limits_blas_while_it_runs(monkeypatch, tmp_path):
 
 
 def test_small_batches_and_single_threads_use_the_per_frame_kernel_with_the_batch_kernels_results():
-    """A batch below ``_PARALLEL_MIN`` (or on one numba thread) runs block by block on the per-frame kernel.
+    """A batch below ``_jit.PARALLEL_MIN`` (or on one numba thread) runs block by block on the per-frame kernel.
 
     The same frames through the batch kernel on two threads give the same forces,
     statuses and σ bit for bit: blocks of consecutive frames are chained the same way.
     """
     config = bendsense.load_config()
     rng = np.random.default_rng(3)
-    B = est._PARALLEL_MIN + 37
+    B = _jit.PARALLEL_MIN + 37
     kappa = rng.uniform(2.0, 10.0, (B, 16))
     pressure = rng.uniform(20e3, 90e3, B)
     previous = numba.get_num_threads()

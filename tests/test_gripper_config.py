@@ -81,8 +81,9 @@ def test_save_and_load_round_trip(tmp_path):
     (lambda d: d["fingers"][0].pop("pressure_line"), "fingers[0]: missing keys pressure_line"),
     (lambda d: d["fingers"][0].update(colour="red"), "fingers[0]: unknown keys colour"),
     (lambda d: d.pop("material"), "fingers[0]: missing sections material"),
-    (lambda d: d["fingers"][1].update(stiffness={"ei0_nm2": -1}), "fingers[1].stiffness.ei0_nm2:"),
-    (lambda d: d.update(stiffness={"ei0_nm2": -1}), "stiffness.ei0_nm2:"),
+    (lambda d: d["fingers"][1].update(stiffness={"ei0_nm2": -1, "ei1_nm2_per_pa": 0.0}),
+     "fingers[1].stiffness.ei0_nm2:"),
+    (lambda d: d.update(stiffness={"ei0_nm2": -1, "ei1_nm2_per_pa": 0.0}), "stiffness.ei0_nm2:"),
     (lambda d: d.update(fingers=[]), "fingers: expected a non-empty list of fingers"),
     (lambda d: d.update(hand="left"), "config: unknown keys hand"),
 ])
@@ -198,3 +199,37 @@ def test_split_session_gives_each_finger_its_pressure_line(tmp_path):
     with pytest.raises(SessionError, match=r"board.csv: 3 pressure lines, but finger ring is on line 3 "
                                            r"\(fingers\[2\].pressure_line of the config, 0-based\)"):
         split_session(multi, g4)
+
+
+@pytest.mark.parametrize(("section", "keep"), [
+    ("stiffness", ["ei0_nm2"]), ("material", ["shear_modulus_pa", "sensor_stiffness_nm_per_rad"]),
+    ("sensor", ["n_segments", "segment_lengths_m", "strip_gap_m", "sleeve_thickness_m"]),
+    ("actuator", ["chamber_radius_m", "bottom_thickness_m", "wall_thickness_m", "length_m", "mass_kg"]),
+])
+def test_a_partial_section_names_its_missing_keys(tmp_path, section, keep):
+    """A finger's section replaces the gripper's whole: one that lacks keys is an error naming them (the finger's
+    stiffness without ei1_nm2_per_pa was EI(P) = ei0, silently); a single actuator's model parameters too."""
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+
+    data = gripper_dict()
+    partial = {k: v for k, v in PAPER[section].items() if k in keep}
+    lacking = sorted(k for k in PAPER[section] if k not in keep)  # in the order of the YAML (safe_dump sorts)
+    data["fingers"][1][section] = partial
+    path = write(tmp_path, data)
+    with pytest.raises(ConfigError, match=rf"fingers\[1\]\.{section}: missing keys {', '.join(lacking)} \(a finger's "
+                                          r"section replaces the gripper's whole"):
+        load_config(path)
+    from bendsense.session import write_session_csv
+
+    write_session_csv(Session(np.arange(3) * 0.01, np.full((3, 3 * N), 2000.0), np.full(3, 40e3)), tmp_path / "s.csv")
+    res = CliRunner().invoke(main, ["load", str(tmp_path / "s.csv"), "--config", str(path), "save",
+                                    str(tmp_path / "never")])
+    assert res.exit_code != 0 and len(res.output.strip().splitlines()) == 1 and lacking[0] in res.output
+    assert not (tmp_path / "never").exists()
+    model = {"stiffness": ["ei1_nm2_per_pa"], "material": ["prebend_angle_rad"]}.get(section)
+    if model:  # a single actuator: its model parameters must be given (the others keep documented defaults)
+        single = {**PAPER, section: partial}
+        with pytest.raises(ConfigError, match=rf"{section}: missing keys {model[0]}$"):
+            load_config(write(tmp_path, single, "one.yaml"))

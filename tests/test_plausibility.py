@@ -277,3 +277,50 @@ def test_a_fit_to_angles_in_degrees_is_not_written_as_a_config():
     with pytest.raises(ConfigError, match=r"^the free-bending fit gives a value no actuator of this geometry can "
                                           r"have .*material\.prebend_angle_rad = "):
         fit.to_config(CONFIG)
+
+
+def test_a_session_at_rest_is_estimated(tmp_path, caplog):
+    """Every pressure_pa reading below 1 kPa (a regulator's noise around its offset): read and estimated as it is,
+    without the advice to call the column pressure_kpa (1000 times wrong) and without the kPa warning."""
+    import logging
+
+    from click.testing import CliRunner
+    from helpers import linear_calibration, loaded_curvatures, signals_for
+
+    from bendsense.cli import main
+    from bendsense.results import read_results
+    from bendsense.session import write_session_csv
+
+    cal = linear_calibration()
+    cal.save(tmp_path / "cal.yaml")
+    pressure = np.random.default_rng(5).uniform(150.0, 900.0, 40)
+    signals = signals_for(loaded_curvatures(pressure, np.zeros((40, 2))), cal)
+    write_session_csv(Session(np.arange(40) * 0.01, signals, pressure), tmp_path / "rest.csv")
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, ["load", str(tmp_path / "rest.csv"), "--calibration", str(tmp_path / "cal.yaml"),
+                                        "reconstruct", "estimate", "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert not [r for r in caplog.records if "kPa" in r.getMessage()]
+    out = read_results(tmp_path / "out")
+    np.testing.assert_allclose(out["pressure_pa"], pressure)
+    ok = out["status"] == "ok"  # the others: straight, an axial load is not identifiable (σ inf along it)
+    assert set(out["status"]) <= {"ok", "not_identifiable"} and ok.any() and np.abs(out["fx_n"][ok]).max() < 0.01
+
+
+def test_pressures_in_kpa_given_as_pa_are_warned_of():
+    """The shapes of an actuator at 20-100 kPa with their pressures in kPa passed as Pa: a DataWarning naming the
+    config's range; the same in Pa, and at rest, pass without it."""
+    import warnings
+
+    from bendsense.errors import DataWarning
+
+    p_kpa = np.linspace(20.0, 100.0, 30)
+    kappa = _shapes(p_kpa * 1e3)
+    with pytest.warns(DataWarning, match=r"^pressure_pa: every pressure is below 1 kPa \(largest 100 Pa\), where the "
+                                         r"actuator hardly bends, but read as kPa they lie inside "
+                                         r"actuator.pressure_range_pa 0..200 kPa: pressures in kPa given as Pa\?"):
+        estimate_force(kappa, p_kpa, CONFIG)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        estimate_force(kappa, p_kpa * 1e3, CONFIG)
+        estimate_force(kappa[:3], np.array([0.0, 80.0, 300.0]), CONFIG)  # at rest: a zero among them

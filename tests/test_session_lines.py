@@ -127,10 +127,9 @@ def test_session_csv_line_column_errors(tmp_path, header, match):
 
 
 def test_session_csv_line_units_are_checked_by_name(tmp_path):
-    (tmp_path / "u.csv").write_text("t_s,ch1,line0_pressure_pa,line1_pressure_pa\n0,1,20000,45\n0.001,1,20000,50\n")
-    with pytest.raises(SessionError, match=r"line 1, column line1_pressure_pa: every reading is below 1 kPa "
-                                           r"\(largest 50\); looks like kilopascals: name the column "
-                                           r"line1_pressure_kpa"):
+    (tmp_path / "u.csv").write_text("t_s,ch1,line0_pressure_kpa,line1_pressure_kpa\n0,1,20,45\n0.001,1,20,5e4\n")
+    with pytest.raises(SessionError, match=r"line 1, column line1_pressure_kpa: readings up to 50000 kPa "
+                       r"\(over 1 MPa\); looks like pascals: name the column line1_pressure_pa"):
         read_session_csv(tmp_path / "u.csv")
     (tmp_path / "inf.csv").write_text("t_s,ch1,line0_pressure_pa,line1_pressure_pa\n0,1,20000,inf\n")
     with pytest.raises(SessionError, match=r"line 2, column line1_pressure_pa: must be finite, got 'inf'"):

@@ -3,6 +3,7 @@
 import csv
 import math
 import os
+import re
 import select
 import signal
 import subprocess
@@ -271,3 +272,18 @@ def test_gripper_config_maps_fingers_to_channels_and_lines():
     for bad in (0, 5, 2.0, True):
         with pytest.raises(ConfigError, match="fingers: must be an integer in 1..4"):
             bendsense.sim.gripper_config(bad)
+
+
+@pytest.mark.parametrize(("args", "option"), [
+    (["simulate", "gripper", "--seconds", "1e6"], "--seconds"), (["simulate", "gripper", "--rate", "1e7"], "--rate"),
+    (["demo", "--seconds", "1e7"], "--seconds")])
+def test_a_session_beyond_the_memory_is_refused_before_any_work(tmp_path, args, option):
+    """Held whole in memory, 1e6 s of a gripper (900 GB) would grow until the machine kills it: one line naming the
+    option, the memory it needs and the longest session that fits; nothing written."""
+    start = time.perf_counter()
+    res = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "out")])
+    assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1, res.output
+    assert re.fullmatch(rf"Error: {option}: (gripper of 3 fingers|demo) would hold [\d,]+ frames in memory, about "
+                        r"[\d.]+ [GT]B; this machine has [\d.]+ [GMT]B available \(at most [\d,]+ s at [\d.e+]+ Hz\)",
+                        res.output.strip()), res.output
+    assert not (tmp_path / "out").exists() and time.perf_counter() - start < 5.0

@@ -257,3 +257,97 @@ def test_live_bandwidth_default_is_the_trackers():
         res = CliRunner().invoke(main, [command, "--help"], terminal_width=200)
         assert f"default: {DEFAULT_BANDWIDTH_HZ:g} Hz (bendsense.tracking.DEFAULT_BANDWIDTH_HZ)" in " ".join(
             res.output.split()), command
+
+
+def test_a_normal_contact_constraint_tracks_the_documented_time_varying_run(tmp_path, calibration_path):
+    """getting-started's run with a track: 10 s at 100 Hz, a 20-frame degree-3 calibration, '--constraint normal'.
+
+    A normal constraint leaves one free direction: each frame's noise covariance has rank 1, and the filter's
+    prior learnt the same direction, so the maximum-likelihood search divided by zero. The track runs and is
+    no further from the simulator's truth than the frames.
+    """
+    frames = list(time_varying_frames(None, 100.0, SEED, truth=True, duration_s=10.0))
+    truth = np.array([[f[2]["fx_n"], f[2]["fy_n"]] for f in frames])
+    write_session_csv(Session(np.array([f[2]["t_s"] for f in frames]), np.array([f[1] for f in frames], dtype=float),
+                              np.array([f[0] for f in frames])), tmp_path / "tv.csv")
+    res = CliRunner().invoke(main, ["load", str(tmp_path / "tv.csv"), "--calibration", str(calibration_path),
+                                    "reconstruct", "estimate", "--constraint", "normal", "track",
+                                    "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    r = read_results(tmp_path / "out")
+    frame = np.stack([r["fx_n"], r["fy_n"]], axis=1) - truth
+    tracked = np.stack([r["fx_track_n"], r["fy_track_n"]], axis=1) - truth
+    assert np.isfinite(tracked).all()
+    assert np.sqrt(np.mean(tracked ** 2)) <= np.sqrt(np.mean(frame ** 2))
+
+
+def test_a_track_the_likelihood_cannot_choose_says_so_in_one_line(tmp_path, caplog):
+    """Frames a second apart: each starts its own segment, no innovation counts, the likelihood is flat; the
+    track falls back to the stated bandwidth and says so (a DataWarning in the library, one line in the CLI)."""
+    from helpers import linear_calibration, loaded_curvatures, signals_for
+
+    from bendsense.errors import DataWarning
+    from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
+
+    cal = linear_calibration()
+    cal.save(tmp_path / "cal.yaml")
+    n = 6
+    pressure = np.full(n, 60e3)
+    signals = signals_for(loaded_curvatures(pressure, np.tile([0.05, 0.0], (n, 1))), cal)
+    write_session_csv(Session(np.arange(n) * 1.0, signals, pressure), tmp_path / "s.csv")
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, ["load", str(tmp_path / "s.csv"), "--calibration", str(tmp_path / "cal.yaml"),
+                                        "reconstruct", "estimate", "track", "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    flat = [r.getMessage() for r in caplog.records if "likelihood is flat" in r.getMessage()]
+    assert flat == [f"track: the likelihood is flat over the bandwidth (no segment has three frames with a "
+                    f"force and a noise covariance): tracking at {DEFAULT_BANDWIDTH_HZ:g} Hz; give bandwidth_hz "
+                    f"(--bandwidth-hz) to choose"]
+    assert np.isfinite(read_results(tmp_path / "out")["fx_track_n"]).all()
+    from bendsense.batch import process_session
+
+    outcome = process_session(tmp_path / "s.csv", tmp_path / "batch", config=bendsense.load_config(), calibration=cal,
+                              track="smooth")
+    assert outcome.status == "ok" and "track: the likelihood is flat" in outcome.reason  # process's note
+    est = bendsense.estimate_force(bendsense.reconstruct(signals, cal, bendsense.load_config().sensor), pressure,
+                                   bendsense.load_config(), calibration=cal)
+    with pytest.warns(DataWarning) as caught:
+        assert bendsense.track(est, np.arange(n) * 1.0).bandwidth_hz == DEFAULT_BANDWIDTH_HZ
+    assert sorted(str(w.message)[:20] for w in caught) == ["track: the likelihoo", "window check: 50 ms "]
+
+
+def test_windows_too_short_for_the_frame_rate_are_said_once_with_the_window_that_would_test_them(
+        tmp_path, calibration_path, caplog):
+    """35 Hz: a 50 ms window holds one to three frames, no test runs; the chain says so once (estimate and track),
+    the library warns, and the window the message names tests every window."""
+    from bendsense.errors import DataWarning
+
+    frames = list(time_varying_frames(None, 35.0, SEED, truth=True, duration_s=3.0))
+    write_session_csv(Session(np.array([f[2]["t_s"] for f in frames]), np.array([f[1] for f in frames], dtype=float),
+                              np.array([f[0] for f in frames])), tmp_path / "s35.csv")
+    chain = ["load", str(tmp_path / "s35.csv"), "--calibration", str(calibration_path), "reconstruct", "estimate"]
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, [*chain, "track", "save", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    said = [r.getMessage() for r in caplog.records if r.getMessage().startswith("window check:")]
+    assert said == ["window check: 50 ms windows hold at most 3 frames at 35 Hz, fewer than the 5 a test needs: no "
+                    "window is tested (window_p_value NaN); window_s=0.172 (--window-s 0.172) holds 6 (frames between "
+                    "pressure steps over 1 kPa stay untested)"]
+    assert np.isnan(read_results(tmp_path / "out")["window_p_value"]).all()
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, [*chain, "--window-s", "0.172", "save", str(tmp_path / "out172")])
+    assert res.exit_code == 0, res.output
+    assert not [r for r in caplog.records if r.getMessage().startswith("window check:")]
+    tested = np.isfinite(read_results(tmp_path / "out172")["window_p_value"])
+    session = bendsense.read_session(tmp_path / "s35.csv")
+    steady = np.flatnonzero(np.abs(np.diff(session.pressure_pa)) <= 1e3)  # the holds at 0 and 100 kPa
+    runs = np.split(steady, np.flatnonzero(np.diff(steady) > 1) + 1)
+    middles = [r[len(r) // 2] for r in runs if len(r) >= 12]
+    assert len(middles) == 2 and tested[middles].all()
+    cal = Calibration.load(calibration_path)
+    config = bendsense.load_config()
+    est = bendsense.estimate_force(bendsense.reconstruct(session.signals, cal, config.sensor), session.pressure_pa,
+                                   config, calibration=cal)
+    with pytest.warns(DataWarning, match=r"^window check: 50 ms windows hold at most 3 frames at 35 Hz"):
+        bendsense.check_windows(est, session.t_s)

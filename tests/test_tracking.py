@@ -400,3 +400,23 @@ def test_a_tracker_takes_single_frames(cases):
         for k in range(60)]
     np.testing.assert_array_equal(np.concatenate([o.force_n for o in one]), whole.force_n)
     np.testing.assert_array_equal(np.concatenate([o.status for o in one]), whole.status)
+
+
+@pytest.mark.parametrize("mode", ["smooth", "filter", "stream"])
+def test_an_estimate_without_a_noise_model_never_tracks_ok_to_nan(mode):
+    est, _ = synthetic(40, np.random.default_rng(5))
+    # what estimate_force gives without a calibration: forces, no σ, no covariance parts
+    est = dataclasses.replace(est, std_n=np.full((40, 2), np.nan), covariance_n2=np.full((40, 2, 2), np.nan),
+                              covariance_parts_n2=None)
+    t = np.arange(40) * 1e-3
+    if mode == "stream":
+        tracker = Tracker(bandwidth_hz=12.0)
+        tr = [tracker.update(_cut(est, lo, lo + 8), t[lo:lo + 8]) for lo in range(0, 40, 8)]
+        force, std, status = (np.concatenate([getattr(b, n) for b in tr]) for n in ("force_n", "std_n", "status"))
+    else:
+        tr = track(est, t, mode=mode, bandwidth_hz=12.0)
+        force, std, status = tr.force_n, tr.std_n, tr.status
+    nan = ~(np.isfinite(force).all(axis=1) & np.isfinite(std).all(axis=1))
+    assert nan.any()  # nothing to weigh the frames with: the track has no value
+    assert not (np.asarray(status)[nan] == "ok").any()
+    assert set(np.asarray(status)[nan]) == {"no_force"}

@@ -327,8 +327,10 @@ control_case("control-grip-sigint-at-1s", grasp("-o", "s", seconds=None), during
              check=stopped)
 control_case("control-grip-sigterm-at-1s", grasp("-o", "s", seconds=None), during=signal_after(1, signal.SIGTERM),
              check=stopped)
-control_case("control-grip-sigint-at-start", grasp(seconds=None), during=signal_after(0.8, signal.SIGINT, running=False))
-control_case("control-grip-sigterm-at-start", grasp(seconds=None), during=signal_after(1.5, signal.SIGTERM, running=False))
+control_case("control-grip-sigint-at-start", grasp(seconds=None),
+             during=signal_after(0.8, signal.SIGINT, running=False))
+control_case("control-grip-sigterm-at-start", grasp(seconds=None),
+             during=signal_after(1.5, signal.SIGTERM, running=False))
 control_case("control-grip-sighup", grasp(seconds=None), during=signal_after(3, signal.SIGHUP))
 control_case("control-grip-double-sigint", grasp(seconds=None), during=signals_after(3, signal.SIGINT, signal.SIGINT))
 control_case("control-grip-sigint-then-sigterm", grasp(seconds=None),
@@ -465,10 +467,12 @@ gcase("gripper-time-one-step-back", gload("b1.csv", tail=FULL),
       setup=retime("b1.csv", lambda k, t: t - 0.5 if k == 100 else t))
 gcase("gripper-time-duplicated", gload("d.csv", tail=FULL), setup=retime("d.csv", lambda k, t: (k // 2) * 0.01))
 gcase("gripper-time-all-equal", gload("eq.csv", tail=FULL), setup=retime("eq.csv", lambda k, t: 1.0))
-gcase("gripper-time-huge-gap", gload("g.csv", tail=FULL), setup=retime("g.csv", lambda k, t: t + (1e6 if k >= 100 else 0)))
+gcase("gripper-time-huge-gap", gload("g.csv", tail=FULL),
+      setup=retime("g.csv", lambda k, t: t + (1e6 if k >= 100 else 0)))
 gcase("gripper-time-35hz", gload("s.csv", tail=FULL), setup=retime("s.csv", lambda k, t: k / 35.0))
 gcase("gripper-time-2khz", gload("f.csv", tail=FULL), setup=retime("f.csv", lambda k, t: k / 2000.0))
-gcase("gripper-time-nan", gload("tn.csv", tail=FULL), setup=retime("tn.csv", lambda k, t: float("nan") if k == 7 else t))
+gcase("gripper-time-nan", gload("tn.csv", tail=FULL),
+      setup=retime("tn.csv", lambda k, t: float("nan") if k == 7 else t))
 gcase("gripper-time-1e300", gload("tb.csv", tail=FULL), setup=retime("tb.csv", lambda k, t: 1e300 + k * 1e290))
 gcase("gripper-missing-line-column", gload("ml.csv", tail=FULL), expect="error",
       setup=gsession("ml.csv", lambda h, r: [",".join(c for c in h.split(",") if c != "line2_pressure_pa"),

@@ -40,7 +40,40 @@ if "NUMBA_THREADING_LAYER" not in os.environ:
 
 _OPT_LEVEL = 1
 _lock = threading.Lock()
+
 _ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)
+
+#: frames from which a batch runs on numba's threads (:func:`bendsense.pcc.reconstruct`,
+#: :func:`bendsense.estimation.estimate_force`): below, waking the thread pool costs more than the frames (~2 µs
+#: each in the reconstruction, and on a loaded machine far more: a live block of 5 frames waited ~1 ms for it), and
+#: a batch below it (~0.1 s of estimates) compiles no parallel kernel, so the workers of a batch find every kernel
+#: its warm-up compiled (``bendsense.batch.warm_up``)
+PARALLEL_MIN = 2048
+
+
+def parallel(frames: int) -> bool:
+    """Whether a batch of ``frames`` runs on numba's threads: from :data:`PARALLEL_MIN` on, unless this thread has one."""
+    return frames >= PARALLEL_MIN and numba.get_num_threads() > 1
+
+
+@contextlib.contextmanager
+def serial(frames: int):
+    """Run a batch of ``frames`` on the per-frame kernels, in the calling thread, even from :data:`PARALLEL_MIN` on.
+
+    A live loop that fell seconds behind its board gets a block of thousands of frames:
+    the parallel batch kernels are not what its warm-up compiled, and compiling them
+    there would stall the loop (seconds from the cache, a minute on the first run).
+    numba's thread count is per thread: only the caller's is changed, and put back.
+    """
+    if frames < PARALLEL_MIN:
+        yield
+        return
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(previous)
 
 
 def call(dispatcher, *args):

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from bendsense import output
 from bendsense._io import check_regular_file
-from bendsense.errors import ArgumentError, BendsenseError, OutputError, SessionError
+from bendsense.errors import ArgumentError, BendsenseError, DataWarning, OutputError, SessionError
 
 # the output's file system refuses every further session: stop, instead of failing each one
 _FATAL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS})
@@ -397,9 +397,10 @@ def process_session(
     start = time.perf_counter()
     try:
         # per-frame problems become the frame's status column; a warning per session
-        # from a worker process would only clutter the console
-        with warnings.catch_warnings():
+        # from a worker process would only clutter the console: what the data cannot carry joins the note
+        with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("ignore")
+            warnings.simplefilter("always", DataWarning)
             counts, lost, tx_drops, pressure_ignored = _run(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
                 {"track": track, "bandwidth_hz": bandwidth_hz, "window_s": window_s, "load": load,
@@ -412,10 +413,11 @@ def process_session(
     except Exception as err:  # noqa: BLE001 - isolate any failure to its session
         reason = f"{type(err).__name__}: {err}"
         return SessionOutcome(status="failed", reason=reason, seconds=time.perf_counter() - start, **row)
-    return _outcome(counts, lost, tx_drops, pressure_ignored, time.perf_counter() - start, row)
+    said = list(dict.fromkeys(str(w.message) for w in caught if issubclass(w.category, DataWarning)))
+    return _outcome(counts, lost, tx_drops, pressure_ignored, time.perf_counter() - start, row, said)
 
 
-def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row) -> SessionOutcome:
+def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) -> SessionOutcome:
     """The outcome of a processed session: its counts, and a note of each kind of flagged frame."""
     frames = counts.frames
     notes = [f"{n} of {frames} frames {what}" for n, what in (
@@ -427,6 +429,7 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row) -> SessionO
         notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")
     if pressure_ignored:
         notes.append("the fallback pressure ignored (every frame has a pressure reading)")
+    notes.extend(said)
     return SessionOutcome(
         status="ok",
         frames=frames,
@@ -535,6 +538,18 @@ def _pdeathsig() -> bool:
         return libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
     except (OSError, AttributeError):
         return False
+
+
+def _check_workers(workers: int) -> None:
+    """Refuse more local workers than this machine's free memory holds, before any work (one line)."""
+    from bendsense.sim.scenarios import _BASE_BYTES, _size, available_memory_bytes
+
+    available = available_memory_bytes()
+    if available is not None and workers * _BASE_BYTES > available:
+        raise ArgumentError(f"workers (--workers): {workers:,} worker processes would need about "
+                            f"{_size(workers * _BASE_BYTES)} ({_size(_BASE_BYTES)} each: numpy, scipy, numba and the "
+                            f"kernels); this machine has {_size(available)} available (at most "
+                            f"{int(available // _BASE_BYTES):,} workers)")
 
 
 def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
@@ -734,6 +749,8 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, paths))}")
     names = session_names(sessions)
     rows, todo = _plan(sessions, names, out_dir, overwrite)
+    if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
+        _check_workers(min(workers, len(todo)))
     options = dict(config=config, calibration=calibration, constraint=constraint, method=method, objective=objective,
                    pressure_pa=pressure_pa, estimate=estimate, overwrite=overwrite, track=track,
                    bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m)

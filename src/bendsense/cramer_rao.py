@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import ArgumentError
-from bendsense.validation import instance
+from bendsense.validation import instance, short
 
 __all__ = ["ContactBound", "contact_bound", "BOUND_CONSTRAINTS"]
 
@@ -96,7 +96,7 @@ def _array(name, value, low=None, low_open=False, high=None):
     if np.any(bad):
         span = "" if low is None else f" {'>' if low_open else '>='} {low:g}"
         span += "" if high is None else f" and <= {high:g}"
-        raise ArgumentError(f"{name}: must be finite{span}, got {np.ravel(a)[np.ravel(bad)][0]!r}")
+        raise ArgumentError(f"{name}: must be finite{span}, got {short(np.ravel(a)[np.ravel(bad)][0])}")
     return a
 
 
@@ -182,7 +182,14 @@ def contact_bound(config=None, calibration=None, *, contact_s_m, force_n, pressu
         noise_std = DEFAULT_NOISE_COUNTS
     if noise_std is not None:
         noise_std = _array("noise_std", noise_std, 0.0)
-    shape = np.broadcast_shapes(sc.shape, f.shape, p.shape)
+        if noise_std.ndim and noise_std.shape != (config.sensor.n_segments,):
+            raise ArgumentError(f"noise_std: expected one value or one per channel ({config.sensor.n_segments},), "
+                                f"got shape {noise_std.shape}")
+    try:
+        shape = np.broadcast_shapes(sc.shape, f.shape, p.shape)
+    except ValueError:
+        raise ArgumentError(f"contact_s_m, force_n, pressure_pa: shapes {sc.shape}, {f.shape}, {p.shape} do not "
+                            "broadcast to one") from None
     B = math.prod(shape)
     sc, f, p = (np.broadcast_to(a, shape).reshape(B) for a in (sc, f, p))
     sim = SimulatedActuator.from_config(config, noise_counts=0.0, seed=0)

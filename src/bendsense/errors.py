@@ -20,6 +20,7 @@ __all__ = [
     "ConvergenceWarning",
     "NoNoiseModelWarning",
     "NoParameterCovarianceWarning",
+    "DataWarning",
 ]
 
 
@@ -128,4 +129,12 @@ class NoParameterCovarianceWarning(BendsenseWarning):
     (μ̄, μ_s, prebend, γ0, γ1) were exact; the shipped paper config states a prior for
     an actuator nobody identified, ``bendsense identify`` writes the covariance of a fit.
     Warned once per process by :func:`bendsense.estimate_force`.
+    """
+
+
+class DataWarning(BendsenseWarning):
+    """The data cannot carry what was asked of them, or do not look like what they claim to be.
+
+    A track whose likelihood does not choose a bandwidth, windows too short for the model
+    check, pressures that look like kPa given as Pa. The command line says each in one line.
     """

@@ -79,6 +79,7 @@ class GripperProcessor:
         }
         self.frames = 0
         self._clock = ReadingClock()
+        self._lines_reported = 0  # the most pressure lines a SAMPLE of this run carried
 
     # the finger processors' shared options, for the outputs' metadata
     def _first(self):
@@ -133,6 +134,7 @@ class GripperProcessor:
         for p in self.processors.values():
             p.reset()
         self._clock.reset()
+        self._lines_reported = 0
 
     def warm_up(self) -> None:
         """Compile or load the kernels before the first frame arrives (every finger's), then forget the frames."""
@@ -189,7 +191,9 @@ class GripperProcessor:
         gives for readings holding only the finger's channels and its line's pressure: ``t_s``
         is the device clock from the first reading this processor saw, the block's
         :attr:`~bendsense.pipeline.LiveBlock.extra` the recording's columns (``host_s``,
-        ``status``, ``tx_drops``).
+        ``status``, ``tx_drops``). A line the board stopped reporting reads as no pressure
+        (its fingers' frames ``no_pressure``); a board that never reported a finger's line
+        is an :class:`~bendsense.errors.ArgumentError`.
 
         Parameters
         ----------
@@ -202,4 +206,10 @@ class GripperProcessor:
             Each finger's block, in the config's order.
         """
         c = self._clock.columns(readings)
-        return self.process_block(c.signals, c.pressures_pa, t_s=c.t_s, seq=c.seq, host_ns=c.host_ns, extra=c.extra)
+        p, lines = c.pressures_pa, self.gripper.n_lines
+        if p.shape[1] < lines <= self._lines_reported:
+            # lines the board reported before and stopped reporting: frames without a reading of them (no_pressure),
+            # not a board that never had them (one error)
+            p = np.hstack([p, np.full((p.shape[0], lines - p.shape[1]), np.nan)])
+        self._lines_reported = max(self._lines_reported, p.shape[1])
+        return self.process_block(c.signals, p, t_s=c.t_s, seq=c.seq, host_ns=c.host_ns, extra=c.extra)

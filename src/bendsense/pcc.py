@@ -32,7 +32,6 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -235,13 +234,6 @@ def frame_curvatures(signals, offset, coef, lo, hi, lengths, gap, kappa, theta):
         kappa[i] = theta[i] / lengths[i]
         prev = shift
     return extrapolated
-
-
-#: frames from which :func:`reconstruct` runs on numba's threads: below, waking the thread pool costs more than the
-#: frames (~2 µs each), and on a loaded machine far more (a live block of 5 frames waited ~1 ms for it). The
-#: estimate's threshold (``bendsense.estimation._PARALLEL_MIN``): a session below it compiles no parallel kernel,
-#: so the workers of a batch find every kernel its warm-up compiled (``bendsense.batch.warm_up``)
-_PARALLEL_MIN = 2048
 
 
 @njit(cache=True)
@@ -714,7 +706,7 @@ def reconstruct(
     tip, tip_ang = np.empty((frames, 2)), np.empty(frames)
     extrapolated = np.empty(frames, dtype=bool)
     out = (np.full(frames, float(base_angle_rad)), grid.seg, grid.sigma, kappa, pos, ang, tip, tip_ang, extrapolated)
-    if frames < _PARALLEL_MIN or numba.get_num_threads() == 1:  # a live block: in this thread
+    if not _jit.parallel(frames):  # a live block: in this thread
         _jit.call(frames_reconstruct, 0, frames, a2, *args, *out)
     else:
         _jit.call(_frames_reconstruct, a2, *args, *out)

@@ -31,13 +31,14 @@ import dataclasses
 import logging
 import math
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from bendsense.batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.choices import OBJECTIVES
-from bendsense.errors import ArgumentError, ConfigError, SessionError
+from bendsense.errors import ArgumentError, ConfigError, DataWarning, SessionError
 from bendsense.readings import ReadingClock
 from bendsense.results import CONTACT_UNRESOLVED, NOT_IDENTIFIABLE, Results
 
@@ -736,6 +737,37 @@ class LiveProcessor:
         self.frames = self.failures = self.estimated = 0
         self.status_counts = {}
 
+    def _estimate(self, shape, p, n):
+        """The block's force estimates (None without a pressure or with ``estimate=False``), warm-started."""
+        from bendsense.estimation import estimate_force
+
+        has_p = np.isfinite(p)
+        if not (self.estimate and has_p.any()):
+            return None
+        prev = self._previous
+        warm = {"initial": prev} if prev is not None else {}
+        sub = shape if has_p.all() else take_frames(shape, has_p, n)
+        kwargs = {"constraint": self.constraint, "method": self.method, "objective": self.objective,
+                  "calibration": self.calibration, **self.options}
+        with warnings.catch_warnings():  # a block of a stream is no session: its pressures are not judged
+            warnings.simplefilter("ignore", DataWarning)
+            est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
+        m = int(has_p.sum())
+        failed = np.flatnonzero(~np.asarray(est.success).reshape(-1))
+        if warm and failed.size:
+            # a start far from a frame (a block over a fast change) can fail where the
+            # frame's own moment-balance start converges: retry those cold
+            retry = estimate_force(take_frames(sub, failed, m), p[has_p][failed], self.config, **kwargs)
+            est = put_frames(est, failed, retry, m)
+        ok = np.flatnonzero(np.asarray(est.success).reshape(-1))
+        if ok.size:  # a failed frame has NaN forces: it cannot seed the next block
+            self._previous = take_frames(est, int(ok[-1]), m)
+        self.failures += int(np.count_nonzero(~np.asarray(est.success)))
+        self.estimated += int(has_p.sum())
+        if not has_p.all():
+            est = expand_frames(est, has_p)
+        return est
+
     def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
                       extra=None) -> LiveBlock:
         """Process a block of consecutive frames.
@@ -756,7 +788,7 @@ class LiveProcessor:
         -------
         LiveBlock
         """
-        from bendsense.estimation import estimate_force
+        from bendsense import _jit
         from bendsense.pcc import reconstruct
 
         t_start = time.perf_counter()
@@ -774,30 +806,9 @@ class LiveProcessor:
                             "sends one); it fills only frames without", self.pressure_pa / 1e3)
                 self._fallback_told = True
             p[~has] = self.pressure_pa
-        shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
-        est = None
-        has_p = np.isfinite(p)
-        if self.estimate and has_p.any():
-            prev = self._previous
-            warm = {"initial": prev} if prev is not None else {}
-            sub = shape if has_p.all() else take_frames(shape, has_p, n)
-            kwargs = {"constraint": self.constraint, "method": self.method, "objective": self.objective,
-                      "calibration": self.calibration, **self.options}
-            est = estimate_force(sub, p[has_p], self.config, **warm, **kwargs)
-            m = int(has_p.sum())
-            failed = np.flatnonzero(~np.asarray(est.success).reshape(-1))
-            if warm and failed.size:
-                # a start far from a frame (a block over a fast change) can fail where the
-                # frame's own moment-balance start converges: retry those cold
-                retry = estimate_force(take_frames(sub, failed, m), p[has_p][failed], self.config, **kwargs)
-                est = put_frames(est, failed, retry, m)
-            ok = np.flatnonzero(np.asarray(est.success).reshape(-1))
-            if ok.size:  # a failed frame has NaN forces: it cannot seed the next block
-                self._previous = take_frames(est, int(ok[-1]), m)
-            self.failures += int(np.count_nonzero(~np.asarray(est.success)))
-            self.estimated += int(has_p.sum())
-            if not has_p.all():
-                est = expand_frames(est, has_p)
+        with _jit.serial(n):  # a block of thousands (a loop seconds behind): the kernels warm_up compiled
+            shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
+            est = self._estimate(shape, p, n)
         t_s = np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float)
         host_ns = np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None else np.asarray(host_ns,
                                                                                                      dtype=np.int64)

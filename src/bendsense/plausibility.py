@@ -7,9 +7,11 @@ The kinds of checks live here, both applied where data enter the library:
   status ``pressure_out_of_range`` (:func:`pressure_range_step`, the first step of
   :func:`bendsense.estimation.estimate_force`);
 - **per column**: a pressure column whose numbers are a thousand times off its unit
-  (kPa numbers in ``pressure_pa``, Pa numbers in ``pressure_kpa``) is refused by the
-  session reader with a message that names the probable mistake
-  (:func:`check_pressure_column`);
+  (Pa numbers in ``pressure_kpa``; kPa numbers in the ``pressure_pa`` column of
+  free-bending data) is refused by the reader with a message that names the probable
+  mistake (:func:`check_pressure_column`); a session's ``pressure_pa`` below 1 kPa is a
+  session at rest, and ``estimate_force`` warns when such pressures would lie inside the
+  actuator's working range in kPa (:func:`warn_kpa_as_pa`);
 - **per frame, the force**: a fitted force beyond what the actuator can carry
   (:func:`force_bound_n`) is no measurement: status ``implausible_force``
   (:func:`force_bound_step`).
@@ -21,18 +23,20 @@ import dataclasses
 import functools
 import logging
 import math
+import warnings
 
 import numpy as np
 
 from bendsense.bounds import max_curvature_per_m
-from bendsense.errors import ArgumentError, SessionError
-from bendsense.validation import float_array, instance
+from bendsense.errors import ArgumentError, DataWarning, SessionError
+from bendsense.validation import float_array, instance, short
 
 __all__ = [
     "OUT_OF_RANGE",
     "pressure_outside",
     "pressure_range_step",
     "check_pressure_column",
+    "warn_kpa_as_pa",
     "check_time_column",
     "check_channels",
     "check_one_line",
@@ -43,6 +47,8 @@ __all__ = [
 
 log = logging.getLogger("bendsense")
 
+#: Below this a soft pneumatic actuator hardly bends [Pa]: pressures all under it are a session at rest, or kPa.
+REST_PA = 1e3
 OUT_OF_RANGE = "pressure_out_of_range"
 """Status (and message prefix) of a frame whose pressure lies outside the actuator's range."""
 
@@ -92,6 +98,7 @@ def pressure_range_step(estimate):
         else:
             instance("config", config, Config, "bendsense.load_config(path)")
         outside = pressure_outside(pressure_pa, config)
+        warn_kpa_as_pa(pressure_pa, config)
         if not outside.any():
             return estimate(shape, pressure_pa, config, *args, **options)
         lo, hi = config.actuator.pressure_range_pa
@@ -105,6 +112,35 @@ def pressure_range_step(estimate):
         return _mark(result, outside, p, lo, hi)
 
     return estimate_force
+
+
+def warn_kpa_as_pa(pressure_pa, config) -> None:
+    """A :class:`~bendsense.errors.DataWarning` when the pressures look like kPa given as Pa.
+
+    Every finite pressure positive and below :data:`REST_PA` (the actuator hardly
+    bends: at rest), but inside ``config.actuator.pressure_range_pa`` read as kPa: a
+    session at rest reads zero or noise around it; kPa numbers of a working actuator
+    read 20–120. One frame, and a block of a live stream (:class:`bendsense.pipeline.LiveProcessor`,
+    which silences it), are not judged: a ramp from rest starts with a few pascals.
+
+    Parameters
+    ----------
+    pressure_pa : float or array_like
+        The pressures given to ``estimate_force`` [Pa].
+    config : Config
+        Its ``actuator.pressure_range_pa`` is the working range [Pa].
+    """
+    if isinstance(pressure_pa, float):
+        return
+    p = np.asarray(pressure_pa, dtype=float)
+    p = p[np.isfinite(p)]
+    lo, hi = config.actuator.pressure_range_pa
+    if p.size < 2 or not (p > 0).all() or not p.max() < REST_PA or not lo <= p.min() * 1e3 <= p.max() * 1e3 <= hi:
+        return
+    warnings.warn(f"pressure_pa: every pressure is below {REST_PA / 1e3:g} kPa (largest {p.max():g} Pa), where the "
+                  f"actuator hardly bends, but read as kPa they lie inside actuator.pressure_range_pa "
+                  f"{lo / 1e3:g}..{hi / 1e3:g} kPa: pressures in kPa given as Pa? (multiply by 1000, or name the "
+                  "column pressure_kpa)", DataWarning, stacklevel=3)
 
 
 def _mark(result, outside, p, lo, hi):
@@ -135,16 +171,17 @@ def _mark(result, outside, p, lo, hi):
     )
 
 
-def check_pressure_column(name: str, values: np.ndarray, line, error=SessionError) -> None:
+def check_pressure_column(name: str, values: np.ndarray, line, error=SessionError, *, at_rest: bool = False) -> None:
     """Refuse a pressure column whose numbers are a thousand times off its unit.
 
     ``line``: the header line of a CSV column, or the place of a record field (e.g.
     ``"run/frames.bin"``) for the message.
 
-    ``pressure_pa`` whose largest reading is between 1 Pa and 1 kPa holds kilopascals
-    (a soft actuator at under 1 kPa does not bend; a column of zeros is an
-    unpressurised session and passes); ``pressure_kpa`` with a reading over
-    1,000 kPa (1 MPa) holds pascals.
+    ``pressure_kpa`` with a reading over 1,000 kPa (1 MPa) holds pascals. Without
+    ``at_rest``, ``pressure_pa`` whose largest reading is between 1 Pa and 1 kPa holds
+    kilopascals (a soft actuator at under 1 kPa does not bend: free-bending data); a
+    session may be at rest (``at_rest=True``: its readings pass, and ``estimate_force``
+    judges them against the config, :func:`warn_kpa_as_pa`).
 
     Parameters
     ----------
@@ -156,13 +193,15 @@ def check_pressure_column(name: str, values: np.ndarray, line, error=SessionErro
         Where the column is, for the message (see above).
     error : type, default SessionError
         The exception class to raise.
+    at_rest : bool, default False
+        Pascals all below 1 kPa may be a session at rest.
     """
     where = f"line {line}, column" if isinstance(line, int) else f"{line}, field"
     finite = values[np.isfinite(values)]
     if not finite.size:
         return
     top = float(finite.max())
-    if name == "pressure_pa" and 1.0 <= top < 1e3:
+    if name == "pressure_pa" and 1.0 <= top < REST_PA and not at_rest:
         raise error(f"{where} pressure_pa: every reading is below 1 kPa (largest {top:g}); "
                     "looks like kilopascals" + (": name the column pressure_kpa" if isinstance(line, int) else ""))
     top = float(np.abs(finite).max())
@@ -196,7 +235,7 @@ def check_time_column(t_s: np.ndarray, source: str, rows=None, error=SessionErro
     finite = np.isfinite(t)
     if not finite.all():
         k = int(np.flatnonzero(~finite)[0])
-        raise error(f"{where(k)}, column t_s: must be finite, got {t[k]!r}")
+        raise error(f"{where(k)}, column t_s: must be finite, got {short(t[k])}")
     if t.size < 2:
         return
     bad = np.flatnonzero(np.diff(t) <= 0) + 1

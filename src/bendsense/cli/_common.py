@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import re
 from pathlib import Path
 
@@ -511,6 +512,30 @@ def say(text: str) -> None:
     """Print ``text`` (a report, a ``wrote ...`` line) unless ``bendsense -q`` was given (only errors then)."""
     if not quiet():
         click.echo(text)
+
+
+@contextlib.contextmanager
+def data_warnings_logged(said=None):
+    """The library's :class:`~bendsense.errors.DataWarning` inside the block as one ``WARNING:`` line each.
+
+    A Python warning prints its source line too; each distinct message is said once (once per
+    chain with the chain's set ``said``). Other warnings pass on as they were.
+    """
+    import logging
+    import warnings
+
+    from bendsense.errors import DataWarning
+
+    said = set() if said is None else said
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        yield
+    for w in caught:
+        if not issubclass(w.category, DataWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        elif str(w.message) not in said:
+            said.add(str(w.message))
+            logging.getLogger("bendsense").warning("%s", w.message)
 
 
 def log_no_parameter_covariance(config) -> None:

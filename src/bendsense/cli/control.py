@@ -81,7 +81,8 @@ def _processor(config, calibrations, constraint, bandwidth_hz, load):
     if any(p.rest_status() == NOT_IDENTIFIABLE for p in fingers.values()):
         raise click.BadParameter(f"{constraint} leaves the load of a finger at rest (straight, no pressure) "
                                  "undetermined: every frame at rest would be not_identifiable and the loop would stop "
-                                 "at once; use normal (a frictionless contact) or follower", param_hint="'--constraint'")
+                                 "at once; use normal (a frictionless contact) or follower",
+                                 param_hint="'--constraint'")
     return processor
 
 

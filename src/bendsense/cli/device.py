@@ -46,9 +46,18 @@ def devices():
     click.echo(format_ports(list_ports()))
 
 
+def _losses(stats) -> str:
+    """What a recording did not keep, for its last line: ``; 4 skipped; 2 malformed; 5 lost (3 dropped by ...)``."""
+    parts = (f"{stats.skipped} skipped (another channel count or pressure lines than the session's)"
+             if stats.skipped else "", f"{stats.malformed} malformed" if stats.malformed else "",
+             f"{stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else "")
+    return "".join(f"; {part}" for part in parts if part)
+
+
 def _status_line(stats, est=None) -> str:
     line = (
-        f"{stats.records} frames  lost {stats.lost}  crc {stats.crc_errors}  malformed {stats.malformed}  "
+        f"{stats.records} frames  skipped {stats.skipped}  lost {stats.lost}  crc {stats.crc_errors}  "
+        f"malformed {stats.malformed}  "
         f"queue drops {stats.queue_drops}  firmware drops {stats.tx_drops}  reconnects {stats.reconnects}  "
         f"{stats.elapsed_s:.1f} s"
     )
@@ -408,7 +417,7 @@ def record(
         raise
     if show:
         sys.stderr.write("\r" + _status_line(stats, est_stats) + "   \n")
-    losses = f"; {stats.lost} lost ({stats.tx_drops} dropped by the firmware)" if stats.lost or stats.tx_drops else ""
+    losses = _losses(stats)
     where = _results_where(results_path, output)
     if estimate and est_stats.frames:
         estimated = f"{est_stats.frames} frames estimated to {where}"
@@ -421,7 +430,7 @@ def record(
         _signals.note(interrupted, kept)
         raise interrupted
     click.echo(f"done: {stats.records} frames written to {output}{losses}", err=True)
-    if stats.records == 0:
+    if stats.records == 0 and not stats.skipped:
         log.warning("%s: no sample frames arrived; the recording %s holds none (is the board streaming samples?)",
                     port, output)
     if estimate:

@@ -27,6 +27,7 @@ from bendsense.cli._common import (
     chain_contact_option,
     config_option,
     contact_locations,
+    data_warnings_logged,
     finger_contact,
     load_option,
     log_no_parameter_covariance,
@@ -188,7 +189,11 @@ def load(session_path, config_path, calibration_paths, pressure_kpa):
 
         session = read_session(session_path)
         if len(session) == 0:
-            raise SessionError(f"{session_path}: no frames (an empty recording)")
+            stats = session.meta.get("stats")
+            skipped = stats.get("skipped") if isinstance(stats, dict) else None
+            why = (f": {skipped} samples were skipped at record time (another channel count or pressure lines than "
+                   f"meta.yaml's; see events.log)" if isinstance(skipped, int) and skipped > 0 else "")
+            raise SessionError(f"{session_path}: no frames (an empty recording){why}")
         if pressure_kpa is not None:
             warn_pressure_fallback(session, "--pressure-kpa")
             session = session.with_pressure(pressure_kpa * 1e3)
@@ -274,7 +279,8 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         # a bad option combination (e.g. --push-only with no constraint) is an
         # ArgumentError, one line through PipelineGroup
         window = DEFAULT_WINDOW_S if window_s is None else window_s
-        with warnings.catch_warnings():  # said below as one WARNING line per chain, not as a Python warning
+        with warnings.catch_warnings(), data_warnings_logged(state.setdefault("said", set())):
+            # said below as one WARNING line per chain, not as a Python warning
             warnings.simplefilter("ignore", NoParameterCovarianceWarning)
             processed = process(session, config, state["calibration"], shape=shape, constraint=constraint,
                                 method=method, objective=objective, push_only=push_only,
@@ -367,8 +373,9 @@ def track(smooth, bandwidth_hz, window_s):
         est = _require(state, "estimate", "track", "'estimate'")
         session = state["session"]
         window = state.get("window_s", DEFAULT_WINDOW_S) if window_s is None else window_s
-        tracked = track_forces(est, session.t_s, mode="smooth" if smooth else "filter", bandwidth_hz=bandwidth_hz,
-                               window_s=window, pressure_pa=session.pressure_pa)
+        with data_warnings_logged(state.setdefault("said", set())):
+            tracked = track_forces(est, session.t_s, mode="smooth" if smooth else "filter",
+                                   bandwidth_hz=bandwidth_hz, window_s=window, pressure_pa=session.pressure_pa)
         log.info("tracked %d frames (%s, bandwidth %.3g Hz)", len(session), tracked.mode, tracked.bandwidth_hz)
         if not np.isfinite(tracked.force_n).any():  # a track of nothing must not pass silently
             log.warning("no tracked force: no frame has a force with a noise covariance (a calibration without "

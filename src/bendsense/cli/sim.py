@@ -193,6 +193,12 @@ def _gripper_step(scenario, out_dir, seed, config_path, noise_counts, frames, ei
         arguments["rate_hz"] = rate_hz
     if seconds is not None:
         arguments["duration_s"] = seconds
+    from bendsense.sim.gripper_scenario import DEFAULT_DURATION_S, DEFAULT_RATE_HZ, check_memory
+
+    # before any work (the group makes it one line); the library's defaults where an option is not given
+    rate = arguments.get("rate_hz", DEFAULT_RATE_HZ)
+    check_memory(round(arguments.get("duration_s", DEFAULT_DURATION_S) * rate), fingers, rate,
+                 "--seconds" if seconds is not None or rate_hz is None else "--rate")
 
     def step(state):
         from bendsense.sim.gripper_scenario import simulate_gripper

@@ -136,6 +136,7 @@ class Finger:
         sections = {}
         for key in _SECTIONS:
             if key in data:
+                _check_whole(data[key], defaults.get(key), f"{path}.{key}")
                 sections[key] = (data[key], path)
             elif key in defaults:
                 sections[key] = (defaults[key], None)
@@ -171,6 +172,16 @@ class Finger:
             elif key not in sections and key in defaults:
                 out[key] = None  # an optional section the finger lacks while the gripper gives it
         return out
+
+
+def _check_whole(section, inherited, path: str) -> None:
+    """A finger's section replaces the gripper's whole: a key the gripper's gives and the finger's lacks is an error."""
+    if not (isinstance(section, dict) and isinstance(inherited, dict)):
+        return
+    missing = [k for k in inherited if k not in section]
+    if missing:
+        raise ConfigError(f"{path}: missing keys {', '.join(map(str, missing))} (a finger's section replaces the "
+                          "gripper's whole: give them too, or leave the section out to inherit it)")
 
 
 def _finger_config(name, sections: dict, path: str) -> Config:

@@ -104,6 +104,9 @@ class _Section:
     """Mixin: dict conversion with unknown/missing-key checks for a config section."""
 
     section: ClassVar[str]
+    #: Model parameters with a default in Python that a YAML section must still give: left out of a
+    #: partial section, the default would change the physics silently (``ei1_nm2_per_pa`` 0).
+    model_keys: ClassVar[tuple] = ()
 
     @classmethod
     def from_dict(cls, data: Any):
@@ -114,7 +117,7 @@ class _Section:
         required = [
             f.name
             for f in dataclasses.fields(cls)
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING or f.name in cls.model_keys
         ]
         unknown = sorted(set(data) - set(names), key=str)
         if unknown:
@@ -251,6 +254,7 @@ class MaterialConfig(_Section):
     """
 
     section: ClassVar[str] = "material"
+    model_keys: ClassVar[tuple] = ("prebend_angle_rad",)
     shear_modulus_pa: float
     sensor_stiffness_nm_per_rad: float
     prebend_angle_rad: float = 0.0
@@ -275,6 +279,7 @@ class StiffnessConfig(_Section):
     """Pressure-dependent flexural rigidity EI(P) = ei0 + ei1·P (paper eq. 15)."""
 
     section: ClassVar[str] = "stiffness"
+    model_keys: ClassVar[tuple] = ("ei1_nm2_per_pa",)
     ei0_nm2: float
     ei1_nm2_per_pa: float = 0.0
 
@@ -440,14 +445,15 @@ class ParameterCovarianceConfig(_Section):
         diag = np.diag(c)
         if np.any(diag < 0):
             i = int(np.argmin(diag))
-            raise _fail(f"{p}.covariance[{i}][{i}]", f"a variance must be >= 0, got {diag[i]!r}")
+            raise _fail(f"{p}.covariance[{i}][{i}]", f"a variance must be >= 0, got {check.short(diag[i])}")
         scale = np.sqrt(np.outer(diag, diag))
         tol = 1e-9 * scale + 1e-300
         asym = np.abs(c - c.T)
         if np.any(asym > tol):
             i, j = np.unravel_index(int(np.argmax(asym - tol)), c.shape)
             raise _fail(
-                f"{p}.covariance", f"must be symmetric, got [{i}][{j}] = {c[i, j]!r} and [{j}][{i}] = {c[j, i]!r}"
+                f"{p}.covariance",
+                f"must be symmetric, got [{i}][{j}] = {check.short(c[i, j])} and [{j}][{i}] = {check.short(c[j, i])}"
             )
         # positive semi-definite, judged on the correlation matrix (units differ by 1e20)
         sd = np.sqrt(diag)

@@ -215,6 +215,9 @@ class Driver:
             if getattr(err, "errno", None) != errno.EACCES:  # denied: that is the message, whatever the path is
                 _check_port_path(self.port)  # a directory or a regular file: say so, not pyserial's ioctl error
             text = " ".join(str(err).split())[:200]
+            if f"({errno.ENOTTY}," in text or getattr(err, "errno", None) == errno.ENOTTY:
+                raise DeviceError(f"{self.port}: a device that is no terminal, not a serial port (give the board's "
+                                  "port, e.g. /dev/ttyACM0; 'bendsense devices' lists them)") from None
             raise DeviceError(f"{self.port}: cannot open serial port ({text})") from None
 
     def open(self) -> Driver:
@@ -656,6 +659,8 @@ def _check_port_path(port: str) -> None:
     """Refuse a path that exists but is no terminal device (a directory, a regular file, a FIFO), naming what it is."""
     import stat
 
+    if not port.strip():
+        raise DeviceError("port: empty (give the board's port, e.g. /dev/ttyACM0; 'bendsense devices' lists them)")
     if "://" in port:
         return  # a pyserial URL (loop://, rfc2217://, socket://)
     try:

@@ -112,6 +112,7 @@ class Recorder:
         self._early_events = list(driver.events)  # e.g. the HELLO of the handshake
         self._lock = threading.Lock()
         self._skipped = 0
+        self._told = False  # the first sample of another channel count has been said
         self._lines_known = False
         self._tx_last = None  # the firmware's cumulative tx_drops counter at the last sample
         self._tx_drops = 0
@@ -186,9 +187,11 @@ class Recorder:
         if len(keep) != len(batch):
             bad = len(batch) - len(keep)
             self._skipped += bad
-            channels = sum(r.sample.n_channels != n for r in batch)
+            other = [r.sample.n_channels for r in batch if r.sample.n_channels != n]
+            channels = len(other)
             if channels:
                 writer.event(f"skipped: {channels} sample(s) with a channel count other than {n}")
+                self._tell_channels(n, other[0])
             if bad - channels:
                 writer.event(f"skipped: {bad - channels} sample(s) with a number of pressure lines other than "
                              f"{n_lines}")
@@ -206,6 +209,17 @@ class Recorder:
         writer.write(rec)
         if self.on_records is not None:
             self.on_records(keep)
+
+    def _tell_channels(self, n, got) -> None:
+        """One line, once per recording, when samples carry another channel count than the session's."""
+        if self._told:
+            return
+        self._told = True
+        hello = self.driver.hello
+        fixed = (f"the board's HELLO announces {n} channels" if hello is not None and hello.n_channels == n
+                 else f"the recording's first sample had {n} channels")
+        log.warning("%s: %s, but its samples carry %d: they are skipped, not recorded (count in the summary)",
+                    self.driver.port, fixed, got)
 
     def write(self, readings) -> None:
         """Append driver readings to the session: what :meth:`run` does with each batch it drains.

@@ -22,6 +22,7 @@ import numpy as np
 from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
 from bendsense.errors import SessionError
 from bendsense.frames import MAX_LINES
+from bendsense.validation import short
 
 __all__ = ["ReplayDevice", "replay_frames"]
 
@@ -58,7 +59,7 @@ def replay_frames(session) -> dict:
         frame, ch = np.argwhere(~counts)[0]
         raise SessionError(
             f"{where}: frame {frame}, ch{ch + 1}: expected ADC counts (integers 0..65535) to replay, "
-            f"got {sig[frame, ch]!r}"
+            f"got {short(sig[frame, ch])}"
         )
     if not 1 <= session.n_channels <= 64:
         raise SessionError(f"{where}: expected 1..64 channels to replay, got {session.n_channels}")

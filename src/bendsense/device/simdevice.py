@@ -561,8 +561,9 @@ class SimulatedDevice:
         if silent_ms <= self.watchdog_ms:
             return
         self._release()
-        text = (f"watchdog: no frame from the host for {math.ceil(silent_ms)} ms (limit {self.watchdog_ms:g} ms) while it "
-                f"held line{'s' if len(self._driven) > 1 else ''} {', '.join(map(str, sorted(self._driven)))} up: "
+        text = (f"watchdog: no frame from the host for {math.ceil(silent_ms)} ms (limit {self.watchdog_ms:g} ms) "
+                f"while it held line{'s' if len(self._driven) > 1 else ''} "
+                f"{', '.join(map(str, sorted(self._driven)))} up: "
                 "set-point 0 on every pressure line")
         self._driven.clear()
         log.warning("%s: %s", self.port, text)

@@ -29,7 +29,6 @@ import math
 import time
 import warnings
 
-import numba
 import numpy as np
 
 from bendsense import _jit
@@ -83,7 +82,6 @@ __all__ = [
 XTOL_N = 1e-10
 MAX_ITER = 100
 _CHAIN = 32  # consecutive frames per warm-started block along a batch
-_PARALLEL_MIN = 2048  # frames from which a batch runs on numba's threads (below: ~0.1 s of work, not worth a compile)
 _PIECE = 4096  # frames per compiled call of a large batch (~0.2 s on 2 cores): signals are handled between calls
 _OPS = tuple(_beam._operators(N_NODES).kernel)  # the beam solver's operators (read-only), as the kernels take them
 _REF = tuple(_beam._split_operators(N_NODES))  # ... and the reference operators of a contact's two domains
@@ -464,13 +462,13 @@ def _run_fast(B, chain, use_guess, fr, pb, err, start, out):
     """Run the compiled estimate of ``B`` frames into ``out``, in calls of a fraction of a second each.
 
     One frame, a live block, a worker of a process pool (one numba thread), a batch
-    below ``_PARALLEL_MIN``: the per-frame kernel, block by block as the batch kernel
+    below ``_jit.PARALLEL_MIN``: the per-frame kernel, block by block as the batch kernel
     runs it (the same results), independent frames in pieces; only a large batch on
     several threads compiles the batch kernel. A compiled call keeps Python (and so
     Ctrl-C and SIGTERM) waiting until it returns: pieces of ``_PIECE`` frames.
     """
     block = min(B, _CHAIN) if chain and B > 1 else 1
-    if B < _PARALLEL_MIN or numba.get_num_threads() == 1:
+    if not _jit.parallel(B):
         step = block if block > 1 else _PIECE
         for lo in range(0, B, step):
             _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, pb, err, _OPS, _REF,
@@ -692,7 +690,7 @@ def _build_problem(config, calibration, ref, options, noise_opt):
 def compile_kernels() -> None:
     """Compile (or load from the cache) the per-frame estimation kernel: one frame of the paper's actuator.
 
-    Every estimate of one frame, a live block or a batch below ``_PARALLEL_MIN`` frames
+    Every estimate of one frame, a live block or a batch below ``_jit.PARALLEL_MIN`` frames
     runs this one compiled kernel, whatever its constraint, objective or noise model.
     """
     from bendsense.config import load_config

@@ -188,7 +188,7 @@ def _pressure(values: dict, lines: list, header_line: int, shape: tuple) -> np.n
     """The session's pressure [Pa] from its pressure column or line columns, checked for their unit."""
     for name in ("pressure_pa", "pressure_kpa"):
         if name in values:
-            check_pressure_column(name, values[name], header_line)
+            check_pressure_column(name, values[name], header_line, at_rest=True)
     if lines:
         cols = []
         for h in lines:

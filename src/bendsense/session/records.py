@@ -79,11 +79,11 @@ def check_line_pressure(column: str, unit_name: str, values: np.ndarray, where) 
         The CSV header line, or the place of the record field.
     """
     try:
-        check_pressure_column(unit_name, values, where)
+        check_pressure_column(unit_name, values, where, at_rest=True)
     except SessionError as err:
         text = str(err).replace(f"column {unit_name}", f"column {column}").replace(
-            f"field {unit_name}", f"field {column}").replace(f"name the column {unit_name.replace('_pa', '_kpa')}",
-                                                              f"name the column {column.replace('_pa', '_kpa')}")
+            f"field {unit_name}", f"field {column}").replace("name the column pressure_pa",
+                                                              f"name the column {column.replace('_kpa', '_pa')}")
         raise SessionError(text) from None
 
 
@@ -115,7 +115,7 @@ def records_pressure(records: np.ndarray, where: str = "session") -> np.ndarray:
         return pressure[:, 0] if pressure.shape[1] == 1 else pressure
     p = records["pressure_pa"]
     pressure = np.where(p == NO_PRESSURE, np.nan, p.astype(float))
-    check_pressure_column("pressure_pa", pressure, f"{where}/{FRAMES}")
+    check_pressure_column("pressure_pa", pressure, f"{where}/{FRAMES}", at_rest=True)
     return pressure
 
 

@@ -802,6 +802,27 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
         )
 
 
+def check_fits(field: str, what: str, n_frames: int, bytes_per_frame: float, rate_hz: float) -> None:
+    """Refuse ``n_frames`` held in memory at once that would not fit this machine's free memory, before any work.
+
+    For a session simulated (or recorded and estimated) whole in memory at ``rate_hz``
+    [Hz]: the message names the option ``field``, the memory needed, the memory
+    available and the longest session that fits.
+
+    Raises
+    ------
+    ArgumentError
+        When ``n_frames`` × ``bytes_per_frame`` (and the process itself) exceed the memory available.
+    """
+    available = available_memory_bytes()
+    need = _BASE_BYTES + n_frames * bytes_per_frame
+    if available is None or need <= available:
+        return
+    most = max(available - _BASE_BYTES, 0.0) / bytes_per_frame / rate_hz
+    raise ArgumentError(f"{field}: {what} would hold {n_frames:,} frames in memory, about {_size(need)}; this machine "
+                        f"has {_size(available)} available (at most {most:,.0f} s at {rate_hz:g} Hz)")
+
+
 def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **options):
     """Do :func:`simulate`; also return ``{scenario: summary}``."""
     if scenario != "all" and scenario not in SCENARIOS:

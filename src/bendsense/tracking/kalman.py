@@ -47,6 +47,10 @@ from bendsense import _jit
 DIFFUSE = 1e6  # prior variance of a restarted force [N²]: σ = 1 kN, beyond any actuator
 DIFFUSE_RATE = 1e4  # prior variance of a restarted rate [N²/s²]: σ = 100 N/s, beyond any actuator
 _SEEN = 0.5 * DIFFUSE  # a variance above this: the component has not been observed since the restart
+#: The least noise variance of a frame's estimate in any direction, relative to its trace: a constrained force
+#: (``constraint="normal"``: one free direction) has a rank-1 noise covariance, and a prior that has learnt the
+#: same direction would leave the innovation's covariance singular.
+RANK_FLOOR = 1e-6
 _LOG_LAMBDA2 = (-120.0, 25.0)  # the bisection's bracket of ln λ² (B from ~1e-10 of the frame rate to Nyquist)
 
 
@@ -142,11 +146,15 @@ def update(x, P, z0, z1, r00, r01, r11, use0, use1, S, K, T):
     if m == 2:
         s00, s01, s11 = P[0, 0] + r00, P[0, 1] + r01, P[1, 1] + r11
         det = s00 * s11 - s01 * s01
+        if not det > 0.0:
+            return 0.0  # no information this frame can add (roundoff below the rank floor): prior kept
         S[0, 0], S[1, 1], S[0, 1], S[1, 0] = s11 / det, s00 / det, -s01 / det, -s01 / det
         nu0, nu1 = z0 - x[0], z1 - x[1]
     else:
         roo = r00 if use0 else r11
         det = P[o0, o0] + roo
+        if not det > 0.0:
+            return 0.0
         S[0, 0] = 1.0 / det
         nu0, nu1 = (z0 if use0 else z1) - x[o0], 0.0
     if m == 2:
@@ -179,8 +187,6 @@ def update(x, P, z0, z1, r00, r01, r11, use0, use1, S, K, T):
             v = 0.5 * (T[i, j] + T[j, i])
             P[i, j] = v
             P[j, i] = v
-    if not det > 0.0:
-        return 0.0
     if m == 2:
         q = nu0 * S[0, 0] * nu0 + 2.0 * nu0 * S[0, 1] * nu1 + nu1 * S[1, 1] * nu1
     else:
@@ -235,9 +241,16 @@ def observe(x, P, Rbar, has, Rn, k, z0, z1, S, K, T):
 
     The first two observations of a component after a restart fix its force and rate:
     they count 0. The process noise follows each component's noise variance (R̄, of the
-    latest fully observed frame), not their correlation.
+    latest fully observed frame), not their correlation. The noise covariance's least
+    eigenvalue is raised to :data:`RANK_FLOOR` of its trace (a constrained force's
+    covariance has rank 1).
     """
     r00, r01, r11 = Rn[k, 0, 0], Rn[k, 0, 1], Rn[k, 1, 1]
+    if math.isfinite(r00 + r01 + r11) and r00 + r11 > 0.0:  # its least eigenvalue raised to the rank floor
+        least = 0.5 * (r00 + r11 - math.sqrt((r00 - r11) ** 2 + 4.0 * r01 * r01))
+        lift = RANK_FLOOR * (r00 + r11) - least
+        if lift > 0.0:
+            r00, r11 = r00 + lift, r11 + lift
     use0 = observed(z0, r00)
     use1 = observed(z1, r11)
     if use0 and use1:

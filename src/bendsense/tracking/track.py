@@ -11,16 +11,17 @@ to the filtered or smoothed covariance, so that a tracked σ is never below that
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from bendsense import _jit
 from bendsense.choices import TRACK_MODES
-from bendsense.errors import ArgumentError
+from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation.kernels import MISFIT_P
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
-from bendsense.results import MODEL_MISFIT, OK, estimate_status
+from bendsense.results import MODEL_MISFIT, NO_FORCE, OK, estimate_status
 from bendsense.tracking import kalman as _kalman
 from bendsense.tracking import stream as _stream
 from bendsense.tracking import windows as _windows
@@ -153,6 +154,8 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
     starts = _windows.segment_starts(t, P, window_s, _windows.reference_interval(t))
     bounds = _windows.window_bounds(t, starts, window_s)
     p, n = _windows.window_p_values(estimate, bounds)
+    if estimate.window_p_value is None:  # check_windows has said it of a checked estimate
+        _windows.warn_untested(estimate, t, bounds, window_s, 3, P)
     checked = _windows.flag(estimate, bounds, p, n, window_s)
     z, Rn, floor = measurements(checked)
     dt = np.diff(t, prepend=t[0])
@@ -218,7 +221,9 @@ def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
     search runs on every m-th frame (~ML_SUBSAMPLE_FRAMES of them: the force-and-rate
     model sampled at m Δt is the same model with Q(m Δt), so this is the exact likelihood
     of those frames, spread over the whole series), then :func:`_ml_refine` on the whole
-    series from there: 4–6 passes over the series in all.
+    series from there: 4–6 passes over the series in all. A likelihood that does not
+    choose (flat: no segment with three observed frames) gives :data:`DEFAULT_BANDWIDTH_HZ`
+    and a :class:`~bendsense.errors.DataWarning` when any frame was observed.
     """
     B = z.shape[0]
     if B > 2 * ML_SUBSAMPLE_FRAMES:
@@ -232,7 +237,13 @@ def ml_bandwidth(z, Rn, dt, starts, dt_ref_s):
         if x is not None:
             return _ml_refine(z, Rn, dt, starts, dt_ref_s, x)
     x = _ml_search(z, Rn, dt, starts, dt_ref_s)
-    return DEFAULT_BANDWIDTH_HZ if x is None else float(10.0 ** x)
+    if x is not None:
+        return float(10.0 ** x)
+    if (np.isfinite(z) & np.isfinite(np.diagonal(Rn, axis1=1, axis2=2))).any():  # without any: nothing to track
+        warnings.warn(f"track: the likelihood is flat over the bandwidth (no segment has three frames with a force "
+                      f"and a noise covariance): tracking at {DEFAULT_BANDWIDTH_HZ:g} Hz; give bandwidth_hz "
+                      f"(--bandwidth-hz) to choose", DataWarning, stacklevel=3)
+    return DEFAULT_BANDWIDTH_HZ
 
 
 def _ml_search(z, Rn, dt, starts, dt_ref_s):
@@ -296,7 +307,7 @@ def result(x, P, floor, window_p, est, bandwidth_hz, mode, t, z):
     _jit.call(_kalman.finish, x, P, np.ascontiguousarray(floor), force, std, cov)
     window_p = np.asarray(window_p, dtype=float)
     return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
-                 status=track_status(est, frame_z, window_p), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t,
+                 status=track_status(est, frame_z, window_p, force, std), bandwidth_hz=bandwidth_hz, mode=mode, t_s=t,
                  frame_force_n=z)
 
 
@@ -377,10 +388,10 @@ class Tracker:
         force, std, cov = np.empty((b, 2)), np.empty((b, 2)), np.empty((b, 2, 2))
         starts = np.empty(b, dtype=np.bool_)
         parts = est.covariance_parts_n2
-        parts = np.full((b, 3, 2, 2), np.nan) if parts is None else np.asarray(parts, dtype=float).reshape(b, 3, 2, 2)
+        parts = np.full((b, 3, 2, 2), np.nan) if parts is None else _c(parts, (b, 3, 2, 2))
         x, Pk, Rbar, has = self._state
-        z = np.asarray(est.force_n, dtype=float).reshape(b, 2)
-        missing = _jit.call(_stream.stream_filter, t, P, z, np.asarray(est.std_n, dtype=float).reshape(b, 2), parts,
+        z = _c(est.force_n, (b, 2))
+        missing = _jit.call(_stream.stream_filter, t, P, z, _c(est.std_n, (b, 2)), parts,
                             self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR,
                             _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has, self._carry, starts, force, std, cov)
         if missing < 0:  # nothing filtered: the times are checked first
@@ -393,7 +404,8 @@ class Tracker:
                                 f"after {before!r} s")
         window_p, misfit = self._windows(est, t, starts, b)
         return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p,
-                     status=track_status(est, z, window_p, missing > 0 or misfit), bandwidth_hz=self.bandwidth_hz,
+                     status=track_status(est, z, window_p, force, std, missing > 0 or misfit),
+                     bandwidth_hz=self.bandwidth_hz,
                      mode=self.mode, t_s=t, frame_force_n=z)
 
     def _inputs(self, est, t_s, pressure_pa):
@@ -406,7 +418,7 @@ class Tracker:
                                 f"batch shape {shape}")
         b = shape[0] if shape else 1
         try:
-            t = np.asarray(t_s, dtype=float).reshape(-1)
+            t = _c(t_s, -1)
         except (TypeError, ValueError):
             raise ArgumentError(f"t_s_block: expected times [s], got {short(t_s)}") from None
         if t.size != b:
@@ -428,8 +440,7 @@ class Tracker:
                 or est.uncertainty != "propagated":
             return p, False
         R, N = resid.shape[-1], shifts.shape[-1]
-        resid, shifts = resid.reshape(b, R), shifts.reshape(b, N)
-        jac, mfac = jac.reshape(b, R, 2), mfac.reshape(b, R, 2)
+        resid, shifts, jac, mfac = _c(resid, (b, R)), _c(shifts, (b, N)), _c(jac, (b, R, 2)), _c(mfac, (b, R, 2))
         if self._sums is None:
             self._sums = (np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N))
         if self._model is None or self._model[0] is not est.shift_errors:  # the same calibration: converted once
@@ -439,17 +450,31 @@ class Tracker:
         return p, misfit
 
 
-def track_status(est, z, window_p, flagged=None):
+def _c(a, shape):
+    """``a`` as the stream kernels take it: float64, C-contiguous, of ``shape`` (a copy only if it is not).
+
+    One layout for every block, whatever view an estimate holds (a strided slice of the
+    estimator's output, a copy after a frame was taken out or put back): numba compiles a
+    kernel once per layout, and a second layout met in a control loop compiled there
+    (~1 µs a block for the copies).
+    """
+    return np.ascontiguousarray(a, dtype=float).reshape(shape)
+
+
+def track_status(est, z, window_p, force, std, flagged=None):
     """The tracked status (b,): the frame's own, ``model_misfit`` where its window's p < MISFIT_P and it was ``ok``.
 
     The frame's own: :func:`bendsense.results.estimate_status`, looked up only where a frame
-    is not ok. ``flagged``: whether any frame's force is missing or its window p below
-    MISFIT_P, when the caller knows (the stream kernels count them).
+    is not ok; ``no_force`` where it was ``ok`` but the tracked force or its σ is not finite
+    (an estimate without a noise model has nothing to weigh: a NaN track is never ok).
+    ``flagged``: whether any frame's force is missing or its window p below MISFIT_P, when
+    the caller knows (the stream kernels count them).
     """
     b = z.shape[0]
     success, message = est.success, est.message
     if flagged is None:
         flagged = not np.isfinite(z).all() or (window_p < MISFIT_P).any()
+    flagged = flagged or not (np.isfinite(force).all() and np.isfinite(std).all())
     if b == 1:  # one frame (the live path): scalar tests, no array reductions
         ok = bool(np.asarray(success).reshape(-1)[0]) and str(np.asarray(message).reshape(-1)[0]) == OK_MESSAGE
     else:
@@ -459,4 +484,5 @@ def track_status(est, z, window_p, flagged=None):
         return np.full(b, OK)  # every frame ok (the live path's usual block): nothing to look up
     status = estimate_status(est, b)
     status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
+    status[~(np.isfinite(force).all(axis=1) & np.isfinite(std).all(axis=1)) & (status == OK)] = NO_FORCE
     return status.astype(str)

@@ -24,12 +24,13 @@ per frame in all (benchmarks/bench_track.py).
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 from numba import njit
 
 from bendsense import _jit
-from bendsense.errors import ArgumentError
+from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation import uncertainty as unc
 from bendsense.estimation.kernels import MISFIT_P
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
@@ -372,12 +373,38 @@ def check_windows(estimate, t_s, *, window_s: float = WINDOW_S, pressure_pa=None
     ForceEstimate
         The same estimate with ``window_p_value`` (B,) (NaN for frames in a window of
         fewer than 5 usable frames) and the flagged frames' ``success`` and ``message``.
+        Windows too short for any test at the session's frame rate give a
+        :class:`~bendsense.errors.DataWarning` naming the ``window_s`` that would test them.
     """
     t, P, window_s = series_inputs(estimate, t_s, window_s, pressure_pa)
     starts = segment_starts(t, P, window_s, reference_interval(t))
     bounds = window_bounds(t, starts, window_s)
     p, n = window_p_values(estimate, bounds)
+    warn_untested(estimate, t, bounds, window_s, 3, P)
     return flag(estimate, bounds, p, n, window_s)
+
+
+def warn_untested(estimate, t_s, bounds, window_s, stacklevel, pressure_pa=None):
+    """A :class:`~bendsense.errors.DataWarning` when a test is available but no window holds MIN_FRAMES frames.
+
+    A session of at least MIN_FRAMES frames whose rate puts fewer in a window of
+    ``window_s`` (35 Hz and 50 ms: one to three) is never tested; the message names the
+    window (a frame to spare, whole ms) that would hold enough, and says when pressure
+    steps cut the session into pieces shorter than that.
+    """
+    tested = all(getattr(estimate, name) is not None for name in PAYLOAD) and estimate.shift_errors is not None \
+        and estimate.uncertainty == "propagated"
+    most = int(np.diff(bounds).max())
+    dt = reference_interval(t_s)
+    if not tested or t_s.size < MIN_FRAMES or most >= MIN_FRAMES or not window_s < MIN_FRAMES * dt:
+        return  # (windows the rate fills, cut short by gaps or pressure steps: no longer window helps)
+    need = math.ceil((MIN_FRAMES + 1) * dt * 1e3) / 1e3
+    steps = pressure_pa is not None and bool((np.abs(np.diff(pressure_pa)) > PRESSURE_STEP_PA).any())
+    cut = f" (frames between pressure steps over {PRESSURE_STEP_PA / 1e3:g} kPa stay untested)" if steps else ""
+    warnings.warn(f"window check: {window_s * 1e3:g} ms windows hold at most {most} frames at {1.0 / dt:.3g} Hz, "
+                  f"fewer than the {MIN_FRAMES} a test needs: no window is tested (window_p_value NaN); "
+                  f"window_s={need:g} (--window-s {need:g}) holds {MIN_FRAMES + 1}{cut}", DataWarning,
+                  stacklevel=stacklevel)
 
 
 def flag(estimate, bounds, p, n, window_s):
@@ -437,8 +464,8 @@ def time_inputs(B, t_s, window_s, pressure_pa):
                             f"{int(np.flatnonzero(~np.isfinite(t))[0])}")
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
-        raise ArgumentError(f"t_s: must not decrease, got {t[back[0] + 1]!r} s after {t[back[0]]!r} s at frame "
-                            f"{int(back[0]) + 1}")
+        raise ArgumentError(f"t_s: must not decrease, got {short(t[back[0] + 1])} s after {short(t[back[0]])} s "
+                            f"at frame {int(back[0]) + 1}")
     if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
             math.isfinite(window_s) and window_s > 0):
         raise ArgumentError(f"window_s: expected a duration > 0 [s], got {short(window_s)}")

@@ -55,8 +55,6 @@ put(S / "tabs.csv", csv_text().replace(",", "\t"), r"line 2: columns are separat
 put(S / "binary.csv", bytes(range(256)) * 4, r"binary data, not a session CSV \(NUL byte at byte offset 0\)", True)
 put(S / "utf16.csv", csv_text().encode("utf-16"), r"UTF-16 text, not UTF-8; save the file as UTF-8", True)
 put(S / "gzip.csv", b"\x1f\x8b\x08\x00" + bytes(range(200)), r"binary data, not a session CSV", True)
-put(S / "pressure_pa_holds_kpa.csv", csv_text(pressure="pressure_pa"),
-    r"line 2, column pressure_pa: every reading is below 1 kPa \(largest 80\); looks like kilopascals")
 put(S / "pressure_kpa_holds_pa.csv", csv_text(pressure="pressure_kpa", scale=1000),
     r"line 2, column pressure_kpa: readings up to 80000 kPa \(over 1 MPa\); looks like pascals")
 put(S / "long_cell.csv", "t_s,ch1\n0," + "x" * 100000 + "\n",

@@ -1,0 +1,115 @@
+"""No compilation once the control loop runs: ``warm_up`` compiles every kernel the loop meets, on an empty cache.
+
+``bendsense control`` runs in a process with an empty numba cache (``NUMBA_CACHE_DIR``: a
+fresh directory) against the simulated grasp board over a pseudo-terminal. The board
+sends no pressure reading in some frames (a sensor glitch: a block with such frames made
+the window check compile a second layout of its kernel in the loop), and after the loop
+the warmed processor gets a block of 2,100 frames (a loop that fell two seconds behind
+its board: the parallel batch kernels). A numba compile event after ``warm_up`` returned
+fails; so does a frame the board sent that the loop skipped, or a loop that fell behind.
+The cold compile costs a minute or more on two cores: one process, one config.
+"""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from test_control_board import RATE, S_C, Truth, board, fresh_board  # noqa: F401 (the board fixtures)
+
+from bendsense.control import CONTROL_LOG
+from bendsense.device.simdevice import SimulatedDevice
+
+pytestmark = [pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals"),
+              pytest.mark.slow]
+
+SECONDS = 0.5
+
+# the command, with a numba compile listener and a mark where warm_up returns; after the loop, a block of
+# 2,100 frames through the same processor
+CHILD = textwrap.dedent('''
+    import json, sys
+    import numpy as np
+    from numba.core import event
+
+    phase, compiled = ["setup"], {"setup": [], "warm_up": [], "after": []}
+
+    class Compiles(event.Listener):
+        def on_start(self, ev):
+            compiled[phase[0]].append(ev.data["dispatcher"].py_func.__qualname__)
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", Compiles())
+
+    from bendsense import control
+    from bendsense.cli import main
+    from bendsense.pipeline import LiveProcessor
+
+    warm_up, run, seen = LiveProcessor.warm_up, control.run, {}
+
+    def watched_warm_up(self):
+        phase[0] = "warm_up"
+        warm_up(self)
+        phase[0] = "after"
+
+    def watched_run(driver, processor, *args, **kwargs):
+        seen["warm before the loop"] = phase[0] == "after"
+        result = run(driver, processor, *args, **kwargs)
+        seen["blocks"] = result.block_frames.tolist()
+        seen["big block"] = len(processor.process_block(np.tile(processor.calibration.offset, (2100, 1)),
+                                                        np.full(2100, 45e3), t_s=10.0 + np.arange(2100) * 1e-3))
+        return result
+
+    LiveProcessor.warm_up, control.run = watched_warm_up, watched_run
+    try:
+        main(sys.argv[1:], standalone_mode=False)
+    finally:
+        print(json.dumps({**seen, "compiled": compiled}))
+''')
+
+
+class Glitching:
+    """The board without a pressure reading in every 7th frame (the truth still records the frame)."""
+
+    def __init__(self, board):
+        self.board = board
+
+    def __getattr__(self, name):  # the board's set-point input
+        return getattr(self.board, name)
+
+    def __call__(self, k):
+        p, counts, truth = self.board(k)
+        return (None if k % 7 == 3 else p), counts, truth
+
+
+def test_a_cold_control_run_compiles_nothing_once_the_loop_runs_and_processes_every_frame(board, calibration_path,
+                                                                                          tmp_path):
+    truth, out = Truth(), tmp_path / "s"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    with SimulatedDevice(Glitching(board), rate_hz=RATE, truth=truth) as dev:
+        proc = subprocess.run([sys.executable, "-c", CHILD, "control", dev.port, "--calibration", str(calibration_path),
+                               "--target-force-n", "0.15", "--load", "contact", "--contact-s-m", str(S_C),
+                               "--seconds", str(SECONDS), "--silence-s", "1", "-o", str(out)],
+                              capture_output=True, text=True, env=env, timeout=1200)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout.splitlines()[-1])
+    compiled = report["compiled"]
+    assert "estimate_block" in compiled["warm_up"]  # the cache was empty: warm_up compiled the kernels
+    assert report["warm before the loop"]  # and the command called it before the loop
+    assert compiled["after"] == []  # nothing compiled in the loop, nor for the big block after it
+    assert report["big block"] == 2100
+    # every frame the board sent, in order, up to the loop's last, is in the control log; the loop kept up
+    with open(out / CONTROL_LOG, newline="") as fh:
+        done = [int(row["seq"]) for row in csv.DictReader(fh)]
+    sent = [row[0] for row in truth.rows]
+    assert done == sent[:len(done)]
+    in_time = int(np.count_nonzero(truth.t_s < truth.t_s[0] + SECONDS))
+    assert len(done) >= 0.9 * in_time, (len(done), in_time)
+    blocks = report["blocks"]
+    assert sum(blocks) == len(done) and max(blocks[5:]) <= 0.1 * RATE, blocks  # behind by at most 0.1 s
