@@ -114,7 +114,7 @@ class ControlResult:
     block_frames : ndarray of int, shape (blocks,)
         Frames of each block.
     zeros : tuple of LineZero
-        Each line's set-point 0 at the end, by line: sent, or why not.
+        Each line's set-point 0 at the end, by line: sent, or why not; whether its pressure fell.
     held : tuple of int
         Lines the controller never drove, held at set-point 0 from the first block.
     """
@@ -354,17 +354,20 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     ------
     ControlStop
         A safety stop (:mod:`bendsense.control.safety`: lost frames, silence, a pressure
-        beyond the limit on any line, a controlled finger without a force or flagged by
+        beyond the limit on any line or above every set-point of the last
+        ``Safety.follow_s``, a controlled finger without a force or flagged by
         the model, a controller's answer that is no set-point), after set-point 0 went to
         every line; its ``result`` holds the counters.
     KeyboardInterrupt
-        Ctrl-C or SIGTERM, after set-point 0 went to every line.
+        Ctrl-C, SIGTERM, SIGHUP or SIGQUIT, after set-point 0 went to every line; also
+        one that came while the loop zeroed (held off until then), whatever ended it.
 
     Notes
     -----
     Whatever the loop raises carries the counters as its ``result`` attribute (a
     :class:`ControlResult`), so that a stopped session still says what it did; its
-    ``zeros`` say line by line whether set-point 0 was sent (:func:`zero_report`).
+    ``zeros`` say line by line whether set-point 0 was sent and whether the pressure fell
+    (:func:`zero_report`).
     """
     if isinstance(max_pressure_pa, bool) or not isinstance(max_pressure_pa, (int, float, np.integer, np.floating)) \
             or not (math.isfinite(max_pressure_pa) and max_pressure_pa > 0):
