@@ -271,8 +271,10 @@ def test_run_holds_the_force_and_zeroes_at_the_end():
     assert res.outcome == "stopped" and res.frames == len(seen) == res.blocks
     assert abs(f[-1] - 0.15) < 2e-3
     assert res.max_setpoint_pa == pytest.approx(sp.max()) and sp.max() <= P_MAX_PA
-    assert zeros_at_end(board, (0, 1)) and board.sent[-2:] == [(board.k, 0, 0.0), (board.k, 1, 0.0)]
+    # the zeros went out at the frame the loop stopped at; the board's pressure then fell (it kept streaming)
+    assert zeros_at_end(board, (0, 1)) and board.sent[-2:] == [(res.frames, 0, 0.0), (res.frames, 1, 0.0)]
     assert 0 <= res.zero_latency_s < 1e-3
+    assert board.plant.pressure_pa <= 5e3 and res.zeros[0].fell and res.high == ()
     assert res.per_frame_s > 0
 
 
@@ -316,8 +318,8 @@ def test_run_zeroes_on_an_error_in_the_controller():
     assert any(v > 0 for _, _, v in board.sent)
 
 
-@pytest.mark.parametrize("signum", [None, signal.SIGTERM])
-def test_run_zeroes_on_ctrl_c_and_sigterm(signum):
+@pytest.mark.parametrize("signum", [None, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT])
+def test_run_zeroes_on_ctrl_c_sigterm_sighup_and_sigquit(signum):
     board = FakeBoard()
 
     def on_block(block, setpoints):
@@ -330,7 +332,45 @@ def test_run_zeroes_on_ctrl_c_and_sigterm(signum):
     with pytest.raises(KeyboardInterrupt):
         run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, on_block=on_block)
     assert zeros_at_end(board)
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the loop's handler is gone again
+    for other in (signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
+        assert signal.getsignal(other) is signal.SIG_DFL  # the loop's handlers are gone again
+
+
+class SignalledBoard(FakeBoard):
+    """A fake board whose first zero set-point brings a stop signal: a second Ctrl-C while the loop zeros."""
+
+    def __init__(self, signum):
+        super().__init__()
+        self.signum, self.signalled = signum, False
+
+    def send_setpoint(self, line, pressure_pa, *, check_line=True):
+        if pressure_pa == 0.0 and self.k > 1 and not self.signalled:  # the zeros at the end (not the first block's)
+            self.signalled = True
+            os.kill(os.getpid(), self.signum)
+        super().send_setpoint(line, pressure_pa, check_line=check_line)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.parametrize("first", ["ctrl-c", "duration"])
+def test_a_stop_signal_while_the_loop_zeros_acts_after_every_line_has_its_zero(signum, first):
+    board = SignalledBoard(signum)
+    stop = threading.Event()
+
+    def on_block(block, setpoints):
+        if block.t_s[-1] >= 0.1:
+            if first == "ctrl-c":
+                raise KeyboardInterrupt
+            stop.set()
+
+    with pytest.raises(KeyboardInterrupt) as info:  # after a normal end too: the signal is acted on, late
+        run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, stop=stop, on_block=on_block,
+            n_lines=3)
+    assert board.signalled and zeros_at_end(board, (0, 1, 2))
+    zeros = board.sent[-3:]
+    assert [(line, v) for _, line, v in zeros] == [(0, 0.0), (1, 0.0), (2, 0.0)]
+    result = info.value.result
+    assert result.unsent == () and [z.line for z in result.zeros] == [0, 1, 2]
+    assert result.outcome == ("interrupted" if first == "ctrl-c" else "stopped")
 
 
 def test_run_stops_on_lost_frames():
@@ -339,7 +379,7 @@ def test_run_stops_on_lost_frames():
         run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, seconds=5.0,
             safety=Safety(max_lost_frames=10))
     assert zeros_at_end(board)
-    assert 200 < board.k <= 200 + 2 * 12  # every other frame lost: the 11th loss stops it
+    assert 200 < board.sent[-1][0] <= 200 + 2 * 12  # every other frame lost: the 11th loss stops it
     assert info.value.result.outcome.startswith("safety stop")
 
 
@@ -375,7 +415,7 @@ def test_run_stops_on_a_run_of_flags_not_on_a_chance_one(flag):
     with pytest.raises(ControlStop, match=rf"{flag} for 10 ms .* at t = 0.21\d s"):
         run(board, FakeProcessor(flagged=range(200, 260), status=flag), as_controller(pi_of()),
             max_pressure_pa=P_MAX_PA, seconds=5.0, safety=Safety(flagged_s=0.01))
-    assert zeros_at_end(board) and board.k <= 213
+    assert zeros_at_end(board) and board.sent[-1][0] <= 213
 
 
 def test_run_refuses_bad_arguments():

@@ -10,6 +10,9 @@ says, is the truth each test checks the loop's words against.
 import copy
 import os
 import re
+import signal
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -202,9 +205,14 @@ def test_a_board_reading_900_kpa_stops_the_command(single_board, files):
     line = one_error_line(res)
     assert line.startswith(f"Error: control stopped: line 0 reads 900 kPa at seq {truth.seq[FAULT_AT]}, "
                            "beyond the pressure limit 60 kPa (+5 kPa for regulator ripple)"), line
-    assert line.endswith("; set-point 0 sent on every pressure line (0)")
+    # its regulator let go (the board's own record), but its sensor still reads 900 kPa: said, not called confirmed
+    assert re.search(r"; set-point 0 sent on every pressure line \(0\); line 0 did not fall: 900 kPa after 0\.5\d* s$",
+                     line), line
     assert max(v for _, v in board.received) <= 60e3 and board.received[-1] == (0, 0.0)
-    assert board.frames < FAULT_AT + 200
+    assert board.board.regulators.setpoint_pa[0] == 0.0
+    setpoint = truth.column("setpoint_pa")  # the board's own set-point, frame by frame
+    let_go = FAULT_AT + int(np.flatnonzero(setpoint[FAULT_AT:] == 0.0)[0])
+    assert setpoint[FAULT_AT] > 0 and let_go < FAULT_AT + 200 and np.all(setpoint[let_go:] == 0.0)  # at once
 
 
 def test_a_board_that_dies_is_said_to_keep_its_pressure(single_board, files):
@@ -332,3 +340,116 @@ def test_a_pressure_outside_the_configs_range_leaves_the_finger_without_a_force(
     first = int(np.flatnonzero(pressure > 30e3)[0])  # the board's first frame beyond the model's range
     assert first <= info.value.result.frames <= first + 30  # stopped 10 ms (and a block) after it
     assert board.received[-1] == (0, 0.0) and truth.column("setpoint_pa")[-1] == 0.0
+
+
+# --------------------------------------------------------------------------- signals, deaf boards, refusals
+
+CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]
+
+
+def wait_for(condition, timeout_s):
+    end = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < end:
+        time.sleep(0.005)
+    return condition()
+
+
+def test_a_closed_terminal_sighup_zeroes_every_line_and_exits_129(single_board, files):
+    # the board has no watchdog (Faulty has no release): a zero on its line can only come from the command itself
+    board = Faulty(copy.deepcopy(single_board))
+    with SimulatedDevice(board, rate_hz=RATE) as dev:
+        proc = subprocess.Popen([*CLI, "control", dev.port, "--calibration", files["calibration"], "--target-force-n",
+                                 "0.15", "--load", "contact", "--contact-s-m", str(S_C), "--silence-s", "1"],
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            assert wait_for(lambda: board.received and board.received[-1][1] > 20e3, 60.0)
+            proc.send_signal(signal.SIGHUP)  # the terminal (or the ssh session) closed
+            err = proc.communicate(timeout=10)[1]
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        time.sleep(0.03)
+    assert proc.returncode == 129, err
+    assert err.splitlines()[-1] == "Interrupted (SIGHUP): set-point 0 sent on every pressure line (0)", err
+    assert board.received[-1] == (0, 0.0) and board.board.regulators.setpoint_pa[0] == 0.0
+    assert dev.stats.watchdog_trips == 0
+
+
+def test_a_second_ctrl_c_while_control_zeros_waits_for_every_zero(gripper_board, files, monkeypatch):
+    # Ctrl-C mid-grasp, and again while the zeros go out (after line 0's): lines 1 and 2 still get theirs
+    board = Faulty(copy.deepcopy(gripper_board))
+    send = Driver.send_setpoint
+    presses = []
+
+    def send_setpoint(self, line, pressure_pa, *, check_line=True):
+        if (pressure_pa > 20e3 and not presses) or (pressure_pa == 0.0 and len(presses) == 1 and line == 1):
+            presses.append(line)
+            os.kill(os.getpid(), signal.SIGINT)
+        return send(self, line, pressure_pa, check_line=check_line)
+
+    monkeypatch.setattr(Driver, "send_setpoint", send_setpoint)
+    with SimulatedDevice(board, rate_hz=RATE, n_channels=GRIPPER_CHANNELS) as dev:
+        res = CliRunner().invoke(main, ["control", dev.port, "--config", files["gripper"], "--calibration",
+                                        files["calibration"], "--target-force-n", "0.15", "--load", "contact",
+                                        "--contact-s-m", str(S_C), "--seconds", "5", "--silence-s", "1"])
+        time.sleep(0.03)
+    assert len(presses) == 2, res.output
+    assert res.exit_code == 130, res.output
+    assert res.output.splitlines()[-1] == "Interrupted (SIGINT): set-point 0 sent on every pressure line (0, 1, 2)"
+    assert max(v for _, v in board.received) > 10e3 and board.last() == {0: 0.0, 1: 0.0, 2: 0.0}
+    assert list(board.board.regulators.setpoint_pa) == [0.0, 0.0, 0.0] and dev.stats.watchdog_trips == 0
+
+
+def test_a_board_that_ignores_its_setpoints_is_said_to_keep_its_pressure(files):
+    # a plain sim-device: its scenario sets the pressure (0 to 100 kPa and back every 5 s), each SETPOINT "ignored"
+    with SimulatedDevice(rate_hz=RATE) as dev:
+        res = control_cli(dev.port, files, "--seconds", "0.5", "--silence-s", "1")
+    stats = dev.stats
+    assert stats.setpoints == 0 and stats.commands > 10  # the board's own counters: it applied none of them
+    assert res.exit_code == 1, res.output
+    line = one_error_line(res)
+    found = re.fullmatch(r"Error: control ended \(duration reached\) but set-point 0 sent on every pressure line "
+                         r"\(0\); line 0 did not fall: ([\d.]+) kPa after 0\.5\d* s", line)
+    assert found, line
+    assert 5 < float(found.group(1)) < 100  # the scenario's ramp, 1 s in (the run, then the watch)
+
+
+def test_a_board_that_holds_a_line_above_its_setpoints_stops_the_loop(single_board, calibration_path):
+    # from frame 300 the board reads 60 kPa whatever it is told (a stuck regulator); the controller holds 20 kPa
+    proc = LiveProcessor(Calibration.load(calibration_path), CONFIG, load="contact", contact_s_m=S_C,
+                         constraint="normal", bandwidth_hz=30.0)
+    proc.warm_up()
+    board = Faulty(copy.deepcopy(single_board), FAULT_AT, lambda p: 60e3)
+    truth = Truth()
+
+    def hold_20_kpa(block):
+        return {0: 20e3}
+
+    with SimulatedDevice(board, rate_hz=RATE, truth=truth) as dev, Driver(dev.port) as driver:
+        driver.start()
+        t0 = time.monotonic()
+        with pytest.raises(ControlStop, match=r"^line 0 reads 60 kPa at seq (\d+), above every set-point sent to it "
+                                              r"for 0\.25 s \(at most 20 kPa, \+5 kPa\): the board does not follow its "
+                                              "set-points") as info:
+            run(driver, proc, hold_20_kpa, max_pressure_pa=LIMIT_PA, seconds=2.0, safety=Safety(silence_s=1.0))
+        ran = time.monotonic() - t0
+        time.sleep(0.03)
+    result = info.value.result
+    # the host has sent 20 kPa for longer than 0.25 s: the first frame that reads 60 kPa stops it, before processing
+    assert info.match(rf"at seq {truth.seq[FAULT_AT]},") and result.frames <= FAULT_AT and ran < 1.5
+    assert board.received[-1] == (0, 0.0) and truth.column("setpoint_pa")[-1] == 0.0
+    assert result.high == (0,) and result.zeros[0].pressure_pa == 60e3 and 0.5 <= result.zeros[0].after_s < 0.7
+    assert zero_report(result).endswith("; line 0 did not fall: 60 kPa after 0.5 s")
+
+
+@pytest.mark.parametrize("constraint", ["direction", "none"])
+def test_a_constraint_that_cannot_start_from_rest_is_refused_before_the_board_is_driven(single_board, files,
+                                                                                       constraint):
+    board = Faulty(copy.deepcopy(single_board))
+    with SimulatedDevice(board, rate_hz=RATE) as dev:
+        res = control_cli(dev.port, files, "--constraint", constraint)
+    assert res.exit_code == 2, res.output
+    assert one_error_line(res).startswith(f"Error: Invalid value for '--constraint': {constraint} leaves the load of "
+                                          "a finger at rest (straight, no pressure) undetermined")
+    assert board.received == [] and dev.stats.commands == 0 and dev.stats.hellos == 0

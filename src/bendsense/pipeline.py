@@ -718,6 +718,21 @@ class LiveProcessor:
         flat = np.asarray(self.calibration.offset, dtype=float)
         for n in (1, 2):
             self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)), t_s=np.arange(n) * 1e-3)
+        self._forget()
+
+    def rest_status(self) -> str:
+        """The status of a frame of the actuator at rest (the flat calibration signals, no pressure), then forgotten.
+
+        ``not_identifiable``: the estimate's constraint leaves the load of a straight
+        actuator undetermined (both components free, or a fixed direction along it), so a
+        force loop could not start from rest.
+        """
+        flat = np.asarray(self.calibration.offset, dtype=float)
+        block = self.process_block(flat[None, :], np.zeros(1), t_s=np.zeros(1))
+        self._forget()
+        return str(block.status[0])
+
+    def _forget(self) -> None:
         self.reset()
         self.frames = self.failures = self.estimated = 0
         self.status_counts = {}

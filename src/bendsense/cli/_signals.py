@@ -1,11 +1,15 @@
-"""Stopping a command: Ctrl-C (SIGINT) and SIGTERM end every command the same way.
+"""Stopping a command: Ctrl-C, SIGTERM, a closed terminal and Ctrl-\\ end every command the same way.
 
-installed() (entered once by the ``bendsense`` group) makes both signals raise
-:class:`KeyboardInterrupt` in the main thread, so that every ``finally`` and every
-output writer cleans up on the way out (outputs are written whole or not at all,
-:mod:`bendsense.output`). The group then prints one line, ``Interrupted (SIGINT): ...``
-with what the command kept, and exits 130 for SIGINT, 143 for SIGTERM (128 + the
-signal number, as a shell reports a command killed by it).
+installed() (entered once by the ``bendsense`` group) makes each of
+:data:`bendsense.stop_signals.STOP_SIGNALS` raise :class:`KeyboardInterrupt` in the main
+thread, so that every ``finally`` and every output writer cleans up on the way out
+(outputs are written whole or not at all, :mod:`bendsense.output`). Only the first
+raises: the command is stopping, and a second Ctrl-C a moment later must not cut its
+cleanup short (the control loop's set-point 0 on every line, the line that says what
+was kept); it is noted, and SIGKILL remains for a command that must die at once. The
+group then prints one line, ``Interrupted (SIGINT): ...`` with what the command kept,
+and exits 128 + the first signal's number, as a shell reports a command killed by it:
+130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP, 131 for SIGQUIT.
 
 A layer that knows what it kept says so on the exception on its way up
 (:func:`note`): ``record`` its fsync'ed frames, ``process`` how many sessions
@@ -18,6 +22,8 @@ import contextlib
 import signal
 import threading
 
+from bendsense.stop_signals import STOP_SIGNALS
+
 __all__ = ["installed", "note", "exit_code", "message"]
 
 _received: list[int] = []  # the stop signals seen, first first
@@ -25,12 +31,13 @@ _received: list[int] = []  # the stop signals seen, first first
 
 def _raise(signum, frame):
     _received.append(signum)
-    raise KeyboardInterrupt
+    if len(_received) == 1:  # a later one while the command stops is only noted
+        raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
 def installed():
-    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread while the block runs.
+    """The stop signals raise KeyboardInterrupt in the main thread while the block runs (the first only).
 
     A signal ignored at start (a job started in the background by a shell) stays
     ignored; the previous handlers come back when the block ends.
@@ -40,7 +47,7 @@ def installed():
         yield
         return
     previous = {}
-    for signum in (signal.SIGINT, signal.SIGTERM):
+    for signum in STOP_SIGNALS:
         if signal.getsignal(signum) is not signal.SIG_IGN:
             previous[signum] = signal.signal(signum, _raise)
     try:
@@ -61,7 +68,7 @@ def signum() -> int:
 
 
 def exit_code() -> int:
-    """128 + the signal number: 130 for SIGINT, 143 for SIGTERM."""
+    """128 + the signal number: 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP, 131 for SIGQUIT."""
     return 128 + int(signum())
 
 

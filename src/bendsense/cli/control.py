@@ -67,10 +67,23 @@ def _controllers(config, finger, target, max_pressure_pa, gains, load_options):
 
 
 def _processor(config, calibrations, constraint, bandwidth_hz, load):
-    """The live processor (a gripper's: one LiveProcessor per finger), its kernels ready."""
-    from bendsense.cli.device import make_processor
+    """The live processor (a gripper's: one LiveProcessor per finger), its kernels ready.
 
-    return make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load)
+    A constraint that leaves the load of a finger at rest undetermined is refused here,
+    before the board is driven: every frame at rest would be ``not_identifiable``, and the
+    loop would stop at its first 10 ms.
+    """
+    from bendsense.cli.device import make_processor
+    from bendsense.results import NOT_IDENTIFIABLE
+
+    processor = make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load)
+    fingers = getattr(processor, "processors", {None: processor})
+    if any(p.rest_status() == NOT_IDENTIFIABLE for p in fingers.values()):
+        raise click.BadParameter(f"{constraint} leaves the load of a finger at rest (straight, no pressure) "
+                                 "undetermined: every frame at rest would be not_identifiable and the loop would stop "
+                                 "at once; use normal (a frictionless contact) or follower",
+                                 param_hint="'--constraint'")
+    return processor
 
 
 def _locations(load_options):
@@ -167,12 +180,16 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     A target beyond what a finger can press with at the pressure limit is refused.
 
     Set-point 0 goes to every pressure line (the config's, every line driven, every line
-    the board reported) when the loop ends, whatever ends it: --seconds, Ctrl-C or SIGTERM
-    (exit 130 / 143), an error, more than 10 frames lost within 1 s, no frame for 0.1 s
-    (--silence-s), a pressure on any line beyond --max-pressure-kpa (+5 kPa), or a
-    controlled finger without a force or model_misfit / not_identifiable for 10 ms (a
-    safety stop: one line, exit 1). The last line says line by line whether set-point 0
-    was sent; one that could not be sent exits 1. -o SESSION records everything
+    the board reported) when the loop ends, whatever ends it: --seconds, Ctrl-C, SIGTERM,
+    the terminal closing (SIGHUP) or Ctrl-\\ (exit 130, 143, 129, 131; a second signal
+    while the zeros go out waits for them), an error, more than 10 frames lost within 1 s,
+    no frame for 0.1 s (--silence-s), a pressure on any line beyond --max-pressure-kpa
+    (+5 kPa) or above every set-point sent to it for 0.25 s (+5 kPa: a board that does
+    not follow its set-points), or a controlled finger without a force or model_misfit /
+    not_identifiable for 10 ms (a safety stop: one line, exit 1). Then it watches the
+    reported pressures fall for up to 0.5 s. The last line says line by line whether
+    set-point 0 was sent and whether the pressure fell; one that could not be sent, or a
+    pressure that did not fall, exits 1. -o SESSION records everything
     (docs/formats.md, "Control session"). docs/grasping.md walks through a grasp on the
     simulated board and lists every stop.
 
@@ -214,8 +231,9 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
 def _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s):
     """Record (with -o), start the board, run the loop; one line for how it ended, saying what became of every line.
 
-    A safety stop, an error of the device or a set-point 0 that could not be sent is one
-    ``Error:`` line and exit 1; Ctrl-C / SIGTERM one ``Interrupted`` line (130 / 143).
+    A safety stop, an error of the device, a set-point 0 that could not be sent or a line
+    whose pressure did not fall after it is one ``Error:`` line and exit 1; Ctrl-C, SIGTERM,
+    SIGHUP, SIGQUIT one ``Interrupted`` line (130, 143, 129, 131).
     """
     from bendsense.control import ControlRecording, Safety, run, zero_report
     from bendsense.errors import BendsenseError
@@ -239,7 +257,7 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
         sys.stderr.flush()
         raise click.ClickException("; ".join(filter(None, (f"control stopped: {getattr(err, 'reason', err)}",
                                                            _zeros_of(err), where)))) from None
-    if result.unsent:
+    if result.unsent or result.high:
         raise click.ClickException("; ".join(filter(None, (f"control ended ({result.outcome}) but "
                                                            f"{zero_report(result)}", where))))
     if not quiet():

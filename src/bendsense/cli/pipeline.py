@@ -78,21 +78,21 @@ class PipelineGroup(click.Group):
         """
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
-        try:
-            with _signals.installed():
+        with _signals.installed():  # until the last line is out: a second Ctrl-C does not cut it short
+            try:
                 rv = super().main(args, prog_name, complete_var, False, **extra)
-        except _Interrupted as err:
-            click.echo(_signals.message(err.__cause__), err=True)
-            sys.exit(_signals.exit_code())
-        except click.ClickException as err:
-            click.echo(f"Error: {' '.join(err.format_message().split())}", err=True)
-            sys.exit(err.exit_code)
-        except click.Abort as err:
-            if isinstance(err.__context__, KeyboardInterrupt):  # a stop signal outside the chain's steps
-                click.echo(_signals.message(err.__context__), err=True)
+            except _Interrupted as err:
+                click.echo(_signals.message(err.__cause__), err=True)
                 sys.exit(_signals.exit_code())
-            click.echo("Aborted!", err=True)
-            sys.exit(1)
+            except click.ClickException as err:
+                click.echo(f"Error: {' '.join(err.format_message().split())}", err=True)
+                sys.exit(err.exit_code)
+            except click.Abort as err:
+                if isinstance(err.__context__, KeyboardInterrupt):  # a stop signal outside the chain's steps
+                    click.echo(_signals.message(err.__context__), err=True)
+                    sys.exit(_signals.exit_code())
+                click.echo("Aborted!", err=True)
+                sys.exit(1)
         sys.exit(rv if isinstance(rv, int) else 0)
 
     def invoke(self, ctx):

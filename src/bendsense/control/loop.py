@@ -8,12 +8,16 @@ mode), checks it (:class:`~bendsense.control.safety.Guard`), calls the controlle
 its set-points to ``[0, max_pressure_pa]`` and sends them
 (:meth:`~bendsense.device.driver.Driver.send_setpoint`), then records the block if asked.
 Lines the controller does not drive get set-point 0 with the first block and are held
-there. Whatever ends the loop — its time, a stop event, Ctrl-C, SIGTERM, a safety stop,
+there. Whatever ends the loop — its time, a stop event, Ctrl-C, SIGTERM, SIGHUP (the
+terminal closed), SIGQUIT, a safety stop,
 an error in the controller or the processor, a failing device — set-point 0 goes first,
 before anything else is closed, to every line the config has, the loop drove or the board
 ever reported; each line's zero is recorded (:class:`LineZero`: sent, or why not) and the
 time from the stop to the last zero written is measured
-(:attr:`ControlResult.zero_latency_s`). While it runs it sends a HEARTBEAT at least every
+(:attr:`ControlResult.zero_latency_s`); more stop signals while it zeros are held off
+until every line has its zero and its record (:func:`bendsense.stop_signals.deferred`).
+Then it watches the board's pressures fall for up to ``Safety.confirm_s`` and records,
+line by line, whether each did. While it runs it sends a HEARTBEAT at least every
 :data:`HEARTBEAT_S`, set-points or not, so that a board's host-silence watchdog lets go of
 every line by itself only when the loop is gone (killed, hung, the cable pulled). The
 safety model in full is :mod:`bendsense.control.safety`'s.
@@ -22,6 +26,7 @@ safety model in full is :mod:`bendsense.control.safety`'s.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import math
 import signal
@@ -35,6 +40,7 @@ import numpy as np
 from bendsense.control.safety import ControlStop, Guard, Safety
 from bendsense.errors import ArgumentError, DeviceError
 from bendsense.readings import sample_lines
+from bendsense.stop_signals import STOP_SIGNALS, deferred
 
 __all__ = ["run", "ControlResult", "LineZero", "zero_report", "DEFAULT_MAX_PRESSURE_PA", "HEARTBEAT_S"]
 
@@ -57,12 +63,23 @@ class LineZero:
         The board's latest frame reports this line's pressure, so a reader of the board
         can confirm that it falls; False: the board does not report it (it stopped, or
         never did) and nothing on the host can confirm it.
+    fell : bool or None
+        The reported pressure fell to ``Safety.pressure_tolerance_pa`` or below within
+        ``Safety.confirm_s`` of the last zero; None: not watched (not sent, not reported,
+        or ``confirm_s`` 0).
+    pressure_pa : float
+        The line's last reported pressure when the watch ended [Pa] (NaN: not watched).
+    after_s : float
+        How long the watch lasted after the last zero [s] (NaN: not watched).
     """
 
     line: int
     sent: bool
     error: str | None
     reported: bool
+    fell: bool | None = None
+    pressure_pa: float = math.nan
+    after_s: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -97,7 +114,7 @@ class ControlResult:
     block_frames : ndarray of int, shape (blocks,)
         Frames of each block.
     zeros : tuple of LineZero
-        Each line's set-point 0 at the end, by line: sent, or why not.
+        Each line's set-point 0 at the end, by line: sent, or why not; whether its pressure fell.
     held : tuple of int
         Lines the controller never drove, held at set-point 0 from the first block.
     """
@@ -126,6 +143,11 @@ class ControlResult:
         """The lines whose set-point 0 could not be sent."""
         return tuple(z.line for z in self.zeros if not z.sent)
 
+    @property
+    def high(self) -> tuple:
+        """The lines whose reported pressure did not fall after their set-point 0."""
+        return tuple(z.line for z in self.zeros if z.fell is False)
+
 
 def _names(lines) -> str:
     return f"line{'s' if len(lines) > 1 else ''} {', '.join(str(k) for k in lines)}"
@@ -136,7 +158,9 @@ def zero_report(result: ControlResult) -> str:
 
     ``set-point 0 sent on every pressure line (0, 1, 2)`` when every write succeeded;
     otherwise the lines sent and, apart, those whose zero could not be sent, with why;
-    lines whose pressure the board does not report are named as not confirmed.
+    lines whose pressure the board does not report are named as not confirmed, and those
+    whose reported pressure did not fall after the zero (``line 2 did not fall: 46 kPa after
+    0.5 s``).
 
     Parameters
     ----------
@@ -155,6 +179,9 @@ def zero_report(result: ControlResult) -> str:
     if unconfirmed:
         whose = "their" if len(unconfirmed) > 1 else "its"
         text += f"; {_names(unconfirmed)} not confirmed (the board does not report {whose} pressure)"
+    for z in result.zeros:
+        if z.fell is False:
+            text += f"; line {z.line} did not fall: {z.pressure_pa / 1e3:.3g} kPa after {z.after_s:.2g} s"
     return text
 
 
@@ -178,21 +205,26 @@ def _prompt_threads():
 
 
 @contextlib.contextmanager
-def _sigterm_stops():
-    """SIGTERM raises KeyboardInterrupt in the loop (main thread, unless someone already handles it)."""
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
+def _signals_stop():
+    """SIGTERM, SIGHUP and SIGQUIT raise KeyboardInterrupt in the loop, as Ctrl-C does.
+
+    In the main thread, for each that nobody handles yet (its default action would kill
+    the process without the zeros); the previous handlers come back after.
+    """
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def handler(signum, frame):
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, handler)
+    previous = {signum: signal.signal(signum, handler) for signum in STOP_SIGNALS
+                if signum != signal.SIGINT and signal.getsignal(signum) is signal.SIG_DFL}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, old in previous.items():
+            signal.signal(signum, old)
 
 
 def _lines(processor, n_lines) -> tuple:
@@ -246,6 +278,36 @@ def _zero(driver, lines, guard) -> tuple:
     return tuple(zeros), (done if all(z.sent for z in zeros) else math.nan)
 
 
+def _confirm(driver, zeros, safety) -> tuple:
+    """Watch the reported pressures of the lines zeroed for up to ``safety.confirm_s``; the zeros with what fell.
+
+    A line has fallen at its first reading at or below ``safety.pressure_tolerance_pa``;
+    the watch ends when every watched line has, or at ``confirm_s``, or when the board
+    stops answering.
+    """
+    watched = {z.line for z in zeros if z.sent and z.reported}
+    get_batch = getattr(driver, "get_batch", None)
+    if not watched or not safety.confirm_s or get_batch is None:
+        return zeros
+    tol = safety.pressure_tolerance_pa
+    last, fell = dict.fromkeys(watched, math.nan), set()
+    t0 = time.monotonic()
+    while fell != watched and (now := time.monotonic()) - t0 < safety.confirm_s:
+        try:
+            readings = get_batch(timeout=min(HEARTBEAT_S, t0 + safety.confirm_s - now))
+        except DeviceError:
+            break
+        for r in readings:
+            for line, value in enumerate(sample_lines(r.sample)):
+                if line in watched and value is not None:
+                    last[line] = value
+                    if value <= tol:
+                        fell.add(line)
+    after = time.monotonic() - t0
+    return tuple(dataclasses.replace(z, fell=z.line in fell, pressure_pa=last[z.line], after_s=after)
+                 if z.line in watched else z for z in zeros)
+
+
 #: the default pressure limit of :func:`run` [Pa]
 DEFAULT_MAX_PRESSURE_PA = 100e3
 
@@ -292,17 +354,20 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     ------
     ControlStop
         A safety stop (:mod:`bendsense.control.safety`: lost frames, silence, a pressure
-        beyond the limit on any line, a controlled finger without a force or flagged by
+        beyond the limit on any line or above every set-point of the last
+        ``Safety.follow_s``, a controlled finger without a force or flagged by
         the model, a controller's answer that is no set-point), after set-point 0 went to
         every line; its ``result`` holds the counters.
     KeyboardInterrupt
-        Ctrl-C or SIGTERM, after set-point 0 went to every line.
+        Ctrl-C, SIGTERM, SIGHUP or SIGQUIT, after set-point 0 went to every line; also
+        one that came while the loop zeroed (held off until then), whatever ended it.
 
     Notes
     -----
     Whatever the loop raises carries the counters as its ``result`` attribute (a
     :class:`ControlResult`), so that a stopped session still says what it did; its
-    ``zeros`` say line by line whether set-point 0 was sent (:func:`zero_report`).
+    ``zeros`` say line by line whether set-point 0 was sent and whether the pressure fell
+    (:func:`zero_report`).
     """
     if isinstance(max_pressure_pa, bool) or not isinstance(max_pressure_pa, (int, float, np.integer, np.floating)) \
             or not (math.isfinite(max_pressure_pa) and max_pressure_pa > 0):
@@ -316,32 +381,40 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
                   rate_hz=getattr(hello, "rate_hz", None) or None, max_pressure_pa=float(max_pressure_pa))
     state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {},
              "driven": set(), "held": ()}
-    outcome, stopped_at, zero_at, error = "stopped", math.nan, math.nan, None
-    try:
-        with _sigterm_stops(), _prompt_threads():
-            outcome = _loop(driver, processor, controller, float(max_pressure_pa), seconds, stop, guard, lines,
-                            recording, on_block, state)
-        stopped_at = time.perf_counter()
-    except BaseException as err:
-        stopped_at = time.perf_counter()
-        error = err
-        outcome = "interrupted" if isinstance(err, KeyboardInterrupt) else f"{type(err).__name__}: {err}"
-        if isinstance(err, ControlStop):
-            outcome = f"safety stop: {err.reason}"
-        raise
-    finally:
-        zeros, zero_at = _zero(driver, set(lines) | set(state["current"]), guard)  # first, before anything is closed
-        result = ControlResult(
-            frames=state["frames"], blocks=len(state["loop"]), outcome=outcome, lines=tuple(z.line for z in zeros),
-            max_setpoint_pa=state["max"], clipped=state["clipped"], zero_latency_s=zero_at - stopped_at,
-            stopped_at_s=stopped_at, loop_s=np.asarray(state["loop"]), process_s=np.asarray(state["process"]),
-            block_frames=np.asarray(state["sizes"], dtype=np.int64), zeros=zeros,
-            held=tuple(k for k in state["held"] if k not in state["driven"]))
-        if error is not None:
-            with contextlib.suppress(AttributeError, TypeError):  # a user's exception may not take attributes
-                error.result = result
-        if recording is not None:
-            recording.close(outcome)
+    outcome, stopped_at, zero_at, error, result = "stopped", math.nan, math.nan, None, None
+    with _signals_stop():
+        try:
+            with _prompt_threads():
+                outcome = _loop(driver, processor, controller, float(max_pressure_pa), seconds, stop, guard, lines,
+                                recording, on_block, state)
+            stopped_at = time.perf_counter()
+        except BaseException as err:
+            stopped_at = time.perf_counter()
+            error = err
+            outcome = "interrupted" if isinstance(err, KeyboardInterrupt) else f"{type(err).__name__}: {err}"
+            if isinstance(err, ControlStop):
+                outcome = f"safety stop: {err.reason}"
+            raise
+        finally:
+            try:
+                with deferred():  # a second Ctrl-C (or a SIGHUP) acts after every line has its zero and its record
+                    zeros, zero_at = _zero(driver, set(lines) | set(state["current"]), guard)  # first of all
+                    zeros = _confirm(driver, zeros, guard.safety)
+                    result = ControlResult(
+                        frames=state["frames"], blocks=len(state["loop"]), outcome=outcome,
+                        lines=tuple(z.line for z in zeros), max_setpoint_pa=state["max"], clipped=state["clipped"],
+                        zero_latency_s=zero_at - stopped_at, stopped_at_s=stopped_at,
+                        loop_s=np.asarray(state["loop"]), process_s=np.asarray(state["process"]),
+                        block_frames=np.asarray(state["sizes"], dtype=np.int64), zeros=zeros,
+                        held=tuple(k for k in state["held"] if k not in state["driven"]))
+                    if error is not None:
+                        with contextlib.suppress(AttributeError, TypeError):  # a user's exception may not take them
+                            error.result = result
+                    if recording is not None:
+                        recording.close(outcome)
+            except KeyboardInterrupt as late:  # a stop signal held off while zeroing, acted on now
+                late.result = result
+                raise
     return result
 
 
@@ -377,7 +450,7 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
         last_frame, started = now, True
         tic = time.perf_counter()
         guard.lost(driver.stats, now)
-        guard.pressures(readings)
+        guard.pressures(readings, now)
         block = processor.process_readings(readings)
         processed = time.perf_counter()
         guard.flags(block)
@@ -388,6 +461,7 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
             setpoints = {**dict.fromkeys(state["held"], 0.0), **setpoints}
         for line, value in setpoints.items():
             driver.send_setpoint(line, value, check_line=False)
+        guard.sent(setpoints, now)
         state["loop"].append(time.perf_counter() - tic)
         state["process"].append(processed - tic)
         state["sizes"].append(len(readings))

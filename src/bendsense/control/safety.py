@@ -40,6 +40,15 @@ raises :class:`ControlStop`):
   room), or below ``-pressure_tolerance_pa`` (no gauge pressure a regulator makes): a
   line the loop does not hold, a stuck regulator or a failed pressure sensor, stopped at
   the first such frame;
+- **a board that does not follow its set-points**: a line's reported pressure above every
+  set-point the host sent it within the last ``follow_s`` by more than
+  ``pressure_tolerance_pa`` (a board that ignores SETPOINTs, a stuck regulator). A
+  first-order regulator's pressure never passes the highest set-point of its past, and
+  what is left of an older, higher one after a time T is ``exp(-T/τ)`` of the
+  difference: below 5 kPa of a 200 kPa full scale after ``τ ln 40 ≈ 3.7 τ``; 0.25 s is
+  that for a slow regulator (τ = 50 ms; the simulated one has 25 ms) with room. Taking
+  the highest set-point of the window (not the last one) keeps a slew-limited fall of the
+  set-point, however slow, from looking like a fault;
 - **no force**: a controlled finger without a force of its own (NaN: no pressure
   reading, a pressure outside the config's ``actuator.pressure_range_pa``, a shape with
   no estimate) for ``flagged_s``: the loop would act blind;
@@ -51,6 +60,11 @@ raises :class:`ControlStop`):
   match flags every frame: both stop the loop within ``flagged_s``;
 - **a controller's answer** that is no set-point (not a dict, a value that is not a
   finite number, a line outside the config's): checked by the loop itself.
+
+After the zeros, the loop watches the board's pressures for up to ``confirm_s`` (0.5 s:
+ten time constants of the slow regulator above) and records, line by line, whether each
+fell below ``pressure_tolerance_pa`` (:class:`~bendsense.control.LineZero`); a line that
+still reads high is said, and ``bendsense control`` exits 1.
 
 No-force and model frames make one run: a finger that cannot be trusted for
 ``flagged_s``, whichever the reason of each frame, stops the loop. A held line (no
@@ -124,8 +138,16 @@ class Safety:
     first_frame_s : float, default 2.0
         Longest wait for the first frame after the loop starts [s].
     pressure_tolerance_pa : float, default 5e3
-        How far a line's reported pressure may pass the pressure limit (or fall below 0)
-        before the loop stops [Pa] (module docstring).
+        How far a line's reported pressure may pass the pressure limit (or fall below 0),
+        or every set-point of the last ``follow_s``, before the loop stops; after the zeros,
+        the pressure below which a line has fallen [Pa] (module docstring).
+    follow_s : float, default 0.25
+        How long a line's pressure may take to follow its set-points [s]: a reading above
+        every set-point the host sent the line within this time (+ the tolerance) stops
+        the loop (module docstring: 3.7 time constants of a 50 ms regulator, with room).
+    confirm_s : float, default 0.5
+        After the zeros, the longest the loop watches the reported pressures fall [s]
+        (0: not watched).
     """
 
     max_lost_frames: int = 10
@@ -134,13 +156,16 @@ class Safety:
     flagged_s: float = 0.01
     first_frame_s: float = 2.0
     pressure_tolerance_pa: float = 5e3
+    follow_s: float = 0.25
+    confirm_s: float = 0.5
 
     def __post_init__(self):
         _number("max_lost_frames", self.max_lost_frames, integer=True)
-        for name in ("lost_window_s", "silence_s", "flagged_s", "first_frame_s", "pressure_tolerance_pa"):
+        for name in ("lost_window_s", "silence_s", "flagged_s", "first_frame_s", "pressure_tolerance_pa",
+                     "follow_s", "confirm_s"):
             if getattr(self, name) is not None or name != "silence_s":
                 _number(name, getattr(self, name))
-        for name in ("silence_s", "first_frame_s"):
+        for name in ("silence_s", "first_frame_s", "follow_s"):
             if getattr(self, name) is not None and not getattr(self, name) > 0:
                 raise ArgumentError(f"{name}: expected a time > 0 [s], got {getattr(self, name)!r}")
 
@@ -183,6 +208,39 @@ class Guard:
         self._lost = collections.deque()  # (host time [s], frames lost since the previous block)
         self._lost_total = None
         self._flag_start = {f: math.nan for f in self.fingers}
+        # per line: when the host first sent it a set-point, and [sent at, value, superseded at] of the sends
+        # whose value no later send reached (a sliding maximum over follow_s)
+        self._first_sent = {}
+        self._sent = collections.defaultdict(collections.deque)
+
+    def sent(self, setpoints, now_s: float) -> None:
+        """Note the set-points just sent (for the check that the board follows them).
+
+        Parameters
+        ----------
+        setpoints : dict of int to float
+            Line -> set-point sent [Pa].
+        now_s : float
+            Host time [s].
+        """
+        for line, value in setpoints.items():
+            sends = self._sent[line]
+            self._first_sent.setdefault(line, now_s)
+            if sends and math.isinf(sends[-1][2]):
+                sends[-1][2] = now_s
+            while sends and sends[-1][1] <= value:
+                sends.pop()
+            sends.append([now_s, value, math.inf])
+
+    def _followed(self, line, now_s) -> float:
+        """The highest set-point in force on ``line`` within the last ``follow_s`` [Pa] (inf: too early to say)."""
+        start = now_s - self.safety.follow_s
+        if self._first_sent.get(line, math.inf) > start:
+            return math.inf
+        sends = self._sent[line]
+        while sends[0][2] <= start:
+            sends.popleft()
+        return sends[0][1]
 
     def lost(self, stats, now_s: float) -> None:
         """Check the driver's lost frames (sequence gaps and queue drops) over the window.
@@ -208,15 +266,22 @@ class Guard:
             raise ControlStop(f"{count} frames lost within {self.safety.lost_window_s:g} s (limit "
                               f"{self.safety.max_lost_frames}): the loop no longer sees every frame")
 
-    def pressures(self, readings) -> None:
+    def pressures(self, readings, now_s: float = math.nan) -> None:
         """Note the lines the board reports and stop on a pressure outside ``[-tol, max_pressure_pa + tol]``.
+
+        Or above every set-point the host sent the line within ``follow_s`` (+ tol): the
+        board does not follow its set-points.
 
         Parameters
         ----------
         readings : list of Reading
             The driver's readings of the block (every line of each SAMPLE).
+        now_s : float, optional
+            Host time [s] (NaN: the set-points are not checked).
         """
         lo, hi = self._pressure_band
+        tol = self.safety.pressure_tolerance_pa
+        followed = {k: self._followed(k, now_s) + tol for k in self._first_sent} if math.isfinite(now_s) else {}
         for r in readings:
             values = sample_lines(r.sample)
             if len(values) > self._reported:
@@ -224,14 +289,20 @@ class Guard:
                 self.board_lines.update(range(len(values)))
             for line, value in enumerate(values):
                 if value is not None and not lo <= value <= hi:
-                    tol = self.safety.pressure_tolerance_pa / 1e3
                     if value > hi:
-                        why = (f"beyond the pressure limit {self.max_pressure_pa / 1e3:g} kPa (+{tol:g} kPa for "
+                        why = (f"beyond the pressure limit {self.max_pressure_pa / 1e3:g} kPa (+{tol / 1e3:g} kPa for "
                                "regulator ripple): a line the loop does not hold, a stuck regulator or a failed "
                                "pressure sensor")
                     else:
-                        why = f"below 0 (-{tol:g} kPa tolerance), no gauge pressure a regulator makes: a failed sensor"
+                        why = (f"below 0 (-{tol / 1e3:g} kPa tolerance), no gauge pressure a regulator makes: a failed "
+                               "sensor")
                     raise ControlStop(f"line {line} reads {value / 1e3:.4g} kPa at seq {r.sample.seq}, {why}")
+                if value is not None and value > followed.get(line, math.inf):
+                    raise ControlStop(
+                        f"line {line} reads {value / 1e3:.4g} kPa at seq {r.sample.seq}, above every set-point sent "
+                        f"to it for {self.safety.follow_s:g} s (at most {(followed[line] - tol) / 1e3:.4g} kPa, "
+                        f"+{tol / 1e3:g} kPa): the board does not follow its set-points (it ignores them, or its "
+                        "regulator is stuck)")
         if readings:
             self.reporting = {k for k, v in enumerate(sample_lines(readings[-1].sample)) if v is not None}
 
