@@ -77,8 +77,8 @@ CHILD = textwrap.dedent('''
 class Glitching:
     """The board without a pressure reading in every 7th frame (the truth still records the frame)."""
 
-    def __init__(self, board):
-        self.board = board
+    def __init__(self, source):
+        self.board = source
 
     def __getattr__(self, name):  # the board's set-point input
         return getattr(self.board, name)
@@ -88,7 +88,7 @@ class Glitching:
         return (None if k % 7 == 3 else p), counts, truth
 
 
-def test_a_cold_control_run_compiles_nothing_once_the_loop_runs_and_processes_every_frame(board, calibration_path,
+def test_a_cold_control_run_compiles_nothing_once_the_loop_runs_and_processes_every_frame(board, calibration_path,  # noqa: F811
                                                                                           tmp_path):
     truth, out = Truth(), tmp_path / "s"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}

@@ -52,7 +52,7 @@ PARALLEL_MIN = 2048
 
 
 def parallel(frames: int) -> bool:
-    """Whether a batch of ``frames`` runs on numba's threads: from :data:`PARALLEL_MIN` on, unless this thread has one."""
+    """Whether a batch of ``frames`` runs on numba's threads: from :data:`PARALLEL_MIN` on (this thread's count > 1)."""
     return frames >= PARALLEL_MIN and numba.get_num_threads() > 1
 
 

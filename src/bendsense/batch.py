@@ -396,16 +396,14 @@ def process_session(
     row = {"name": name, "source": str(path), "out_dir": str(out_dir)}
     start = time.perf_counter()
     try:
-        # per-frame problems become the frame's status column; a warning per session
-        # from a worker process would only clutter the console: what the data cannot carry joins the note
+        # per-frame problems become the frame's status column; what the data cannot carry joins the note
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("ignore")
             warnings.simplefilter("always", DataWarning)
             counts, lost, tx_drops, pressure_ignored = _run(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
                 {"track": track, "bandwidth_hz": bandwidth_hz, "window_s": window_s, "load": load,
-                 "contact_s_m": contact_s_m},
-            )
+                 "contact_s_m": contact_s_m})
     except (BendsenseError, OSError) as err:
         if isinstance(err, OutputError) and err.errno in _FATAL_ERRNOS:
             raise  # a full disk is not this session's fault: process_sessions stops
@@ -431,10 +429,7 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) ->
         notes.append("the fallback pressure ignored (every frame has a pressure reading)")
     notes.extend(said)
     return SessionOutcome(
-        status="ok",
-        frames=frames,
-        seconds=seconds,
-        reason=", ".join(notes),
+        status="ok", frames=frames, seconds=seconds, reason=", ".join(notes),
         extrapolated=counts.extrapolated,
         not_converged=counts.not_converged,
         model_misfit=counts.model_misfit,
@@ -538,18 +533,6 @@ def _pdeathsig() -> bool:
         return libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
     except (OSError, AttributeError):
         return False
-
-
-def _check_workers(workers: int) -> None:
-    """Refuse more local workers than this machine's free memory holds, before any work (one line)."""
-    from bendsense.sim.scenarios import _BASE_BYTES, _size, available_memory_bytes
-
-    available = available_memory_bytes()
-    if available is not None and workers * _BASE_BYTES > available:
-        raise ArgumentError(f"workers (--workers): {workers:,} worker processes would need about "
-                            f"{_size(workers * _BASE_BYTES)} ({_size(_BASE_BYTES)} each: numpy, scipy, numba and the "
-                            f"kernels); this machine has {_size(available)} available (at most "
-                            f"{int(available // _BASE_BYTES):,} workers)")
 
 
 def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
@@ -750,7 +733,9 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
     names = session_names(sessions)
     rows, todo = _plan(sessions, names, out_dir, overwrite)
     if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
-        _check_workers(min(workers, len(todo)))
+        from bendsense.sim.scenarios import check_workers
+
+        check_workers(min(workers, len(todo)))
     options = dict(config=config, calibration=calibration, constraint=constraint, method=method, objective=objective,
                    pressure_pa=pressure_pa, estimate=estimate, overwrite=overwrite, track=track,
                    bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m)

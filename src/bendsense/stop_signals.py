@@ -1,7 +1,7 @@
 """The signals that stop a long run, declared once, and a shield for what must finish after one.
 
 :data:`STOP_SIGNALS`: Ctrl-C (SIGINT), ``kill`` or a service manager (SIGTERM), the
-terminal or the ssh session closing (SIGHUP), Ctrl-\\ (SIGQUIT). The command line
+terminal or the ssh session closing (SIGHUP), Ctrl-backslash (SIGQUIT). The command line
 (:mod:`bendsense.cli._signals`) and the control loop (:func:`bendsense.control.run`) turn
 each into :class:`KeyboardInterrupt`. :func:`deferred` holds them off while a block that
 must finish runs (the control loop's set-point 0 on every line and its report), then

@@ -1,4 +1,4 @@
-"""Stopping a command: Ctrl-C, SIGTERM, a closed terminal and Ctrl-\\ end every command the same way.
+"""Stopping a command: Ctrl-C, SIGTERM, a closed terminal and Ctrl-backslash end every command the same way.
 
 installed() (entered once by the ``bendsense`` group) makes each of
 :data:`bendsense.stop_signals.STOP_SIGNALS` raise :class:`KeyboardInterrupt` in the main

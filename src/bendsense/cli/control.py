@@ -181,7 +181,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
 
     Set-point 0 goes to every pressure line (the config's, every line driven, every line
     the board reported) when the loop ends, whatever ends it: --seconds, Ctrl-C, SIGTERM,
-    the terminal closing (SIGHUP) or Ctrl-\\ (exit 130, 143, 129, 131; a second signal
+    the terminal closing (SIGHUP) or Ctrl-backslash (exit 130, 143, 129, 131; a second signal
     while the zeros go out waits for them), an error, more than 10 frames lost within 1 s,
     no frame for 0.1 s (--silence-s), a pressure on any line beyond --max-pressure-kpa
     (+5 kPa) or above every set-point sent to it for 0.25 s (+5 kPa: a board that does

@@ -327,9 +327,11 @@ class Guard:
     def flags(self, block) -> None:
         """Stop when a controlled finger has had no force, or been flagged by the model, for ``flagged_s``.
 
-        A frame counts when its own force is not a number (no pressure reading, a pressure
-        outside the config's range, no estimate) or its status is ``model_misfit`` /
-        ``not_identifiable``; a run of such frames for ``flagged_s`` stops the loop.
+        A frame counts when its force (the tracked one where the block is tracked: what a
+        controller acts on) is not a number (no pressure reading, a pressure outside the
+        config's range, no estimate, a component the constraint leaves free) or its status
+        is ``model_misfit`` / ``not_identifiable``; a run of such frames for ``flagged_s``
+        stops the loop.
 
         Parameters
         ----------
@@ -341,7 +343,8 @@ class Guard:
         for finger in self.fingers:
             own = finger_block(block, finger)
             status = np.asarray(own.track.status if own.track is not None else own.status, dtype=object)
-            blind = ~np.isfinite(np.asarray(own.force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
+            force = own.force_n if own.track is None else own.track_force_n  # what the controller acts on
+            blind = ~np.isfinite(np.asarray(force, dtype=float).reshape(len(own), -1)).all(axis=1)
             flagged = np.isin(status, STOP_STATUSES) | blind
             if not flagged.any():
                 self._flag_start[finger] = math.nan

@@ -702,9 +702,9 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
 # (`simulate SCENARIO --frames 200` vs `--frames 2000`): ~10 KB a frame for the
 # scenarios with a beam solve and truth shapes (tip-loads 10.1 KB, contact 9.5 KB), well
 # under 1 KB for the strip recordings (written one strip at a time); rounded up.
-_BYTES_PER_FRAME = {"calibration": 2_000, "validation": 2_000, "tip-loads": 12_000, "contact": 12_000,
+BYTES_PER_FRAME = {"calibration": 2_000, "validation": 2_000, "tip-loads": 12_000, "contact": 12_000,
                     "time-varying": 12_000, "free-sweep": 12_000}
-_BASE_BYTES = 300e6  # the process before the first frame: numpy, scipy, numba and the kernels
+BASE_BYTES = 300e6  # the process before the first frame: numpy, scipy, numba and the kernels
 
 
 def frames_in_memory(name: str, options: dict) -> tuple[int, int]:
@@ -761,7 +761,7 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
 
     A scenario is simulated and written in memory (one recording at a time); a
     ``--frames 100000000`` would grow until the machine swaps or kills it. The
-    estimate uses the measured memory per frame (:data:`_BYTES_PER_FRAME`).
+    estimate uses the measured memory per frame (:data:`BYTES_PER_FRAME`).
 
     Parameters
     ----------
@@ -786,15 +786,15 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
             at_once, _ = frames_in_memory(name, options)
         except (TypeError, ValueError):  # an option that is not a number: the scenario's own check says so
             continue
-        need = _BASE_BYTES + at_once * _BYTES_PER_FRAME[name]
+        need = BASE_BYTES + at_once * BYTES_PER_FRAME[name]
         if need <= available:
             continue
         key = {"calibration": "frames_per_strip", "validation": "frames_per_strip",
                "time-varying": "duration_s", "free-sweep": "n_frames"}.get(name, "frames_per_config")
-        per_frame = _BYTES_PER_FRAME[name]
+        per_frame = BYTES_PER_FRAME[name]
         per_what = "strip" if key == "frames_per_strip" else "configuration"
         per_unit = at_once / max(float(options.get(key, _OPTIONS[name][key])), 1e-300)
-        most = int((available - _BASE_BYTES) / per_frame / per_unit) if available > _BASE_BYTES else 0
+        most = int((available - BASE_BYTES) / per_frame / per_unit) if available > BASE_BYTES else 0
         raise ArgumentError(
             f"{field or key}: {name} would hold {at_once:,} frames in memory, about {_size(need)}; this machine "
             f"has {_size(available)} available (at most {max(most, 0):,} {'s' if key == 'duration_s' else 'frames'}"
@@ -815,12 +815,28 @@ def check_fits(field: str, what: str, n_frames: int, bytes_per_frame: float, rat
         When ``n_frames`` × ``bytes_per_frame`` (and the process itself) exceed the memory available.
     """
     available = available_memory_bytes()
-    need = _BASE_BYTES + n_frames * bytes_per_frame
+    need = BASE_BYTES + n_frames * bytes_per_frame
     if available is None or need <= available:
         return
-    most = max(available - _BASE_BYTES, 0.0) / bytes_per_frame / rate_hz
+    most = max(available - BASE_BYTES, 0.0) / bytes_per_frame / rate_hz
     raise ArgumentError(f"{field}: {what} would hold {n_frames:,} frames in memory, about {_size(need)}; this machine "
                         f"has {_size(available)} available (at most {most:,.0f} s at {rate_hz:g} Hz)")
+
+
+def check_workers(workers: int) -> None:
+    """Refuse more local worker processes than this machine's free memory holds, before any work (one line).
+
+    Raises
+    ------
+    ArgumentError
+        When ``workers`` processes of :data:`BASE_BYTES` each exceed the memory available.
+    """
+    available = available_memory_bytes()
+    if available is not None and workers * BASE_BYTES > available:
+        raise ArgumentError(f"workers (--workers): {workers:,} worker processes would need about "
+                            f"{_size(workers * BASE_BYTES)} ({_size(BASE_BYTES)} each: numpy, scipy, numba and the "
+                            f"kernels); this machine has {_size(available)} available (at most "
+                            f"{int(available // BASE_BYTES):,} workers)")
 
 
 def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **options):
