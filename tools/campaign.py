@@ -661,7 +661,7 @@ def classify(c: Case, work: Path, before: dict, rc, out: str, hung: bool) -> tup
     errors = [ln for ln in out.splitlines() if ln.startswith("Error:")]
     if c.command == "process" and not errors and rc == 1 and re.search(r"(?m)^error: \d+ of \d+ sessions failed$", out):
         return "handled", "documented: " + first_line(out, r"failed: ")  # each failure in the table, exit 1
-    if rc in (130, 143) and not errors:
+    if rc in (129, 130, 131, 143) and not errors:  # SIGHUP, SIGINT, SIGQUIT, SIGTERM: 128 + the signal
         return "handled", f"stopped, exit {rc}"
     if len(errors) != 1:
         return "poor", f"exit {rc} with {len(errors)} 'Error:' lines: " + first_line(out)

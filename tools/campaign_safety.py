@@ -118,13 +118,15 @@ def truth_rows(work):
     return (rows[0], rows[1:]) if rows else ([], [])
 
 
-def truth_verdict(work, before_probe, never_driven):
+def truth_verdict(work, before_probe, never_driven, rc=0, out=""):
     """WRONG-OK lines when the board's truth shows a line left pressurised (or driven at all).
 
     BEFORE_PROBE rows are the client's; the probe's rows after them show what the board
     holds once the client ended (a board the client never started is not judged by them:
-    the probe itself runs its closing profile).
+    the probe itself runs its closing profile). A board that ignores set-points cannot be
+    made to let go: a line the command said "did not fall" of, with a non-zero exit, is the truth.
     """
+    honest = {int(k) for k in re.findall(r"line (\d+) did not fall", out)} if rc else set()
     head, rows = truth_rows(work)
     rows = [r for r in rows if len(r) == len(head)]
     client = rows[:before_probe] if before_probe is not None else rows
@@ -135,7 +137,8 @@ def truth_verdict(work, before_probe, never_driven):
         if not name.endswith("setpoint_pa"):
             continue
         last = float(rows[-1][i])
-        if last > 0:
+        line = int(name[4:name.index("_")]) if name.startswith("line") else 0
+        if last > 0 and line not in honest:
             out.append(f"WRONG-OK: {name} = {last / 1e3:.1f} kPa on the board after the command ended")
         peak = max(float(r[i]) for r in client)
         if never_driven and peak > 1e3:  # a refusal that needs the board's frames may start it, not drive it
@@ -167,7 +170,7 @@ def controlled(client, board=BOARD, during=None, never_driven=False, probe_after
             sent = re.search(r"set-point 0 sent on (every|line)[^\n]*", out)
             lost = re.search(r"could not be sent|not be confirmed", out)
             return rc, out + (f"\nWRONG-OK: the board died, yet '{sent.group(0)}'" if sent and not lost else ""), hung
-        return rc, out + truth_verdict(work, seen.get("rows"), never_driven), hung
+        return rc, out + truth_verdict(work, seen.get("rows"), never_driven, rc, out), hung
     return run
 
 
