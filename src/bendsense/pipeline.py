@@ -723,9 +723,8 @@ class LiveProcessor:
     def rest_status(self) -> str:
         """The status of a frame of the actuator at rest (the flat calibration signals, no pressure), then forgotten.
 
-        ``not_identifiable``: the estimate's constraint leaves the load of a straight
-        actuator undetermined (both components free, or a fixed direction along it), so a
-        force loop could not start from rest.
+        ``not_identifiable``: the constraint leaves the load of a straight actuator undetermined (both
+        components free, or a fixed direction along it), so a force loop could not start from rest.
         """
         flat = np.asarray(self.calibration.offset, dtype=float)
         block = self.process_block(flat[None, :], np.zeros(1), t_s=np.zeros(1))
@@ -744,8 +743,7 @@ class LiveProcessor:
         has_p = np.isfinite(p)
         if not (self.estimate and has_p.any()):
             return None
-        prev = self._previous
-        warm = {"initial": prev} if prev is not None else {}
+        warm = {"initial": self._previous} if self._previous is not None else {}
         sub = shape if has_p.all() else take_frames(shape, has_p, n)
         kwargs = {"constraint": self.constraint, "method": self.method, "objective": self.objective,
                   "calibration": self.calibration, **self.options}
@@ -755,18 +753,15 @@ class LiveProcessor:
         m = int(has_p.sum())
         failed = np.flatnonzero(~np.asarray(est.success).reshape(-1))
         if warm and failed.size:
-            # a start far from a frame (a block over a fast change) can fail where the
-            # frame's own moment-balance start converges: retry those cold
+            # a start far from a frame (a fast change) can fail where its own start converges: retry those cold
             retry = estimate_force(take_frames(sub, failed, m), p[has_p][failed], self.config, **kwargs)
             est = put_frames(est, failed, retry, m)
         ok = np.flatnonzero(np.asarray(est.success).reshape(-1))
         if ok.size:  # a failed frame has NaN forces: it cannot seed the next block
             self._previous = take_frames(est, int(ok[-1]), m)
         self.failures += int(np.count_nonzero(~np.asarray(est.success)))
-        self.estimated += int(has_p.sum())
-        if not has_p.all():
-            est = expand_frames(est, has_p)
-        return est
+        self.estimated += m
+        return est if m == n else expand_frames(est, has_p)
 
     def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
                       extra=None) -> LiveBlock:

@@ -327,7 +327,7 @@ class Guard:
     def flags(self, block) -> None:
         """Stop when a controlled finger has had no force, or been flagged by the model, for ``flagged_s``.
 
-        A frame counts when its force (the tracked one where the block is tracked: what a
+        A frame counts when its force (or the tracked one, where the block is tracked: what a
         controller acts on) is not a number (no pressure reading, a pressure outside the
         config's range, no estimate, a component the constraint leaves free) or its status
         is ``model_misfit`` / ``not_identifiable``; a run of such frames for ``flagged_s``
@@ -343,15 +343,17 @@ class Guard:
         for finger in self.fingers:
             own = finger_block(block, finger)
             status = np.asarray(own.track.status if own.track is not None else own.status, dtype=object)
-            force = own.force_n if own.track is None else own.track_force_n  # what the controller acts on
-            blind = ~np.isfinite(np.asarray(force, dtype=float).reshape(len(own), -1)).all(axis=1)
+            blind = ~np.isfinite(np.asarray(own.force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
+            if own.track is not None:  # and the force the controller acts on
+                blind |= ~np.isfinite(np.asarray(own.track_force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
             flagged = np.isin(status, STOP_STATUSES) | blind
             if not flagged.any():
                 self._flag_start[finger] = math.nan
                 continue
             if blind.any():  # the frame's own status says why it has no force (no_pressure, out of range, ...)
                 own_status = np.asarray(own.status, dtype=object)
-                status = np.where(blind, [f"no force ({w})" for w in own_status.tolist()], status)
+                status = np.where(blind & ~np.isin(status, STOP_STATUSES), [f"no force ({w})" for w in
+                                                                            own_status.tolist()], status)
             start = self._flag_start[finger]
             for t, bad, what in zip(own.t_s.tolist(), flagged.tolist(), status.tolist()):
                 if not bad:
