@@ -228,20 +228,29 @@ def test_window_of_the_model_check_is_an_option(workdir):
         assert runs == windows, (out, runs)
 
 
-def test_track_without_a_noise_model_says_so(tmp_path, caplog):
-    """A calibration without its flat-recording noise gives no σ: the track has nothing to weigh, and says so."""
-    from helpers import linear_calibration, loaded_curvatures, signals_for
+def _tracked_hold(tmp_path, caplog, cal, n, dt_s):
+    """``load s.csv reconstruct estimate track save out`` of n frames dt_s apart, a tip load held at 60 kPa.
 
-    cal = linear_calibration(noise_std=None)
+    Returns the session's (signals, pressure); the chain must exit 0.
+    """
+    from helpers import loaded_curvatures, signals_for
+
     cal.save(tmp_path / "cal.yaml")
-    n = 20
     pressure = np.full(n, 60e3)
     signals = signals_for(loaded_curvatures(pressure, np.tile([0.05, 0.0], (n, 1))), cal)
-    write_session_csv(Session(np.arange(n) * 0.01, signals, pressure), tmp_path / "s.csv")
+    write_session_csv(Session(np.arange(n) * dt_s, signals, pressure), tmp_path / "s.csv")
     with caplog.at_level(logging.WARNING, logger="bendsense"):
         res = CliRunner().invoke(main, ["load", str(tmp_path / "s.csv"), "--calibration", str(tmp_path / "cal.yaml"),
                                         "reconstruct", "estimate", "track", "save", str(tmp_path / "out")])
     assert res.exit_code == 0, res.output
+    return signals, pressure
+
+
+def test_track_without_a_noise_model_says_so(tmp_path, caplog):
+    """A calibration without its flat-recording noise gives no σ: the track has nothing to weigh, and says so."""
+    from helpers import linear_calibration
+
+    _tracked_hold(tmp_path, caplog, linear_calibration(noise_std=None), 20, 0.01)
     assert any(r.getMessage().startswith("no tracked force: no frame has a force with a noise covariance")
                for r in caplog.records)
     results = read_results(tmp_path / "out")
@@ -284,21 +293,13 @@ def test_a_normal_contact_constraint_tracks_the_documented_time_varying_run(tmp_
 def test_a_track_the_likelihood_cannot_choose_says_so_in_one_line(tmp_path, caplog):
     """Frames a second apart: each starts its own segment, no innovation counts, the likelihood is flat; the
     track falls back to the stated bandwidth and says so (a DataWarning in the library, one line in the CLI)."""
-    from helpers import linear_calibration, loaded_curvatures, signals_for
+    from helpers import linear_calibration
 
     from bendsense.errors import DataWarning
     from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
 
-    cal = linear_calibration()
-    cal.save(tmp_path / "cal.yaml")
-    n = 6
-    pressure = np.full(n, 60e3)
-    signals = signals_for(loaded_curvatures(pressure, np.tile([0.05, 0.0], (n, 1))), cal)
-    write_session_csv(Session(np.arange(n) * 1.0, signals, pressure), tmp_path / "s.csv")
-    with caplog.at_level(logging.WARNING, logger="bendsense"):
-        res = CliRunner().invoke(main, ["load", str(tmp_path / "s.csv"), "--calibration", str(tmp_path / "cal.yaml"),
-                                        "reconstruct", "estimate", "track", "save", str(tmp_path / "out")])
-    assert res.exit_code == 0, res.output
+    cal, n = linear_calibration(), 6
+    signals, pressure = _tracked_hold(tmp_path, caplog, cal, n, 1.0)
     flat = [r.getMessage() for r in caplog.records if "likelihood is flat" in r.getMessage()]
     assert flat == [f"track: the likelihood is flat over the bandwidth (no segment has three frames with a "
                     f"force and a noise covariance): tracking at {DEFAULT_BANDWIDTH_HZ:g} Hz; give bandwidth_hz "
