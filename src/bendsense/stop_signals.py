@@ -14,7 +14,7 @@ import contextlib
 import signal
 import threading
 
-__all__ = ["STOP_SIGNALS", "deferred"]
+__all__ = ["STOP_SIGNALS", "handled", "deferred"]
 
 #: SIGINT, SIGTERM, SIGHUP, SIGQUIT (those the platform has)
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
@@ -22,26 +22,42 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SI
 
 
 @contextlib.contextmanager
-def deferred():
-    """Hold the stop signals off while the block runs; then raise the first that came again.
+def handled(handler, taken=lambda signum, current: current not in (signal.SIG_IGN, None)):
+    """``handler(signum, frame)`` for each stop signal that ``taken(signum, its current handler)`` accepts.
 
-    In the main thread (signals reach no other), each stop signal that is not ignored is
-    only noted while the block runs; after it, the previous handlers come back and the
-    first signal noted is raised again, so that its own handler acts on it (a
-    :class:`KeyboardInterrupt`, an exit status). Elsewhere the block runs as it is.
+    In the main thread only (signals reach no other; elsewhere the block runs as it is);
+    while the block runs; by default every stop signal not ignored (a job a shell started
+    in the background keeps ignoring them). The previous handlers come back after it.
+
+    Parameters
+    ----------
+    handler : callable
+        The handler, as for :func:`signal.signal`.
+    taken : callable, optional
+        ``taken(signum, current) -> bool``: whether to replace the signal's current handler.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    noted = []
-    previous = {}
-    for signum in STOP_SIGNALS:
-        if signal.getsignal(signum) not in (signal.SIG_IGN, None):
-            previous[signum] = signal.signal(signum, lambda s, frame: noted.append(s))
+    previous = {signum: signal.signal(signum, handler) for signum in STOP_SIGNALS
+                if taken(signum, signal.getsignal(signum))}
     try:
         yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        if noted:
-            signal.raise_signal(noted[0])
+        for signum, old in previous.items():
+            signal.signal(signum, old)
+
+
+@contextlib.contextmanager
+def deferred():
+    """Hold the stop signals off while the block runs; then raise the first that came again.
+
+    Each stop signal that is not ignored is only noted while the block runs (:func:`handled`);
+    after it, the previous handlers are back and the first signal noted is raised again, so
+    that its own handler acts on it (a :class:`KeyboardInterrupt`, an exit status).
+    """
+    noted = []
+    with handled(lambda signum, frame: noted.append(signum)):
+        yield
+    if noted:
+        signal.raise_signal(noted[0])

@@ -20,9 +20,8 @@ from __future__ import annotations
 
 import contextlib
 import signal
-import threading
 
-from bendsense.stop_signals import STOP_SIGNALS
+from bendsense.stop_signals import handled
 
 __all__ = ["installed", "note", "exit_code", "message"]
 
@@ -43,18 +42,8 @@ def installed():
     ignored; the previous handlers come back when the block ends.
     """
     _received.clear()
-    if threading.current_thread() is not threading.main_thread():
+    with handled(_raise, lambda signum, current: current is not signal.SIG_IGN):
         yield
-        return
-    previous = {}
-    for signum in STOP_SIGNALS:
-        if signal.getsignal(signum) is not signal.SIG_IGN:
-            previous[signum] = signal.signal(signum, _raise)
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
 
 
 def note(err: BaseException, text: str) -> None:

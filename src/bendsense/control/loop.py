@@ -31,7 +31,6 @@ import logging
 import math
 import signal
 import sys
-import threading
 import time
 from dataclasses import dataclass
 
@@ -40,7 +39,7 @@ import numpy as np
 from bendsense.control.safety import ControlStop, Guard, Safety
 from bendsense.errors import ArgumentError, DeviceError
 from bendsense.readings import sample_lines
-from bendsense.stop_signals import STOP_SIGNALS, deferred
+from bendsense.stop_signals import deferred, handled
 
 __all__ = ["run", "ControlResult", "LineZero", "zero_report", "DEFAULT_MAX_PRESSURE_PA", "HEARTBEAT_S"]
 
@@ -211,20 +210,11 @@ def _signals_stop():
     In the main thread, for each that nobody handles yet (its default action would kill
     the process without the zeros); the previous handlers come back after.
     """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
+    def interrupt(signum, frame):
         raise KeyboardInterrupt
 
-    previous = {signum: signal.signal(signum, handler) for signum in STOP_SIGNALS
-                if signum != signal.SIGINT and signal.getsignal(signum) is signal.SIG_DFL}
-    try:
+    with handled(interrupt, lambda signum, current: signum != signal.SIGINT and current is signal.SIG_DFL):
         yield
-    finally:
-        for signum, old in previous.items():
-            signal.signal(signum, old)
 
 
 def _lines(processor, n_lines) -> tuple:
