@@ -50,10 +50,10 @@ def hold(port, pressure_pa, settle_s=0.25, seconds=0.3):
 
 
 def test_a_board_whose_ei_is_30_percent_high_presses_harder_on_a_rigid_object(tmp_path):
-    # the same rigid object (touched at 40 kPa, at s_c = 0.10 m) and pressure: a stiffer finger pushes harder
-    options = {"object_kind": "rigid", "object_s_m": (0.10,), "object_touch_kpa": (40.0,), "max_pressure_kpa": 80.0}
+    # the same rigid object (touched at 60 kPa, at s_c = 0.10 m) and pressure: a stiffer finger pushes harder
+    options = {"object_kind": "rigid", "object_s_m": (0.10,), "object_touch_kpa": (60.0,), "max_pressure_kpa": 80.0}
     stiff = grasp_board(options, rate_hz=RATE, seed=0, adc_bits=12, errors={"ei_error": 0.3})
-    exact = FingerGrasp(SimulatedActuator.from_config(CONFIG), GraspObject(0.10, 40e3), max_pressure_pa=80e3,
+    exact = FingerGrasp(SimulatedActuator.from_config(CONFIG), GraspObject(0.10, 60e3), max_pressure_pa=80e3,
                         step_pa=40e3)
     path = tmp_path / "truth.csv"
     truth = TruthWriter(path, truth_columns())
@@ -84,3 +84,24 @@ def test_sim_device_model_errors_are_checked(args, hint):
     errors = [line for line in res.output.splitlines() if line.startswith("Error")]
     assert res.exit_code == 2 and len(errors) == 1 and hint in res.output, res.output
     assert "Traceback" not in res.output
+
+
+def test_a_board_with_pressure_play_bends_as_the_pressure_it_came_from():
+    # play of 10 kPa: held at 50 kPa after 60 kPa, the finger bends as at 55 kPa (the play's upper edge)
+    from bendsense.sim.gripper import GraspBoard
+
+    def settled(board, setpoints):
+        k = 0
+        for p in setpoints:
+            board.setpoint(0, p)
+            for _ in range(250):  # 0.5 s at 500 Hz: 20 time constants of the regulator
+                pressure, counts, _ = board(k)
+                k += 1
+        return pressure, counts
+
+    play = GraspBoard(CONFIG, [None], rate_hz=RATE, noise_counts=0.0, step_pa=5e3, hysteresis_pa=10e3)
+    plain = GraspBoard(CONFIG, [None], rate_hz=RATE, noise_counts=0.0, step_pa=5e3)
+    pressure, counts = settled(play, [60e3, 50e3])
+    assert pressure == pytest.approx(50e3, abs=1.0)  # the reading: the regulator's pressure
+    assert np.array_equal(counts, settled(plain, [55e3])[1])
+    assert not np.array_equal(counts, settled(plain, [50e3])[1])
