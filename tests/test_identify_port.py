@@ -1,7 +1,8 @@
 """``identify free-bending --port``: a free sweep driven on a live board, recorded and fitted.
 
-The boards are ``bendsense sim-device`` processes whose actuator's K0 is 8 % above or
-below the config's (``--k0-error``), started once for the module; the identified K0(P) is
+The boards are simulated boards whose actuator's K0 is 8 % above or below the config's
+(``bendsense sim-device --k0-error 0.08`` in the background, and the same board with -0.08
+in this process), started once for the module; the identified K0(P) is
 scored against the true one computed independently (tests/forward_model.py: its own
 quadrature of the free-bending model, times the board's ``1 + k0_error``), and the
 board's truth file says what the line did.
@@ -26,6 +27,7 @@ from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.device.driver import Driver
 from bendsense.device.simdevice import SimulatedDevice, scripted_board
+from bendsense.sim.truth import TruthWriter, truth_columns
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 CONFIG = bendsense.load_config()
@@ -43,27 +45,29 @@ def truth_rows(path):
 
 @pytest.fixture(scope="module")
 def boards(tmp_path_factory):
-    """Two sim-device boards, K0 +8 % and -8 %, each with its truth file (started together)."""
+    """K0 +8 %: ``bendsense sim-device --k0-error 0.08`` in the background; K0 -8 %: its board in this process.
+
+    Each with its truth file; the second is built while the first starts.
+    """
     root = tmp_path_factory.mktemp("boards")
-    procs = {}
-    for error in (0.08, -0.08):
-        truth = root / f"truth{error:+g}.csv"
-        procs[error] = (subprocess.Popen([*CLI, "sim-device", "--rate", str(RATE), "--k0-error", str(error),
-                                          "--truth", str(truth)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                         text=True), truth)
+    high, low = root / "truth+0.08.csv", root / "truth-0.08.csv"
+    proc = subprocess.Popen([*CLI, "sim-device", "--rate", str(RATE), "--k0-error", "0.08", "--truth", str(high)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    truth = None
     try:
-        ports = {}
-        for error, (proc, truth) in procs.items():
+        truth = TruthWriter(low, truth_columns())
+        with SimulatedDevice(scripted_board(rate_hz=RATE, k0_error=-0.08, truth=True), rate_hz=RATE,
+                             truth=truth) as dev:
             port = proc.stdout.readline().strip()
             assert port.startswith("/dev/"), proc.stderr.read()
-            ports[error] = (port, truth)
-        yield ports
+            yield {0.08: (port, high), -0.08: (dev.port, low)}
     finally:
-        for proc, _ in procs.values():
-            proc.terminate()
-            proc.wait(10)
-            proc.stdout.close()
-            proc.stderr.close()
+        proc.terminate()
+        proc.wait(10)
+        proc.stdout.close()
+        proc.stderr.close()
+        if truth is not None:
+            truth.close()
 
 
 def identify(port, calibration_path, out, *extra):
