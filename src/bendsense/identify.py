@@ -222,6 +222,9 @@ class FreeBendingFit:
         Covariance of ``shear_modulus_pa``, ``sensor_stiffness_nm_per_rad``,
         ``prebend_angle_rad`` in that order (``s² (JᵀJ)⁻¹`` for the free ones, 0 for
         fixed ones; inf if not identifiable).
+    posterior : dict, optional
+        A fit with a prior: ``values`` (every parameter the prior states, the stiffness
+        ones included) and ``section`` (the config's ``parameter_covariance``, updated).
     """
 
     params: dict
@@ -235,6 +238,7 @@ class FreeBendingFit:
     success: bool
     message: str
     covariance: np.ndarray | None = None
+    posterior: dict | None = None
 
     @property
     def rms_rad(self) -> float:
@@ -246,13 +250,18 @@ class FreeBendingFit:
 
         The covariance goes into ``parameter_covariance`` (the block of the three
         free-bending parameters; another fit's block already there is kept, with zero
-        cross-covariance). Not written if the parameters are not identifiable.
+        cross-covariance). Not written if the parameters are not identifiable. A fit with
+        a prior writes its posterior: every parameter the prior states, and the whole
+        covariance section updated.
 
         Parameters
         ----------
         config : Config
             The config to copy.
         """
+        if self.posterior is not None:
+            new = _implausible_fit("free-bending", lambda: config.with_model_parameters(self.posterior["values"]))
+            return new.replace(parameter_covariance=self.posterior["section"])
         new = _implausible_fit("free-bending", lambda: config.replace(
             material=dataclasses.replace(config.material, **self.params)))
         if self.covariance is None:
@@ -313,12 +322,21 @@ def fit_free_bending(
     initial: Mapping[str, float] | None = None,
     data_covariance=None,
     systematic_covariance=None,
+    prior: bool = False,
+    stiffness_response=None,
 ) -> FreeBendingFit:
     """Fit μ̄, μ_s and the prebend angle to free-bending data (paper eq. 8–12, section V-C).
 
     Minimises Σ (θ_model(P_i) − θ_i)² with ``scipy.optimize.least_squares`` and the exact
     Jacobian from the implicit function theorem on eq. 8 (μ̄ ≥ 0, μ_s ≥ 0). Standard
     errors are ``sqrt(diag(s² (JᵀJ)⁻¹))`` with ``s² = RSS / (n − k)``.
+
+    With ``prior`` the config's values and its ``parameter_covariance`` Σ₀ are a Gaussian
+    prior: its rows ``Σ₀^(-1/2) (x − x₀)`` join the same least squares, and the data's
+    rows are whitened by their covariance (``Σ^(-1/2) (θ_model − θ)``), so that the
+    minimum is the posterior mean (a Bayesian update, linearised at the optimum) and the
+    sandwich below ``(J̃ᵀJ̃)⁻¹``, the posterior covariance (:func:`bendsense.adapt`). A
+    fit without a prior is the special case with no prior rows, the data weighted equally.
 
     Parameters
     ----------
@@ -338,11 +356,21 @@ def fit_free_bending(
     data_covariance : array_like, shape (n, n), optional
         Covariance of the angles [rad²] (correlated errors, e.g. one calibration's for
         every frame of a session); the parameters' covariance is then the sandwich
-        ``A Σ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``) scaled by ``max(1, RSS / tr((I − H) Σ))``.
+        ``A Σ Aᵀ`` (``A`` the whitened fit's linear map) with Σ scaled by
+        ``max(1, RSS / E[RSS])`` when the residuals scatter more than it says.
     systematic_covariance : array_like, shape (n, n), optional
         With ``data_covariance``: a further error common to the angles that the
         residuals cannot show (e.g. from another fit's parameters) [rad²]; added to the
         sandwich unscaled.
+    prior : bool
+        Update ``config.parameter_covariance`` (the prior about the config's values)
+        with the data; needs ``data_covariance`` (the data's weight against the prior).
+        Free-bending parameters with no prior variance are held at their values.
+    stiffness_response : array_like, shape (n, 2), optional
+        With ``prior``: ∂θ_i/∂(ei0_nm2, ei1_nm2_per_pa), how each measured angle moves
+        with the stiffness (the gravity correction of a session's free frames). The
+        stiffness the prior states keeps its values and variances; its uncertainty
+        weighs the data and the posterior keeps the cross-covariances it implies.
 
     Returns
     -------
@@ -362,22 +390,39 @@ def fit_free_bending(
     p, y = _free_bending_data(pressure_pa, bending_angle_rad)
     start = _free_bending_start(config.material, initial)
     free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start, config)
-    if len(p) <= len(free):
+    data_cov = _data_covariance(data_covariance, len(p))
+    sys_cov = _data_covariance(systematic_covariance, len(p), "systematic_covariance")
+    belief = _Prior.of(config, prior, fix, start, data_cov, stiffness_response, len(p))
+    free = [n for n in free if n not in belief.held]
+    fixed.update({n: start[n] for n in belief.held})
+    names = free
+    if len(p) + len(belief.mean) <= len(names) or (prior and not names):
         raise ArgumentError(
             f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
         )
-    scale = np.array([abs(start[n]) or _TYPICAL[n] for n in free])
+    scale = np.array([abs(start[n]) or _TYPICAL[n] for n in names])
     lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf}
-    lb = np.array([lower[n] for n in free]) / scale
-    x0 = np.array([start[n] for n in free]) / scale
+    lb = np.array([lower[n] for n in names]) / scale
+    x0 = np.array([start[n] for n in names]) / scale
     x0 = np.maximum(x0, np.where(np.isfinite(lb), lb + 1e-6, -np.inf))
-    unpack, resid, jac = _free_bending_problem(p, y, _geometry(config.actuator), free, fixed, scale)
-    x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, free)
+    # weighed against a prior, the data count by their covariance (the stiffness' part included); alone,
+    # equally (the sandwich below)
+    whiten = np.linalg.inv(np.linalg.cholesky(data_cov + (0.0 if sys_cov is None else sys_cov)
+                                              + belief.stiffness_covariance())) if prior else None
+    unpack, angles, resid, jac = _free_bending_problem(p, y, _geometry(config.actuator), names, fixed, scale,
+                                                       whiten, belief)
+    x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, names)
     values = unpack(x)
     r = resid(x)
-    cov, dof = _covariance(jac(x) / scale, r, _data_covariance(data_covariance, len(p)),
-                           _data_covariance(systematic_covariance, len(p), "systematic_covariance"))
-    stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
+    joint = None
+    if whiten is None:
+        cov, dof = _covariance(jac(x), r, data_cov, sys_cov)
+        cov = cov * np.outer(scale, scale)
+    else:
+        joint = belief.sandwich(jac(x), r, whiten, data_cov, sys_cov, scale)
+        cov, dof = joint[:len(names), :len(names)], len(p)
+    m = len(free)
+    stderr = _stderr(cov[:m, :m], free, FREE_BENDING_PARAMS)
     if at_bound:
         ok = False
         message += f"; {', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
@@ -385,18 +430,111 @@ def fit_free_bending(
         ok = False
         message += "; parameters not identifiable from these data (fix one)"
     return FreeBendingFit(
-        params=values,
+        params={n: values[n] for n in FREE_BENDING_PARAMS},
         stderr=stderr,
         free=tuple(free),
-        correlation=_correlation(cov),
-        residuals=r,
+        correlation=_correlation(cov[:m, :m]),
+        residuals=angles(x),
         pressure_pa=p,
         bending_angle_rad=y,
         dof=dof,
         success=ok,
         message=message,
-        covariance=_full_covariance(cov, free, FREE_BENDING_PARAMS),
+        covariance=_full_covariance(cov[:m, :m], free, FREE_BENDING_PARAMS),
+        posterior=belief.posterior(names, values, joint, len(p)) if prior else None,
     )
+
+
+@dataclass(frozen=True)
+class _Prior:
+    """The prior rows of :func:`fit_free_bending`: ``Σ₀^(-1/2) (x − x₀)`` over the free-bending parameters.
+
+    ``held``: free-bending parameters the prior states no variance for (known exactly);
+    ``stiffness``: the stiffness parameters it states, which the data see through
+    ``response`` (n, len(stiffness)) = ∂θ_i/∂(ei0, ei1) only: their values stay the
+    prior's (the gravity sag of free frames is too weak a lever to learn EI from, and a
+    small misfit of K0(P) would move it), their uncertainty is carried in the data's
+    weights and the posterior's cross-covariances. ``mean`` and ``root`` over the
+    free-bending parameters fitted; ``cov`` the prior over those, then ``stiffness``.
+    """
+
+    held: tuple = ()
+    stiffness: tuple = ()
+    response: np.ndarray | None = None
+    mean: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    root: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    section: object = None
+
+    @classmethod
+    def of(cls, config, prior, fix, start, data_cov, stiffness_response, n):
+        if not prior:
+            return cls()
+        section = config.parameter_covariance
+        if section is None:
+            raise ArgumentError(f"prior: config {config.name!r} states no parameter_covariance to update")
+        if data_cov is None:
+            raise ArgumentError("prior: needs data_covariance (what the data weigh against the prior)")
+        if fix:
+            raise ArgumentError("fix: not with a prior (a parameter known exactly has no prior variance)")
+        var = {name: float(section.matrix[i, i]) for i, name in enumerate(section.parameters)}
+        held = tuple(name for name in FREE_BENDING_PARAMS if not var.get(name, 0.0) > 0)
+        stiffness = tuple(name for name in STIFFNESS_PARAMS if var.get(name, 0.0) > 0)
+        response = np.zeros((n, 0))
+        if stiffness:
+            if stiffness_response is None:
+                raise ArgumentError(f"stiffness_response: needed with a prior on {', '.join(stiffness)}")
+            response = np.asarray(stiffness_response, dtype=float).reshape(n, len(STIFFNESS_PARAMS))
+            response = response[:, [STIFFNESS_PARAMS.index(name) for name in stiffness]]
+        fitted = [name for name in FREE_BENDING_PARAMS if name not in held]
+        idx = [section.parameters.index(name) for name in [*fitted, *stiffness]]
+        cov = section.matrix[np.ix_(idx, idx)]
+        k = len(fitted)
+        root = np.linalg.inv(np.linalg.cholesky(cov[:k, :k]))
+        return cls(held, stiffness, response, np.array([start[name] for name in fitted]), root, cov, section)
+
+    def stiffness_covariance(self) -> np.ndarray:
+        """The data's covariance from the stiffness' prior: ``R Σ_b Rᵀ`` [rad²]."""
+        k = len(self.mean)
+        return self.response @ self.cov[k:, k:] @ self.response.T
+
+    def sandwich(self, jac, resid, whiten, data_cov, sys_cov, scale) -> np.ndarray:
+        """The posterior covariance over the fitted free-bending parameters, then ``stiffness``.
+
+        The fit is linear in its errors: ``x̂ − x = A_p L (x₀ − x) + A_d W (R (b − b₀) + e)``
+        (``A = J̃⁺`` split into the data's and the prior's columns, ``L = root``,
+        ``W`` the whitening), the stiffness' estimate ``b₀`` errs by ``b₀ − b``; so with
+        the prior's joint covariance Σ₀ the posterior is ``M Σ₀ Mᵀ + f A_d W Σ_e Wᵀ A_dᵀ``
+        (``f = max(1, RSS / E[RSS])`` over the data rows, as :func:`_covariance`).
+        """
+        n, k = len(whiten), len(self.mean)
+        pinv = np.linalg.pinv(jac)
+        a = scale[:, None] * pinv  # in SI units (jac is in the scaled parameters)
+        a_d, a_p = a[:, :n], a[:, n:]
+        sigma = whiten @ data_cov @ whiten.T
+        hat = (jac @ pinv)[:n, :n]
+        expected = float(np.trace(sigma) - np.trace(hat @ sigma))
+        factor = max(1.0, float(resid[:n] @ resid[:n]) / expected) if expected > 0 else 1.0
+        m = np.eye(len(self.cov))
+        m[:k, :k] = a_p @ self.root
+        m[:k, k:] = -a_d @ whiten @ self.response
+        out = m @ self.cov @ m.T
+        noise = factor * sigma + (0.0 if sys_cov is None else whiten @ sys_cov @ whiten.T)
+        out[:k, :k] += a_d @ noise @ a_d.T
+        return 0.5 * (out + out.T)
+
+    def posterior(self, names, values, joint, n) -> dict:
+        """The posterior: the fitted ``values`` and the config's covariance section updated by ``joint``."""
+        from bendsense.config import ParameterCovarianceConfig
+
+        old = self.section
+        idx = [old.parameters.index(name) for name in [*names, *self.stiffness]]
+        matrix = np.zeros_like(old.matrix)  # the parameters the prior holds exactly stay exact
+        matrix[np.ix_(idx, idx)] = joint
+        source = f"{old.source or 'a prior'}; updated by {n} free frames (Bayesian: prior and data)"
+        section = ParameterCovarianceConfig(parameters=old.parameters, source=source,
+                                            covariance=tuple(tuple(float(v) for v in row) for row in matrix))
+        return {"values": {name: values[name] for name in names}, "section": section}
 
 
 def _free_bending_data(pressure_pa, bending_angle_rad):
@@ -432,25 +570,31 @@ def _free_bending_start(material, initial) -> dict:
     return start
 
 
-def _free_bending_problem(p, y, geom, free, fixed, scale):
-    """The least-squares problem in the scaled free parameters x: ``(unpack, resid, jac)``.
+def _free_bending_problem(p, y, geom, names, fixed, scale, whiten=None, prior=None):
+    """The least-squares problem in the scaled fitted parameters x: ``(unpack, angles, resid, jac)``.
 
-    ``unpack(x)`` gives every parameter's value, ``resid(x)`` the angle residuals
-    θ_model(P_i) − θ_i [rad], ``jac(x)`` their exact Jacobian in x from the implicit
-    function theorem on eq. 8.
+    ``unpack(x)`` gives every parameter's value, ``angles(x)`` the angle residuals
+    θ_model(P_i) − θ_i [rad], ``resid(x)``
+    them whitened by ``whiten`` and followed by the prior rows, ``jac(x)`` its exact
+    Jacobian in x from the implicit function theorem on eq. 8.
     """
+    prior = _Prior() if prior is None else prior
 
     def unpack(x):
         values = dict(fixed)
-        values.update({n: float(v) for n, v in zip(free, x * scale, strict=True)})
+        values.update({n: float(v) for n, v in zip(names, x * scale, strict=True)})
         return values
 
     def model(values):
-        theta = solve_bending_angle(p, **geom, **values)
+        theta = solve_bending_angle(p, **geom, **{n: values[n] for n in FREE_BENDING_PARAMS})
         return theta, theta - values["prebend_angle_rad"]
 
-    def resid(x):
+    def angles(x):
         return model(unpack(x))[0] - y
+
+    def resid(x):
+        r = angles(x) if whiten is None else whiten @ angles(x)
+        return r if prior.root is None else np.concatenate([r, prior.root @ (x * scale - prior.mean)])
 
     def jac(x):
         values = unpack(x)
@@ -465,9 +609,11 @@ def _free_bending_problem(p, y, geom, free, fixed, scale):
             "sensor_stiffness_nm_per_rad": -theta0 / denom,
             "prebend_angle_rad": np.ones_like(theta0),
         }
-        return np.stack([cols[n] for n in free], axis=-1) * scale if free else np.zeros((len(p), 0))
+        j = np.stack([cols[n] for n in names], axis=-1) * scale if names else np.zeros((len(p), 0))
+        j = j if whiten is None else whiten @ j
+        return j if prior.root is None else np.concatenate([j, prior.root * scale], axis=0)
 
-    return unpack, resid, jac
+    return unpack, angles, resid, jac
 
 
 def _solve_free_bending(resid, jac, x0, lb, free):

@@ -21,13 +21,15 @@ _FRAMES_PER_BLOCK = 64  # frames per block of the joint covariance (memory (2 ·
 
 
 def _covariance(jac: np.ndarray, resid: np.ndarray, data_cov: np.ndarray | None = None,
-                systematic_cov: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                systematic_cov: np.ndarray | None = None, n_data: int | None = None) -> tuple[np.ndarray, int]:
     """s² (JᵀJ)⁻¹ with s² = RSS / (n − k); inf where the parameters are not identifiable.
 
     With the data's covariance Σ (n, n): the sandwich ``A (f Σ + Σ_sys) Aᵀ``,
     ``A = (JᵀJ)⁻¹Jᵀ``, ``f = max(1, RSS / E[RSS])`` with ``E[RSS] = tr((I − H) Σ)``
     (H the hat matrix): residuals that scatter more than Σ says scale Σ up, not the
     systematic part ``Σ_sys`` (an error common to the data that the residuals cannot show).
+    ``n_data``: only the first rows are data (RSS and its expectation over them); the
+    others are a prior's rows (their covariance in ``Σ_sys``).
     """
     n, k = jac.shape
     dof = n - k
@@ -41,8 +43,10 @@ def _covariance(jac: np.ndarray, resid: np.ndarray, data_cov: np.ndarray | None 
     if data_cov is None:
         return (vt.T / sv**2) @ vt * s2, dof
     a = (vt.T / sv) @ u.T  # (JᵀJ)⁻¹Jᵀ
-    expected = float(np.trace(data_cov) - np.trace(u.T @ data_cov @ u))
-    factor = max(1.0, float(resid @ resid) / expected) if expected > 0 else 1.0
+    d = n if n_data is None else n_data
+    ud = u[:d]
+    expected = float(np.trace(data_cov[:d, :d]) - np.trace(ud.T @ data_cov[:d, :d] @ ud))
+    factor = max(1.0, float(resid[:d] @ resid[:d]) / expected) if expected > 0 else 1.0
     total = data_cov * factor + (0.0 if systematic_cov is None else systematic_cov)
     return a @ total @ a.T, dof
 
@@ -124,7 +128,7 @@ def _covariance_note(cov) -> str:
     return "  covariance NOT written (parameters not identifiable, or no degrees of freedom)"
 
 
-def session_covariance(calibration, signals, weights, groups, n_groups: int, noise_std=None) -> np.ndarray:
+def session_covariance(calibration, shifts_m, weights, groups, n_groups: int, noise_std=None) -> np.ndarray:
     """Covariance of linear functions of many frames' shifts under one calibration's errors.
 
     Output ``g`` is ``y_g = Σ_{a: groups[a] = g} weights[a] · S_a`` (to first order),
@@ -139,8 +143,8 @@ def session_covariance(calibration, signals, weights, groups, n_groups: int, noi
     ----------
     calibration : Calibration
         The calibration (its :meth:`~bendsense.calibration.Calibration.error_model`).
-    signals : array_like, shape (K, N)
-        The frames' raw signals.
+    shifts_m : array_like, shape (K, N)
+        The frames' shifts [m] (``calibration.shifts_m(signals)``).
     weights : array_like, shape (K, N)
         ∂y/∂S of each frame [output unit per m].
     groups : array_like of int, shape (K,)
@@ -158,7 +162,7 @@ def session_covariance(calibration, signals, weights, groups, n_groups: int, noi
     from bendsense.shift_errors import shift_covariance
 
     m = calibration.error_model(noise_std)
-    shifts = np.asarray(calibration.shifts_m(signals), dtype=float)
+    shifts = np.asarray(shifts_m, dtype=float)
     K, N = shifts.shape
     w = np.asarray(weights, dtype=float)
     g = np.asarray(groups, dtype=int)
