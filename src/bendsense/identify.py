@@ -65,6 +65,9 @@ from bendsense.identify_covariance import (
     _covariance,
     _covariance_note,
     _full_covariance,
+    _pooled_errors,
+    _Prior,
+    _regress_levels,
     _stderr,
     _with_covariance,
 )
@@ -416,8 +419,7 @@ def fit_free_bending(
     r = resid(x)
     joint = None
     if whiten is None:
-        cov, dof = _covariance(jac(x), r, data_cov, sys_cov)
-        cov = cov * np.outer(scale, scale)
+        cov, dof = _covariance(jac(x) / scale, r, data_cov, sys_cov)
     else:
         joint = belief.sandwich(jac(x), r, whiten, data_cov, sys_cov, scale)
         cov, dof = joint[:len(names), :len(names)], len(p)
@@ -443,98 +445,6 @@ def fit_free_bending(
         covariance=_full_covariance(cov[:m, :m], free, FREE_BENDING_PARAMS),
         posterior=belief.posterior(names, values, joint, len(p)) if prior else None,
     )
-
-
-@dataclass(frozen=True)
-class _Prior:
-    """The prior rows of :func:`fit_free_bending`: ``Σ₀^(-1/2) (x − x₀)`` over the free-bending parameters.
-
-    ``held``: free-bending parameters the prior states no variance for (known exactly);
-    ``stiffness``: the stiffness parameters it states, which the data see through
-    ``response`` (n, len(stiffness)) = ∂θ_i/∂(ei0, ei1) only: their values stay the
-    prior's (the gravity sag of free frames is too weak a lever to learn EI from, and a
-    small misfit of K0(P) would move it), their uncertainty is carried in the data's
-    weights and the posterior's cross-covariances. ``mean`` and ``root`` over the
-    free-bending parameters fitted; ``cov`` the prior over those, then ``stiffness``.
-    """
-
-    held: tuple = ()
-    stiffness: tuple = ()
-    response: np.ndarray | None = None
-    mean: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
-    root: np.ndarray | None = None
-    cov: np.ndarray | None = None
-    section: object = None
-
-    @classmethod
-    def of(cls, config, prior, fix, start, data_cov, stiffness_response, n):
-        if not prior:
-            return cls()
-        section = config.parameter_covariance
-        if section is None:
-            raise ArgumentError(f"prior: config {config.name!r} states no parameter_covariance to update")
-        if data_cov is None:
-            raise ArgumentError("prior: needs data_covariance (what the data weigh against the prior)")
-        if fix:
-            raise ArgumentError("fix: not with a prior (a parameter known exactly has no prior variance)")
-        var = {name: float(section.matrix[i, i]) for i, name in enumerate(section.parameters)}
-        held = tuple(name for name in FREE_BENDING_PARAMS if not var.get(name, 0.0) > 0)
-        stiffness = tuple(name for name in STIFFNESS_PARAMS if var.get(name, 0.0) > 0)
-        response = np.zeros((n, 0))
-        if stiffness:
-            if stiffness_response is None:
-                raise ArgumentError(f"stiffness_response: needed with a prior on {', '.join(stiffness)}")
-            response = np.asarray(stiffness_response, dtype=float).reshape(n, len(STIFFNESS_PARAMS))
-            response = response[:, [STIFFNESS_PARAMS.index(name) for name in stiffness]]
-        fitted = [name for name in FREE_BENDING_PARAMS if name not in held]
-        idx = [section.parameters.index(name) for name in [*fitted, *stiffness]]
-        cov = section.matrix[np.ix_(idx, idx)]
-        k = len(fitted)
-        root = np.linalg.inv(np.linalg.cholesky(cov[:k, :k]))
-        return cls(held, stiffness, response, np.array([start[name] for name in fitted]), root, cov, section)
-
-    def stiffness_covariance(self) -> np.ndarray:
-        """The data's covariance from the stiffness' prior: ``R Σ_b Rᵀ`` [rad²]."""
-        k = len(self.mean)
-        return self.response @ self.cov[k:, k:] @ self.response.T
-
-    def sandwich(self, jac, resid, whiten, data_cov, sys_cov, scale) -> np.ndarray:
-        """The posterior covariance over the fitted free-bending parameters, then ``stiffness``.
-
-        The fit is linear in its errors: ``x̂ − x = A_p L (x₀ − x) + A_d W (R (b − b₀) + e)``
-        (``A = J̃⁺`` split into the data's and the prior's columns, ``L = root``,
-        ``W`` the whitening), the stiffness' estimate ``b₀`` errs by ``b₀ − b``; so with
-        the prior's joint covariance Σ₀ the posterior is ``M Σ₀ Mᵀ + f A_d W Σ_e Wᵀ A_dᵀ``
-        (``f = max(1, RSS / E[RSS])`` over the data rows, as :func:`_covariance`).
-        """
-        n, k = len(whiten), len(self.mean)
-        pinv = np.linalg.pinv(jac)
-        a = scale[:, None] * pinv  # in SI units (jac is in the scaled parameters)
-        a_d, a_p = a[:, :n], a[:, n:]
-        sigma = whiten @ data_cov @ whiten.T
-        hat = (jac @ pinv)[:n, :n]
-        expected = float(np.trace(sigma) - np.trace(hat @ sigma))
-        factor = max(1.0, float(resid[:n] @ resid[:n]) / expected) if expected > 0 else 1.0
-        m = np.eye(len(self.cov))
-        m[:k, :k] = a_p @ self.root
-        m[:k, k:] = -a_d @ whiten @ self.response
-        out = m @ self.cov @ m.T
-        noise = factor * sigma + (0.0 if sys_cov is None else whiten @ sys_cov @ whiten.T)
-        out[:k, :k] += a_d @ noise @ a_d.T
-        return 0.5 * (out + out.T)
-
-    def posterior(self, names, values, joint, n) -> dict:
-        """The posterior: the fitted ``values`` and the config's covariance section updated by ``joint``."""
-        from bendsense.config import ParameterCovarianceConfig
-
-        old = self.section
-        idx = [old.parameters.index(name) for name in [*names, *self.stiffness]]
-        matrix = np.zeros_like(old.matrix)  # the parameters the prior holds exactly stay exact
-        matrix[np.ix_(idx, idx)] = joint
-        source = f"{old.source or 'a prior'}; updated by {n} free frames (Bayesian: prior and data)"
-        section = ParameterCovarianceConfig(parameters=old.parameters, source=source,
-                                            covariance=tuple(tuple(float(v) for v in row) for row in matrix))
-        return {"values": {name: values[name] for name in names}, "section": section}
 
 
 def _free_bending_data(pressure_pa, bending_angle_rad):
@@ -944,73 +854,3 @@ def _fit_levels(data: StiffnessData, level, n_levels: int, stiffness, k0, w, len
         if not ok:
             failed.append(f"{lp[j] / 1e3:.3g} kPa")
     return lp, lei, _pooled_errors(lse, lrms, counts), lrms, pos_res, failed, sens
-
-
-def _pooled_errors(lse, lrms, counts):
-    """The levels' standard errors of EI, their residual variance at least the one pooled over the levels.
-
-    A level's own ``s_j² = RSS_j / (n_j − 1)`` rests on 3–5 degrees of freedom (two or
-    three loads); weighted by such noisy ``1/se²`` the regression claimed a σ of γ1 0.77 of
-    its scatter over 200 refits (tests/test_parameter_prior.py). One camera sees every
-    level with the same noise: ``max(s_j², s²)``, ``s² = Σ RSS_j / Σ (n_j − 1)``,
-    ``RSS_j = n_j rms_j²``; a level that misfits more than the others keeps its weight down.
-    """
-    dof = counts - 1
-    rss = counts * lrms**2
-    own = rss / np.maximum(dof, 1)
-    use = np.isfinite(lse) & np.isfinite(rss) & (dof > 0)
-    if not use.any() or not rss[use].sum() > 0:
-        return lse
-    pooled = rss[use].sum() / dof[use].sum()
-    scale = use & (own > 0)
-    out = lse.copy()
-    out[scale] = lse[scale] * np.sqrt(np.maximum(pooled, own[scale]) / own[scale])
-    return out
-
-
-def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool, level_cov=None):
-    """Linear regression EI_j = ei0 + ei1 P_j over the levels (paper eq. 15).
-
-    Weighted by 1/σ_EI² when ``weighted`` and every level has a finite standard error;
-    the covariance scaled up by χ²/(levels − k) when the levels scatter more than their
-    errors say. With the levels' covariances (Σ, Σ_sys) (correlated errors): the
-    sandwich ``A (f Σ + Σ_sys) Aᵀ`` (A the regression's linear map), ``f = max(1,
-    χ² / E[χ²])`` with E[χ²] from Σ. Returns
-    the parameters' values, the levels' residuals [N m²], the free parameters'
-    covariance and whether the weights were used.
-    """
-    n_levels = len(lp)
-    design = {"ei0_nm2": np.ones(n_levels), "ei1_nm2_per_pa": lp}
-    target = lei - sum(fixed[n] * design[n] for n in fixed)
-    X = np.stack([design[n] for n in free], axis=-1) if free else np.zeros((n_levels, 0))
-    finite_se = np.isfinite(lse) & (lse > 0)
-    use_weights = weighted and bool(np.all(finite_se))
-    weights = 1.0 / lse**2 if use_weights else np.ones(n_levels)
-    sw = np.sqrt(weights)
-    if free:
-        beta, *_ = np.linalg.lstsq(X * sw[:, None], target * sw, rcond=None)
-    else:
-        beta = np.zeros(0)
-    values = dict(fixed)
-    values.update({n: float(b) for n, b in zip(free, beta, strict=True)})
-    line = values["ei0_nm2"] + values["ei1_nm2_per_pa"] * lp
-    residuals = lei - line
-    dof = n_levels - len(free)
-    if free and level_cov is not None:
-        a = np.linalg.pinv((X * weights[:, None]).T @ X) @ (X * weights[:, None]).T
-        resid_map = np.eye(n_levels) - X @ a
-        data_cov, sys_cov = level_cov
-        expected = float(np.trace(weights[:, None] * (resid_map @ data_cov @ resid_map.T)))
-        chi2 = float(np.sum(weights * residuals**2))
-        cov = a @ (data_cov * (max(1.0, chi2 / expected) if expected > 0 else 1.0) + sys_cov) @ a.T
-    elif free:
-        xtwx_inv = np.linalg.pinv((X * weights[:, None]).T @ X)
-        chi2 = float(np.sum(weights * residuals**2))
-        if use_weights:
-            factor = max(1.0, chi2 / dof) if dof > 0 else 1.0
-        else:
-            factor = chi2 / dof if dof > 0 else math.inf
-        cov = xtwx_inv * factor
-    else:
-        cov = np.zeros((0, 0))
-    return values, residuals, cov, use_weights

@@ -59,7 +59,9 @@ from bendsense.identify import StiffnessData, fit_free_bending
 from bendsense.identify_covariance import session_covariance
 
 __all__ = [
+    "ADAPT_FRAMES",
     "FREE_CHI2_2SIGMA",
+    "FREE_P",
     "MAX_FRAMES",
     "Adaptation",
     "FreeBendingSessionFit",
@@ -77,6 +79,9 @@ FREE_CHI2_2SIGMA = -2.0 * math.log(1.0 - math.erf(2.0 / math.sqrt(2.0)))
 FREE_P = 1e-3
 #: Usable frames a free-bending fit considers at most (evenly spread over the session).
 MAX_FRAMES = 400
+#: Frames :func:`adapt` learns from at most (spread over pressure): past ~100 the calibration's error, common to
+#: all, bounds what more frames add, and their joint covariance costs the square of their number.
+ADAPT_FRAMES = 160
 
 
 def _source(session) -> str:
@@ -482,13 +487,17 @@ def _thin(candidates, pressure_pa, max_frames: int) -> np.ndarray:
     if candidates.size <= max_frames:
         return candidates
     _, inverse, counts = np.unique(np.round(pressure_pa[candidates] / 1e3), return_inverse=True, return_counts=True)
+    bins = np.unique(np.linspace(0, counts.size - 1, min(counts.size, max_frames)).round().astype(int))
     quota = 1
     while np.minimum(counts, quota + 1).sum() <= max_frames:  # the most frames per bin that fit
         quota += 1
     keep = []
-    for b in range(counts.size):
+    for k, b in enumerate(bins):
         rows = np.flatnonzero(inverse == b)
-        keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, quota)).round().astype(int))])
+        if quota == 1:  # one frame per bin: the first and the last in time by turns (a sweep's up and down)
+            keep.append(rows[[0 if k % 2 == 0 else -1]])
+        else:
+            keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, quota)).round().astype(int))])
     return candidates[np.sort(np.concatenate(keep))]
 
 
@@ -644,7 +653,7 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None) -> Adaptati
         usable = (~np.asarray(shape.extrapolated, dtype=bool) & np.all(np.isfinite(kappa), axis=-1)
                   & (p >= lo) & (p <= hi))
     try:
-        fit = _free_frames_fit(shape, p, usable, config, calibration, "adapt", prior=True)
+        fit = _free_frames_fit(shape, p, usable, config, calibration, "adapt", prior=True, max_frames=ADAPT_FRAMES)
     except SessionError as err:
         why = str(err).removeprefix("adapt: ")
         report = (f"adapt: learned nothing from {len(p)} frames and kept the config's prior: {why}. "
@@ -686,7 +695,7 @@ def _adapt_report(fit, prior, posterior, t_s) -> str:
     caveats = "".join(f" Note: {c}." for c in fit.caveats)
     settled = "" if fit.settled else " WARNING: the frame selection had not settled; check the free frames."
     return (f"adapt: learned from {int(used.sum())} free frames of {considered} considered ({len(used)} in the "
-            f"session, evenly thinned to at most {MAX_FRAMES}) at {span}{when}; K0 moved by {learned}; "
+            f"session, spread over pressure, at most {ADAPT_FRAMES}) at {span}{when}; K0 moved by {learned}; "
             f"{params}. Refused: {refused} (loaded: the force outside its 2-sigma ellipse of zero; unusable: "
             f"outside the calibrated or pressure range), in {fit.rounds} round(s) of selection.{one}{caveats}"
             f"{settled}")
