@@ -10,6 +10,7 @@ change what is tested. Noise: 8 counts on these sensors'
 2.5 counts/µm, ~3.2 mrad per coil (the simulated board's 1.5 counts).
 """
 
+import re
 import sys
 import tempfile
 import warnings
@@ -17,11 +18,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from forward_model import HiddenSensor, forward, free_bending_k0
 from scipy.interpolate import BarycentricInterpolator
 
 import bendsense
-from bendsense.config import ParameterCovarianceConfig
+from bendsense.cli import main
+from bendsense.config import ParameterCovarianceConfig, save_config
 from bendsense.errors import ArgumentError
 from bendsense.estimation import estimate_force
 from bendsense.pcc import reconstruct
@@ -80,19 +83,19 @@ def adapted(session):
         sensor = HiddenSensor(noise_counts=NOISE_COUNTS, seed=seed)
         with tempfile.TemporaryDirectory() as tmp:
             cal = bendsense.Calibration.fit(sensor.write_calibration(Path(tmp), CFG, frames=40, flat_frames=80))
-        shape = reconstruct(sensor.signals(CFG.sensor.strip_gap_m * angles, np.random.default_rng(seed)), cal,
-                            CFG.sensor)
+        signals = sensor.signals(CFG.sensor.strip_gap_m * angles, np.random.default_rng(seed))
+        shape = reconstruct(signals, cal, CFG.sensor)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             result = bendsense.adapt(shape, p, PRIOR, calibration=cal, t_s=t)
-        out.append((cal, shape, result))
+        out.append((cal, shape, result, signals))
     return out
 
 
 def test_adapt_learns_k0_within_2_percent(adapted):
     levels = np.array([20e3, 60e3, 100e3])
     k0_true = np.array([K0_SCALE * free_bending_k0(CFG, x) for x in levels])
-    for _, _, result in adapted:
+    for _, _, result, _ in adapted:
         k0 = bendsense.FreeBendingModel.from_config(result.config).tip_curvature_per_m(levels)
         prior = bendsense.FreeBendingModel.from_config(PRIOR).tip_curvature_per_m(levels)
         assert np.all(np.abs(k0 / k0_true - 1) <= 0.02), k0 / k0_true - 1
@@ -101,7 +104,7 @@ def test_adapt_learns_k0_within_2_percent(adapted):
 
 def test_adapt_uses_free_frames_only(session, adapted):
     _, _, _, force, _ = session
-    for _, _, result in adapted:
+    for _, _, result, _ in adapted:
         assert result.free.sum() >= 100
         assert np.all(np.hypot(*force[result.free].T) <= 0.03), "learned from a loaded frame"
         assert "free frames" in result.report and "->" in result.report
@@ -109,7 +112,7 @@ def test_adapt_uses_free_frames_only(session, adapted):
 
 def test_adapt_posterior_is_a_bayesian_update(adapted):
     section = PRIOR.parameter_covariance
-    for _, _, result in adapted:
+    for _, _, result, _ in adapted:
         post = result.config.parameter_covariance
         assert post.parameters == section.parameters
         before, after = section.std, post.std
@@ -127,7 +130,7 @@ def test_adapt_posterior_is_a_bayesian_update(adapted):
 def test_held_loads_covered_after_adapt(session, adapted):
     _, p, _, force, hold = session
     inside, silent, sigma = [], [], []
-    for cal, shape, result in adapted:
+    for cal, shape, result, _ in adapted:
         kappa = np.asarray(shape.curvature_per_m)[hold]
         est = estimate_force(kappa, p[hold], result.config, calibration=cal)
         ok = frame_status(bendsense.Shape.from_curvatures(kappa, CFG.sensor.segment_lengths_m), est) == "ok"
@@ -145,7 +148,7 @@ def test_held_loads_covered_after_adapt(session, adapted):
 
 def test_adapt_refuses_a_session_of_loaded_frames(session, adapted):
     _, p, _, force, hold = session
-    cal, shape, _ = adapted[0]
+    cal, shape, _, _ = adapted[0]
     loaded = hold & (np.hypot(*force.T) > 0.1)
     kappa = np.asarray(shape.curvature_per_m)[loaded]
     with warnings.catch_warnings():
@@ -156,9 +159,65 @@ def test_adapt_refuses_a_session_of_loaded_frames(session, adapted):
 
 
 def test_adapt_needs_a_calibration_and_a_prior(adapted):
-    cal, shape, _ = adapted[0]
+    cal, shape, _, _ = adapted[0]
     p = np.full(len(shape.curvature_per_m), 50e3)
     with pytest.raises(ArgumentError, match="calibration: adapt needs"):
         bendsense.adapt(shape, p, PRIOR)
     with pytest.raises(ArgumentError, match="no parameter_covariance"):
         bendsense.adapt(shape, p, PRIOR.replace(parameter_covariance=None), calibration=cal)
+
+
+# --------------------------------------------------------------------------- the command line
+
+
+@pytest.fixture(scope="module")
+def files(session, adapted, tmp_path_factory):
+    """The session as a session CSV, its sensor's calibration and the prior as files."""
+    root = tmp_path_factory.mktemp("adapt-cli")
+    t, p, _, _, _ = session
+    cal, _, _, signals = adapted[0]
+    cal.save(root / "cal.yaml")
+    bendsense.write_session_csv(bendsense.Session(t, signals, p), root / "run.csv")
+    save_config(PRIOR, root / "prior.yaml")
+    return root
+
+
+def _k0_error(config):
+    levels = np.array([20e3, 60e3, 100e3])
+    k0_true = np.array([K0_SCALE * free_bending_k0(CFG, x) for x in levels])
+    return np.abs(bendsense.FreeBendingModel.from_config(config).tip_curvature_per_m(levels) / k0_true - 1)
+
+
+def test_chain_adapt_then_save_writes_the_config_with_its_provenance(files):
+    out = files / "out"
+    res = CliRunner().invoke(main, ["load", str(files / "run.csv"), "--calibration", str(files / "cal.yaml"),
+                                    "--config", str(files / "prior.yaml"), "reconstruct", "adapt", "estimate",
+                                    "save", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "adapt: learned from" in res.output and "config.yaml" in res.output
+    config = bendsense.load_config(out / "config.yaml")
+    assert np.all(_k0_error(config) <= 0.02)
+    source = config.parameter_covariance.source
+    assert re.search(r"^adapt \d{4}-\d\d-\d\d \d\d:\d\d UTC from run: \d+ of \d+ frames free; the prior: test prior",
+                     source), source
+    assert (out / "results.csv").exists()
+
+
+def test_chain_adapt_needs_reconstruct_first(files):
+    res = CliRunner().invoke(main, ["load", str(files / "run.csv"), "--calibration", str(files / "cal.yaml"),
+                                    "--config", str(files / "prior.yaml"), "adapt", "estimate"])
+    assert res.exit_code == 2 and "'adapt' needs 'reconstruct' earlier in the chain" in res.output
+
+
+def test_process_adapt_adapts_each_session(files):
+    out = files / "batch"
+    res = CliRunner().invoke(main, ["process", str(files / "run.csv"), "--calibration", str(files / "cal.yaml"),
+                                    "--config", str(files / "prior.yaml"), "-o", str(out), "--adapt",
+                                    "--workers", "0", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    config = bendsense.load_config(out / "run" / "config.yaml")
+    assert np.all(_k0_error(config) <= 0.02)
+    assert (out / "run" / "results.csv").exists()
+    bad = CliRunner().invoke(main, ["process", str(files / "run.csv"), "--calibration", str(files / "cal.yaml"),
+                                    "-o", str(files / "nope"), "--adapt", "--no-estimate"])
+    assert bad.exit_code == 2 and "--adapt" in bad.output and not (files / "nope").exists()

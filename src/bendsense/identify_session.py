@@ -48,6 +48,8 @@ fits EI per pressure level and the line EI(P).
 
 from __future__ import annotations
 
+import dataclasses
+import datetime
 import math
 from dataclasses import dataclass
 
@@ -66,6 +68,7 @@ __all__ = [
     "Adaptation",
     "FreeBendingSessionFit",
     "adapt",
+    "adapt_session",
     "free_bending_angles",
     "fit_free_bending_session",
     "fit_stiffness_session",
@@ -585,7 +588,7 @@ class Adaptation:
         return self.fit is None
 
 
-def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None) -> Adaptation:
+def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None) -> Adaptation:
     """Learn the actuator's free bending from a session's own free frames: the prior updated by them.
 
     The free frames are found as ``identify free-bending --session`` finds them (module
@@ -616,6 +619,9 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None) -> Adaptati
         The sensor's calibration: its noise and error model weigh the data (required).
     t_s : array_like, shape (frames,), optional
         Time of each frame [s]: the report gives the free frames' time span.
+    source : str, optional
+        The session's name, for the provenance the adapted config carries
+        (``parameter_covariance.source``: the session, the frames used, the date).
 
     Returns
     -------
@@ -662,7 +668,32 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None) -> Adaptati
                   "grasp, a rest between touches).")
         return Adaptation(config=config, free=np.zeros(len(p), dtype=bool), report=report)
     new = fit.to_config(config)
+    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    provenance = (f"adapt {when} from {source or 'a session'}: {int(fit.used.sum())} of {len(p)} frames free; "
+                  f"the prior: {config.parameter_covariance.source or 'not named'}")
+    new = new.replace(parameter_covariance=dataclasses.replace(new.parameter_covariance, source=provenance))
     return Adaptation(config=new, free=fit.used.copy(), report=_adapt_report(fit, config, new, t), fit=fit)
+
+
+def adapt_session(session, config, calibration, pressure_pa=None) -> Adaptation:
+    """:func:`adapt` on a recorded session (``process --adapt``): its shapes, pressures, times and name.
+
+    Parameters
+    ----------
+    session : Session
+        The recording.
+    config : Config
+        The actuator, with the prior to update.
+    calibration : Calibration
+        The sensor's calibration.
+    pressure_pa : float, optional
+        Pressure of frames without a reading [Pa].
+    """
+    if pressure_pa is not None:
+        session = session.with_pressure(pressure_pa)
+    shape, _ = session_shapes(session, calibration, config, need_pressure=False)
+    return adapt(shape, session.pressure_pa, config, calibration=calibration, t_s=session.t_s,
+                 source=_source(session))
 
 
 def _adapt_report(fit, prior, posterior, t_s) -> str:
