@@ -727,8 +727,9 @@ def _adapt_report(fit, prior, posterior, t_s) -> str:
     settled = "" if fit.settled else " WARNING: the frame selection had not settled; check the free frames."
     return (f"adapt: learned from {int(used.sum())} free frames of {considered} considered ({len(used)} in the "
             f"session, spread over pressure, at most {ADAPT_FRAMES}) at {span}{when}; K0 moved by {learned}; "
-            f"{params}. Refused: {refused} (loaded: the force outside its 2-sigma ellipse of zero; unusable: "
-            f"outside the calibrated or pressure range), in {fit.rounds} round(s) of selection.{one}{caveats}"
+            f"{params}. Refused: {refused} (loaded: the force outside its 2-sigma ellipse of zero; load_shape: a "
+            f"shape no free beam has, p < {FREE_P:g}; unusable: outside the calibrated or pressure range), in "
+            f"{fit.rounds} round(s) of selection.{one}{caveats}"
             f"{settled}")
 
 
