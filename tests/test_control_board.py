@@ -208,8 +208,12 @@ def test_a_model_misfit_on_the_controlled_finger_stops_the_loop(board, processor
     pi = PIController(0.15, max_pressure_pa=LIMIT_PA)
     err, truth = session(board, processor, pi, seconds=5.0, source=Bent(board))
     assert isinstance(err, ControlStop) and "model_misfit" in err.reason
-    assert truth.column("setpoint_pa")[-1] == 0.0
-    assert 0.3 < err.result.frames / RATE < 0.5  # stopped within the first windows after the fault
+    setpoints = truth.column("setpoint_pa")
+    assert setpoints[-1] == 0.0
+    # stopped within the first windows after the fault, by the board's own frame count (truth row k is frame k;
+    # the loop's count leaves out what the board sent before the loop began)
+    last_driven = int(np.flatnonzero(setpoints > 0)[-1])
+    assert 300 <= last_driven < 500, last_driven
 
 
 def test_not_identifiable_on_the_controlled_finger_stops_the_loop(board, calibration_path):
