@@ -23,6 +23,7 @@ from forward_model import HiddenSensor, forward, free_bending_k0
 from scipy.interpolate import BarycentricInterpolator
 
 import bendsense
+from bendsense.actuator import model_jacobian
 from bendsense.cli import main
 from bendsense.config import ParameterCovarianceConfig, save_config
 from bendsense.errors import ArgumentError
@@ -156,6 +157,28 @@ def test_adapt_refuses_a_session_of_loaded_frames(session, adapted):
         result = bendsense.adapt(kappa, p[loaded], PRIOR, calibration=cal)
     assert result.refused and result.config is PRIOR and not result.free.any()
     assert "learned nothing" in result.report
+
+
+def test_frames_at_one_pressure_teach_k0_there_and_leave_the_split_to_the_prior(session, adapted):
+    _, p, _, force, _ = session
+    cal, shape, _, _ = adapted[0]
+    near = (np.abs(p - 60e3) < 4e3) & (np.hypot(*force.T) == 0)  # the sweep passing 60 kPa
+    kappa = np.asarray(shape.curvature_per_m)[near]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = bendsense.adapt(kappa, p[near], PRIOR, calibration=cal)
+    assert not result.refused and "one pressure" in result.report
+    k0 = bendsense.FreeBendingModel.from_config(result.config).tip_curvature_per_m(60e3)
+    assert abs(k0 / (K0_SCALE * free_bending_k0(CFG, 60e3)) - 1) <= 0.02
+    before, after = PRIOR.parameter_covariance, result.config.parameter_covariance
+
+    def sigma_k0(config, p_pa):
+        J = model_jacobian(config, np.array([p_pa]), config.parameter_covariance.parameters)[0, 0]
+        return float(np.sqrt(J @ config.parameter_covariance.matrix @ J))
+
+    # K0 at 60 kPa is pinned; μ_s, which only the split over pressure would tell from μ̄, keeps most of its σ
+    assert sigma_k0(result.config, 60e3) < 0.3 * sigma_k0(PRIOR, 60e3)
+    assert after.std["sensor_stiffness_nm_per_rad"] > 0.5 * before.std["sensor_stiffness_nm_per_rad"]
 
 
 def test_adapt_needs_a_calibration_and_a_prior(adapted):

@@ -399,7 +399,9 @@ def fit_free_bending(
     free = [n for n in free if n not in belief.held]
     fixed.update({n: start[n] for n in belief.held})
     names = free
-    if len(p) + len(belief.mean) <= len(names) or (prior and not names):
+    if prior and not names:
+        raise ArgumentError("prior: states no variance of any free-bending parameter: nothing to learn")
+    if len(p) + len(belief.mean) <= len(names):
         raise ArgumentError(
             f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
         )

@@ -257,9 +257,9 @@ def adapt():
     def step(state):
         from bendsense.identify_session import adapt as adapt_config
 
-        shape = _require(state, "shape", "adapt", "'reconstruct'")
         if is_gripper(state):
             raise click.UsageError("'adapt' takes one actuator's config, not a gripper's fingers:")
+        shape = _require(state, "shape", "adapt", "'reconstruct'")
         session = state["session"]
         with data_warnings_logged(state.setdefault("said", set())):
             result = adapt_config(shape, session.pressure_pa, state["config"], calibration=state["calibration"],
