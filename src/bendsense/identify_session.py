@@ -26,6 +26,10 @@ mostly free; a touch in a minority of frames is then rejected in the next round)
 Usable frames: a reconstructed shape inside the calibrated range (status not
 ``extrapolated``) and a pressure inside ``actuator.pressure_range_pa``.
 
+**Adapt** (:func:`adapt`): the same selection and the same fit, as a Bayesian update of
+the config's prior (``fit_free_bending(..., prior=True)``), on frames of any session:
+no fall back to all frames, and a frame must also pass the free-shape test.
+
 The covariance of the fit is not the residual scatter's ``s² (JᵀJ)⁻¹``: the calibration
 error is one error common to all frames of a session (the same polynomials map every
 frame), so it does not average down over the frames. The angles' joint covariance over
@@ -80,7 +84,7 @@ __all__ = [
 FREE_CHI2_2SIGMA = -2.0 * math.log(1.0 - math.erf(2.0 / math.sqrt(2.0)))
 #: A frame whose free-beam fit has a p-value below this is not free (:func:`adapt`).
 FREE_P = 1e-3
-#: Usable frames a free-bending fit considers at most (evenly spread over the session).
+#: Usable frames a free-bending fit considers at most (spread over pressure, :func:`_thin`).
 MAX_FRAMES = 400
 #: Frames :func:`adapt` learns from at most (spread over pressure): past ~100 the calibration's error, common to
 #: all, bounds what more frames add, and their joint covariance costs the square of their number.
@@ -395,10 +399,10 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     chi2_limit : float
         A frame is free when ``Fᵀ C⁻¹ F`` is at most this (default the 2σ level of χ²₂).
     max_frames : int
-        Consider at most this many usable frames, evenly spread over the session (a
-        sweep recorded at 2 kHz has tens of thousands; the calibration's error, common
-        to all, bounds what more frames could add); the others have the reason
-        ``thinned``.
+        Consider at most this many usable frames, spread evenly over pressure and each
+        pressure's over time (a sweep recorded at 2 kHz has tens of thousands; the
+        calibration's error, common to all, bounds what more frames could add); the
+        others have the reason ``thinned``.
 
     Returns
     -------
@@ -566,8 +570,9 @@ class Adaptation:
     ----------
     config : Config
         The config with the posterior of its model parameters: the free-bending values
-        (and the stiffness, as far as the free frames' gravity sag teaches it) and the
-        whole ``parameter_covariance`` updated; the config unchanged when it refused.
+        and the whole ``parameter_covariance`` updated (the stiffness keeps its values
+        and variances, its cross-covariances with the free-bending parameters are the
+        posterior's); the config unchanged when it refused.
     free : ndarray of bool, shape (frames,)
         The frames it learned from.
     report : str
@@ -598,8 +603,12 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
     joint covariance under the calibration's errors are the data; the config's values
     and ``parameter_covariance`` are the prior; :func:`bendsense.identify.fit_free_bending`
     with ``prior=True`` gives the posterior (the prior's rows in the same least squares).
-    The stiffness parameters the prior states join it through the gravity correction,
-    so the cross-covariances stay consistent. Frames at one pressure teach K0 at that
+    The stiffness the prior states enters through the gravity correction: it keeps its
+    values and variances (free frames are too weak a lever on EI), its uncertainty weighs
+    the data and the posterior holds the cross-covariances it implies. Besides the
+    force ellipse, a frame must pass the free-shape test (:func:`_free_p_value`: its
+    coil angles a free beam's for some K0), which rejects loads the prior's wide
+    ellipse would let through. Frames at one pressure teach K0 at that
     pressure only: the posterior keeps the prior's split between μ̄ and μ_s there.
 
     It refuses to learn (the config returned unchanged, ``refused`` True, the report
