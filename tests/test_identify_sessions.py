@@ -193,7 +193,7 @@ def test_session_covariance_of_repeated_frames(lab):
     noise = np.empty(N)
     shift_covariance(m, S, sigma, noise)
     u = np.random.default_rng(4).normal(size=N)
-    out = session_covariance(cal, np.repeat(signals, 2, axis=0), np.stack([u, u]), np.array([0, 1]), 2)
+    out = session_covariance(cal, cal.shifts_m(np.repeat(signals, 2, axis=0)), np.stack([u, u]), np.array([0, 1]), 2)
     assert out[0, 0] == pytest.approx(u @ sigma @ u, rel=1e-10)
     assert out[0, 1] == pytest.approx(u @ (sigma - np.diag(noise)) @ u, rel=1e-10)
     assert 0 < out[0, 1] < out[0, 0]
@@ -206,9 +206,9 @@ def test_session_covariance_blocks_agree_with_one_stack(lab, monkeypatch):
     signals = bendsense.read_session(lab["sweep"]).signals[:10]
     w = np.random.default_rng(5).normal(size=signals.shape) * 1e3
     groups = np.array([0, 1, 2, 0, 1, 2, 3, 3, 4, 4])
-    whole = session_covariance(cal, signals, w, groups, 5)
+    whole = session_covariance(cal, cal.shifts_m(signals), w, groups, 5)
     monkeypatch.setattr(ic, "_FRAMES_PER_BLOCK", 3)
-    np.testing.assert_allclose(session_covariance(cal, signals, w, groups, 5), whole, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(session_covariance(cal, cal.shifts_m(signals), w, groups, 5), whole, rtol=1e-10, atol=0)
 
 
 def test_sandwich_covariance_matches_refits_under_a_common_error():

@@ -46,6 +46,8 @@ _LAZY = {
     "Track": "bendsense.tracking",
     "Tracker": "bendsense.tracking",
     "check_windows": "bendsense.tracking",
+    "adapt": "bendsense.identify_session",
+    "Adaptation": "bendsense.identify_session",
     "contact_bound": "bendsense.cramer_rao",
     "ContactBound": "bendsense.cramer_rao",
 }

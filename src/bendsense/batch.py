@@ -59,9 +59,8 @@ class SessionOutcome:
     seconds : float
         Time spent on the session in its worker, reading to writing [s].
     reason : str
-        Why the session failed or was skipped; for ``ok`` sessions a note on frames
-        flagged ``extrapolated``, ``not_converged``, ``model_misfit``, ``not_identifiable`` or
-        out of range (empty if none).
+        Why the session failed or was skipped; for ``ok`` sessions a note on frames flagged ``extrapolated``,
+        ``not_converged``, ``model_misfit``, ``not_identifiable`` or out of range (empty if none).
     extrapolated : int
         Frames whose signals lay outside the calibrated range.
     not_converged : int
@@ -69,8 +68,7 @@ class SessionOutcome:
     model_misfit : int
         Frames whose model shape stays far from the measured one (status ``model_misfit``).
     not_identifiable : int
-        Frames whose shape does not determine the load along one direction (status
-        ``not_identifiable``).
+        Frames whose shape does not determine the load along one direction (status ``not_identifiable``).
     out_of_range : int
         Frames whose pressure lay outside ``actuator.pressure_range_pa`` (no force).
     frames_lost : int
@@ -340,14 +338,14 @@ def process_session(
     window_s: float = 0.05,
     load: str = "tip",
     contact_s_m: float | None = None,
+    adapt: bool = False,
 ) -> SessionOutcome:
     """Process one session and write its results; never raises for a bad session.
 
-    Reads ``path`` (:func:`bendsense.session.read_session`), reconstructs the shapes
-    (paper eq. 1–7) and estimates the tip forces (paper eq. 18) unless ``estimate`` is
-    False (:func:`bendsense.pipeline.process`), and writes ``results.csv`` and
-    ``shape.npz`` into ``out_dir`` (:func:`bendsense.results.write_results`). This is
-    the task that :func:`process_sessions` sends to its executor; its arguments pickle.
+    Reads ``path`` (:func:`bendsense.session.read_session`), reconstructs the shapes (paper eq. 1–7)
+    and estimates the tip forces (paper eq. 18) unless ``estimate`` is False
+    (:func:`bendsense.pipeline.process`), and writes ``results.csv`` and ``shape.npz`` into ``out_dir``
+    (:func:`bendsense.results.write_results`): the task :func:`process_sessions` sends to its executor.
 
     Parameters
     ----------
@@ -360,8 +358,7 @@ def process_session(
     calibration : Calibration
         Signal → shift calibration of the sensor.
     constraint, method, objective : str, optional
-        Force estimate options (:func:`bendsense.estimation.estimate_force`); None takes
-        the config's.
+        Force estimate options (:func:`bendsense.estimation.estimate_force`); None: the config's.
     pressure_pa : float, optional
         Constant pressure for a session without a pressure column [Pa].
     estimate : bool, default True
@@ -375,21 +372,22 @@ def process_session(
         bandwidth [Hz] and the window of the model check [s] (:func:`bendsense.pipeline.process`).
     load, contact_s_m : str, float, optional
         The load model and a known contact location [m] (:func:`bendsense.pipeline.process`).
+    adapt : bool
+        First adapt the config to the session's own free frames (:func:`bendsense.adapt`): ``config.yaml``.
 
     Returns
     -------
     SessionOutcome
-        ``failed`` with the error message as reason for a user-level error
-        (:class:`~bendsense.errors.BendsenseError`, ``OSError``, ``ValueError``); an
-        unexpected exception is reported with its type. Warnings raised on the way
-        (e.g. solver non-convergence) are not propagated: the frames they concern are
-        counted in ``extrapolated`` and ``not_converged``.
+        ``failed`` with the error message as reason for a user-level error (:class:`~bendsense.errors.BendsenseError`,
+        ``OSError``, ``ValueError``); an unexpected exception is reported with its type. Warnings raised on the way
+        (e.g. solver non-convergence) are not propagated: the frames they concern are counted in ``extrapolated``
+        and ``not_converged``.
 
     Raises
     ------
     OutputError
-        Only when the output's file system refuses any further write (no space left,
-        quota exceeded, read-only): not this session's fault, so the batch stops.
+        Only when the output's file system refuses any further write (no space left, quota exceeded, read-only):
+        not this session's fault, so the batch stops.
     """
     path, out_dir = Path(path), Path(out_dir)
     name = name or (path.stem if path.is_file() else path.name)
@@ -403,7 +401,7 @@ def process_session(
             counts, lost, tx_drops, pressure_ignored = _run(
                 path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
                 {"track": track, "bandwidth_hz": bandwidth_hz, "window_s": window_s, "load": load,
-                 "contact_s_m": contact_s_m})
+                 "contact_s_m": contact_s_m, "adapt": adapt})
     except (BendsenseError, OSError) as err:
         if isinstance(err, OutputError) and err.errno in _FATAL_ERRNOS:
             raise  # a full disk is not this session's fault: process_sessions stops
@@ -445,6 +443,8 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
          over_time):
     import numpy as np
 
+    from bendsense.config import save_config
+    from bendsense.identify_session import adapt_session
     from bendsense.pipeline import process
     from bendsense.session import read_session
 
@@ -457,10 +457,13 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
     session = read_session(path)
     # (a worker's log line would be lost in the console: the session's report row says it)
     ignored = pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
-    processed = process(session, config, calibration, constraint=constraint, method=method,
-                        objective=objective, pressure_pa=pressure_pa, estimate=estimate, **over_time)
+    adapted = over_time.pop("adapt", False) and adapt_session(session, config, calibration, pressure_pa)
+    processed = process(session, config if not adapted else adapted.config, calibration, constraint=constraint,
+                        method=method, objective=objective, pressure_pa=pressure_pa, estimate=estimate, **over_time)
     session = processed.session
     processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made
+    if adapted:
+        save_config(adapted.config, out_dir / "config.yaml")
     return (processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)),
             ignored)
 
@@ -586,13 +589,11 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
             track: str | None = None) -> None:
     """Compile or load the kernels a batch uses, in one worker, before the others start.
 
-    :func:`process_sessions` runs it as the first task and waits for it: on a cold cache
-    (the first run after an install) that worker compiles the kernels once, announced on
-    stderr, and writes numba's cache; the other workers then only load it. Without this
-    every worker would compile the same kernels at the same time. Runs
-    :func:`bendsense.pipeline.process` on a session of 100 flat frames (a worker's
-    per-frame kernel) at the middle of the pressure range, with the batch's options
-    (``track``: the tracker's kernels too).
+    :func:`process_sessions` runs it as the first task and waits for it: on a cold cache (the first run after
+    an install) that worker compiles the kernels once, announced on stderr, and writes numba's cache; the other
+    workers then only load it, instead of all compiling the same kernels at once. Runs
+    :func:`bendsense.pipeline.process` on 100 flat frames (a worker's per-frame kernel) at the middle of the
+    pressure range, with the batch's options (``track``: the tracker's kernels too).
     """
     import numpy as np
 
@@ -635,6 +636,7 @@ def process_sessions(
     window_s: float = 0.05,
     load: str = "tip",
     contact_s_m: float | None = None,
+    adapt: bool = False,
 ) -> BatchReport:
     """Process many sessions in parallel and write one results directory per session.
 
@@ -664,9 +666,8 @@ def process_sessions(
     constraint, method, objective : str, optional
         Force constraint, estimator and objective (default: from ``config.estimation``).
     overwrite : bool
-        Reprocess sessions whose output directory exists (default: skip them); a
-        session's directory that holds files bendsense did not write is never replaced
-        (that session fails, naming them).
+        Reprocess sessions whose output directory exists (default: skip them); a session's directory that holds
+        files bendsense did not write is never replaced (that session fails, naming them).
     pressure_pa : float, optional
         Pressure for frames without a reading [Pa].
     estimate : bool
@@ -682,8 +683,9 @@ def process_sessions(
     window_s : float, default 0.05
         Window of the model check over frames (:func:`bendsense.check_windows`) [s].
     load, contact_s_m : str, float, optional
-        The load model (``"tip"``, ``"contact"``) and a known contact location [m]
-        (:func:`bendsense.load_models.estimate_load`).
+        The load model (``"tip"``, ``"contact"``), a known contact location [m] (:mod:`bendsense.load_models`).
+    adapt : bool
+        Each session first adapts the config to its own free frames (:func:`process_session`).
 
     Returns
     -------
@@ -714,12 +716,12 @@ def process_sessions(
                         workers=workers, constraint=constraint, method=method, objective=objective,
                         overwrite=overwrite, pressure_pa=pressure_pa, estimate=estimate, recursive=recursive,
                         progress=progress, track=track, bandwidth_hz=bandwidth_hz, window_s=window_s, load=load,
-                        contact_s_m=contact_s_m)
+                        contact_s_m=contact_s_m, adapt=adapt)
 
 
 def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
              overwrite, pressure_pa, estimate, recursive, progress, track, bandwidth_hz, window_s, load,
-             contact_s_m) -> BatchReport:
+             contact_s_m, adapt) -> BatchReport:
     from bendsense.batch_fingers import prepare
     from bendsense.config import Config, GripperConfig, load_config
 
@@ -738,7 +740,7 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         check_workers(min(workers, len(todo)))
     options = dict(config=config, calibration=calibration, constraint=constraint, method=method, objective=objective,
                    pressure_pa=pressure_pa, estimate=estimate, overwrite=overwrite, track=track,
-                   bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m)
+                   bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m, adapt=adapt)
     created = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)

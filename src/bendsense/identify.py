@@ -65,6 +65,9 @@ from bendsense.identify_covariance import (
     _covariance,
     _covariance_note,
     _full_covariance,
+    _pooled_errors,
+    _Prior,
+    _regress_levels,
     _stderr,
     _with_covariance,
 )
@@ -222,6 +225,9 @@ class FreeBendingFit:
         Covariance of ``shear_modulus_pa``, ``sensor_stiffness_nm_per_rad``,
         ``prebend_angle_rad`` in that order (``s² (JᵀJ)⁻¹`` for the free ones, 0 for
         fixed ones; inf if not identifiable).
+    posterior : dict, optional
+        A fit with a prior: ``values`` (every parameter the prior states, the stiffness
+        ones included) and ``section`` (the config's ``parameter_covariance``, updated).
     """
 
     params: dict
@@ -235,6 +241,7 @@ class FreeBendingFit:
     success: bool
     message: str
     covariance: np.ndarray | None = None
+    posterior: dict | None = None
 
     @property
     def rms_rad(self) -> float:
@@ -246,13 +253,18 @@ class FreeBendingFit:
 
         The covariance goes into ``parameter_covariance`` (the block of the three
         free-bending parameters; another fit's block already there is kept, with zero
-        cross-covariance). Not written if the parameters are not identifiable.
+        cross-covariance). Not written if the parameters are not identifiable. A fit with
+        a prior writes its posterior: every parameter the prior states, and the whole
+        covariance section updated.
 
         Parameters
         ----------
         config : Config
             The config to copy.
         """
+        if self.posterior is not None:
+            new = _implausible_fit("free-bending", lambda: config.with_model_parameters(self.posterior["values"]))
+            return new.replace(parameter_covariance=self.posterior["section"])
         new = _implausible_fit("free-bending", lambda: config.replace(
             material=dataclasses.replace(config.material, **self.params)))
         if self.covariance is None:
@@ -313,12 +325,21 @@ def fit_free_bending(
     initial: Mapping[str, float] | None = None,
     data_covariance=None,
     systematic_covariance=None,
+    prior: bool = False,
+    stiffness_response=None,
 ) -> FreeBendingFit:
     """Fit μ̄, μ_s and the prebend angle to free-bending data (paper eq. 8–12, section V-C).
 
     Minimises Σ (θ_model(P_i) − θ_i)² with ``scipy.optimize.least_squares`` and the exact
     Jacobian from the implicit function theorem on eq. 8 (μ̄ ≥ 0, μ_s ≥ 0). Standard
     errors are ``sqrt(diag(s² (JᵀJ)⁻¹))`` with ``s² = RSS / (n − k)``.
+
+    With ``prior`` the config's values and its ``parameter_covariance`` Σ₀ are a Gaussian
+    prior: its rows ``Σ₀^(-1/2) (x − x₀)`` join the same least squares, and the data's
+    rows are whitened by their covariance (``Σ^(-1/2) (θ_model − θ)``), so that the
+    minimum is the posterior mean (a Bayesian update, linearised at the optimum) and the
+    sandwich below ``(J̃ᵀJ̃)⁻¹``, the posterior covariance (:func:`bendsense.adapt`). A
+    fit without a prior is the special case with no prior rows, the data weighted equally.
 
     Parameters
     ----------
@@ -338,11 +359,21 @@ def fit_free_bending(
     data_covariance : array_like, shape (n, n), optional
         Covariance of the angles [rad²] (correlated errors, e.g. one calibration's for
         every frame of a session); the parameters' covariance is then the sandwich
-        ``A Σ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``) scaled by ``max(1, RSS / tr((I − H) Σ))``.
+        ``A Σ Aᵀ`` (``A`` the whitened fit's linear map) with Σ scaled by
+        ``max(1, RSS / E[RSS])`` when the residuals scatter more than it says.
     systematic_covariance : array_like, shape (n, n), optional
         With ``data_covariance``: a further error common to the angles that the
         residuals cannot show (e.g. from another fit's parameters) [rad²]; added to the
         sandwich unscaled.
+    prior : bool
+        Update ``config.parameter_covariance`` (the prior about the config's values)
+        with the data; needs ``data_covariance`` (the data's weight against the prior).
+        Free-bending parameters with no prior variance are held at their values.
+    stiffness_response : array_like, shape (n, 2), optional
+        With ``prior``: ∂θ_i/∂(ei0_nm2, ei1_nm2_per_pa), how each measured angle moves
+        with the stiffness (the gravity correction of a session's free frames). The
+        stiffness the prior states keeps its values and variances; its uncertainty
+        weighs the data and the posterior keeps the cross-covariances it implies.
 
     Returns
     -------
@@ -362,22 +393,40 @@ def fit_free_bending(
     p, y = _free_bending_data(pressure_pa, bending_angle_rad)
     start = _free_bending_start(config.material, initial)
     free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start, config)
-    if len(p) <= len(free):
+    data_cov = _data_covariance(data_covariance, len(p))
+    sys_cov = _data_covariance(systematic_covariance, len(p), "systematic_covariance")
+    belief = _Prior.of(config, prior, fix, start, data_cov, stiffness_response, len(p))
+    free = [n for n in free if n not in belief.held]
+    fixed.update({n: start[n] for n in belief.held})
+    names = free
+    if prior and not names:
+        raise ArgumentError("prior: states no variance of any free-bending parameter: nothing to learn")
+    if len(p) + len(belief.mean) <= len(names):
         raise ArgumentError(
             f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
         )
-    scale = np.array([abs(start[n]) or _TYPICAL[n] for n in free])
+    scale = np.array([abs(start[n]) or _TYPICAL[n] for n in names])
     lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf}
-    lb = np.array([lower[n] for n in free]) / scale
-    x0 = np.array([start[n] for n in free]) / scale
+    lb = np.array([lower[n] for n in names]) / scale
+    x0 = np.array([start[n] for n in names]) / scale
     x0 = np.maximum(x0, np.where(np.isfinite(lb), lb + 1e-6, -np.inf))
-    unpack, resid, jac = _free_bending_problem(p, y, _geometry(config.actuator), free, fixed, scale)
-    x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, free)
+    # weighed against a prior, the data count by their covariance (the stiffness' part included); alone,
+    # equally (the sandwich below)
+    whiten = np.linalg.inv(np.linalg.cholesky(data_cov + (0.0 if sys_cov is None else sys_cov)
+                                              + belief.stiffness_covariance())) if prior else None
+    unpack, angles, resid, jac = _free_bending_problem(p, y, _geometry(config.actuator), names, fixed, scale,
+                                                       whiten, belief)
+    x, ok, message, at_bound = _solve_free_bending(resid, jac, x0, lb, names)
     values = unpack(x)
     r = resid(x)
-    cov, dof = _covariance(jac(x) / scale, r, _data_covariance(data_covariance, len(p)),
-                           _data_covariance(systematic_covariance, len(p), "systematic_covariance"))
-    stderr = _stderr(cov, free, FREE_BENDING_PARAMS)
+    joint = None
+    if whiten is None:
+        cov, dof = _covariance(jac(x) / scale, r, data_cov, sys_cov)
+    else:
+        joint = belief.sandwich(jac(x), r, whiten, data_cov, sys_cov, scale)
+        cov, dof = joint[:len(names), :len(names)], len(p)
+    m = len(free)
+    stderr = _stderr(cov[:m, :m], free, FREE_BENDING_PARAMS)
     if at_bound:
         ok = False
         message += f"; {', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
@@ -385,17 +434,18 @@ def fit_free_bending(
         ok = False
         message += "; parameters not identifiable from these data (fix one)"
     return FreeBendingFit(
-        params=values,
+        params={n: values[n] for n in FREE_BENDING_PARAMS},
         stderr=stderr,
         free=tuple(free),
-        correlation=_correlation(cov),
-        residuals=r,
+        correlation=_correlation(cov[:m, :m]),
+        residuals=angles(x),
         pressure_pa=p,
         bending_angle_rad=y,
         dof=dof,
         success=ok,
         message=message,
-        covariance=_full_covariance(cov, free, FREE_BENDING_PARAMS),
+        covariance=_full_covariance(cov[:m, :m], free, FREE_BENDING_PARAMS),
+        posterior=belief.posterior(names, values, joint, len(p)) if prior else None,
     )
 
 
@@ -432,25 +482,31 @@ def _free_bending_start(material, initial) -> dict:
     return start
 
 
-def _free_bending_problem(p, y, geom, free, fixed, scale):
-    """The least-squares problem in the scaled free parameters x: ``(unpack, resid, jac)``.
+def _free_bending_problem(p, y, geom, names, fixed, scale, whiten=None, prior=None):
+    """The least-squares problem in the scaled fitted parameters x: ``(unpack, angles, resid, jac)``.
 
-    ``unpack(x)`` gives every parameter's value, ``resid(x)`` the angle residuals
-    θ_model(P_i) − θ_i [rad], ``jac(x)`` their exact Jacobian in x from the implicit
-    function theorem on eq. 8.
+    ``unpack(x)`` gives every parameter's value, ``angles(x)`` the angle residuals
+    θ_model(P_i) − θ_i [rad], ``resid(x)``
+    them whitened by ``whiten`` and followed by the prior rows, ``jac(x)`` its exact
+    Jacobian in x from the implicit function theorem on eq. 8.
     """
+    prior = _Prior() if prior is None else prior
 
     def unpack(x):
         values = dict(fixed)
-        values.update({n: float(v) for n, v in zip(free, x * scale, strict=True)})
+        values.update({n: float(v) for n, v in zip(names, x * scale, strict=True)})
         return values
 
     def model(values):
-        theta = solve_bending_angle(p, **geom, **values)
+        theta = solve_bending_angle(p, **geom, **{n: values[n] for n in FREE_BENDING_PARAMS})
         return theta, theta - values["prebend_angle_rad"]
 
-    def resid(x):
+    def angles(x):
         return model(unpack(x))[0] - y
+
+    def resid(x):
+        r = angles(x) if whiten is None else whiten @ angles(x)
+        return r if prior.root is None else np.concatenate([r, prior.root @ (x * scale - prior.mean)])
 
     def jac(x):
         values = unpack(x)
@@ -465,9 +521,11 @@ def _free_bending_problem(p, y, geom, free, fixed, scale):
             "sensor_stiffness_nm_per_rad": -theta0 / denom,
             "prebend_angle_rad": np.ones_like(theta0),
         }
-        return np.stack([cols[n] for n in free], axis=-1) * scale if free else np.zeros((len(p), 0))
+        j = np.stack([cols[n] for n in names], axis=-1) * scale if names else np.zeros((len(p), 0))
+        j = j if whiten is None else whiten @ j
+        return j if prior.root is None else np.concatenate([j, prior.root * scale], axis=0)
 
-    return unpack, resid, jac
+    return unpack, angles, resid, jac
 
 
 def _solve_free_bending(resid, jac, x0, lb, free):
@@ -798,73 +856,3 @@ def _fit_levels(data: StiffnessData, level, n_levels: int, stiffness, k0, w, len
         if not ok:
             failed.append(f"{lp[j] / 1e3:.3g} kPa")
     return lp, lei, _pooled_errors(lse, lrms, counts), lrms, pos_res, failed, sens
-
-
-def _pooled_errors(lse, lrms, counts):
-    """The levels' standard errors of EI, their residual variance at least the one pooled over the levels.
-
-    A level's own ``s_j² = RSS_j / (n_j − 1)`` rests on 3–5 degrees of freedom (two or
-    three loads); weighted by such noisy ``1/se²`` the regression claimed a σ of γ1 0.77 of
-    its scatter over 200 refits (tests/test_parameter_prior.py). One camera sees every
-    level with the same noise: ``max(s_j², s²)``, ``s² = Σ RSS_j / Σ (n_j − 1)``,
-    ``RSS_j = n_j rms_j²``; a level that misfits more than the others keeps its weight down.
-    """
-    dof = counts - 1
-    rss = counts * lrms**2
-    own = rss / np.maximum(dof, 1)
-    use = np.isfinite(lse) & np.isfinite(rss) & (dof > 0)
-    if not use.any() or not rss[use].sum() > 0:
-        return lse
-    pooled = rss[use].sum() / dof[use].sum()
-    scale = use & (own > 0)
-    out = lse.copy()
-    out[scale] = lse[scale] * np.sqrt(np.maximum(pooled, own[scale]) / own[scale])
-    return out
-
-
-def _regress_levels(lp, lei, lse, free, fixed: dict, weighted: bool, level_cov=None):
-    """Linear regression EI_j = ei0 + ei1 P_j over the levels (paper eq. 15).
-
-    Weighted by 1/σ_EI² when ``weighted`` and every level has a finite standard error;
-    the covariance scaled up by χ²/(levels − k) when the levels scatter more than their
-    errors say. With the levels' covariances (Σ, Σ_sys) (correlated errors): the
-    sandwich ``A (f Σ + Σ_sys) Aᵀ`` (A the regression's linear map), ``f = max(1,
-    χ² / E[χ²])`` with E[χ²] from Σ. Returns
-    the parameters' values, the levels' residuals [N m²], the free parameters'
-    covariance and whether the weights were used.
-    """
-    n_levels = len(lp)
-    design = {"ei0_nm2": np.ones(n_levels), "ei1_nm2_per_pa": lp}
-    target = lei - sum(fixed[n] * design[n] for n in fixed)
-    X = np.stack([design[n] for n in free], axis=-1) if free else np.zeros((n_levels, 0))
-    finite_se = np.isfinite(lse) & (lse > 0)
-    use_weights = weighted and bool(np.all(finite_se))
-    weights = 1.0 / lse**2 if use_weights else np.ones(n_levels)
-    sw = np.sqrt(weights)
-    if free:
-        beta, *_ = np.linalg.lstsq(X * sw[:, None], target * sw, rcond=None)
-    else:
-        beta = np.zeros(0)
-    values = dict(fixed)
-    values.update({n: float(b) for n, b in zip(free, beta, strict=True)})
-    line = values["ei0_nm2"] + values["ei1_nm2_per_pa"] * lp
-    residuals = lei - line
-    dof = n_levels - len(free)
-    if free and level_cov is not None:
-        a = np.linalg.pinv((X * weights[:, None]).T @ X) @ (X * weights[:, None]).T
-        resid_map = np.eye(n_levels) - X @ a
-        data_cov, sys_cov = level_cov
-        expected = float(np.trace(weights[:, None] * (resid_map @ data_cov @ resid_map.T)))
-        chi2 = float(np.sum(weights * residuals**2))
-        cov = a @ (data_cov * (max(1.0, chi2 / expected) if expected > 0 else 1.0) + sys_cov) @ a.T
-    elif free:
-        xtwx_inv = np.linalg.pinv((X * weights[:, None]).T @ X)
-        chi2 = float(np.sum(weights * residuals**2))
-        if use_weights:
-            factor = max(1.0, chi2 / dof) if dof > 0 else 1.0
-        else:
-            factor = chi2 / dof if dof > 0 else math.inf
-        cov = xtwx_inv * factor
-    else:
-        cov = np.zeros((0, 0))
-    return values, residuals, cov, use_weights

@@ -26,6 +26,10 @@ mostly free; a touch in a minority of frames is then rejected in the next round)
 Usable frames: a reconstructed shape inside the calibrated range (status not
 ``extrapolated``) and a pressure inside ``actuator.pressure_range_pa``.
 
+**Adapt** (:func:`adapt`): the same selection and the same fit, as a Bayesian update of
+the config's prior (``fit_free_bending(..., prior=True)``), on frames of any session:
+no fall back to all frames, and a frame must also pass the free-shape test.
+
 The covariance of the fit is not the residual scatter's ``s² (JᵀJ)⁻¹``: the calibration
 error is one error common to all frames of a session (the same polynomials map every
 frame), so it does not average down over the frames. The angles' joint covariance over
@@ -48,6 +52,8 @@ fits EI per pressure level and the line EI(P).
 
 from __future__ import annotations
 
+import dataclasses
+import datetime
 import math
 from dataclasses import dataclass
 
@@ -59,9 +65,14 @@ from bendsense.identify import StiffnessData, fit_free_bending
 from bendsense.identify_covariance import session_covariance
 
 __all__ = [
+    "ADAPT_FRAMES",
     "FREE_CHI2_2SIGMA",
+    "FREE_P",
     "MAX_FRAMES",
+    "Adaptation",
     "FreeBendingSessionFit",
+    "adapt",
+    "adapt_session",
     "free_bending_angles",
     "fit_free_bending_session",
     "fit_stiffness_session",
@@ -71,8 +82,13 @@ __all__ = [
 
 #: χ² with 2 degrees of freedom at the 2σ level (95.45 %): the free frames' force ellipse.
 FREE_CHI2_2SIGMA = -2.0 * math.log(1.0 - math.erf(2.0 / math.sqrt(2.0)))
-#: Usable frames a free-bending fit considers at most (evenly spread over the session).
+#: A frame whose free-beam fit has a p-value below this is not free (:func:`adapt`).
+FREE_P = 1e-3
+#: Usable frames a free-bending fit considers at most (spread over pressure, :func:`_thin`).
 MAX_FRAMES = 400
+#: Frames :func:`adapt` learns from at most (spread over pressure): past ~100 the calibration's error, common to
+#: all, bounds what more frames add, and their joint covariance costs the square of their number.
+ADAPT_FRAMES = 160
 
 
 def _source(session) -> str:
@@ -122,7 +138,7 @@ def session_shapes(session, calibration, config, *, need_pressure: bool = True):
     return shape, usable
 
 
-def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
+def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8, with_misfit: bool = False):
     """The free-bending angle θ = K0 L of each frame, gravity taken out, and its weights.
 
     K0 minimises ``Σ_i (φ_i − φ_model(L_i; K0))²`` over the coils, with ``φ_i`` the
@@ -140,6 +156,10 @@ def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
         Actuator, stiffness and gravity.
     max_iter : int
         Gauss–Newton steps.
+    with_misfit : bool
+        Also return the residuals of the coil angles about the fitted free beam
+        (frames, N) [rad], ∂φ/∂K0 and ∂φ/∂EI (frames, N), as a fourth item (the free
+        frames' test of :func:`adapt`).
 
     Returns
     -------
@@ -183,8 +203,42 @@ def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8):
     angle = np.where(good, k0 * length, np.nan)
     weights = length * j / jj[:, None]
     # at the optimum K0 moves by −(jᵀ ∂φ/∂EI)/(jᵀj) per unit of EI
-    slope_ei = -np.einsum("bi,bi->b", weights, (ei_hi - ei_lo) / (2.0 * dei[:, None]))
-    return angle, weights, slope_ei
+    dphi_dei = (ei_hi - ei_lo) / (2.0 * dei[:, None])
+    slope_ei = -np.einsum("bi,bi->b", weights, dphi_dei)
+    if not with_misfit:
+        return angle, weights, slope_ei
+    return angle, weights, slope_ei, (phi - mid, j, dphi_dei)
+
+
+def _free_p_value(misfit, shape, p, config, calibration):
+    """The p-value of each frame's free-beam fit: whether its shape is a free beam's for some K0.
+
+    The residual r of the measured coil angles about the free beam at the frame's own
+    K0 (:func:`free_bending_angles`) is tested against the angles' covariance C (the
+    calibration's error model at the frame's shifts, and the config's uncertainty of
+    EI(P) through the gravity sag): ``χ² = rᵀC⁻¹r − (jᵀC⁻¹r)² / (jᵀC⁻¹j)`` with N − 1
+    degrees of freedom (j = ∂φ/∂K0). A tip load bends the actuator unlike any K0 (its
+    moment grows toward the base), so a loaded frame fails this test where its force
+    still lies inside the prior's wide ellipse.
+    """
+    from scipy.stats import chi2
+
+    from bendsense.shift_errors import shift_covariances
+
+    r, j, dphi_dei = misfit
+    gap = float(calibration.strip_gap_m(config.sensor))
+    lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
+    shifts = np.ascontiguousarray(gap * np.cumsum(np.asarray(shape.curvature_per_m, dtype=float) * lengths, axis=-1))
+    cov = np.empty(shifts.shape + shifts.shape[-1:])
+    shift_covariances(calibration.error_model(), shifts, cov, np.empty(shifts.shape))
+    cov /= gap**2
+    g = np.stack([np.ones(len(p)), p], axis=-1)
+    var_ei = np.einsum("bi,ij,bj->b", g, _block(config, STIFFNESS_PARAMETERS), g)
+    cov += var_ei[:, None, None] * np.einsum("bi,bj->bij", dphi_dei, dphi_dei)
+    ci_r = np.linalg.solve(cov, r[..., None])[..., 0]
+    ci_j = np.linalg.solve(cov, j[..., None])[..., 0]
+    stat = np.einsum("bi,bi->b", r, ci_r) - np.einsum("bi,bi->b", j, ci_r) ** 2 / np.einsum("bi,bi->b", j, ci_j)
+    return chi2.sf(stat, r.shape[-1] - 1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,8 +344,12 @@ class FreeBendingSessionFit:
         return ax
 
 
-def _select(shape, pressure, usable, config, calibration, nsigma2, thinned):
-    """Frames whose estimate is ``ok`` with the force inside its χ² ellipse; the reason for every frame."""
+def _select(shape, pressure, usable, config, calibration, nsigma2, thinned, shaped):
+    """Frames whose estimate is ``ok`` with the force inside its χ² ellipse; the reason for every frame.
+
+    ``shaped``: frames whose shape is a free beam's (:func:`_free_p_value`); the others
+    are ``load_shape``.
+    """
     from bendsense.estimation import estimate_force
     from bendsense.results import frame_status
 
@@ -306,8 +364,9 @@ def _select(shape, pressure, usable, config, calibration, nsigma2, thinned):
     d2 = np.full(len(idx), np.inf)
     if finite.any():
         d2[finite] = np.einsum("bi,bij,bj->b", F[finite], np.linalg.pinv(C[finite]), F[finite])
-    free = (status == "ok") & (d2 <= nsigma2)
-    reason[idx] = np.where(free, "used", np.where(status == "ok", "loaded", status))
+    free = (status == "ok") & (d2 <= nsigma2) & shaped[idx]
+    reason[idx] = np.where(free, "used", np.where(status != "ok", status, np.where(shaped[idx], "loaded",
+                                                                                     "load_shape")))
     return reason == "used", reason
 
 
@@ -340,10 +399,10 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     chi2_limit : float
         A frame is free when ``Fᵀ C⁻¹ F`` is at most this (default the 2σ level of χ²₂).
     max_frames : int
-        Consider at most this many usable frames, evenly spread over the session (a
-        sweep recorded at 2 kHz has tens of thousands; the calibration's error, common
-        to all, bounds what more frames could add); the others have the reason
-        ``thinned``.
+        Consider at most this many usable frames, spread evenly over pressure and each
+        pressure's over time (a sweep recorded at 2 kHz has tens of thousands; the
+        calibration's error, common to all, bounds what more frames could add); the
+        others have the reason ``thinned``.
 
     Returns
     -------
@@ -357,39 +416,54 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     from bendsense.pipeline import _inputs
 
     session, config, calibration, _ = _inputs(session, config, calibration, "")
+    shape, usable = session_shapes(session, calibration, config)
+    return _free_frames_fit(shape, np.asarray(session.pressure_pa, dtype=float), usable, config, calibration,
+                            _source(session), fix=fix, rounds=rounds, chi2_limit=chi2_limit, max_frames=max_frames)
+
+
+def _free_frames_fit(shape, p, usable, config, calibration, source, *, fix=None, rounds=5,
+                     chi2_limit=FREE_CHI2_2SIGMA, max_frames=MAX_FRAMES, prior=False) -> FreeBendingSessionFit:
+    """The free frames of a session and the free-bending fit on them, iterated (module docstring).
+
+    ``prior``: the fit updates the config's prior (:func:`adapt`); the first selection is
+    then the starting config's alone (no fall back to every usable frame: a session
+    need not be a free sweep) and fewer than four free frames raise :class:`SessionError`.
+    """
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise ArgumentError(f"rounds: expected an integer >= 1, got {rounds!r}")
     if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 4:
         raise ArgumentError(f"max_frames: expected an integer >= 4, got {max_frames!r}")
-    shape, usable = session_shapes(session, calibration, config)
     thinned = usable.copy()
-    candidates = np.flatnonzero(usable)
-    usable[:] = False
-    usable[candidates[np.unique(np.linspace(0, candidates.size - 1, min(candidates.size, max_frames)).round()
-                                .astype(int))] if candidates.size else candidates] = True
+    usable = np.zeros_like(usable)
+    usable[_thin(np.flatnonzero(thinned), p, max_frames)] = True
     thinned &= ~usable
-    p = np.asarray(session.pressure_pa, dtype=float)
     angle = np.full(len(p), np.nan)
     weights = np.full((len(p), config.sensor.n_segments), np.nan)
     slope_ei = np.full(len(p), np.nan)
     idx = np.flatnonzero(usable)
+    shaped = np.ones(len(p), dtype=bool)  # a free beam's shape (the test of a prior's update)
     if idx.size:
-        angle[idx], weights[idx], slope_ei[idx] = free_bending_angles(_take(shape, idx), p[idx], config)
+        part = _take(shape, idx)
+        out = free_bending_angles(part, p[idx], config, with_misfit=prior)
+        angle[idx], weights[idx], slope_ei[idx] = out[:3]
+        if prior:
+            shaped[idx] = _free_p_value(out[3], part, p[idx], config, calibration) >= FREE_P
     usable &= np.isfinite(angle)
     if not usable.any():
-        raise SessionError(f"{_source(session)}: no frame with a usable shape (all outside the calibrated range, "
+        raise SessionError(f"{source}: no frame with a usable shape (all outside the calibrated range, "
                            "or their pressure outside actuator.pressure_range_pa)")
-    used, reason = _select(shape, p, usable, config, calibration, chi2_limit, thinned)
+    used, reason = _select(shape, p, usable, config, calibration, chi2_limit, thinned, shaped)
     note = "the first selection by the starting config"
-    if used.sum() < 0.5 * usable.sum():
+    if used.sum() < 0.5 * usable.sum() and not prior:
         used, note = usable.copy(), (f"the starting config found {int(used.sum())} of {int(usable.sum())} usable "
                                      "frames free; the first fit used all usable frames")
+    frames = _FreeFrames(shape, p, angle, weights, slope_ei, calibration, config, source)
     fit, settled, done, caveats = None, False, 0, ()
     while done < rounds:
         done += 1
-        fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
+        fit = frames.fit(used, fix, prior)
         current = fit.to_config(config)
-        new_used, new_reason = _select(shape, p, usable, current, calibration, chi2_limit, thinned)
+        new_used, new_reason = _select(shape, p, usable, current, calibration, chi2_limit, thinned, shaped)
         if new_used.sum() < 0.5 * used.sum():  # the fitted model describes few of its own frames: keep them
             caveats = (f"the fitted config finds only {int(new_used.sum())} of the {int(used.sum())} frames it was "
                        "fitted to free: the model does not describe the free sweep to within its sigma (is EI(P) "
@@ -401,8 +475,8 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
         if settled:
             break
     if not settled and not caveats:  # the final fit is on the final selection
-        fit = _fit_frames(session, calibration, p, angle, (weights, slope_ei), used, config, fix)
-    if not np.any(_block(config, STIFFNESS_PARAMETERS)):
+        fit = frames.fit(used, fix, prior)
+    if not prior and not np.any(_block(config, STIFFNESS_PARAMETERS)):
         caveats += ("the config states no covariance of ei0_nm2, ei1_nm2_per_pa: the gravity correction takes its "
                     "EI(P) as exact; identify stiffness, then free bending again with that config",)
     return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
@@ -410,23 +484,68 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
                                  caveats=caveats)
 
 
-def _fit_frames(session, calibration, p, angle, sensitivities, used, config, fix):
-    """:func:`fit_free_bending` on the ``used`` frames, with their angles' joint covariance.
+def _thin(candidates, pressure_pa, max_frames: int) -> np.ndarray:
+    """At most ``max_frames`` of ``candidates``, spread evenly over pressure (1 kPa bins), each bin's over time.
 
-    The covariance: the calibration's errors over the frames (:func:`session_covariance`)
-    plus the config's stated uncertainty of EI(P) through the gravity correction.
+    The model is a function of pressure, and the calibration's error, common to the
+    frames at one pressure, does not average down over them: a hold at one pressure
+    (thousands of frames, loaded or not) gets no more than a bin of the sweep.
     """
-    weights, slope_ei = sensitivities
-    rows = np.flatnonzero(used)
-    if rows.size < 4:
-        raise SessionError(f"{_source(session)}: {rows.size} free frame(s) found (status ok and the force inside "
-                           "its 2-sigma ellipse); need at least 4 over the pressure range: record a free sweep")
-    gap = float(calibration.strip_gap_m(config.sensor))
-    cov = session_covariance(calibration, np.asarray(session.signals)[rows], weights[rows] / gap,
-                             np.arange(rows.size), rows.size)
-    g = slope_ei[rows, None] * np.stack([np.ones(rows.size), p[rows]], axis=-1)  # ∂θ/∂(ei0, ei1)
-    return fit_free_bending(p[rows], angle[rows], config, fix=fix, data_covariance=cov,
-                            systematic_covariance=g @ _block(config, STIFFNESS_PARAMETERS) @ g.T)
+    if candidates.size <= max_frames:
+        return candidates
+    _, inverse, counts = np.unique(np.round(pressure_pa[candidates] / 1e3), return_inverse=True, return_counts=True)
+    bins = np.unique(np.linspace(0, counts.size - 1, min(counts.size, max_frames)).round().astype(int))
+    quota = 1
+    while np.minimum(counts, quota + 1).sum() <= max_frames:  # the most frames per bin that fit
+        quota += 1
+    keep = []
+    for k, b in enumerate(bins):
+        rows = np.flatnonzero(inverse == b)
+        if quota == 1:  # one frame per bin: the first and the last in time by turns (a sweep's up and down)
+            keep.append(rows[[0 if k % 2 == 0 else -1]])
+        else:
+            keep.append(rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, quota)).round().astype(int))])
+    return candidates[np.sort(np.concatenate(keep))]
+
+
+@dataclass(frozen=True, eq=False)
+class _FreeFrames:
+    """A session's free-bending angles and what :func:`fit_free_bending` needs of them."""
+
+    shape: object
+    pressure_pa: np.ndarray
+    angle_rad: np.ndarray
+    weights: np.ndarray
+    slope_ei: np.ndarray
+    calibration: object
+    config: object
+    source: str
+
+    def fit(self, used, fix, prior):
+        """:func:`fit_free_bending` on the ``used`` frames, with their angles' joint covariance.
+
+        The covariance: the calibration's errors over the frames (:func:`session_covariance`).
+        The config's uncertainty of EI(P) enters through the gravity correction: as a
+        systematic covariance of the angles, or, with a prior, as the stiffness
+        parameters' response (the posterior keeps their cross-covariances).
+        """
+        rows = np.flatnonzero(used)
+        if rows.size < 4:
+            raise SessionError(f"{self.source}: {rows.size} free frame(s) found (status ok and the force inside "
+                               "its 2-sigma ellipse); need at least 4 over the pressure range: record a free sweep")
+        config = self.config
+        p = self.pressure_pa[rows]
+        gap = float(self.calibration.strip_gap_m(config.sensor))
+        lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
+        shifts = gap * np.cumsum(np.asarray(self.shape.curvature_per_m, dtype=float)[rows] * lengths, axis=-1)
+        cov = session_covariance(self.calibration, shifts, self.weights[rows] / gap, np.arange(rows.size),
+                                 rows.size)
+        g = self.slope_ei[rows, None] * np.stack([np.ones(rows.size), p], axis=-1)  # ∂θ/∂(ei0, ei1)
+        if prior:  # θ was taken out with the config's EI: the true EI moves it by −g
+            return fit_free_bending(p, self.angle_rad[rows], config, data_covariance=cov, prior=True,
+                                    stiffness_response=-g)
+        return fit_free_bending(p, self.angle_rad[rows], config, fix=fix, data_covariance=cov,
+                                systematic_covariance=g @ _block(config, STIFFNESS_PARAMETERS) @ g.T)
 
 
 def _block(config, names) -> np.ndarray:
@@ -441,6 +560,186 @@ def _block(config, names) -> np.ndarray:
             if i >= 0 and j >= 0:
                 out[a, b] = section.matrix[i, j]
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class Adaptation:
+    """Result of :func:`adapt`: the config updated by a session's own free frames.
+
+    Attributes
+    ----------
+    config : Config
+        The config with the posterior of its model parameters: the free-bending values
+        and the whole ``parameter_covariance`` updated (the stiffness keeps its values
+        and variances, its cross-covariances with the free-bending parameters are the
+        posterior's); the config unchanged when it refused.
+    free : ndarray of bool, shape (frames,)
+        The frames it learned from.
+    report : str
+        One paragraph: frames used of how many, what was learned (σ before → after),
+        what it refused and why.
+    fit : FreeBendingSessionFit or None
+        The fit behind it (None when it refused).
+    """
+
+    config: object
+    free: np.ndarray
+    report: str
+    fit: object = None
+
+    @property
+    def refused(self) -> bool:
+        """It learned nothing: no free frames it could tell from loaded ones."""
+        return self.fit is None
+
+
+def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None) -> Adaptation:
+    """Learn the actuator's free bending from a session's own free frames: the prior updated by them.
+
+    The free frames are found as ``identify free-bending --session`` finds them (module
+    docstring): the force estimator's status ``ok`` and the force inside its 2σ ellipse,
+    first with the config's prior, then with each round's posterior, until the
+    selection repeats. Each one's free-bending angle (gravity taken out) and the angles'
+    joint covariance under the calibration's errors are the data; the config's values
+    and ``parameter_covariance`` are the prior; :func:`bendsense.identify.fit_free_bending`
+    with ``prior=True`` gives the posterior (the prior's rows in the same least squares).
+    The stiffness the prior states enters through the gravity correction: it keeps its
+    values and variances (free frames are too weak a lever on EI), its uncertainty weighs
+    the data and the posterior holds the cross-covariances it implies. Besides the
+    force ellipse, a frame must pass the free-shape test (:func:`_free_p_value`: its
+    coil angles a free beam's for some K0), which rejects loads the prior's wide
+    ellipse would let through. Frames at one pressure teach K0 at that
+    pressure only: the posterior keeps the prior's split between μ̄ and μ_s there.
+
+    It refuses to learn (the config returned unchanged, ``refused`` True, the report
+    says why) from fewer than four free frames: a session whose frames are all loaded,
+    or none in the calibrated range and the pressure range.
+
+    Parameters
+    ----------
+    shape : Shape or array_like, shape (frames, N)
+        Reconstructed shapes (:func:`bendsense.reconstruct`) or segment curvatures [1/m]
+        on ``config.sensor``.
+    pressure_pa : array_like, shape (frames,)
+        Pressure of each frame [Pa].
+    config : Config
+        The actuator, with the prior to update (``parameter_covariance``).
+    calibration : Calibration
+        The sensor's calibration: its noise and error model weigh the data (required).
+    t_s : array_like, shape (frames,), optional
+        Time of each frame [s]: the report gives the free frames' time span.
+    source : str, optional
+        The session's name, for the provenance the adapted config carries
+        (``parameter_covariance.source``: the session, the frames used, the date).
+
+    Returns
+    -------
+    Adaptation
+
+    Raises
+    ------
+    ArgumentError
+        No calibration, a config without a prior, shapes that do not match.
+    """
+    from bendsense import validation as check
+    from bendsense.calibration import Calibration
+    from bendsense.config import Config
+    from bendsense.pcc import Shape
+
+    check.instance("config", config, Config, "bendsense.load_config(path)")
+    if not isinstance(calibration, Calibration):
+        raise ArgumentError("calibration: adapt needs the sensor's Calibration (its noise and error model weigh the "
+                            f"free frames against the prior), got {type(calibration).__name__}")
+    if config.parameter_covariance is None:
+        raise ArgumentError(f"config {config.name!r}: no parameter_covariance: adapt updates a prior; state one "
+                            "(the shipped config's) or identify free bending from a free sweep")
+    if not isinstance(shape, Shape):
+        shape = Shape.from_curvatures(np.asarray(shape, dtype=float), config.sensor.segment_lengths_m)
+    kappa = np.asarray(shape.curvature_per_m, dtype=float)
+    p = np.asarray(pressure_pa, dtype=float)
+    if kappa.ndim != 2 or kappa.shape[-1] != config.sensor.n_segments or p.shape != kappa.shape[:1]:
+        raise ArgumentError(f"shape, pressure_pa: expected ({config.sensor.n_segments} curvatures) per frame and one "
+                            f"pressure per frame, got {kappa.shape} and {p.shape}")
+    t = None if t_s is None else np.asarray(t_s, dtype=float)
+    if t is not None and t.shape != p.shape:
+        raise ArgumentError(f"t_s: expected one time per frame {p.shape}, got {t.shape}")
+    lo, hi = config.actuator.pressure_range_pa
+    with np.errstate(invalid="ignore"):
+        usable = (~np.asarray(shape.extrapolated, dtype=bool) & np.all(np.isfinite(kappa), axis=-1)
+                  & (p >= lo) & (p <= hi))
+    try:
+        fit = _free_frames_fit(shape, p, usable, config, calibration, "adapt", prior=True, max_frames=ADAPT_FRAMES)
+    except SessionError as err:
+        why = str(err).removeprefix("adapt: ")
+        report = (f"adapt: learned nothing from {len(p)} frames and kept the config's prior: {why}. "
+                  "It learns only from frames it can tell from loaded ones (the force estimate ok and inside its "
+                  "2-sigma ellipse of zero); record a moment of free motion (a sweep, the approach before a "
+                  "grasp, a rest between touches).")
+        return Adaptation(config=config, free=np.zeros(len(p), dtype=bool), report=report)
+    new = fit.to_config(config)
+    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    provenance = (f"adapt {when} from {source or 'a session'}: {int(fit.used.sum())} of {len(p)} frames free; "
+                  f"the prior: {config.parameter_covariance.source or 'not named'}")
+    new = new.replace(parameter_covariance=dataclasses.replace(new.parameter_covariance, source=provenance))
+    return Adaptation(config=new, free=fit.used.copy(), report=_adapt_report(fit, config, new, t), fit=fit)
+
+
+def adapt_session(session, config, calibration, pressure_pa=None) -> Adaptation:
+    """:func:`adapt` on a recorded session (``process --adapt``): its shapes, pressures, times and name.
+
+    Parameters
+    ----------
+    session : Session
+        The recording.
+    config : Config
+        The actuator, with the prior to update.
+    calibration : Calibration
+        The sensor's calibration.
+    pressure_pa : float, optional
+        Pressure of frames without a reading [Pa].
+    """
+    if pressure_pa is not None:
+        session = session.with_pressure(pressure_pa)
+    shape, _ = session_shapes(session, calibration, config, need_pressure=False)
+    return adapt(shape, session.pressure_pa, config, calibration=calibration, t_s=session.t_s,
+                 source=_source(session))
+
+
+def _adapt_report(fit, prior, posterior, t_s) -> str:
+    """One paragraph: frames used of how many, what was learned (σ before → after), what was refused."""
+    from bendsense.actuator import FreeBendingModel, model_jacobian
+
+    used = fit.used
+    p = fit.pressure_pa[used]
+    span = f"{p.min() / 1e3:.0f}-{p.max() / 1e3:.0f} kPa" if np.ptp(p) > 1e3 else f"{np.median(p) / 1e3:.0f} kPa"
+    when = ""
+    if t_s is not None:
+        when = f" between {t_s[used].min():.2f} and {t_s[used].max():.2f} s"
+    levels = np.unique(np.round(np.percentile(p, [5, 50, 95]), -3))
+    k0 = [FreeBendingModel.from_config(c).tip_curvature_per_m(levels) for c in (prior, posterior)]
+    sig = []
+    for c in (prior, posterior):
+        J = model_jacobian(c, levels, c.parameter_covariance.parameters)
+        sig.append(np.sqrt(np.einsum("bi,ij,bj->b", J[:, 0], c.parameter_covariance.matrix, J[:, 0])))
+    learned = ", ".join(f"{lv / 1e3:.0f} kPa {100 * (b / a - 1):+.1f} % (sigma {100 * sa / abs(a):.1f} % -> "
+                        f"{100 * sb / abs(b):.1f} %)" for lv, a, b, sa, sb in zip(levels, *k0, *sig, strict=True))
+    before, after = prior.parameter_covariance.std, posterior.parameter_covariance.std
+    old, new = prior.model_parameters(), posterior.model_parameters()
+    params = "; ".join(f"{n} {old[n]:.4g} +- {before[n]:.2g} -> {new[n]:.4g} +- {after[n]:.2g}"
+                       for n in prior.parameter_covariance.parameters if before[n] > 0)
+    counts = {r: int(np.count_nonzero(fit.reason == r)) for r in dict.fromkeys(fit.reason.tolist())}
+    considered = len(used) - counts.pop("thinned", 0)
+    refused = ", ".join(f"{c} {r}" for r, c in counts.items() if r != "used") or "none"
+    one = "" if np.ptp(p) > 10e3 else (" Its free frames lie at one pressure: they teach K0 there, and the split "
+                                       "between shear_modulus_pa and sensor_stiffness_nm_per_rad stays the prior's.")
+    caveats = "".join(f" Note: {c}." for c in fit.caveats)
+    settled = "" if fit.settled else " WARNING: the frame selection had not settled; check the free frames."
+    return (f"adapt: learned from {int(used.sum())} free frames of {considered} considered ({len(used)} in the "
+            f"session, spread over pressure, at most {ADAPT_FRAMES}) at {span}{when}; K0 moved by {learned}; "
+            f"{params}. Refused: {refused} (loaded: the force outside its 2-sigma ellipse of zero; load_shape: a "
+            f"shape no free beam has, p < {FREE_P:g}; unusable: outside the calibrated or pressure range), in "
+            f"{fit.rounds} round(s) of selection.{one}{caveats}"
+            f"{settled}")
 
 
 def stiffness_data_from_session(session, calibration, config=None):
@@ -516,13 +815,12 @@ def fit_stiffness_session(session, calibration, config=None, **options):
 
     session, config, calibration, _ = _inputs(session, config, calibration, "")
     data, rows = _stiffness_rows(session, calibration, config)
-    signals = np.asarray(session.signals, dtype=float)[rows]
-    dpos_ds = _points_shift_jacobian(calibration.shifts_m(signals), calibration.strip_gap_m(config.sensor),
-                                     config)
+    shifts = np.asarray(calibration.shifts_m(np.asarray(session.signals, dtype=float)[rows]))
+    dpos_ds = _points_shift_jacobian(shifts, calibration.strip_gap_m(config.sensor), config)
 
     def level_covariance(sensitivity, level, level_ei):
         weights = np.einsum("nmc,nmcj->nj", sensitivity, dpos_ds)
-        cov = session_covariance(calibration, signals, weights, level, len(level_ei))
+        cov = session_covariance(calibration, shifts, weights, level, len(level_ei))
         g = _level_k0_jacobian(data, config, sensitivity, level, level_ei)
         return cov, g @ _block(config, FREE_BENDING_PARAMETERS) @ g.T
 

@@ -73,6 +73,9 @@ def _dask_executor(address: str):
 @objective_option
 @click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")
 @click.option("--no-estimate", is_flag=True, help="Reconstruct shapes only, no force estimate.")
+@click.option("--adapt", "adapt", is_flag=True,
+              help="Each session first updates the config's prior with its own free frames (bendsense.adapt, as "
+                   "the chain's 'adapt'); its config goes to OUT/NAME/config.yaml.")
 @window_option
 @click.option("--track", "track_mode", type=click.Choice(TRACK_MODES),
               help="Track each session's force over time, as the chain's 'track' step: 'smooth' (offline, RTS "
@@ -84,8 +87,8 @@ def _dask_executor(address: str):
 @overwrite_option
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, constraint, method, objective,
-            pressure_kpa, no_estimate, window_s, track_mode, bandwidth_hz, load, contact_s_m, recursive, overwrite,
-            no_progress):
+            pressure_kpa, no_estimate, adapt, window_s, track_mode, bandwidth_hz, load, contact_s_m, recursive,
+            overwrite, no_progress):
     """Process many sessions in parallel: reconstruct, estimate and save each one.
 
     Every SESSION_OR_DIR is a session CSV, a native session directory, or a
@@ -95,7 +98,9 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
     fails is reported with its reason while the others finish; the exit code is 1
     if any failed. Prints a summary table at the end. Each session's frames are
     model-checked in windows (--window-s, as the chain's 'estimate'); --track adds
-    the tracked force (as the chain's 'track' step). With a gripper's config
+    the tracked force (as the chain's 'track' step); --adapt first updates the
+    config's prior with each session's own free frames (as the chain's 'adapt') and
+    writes that session's config to OUT/NAME/config.yaml. With a gripper's config
     (fingers:) each session is a whole board: its fingers go to
     OUT/NAME/<finger>/results.csv and shape.npz (--calibration NAME=CAL.yaml per
     finger, or one for every finger).
@@ -124,6 +129,8 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
             raise click.UsageError("--track and --bandwidth-hz need the force estimate: not with --no-estimate")
         if bandwidth_hz is not None and not track_mode:
             raise click.UsageError("--bandwidth-hz is the bandwidth of the track: give --track smooth|filter")
+        if no_estimate and adapt:
+            raise click.UsageError("--adapt learns what the force estimate uses: not with --no-estimate")
         if no_estimate and (load != "tip" or contact_s_m is not None):
             raise click.UsageError("--load and --contact-s-m are options of the force estimate: not with --no-estimate")
         from bendsense.config import load_config
@@ -131,6 +138,9 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
         config = load_config(config_path)  # (a gripper's config: each board session's fingers)
         calibration = calibration_paths(calibration_paths_given, config)
         actuators = [f.config for f in config.fingers] if hasattr(config, "fingers") else [config]
+        if adapt and (hasattr(config, "fingers") or config.parameter_covariance is None):
+            raise click.BadParameter("needs one actuator's config with a prior (parameter_covariance) to update",
+                                     param_hint="--adapt")
         if contact_s_m is not None:  # a location beyond the actuator is refused here, not once per session
             for actuator in actuators:
                 check_load(load, contact_s_m, actuator)
@@ -160,6 +170,7 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
                 window_s=0.05 if window_s is None else window_s,
                 load=load,
                 contact_s_m=contact_s_m,
+                adapt=adapt,
             )
         except KeyboardInterrupt:
             if client is not None:  # its connections close under the cluster's feet: no tracebacks of theirs

@@ -1,4 +1,4 @@
-"""Chained processing steps: ``load``, ``reconstruct``, ``estimate``, ``track``, ``save``, ``mcap``, ``export``.
+"""Chained steps: ``load``, ``reconstruct``, ``adapt``, ``estimate``, ``track``, ``save``, ``mcap``, ``export``.
 
 Each step returns a function of the pipeline state; the group runs them in the
 order given on the command line::
@@ -43,7 +43,8 @@ from bendsense.errors import BendsenseError, SessionError
 
 log = logging.getLogger("bendsense")
 
-RESULTS_FILES = ("results.csv", "shape.npz")  # what 'save' writes into its directory
+RESULTS_FILES = ("results.csv", "shape.npz", "config.yaml")  # what 'save' writes into its directory (the last: after
+# 'adapt')
 DEFAULT_WINDOW_S = 0.05  # the window of the model check over frames (bendsense.check_windows) [s]
 
 
@@ -240,6 +241,39 @@ def reconstruct(points):
     return per_finger(step)
 
 
+@click.command("adapt", cls=InterspersedCommand)
+def adapt():
+    """Learn the actuator's free bending from the session's own free frames (bendsense.adapt).
+
+    The frames with no load (the force estimate ok and inside its 2-sigma ellipse of
+    zero, a shape no tip load made) update the config's prior (its
+    parameter_covariance): a Bayesian update, the posterior's values and covariance.
+    The later steps use the adapted config; 'save OUT' writes it to OUT/config.yaml,
+    its provenance (session, frames used, date) in parameter_covariance.source. Give it
+    after 'reconstruct', before 'estimate'. A session without free frames teaches
+    nothing: a warning says why and the config stays the prior.
+    """
+
+    def step(state):
+        from bendsense.identify_session import adapt as adapt_config
+
+        if is_gripper(state):
+            raise click.UsageError("'adapt' takes one actuator's config, not a gripper's fingers:")
+        shape = _require(state, "shape", "adapt", "'reconstruct'")
+        session = state["session"]
+        with data_warnings_logged(state.setdefault("said", set())):
+            result = adapt_config(shape, session.pressure_pa, state["config"], calibration=state["calibration"],
+                                  t_s=session.t_s, source=state.get("name"))
+        if result.refused:
+            log.warning("%s", result.report)
+        else:
+            say(result.report)
+        state.update(config=result.config, adapted=True)
+        return state
+
+    return step
+
+
 @click.command("estimate", cls=InterspersedCommand)
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
@@ -390,7 +424,11 @@ def track(smooth, bandwidth_hz, window_s):
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
 @overwrite_option
 def save(out_dir, overwrite):
-    """Write results.csv and shape.npz into OUT_DIR (a gripper: OUT_DIR/<finger>/ for each finger)."""
+    """Write results.csv and shape.npz into OUT_DIR (a gripper: OUT_DIR/<finger>/ for each finger).
+
+    After 'adapt' also config.yaml: the adapted config, its provenance in
+    parameter_covariance.source.
+    """
 
     def step(state):
         from bendsense.results import write_results
@@ -407,7 +445,12 @@ def save(out_dir, overwrite):
         write_results(out_dir, state["session"], shape, state.get("estimate"), track=state.get("track"),
                       overwrite=overwrite)
         state["out_dir"] = out_dir
-        say(f"wrote {out_dir}/results.csv and shape.npz ({len(state['session'])} frames)")
+        if state.get("adapted"):
+            from bendsense.config import save_config
+
+            save_config(state["config"], out_dir / "config.yaml")
+        written = " and config.yaml" if state.get("adapted") else ""
+        say(f"wrote {out_dir}/results.csv, shape.npz{written} ({len(state['session'])} frames)")
         return state
 
     return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite, files=RESULTS_FILES)])
@@ -470,4 +513,4 @@ def export(csv_path, finger, overwrite):
     return step_io(step, outputs=[output.file(csv_path, overwrite=overwrite, suffixes=output.CSV)])
 
 
-COMMANDS = [load, reconstruct, estimate, track, save, mcap, export]
+COMMANDS = [load, reconstruct, adapt, estimate, track, save, mcap, export]
