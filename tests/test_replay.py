@@ -75,6 +75,7 @@ def test_replayed_session_recorded_again_is_identical(tmp_path):
     assert abs(again.meta["device"]["rate_hz"] - 1000) <= 10  # the median interval of the jittered clock
 
 
+@pytest.mark.realtime
 def test_replay_keeps_the_original_timing(tmp_path):
     original = make_recording(tmp_path / "orig", n=400)
     with ReplayDevice(original) as dev, Driver(dev.port) as drv:

@@ -431,6 +431,7 @@ def test_a_cold_cache_compiles_once_before_the_workers_start(batch, tmp_path):
         assert list((tmp_path / f"numba-cache-{name}").rglob("*.nbi"))  # (the cache really was the fresh directory)
 
 
+@pytest.mark.realtime  # what the cluster finishes in the 2 s after the client left
 def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path):
     """``process --scheduler``: Ctrl-C cancels the queued sessions and closes the client within seconds; the
     sessions the cluster finished are complete (a running one may still finish: then whole), a rerun does the

@@ -183,7 +183,8 @@ class BatchReport:
         width = max([len("session")] + [len(s.name) for s in self.sessions])
         lines = [f"{'session':<{width}}  {'status':<7} {'frames':>8} {'time [s]':>9}  note"]
         for s in self.sessions:
-            reason = " ".join(s.reason.split())
+            # the row names the session: its path in the note shrinks to the file's name, keeping the reason in view
+            reason = " ".join((s.reason.replace(s.source, Path(s.source).name) if s.source else s.reason).split())
             if len(reason) > max_reason:
                 reason = reason[: max_reason - 3] + "..."
             frames = f"{s.frames:8d}" if s.status == "ok" else f"{'-':>8}"
