@@ -8,6 +8,7 @@ every frame it generates; the loop runs the real driver, processor and controlle
 import copy
 import csv
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -26,7 +27,8 @@ from bendsense.pipeline import LiveProcessor
 from bendsense.sim.grasp import GraspObject
 from bendsense.sim.gripper import GraspBoard
 
-pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
+pytestmark = [pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals"),
+              pytest.mark.realtime]
 CONFIG = bendsense.load_config()
 S_C, TOUCH_PA, RATE = 0.10, 40e3, 1000.0
 LIMIT_PA = 100e3
@@ -209,7 +211,10 @@ def test_a_model_misfit_on_the_controlled_finger_stops_the_loop(board, processor
     err, truth = session(board, processor, pi, seconds=5.0, source=Bent(board))
     assert isinstance(err, ControlStop) and "model_misfit" in err.reason
     assert truth.column("setpoint_pa")[-1] == 0.0
-    assert 0.3 < err.result.frames / RATE < 0.5  # stopped within the first windows after the fault
+    # stopped within the first windows after the fault, by the board's clock (truth row k is frame k; the loop's
+    # frame count leaves out the block it stopped in, which is long on a loaded machine)
+    stopped_t_s = float(re.search(r"at t = ([\d.]+) s", str(err))[1])
+    assert 0.0 < stopped_t_s - truth.t_s[300] < 0.2
 
 
 def test_not_identifiable_on_the_controlled_finger_stops_the_loop(board, calibration_path):

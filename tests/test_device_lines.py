@@ -76,16 +76,19 @@ def test_send_setpoint_from_several_threads_keeps_frames_whole(board):
         def send(line):
             for k in range(40):
                 drv.send_setpoint(line, 1000 * line + k)
+                drv.send_heartbeat()
 
         threads = [threading.Thread(target=send, args=(line,)) for line in range(4)]
         for t in threads:
             t.start()
         for t in threads:
             t.join()
-        frames = board.received(160)
-    assert board.decoder.errors == 0 and len(frames) == 160
+        frames = board.received(320)
+    assert board.decoder.errors == 0 and len(frames) == 320
+    setpoints = [f for f in frames if type(f) is Setpoint]
     for line in range(4):  # each thread's set-points arrive whole and in its order
-        assert [f.pressure_pa for f in frames if f.line == line] == [1000 * line + k for k in range(40)]
+        assert [f.pressure_pa for f in setpoints if f.line == line] == [1000 * line + k for k in range(40)]
+    assert sorted(f.seq for f in frames) == list(range(1, 321))  # every frame its own sequence number
 
 
 @pytest.mark.parametrize(

@@ -324,8 +324,7 @@ class Driver:
         """
         if self.dialect != "binary":
             return
-        self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
-        self.write(encode_command(kind, seq=self._cmd_seq))
+        self.write(encode_command(kind, seq=self._next_command_seq()))
 
     def send_setpoint(self, line: int, pressure_pa: float, *, check_line: bool = True) -> None:
         """Send a SETPOINT: the target pressure of one of the board's pressure lines.
@@ -363,14 +362,12 @@ class Driver:
             if line >= n_lines:
                 raise ArgumentError(f"line: {line} is not a pressure line of the board on {self.port} "
                                     f"(it sends {n_lines} line{'s' if n_lines > 1 else ''}, 0..{n_lines - 1})")
-        try:
-            data = encode_setpoint(int(line), pressure_pa, seq=(self._cmd_seq + 1) & 0xFFFF)
-        except FrameError as err:
-            raise ArgumentError(str(err)) from None
         if self.dialect != "binary":
             raise DeviceError(f"{self.port}: the line dialect has no set-points (SETPOINT needs the binary protocol)")
-        with self._write_lock:
-            self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
+        try:
+            data = encode_setpoint(int(line), pressure_pa, seq=self._next_command_seq())
+        except FrameError as err:
+            raise ArgumentError(str(err)) from None
         self.write(data)
 
     def send_heartbeat(self) -> None:
@@ -390,9 +387,13 @@ class Driver:
         """
         if self.dialect != "binary":
             return
+        self.write(encode_command(FrameType.HEARTBEAT, seq=self._next_command_seq()))
+
+    def _next_command_seq(self) -> int:
+        """The next host-to-device sequence number (thread-safe: each frame gets its own)."""
         with self._write_lock:
-            self._cmd_seq = seq = (self._cmd_seq + 1) & 0xFFFF
-        self.write(encode_command(FrameType.HEARTBEAT, seq=seq))
+            self._cmd_seq = (self._cmd_seq + 1) & 0xFFFF
+            return self._cmd_seq
 
     def start(self) -> None:
         """Ask the board to stream SAMPLE frames."""
