@@ -7,8 +7,11 @@ free-bending solve, a hidden nonlinear sensor whose calibration ``Calibration.fi
 never from the library's solvers. Several sensors (seeds): the frames of one sensor share
 its calibration error.
 
+The sensors read at 3.2 mrad per coil, the simulated board's noise (1.5 counts there).
+
 - truth parameters drawn from the stated prior: ±2σ coverage of each component 90–98 %;
-- truth with K0 +5 % or EI +15 % and nothing declared but the shipped prior: ≥ 85 %;
+- truth with K0 ±5 % or EI +15 % and nothing declared but the shipped prior: ≥ 85 %;
+- a soft actuator (EI −30 % with K0 +10 %, issue 31): ≥ 85 % and ≤ 2 % of frames ``ok`` and beyond 3σ;
 - the same frames with no parameter covariance (the "before"): far below.
 """
 
@@ -30,16 +33,21 @@ from bendsense.config import MODEL_PARAMETERS, Config, save_config
 from bendsense.errors import ConfigError, NoNoiseModelWarning, NoParameterCovarianceWarning
 from bendsense.estimation import estimate_force, uncertainty
 from bendsense.pcc import reconstruct
+from bendsense.results import frame_status
 from bendsense.session import Session, write_session_csv
 
 CFG = bendsense.load_config()
 KNOWN = CFG.replace(parameter_covariance=None)  # the parameters are the truth (a simulation, a tracking target)
 SENSOR = CFG.sensor
 NOMINAL = np.array([CFG.model_parameters()[n] for n in MODEL_PARAMETERS])
-# the prior as docs/theory.md states it: relative σ of the moduli, absolute σ of the prebend [rad]
-STATED_SD = {"shear_modulus_pa": 0.10 * 180e3, "sensor_stiffness_nm_per_rad": 0.15 * 1.5e-3,
-             "prebend_angle_rad": 0.0175, "ei0_nm2": 0.10 * 2.53e-3, "ei1_nm2_per_pa": 0.10 * 1.25e-8}
+# the prior as docs/theory.md states it: relative σ (of ln θ) made of the silicone modulus's part, which μ̄, γ0 and
+# γ1 share, and each parameter's own; the prebend's absolute [rad]
+SHARED = np.array([0.085, 0.0, 0.0, 0.085, 0.085])
+OWN = np.array([0.04, 0.15, 0.0175, 0.15, 0.15])
 SEEDS = (11, 12, 13)  # independent hidden sensors, each with its own fitted calibration
+# 3.2 mrad per coil, the simulated board's noise: counts of the hidden sensor (gains 5200 / 4700 per s0 / d = 2 rad)
+NOISE_COUNTS = 3.2e-3 * SENSOR.strip_gap_m / HiddenSensor.s0_m * math.sqrt(HiddenSensor.gain_odd
+                                                                            * HiddenSensor.gain_even)
 
 
 # --------------------------------------------------------------------------- the config
@@ -48,17 +56,19 @@ SEEDS = (11, 12, 13)  # independent hidden sensors, each with its own fitted cal
 def test_the_shipped_config_states_the_documented_prior():
     section = CFG.parameter_covariance
     assert section is not None and section.parameters == MODEL_PARAMETERS
-    for name, sd in section.std.items():
-        assert sd == pytest.approx(STATED_SD[name], rel=1e-9), name
-    c = section.matrix
-    assert np.all(c[~np.eye(5, dtype=bool)] == 0.0)  # no correlation stated
+    scale = np.where(np.arange(5) == 2, 1.0, NOMINAL)  # relative σ's, the prebend's absolute
+    stated = scale[:, None] * (np.outer(SHARED, SHARED) + np.diag(OWN**2)) * scale[None, :]
+    np.testing.assert_allclose(section.matrix, stated, rtol=2e-4, atol=0.0)  # the YAML's five digits
+    sd = np.sqrt(np.diag(section.matrix))
+    corr = section.matrix / np.outer(sd, sd)
+    assert corr[0, 3] == pytest.approx(0.45, abs=0.01) and corr[3, 4] == pytest.approx(0.24, abs=0.01)
     assert section.source.startswith("prior for an actuator not identified")
     assert "docs/theory.md" in section.source
     # the documentation page states the same numbers
     page = (Path(__file__).parents[1] / "docs" / "theory.md").read_text(encoding="utf-8")
     assert "## The parameter prior" in page
-    for needle in ("18 kPa", "15 %", "0.0175 rad", "10 %"):
-        assert needle in page
+    for needle in ("8.5 %", "9.4 %", "17.2 %", "15 %", "0.0175 rad", "0.45", "0.24"):
+        assert needle in page, needle
 
 
 def test_the_prior_passes_the_bounds_and_a_config_may_have_none():
@@ -167,15 +177,13 @@ def _shifts(pressure_pa, force_n, theta=NOMINAL, k0_factor=1.0, ei_factor=1.0):
     """Exact shifts of the forward model's actuator with parameters θ, its K0 and EI scaled."""
     values = dict(zip(MODEL_PARAMETERS, theta, strict=True))
     material = {n: values[n] for n in MODEL_PARAMETERS[:3]}
-    stiffness = {n: values[n] for n in MODEL_PARAMETERS[3:]}
-    if k0_factor == 1.0 and ei_factor == 1.0:
-        return forward(CFG, pressure_pa, force_n, material=material, stiffness=stiffness).shifts_m
-    ei = ei_factor * (stiffness["ei0_nm2"] + stiffness["ei1_nm2_per_pa"] * pressure_pa)
+    ei = ei_factor * (values["ei0_nm2"] + values["ei1_nm2_per_pa"] * pressure_pa)
     k0 = k0_factor * free_bending_k0(CFG, pressure_pa, material)
     ends = np.cumsum(SENSOR.lengths_m)
     q = CFG.actuator.mass_kg * CFG.gravity.g_m_per_s2 / CFG.actuator.length_m
+    # tol 1e-7: the angles within 1e-10 rad of tol 1e-9's (≪ the 3.2 mrad of noise), ~20× faster on soft actuators
     shape = solve_beam_bvp(CFG.actuator.length_m, ei, k0, force_n, q * np.asarray(CFG.gravity.direction),
-                           s_m=np.concatenate(([0.0], ends)))
+                           s_m=np.concatenate(([0.0], ends)), tol=1e-7)
     return SENSOR.strip_gap_m * shape.angle_rad[np.searchsorted(shape.s_m, ends)]
 
 
@@ -188,10 +196,10 @@ def _loads(rng, n):
 
 @pytest.fixture(scope="module")
 def sensors(tmp_path_factory):
-    """Hidden sensors at 1.5 counts and the calibrations ``Calibration.fit`` makes of them."""
+    """Hidden sensors at 3.2 mrad per coil and the calibrations ``Calibration.fit`` makes of them."""
     out = []
     for seed in SEEDS:
-        hidden = HiddenSensor(noise_counts=1.5, seed=seed)
+        hidden = HiddenSensor(noise_counts=NOISE_COUNTS, seed=seed)
         out.append((hidden, Calibration.fit(hidden.write_calibration(tmp_path_factory.mktemp(f"s{seed}"), CFG))))
     return out
 
@@ -200,9 +208,12 @@ def _coverage(sensors, case, n, seed, configs=(CFG, KNOWN)):
     """±2σ coverage (Fx, Fy) of each config over ``n`` frames per sensor of the truth ``case``.
 
     Over the frames with a force: a frame without one (NaN, a failed solve with its
-    status) claims nothing. With the prior, at most 1 % of them.
+    status) claims nothing. With the prior, at most 1 % of them. Also, per config, the
+    fraction of all frames that are ``ok`` and beyond 3σ in a component (silently wrong)
+    and the median σ of |F| (along the estimated force) [N].
     """
     inside, has_force = {id(c): [] for c in configs}, {id(c): [] for c in configs}
+    silent, sigma = {id(c): [] for c in configs}, {id(c): [] for c in configs}
     for k, (hidden, cal) in enumerate(sensors):
         rng = np.random.default_rng(seed + k)
         p, force = _loads(rng, n)
@@ -216,28 +227,41 @@ def _coverage(sensors, case, n, seed, configs=(CFG, KNOWN)):
             est = estimate_force(shape, p, config, calibration=cal)
             has = np.isfinite(est.force_n).all(axis=-1)
             assert np.all(est.std_n[has] > 0)
-            inside[id(config)].append((np.abs(est.force_n - force) <= 2.0 * est.std_n)[has])
+            z = np.abs(est.force_n - force) / est.std_n
+            inside[id(config)].append((z <= 2.0)[has])
             has_force[id(config)].append(has)
+            silent[id(config)].append((frame_status(shape, est) == "ok") & np.any(z > 3.0, axis=-1))
+            u = est.force_n[has] / np.linalg.norm(est.force_n[has], axis=-1, keepdims=True)
+            sigma[id(config)].append(np.sqrt(np.einsum("bi,bij,bj->b", u, est.covariance_n2[has], u)))
     for c in configs:
         assert c.parameter_covariance is None or np.concatenate(has_force[id(c)]).mean() >= 0.99
-    return [np.concatenate(inside[id(c)]).mean(axis=0) for c in configs]
+    return [(np.concatenate(inside[id(c)]).mean(axis=0), np.concatenate(silent[id(c)]).mean(),
+             np.median(np.concatenate(sigma[id(c)]))) for c in configs]
 
 
 def test_two_sigma_covers_actuators_drawn_from_the_prior(sensors):
     """300 frames, each of its own actuator θ ~ N(θ_paper, Σ_prior), three sensors."""
-    after, before = _coverage(sensors, "prior", 100, seed=40)
-    print(f"drawn from the prior: ±2σ coverage {after} with the prior, {before} without")
+    (after, _, sd), (before, _, _) = _coverage(sensors, "prior", 100, seed=40)
+    print(f"drawn from the prior: ±2σ coverage {after} with the prior, {before} without; median σ_|F| {sd:.4f} N")
     assert np.all((after >= 0.90) & (after <= 0.98)), after
     assert np.all(before < 0.5), before
 
 
 @pytest.mark.parametrize(("case", "label"), [({"k0_factor": 1.05}, "K0 +5 %"), ({"k0_factor": 0.95}, "K0 -5 %"),
-                                             ({"ei_factor": 1.15}, "EI +15 %")])
+                                             ({"ei_factor": 1.15}, "EI +15 %"),
+                                             ({"ei_factor": 0.70, "k0_factor": 1.10}, "EI -30 %, K0 +10 %")])
 def test_two_sigma_covers_a_model_error_within_the_prior(sensors, case, label):
-    """The truth's K0 or EI off, nothing declared but the shipped prior: ≥ 85 % (150 frames)."""
-    after, before = _coverage(sensors, case, 50, seed=70)
-    print(f"{label}: ±2σ coverage {after} with the shipped prior, {before} without")
+    """The truth's K0 or EI off, nothing declared but the shipped prior: ≥ 85 % and ≤ 2 % silent (90 frames).
+
+    EI −30 % with K0 +10 % is a soft actuator (issue 31): a softer silicone curls more and
+    bends more under a load; with the uncorrelated 10 % prior of before, Fy was covered
+    48 % and 18 % of the frames were ``ok`` and beyond 3σ (240 frames, 3.2 mrad).
+    """
+    (after, silent, sd), (before, _, _) = _coverage(sensors, case, 30, seed=70)
+    print(f"{label}: ±2σ coverage {after}, {100 * silent:.1f} % silent, median σ_|F| {sd:.4f} N with the shipped "
+          f"prior; {before} without")
     assert np.all(after >= 0.85), after
+    assert silent <= 0.02, silent
     assert np.all(before < 0.5), before
 
 

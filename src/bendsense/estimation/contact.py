@@ -31,8 +31,13 @@ window's mean:
 6. every frame of a contact window is estimated at ŝ; its force covariance gains
    ``g gᵀ σ(s_c)²`` (each part its own), ``g = ∂F/∂s_c`` by central differences at the
    window's mean, and the covariance between the frame's own error and ŝ's (for a 2-D
-   force; a 1-D constraint's is left out, :func:`_force_slope`); tools/contact_eval.py
-   measures the coverage this gives.
+   force; a 1-D constraint's is left out, :func:`_force_slope`);
+7. the force and σ cover every hypothesis the window did not rule out, never the chosen
+   one's alone (DESIGN section 2c, "Honest model choice"): the tip and a contact
+   anywhere, weighed by their evidence (the window likelihood ``exp(−T/2)``, integrated
+   over the contact's location), give a mixture whose mean and covariance the frames
+   report (:func:`_mixture`); a window the data decide keeps its chosen force and σ.
+   tools/contact_eval.py measures the coverage this gives.
 
 A location the data cannot resolve — ``σ(s_c)`` beyond the length of the segment it
 lies in, the force within ``TANGENT_DEG`` of the tangent at ŝ (the reconstructed
@@ -228,7 +233,8 @@ def locate(estimate_force, kappa, P, bounds, config, options, threshold):
     best = np.argmin(Tg, axis=1)
     w = np.arange(W)
     s_hat, T_hat, er_hat, ee_hat, parts_hat = grid[best], Tg[w, best], er[w, best], ee[w, best], parts[w, best]
-    force_hat = e0.force_n.reshape(W, G, 2)[w, best]
+    forces, covs = e0.force_n.reshape(W, G, 2), e0.covariance_parts_n2.reshape(W, G, 3, 2, 2)
+    force_hat, cov_hat = forces[w, best], covs[w, best]
     shifts_hat = e0.shifts_m.reshape(W, G, -1)[w, best]
     T_tip = Tg[:, -1]
     step = np.full(W, np.diff(grid).max())
@@ -245,6 +251,7 @@ def locate(estimate_force, kappa, P, bounds, config, options, threshold):
         sub = better[move]
         s_hat[idx], T_hat[idx], er_hat[idx], ee_hat[idx] = trial[idx], T1[sub], er1[sub], ee1[sub]
         parts_hat[idx], force_hat[idx], shifts_hat[idx] = p1[sub], e1.force_n[sub], e1.shifts_m[sub]
+        cov_hat[idx] = e1.covariance_parts_n2[sub]
         step = np.where(better, step, 0.5 * step)
     contact = np.isfinite(T_hat) & (T_tip - T_hat > threshold) & (s_hat < L)
     var_s = np.where(ee_hat > 0, 1.0 / ee_hat, np.inf)
@@ -254,7 +261,66 @@ def locate(estimate_force, kappa, P, bounds, config, options, threshold):
     why = _unresolved(config, s_hat, var_s, force_hat, shifts_hat)
     s_frames = np.repeat(np.where(contact, s_hat, L), counts)
     est = estimate_force(kappa, P, config, load="contact", contact_s_m=s_frames, **options)
-    return _finish(est, bounds, contact, s_hat, var_s, var_parts, (g, cross), why, grid[0], L)
+    mix = _mixture(grid, Tg, forces, covs, (s_hat, T_hat, force_hat, cov_hat, var_s), contact)
+    return _finish(est, bounds, contact, s_hat, var_s, var_parts, (g, cross), why, grid[0], L, mix)
+
+
+def _mixture(grid, T, forces, covs, refined, contact):
+    """The force's shift (W, 2) and added covariance parts (W, 3, 2, 2) that cover every hypothesis the window allows.
+
+    The hypotheses are the tip (s_c = L) and a contact anywhere in ``[grid[0], L)``, each
+    with prior probability ½ and the location uniform. A hypothesis' evidence is its
+    window likelihood ``exp(−T/2)`` (``T``: the window statistic of the window's mean,
+    ``T`` (W, G) on the grid); a contact's is integrated over the location: the grid
+    points each stand for their cell, and the refined ŝ (``refined``: ŝ, T(ŝ), the force
+    and its covariance parts at the mean, σ²(s_c)) replaces the grid point nearest to it,
+    its cell narrowed to the Laplace width ``√(2π) σ(s_c)`` of a sharp optimum. With the
+    weights ``w_h``, the mixture's mean ``F̄ = Σ w_h F_h`` and covariance ``Σ w_h (C_h +
+    (F_h − F̄)(F_h − F̄)ᵀ)``; against the chosen hypothesis' (the window's ŝ or the tip)
+    this shifts the force by ``F̄ − F_chosen`` and adds the spread of the hypotheses'
+    forces to the model part and, per part, what the others' covariances hold beyond the
+    chosen one's (its positive part). Where the data decide (one weight ≈ 1) both vanish.
+    """
+    s_hat, T_hat, f_hat, c_hat, var_s = refined
+    W, G = T.shape
+    L = grid[-1]
+    edges = np.concatenate([[grid[0]], 0.5 * (grid[1:-1] + grid[:-2]) if G > 2 else [], [L]])
+    cell = np.diff(edges) if G > 1 else np.zeros(0)  # the contact points' cells (the grid but L)
+    Th = np.concatenate([T, T_hat[:, None]], axis=1)
+    F = np.concatenate([forces, f_hat[:, None]], axis=1)
+    C = np.concatenate([covs, c_hat[:, None]], axis=1)
+    width = np.zeros((W, G + 1))
+    width[:, :G - 1] = cell
+    near = np.argmin(np.abs(grid[None, :] - s_hat[:, None]), axis=1)
+    swap = (near < G - 1) & np.isfinite(T_hat)
+    rows = np.flatnonzero(swap)
+    width[rows, G] = np.minimum(cell[near[rows]], np.sqrt(2.0 * math.pi * var_s[rows]))
+    width[rows, near[rows]] = 0.0
+    span = L - grid[0]
+    with np.errstate(divide="ignore"):
+        logw = -0.5 * Th + np.log(width / span if span > 0 else width)
+        logw[:, G - 1] = -0.5 * T[:, -1]  # the tip: a point of prior mass ½ (the contact's ½ is its integral)
+    logw = np.where(np.isfinite(logw) & np.isfinite(F).all(axis=-1), logw, -np.inf)
+    top = logw.max(axis=1, keepdims=True)
+    wts = np.where(np.isfinite(top), np.exp(logw - np.where(np.isfinite(top), top, 0.0)), 0.0)
+    total = wts.sum(axis=1, keepdims=True)
+    wts = np.divide(wts, total, out=np.zeros_like(wts), where=total > 0)
+    chosen = np.where(contact, G, G - 1)
+    idx = np.arange(W)
+    finite = np.isfinite(C).all(axis=(2, 3, 4))
+    Fz, Cz = np.nan_to_num(F), np.where(finite[..., None, None, None], C, 0.0)
+    mean = np.einsum("wh,whi->wi", wts, Fz)
+    dev = Fz - mean[:, None]
+    spread = np.einsum("wh,whi,whj->wij", wts, dev, dev)
+    beyond = np.einsum("wh,whpij->wpij", wts, Cz) - Cz[idx, chosen]
+    lam, V = np.linalg.eigh(beyond)
+    beyond = np.einsum("wpik,wpk,wpjk->wpij", V, np.maximum(lam, 0.0), V)
+    beyond[:, 2] += spread
+    beyond[np.any((wts > 1e-9) & ~finite, axis=1), 2] = np.diag([np.inf, np.inf])  # a hypothesis without a σ
+    decided = ~(total[:, 0] > 0) | ~np.isfinite(F[idx, chosen]).all(axis=-1)
+    shift = np.where(decided[:, None], 0.0, mean - Fz[idx, chosen])
+    beyond[decided] = 0.0
+    return shift, beyond
 
 
 def _means(kappa, P, bounds):
@@ -335,11 +401,13 @@ def _unresolved(config, s_hat, var_s, force, shifts):
     return why
 
 
-def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, lo, L):
+def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, lo, L, mixture):
     """``est`` (the frames at their windows' locations) with the location, its σ, its part of the force's σ.
 
     Per part p of the budget: ``g gᵀ σ_p(s_c)² + c_p gᵀ + g c_pᵀ`` with ``g = ∂F/∂s_c`` and
-    ``c_p`` the frames' force covariance with ŝ (:func:`_force_slope`).
+    ``c_p`` the frames' force covariance with ŝ (:func:`_force_slope`); then the
+    hypotheses the window did not rule out (``mixture``: the force's shift and the added
+    covariance parts per window, :func:`_mixture`).
     """
     counts = np.diff(bounds)
     B = int(bounds[-1])
@@ -353,7 +421,7 @@ def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, lo, L):
     cw[capped] = 0.0
     gc = gw[:, None, :, None] * cw[:, :, None, :]  # (W, 3, 2, 2): g c_pᵀ
     add_w = gw[:, None, :, None] * gw[:, None, None, :] * parts_w[:, :, None, None] + gc + np.swapaxes(gc, -1, -2)
-    add_parts = rep(add_w)  # (B, 3, 2, 2)
+    add_parts = rep(add_w + mixture[1])  # (B, 3, 2, 2)
     cov_parts = est.covariance_parts_n2 + add_parts
     cov = est.covariance_n2 + add_parts.sum(axis=1)
     var = est.std_n ** 2 + np.diagonal(add_parts.sum(axis=1), axis1=-2, axis2=-1)
@@ -368,5 +436,6 @@ def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, lo, L):
         message[i] = (f"contact_unresolved: the data do not place the contact ({frame_why[i]}); the force is at the "
                       f"best location s_c = {1e3 * frame_s[i]:.4g} mm, contact_std_m inf")
     return dataclasses.replace(est, load="contact", contact_s_m=frame_s, contact_std_m=rep(std_m),
-                               covariance_n2=cov, covariance_parts_n2=cov_parts, std_n=std,
+                               force_n=est.force_n + rep(mixture[0]), covariance_n2=cov, covariance_parts_n2=cov_parts,
+                               std_n=std,
                                message=message.astype(str))
