@@ -70,3 +70,20 @@ def hold_output(path, ready, release, timeout_s):
     with output.reserve([output.directory(path)]):
         ready.set()
         release.wait(timeout_s)
+
+
+class Listening:
+    """A simulated board, keeping every SETPOINT it receives (also after it stopped streaming): its own record."""
+
+    def __init__(self, board):
+        self.board, self.received = board, []
+
+    def setpoint(self, line, pressure_pa):
+        self.received.append((line, pressure_pa))
+        return self.board.setpoint(line, pressure_pa)
+
+    def release(self):
+        self.board.release()
+
+    def __call__(self, k):
+        return self.board(k)

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 import pytest
+from helpers import Listening
 
 import bendsense
 from bendsense.calibration import Calibration
@@ -160,19 +161,6 @@ def test_lost_frames_stop_the_loop(board, processor):
     assert isinstance(err, ControlStop) and "frames lost" in err.reason
     assert truth.column("setpoint_pa")[-1] == 0.0 and truth.t_s[-1] < 2.0
 
-
-class Listening:
-    """The board, keeping every SETPOINT it receives (also after it stopped streaming)."""
-
-    def __init__(self, board):
-        self.board, self.received = board, []
-
-    def setpoint(self, line, pressure_pa):
-        self.received.append((line, pressure_pa))
-        return self.board.setpoint(line, pressure_pa)
-
-    def __call__(self, k):
-        return self.board(k)
 
 
 def test_a_board_that_falls_silent_stops_the_loop(board, processor):

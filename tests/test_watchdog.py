@@ -309,7 +309,7 @@ def test_a_killed_control_leaves_no_line_pressurised(finger_board, calibration_p
 @pytest.mark.parametrize(
     "args, words",
     [
-        (["--watchdog-ms", "100"], "applies to a board with pressure regulators: give --fingers K or --object"),
+        (["--source", "ramp", "--watchdog-ms", "100"], "applies to --source sensor only, not ramp"),
         (["--object", "rigid", "--watchdog-ms", "-1"], "expected >= 0, got -1"),
         (["--object", "rigid", "--watchdog-ms", "nan"], "expected a finite number, got nan"),
         (["--replay", ".", "--watchdog-ms", "100"], "--watchdog-ms does not apply to --replay"),

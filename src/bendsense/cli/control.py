@@ -94,8 +94,16 @@ def _locations(load_options):
     return load_options.get("contact_s_m")
 
 
-def _limit(config, max_pressure_kpa):
-    """The pressure limit [Pa]: given (within the config's pressure range), else 100 kPa or the range's end if lower."""
+def pressure_limit(config, max_pressure_kpa):
+    """The pressure limit [Pa]: given (within the config's pressure range), else 100 kPa or the range's end if lower.
+
+    Parameters
+    ----------
+    config : Config or GripperConfig
+        Its actuators' ``pressure_range_pa`` bound the limit (a gripper: the lowest end).
+    max_pressure_kpa : float or None
+        ``--max-pressure-kpa``; beyond the config's range: a ``click.BadParameter``.
+    """
     from bendsense.config import GripperConfig
     from bendsense.control import DEFAULT_MAX_PRESSURE_PA
 
@@ -212,7 +220,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
                                           [config_path, *(p for _, p in calibration_paths)]))
     config = load_config(config_path)
     calibrations = calibration_paths_of(calibration_paths, config)
-    pmax = _limit(config, max_pressure_kpa)
+    pmax = pressure_limit(config, max_pressure_kpa)
     gains = {"kp_pa_per_n": DEFAULT_KP_PA_PER_N if kp_kpa_per_n is None else kp_kpa_per_n * 1e3,
              "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,
              "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
@@ -235,8 +243,7 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
     whose pressure did not fall after it is one ``Error:`` line and exit 1; Ctrl-C, SIGTERM,
     SIGHUP, SIGQUIT one ``Interrupted`` line (130, 143, 129, 131).
     """
-    from bendsense.control import ControlRecording, Safety, run, zero_report
-    from bendsense.errors import BendsenseError
+    from bendsense.control import ControlRecording, Safety
 
     fingers = getattr(config, "names", None)
     recording = None if output is None else ControlRecording(driver, output, overwrite=overwrite, config=config,
@@ -246,24 +253,54 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
         click.echo(f"holding {controller.target_force_n * 1e3:.4g} mN (pressure limit {pmax / 1e3:g} kPa); "
                    "Ctrl-C stops", err=True)
     where = "" if output is None else f"the session is in {output}"
+    result = drive(driver, processor, controller, "control", where, max_pressure_pa=pmax, seconds=seconds,
+                   n_lines=n_lines, recording=recording, safety=Safety(silence_s=silence_s))
+    if not quiet():
+        click.echo(_summary(result, controller), err=True)
+        if output is not None:
+            click.echo(f"session written to {output}", err=True)
+
+
+def drive(driver, processor, controller, name: str, where: str = "", **options):
+    """Start the board and run the loop (:func:`bendsense.control.run`); one line for how it ended.
+
+    A safety stop, an error of the device, a set-point 0 that could not be sent or a line
+    whose pressure did not fall after it is one ``Error:`` line (``NAME stopped: why; what
+    became of every line; WHERE``) and exit 1; Ctrl-C, SIGTERM, SIGHUP, SIGQUIT one
+    ``Interrupted`` line (130, 143, 129, 131) saying the same.
+
+    Parameters
+    ----------
+    driver, processor, controller
+        As :func:`bendsense.control.run`.
+    name : str
+        What runs, for the messages (``control``, ``the sweep``).
+    where : str
+        Where its recording is, for the messages ("" without one).
+    **options
+        Passed to :func:`bendsense.control.run`.
+
+    Returns
+    -------
+    ControlResult
+    """
+    from bendsense.control import run, zero_report
+    from bendsense.errors import BendsenseError
+
     driver.start()
     try:
-        result = run(driver, processor, controller, max_pressure_pa=pmax, seconds=seconds, n_lines=n_lines,
-                     recording=recording, safety=Safety(silence_s=silence_s))
+        result = run(driver, processor, controller, **options)
     except KeyboardInterrupt as err:
         _signals.note(err, "; ".join(filter(None, (_zeros_of(err), where))))
         raise
     except BendsenseError as err:  # a safety stop (ControlStop) or the device failing under the loop
         sys.stderr.flush()
-        raise click.ClickException("; ".join(filter(None, (f"control stopped: {getattr(err, 'reason', err)}",
+        raise click.ClickException("; ".join(filter(None, (f"{name} stopped: {getattr(err, 'reason', err)}",
                                                            _zeros_of(err), where)))) from None
     if result.unsent or result.high:
-        raise click.ClickException("; ".join(filter(None, (f"control ended ({result.outcome}) but "
+        raise click.ClickException("; ".join(filter(None, (f"{name} ended ({result.outcome}) but "
                                                            f"{zero_report(result)}", where))))
-    if not quiet():
-        click.echo(_summary(result, controller), err=True)
-        if output is not None:
-            click.echo(f"session written to {output}", err=True)
+    return result
 
 
 def _zeros_of(err) -> str:

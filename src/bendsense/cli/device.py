@@ -33,7 +33,7 @@ from bendsense.cli._common import (
     objective_option,
     quiet,
 )
-from bendsense.cli.sim import grasp_options
+from bendsense.cli.sim import grasp_options, model_error_options, model_errors, noise_option
 
 log = logging.getLogger("bendsense")
 
@@ -483,18 +483,21 @@ def _manifest_names(results_path, output: Path) -> list:
               help="sensor: where the simulated touches land: an arc length s_c [m] along the body (0 < s_c <= L), "
                    "or 'along-body' (each touch somewhere else: 0.5, 0.7, 0.85, 1.0, 0.6, 0.9 L); default the tip.")
 @grasp_options
+@model_error_options
+@noise_option
 @click.option("--truth", "truth_path", metavar="FILE.csv", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the simulator's truth of every frame as it is sent: seq, t_us, then per finger "
                    "<finger>_fx_n, <finger>_fy_n, <finger>_contact_s_m and per line line<k>_setpoint_pa, "
                    "line<k>_pressure_pa (one actuator: fx_n, fy_n, contact_s_m, setpoint_pa, pressure_pa).")
 @click.option("--watchdog-ms", type=Finite(min=0),
-              help="--fingers/--object: the host-silence watchdog [ms] (default 1000; 0: none). A host that holds a "
+              help="--source sensor: the host-silence watchdog [ms] (default 1000; 0: none). A host that holds a "
                    "line at a non-zero set-point and then sends no frame (SETPOINT, HEARTBEAT, any) for this long "
                    "gets set-point 0 on every line and a TEXT frame saying so; its next non-zero SETPOINT re-arms it.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --truth file that bendsense wrote.")
 def sim_device(
     rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, replay_path, speed, loop,
-    contact_s_m, truth_path, watchdog_ms, overwrite, **grasp,
+    contact_s_m, truth_path, watchdog_ms, overwrite, ei_error, k0_error, base_rotation, hysteresis_kpa, noise_counts,
+    **grasp,
 ):
     """Run a simulated sensor board on a pseudo-terminal and print its port path.
 
@@ -505,13 +508,23 @@ def sim_device(
     and keeps the port open and silent, like BrainFlow's playback board, so that a
     client ends its recording when it chooses instead of seeing the board unplugged.
 
-    With --fingers K the board is a simulated gripper whose fingers close on an object
-    (--object rigid or compliant): one pressure regulator per finger (a first-order lag
-    with limits) follows the scenario's closing profile until the host sends that line a
-    SETPOINT. --object without --fingers: the single actuator presses the object.
-    Its watchdog sets every line to 0 when a host that drove one falls silent for
-    --watchdog-ms ('bendsense control' sends a HEARTBEAT every 50 ms).
+    The single actuator (no --fingers, no --object) plays the time-varying scenario
+    (a pressure ramp with touches at the tip) until the host sends a SETPOINT on line 0;
+    from then on the actuator is free and its pressure regulator (a first-order lag with
+    limits) follows the host. With --fingers K the board is a simulated gripper whose
+    fingers close on an object (--object rigid or compliant): one regulator per finger
+    follows the scenario's closing profile until the host sends that line a SETPOINT.
+    --object without --fingers: the single actuator presses the object. The watchdog sets
+    every line to 0 when a host that drove one falls silent for --watchdog-ms ('bendsense
+    control' sends a HEARTBEAT every 50 ms).
+
+    --ei-error, --k0-error, --base-rotation, --hysteresis-kpa: the simulated actuator
+    (every finger) departs from the config the host uses, as in 'bendsense simulate';
+    --truth records its true force and pressures.
     """
+    errors = model_errors(ei_error, k0_error, base_rotation, hysteresis_kpa)
+    if noise_counts is not None:  # the sensor's, with the model errors to every simulated finger
+        errors["noise_counts"] = noise_counts
     if not speed > 0:
         raise click.BadParameter(f"expected > 0, got {speed:g}", param_hint="--speed")
     if replay_path is not None:
@@ -523,7 +536,8 @@ def sim_device(
             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
                 raise click.UsageError(f"{flag} does not apply to --replay: the recording gives it "
                                        "(--speed changes the pace)")
-        for name in ("truth_path", "watchdog_ms", *grasp):
+        for name in ("truth_path", "watchdog_ms", "ei_error", "k0_error", "base_rotation", "hysteresis_kpa",
+                     "noise_counts", *grasp):
             if ctx.get_parameter_source(name) is click.core.ParameterSource.COMMANDLINE:
                 flag = {"truth_path": "--truth", "object_kind": "--object"}.get(name, "--" + name.replace("_", "-"))
                 raise click.UsageError(f"{flag} does not apply to --replay: a recording is played back, not "
@@ -549,17 +563,17 @@ def sim_device(
                                  f"carries for {wide} channels), got {rate_hz:g}", param_hint="--rate")
     if source == "ramp":
         for flag, value in (("--contact-s-m", contact_s_m), ("--truth", truth_path),
-                            ("--fingers/--object", grasp["fingers"] or grasp["object_kind"])):
+                            ("--fingers/--object", grasp["fingers"] or grasp["object_kind"]),
+                            ("--watchdog-ms", watchdog_ms), ("--ei-error", ei_error), ("--k0-error", k0_error),
+                            ("--base-rotation", base_rotation), ("--hysteresis-kpa", hysteresis_kpa),
+                            ("--noise-counts", noise_counts)):
             if value is not None:
                 raise click.BadParameter("applies to --source sensor only, not ramp", param_hint=flag)
     _check_grasp_flags(grasp, contact_s_m, channels)
-    if watchdog_ms is not None and grasp["fingers"] is None and grasp["object_kind"] is None:
-        raise click.BadParameter("applies to a board with pressure regulators: give --fingers K or --object",
-                                 param_hint="--watchdog-ms")
     targets = [] if truth_path is None else [outputs.file(truth_path, overwrite=overwrite)]
     with outputs.reserve(targets):  # checked before any work, locked while the board runs
         _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart,
-                   contact_s_m, truth_path, watchdog_ms, grasp)
+                   contact_s_m, truth_path, watchdog_ms, grasp, errors)
 
 
 def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
@@ -578,22 +592,22 @@ def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
 
 
 def _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, contact_s_m,
-               truth_path, watchdog_ms, grasp) -> None:
+               truth_path, watchdog_ms, grasp, errors) -> None:
     """Build the simulated board's source (and truth file) and serve it."""
     from bendsense.cli.sim import grasp_board
-    from bendsense.device.simdevice import DEFAULT_WATCHDOG_MS, SimulatedDevice, default_source, ramp_source
-    from bendsense.sim.truth import TruthWriter, scenario_truth, truth_columns
+    from bendsense.device.simdevice import DEFAULT_WATCHDOG_MS, SimulatedDevice, ramp_source, scripted_board
+    from bendsense.sim.truth import TruthWriter, truth_columns
 
-    board = grasp_board(grasp, rate_hz=rate_hz, seed=seed, adc_bits=adc_bits)
+    board = grasp_board(grasp, rate_hz=rate_hz, seed=seed, adc_bits=adc_bits, errors=errors)
+    columns = truth_columns()
     if board is not None:
         src, channels = board, board.n_channels
         columns = truth_columns(board.truth_fingers, board.n_lines)
     elif source == "ramp":
         src = ramp_source(channels, adc_bits)
     else:
-        src = default_source(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed,
-                             contact_s_m=contact_s_m, **({} if truth_path is None else {"truth": True}))
-        src, columns = (src, None) if truth_path is None else (scenario_truth(src), truth_columns())
+        src = scripted_board(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed,
+                             contact_s_m=contact_s_m, truth=truth_path is not None, **errors)
     truth = None if truth_path is None else TruthWriter(truth_path, columns)
     dev = SimulatedDevice(
         src,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime
 from pathlib import Path
 
 import click
@@ -9,6 +10,7 @@ import click
 from bendsense import output as outputs
 from bendsense.choices import BEAM_METHODS
 from bendsense.cli._common import (
+    Finite,
     InterspersedCommand,
     PressureKpa,
     check_figure_suffix,
@@ -63,7 +65,19 @@ def _parse_fix(kind: str, items) -> dict:
     "DATA.csv: free-bending from a free pressure sweep, stiffness from hanging weights (columns fx_n, fy_n "
     "or mass_kg). Needs --calibration.",
 )
-@make_calibration_option("With --session: the sensor's calibration YAML (bendsense calibrate)")
+@click.option(
+    "--port",
+    help="free-bending: drive a free sweep on the board on PORT through SETPOINT frames (line 0: a slow staircase "
+    "up and down the config's pressure range, capped by --max-pressure-kpa, holding at each step), record it to "
+    "OUTPUT's stem + '-sweep/' (a native session: 'identify free-bending --session' fits it again) and fit it. "
+    "Set-point 0 goes to the line whatever ends the sweep (as in 'bendsense control'). Needs --calibration.",
+)
+@click.option("--max-pressure-kpa", type=PressureKpa(min=0),
+              help="With --port: the sweep's highest set-point [kPa] (default 100, or the end of the config's "
+                   "pressure range if lower).")
+@click.option("--seconds", type=Finite(min=0, min_open=True),
+              help="With --port: the sweep's length, up and down [s] (default 20).")
+@make_calibration_option("With --session or --port: the sensor's calibration YAML (bendsense calibrate)")
 @config_option
 @click.option("--finger", metavar="NAME",
               help="With a gripper's config (fingers:) and --session (a board session): identify this finger from "
@@ -106,8 +120,8 @@ def _parse_fix(kind: str, items) -> dict:
               "the fitted and the prior model).")
 @overwrite_option
 def identify(
-    kind, data, session_path, calibration_paths, config_path, finger, output, fix_items, pressure_tolerance_kpa,
-    unweighted, method, plot_path, overwrite
+    kind, data, session_path, port, max_pressure_kpa, seconds, calibration_paths, config_path, finger, output,
+    fix_items, pressure_tolerance_kpa, unweighted, method, plot_path, overwrite
 ):
     """Fit the free-bending or stiffness model to DATA.csv or a session (paper section V-C).
 
@@ -126,13 +140,18 @@ def identify(
     with the fit); stiffness from hanging weights (known tip force in the columns
     fx_n, fy_n, or mass_kg hanging under gravity).
 
+    free-bending --port PORT --calibration C: drive the free sweep on the board, record it
+    to OUTPUT's stem + '-sweep/' and fit it as --session does (docs/identify.md, "On a
+    live board"). Stiffness needs known loads: hanging weights, --session.
+
     Writes the config (--config, or the paper's) with the fitted values and their
-    covariance to OUTPUT.
+    covariance to OUTPUT, with a comment line saying what it was identified from.
     """
     fix = _parse_fix(kind, fix_items)
     check_figure_suffix(plot_path, "--plot")
-    _check_sources(data, session_path, calibration_paths)
-    source = data if data is not None else session_path
+    _check_sources(kind, data, session_path, port, calibration_paths, max_pressure_kpa, seconds)
+    sweep_path = None if port is None else output.with_name(output.stem + "-sweep")
+    source = next(s for s in (data, session_path, sweep_path) if s is not None)
 
     def step(state):
         from bendsense.cli.gripper import identify_inputs
@@ -146,12 +165,17 @@ def identify(
         )
 
         config = load_config(config_path)  # (its errors name the config, not the data)
+        if port is not None and hasattr(config, "fingers"):
+            raise click.BadParameter("drives one actuator on line 0: give its own config (a gripper's finger: "
+                                     "record its sweep, then --session with --finger)", param_hint="--port")
         # the actuator identified, and how its fit becomes the config written (a gripper: one finger of it)
-        config, inputs, written = identify_inputs(config, finger, session_path, calibration_paths)
+        config, inputs, written = identify_inputs(config, finger, session_path or sweep_path, calibration_paths)
         # a held value no actuator of this geometry can have: named before any data is read
         check_fixed(fix, config, field="--fix")
+        if port is not None:
+            _sweep(port, config, calibration_paths, max_pressure_kpa, seconds, sweep_path, output, overwrite)
         try:
-            if kind == "free-bending" and session_path is not None:
+            if kind == "free-bending" and data is None:
                 fit = _free_bending_session(inputs, config, fix)
             elif kind == "free-bending":
                 pressure, angle = read_free_bending_csv(data)
@@ -159,7 +183,7 @@ def identify(
             else:
                 options = {"fix": fix, "pressure_tolerance_pa": pressure_tolerance_kpa * 1e3,
                            "weighted": not unweighted, "method": method}
-                if session_path is None:
+                if data is not None:
                     fit = fit_stiffness(read_stiffness_csv(data, config.actuator.length_m), config, **options)
                 else:
                     fit = _stiffness_session(inputs, config, options)
@@ -173,7 +197,9 @@ def identify(
 
             matplotlib.use("Agg")
             ax = fit.plot(config=config) if kind == "free-bending" else fit.plot()
-        save_config(new_config, output, overwrite=overwrite)
+        when = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+        save_config(new_config, output, overwrite=overwrite,
+                    note=f"{kind} identified by bendsense from {source} ({when})")
         say(f"wrote {output}")
         if ax is not None:
             save_figure(ax.figure, plot_path, overwrite=overwrite)
@@ -181,23 +207,74 @@ def identify(
         return state
 
     targets = [outputs.file(output, overwrite=overwrite, suffixes=outputs.YAML)]
+    if sweep_path is not None:
+        targets.append(outputs.recording(sweep_path, overwrite=overwrite))
     if plot_path is not None:
         targets.append(outputs.file(plot_path, overwrite=overwrite, suffixes=outputs.FIGURE))
-    return step_io(step, outputs=targets, inputs=[source, *(p for _, p in calibration_paths), config_path])
+    inputs = [data, session_path, *(p for _, p in calibration_paths), config_path]
+    return step_io(step, outputs=targets, inputs=inputs)
 
 
-def _check_sources(data, session_path, calibration_paths) -> None:
-    """DATA.csv, or --session with --calibration: one of them, named when wrong."""
-    if data is not None and session_path is not None:
-        raise click.BadParameter("give DATA.csv or --session, not both", param_hint="--session")
-    if data is None and session_path is None:
-        raise click.UsageError("give DATA.csv, or --session SESSION with --calibration CAL.yaml")
-    if session_path is not None and not calibration_paths:
-        raise click.BadParameter("required with --session (the sensor's calibration YAML, from bendsense calibrate)",
+def _check_sources(kind, data, session_path, port, calibration_paths, max_pressure_kpa, seconds) -> None:
+    """DATA.csv, or --session or --port with --calibration: one of them, named when wrong."""
+    given = [name for name, value in (("DATA.csv", data), ("--session", session_path), ("--port", port))
+             if value is not None]
+    if len(given) > 1:
+        raise click.BadParameter(f"give {' or '.join(given)}, not {'both' if len(given) == 2 else 'all three'}",
+                                 param_hint=given[-1])
+    if not given:
+        raise click.UsageError("give DATA.csv, or --session SESSION (or free-bending: --port PORT) with "
+                               "--calibration CAL.yaml")
+    if port is not None and kind != "free-bending":
+        raise click.BadParameter("stiffness needs known loads: record hanging weights and give --session (a free "
+                                 "sweep has none)", param_hint="--port")
+    for flag, value in (("--max-pressure-kpa", max_pressure_kpa), ("--seconds", seconds)):
+        if value is not None and port is None:
+            raise click.BadParameter("only with --port (the sweep it drives)", param_hint=flag)
+    if data is None and not calibration_paths:
+        raise click.BadParameter(f"required with {given[0]} (the sensor's calibration YAML, from bendsense calibrate)",
                                  param_hint="--calibration")
-    if session_path is None and calibration_paths:
-        raise click.BadParameter("only with --session (DATA.csv holds measured angles or shapes already)",
+    if data is not None and calibration_paths:
+        raise click.BadParameter("only with --session or --port (DATA.csv holds measured angles or shapes already)",
                                  param_hint="--calibration")
+
+
+#: the sweep's default length, up and down [s]
+SWEEP_SECONDS = 20.0
+
+
+def _sweep(port, config, calibration_paths, max_pressure_kpa, seconds, path, output, overwrite) -> None:
+    """Drive and record the free sweep of ``identify free-bending --port`` (:class:`bendsense.control.Sweep`).
+
+    The control loop runs it (:func:`bendsense.cli.control.drive`): set-point 0 on the
+    line whatever ends it, one line when it stops early, and nothing written to OUTPUT.
+    """
+    from bendsense.calibration import Calibration
+    from bendsense.cli._common import calibration_paths as for_config
+    from bendsense.cli.control import drive, pressure_limit
+    from bendsense.control import ControlRecording, Sweep
+    from bendsense.device.driver import Driver
+    from bendsense.pipeline import LiveProcessor
+
+    top = pressure_limit(config, max_pressure_kpa)
+    low = max(float(config.actuator.pressure_range_pa[0]), 0.0)
+    sweep = Sweep(low, top, SWEEP_SECONDS if seconds is None else seconds)
+    processor = LiveProcessor(Calibration.load(for_config(calibration_paths, config)), config, estimate=False)
+    processor.warm_up()
+    meta = {"command": "bendsense identify free-bending --port",
+            "sweep": {"line": sweep.line, "low_pa": low, "high_pa": top, "seconds": sweep.seconds,
+                      "levels": sweep.levels}}
+    where = f"the frames so far are in {path}; nothing written to {output}"
+    with Driver(port) as driver:
+        recording = ControlRecording(driver, path, overwrite=overwrite, config=config, meta=meta)
+        say(f"sweeping line {sweep.line} from {low / 1e3:g} to {top / 1e3:g} kPa and back over {sweep.seconds:g} s "
+            f"(recorded to {path}); Ctrl-C stops")
+        # the board's clock ends the sweep; the host's is the backstop for a board whose clock does not run
+        result = drive(driver, processor, sweep, "the sweep", where, max_pressure_pa=top, stop=sweep.done,
+                       seconds=2.0 * sweep.seconds + 5.0, recording=recording)
+    if not sweep.done.is_set():
+        raise click.ClickException(f"the sweep did not finish ({result.outcome}); {where}")
+    say(f"sweep: {result.frames} frames recorded to {path}")
 
 
 def _free_bending_session(inputs, config, fix):

@@ -40,6 +40,52 @@ class _Numbers(Finite):
         return tuple(super(_Numbers, self).convert(v.strip(), param, ctx) for v in str(value).split(","))
 
 
+_MODEL_ERROR_OPTIONS = [
+    click.option("--ei-error", type=Relative(), help="Model mismatch: relative error of the true EI."),
+    click.option("--k0-error", type=Relative(), help="Model mismatch: relative error of the true K0."),
+    click.option("--base-rotation", type=Relative(),
+                 help="Model mismatch: base rotation per radian of bending [rad/rad]."),
+    click.option("--hysteresis-kpa", type=PressureKpa(min=0), help="Model mismatch: pressure play [kPa]."),
+]
+
+
+def _decorated(command, options):
+    """``command`` with the click ``options`` added, in their order in ``--help``."""
+    for option in reversed(options):
+        command = option(command)
+    return command
+
+
+noise_option = click.option("--noise-counts", type=Finite(min=0), help="Sensor noise std [counts] (default 1.5).")
+"""``--noise-counts`` of ``simulate`` and ``sim-device``: the virtual sensor's noise."""
+
+
+def model_error_options(command):
+    """Add the model-error options (``--ei-error``, ``--k0-error``, ``--base-rotation``, ``--hysteresis-kpa``).
+
+    ``simulate`` and ``sim-device`` take them: the simulated actuator departs from the
+    config by these (:class:`bendsense.sim.actuator.SimulatedActuator`).
+
+    Parameters
+    ----------
+    command : callable
+        The command function being decorated.
+    """
+    return _decorated(command, _MODEL_ERROR_OPTIONS)
+
+
+def model_errors(ei_error=None, k0_error=None, base_rotation=None, hysteresis_kpa=None) -> dict:
+    """The model-error options as :class:`~bendsense.sim.actuator.SimulatedActuator`'s keywords (those given).
+
+    Parameters
+    ----------
+    ei_error, k0_error, base_rotation, hysteresis_kpa : float or None
+        The options' values (None: not given).
+    """
+    values = {"ei_error": ei_error, "k0_error": k0_error, "base_rotation_rad_per_rad": base_rotation,
+              "hysteresis_pa": None if hysteresis_kpa is None else hysteresis_kpa * 1e3}
+    return {k: v for k, v in values.items() if v is not None}
+
 
 @click.command("simulate", cls=InterspersedCommand)
 @click.argument("scenario", metavar="SCENARIO", type=click.Choice(_SCENARIOS))
@@ -53,16 +99,13 @@ class _Numbers(Finite):
 )
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the sensor hardware and the noise.")
 @config_option
-@click.option("--noise-counts", type=Finite(min=0), help="Sensor noise std [counts] (default 1.5).")
+@noise_option
 @click.option("--frames", type=click.IntRange(min=1),
               help="Frames per strip or configuration (default 50 / 5; free-sweep: frames of the sweep, "
                    "default 200). A scenario is simulated in memory, "
                    "one recording at a time (tip-loads: 44 configurations, ~10 kB a frame): a number whose "
                    "frames would not fit the free memory is refused before any work.")
-@click.option("--ei-error", type=Relative(), help="Model mismatch: relative error of the true EI.")
-@click.option("--k0-error", type=Relative(), help="Model mismatch: relative error of the true K0.")
-@click.option("--base-rotation", type=Relative(), help="Model mismatch: base rotation per radian of bending [rad/rad].")
-@click.option("--hysteresis-kpa", type=PressureKpa(min=0), help="Model mismatch: pressure play [kPa].")
+@model_error_options
 @click.option("--max-pressure-kpa", type=PressureKpa(min=0),
               help="free-sweep: peak pressure [kPa] (default 120); gripper: the regulators' limit (default 120).")
 @click.option("--contact-n", type=Finite(min=0),
@@ -127,10 +170,7 @@ def simulate(
                              overwrite, seconds, grasp)
     options = {
         "noise_counts": noise_counts,
-        "ei_error": ei_error,
-        "k0_error": k0_error,
-        "base_rotation_rad_per_rad": base_rotation,
-        "hysteresis_pa": None if hysteresis_kpa is None else hysteresis_kpa * 1e3,
+        **model_errors(ei_error, k0_error, base_rotation, hysteresis_kpa),
         "pressure_max_pa": None if max_pressure_kpa is None else max_pressure_kpa * 1e3,
         "contact_n": contact_n,
         "contact_s_m": contact_s_m,
@@ -245,9 +285,7 @@ def grasp_options(command):
     command : callable
         The command function being decorated.
     """
-    for option in reversed(_GRASP_OPTIONS):
-        command = option(command)
-    return command
+    return _decorated(command, _GRASP_OPTIONS)
 
 
 def grasp_arguments(options: dict, *, gripper: bool = False) -> dict | None:
@@ -314,7 +352,7 @@ def grasp_arguments(options: dict, *, gripper: bool = False) -> dict | None:
     return arguments
 
 
-def grasp_board(options: dict, *, rate_hz: float, seed, adc_bits: int):
+def grasp_board(options: dict, *, rate_hz: float, seed, adc_bits: int, errors=None):
     """The simulated grasp's board from ``sim-device``'s options, or None without ``--fingers``/``--object``.
 
     Parameters
@@ -323,6 +361,8 @@ def grasp_board(options: dict, *, rate_hz: float, seed, adc_bits: int):
         The values of the grasp options (by parameter name).
     rate_hz, seed, adc_bits
         The board's frame rate [Hz], seed and ADC resolution.
+    errors : dict, optional
+        How every finger departs from the config (:func:`model_errors`), and ``noise_counts``.
 
     Returns
     -------
@@ -339,7 +379,7 @@ def grasp_board(options: dict, *, rate_hz: float, seed, adc_bits: int):
                               arguments.pop("touch_pressure_pa"))
     paper = load_config()
     config = paper if fingers is None else gripper_config(fingers, paper)
-    return GraspBoard(config, objects, rate_hz=rate_hz, seed=seed, adc_bits=adc_bits, **arguments)
+    return GraspBoard(config, objects, rate_hz=rate_hz, seed=seed, adc_bits=adc_bits, **arguments, **(errors or {}))
 
 
 COMMANDS = [simulate]

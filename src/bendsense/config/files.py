@@ -50,7 +50,8 @@ def load_config(path: str | os.PathLike | None = None) -> Config | GripperConfig
     return load_yaml(path, "config", parse_config)
 
 
-def save_config(config: Config | GripperConfig, path: str | os.PathLike, *, overwrite: bool = True) -> None:
+def save_config(config: Config | GripperConfig, path: str | os.PathLike, *, overwrite: bool = True,
+                note: str | None = None) -> None:
     """Write ``config`` (one actuator's or a gripper's) as YAML atomically (:func:`bendsense.output.write_text`).
 
     ``overwrite=False`` refuses an existing file (:class:`~bendsense.errors.OutputExistsError`).
@@ -63,6 +64,9 @@ def save_config(config: Config | GripperConfig, path: str | os.PathLike, *, over
         Output YAML file.
     overwrite : bool, default True
         Replace an existing file; False refuses one.
+    note : str, optional
+        A comment line under the header (where the values come from: ``identify`` writes
+        its data, the command and the date).
     """
     from bendsense import output
     from bendsense.validation import instance
@@ -75,5 +79,7 @@ def save_config(config: Config | GripperConfig, path: str | os.PathLike, *, over
         text = "# bendsense config (actuator, sensor and model parameters; docs/formats.md)\n"
     else:
         text = "# bendsense config (a gripper: each finger's channels, pressure line and model; docs/gripper.md)\n"
+    if note:
+        text += "".join(f"# {line}\n" for line in str(note).splitlines())
     output.write_text(path, text + yaml.safe_dump(config.to_dict(), sort_keys=False), overwrite=overwrite,
                       writer="bendsense identify")

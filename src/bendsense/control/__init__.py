@@ -12,7 +12,9 @@
 - :class:`Safety`, :class:`ControlStop` (:mod:`~bendsense.control.safety`): the safety
   model, the loop's own stops (lost frames, silence, a pressure beyond the limit, a
   controlled finger without a force or flagged by the model);
-- :class:`ControlRecording` (:mod:`~bendsense.control.record`): the session on disk.
+- :class:`ControlRecording` (:mod:`~bendsense.control.record`): the session on disk;
+- :class:`Sweep` (:mod:`~bendsense.control.sweep`): a free pressure sweep, a controller that
+  ignores the force (``identify free-bending --port``).
 
 A controller is any callable ``controller(block) -> {line: pressure_pa}`` (python-control's
 habit: plain callables, their state in a small object). docs/grasping.md walks through a
@@ -31,8 +33,9 @@ from bendsense.control.pi import (
 )
 from bendsense.control.record import CONTROL_LOG, ControlRecording
 from bendsense.control.safety import ControlStop, Safety
+from bendsense.control.sweep import Sweep
 
 __all__ = ["run", "ControlResult", "LineZero", "zero_report", "PIController", "Grasp", "normal_force",
            "contact_normal", "force_limit_n", "NormalForce",
-           "Safety", "ControlStop", "ControlRecording", "CONTROL_LOG", "DEFAULT_KP_PA_PER_N",
+           "Safety", "ControlStop", "Sweep", "ControlRecording", "CONTROL_LOG", "DEFAULT_KP_PA_PER_N",
            "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S", "TRACK_BANDWIDTH_HZ", "DEFAULT_MAX_PRESSURE_PA"]

@@ -65,7 +65,7 @@ class LineZero:
     fell : bool or None
         The reported pressure fell to ``Safety.pressure_tolerance_pa`` or below within
         ``Safety.confirm_s`` of the last zero; None: not watched (not sent, not reported,
-        or ``confirm_s`` 0).
+        or ``confirm_s`` 0), or no frame reported the line during the watch.
     pressure_pa : float
         The line's last reported pressure when the watch ended [Pa] (NaN: not watched).
     after_s : float
@@ -178,6 +178,9 @@ def zero_report(result: ControlResult) -> str:
     if unconfirmed:
         whose = "their" if len(unconfirmed) > 1 else "its"
         text += f"; {_names(unconfirmed)} not confirmed (the board does not report {whose} pressure)"
+    silent = [z.line for z in result.zeros if z.fell is None and math.isfinite(z.after_s)]
+    if silent:
+        text += f"; {_names(silent)} not confirmed (no frame from the board after the zero)"
     for z in result.zeros:
         if z.fell is False:
             text += f"; line {z.line} did not fall: {z.pressure_pa / 1e3:.3g} kPa after {z.after_s:.2g} s"
@@ -294,7 +297,9 @@ def _confirm(driver, zeros, safety) -> tuple:
                     if value <= tol:
                         fell.add(line)
     after = time.monotonic() - t0
-    return tuple(dataclasses.replace(z, fell=z.line in fell, pressure_pa=last[z.line], after_s=after)
+    # a line with no reading after its zero (a board that stopped streaming) is not confirmed either way
+    return tuple(dataclasses.replace(z, fell=z.line in fell if math.isfinite(last[z.line]) else None,
+                                     pressure_pa=last[z.line], after_s=after)
                  if z.line in watched else z for z in zeros)
 
 
@@ -316,8 +321,9 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
         Its ``process_readings(readings)`` makes the block the controller gets.
     controller : callable
         ``controller(block) -> {line: pressure_pa}``; its ``fingers`` attribute (if any)
-        names the fingers whose model status the safety checks watch (default: every
-        finger of the block).
+        names the fingers whose force and model status the safety checks watch (default:
+        every finger of the block; empty: none, a controller that acts on no force, such as
+        :class:`~bendsense.control.Sweep`).
     max_pressure_pa : float, default :data:`DEFAULT_MAX_PRESSURE_PA` (100 kPa)
         Highest set-point ever sent [Pa]: every set-point is clipped to
         ``[0, max_pressure_pa]``.
@@ -367,7 +373,8 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     lines = _lines(processor, n_lines)
     safety = Safety() if safety is None else safety
     hello = getattr(driver, "hello", None)
-    guard = Guard(safety, getattr(controller, "fingers", None) or _fingers(processor),
+    fingers = getattr(controller, "fingers", None)
+    guard = Guard(safety, _fingers(processor) if fingers is None else fingers,
                   rate_hz=getattr(hello, "rate_hz", None) or None, max_pressure_pa=float(max_pressure_pa))
     state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {},
              "driven": set(), "held": ()}

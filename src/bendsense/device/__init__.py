@@ -21,6 +21,7 @@ _LAZY = {
     "SimulatedDevice": "bendsense.device.simdevice",
     "SimStats": "bendsense.device.simdevice",
     "default_source": "bendsense.device.simdevice",
+    "scripted_board": "bendsense.device.simdevice",
     "ramp_source": "bendsense.device.simdevice",
     "PortInfo": "bendsense.device.ports",
     "list_ports": "bendsense.device.ports",

@@ -35,7 +35,7 @@ import numpy as np
 from bendsense.errors import DeviceError
 from bendsense.frames import Command, Decoder, FrameType, Setpoint, encode_hello, encode_sample, encode_text
 
-__all__ = ["SimulatedDevice", "SimStats", "default_source", "ramp_source", "DEFAULT_WATCHDOG_MS"]
+__all__ = ["SimulatedDevice", "SimStats", "default_source", "scripted_board", "ramp_source", "DEFAULT_WATCHDOG_MS"]
 
 log = logging.getLogger("bendsense.device.sim")
 
@@ -111,22 +111,14 @@ def default_source(
         Of ``(pressure_pa, adc_counts)``; endless unless ``duration_s`` is given. Its first
         frame is already computed (the slow first run after an install happens here).
     """
-    import dataclasses
-
-    from bendsense.config import load_config
     from bendsense.sim.scenarios import time_varying_frames
     from bendsense.sim.sensor import VirtualSensor
 
-    config = load_config() if config is None else config
+    config = _board_config(config, n_channels)
     seed = 0 if seed is None else seed
-    sensor = config.sensor
-    if n_channels != sensor.n_segments:
-        lengths = (sensor.length_m / n_channels,) * n_channels
-        sensor = dataclasses.replace(sensor, n_segments=n_channels, segment_lengths_m=lengths)
-        config = dataclasses.replace(config, sensor=sensor)
     if adc_bits != 12 and "sensor" not in options:
         options["sensor"] = VirtualSensor.from_config(
-            sensor, noise_counts=options.pop("noise_counts", 1.5), adc_bits=adc_bits, seed=seed
+            config.sensor, noise_counts=options.pop("noise_counts", 1.5), adc_bits=adc_bits, seed=seed
         )
     frames = time_varying_frames(config, rate_hz, seed, **options)
     # the first block is simulated here, before the board exists: on the first run after an
@@ -134,6 +126,59 @@ def default_source(
     # receiver that opened the printed port waits for frames
     first = next(frames, None)
     return frames if first is None else itertools.chain([first], frames)
+
+
+def _board_config(config, n_channels: int):
+    """The config (default the paper's) with an N-channel sensor: N equal segments over the same length if N differs."""
+    import dataclasses
+
+    from bendsense.config import load_config
+
+    config = load_config() if config is None else config
+    sensor = config.sensor
+    if n_channels != sensor.n_segments:
+        lengths = (sensor.length_m / n_channels,) * n_channels
+        config = dataclasses.replace(config, sensor=dataclasses.replace(sensor, n_segments=n_channels,
+                                                                        segment_lengths_m=lengths))
+    return config
+
+
+def scripted_board(n_channels: int = 16, adc_bits: int = 12, rate_hz: float = 500.0, seed=None, *, config=None,
+                   truth: bool = False, **options):
+    """The single actuator's board of ``sim-device``: :func:`default_source` until the host drives line 0.
+
+    A :class:`~bendsense.sim.gripper.ScriptedBoard`: the time-varying scenario frame for
+    frame while the host sends no SETPOINT; from the first SETPOINT on line 0, the free
+    actuator (no object) on the same sensor hardware, its pressure regulator following the
+    host (and the watchdog). Model errors act on both.
+
+    Parameters
+    ----------
+    n_channels, adc_bits, rate_hz, seed, config
+        As :func:`default_source`.
+    truth : bool
+        Every frame carries its truth as the truth file's columns
+        (:func:`bendsense.sim.truth.truth_columns`).
+    **options
+        Passed to :func:`default_source` (``contact_s_m``, ``noise_counts``, the model errors
+        ``ei_error``, ``k0_error``, ``base_rotation_rad_per_rad``, ``hysteresis_pa``, ...);
+        the model errors and ``noise_counts`` also to the free actuator's
+        :class:`~bendsense.sim.gripper.GraspBoard`.
+
+    Returns
+    -------
+    ScriptedBoard
+    """
+    from bendsense.sim.actuator import MODEL_ERRORS
+    from bendsense.sim.gripper import GraspBoard, ScriptedBoard
+    from bendsense.sim.truth import scenario_truth
+
+    shared = {k: v for k, v in options.items() if k in (*MODEL_ERRORS, "noise_counts")}
+    # the free actuator's tables first: a bad model error fails here, before the scenario's first block
+    board = GraspBoard(_board_config(config, n_channels), [None], rate_hz=rate_hz, seed=seed, adc_bits=adc_bits,
+                       **shared)
+    script = default_source(n_channels, adc_bits, rate_hz, seed, config=config, truth=truth, **options)
+    return ScriptedBoard(scenario_truth(script) if truth else script, board)
 
 
 def ramp_source(n_channels: int = 16, adc_bits: int = 12, pressure_pa: float | None = 20_000.0):
@@ -539,7 +584,7 @@ class SimulatedDevice:
         with self._lock:
             self._counts["commands"] += 1
         if self._on_setpoint is None:
-            why = "this board's pressure follows its scenario (sim-device --object or --fingers simulates regulators)"
+            why = "this board's pressure follows its scenario (sim-device --source sensor simulates a regulator)"
         elif self._on_setpoint(frame.line, frame.pressure_pa):
             with self._lock:
                 self._counts["setpoints"] += 1

@@ -37,8 +37,10 @@ from bendsense.config import Config
 from bendsense.errors import ConfigError
 from bendsense.sim.sensor import VirtualSensor, shifts_from_shape
 
-__all__ = ["SimulatedActuator", "ActuatorFrames", "play_operator"]
+__all__ = ["SimulatedActuator", "ActuatorFrames", "play_operator", "MODEL_ERRORS"]
 
+#: The model errors of the true actuator (module docstring): its keywords, all 0 by default.
+MODEL_ERRORS = ("ei_error", "k0_error", "base_rotation_rad_per_rad", "hysteresis_pa")
 #: Points of the default true-shape grid over the sensor length.
 DEFAULT_SHAPE_POINTS = 133
 
@@ -211,7 +213,7 @@ class SimulatedActuator:
     _s_beam: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        for name in ("ei_error", "k0_error", "base_rotation_rad_per_rad", "hysteresis_pa"):
+        for name in MODEL_ERRORS:
             value = getattr(self, name)
             low = {"ei_error": -1.0, "k0_error": -1.0, "hysteresis_pa": 0.0}.get(name)
             ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)

@@ -120,8 +120,8 @@ class FingerGrasp:
     ----------
     actuator : SimulatedActuator
         The true finger with its sensor.
-    obj : GraspObject
-        The object as this finger meets it.
+    obj : GraspObject or None
+        The object as this finger meets it; None: a free finger (no object, force 0).
     max_pressure_pa : float
         Highest pressure of the table [Pa] (the regulators' limit).
     step_pa : float
@@ -131,10 +131,12 @@ class FingerGrasp:
 
     Attributes
     ----------
+    contact_s_m : float
+        s_c [m]; NaN for a free finger.
     surface_point_m : ndarray, shape (2,)
-        q, the free finger's point at s_c at the touch pressure [m].
+        q, the free finger's point at s_c at the touch pressure [m] (None for a free finger).
     surface_normal : ndarray, shape (2,)
-        n_0, the finger's normal there (pointing into the object).
+        n_0, the finger's normal there (pointing into the object; None for a free finger).
     table_pressure_pa : ndarray, shape (G,)
         Nodes of the table [Pa].
     table_force_n : ndarray, shape (G, 2)
@@ -152,24 +154,28 @@ class FingerGrasp:
                  step_pa: float = 500.0, tol_m: float = 1e-9):
         self.actuator = actuator
         self.object = obj
-        length = actuator.config.actuator.length_m
-        self.contact_s_m = contact_number(obj.contact_s_m, length)
-        if not obj.touch_pressure_pa <= max_pressure_pa:
-            raise ConfigError(f"touch_pressure_pa: {obj.touch_pressure_pa:g} Pa is above the pressure limit "
-                              f"{max_pressure_pa:g} Pa: the finger would never touch the object")
         self.tol_m = float(tol_m)
-        self._grid = np.append(actuator._s_beam, self.contact_s_m)
-        free = actuator.solve(obj.touch_pressure_pa, (0.0, 0.0), s_m=self._grid)
-        phi0 = float(free.angle_rad[-1])
-        self.surface_point_m = np.array(free.positions_m[-1], dtype=float)
-        self.surface_normal = np.array([math.cos(phi0), -math.sin(phi0)])
         n = max(2, math.ceil(max_pressure_pa / step_pa) + 1)
-        nodes = np.union1d(np.linspace(0.0, max_pressure_pa, n), [obj.touch_pressure_pa])
+        nodes = np.linspace(0.0, max_pressure_pa, n)
+        self.contact_s_m, self.surface_point_m, self.surface_normal = math.nan, None, None
+        self._grid = actuator._s_beam
+        if obj is not None:
+            self.contact_s_m = contact_number(obj.contact_s_m, actuator.config.actuator.length_m)
+            if not obj.touch_pressure_pa <= max_pressure_pa:
+                raise ConfigError(f"touch_pressure_pa: {obj.touch_pressure_pa:g} Pa is above the pressure limit "
+                                  f"{max_pressure_pa:g} Pa: the finger would never touch the object")
+            self._grid = np.append(actuator._s_beam, self.contact_s_m)
+            free = actuator.solve(obj.touch_pressure_pa, (0.0, 0.0), s_m=self._grid)
+            phi0 = float(free.angle_rad[-1])
+            self.surface_point_m = np.array(free.positions_m[-1], dtype=float)
+            self.surface_normal = np.array([math.cos(phi0), -math.sin(phi0)])
+            nodes = np.union1d(nodes, [obj.touch_pressure_pa])
         state = self.solve(nodes)
         if not state.valid.all():  # never a table with holes: a force that drops to 0 would be a lie
             bad = nodes[~state.valid]
-            raise ConfigError(f"object: no equilibrium of the finger on the object (s_c = {self.contact_s_m:g} m, "
-                              f"touch at {obj.touch_pressure_pa / 1e3:g} kPa) at {bad.size} pressures from "
+            where = "free" if obj is None else (f"on the object (s_c = {self.contact_s_m:g} m, touch at "
+                                                f"{obj.touch_pressure_pa / 1e3:g} kPa)")
+            raise ConfigError(f"object: no equilibrium of the finger {where} at {bad.size} pressures from "
                               f"{bad[0] / 1e3:g} kPa; lower the pressure limit or move the object")
         self.table_pressure_pa = nodes
         self.table_force_n = state.force_n
@@ -203,12 +209,17 @@ class FingerGrasp:
         GraspState
         """
         p = np.atleast_1d(np.asarray(pressure_pa, dtype=float))
-        k = self.object.stiffness_n_per_m
-        sol0, d0 = self._loaded(p, np.zeros_like(p))
         f = np.zeros_like(p)
+        if self.object is None:  # a free finger: no contact
+            sol = self.actuator.solve(p, (0.0, 0.0), s_m=self._grid)
+            nan = np.full_like(p, np.nan)
+            return GraspState(pressure_pa=p, contact_n=f, force_n=np.zeros((p.size, 2)), penetration_m=nan,
+                              contact_position_m=np.full((p.size, 2), np.nan), contact_angle_rad=nan, solution=sol,
+                              valid=np.asarray(sol.success))
+        sol0, d0 = self._loaded(p, np.zeros_like(p))
         touching = np.flatnonzero(d0 > 0)
         if touching.size:
-            f[touching] = self._root(p[touching], d0[touching], k)
+            f[touching] = self._root(p[touching], d0[touching], self.object.stiffness_n_per_m)
         ok = np.isfinite(f)
         f = np.where(ok, f, 0.0)
         sol, d = self._loaded(p, f)

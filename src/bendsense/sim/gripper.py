@@ -12,7 +12,11 @@ fingers share one sensor design and hardware (the simulator's seed), so one cali
 is independent.
 
 The same board with one finger and no prefixes is the single actuator pressing an object
-(``sim-device --object rigid``): version-1 frames, SETPOINT line 0.
+(``sim-device --object rigid``): version-1 frames, SETPOINT line 0; with no object it is
+the free actuator, which :class:`ScriptedBoard` hands the line to once the host drives it
+(``sim-device`` without ``--object``). Every finger may depart from its config by
+``simulate``'s model errors (``ei_error``, ``k0_error``, ``base_rotation_rad_per_rad``,
+``hysteresis_pa``).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import ConfigError
+from bendsense.sim.actuator import play_operator
 from bendsense.sim.grasp import FingerGrasp, GraspObject
 from bendsense.sim.regulator import DEFAULT_MAX_PRESSURE_PA, DEFAULT_TAU_S, PressureRegulators, _closing
 
@@ -33,6 +38,7 @@ __all__ = [
     "DEFAULT_CLOSE_PA",
     "DEFAULT_COMPLIANT_N_PER_M",
     "GraspBoard",
+    "ScriptedBoard",
     "gripper_config",
     "default_objects",
 ]
@@ -134,8 +140,9 @@ class GraspBoard:
     ----------
     config : GripperConfig or Config
         A gripper (:func:`gripper_config`) or a single actuator (one line, no prefixes).
-    objects : sequence of GraspObject
-        The object as each finger meets it, in the fingers' order (one for an actuator).
+    objects : sequence of GraspObject or None
+        The object as each finger meets it, in the fingers' order (one for an actuator);
+        None: a free finger (no object).
     rate_hz : float
         Frame rate [Hz].
     seed : int, optional
@@ -150,6 +157,12 @@ class GraspBoard:
         ADC resolution [bit].
     step_pa : float
         Node spacing of the pressure tables [Pa].
+    **mismatch
+        How every finger departs from its config: ``ei_error``, ``k0_error``,
+        ``base_rotation_rad_per_rad``, ``hysteresis_pa``
+        (:class:`~bendsense.sim.actuator.SimulatedActuator`, as ``bendsense simulate``'s
+        model errors). The hysteresis acts frame by frame between a line's pressure
+        reading and the pressure that bends its finger.
 
     Attributes
     ----------
@@ -167,7 +180,8 @@ class GraspBoard:
 
     def __init__(self, config, objects, *, rate_hz: float, seed: int | None = 0, tau_s: float = DEFAULT_TAU_S,
                  max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA, close_pa: float = DEFAULT_CLOSE_PA,
-                 period_s: float = 8.0, noise_counts: float = 1.5, adc_bits: int = 12, step_pa: float = 500.0):
+                 period_s: float = 8.0, noise_counts: float = 1.5, adc_bits: int = 12, step_pa: float = 500.0,
+                 **mismatch):
         from bendsense.sim.actuator import SimulatedActuator
         from bendsense.sim.sensor import VirtualSensor
 
@@ -193,20 +207,31 @@ class GraspBoard:
             key = id(cfg.sensor)
             if key not in sensors:  # one hardware per sensor design: the seed's
                 sensors[key] = VirtualSensor.from_config(cfg, noise_counts=noise_counts, adc_bits=adc_bits, seed=seed)
-            sim = SimulatedActuator.from_config(cfg, sensor=sensors[key])
+            sim = SimulatedActuator.from_config(cfg, sensor=sensors[key], **mismatch)
             grasp = FingerGrasp(sim, obj, max_pressure_pa=max_pressure_pa, step_pa=step_pa)
             prefix = "" if name is None else f"{name}_"
             keys = (f"{prefix}fx_n", f"{prefix}fy_n", f"{prefix}contact_s_m")
             self._fingers.append(_Finger(name, np.asarray(channels) - 1, line, grasp, keys))
         self.fingers = {f.name: f.grasp for f in self._fingers}
+        self.hysteresis_pa = self._fingers[0].grasp.actuator.hysteresis_pa
         self.noise_counts = float(noise_counts)
         self._full_scale = 2 ** int(adc_bits) - 1
         self._line_keys = [("setpoint_pa", "pressure_pa")] if single else [
             (f"line{k}_setpoint_pa", f"line{k}_pressure_pa") for k in range(self.n_lines)]
 
-    def reset(self) -> None:
-        """Start over: regulators at 0 Pa following the scenario, the noise stream from its seed (tables kept)."""
-        self.regulators = PressureRegulators(self.n_lines, self.rate_hz, **self._regulator_options)
+    def reset(self, initial_pa: float = 0.0) -> None:
+        """Start over: regulators at ``initial_pa`` following the scenario, the noise stream from its seed.
+
+        The tables are kept; the fingers' hysteresis starts at ``initial_pa`` too.
+
+        Parameters
+        ----------
+        initial_pa : float
+            Every line's pressure at the start [Pa].
+        """
+        self.regulators = PressureRegulators(self.n_lines, self.rate_hz, initial_pa=initial_pa,
+                                             **self._regulator_options)
+        self._effective = self.regulators.pressure_pa.copy()  # the pressure that bends each line's finger
         self._rng = np.random.default_rng(np.random.SeedSequence(self._seed, spawn_key=(_NOISE_KEY,)))
 
     def setpoint(self, line: int, pressure_pa: float) -> bool:
@@ -243,10 +268,13 @@ class GraspBoard:
         truth file's columns (:func:`bendsense.sim.truth.truth_columns`).
         """
         p = self.regulators.step(k / self.rate_hz)
+        if self.hysteresis_pa:
+            self._effective = play_operator(p[None], self.hysteresis_pa, self._effective)[0]
+        bending = self._effective if self.hysteresis_pa else p
         values = np.zeros(self.n_channels)
         truth = {}
         for f in self._fingers:
-            fx, fy, values[f.index] = f.grasp.lookup_one(p[f.line])
+            fx, fy, values[f.index] = f.grasp.lookup_one(bending[f.line])
             truth[f.keys[0]], truth[f.keys[1]] = fx + 0.0, fy + 0.0  # no -0.0
             truth[f.keys[2]] = f.grasp.contact_s_m
         for (set_key, p_key), sp, pp in zip(self._line_keys, self.regulators.setpoint_pa, p, strict=True):
@@ -266,3 +294,72 @@ class _Profile:
 
     def __call__(self, t_s):
         return _closing(t_s, self.close_pa, self.period_s)
+
+
+class ScriptedBoard:
+    """The single actuator's scripted scenario until the host drives its line; then its regulator.
+
+    The board of ``sim-device`` without ``--object`` or ``--fingers``: frame by frame the
+    ``script`` (the time-varying scenario, :func:`bendsense.device.simdevice.default_source`)
+    until the first SETPOINT on line 0 (or the watchdog's :meth:`release`); from then on
+    ``board``, a :class:`GraspBoard` of the same actuator free (no object, no scripted
+    touches), whose regulator starts at the script's last pressure and follows the host.
+    A host that sends no SETPOINT gets the scripted scenario frame for frame.
+
+    Parameters
+    ----------
+    script : iterable
+        Of ``(pressure_pa, counts)`` or ``(pressure_pa, counts, truth)``.
+    board : GraspBoard
+        The free single actuator (``objects=[None]``) on the script's sensor hardware.
+
+    Attributes
+    ----------
+    scripted : bool
+        The script still runs (no SETPOINT yet).
+    """
+
+    def __init__(self, script, board: GraspBoard):
+        if not board.single:
+            raise ConfigError("board: expected the single actuator's GraspBoard, got a gripper's")
+        self.script, self.board = iter(script), board
+        self.scripted = True
+        self._pressure = 0.0
+
+    def setpoint(self, line: int, pressure_pa: float) -> bool:
+        """Take a SETPOINT (:meth:`GraspBoard.setpoint`); the first on line 0 ends the script.
+
+        Parameters
+        ----------
+        line : int
+            0-based pressure line (the board has line 0 only).
+        pressure_pa : float
+            Set-point [Pa].
+
+        Returns
+        -------
+        bool
+            False when the board has no such line or the value is not finite.
+        """
+        if line != 0 or not math.isfinite(pressure_pa):
+            return False
+        self._take_over()
+        return self.board.setpoint(line, pressure_pa)
+
+    def release(self) -> None:
+        """Set-point 0 on the line (the board's watchdog, :meth:`GraspBoard.release`); ends the script."""
+        self._take_over()
+        self.board.release()
+
+    def _take_over(self) -> None:
+        if self.scripted:
+            self.board.reset(self._pressure)
+            self.scripted = False
+
+    def __call__(self, k: int):
+        """Frame ``k``: the script's next frame, or the board's (:meth:`GraspBoard.__call__`)."""
+        if not self.scripted:
+            return self.board(k)
+        values = next(self.script)
+        self._pressure = float(values[0])
+        return values

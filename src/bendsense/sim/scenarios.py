@@ -83,7 +83,7 @@ from bendsense.calibration import strip_shifts
 from bendsense.config import Config
 from bendsense.errors import ArgumentError, ConfigError
 from bendsense.session import Session, write_session_csv
-from bendsense.sim.actuator import SimulatedActuator, contact_number
+from bendsense.sim.actuator import MODEL_ERRORS, SimulatedActuator, contact_number
 from bendsense.sim.sensor import VirtualSensor, calibration_shifts
 
 __all__ = [
@@ -119,7 +119,7 @@ _FORMAT_VERSION = 1
 _STREAM_BASE = 1000
 
 # options each scenario accepts besides the actuator's (noise and mismatch)
-_ACTUATOR_OPTIONS = ("noise_counts", "ei_error", "k0_error", "base_rotation_rad_per_rad", "hysteresis_pa")
+_ACTUATOR_OPTIONS = ("noise_counts", *MODEL_ERRORS)
 _OPTIONS = {
     "calibration": {"frames_per_strip": 50, "rate_hz": 35.0, "radii_m": CALIBRATION_RADII_M},
     "validation": {"frames_per_strip": 50, "rate_hz": 35.0, "radii_m": VALIDATION_RADII_M},
