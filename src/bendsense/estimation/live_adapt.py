@@ -8,7 +8,8 @@ device time, or as soon as :data:`NEW_BINS` bins more are covered than at the la
 update, it hands the buffer to one worker process, which runs :func:`bendsense.adapt`
 on it: the ORIGINAL config's prior updated by every free frame in the buffer (a frame
 counts once, however many updates it sees; ``adapt`` chooses the free frames and
-refuses loaded ones). The processor checks for the result without waiting, once per
+refuses loaded ones). An update whose frame selection did not settle (its posterior
+finds too few of its own frames free) is not swapped in: the loop keeps its config. The processor checks for the result without waiting, once per
 block, and continues with the adapted config from the next block: the same arrays of
 the same shapes, so nothing compiles in the loop.
 
@@ -43,6 +44,9 @@ def _learn(kappa, pressure_pa, t_s, config, calibration, source):
     from bendsense.identify_session import adapt
 
     result = adapt(kappa, pressure_pa, config, calibration=calibration, t_s=t_s, source=source)
+    if not result.refused and not result.fit.settled:  # a posterior that does not describe its own free frames
+        return None, 0, (f"{result.report} Not used live: the frame selection did not settle (the config kept; "
+                         "record a free sweep over the pressure range)")
     return (None if result.refused else result.config), int(np.count_nonzero(result.free)), result.report
 
 
