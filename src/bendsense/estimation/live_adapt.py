@@ -8,10 +8,11 @@ device time, or as soon as :data:`NEW_BINS` bins more are covered than at the la
 update, it hands the buffer to one worker process, which runs :func:`bendsense.adapt`
 on it: the ORIGINAL config's prior updated by every free frame in the buffer (a frame
 counts once, however many updates it sees; ``adapt`` chooses the free frames and
-refuses loaded ones). An update whose frame selection did not settle (its posterior
-finds too few of its own frames free) is not swapped in: the loop keeps its config. The processor checks for the result without waiting, once per
+refuses loaded ones). The processor checks for the result without waiting, once per
 block, and continues with the adapted config from the next block: the same arrays of
-the same shapes, so nothing compiles in the loop.
+the same shapes, so nothing compiles in the loop. An update whose frame selection did
+not settle (its posterior finds too few of its own frames free) is not swapped in: the
+loop keeps its config.
 
 A process and not a thread: the compiled kernels hold the GIL, and an update of a few
 hundred frames (0.5–2 s) would stall the loop. The worker is spawned and warmed when
