@@ -7,16 +7,22 @@ processor in blocks of 10 (0.1 s) as a live stream would bring them. The true K0
 config's times 1.08, by the forward model's own quadrature (tests/forward_model.py).
 """
 
+import csv
+import re
+import subprocess
+import sys
 import time
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from forward_model import free_bending_k0
 from numba.core import event
 
 import bendsense
 from bendsense.actuator import FreeBendingModel
 from bendsense.calibration import Calibration
+from bendsense.cli import main
 from bendsense.errors import ArgumentError
 from bendsense.estimation.live_adapt import LiveAdaptation
 from bendsense.identify_session import k0_with_sigma
@@ -114,3 +120,51 @@ def test_adapt_refuses_a_config_without_a_prior(calibration_path):
     bare = dataclasses.replace(CONFIG, parameter_covariance=None)
     with pytest.raises(ArgumentError, match="parameter_covariance"):
         LiveAdaptation(Calibration.load(calibration_path), bare)
+
+
+@pytest.fixture(scope="module")
+def object_board(tmp_path_factory):
+    """``sim-device --object rigid --k0-error 0.05 --ei-error 0.15``: a finger that is not the config's, pressing."""
+    truth = tmp_path_factory.mktemp("board") / "truth.csv"
+    proc = subprocess.Popen([sys.executable, "-c", "from bendsense.cli import main; main()", "sim-device", "--object",
+                             "rigid", "--rate", "1000", "--k0-error", "0.05", "--ei-error", "0.15", "--truth",
+                             str(truth)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/"), proc.stderr.read()
+        yield port, truth
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        proc.stdout.close()
+        proc.stderr.close()
+
+
+def test_control_adapt_on_a_finger_that_is_not_the_configs(object_board, calibration_path, tmp_path):
+    port, truth = object_board
+    out = tmp_path / "grasp"
+    res = CliRunner().invoke(main, ["control", port, "--calibration", str(calibration_path), "--target-force-n", "0.15",
+                                    "--load", "contact", "--contact-s-m", "0.10", "--seconds", "1.5", "-o", str(out),
+                                    "--adapt"])
+    assert res.exit_code == 0, res.output
+    line = next(x for x in res.output.splitlines() if x.startswith("adapt: "))
+    if "update(s)" in line:  # what it learned went into the loop and into the session's config.yaml
+        assert "adapt" in bendsense.load_config(out / "config.yaml").parameter_covariance.source
+    # the board's truth over the last 0.3 s the line was driven, against what the loop claimed (N = x ± s mN)
+    time.sleep(0.1)
+    with open(truth, encoding="utf-8") as fh:
+        rows = [r for r in csv.DictReader(x for x in fh if not x.startswith("#")) if None not in r.values()]
+    t = np.array([float(r["t_us"]) for r in rows]) * 1e-6
+    force = np.hypot([float(r["fx_n"]) for r in rows], [float(r["fy_n"]) for r in rows])
+    driven = np.flatnonzero(np.array([float(r["setpoint_pa"]) for r in rows]) > 0)[-1]
+    true = force[(t > t[driven] - 0.3) & (t <= t[driven])].mean()
+    claimed, sigma = (float(x) for x in re.search(r"N = ([\d.]+) ± ([\d.]+) mN", res.output).groups())
+    print(f"control --adapt, K0 +5 %, EI +15 %: true force {true * 1e3:.1f} mN for the 150 mN target, claimed "
+          f"{claimed:.1f} ± {sigma:.1f} mN; {line}")
+    assert true > 0.1  # it pressed the object
+    assert abs(true * 1e3 - claimed) <= 3 * sigma  # the sigma it claims covers what it did not learn
+
+
+def test_record_adapt_needs_estimate(tmp_path):
+    res = CliRunner().invoke(main, ["record", "/dev/null", "-o", str(tmp_path / "s"), "--adapt"])
+    assert res.exit_code == 2 and "--adapt" in res.output and "needs --estimate" in res.output
