@@ -17,7 +17,8 @@ loop keeps its config.
 A process and not a thread: the compiled kernels hold the GIL, and an update of a few
 hundred frames (0.5–2 s) would stall the loop. The worker is spawned and warmed when
 the processor warms up (:meth:`LiveAdaptation.start`), uses one numba and BLAS thread,
-ignores Ctrl-C and ends with its parent (as :mod:`bendsense.batch`'s workers do).
+ignores Ctrl-C and ends with its parent (as :mod:`bendsense.batch`'s workers do), and
+runs at a lower priority (``nice`` 10) than the loop.
 """
 
 from __future__ import annotations
@@ -38,6 +39,18 @@ EVERY_S = 5.0
 NEW_BINS = 10
 #: Frames kept per 1 kPa pressure bin (the newest).
 PER_BIN = 4
+
+
+def _worker_init(parent_pid: int) -> None:
+    """The batch workers' set-up (one thread, no Ctrl-C, ends with its parent), at a lower priority.
+
+    The loop and, on a test machine, the simulated board share the cores with it: an
+    update may take a second, they must not wait for it.
+    """
+    from bendsense.batch import _worker_init as batch_worker_init
+
+    batch_worker_init(parent_pid)
+    os.nice(10)
 
 
 def _learn(kappa, pressure_pa, t_s, config, calibration, source):
@@ -99,8 +112,6 @@ class LiveAdaptation:
     def start(self) -> None:
         """Spawn the worker and warm it: an update on a straight actuator over mid pressures (it learns nothing)."""
         import multiprocessing
-
-        from bendsense.batch import _worker_init
 
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")
