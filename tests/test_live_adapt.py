@@ -23,6 +23,7 @@ import bendsense
 from bendsense.actuator import FreeBendingModel
 from bendsense.calibration import Calibration
 from bendsense.cli import main
+from bendsense.device.simdevice import SimulatedDevice
 from bendsense.errors import ArgumentError
 from bendsense.estimation.live_adapt import LiveAdaptation
 from bendsense.identify_session import k0_with_sigma
@@ -39,13 +40,27 @@ def _setpoint(t):
 
 
 @pytest.fixture(scope="module")
-def run(calibration_path):
+def sweep():
+    """The board's frames: (pressure, counts, truth) each."""
     board = GraspBoard(CONFIG, [None], rate_hz=RATE, seed=0, k0_error=K0_ERROR)
-    n = int(5 * RATE)
     frames = []
-    for k in range(n):
+    for k in range(int(5 * RATE)):
         board.setpoint(0, _setpoint(k / RATE))
         frames.append(board(k))
+    return frames
+
+
+def _k0_errors(config):
+    """K0(P) against the board's truth: the error relative to K0(100 kPa) over 0-100 kPa, relative to K0(P) above."""
+    p = np.linspace(0.0, 100e3, 21)
+    true = (1.0 + K0_ERROR) * np.array([free_bending_k0(CONFIG, x) for x in p])
+    got = FreeBendingModel.from_config(config).tip_curvature_per_m(p)
+    return p, got, true
+
+
+@pytest.fixture(scope="module")
+def run(calibration_path, sweep):
+    frames, n = sweep, len(sweep)
     pressure = np.array([f[0] for f in frames])
     counts = np.array([f[1] for f in frames], dtype=float)
     truth_force = np.array([[f[2]["fx_n"], f[2]["fy_n"]] for f in frames])
@@ -83,9 +98,7 @@ def test_live_adapt_learns_k0_within_2_percent_and_its_sigma_shrinks(run):
     assert np.all(run["truth_force"] == 0.0)  # the board's own record: the finger was free all along
     adapted = run["adapted"]
     assert adapted is not None and run["proc"].adaptation.updates >= 1
-    p = np.linspace(0.0, 100e3, 21)
-    true = (1.0 + K0_ERROR) * np.array([free_bending_k0(CONFIG, x) for x in p])
-    got = FreeBendingModel.from_config(adapted).tip_curvature_per_m(p)
+    p, got, true = _k0_errors(adapted)
     upper = p >= 30e3  # at 20-25 kPa it is 2.0-2.3 % low, inside its sigma (below)
     sigma = k0_with_sigma(adapted, p)[1]
     print(f"live adapt: K0(P) error max {np.max(np.abs(got - true)) / true.max() * 100:.2f} % of K0(100 kPa), "
@@ -168,3 +181,18 @@ def test_control_adapt_on_a_finger_that_is_not_the_configs(object_board, calibra
 def test_record_adapt_needs_estimate(tmp_path):
     res = CliRunner().invoke(main, ["record", "/dev/null", "-o", str(tmp_path / "s"), "--adapt"])
     assert res.exit_code == 2 and "--adapt" in res.output and "needs --estimate" in res.output
+
+
+def test_record_estimate_adapt_writes_the_adapted_config(calibration_path, sweep, tmp_path):
+    out = tmp_path / "s"
+    with SimulatedDevice(sweep[:int(3 * RATE)], rate_hz=300.0) as dev:  # the sweep, three times as fast
+        res = CliRunner().invoke(main, ["record", dev.port, "-o", str(out), "--seconds", "1.5", "--calibration",
+                                        str(calibration_path), "--estimate", "--adapt"])
+    assert res.exit_code == 0, res.output
+    assert any(x.startswith("adapt: ") and "update(s)" in x for x in res.output.splitlines()), res.output
+    adapted = bendsense.load_config(out / "config.yaml")
+    assert adapted.parameter_covariance.source.startswith("adapt ")
+    p, got, true = _k0_errors(adapted)
+    upper = p >= 30e3
+    assert np.all(np.abs(got[upper] / true[upper] - 1) <= 0.02), got[upper] / true[upper] - 1
+    assert len(bendsense.read_session(out)) == int(3 * RATE)  # every frame recorded
