@@ -41,7 +41,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from concurrent.futures import ThreadPoolExecutor, wait
+from contextlib import nullcontext
 from pathlib import Path
 
 import pytest
@@ -307,60 +307,43 @@ def _run(lang: str, code: str, cwd: Path, env: dict) -> subprocess.CompletedProc
 
 # pages without a bash or python block (theory.md) have nothing to run
 RUNNABLE = [p for p in PAGES if extract_blocks(p.read_text(encoding="utf-8"))]
-# pages whose commands are timed or hold a force loop against a simulated board at its frame rate run alone; the
-# others run two at a time, each page in its own processes, so the suite's longest part uses both cores
-ALONE = {"grasping.md", "performance.md"}
+# a block that runs a simulated board against a client at its frame rate, or times commands, runs alone
+# (tests/conftest.py: no other test runs meanwhile)
+ALONE = re.compile(r"\bsim-device\b|\bSimulatedDevice\b|\bbenchmarks/")
 
 
 def test_the_pages_with_commands_are_run():
     assert {p.name for p in RUNNABLE} >= {"README.md", "getting-started.md", "cli.md", "calibration.md"}
 
 
-def run_page(page: Path, workdir: Path) -> str | None:
-    """Run the runnable blocks of ``page`` in order in ``workdir``; why the first one failed, or None."""
+@pytest.mark.slow
+@pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
+def test_page_runs(page: Path, tmp_path: Path, machine):
+    blocks = extract_steps(page.read_text(encoding="utf-8"))
+    assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
     for name in COPIED:
         if (ROOT / name).is_dir():
-            shutil.copytree(ROOT / name, workdir / name, ignore=shutil.ignore_patterns("__pycache__"))
+            shutil.copytree(ROOT / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__"))
     for name in COPIED_FILES:
-        (workdir / name).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(ROOT / name, workdir / name)
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ROOT / name, tmp_path / name)
     # single-threaded BLAS as the CLI sets it (troubleshooting.md): the python blocks'
     # many small matrices crawl when threaded BLAS competes for the cores
     env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    for k, (lang, code, outputs) in enumerate(extract_steps(page.read_text(encoding="utf-8")), start=1):
-        proc = _run(lang, code, workdir, env)
-        printed = f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
-        if proc.returncode != 0:
-            return f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n{printed}"
+    for k, (lang, code, outputs) in enumerate(blocks, start=1):
+        with machine.alone() if ALONE.search(code) else nullcontext():
+            proc = _run(lang, code, tmp_path, env)
+        assert proc.returncode == 0, (
+            f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
+            f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
+        )
         for documented in outputs:
             missing = missing_output(documented, proc.stdout + "\n" + proc.stderr)
-            if missing:
-                return (f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it prints;\n"
-                        "documented lines not printed (masked):\n" + "\n".join(missing) + f"\n{printed}")
-    return None
-
-
-@pytest.fixture(scope="module")
-def shared_runs(request, tmp_path_factory):
-    """The selected pages not in ALONE, started two at a time on first use (the longest first): page → future."""
-    selected = [item.callspec.params["page"] for item in request.session.items
-                if getattr(item, "originalname", None) == "test_page_runs"]
-    shared = sorted((p for p in selected if p.name not in ALONE), key=lambda p: -len(extract_steps(p.read_text())))
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        yield {p: pool.submit(run_page, p, tmp_path_factory.mktemp(p.stem)) for p in shared}
-        pool.shutdown(cancel_futures=True)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
-def test_page_runs(page: Path, tmp_path: Path, shared_runs):
-    assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
-    if page in shared_runs:
-        failure = shared_runs[page].result()
-    else:
-        wait(shared_runs.values())  # alone
-        failure = run_page(page, tmp_path)
-    assert failure is None, failure
+            assert not missing, (
+                f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it prints;\n"
+                f"documented lines not printed (masked):\n" + "\n".join(missing) + "\n"
+                f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
+            )
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")

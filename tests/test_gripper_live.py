@@ -19,6 +19,8 @@ from bendsense.gripper_live import GripperProcessor
 from bendsense.pipeline import LiveProcessor
 from bendsense.sim.scenarios import time_varying_frames
 
+pytestmark = pytest.mark.realtime  # a simulated board against the live path at its frame rate
+
 # the board: index on channels 1..16 (line 0), thumb on 33..48 in reverse board order (line 1), middle on
 # 17..32 sharing the thumb's line; 48 channels, two lines
 MAP = {"index": (list(range(1, 17)), 0), "thumb": (list(range(48, 32, -1)), 1), "middle": (list(range(17, 33)), 1)}

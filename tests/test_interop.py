@@ -175,6 +175,7 @@ def pull_all(inlets, proc, idle_s=2.0):
         assert time.monotonic() - last < 60, "no samples for a minute"
 
 
+@pytest.mark.realtime
 def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_path):
     import pylsl
 

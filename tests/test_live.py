@@ -19,6 +19,8 @@ from bendsense.pipeline import LiveFrame, LiveProcessor
 from bendsense.sim.scenarios import time_varying_frames
 from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
 
+pytestmark = pytest.mark.realtime  # a simulated board against the live path at its frame rate
+
 SEED = 0
 RATE_HZ = 100.0
 

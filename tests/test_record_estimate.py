@@ -22,7 +22,8 @@ from bendsense.pipeline import LiveProcessor
 from bendsense.sim.scenarios import time_varying_frames
 from bendsense.tracking import DEFAULT_BANDWIDTH_HZ
 
-pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
+pytestmark = [pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals"),
+              pytest.mark.realtime]
 SEED = 0
 CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]
 

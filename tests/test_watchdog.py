@@ -43,7 +43,8 @@ from bendsense.frames import (
 from bendsense.sim.grasp import GraspObject
 from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
 
-pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
+pytestmark = [pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals"),
+              pytest.mark.realtime]
 
 RATE = 1000.0
 WATCHDOG_MS = 100.0  # the board of a host that falls silent: short, so that each test is short
