@@ -58,8 +58,21 @@ def _k0_errors(config):
     return p, got, true
 
 
-@pytest.fixture(scope="module")
-def run(calibration_path, sweep):
+_RUN = {}
+
+
+def _stream(calibration_path, sweep):
+    """The sweep through ``LiveProcessor(adapt=True)`` in blocks, the hold at the board's pace (once per module).
+
+    Called inside a ``realtime`` test, not as a fixture: it times the blocks, so it runs while no other test does
+    (tests/conftest.py), which a module fixture, set up before the test's lock, would not.
+    """
+    if not _RUN:
+        _RUN.update(_run(calibration_path, sweep))
+    return _RUN
+
+
+def _run(calibration_path, sweep):
     frames, n = sweep, len(sweep)
     pressure = np.array([f[0] for f in frames])
     counts = np.array([f[1] for f in frames], dtype=float)
@@ -94,7 +107,9 @@ def run(calibration_path, sweep):
             "frames": frames_out, "n": n, "adapted": adapted, "truth_force": truth_force}
 
 
-def test_live_adapt_learns_k0_within_2_percent_and_its_sigma_shrinks(run):
+@pytest.mark.realtime
+def test_live_adapt_learns_k0_within_2_percent_and_its_sigma_shrinks(calibration_path, sweep):
+    run = _stream(calibration_path, sweep)
     assert np.all(run["truth_force"] == 0.0)  # the board's own record: the finger was free all along
     adapted = run["adapted"]
     assert adapted is not None and run["proc"].adaptation.updates >= 1
@@ -115,7 +130,9 @@ def test_live_adapt_learns_k0_within_2_percent_and_its_sigma_shrinks(run):
     assert "adapt" in adapted.parameter_covariance.source
 
 
-def test_frames_keep_flowing_while_it_learns_and_nothing_compiles(run):
+@pytest.mark.realtime
+def test_frames_keep_flowing_while_it_learns_and_nothing_compiles(calibration_path, sweep):
+    run = _stream(calibration_path, sweep)
     # every frame came out, the processor's config changed between blocks (an update landed mid-run), and no
     # block waited for an update (~1 s each in the worker): the longest block stays far below it
     assert run["frames"] == run["n"]
@@ -153,6 +170,7 @@ def object_board(tmp_path_factory):
         proc.stderr.close()
 
 
+@pytest.mark.realtime
 def test_control_adapt_on_a_finger_that_is_not_the_configs(object_board, calibration_path, tmp_path):
     port, truth = object_board
     out = tmp_path / "grasp"
@@ -183,6 +201,7 @@ def test_record_adapt_needs_estimate(tmp_path):
     assert res.exit_code == 2 and "--adapt" in res.output and "needs --estimate" in res.output
 
 
+@pytest.mark.realtime
 def test_record_estimate_adapt_writes_the_adapted_config(calibration_path, sweep, tmp_path):
     out = tmp_path / "s"
     with SimulatedDevice(sweep[:int(3 * RATE)], rate_hz=300.0) as dev:  # the sweep, three times as fast
