@@ -215,3 +215,13 @@ def test_record_estimate_adapt_writes_the_adapted_config(calibration_path, sweep
     upper = p >= 30e3
     assert np.all(np.abs(got[upper] / true[upper] - 1) <= 0.02), got[upper] / true[upper] - 1
     assert len(bendsense.read_session(out)) == int(3 * RATE)  # every frame recorded
+
+
+def test_adapt_refuses_a_gripper(calibration_path, tmp_path):
+    from bendsense.config import save_config
+    from bendsense.sim.gripper import gripper_config
+
+    save_config(gripper_config(2), tmp_path / "gripper.yaml")
+    res = CliRunner().invoke(main, ["control", "/dev/null", "--config", str(tmp_path / "gripper.yaml"),
+                                    "--calibration", str(calibration_path), "--target-force-n", "0.15", "--adapt"])
+    assert res.exit_code == 2 and "'--adapt'" in res.output and "single actuator" in res.output, res.output
