@@ -74,6 +74,7 @@ __all__ = [
     "adapt",
     "adapt_session",
     "free_bending_angles",
+    "k0_with_sigma",
     "fit_free_bending_session",
     "fit_stiffness_session",
     "session_shapes",
@@ -705,10 +706,25 @@ def adapt_session(session, config, calibration, pressure_pa=None) -> Adaptation:
                  source=_source(session))
 
 
-def _adapt_report(fit, prior, posterior, t_s) -> str:
-    """One paragraph: frames used of how many, what was learned (σ before → after), what was refused."""
+def k0_with_sigma(config, pressure_pa):
+    """K0 [1/m] at ``pressure_pa`` and its standard deviation under ``config.parameter_covariance``.
+
+    Parameters
+    ----------
+    config : Config
+        The actuator, with its prior or posterior.
+    pressure_pa : ndarray
+        Pressures [Pa].
+    """
     from bendsense.actuator import FreeBendingModel, model_jacobian
 
+    J = model_jacobian(config, pressure_pa, config.parameter_covariance.parameters)
+    sigma = np.sqrt(np.einsum("bi,ij,bj->b", J[:, 0], config.parameter_covariance.matrix, J[:, 0]))
+    return FreeBendingModel.from_config(config).tip_curvature_per_m(pressure_pa), sigma
+
+
+def _adapt_report(fit, prior, posterior, t_s) -> str:
+    """One paragraph: frames used of how many, what was learned (σ before → after), what was refused."""
     used = fit.used
     p = fit.pressure_pa[used]
     span = f"{p.min() / 1e3:.0f}-{p.max() / 1e3:.0f} kPa" if np.ptp(p) > 1e3 else f"{np.median(p) / 1e3:.0f} kPa"
@@ -716,11 +732,7 @@ def _adapt_report(fit, prior, posterior, t_s) -> str:
     if t_s is not None:
         when = f" between {t_s[used].min():.2f} and {t_s[used].max():.2f} s"
     levels = np.unique(np.round(np.percentile(p, [5, 50, 95]), -3))
-    k0 = [FreeBendingModel.from_config(c).tip_curvature_per_m(levels) for c in (prior, posterior)]
-    sig = []
-    for c in (prior, posterior):
-        J = model_jacobian(c, levels, c.parameter_covariance.parameters)
-        sig.append(np.sqrt(np.einsum("bi,ij,bj->b", J[:, 0], c.parameter_covariance.matrix, J[:, 0])))
+    k0, sig = zip(*(k0_with_sigma(c, levels) for c in (prior, posterior)), strict=True)
     learned = ", ".join(f"{lv / 1e3:.0f} kPa {100 * (b / a - 1):+.1f} % (sigma {100 * sa / abs(a):.1f} % -> "
                         f"{100 * sb / abs(b):.1f} %)" for lv, a, b, sa, sb in zip(levels, *k0, *sig, strict=True))
     before, after = prior.parameter_covariance.std, posterior.parameter_covariance.std

@@ -580,19 +580,11 @@ class LiveBlock:
         est = None
         if self.estimate is not None and np.isfinite(self.pressure_pa[i]):
             est = take_frames(self.estimate, i, n)
-        return LiveFrame(
-            seq=int(self.seq[i]),
-            t_s=float(self.t_s[i]),
-            host_ns=int(self.host_ns[i]),
-            pressure_pa=float(self.pressure_pa[i]),
-            delta_a=self.signals[i] - self.offset,
-            shape=take_frames(self.shape, i, n),
-            estimate=est,
-            process_s=self.process_s / n,
-            status=str(self.status[i]),
-            track_force_n=self.track_force_n[i] if self.tracked else None,
-            track_std_n=self.track_std_n[i] if self.tracked else None,
-        )
+        return LiveFrame(seq=int(self.seq[i]), t_s=float(self.t_s[i]), host_ns=int(self.host_ns[i]),
+                         pressure_pa=float(self.pressure_pa[i]), delta_a=self.signals[i] - self.offset,
+                         shape=take_frames(self.shape, i, n), estimate=est, process_s=self.process_s / n,
+                         status=str(self.status[i]), track_force_n=self.track_force_n[i] if self.tracked else None,
+                         track_std_n=self.track_std_n[i] if self.tracked else None)
 
 
 class LiveProcessor:
@@ -626,12 +618,19 @@ class LiveProcessor:
         Bandwidth of the track [Hz]; None: the tracker's default.
     window_s : float, default 0.05
         Window of the streaming model check [s].
+    adapt : bool, default False
+        Learn the free-bending model from the stream's free frames as it runs
+        (:class:`~bendsense.estimation.live_adapt.LiveAdaptation`, :attr:`adaptation`).
     **options
         Further options of :func:`bendsense.estimation.estimate_force` (``push_only``,
         ``tip_angle_source``, ...). ``max_iter`` defaults to :data:`LIVE_MAX_ITER`.
 
     Attributes
     ----------
+    config : Config
+        The config of the next block (with ``adapt``: the latest adapted one).
+    adaptation : LiveAdaptation or None
+        What ``adapt`` learned (None without it).
     frames : int
         Frames processed.
     failures : int
@@ -645,8 +644,9 @@ class LiveProcessor:
     """
 
     def __init__(self, calibration, config=None, *, constraint=None, method=None, objective=None, pressure_pa=None,
-                 n_points=41, estimate=True, track=True, bandwidth_hz=None, window_s=0.05, **options):
+                 n_points=41, estimate=True, track=True, bandwidth_hz=None, window_s=0.05, adapt=False, **options):
         from bendsense.config import load_config
+        from bendsense.estimation.live_adapt import LiveAdaptation
 
         self.config = load_config() if config is None else config
         sensor = self.config.sensor
@@ -672,6 +672,7 @@ class LiveProcessor:
         self.status_counts: dict[str, int] = {}
         self._previous = None
         self._clock = ReadingClock()
+        self.adaptation = LiveAdaptation(calibration, self.config) if adapt else None
 
     def _new_tracker(self):
         if not self.track:
@@ -719,6 +720,8 @@ class LiveProcessor:
         for n in (1, 2):
             self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)), t_s=np.arange(n) * 1e-3)
         self._forget()
+        if self.adaptation is not None:  # its worker started and warmed
+            self.adaptation.start()
 
     def rest_status(self) -> str:
         """The status of a frame of the actuator at rest (the flat calibration signals, no pressure), then forgotten.
@@ -735,6 +738,8 @@ class LiveProcessor:
         self.reset()
         self.frames = self.failures = self.estimated = 0
         self.status_counts = {}
+        if self.adaptation is not None:
+            self.adaptation.clear()
 
     def _estimate(self, shape, p, n):
         """The block's force estimates (None without a pressure or with ``estimate=False``), warm-started."""
@@ -805,20 +810,16 @@ class LiveProcessor:
             shape = reconstruct(a, self.calibration, self.config.sensor, s_m=self.s_m)
             est = self._estimate(shape, p, n)
         t_s = np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float)
-        host_ns = np.full(n, time.monotonic_ns(), dtype=np.int64) if host_ns is None else np.asarray(host_ns,
-                                                                                                     dtype=np.int64)
-        track = None
-        if self.tracker is not None and est is not None:  # frames without a device time: the host's
-            track = self._track(est, np.where(np.isfinite(t_s), t_s, host_ns * 1e-9), p)
+        host_ns = np.asarray(np.full(n, time.monotonic_ns()) if host_ns is None else host_ns, dtype=np.int64)
+        track, t = None, np.where(np.isfinite(t_s), t_s, host_ns * 1e-9)  # frames without a device time: the host's
+        if self.tracker is not None and est is not None:
+            track = self._track(est, t, p)
+        if self.adaptation is not None:  # an update that finished: its config from the next block on
+            self.config = self.adaptation.add(shape, p, t) or self.config
         block = LiveBlock(
             t_s=t_s,
             seq=np.full(n, -1, dtype=np.int64) if seq is None else np.asarray(seq, dtype=np.int64),
-            host_ns=host_ns,
-            pressure_pa=p,
-            signals=a,
-            shape=shape,
-            estimate=est,
-            estimated=self.estimate,
+            host_ns=host_ns, pressure_pa=p, signals=a, shape=shape, estimate=est, estimated=self.estimate,
             process_s=time.perf_counter() - t_start,
             offset=np.asarray(self.calibration.offset, dtype=float),
             track=track,
@@ -870,14 +871,9 @@ class LiveProcessor:
         host_ns : int, optional
             Host clock when the frame arrived [ns].
         """
-        block = self.process_block(
-            np.asarray(signals, dtype=float)[None],
-            None if pressure_pa is None else [pressure_pa],
-            t_s=[t_s],
-            seq=[seq],
-            host_ns=[time.monotonic_ns() if host_ns is None else host_ns],
-        )
-        return block.frame(0)
+        p = None if pressure_pa is None else [pressure_pa]
+        return self.process_block(np.asarray(signals, dtype=float)[None], p, t_s=[t_s], seq=[seq],
+                                  host_ns=[time.monotonic_ns() if host_ns is None else host_ns]).frame(0)
 
     def process(self, reading) -> LiveFrame:
         """Process one :class:`~bendsense.device.driver.Reading`.

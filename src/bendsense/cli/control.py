@@ -24,6 +24,7 @@ from bendsense.cli._common import (
     quiet,
 )
 from bendsense.cli._common import calibration_paths as calibration_paths_of
+from bendsense.cli.device import adapt_option, finish_adapt
 
 log = logging.getLogger("bendsense")
 
@@ -66,7 +67,7 @@ def _controllers(config, finger, target, max_pressure_pa, gains, load_options):
                                  param_hint="'--finger'") from None
 
 
-def _processor(config, calibrations, constraint, bandwidth_hz, load):
+def _processor(config, calibrations, constraint, bandwidth_hz, load, adapt):
     """The live processor (a gripper's: one LiveProcessor per finger), its kernels ready.
 
     A constraint that leaves the load of a finger at rest undetermined is refused here,
@@ -76,7 +77,8 @@ def _processor(config, calibrations, constraint, bandwidth_hz, load):
     from bendsense.cli.device import make_processor
     from bendsense.results import NOT_IDENTIFIABLE
 
-    processor = make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load)
+    processor = make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load,
+                               adapt=adapt)
     fingers = getattr(processor, "processors", {None: processor})
     if any(p.rest_status() == NOT_IDENTIFIABLE for p in fingers.values()):
         raise click.BadParameter(f"{constraint} leaves the load of a finger at rest (straight, no pressure) "
@@ -173,9 +175,10 @@ def _summary(result, controller) -> str:
               help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--hello-timeout", type=Finite(min=0, min_open=True), default=2.0, show_default=True,
               help="HELLO wait [s].")
+@adapt_option
 def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, output, overwrite, config_path, seconds,
             load, contact_s_m, constraint, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s, bandwidth_hz, silence_s,
-            baud, hello_timeout):
+            baud, hello_timeout, adapt):
     """Hold a contact force: a PI loop on the tracked contact normal force, at the board's frame rate.
 
     Every frame from the board on PORT is reconstructed, its force estimated and tracked
@@ -200,6 +203,10 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     pressure that did not fall, exits 1. -o SESSION records everything
     (docs/formats.md, "Control session"). docs/grasping.md walks through a grasp on the
     simulated board and lists every stop.
+
+    --adapt learns the finger's free bending from its free frames (the approach, the
+    rests) as the loop runs and swaps the config between blocks (docs/grasping.md, "A
+    finger that is not the config's").
 
     While it runs it sends a HEARTBEAT every 50 ms, so that a board with a host-silence
     watchdog (sim-device --watchdog-ms) lets go of every line when this command is killed.
@@ -226,7 +233,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
              "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
     load_options = live_load(load, contact_s_m, config)
     controller = _controllers(config, finger, target_force_n, pmax, gains, load_options)
-    processor = _processor(config, calibrations, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options)
+    processor = _processor(config, calibrations, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options, adapt)
     meta = {"command": "bendsense control",
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
                         "fingers": [f for f in controller.fingers if f is not None], "load": load,
@@ -257,8 +264,9 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
                    n_lines=n_lines, recording=recording, safety=Safety(silence_s=silence_s))
     if not quiet():
         click.echo(_summary(result, controller), err=True)
-        if output is not None:
-            click.echo(f"session written to {output}", err=True)
+    finish_adapt(processor, output)
+    if not quiet() and output is not None:
+        click.echo(f"session written to {output}", err=True)
 
 
 def drive(driver, processor, controller, name: str, where: str = "", **options):

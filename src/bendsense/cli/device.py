@@ -69,8 +69,38 @@ def _status_line(stats, est=None) -> str:
     return line
 
 
+#: ``--adapt`` of ``record --estimate``, ``live`` and ``control``.
+adapt_option = click.option(
+    "--adapt", is_flag=True,
+    help="Learn the free-bending model K0(P) from the free frames as they arrive (bendsense.adapt in a worker "
+         "process, from the config's prior; the config is swapped between blocks); a last line says what was "
+         "learned, and the adapted config goes to OUT/config.yaml with its provenance (record, control -o).")
+
+
+def finish_adapt(processor, output=None) -> None:
+    """``--adapt``'s end: the last update, one line of what was learned, the adapted config to ``output/config.yaml``.
+
+    Parameters
+    ----------
+    processor : LiveProcessor
+        The processor; nothing to do without ``adapt``.
+    output : Path, optional
+        The session directory (None: nothing written).
+    """
+    from bendsense.config import save_config
+
+    adaptation = getattr(processor, "adaptation", None)
+    if adaptation is None:
+        return
+    config = adaptation.close()
+    click.echo(adaptation.summary(), err=True)
+    if config is not None and output is not None and output.is_dir():
+        save_config(config, output / "config.yaml")
+        click.echo(f"adapted config written to {output / 'config.yaml'}", err=True)
+
+
 def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True, bandwidth_hz=None,
-                   load=None):
+                   load=None, adapt=False):
     """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``, its kernels ready.
 
     The kernels compile (first run after an install) or load here, before a port opens
@@ -96,6 +126,8 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     load : dict, optional
         The load options (:func:`~bendsense.cli._common.live_contact`): a contact at a
         known location; None or empty: the tip.
+    adapt : bool, default False
+        ``--adapt``: learn the free-bending model as frames arrive (a single actuator only).
     """
     from bendsense.calibration import Calibration
     from bendsense.config import GripperConfig
@@ -103,6 +135,10 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     from bendsense.pipeline import LiveProcessor
 
     gripper = isinstance(config, GripperConfig)
+    if adapt and gripper:
+        raise click.BadParameter("learns a single actuator's model: give a single actuator's config (a gripper's "
+                                 "fingers: bendsense process --adapt on each finger's recording)",
+                                 param_hint="'--adapt'")
     processor = (GripperProcessor if gripper else LiveProcessor)(
         calibration_path if gripper else Calibration.load(calibration_path),
         config,
@@ -112,6 +148,7 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         estimate=estimate,
         bandwidth_hz=bandwidth_hz,
         **(load or {}),
+        **({"adapt": True} if adapt else {}),
     )
     import warnings
 
@@ -275,6 +312,7 @@ def _sigterm_as_interrupt():
 @live_bandwidth_option
 @load_option
 @live_contact_option
+@adapt_option
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",
@@ -305,6 +343,7 @@ def record(
     bandwidth_hz,
     load,
     contact_s_m,
+    adapt,
     lsl,
     lsl_wait,
     quiet_status,
@@ -346,6 +385,8 @@ def record(
     if (estimate or lsl) and not calibration_paths:
         raise click.BadParameter(f"{'--estimate' if estimate else '--lsl'} needs --calibration CAL.yaml",
                                  param_hint="--calibration")
+    if adapt and not estimate:
+        raise click.BadParameter("needs --estimate", param_hint="'--adapt'")
     if (load != "tip" or contact_s_m) and not (estimate or lsl):
         raise click.BadParameter("a load model needs --estimate (or --lsl)",
                                  param_hint="'--load'" if load != "tip" else "'--contact-s-m'")
@@ -373,7 +414,8 @@ def record(
             est_config = config or load_config()
             calibration = resolve_calibrations(calibration_paths, est_config)
             processor = make_processor(est_config, calibration, constraint, objective, pressure_kpa,
-                                       bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, est_config))
+                                       bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, est_config),
+                                       adapt=adapt)
         driver = Driver(
             port,
             baudrate=baud or DEFAULT_BAUDRATE,
@@ -435,6 +477,7 @@ def record(
                     port, output)
     if estimate:
         click.echo(estimated, err=True)
+    finish_adapt(processor, output)
 
 
 def _results_where(results_path, output: Path) -> str:

@@ -25,6 +25,7 @@ from bendsense.cli._common import (
     quiet,
     say,
 )
+from bendsense.cli.device import adapt_option
 
 _NO_CALIBRATION = (
     "live needs a sensor calibration: --calibration CAL.yaml (make one with "
@@ -73,6 +74,7 @@ _NO_CALIBRATION = (
               help="Baud rate, 50..12000000 (default 921600; USB CDC ignores it).")
 @click.option("--no-start", is_flag=True, help="Do not send START (free-running board).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --save image.")
+@adapt_option
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",
@@ -98,6 +100,7 @@ def live(
     baud,
     no_start,
     overwrite,
+    adapt,
     lsl,
     lsl_wait,
 ):
@@ -115,7 +118,8 @@ def live(
     length X, drawn there on the shape. A gripper config (--config with fingers:) shows
     a panel per finger (its streams: bendsense-force-<finger>, bendsense-shape-<finger>).
     Ctrl-C or SIGTERM stops it with one line and exit status 130 or 143 (no --save image
-    then).
+    then). --adapt learns the actuator's free bending from its free frames as they arrive
+    (docs/grasping.md, "A finger that is not the config's").
     """
     if not calibration_paths:
         raise click.ClickException(_NO_CALIBRATION)
@@ -134,7 +138,7 @@ def live(
             seconds = 3.0
     from bendsense.apps.live_view import run_live
     from bendsense.cli._common import calibration_paths as resolve_calibrations
-    from bendsense.cli.device import live_load, make_outlets, make_processor, wait_for_consumer
+    from bendsense.cli.device import finish_adapt, live_load, make_outlets, make_processor, wait_for_consumer
     from bendsense.config import load_config
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
 
@@ -145,7 +149,8 @@ def live(
         require_extra("pylsl", "lsl", "--lsl")
     config = load_config(config_path)
     processor = make_processor(config, resolve_calibrations(calibration_paths, config), constraint, objective,
-                               pressure_kpa, bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, config))
+                               pressure_kpa, bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, config),
+                               adapt=adapt)
     if save_path is not None:
         view, is_open = _view_class(processor)(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:
@@ -173,6 +178,7 @@ def live(
         view.save(save_path, overwrite=overwrite)
     if stats is not None:
         say(stats.summary())
+    finish_adapt(processor)
     if save_path is not None:
         say(f"wrote {save_path}")
 

@@ -17,6 +17,8 @@ The package reads as the algorithm:
 - :mod:`~bendsense.estimation.uncertainty`: propagation of the shift errors and the χ²;
 - :mod:`~bendsense.estimation.paper`: the paper's shooting + ``scipy.optimize`` baseline;
 - :mod:`~bendsense.estimation.result`: :class:`ForceEstimate` and the status messages.
+- :mod:`~bendsense.estimation.live_adapt`: the free-bending model learned while a live
+  stream runs (``LiveProcessor(adapt=True)``).
 
 Poorly identifiable loads (an axial load on a nearly straight actuator) stop at the best
 stable point with ``success=True``, the message ``"not identifiable along (x, y): ..."``

@@ -1,0 +1,219 @@
+"""Learn the free-bending model while a live stream runs (``record --estimate --adapt``, ``live``, ``control``).
+
+:class:`LiveAdaptation` is what :class:`bendsense.pipeline.LiveProcessor` does with
+``adapt=True``. It keeps a bounded buffer of the stream's frames (segment curvatures,
+pressure, time), spread over pressure: :data:`PER_BIN` frames per 1 kPa bin of the
+config's pressure range, the newest of each bin. Every :data:`EVERY_S` seconds of
+device time, or as soon as :data:`NEW_BINS` bins more are covered than at the last
+update, it hands the buffer to one worker process, which runs :func:`bendsense.adapt`
+on it: the ORIGINAL config's prior updated by every free frame in the buffer (a frame
+counts once, however many updates it sees; ``adapt`` chooses the free frames and
+refuses loaded ones). The processor checks for the result without waiting, once per
+block, and continues with the adapted config from the next block: the same arrays of
+the same shapes, so nothing compiles in the loop. An update whose frame selection did
+not settle (its posterior finds too few of its own frames free) is not swapped in: the
+loop keeps its config.
+
+A process and not a thread: the compiled kernels hold the GIL, and an update of a few
+hundred frames (0.5–2 s) would stall the loop. The worker is spawned and warmed when
+the processor warms up (:meth:`LiveAdaptation.start`), uses one numba and BLAS thread,
+ignores Ctrl-C and ends with its parent (as :mod:`bendsense.batch`'s workers do), and
+runs at a lower priority (``nice`` 10) than the loop.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import os
+
+import numpy as np
+
+log = logging.getLogger("bendsense")
+
+__all__ = ["EVERY_S", "NEW_BINS", "PER_BIN", "LiveAdaptation"]
+
+#: Device time between two updates [s].
+EVERY_S = 5.0
+#: Pressure bins (1 kPa) newly covered that start an update before :data:`EVERY_S`.
+NEW_BINS = 10
+#: Frames kept per 1 kPa pressure bin (the newest).
+PER_BIN = 4
+
+
+def _worker_init(parent_pid: int) -> None:
+    """The batch workers' set-up (one thread, no Ctrl-C, ends with its parent), at a lower priority.
+
+    The loop and, on a test machine, the simulated board share the cores with it: an
+    update may take a second, they must not wait for it.
+    """
+    from bendsense.batch import _worker_init as batch_worker_init
+
+    batch_worker_init(parent_pid)
+    os.nice(10)
+
+
+def _learn(kappa, pressure_pa, t_s, config, calibration, source):
+    """The worker's job: :func:`bendsense.adapt` on the buffer; (config or None when refused, free frames, report)."""
+    from bendsense.identify_session import adapt
+
+    result = adapt(kappa, pressure_pa, config, calibration=calibration, t_s=t_s, source=source)
+    if not result.refused and not result.fit.settled:  # a posterior that does not describe its own free frames
+        return None, 0, (f"{result.report} Not used live: the frame selection did not settle (the config kept; "
+                         "record a free sweep over the pressure range)")
+    return (None if result.refused else result.config), int(np.count_nonzero(result.free)), result.report
+
+
+class LiveAdaptation:
+    """The free-bending model of a live stream, learned by a worker process between blocks.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        The sensor's calibration (its error model weighs the free frames).
+    config : Config
+        The actuator, with the prior (``parameter_covariance``) every update starts from.
+    source : str
+        What the adapted config's provenance names (e.g. ``"live PORT"``).
+
+    Attributes
+    ----------
+    prior : Config
+        The config every update starts from.
+    config : Config
+        The latest adapted config (``prior`` until an update learned something).
+    updates : int
+        Updates that learned something.
+    free : int
+        Free frames of the latest of them.
+    report : str
+        The latest update's report (:attr:`bendsense.Adaptation.report`).
+    """
+
+    def __init__(self, calibration, config, *, source: str = "a live stream"):
+        from bendsense.errors import ArgumentError
+
+        if config.parameter_covariance is None:
+            raise ArgumentError(f"config {config.name!r}: no parameter_covariance: adapt updates a prior; state one "
+                                "(the shipped config's) or identify free bending from a free sweep")
+        self.calibration, self.prior, self.config, self.source = calibration, config, config, source
+        lo, hi = config.actuator.pressure_range_pa
+        self._lo, bins = lo, int(np.ceil((hi - lo) / 1e3)) + 1
+        n = config.sensor.n_segments
+        self._kappa = np.zeros((bins, PER_BIN, n))
+        self._p = np.full((bins, PER_BIN), np.nan)
+        self._t = np.zeros((bins, PER_BIN))
+        self._next = np.zeros(bins, dtype=int)
+        self._pool = self._job = None
+        self._last_t, self._last_bins, self._since = None, 0, 0
+        self.updates = self.free = 0
+        self.report = "adapt: no update yet"
+
+    def start(self) -> None:
+        """Spawn the worker and warm it: an update on a straight actuator over mid pressures (it learns nothing)."""
+        import multiprocessing
+
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
+        self._pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                                            initializer=_worker_init, initargs=(os.getpid(),))
+        lo, hi = self.prior.actuator.pressure_range_pa
+        p = np.linspace(lo + 0.2 * (hi - lo), lo + 0.8 * (hi - lo), 8)
+        self._pool.submit(_learn, np.zeros((p.size, self.prior.sensor.n_segments)), p, np.arange(p.size) * 1e-3,
+                          self.prior, self.calibration, "warm-up").result()
+
+    def clear(self) -> None:
+        """Forget the frames kept (and a pending update's result)."""
+        self._p[:] = np.nan
+        self._next[:] = 0
+        self._job, self._last_t, self._last_bins, self._since = None, None, 0, 0
+
+    def add(self, shape, pressure_pa, t_s):
+        """Keep a block's usable frames; return the adapted config when an update has just finished, else None.
+
+        Parameters
+        ----------
+        shape : Shape
+            The block's shapes.
+        pressure_pa, t_s : ndarray, shape (n,)
+            Pressure [Pa] and device time [s] of each frame.
+        """
+        kappa = np.asarray(shape.curvature_per_m, dtype=float).reshape(len(pressure_pa), -1)
+        with np.errstate(invalid="ignore"):
+            b = np.floor((pressure_pa - self._lo) / 1e3)
+            usable = (np.isfinite(b) & (b >= 0) & (b < self._next.size) & np.all(np.isfinite(kappa), axis=-1)
+                      & ~np.broadcast_to(np.asarray(shape.extrapolated, dtype=bool), b.shape))
+        rows = np.flatnonzero(usable)
+        for k in rows[-PER_BIN * 50:]:  # the newest of a long block (a loop seconds behind)
+            i = int(b[k])
+            j = self._next[i] % PER_BIN
+            self._kappa[i, j], self._p[i, j], self._t[i, j] = kappa[k], pressure_pa[k], t_s[k]
+            self._next[i] += 1
+        self._since += rows.size
+        new = self._result()
+        if rows.size and self._job is None and self._due(float(t_s[rows[-1]])):
+            self._submit()
+        return new
+
+    def _submit(self) -> None:
+        """Hand every frame kept to the worker: an update from the prior."""
+        keep = np.isfinite(self._p)
+        self._job = self._pool.submit(_learn, self._kappa[keep], self._p[keep], self._t[keep], self.prior,
+                                      self.calibration, self.source)
+        self._since = 0
+
+    def _due(self, t: float) -> bool:
+        """An update is due: :data:`EVERY_S` since the last, or :data:`NEW_BINS` bins newly covered."""
+        bins = int(np.count_nonzero(self._next))
+        if self._last_t is None:
+            self._last_t = t
+        if t - self._last_t < EVERY_S and bins - self._last_bins < NEW_BINS:
+            return False
+        self._last_t, self._last_bins = t, bins
+        return True
+
+    def _result(self):
+        """The finished update's config (None: none finished, or it learned nothing)."""
+        if self._job is None or not self._job.done():
+            return None
+        job, self._job = self._job, None
+        try:
+            config, free, self.report = job.result()
+        except Exception as err:  # noqa: BLE001 (a failed update must not stop the stream: the config is kept)
+            self.report = f"adapt: the update failed ({type(err).__name__}: {err}); the config kept"
+            log.warning("%s", self.report)
+            return None
+        if config is None:
+            return None
+        self.config, self.free = config, free
+        self.updates += 1
+        log.info("adapt: update %d from %d free frames", self.updates, free)
+        return config
+
+    def close(self):
+        """The last update (from every frame kept, waited for), then stop the worker; the adapted config, or None."""
+        if self._pool is None:
+            return None
+        for _ in range(2):  # the pending update, then one with the frames that came since
+            if self._job is not None:
+                cf.wait([self._job])
+                self._result()
+            if not self._since:
+                break
+            self._submit()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = None
+        return self.config if self.updates else None
+
+    def summary(self) -> str:
+        """One line: what was learned (K0 and its sigma before -> after, at the free frames' pressures)."""
+        from bendsense.identify_session import k0_with_sigma
+
+        if not self.updates:
+            return f"adapt: learned nothing, the config's prior kept ({self.report.removeprefix('adapt: ')[:160]})"
+        p = self._p[np.isfinite(self._p)]
+        levels = np.unique(np.round(np.percentile(p, [5, 50, 95]), -3))
+        (k0, before), (k1, after) = (k0_with_sigma(c, levels) for c in (self.prior, self.config))
+        return (f"adapt: {self.updates} update(s), the latest from {self.free} free frames; K0 " + ", ".join(
+            f"{lv / 1e3:.0f} kPa {100 * (b / a - 1):+.1f} % (sigma {100 * sa / abs(a):.1f} % -> "
+            f"{100 * sb / abs(b):.1f} %)" for lv, a, b, sa, sb in zip(levels, k0, k1, before, after, strict=True)))
