@@ -7,8 +7,7 @@ the window check compile a second layout of its kernel in the loop), and after t
 the warmed processor gets a block of 2,100 frames (a loop that fell two seconds behind
 its board: the parallel batch kernels). A numba compile event after ``warm_up`` returned
 fails; so does a frame the board sent that the loop skipped, or a loop that fell behind.
-The cold compile costs a minute or more on two cores (one process, one config): it runs beside the other
-tests, and the loop alone (tests/conftest.py, `machine.alone()`).
+The cold compile costs a minute or more on two cores: one process, one config.
 """
 
 import csv
@@ -17,7 +16,6 @@ import os
 import subprocess
 import sys
 import textwrap
-import time
 
 import numpy as np
 import pytest
@@ -27,14 +25,14 @@ from bendsense.control import CONTROL_LOG
 from bendsense.device.simdevice import SimulatedDevice
 
 pytestmark = [pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals"),
-              pytest.mark.slow]
+              pytest.mark.slow, pytest.mark.realtime]
 
 SECONDS = 0.5
 
 # the command, with a numba compile listener and a mark where warm_up returns; after the loop, a block of
 # 2,100 frames through the same processor
 CHILD = textwrap.dedent('''
-    import json, os, sys, time
+    import json, sys
     import numpy as np
     from numba.core import event
 
@@ -59,9 +57,6 @@ CHILD = textwrap.dedent('''
         phase[0] = "warm_up"
         warm_up(self)
         phase[0] = "after"
-        open(os.environ["WARM_FILE"], "w").close()  # compiled: the loop waits until the test runs it alone
-        while not os.path.exists(os.environ["GO_FILE"]):
-            time.sleep(0.05)
 
     def watched_run(driver, processor, *args, **kwargs):
         seen["warm before the loop"] = phase[0] == "after"
@@ -94,25 +89,16 @@ class Glitching:
 
 
 def test_a_cold_control_run_compiles_nothing_once_the_loop_runs_and_processes_every_frame(board, calibration_path,  # noqa: F811
-                                                                                          tmp_path, machine):
+                                                                                          tmp_path):
     truth, out = Truth(), tmp_path / "s"
-    warm, go = tmp_path / "warm", tmp_path / "go"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache"), "WARM_FILE": str(warm), "GO_FILE": str(go)}
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
     with SimulatedDevice(Glitching(board), rate_hz=RATE, truth=truth) as dev:
-        proc = subprocess.Popen([sys.executable, "-c", CHILD, "control", dev.port, "--calibration",
-                                 str(calibration_path), "--target-force-n", "0.15", "--load", "contact",
-                                 "--contact-s-m", str(S_C), "--seconds", str(SECONDS), "--silence-s", "1",
-                                 "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-        try:
-            while not warm.exists() and proc.poll() is None:  # the cold compile, beside the other tests
-                time.sleep(0.1)
-            with machine.alone():  # the loop at the board's frame rate, alone
-                go.touch()
-                stdout, stderr = proc.communicate(timeout=600)
-        finally:
-            proc.kill()
-    assert proc.returncode == 0, stderr
-    report = json.loads(stdout.splitlines()[-1])
+        proc = subprocess.run([sys.executable, "-c", CHILD, "control", dev.port, "--calibration", str(calibration_path),
+                               "--target-force-n", "0.15", "--load", "contact", "--contact-s-m", str(S_C),
+                               "--seconds", str(SECONDS), "--silence-s", "1", "-o", str(out)],
+                              capture_output=True, text=True, env=env, timeout=1200)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout.splitlines()[-1])
     compiled = report["compiled"]
     assert "estimate_block" in compiled["warm_up"]  # the cache was empty: warm_up compiled the kernels
     assert report["warm before the loop"]  # and the command called it before the loop

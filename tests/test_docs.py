@@ -41,7 +41,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from contextlib import nullcontext
 from pathlib import Path
 
 import pytest
@@ -307,9 +306,6 @@ def _run(lang: str, code: str, cwd: Path, env: dict) -> subprocess.CompletedProc
 
 # pages without a bash or python block (theory.md) have nothing to run
 RUNNABLE = [p for p in PAGES if extract_blocks(p.read_text(encoding="utf-8"))]
-# a block that runs a simulated board against a client at its frame rate, or times commands, runs alone
-# (tests/conftest.py: no other test runs meanwhile)
-ALONE = re.compile(r"\bsim-device\b|\bSimulatedDevice\b|\bbenchmarks/")
 
 
 def test_the_pages_with_commands_are_run():
@@ -318,7 +314,7 @@ def test_the_pages_with_commands_are_run():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
-def test_page_runs(page: Path, tmp_path: Path, machine):
+def test_page_runs(page: Path, tmp_path: Path):
     blocks = extract_steps(page.read_text(encoding="utf-8"))
     assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
     for name in COPIED:
@@ -331,8 +327,7 @@ def test_page_runs(page: Path, tmp_path: Path, machine):
     # many small matrices crawl when threaded BLAS competes for the cores
     env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     for k, (lang, code, outputs) in enumerate(blocks, start=1):
-        with machine.alone() if ALONE.search(code) else nullcontext():
-            proc = _run(lang, code, tmp_path, env)
+        proc = _run(lang, code, tmp_path, env)
         assert proc.returncode == 0, (
             f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
             f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"

@@ -455,15 +455,15 @@ def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path)
 
 WATCHED = """
 import os, subprocess, sys, time
-import bendsense.batch as batch
+import bendsense.stop_signals as stop_signals
 if sys.argv[1] == "parent":
     child = subprocess.Popen([sys.executable, __file__, "worker", str(os.getpid()), sys.argv[2]])
     print(child.pid, flush=True)
     time.sleep(600)
 else:
     if sys.argv[3] == "thread":  # the portable fallback: a thread that watches the parent's pid
-        batch._pdeathsig = lambda: False
-    batch.exit_with_parent(int(sys.argv[2]), poll_s=0.1)
+        stop_signals._pdeathsig = lambda: False
+    stop_signals.exit_with_parent(int(sys.argv[2]), poll_s=0.1)
     print("watching", flush=True)
     end = time.monotonic() + 600
     while time.monotonic() < end:  # busy, as a worker in its session
@@ -473,7 +473,7 @@ else:
 
 @pytest.mark.parametrize("how", ["prctl", "thread"])
 def test_a_worker_exits_when_its_parent_is_killed(tmp_path, how):
-    """bendsense.batch.exit_with_parent, both ways (Linux's PR_SET_PDEATHSIG and the thread that polls the
+    """bendsense.stop_signals.exit_with_parent, both ways (Linux's PR_SET_PDEATHSIG and the thread that polls the
     parent's pid): a busy child of a parent killed with SIGKILL ends within seconds."""
     (tmp_path / "watched.py").write_text(WATCHED, encoding="utf-8")
     parent = subprocess.Popen([sys.executable, str(tmp_path / "watched.py"), "parent", how], stdout=subprocess.PIPE,

@@ -427,17 +427,10 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) ->
     if pressure_ignored:
         notes.append("the fallback pressure ignored (every frame has a pressure reading)")
     notes.extend(said)
-    return SessionOutcome(
-        status="ok", frames=frames, seconds=seconds, reason=", ".join(notes),
-        extrapolated=counts.extrapolated,
-        not_converged=counts.not_converged,
-        model_misfit=counts.model_misfit,
-        not_identifiable=counts.not_identifiable,
-        out_of_range=counts.out_of_range,
-        frames_lost=lost,
-        tx_drops=tx_drops,
-        **row,
-    )
+    return SessionOutcome(status="ok", frames=frames, seconds=seconds, reason=", ".join(notes),
+                          extrapolated=counts.extrapolated, not_converged=counts.not_converged,
+                          model_misfit=counts.model_misfit, not_identifiable=counts.not_identifiable,
+                          out_of_range=counts.out_of_range, frames_lost=lost, tx_drops=tx_drops, **row)
 
 
 def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
@@ -449,6 +442,7 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
     from bendsense.pipeline import process
     from bendsense.session import read_session
 
+    adapt = over_time.pop("adapt", False)  # (refused for a gripper before any session)
     if isinstance(calibration, dict):  # a gripper: each finger's part of the board (bendsense.batch_fingers)
         from bendsense.batch_fingers import run_gripper
 
@@ -458,7 +452,7 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
     session = read_session(path)
     # (a worker's log line would be lost in the console: the session's report row says it)
     ignored = pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
-    adapted = over_time.pop("adapt", False) and adapt_session(session, config, calibration, pressure_pa)
+    adapted = adapt and adapt_session(session, config, calibration, pressure_pa)
     processed = process(session, config if not adapted else adapted.config, calibration, constraint=constraint,
                         method=method, objective=objective, pressure_pa=pressure_pa, estimate=estimate, **over_time)
     session = processed.session
@@ -478,67 +472,6 @@ def _executor_name(executor) -> str:
     return f"{kind}({workers} workers)" if workers else kind
 
 
-def _worker_init(parent_pid: int | None = None) -> None:
-    """Pool worker initializer: one numba thread, Ctrl-C left to the parent, and exit with the parent.
-
-    One numba thread because the processes are the parallelism. SIGINT (Ctrl-C reaches
-    the whole process group) is ignored: the parent stops the workers itself, so that
-    no worker prints a traceback or leaves half a session behind on its own. A worker
-    whose parent died (SIGKILL, a crash) exits at once: it must not go on using the
-    CPU nor write results for a run that is over (:func:`exit_with_parent`).
-    """
-    import signal
-
-    import numba
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if hasattr(signal, "pthread_sigmask"):  # the parent blocked it while starting us (_started_quietly)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-    if parent_pid is not None:
-        exit_with_parent(parent_pid)
-    numba.set_num_threads(1)
-
-
-def exit_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
-    """End this process as soon as the process ``parent_pid`` (its parent) ends.
-
-    On Linux the kernel does it: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, which also stops a
-    worker inside a compiled kernel. Elsewhere (or if prctl fails) a daemon thread
-    compares ``os.getppid()`` with ``parent_pid`` every ``poll_s`` seconds and calls
-    ``os._exit`` when the parent is gone (the worker is then re-parented).
-    """
-    import sys
-    import threading
-
-    if sys.platform.startswith("linux") and _pdeathsig():
-        if os.getppid() != parent_pid:  # the parent died before the prctl took effect
-            os._exit(1)
-        return
-
-    def watch():
-        while os.getppid() == parent_pid:
-            time.sleep(poll_s)
-        os._exit(1)
-
-    if os.getppid() != parent_pid:
-        os._exit(1)
-    threading.Thread(target=watch, name="bendsense-parent-watch", daemon=True).start()
-
-
-def _pdeathsig() -> bool:
-    """Ask Linux to SIGKILL this process when its parent dies; False if that is not possible."""
-    import ctypes
-    import ctypes.util
-    import signal
-
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        pr_set_pdeathsig = 1
-        return libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
-    except (OSError, AttributeError):
-        return False
-
-
 def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
     """A process pool whose workers use one BLAS thread and one numba thread each.
 
@@ -546,14 +479,16 @@ def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
     kernels' threads (``--workers 0``, in-process), never both: two levels of threads on
     few cores only oversubscribe them. The workers are spawned (not forked) so that
     they import numpy afresh with these variables, even if this process has numpy
-    loaded already. They ignore Ctrl-C and exit with this process (:func:`_worker_init`).
+    loaded already. They ignore Ctrl-C and exit with this process (:func:`bendsense.stop_signals.worker_init`).
     """
     import multiprocessing
+
+    from bendsense.stop_signals import worker_init
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=_worker_init, initargs=(os.getpid(),))
+                                  initializer=worker_init, initargs=(os.getpid(),))
 
 
 @contextlib.contextmanager
@@ -617,27 +552,11 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
 
 
 def process_sessions(
-    paths,
-    out_dir,
-    *,
-    config=None,
-    calibration,
-    executor: cf.Executor | None = None,
-    workers: int | None = None,
-    constraint: str | None = None,
-    method: str | None = None,
-    objective: str | None = None,
-    overwrite: bool = False,
-    pressure_pa: float | None = None,
-    estimate: bool = True,
-    recursive: bool = False,
-    progress: bool = True,
-    track: str | None = None,
-    bandwidth_hz: float | None = None,
-    window_s: float = 0.05,
-    load: str = "tip",
-    contact_s_m: float | None = None,
-    adapt: bool = False,
+    paths, out_dir, *, config=None, calibration, executor: cf.Executor | None = None, workers: int | None = None,
+    constraint: str | None = None, method: str | None = None, objective: str | None = None, overwrite: bool = False,
+    pressure_pa: float | None = None, estimate: bool = True, recursive: bool = False, progress: bool = True,
+    track: str | None = None, bandwidth_hz: float | None = None, window_s: float = 0.05, load: str = "tip",
+    contact_s_m: float | None = None, adapt: bool = False,
 ) -> BatchReport:
     """Process many sessions in parallel and write one results directory per session.
 

@@ -65,20 +65,9 @@ from bendsense.identify import StiffnessData, fit_free_bending
 from bendsense.identify_covariance import session_covariance
 
 __all__ = [
-    "ADAPT_FRAMES",
-    "FREE_CHI2_2SIGMA",
-    "FREE_P",
-    "MAX_FRAMES",
-    "Adaptation",
-    "FreeBendingSessionFit",
-    "adapt",
-    "adapt_session",
-    "free_bending_angles",
-    "k0_with_sigma",
-    "fit_free_bending_session",
-    "fit_stiffness_session",
-    "session_shapes",
-    "stiffness_data_from_session",
+    "ADAPT_FRAMES", "FREE_CHI2_2SIGMA", "FREE_P", "MAX_FRAMES", "Adaptation", "FreeBendingSessionFit", "adapt",
+    "adapt_session", "free_bending_angles", "k0_with_sigma", "fit_free_bending_session", "fit_stiffness_session",
+    "session_shapes", "stiffness_data_from_session",
 ]
 
 #: χ² with 2 degrees of freedom at the 2σ level (95.45 %): the free frames' force ellipse.
@@ -414,9 +403,9 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     SessionError
         No pressure, channels that do not match, or too few free frames.
     """
-    from bendsense.pipeline import _inputs
+    from bendsense.session.inputs import process_inputs
 
-    session, config, calibration, _ = _inputs(session, config, calibration, "")
+    session, config, calibration, _ = process_inputs(session, config, calibration, "")
     shape, usable = session_shapes(session, calibration, config)
     return _free_frames_fit(shape, np.asarray(session.pressure_pa, dtype=float), usable, config, calibration,
                             _source(session), fix=fix, rounds=rounds, chi2_limit=chi2_limit, max_frames=max_frames)
@@ -777,9 +766,9 @@ def stiffness_data_from_session(session, calibration, config=None):
     SessionError
         No pressure, no load columns, or no usable loaded frame.
     """
-    from bendsense.pipeline import _inputs
+    from bendsense.session.inputs import process_inputs
 
-    session, config, calibration, _ = _inputs(session, config, calibration, "")
+    session, config, calibration, _ = process_inputs(session, config, calibration, "")
     return _stiffness_rows(session, calibration, config)[0]
 
 
@@ -823,9 +812,9 @@ def fit_stiffness_session(session, calibration, config=None, **options):
     StiffnessFit
     """
     from bendsense.identify import fit_stiffness
-    from bendsense.pipeline import _inputs
+    from bendsense.session.inputs import process_inputs
 
-    session, config, calibration, _ = _inputs(session, config, calibration, "")
+    session, config, calibration, _ = process_inputs(session, config, calibration, "")
     data, rows = _stiffness_rows(session, calibration, config)
     shifts = np.asarray(calibration.shifts_m(np.asarray(session.signals, dtype=float)[rows]))
     dpos_ds = _points_shift_jacobian(shifts, calibration.strip_gap_m(config.sensor), config)

@@ -287,8 +287,10 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     """
     from bendsense import validation as check
     from bendsense.plausibility import check_channels, check_one_line, check_time_column
+    from bendsense.session.inputs import process_inputs
 
-    session, config, calibration, calibration_source = _inputs(session, config, calibration, calibration_source)
+    session, config, calibration, calibration_source = process_inputs(session, config, calibration,
+                                                                      calibration_source)
     check_one_line(session)
     if len(session) == 0:
         raise SessionError(f"{_source(session)}: no frames")
@@ -353,32 +355,6 @@ def _over_time(est, session, window_s, mode, bandwidth_hz):
         return est, None
     return est, track(est, session.t_s, mode=mode, bandwidth_hz=bandwidth_hz, window_s=window_s,
                       pressure_pa=session.pressure_pa)
-
-
-def _inputs(session, config, calibration, calibration_source):
-    """:func:`process`'s inputs as objects: each may be given as the path of its file; checked types."""
-    import os
-
-    from bendsense import validation as check
-    from bendsense.calibration import Calibration
-    from bendsense.config import Config, load_config
-    from bendsense.session import Session, read_session
-
-    if isinstance(session, (str, os.PathLike)):
-        session = read_session(session)
-    if isinstance(config, (str, os.PathLike)):
-        config = load_config(config)
-    if isinstance(calibration, (str, os.PathLike)):
-        calibration_source = calibration_source or str(calibration)
-        calibration = Calibration.load(calibration)
-    check.instance("session", session, Session, "bendsense.read_session(path), or the path")
-    if config is None:
-        config = load_config()
-    check.instance("config", config, Config, "bendsense.load_config(path), or the path")
-    if not isinstance(calibration, Calibration):
-        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path), or the path), got "
-                            f"{type(calibration).__name__}")
-    return session, config, calibration, calibration_source
 
 
 # --------------------------------------------------------------------------- as frames arrive

@@ -5,16 +5,19 @@ terminal or the ssh session closing (SIGHUP), Ctrl-backslash (SIGQUIT). The comm
 (:mod:`bendsense.cli._signals`) and the control loop (:func:`bendsense.control.run`) turn
 each into :class:`KeyboardInterrupt`. :func:`deferred` holds them off while a block that
 must finish runs (the control loop's set-point 0 on every line and its report), then
-acts on the first that came.
+acts on the first that came. A worker process takes none of them (:func:`worker_init`):
+its parent stops it, and it ends with its parent (:func:`exit_with_parent`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
+import time
 
-__all__ = ["STOP_SIGNALS", "handled", "deferred"]
+__all__ = ["STOP_SIGNALS", "handled", "deferred", "worker_init", "exit_with_parent"]
 
 #: SIGINT, SIGTERM, SIGHUP, SIGQUIT (those the platform has)
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
@@ -61,3 +64,79 @@ def deferred():
         yield
     if noted:
         signal.raise_signal(noted[0])
+
+
+# --------------------------------------------------------------------------- worker processes
+
+
+def worker_init(parent_pid: int | None = None) -> None:
+    """Pool worker initializer: one numba thread, Ctrl-C left to the parent, and exit with the parent.
+
+    One numba thread because the processes are the parallelism. SIGINT (Ctrl-C reaches
+    the whole process group) is ignored: the parent stops the workers itself, so that
+    no worker prints a traceback or leaves half a session behind on its own. A worker
+    whose parent died (SIGKILL, a crash) exits at once: it must not go on using the
+    CPU nor write results for a run that is over (:func:`exit_with_parent`).
+
+    Parameters
+    ----------
+    parent_pid : int, optional
+        The parent's process id (None: the worker does not watch its parent).
+    """
+    import signal
+
+    import numba
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):  # the parent blocked it while starting us (batch._started_quietly)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    if parent_pid is not None:
+        exit_with_parent(parent_pid)
+    numba.set_num_threads(1)
+
+
+def exit_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
+    """End this process as soon as the process ``parent_pid`` (its parent) ends.
+
+    On Linux the kernel does it: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, which also stops a
+    worker inside a compiled kernel. Elsewhere (or if prctl fails) a daemon thread
+    compares ``os.getppid()`` with ``parent_pid`` every ``poll_s`` seconds and calls
+    ``os._exit`` when the parent is gone (the worker is then re-parented).
+
+    Parameters
+    ----------
+    parent_pid : int
+        The parent's process id.
+    poll_s : float, default 0.5
+        How often the fallback thread looks [s].
+    """
+    import sys
+    import threading
+
+    if sys.platform.startswith("linux") and _pdeathsig():
+        if os.getppid() != parent_pid:  # the parent died before the prctl took effect
+            os._exit(1)
+        return
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    if os.getppid() != parent_pid:
+        os._exit(1)
+    threading.Thread(target=watch, name="bendsense-parent-watch", daemon=True).start()
+
+
+def _pdeathsig() -> bool:
+    """Ask Linux to SIGKILL this process when its parent dies; False if that is not possible."""
+    import ctypes
+    import ctypes.util
+    import signal
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        pr_set_pdeathsig = 1
+        return libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False

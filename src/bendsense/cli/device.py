@@ -323,30 +323,9 @@ def _sigterm_as_interrupt():
 )
 @click.option("--quiet-status", is_flag=True, help="No live status line.")
 def record(
-    port,
-    output,
-    seconds,
-    overwrite,
-    baud,
-    dialect,
-    channels,
-    columns,
-    no_handshake,
-    no_start,
-    hello_timeout,
-    config_path,
-    calibration_paths,
-    estimate,
-    constraint,
-    objective,
-    pressure_kpa,
-    bandwidth_hz,
-    load,
-    contact_s_m,
-    adapt,
-    lsl,
-    lsl_wait,
-    quiet_status,
+    port, output, seconds, overwrite, baud, dialect, channels, columns, no_handshake, no_start, hello_timeout,
+    config_path, calibration_paths, estimate, constraint, objective, pressure_kpa, bandwidth_hz, load,
+    contact_s_m, adapt, lsl, lsl_wait, quiet_status,
 ):
     """Record the board on PORT to a native session directory.
 
@@ -416,15 +395,8 @@ def record(
             processor = make_processor(est_config, calibration, constraint, objective, pressure_kpa,
                                        bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, est_config),
                                        adapt=adapt)
-        driver = Driver(
-            port,
-            baudrate=baud or DEFAULT_BAUDRATE,
-            dialect=dialect,
-            columns=cols,
-            n_channels=channels,
-            handshake=not no_handshake,
-            hello_timeout_s=hello_timeout,
-        )
+        driver = Driver(port, baudrate=baud or DEFAULT_BAUDRATE, dialect=dialect, columns=cols, n_channels=channels,
+                        handshake=not no_handshake, hello_timeout_s=hello_timeout)
         with driver:
             if processor is not None:
                 from bendsense.device.estimator import LiveEstimator
@@ -432,18 +404,12 @@ def record(
                 outlets = make_outlets(processor, driver, port) if lsl else None
                 if outlets is not None:
                     wait_for_consumer(outlets, lsl_wait)
-                estimator = LiveEstimator(
-                    processor, results_path=results_path if estimate else None, outlets=outlets
-                )
-            recorder = Recorder(
-                driver,
-                output,
-                overwrite=overwrite,
-                config=config,
-                meta={"command": "bendsense record"},
-                on_records=None if estimator is None else estimator.put,
-                extra_files=_manifest_names(results_path, output) if estimate else [],
-            )
+                estimator = LiveEstimator(processor, outlets=outlets,
+                                          results_path=results_path if estimate else None)
+            recorder = Recorder(driver, output, overwrite=overwrite, config=config,
+                                meta={"command": "bendsense record"},
+                                on_records=None if estimator is None else estimator.put,
+                                extra_files=_manifest_names(results_path, output) if estimate else [])
             if not no_start:
                 driver.start()
             interrupted = None

@@ -47,9 +47,9 @@ def _worker_init(parent_pid: int) -> None:
     The loop and, on a test machine, the simulated board share the cores with it: an
     update may take a second, they must not wait for it.
     """
-    from bendsense.batch import _worker_init as batch_worker_init
+    from bendsense.stop_signals import worker_init
 
-    batch_worker_init(parent_pid)
+    worker_init(parent_pid)
     os.nice(10)
 
 

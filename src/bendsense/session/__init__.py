@@ -7,7 +7,9 @@ format into one. Each format of DESIGN.md section 3 is a module of its own:
 - :mod:`bendsense.session.native`: the native session directory the recorder writes,
   crash-safe, with the device's raw records (and its export to and import from CSV);
 - :mod:`bendsense.session.cells`: how one CSV cell is written and read back (shared
-  with ``results.csv``).
+  with ``results.csv``);
+- :mod:`bendsense.session.inputs`: a run's session, config and calibration as objects,
+  each given or its path.
 
 :mod:`bendsense.session.base` holds the :class:`Session` object alone, so that the
 format modules build it without importing this package's dispatch.
