@@ -15,7 +15,6 @@ from bendsense import load_config
 from bendsense.batch import (
     BatchReport,
     SessionOutcome,
-    _local_pool,
     discover_sessions,
     process_session,
     process_sessions,
@@ -26,6 +25,7 @@ from bendsense.errors import SessionError
 from bendsense.results import read_results
 from bendsense.session import Session, write_session_csv
 from bendsense.sessiondir import SessionWriter
+from bendsense.stop_signals import worker_pool
 
 CONFIG = load_config()
 SENSOR = CONFIG.sensor
@@ -364,7 +364,7 @@ def test_processes_or_numba_threads_never_both(sessions, tmp_path):
     local = process_sessions(runs / "a.csv", tmp_path / "here", calibration=linear_calibration(), workers=0,
                              estimate=ESTIMATE, progress=False)
     assert local.workers == f"in-process, {numba.get_num_threads()} numba threads"
-    pool = _local_pool(1)
+    pool = worker_pool(1)
     try:
         assert pool.submit(numba.get_num_threads).result() == 1
     finally:

@@ -31,6 +31,7 @@ from pathlib import Path
 from bendsense import output
 from bendsense._io import check_regular_file
 from bendsense.errors import ArgumentError, BendsenseError, DataWarning, OutputError, SessionError
+from bendsense.stop_signals import worker_pool
 
 # the output's file system refuses every further session: stop, instead of failing each one
 _FATAL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS})
@@ -472,25 +473,6 @@ def _executor_name(executor) -> str:
     return f"{kind}({workers} workers)" if workers else kind
 
 
-def _local_pool(workers: int) -> cf.ProcessPoolExecutor:
-    """A process pool whose workers use one BLAS thread and one numba thread each.
-
-    Parallelism comes either from the worker processes (here) or from the compiled
-    kernels' threads (``--workers 0``, in-process), never both: two levels of threads on
-    few cores only oversubscribe them. The workers are spawned (not forked) so that
-    they import numpy afresh with these variables, even if this process has numpy
-    loaded already. They ignore Ctrl-C and exit with this process (:func:`bendsense.stop_signals.worker_init`).
-    """
-    import multiprocessing
-
-    from bendsense.stop_signals import worker_init
-
-    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(var, "1")
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=worker_init, initargs=(os.getpid(),))
-
-
 @contextlib.contextmanager
 def _started_quietly():
     """Block SIGINT in this thread while workers start: they inherit the mask and ignore Ctrl-C from birth.
@@ -742,7 +724,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
                 finish(i, process_session(path, out_dir / name, name=name, **options))
         else:
             if executor is None and tasks:
-                own = executor = _local_pool(min(workers or os.cpu_count() or 1, len(tasks)))
+                own = executor = worker_pool(min(workers or os.cpu_count() or 1, len(tasks)))
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description.replace(" workers)", " workers, 1 numba thread each)")

@@ -5,7 +5,7 @@ terminal or the ssh session closing (SIGHUP), Ctrl-backslash (SIGQUIT). The comm
 (:mod:`bendsense.cli._signals`) and the control loop (:func:`bendsense.control.run`) turn
 each into :class:`KeyboardInterrupt`. :func:`deferred` holds them off while a block that
 must finish runs (the control loop's set-point 0 on every line and its report), then
-acts on the first that came. A worker process takes none of them (:func:`worker_init`):
+acts on the first that came. A worker process (:func:`worker_pool`) takes none of them:
 its parent stops it, and it ends with its parent (:func:`exit_with_parent`).
 """
 
@@ -17,7 +17,7 @@ import signal
 import threading
 import time
 
-__all__ = ["STOP_SIGNALS", "handled", "deferred", "worker_init", "exit_with_parent"]
+__all__ = ["STOP_SIGNALS", "handled", "deferred", "worker_pool", "worker_init", "exit_with_parent"]
 
 #: SIGINT, SIGTERM, SIGHUP, SIGQUIT (those the platform has)
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
@@ -69,7 +69,33 @@ def deferred():
 # --------------------------------------------------------------------------- worker processes
 
 
-def worker_init(parent_pid: int | None = None) -> None:
+def worker_pool(workers: int, *, nice: int = 0):
+    """A process pool whose workers use one BLAS thread and one numba thread each.
+
+    Parallelism comes either from the worker processes (here) or from the compiled
+    kernels' threads (in-process), never both: two levels of threads on few cores only
+    oversubscribe them. The workers are spawned (not forked) so that they import numpy
+    afresh with these variables, even if this process has numpy loaded already. They
+    ignore Ctrl-C and exit with this process (:func:`worker_init`).
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes.
+    nice : int, default 0
+        Added to the workers' niceness: a background worker (live ``--adapt``) yields the
+        cores to the loop and, on a test machine, the simulated board.
+    """
+    import concurrent.futures as cf
+    import multiprocessing
+
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=worker_init, initargs=(os.getpid(), nice))
+
+
+def worker_init(parent_pid: int | None = None, nice: int = 0) -> None:
     """Pool worker initializer: one numba thread, Ctrl-C left to the parent, and exit with the parent.
 
     One numba thread because the processes are the parallelism. SIGINT (Ctrl-C reaches
@@ -82,6 +108,8 @@ def worker_init(parent_pid: int | None = None) -> None:
     ----------
     parent_pid : int, optional
         The parent's process id (None: the worker does not watch its parent).
+    nice : int, default 0
+        Added to the worker's niceness (:func:`worker_pool`).
     """
     import signal
 
@@ -93,6 +121,8 @@ def worker_init(parent_pid: int | None = None) -> None:
     if parent_pid is not None:
         exit_with_parent(parent_pid)
     numba.set_num_threads(1)
+    if nice:
+        os.nice(nice)
 
 
 def exit_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import logging
-import os
 
 import numpy as np
 
@@ -39,18 +38,6 @@ EVERY_S = 5.0
 NEW_BINS = 10
 #: Frames kept per 1 kPa pressure bin (the newest).
 PER_BIN = 4
-
-
-def _worker_init(parent_pid: int) -> None:
-    """The batch workers' set-up (one thread, no Ctrl-C, ends with its parent), at a lower priority.
-
-    The loop and, on a test machine, the simulated board share the cores with it: an
-    update may take a second, they must not wait for it.
-    """
-    from bendsense.stop_signals import worker_init
-
-    worker_init(parent_pid)
-    os.nice(10)
 
 
 def _learn(kappa, pressure_pa, t_s, config, calibration, source):
@@ -111,12 +98,10 @@ class LiveAdaptation:
 
     def start(self) -> None:
         """Spawn the worker and warm it: an update on a straight actuator over mid pressures (it learns nothing)."""
-        import multiprocessing
+        from bendsense.stop_signals import worker_pool
 
-        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-            os.environ.setdefault(var, "1")
-        self._pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                                            initializer=_worker_init, initargs=(os.getpid(),))
+        # at a lower priority: the loop and, on a test machine, the simulated board must not wait for an update
+        self._pool = worker_pool(1, nice=10)
         lo, hi = self.prior.actuator.pressure_range_pa
         p = np.linspace(lo + 0.2 * (hi - lo), lo + 0.8 * (hi - lo), 8)
         self._pool.submit(_learn, np.zeros((p.size, self.prior.sensor.n_segments)), p, np.arange(p.size) * 1e-3,
