@@ -122,10 +122,14 @@ def session_shapes(session, calibration, config, *, need_pressure: bool = True):
                            "identification needs the pressure of every frame (a pressure_pa or pressure_kpa column)")
     coils = np.cumsum(config.sensor.segment_lengths_m)
     shape = reconstruct(session.signals, calibration, config.sensor, s_m=coils)
+    return shape, _usable(shape, p, config)
+
+
+def _usable(shape, p, config) -> np.ndarray:
+    """Frames with a finite shape inside the calibrated range and a pressure in the working range."""
     lo, hi = config.actuator.pressure_range_pa
-    usable = ~np.asarray(shape.extrapolated, dtype=bool) & np.all(np.isfinite(shape.curvature_per_m), axis=-1)
-    usable &= (p >= lo) & (p <= hi)
-    return shape, usable
+    return (~np.asarray(shape.extrapolated, dtype=bool) & np.all(np.isfinite(shape.curvature_per_m), axis=-1)
+            & (p >= lo) & (p <= hi))
 
 
 def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8, with_misfit: bool = False):
@@ -214,11 +218,11 @@ def _free_p_value(misfit, shape, p, config, calibration):
     from scipy.stats import chi2
 
     from bendsense.shift_errors import shift_covariances
+    from bendsense.sim.sensor import shifts_from_curvatures
 
     r, j, dphi_dei = misfit
     gap = float(calibration.strip_gap_m(config.sensor))
-    lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
-    shifts = np.ascontiguousarray(gap * np.cumsum(np.asarray(shape.curvature_per_m, dtype=float) * lengths, axis=-1))
+    shifts = np.ascontiguousarray(shifts_from_curvatures(shape.curvature_per_m, config.sensor.lengths_m, gap))
     cov = np.empty(shifts.shape + shifts.shape[-1:])
     shift_covariances(calibration.error_model(), shifts, cov, np.empty(shifts.shape))
     cov /= gap**2
@@ -519,6 +523,8 @@ class _FreeFrames:
         systematic covariance of the angles, or, with a prior, as the stiffness
         parameters' response (the posterior keeps their cross-covariances).
         """
+        from bendsense.sim.sensor import shifts_from_curvatures
+
         rows = np.flatnonzero(used)
         if rows.size < 4:
             raise SessionError(f"{self.source}: {rows.size} free frame(s) found (status ok and the force inside "
@@ -526,8 +532,7 @@ class _FreeFrames:
         config = self.config
         p = self.pressure_pa[rows]
         gap = float(self.calibration.strip_gap_m(config.sensor))
-        lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
-        shifts = gap * np.cumsum(np.asarray(self.shape.curvature_per_m, dtype=float)[rows] * lengths, axis=-1)
+        shifts = shifts_from_curvatures(np.asarray(self.shape.curvature_per_m)[rows], config.sensor.lengths_m, gap)
         cov = session_covariance(self.calibration, shifts, self.weights[rows] / gap, np.arange(rows.size),
                                  rows.size)
         g = self.slope_ei[rows, None] * np.stack([np.ones(rows.size), p], axis=-1)  # ∂θ/∂(ei0, ei1)
@@ -640,9 +645,7 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
     if not isinstance(calibration, Calibration):
         raise ArgumentError("calibration: adapt needs the sensor's Calibration (its noise and error model weigh the "
                             f"free frames against the prior), got {type(calibration).__name__}")
-    if config.parameter_covariance is None:
-        raise ArgumentError(f"config {config.name!r}: no parameter_covariance: adapt updates a prior; state one "
-                            "(the shipped config's) or identify free bending from a free sweep")
+    _check_prior(config)
     if not isinstance(shape, Shape):
         shape = Shape.from_curvatures(np.asarray(shape, dtype=float), config.sensor.segment_lengths_m)
     kappa = np.asarray(shape.curvature_per_m, dtype=float)
@@ -653,12 +656,9 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
     t = None if t_s is None else np.asarray(t_s, dtype=float)
     if t is not None and t.shape != p.shape:
         raise ArgumentError(f"t_s: expected one time per frame {p.shape}, got {t.shape}")
-    lo, hi = config.actuator.pressure_range_pa
-    with np.errstate(invalid="ignore"):
-        usable = (~np.asarray(shape.extrapolated, dtype=bool) & np.all(np.isfinite(kappa), axis=-1)
-                  & (p >= lo) & (p <= hi))
     try:
-        fit = _free_frames_fit(shape, p, usable, config, calibration, "adapt", prior=True, max_frames=ADAPT_FRAMES)
+        fit = _free_frames_fit(shape, p, _usable(shape, p, config), config, calibration, "adapt", prior=True,
+                               max_frames=ADAPT_FRAMES)
     except SessionError as err:
         why = str(err).removeprefix("adapt: ")
         report = (f"adapt: learned nothing from {len(p)} frames and kept the config's prior: {why}. "
@@ -672,6 +672,13 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
                   f"the prior: {config.parameter_covariance.source or 'not named'}")
     new = new.replace(parameter_covariance=dataclasses.replace(new.parameter_covariance, source=provenance))
     return Adaptation(config=new, free=fit.used.copy(), report=_adapt_report(fit, config, new, t), fit=fit)
+
+
+def _check_prior(config) -> None:
+    """Refuse a config without ``parameter_covariance`` (:func:`adapt` and live ``--adapt`` update a prior)."""
+    if config.parameter_covariance is None:
+        raise ArgumentError(f"config {config.name!r}: no parameter_covariance: adapt updates a prior; state one "
+                            "(the shipped config's) or identify free bending from a free sweep")
 
 
 def adapt_session(session, config, calibration, pressure_pa=None) -> Adaptation:

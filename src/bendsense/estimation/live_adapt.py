@@ -78,11 +78,9 @@ class LiveAdaptation:
     """
 
     def __init__(self, calibration, config, *, source: str = "a live stream"):
-        from bendsense.errors import ArgumentError
+        from bendsense.identify_session import _check_prior
 
-        if config.parameter_covariance is None:
-            raise ArgumentError(f"config {config.name!r}: no parameter_covariance: adapt updates a prior; state one "
-                                "(the shipped config's) or identify free bending from a free sweep")
+        _check_prior(config)
         self.calibration, self.prior, self.config, self.source = calibration, config, config, source
         lo, hi = config.actuator.pressure_range_pa
         self._lo, bins = lo, int(np.ceil((hi - lo) / 1e3)) + 1
