@@ -217,6 +217,34 @@ def test_record_estimate_adapt_writes_the_adapted_config(calibration_path, sweep
     assert len(bendsense.read_session(out)) == int(3 * RATE)  # every frame recorded
 
 
+@pytest.mark.realtime
+def test_an_interrupted_record_keeps_what_adapt_learned(calibration_path, sweep, tmp_path):
+    """Ctrl-C after an update: the adapted config is written all the same, and the one Interrupted line says so."""
+    import signal
+
+    from test_stop import run_and_stop  # the helper that stops a command and checks its one line
+
+    out, since = tmp_path / "s", []
+    with SimulatedDevice(sweep[:int(3 * RATE)], rate_hz=300.0) as dev:
+        def updated():  # the whole sweep sent, an update logged (at -v), and 3 s for one still running to finish
+            if not since and dev.stats.sent >= int(3 * RATE) and "adapt: update" in (
+                    tmp_path / "stderr.txt").read_text(encoding="utf-8"):
+                since.append(time.monotonic())
+            return bool(since) and time.monotonic() - since[0] > 3.0
+
+        line = run_and_stop(["-v", "record", dev.port, "-o", str(out), "--seconds", "600", "--calibration",
+                             str(calibration_path), "--estimate", "--adapt"], tmp_path, signal.SIGINT,
+                            whole_group=False, ready=updated)
+    assert re.search(r"; adapted config \(\d+ update\(s\)\) written to " + re.escape(str(out / "config.yaml")), line), line
+    adapted = bendsense.load_config(out / "config.yaml")
+    assert adapted.parameter_covariance.source.startswith("adapt ")
+    # an update from the frames so far (no last one from all of them): K0 nearer the board's than the prior's
+    p, got, true = _k0_errors(adapted)
+    _, prior, _ = _k0_errors(CONFIG)
+    upper = p >= 30e3
+    assert np.all(np.abs(got[upper] / true[upper] - 1) < np.abs(prior[upper] / true[upper] - 1) - 0.01), got / true
+
+
 def test_adapt_refuses_a_gripper(calibration_path, tmp_path):
     from bendsense.config import save_config
     from bendsense.sim.gripper import gripper_config

@@ -260,7 +260,7 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
         click.echo(f"holding {controller.target_force_n * 1e3:.4g} mN (pressure limit {pmax / 1e3:g} kPa); "
                    "Ctrl-C stops", err=True)
     where = "" if output is None else f"the session is in {output}"
-    result = drive(driver, processor, controller, "control", where, max_pressure_pa=pmax, seconds=seconds,
+    result = drive(driver, processor, controller, "control", where, output, max_pressure_pa=pmax, seconds=seconds,
                    n_lines=n_lines, recording=recording, safety=Safety(silence_s=silence_s))
     if not quiet():
         click.echo(_summary(result, controller), err=True)
@@ -269,7 +269,7 @@ def _run(driver, processor, controller, config, pmax, seconds, output, overwrite
         click.echo(f"session written to {output}", err=True)
 
 
-def drive(driver, processor, controller, name: str, where: str = "", **options):
+def drive(driver, processor, controller, name: str, where: str = "", adapt_output=None, **options):
     """Start the board and run the loop (:func:`bendsense.control.run`); one line for how it ended.
 
     A safety stop, an error of the device, a set-point 0 that could not be sent or a line
@@ -285,6 +285,9 @@ def drive(driver, processor, controller, name: str, where: str = "", **options):
         What runs, for the messages (``control``, ``the sweep``).
     where : str
         Where its recording is, for the messages ("" without one).
+    adapt_output : Path, optional
+        With ``--adapt``: the session directory that gets the adapted config however the
+        loop ends (:func:`bendsense.cli.device.finish_adapt`; a stop writes the latest one).
     **options
         Passed to :func:`bendsense.control.run`.
 
@@ -299,12 +302,15 @@ def drive(driver, processor, controller, name: str, where: str = "", **options):
     try:
         result = run(driver, processor, controller, **options)
     except KeyboardInterrupt as err:
-        _signals.note(err, "; ".join(filter(None, (_zeros_of(err), where))))
+        _signals.note(err, "; ".join(filter(None, (_zeros_of(err), where,
+                                                   finish_adapt(processor, adapt_output, wait=False)))))
         raise
     except BendsenseError as err:  # a safety stop (ControlStop) or the device failing under the loop
         sys.stderr.flush()
         raise click.ClickException("; ".join(filter(None, (f"{name} stopped: {getattr(err, 'reason', err)}",
-                                                           _zeros_of(err), where)))) from None
+                                                           _zeros_of(err), where,
+                                                           finish_adapt(processor, adapt_output, wait=False))))
+                                   ) from None
     if result.unsent or result.high:
         raise click.ClickException("; ".join(filter(None, (f"{name} ended ({result.outcome}) but "
                                                            f"{zero_report(result)}", where))))

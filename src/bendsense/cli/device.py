@@ -77,7 +77,7 @@ adapt_option = click.option(
          "learned, and the adapted config goes to OUT/config.yaml with its provenance (record, control -o).")
 
 
-def finish_adapt(processor, output=None) -> None:
+def finish_adapt(processor, output=None, *, wait: bool = True) -> str:
     """``--adapt``'s end: the last update, one line of what was learned, the adapted config to ``output/config.yaml``.
 
     Parameters
@@ -86,17 +86,31 @@ def finish_adapt(processor, output=None) -> None:
         The processor; nothing to do without ``adapt``.
     output : Path, optional
         The session directory (None: nothing written).
+    wait : bool, default True
+        False for a command that was interrupted or stopped: no last update and nothing
+        printed; the latest finished update's config is written all the same.
+
+    Returns
+    -------
+    str
+        Where the adapted config went, for the line that ends an interrupted command
+        ("" without ``adapt``, or when nothing was learned or written).
     """
     from bendsense.config import save_config
 
     adaptation = getattr(processor, "adaptation", None)
     if adaptation is None:
-        return
-    config = adaptation.close()
-    click.echo(adaptation.summary(), err=True)
-    if config is not None and output is not None and output.is_dir():
-        save_config(config, output / "config.yaml")
-        click.echo(f"adapted config written to {output / 'config.yaml'}", err=True)
+        return ""
+    config = adaptation.close(wait)
+    if wait:
+        click.echo(adaptation.summary(), err=True)
+    if config is None or output is None or not output.is_dir():
+        return ""
+    save_config(config, output / "config.yaml")
+    written = f"adapted config ({adaptation.updates} update(s)) written to {output / 'config.yaml'}"
+    if wait:
+        click.echo(written, err=True)
+    return written
 
 
 def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True, bandwidth_hz=None,
@@ -435,7 +449,7 @@ def record(
         kept = f"kept {stats.records} frames in {output} (synced to disk, session marked finished){losses}"
         if estimate:  # the frames still queued are in frames.bin, not estimated
             kept += f"; {est_stats.frames} of them estimated to {where}"
-        _signals.note(interrupted, kept)
+        _signals.note(interrupted, "; ".join(filter(None, (kept, finish_adapt(processor, output, wait=False)))))
         raise interrupted
     click.echo(f"done: {stats.records} frames written to {output}{losses}", err=True)
     if stats.records == 0 and not stats.skipped:

@@ -173,11 +173,20 @@ class LiveAdaptation:
         log.info("adapt: update %d from %d free frames", self.updates, free)
         return config
 
-    def close(self):
-        """The last update (from every frame kept, waited for), then stop the worker; the adapted config, or None."""
+    def close(self, wait: bool = True):
+        """The last update (from every frame kept, waited for), then stop the worker; the adapted config, or None.
+
+        Parameters
+        ----------
+        wait : bool, default True
+            False for an interrupted command: no last update; a pending one is cancelled
+            and the latest finished one is the answer.
+        """
         if self._pool is None:
             return None
-        for _ in range(2):  # the pending update, then one with the frames that came since
+        if not wait and self._job is not None and self._job.done():
+            self._result()  # an update that finished since the last block
+        for _ in range(2 if wait else 0):  # the pending update, then one with the frames that came since
             if self._job is not None:
                 cf.wait([self._job])
                 self._result()
