@@ -5,7 +5,9 @@ holds copies of the repository's ``configs/`` and ``examples/`` (the docs are wr
 to run from the repository root), so later blocks see the files earlier ones wrote.
 ``bash`` blocks run under ``bash -euo pipefail``, ``python`` blocks with this
 interpreter; each must exit 0. Blocks in other languages (``text``, ``yaml``, …) are
-not run.
+not run. Two pages run at a time, each in its own directory; a block that times a board
+against its client (a simulated board, a recording, a control loop, a benchmark) waits
+until it is alone and runs alone.
 
 What is not run as written:
 
@@ -33,6 +35,7 @@ before it.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -40,7 +43,9 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -312,33 +317,84 @@ def test_the_pages_with_commands_are_run():
     assert {p.name for p in RUNNABLE} >= {"README.md", "getting-started.md", "cli.md", "calibration.md"}
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
-def test_page_runs(page: Path, tmp_path: Path):
+# Two pages run at a time (their blocks are mostly one process on one core), each in its own
+# directory; a block that times a board against its client (a simulated board, a recording, a
+# control loop, a benchmark) runs alone, as the rest of the suite does (``realtime``).
+TIMED = re.compile(r"\bbendsense\s+(?:-\w+\s+)*(?:sim-device|record|live|control|demo)\b|"
+                   r"--port\b|benchmarks/|SimulatedDevice|Driver\(")
+PAGES_AT_ONCE = 2
+
+
+class _Turns:
+    """Blocks share the machine two at a time; a timed block waits until it is alone, and keeps it."""
+
+    def __init__(self):
+        self._cond = threading.Condition()
+        self._shared = 0
+        self._alone = False
+
+    @contextlib.contextmanager
+    def turn(self, alone: bool):
+        with self._cond:
+            self._cond.wait_for(lambda: not self._alone and (not alone or self._shared == 0))
+            if alone:
+                self._alone = True
+            else:
+                self._shared += 1
+        try:
+            yield
+        finally:
+            with self._cond:
+                if alone:
+                    self._alone = False
+                else:
+                    self._shared -= 1
+                self._cond.notify_all()
+
+
+def _run_page(page: Path, work: Path, turns: _Turns) -> list[str]:
+    """Run every block of ``page`` in ``work``; the problems found (empty: the page runs as documented)."""
     blocks = extract_steps(page.read_text(encoding="utf-8"))
-    assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
     for name in COPIED:
         if (ROOT / name).is_dir():
-            shutil.copytree(ROOT / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__"))
+            shutil.copytree(ROOT / name, work / name, ignore=shutil.ignore_patterns("__pycache__"))
     for name in COPIED_FILES:
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(ROOT / name, tmp_path / name)
+        (work / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ROOT / name, work / name)
     # single-threaded BLAS as the CLI sets it (troubleshooting.md): the python blocks'
     # many small matrices crawl when threaded BLAS competes for the cores
     env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     for k, (lang, code, outputs) in enumerate(blocks, start=1):
-        proc = _run(lang, code, tmp_path, env)
-        assert proc.returncode == 0, (
-            f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
-            f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
-        )
+        with turns.turn(alone=bool(TIMED.search(code))):
+            proc = _run(lang, code, work, env)
+        if proc.returncode != 0:
+            return [f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
+                    f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"]
         for documented in outputs:
             missing = missing_output(documented, proc.stdout + "\n" + proc.stderr)
-            assert not missing, (
-                f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it prints;\n"
-                f"documented lines not printed (masked):\n" + "\n".join(missing) + "\n"
-                f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
-            )
+            if missing:
+                return [f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it prints;\n"
+                        f"documented lines not printed (masked):\n" + "\n".join(missing) + "\n"
+                        f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"]
+    return []
+
+
+@pytest.fixture(scope="module")
+def page_runs(request, tmp_path_factory):
+    """The selected pages' runs, started together (two at a time) when the first page's test asks."""
+    selected = [item.callspec.params["page"] for item in request.session.items
+                if getattr(item, "originalname", None) == "test_page_runs"]
+    turns = _Turns()
+    with ThreadPoolExecutor(PAGES_AT_ONCE) as pool:
+        yield {page: pool.submit(_run_page, page, tmp_path_factory.mktemp(page.stem), turns) for page in selected}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
+def test_page_runs(page: Path, page_runs):
+    assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
+    problems = page_runs[page].result()
+    assert not problems, problems[0]
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
