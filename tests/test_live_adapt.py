@@ -235,7 +235,8 @@ def test_an_interrupted_record_keeps_what_adapt_learned(calibration_path, sweep,
         line = run_and_stop(["-v", "record", dev.port, "-o", str(out), "--seconds", "600", "--calibration",
                              str(calibration_path), "--estimate", "--adapt"], tmp_path, signal.SIGINT,
                             whole_group=False, ready=updated)
-    assert re.search(r"; adapted config \(\d+ update\(s\)\) written to " + re.escape(str(out / "config.yaml")), line), line
+    written = r"; adapted config \(\d+ update\(s\)\) written to " + re.escape(str(out / "config.yaml"))
+    assert re.search(written, line), line
     adapted = bendsense.load_config(out / "config.yaml")
     assert adapted.parameter_covariance.source.startswith("adapt ")
     # an update from the frames so far (no last one from all of them): K0 nearer the board's than the prior's
