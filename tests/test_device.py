@@ -352,6 +352,19 @@ def test_recorder_background_thread_with_concurrent_reader(tmp_path):
     assert len(s) == 400 and seen and max(seen) == 400
 
 
+def test_recorder_stopped_while_its_thread_was_starting(tmp_path):
+    """Ctrl-C inside ``Thread.start()`` leaves a thread that starts a moment later: leaving the recorder waits for
+    it and ends it (it used to raise "cannot join thread before it is started": a traceback instead of one line)."""
+    with SimulatedDevice(ramp_source(N_CH), rate_hz=1000, max_frames=100) as sim, Driver(sim.port) as drv:
+        rec = Recorder(drv, tmp_path / "s")
+        rec._thread = thread = threading.Thread(target=lambda: rec.run(None), daemon=True)
+        threading.Timer(0.05, thread.start).start()  # what the interrupted start() left: a thread not yet started
+        with rec:
+            pass
+        assert thread.ident is not None and not thread.is_alive()  # it started, saw the stop, and ended
+    assert len(read_session(tmp_path / "s")) <= 100  # a whole, readable session
+
+
 def test_a_board_whose_hello_lies_about_its_channels_is_one_line_and_counted(tmp_path, caplog):
     """HELLO announces 8 channels, the SAMPLEs carry 16: one line at record time naming both counts, the last line
     counts the skipped and malformed frames as the board's own counters have them, and 'load' is one line."""

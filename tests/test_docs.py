@@ -327,7 +327,7 @@ PAGES_AT_ONCE = 3
 
 
 class _Turns:
-    """Blocks share the machine two at a time; a timed block waits until it is alone, and keeps it."""
+    """Blocks share the machine (PAGES_AT_ONCE at a time); a timed block waits until it is alone, and keeps it."""
 
     def __init__(self):
         self._cond = threading.Condition()
@@ -382,7 +382,7 @@ def _run_page(page: Path, work: Path, turns: _Turns) -> list[str]:
 
 @pytest.fixture(scope="module")
 def page_runs(request, tmp_path_factory):
-    """The selected pages' runs, started together (two at a time) when the first page's test asks."""
+    """The selected pages' runs, started together (PAGES_AT_ONCE at a time) when the first page's test asks."""
     selected = [item.callspec.params["page"] for item in request.session.items
                 if getattr(item, "originalname", None) == "test_page_runs"]
     turns = _Turns()

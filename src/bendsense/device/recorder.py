@@ -341,17 +341,29 @@ class Recorder:
             Longest wait for the recording thread [s].
         """
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout_s)
+        self._join(timeout_s)
         if self.error is not None:
             raise self.error
         return self.stats
+
+    def _join(self, timeout_s: float) -> None:
+        """Wait for the recording thread, also one whose ``start()`` a Ctrl-C interrupted while it was starting."""
+        if self._thread is None:
+            return
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                self._thread.join(max(0.0, deadline - time.monotonic()))
+                return
+            except RuntimeError:  # "cannot join thread before it is started": it is starting, or never will
+                if time.monotonic() >= deadline:
+                    return
+                time.sleep(0.001)
 
     def __enter__(self) -> Recorder:
         return self
 
     def __exit__(self, *exc) -> None:
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(5.0)
+        self._join(5.0)
         self.close()
