@@ -332,16 +332,11 @@ class Background:
             self._log = tempfile.TemporaryFile(mode="w+")
         except OSError:  # no temporary directory to write to: this process compiles on its first call
             return self
-        code = ("import os, sys, threading, time\n"
-                "parent = os.getppid()\n"
-                "def watch():\n"
-                "    while os.getppid() == parent: time.sleep(1.0)\n"
-                "    os._exit(1)\n"
-                "threading.Thread(target=watch, daemon=True).start()\n"
+        code = ("from bendsense.stop_signals import exit_with_parent\n"  # as the pool workers do
+                f"exit_with_parent({os.getpid()})\n"
                 f"from {module} import {function}\n{function}()\n")
         self.process = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
-                                        stdout=subprocess.DEVNULL, stderr=self._log, preexec_fn=_die_with_parent
-                                        if sys.platform.startswith("linux") else None)
+                                        stdout=subprocess.DEVNULL, stderr=self._log)
         what = _KERNEL_NAMES.get(self.dispatcher.py_func.__module__, "compiled kernels")
         sys.stderr.write(f"bendsense: compiling the {what} in a second process meanwhile "
                          "(first run after install, cached for later runs)\n")
@@ -395,13 +390,3 @@ class Background:
 def dispatcher_ready(dispatcher) -> bool:
     """Whether ``dispatcher`` needs no compile: called in this process already, or cached on disk."""
     return dispatcher in _ready or _cached(dispatcher)
-
-
-def _die_with_parent():  # pragma: no cover (runs in the child between fork and exec)
-    import ctypes
-    import signal
-
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass

@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
 import time
 
@@ -111,8 +112,6 @@ def worker_init(parent_pid: int | None = None, nice: int = 0) -> None:
     nice : int, default 0
         Added to the worker's niceness (:func:`worker_pool`).
     """
-    import signal
-
     import numba
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -140,9 +139,6 @@ def exit_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
     poll_s : float, default 0.5
         How often the fallback thread looks [s].
     """
-    import sys
-    import threading
-
     if sys.platform.startswith("linux") and _pdeathsig():
         if os.getppid() != parent_pid:  # the parent died before the prctl took effect
             os._exit(1)
@@ -162,7 +158,6 @@ def _pdeathsig() -> bool:
     """Ask Linux to SIGKILL this process when its parent dies; False if that is not possible."""
     import ctypes
     import ctypes.util
-    import signal
 
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
