@@ -285,6 +285,31 @@ def test_recorder_refuses_existing_session(tmp_path):
         Recorder(drv, tmp_path / "s")
 
 
+@pytest.mark.parametrize("written", [1.0, 0.5])
+def test_a_ctrl_c_between_a_write_and_its_count_keeps_the_session_whole(tmp_path, monkeypatch, written):
+    """The signal lands after ``os.write`` returned (whole records uncounted) or within it (a torn record): the
+    finished session counts what frames.bin holds, whole records only, and reads."""
+    import bendsense.session.native as native
+
+    real_write = os.write
+
+    def interrupted(fd, data):
+        real_write(fd, bytes(data)[:int(len(data) * written)])
+        raise KeyboardInterrupt
+
+    with SessionWriter(tmp_path / "s", 2) as w:
+        rec = w.empty(6)
+        rec["seq"] = np.arange(6)
+        w.write(rec[:4])
+        monkeypatch.setattr(native.os, "write", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            w.write(rec[4:])
+        monkeypatch.undo()
+    session = read_session(tmp_path / "s")
+    assert len(session) == (6 if written == 1.0 else 5)
+    assert (tmp_path / "s" / "frames.bin").stat().st_size == len(session) * rec.dtype.itemsize
+
+
 # ----------------------------------------------------------------- CLI
 
 

@@ -224,14 +224,17 @@ def test_an_interrupted_record_keeps_what_adapt_learned(calibration_path, sweep,
 
     from test_stop import run_and_stop  # the helper that stops a command and checks its one line
 
-    out, since = tmp_path / "s", []
-    with SimulatedDevice(sweep[:int(3 * RATE)], rate_hz=300.0) as dev:
-        def updated():  # the whole sweep sent, an update logged (at -v), and 3 s for one still running to finish
-            if not since and dev.stats.sent >= int(3 * RATE) and "adapt: update" in (
-                    tmp_path / "stderr.txt").read_text(encoding="utf-8"):
-                since.append(time.monotonic())
-            return bool(since) and time.monotonic() - since[0] > 3.0
+    out, rise_s = tmp_path / "s", 0.5  # the sweep's rise, 1.5 s of the board's time, three times as fast
 
+    def sweep_then_hold(k):  # the sweep, then its last frame (50 kPa) for as long as the board runs
+        return sweep[min(k, len(sweep) - 1)]
+
+    def updated():  # an update learned from the whole rise to 100 kPa (whenever the loaded machine finished it)
+        log = (tmp_path / "stderr.txt").read_text(encoding="utf-8")
+        return any(float(t) >= rise_s for t in re.findall(r"adapt: update \d+ from \d+ free frames, the newest at "
+                                                          r"t = ([\d.]+) s", log))
+
+    with SimulatedDevice(sweep_then_hold, rate_hz=3 * RATE) as dev:
         line = run_and_stop(["-v", "record", dev.port, "-o", str(out), "--seconds", "600", "--calibration",
                              str(calibration_path), "--estimate", "--adapt"], tmp_path, signal.SIGINT,
                             whole_group=False, ready=updated)
@@ -243,7 +246,8 @@ def test_an_interrupted_record_keeps_what_adapt_learned(calibration_path, sweep,
     p, got, true = _k0_errors(adapted)
     _, prior, _ = _k0_errors(CONFIG)
     upper = p >= 30e3
-    assert np.all(np.abs(got[upper] / true[upper] - 1) < np.abs(prior[upper] / true[upper] - 1) - 0.01), got / true
+    error, before = np.abs(got[upper] / true[upper] - 1), np.abs(prior[upper] / true[upper] - 1)
+    assert np.all(error < before - 0.01), (error, before)
 
 
 def test_adapt_refuses_a_gripper(calibration_path, tmp_path):

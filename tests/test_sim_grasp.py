@@ -152,6 +152,18 @@ def test_regulator_limits_and_host_control():
         PressureRegulators(1, 500.0, tau_s=0.0)
 
 
+def test_a_setpoint_is_in_force_on_receipt_between_frames():
+    # a host that sends zeros and stops the stream before the next frame: the board holds its zeros all the same
+    reg = PressureRegulators(2, 500.0, tau_s=0.01, profile=lambda t: 30e3)
+    before = reg.step(0.0).copy()
+    assert reg.setpoint_pa.tolist() == [30e3, 30e3]
+    reg.set(0, 0.0)
+    assert reg.setpoint_pa.tolist() == [0.0, 30e3]  # no frame since
+    reg.release()
+    assert reg.setpoint_pa.tolist() == [0.0, 0.0]
+    assert reg.step(0.002) == pytest.approx(before * np.exp(-1 / (500.0 * 0.01)), rel=1e-12)  # both fall
+
+
 def test_closing_profile():
     t = np.array([0.0, 1.0, 2.0, 3.0, 5.0, 5.5, 6.0, 7.0, 8.0 + 1.0])
     expected = 70e3 * np.array([0.0, 0.5, 1.0, 1.0, 1.0, 0.5, 0.0, 0.0, 0.5])

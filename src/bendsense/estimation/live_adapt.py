@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import logging
+import math
 
 import numpy as np
 
@@ -90,6 +91,7 @@ class LiveAdaptation:
         self._t = np.zeros((bins, PER_BIN))
         self._next = np.zeros(bins, dtype=int)
         self._pool = self._job = None
+        self._job_t = math.nan  # the device time of the newest frame of the update submitted last [s]
         self._last_t, self._last_bins, self._since = None, 0, 0
         self.updates = self.free = 0
         self.report = "adapt: no update yet"
@@ -141,6 +143,7 @@ class LiveAdaptation:
     def _submit(self) -> None:
         """Hand every frame kept to the worker: an update from the prior."""
         keep = np.isfinite(self._p)
+        self._job_t = float(self._t[keep].max())
         self._job = self._pool.submit(_learn, self._kappa[keep], self._p[keep], self._t[keep], self.prior,
                                       self.calibration, self.source)
         self._since = 0
@@ -170,7 +173,7 @@ class LiveAdaptation:
             return None
         self.config, self.free = config, free
         self.updates += 1
-        log.info("adapt: update %d from %d free frames", self.updates, free)
+        log.info("adapt: update %d from %d free frames, the newest at t = %.3f s", self.updates, free, self._job_t)
         return config
 
     def close(self, wait: bool = True):

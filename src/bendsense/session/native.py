@@ -616,6 +616,13 @@ class SessionWriter:
             pass  # self.failed says it; the frames written are kept and counted
         with self._lock:
             self.closed = True
+            with contextlib.suppress(OSError):
+                # the file, not the count, is the truth: a signal handler that raised between a write and
+                # its count (a Ctrl-C of the thread writing) leaves whole records uncounted, or a torn one
+                end = os.fstat(self._fd).st_size
+                if end % self.dtype.itemsize:
+                    os.ftruncate(self._fd, end - end % self.dtype.itemsize)
+                self.n_records = end // self.dtype.itemsize
             os.close(self._fd)
             try:
                 self._events.close()

@@ -96,7 +96,9 @@ class PressureRegulators:
     pressure_pa : ndarray, shape (n_lines,)
         The lines' pressures now [Pa].
     setpoint_pa : ndarray, shape (n_lines,)
-        The set-points in force now [Pa] (after clipping).
+        The set-points in force now [Pa] (after clipping): a host's from when it arrives (a
+        board applies a SETPOINT on receipt, between frames too), the profile's from the
+        frame it is read at.
     host : ndarray of bool, shape (n_lines,)
         Lines under host control (they got a SETPOINT).
     """
@@ -144,7 +146,7 @@ class PressureRegulators:
         if not 0 <= line < self.n_lines or not math.isfinite(pressure_pa):
             return False
         self._host[line] = True
-        self._host_setpoint[line] = min(max(float(pressure_pa), 0.0), self.max_pressure_pa)
+        self._host_setpoint[line] = self.setpoint_pa[line] = min(max(float(pressure_pa), 0.0), self.max_pressure_pa)
         return True
 
     def release(self) -> None:
@@ -154,7 +156,7 @@ class PressureRegulators:
         lets go of everything.
         """
         self._host[:] = True
-        self._host_setpoint[:] = 0.0
+        self._host_setpoint[:] = self.setpoint_pa[:] = 0.0
 
     def step(self, t_s: float) -> np.ndarray:
         """Advance one frame period, to the frame at time ``t_s``; return the pressures [Pa].
