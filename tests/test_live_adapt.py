@@ -196,6 +196,47 @@ def test_control_adapt_on_a_finger_that_is_not_the_configs(object_board, calibra
     assert abs(true * 1e3 - claimed) <= 3 * sigma  # the sigma it claims covers what it did not learn
 
 
+@pytest.fixture(scope="module")
+def gravity_identified(calibration_path, tmp_path_factory):
+    """The board's finger (K0 +5 %, EI +15 %) identified from free sweeps in two mounts (upright, hanging)."""
+    import dataclasses
+
+    root = tmp_path_factory.mktemp("mounts")
+    bendsense.save_config(CONFIG.replace(gravity=dataclasses.replace(CONFIG.gravity, direction=(0.0, 1.0))),
+                          root / "hanging.yaml")
+    for name, extra in (("up", []), ("down", ["--config", str(root / "hanging.yaml")])):
+        res = CliRunner().invoke(main, ["simulate", "free-sweep", "-o", str(root / name), "--k0-error", "0.05",
+                                        "--ei-error", "0.15", *extra])
+        assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(main, ["identify", "stiffness", "--session", str(root / "up" / "free_sweep.csv"),
+                                    "--turned-session", str(root / "down" / "free_sweep.csv"), "--calibration",
+                                    str(calibration_path), "-o", str(root / "lab.yaml")])
+    assert res.exit_code == 0, res.output
+    return root / "lab.yaml"
+
+
+@pytest.mark.realtime
+def test_control_adapt_after_two_mounts_holds_the_target_within_10_mn(object_board, gravity_identified,
+                                                                       calibration_path, tmp_path):
+    """EI from the two mounts, K0 learned while it works: the true force within 10 mN of the target."""
+    port, truth = object_board
+    res = CliRunner().invoke(main, ["control", port, "--config", str(gravity_identified), "--calibration",
+                                    str(calibration_path), "--target-force-n", "0.15", "--load", "contact",
+                                    "--contact-s-m", "0.10", "--seconds", "1.5", "-o", str(tmp_path / "grasp"),
+                                    "--adapt"])
+    assert res.exit_code == 0, res.output
+    time.sleep(0.1)
+    with open(truth, encoding="utf-8") as fh:
+        rows = [r for r in csv.DictReader(x for x in fh if not x.startswith("#")) if None not in r.values()]
+    t = np.array([float(r["t_us"]) for r in rows]) * 1e-6
+    force = np.hypot([float(r["fx_n"]) for r in rows], [float(r["fy_n"]) for r in rows])
+    driven = np.flatnonzero(np.array([float(r["setpoint_pa"]) for r in rows]) > 0)[-1]
+    true = force[(t > t[driven] - 0.3) & (t <= t[driven])].mean()
+    claimed, sigma = (float(x) for x in re.search(r"N = ([\d.]+) ± ([\d.]+) mN", res.output).groups())
+    assert abs(true * 1e3 - 150.0) <= 10.0, (true, res.output)
+    assert abs(true * 1e3 - claimed) <= 3 * sigma and sigma < 10.0, (true, claimed, sigma)
+
+
 def test_record_adapt_needs_estimate(tmp_path):
     res = CliRunner().invoke(main, ["record", "/dev/null", "-o", str(tmp_path / "s"), "--adapt"])
     assert res.exit_code == 2 and "--adapt" in res.output and "needs --estimate" in res.output

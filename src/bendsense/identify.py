@@ -327,6 +327,7 @@ def fit_free_bending(
     systematic_covariance=None,
     prior: bool = False,
     stiffness_response=None,
+    learn_stiffness: bool = False,
 ) -> FreeBendingFit:
     """Fit μ̄, μ_s and the prebend angle to free-bending data (paper eq. 8–12, section V-C).
 
@@ -374,6 +375,11 @@ def fit_free_bending(
         with the stiffness (the gravity correction of a session's free frames). The
         stiffness the prior states keeps its values and variances; its uncertainty
         weighs the data and the posterior keeps the cross-covariances it implies.
+    learn_stiffness : bool
+        With ``prior`` and ``stiffness_response``: fit the stiffness too, the angles
+        moving by ``stiffness_response @ (b − b₀)`` from the config's ``b₀``; the data
+        must see it from more than one side (free frames in two mounts,
+        :func:`bendsense.identify_session.identify_gravity`).
 
     Returns
     -------
@@ -395,10 +401,11 @@ def fit_free_bending(
     free, fixed = _split_fix(fix, FREE_BENDING_PARAMS, start, config)
     data_cov = _data_covariance(data_covariance, len(p))
     sys_cov = _data_covariance(systematic_covariance, len(p), "systematic_covariance")
-    belief = _Prior.of(config, prior, fix, start, data_cov, stiffness_response, len(p))
+    start.update({n: getattr(config.stiffness, n) for n in STIFFNESS_PARAMS})
+    belief = _Prior.of(config, prior, fix, start, data_cov, stiffness_response, len(p), learn_stiffness)
     free = [n for n in free if n not in belief.held]
     fixed.update({n: start[n] for n in belief.held})
-    names = free
+    names = [*free, *belief.learned]
     if prior and not names:
         raise ArgumentError("prior: states no variance of any free-bending parameter: nothing to learn")
     if len(p) + len(belief.mean) <= len(names):
@@ -406,7 +413,8 @@ def fit_free_bending(
             f"free-bending data: need more than {len(free)} points to fit {len(free)} parameters, got {len(p)}"
         )
     scale = np.array([abs(start[n]) or _TYPICAL[n] for n in names])
-    lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf}
+    lower = {"shear_modulus_pa": 1e-9, "sensor_stiffness_nm_per_rad": 0.0, "prebend_angle_rad": -np.inf,
+             "ei0_nm2": 1e-12, "ei1_nm2_per_pa": -np.inf}
     lb = np.array([lower[n] for n in names]) / scale
     x0 = np.array([start[n] for n in names]) / scale
     x0 = np.maximum(x0, np.where(np.isfinite(lb), lb + 1e-6, -np.inf))
@@ -502,7 +510,8 @@ def _free_bending_problem(p, y, geom, names, fixed, scale, whiten=None, prior=No
         return theta, theta - values["prebend_angle_rad"]
 
     def angles(x):
-        return model(unpack(x))[0] - y
+        values = unpack(x)
+        return model(values)[0] + prior.moved(values) - y
 
     def resid(x):
         r = angles(x) if whiten is None else whiten @ angles(x)
@@ -520,6 +529,7 @@ def _free_bending_problem(p, y, geom, names, fixed, scale, whiten=None, prior=No
             "shear_modulus_pa": -m / denom,
             "sensor_stiffness_nm_per_rad": -theta0 / denom,
             "prebend_angle_rad": np.ones_like(theta0),
+            **{n: prior.linear[:, i] for i, n in enumerate(prior.learned)},
         }
         j = np.stack([cols[n] for n in names], axis=-1) * scale if names else np.zeros((len(p), 0))
         j = j if whiten is None else whiten @ j

@@ -59,10 +59,13 @@ class _Prior:
     ``held``: free-bending parameters the prior states no variance for (known exactly);
     ``stiffness``: the stiffness parameters it states, which the data see through
     ``response`` (n, len(stiffness)) = ∂θ_i/∂(ei0, ei1) only: their values stay the
-    prior's (the gravity sag of free frames is too weak a lever to learn EI from, and a
+    prior's (in one mount the gravity sag of free frames is a weak lever on EI, and a
     small misfit of K0(P) would move it), their uncertainty is carried in the data's
-    weights and the posterior's cross-covariances. ``mean`` and ``root`` over the
-    free-bending parameters fitted; ``cov`` the prior over those, then ``stiffness``.
+    weights and the posterior's cross-covariances. ``learned`` instead (free frames in
+    two mounts, whose gravity sags differ: :func:`bendsense.identify_gravity.identify_gravity`):
+    the stiffness parameters are fitted with the rest, the data moving by
+    ``linear @ (b − b₀)``. ``mean`` and ``root`` over the parameters fitted (free
+    bending, then ``learned``); ``cov`` the prior over those, then ``stiffness``.
     """
 
     held: tuple = ()
@@ -72,10 +75,14 @@ class _Prior:
     root: np.ndarray | None = None
     cov: np.ndarray | None = None
     section: object = None
+    learned: tuple = ()
+    linear: np.ndarray | None = None
 
     @classmethod
-    def of(cls, config, prior, fix, start, data_cov, stiffness_response, n):
+    def of(cls, config, prior, fix, start, data_cov, stiffness_response, n, learn_stiffness=False):
         if not prior:
+            if learn_stiffness:
+                raise ArgumentError("learn_stiffness: needs prior=True (the stiffness is learned as an update)")
             return cls()
         section = config.parameter_covariance
         if section is None:
@@ -94,11 +101,25 @@ class _Prior:
             response = np.asarray(stiffness_response, dtype=float).reshape(n, len(STIFFNESS_PARAMETERS))
             response = response[:, [STIFFNESS_PARAMETERS.index(name) for name in stiffness]]
         fitted = [name for name in FREE_BENDING_PARAMETERS if name not in held]
+        learned, linear = (), None
+        if learn_stiffness:
+            if not stiffness:
+                raise ArgumentError("learn_stiffness: the prior states no variance of ei0_nm2 or ei1_nm2_per_pa")
+            learned, stiffness, linear, response = stiffness, (), response, np.zeros((n, 0))
+            fitted += learned
         idx = [section.parameters.index(name) for name in [*fitted, *stiffness]]
         cov = section.matrix[np.ix_(idx, idx)]
         k = len(fitted)
         root = np.linalg.inv(np.linalg.cholesky(cov[:k, :k]))
-        return cls(held, stiffness, response, np.array([start[name] for name in fitted]), root, cov, section)
+        return cls(held, stiffness, response, np.array([start[name] for name in fitted]), root, cov, section,
+                   learned, linear)
+
+    def moved(self, values: dict):
+        """How far the learned stiffness moves the data from the prior's: ``linear @ (b − b₀)`` [rad] (0: none)."""
+        if not self.learned:
+            return 0.0
+        b = np.array([values[name] for name in self.learned])
+        return self.linear @ (b - self.mean[len(self.mean) - len(self.learned):])
 
     def stiffness_covariance(self) -> np.ndarray:
         """The data's covariance from the stiffness' prior: ``R Σ_b Rᵀ`` [rad²]."""

@@ -72,6 +72,18 @@ def _parse_fix(kind: str, items) -> dict:
     "OUTPUT's stem + '-sweep/' (a native session: 'identify free-bending --session' fits it again) and fit it. "
     "Set-point 0 goes to the line whatever ends the sweep (as in 'bendsense control'). Needs --calibration.",
 )
+@click.option(
+    "--turned-session",
+    "turned_path",
+    type=click.Path(exists=True, path_type=Path),
+    help="stiffness without weights: a second free sweep of the same finger and sensor with the rig turned "
+    "(--session: the sweep in the config's mount). The weight sags the finger one way in one mount and the other "
+    "way in the other: the two fit EI(P) and the free bending together, as an update of the config's prior "
+    "(docs/identify.md, \"Stiffness without weights\"). Both sweeps must be free: nothing touches the finger.",
+)
+@click.option("--turned-gravity", type=(Finite(), Finite()), metavar="X Y",
+              help="With --turned-session: gravity's direction in the finger's base frame in the turned mount "
+                   "(default: opposite to the config's gravity.direction, the rig upside down).")
 @click.option("--max-pressure-kpa", type=PressureKpa(min=0),
               help="With --port: the sweep's highest set-point [kPa] (default 100, or the end of the config's "
                    "pressure range if lower).")
@@ -120,8 +132,8 @@ def _parse_fix(kind: str, items) -> dict:
               "the fitted and the prior model).")
 @overwrite_option
 def identify(
-    kind, data, session_path, port, max_pressure_kpa, seconds, calibration_paths, config_path, finger, output,
-    fix_items, pressure_tolerance_kpa, unweighted, method, plot_path, overwrite
+    kind, data, session_path, port, turned_path, turned_gravity, max_pressure_kpa, seconds, calibration_paths,
+    config_path, finger, output, fix_items, pressure_tolerance_kpa, unweighted, method, plot_path, overwrite
 ):
     """Fit the free-bending or stiffness model to DATA.csv or a session (paper section V-C).
 
@@ -142,7 +154,8 @@ def identify(
 
     free-bending --port PORT --calibration C: drive the free sweep on the board, record it
     to OUTPUT's stem + '-sweep/' and fit it as --session does (docs/identify.md, "On a
-    live board"). Stiffness needs known loads: hanging weights, --session.
+    live board"). Stiffness needs known loads: hanging weights, --session; or no weights:
+    --session UP --turned-session DOWN, free sweeps in two mounts.
 
     Writes the config (--config, or the paper's) with the fitted values and their
     covariance to OUTPUT, with a comment line saying what it was identified from.
@@ -150,6 +163,7 @@ def identify(
     fix = _parse_fix(kind, fix_items)
     check_figure_suffix(plot_path, "--plot")
     _check_sources(kind, data, session_path, port, calibration_paths, max_pressure_kpa, seconds)
+    turned = _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, plot_path)
     sweep_path = None if port is None else output.with_name(output.stem + "-sweep")
     source = next(s for s in (data, session_path, sweep_path) if s is not None)
 
@@ -175,7 +189,9 @@ def identify(
         if port is not None:
             _sweep(port, config, calibration_paths, max_pressure_kpa, seconds, sweep_path, output, overwrite)
         try:
-            if kind == "free-bending" and data is None:
+            if turned_path is not None:
+                fit = _gravity_sessions(inputs, config, turned_path, turned)
+            elif kind == "free-bending" and data is None:
                 fit = _free_bending_session(inputs, config, fix)
             elif kind == "free-bending":
                 pressure, angle = read_free_bending_csv(data)
@@ -211,7 +227,7 @@ def identify(
         targets.append(outputs.recording(sweep_path, overwrite=overwrite))
     if plot_path is not None:
         targets.append(outputs.file(plot_path, overwrite=overwrite, suffixes=outputs.FIGURE))
-    inputs = [data, session_path, *(p for _, p in calibration_paths), config_path]
+    inputs = [data, session_path, turned_path, *(p for _, p in calibration_paths), config_path]
     return step_io(step, outputs=targets, inputs=inputs)
 
 
@@ -237,6 +253,32 @@ def _check_sources(kind, data, session_path, port, calibration_paths, max_pressu
     if data is not None and calibration_paths:
         raise click.BadParameter("only with --session or --port (DATA.csv holds measured angles or shapes already)",
                                  param_hint="--calibration")
+
+
+def _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, plot_path):
+    """--turned-session's company, named when wrong; the turned mount's gravity (None: the config's, reversed)."""
+    if turned_path is None:
+        if turned_gravity is not None:
+            raise click.BadParameter("only with --turned-session", param_hint="--turned-gravity")
+        return None
+    for wrong, flag, why in ((kind != "stiffness", "--turned-session", "identifies stiffness (identify stiffness)"),
+                             (session_path is None, "--turned-session", "needs --session (the sweep in the config's "
+                                                                        "mount)"),
+                             (finger is not None, "--finger", "not with --turned-session (one actuator's sweeps)"),
+                             (bool(fix), "--fix", "not with --turned-session (it updates the config's prior)"),
+                             (plot_path is not None, "--plot", "not with --turned-session")):
+        if wrong:
+            raise click.BadParameter(why, param_hint=flag)
+    return turned_gravity
+
+
+def _gravity_sessions(inputs, config, turned_path, turned):
+    """EI(P) and the free bending from free sweeps in two mounts (:mod:`bendsense.identify_gravity`)."""
+    from bendsense.identify_gravity import identify_gravity
+    from bendsense.session import read_session
+
+    session, calibration = inputs()
+    return identify_gravity([session, read_session(turned_path)], config, calibration, turned=turned)
 
 
 #: the sweep's default length, up and down [s]
