@@ -217,3 +217,31 @@ def test_model_rejects_bad_input(paper_model):
         paper_model.signal(np.zeros(15))
     with pytest.raises(ConfigError, match="pitch_m: must be > 0"):
         CoilArrayModel.build(n_receivers=2, pitch_m=0.0, gap_m=1e-3, receiver_coil=CoilGeometry.flat_spiral())
+
+
+def test_the_coil_spline_kept_between_processes_is_the_one_computed(tmp_path, monkeypatch):
+    import bendsense.sim.coils as coils
+
+    sensor = load_config().sensor
+    monkeypatch.setattr(coils, "CACHE_DIR", tmp_path / "cache")
+    coils._coil_spline.cache_clear()
+    computed = CoilArrayModel.from_config(sensor)  # computes, writes the file
+    (written,) = (tmp_path / "cache").glob("coils-*.npy")
+    coils._coil_spline.cache_clear()
+    monkeypatch.setattr(coils, "coil_mutual_inductance", lambda *a, **k: pytest.fail("computed again"))
+    read = CoilArrayModel.from_config(sensor)  # as a second process would: from the file
+    rho = np.linspace(0.0, 0.1, 57)
+    assert np.array_equal(read.coil_mutual_inductance(rho), computed.coil_mutual_inductance(rho))
+    # a file cut short (a full disk, a kill) or a cache that cannot be written: computed, no error
+    monkeypatch.undo()
+    monkeypatch.setattr(coils, "CACHE_DIR", tmp_path / "cache")
+    written.write_bytes(written.read_bytes()[:100])
+    coils._coil_spline.cache_clear()
+    assert np.array_equal(CoilArrayModel.from_config(sensor).coil_mutual_inductance(rho),
+                          computed.coil_mutual_inductance(rho))
+    (tmp_path / "blocked").write_text("a file where the cache directory would be")
+    monkeypatch.setattr(coils, "CACHE_DIR", tmp_path / "blocked")
+    coils._coil_spline.cache_clear()
+    assert np.array_equal(CoilArrayModel.from_config(sensor).coil_mutual_inductance(rho),
+                          computed.coil_mutual_inductance(rho))
+    coils._coil_spline.cache_clear()

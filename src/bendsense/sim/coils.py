@@ -34,9 +34,14 @@ for which the trapezoidal rule converges exponentially.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import hashlib
 import math
+import os
+import tempfile
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.constants import mu_0
@@ -310,8 +315,43 @@ def _coil_spline(coil_a: CoilGeometry, coil_b: CoilGeometry, gap_m: float, rho_m
     if rho_max_m > near:
         n_far = int(math.ceil(math.log(rho_max_m / near) / 0.025))
         knots = np.concatenate([knots, np.geomspace(near, rho_max_m, n_far + 1)[1:]])
-    values = coil_mutual_inductance(coil_a, coil_b, gap_m, knots, n_quad=n_quad)
+    values = _stored(("coil_spline", coil_a.radii_m, coil_a.z_m, coil_b.radii_m, coil_b.z_m, gap_m, knots, n_quad),
+                     lambda: coil_mutual_inductance(coil_a, coil_b, gap_m, knots, n_quad=n_quad))
     return CubicSpline(knots, values, bc_type=((1, 0.0), "not-a-knot"))
+
+
+#: where computed coil tables are kept between processes (beside numba's cache of the compiled kernels)
+CACHE_DIR = Path(__file__).resolve().parent / "__pycache__"
+
+
+def _stored(key: tuple, compute) -> np.ndarray:
+    """``compute()``, kept in :data:`CACHE_DIR` under a hash of ``key`` (its arrays' bytes included).
+
+    A simulated sensor's coil spline takes ~1 s to compute and every ``simulate``,
+    ``sim-device`` and ``demo`` process needs it: the first one writes it (atomically, by
+    a rename), the others read it. A file that cannot be read or written (a read-only
+    install, a full disk) is no error: the values are computed as without a cache.
+    """
+    digest = hashlib.sha256(Path(__file__).read_bytes())  # any change of this module's code: computed anew
+    for part in key:
+        digest.update(np.ascontiguousarray(part).tobytes() if isinstance(part, np.ndarray | tuple | list)
+                      else repr(part).encode())
+        digest.update(b"|")
+    path = CACHE_DIR / f"coils-{digest.hexdigest()[:24]}.npy"
+    with contextlib.suppress(OSError, ValueError, EOFError):
+        return np.load(path, allow_pickle=False)
+    values = np.asarray(compute(), dtype=float)
+    with contextlib.suppress(OSError):
+        CACHE_DIR.mkdir(exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=CACHE_DIR, prefix=".coils-", suffix=".npy")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.save(fh, values, allow_pickle=False)
+            os.replace(tmp, path)
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+    return values
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -370,7 +410,7 @@ class CoilArrayModel:
         n_samples: int = 4001,
         n_quad: int | None = None,
     ) -> CoilArrayModel:
-        """Precompute the model (cached per geometry; about a second the first time).
+        """Precompute the model (its coil spline cached per geometry, on disk too: about a second the first time).
 
         Parameters
         ----------
