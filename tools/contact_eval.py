@@ -296,18 +296,24 @@ def main(argv=None):
     ap.add_argument("--holds", type=int, default=None, help="holds per sensor (600 frames each; half contact)")
     ap.add_argument("--prior", action="store_true", help="keep the shipped parameter prior (not identified)")
     ap.add_argument("--no-cache", action="store_true", help="solve every forward problem again")
+    ap.add_argument("--noise-counts", type=float, default=NOISE_COUNTS,
+                    help=f"the hidden sensors' noise [counts] (default {NOISE_COUNTS}: ~0.6 mrad per coil; "
+                         "8: ~3.2 mrad, the simulated board's; 16.5: ~6.6 mrad)")
     args = ap.parse_args(argv)
     n_seeds = args.seeds or (16 if args.quick else 32)
     n_holds = args.holds or 8
     config = bendsense.load_config()
     start = time.perf_counter()
-    scores, _ = run(config, range(n_seeds), n_holds, prior=args.prior, use_cache=not args.no_cache)
+    scores, _ = run(config, range(n_seeds), n_holds, prior=args.prior, use_cache=not args.no_cache,
+                    noise_counts=args.noise_counts)
     wt = window_time(config)
     print(f"# contact along the finger: {n_seeds} sensors × {n_holds} holds × 600 frames at 2 kHz, "
-          f"{NOISE_COUNTS} counts, {WINDOW_S * 1e3:g} ms windows, {'shipped prior' if args.prior else 'no prior'}; "
+          f"{args.noise_counts:g} counts, {WINDOW_S * 1e3:g} ms windows, "
+          f"{'shipped prior' if args.prior else 'no prior'}; "
           f"{scores['contact_windows']} contact windows, {scores['tip_windows']} tip windows\n")
     print(table(scores, wt))
-    hard, _ = run(config, range(n_seeds), n_holds, prior=args.prior, use_cache=not args.no_cache, **HARD)
+    hard, _ = run(config, range(n_seeds), n_holds, prior=args.prior, use_cache=not args.no_cache,
+                  noise_counts=args.noise_counts, **HARD)
     print(f"\n## Beyond the targets: {hard['contact_windows']} windows of contacts nearer the base and lighter\n")
     print(hard_table(hard))
     print(f"\n{time.perf_counter() - start:.0f} s")

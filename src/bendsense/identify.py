@@ -379,7 +379,7 @@ def fit_free_bending(
         With ``prior`` and ``stiffness_response``: fit the stiffness too, the angles
         moving by ``stiffness_response @ (b − b₀)`` from the config's ``b₀``; the data
         must see it from more than one side (free frames in two mounts,
-        :func:`bendsense.identify_session.identify_gravity`).
+        :func:`bendsense.identify_gravity.identify_gravity`).
 
     Returns
     -------

@@ -164,12 +164,9 @@ def identify_gravity(sessions, config, calibration, *, turned=None, max_rounds: 
     current, rounds, fit = config, 0, None
     while rounds < max_rounds:
         rounds += 1
-        angle, weights, slope, pressure, kappa = [], [], [], [], []
-        for direction, shape, p in data:
-            a, w, s = free_bending_angles(shape, p, _mounted(current, direction))[:3]
-            angle.append(a), weights.append(w), slope.append(s), pressure.append(p)
-            kappa.append(np.asarray(shape.curvature_per_m))
-        a, w, s, p, kappa = map(np.concatenate, (angle, weights, slope, pressure, kappa))
+        parts = [(*free_bending_angles(shape, p, _mounted(current, direction))[:3], p, shape.curvature_per_m)
+                 for direction, shape, p in data]
+        a, w, s, p, kappa = (np.concatenate(x) for x in zip(*parts, strict=True))
         ok = np.isfinite(a) & np.isfinite(s)
         a, w, s, p, kappa = a[ok], w[ok], s[ok], p[ok], kappa[ok]
         # the angle taken out with EI b_lin is the true θ0 − g (b − b_lin): the data, moved to the prior's b0
