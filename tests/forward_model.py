@@ -351,3 +351,16 @@ class HiddenSensor:
         manifest = directory / "manifest.yaml"
         manifest.write_text(yaml.safe_dump({"flat": "flat.csv", "strips": strips}), encoding="utf-8")
         return manifest
+
+
+def free_sweep(config, n, *, nodes=13, p_max=110e3, **truth):
+    """A free sweep 0 → ``p_max`` → 0 over ``n`` frames: pressures [Pa] and true coil angles [rad] (n, N).
+
+    :func:`forward` at ``nodes`` Chebyshev–Lobatto pressures, interpolated in P (barycentric); ``truth``:
+    :func:`forward`'s options of the true actuator (``k0_scale``, ``stiffness``, ...)."""
+    from scipy.interpolate import BarycentricInterpolator
+
+    x = 0.5 * (1 - np.cos(np.pi * np.arange(nodes) / (nodes - 1))) * p_max
+    angles = np.array([forward(config, p, (0.0, 0.0), **truth).angles_rad for p in x])
+    p = 0.5 * p_max * (1 - np.cos(2 * np.pi * np.arange(n) / n))
+    return p, BarycentricInterpolator(x, angles)(p)

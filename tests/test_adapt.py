@@ -19,8 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from forward_model import HiddenSensor, forward, free_bending_k0
-from scipy.interpolate import BarycentricInterpolator
+from forward_model import HiddenSensor, free_bending_k0, free_sweep
 
 import bendsense
 from bendsense.actuator import model_jacobian
@@ -55,18 +54,10 @@ def _prior(ei_sd):
 PRIOR = _prior(0.20)
 
 
-def _sweep(n=1000, nodes=13, p_max=110e3):
-    """A free sweep 0 → p_max → 0 over ``n`` frames: pressures and true coil angles (interpolated in P)."""
-    x = 0.5 * (1 - np.cos(np.pi * np.arange(nodes) / (nodes - 1))) * p_max
-    angles = np.array([forward(CFG, p, (0.0, 0.0), **TRUTH).angles_rad for p in x])
-    p = 0.5 * p_max * (1 - np.cos(2 * np.pi * np.arange(n) / n))
-    return p, BarycentricInterpolator(x, angles)(p)
-
-
 @pytest.fixture(scope="module")
 def session():
     """The true series: a free sweep, then two holds (their pressures and loads as tools/model_error draws them)."""
-    p_sw, a_sw = _sweep()
+    p_sw, a_sw = free_sweep(CFG, 1000, **TRUTH)
     holds = me.series(CFG, me.Case("truth", TRUTH), 0, 2, use_cache=False)
     keep = np.arange(len(holds.pressure_pa)) % 2 == 0  # every other frame of the holds: 1 kHz
     p = np.concatenate([p_sw, holds.pressure_pa[keep]])

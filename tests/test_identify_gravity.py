@@ -15,8 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from forward_model import HiddenSensor, forward, free_bending_k0
-from scipy.interpolate import BarycentricInterpolator
+from forward_model import HiddenSensor, free_bending_k0, free_sweep
 
 import bendsense
 from bendsense.errors import ArgumentError
@@ -34,14 +33,6 @@ def _mounted(direction):
     return CFG.replace(gravity=dataclasses.replace(CFG.gravity, direction=direction))
 
 
-def _sweep(config, truth, n=600, nodes=13, p_max=110e3):
-    """A free sweep 0 → p_max → 0: pressures and true coil angles (the forward model at nodes, interpolated in P)."""
-    x = 0.5 * (1 - np.cos(np.pi * np.arange(nodes) / (nodes - 1))) * p_max
-    angles = np.array([forward(config, p, (0.0, 0.0), **truth).angles_rad for p in x])
-    p = 0.5 * p_max * (1 - np.cos(2 * np.pi * np.arange(n) / n))
-    return p, BarycentricInterpolator(x, angles)(p)
-
-
 @pytest.fixture(scope="module")
 def identified():
     """Each case of CASES: (result, K0 scale, true stiffness, the two sessions, the calibration)."""
@@ -57,7 +48,7 @@ def _identify(k0_scale, ei_scale, seed, noise):
     rng = np.random.default_rng(seed)
     sessions = []
     for config in (CFG, _mounted(HANGING)):
-        p, angles = _sweep(config, truth)
+        p, angles = free_sweep(config, 600, **truth)
         sessions.append(Session(np.arange(p.size) / 500.0, sensor.signals(CFG.sensor.strip_gap_m * angles, rng), p))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -170,6 +170,18 @@ def object_board(tmp_path_factory):
         proc.stderr.close()
 
 
+def _held(truth, output):
+    """The board's true force over the last 0.3 s the line was driven [N], and what the loop claimed (N = x ± s mN)."""
+    time.sleep(0.1)
+    with open(truth, encoding="utf-8") as fh:
+        rows = [r for r in csv.DictReader(x for x in fh if not x.startswith("#")) if None not in r.values()]
+    t = np.array([float(r["t_us"]) for r in rows]) * 1e-6
+    force = np.hypot([float(r["fx_n"]) for r in rows], [float(r["fy_n"]) for r in rows])
+    driven = np.flatnonzero(np.array([float(r["setpoint_pa"]) for r in rows]) > 0)[-1]
+    claimed, sigma = (float(x) for x in re.search(r"N = ([\d.]+) ± ([\d.]+) mN", output).groups())
+    return force[(t > t[driven] - 0.3) & (t <= t[driven])].mean(), claimed, sigma
+
+
 @pytest.mark.realtime
 def test_control_adapt_on_a_finger_that_is_not_the_configs(object_board, calibration_path, tmp_path):
     port, truth = object_board
@@ -181,15 +193,7 @@ def test_control_adapt_on_a_finger_that_is_not_the_configs(object_board, calibra
     line = next(x for x in res.output.splitlines() if x.startswith("adapt: "))
     if "update(s)" in line:  # what it learned went into the loop and into the session's config.yaml
         assert "adapt" in bendsense.load_config(out / "config.yaml").parameter_covariance.source
-    # the board's truth over the last 0.3 s the line was driven, against what the loop claimed (N = x ± s mN)
-    time.sleep(0.1)
-    with open(truth, encoding="utf-8") as fh:
-        rows = [r for r in csv.DictReader(x for x in fh if not x.startswith("#")) if None not in r.values()]
-    t = np.array([float(r["t_us"]) for r in rows]) * 1e-6
-    force = np.hypot([float(r["fx_n"]) for r in rows], [float(r["fy_n"]) for r in rows])
-    driven = np.flatnonzero(np.array([float(r["setpoint_pa"]) for r in rows]) > 0)[-1]
-    true = force[(t > t[driven] - 0.3) & (t <= t[driven])].mean()
-    claimed, sigma = (float(x) for x in re.search(r"N = ([\d.]+) ± ([\d.]+) mN", res.output).groups())
+    true, claimed, sigma = _held(truth, res.output)
     print(f"control --adapt, K0 +5 %, EI +15 %: true force {true * 1e3:.1f} mN for the 150 mN target, claimed "
           f"{claimed:.1f} ± {sigma:.1f} mN; {line}")
     assert true > 0.1  # it pressed the object
@@ -225,14 +229,7 @@ def test_control_adapt_after_two_mounts_holds_the_target_within_10_mn(object_boa
                                     "--contact-s-m", "0.10", "--seconds", "1.5", "-o", str(tmp_path / "grasp"),
                                     "--adapt"])
     assert res.exit_code == 0, res.output
-    time.sleep(0.1)
-    with open(truth, encoding="utf-8") as fh:
-        rows = [r for r in csv.DictReader(x for x in fh if not x.startswith("#")) if None not in r.values()]
-    t = np.array([float(r["t_us"]) for r in rows]) * 1e-6
-    force = np.hypot([float(r["fx_n"]) for r in rows], [float(r["fy_n"]) for r in rows])
-    driven = np.flatnonzero(np.array([float(r["setpoint_pa"]) for r in rows]) > 0)[-1]
-    true = force[(t > t[driven] - 0.3) & (t <= t[driven])].mean()
-    claimed, sigma = (float(x) for x in re.search(r"N = ([\d.]+) ± ([\d.]+) mN", res.output).groups())
+    true, claimed, sigma = _held(truth, res.output)
     assert abs(true * 1e3 - 150.0) <= 10.0, (true, res.output)
     assert abs(true * 1e3 - claimed) <= 3 * sigma and sigma < 10.0, (true, claimed, sigma)
 
