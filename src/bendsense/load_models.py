@@ -9,12 +9,10 @@ contact located once per quasi-static window and a force per frame
 
 from __future__ import annotations
 
+from bendsense.choices import LOADS  # the load models of ``estimate --load``, declared once
 from bendsense.errors import ArgumentError
 
 __all__ = ["LOADS", "check_contact_s_m", "estimate_load"]
-
-#: the load models of ``estimate --load`` (:func:`bendsense.estimate_force`'s ``load``)
-LOADS = ("tip", "contact")
 
 
 def check_contact_s_m(value, config, name: str = "contact_s_m") -> float:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, METHODS, OBJECTIVES  # noqa: F401 (the CLI's choices)
+from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, LOADS, METHODS, OBJECTIVES  # noqa: F401 (the CLI's choices)
 
 __all__ = [
     "ANGLE_SOURCES",
@@ -304,7 +304,7 @@ window_option = click.option(
          "p < 0.001 flags its frames model_misfit), and of an unknown contact location (--load contact without "
          "--contact-s-m: one s_c per window); default 0.05.")
 load_option = click.option(
-    "--load", type=click.Choice(("tip", "contact")), default="tip", show_default=True,
+    "--load", type=click.Choice(LOADS), default="tip", show_default=True,
     help="Load model: a force at the tip, or one point force at arc length s_c along the actuator (contact).")
 contact_option = click.option(
     "--contact-s-m", type=Finite(min=0, min_open=True), default=None,
