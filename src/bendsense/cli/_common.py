@@ -303,6 +303,8 @@ window_option = click.option(
     help="Window of the model check over frames [s] (a mean residual per window tested against its covariance; "
          "p < 0.001 flags its frames model_misfit), and of an unknown contact location (--load contact without "
          "--contact-s-m: one s_c per window); default 0.05.")
+constraint_option = click.option("--constraint", type=click.Choice(CONSTRAINTS),
+                                 help="Force constraint (default: from the config).")
 load_option = click.option(
     "--load", type=click.Choice(LOADS), default="tip", show_default=True,
     help="Load model: a force at the tip, or one point force at arc length s_c along the actuator (contact).")

@@ -16,7 +16,6 @@ import click
 from bendsense import output
 from bendsense.choices import TRACK_MODES
 from bendsense.cli._common import (
-    CONSTRAINTS,
     METHODS,
     InterspersedCommand,
     PressureKpa,
@@ -24,6 +23,7 @@ from bendsense.cli._common import (
     check_figure_suffix,
     check_load,
     config_option,
+    constraint_option,
     contact_option,
     load_option,
     log_no_parameter_covariance,
@@ -68,7 +68,7 @@ def _dask_executor(address: str):
 @click.option("--workers", type=click.IntRange(0), help="Local worker processes (default: one per CPU; 0: no pool).")
 @click.option("--scheduler", metavar="tcp://HOST:PORT",
               help="Run on a Dask distributed scheduler instead (needs bendsense[distributed]).")
-@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@constraint_option
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
 @objective_option
 @click.option("--pressure-kpa", type=PressureKpa(), help="Constant pressure for frames without a reading [kPa].")

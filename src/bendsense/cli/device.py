@@ -15,12 +15,12 @@ import click
 from bendsense import output as outputs
 from bendsense.cli import _signals
 from bendsense.cli._common import (
-    CONSTRAINTS,
     SEED,
     ContactLocation,
     Finite,
     InterspersedCommand,
     PressureKpa,
+    constraint_option,
     contact_locations,
     live_bandwidth_option,
     live_contact,
@@ -320,7 +320,7 @@ def _sigterm_as_interrupt():
 @make_config_option("Config YAML to snapshot into meta.yaml (and to estimate with).")
 @make_calibration_option("Calibration YAML (needed by --estimate and --lsl).")
 @click.option("--estimate", is_flag=True, help="Shape and force of every frame as it arrives, to SESSION/results.csv.")
-@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@constraint_option
 @objective_option
 @click.option("--pressure-kpa", type=PressureKpa(), help="Pressure for frames without a pressure reading [kPa].")
 @live_bandwidth_option

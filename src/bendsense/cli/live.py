@@ -9,13 +9,13 @@ import click
 
 from bendsense.cli import _signals
 from bendsense.cli._common import (
-    CONSTRAINTS,
     SEED,
     Finite,
     InterspersedCommand,
     PressureKpa,
     check_figure_suffix,
     config_option,
+    constraint_option,
     live_bandwidth_option,
     live_contact_option,
     load_option,
@@ -38,7 +38,7 @@ _NO_CALIBRATION = (
 @click.argument("port")
 @config_option
 @make_calibration_option("Calibration YAML written by 'bendsense calibrate' (required).")
-@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@constraint_option
 @objective_option
 @click.option(
     "--save",

@@ -18,7 +18,6 @@ from bendsense import output
 from bendsense.cli import _signals
 from bendsense.cli._common import (
     ANGLE_SOURCES,
-    CONSTRAINTS,
     METHODS,
     Finite,
     InterspersedCommand,
@@ -26,6 +25,7 @@ from bendsense.cli._common import (
     bandwidth_option,
     chain_contact_option,
     config_option,
+    constraint_option,
     contact_locations,
     data_warnings_logged,
     finger_contact,
@@ -275,7 +275,7 @@ def adapt():
 
 
 @click.command("estimate", cls=InterspersedCommand)
-@click.option("--constraint", type=click.Choice(CONSTRAINTS), help="Force constraint (default: from the config).")
+@constraint_option
 @click.option("--method", type=click.Choice(METHODS), help="Estimator (default: from the config).")
 @objective_option
 @click.option("--push-only", is_flag=True, default=None, help="Contact forces only push (u >= 0).")
