@@ -14,8 +14,9 @@ import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 
-# one job per family of kernels: a batch above bendsense._jit.PARALLEL_MIN frames (the prange kernels) with the
-# tracker and its window check, then a contact load; a gripper's per-finger kernels are the single finger's
+# three jobs, each a family of kernels: a batch above bendsense._jit.PARALLEL_MIN frames (the prange kernels) with
+# the tracker and its window check; contact loads, known and not; the paper's baseline, the positions objective,
+# adapt and the live tracker (a gripper's per-finger kernels are the single finger's)
 SETUP = """
 import numpy as np
 from bendsense.calibration import Calibration
