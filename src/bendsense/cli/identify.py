@@ -163,7 +163,7 @@ def identify(
     fix = _parse_fix(kind, fix_items)
     check_figure_suffix(plot_path, "--plot")
     _check_sources(kind, data, session_path, port, calibration_paths, max_pressure_kpa, seconds)
-    turned = _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, plot_path)
+    _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, plot_path)
     sweep_path = None if port is None else output.with_name(output.stem + "-sweep")
     source = next(s for s in (data, session_path, sweep_path) if s is not None)
 
@@ -190,7 +190,7 @@ def identify(
             _sweep(port, config, calibration_paths, max_pressure_kpa, seconds, sweep_path, output, overwrite)
         try:
             if turned_path is not None:
-                fit = _gravity_sessions(inputs, config, turned_path, turned)
+                fit = _gravity_sessions(inputs, config, turned_path, turned_gravity)
             elif kind == "free-bending" and data is None:
                 fit = _free_bending_session(inputs, config, fix)
             elif kind == "free-bending":
@@ -255,12 +255,12 @@ def _check_sources(kind, data, session_path, port, calibration_paths, max_pressu
                                  param_hint="--calibration")
 
 
-def _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, plot_path):
-    """--turned-session's company, named when wrong; the turned mount's gravity (None: the config's, reversed)."""
+def _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, plot_path) -> None:
+    """--turned-session and --turned-gravity with their company, named when wrong."""
     if turned_path is None:
         if turned_gravity is not None:
             raise click.BadParameter("only with --turned-session", param_hint="--turned-gravity")
-        return None
+        return
     for wrong, flag, why in ((kind != "stiffness", "--turned-session", "identifies stiffness (identify stiffness)"),
                              (session_path is None, "--turned-session", "needs --session (the sweep in the config's "
                                                                         "mount)"),
@@ -269,7 +269,6 @@ def _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, 
                              (plot_path is not None, "--plot", "not with --turned-session")):
         if wrong:
             raise click.BadParameter(why, param_hint=flag)
-    return turned_gravity
 
 
 def _gravity_sessions(inputs, config, turned_path, turned):

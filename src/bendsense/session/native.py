@@ -486,16 +486,26 @@ class SessionWriter:
         """Stop writing after the file system refused ``err``: keep every whole record, free the reserve."""
         from bendsense import output
 
-        size = self.dtype.itemsize
         with contextlib.suppress(OSError):
-            end = os.fstat(self._fd).st_size
-            os.ftruncate(self._fd, end - end % size)  # a torn last record is removed, no whole one
-            self.n_records = (end - end % size) // size
+            self._count_whole_records()
             os.fsync(self._fd)
         self._release_reserve()
         self.failed = output.write_error(
             self.path / FRAMES, err, f"recording stopped; {self.n_records:,} frames kept (the session is readable)")
         return self.failed
+
+    def _count_whole_records(self) -> None:
+        """Set ``n_records`` from what ``frames.bin`` holds, a torn last record cut off (no whole one).
+
+        The file, not the running count, is the truth: a full disk stops a write part way, and a
+        signal handler that raised between a write and its count (Ctrl-C of the writing thread)
+        leaves whole records uncounted.
+        """
+        size = self.dtype.itemsize
+        end = os.fstat(self._fd).st_size
+        if end % size:
+            os.ftruncate(self._fd, end - end % size)
+        self.n_records = end // size
 
     def set_lines(self, n_lines: int) -> None:
         """Record ``n_lines`` pressure lines: the record dtype and ``meta.yaml`` change; only before the first record.
@@ -617,12 +627,7 @@ class SessionWriter:
         with self._lock:
             self.closed = True
             with contextlib.suppress(OSError):
-                # the file, not the count, is the truth: a signal handler that raised between a write and
-                # its count (a Ctrl-C of the thread writing) leaves whole records uncounted, or a torn one
-                end = os.fstat(self._fd).st_size
-                if end % self.dtype.itemsize:
-                    os.ftruncate(self._fd, end - end % self.dtype.itemsize)
-                self.n_records = end // self.dtype.itemsize
+                self._count_whole_records()
             os.close(self._fd)
             try:
                 self._events.close()
