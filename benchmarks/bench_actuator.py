@@ -10,8 +10,8 @@ import time
 import numpy as np
 
 import bendsense
-from bendsense import actuator
-from bendsense.actuator import FreeBendingModel
+from bendsense.mechanics import actuator
+from bendsense.mechanics.actuator import FreeBendingModel
 
 
 def best_time(fn, repeat=7, number=None):

@@ -73,7 +73,7 @@ def _warm():
     """Import what a batch task needs (run once per worker before the clock starts)."""
     import bendsense.batch  # noqa: F401
     import bendsense.estimation  # noqa: F401
-    import bendsense.pcc  # noqa: F401
+    import bendsense.shape.pcc  # noqa: F401
     import bendsense.results  # noqa: F401
 
     return os.getpid()
@@ -106,7 +106,7 @@ def run(label, root, out, calibration, config, **kwargs):
 def estimate_task(signals, pressure_pa, calibration, config, constraint):
     """Reconstruct and estimate one session's frames; returns (frames, estimate CPU [s], wall [s], failed)."""
     from bendsense.estimation import estimate_force
-    from bendsense.pcc import reconstruct
+    from bendsense.shape.pcc import reconstruct
 
     shape = reconstruct(signals, calibration, config.sensor)
     with warnings.catch_warnings():

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
 
-from bendsense.beam import DEFAULT_NODES, BeamConvergenceWarning, solve, solve_beam
+from bendsense.mechanics.beam import DEFAULT_NODES, BeamConvergenceWarning, solve, solve_beam
 
 L = 0.134
 W = 0.03927 * 9.81 / L

@@ -39,9 +39,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import bendsense  # noqa: E402
-from bendsense.beam import solve_beam  # noqa: E402
+from bendsense.mechanics.beam import solve_beam  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
-from bendsense.pcc import shifts_to_curvatures  # noqa: E402
+from bendsense.shape.pcc import shifts_to_curvatures  # noqa: E402
 from bendsense.sim.actuator import SimulatedActuator  # noqa: E402
 from bendsense.sim.sensor import shifts_from_shape  # noqa: E402
 

@@ -142,7 +142,7 @@ def processor(cal, k):
     if k == 1:
         proc = LiveProcessor(cal, load_config(), contact_s_m=S_C[0], **options)
     else:
-        from bendsense.gripper_live import GripperProcessor
+        from bendsense.pipeline.gripper import GripperProcessor
 
         gripper = gripper_config(k)
         proc = GripperProcessor(cal, gripper, **options,

@@ -18,7 +18,7 @@ import tty
 import numpy as np
 
 from bendsense.device import Driver, SimulatedDevice, ramp_source
-from bendsense.frames import Decoder, LineDecoder, encode_sample
+from bendsense.wire.frames import Decoder, LineDecoder, encode_sample
 
 N_CH = 16
 N_FRAMES = 50_000

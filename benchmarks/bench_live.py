@@ -20,7 +20,7 @@ The gripper rows (issue 24): three fingers of the simulated gripper
 board at 1 kHz, estimated with a known contact location (``--load contact
 --contact-s-m 0.1``, constraint ``normal``) and tracked:
 
-- the model alone (:class:`bendsense.gripper_live.GripperProcessor`, a processor per
+- the model alone (:class:`bendsense.pipeline.gripper.GripperProcessor`, a processor per
   finger): wall time per board frame (three fingers) in blocks of 10 board frames (what
   arrives in 10 ms), and how many times real time that is at 1 kHz;
 - ``live`` with a panel per finger (headless), the board in another process: frames
@@ -39,7 +39,7 @@ The block rows (issue 24, the control loop's cost): a warm processor as
 ``bendsense control`` runs it (contact at s_c = 0.1 m, constraint ``normal``, tracked at
 30 Hz, windowed model check) given the board's readings in blocks of 1, 2, 5 and 10
 frames (``process_readings``: what the loop calls per block), one finger
-(:class:`LiveProcessor`) and three (:class:`~bendsense.gripper_live.GripperProcessor`),
+(:class:`LiveProcessor`) and three (:class:`~bendsense.pipeline.gripper.GripperProcessor`),
 the fingers closing on the object: median wall time per block and per frame. The
 readings are made ahead; the cold process (compilation, cache load) is excluded.
 
@@ -119,7 +119,7 @@ def end_to_end(cal, rate_hz, seconds, where, constraint="normal"):
 
 
 def gripper_processor(cal, gripper):
-    from bendsense.gripper_live import GripperProcessor
+    from bendsense.pipeline.gripper import GripperProcessor
 
     proc = GripperProcessor(cal, gripper, constraint="normal", load="contact", contact_s_m=CONTACT_S_M)
     proc.warm_up()
@@ -225,7 +225,7 @@ def board_readings(k, n):
     """``n`` driver readings of the simulated board of ``k`` fingers closing on the object (1: the single actuator)."""
     from bendsense import load_config
     from bendsense.device.driver import Reading
-    from bendsense.frames import Sample
+    from bendsense.wire.frames import Sample
     from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
 
     config = load_config() if k == 1 else gripper_config(k)
@@ -244,7 +244,7 @@ def board_readings(k, n):
 def block_rows(cal, sizes=(1, 2, 5, 10), frames=1200, repeats=3):
     """Median wall time of ``process_readings`` per block of each size, one finger and three; prints the rows."""
     from bendsense import load_config
-    from bendsense.gripper_live import GripperProcessor
+    from bendsense.pipeline.gripper import GripperProcessor
     from bendsense.sim.gripper import gripper_config
 
     options = {"load": "contact", "contact_s_m": CONTACT_S_M, "constraint": "normal", "bandwidth_hz": 30.0}

@@ -87,7 +87,7 @@ def noise_ratio(me, config, seeds, holds):
     """RMS of (tracked − noise-free estimate) over RMS of (per frame − noise-free estimate), correct data."""
     import bendsense
     from bendsense.estimation import estimate_force
-    from bendsense.pcc import reconstruct
+    from bendsense.shape.pcc import reconstruct
 
     num = den = 0.0
     for seed in seeds:
@@ -115,7 +115,7 @@ def fine_calibration_ratio(me, config, seeds, holds):
     import bendsense
     from bendsense.calibration import Calibration
     from bendsense.estimation import estimate_force
-    from bendsense.pcc import reconstruct
+    from bendsense.shape.pcc import reconstruct
 
     err_f = err_t = 0.0
     inside = []

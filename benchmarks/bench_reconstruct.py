@@ -16,7 +16,7 @@ import numpy as np
 
 from bendsense import load_config
 from bendsense.calibration import Calibration
-from bendsense.pcc import forward_kinematics, reconstruct, shifts_to_curvatures, tip_pose
+from bendsense.shape.pcc import forward_kinematics, reconstruct, shifts_to_curvatures, tip_pose
 
 
 def synthetic_calibration(sensor):

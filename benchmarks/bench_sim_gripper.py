@@ -22,7 +22,7 @@ RATE_HZ = 1000.0
 
 
 def _per_frame(k: int, n: int) -> tuple:
-    from bendsense.frames import encode_sample
+    from bendsense.wire.frames import encode_sample
     from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
 
     t0 = time.perf_counter()

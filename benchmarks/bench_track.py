@@ -40,9 +40,9 @@ import numpy as np  # noqa: E402
 from bench_cold import CFG, MODEL, SENSOR, L, calibration  # noqa: E402
 
 from bendsense import Tracker, check_windows, track  # noqa: E402
-from bendsense.beam import solve_beam  # noqa: E402
+from bendsense.mechanics.beam import solve_beam  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
-from bendsense.pcc import shifts_to_curvatures  # noqa: E402
+from bendsense.shape.pcc import shifts_to_curvatures  # noqa: E402
 from bendsense.sim.sensor import shifts_from_shape  # noqa: E402
 
 RATE_HZ = 2000.0

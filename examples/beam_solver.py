@@ -43,7 +43,7 @@ out.mkdir(parents=True, exist_ok=True)
 
 # %% The actuator at 60 kPa (paper's prototype)
 config = bendsense.load_config()
-from bendsense.actuator import FreeBendingModel  # noqa: E402  (kept next to its use in a cell)
+from bendsense.mechanics.actuator import FreeBendingModel  # noqa: E402  (kept next to its use in a cell)
 
 pressure_pa = 60e3
 length_m = config.actuator.length_m

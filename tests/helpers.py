@@ -36,7 +36,7 @@ def linear_calibration(gain=GAIN, *, offset=None, delta_a=3000.0, noise_std=1.0,
 
 
 def shifts_for(kappa):
-    """Total shifts S_i = d Σ_{j≤i} κ_j l_j [m] (paper eq. 3–4), independent of bendsense.pcc."""
+    """Total shifts S_i = d Σ_{j≤i} κ_j l_j [m] (paper eq. 3–4), independent of bendsense.shape.pcc."""
     return SENSOR.strip_gap_m * np.cumsum(np.asarray(kappa) * SENSOR.lengths_m, axis=-1)
 
 
@@ -48,7 +48,7 @@ def signals_for(kappa, calibration, gain=GAIN):
 
 def curvatures_for(shifts):
     """Segment curvatures [1/m] of total shifts [m] on the paper's sensor."""
-    from bendsense.pcc import shifts_to_curvatures
+    from bendsense.shape.pcc import shifts_to_curvatures
 
     return shifts_to_curvatures(shifts, SENSOR.lengths_m, SENSOR.strip_gap_m)
 

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from scipy import integrate
 
 import bendsense
-from bendsense import actuator
-from bendsense.actuator import (
+from bendsense.mechanics import actuator
+from bendsense.mechanics.actuator import (
     FreeBendingModel,
     ei_nm2,
     elastic_moment,

@@ -22,12 +22,12 @@ from click.testing import CliRunner
 from forward_model import HiddenSensor, free_bending_k0, free_sweep
 
 import bendsense
-from bendsense.actuator import model_jacobian
+from bendsense.mechanics.actuator import model_jacobian
 from bendsense.cli import main
 from bendsense.config import ParameterCovarianceConfig, save_config
 from bendsense.errors import ArgumentError
 from bendsense.estimation import estimate_force
-from bendsense.pcc import reconstruct
+from bendsense.shape.pcc import reconstruct
 from bendsense.results import frame_status
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))

@@ -23,7 +23,7 @@ from bendsense import output
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.cli._common import InterspersedCommand, overwrite_option, step_io
-from bendsense.pcc import reconstruct
+from bendsense.shape.pcc import reconstruct
 from bendsense.session import Session, write_session_csv
 
 # --------------------------------------------------------------------------- a constraint
@@ -111,7 +111,7 @@ def test_the_sample_fields_reach_every_layer(tmp_path):
 
     from bendsense import read_session, read_session_csv
     from bendsense.device import Driver, Recorder, SimulatedDevice, ramp_source
-    from bendsense.frames import SAMPLE_FIELDS, Sample
+    from bendsense.wire.frames import SAMPLE_FIELDS, Sample
     from bendsense.session.native import export_session_csv, record_dtype
 
     # the table's fields are the SAMPLE's scalar values (adc and its count apart), and the record's

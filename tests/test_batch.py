@@ -24,7 +24,7 @@ from bendsense.cli import main
 from bendsense.errors import SessionError
 from bendsense.results import read_results
 from bendsense.session import Session, write_session_csv
-from bendsense.sessiondir import SessionWriter
+from bendsense.session.native import SessionWriter
 from bendsense.stop_signals import worker_pool
 
 CONFIG = load_config()
@@ -105,7 +105,7 @@ def check_outputs(out, truth):
         assert list(res["status"]) == ["ok"] * len(kappa)
         if ESTIMATE:
             from bendsense.estimation import estimate_force
-            from bendsense.pcc import Shape
+            from bendsense.shape.pcc import Shape
 
             shape = Shape.from_curvatures(kappa, SENSOR.lengths_m)
             direct = estimate_force(shape, res["pressure_pa"], CONFIG, constraint="none", method="fast")
@@ -372,7 +372,7 @@ def test_processes_or_numba_threads_never_both(sessions, tmp_path):
 
 
 def test_process_reports_lost_frames_and_firmware_drops(tmp_path):
-    from bendsense.sessiondir import SessionWriter
+    from bendsense.session.native import SessionWriter
 
     cal = linear_calibration()
     with SessionWriter(tmp_path / "runs" / "rec", 16, adc_bits=16) as w:

@@ -1,6 +1,6 @@
 """Tests of the curved-beam solver against closed forms and independent methods.
 
-References written here, independent of ``bendsense.beam``: the exact elastica of a
+References written here, independent of ``bendsense.mechanics.beam``: the exact elastica of a
 straight cantilever under a perpendicular tip load (elliptic integrals), linear beam
 theory, the circular arc, the linear buckling load from an eigenvalue (a shooting
 computation on the linearised equation), the moment balance of the returned shape,
@@ -18,7 +18,7 @@ from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
 
-from bendsense.beam import BeamConvergenceWarning, BeamSolution, free_arc, solve, solve_beam
+from bendsense.mechanics.beam import BeamConvergenceWarning, BeamSolution, free_arc, solve, solve_beam
 from bendsense.errors import ConvergenceError
 
 L = 0.134  # paper actuator length [m]
@@ -488,7 +488,7 @@ def test_fast_matches_shooting_property(p, fx, fy, beta):
 
 def test_warm_start_without_continuation():
     """``continuation=False`` reports an unstable warm landing instead of re-solving it."""
-    from bendsense.beam import DEFAULT_NODES
+    from bendsense.mechanics.beam import DEFAULT_NODES
 
     ei = ei_of(0.0)
     fcr = critical_tip_load(ei, W_GRAV)

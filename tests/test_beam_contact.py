@@ -1,6 +1,6 @@
 """The beam with its point force along the body (``solve_beam(..., contact_s_m=)``, issue 23).
 
-References written here or independent of ``bendsense.beam``: scipy's ``solve_bvp`` with
+References written here or independent of ``bendsense.mechanics.beam``: scipy's ``solve_bvp`` with
 the BVP split at s_c (``tests/forward_model.py``), linear beam theory of a cantilever
 loaded at s_c, the free arc beyond the contact without weight, and central finite
 differences of both solvers for ∂/∂s_c.
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bendsense.beam import solve_beam
+from bendsense.mechanics.beam import solve_beam
 from bendsense.errors import ArgumentError
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -16,7 +16,7 @@ from bendsense.calibration import Calibration, cross_validate_degree, polyfit_sh
 from bendsense.cli import calibrate as calibrate_cli
 from bendsense.cli.pipeline import PipelineGroup, run_steps
 from bendsense.errors import ConfigError, SessionError
-from bendsense.pcc import fit_arc_curvature, max_position_error, reconstruct
+from bendsense.shape.pcc import fit_arc_curvature, max_position_error, reconstruct
 from bendsense.session import Session, write_session_csv
 
 DATA = Path(__file__).parent / "data" / "calibration"

@@ -5,8 +5,8 @@ import pytest
 from click.testing import CliRunner
 
 import bendsense
-from bendsense.actuator import FreeBendingModel
-from bendsense.beam import solve_beam
+from bendsense.mechanics.actuator import FreeBendingModel
+from bendsense.mechanics.beam import solve_beam
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.results import read_results

@@ -93,7 +93,7 @@ def test_quiet_chains_print_nothing(tmp_path, monkeypatch, args):
 
 
 def test_the_line_dialect_message_says_what_the_user_knows():
-    from bendsense.frames import LineDecoder
+    from bendsense.wire.frames import LineDecoder
 
     with pytest.raises(FrameError, match=r"^the line dialect needs its column layout: give columns") as info:
         LineDecoder()

@@ -9,7 +9,7 @@ from click.testing import CliRunner
 
 import bendsense
 from bendsense.cli import main
-from bendsense.pcc import fit_arc_curvature
+from bendsense.shape.pcc import fit_arc_curvature
 from bendsense.results import read_results
 from bendsense.session import Session, write_session_csv
 from bendsense.sim.sensor import VirtualSensor, calibration_shifts
@@ -108,7 +108,7 @@ def test_export_round_trip(workdir):
 def test_input_columns_named_like_results_are_kept(tmp_path):
     from types import SimpleNamespace
 
-    from bendsense.pcc import Shape
+    from bendsense.shape.pcc import Shape
     from bendsense.results import write_results
 
     truth = np.array([0.1, 0.2])

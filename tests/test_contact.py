@@ -22,7 +22,7 @@ import bendsense
 from bendsense.config import ParameterCovarianceConfig
 from bendsense.errors import ArgumentError
 from bendsense.estimation.contact import LR_THRESHOLD
-from bendsense.pcc import reconstruct, shifts_to_curvatures
+from bendsense.shape.pcc import reconstruct, shifts_to_curvatures
 from bendsense.results import CONTACT_UNRESOLVED, OK, estimate_status
 
 _TOOL = Path(__file__).resolve().parents[1] / "tools" / "contact_eval.py"

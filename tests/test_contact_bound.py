@@ -14,7 +14,7 @@ import pytest
 from forward_model import forward
 
 from bendsense.config import load_config
-from bendsense.cramer_rao import contact_bound
+from bendsense.estimation.cramer_rao import contact_bound
 from bendsense.errors import ArgumentError
 from bendsense.sim.sensor import VirtualSensor
 

@@ -18,7 +18,7 @@ from click.testing import CliRunner
 import bendsense
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from bendsense.contact_output import arc_on_shape, point_on_shape
+from bendsense.results.contact import arc_on_shape, point_on_shape
 from bendsense.pipeline import process
 from bendsense.results import Results, read_results
 from bendsense.session import Session, write_session_csv
@@ -169,7 +169,7 @@ def test_mcap_has_the_contact_point_of_resolved_frames(work, tmp_path):
 
 
 def _block(processed, est, lo, hi, load):
-    from bendsense.batched import take_frames
+    from bendsense._batched import take_frames
     from bendsense.pipeline import LiveBlock
 
     n = len(processed.session)
@@ -333,7 +333,7 @@ def test_process_checks_the_load_options_before_any_work(work, tmp_path):
 
 
 def test_one_frame_of_a_contact_draws_its_arrow_at_the_contact(work):
-    from bendsense.batched import take_frames
+    from bendsense._batched import take_frames
 
     processed, contact = work["processed"], work["contact"]
     n = len(processed.session)

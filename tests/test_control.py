@@ -23,7 +23,7 @@ from bendsense.control import ControlStop, PIController, Safety, normal_force, r
 from bendsense.control.force import contact_normal
 from bendsense.device.driver import DeviceStats, Reading
 from bendsense.errors import ArgumentError
-from bendsense.frames import Sample
+from bendsense.wire.frames import Sample
 
 TAU_S = 0.025
 P_TOUCH_PA = 30e3

@@ -252,7 +252,7 @@ def test_sigterm_ends_the_command_with_every_line_at_zero(board, calibration_pat
 
 def test_a_gripper_holds_with_two_fingers_and_lets_go_of_every_line(calibration_path, tmp_path):
     from bendsense.control import Grasp
-    from bendsense.gripper_live import GripperProcessor
+    from bendsense.pipeline.gripper import GripperProcessor
     from bendsense.sim import gripper_config
 
     gripper = gripper_config(3)

@@ -26,7 +26,7 @@ from bendsense.control import ControlStop, Grasp, PIController, Safety, force_li
 from bendsense.device.driver import Driver
 from bendsense.device.simdevice import SimulatedDevice
 from bendsense.errors import ArgumentError
-from bendsense.gripper_live import GripperProcessor
+from bendsense.pipeline.gripper import GripperProcessor
 from bendsense.pipeline import LiveProcessor
 from bendsense.sim import gripper_config
 from bendsense.sim.grasp import GraspObject

@@ -9,7 +9,7 @@ from click.testing import CliRunner
 
 from bendsense.cli import main
 from bendsense.results import read_results
-from bendsense.sessiondir import read_records, read_session_dir
+from bendsense.session.native import read_records, read_session_dir
 from bendsense.sim.scenarios import time_varying_frames
 
 SECONDS = 2.0

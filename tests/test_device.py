@@ -16,8 +16,8 @@ from bendsense.cli import main
 from bendsense.device import Driver, Recorder, SimulatedDevice, ramp_source
 from bendsense.device import ports as ports_mod
 from bendsense.errors import DeviceError, OutputExistsError
-from bendsense.frames import encode_hello, encode_sample, encode_text
-from bendsense.sessiondir import SessionWriter
+from bendsense.wire.frames import encode_hello, encode_sample, encode_text
+from bendsense.session.native import SessionWriter
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 

@@ -15,7 +15,7 @@ import pytest
 
 from bendsense.device import Driver
 from bendsense.errors import ArgumentError, DeviceError
-from bendsense.frames import Decoder, Setpoint, encode_sample
+from bendsense.wire.frames import Decoder, Setpoint, encode_sample
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 
@@ -136,7 +136,7 @@ def test_bad_v2_frames_are_counted_and_the_good_ones_read(board):
     import binascii
     import struct
 
-    from bendsense.frames import cobs_encode
+    from bendsense.wire.frames import cobs_encode
 
     def wire(payload):
         return b"\x00" + cobs_encode(payload + struct.pack("<H", binascii.crc_hqx(payload, 0xFFFF))) + b"\x00"

@@ -314,7 +314,7 @@ import bendsense
 from bendsense.calibration import Calibration
 from bendsense.errors import OutputError
 from bendsense.session import read_session_csv, write_session_csv
-from bendsense.sessiondir import SessionWriter, record_dtype
+from bendsense.session.native import SessionWriter, record_dtype
 
 disk, lab = sys.argv[1], sys.argv[2]
 session = read_session_csv(lab + "/run.csv")

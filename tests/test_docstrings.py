@@ -25,7 +25,7 @@ NO_PARAMETERS_YET = {
     "bendsense.estimation.uncertainty.tip_angle_weights",
     "bendsense.estimation.uncertainty.tip_angle_shift_gradient",
     "bendsense.estimation.uncertainty.noise_std",
-    "bendsense.shift_errors.noise_only",
+    "bendsense.calibration.shift_errors.noise_only",
     "bendsense.estimation.result.ForceEstimate.plot",
 }
 
@@ -66,7 +66,7 @@ def _summary(doc: str | None) -> str:
 
 
 def test_the_walk_finds_the_public_api():
-    assert {"bendsense.estimation.estimate_force", "bendsense.beam.solve_beam", "bendsense.pcc.reconstruct",
+    assert {"bendsense.estimation.estimate_force", "bendsense.mechanics.beam.solve_beam", "bendsense.shape.pcc.reconstruct",
             "bendsense.calibration.Calibration", "bendsense.results.read_results",
             "bendsense.output.write_file"} <= set(OBJECTS)
     assert len(FUNCTIONS) > 150 and len(CLASSES) > 50

@@ -11,11 +11,11 @@ from forward_model import HiddenSensor, forward
 from helpers import curvatures_for as _kappa
 
 import bendsense
-from bendsense.beam import solve_beam
+from bendsense.mechanics.beam import solve_beam
 from bendsense.calibration import Calibration
 from bendsense.errors import ArgumentError
 from bendsense.estimation import estimate_force
-from bendsense.pcc import reconstruct
+from bendsense.shape.pcc import reconstruct
 
 CFG = bendsense.load_config()
 SENSOR = CFG.sensor
@@ -56,7 +56,7 @@ def test_noise_free_exact_shifts_give_the_force_at_the_contact(truths):
 def test_normal_constraint_at_the_contact(source):
     """A frictionless push at s_c: F ⟂ t(s_c), t of the free arc (K0 s_c) or of the reconstructed shape."""
     p, sc = 60e3, 0.7 * L
-    k0 = bendsense.actuator.FreeBendingModel.from_config(CFG).tip_curvature_per_m(p)
+    k0 = bendsense.mechanics.actuator.FreeBendingModel.from_config(CFG).tip_curvature_per_m(p)
     phi_c = k0 * sc
     force = 0.15 * np.array([-np.cos(phi_c), np.sin(phi_c)])  # n = (−cos φ, sin φ): toward −x at the free arc
     t = forward(CFG, p, force, contact_s_m=sc)
@@ -100,7 +100,7 @@ def test_contact_jacobian_is_the_beam_sensitivity_at_the_optimum(truths):
     p, force, sc, shifts = truths
     i = 3
     est = estimate_force(_kappa(shifts[i]), p[i], KNOWN, load="contact", contact_s_m=sc[i], noise_std=1e-7)
-    model = bendsense.actuator.FreeBendingModel.from_config(CFG)
+    model = bendsense.mechanics.actuator.FreeBendingModel.from_config(CFG)
     coils = np.cumsum(SENSOR.lengths_m)[list(est.coils)]
     beam = solve_beam(L, CFG.stiffness.ei_nm2(p[i]), model.tip_curvature_per_m(p[i]), est.force_n,
                       CFG.weight_per_length_n_per_m, s_m=coils, contact_s_m=sc[i], sensitivities=True)

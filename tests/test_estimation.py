@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 import bendsense
-from bendsense.actuator import FreeBendingModel
-from bendsense.beam import solve_beam
+from bendsense.mechanics.actuator import FreeBendingModel
+from bendsense.mechanics.beam import solve_beam
 from bendsense.calibration import Calibration
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import ForceEstimate, constraint_basis, estimate_force, quadrature
-from bendsense.estimation.kernels import SIGMA_STEP
-from bendsense.pcc import reconstruct, shifts_to_curvatures
+from bendsense.estimation._kernels import SIGMA_STEP
+from bendsense.shape.pcc import reconstruct, shifts_to_curvatures
 from bendsense.results import frame_status
 from bendsense.sim.sensor import shifts_from_shape
 

@@ -17,12 +17,12 @@ import pytest
 from scipy import stats
 
 import bendsense
-from bendsense.actuator import FreeBendingModel
-from bendsense.beam import solve_beam
+from bendsense.mechanics.actuator import FreeBendingModel
+from bendsense.mechanics.beam import solve_beam
 from bendsense.calibration import Calibration, parity_masks, strip_shifts
 from bendsense.estimation import estimate_force
-from bendsense.estimation.kernels import MAX_JUMPS
-from bendsense.pcc import reconstruct, shifts_to_curvatures
+from bendsense.estimation._kernels import MAX_JUMPS
+from bendsense.shape.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.scenarios import simulate
 from bendsense.sim.sensor import shifts_from_shape
 

@@ -171,7 +171,7 @@ def test_live_sized_blocks_never_compile_the_batch_kernel(n, calibration_path):
     code = textwrap.dedent(f'''
         import numpy as np, bendsense
         from bendsense.calibration import Calibration
-        from bendsense.estimation import kernels
+        from bendsense.estimation import _kernels as kernels
         cal = Calibration.load({str(calibration_path)!r})
         bendsense.estimate_force(np.full(({n}, 16), 5.0), np.full({n}, 4e4), bendsense.load_config(), calibration=cal)
         print(len(kernels.estimate_block.signatures), len(kernels.estimate_frames.signatures))

@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from bendsense import read_session, read_session_csv
-from bendsense.frames import Decoder, Hello, Sample, Text
+from bendsense.wire.frames import Decoder, Hello, Sample, Text
 from bendsense.session.native import export_session_csv, read_records, record_dtype
 
 DATA = Path(__file__).parent / "data" / "formats"

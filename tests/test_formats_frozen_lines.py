@@ -18,7 +18,7 @@ import yaml
 from test_formats_frozen import cobs_decode  # the independent COBS decoder of the version-1 files
 
 from bendsense import read_session, read_session_csv
-from bendsense.frames import Decoder, Hello, Sample
+from bendsense.wire.frames import Decoder, Hello, Sample
 from bendsense.session.native import export_session_csv
 
 DATA = Path(__file__).parent / "data" / "formats"

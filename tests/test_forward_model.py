@@ -6,7 +6,7 @@ from click.testing import CliRunner
 from forward_model import HiddenSensor, forward, free_bending_k0, solve_beam_bvp
 
 import bendsense
-from bendsense.actuator import FreeBendingModel
+from bendsense.mechanics.actuator import FreeBendingModel
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 
@@ -24,7 +24,7 @@ def test_free_bending_matches_the_library_direct_solve():
     np.testing.assert_allclose(np.degrees(ours[[2, 3, 4]] * L), [25, 80, 176], atol=2.0)
     soft = free_bending_k0(CFG, 6e4, {"shear_modulus_pa": 9e4, "prebend_angle_rad": 0.1})
     params = {**model.params, "shear_modulus_pa": 9e4, "prebend_angle_rad": 0.1}
-    assert soft == pytest.approx(float(bendsense.actuator.solve_bending_angle(6e4, **params)) / L, rel=1e-12)
+    assert soft == pytest.approx(float(bendsense.mechanics.actuator.solve_bending_angle(6e4, **params)) / L, rel=1e-12)
 
 
 def test_small_load_cantilever():

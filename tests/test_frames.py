@@ -7,7 +7,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bendsense.errors import FrameError
-from bendsense.frames import (
+from bendsense.wire.frames import (
     NO_PRESSURE,
     Command,
     Decoder,
@@ -431,7 +431,7 @@ def test_line_decoder_never_raises(data):
 
 def test_sample_fields_table_names_sample_attributes():
     # the recorder copies each field of the table from the Sample attribute of the same name
-    from bendsense.frames import SAMPLE_FIELDS, Sample
+    from bendsense.wire.frames import SAMPLE_FIELDS, Sample
 
     names = [f.name for f in SAMPLE_FIELDS]
     assert len(set(names)) == len(names)

@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bendsense.errors import FrameError
-from bendsense.frames import (
+from bendsense.wire.frames import (
     NO_PRESSURE,
     Decoder,
     FrameType,

@@ -17,8 +17,8 @@ from bendsense import ConfigError, load_config, save_config
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.config import Finger, GripperConfig
-from bendsense.fingers import calibrations, split_session
-from bendsense.gripper_results import read_gripper_results
+from bendsense.session.fingers import calibrations, split_session
+from bendsense.results.gripper import read_gripper_results
 from bendsense.results import read_results
 from bendsense.session import Session, read_session, write_session_csv
 from bendsense.sim.actuator import SimulatedActuator
@@ -102,7 +102,7 @@ def test_each_finger_is_a_single_actuator_run_of_its_part(board, chain):
                   "reconstruct", "estimate", "track", "save", root / f"single-{finger.name}")
         assert res.exit_code == 0, res.output
         same_output(chain / finger.name, root / f"single-{finger.name}")
-    from bendsense.output_manifest import read_manifest
+    from bendsense.output.manifest import read_manifest
 
     assert sorted(p.name for p in chain.iterdir() if not p.name.startswith(".")) == sorted(NAMES)
     listed = read_manifest(chain)["files"]
@@ -156,7 +156,7 @@ def test_plot_has_a_panel_per_finger(board, chain):
     import matplotlib
 
     matplotlib.use("Agg")
-    from bendsense.plots_gripper import grasp_force, plot_gripper
+    from bendsense.plots.gripper import grasp_force, plot_gripper
 
     results = read_gripper_results(chain, names=NAMES)
     fig = plot_gripper(results)

@@ -11,7 +11,7 @@ import bendsense
 from bendsense import ConfigError, SessionError
 from bendsense.config import Config, Finger, GripperConfig, load_config, save_config
 from bendsense.errors import ArgumentError
-from bendsense.fingers import split_session, split_signals
+from bendsense.session.fingers import split_session, split_signals
 from bendsense.session import Session
 
 PAPER = load_config().to_dict()

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from bendsense.cli import main
 from bendsense.config import save_config
-from bendsense.fingers import split_session
+from bendsense.session.fingers import split_session
 from bendsense.session import Session, write_session_csv
 from bendsense.sim import gripper_config
 from bendsense.sim.actuator import SimulatedActuator
@@ -129,7 +129,7 @@ def test_live_commands_check_the_fingers_before_the_port(board, calibration_path
 
 def test_gripper_processor_takes_each_finger_its_location(board, calibration_path):
     from bendsense.cli.device import live_load
-    from bendsense.gripper_live import GripperProcessor
+    from bendsense.pipeline.gripper import GripperProcessor
 
     _, gripper, _ = board
     options = live_load("contact", ((None, 0.1), ("index", 0.11)), gripper)
@@ -192,7 +192,7 @@ def test_each_finger_stream_tells_its_own_location(monkeypatch, board, calibrati
 
     import bendsense.interop.lsl as lsl
     from bendsense.cli.device import live_load, make_outlets
-    from bendsense.gripper_live import GripperProcessor
+    from bendsense.pipeline.gripper import GripperProcessor
 
     _, gripper, _ = board
     made = {}

@@ -14,8 +14,8 @@ import pytest
 from bendsense.calibration import Calibration
 from bendsense.config import Finger, GripperConfig
 from bendsense.device.driver import Reading
-from bendsense.frames import decode_frame, encode_sample
-from bendsense.gripper_live import GripperProcessor
+from bendsense.wire.frames import decode_frame, encode_sample
+from bendsense.pipeline.gripper import GripperProcessor
 from bendsense.pipeline import LiveProcessor
 from bendsense.sim.scenarios import time_varying_frames
 
@@ -276,7 +276,7 @@ def test_record_estimate_writes_every_finger_for_every_frame(calibration_path, g
                                        atol=1e-4)
         touched += np.abs(live["fx_n"][ok]).max() > 0.05  # the fingers closed on the object: forces, not zeros
     assert touched == 3
-    from bendsense.output_manifest import read_manifest
+    from bendsense.output.manifest import read_manifest
 
     assert {f"{f}/results.csv" for f in gripper.names} <= set(read_manifest(out)["files"])
     # a new recording over it (--overwrite) replaces every finger's results, and only them

@@ -8,8 +8,8 @@ import pytest
 from click.testing import CliRunner
 
 import bendsense
-from bendsense.actuator import FreeBendingModel, solve_bending_angle
-from bendsense.beam import solve_beam
+from bendsense.mechanics.actuator import FreeBendingModel, solve_bending_angle
+from bendsense.mechanics.beam import solve_beam
 from bendsense.cli import main
 from bendsense.errors import ConfigError, SessionError
 from bendsense.identify import (

@@ -1,4 +1,4 @@
-"""``bendsense.identify_gravity``: EI(P) and the free bending from free sweeps in two mounts, no weights.
+"""``bendsense.identify.gravity``: EI(P) and the free bending from free sweeps in two mounts, no weights.
 
 Data the estimator did not make: the independent forward model of tests/forward_model.py
 (scipy ``solve_bvp``, its own eq. 8–12, the weight along the mount's gravity) and hidden
@@ -19,7 +19,7 @@ from forward_model import HiddenSensor, free_bending_k0, free_sweep
 
 import bendsense
 from bendsense.errors import ArgumentError
-from bendsense.identify_gravity import identify_gravity
+from bendsense.identify.gravity import identify_gravity
 from bendsense.session import Session
 
 CFG = bendsense.load_config()

@@ -22,7 +22,7 @@ from forward_model import forward, free_bending_k0
 from helpers import Listening
 
 import bendsense
-from bendsense.actuator import FreeBendingModel
+from bendsense.mechanics.actuator import FreeBendingModel
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.device.driver import Driver

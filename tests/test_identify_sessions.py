@@ -15,13 +15,13 @@ import yaml
 from click.testing import CliRunner
 
 import bendsense
-from bendsense.actuator import FreeBendingModel, model_jacobian
+from bendsense.mechanics.actuator import FreeBendingModel, model_jacobian
 from bendsense.cli import main
 from bendsense.config import MODEL_PARAMETERS, ParameterCovarianceConfig
 from bendsense.errors import SessionError
 from bendsense.identify import fit_free_bending
-from bendsense.identify_covariance import session_covariance
-from bendsense.identify_session import (
+from bendsense.identify.covariance import session_covariance
+from bendsense.identify.sessions import (
     fit_free_bending_session,
     fit_stiffness_session,
     stiffness_data_from_session,
@@ -182,7 +182,7 @@ def test_gravity_is_taken_out_of_the_free_angle(lab):
 def test_session_covariance_of_repeated_frames(lab):
     # two identical frames: each one's variance is the frame's Σ_S; their covariance is Σ_S without
     # the noise (the calibration's error is common, the noise independent)
-    from bendsense.shift_errors import shift_covariance
+    from bendsense.calibration.shift_errors import shift_covariance
 
     cal = lab["cal"]
     signals = bendsense.read_session(lab["sweep"]).signals[[20]]
@@ -200,7 +200,7 @@ def test_session_covariance_of_repeated_frames(lab):
 
 
 def test_session_covariance_blocks_agree_with_one_stack(lab, monkeypatch):
-    import bendsense.identify_covariance as ic
+    import bendsense.identify.covariance as ic
 
     cal = lab["cal"]
     signals = bendsense.read_session(lab["sweep"]).signals[:10]

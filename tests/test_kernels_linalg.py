@@ -42,7 +42,7 @@ def test_semidefinite_cholesky_is_a_pseudo_inverse_of_the_measured_channels():
 
 
 def test_scalar_interp_matches_numpy():
-    from bendsense.shift_errors import _interp
+    from bendsense.calibration.shift_errors import _interp
 
     xp = np.linspace(0.0, 2.0, 9) ** 1.5
     fp = np.cos(xp)
@@ -82,7 +82,7 @@ def test_misfit_gls_equals_the_pseudo_inverse_form_when_the_fit_absorbs_k_direct
 
 
 def test_lu_factor_and_apply_solve_column_by_column_as_together():
-    from bendsense import beam_kernels as bk
+    from bendsense.mechanics import _beam_kernels as bk
 
     rng = np.random.default_rng(7)
     for _ in range(20):

@@ -274,7 +274,7 @@ def test_warm_up_readies_the_live_kernel_and_forgets_its_frames(calibration_path
     code = (
         "import bendsense\n"
         "from bendsense.calibration import Calibration\n"
-        "from bendsense.estimation import kernels\n"
+        "from bendsense.estimation import _kernels as kernels\n"
         "from bendsense.pipeline import LiveProcessor\n"
         f"p = LiveProcessor(Calibration.load({str(calibration_path)!r}), bendsense.load_config())\n"
         "assert not kernels.estimate_block.signatures and not kernels.estimate_frames.signatures\n"

@@ -20,13 +20,13 @@ from forward_model import free_bending_k0
 from numba.core import event
 
 import bendsense
-from bendsense.actuator import FreeBendingModel
+from bendsense.mechanics.actuator import FreeBendingModel
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.device.simdevice import SimulatedDevice
 from bendsense.errors import ArgumentError
 from bendsense.estimation.live_adapt import LiveAdaptation
-from bendsense.identify_session import k0_with_sigma
+from bendsense.identify.sessions import k0_with_sigma
 from bendsense.pipeline import LiveProcessor
 from bendsense.sim.gripper import GraspBoard
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bendsense import load_config
-from bendsense.actuator import (
+from bendsense.mechanics.actuator import (
     FREE_BENDING_PARAMETERS,
     MODEL_PARAMETERS,
     FreeBendingModel,

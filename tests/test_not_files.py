@@ -46,7 +46,7 @@ def fifo(tmp_path):
 
 
 def _session_dir(tmp_path):
-    from bendsense.sessiondir import SessionWriter
+    from bendsense.session.native import SessionWriter
 
     d = tmp_path / "rec"
     with SessionWriter(d, 16, adc_bits=12) as w:
@@ -116,7 +116,7 @@ def test_a_manifest_naming_a_fifo_recording(tmp_path):
 
 
 def test_results_whose_shape_is_a_fifo(tmp_path):
-    from bendsense.pcc import reconstruct
+    from bendsense.shape.pcc import reconstruct
     from bendsense.results import read_results, write_results
 
     session = bendsense.read_session_csv(GOOD_CSV)

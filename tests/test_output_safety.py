@@ -23,7 +23,7 @@ from bendsense import load_config, output
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.session import Session, write_session_csv
-from bendsense.sessiondir import SessionWriter, read_session_dir
+from bendsense.session.native import SessionWriter, read_session_dir
 from bendsense.sim.scenarios import simulate
 
 SENSOR = load_config().sensor

@@ -32,7 +32,7 @@ from bendsense.cli import main
 from bendsense.config import MODEL_PARAMETERS, Config, save_config
 from bendsense.errors import ConfigError, NoNoiseModelWarning, NoParameterCovarianceWarning
 from bendsense.estimation import estimate_force, uncertainty
-from bendsense.pcc import reconstruct
+from bendsense.shape.pcc import reconstruct
 from bendsense.results import frame_status
 from bendsense.session import Session, write_session_csv
 
@@ -75,7 +75,7 @@ def test_the_prior_passes_the_bounds_and_a_config_may_have_none():
     data = CFG.to_dict()
     assert Config.from_dict(data) == CFG  # the bounds module accepts it, and it round-trips
     # each σ lies well inside the parameter's plausible range (bounds.parameter_bounds)
-    from bendsense.bounds import parameter_bounds
+    from bendsense.mechanics.bounds import parameter_bounds
 
     bounds = parameter_bounds(CFG.actuator, ei0_nm2=CFG.stiffness.ei0_nm2)
     for name, sd in CFG.parameter_covariance.std.items():

@@ -11,7 +11,7 @@ from scipy.optimize import minimize_scalar
 
 from bendsense import load_config
 from bendsense.errors import ConfigError
-from bendsense.pcc import (
+from bendsense.shape.pcc import (
     Shape,
     arc_positions,
     default_s_m,

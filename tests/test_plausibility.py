@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import bendsense
-from bendsense.beam import solve_beam
+from bendsense.mechanics.beam import solve_beam
 from bendsense.errors import ArgumentError, SessionError
 from bendsense.estimation import estimate_force
-from bendsense.plausibility import OUT_OF_RANGE, check_channels, pressure_outside
+from bendsense.estimation.plausibility import OUT_OF_RANGE, check_channels, pressure_outside
 from bendsense.results import frame_status
 from bendsense.session import Session
 
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _shapes(pressures):
     """Segment curvatures of the beam model under a small tip load at each pressure."""
-    from bendsense.actuator import FreeBendingModel
+    from bendsense.mechanics.actuator import FreeBendingModel
 
     model = FreeBendingModel.from_config(CONFIG)
     sensor = CONFIG.sensor
@@ -50,7 +50,7 @@ def test_frames_outside_the_range_get_no_force_and_the_others_are_unchanged():
     assert np.isnan(est.force_n[[1, 3]]).all() and np.isnan(est.std_n[[1, 3]]).all()
     np.testing.assert_array_equal(est.success, [True, False, True, False])
     assert est.message[1] == f"{OUT_OF_RANGE}: -50 kPa outside 0..200 kPa (actuator.pressure_range_pa)"
-    shape = bendsense.pcc.Shape.from_curvatures(kappa, CONFIG.sensor.lengths_m)
+    shape = bendsense.shape.pcc.Shape.from_curvatures(kappa, CONFIG.sensor.lengths_m)
     assert list(frame_status(shape, est)) == ["ok", OUT_OF_RANGE, "ok", OUT_OF_RANGE]
 
 
@@ -74,7 +74,7 @@ def test_a_nan_force_is_never_ok():
     kappa = _shapes([60e3])
     est = estimate_force(kappa, [60e3], CONFIG)
     broken = dataclasses.replace(est, force_n=np.full((1, 2), np.nan))
-    shape = bendsense.pcc.Shape.from_curvatures(kappa, CONFIG.sensor.lengths_m)
+    shape = bendsense.shape.pcc.Shape.from_curvatures(kappa, CONFIG.sensor.lengths_m)
     assert frame_status(shape, broken)[0] != "ok"
 
 
@@ -104,7 +104,7 @@ def _cross_section_on_a_grid(a, t, b, hollow, n=1201):
 
 
 def test_cross_section_matches_a_grid_integration():
-    from bendsense.bounds import cross_section
+    from bendsense.mechanics.bounds import cross_section
 
     got = cross_section(CONFIG.actuator)
     act = CONFIG.actuator
@@ -117,7 +117,7 @@ def test_cross_section_matches_a_grid_integration():
 
 
 def test_stiffness_bound_is_e_times_i_of_soft_silicones_and_holds_the_paper():
-    from bendsense.bounds import stiffness_bound_nm2
+    from bendsense.mechanics.bounds import stiffness_bound_nm2
 
     act = CONFIG.actuator
     _, i_solid = _cross_section_on_a_grid(act.chamber_radius_m, act.wall_thickness_m, act.bottom_thickness_m, False)
@@ -221,7 +221,7 @@ def _wide_gap_config():
 
 
 def _beam_curvatures(config, force_n, pressure_pa):
-    from bendsense.actuator import FreeBendingModel
+    from bendsense.mechanics.actuator import FreeBendingModel
 
     s = np.concatenate([[0.0], np.cumsum(config.sensor.lengths_m)])
     sol = solve_beam(config.actuator.length_m, config.stiffness.ei_nm2(pressure_pa),
@@ -232,7 +232,7 @@ def _beam_curvatures(config, force_n, pressure_pa):
 
 
 def test_a_force_beyond_what_the_actuator_carries_is_never_ok():
-    from bendsense.plausibility import IMPLAUSIBLE_FORCE
+    from bendsense.estimation.plausibility import IMPLAUSIBLE_FORCE
 
     config = _wide_gap_config()
     p = 60e3
@@ -248,7 +248,7 @@ def test_a_force_beyond_what_the_actuator_carries_is_never_ok():
     assert list(est.success) == [True, False]
     assert est.message[1].startswith(f"{IMPLAUSIBLE_FORCE}: |F| = 20 N is beyond the {bound:.3g} N")
     assert est.residual_m[1] < 0.05 * 0.134  # a fit that matches the shape: no model_misfit to hide behind
-    shape = bendsense.pcc.Shape.from_curvatures(kappa, config.sensor.lengths_m)
+    shape = bendsense.shape.pcc.Shape.from_curvatures(kappa, config.sensor.lengths_m)
     assert list(frame_status(shape, est)) == ["ok", IMPLAUSIBLE_FORCE]
     one = estimate_force(kappa[1], p, config)  # the one-frame path
     assert not one.success and one.message.startswith(IMPLAUSIBLE_FORCE)
@@ -259,7 +259,7 @@ def test_a_force_beyond_what_the_actuator_carries_is_never_ok():
 
 
 def test_the_paper_prototype_carries_tens_of_newtons_not_kilonewtons():
-    from bendsense.plausibility import force_bound_n
+    from bendsense.estimation.plausibility import force_bound_n
 
     # paper: 10 EI(P) min(1/1 mm, π/8 mm) / 134 mm
     assert force_bound_n(0.0, CONFIG) == pytest.approx(10 * 2.53e-3 * (np.pi / 0.008) / 0.134)

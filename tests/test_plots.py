@@ -13,7 +13,7 @@ from helpers import linear_calibration, signals_for  # noqa: E402
 from bendsense import load_config  # noqa: E402
 from bendsense.calibration import Calibration  # noqa: E402
 from bendsense.cli import main  # noqa: E402
-from bendsense.pcc import Shape  # noqa: E402
+from bendsense.shape.pcc import Shape  # noqa: E402
 from bendsense.plots import (  # noqa: E402
     plot_calibration,
     plot_force_error_map,
@@ -319,7 +319,7 @@ def test_cli_plot_in_a_chain_after_save(tmp_path):
 
 
 def _state(tmp_path, cal):
-    from bendsense.pcc import reconstruct
+    from bendsense.shape.pcc import reconstruct
     from bendsense.session import read_session
 
     session = read_session(tmp_path / "run.csv")

@@ -14,7 +14,7 @@ import yaml
 from click.testing import CliRunner
 
 import bendsense
-from bendsense.batched import take_frames
+from bendsense._batched import take_frames
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.device.simdevice import SimulatedDevice, default_source

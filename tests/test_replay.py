@@ -17,7 +17,7 @@ from bendsense.device import Driver, Recorder
 from bendsense.device.replay import ReplayDevice
 from bendsense.errors import SessionError
 from bendsense.session import Session, write_session_csv
-from bendsense.sessiondir import NO_PRESSURE, SessionWriter
+from bendsense.session.native import NO_PRESSURE, SessionWriter
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 

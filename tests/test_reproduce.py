@@ -12,7 +12,7 @@ from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.config import load_config
 from bendsense.output import write_dir
-from bendsense.pcc import arc_positions
+from bendsense.shape.pcc import arc_positions
 
 FIGURES = ("fig8_validation_shapes.png", "fig9_static_model.png", "fig10_tip_load_error.png", "identification.png",
            "coverage_calibration.png", "model_error.png")

@@ -17,7 +17,7 @@ from bendsense import read_session, read_session_csv
 from bendsense.device import Driver, Recorder
 from bendsense.device.replay import ReplayDevice, replay_frames
 from bendsense.errors import SessionError
-from bendsense.frames import NO_PRESSURE, Sample, encode_hello, encode_sample
+from bendsense.wire.frames import NO_PRESSURE, Sample, encode_hello, encode_sample
 from bendsense.session import Session, write_session_csv
 from bendsense.session.native import (
     SessionWriter,

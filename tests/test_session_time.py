@@ -9,7 +9,7 @@ import pytest
 
 import bendsense
 from bendsense.errors import SessionError
-from bendsense.sessiondir import SessionWriter
+from bendsense.session.native import SessionWriter
 
 
 def _native(path, t_us, host_ns=None):

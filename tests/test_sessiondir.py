@@ -13,7 +13,7 @@ import yaml
 from bendsense import read_session, read_session_csv, write_session_csv
 from bendsense.errors import OutputExistsError, SessionError
 from bendsense.session import Session
-from bendsense.sessiondir import (
+from bendsense.session.native import (
     SessionWriter,
     dtype_from_list,
     dtype_to_list,
@@ -80,7 +80,7 @@ def test_torn_last_record_is_ignored_and_reported(tmp_path, caplog):
     data = hand_made_v1(tmp_path / "s", ROWS)
     with open(tmp_path / "s" / "frames.bin", "ab") as fh:
         fh.write(data[:23])  # a record cut short by a crash
-    with caplog.at_level(logging.WARNING, logger="bendsense.sessiondir"):
+    with caplog.at_level(logging.WARNING, logger="bendsense.session"):
         s = read_session_dir(tmp_path / "s")
     assert len(s) == 4 and s.meta["torn_bytes"] == 23
     assert "torn last record (23 of 29 bytes)" in caplog.text
@@ -230,7 +230,7 @@ def test_killed_recording_is_read_and_flagged_unfinished(tmp_path, caplog):
     # killed: the files are closed by the OS, meta.yaml is never rewritten (finished: false)
     os.close(w._fd)
     w._events.close()
-    with caplog.at_level(logging.WARNING, logger="bendsense.sessiondir"):
+    with caplog.at_level(logging.WARNING, logger="bendsense.session"):
         s = read_session_dir(tmp_path / "s")
     assert len(s) == 6 and not s.meta["finished"] and s.meta["torn_bytes"] == 7
     assert "unfinished recording (no clean stop: killed, crashed or still recording); 6 records present; " \
@@ -253,25 +253,17 @@ def test_pressures_below_1_kpa_are_read_as_a_session_at_rest(tmp_path):
     assert read_session(tmp_path / "kpa").pressure_pa.tolist() == [50, 51, 52, 53, 54]
 
 
-def test_sessiondir_still_imports_the_native_format():
-    # bendsense.sessiondir was the module of the native format before bendsense.session became a package
-    import bendsense.session.native as native
-    import bendsense.sessiondir as sessiondir
 
-    for name in sessiondir.__all__:
-        assert getattr(sessiondir, name) is getattr(native, name), name
-    assert sessiondir.NO_PRESSURE == 0x7FFFFFFF
-    assert sessiondir.STANDARD_FIELDS == ("host_ns", "t_us", "seq", "status", "pressure_pa", "adc")
 
 
 def test_a_new_sample_field_reaches_every_layer(tmp_path, monkeypatch):
-    """The recipe of bendsense.frames.SAMPLE_FIELDS, step 1: one table entry, and the record
+    """The recipe of bendsense.wire.frames.SAMPLE_FIELDS, step 1: one table entry, and the record
     dtype, the recorder's copy, the Session, the CSV export and the import all carry the field."""
     from types import SimpleNamespace
 
     import bendsense.device.recorder as recorder
     import bendsense.session.native as native
-    from bendsense.frames import SAMPLE_FIELDS, SampleField
+    from bendsense.wire.frames import SAMPLE_FIELDS, SampleField
 
     old = tmp_path / "v2"
     with SessionWriter(old, 2) as w:  # written before the field existed

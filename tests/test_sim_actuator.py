@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from bendsense.actuator import FreeBendingModel
+from bendsense.mechanics.actuator import FreeBendingModel
 from bendsense.errors import ConfigError
 from bendsense.sim import VirtualSensor, shifts_from_curvatures
 from bendsense.sim.actuator import SimulatedActuator, play_operator

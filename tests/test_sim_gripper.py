@@ -17,7 +17,7 @@ from click.testing import CliRunner
 from bendsense.cli import main
 from bendsense.config import load_config
 from bendsense.device import SimulatedDevice, ramp_source
-from bendsense.frames import Decoder, FrameType, Sample, Text, encode_command, encode_setpoint
+from bendsense.wire.frames import Decoder, FrameType, Sample, Text, encode_command, encode_setpoint
 from bendsense.sim.gripper import (
     DEFAULT_CLOSE_PA,
     DEFAULT_TOUCH_PRESSURE_PA,
@@ -199,7 +199,7 @@ def test_sim_device_fingers_truth_is_readable_after_a_kill(tmp_path):
 def test_simulate_gripper_writes_config_calibration_and_a_board_session(board, tmp_path):
     from bendsense import load_config as load
     from bendsense.calibration import Calibration
-    from bendsense.fingers import split_session
+    from bendsense.session.fingers import split_session
     from bendsense.session import read_session
     from bendsense.sim.actuator import SimulatedActuator
 

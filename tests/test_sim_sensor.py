@@ -205,7 +205,7 @@ def test_from_config_rejects_bad_options(sensor_config, model):
 
 
 def test_shifts_from_an_unloaded_beam_solution_are_an_arc(virtual, sensor_config):
-    beam = pytest.importorskip("bendsense.beam")
+    beam = pytest.importorskip("bendsense.mechanics.beam")
     # no load: the beam keeps its free-bending curvature, a calibration-strip arc
     solution = beam.solve_beam(0.134, 3e-3, 12.5, force_n=(0.0, 0.0), distributed_load_n_per_m=(0.0, 0.0))
     shifts = virtual.shifts_from_shape(solution.s_m, solution.angle_rad)

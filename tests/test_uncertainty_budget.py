@@ -18,7 +18,7 @@ from bendsense.calibration import Calibration
 from bendsense.config import ParameterCovarianceConfig
 from bendsense.estimation import estimate_force
 from bendsense.estimation.result import BUDGET
-from bendsense.pcc import reconstruct
+from bendsense.shape.pcc import reconstruct
 
 # the truths below are made with the config's own parameters: they are known exactly, so the
 # config declares no parameter_covariance (the shipped config's prior would cover an actuator

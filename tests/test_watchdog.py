@@ -30,7 +30,7 @@ from bendsense.control.loop import HEARTBEAT_S
 from bendsense.device.driver import Driver
 from bendsense.device.simdevice import DEFAULT_WATCHDOG_MS, SimulatedDevice
 from bendsense.errors import DeviceError, FrameError
-from bendsense.frames import (
+from bendsense.wire.frames import (
     Command,
     Decoder,
     FrameType,

@@ -410,7 +410,7 @@ def text_board(client_args, hello=True, texts=("calibrating coil 3", "überhitzt
         import threading
         import tty
 
-        from bendsense.frames import encode_hello, encode_text
+        from bendsense.wire.frames import encode_hello, encode_text
 
         master, slave = pty.openpty()
         tty.setraw(slave)

@@ -83,7 +83,7 @@ def single(*extra, target="0.15", seconds="1"):
 
 def probe(port, board):
     """Ask the board for frames after the client ended: the truth then shows the set-points it holds."""
-    from bendsense.frames import FrameType, encode_command
+    from bendsense.wire.frames import FrameType, encode_command
 
     if board.poll() is not None:
         return

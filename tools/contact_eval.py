@@ -50,7 +50,7 @@ from forward_model import forward, free_bending_k0  # noqa: E402
 from model_error import RATE_HZ, calibration, fractions, lobatto  # noqa: E402
 
 import bendsense  # noqa: E402
-from bendsense.pcc import reconstruct  # noqa: E402
+from bendsense.shape.pcc import reconstruct  # noqa: E402
 
 NOISE_COUNTS = 1.5
 WINDOW_S = 0.05

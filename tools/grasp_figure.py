@@ -52,7 +52,7 @@ def draw(session: Path, truth_path: Path, out: Path, config=None) -> None:
     import matplotlib.pyplot as plt
 
     from bendsense.control import contact_normal
-    from bendsense.pcc import forward_kinematics
+    from bendsense.shape.pcc import forward_kinematics
 
     log, truth = read_csv(session / "control.csv"), read_csv(truth_path)
     row_of = {int(s): i for i, s in enumerate(truth["seq"])}

@@ -38,7 +38,7 @@ JOBS = {
                "process(session, None, calibration, constraint='normal', load='contact')",
     "baseline, positions, adapt, live": """
 from bendsense import adapt, load_config
-from bendsense.pcc import forward_kinematics
+from bendsense.shape.pcc import forward_kinematics
 from bendsense.pipeline import LiveProcessor
 short = Session(session.t_s[:40], session.signals[:40], session.pressure_pa[:40])
 process(short, None, calibration, constraint='normal', method='paper')

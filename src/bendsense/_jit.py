@@ -43,7 +43,7 @@ _lock = threading.Lock()
 
 _ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)
 
-#: frames from which a batch runs on numba's threads (:func:`bendsense.pcc.reconstruct`,
+#: frames from which a batch runs on numba's threads (:func:`bendsense.shape.pcc.reconstruct`,
 #: :func:`bendsense.estimation.estimate_force`): below, waking the thread pool costs more than the frames (~2 µs
 #: each in the reconstruction, and on a loaded machine far more: a live block of 5 frames waited ~1 ms for it), and
 #: a batch below it (~0.1 s of estimates) compiles no parallel kernel, so the workers of a batch find every kernel
@@ -283,10 +283,10 @@ def _progress(dispatcher):
 
 
 _KERNEL_NAMES = {
-    "bendsense.estimation.kernels": "estimation kernels",
-    "bendsense.beam_kernels": "beam solver",
-    "bendsense.pcc": "shape reconstruction",
-    "bendsense.shift_errors": "shift error model",
+    "bendsense.estimation._kernels": "estimation kernels",
+    "bendsense.mechanics._beam_kernels": "beam solver",
+    "bendsense.shape.pcc": "shape reconstruction",
+    "bendsense.calibration.shift_errors": "shift error model",
     "bendsense.estimation.problem": "estimation set-up",
     "bendsense.estimation.uncertainty": "uncertainty kernels",
     "bendsense.tracking.kalman": "tracking kernels",

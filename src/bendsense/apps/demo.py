@@ -338,7 +338,7 @@ def run_demo(
 def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progress) -> DemoResult:
     """The demo's steps, writing into ``work`` (swapped in as ``out`` at the end)."""
     from bendsense import _jit
-    from bendsense.estimation import kernels
+    from bendsense.estimation import _kernels as kernels
     from bendsense.pipeline import process
     from bendsense.results import write_results
     from bendsense.session.native import read_session_dir

@@ -22,7 +22,7 @@ LSL if asked), draws the newest frame at most ``max_fps`` times a second, and me
 the end-to-end latency per drawn frame (bytes read by the driver → shape and force →
 artists drawn) and the rates.
 
-A gripper (:class:`~bendsense.gripper_live.GripperProcessor`) is shown by
+A gripper (:class:`~bendsense.pipeline.gripper.GripperProcessor`) is shown by
 :class:`GripperView`: one :class:`LiveView` per finger, each in its own panel (a
 matplotlib subfigure) of one figure, the finger's name over its shape and its own status
 line;
@@ -394,7 +394,7 @@ class LiveView:
             self.contact_marker.set_data([], [])
             self.contact_arc.set_data([], [])
             return tip, ""
-        from bendsense.contact_output import arc_on_shape, point_on_shape
+        from bendsense.results.contact import arc_on_shape, point_on_shape
 
         shape = frame.shape
         sd = float(np.asarray(est.contact_std_m))

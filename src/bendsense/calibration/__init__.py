@@ -48,25 +48,13 @@ The package reads as the method, one module per step:
 
 from __future__ import annotations
 
-from bendsense.calibration.error_model import _MISFIT_POINTS, AngleCovariance, _misfit_correlation
-from bendsense.calibration.fit import StripResidual, _resolve_sensor, _signals
-from bendsense.calibration.io import FORMAT, VERSION, _array, _range
-from bendsense.calibration.manifest import (
-    _STRIP_KEYS,
-    Manifest,
-    _parse_manifest,
-    _radius_m,
-    _recording,
-    log,
-    read_manifest,
-)
-from bendsense.calibration.model import RANGE_MARGIN_STD, Calibration
+from bendsense.calibration.error_model import AngleCovariance
+from bendsense.calibration.fit import StripResidual
+from bendsense.calibration.manifest import Manifest, read_manifest
+from bendsense.calibration.model import Calibration
 from bendsense.calibration.polynomials import (
     DEGREES,
     WEIGHTINGS,
-    _cv_fold_errors,
-    _fit_parities,
-    _shift_weights,
     cross_validate_degree,
     parity_masks,
     polyfit_shift,
@@ -90,14 +78,3 @@ __all__ = [
     "WEIGHTINGS",
     "DEGREES",
 ]
-
-# the names keep the module they had before the package (pickles, the API docs)
-for _obj in (Calibration, AngleCovariance, StripResidual, Manifest, read_manifest, strip_shifts, polyfit_shift,
-             polyval_shift, parity_masks, cross_validate_degree, select_degree):
-    _obj.__module__ = __name__
-del _obj
-
-# formerly module-level names, importable from here as before
-_PRIVATE = (FORMAT, VERSION, RANGE_MARGIN_STD, log, _MISFIT_POINTS, _misfit_correlation, _shift_weights,
-            _fit_parities, _cv_fold_errors, _array, _range, _signals, _resolve_sensor, _STRIP_KEYS, _radius_m,
-            _recording, _parse_manifest)

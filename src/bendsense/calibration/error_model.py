@@ -11,7 +11,7 @@ How wrong ``S = f(ΔA)`` is, apart from the frame's own signal noise
   fitted to.
 
 :func:`error_model` gathers both, with the signal noise, into the
-:class:`~bendsense.shift_errors.ShiftErrorModel` the compiled kernels take.
+:class:`~bendsense.calibration.shift_errors.ShiftErrorModel` the compiled kernels take.
 """
 
 from __future__ import annotations
@@ -287,9 +287,9 @@ def error_model(cal, noise_std_counts=None):
 
     Returns
     -------
-    bendsense.shift_errors.ShiftErrorModel
+    bendsense.calibration.shift_errors.ShiftErrorModel
     """
-    from bendsense.shift_errors import ShiftErrorModel
+    from bendsense.calibration.shift_errors import ShiftErrorModel
 
     noise = cal.noise_std if noise_std_counts is None else noise_std_counts
     try:
@@ -331,7 +331,7 @@ def angle_covariance(cal, signals, sensor=None) -> AngleCovariance:
     -------
     AngleCovariance
     """
-    from bendsense.shift_errors import shift_covariances
+    from bendsense.calibration.shift_errors import shift_covariances
 
     a = np.asarray(signals, dtype=float)
     cal._check_channels(a)

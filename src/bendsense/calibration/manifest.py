@@ -30,7 +30,7 @@ _STRIP_KEYS = ("radius_m", "radius_mm", "recording")
 
 
 #: Smallest strip radius [m]: a sensor bent tighter than about its strip gap (1 mm) measures nothing
-#: the shifts' model holds for (the tightest curvature it resolves is ~1/d, bendsense.bounds).
+#: the shifts' model holds for (the tightest curvature it resolves is ~1/d, bendsense.mechanics.bounds).
 MIN_RADIUS_M = 1e-3
 
 

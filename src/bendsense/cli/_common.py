@@ -97,7 +97,7 @@ class PressureKpa(Finite):
     """A gauge pressure option in kPa: finite, from ``min`` (default vacuum) to 1 MPa.
 
     Above, the message names the likely unit slip (pascals, bar, psi) and the value in
-    kPa (:class:`bendsense.bounds.Bound`).
+    kPa (:class:`bendsense.mechanics.bounds.Bound`).
     """
 
     def __init__(self, min: float = -101.325):
@@ -105,7 +105,7 @@ class PressureKpa(Finite):
 
     def convert(self, value, param, ctx):
         """Parse and check one value."""
-        from bendsense.bounds import PRESSURE_MAX_PA, Bound
+        from bendsense.mechanics.bounds import PRESSURE_MAX_PA, Bound
 
         number = super().convert(value, param, ctx)  # finite, >= min
         bound = Bound("gauge pressure of a soft pneumatic actuator", self.min, PRESSURE_MAX_PA / 1e3, "kPa",
@@ -124,7 +124,7 @@ class Relative(Finite):
 
     def convert(self, value, param, ctx):
         """Parse and check one value."""
-        from bendsense.bounds import Bound
+        from bendsense.mechanics.bounds import Bound
 
         number = super().convert(value, param, ctx)
         bound = Bound("relative error", -0.99, 1.0, "", "a fraction: 0.1 is 10 %", (("percent", 0.01),))
@@ -256,7 +256,7 @@ def calibration_paths(values, config, option: str = "--calibration"):
     config : Config or GripperConfig
         A single actuator takes one plain path (or none: None); a gripper a mapping
         from finger name (None: every finger not named) to path, checked by
-        :func:`bendsense.fingers.calibrations`.
+        :func:`bendsense.session.fingers.calibrations`.
     option : str
         The option, for messages.
 
@@ -338,7 +338,7 @@ def check_load(load: str, contact_s_m, config) -> None:
         The actuator's length bounds it.
     """
     from bendsense.errors import BendsenseError
-    from bendsense.load_models import check_contact_s_m
+    from bendsense.estimation.load_models import check_contact_s_m
 
     if contact_s_m is not None:
         if load != "contact":

@@ -119,13 +119,13 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
 
     The kernels compile (first run after an install) or load here, before a port opens
     (:meth:`~bendsense.pipeline.LiveProcessor.warm_up`). A gripper config gives a
-    :class:`~bendsense.gripper_live.GripperProcessor` (a processor per finger).
+    :class:`~bendsense.pipeline.gripper.GripperProcessor` (a processor per finger).
 
     Parameters
     ----------
     config : Config or GripperConfig
         Sensor and actuator configuration (a gripper's: its fingers').
-    calibration_path : path, or what :func:`bendsense.fingers.calibrations` takes
+    calibration_path : path, or what :func:`bendsense.session.fingers.calibrations` takes
         Calibration YAML (a gripper: one for every finger, or a mapping finger name →
         calibration).
     constraint, objective : str or None
@@ -145,7 +145,7 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     """
     from bendsense.calibration import Calibration
     from bendsense.config import GripperConfig
-    from bendsense.gripper_live import GripperProcessor
+    from bendsense.pipeline.gripper import GripperProcessor
     from bendsense.pipeline import LiveProcessor
 
     gripper = isinstance(config, GripperConfig)
@@ -199,7 +199,7 @@ def live_load(load: str, contact_s_m, config) -> dict:
     dict
         A single actuator's options of :class:`~bendsense.pipeline.LiveProcessor`; a
         gripper's ``{"finger_options": {finger: options}}`` of
-        :class:`~bendsense.gripper_live.GripperProcessor`.
+        :class:`~bendsense.pipeline.gripper.GripperProcessor`.
     """
     from bendsense.config import GripperConfig
 

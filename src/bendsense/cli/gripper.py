@@ -1,7 +1,7 @@
 """The chain for a gripper: every step runs on each finger's part of the board.
 
 ``load`` with a gripper's config (``fingers:``) splits the board session
-(:func:`bendsense.fingers.split_session`) and keeps one single-actuator state per
+(:func:`bendsense.session.fingers.split_session`) and keeps one single-actuator state per
 finger in ``state["fingers"]``; :func:`per_finger` runs a step of the single-actuator
 chain on each of them in turn (its warnings and errors name the finger). The board's
 own state keeps ``session`` (the whole board), ``config`` and ``gripper`` (the
@@ -50,7 +50,7 @@ def load_fingers(state: dict, session, gripper, calibration_paths, name: str) ->
     name : str
         The session's name (its file stem).
     """
-    from bendsense.fingers import calibrations, split_session
+    from bendsense.session.fingers import calibrations, split_session
 
     parts = split_session(session, gripper)
     cals = calibrations(gripper, calibration_paths) if calibration_paths else {}
@@ -185,7 +185,7 @@ def identify_inputs(config, finger, session_path, calibration_paths) -> tuple:
     chosen = config.finger(finger)
 
     def inputs():
-        from bendsense.fingers import calibrations, split_session
+        from bendsense.session.fingers import calibrations, split_session
 
         session = split_session(read_session(session_path), config)[chosen.name]
         wanted = {k: v for k, v in paths.items() if k in (None, chosen.name)}

@@ -272,8 +272,8 @@ def _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, 
 
 
 def _gravity_sessions(inputs, config, turned_path, turned):
-    """EI(P) and the free bending from free sweeps in two mounts (:mod:`bendsense.identify_gravity`)."""
-    from bendsense.identify_gravity import identify_gravity
+    """EI(P) and the free bending from free sweeps in two mounts (:mod:`bendsense.identify.gravity`)."""
+    from bendsense.identify.gravity import identify_gravity
     from bendsense.session import read_session
 
     session, calibration = inputs()
@@ -319,8 +319,8 @@ def _sweep(port, config, calibration_paths, max_pressure_kpa, seconds, path, out
 
 
 def _free_bending_session(inputs, config, fix):
-    """The free-bending fit of a free sweep (:func:`bendsense.identify_session.fit_free_bending_session`)."""
-    from bendsense.identify_session import fit_free_bending_session
+    """The free-bending fit of a free sweep (:func:`bendsense.identify.sessions.fit_free_bending_session`)."""
+    from bendsense.identify.sessions import fit_free_bending_session
 
     session, calibration = inputs()
     return fit_free_bending_session(session, calibration, config, fix=fix)
@@ -328,7 +328,7 @@ def _free_bending_session(inputs, config, fix):
 
 def _stiffness_session(inputs, config, options):
     """The stiffness fit of a session of hanging weights."""
-    from bendsense.identify_session import fit_stiffness_session
+    from bendsense.identify.sessions import fit_stiffness_session
 
     session, calibration = inputs()
     return fit_stiffness_session(session, calibration, config, **options)

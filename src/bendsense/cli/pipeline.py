@@ -255,7 +255,7 @@ def adapt():
     """
 
     def step(state):
-        from bendsense.identify_session import adapt as adapt_config
+        from bendsense.identify.sessions import adapt as adapt_config
 
         if is_gripper(state):
             raise click.UsageError("'adapt' takes one actuator's config, not a gripper's fingers:")
@@ -304,7 +304,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
 
         from bendsense.errors import NoParameterCovarianceWarning
         from bendsense.pipeline import process
-        from bendsense.plausibility import OUT_OF_RANGE
+        from bendsense.estimation.plausibility import OUT_OF_RANGE
 
         shape = _require(state, "shape", "estimate", "'reconstruct'")
         session = state["session"]
@@ -354,7 +354,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
             finger_contact(contact_s_m, state, load)
         session = state.get("session")
         if session is not None and not is_gripper(state) and state.get("finger") is None:
-            from bendsense.plausibility import check_one_line
+            from bendsense.estimation.plausibility import check_one_line
 
             try:  # a board of several lines read with one actuator's config: before any work
                 check_one_line(session)
@@ -434,7 +434,7 @@ def save(out_dir, overwrite):
         from bendsense.results import write_results
 
         if is_gripper(state):  # OUT/<finger>/results.csv and shape.npz, one manifest
-            from bendsense.gripper_results import write_gripper_results
+            from bendsense.results.gripper import write_gripper_results
 
             write_gripper_results(out_dir, finger_parts(state, "save"), overwrite=overwrite)
             state["out_dir"] = out_dir

@@ -233,7 +233,7 @@ def _gripper_step(scenario, out_dir, seed, config_path, noise_counts, frames, ei
         arguments["rate_hz"] = rate_hz
     if seconds is not None:
         arguments["duration_s"] = seconds
-    from bendsense.sim.gripper_scenario import DEFAULT_DURATION_S, DEFAULT_RATE_HZ, check_memory
+    from bendsense.sim.gripping import DEFAULT_DURATION_S, DEFAULT_RATE_HZ, check_memory
 
     # before any work (the group makes it one line); the library's defaults where an option is not given
     rate = arguments.get("rate_hz", DEFAULT_RATE_HZ)
@@ -241,7 +241,7 @@ def _gripper_step(scenario, out_dir, seed, config_path, noise_counts, frames, ei
                  "--seconds" if seconds is not None or rate_hz is None else "--rate")
 
     def step(state):
-        from bendsense.sim.gripper_scenario import simulate_gripper
+        from bendsense.sim.gripping import simulate_gripper
 
         summary = simulate_gripper(out_dir, fingers, seed=seed, overwrite=overwrite, **arguments)
         say(f"gripper: wrote {', '.join(summary['files'])} ({fingers} fingers, {summary['frames']} frames) to "

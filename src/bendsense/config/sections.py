@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bendsense import bounds
+from bendsense.mechanics import bounds
 from bendsense import validation as check
 from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, METHODS, OBJECTIVES  # noqa: F401 (re-exported)
 from bendsense.errors import ConfigError

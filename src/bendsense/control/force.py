@@ -162,7 +162,7 @@ def force_limit_n(config, max_pressure_pa: float, contact_s_m: float | None = No
     float
         The bound [N].
     """
-    from bendsense.actuator import FreeBendingModel
+    from bendsense.mechanics.actuator import FreeBendingModel
 
     s_c = float(config.actuator.length_m if contact_s_m is None else contact_s_m)
     p = float(max_pressure_pa)

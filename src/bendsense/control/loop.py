@@ -38,7 +38,7 @@ import numpy as np
 
 from bendsense.control.safety import ControlStop, Guard, Safety
 from bendsense.errors import ArgumentError, DeviceError
-from bendsense.readings import sample_lines
+from bendsense.pipeline.readings import sample_lines
 from bendsense.stop_signals import deferred, handled
 
 __all__ = ["run", "ControlResult", "LineZero", "zero_report", "DEFAULT_MAX_PRESSURE_PA", "HEARTBEAT_S"]

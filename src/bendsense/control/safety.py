@@ -81,7 +81,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import ArgumentError, BendsenseError
-from bendsense.readings import sample_lines
+from bendsense.pipeline.readings import sample_lines
 from bendsense.results import MODEL_MISFIT, NOT_IDENTIFIABLE
 
 __all__ = ["Safety", "Guard", "ControlStop", "STOP_STATUSES"]

@@ -1,6 +1,6 @@
 """The sensor board: serial driver, simulated board, replay, recorder and port listing.
 
-Layers, from the wire up: :mod:`bendsense.frames` (protocol, pure) ←
+Layers, from the wire up: :mod:`bendsense.wire.frames` (protocol, pure) ←
 :mod:`~bendsense.device.driver` (serial port, reader thread) ←
 :mod:`~bendsense.device.recorder` (session directory on disk), with
 :mod:`~bendsense.device.estimator` estimating a recording's frames as they arrive. The

@@ -2,7 +2,7 @@
 
 The driver opens any pyserial port or URL (``/dev/ttyACM0``, ``COM3``, a pseudo-terminal
 path such as ``/dev/pts/5``, ``loop://``), reads in bulk on a background thread, decodes
-with :class:`bendsense.frames.Decoder` (or :class:`~bendsense.frames.LineDecoder`) and
+with :class:`bendsense.wire.frames.Decoder` (or :class:`~bendsense.wire.frames.LineDecoder`) and
 hands every SAMPLE on to two consumers:
 
 - a bounded queue for the recorder, which never drops silently: when it is full the
@@ -28,7 +28,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from bendsense.errors import ArgumentError, DeviceError, FrameError
-from bendsense.frames import (
+from bendsense.wire.frames import (
     MAX_LINES,
     Command,
     Decoder,

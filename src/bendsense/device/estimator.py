@@ -7,7 +7,7 @@ appends the block's rows to ``results.csv`` (:class:`ResultsAppender`) and publi
 on LSL (:class:`~bendsense.interop.lsl.LslOutlets`), if asked. The backlog (frames
 queued, not yet processed) and the processing rate are in :attr:`LiveEstimator.stats`.
 
-A gripper's processor (:class:`~bendsense.gripper_live.GripperProcessor`) gives a block
+A gripper's processor (:class:`~bendsense.pipeline.gripper.GripperProcessor`) gives a block
 per finger: each goes to its finger's ``results.csv`` (``SESSION/<finger>/results.csv``)
 and its finger's streams (:class:`~bendsense.interop.lsl.GripperOutlets`).
 """

@@ -21,7 +21,7 @@ import numpy as np
 
 from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
 from bendsense.errors import SessionError
-from bendsense.frames import MAX_LINES
+from bendsense.wire.frames import MAX_LINES
 from bendsense.validation import short
 
 __all__ = ["ReplayDevice", "replay_frames"]

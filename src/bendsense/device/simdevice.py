@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense.errors import DeviceError
-from bendsense.frames import Command, Decoder, FrameType, Setpoint, encode_hello, encode_sample, encode_text
+from bendsense.wire.frames import Command, Decoder, FrameType, Setpoint, encode_hello, encode_sample, encode_text
 
 __all__ = ["SimulatedDevice", "SimStats", "default_source", "scripted_board", "ramp_source", "DEFAULT_WATCHDOG_MS"]
 

@@ -11,7 +11,7 @@ model (eq. 15), the distributed load from ``config.weight_per_length_n_per_m``.
 The package reads as the algorithm:
 
 - :mod:`~bendsense.estimation.problem`: the reference shape, quadrature and constraints;
-- :mod:`~bendsense.estimation.kernels`: the compiled per-frame estimate (moment-balance
+- :mod:`~bendsense.estimation._kernels`: the compiled per-frame estimate (moment-balance
   start, trust-region Gauss–Newton around the spectral beam solver), batched by a
   ``prange`` loop over frames;
 - :mod:`~bendsense.estimation.uncertainty`: propagation of the shift errors and the χ²;
@@ -34,12 +34,12 @@ import warnings
 import numpy as np
 
 from bendsense import _jit
-from bendsense import beam as _beam
-from bendsense.actuator import model_jacobian
+from bendsense.mechanics import beam as _beam
+from bendsense.mechanics.actuator import model_jacobian
 from bendsense.calibration import Calibration
 from bendsense.choices import ANGLE_SOURCES, LOADS, METHODS, OBJECTIVES
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
-from bendsense.estimation import kernels as _kernels
+from bendsense.estimation import _kernels
 from bendsense.estimation.paper import paper_fit
 from bendsense.estimation.problem import (
     ANGLES,
@@ -59,8 +59,8 @@ from bendsense.estimation.problem import (
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
 from bendsense.estimation.uncertainty import tip_angle_shift_gradient, warn_no_parameter_covariance
-from bendsense.plausibility import force_bound_step, pressure_range_step
-from bendsense.shift_errors import noise_only
+from bendsense.estimation.plausibility import force_bound_step, pressure_range_step
+from bendsense.calibration.shift_errors import noise_only
 from bendsense.status import Status
 from bendsense.validation import float_array, short
 
@@ -103,7 +103,7 @@ def _c(a, dtype=float):
 def _models(config):
     # memoised on the config object itself (one attribute lookup per call); an lru_cache on the
     # value-hashable config would do the same at the cost of hashing it (~1 µs) every frame
-    from bendsense.actuator import FreeBendingModel
+    from bendsense.mechanics.actuator import FreeBendingModel
 
     cached = getattr(config, "_free_bending_cache", None)
     if cached is None:
@@ -130,7 +130,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     Parameters
     ----------
     shape : Shape, BeamSolution or array_like
-        A :class:`~bendsense.pcc.Shape` (its curvatures and segment lengths are used),
+        A :class:`~bendsense.shape.pcc.Shape` (its curvatures and segment lengths are used),
         segment curvatures (..., N) [1/m] on ``config.sensor``, a shape given by points
         (any object with ``s_m`` (M,) and ``positions_m`` (..., M, 2)), or positions
         (..., M, 2) [m] with ``s_m``. Leading axes are frames.
@@ -194,9 +194,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         Frames that fail have ``success=False``, NaN force and a message. Frames whose
         pressure lies outside ``config.actuator.pressure_range_pa`` have no force,
         ``success=False`` and the message ``"pressure_out_of_range: ..."``
-        (:func:`bendsense.plausibility.pressure_range_step`). Frames whose force is beyond
+        (:func:`bendsense.estimation.plausibility.pressure_range_step`). Frames whose force is beyond
         what the actuator can carry keep it, with ``success=False`` and the message
-        ``"implausible_force: ..."`` (:func:`bendsense.plausibility.force_bound_step`).
+        ``"implausible_force: ..."`` (:func:`bendsense.estimation.plausibility.force_bound_step`).
         With ``load="contact"``: ``contact_s_m`` the given location, ``contact_std_m`` 0
         and ``contact_jacobian_rad_per_m`` ∂(model coil angle)/∂s_c at the optimum.
 
@@ -392,7 +392,7 @@ def _contact():
 
 
 def _payload_buffers(B, pb):
-    """The kernels' outputs of the window test's payload (:func:`~bendsense.estimation.kernels.payload`)."""
+    """The kernels' outputs of the window test's payload (:func:`~bendsense.estimation._kernels.payload`)."""
     return np.empty((B, pb.coils.size, 6)), np.empty((B, pb.lengths.size))
 
 
@@ -536,7 +536,7 @@ def _frames(ref, P, batch, B, config, contact) -> Frames:
 def _model_cov(config, pressure_pa):
     """Covariance (B, 2, 2) of the beam's inputs (K0, EI) from the identified parameters' (zero without them).
 
-    ``Σ_m = J Σ_θ Jᵀ`` with ``J = ∂(K0, EI)/∂θ`` (:func:`bendsense.actuator.model_jacobian`)
+    ``Σ_m = J Σ_θ Jᵀ`` with ``J = ∂(K0, EI)/∂θ`` (:func:`bendsense.mechanics.actuator.model_jacobian`)
     and ``Σ_θ`` the config's ``parameter_covariance`` (written by ``bendsense identify``).
     """
     section = config.parameter_covariance
@@ -602,8 +602,8 @@ def _problem(config, calibration, ref, options, noise_opt):
     """The constants of an estimate, cached per inputs.
 
     Returns (:class:`~bendsense.estimation.problem.Problem`, it and the shift error model
-    (:class:`~bendsense.shift_errors.ShiftErrorModel`) as the kernels take them
-    (:func:`~bendsense.estimation.kernels.plain`), the ``uncertainty`` label).
+    (:class:`~bendsense.calibration.shift_errors.ShiftErrorModel`) as the kernels take them
+    (:func:`~bendsense.estimation._kernels.plain`), the ``uncertainty`` label).
     """
     key = (id(config), id(calibration), id(ref.grid) if ref.kappa is not None else ref.s.tobytes(), options)
     hit = _PROBLEMS.get(key)

@@ -43,7 +43,7 @@ PER_BIN = 4
 
 def _learn(kappa, pressure_pa, t_s, config, calibration, source):
     """The worker's job: :func:`bendsense.adapt` on the buffer; (config or None when refused, free frames, report)."""
-    from bendsense.identify_session import adapt
+    from bendsense.identify.sessions import adapt
 
     result = adapt(kappa, pressure_pa, config, calibration=calibration, t_s=t_s, source=source)
     if not result.refused and not result.fit.settled:  # a posterior that does not describe its own free frames
@@ -79,7 +79,7 @@ class LiveAdaptation:
     """
 
     def __init__(self, calibration, config, *, source: str = "a live stream"):
-        from bendsense.identify_session import _check_prior
+        from bendsense.identify.sessions import _check_prior
 
         _check_prior(config)
         self.calibration, self.prior, self.config, self.source = calibration, config, config, source
@@ -202,7 +202,7 @@ class LiveAdaptation:
 
     def summary(self) -> str:
         """One line: what was learned (K0 and its sigma before -> after, at the free frames' pressures)."""
-        from bendsense.identify_session import k0_with_sigma
+        from bendsense.identify.sessions import k0_with_sigma
 
         if not self.updates:
             return f"adapt: learned nothing, the config's prior kept ({self.report.removeprefix('adapt: ')[:160]})"

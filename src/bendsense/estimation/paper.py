@@ -8,7 +8,7 @@ Python loop over frames.
 
 import numpy as np
 
-from bendsense.beam import solve_beam
+from bendsense.mechanics.beam import solve_beam
 from bendsense.status import Status
 
 _PAPER_ODE_TOL = 1e-9

@@ -23,8 +23,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from bendsense import _jit, pcc
-from bendsense import beam_kernels as bk
+from bendsense import _jit
+from bendsense.shape import pcc
+from bendsense.mechanics import _beam_kernels as bk
 from bendsense.choices import CONSTRAINTS
 from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
@@ -37,7 +38,7 @@ POSITIONS, ANGLES = 0, 1  # codes of bendsense.choices.OBJECTIVES in the kernels
 
 #: Chebyshev–Lobatto nodes of the estimate's beam. Against a 40-node solve over 15–120 kPa
 #: and tip loads up to 0.3 N, 16 nodes are within 4e-9 rad in angle and 3e-10 m in position
-#: (20 nodes, the default of :func:`bendsense.beam.solve_beam`: 2e-11 rad), some six orders
+#: (20 nodes, the default of :func:`bendsense.mechanics.beam.solve_beam`: 2e-11 rad), some six orders
 #: below the sensor's noise, and the 15 × 15 Newton systems cost half the 19 × 19 ones.
 N_NODES = 16
 
@@ -102,7 +103,7 @@ class Problem(NamedTuple):
     seg: np.ndarray  # (M,) segment of each comparison node (a shape given by points: one per point)
     sigma: np.ndarray  # (M,) its arc length within it [m]
     dphi_ds: np.ndarray  # (N,) ∂φ(L)/∂S (∂φ(s_c)/∂S for a contact)
-    noise: bool  # a noise model is known (the shift covariance, bendsense.shift_errors)
+    noise: bool  # a noise model is known (the shift covariance, bendsense.calibration.shift_errors)
     s: np.ndarray  # (M,) comparison arc lengths [m]
     w: np.ndarray  # (M,) their quadrature weights [m]
     L: float  # actuator length [m]
@@ -269,7 +270,7 @@ def contact_problem(pb, sc, ref):
     """The frame's problem for a force at σ_c = s_c/L < 1: ``pb`` with the grid's sampling and the angle at s_c.
 
     The sampling of the beam's nodes (``PA``, ``PQ``, ``PQ_fit``, ``q``) follows the
-    contact's two Chebyshev domains (:func:`bendsense.beam_kernels.contact_sampling`);
+    contact's two Chebyshev domains (:func:`bendsense.mechanics._beam_kernels.contact_sampling`);
     ``tip_weights`` and ``dphi_ds`` give the reconstructed shape's angle at s_c
     (φ(s_c) = c · κ, the last curvature carried on beyond the sensor) and its gradient
     by the shifts, for the constraints at s_c. ``pb`` itself for σ_c ≥ 1.

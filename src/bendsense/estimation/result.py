@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bendsense.estimation.kernels import MISFIT_P
+from bendsense.estimation._kernels import MISFIT_P
 from bendsense.status import Status
 
 __all__ = ["ForceEstimate", "messages"]
@@ -84,7 +84,7 @@ class ForceEstimate:
         :data:`~bendsense.estimation.problem.N_NODES` Chebyshev–Lobatto nodes
         (:func:`~bendsense.estimation.chebyshev_nodes_m`); for ``load="contact"`` at
         s_c < L, the nodes of the two domains split at s_c
-        (:func:`bendsense.beam_kernels.contact_grid`).
+        (:func:`bendsense.mechanics._beam_kernels.contact_grid`).
     guess_n : ndarray, shape (..., 2) or None
         The moment-balance starting force; with ``force_n`` it corrects the start of
         the next frame (``initial=`` of the next call).
@@ -116,7 +116,7 @@ class ForceEstimate:
         The measured shifts S of the frame [m] (a PCC shape only).
     shift_errors : tuple or None
         The shift error model the estimate used, as a plain tuple of
-        :class:`~bendsense.shift_errors.ShiftErrorModel` (``ShiftErrorModel(*shift_errors)``).
+        :class:`~bendsense.calibration.shift_errors.ShiftErrorModel` (``ShiftErrorModel(*shift_errors)``).
     coils : tuple of int or None
         The channels (0-based) whose coils lie on the actuator: the rows of ``residual_rad``.
     strip_gap_m : float

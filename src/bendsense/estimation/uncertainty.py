@@ -5,7 +5,7 @@ optimum moves by ``δu = (JᵀJ)⁻¹ Jᵀ W^½ δp⁰`` when the reconstructed 
 ``δp⁰ = G δS``, ``G = ∂p⁰/∂S`` through the PCC kinematics (paper eq. 3–7). So
 ``Cov(F) = T Σ_S Tᵀ`` with ``T = ∂F/∂S`` (including the change of ``D`` with the tip
 angle for ``tip_angle_source="shape"``). ``Σ_S`` holds the signal noise through the
-calibration slope and the calibration's own error (:func:`bendsense.shift_errors.shift_covariance`).
+calibration slope and the calibration's own error (:func:`bendsense.calibration.shift_errors.shift_covariance`).
 
 The misfit: the residual is pulled back to the shift perturbation that explains it
 best, ``δŜ = −(GᵀWG)⁻¹ GᵀW r``, and ``χ² = δŜᵀ C⁺ δŜ`` with ``C`` the covariance that
@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
-from bendsense import beam_kernels as bk
+from bendsense.mechanics import _beam_kernels as bk
 from bendsense.errors import ArgumentError
 
 
@@ -355,7 +355,7 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
     """Cov(F) (2, 2) into ``out``, its parts into ``parts``, χ²/dof and p of one frame fitted to the coil angles.
 
     ``e`` (R, 3): the whitened residual and its Jacobian by F at the optimum
-    (:func:`bendsense.estimation.kernels.whitened`); the measured angles are
+    (:func:`bendsense.estimation._kernels.whitened`); the measured angles are
     ``θ_i = S_(c_i) / d`` at the coils ``coils``. The optimum moves by
     ``δu = −H⁻¹ J̃ᵀ L_w⁻¹ ∂r/∂S δS`` with ``J̃ = L_w⁻¹ (∂y/∂F) D``, ``H = J̃ᵀ J̃`` and
     ``∂r/∂S = −E/d`` (plus the turn of D with the shape's tip angle for

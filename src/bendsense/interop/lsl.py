@@ -130,7 +130,7 @@ class LslOutlets:
         force = np.column_stack([block.force_n, block.std_n, *((block.track_force_n, block.track_std_n)
                                                                 if self.tracked else ())])
         if self.contact:  # NaN where a frame has no estimate
-            from bendsense.contact_output import contact_columns
+            from bendsense.results.contact import contact_columns
 
             where = contact_columns(n, block.estimate) or {name: np.full(n, np.nan) for name, _ in CONTACT_CHANNELS}
             force = np.column_stack([force, *(where[name] for name, _ in CONTACT_CHANNELS)])
@@ -193,7 +193,7 @@ class GripperOutlets:
         Parameters
         ----------
         blocks : dict of str to LiveBlock
-            The processed frames per finger (:meth:`bendsense.gripper_live.GripperProcessor.process_readings`).
+            The processed frames per finger (:meth:`bendsense.pipeline.gripper.GripperProcessor.process_readings`).
         """
         for name, block in blocks.items():
             self.outlets[name].push(block)

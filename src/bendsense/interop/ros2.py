@@ -254,7 +254,7 @@ class _Part:
     """One actuator's messages: its results, topics and contact points."""
 
     def __init__(self, finger, session, shape, estimate, track):
-        from bendsense.contact_output import point_on_shape, resolved
+        from bendsense.results.contact import point_on_shape, resolved
         from bendsense.results import Results
 
         self.results = Results.from_state(session, shape, estimate, track)

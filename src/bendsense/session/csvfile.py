@@ -22,7 +22,7 @@ import numpy as np
 from bendsense import validation as check
 from bendsense._io import check_csv_header, read_text
 from bendsense.errors import SessionError
-from bendsense.plausibility import check_pressure_column, check_time_column
+from bendsense.estimation.plausibility import check_pressure_column, check_time_column
 from bendsense.session.base import Session
 from bendsense.session.cells import parse_column, write_columns
 from bendsense.session.records import check_line_pressure

@@ -9,7 +9,7 @@ A session is a directory::
     events.log   one line per event: ISO-8601 UTC time, a space, the text
 
 The record (:func:`record_dtype`) is ``host_ns``, the SAMPLE's fields of
-:data:`bendsense.frames.SAMPLE_FIELDS` and the ADC counts; today, in this order and packed::
+:data:`bendsense.wire.frames.SAMPLE_FIELDS` and the ADC counts; today, in this order and packed::
 
     host_ns      <i8      host clock, time.monotonic_ns() when the bytes were read [ns]
     t_us         <u8      device clock, unwrapped (u32 wraps removed by the driver) [us]
@@ -72,7 +72,7 @@ import yaml
 from bendsense import validation as check
 from bendsense._io import check_regular_file, load_yaml, open_regular
 from bendsense.errors import OutputError, SessionError
-from bendsense.frames import MAX_LINES, NO_PRESSURE, SAMPLE_FIELDS
+from bendsense.wire.frames import MAX_LINES, NO_PRESSURE, SAMPLE_FIELDS
 from bendsense.session.csvfile import read_session_csv, write_session_csv
 from bendsense.session.records import (
     LINES_FIELD,
@@ -101,8 +101,7 @@ __all__ = [
     "import_session_csv",
 ]
 
-# the logger keeps the name of this module's earlier home, bendsense.sessiondir (logging configurations name it)
-log = logging.getLogger("bendsense.sessiondir")
+log = logging.getLogger("bendsense.session")
 
 FORMAT = "bendsense-session"
 FORMAT_VERSION = 2
@@ -125,7 +124,6 @@ def _standard_fields(version: int) -> list:
     return [name for name, since in sorted(fields, key=lambda f: f[1]) if since <= version]
 
 
-# as bendsense.sessiondir had them
 STANDARD_FIELDS = tuple(_standard_fields(1))  # the fields of version 1
 FIELD_TYPES = _field_types()
 
@@ -139,7 +137,7 @@ def utc_now_iso(t: float | None = None) -> str:
 def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=(), n_lines: int = 1) -> np.dtype:
     """Structured dtype of one ``frames.bin`` record (packed, little-endian).
 
-    ``host_ns``, the fields of :data:`bendsense.frames.SAMPLE_FIELDS`, ``adc``, with
+    ``host_ns``, the fields of :data:`bendsense.wire.frames.SAMPLE_FIELDS`, ``adc``, with
     several pressure lines ``pressures_pa`` (``(n_lines,)<i4``), then ``extra_fields``.
 
     Parameters
@@ -174,7 +172,7 @@ def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=(), n_lin
 def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
     """Records of ``dtype`` holding ``samples``, as the recorder writes them.
 
-    Every field of :data:`bendsense.frames.SAMPLE_FIELDS` is the sample's attribute of
+    Every field of :data:`bendsense.wire.frames.SAMPLE_FIELDS` is the sample's attribute of
     the same name, except two: ``t_us`` is the device clock given here, unwrapped, and
     ``pressure_pa`` is rounded to whole pascals, with :data:`NO_PRESSURE` for None (no
     reading). Further fields of ``dtype`` are left zero, and so is a field the sample has no
@@ -188,7 +186,7 @@ def sample_records(dtype: np.dtype, samples, host_ns, t_us) -> np.ndarray:
     dtype : numpy.dtype
         A record dtype (:func:`record_dtype`).
     samples : sequence of Sample
-        Decoded SAMPLE frames (:class:`bendsense.frames.Sample`), all with as many
+        Decoded SAMPLE frames (:class:`bendsense.wire.frames.Sample`), all with as many
         channels as ``dtype``.
     host_ns : sequence of int, length len(samples)
         Host clock when each sample's bytes were read [ns].
@@ -813,7 +811,7 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
     in 0..65535, else as ``<f8``. Several pressure lines (``line<k>_pressure_pa``
     columns) are stored as ``pressures_pa`` with ``n_lines``. Numeric extra columns become further record fields;
     text columns are dropped (and logged). Columns named after a field of
-    :data:`bendsense.frames.SAMPLE_FIELDS` (an exported native session's ``status``,
+    :data:`bendsense.wire.frames.SAMPLE_FIELDS` (an exported native session's ``status``,
     ``tx_drops``) go back into that field.
 
     Parameters

@@ -23,8 +23,8 @@ import logging
 import numpy as np
 
 from bendsense.errors import SessionError
-from bendsense.frames import MAX_LINES, NO_PRESSURE
-from bendsense.plausibility import check_pressure_column, check_time_column
+from bendsense.wire.frames import MAX_LINES, NO_PRESSURE
+from bendsense.estimation.plausibility import check_pressure_column, check_time_column
 from bendsense.session.base import Session
 
 __all__ = [
@@ -39,7 +39,7 @@ __all__ = [
 ]
 
 # the same logger as bendsense.session.native (logging configurations name it)
-log = logging.getLogger("bendsense.sessiondir")
+log = logging.getLogger("bendsense.session")
 
 FRAMES = "frames.bin"
 LINES_FIELD = "pressures_pa"
@@ -65,7 +65,7 @@ def line_columns(n_lines: int, unit: str = "pa") -> list:
 
 
 def check_line_pressure(column: str, unit_name: str, values: np.ndarray, where) -> None:
-    """:func:`bendsense.plausibility.check_pressure_column` for one line's column, named as it is.
+    """:func:`bendsense.estimation.plausibility.check_pressure_column` for one line's column, named as it is.
 
     Parameters
     ----------
@@ -201,7 +201,7 @@ def records_to_session(records: np.ndarray, meta: dict, source: str = ""):
     clock (:func:`device_time_us`); ``extra`` holds ``host_s`` (host clock
     relative to the first frame [s]), ``status`` and any further record fields
     (``tx_drops``: the firmware's cumulative counter; any field of
-    :data:`bendsense.frames.SAMPLE_FIELDS` beyond ``SESSION_COLUMNS`` under its own name,
+    :data:`bendsense.wire.frames.SAMPLE_FIELDS` beyond ``SESSION_COLUMNS`` under its own name,
     as recorded). ``meta["frames_lost"]`` counts
     the sequence gaps and ``meta["tx_drops"]`` the frames the firmware could not send
     during the session (0 for version 1, which has no counter).

@@ -238,7 +238,7 @@ class SimulatedActuator:
         s = np.linspace(0.0, min(sensor_length, length), self.n_points)
         # the actuator tip rides along as the last output point
         s_beam = np.append(s, length) if length > s[-1] * (1 + 1e-12) else s
-        from bendsense.actuator import FreeBendingModel
+        from bendsense.mechanics.actuator import FreeBendingModel
 
         object.__setattr__(self, "_bending", FreeBendingModel.from_config(self.config))
         object.__setattr__(self, "_s_beam", s_beam)
@@ -371,10 +371,10 @@ class SimulatedActuator:
 
         Returns
         -------
-        bendsense.beam.BeamSolution
+        bendsense.mechanics.beam.BeamSolution
             At ``s_m``: by default the points on ``[0, L_sensor]`` followed by the tip ``L``.
         """
-        from bendsense.beam import solve_beam
+        from bendsense.mechanics.beam import solve_beam
 
         p = np.asarray(pressure_pa, dtype=float)
         sc = self.contact_location(contact_s_m)
@@ -435,7 +435,7 @@ class SimulatedActuator:
             The beam under that force; ``success`` is also false where Newton did not
             converge.
         """
-        from bendsense.beam import BeamSolution
+        from bendsense.mechanics.beam import BeamSolution
 
         p = np.asarray(pressure_pa, dtype=float)
         fc = np.asarray(contact_n, dtype=float)

@@ -17,8 +17,8 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
-from bendsense.estimation.kernels import MISFIT_P
-from bendsense.shift_errors import ShiftErrorModel
+from bendsense.estimation._kernels import MISFIT_P
+from bendsense.calibration.shift_errors import ShiftErrorModel
 from bendsense.tracking import kalman as K
 from bendsense.tracking import windows as W
 

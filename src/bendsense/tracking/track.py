@@ -19,7 +19,7 @@ import numpy as np
 from bendsense import _jit
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError, DataWarning
-from bendsense.estimation.kernels import MISFIT_P
+from bendsense.estimation._kernels import MISFIT_P
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
 from bendsense.results import MODEL_MISFIT, NO_FORCE, OK, estimate_status
 from bendsense.tracking import kalman as _kalman

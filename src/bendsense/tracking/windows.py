@@ -9,7 +9,7 @@ frames (a finite residual):
 
 - the means r̄ (R,) of the residuals (measured − model coil angle), Ā (R, 2) of the
   Jacobians by the fitted parameters u, M̄ (R, 2) of the model factors, S̄ of the shifts;
-- ``Σ_θ = Σ_S(S̄)_(coils) / d²`` (:func:`bendsense.shift_errors.shift_covariance`) with its
+- ``Σ_θ = Σ_S(S̄)_(coils) / d²`` (:func:`bendsense.calibration.shift_errors.shift_covariance`) with its
   noise diagonal ``nv``: ``Σ_cal = Σ_θ − diag(nv)`` is the calibration's part;
 - ``C = P̄ (diag(nv)/n + Σ_cal + M̄ M̄ᵀ) P̄ᵀ``, ``P̄ = I − Ā (ĀᵀWĀ)⁺ ĀᵀW``, ``W = Σ_θ⁻¹``
   (the estimator's own weights): the noise averages down, the calibration and parameter
@@ -32,9 +32,9 @@ from numba import njit
 from bendsense import _jit
 from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation import uncertainty as unc
-from bendsense.estimation.kernels import MISFIT_P
+from bendsense.estimation._kernels import MISFIT_P
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
-from bendsense.shift_errors import ShiftErrorModel, shift_covariance
+from bendsense.calibration.shift_errors import ShiftErrorModel, shift_covariance
 from bendsense.validation import short
 
 __all__ = ["check_windows", "WINDOW_S", "PRESSURE_STEP_PA", "MIN_FRAMES"]
@@ -351,7 +351,7 @@ def check_windows(estimate, t_s, *, window_s: float = WINDOW_S, pressure_pa=None
     consecutive windows of ``window_s`` (a remainder shorter than half a window joins the
     previous one). Each window's mean residual is tested against its covariance (the
     sensor noise divided by the frames, the calibration and parameter parts whole; module
-    docstring). Where p < 0.001 (:data:`~bendsense.estimation.kernels.MISFIT_P`), the
+    docstring). Where p < 0.001 (:data:`~bendsense.estimation._kernels.MISFIT_P`), the
     window's converged frames become ``model_misfit`` (``success=False``, the force kept,
     a message naming the window test).
 

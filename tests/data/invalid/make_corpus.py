@@ -14,7 +14,7 @@ import yaml
 REPO = Path(__file__).resolve().parents[3]
 ROOT = REPO / "tests" / "data" / "invalid"
 sys.path.insert(0, str(REPO / "src"))
-from bendsense.sessiondir import SessionWriter  # noqa: E402
+from bendsense.session.native import SessionWriter  # noqa: E402
 
 N = 16
 OFFSET = [2000.0 + 10 * i for i in range(N)]
@@ -484,7 +484,7 @@ print(len(cases), "cli cases")
 
 # ---- results directories: plot RESULTS_DIR -o FIG; "expect" holds the regex
 import bendsense  # noqa: E402
-from bendsense.pcc import reconstruct  # noqa: E402
+from bendsense.shape.pcc import reconstruct  # noqa: E402
 from bendsense.results import write_results  # noqa: E402
 
 R = ROOT / "results"

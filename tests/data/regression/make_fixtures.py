@@ -18,11 +18,11 @@ import tempfile
 import numpy as np
 
 import bendsense
-from bendsense.actuator import FreeBendingModel
-from bendsense.beam import solve_beam
+from bendsense.mechanics.actuator import FreeBendingModel
+from bendsense.mechanics.beam import solve_beam
 from bendsense.calibration import Calibration
 from bendsense.estimation import constraint_basis, estimate_force
-from bendsense.pcc import reconstruct, shifts_to_curvatures
+from bendsense.shape.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.scenarios import simulate
 from bendsense.sim.sensor import shifts_from_shape
 

@@ -29,7 +29,7 @@ Protocol (simulated experiments, one ``seed``):
 
 1. ``calibration`` and ``validation`` strips (paper V-B); calibrations of degree n = 1, 2,
    3 (:meth:`~bendsense.calibration.Calibration.fit`); every validation frame is
-   reconstructed (:func:`~bendsense.pcc.reconstruct`) and scored by κ_recon (eq. 19) and
+   reconstructed (:func:`~bendsense.shape.pcc.reconstruct`) and scored by κ_recon (eq. 19) and
    (δp)_max (eq. 20, relative to the sensor length). κ_recon of a strip is the mean over
    its frames, δκ the error of that mean, (δp)_max the mean over its frames.
 2. Free bending with the actuator lying on its side (bending plane horizontal, so gravity

@@ -48,7 +48,7 @@ def fig8_validation_shapes(path, table, radii, kappa_val, s_m) -> Path:
     s_m : ndarray
         Arc lengths of the shapes [m].
     """
-    from bendsense.pcc import arc_positions
+    from bendsense.shape.pcc import arc_positions
     from bendsense.plots import plot_shape_comparison
 
     fig = _figure(figsize=(7.6, 5.4))
@@ -185,7 +185,7 @@ def fig_identification(path, ident, nominal, true, identified) -> Path:
     nominal, true, identified : Config
         The nominal, the simulated (true) and the identified actuator models.
     """
-    from bendsense.actuator import FreeBendingModel
+    from bendsense.mechanics.actuator import FreeBendingModel
 
     fig = _figure(figsize=(11.0, 4.4))
     ax_a, ax_b = fig.subplots(1, 2)

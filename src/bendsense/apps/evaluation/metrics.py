@@ -99,7 +99,7 @@ def shape_accuracy(calibration, strips, sensor, s_m) -> dict:
         frames of (δp)_max (paper eq. 20, relative to the sensor length); ``shapes``:
         the reconstructed positions of each strip's first frame (strips, M, 2) [m].
     """
-    from bendsense.pcc import fit_arc_curvature, max_position_error, reconstruct
+    from bendsense.shape.pcc import fit_arc_curvature, max_position_error, reconstruct
 
     length = float(np.sum(sensor.lengths_m))
     kappa, dkappa, dp, shapes = [], [], [], []
@@ -144,9 +144,9 @@ def static_model_errors(tips, truth, calibration, model_config: Config) -> dict:
         ``config_load_n``): ``config_model_error_pct``, ``config_sensor_error_pct``, and the
         shapes (``model_positions_m``, ``sensor_positions_m``, ``truth_positions_m``).
     """
-    from bendsense.actuator import FreeBendingModel
-    from bendsense.beam import solve_beam
-    from bendsense.pcc import reconstruct
+    from bendsense.mechanics.actuator import FreeBendingModel
+    from bendsense.mechanics.beam import solve_beam
+    from bendsense.shape.pcc import reconstruct
 
     s = np.asarray(truth["s_m"])
     true_pos = np.asarray(truth["positions_m"])
@@ -255,7 +255,7 @@ def contact_errors(shape, contact, calibration, model_config: Config, objective:
     objective : str, default "angles"
         Force estimate objective, ``"angles"`` or ``"positions"``.
     """
-    from bendsense.actuator import FreeBendingModel
+    from bendsense.mechanics.actuator import FreeBendingModel
     from bendsense.estimation import estimate_force
 
     true_f = np.stack([contact.extra["fx_n"], contact.extra["fy_n"]], axis=-1)

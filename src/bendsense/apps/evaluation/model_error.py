@@ -66,7 +66,7 @@ def model_error_evaluation(calibration, config, seed: int) -> dict:
         ``series``: the K0 case's arrays for the figure.
     """
     from bendsense.estimation import estimate_force
-    from bendsense.pcc import reconstruct
+    from bendsense.shape.pcc import reconstruct
     from bendsense.sim.actuator import SimulatedActuator
     from bendsense.sim.sensor import VirtualSensor
     from bendsense.tracking import check_windows, track

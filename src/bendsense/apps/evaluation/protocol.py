@@ -385,7 +385,7 @@ def time_stages(tips, contact_shape, contact, cal, model_config, plan, say) -> d
         Progress messages, ``say(text)``.
     """
     from bendsense.estimation import estimate_force
-    from bendsense.pcc import reconstruct
+    from bendsense.shape.pcc import reconstruct
 
     sensor = model_config.sensor
     out = {}

@@ -375,7 +375,7 @@ def _timing(res) -> list:
         lines += [
             f"On the frames timed with both, the fast method and the paper's agree to {diff:.1e} N; the fast one "
             f"is {min(ratio):,.0f}–{max(ratio):,.0f} times faster per frame. The paper's method here runs the "
-            "shooting reference solver of `bendsense.beam` in every objective evaluation, and its time per frame "
+            "shooting reference solver of `bendsense.mechanics.beam` in every objective evaluation, and its time per frame "
             "varies a lot between frames.",
             "",
         ]

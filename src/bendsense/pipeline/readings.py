@@ -1,0 +1,129 @@
+"""A block of driver readings as the arrays the live processors take (one finger or a whole board).
+
+:func:`reading_columns` is the one conversion of :class:`~bendsense.device.driver.Reading`
+s into per-frame arrays: the board's signals, its pressure lines, the frame times from the
+first reading a processor saw, and the columns a recording of these readings has beside
+its own. :meth:`bendsense.pipeline.LiveProcessor.process_readings` (one actuator) and
+:meth:`bendsense.pipeline.gripper.GripperProcessor.process_readings` (a gripper, which then
+splits the board per finger) both read readings through it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ReadingColumns", "ReadingClock", "reading_columns", "sample_lines"]
+
+
+@dataclass(frozen=True)
+class ReadingColumns:
+    """Per-frame arrays of a block of readings.
+
+    Attributes
+    ----------
+    signals : ndarray, shape (n, N)
+        Raw ADC counts of the board's N channels [counts].
+    pressure_pa : ndarray, shape (n,)
+        Pressure of line 0 [Pa] (the SAMPLE's ``pressure_pa``); NaN: no reading.
+    pressures_pa : ndarray, shape (n, n_lines)
+        Pressure of every line the frames carry [Pa] (a version-1 frame: line 0 only);
+        NaN: no reading, or a line a frame does not carry.
+    t_s : ndarray, shape (n,)
+        Device clock from the time origin [s].
+    seq : list of int
+        Raw sequence numbers.
+    host_ns : list of int
+        Arrival time of each frame on the host clock [ns].
+    extra : dict of str to ndarray
+        The columns a recording of the readings has beside its own
+        (:func:`bendsense.session.native.records_extra`).
+    """
+
+    signals: np.ndarray
+    pressure_pa: np.ndarray
+    pressures_pa: np.ndarray
+    t_s: np.ndarray
+    seq: list
+    host_ns: list
+    extra: dict
+
+
+def sample_lines(sample) -> tuple:
+    """The pressures of a SAMPLE's lines [Pa], None for no reading: ``pressures_pa``, else line 0 alone.
+
+    Parameters
+    ----------
+    sample : Sample
+        A decoded SAMPLE frame (version 1 carries one line, ``pressure_pa``).
+    """
+    lines = tuple(getattr(sample, "pressures_pa", ()) or ())
+    return lines if lines else (sample.pressure_pa,)
+
+
+def reading_columns(readings, t0_us: int, host0_ns: int | None) -> ReadingColumns:
+    """The arrays of a block of readings.
+
+    Parameters
+    ----------
+    readings : list of Reading
+        Driver readings, oldest first.
+    t0_us : int
+        Device clock of the time origin [us] (the first reading the processor saw).
+    host0_ns : int or None
+        Host clock of that reading [ns] (the ``host_s`` column's origin).
+
+    Returns
+    -------
+    ReadingColumns
+    """
+    from bendsense.session.native import record_dtype, records_extra, sample_records
+
+    readings = list(readings)
+    n = len(readings)
+    signals = np.array([r.sample.adc for r in readings], dtype=float).reshape(n, -1)
+    host_ns = [r.host_ns for r in readings]
+    # the records the recorder writes of these readings, for the same extra columns
+    records = sample_records(record_dtype(max(signals.shape[1], 1), "<f8"), [r.sample for r in readings],
+                             host_ns, [max(r.device_us, 0) for r in readings])
+    lines = [sample_lines(r.sample) for r in readings]
+    pressures = np.full((n, max((len(x) for x in lines), default=1)), np.nan)
+    for k, values in enumerate(lines):
+        pressures[k, : len(values)] = [np.nan if v is None else v for v in values]
+    return ReadingColumns(
+        signals=signals,
+        pressure_pa=np.array([np.nan if r.sample.pressure_pa is None else r.sample.pressure_pa for r in readings],
+                             float),
+        pressures_pa=pressures,
+        t_s=(np.array([r.device_us for r in readings], dtype=np.int64) - t0_us) * 1e-6,
+        seq=[r.sample.seq for r in readings],
+        host_ns=host_ns,
+        extra=records_extra(records, host0_ns),
+    )
+
+
+class ReadingClock:
+    """The time origin of a live processor's readings: the first reading it saw since it was made or reset."""
+
+    def __init__(self):
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the origin: the next block's first reading is ``t_s = 0``."""
+        self.t0_us = None
+        self.host0_ns = None
+
+    def columns(self, readings) -> ReadingColumns:
+        """:func:`reading_columns` of a block of readings, timed from the origin (set by the first block).
+
+        Parameters
+        ----------
+        readings : list of Reading
+            Driver readings, oldest first.
+        """
+        readings = list(readings)
+        if self.t0_us is None and readings:
+            self.t0_us = readings[0].device_us
+            self.host0_ns = readings[0].host_ns
+        return reading_columns(readings, 0 if self.t0_us is None else self.t0_us, self.host0_ns)

@@ -1,0 +1,414 @@
+"""Results of the pipeline on disk: ``results.csv`` and ``shape.npz`` (DESIGN.md section 3).
+
+``results.csv`` has a row per frame: ``t_s``, ``pressure_pa``, ``kappa1..kappaN``
+[1/m], ``tip_x_m``, ``tip_y_m``, ``tip_angle_rad``, after estimation ``fx_n``,
+``fy_n``, ``fx_std_n``, ``fy_std_n``, for a contact load (``load="contact"``)
+``contact_s_m``, ``contact_std_m`` [m], then ``residual_m``, ``status``; after tracking
+(:func:`bendsense.track`) ``fx_track_n``, ``fy_track_n``, ``fx_track_std_n``,
+``fy_track_std_n``, ``track_status``; then ``window_p_value`` when a window model check
+ran (:func:`bendsense.check_windows`); then the input's extra columns unchanged (one
+whose name is a result column's, such as a ground-truth ``fx_n``, is written as
+``input_fx_n``, also when there is no estimate, so that it never poses as one).
+``shape.npz`` holds ``s_m`` (M,) and ``positions_m`` (frames, M, 2).
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bendsense._io import open_regular, read_text
+from bendsense.results.contact import CONTACT_COLUMNS, contact_columns
+from bendsense.errors import SessionError
+from bendsense.estimation.plausibility import IMPLAUSIBLE_FORCE, OUT_OF_RANGE
+from bendsense.session.cells import parse_column, write_columns
+
+# the per-frame ``status`` of results.csv (DESIGN section 3): ``ok`` or a short reason
+OK = "ok"
+EXTRAPOLATED = "extrapolated"  # a signal outside the calibrated range
+NO_SHAPE = "no_shape"  # non-finite signals
+NOT_CONVERGED = "not_converged"  # the force estimate failed
+NOT_IDENTIFIABLE = "not_identifiable"  # the shape does not determine the load along one direction (σ inf)
+MODEL_MISFIT = "model_misfit"
+CONTACT_UNRESOLVED = "contact_unresolved"  # load="contact": the location is not resolved (contact_std_m inf)
+NO_FORCE = "no_force"  # a NaN force is never ok
+IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
+WINDOW_MISFIT = "window_misfit"  # a count, not a status: frames whose latest window failed the window test
+#: the flagged statuses that the status lines of ``record`` and ``live`` count, with their labels
+FLAGGED = ((EXTRAPOLATED, "extrapolated"), (NOT_CONVERGED, "not converged"), (MODEL_MISFIT, "misfit"),
+           (WINDOW_MISFIT, "window misfit"), (NOT_IDENTIFIABLE, "not identifiable"),
+           (IMPLAUSIBLE_FORCE, "implausible force"))
+
+__all__ = ["Results", "write_results", "read_results", "frame_status", "estimate_status", "tracked_columns"]
+
+_KAPPA = re.compile(r"kappa[0-9]+$")
+FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
+#: the tracked force (:meth:`bendsense.Track.to_columns`), after ``status``
+TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
+#: the p-value of the window model check of each frame's window, after the tracked columns
+WINDOW_COLUMN = "window_p_value"
+RESULT_COLUMNS = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", *FORCE_COLUMNS, *CONTACT_COLUMNS,
+                  *TRACK_COLUMNS, WINDOW_COLUMN)
+_NUMERIC = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n", "fy_n", "fx_std_n", "fy_std_n",
+            *CONTACT_COLUMNS, "residual_m", *TRACK_COLUMNS[:4], WINDOW_COLUMN)
+
+
+@dataclass(frozen=True, eq=False)
+class Results:
+    """Per-frame results as read back from an output directory."""
+
+    columns: dict
+    s_m: np.ndarray
+    positions_m: np.ndarray
+    extra_names: tuple = field(default_factory=tuple)
+
+    @classmethod
+    def from_state(cls, session, shape, estimate=None, track=None) -> Results:
+        """The results of a processed session in memory: the columns of ``results.csv``.
+
+        Parameters
+        ----------
+        session : Session
+            The processed session.
+        shape : Shape
+            Its reconstructed shapes.
+        estimate : ForceEstimate, optional
+            Its force estimates; of a contact load (``load="contact"``) also the columns
+            ``contact_s_m, contact_std_m`` after ``fy_std_n``.
+        track : Track, optional
+            Its tracked forces (:func:`bendsense.track`): the columns
+            :data:`TRACK_COLUMNS` after ``status``, and the track's ``window_p_value``.
+        """
+        frames = len(session)
+        kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
+        tip = np.asarray(shape.tip_position_m).reshape(frames, 2)
+        columns: dict[str, np.ndarray] = {
+            "t_s": session.t_s,
+            "pressure_pa": session.pressure_pa,
+            **{f"kappa{i + 1}": kappa[:, i] for i in range(kappa.shape[1])},
+            "tip_x_m": tip[:, 0],
+            "tip_y_m": tip[:, 1],
+            "tip_angle_rad": np.asarray(shape.tip_angle_rad).reshape(frames),
+        }
+        if estimate is not None:
+            force = np.asarray(estimate.force_n).reshape(frames, 2)
+            std = np.asarray(estimate.std_n).reshape(frames, 2)
+            columns.update(
+                fx_n=force[:, 0],
+                fy_n=force[:, 1],
+                fx_std_n=std[:, 0],
+                fy_std_n=std[:, 1],
+                **contact_columns(frames, estimate),
+                residual_m=np.asarray(estimate.residual_m).reshape(frames),
+            )
+        columns["status"] = frame_status(shape, estimate)
+        columns.update(tracked_columns(frames, estimate, track, columns["status"]))
+        extra_names = []
+        for name, values in session.extra.items():
+            # an input column named like a result (e.g. ground truth fx_n) is kept as
+            # input_fx_n, with or without an estimate: it never poses as one
+            reserved = name in columns or name in RESULT_COLUMNS or _KAPPA.match(name)
+            name = f"input_{name}" if reserved else name
+            columns[name] = values
+            extra_names.append(name)
+        positions = np.asarray(shape.positions_m).reshape(frames, -1, 2)
+        return cls(columns=columns, s_m=np.asarray(shape.s_m), positions_m=positions,
+                   extra_names=tuple(extra_names))
+
+    def write(self, out_dir, *, overwrite: bool = False, inputs=()) -> Path:
+        """Write ``results.csv`` and ``shape.npz`` into ``out_dir`` (as :func:`write_results`).
+
+        Parameters
+        ----------
+        out_dir : path
+            Output directory (:func:`write_results`).
+        overwrite : bool, default False
+            Replace only a previous bendsense output there.
+        inputs : iterable of paths
+            Inputs never to be written over (the session's source among them).
+        """
+        from bendsense import output
+
+        out_dir = Path(out_dir)
+        output.check([output.directory(out_dir, overwrite=overwrite)], inputs)
+        with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
+            self.write_files(tmp)
+        return out_dir
+
+    def write_files(self, directory) -> None:
+        """Write ``results.csv`` and ``shape.npz`` into ``directory`` (existing; no manifest, no checks).
+
+        The writer inside :meth:`write` (and inside a gripper's output directory, one
+        directory per finger: :func:`bendsense.results.gripper.write_gripper_results`).
+
+        Parameters
+        ----------
+        directory : path
+            An existing directory, being written (e.g. by :func:`bendsense.output.write_dir`).
+        """
+        directory = Path(directory)
+        columns = self.columns
+        with open(directory / "results.csv", "w", encoding="utf-8", newline="") as fh:
+            write_columns(fh, list(columns), list(columns.values()))
+        # stored, not deflated: positions of noisy shapes deflate by ~10 % at ~35 ms per
+        # 1,000 frames, the largest cost of writing; np.load reads either
+        np.savez(directory / "shape.npz", s_m=self.s_m, positions_m=self.positions_m)
+
+    def __getitem__(self, name):
+        return self.columns[name]
+
+    @property
+    def curvature_per_m(self) -> np.ndarray:
+        """Segment curvatures, shape (frames, N) [1/m]."""
+        n = sum(1 for k in self.columns if _KAPPA.match(k))
+        return np.column_stack([self.columns[f"kappa{i + 1}"] for i in range(n)])
+
+    @property
+    def has_forces(self) -> bool:
+        """True when the results include a force estimate."""
+        return "fx_n" in self.columns
+
+    @property
+    def has_contact(self) -> bool:
+        """True when the results hold a contact location (:data:`~bendsense.results.contact.CONTACT_COLUMNS`)."""
+        return "contact_s_m" in self.columns
+
+    @property
+    def has_track(self) -> bool:
+        """True when the results include a tracked force (:data:`TRACK_COLUMNS`)."""
+        return "fx_track_n" in self.columns
+
+
+def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict:
+    """The columns after ``status``: the tracked force and the window p-value, where known.
+
+    Parameters
+    ----------
+    frames : int
+        Frames of the results.
+    estimate : ForceEstimate, optional
+        Its ``window_p_value`` (:func:`bendsense.check_windows`) is the column
+        ``window_p_value`` when there is no track.
+    track : Track, optional
+        The tracked force: the columns :data:`TRACK_COLUMNS`, and its ``window_p_value``.
+    status : ndarray of str, shape (frames,), optional
+        The frames' own ``status``: a frame that is not ``ok`` has that reason as its
+        ``track_status`` too (the track's value stays, a prediction where the frame has
+        no force), never ``ok``.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (frames,)
+        Empty without a track and without a window check.
+    """
+    columns = {}
+    window = getattr(estimate, WINDOW_COLUMN, None)
+    if track is not None:
+        columns.update({name: np.asarray(values).reshape(frames) for name, values in track.to_columns().items()})
+        if status is not None:
+            own = np.asarray(status, dtype=object).reshape(frames)
+            columns["track_status"] = np.where(own != OK, own, np.asarray(columns["track_status"], dtype=object))
+        window = track.window_p_value
+    if window is not None:
+        columns[WINDOW_COLUMN] = np.asarray(window, dtype=float).reshape(frames)
+    return columns
+
+
+def _all_ok(estimate) -> bool:
+    """Whether every frame of a force estimate is ok: converged, a finite force, a resolved contact."""
+    contact_std = getattr(estimate, "contact_std_m", None) if getattr(estimate, "load", "tip") == "contact" else None
+    message = np.asarray(getattr(estimate, "message", ""), dtype=str)
+    return bool(np.all(estimate.success)) and bool(np.all(message == "converged")) \
+        and bool(np.isfinite(estimate.force_n).all()) and not (contact_std is not None and bool(np.isinf(
+            np.asarray(contact_std, dtype=float)).any()))
+
+
+def estimate_status(estimate, n: int) -> np.ndarray:
+    """Per-frame status strings (n,) of a force estimate alone: ``ok`` or the estimate's reason.
+
+    ``not_converged``, ``not_identifiable``, ``pressure_out_of_range``, ``model_misfit``,
+    ``implausible_force``, ``no_force`` or, for a contact load, ``contact_unresolved``
+    (a force whose location the data cannot place: its message says so, or
+    ``contact_std_m`` is infinite) (:func:`frame_status`, which adds the shape's).
+
+    Parameters
+    ----------
+    estimate : ForceEstimate
+        Force estimates of ``n`` frames.
+    n : int
+        The number of frames.
+    """
+    status = np.full(n, OK, dtype=object)
+    if _all_ok(estimate):
+        return status  # every frame ok (the live path's usual block): nothing to look up
+    failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
+    message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
+    unresolved = np.zeros(n, dtype=bool)
+    if getattr(estimate, "load", "tip") == "contact" and estimate.contact_std_m is not None:
+        unresolved = np.broadcast_to(np.isinf(np.asarray(estimate.contact_std_m, dtype=float)), (n,))
+    status[failed] = NOT_CONVERGED
+    status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
+    status[~failed & np.char.startswith(message, CONTACT_UNRESOLVED)] = CONTACT_UNRESOLVED
+    status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
+    status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
+    status[failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)] = IMPLAUSIBLE_FORCE
+    # a NaN force is never ok, whatever the solver said
+    force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
+    status[(status == OK) & ~np.isfinite(force).all(axis=1)] = NO_FORCE
+    status[(status == OK) & unresolved] = CONTACT_UNRESOLVED  # the force reported, never ok
+    return status
+
+
+def frame_status(shape, estimate=None) -> np.ndarray:
+    """Per-frame status strings: ``ok`` or a short reason.
+
+    ``extrapolated`` (signals outside the calibrated range), ``no_shape`` (non-finite
+    signals), ``not_converged``, ``not_identifiable`` (the shape does not determine the
+    load along one direction: σ is infinite there), ``pressure_out_of_range``,
+    ``model_misfit`` (the model shape stays over 5 % of the length from the measured one,
+    or a χ² beyond chance), ``contact_unresolved`` (a contact load whose location the
+    data cannot place: ``contact_std_m`` inf, force kept), ``implausible_force`` (a force beyond what the actuator can
+    carry, :func:`bendsense.estimation.plausibility.force_bound_n`: a unit or calibration mistake;
+    force kept), ``no_force``, and ``implausible_shape`` (a tip angle beyond a full
+    turn: a unit or calibration mistake).
+
+    Parameters
+    ----------
+    shape : Shape
+        Reconstructed shapes, batch axis over frames.
+    estimate : ForceEstimate, optional
+        Force estimates of the same frames.
+    """
+    n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
+    status = np.full(n, OK, dtype=object)
+    kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
+    if not np.any(getattr(shape, "extrapolated", False)) and np.isfinite(kappa).all() and (
+            estimate is None or _all_ok(estimate)) and not (np.abs(shape.tip_angle_rad) > 2.0 * np.pi).any():
+        return status  # every frame ok (the live path's usual block): nothing to look up
+    extrapolated = np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))
+    status[extrapolated] = EXTRAPOLATED
+    # a shape from non-finite signals is never ok
+    status[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = NO_SHAPE
+    if estimate is not None:
+        own = estimate_status(estimate, n)
+        failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
+        status[failed] = own[failed]
+        status[(status == OK) & (own != OK)] = own[(status == OK) & (own != OK)]
+    # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
+    tip = np.broadcast_to(np.asarray(shape.tip_angle_rad, dtype=float), (n,))
+    status[np.abs(tip) > 2.0 * np.pi] = IMPLAUSIBLE
+    return status
+
+
+def flagged_counts(counts: dict, sep: str = "  ") -> str:
+    """``extrapolated N  not converged N  misfit N  not identifiable N  implausible force N`` for a status line.
+
+    Parameters
+    ----------
+    counts : dict of str to int
+        Frames per status (e.g. ``LiveProcessor.status_counts``).
+    sep : str
+        Between the counts.
+    """
+    return sep.join(f"{label} {counts.get(status, 0)}" for status, label in FLAGGED)
+
+
+def write_results(out_dir, session, shape, estimate=None, *, track=None, overwrite: bool = False, inputs=()) -> Path:
+    """Write ``results.csv`` and ``shape.npz`` of a processed session into ``out_dir``.
+
+    The directory is written complete or not at all (:func:`bendsense.output.write_dir`):
+    files go to a hidden directory beside it that is swapped in at the end, with a
+    manifest of what bendsense wrote.
+
+    Parameters
+    ----------
+    out_dir : path
+        Output directory; must not exist (or be empty) unless ``overwrite``, which
+        replaces only a previous bendsense output there.
+    session : Session
+        The input session (time, pressure and extra columns).
+    shape : Shape
+        Reconstructed shapes, batch axis over the session's frames.
+    estimate : ForceEstimate, optional
+        Force estimates for the same frames.
+    track : Track, optional
+        Tracked forces of the same frames (:func:`bendsense.track`).
+    overwrite : bool, default False
+        Replace a previous bendsense output in ``out_dir``.
+    inputs : iterable of paths
+        Inputs never to be written over (the session's source is always one).
+
+    Raises
+    ------
+    OutputExistsError, OutputError
+        See :func:`bendsense.output.check`.
+    """
+    source = getattr(session, "source", None)
+    inputs = [*inputs, *([source] if source and Path(source).exists() else [])]
+    return Results.from_state(session, shape, estimate, track).write(out_dir, overwrite=overwrite, inputs=inputs)
+
+
+def read_results(out_dir) -> Results:
+    """Read an output directory written by :func:`write_results`.
+
+    Parameters
+    ----------
+    out_dir : str or path-like
+        The output directory (holding ``results.csv`` and ``shape.npz``).
+    """
+    out_dir = Path(out_dir)
+    path = out_dir / "results.csv"
+    if not path.exists():
+        raise SessionError(f"{out_dir}: no results.csv (not a results directory)")
+    rows = list(csv.reader(read_text(path, "results CSV", SessionError).splitlines()))
+    if not rows:
+        raise SessionError(f"{path}: empty (no header row)")
+    header, body = rows[0], rows[1:]
+    for line, row in enumerate(body, start=2):
+        if len(row) != len(header):  # (zip below would cut every column to the shortest row)
+            raise SessionError(f"{path}: line {line}: {len(row)} cells, expected {len(header)} (one per column)")
+    cells = list(zip(*body)) if body else [[] for _ in header]
+    columns = {h: parse_column(list(c)) for h, c in zip(header, cells)}
+    for h in (*_NUMERIC, *(h for h in header if _KAPPA.match(h))):
+        if h in columns:
+            try:
+                columns[h] = columns[h].astype(float)
+            except ValueError:
+                line, cell = next((k, c) for k, c in enumerate(columns[h], start=2) if not _is_number(c))
+                raise SessionError(f"{path}: column {h}: expected numbers, got {cell!r} on line {line}") from None
+            inf = np.flatnonzero(np.isinf(columns[h]))
+            if inf.size and h in ("t_s", "pressure_pa"):  # (an infinite std marks an unidentifiable direction)
+                raise SessionError(f"{path}: line {inf[0] + 2}, column {h}: must be finite or nan, got inf")
+    missing = [h for h in ("t_s", "tip_x_m", "tip_y_m", "tip_angle_rad", "kappa1", "status") if h not in columns]
+    if missing:
+        raise SessionError(f"{path}: not a results.csv of bendsense (no column {missing[0]})")
+    npz_path = out_dir / "shape.npz"
+    if not npz_path.exists():
+        raise SessionError(f"{npz_path}: missing (every results directory has one)")
+    # our own file object: np.load leaks its handle when the zip is damaged
+    fh = open_regular(npz_path, "shape.npz", SessionError)
+    try:
+        with fh, np.load(fh) as npz:
+            s_m, positions = np.asarray(npz["s_m"], dtype=float), np.asarray(npz["positions_m"], dtype=float)
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
+        raise SessionError(f"{npz_path}: not a shape.npz of bendsense ({' '.join(str(err).split())[:80]})") from None
+    frames = len(columns["t_s"])
+    if positions.ndim != 3 or positions.shape[0] != frames or positions.shape[1:] != (s_m.size, 2):
+        raise SessionError(f"{npz_path}: positions_m has shape {positions.shape}, expected ({frames}, {s_m.size}, 2) "
+                           "for the frames of results.csv")
+    known = set(RESULT_COLUMNS)
+    extra = tuple(h for h in header if h not in known and not _KAPPA.match(h))
+    return Results(columns=columns, s_m=s_m, positions_m=positions, extra_names=extra)
+
+
+def _is_number(cell) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
