@@ -73,8 +73,8 @@ def _warm():
     """Import what a batch task needs (run once per worker before the clock starts)."""
     import bendsense.batch  # noqa: F401
     import bendsense.estimation  # noqa: F401
-    import bendsense.shape.pcc  # noqa: F401
     import bendsense.results  # noqa: F401
+    import bendsense.shape.pcc  # noqa: F401
 
     return os.getpid()
 

@@ -31,10 +31,10 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bendsense import load_config  # noqa: E402
-from bendsense.mechanics.actuator import FreeBendingModel  # noqa: E402
-from bendsense.mechanics.beam import solve_beam  # noqa: E402
 from bendsense.calibration import Calibration  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
+from bendsense.mechanics.actuator import FreeBendingModel  # noqa: E402
+from bendsense.mechanics.beam import solve_beam  # noqa: E402
 from bendsense.shape.pcc import shifts_to_curvatures  # noqa: E402
 from bendsense.sim.sensor import shifts_from_shape  # noqa: E402
 

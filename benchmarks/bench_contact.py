@@ -18,7 +18,7 @@
   kept, from ``tools/contact_eval.py`` (the independent forward model with hidden
   sensors; its ``--quick`` sample with ``--quick``), and the wall time of one 100-frame
   window of ``estimate_contact`` (50 ms at 2 kHz, location unknown; target ≤ 20 ms);
-- **the Cramér–Rao bound** (``bendsense.contact_bound``) at 0.8 L, 0.2 N, for scale.
+- **the Cramér–Rao bound** (``contact_bound``) at 0.8 L, 0.2 N, for scale.
 
     python benchmarks/bench_contact.py [--frames 2000] [--sensors 4] [--quick]
 """
@@ -39,8 +39,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import bendsense  # noqa: E402
-from bendsense.mechanics.beam import solve_beam  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
+from bendsense.estimation.cramer_rao import contact_bound
+from bendsense.mechanics.beam import solve_beam  # noqa: E402
 from bendsense.shape.pcc import shifts_to_curvatures  # noqa: E402
 from bendsense.sim.actuator import SimulatedActuator  # noqa: E402
 from bendsense.sim.sensor import shifts_from_shape  # noqa: E402
@@ -203,7 +204,7 @@ def bench_location(table, quick, repeats):
 
 
 def bench_bound(table):
-    b1 = bendsense.contact_bound(CFG, contact_s_m=0.8 * L, force_n=0.2, pressure_pa=60e3, constraint="none")
+    b1 = contact_bound(CFG, contact_s_m=0.8 * L, force_n=0.2, pressure_pa=60e3, constraint="none")
     table.append(("Cramér–Rao σ(s_c) at 0.8 L, 0.2 N, 60 kPa, simulated sensor at 1.5 counts",
                   f"{1e3 * b1.contact_std_m:.1f} mm one frame, {1e3 * b1.contact_std_m / 10:.2f} mm over 100 frames",
                   "—", None))

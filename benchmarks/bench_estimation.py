@@ -33,9 +33,9 @@ from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bendsense import load_config  # noqa: E402
+from bendsense.estimation import constraint_basis, estimate_force  # noqa: E402
 from bendsense.mechanics.actuator import FreeBendingModel  # noqa: E402
 from bendsense.mechanics.beam import solve_beam  # noqa: E402
-from bendsense.estimation import constraint_basis, estimate_force  # noqa: E402
 from bendsense.shape.pcc import shifts_to_curvatures  # noqa: E402
 from bendsense.sim.sensor import shifts_from_shape  # noqa: E402
 

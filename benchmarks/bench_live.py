@@ -225,8 +225,8 @@ def board_readings(k, n):
     """``n`` driver readings of the simulated board of ``k`` fingers closing on the object (1: the single actuator)."""
     from bendsense import load_config
     from bendsense.device.driver import Reading
-    from bendsense.wire.frames import Sample
     from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+    from bendsense.wire.frames import Sample
 
     config = load_config() if k == 1 else gripper_config(k)
     board = GraspBoard(config, default_objects(k, contact_s_m=CONTACT_S_M), rate_hz=GRIPPER_RATE_HZ, seed=SEED,

@@ -22,8 +22,8 @@ RATE_HZ = 1000.0
 
 
 def _per_frame(k: int, n: int) -> tuple:
-    from bendsense.wire.frames import encode_sample
     from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+    from bendsense.wire.frames import encode_sample
 
     t0 = time.perf_counter()
     board = GraspBoard(gripper_config(k), default_objects(k), rate_hz=RATE_HZ, seed=0)

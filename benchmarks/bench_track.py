@@ -39,11 +39,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 from bench_cold import CFG, MODEL, SENSOR, L, calibration  # noqa: E402
 
-from bendsense import Tracker, check_windows, track  # noqa: E402
-from bendsense.mechanics.beam import solve_beam  # noqa: E402
+from bendsense import check_windows, track  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
+from bendsense.mechanics.beam import solve_beam  # noqa: E402
 from bendsense.shape.pcc import shifts_to_curvatures  # noqa: E402
 from bendsense.sim.sensor import shifts_from_shape  # noqa: E402
+from bendsense.tracking import Tracker
 
 RATE_HZ = 2000.0
 PRESSURE_PA = 50e3
@@ -105,7 +106,8 @@ COLD = """
 import pickle, sys, time
 t0 = time.perf_counter()
 import bendsense
-from bendsense import Tracker, check_windows, track
+from bendsense import check_windows, track
+from bendsense.tracking import Tracker
 est, t = pickle.load(open(sys.argv[1], "rb"))
 what = sys.argv[2]
 t0 = time.perf_counter()

@@ -63,10 +63,10 @@ from bench_frames import N_FRAMES, stream  # noqa: E402
 from bench_reconstruct import synthetic_calibration  # noqa: E402
 
 from bendsense import load_config  # noqa: E402
-from bendsense.mechanics.beam import BeamConvergenceWarning, solve_beam  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
-from bendsense.wire.frames import Decoder  # noqa: E402
+from bendsense.mechanics.beam import BeamConvergenceWarning, solve_beam  # noqa: E402
 from bendsense.shape.pcc import reconstruct  # noqa: E402
+from bendsense.wire.frames import Decoder  # noqa: E402
 
 
 def clocks():

@@ -1,7 +1,7 @@
 """What tracking gains over the per-frame estimates on two 2 kHz ramp-and-hold setups (used by bench_track.py).
 
 Each setup: several independent sensors (seeds), one 2 s ramp-and-hold series each at
-30 kPa (two holds joined by 0.3 s ramps, tests/test_tracking.py's profile), 1.5 counts of
+30 kPa (two holds joined by 0.3 s ramps, tests/tracking/test_tracking.py's profile), 1.5 counts of
 noise. Every series is estimated twice, from its noisy signals and from the same
 signals without noise, so that a frame's error splits into
 
@@ -17,7 +17,7 @@ of the truth over the whole series (Fx, Fy). Setups:
 - ``forward model``: tests/forward_model.py's hidden nonlinear sensors (scipy solve_bvp
   beam), calibrations fitted by ``Calibration.fit`` at its default degree 3 from 100
   frames per strip (the calibration error as large as the noise), and at degree 5 from
-  1,000 frames per strip (the noise dominates: tests/test_tracking.py's setup);
+  1,000 frames per strip (the noise dominates: tests/tracking/test_tracking.py's setup);
 - ``simulated board``: bendsense.sim (``bendsense simulate calibration`` then
   ``bendsense calibrate``; the series from ``SimulatedActuator.frames`` of the same board).
 """

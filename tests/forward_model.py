@@ -4,7 +4,7 @@ Nothing here calls the library's solvers: the beam is scipy's ``solve_bvp`` on t
 DESIGN.md equation, the free bending K0(P) is eq. 8–12 solved with its own quadrature
 and ``brentq``, and the sensor is a nonlinear map the calibration polynomials do not
 contain. Used by the force-validation tests (issue 12) and tested in
-``tests/test_forward_model.py`` against closed forms and the library.
+``tests/integration/test_forward_model.py`` against closed forms and the library.
 
 - :func:`free_bending_k0` — K0(P) (paper eq. 8–12), Gauss–Legendre 40 × 40 × 40, brentq.
 - :func:`solve_beam_bvp` — ``EI φ'' = sin φ G_y − cos φ G_x``, ``G = F [s < s_c] +

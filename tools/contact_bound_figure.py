@@ -5,7 +5,7 @@ Run from the repository root::
     python tools/contact_bound_figure.py [--out docs/img/contact-bound.png] [--pressure-kpa 60]
     python tools/contact_bound_figure.py --hidden-sensor 0    # the table for a hidden sensor of the tests
 
-Draws ``bendsense.contact_bound`` (the bound of the paper's prototype with the simulated
+Draws ``bendsense.estimation.cramer_rao.contact_bound`` (the bound of the paper's prototype with the simulated
 sensor at 1.5 counts) as σ(s_c) over s_c / L for several contact forces, one frame and a
 50 ms window at 2 kHz (100 frames), for the two force models (``none``: both components
 free; ``normal``: the magnitude along the contact normal), and prints the table of
@@ -28,7 +28,7 @@ WINDOW_FRAMES = 100  # 50 ms at 2 kHz
 
 def table(config, pressure_pa, noise_counts, calibration=None):
     """Rows (s_c / L, |F|, σ(s_c) one frame and window [mm], σ(F) known / unknown s_c [mN]) per constraint."""
-    from bendsense import contact_bound
+    from bendsense.estimation.cramer_rao import contact_bound
 
     length = config.actuator.length_m
     sc = np.asarray(TABLE_FRACTIONS)[:, None] * length
@@ -53,7 +53,7 @@ def figure(config, pressure_pa, noise_counts, out):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from bendsense import contact_bound
+    from bendsense.estimation.cramer_rao import contact_bound
 
     length = config.actuator.length_m
     lengths = np.asarray(config.sensor.lengths_m, dtype=float)

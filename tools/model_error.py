@@ -47,8 +47,9 @@ from bendsense.calibration import Calibration  # noqa: E402
 from bendsense.config import ParameterCovarianceConfig  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
 from bendsense.estimation._kernels import MISFIT_P  # noqa: E402
-from bendsense.shape.pcc import reconstruct  # noqa: E402
 from bendsense.results import frame_status  # noqa: E402
+from bendsense.shape.pcc import reconstruct  # noqa: E402
+from bendsense.status import Status  # noqa: E402
 
 RATE_HZ = 2000.0
 RAMP_FRAMES, HOLD_FRAMES = 100, 400  # 50 ms ramps, 200 ms holds at 2 kHz
@@ -268,7 +269,7 @@ def run_case(config, case, seeds, holds, noise_counts, configs, use_cache=True, 
             rows["shipped"].append((est.force_n, est.std_n, frame_status(shape, est) == "ok", truth.force_n))
             tr = bendsense.track(checked, truth.t_s, mode="smooth", pressure_pa=truth.pressure_pa)
             # a tracked frame is ok when the tracker says so and its shape is (in the calibrated range)
-            ok = (np.asarray(tr.status) == "ok") & (frame_status(shape, checked) == "ok")
+            ok = (np.asarray(tr.status) == Status.OK) & (frame_status(shape, checked) == "ok")
             rows["after"].append((tr.force_n, tr.std_n, ok, truth.force_n))
     out = {}
     for part in ("before", "shipped", "after"):

@@ -39,6 +39,7 @@ import numpy as np
 
 from bendsense.pipeline import LiveFrame, LiveProcessor
 from bendsense.results import flagged_counts
+from bendsense.status import Status
 
 __all__ = ["LiveView", "GripperView", "LiveStats", "run_live", "status_line"]
 
@@ -369,7 +370,7 @@ class LiveView:
             self.arrow.set_visible(False)
             if frame.estimate is None:
                 text = "F: no pressure reading" if not math.isfinite(frame.pressure_pa) else "F: not estimated"
-            elif str(frame.estimate.message).startswith("pressure_out_of_range"):
+            elif frame.estimate.status == Status.PRESSURE_OUT_OF_RANGE:
                 text = "F: pressure out of range"
             else:
                 text = "F: not converged"

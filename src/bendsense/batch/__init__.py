@@ -585,7 +585,8 @@ def process_sessions(
     window_s : float, default 0.05
         Window of the model check over frames (:func:`bendsense.check_windows`) [s].
     load, contact_s_m : str, float, optional
-        The load model (``"tip"``, ``"contact"``), a known contact location [m] (:mod:`bendsense.estimation.load_models`).
+        The load model (``"tip"``, ``"contact"``), a known contact location [m]
+        (:mod:`bendsense.estimation.load_models`).
     adapt : bool
         Each session first adapts the config to its own free frames (:func:`process_session`).
 

@@ -98,10 +98,10 @@ def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, optio
         returns them: the board's frames, each flagged count summed over the fingers.
     """
     from bendsense import output
-    from bendsense.session.fingers import split_session
-    from bendsense.results.gripper import write_gripper_results
     from bendsense.pipeline import process
+    from bendsense.results.gripper import write_gripper_results
     from bendsense.session import read_session
+    from bendsense.session.fingers import split_session
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
     session = read_session(path)

@@ -272,8 +272,8 @@ def plot(target, figure_path, shapes, dpi, overwrite):
 def _plot_gripper(state, target, figure_path, shapes, dpi, overwrite) -> bool:
     """``plot`` of a gripper (a panel per finger and the grasp): its chain, or its results directory."""
     from bendsense.cli.gripper import finger_parts, is_gripper
-    from bendsense.results.gripper import is_gripper_results
     from bendsense.plots.gripper import plot_gripper
+    from bendsense.results.gripper import is_gripper_results
 
     if figure_path is not None and is_gripper_results(target):
         plot_gripper(target, figure_path, max_shapes=shapes, dpi=dpi, overwrite=overwrite)

@@ -75,12 +75,12 @@ def _processor(config, calibrations, constraint, bandwidth_hz, load, adapt):
     loop would stop at its first 10 ms.
     """
     from bendsense.cli.device import make_processor
-    from bendsense.results import NOT_IDENTIFIABLE
+    from bendsense.status import Status
 
     processor = make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load,
                                adapt=adapt)
     fingers = getattr(processor, "processors", {None: processor})
-    if any(p.rest_status() == NOT_IDENTIFIABLE for p in fingers.values()):
+    if any(p.rest_status() == Status.NOT_IDENTIFIABLE for p in fingers.values()):
         raise click.BadParameter(f"{constraint} leaves the load of a finger at rest (straight, no pressure) "
                                  "undetermined: every frame at rest would be not_identifiable and the loop would stop "
                                  "at once; use normal (a frictionless contact) or follower",

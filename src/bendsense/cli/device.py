@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import signal
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -133,7 +130,7 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     pressure_kpa : float or None
         Constant pressure for a board without a pressure reading [kPa].
     estimate : bool, default True
-        Estimate the tip forces (and track them causally, :class:`bendsense.Tracker`);
+        Estimate the tip forces (and track them causally, :class:`bendsense.tracking.Tracker`);
         False reconstructs shapes only.
     bandwidth_hz : float or None
         Bandwidth of the track [Hz]; None: the tracker's default.
@@ -145,8 +142,8 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     """
     from bendsense.calibration import Calibration
     from bendsense.config import GripperConfig
-    from bendsense.pipeline.gripper import GripperProcessor
     from bendsense.pipeline import LiveProcessor
+    from bendsense.pipeline.gripper import GripperProcessor
 
     gripper = isinstance(config, GripperConfig)
     if adapt and gripper:
@@ -282,23 +279,6 @@ def make_outlets(processor, driver, port):
                                            for name, p in fingers.items() if contact})
     return LslOutlets(processor.config.sensor.n_segments, rate, source_id=f"bendsense {port}", meta=meta,
                       tracked=processor.track, contact=contact)
-
-
-@contextlib.contextmanager
-def _sigterm_as_interrupt():
-    """Turn SIGTERM (``kill``, a service manager) into Ctrl-C: the recorder stops cleanly."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 @click.command("record", cls=InterspersedCommand)
@@ -664,7 +644,7 @@ def _serve(dev, seconds, *, replay: bool = False) -> None:
     end = None if seconds is None else time.monotonic() + seconds
     announced = False
     try:
-        with _sigterm_as_interrupt(), dev:
+        with dev:  # Ctrl-C and SIGTERM raise KeyboardInterrupt (bendsense.cli._signals)
             while end is None or time.monotonic() < end:
                 if dev.finished.is_set():
                     if not replay or dev.stats.disconnected:

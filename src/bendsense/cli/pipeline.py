@@ -304,7 +304,7 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
 
         from bendsense.errors import NoParameterCovarianceWarning
         from bendsense.pipeline import process
-        from bendsense.estimation.plausibility import OUT_OF_RANGE
+        from bendsense.status import Status
 
         shape = _require(state, "shape", "estimate", "'reconstruct'")
         session = state["session"]
@@ -326,7 +326,8 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         if counts.out_of_range:
             lo, hi = config.actuator.pressure_range_pa
             log.warning("%d of %d frames have a pressure outside actuator.pressure_range_pa %g..%g kPa: no force "
-                        "(status '%s')", counts.out_of_range, len(session), lo / 1e3, hi / 1e3, OUT_OF_RANGE)
+                        "(status '%s')", counts.out_of_range, len(session), lo / 1e3, hi / 1e3,
+                        Status.PRESSURE_OUT_OF_RANGE.word)
         if counts.not_converged:
             log.warning("%d of %d frames did not converge (status 'not_converged')", counts.not_converged,
                         len(session))

@@ -16,10 +16,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bendsense.mechanics import bounds
 from bendsense import validation as check
 from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, METHODS, OBJECTIVES  # noqa: F401 (re-exported)
 from bendsense.errors import ConfigError
+from bendsense.mechanics import bounds
 
 __all__ = [
     "SensorConfig",

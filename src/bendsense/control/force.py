@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense.status import words
+
 __all__ = ["NormalForce", "contact_normal", "normal_force", "force_limit_n", "BLOCKED_FORCE_MARGIN"]
 
 #: :func:`force_limit_n` is this many blocked forces
@@ -116,12 +118,12 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
     if use_track:
         force = block.track_force_n
         cov = np.asarray(block.track.covariance_n2, dtype=float).reshape(n, 2, 2)
-        status = np.asarray(block.track.status, dtype=object).reshape(n)
+        status = words(np.asarray(block.track.status).reshape(n))
     else:
         force = block.force_n
         cov = (np.full((n, 2, 2), np.nan) if est is None
                else np.asarray(est.covariance_n2, dtype=float).reshape(n, 2, 2))
-        status = np.asarray(block.status, dtype=object)
+        status = words(block.status)
     nx, ny = normal[:, 0], normal[:, 1]
     value = force[:, 0] * nx + force[:, 1] * ny
     var = cov[:, 0, 0] * nx * nx + (cov[:, 0, 1] + cov[:, 1, 0]) * nx * ny + cov[:, 1, 1] * ny * ny

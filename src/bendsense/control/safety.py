@@ -82,14 +82,14 @@ import numpy as np
 
 from bendsense.errors import ArgumentError, BendsenseError
 from bendsense.pipeline.readings import sample_lines
-from bendsense.results import MODEL_MISFIT, NOT_IDENTIFIABLE
+from bendsense.status import Status, words
 
 __all__ = ["Safety", "Guard", "ControlStop", "STOP_STATUSES"]
 
 #: the shortest silence limit [s] (a faster board's default; a slower one's is 10 frame periods)
 DEFAULT_SILENCE_S = 0.1
 #: a controlled finger's statuses that stop the loop when they last ``flagged_s``
-STOP_STATUSES = (MODEL_MISFIT, NOT_IDENTIFIABLE)
+STOP_STATUSES = (Status.MODEL_MISFIT, Status.NOT_IDENTIFIABLE)
 
 
 class ControlStop(BendsenseError, RuntimeError):
@@ -342,7 +342,7 @@ class Guard:
 
         for finger in self.fingers:
             own = finger_block(block, finger)
-            status = np.asarray(own.track.status if own.track is not None else own.status, dtype=object)
+            status = np.asarray(own.track.status if own.track is not None else own.status)
             blind = ~np.isfinite(np.asarray(own.force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
             if own.track is not None:  # and the force the controller acts on
                 blind |= ~np.isfinite(np.asarray(own.track_force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
@@ -350,12 +350,12 @@ class Guard:
             if not flagged.any():
                 self._flag_start[finger] = math.nan
                 continue
+            reason = words(status).astype(object)
             if blind.any():  # the frame's own status says why it has no force (no_pressure, out of range, ...)
-                own_status = np.asarray(own.status, dtype=object)
-                status = np.where(blind & ~np.isin(status, STOP_STATUSES), [f"no force ({w})" for w in
-                                                                            own_status.tolist()], status)
+                reason = np.where(blind & ~np.isin(status, STOP_STATUSES),
+                                  [f"no force ({w})" for w in words(own.status).tolist()], reason)
             start = self._flag_start[finger]
-            for t, bad, what in zip(own.t_s.tolist(), flagged.tolist(), status.tolist()):
+            for t, bad, what in zip(own.t_s.tolist(), flagged.tolist(), reason.tolist()):
                 if not bad:
                     start = math.nan
                     continue

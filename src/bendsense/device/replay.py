@@ -21,8 +21,8 @@ import numpy as np
 
 from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
 from bendsense.errors import SessionError
-from bendsense.wire.frames import MAX_LINES
 from bendsense.validation import short
+from bendsense.wire.frames import MAX_LINES
 
 __all__ = ["ReplayDevice", "replay_frames"]
 

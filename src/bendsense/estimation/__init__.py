@@ -34,13 +34,13 @@ import warnings
 import numpy as np
 
 from bendsense import _jit
-from bendsense.mechanics import beam as _beam
-from bendsense.mechanics.actuator import model_jacobian
 from bendsense.calibration import Calibration
+from bendsense.calibration.shift_errors import noise_only
 from bendsense.choices import ANGLE_SOURCES, LOADS, METHODS, OBJECTIVES
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import _kernels
 from bendsense.estimation.paper import paper_fit
+from bendsense.estimation.plausibility import force_bound_step, pressure_range_step
 from bendsense.estimation.problem import (
     ANGLES,
     CONSTRAINTS,
@@ -59,8 +59,8 @@ from bendsense.estimation.problem import (
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
 from bendsense.estimation.uncertainty import tip_angle_shift_gradient, warn_no_parameter_covariance
-from bendsense.estimation.plausibility import force_bound_step, pressure_range_step
-from bendsense.calibration.shift_errors import noise_only
+from bendsense.mechanics import beam as _beam
+from bendsense.mechanics.actuator import model_jacobian
 from bendsense.status import Status
 from bendsense.validation import float_array, short
 
@@ -411,6 +411,7 @@ def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, obje
         covariance_n2=cov.reshape(b22),
         residual_m=residual.reshape(batch),
         success=success.reshape(batch),
+        status=status.astype(np.int8).reshape(batch),
         message=text.reshape(batch) if batch else str(text[0]),
         iterations=iters.reshape(batch),
         wall_time_s=wall_time_s,

@@ -20,11 +20,11 @@ import numpy as np
 from numba import njit, prange
 
 from bendsense import _jit
-from bendsense.mechanics import _beam_kernels as bk
-from bendsense.mechanics._beam_kernels import _KernelOperators
+from bendsense.calibration.shift_errors import ShiftErrorModel, shift_covariance
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
-from bendsense.calibration.shift_errors import ShiftErrorModel, shift_covariance
+from bendsense.mechanics import _beam_kernels as bk
+from bendsense.mechanics._beam_kernels import _KernelOperators
 from bendsense.status import Status
 
 _RUNNING = int(Status.RUNNING)
@@ -38,6 +38,7 @@ _MODEL_MISFIT = int(Status.MODEL_MISFIT)
 # flags to compiled callees go through bool()/int(): numba compiles a callee once per literal
 # value it is called with, and once for all non-literal values (compile time)
 YES, NO = bk.YES, bk.NO
+NEWTON_TOL = bk.NEWTON_TOL
 
 POSITIONS, ANGLES = prob.POSITIONS, prob.ANGLES
 
@@ -47,7 +48,6 @@ BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a shape is no bending of
 SIGMA_STEP = 1e-4  # a step below this many σ (a whitened cost) changes nothing a user can see: converged
 MISFIT_P = 1e-3  # χ² p-value below which a converged fit is model_misfit
 FLAT = 2.0  # σ beyond FLAT · EI/L² (the force that bends the actuator a radian): the data do not determine it
-NEWTON_TOL = 1e-11
 NEWTON_MAX_ITER = 30
 
 

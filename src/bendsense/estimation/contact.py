@@ -57,7 +57,7 @@ import numpy as np
 
 from bendsense import _jit
 from bendsense.errors import ArgumentError
-from bendsense.estimation.result import OK_MESSAGE
+from bendsense.status import Status
 from bendsense.tracking import windows as _win
 from bendsense.validation import float_array, short
 
@@ -432,10 +432,12 @@ def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, lo, L, mi
     message = np.array(np.broadcast_to(np.asarray(est.message, dtype=object), (B,)), dtype=object)
     frame_why = rep(np.where(unres, why, ""))
     frame_s = rep(s_m)
-    for i in np.flatnonzero((frame_why != "") & (message == OK_MESSAGE)):
+    unresolved = (frame_why != "") & (np.asarray(est.status) == Status.OK)
+    for i in np.flatnonzero(unresolved):
         message[i] = (f"contact_unresolved: the data do not place the contact ({frame_why[i]}); the force is at the "
                       f"best location s_c = {1e3 * frame_s[i]:.4g} mm, contact_std_m inf")
     return dataclasses.replace(est, load="contact", contact_s_m=frame_s, contact_std_m=rep(std_m),
                                force_n=est.force_n + rep(mixture[0]), covariance_n2=cov, covariance_parts_n2=cov_parts,
                                std_n=std,
+                               status=np.where(unresolved, Status.CONTACT_UNRESOLVED, est.status).astype(np.int8),
                                message=message.astype(str))

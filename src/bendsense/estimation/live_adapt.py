@@ -75,7 +75,7 @@ class LiveAdaptation:
     free : int
         Free frames of the latest of them.
     report : str
-        The latest update's report (:attr:`bendsense.Adaptation.report`).
+        The latest update's report (:attr:`bendsense.identify.sessions.Adaptation.report`).
     """
 
     def __init__(self, calibration, config, *, source: str = "a live stream"):

@@ -27,12 +27,12 @@ import warnings
 
 import numpy as np
 
-from bendsense.mechanics.bounds import max_curvature_per_m
 from bendsense.errors import ArgumentError, DataWarning, SessionError
+from bendsense.mechanics.bounds import max_curvature_per_m
+from bendsense.status import Status
 from bendsense.validation import float_array, instance, short
 
 __all__ = [
-    "OUT_OF_RANGE",
     "pressure_outside",
     "pressure_range_step",
     "check_pressure_column",
@@ -40,7 +40,6 @@ __all__ = [
     "check_time_column",
     "check_channels",
     "check_one_line",
-    "IMPLAUSIBLE_FORCE",
     "force_bound_n",
     "force_bound_step",
 ]
@@ -49,8 +48,6 @@ log = logging.getLogger("bendsense")
 
 #: Below this a soft pneumatic actuator hardly bends [Pa]: pressures all under it are a session at rest, or kPa.
 REST_PA = 1e3
-OUT_OF_RANGE = "pressure_out_of_range"
-"""Status (and message prefix) of a frame whose pressure lies outside the actuator's range."""
 
 
 def pressure_outside(pressure_pa, config) -> np.ndarray:
@@ -151,7 +148,8 @@ def _mark(result, outside, p, lo, hi):
     nan2 = mask[..., None]
     message = np.array(np.broadcast_to(np.asarray(result.message, dtype=object), batch), dtype=object)
     for index in zip(*np.nonzero(mask)) if batch else [()]:
-        message[index] = (f"{OUT_OF_RANGE}: {_kpa(float(p[index]))} outside {lo / 1e3:g}..{hi / 1e3:g} kPa "
+        message[index] = (f"{Status.PRESSURE_OUT_OF_RANGE.word}: {_kpa(float(p[index]))} outside "
+                          f"{lo / 1e3:g}..{hi / 1e3:g} kPa "
                           "(actuator.pressure_range_pa)")
     chi2 = result.chi2_per_dof
     return dataclasses.replace(
@@ -161,6 +159,7 @@ def _mark(result, outside, p, lo, hi):
         covariance_n2=np.where(mask[..., None, None], np.nan, result.covariance_n2),
         residual_m=np.where(mask, np.nan, result.residual_m),
         success=np.where(mask, False, result.success),
+        status=np.where(mask, Status.PRESSURE_OUT_OF_RANGE, result.status).astype(np.int8),
         message=message.astype(str) if batch else str(message[()]),
         chi2_per_dof=None if chi2 is None else np.where(mask, np.nan, chi2),
         p_value=None if result.p_value is None else np.where(mask, np.nan, result.p_value),
@@ -299,8 +298,6 @@ def check_one_line(session) -> None:
 
 # --- per frame: a force the actuator cannot carry -------------------------------------------
 
-IMPLAUSIBLE_FORCE = "implausible_force"
-"""Status (and message prefix) of a frame whose fitted force is beyond what the actuator can carry."""
 FORCE_MARGIN = 10.0
 """Factor of :func:`force_bound_n` over the force that bends the actuator by the sensor's range."""
 
@@ -392,7 +389,8 @@ def force_bound_step(estimate):
 
             first = np.argwhere(np.atleast_1d(over))[0]
             m, t = np.atleast_1d(magnitude)[tuple(first)], np.atleast_1d(top)[tuple(first)]
-            raise ConvergenceError(f"{int(np.count_nonzero(over))} frame(s) {IMPLAUSIBLE_FORCE}: |F| = {m:.3g} N "
+            raise ConvergenceError(f"{int(np.count_nonzero(over))} frame(s) {Status.IMPLAUSIBLE_FORCE.word}: "
+                                   f"|F| = {m:.3g} N "
                                    f"beyond the {t:.3g} N this actuator can carry")
         return _mark_force(result, over, magnitude, top, p)
 
@@ -404,9 +402,10 @@ def _mark_force(result, over, magnitude, top, p):
     batch = result.batch_shape
     message = np.array(np.broadcast_to(np.asarray(result.message, dtype=object), batch), dtype=object)
     for index in zip(*np.nonzero(over)) if batch else [()]:
-        message[index] = (f"{IMPLAUSIBLE_FORCE}: |F| = {float(magnitude[index]):.3g} N is beyond the "
+        message[index] = (f"{Status.IMPLAUSIBLE_FORCE.word}: |F| = {float(magnitude[index]):.3g} N is beyond the "
                           f"{float(top[index]):.3g} N this actuator can carry at {float(p[index]) / 1e3:g} kPa "
                           f"({FORCE_MARGIN:g} EI(P) κ_max / L): check the units of the config's stiffness and the "
                           "calibration")
     return dataclasses.replace(result, success=np.where(over, False, result.success),
+                               status=np.where(over, Status.IMPLAUSIBLE_FORCE, result.status).astype(np.int8),
                                message=message.astype(str) if batch else str(message[()]))

@@ -24,11 +24,11 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
-from bendsense.shape import pcc
-from bendsense.mechanics import _beam_kernels as bk
 from bendsense.choices import CONSTRAINTS
 from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
+from bendsense.mechanics import _beam_kernels as bk
+from bendsense.shape import pcc
 from bendsense.validation import float_array
 
 __all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", "quadrature", "reference", "points",

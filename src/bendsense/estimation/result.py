@@ -63,9 +63,15 @@ class ForceEstimate:
         Converged, with a stable beam equilibrium; or stopped at the best stable point
         where the load along one direction is not identifiable (message
         ``"not identifiable along ..."``, ``std_n`` inf along it).
+    status : ndarray of int8, shape (...)
+        Each frame's code (:class:`bendsense.status.Status`): ``OK``,
+        ``NOT_IDENTIFIABLE``, ``CONTACT_UNRESOLVED`` (successes), ``NOT_CONVERGED``,
+        ``BEAM_FAILED``, ``NO_STABLE_MATCH``, ``MODEL_MISFIT``, ``PRESSURE_OUT_OF_RANGE``,
+        ``IMPLAUSIBLE_FORCE``. :func:`bendsense.status.words` gives their results.csv words.
     message : str or ndarray of str, shape (...)
-        ``"converged"``, ``"not identifiable along (x, y): ..."`` or the reason for
-        ``success=False``.
+        For people: ``"converged"``, ``"not identifiable along (x, y): ..."`` or the
+        reason for ``success=False``, with the numbers that tell it (nothing parses it:
+        the status is ``status``).
     iterations : ndarray of int, shape (...)
         Beam solves spent on each frame (objective evaluations for ``paper``).
     wall_time_s : float
@@ -144,6 +150,7 @@ class ForceEstimate:
     covariance_n2: np.ndarray
     residual_m: np.ndarray
     success: np.ndarray
+    status: np.ndarray
     message: object
     iterations: np.ndarray
     wall_time_s: float
@@ -196,6 +203,7 @@ class ForceEstimate:
             "covariance_n2": np.asarray(self.covariance_n2).tolist(),
             "residual_m": np.asarray(self.residual_m).tolist(),
             "success": np.asarray(self.success).tolist(),
+            "status": np.asarray(self.status).tolist(),
             "message": np.asarray(self.message).tolist(),
             "iterations": np.asarray(self.iterations).tolist(),
             "wall_time_s": float(self.wall_time_s),

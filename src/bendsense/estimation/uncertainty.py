@@ -23,8 +23,8 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
-from bendsense.mechanics import _beam_kernels as bk
 from bendsense.errors import ArgumentError
+from bendsense.mechanics import _beam_kernels as bk
 
 
 @njit(cache=True)

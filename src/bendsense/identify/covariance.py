@@ -317,7 +317,7 @@ def _pooled_errors(lse, lrms, counts):
 
     A level's own ``s_j² = RSS_j / (n_j − 1)`` rests on 3–5 degrees of freedom (two or
     three loads); weighted by such noisy ``1/se²`` the regression claimed a σ of γ1 0.77 of
-    its scatter over 200 refits (tests/test_parameter_prior.py). One camera sees every
+    its scatter over 200 refits (tests/estimation/test_parameter_prior.py). One camera sees every
     level with the same noise: ``max(s_j², s²)``, ``s² = Σ RSS_j / Σ (n_j − 1)``,
     ``RSS_j = n_j rms_j²``; a level that misfits more than the others keeps its weight down.
     """

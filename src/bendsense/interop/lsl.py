@@ -5,7 +5,7 @@
 - ``bendsense-force``, type ``Force``: ``fx_n, fy_n, fx_std_n, fy_std_n`` [N] (NaN where a
   frame has no estimate), then, when the processor tracks the force (the default of
   ``record --estimate`` and ``live``), the causally tracked force ``fx_track_n,
-  fy_track_n, fx_track_std_n, fy_track_std_n`` [N] (:class:`bendsense.Tracker`: a
+  fy_track_n, fx_track_std_n, fy_track_std_n`` [N] (:class:`bendsense.tracking.Tracker`: a
   Kalman filter, so each sample's tracked value uses that frame and the frames before),
   then, for a contact load (``record --estimate --load contact --contact-s-m X``), the
   contact's arc length and its standard deviation ``contact_s_m, contact_std_m`` [m];

@@ -60,7 +60,7 @@ import numpy as np
 
 from bendsense import output
 from bendsense.errors import SessionError, require_extra
-from bendsense.results import CONTACT_UNRESOLVED, EXTRAPOLATED, MODEL_MISFIT, NOT_CONVERGED, NOT_IDENTIFIABLE, OK
+from bendsense.status import Status
 
 __all__ = ["write_mcap", "write_mcap_fingers", "finger_topic", "require_ros", "FRAME_ID", "TOPICS"]
 
@@ -123,8 +123,9 @@ SCHEMAS = {
     ),
     POINT_STAMPED: _definition("std_msgs/Header header\ngeometry_msgs/Point point\n", _HEADER, _TIME, _POINT),
 }
-_LEVEL = {OK: 0, EXTRAPOLATED: 1, MODEL_MISFIT: 1, NOT_IDENTIFIABLE: 1, CONTACT_UNRESOLVED: 1,
-          NOT_CONVERGED: 2}  # diagnostic levels
+_LEVEL = {Status.OK.word: 0, Status.EXTRAPOLATED.word: 1, Status.MODEL_MISFIT.word: 1,
+          Status.NOT_IDENTIFIABLE.word: 1, Status.CONTACT_UNRESOLVED.word: 1,
+          Status.NOT_CONVERGED.word: 2}  # diagnostic levels of the status words of results.csv
 
 
 def require_ros():
@@ -254,8 +255,8 @@ class _Part:
     """One actuator's messages: its results, topics and contact points."""
 
     def __init__(self, finger, session, shape, estimate, track):
-        from bendsense.results.contact import point_on_shape, resolved
         from bendsense.results import Results
+        from bendsense.results.contact import point_on_shape, resolved
 
         self.results = Results.from_state(session, shape, estimate, track)
         self.cols = self.results.columns

@@ -40,6 +40,7 @@ STABLE_BOUND = math.pi**2 / 4  # first eigenvalue of -d²/dσ² with η(0)=0, η
 WEIGHT_BOUND = 7.83  # Greenhill: first eigenvalue b of -η'' = b (1 - σ) η, 7.8373 (rounded down)
 QUAD = 1e-4  # Newton's quadratic-regime early stop (see _newton)
 QUAD_SENS = 1e-8  # ... with sensitivities, which come from the last Jacobian
+NEWTON_TOL = 1e-11  # rad: the Newton tolerance of the beam solver and the force estimate
 LOCATE = 1e-3  # load-factor step within which a loss of stability is accepted as real
 WARM_MOVE = 0.1  # [rad] a non-convex warm start moving farther is re-solved from the arc
 FIRST_STEP = 1.0  # first continuation step, in units of the convexity bound

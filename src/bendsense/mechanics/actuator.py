@@ -53,7 +53,7 @@ _log = logging.getLogger(__name__)
 # Gauss–Legendre orders of the eq. 10 quadrature. The integrand is analytic with its
 # nearest singularity at λ = 0, far from the stretches λ ∈ [1, 1 + θ0 (a+b+t)/L] that
 # occur, so these orders are at round-off (~1e-15 relative) up to θ0 of several turns;
-# tests/test_actuator.py checks this against a doubled order and adaptive quadrature.
+# tests/mechanics/test_actuator.py checks this against a doubled order and adaptive quadrature.
 _N_BETA = 12
 _N_TAU = 12
 _N_PHI = 16
@@ -516,7 +516,7 @@ class FreeBendingModel:
     Examples
     --------
     >>> import bendsense
-    >>> model = bendsense.FreeBendingModel.from_config(bendsense.load_config())
+    >>> model = bendsense.mechanics.actuator.FreeBendingModel.from_config(bendsense.load_config())
     >>> round(float(np.degrees(model.bending_angle_rad(60e3))), 1)
     79.5
     """

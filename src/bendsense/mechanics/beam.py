@@ -44,8 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense import _jit
-from bendsense.mechanics import _beam_kernels as _k
 from bendsense.errors import ArgumentError, ConvergenceError, ConvergenceWarning
+from bendsense.mechanics import _beam_kernels as _k
 from bendsense.status import Status
 from bendsense.validation import short
 
@@ -66,7 +66,7 @@ DEFAULT_NODES = 20
 DEFAULT_POINTS = 101
 
 _OK = "converged"
-NEWTON_TOL = 1e-11  # rad: default Newton tolerance of :func:`solve`
+NEWTON_TOL = _k.NEWTON_TOL  # rad: default Newton tolerance of :func:`solve`
 NEWTON_MAX_ITER = 30
 
 
@@ -347,7 +347,7 @@ def solve(
     continuation: bool = True,
     contact_s_m=None,
 ) -> BeamSolution:
-    """Fast spectral solver on already validated arrays (the compiled kernels of :mod:`bendsense.mechanics._beam_kernels`).
+    """Fast spectral solver on already validated arrays (compiled kernels: :mod:`bendsense.mechanics._beam_kernels`).
 
     Parameters
     ----------

@@ -40,7 +40,8 @@ from bendsense._batched import concat_frames, expand_frames, put_frames, take_fr
 from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, DataWarning, SessionError
 from bendsense.pipeline.readings import ReadingClock
-from bendsense.results import CONTACT_UNRESOLVED, NOT_IDENTIFIABLE, Results
+from bendsense.results import Results
+from bendsense.status import Status, words
 
 log = logging.getLogger("bendsense")
 
@@ -50,7 +51,6 @@ __all__ = [
     "LiveFrame",
     "LiveProcessor",
     "LIVE_MAX_ITER",
-    "NO_PRESSURE_STATUS",
     "Processed",
     "estimation_options",
     "process",
@@ -61,8 +61,6 @@ __all__ = [
 #: iterations; one that cannot (an unconstrained axial force on the straight actuator
 #: does not change its shape) must not stall the stream for 100 beam solves.
 LIVE_MAX_ITER = 20
-#: ``status`` of a frame that has no pressure reading (and no fallback pressure).
-NO_PRESSURE_STATUS = "no_pressure"
 
 
 def estimation_options(config, constraint=None, method=None, objective=None) -> tuple[str, str, str]:
@@ -171,8 +169,8 @@ class Processed(Results):
 
     def counts(self) -> FrameCounts:
         """Frames flagged: extrapolated, pressure out of range, not converged, model_misfit, not identifiable."""
-        from bendsense.estimation.plausibility import IMPLAUSIBLE_FORCE, pressure_outside
-        from bendsense.results import MODEL_MISFIT
+        from bendsense.estimation.plausibility import pressure_outside
+        from bendsense.results import frame_codes
 
         n = len(self.session)
         extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(self.shape.extrapolated), (n,))))
@@ -180,14 +178,15 @@ class Processed(Results):
             return FrameCounts(frames=n, extrapolated=extrapolated)
         outside = pressure_outside(self.session.pressure_pa, self.config)
         failed = ~np.asarray(self.estimate.success, dtype=bool) & ~outside
-        message = np.broadcast_to(np.asarray(self.estimate.message, dtype=str), (n,))
-        misfit = failed & np.char.startswith(message, MODEL_MISFIT)
-        implausible = failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)
+        own = np.broadcast_to(np.asarray(self.estimate.status), (n,))
+        misfit = failed & (own == Status.MODEL_MISFIT)
+        implausible = failed & (own == Status.IMPLAUSIBLE_FORCE)
+        codes = frame_codes(self.shape, self.estimate)
         return FrameCounts(frames=n, extrapolated=extrapolated, out_of_range=int(outside.sum()),
                            not_converged=int(np.count_nonzero(failed & ~misfit & ~implausible)),
                            model_misfit=int(misfit.sum()), implausible_force=int(implausible.sum()),
-                           not_identifiable=int(np.count_nonzero(self.columns["status"] == NOT_IDENTIFIABLE)),
-                           contact_unresolved=int(np.count_nonzero(self.columns["status"] == CONTACT_UNRESOLVED)))
+                           not_identifiable=int(np.count_nonzero(codes == Status.NOT_IDENTIFIABLE)),
+                           contact_unresolved=int(np.count_nonzero(codes == Status.CONTACT_UNRESOLVED)))
 
 
 def _source(session) -> str:
@@ -444,7 +443,7 @@ class LiveBlock:
     offset : ndarray, shape (N,)
         The calibration's offsets A0 (for ΔA).
     track : Track or None
-        The causally tracked forces of the block (:class:`bendsense.Tracker`); None when
+        The causally tracked forces of the block (:class:`bendsense.tracking.Tracker`); None when
         the processor does not track or no frame of the block has a force estimate.
     tracked : bool
         Whether the processor tracks the forces (the tracked columns are then present,
@@ -505,22 +504,22 @@ class LiveBlock:
 
     @property
     def status(self) -> np.ndarray:
-        """Per-frame status of ``results.csv``.
+        """Per-frame status codes (n,) of int8 (:class:`bendsense.status.Status`).
 
-        That of :func:`bendsense.results.frame_status`, and :data:`NO_PRESSURE_STATUS`
-        for frames without pressure when forces are estimated.
+        Those of :func:`bendsense.results.frame_codes`, and ``NO_PRESSURE`` for frames
+        without pressure when forces are estimated. Their words are results.csv's ``status``.
         """
-        from bendsense.results import frame_status
+        from bendsense.results import frame_codes
 
-        status = frame_status(self.shape, self.estimate)
+        status = frame_codes(self.shape, self.estimate)
         if self.estimated:
-            status[~np.isfinite(self.pressure_pa)] = NO_PRESSURE_STATUS
+            status[~np.isfinite(self.pressure_pa)] = Status.NO_PRESSURE
         return status
 
     def columns(self) -> dict:
         """The columns of ``results.csv`` for these frames (those of ``bendsense ... save``)."""
-        from bendsense.results.contact import CONTACT_COLUMNS
         from bendsense.results import TRACK_COLUMNS, WINDOW_COLUMN, Results, tracked_columns
+        from bendsense.results.contact import CONTACT_COLUMNS
         from bendsense.session import Session
 
         session = Session(self.t_s, self.signals, self.pressure_pa, extra=self.extra)
@@ -536,11 +535,11 @@ class LiveBlock:
             columns["status"] = None
             if self.tracked:
                 columns.update({name: nan for name in TRACK_COLUMNS[:4]})
-                columns.update({"track_status": status, WINDOW_COLUMN: nan})
+                columns.update({"track_status": words(status), WINDOW_COLUMN: nan})
             columns.update(extra)
         elif self.track is not None:  # the frames without pressure: that status, not the estimate's
             columns.update(tracked_columns(len(self), self.estimate, self.track, status))
-        columns["status"] = status
+        columns["status"] = words(status)
         return columns
 
     def frame(self, i: int = -1) -> LiveFrame:
@@ -559,7 +558,8 @@ class LiveBlock:
         return LiveFrame(seq=int(self.seq[i]), t_s=float(self.t_s[i]), host_ns=int(self.host_ns[i]),
                          pressure_pa=float(self.pressure_pa[i]), delta_a=self.signals[i] - self.offset,
                          shape=take_frames(self.shape, i, n), estimate=est, process_s=self.process_s / n,
-                         status=str(self.status[i]), track_force_n=self.track_force_n[i] if self.tracked else None,
+                         status=Status(self.status[i]).word,
+                         track_force_n=self.track_force_n[i] if self.tracked else None,
                          track_std_n=self.track_std_n[i] if self.tracked else None)
 
 
@@ -582,13 +582,13 @@ class LiveProcessor:
         ``config.estimation.objective``.
     pressure_pa : float, optional
         Pressure for frames without a reading [Pa]; without it such frames get a
-        shape only (status :data:`NO_PRESSURE_STATUS`).
+        shape only (status ``no_pressure``).
     n_points : int
         Points of each shape along the sensor.
     estimate : bool
         Estimate the force (False: shapes only).
     track : bool, default True
-        Track the forces causally (:class:`bendsense.Tracker`, a Kalman filter over the
+        Track the forces causally (:class:`bendsense.tracking.Tracker`, a Kalman filter over the
         per-frame estimates, its state kept across blocks): :attr:`LiveBlock.track`.
     bandwidth_hz : float, optional
         Bandwidth of the track [Hz]; None: the tracker's default.
@@ -699,16 +699,16 @@ class LiveProcessor:
         if self.adaptation is not None:  # its worker started and warmed
             self.adaptation.start()
 
-    def rest_status(self) -> str:
+    def rest_status(self) -> Status:
         """The status of a frame of the actuator at rest (the flat calibration signals, no pressure), then forgotten.
 
-        ``not_identifiable``: the constraint leaves the load of a straight actuator undetermined (both
+        ``NOT_IDENTIFIABLE``: the constraint leaves the load of a straight actuator undetermined (both
         components free, or a fixed direction along it), so a force loop could not start from rest.
         """
         flat = np.asarray(self.calibration.offset, dtype=float)
         block = self.process_block(flat[None, :], np.zeros(1), t_s=np.zeros(1))
         self._forget()
-        return str(block.status[0])
+        return Status(block.status[0])
 
     def _forget(self) -> None:
         self.reset()
@@ -804,8 +804,9 @@ class LiveProcessor:
             extra={} if extra is None else {k: np.asarray(v) for k, v in extra.items()},
         )
         self.frames += n
-        for status in block.status:
-            self.status_counts[status] = self.status_counts.get(status, 0) + 1
+        codes, counts = np.unique(block.status, return_counts=True)
+        for word, count in zip(words(codes), counts):
+            self.status_counts[word] = self.status_counts.get(word, 0) + int(count)
         if track is not None:
             from bendsense.estimation._kernels import MISFIT_P
             from bendsense.results import WINDOW_MISFIT

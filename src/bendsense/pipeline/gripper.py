@@ -58,8 +58,8 @@ class GripperProcessor:
 
     def __init__(self, calibrations, gripper, *, pressure_pa=None, finger_options=None, **options):
         from bendsense.config import GripperConfig
-        from bendsense.session.fingers import calibrations as finger_calibrations
         from bendsense.pipeline import LiveProcessor
+        from bendsense.session.fingers import calibrations as finger_calibrations
 
         if not isinstance(gripper, GripperConfig):
             raise ArgumentError(f"gripper: expected a GripperConfig (a config with fingers:), got "

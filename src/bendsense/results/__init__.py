@@ -23,28 +23,19 @@ from pathlib import Path
 import numpy as np
 
 from bendsense._io import open_regular, read_text
-from bendsense.results.contact import CONTACT_COLUMNS, contact_columns
 from bendsense.errors import SessionError
-from bendsense.estimation.plausibility import IMPLAUSIBLE_FORCE, OUT_OF_RANGE
+from bendsense.results.contact import CONTACT_COLUMNS, contact_columns
 from bendsense.session.cells import parse_column, write_columns
+from bendsense.status import Status, words
 
-# the per-frame ``status`` of results.csv (DESIGN section 3): ``ok`` or a short reason
-OK = "ok"
-EXTRAPOLATED = "extrapolated"  # a signal outside the calibrated range
-NO_SHAPE = "no_shape"  # non-finite signals
-NOT_CONVERGED = "not_converged"  # the force estimate failed
-NOT_IDENTIFIABLE = "not_identifiable"  # the shape does not determine the load along one direction (σ inf)
-MODEL_MISFIT = "model_misfit"
-CONTACT_UNRESOLVED = "contact_unresolved"  # load="contact": the location is not resolved (contact_std_m inf)
-NO_FORCE = "no_force"  # a NaN force is never ok
-IMPLAUSIBLE = "implausible_shape"  # a tip angle beyond a full turn
 WINDOW_MISFIT = "window_misfit"  # a count, not a status: frames whose latest window failed the window test
-#: the flagged statuses that the status lines of ``record`` and ``live`` count, with their labels
-FLAGGED = ((EXTRAPOLATED, "extrapolated"), (NOT_CONVERGED, "not converged"), (MODEL_MISFIT, "misfit"),
-           (WINDOW_MISFIT, "window misfit"), (NOT_IDENTIFIABLE, "not identifiable"),
-           (IMPLAUSIBLE_FORCE, "implausible force"))
+#: the flagged statuses (words) that the status lines of ``record`` and ``live`` count, with their labels
+FLAGGED = ((Status.EXTRAPOLATED.word, "extrapolated"), (Status.NOT_CONVERGED.word, "not converged"),
+           (Status.MODEL_MISFIT.word, "misfit"), (WINDOW_MISFIT, "window misfit"),
+           (Status.NOT_IDENTIFIABLE.word, "not identifiable"), (Status.IMPLAUSIBLE_FORCE.word, "implausible force"))
 
-__all__ = ["Results", "write_results", "read_results", "frame_status", "estimate_status", "tracked_columns"]
+__all__ = ["Results", "write_results", "read_results", "frame_status", "frame_codes", "estimate_codes",
+           "tracked_columns"]
 
 _KAPPA = re.compile(r"kappa[0-9]+$")
 FORCE_COLUMNS = ("fx_n", "fy_n", "fx_std_n", "fy_std_n", "residual_m", "status")
@@ -196,10 +187,10 @@ def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict
         ``window_p_value`` when there is no track.
     track : Track, optional
         The tracked force: the columns :data:`TRACK_COLUMNS`, and its ``window_p_value``.
-    status : ndarray of str, shape (frames,), optional
-        The frames' own ``status``: a frame that is not ``ok`` has that reason as its
-        ``track_status`` too (the track's value stays, a prediction where the frame has
-        no force), never ``ok``.
+    status : ndarray of int, shape (frames,), optional
+        The frames' own status codes (:func:`frame_codes`): a frame that is not ``OK``
+        has that reason as its ``track_status`` too (the track's value stays, a
+        prediction where the frame has no force), never ``ok``.
 
     Returns
     -------
@@ -211,30 +202,23 @@ def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict
     if track is not None:
         columns.update({name: np.asarray(values).reshape(frames) for name, values in track.to_columns().items()})
         if status is not None:
-            own = np.asarray(status, dtype=object).reshape(frames)
-            columns["track_status"] = np.where(own != OK, own, np.asarray(columns["track_status"], dtype=object))
+            own = np.asarray(status).reshape(frames)
+            columns["track_status"] = words(np.where(own != Status.OK, own, np.asarray(track.status).reshape(frames)))
         window = track.window_p_value
     if window is not None:
         columns[WINDOW_COLUMN] = np.asarray(window, dtype=float).reshape(frames)
     return columns
 
 
-def _all_ok(estimate) -> bool:
-    """Whether every frame of a force estimate is ok: converged, a finite force, a resolved contact."""
-    contact_std = getattr(estimate, "contact_std_m", None) if getattr(estimate, "load", "tip") == "contact" else None
-    message = np.asarray(getattr(estimate, "message", ""), dtype=str)
-    return bool(np.all(estimate.success)) and bool(np.all(message == "converged")) \
-        and bool(np.isfinite(estimate.force_n).all()) and not (contact_std is not None and bool(np.isinf(
-            np.asarray(contact_std, dtype=float)).any()))
+_SUCCESSES = (Status.OK, Status.NOT_IDENTIFIABLE, Status.CONTACT_UNRESOLVED)
 
 
-def estimate_status(estimate, n: int) -> np.ndarray:
-    """Per-frame status strings (n,) of a force estimate alone: ``ok`` or the estimate's reason.
+def estimate_codes(estimate, n: int) -> np.ndarray:
+    """Per-frame status codes (n,) of a force estimate alone: its own, and what the outputs add.
 
-    ``not_converged``, ``not_identifiable``, ``pressure_out_of_range``, ``model_misfit``,
-    ``implausible_force``, ``no_force`` or, for a contact load, ``contact_unresolved``
-    (a force whose location the data cannot place: its message says so, or
-    ``contact_std_m`` is infinite) (:func:`frame_status`, which adds the shape's).
+    The estimate's :attr:`~bendsense.ForceEstimate.status`; ``NO_FORCE`` for an ``OK``
+    frame without a finite force (whatever the solver said), ``CONTACT_UNRESOLVED`` for
+    an ``OK`` frame of a contact load whose ``contact_std_m`` is infinite.
 
     Parameters
     ----------
@@ -243,39 +227,27 @@ def estimate_status(estimate, n: int) -> np.ndarray:
     n : int
         The number of frames.
     """
-    status = np.full(n, OK, dtype=object)
-    if _all_ok(estimate):
-        return status  # every frame ok (the live path's usual block): nothing to look up
-    failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
-    message = np.broadcast_to(np.asarray(getattr(estimate, "message", ""), dtype=str), (n,))
-    unresolved = np.zeros(n, dtype=bool)
+    codes = np.array(np.broadcast_to(np.asarray(estimate.status, dtype=np.int8), (n,)))
+    failed = ~np.broadcast_to(np.asarray(estimate.success, dtype=bool), (n,))
+    codes[failed & np.isin(codes, _SUCCESSES)] = Status.NOT_CONVERGED  # a failure never reads as a success
+    ok = codes == Status.OK
+    if not ok.any():
+        return codes
+    force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
+    codes[ok & ~np.isfinite(force).all(axis=1)] = Status.NO_FORCE
     if getattr(estimate, "load", "tip") == "contact" and estimate.contact_std_m is not None:
         unresolved = np.broadcast_to(np.isinf(np.asarray(estimate.contact_std_m, dtype=float)), (n,))
-    status[failed] = NOT_CONVERGED
-    status[~failed & np.char.startswith(message, "not identifiable")] = NOT_IDENTIFIABLE
-    status[~failed & np.char.startswith(message, CONTACT_UNRESOLVED)] = CONTACT_UNRESOLVED
-    status[failed & np.char.startswith(message, OUT_OF_RANGE)] = OUT_OF_RANGE
-    status[failed & np.char.startswith(message, MODEL_MISFIT)] = MODEL_MISFIT
-    status[failed & np.char.startswith(message, IMPLAUSIBLE_FORCE)] = IMPLAUSIBLE_FORCE
-    # a NaN force is never ok, whatever the solver said
-    force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
-    status[(status == OK) & ~np.isfinite(force).all(axis=1)] = NO_FORCE
-    status[(status == OK) & unresolved] = CONTACT_UNRESOLVED  # the force reported, never ok
-    return status
+        codes[(codes == Status.OK) & unresolved] = Status.CONTACT_UNRESOLVED  # the force reported, never ok
+    return codes
 
 
-def frame_status(shape, estimate=None) -> np.ndarray:
-    """Per-frame status strings: ``ok`` or a short reason.
+def frame_codes(shape, estimate=None) -> np.ndarray:
+    """Per-frame status codes (n,) of int8: the shape's, then the force estimate's (:mod:`bendsense.status`).
 
-    ``extrapolated`` (signals outside the calibrated range), ``no_shape`` (non-finite
-    signals), ``not_converged``, ``not_identifiable`` (the shape does not determine the
-    load along one direction: σ is infinite there), ``pressure_out_of_range``,
-    ``model_misfit`` (the model shape stays over 5 % of the length from the measured one,
-    or a χ² beyond chance), ``contact_unresolved`` (a contact load whose location the
-    data cannot place: ``contact_std_m`` inf, force kept), ``implausible_force`` (a force beyond what the actuator can
-    carry, :func:`bendsense.estimation.plausibility.force_bound_n`: a unit or calibration mistake;
-    force kept), ``no_force``, and ``implausible_shape`` (a tip angle beyond a full
-    turn: a unit or calibration mistake).
+    ``EXTRAPOLATED`` (signals outside the calibrated range), ``NO_SHAPE`` (non-finite
+    signals), the estimate's own (:func:`estimate_codes`) where the shape is ok or the
+    estimate failed, and ``IMPLAUSIBLE_SHAPE`` (a tip angle beyond a full turn: a unit or
+    calibration mistake) over all.
 
     Parameters
     ----------
@@ -285,24 +257,39 @@ def frame_status(shape, estimate=None) -> np.ndarray:
         Force estimates of the same frames.
     """
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
-    status = np.full(n, OK, dtype=object)
+    codes = np.full(n, Status.OK, dtype=np.int8)
+    codes[np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))] = Status.EXTRAPOLATED
     kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
-    if not np.any(getattr(shape, "extrapolated", False)) and np.isfinite(kappa).all() and (
-            estimate is None or _all_ok(estimate)) and not (np.abs(shape.tip_angle_rad) > 2.0 * np.pi).any():
-        return status  # every frame ok (the live path's usual block): nothing to look up
-    extrapolated = np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))
-    status[extrapolated] = EXTRAPOLATED
-    # a shape from non-finite signals is never ok
-    status[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = NO_SHAPE
+    codes[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = Status.NO_SHAPE
     if estimate is not None:
-        own = estimate_status(estimate, n)
+        own = estimate_codes(estimate, n)
         failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
-        status[failed] = own[failed]
-        status[(status == OK) & (own != OK)] = own[(status == OK) & (own != OK)]
+        codes[failed] = own[failed]
+        codes[codes == Status.OK] = own[codes == Status.OK]
     # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
     tip = np.broadcast_to(np.asarray(shape.tip_angle_rad, dtype=float), (n,))
-    status[np.abs(tip) > 2.0 * np.pi] = IMPLAUSIBLE
-    return status
+    codes[np.abs(tip) > 2.0 * np.pi] = Status.IMPLAUSIBLE_SHAPE
+    return codes
+
+
+def frame_status(shape, estimate=None) -> np.ndarray:
+    """Per-frame ``status`` words of results.csv: ``ok`` or a short reason (the words of :func:`frame_codes`).
+
+    ``extrapolated``, ``no_shape``, ``not_converged``, ``not_identifiable`` (the shape
+    does not determine the load along one direction: σ is infinite there),
+    ``pressure_out_of_range``, ``model_misfit`` (the model shape stays over 5 % of the
+    length from the measured one, or a χ² beyond chance), ``contact_unresolved``,
+    ``implausible_force`` (:func:`bendsense.estimation.plausibility.force_bound_n`: force
+    kept), ``no_force`` and ``implausible_shape``.
+
+    Parameters
+    ----------
+    shape : Shape
+        Reconstructed shapes, batch axis over frames.
+    estimate : ForceEstimate, optional
+        Force estimates of the same frames.
+    """
+    return words(frame_codes(shape, estimate))
 
 
 def flagged_counts(counts: dict, sep: str = "  ") -> str:

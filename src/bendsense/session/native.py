@@ -72,7 +72,6 @@ import yaml
 from bendsense import validation as check
 from bendsense._io import check_regular_file, load_yaml, open_regular
 from bendsense.errors import OutputError, SessionError
-from bendsense.wire.frames import MAX_LINES, NO_PRESSURE, SAMPLE_FIELDS
 from bendsense.session.csvfile import read_session_csv, write_session_csv
 from bendsense.session.records import (
     LINES_FIELD,
@@ -81,6 +80,7 @@ from bendsense.session.records import (
     records_to_session,
 )
 from bendsense.validation import short
+from bendsense.wire.frames import MAX_LINES, NO_PRESSURE, SAMPLE_FIELDS
 
 __all__ = [
     "FORMAT",

@@ -23,9 +23,9 @@ import logging
 import numpy as np
 
 from bendsense.errors import SessionError
-from bendsense.wire.frames import MAX_LINES, NO_PRESSURE
 from bendsense.estimation.plausibility import check_pressure_column, check_time_column
 from bendsense.session.base import Session
+from bendsense.wire.frames import MAX_LINES, NO_PRESSURE
 
 __all__ = [
     "LINES_FIELD",

@@ -36,8 +36,8 @@ import numpy as np
 from numba import njit, prange
 
 from bendsense import _jit
-from bendsense.errors import ArgumentError
 from bendsense.calibration.shift_errors import horner
+from bendsense.errors import ArgumentError
 from bendsense.validation import float_array, short
 
 if TYPE_CHECKING:  # pragma: no cover

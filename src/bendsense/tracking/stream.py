@@ -1,4 +1,4 @@
-"""The compiled kernels of the streaming tracker (:class:`bendsense.Tracker`): a block of frames in one call each.
+"""The compiled kernels of the streaming tracker (:class:`~bendsense.tracking.Tracker`): a block of frames per call.
 
 :func:`stream_filter` cuts the segments (a gap, a pressure step), runs the filter's
 frames (:func:`bendsense.tracking.kalman.advance` and ``observe``, the steps of ``track``'s filter), carries
@@ -17,8 +17,8 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
-from bendsense.estimation._kernels import MISFIT_P
 from bendsense.calibration.shift_errors import ShiftErrorModel
+from bendsense.estimation._kernels import MISFIT_P
 from bendsense.tracking import kalman as K
 from bendsense.tracking import windows as W
 

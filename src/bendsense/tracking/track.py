@@ -20,8 +20,9 @@ from bendsense import _jit
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation._kernels import MISFIT_P
-from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
-from bendsense.results import MODEL_MISFIT, NO_FORCE, OK, estimate_status
+from bendsense.estimation.result import ForceEstimate
+from bendsense.results import TRACK_COLUMNS, estimate_codes
+from bendsense.status import Status, words
 from bendsense.tracking import kalman as _kalman
 from bendsense.tracking import stream as _stream
 from bendsense.tracking import windows as _windows
@@ -37,8 +38,6 @@ ML_SUBSAMPLE_FRAMES = 1000
 ML_STEP_DECADES = 0.05
 ML_REFINE_PASSES = 6  # at most this many more passes over the whole series after its first three
 LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
-#: The results.csv columns of a track (:meth:`Track.to_columns`).
-TRACK_COLUMNS = ("fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status")
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,10 +58,11 @@ class Track:
         The window test's p-value (:func:`bendsense.check_windows`): the frame's window
         (offline), or the latest completed window when the frame arrived (:class:`Tracker`);
         NaN where no test is available.
-    status : ndarray of str, shape (B,)
-        ``ok``, ``model_misfit`` (a window test below 0.001) or the frame's own reason
-        (``not_converged``, ``not_identifiable``, ...): never ``ok`` for a frame whose own
-        status is not.
+    status : ndarray of int8, shape (B,)
+        Status codes (:class:`bendsense.status.Status`): ``OK``, ``MODEL_MISFIT`` (a
+        window test below 0.001), ``NO_FORCE`` (no finite track) or the frame's own
+        (``NOT_CONVERGED``, ``NOT_IDENTIFIABLE``, ...): never ``OK`` for a frame whose own
+        status is not. Its words are results.csv's ``track_status``.
     bandwidth_hz : float
         The bandwidth of the filter used [Hz] (module :mod:`~bendsense.tracking.kalman`).
     mode : str
@@ -86,7 +86,7 @@ class Track:
     def to_columns(self) -> dict:
         """The results.csv columns ``fx_track_n, fy_track_n, fx_track_std_n, fy_track_std_n, track_status``."""
         f, s = np.asarray(self.force_n), np.asarray(self.std_n)
-        return dict(zip(TRACK_COLUMNS, (f[:, 0], f[:, 1], s[:, 0], s[:, 1], np.asarray(self.status))))
+        return dict(zip(TRACK_COLUMNS, (f[:, 0], f[:, 1], s[:, 0], s[:, 1], words(self.status))))
 
     def plot(self, ax=None):
         """Fx and Fy against time: the tracked force with its ±2σ band over the per-frame points; returns the axes.
@@ -462,27 +462,21 @@ def _c(a, shape):
 
 
 def track_status(est, z, window_p, force, std, flagged=None):
-    """The tracked status (b,): the frame's own, ``model_misfit`` where its window's p < MISFIT_P and it was ``ok``.
+    """The tracked status codes (b,): the frame's own, ``MODEL_MISFIT`` where its window's p < MISFIT_P and it was ok.
 
-    The frame's own: :func:`bendsense.results.estimate_status`, looked up only where a frame
-    is not ok; ``no_force`` where it was ``ok`` but the tracked force or its σ is not finite
+    The frame's own: :func:`bendsense.results.estimate_codes`, looked up only where a frame
+    is not ok; ``NO_FORCE`` where it was ok but the tracked force or its σ is not finite
     (an estimate without a noise model has nothing to weigh: a NaN track is never ok).
     ``flagged``: whether any frame's force is missing or its window p below MISFIT_P, when
     the caller knows (the stream kernels count them).
     """
     b = z.shape[0]
-    success, message = est.success, est.message
     if flagged is None:
         flagged = not np.isfinite(z).all() or (window_p < MISFIT_P).any()
     flagged = flagged or not (np.isfinite(force).all() and np.isfinite(std).all())
-    if b == 1:  # one frame (the live path): scalar tests, no array reductions
-        ok = bool(np.asarray(success).reshape(-1)[0]) and str(np.asarray(message).reshape(-1)[0]) == OK_MESSAGE
-    else:
-        ok = bool(np.all(success)) and bool(np.all(message == OK_MESSAGE))
-    ok = ok and not flagged
-    if ok:
-        return np.full(b, OK)  # every frame ok (the live path's usual block): nothing to look up
-    status = estimate_status(est, b)
-    status[(window_p < MISFIT_P) & (status == OK)] = MODEL_MISFIT
-    status[~(np.isfinite(force).all(axis=1) & np.isfinite(std).all(axis=1)) & (status == OK)] = NO_FORCE
-    return status.astype(str)
+    if not flagged and bool(np.all(est.success)) and bool(np.all(est.status == Status.OK)):
+        return np.full(b, Status.OK, dtype=np.int8)  # every frame ok (the live path's usual block)
+    status = estimate_codes(est, b)
+    status[(window_p < MISFIT_P) & (status == Status.OK)] = Status.MODEL_MISFIT
+    status[~(np.isfinite(force).all(axis=1) & np.isfinite(std).all(axis=1)) & (status == Status.OK)] = Status.NO_FORCE
+    return status

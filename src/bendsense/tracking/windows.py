@@ -30,11 +30,12 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
+from bendsense.calibration.shift_errors import ShiftErrorModel, shift_covariance
 from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation import uncertainty as unc
 from bendsense.estimation._kernels import MISFIT_P
-from bendsense.estimation.result import OK_MESSAGE, ForceEstimate
-from bendsense.calibration.shift_errors import ShiftErrorModel, shift_covariance
+from bendsense.estimation.result import ForceEstimate
+from bendsense.status import Status
 from bendsense.validation import short
 
 __all__ = ["check_windows", "WINDOW_S", "PRESSURE_STEP_PA", "MIN_FRAMES"]
@@ -414,13 +415,14 @@ def flag(estimate, bounds, p, n, window_s):
     frame_p = np.repeat(p, counts)
     frame_n = np.repeat(n, counts)
     message = np.array(np.broadcast_to(np.asarray(estimate.message, dtype=object), (B,)), dtype=object)
-    bad = (frame_p < MISFIT_P) & (message == OK_MESSAGE) & np.asarray(estimate.success, dtype=bool)
+    bad = (frame_p < MISFIT_P) & (np.asarray(estimate.status) == Status.OK) & np.asarray(estimate.success, dtype=bool)
     for i in np.flatnonzero(bad):
         message[i] = (f"model_misfit: window test over {window_s * 1e3:g} ms ({frame_n[i]} frames): p = "
                       f"{frame_p[i]:.2g} < {MISFIT_P:g}: the model does not explain the window's mean residual within "
                       "the stated noise, calibration and parameter errors (a load not at the tip, contact along the "
                       "body, or a mis-identified actuator)")
     return dataclasses.replace(estimate, window_p_value=frame_p, success=np.where(bad, False, estimate.success),
+                               status=np.where(bad, Status.MODEL_MISFIT, estimate.status).astype(np.int8),
                                message=message.astype(str))
 
 

@@ -238,7 +238,7 @@ new field is a new protocol version, agreed there first. Then, for a board tempe
 
 The record dtype, the recorder, ``Session.extra``, the session CSV export and import
 follow from step 1; the simulated board sends :func:`encode_sample`'s default until
-it is given a value. ``tests/test_sessiondir.py::test_a_new_sample_field_reaches_every_layer``
+it is given a value. ``tests/session/test_native.py::test_a_new_sample_field_reaches_every_layer``
 does step 1 and checks those.
 """
 

@@ -1,4 +1,4 @@
-"""Write the frozen format fixtures that tests/test_formats_frozen.py loads.
+"""Write the frozen format fixtures that tests/integration/test_formats_frozen.py loads.
 
     python tests/data/formats/make.py          # stream_v1.bin, session_v2/
     python tests/data/formats/make.py lines    # stream_v2_lines.bin, session_v2_lines/

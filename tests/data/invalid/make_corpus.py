@@ -484,8 +484,8 @@ print(len(cases), "cli cases")
 
 # ---- results directories: plot RESULTS_DIR -o FIG; "expect" holds the regex
 import bendsense  # noqa: E402
-from bendsense.shape.pcc import reconstruct  # noqa: E402
 from bendsense.results import write_results  # noqa: E402
+from bendsense.shape.pcc import reconstruct  # noqa: E402
 
 R = ROOT / "results"
 shutil.rmtree(R, ignore_errors=True)

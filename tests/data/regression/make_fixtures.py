@@ -1,4 +1,4 @@
-"""Write the estimator's regression fixtures (tests/test_regression.py checks them).
+"""Write the estimator's regression fixtures (tests/integration/test_regression.py checks them).
 
 The fixtures freeze the outputs (force, σ, success, message, residual, χ²/dof) of the
 force estimator on small corpora: cold independent frames (random pressures 15–120 kPa,
@@ -18,10 +18,10 @@ import tempfile
 import numpy as np
 
 import bendsense
-from bendsense.mechanics.actuator import FreeBendingModel
-from bendsense.mechanics.beam import solve_beam
 from bendsense.calibration import Calibration
 from bendsense.estimation import constraint_basis, estimate_force
+from bendsense.mechanics.actuator import FreeBendingModel
+from bendsense.mechanics.beam import solve_beam
 from bendsense.shape.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.scenarios import simulate
 from bendsense.sim.sensor import shifts_from_shape

@@ -48,8 +48,8 @@ def fig8_validation_shapes(path, table, radii, kappa_val, s_m) -> Path:
     s_m : ndarray
         Arc lengths of the shapes [m].
     """
-    from bendsense.shape.pcc import arc_positions
     from bendsense.plots import plot_shape_comparison
+    from bendsense.shape.pcc import arc_positions
 
     fig = _figure(figsize=(7.6, 5.4))
     ax = fig.add_subplot()

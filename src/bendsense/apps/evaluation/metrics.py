@@ -255,8 +255,8 @@ def contact_errors(shape, contact, calibration, model_config: Config, objective:
     objective : str, default "angles"
         Force estimate objective, ``"angles"`` or ``"positions"``.
     """
-    from bendsense.mechanics.actuator import FreeBendingModel
     from bendsense.estimation import estimate_force
+    from bendsense.mechanics.actuator import FreeBendingModel
 
     true_f = np.stack([contact.extra["fx_n"], contact.extra["fy_n"]], axis=-1)
     fc = np.asarray(contact.extra["fc_n"])

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bendsense.status import Status
+
 __all__ = ["MODEL_ERROR_CASES", "model_error_evaluation", "fig_model_error"]
 
 #: Rows of the section: label and the simulator's mismatch options.
@@ -93,7 +95,7 @@ def model_error_evaluation(calibration, config, seed: int) -> dict:
             "windows": (float(np.mean(wp < 1e-3)), len(held)),
             "coverage_frame": np.mean(np.abs(plain.force_n - force) <= 2 * plain.std_n, axis=0),
             "coverage_track": np.mean(np.abs(tracked.force_n - force) <= 2 * tracked.std_n, axis=0),
-            "flagged_track": float(np.mean(np.asarray(tracked.status) != "ok")),
+            "flagged_track": float(np.mean(np.asarray(tracked.status) != Status.OK)),
         }
         if key == "k0":
             out["series"] = {"t_s": t, "force_n": force, "frame_n": plain.force_n, "frame_std_n": plain.std_n,

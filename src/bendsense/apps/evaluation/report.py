@@ -374,9 +374,9 @@ def _timing(res) -> list:
                  if tm[f"force_paper_{k}_frames"]]
         lines += [
             f"On the frames timed with both, the fast method and the paper's agree to {diff:.1e} N; the fast one "
-            f"is {min(ratio):,.0f}–{max(ratio):,.0f} times faster per frame. The paper's method here runs the "
-            "shooting reference solver of `bendsense.mechanics.beam` in every objective evaluation, and its time per frame "
-            "varies a lot between frames.",
+            f"is {min(ratio):,.0f}–{max(ratio):,.0f} times faster per frame. The paper's method here runs "
+            "the shooting reference solver of `bendsense.mechanics.beam` in every objective evaluation, and its time "
+            "per frame varies a lot between frames.",
             "",
         ]
     return lines

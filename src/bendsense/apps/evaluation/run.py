@@ -188,8 +188,8 @@ def reproduce(
 def _evaluate(data: Path, seed: int, plan: Plan, say) -> dict:
     """Every stage of the protocol, simulating into ``data``: the numbers of the tables and figures."""
     from bendsense.config import load_config
-    from bendsense.shape.pcc import reconstruct
     from bendsense.session import read_session_csv
+    from bendsense.shape.pcc import reconstruct
 
     nominal = load_config()
     true = true_config(nominal)

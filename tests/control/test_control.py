@@ -1,0 +1,463 @@
+"""bendsense.control: the PI controller, the loop and its safety stops, against a plant written here.
+
+The plant is a first-order pressure regulator (τ = 25 ms, 0 ≤ p ≤ p_max) and a static
+force-vs-pressure map of a finger against a rigid object (no force below the pressure
+of first touch, then linear), stepped at 1 kHz in simulated time by a fake driver. The
+normal force's sign is checked against the independent forward model
+(tests/forward_model.py) through the real processor.
+"""
+
+import math
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from forward_model import forward
+from helpers import CONFIG, GAIN, ODD, linear_calibration
+
+from bendsense.control import ControlStop, PIController, Safety, normal_force, run
+from bendsense.control.force import contact_normal
+from bendsense.device.driver import DeviceStats, Reading
+from bendsense.errors import ArgumentError
+from bendsense.wire.frames import Sample
+
+TAU_S = 0.025
+P_TOUCH_PA = 30e3
+SLOPE_N_PER_PA = 6e-6  # ~6 mN per kPa beyond first touch
+P_MAX_PA = 120e3
+DT_S = 1e-3
+
+
+@dataclass
+class Plant:
+    """A regulated pressure line and a finger against a rigid object (the map of the module docstring)."""
+
+    setpoint_pa: float = 0.0
+    pressure_pa: float = 0.0
+
+    def advance(self, dt_s):
+        target = min(max(self.setpoint_pa, 0.0), P_MAX_PA)
+        self.pressure_pa += (target - self.pressure_pa) * (1.0 - math.exp(-dt_s / TAU_S))
+
+    @property
+    def force_n(self):
+        return SLOPE_N_PER_PA * max(self.pressure_pa - P_TOUCH_PA, 0.0)
+
+
+@dataclass
+class FakeBlock:
+    t_s: np.ndarray
+    force_n: np.ndarray
+    status: np.ndarray
+    track = None
+
+    def __len__(self):
+        return self.t_s.size
+
+
+class FakeProcessor:
+    """Turns the fake board's readings into blocks: the force rides in the first ADC count (µN)."""
+
+    def __init__(self, flagged=(), status="model_misfit"):
+        self.flagged = set(flagged)  # frame indices reported with ``status``
+        self.flag = status
+
+    def process_readings(self, readings):
+        t = np.array([r.device_us for r in readings]) * 1e-6
+        f = np.array([r.sample.adc[0] for r in readings]) * 1e-6
+        status = np.array([self.flag if r.sample.seq in self.flagged else "ok" for r in readings], dtype=object)
+        return FakeBlock(t, f, status)
+
+
+class FakeBoard:
+    """The plant at 1 kHz in simulated time; a frame per ``get_batch`` (what a loop that keeps up sees)."""
+
+    def __init__(self, *, lose_after=None, silent_after=None, per_batch=1):
+        self.plant = Plant()
+        self.k = 0
+        self.sent = []  # (frame, line, pressure_pa)
+        self.beats = 0
+        self.lost = 0
+        self.lose_after = lose_after
+        self.silent_after = silent_after
+        self.per_batch = per_batch
+
+    def get_batch(self, timeout=None, max_items=4096):
+        if self.silent_after is not None and self.k >= self.silent_after:
+            time.sleep(min(timeout, 0.01))
+            return []
+        out = []
+        for _ in range(self.per_batch):
+            if self.lose_after is not None and self.k >= self.lose_after:
+                self.lost += 1  # a frame lost on the wire: its seq is skipped
+                self.plant.advance(DT_S)
+                self.k += 1
+            self.plant.advance(DT_S)
+            self.k += 1
+            sample = Sample(seq=self.k & 0xFFFF, t_us=self.k * 1000, n_channels=1, status=0, tx_drops=0,
+                            pressure_pa=int(self.plant.pressure_pa), adc=(int(round(self.plant.force_n * 1e6)),))
+            out.append(Reading(time.monotonic_ns(), self.k * 1000, sample))
+        return out
+
+    def send_setpoint(self, line, pressure_pa, *, check_line=True):
+        self.sent.append((self.k, line, float(pressure_pa)))
+        if line == 0:
+            self.plant.setpoint_pa = float(pressure_pa)
+
+    def send_heartbeat(self):
+        self.beats += 1
+
+    @property
+    def stats(self):
+        return DeviceStats(frames=self.k, samples=self.k, crc_errors=0, malformed=0, lost=self.lost, queue_drops=0,
+                           reconnects=0, overruns=0, bytes=0)
+
+
+def pi_of(target=0.15, **kw):
+    return PIController(target, max_pressure_pa=kw.pop("max_pressure_pa", P_MAX_PA), **kw)
+
+
+def as_controller(pi):
+    """The PI on the fake blocks (their force is the normal force)."""
+
+    def controller(block):
+        return {0: pi.step(block.t_s, block.force_n)}
+
+    controller.fingers = (None,)
+    return controller
+
+
+def closed_loop(pi, seconds, plant=None, on_frame=None):
+    """The PI and the plant at 1 kHz: returns t, force, set-point, pressure per frame."""
+    plant = plant or Plant()
+    rows = []
+    for k in range(int(round(seconds / DT_S))):
+        plant.advance(DT_S)
+        t = (k + 1) * DT_S
+        if on_frame is not None:
+            on_frame(t, pi)
+        plant.setpoint_pa = pi.step([t], [plant.force_n])
+        rows.append((t, plant.force_n, plant.setpoint_pa, plant.pressure_pa))
+    return np.array(rows).T
+
+
+# --------------------------------------------------------------------------- the PI controller
+
+
+def test_pi_reaches_a_step_and_holds_it():
+    t, f, sp, p = closed_loop(pi_of(), 1.0)
+    reached = t[np.flatnonzero(np.abs(f - 0.15) <= 0.01)[0]]
+    assert reached < 0.3
+    assert np.all(np.abs(f[t > 0.6] - 0.15) < 1e-4)  # integral action: no steady error on a static plant
+    # the pressure a static map needs for 0.15 N, in closed form
+    assert sp[-1] == pytest.approx(P_TOUCH_PA + 0.15 / SLOPE_N_PER_PA, rel=1e-3)
+    assert sp.max() <= P_MAX_PA and sp.min() >= 0.0
+    assert np.all(np.abs(np.diff(sp)) <= 500.0 + 1e-6)  # the slew limit: 0.5 kPa per frame at 1 kHz
+
+
+def test_pi_anti_windup_leaves_the_limit_at_once():
+    # 0.5 N needs 113 kPa: with a 60 kPa limit the output sits at the limit for a second
+    limit = 60e3
+    lowered = {}
+
+    def lower(t, pi):
+        if t >= 1.0 and not lowered:
+            pi.target_force_n = 0.05  # reachable again: 38.3 kPa
+            lowered["t"] = t
+
+    pi = pi_of(0.5, max_pressure_pa=limit)
+    t, f, sp, p = closed_loop(pi, 1.5, on_frame=lower)
+    assert sp.max() <= limit
+    assert np.all(sp[(t > 0.4) & (t < 1.0)] == limit)
+    assert pi.integral_pa <= limit
+    # a wound-up integral (∫ e dt over a second at e ≈ 0.32 N: ~6e5 Pa) would hold the limit for ~0.3 s
+    left = t[np.flatnonzero((t > 1.0) & (sp < limit))[0]]
+    assert left - 1.0 < 0.01
+    assert abs(f[-1] - 0.05) < 1e-3
+
+
+def test_pi_holds_its_integral_without_a_force():
+    pi = pi_of()
+    closed_loop(pi, 0.5)
+    held = pi.integral_pa
+    out = pi.step([0.501, 0.502], [np.nan, np.nan])
+    assert pi.integral_pa == held
+    assert out == pytest.approx(held, abs=1e-9)
+
+
+def test_pi_a_late_block_acts_as_a_short_one():
+    # a block of 100 frames (the loop 100 ms behind) integrates and slews over 20 ms, not 100 ms
+    pi = pi_of()
+    pi.step([0.0], [0.0])
+    out = pi.step(np.arange(1, 101) * 1e-3, np.zeros(100))
+    assert pi.integral_pa == pytest.approx(pi.ki * 0.15 * 0.02)
+    assert out == pytest.approx(pi.max_rate * 0.02)  # K_p e + I = 16.5 kPa, slewed to 10 kPa
+    # a prompt block (2 frames) is not scaled
+    before = pi.integral_pa
+    pi.step([0.101, 0.102], [0.0, 0.0])
+    assert pi.integral_pa - before == pytest.approx(pi.ki * 0.15 * 0.002)
+
+
+@pytest.mark.parametrize(("kw", "match"), [({"kp_pa_per_n": -1.0}, "kp_pa_per_n"),
+                                           ({"max_pressure_pa": 0.0}, "max_pressure_pa"),
+                                           ({"line": 300}, "line"), ({"max_rate_pa_per_s": math.nan}, "max_rate")])
+def test_pi_refuses_bad_settings(kw, match):
+    with pytest.raises(ArgumentError, match=match):
+        pi_of(**kw)
+
+
+# --------------------------------------------------------------------------- the normal force
+
+
+def test_normal_force_is_positive_when_the_finger_presses():
+    """An object that holds the finger back pushes along n = (−cos φ_c, sin φ_c): N = F · n > 0.
+
+    The physical fact: a finger pressed by an object closes less than a free one (the
+    forward model, independent of bendsense); the processor's tracked N then equals the
+    push applied.
+    """
+    from bendsense.pipeline import LiveProcessor
+
+    p, s_c, push = 40e3, 0.1, 0.15
+    free = forward(CONFIG, p, (0.0, 0.0), s_m=[s_c])
+    phi = float(np.interp(s_c, free.shape.s_m, free.shape.angle_rad))
+    for _ in range(30):  # the push normal to the loaded tangent at s_c (a fixed point)
+        loaded = forward(CONFIG, p, push * contact_normal(phi), s_m=[s_c], contact_s_m=s_c)
+        phi_new = float(np.interp(s_c, loaded.shape.s_m, loaded.shape.angle_rad))
+        if abs(phi_new - phi) < 1e-12:
+            break
+        phi = phi_new
+    assert loaded.angles_rad[-1] < free.angles_rad[-1] - 0.05  # held back: the finger closes less
+    cal = linear_calibration()
+    signals = cal.offset + np.where(ODD, loaded.shifts_m / GAIN, -loaded.shifts_m / GAIN)
+    proc = LiveProcessor(cal, CONFIG, load="contact", contact_s_m=s_c, constraint="normal", bandwidth_hz=20.0)
+    n = 40
+    block = proc.process_block(np.tile(signals, (n, 1)), np.full(n, p), t_s=np.arange(n) * 1e-3)
+    nf = normal_force(block)
+    assert nf.force_n[-1] == pytest.approx(push, rel=0.02)
+    assert np.all(nf.contact_s_m == s_c)
+    assert nf.angle_rad[-1] == pytest.approx(phi, abs=2e-3)
+    assert 0 < nf.std_n[-1] < 0.05
+    assert normal_force(block, tracked=False).force_n[-1] == pytest.approx(push, rel=0.02)
+
+
+# --------------------------------------------------------------------------- the loop and its stops
+
+
+def zeros_at_end(board, lines=(0,)):
+    last = {}
+    for _, line, value in board.sent:
+        last[line] = value
+    return all(last.get(k) == 0.0 for k in lines)
+
+
+def test_run_holds_the_force_and_zeroes_at_the_end():
+    board = FakeBoard()
+    stop = threading.Event()
+    seen = []
+
+    def on_block(block, setpoints):
+        seen.append((block.t_s[-1], block.force_n[-1], setpoints[0]))
+        if block.t_s[-1] >= 0.6:
+            stop.set()
+
+    res = run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, stop=stop,
+              on_block=on_block, n_lines=2)
+    t, f, sp = np.array(seen).T
+    assert res.outcome == "stopped" and res.frames == len(seen) == res.blocks
+    assert abs(f[-1] - 0.15) < 2e-3
+    assert res.max_setpoint_pa == pytest.approx(sp.max()) and sp.max() <= P_MAX_PA
+    # the zeros went out at the frame the loop stopped at; the board's pressure then fell (it kept streaming)
+    assert zeros_at_end(board, (0, 1)) and board.sent[-2:] == [(res.frames, 0, 0.0), (res.frames, 1, 0.0)]
+    assert 0 <= res.zero_latency_s < 1e-3
+    assert board.plant.pressure_pa <= 5e3 and res.zeros[0].fell and res.high == ()
+    assert res.per_frame_s > 0
+
+
+def test_run_clips_what_the_controller_asks():
+    board = FakeBoard()
+    asks = iter([1e9, -5.0, 50e3])
+    stop = threading.Event()
+
+    def controller(block):
+        value = next(asks)
+        if value == 50e3:
+            stop.set()
+        return {0: value}
+
+    run(board, FakeProcessor(), controller, max_pressure_pa=80e3, stop=stop)
+    sent = [v for _, _, v in board.sent]
+    assert sent[:3] == [80e3, 0.0, 50e3]
+    assert max(sent) <= 80e3 and sent[-1] == 0.0
+
+
+@pytest.mark.parametrize("answer", [{0: math.nan}, {3: 1e3}, [1e3]])
+def test_run_stops_on_an_answer_that_is_no_setpoint(answer):
+    board = FakeBoard()
+    with pytest.raises(ControlStop) as info:
+        run(board, FakeProcessor(), lambda block: answer, max_pressure_pa=P_MAX_PA, seconds=1.0)
+    assert zeros_at_end(board) and info.value.result.blocks == 0
+
+
+def test_run_zeroes_on_an_error_in_the_controller():
+    board = FakeBoard()
+    pi = pi_of()
+
+    def controller(block):
+        if block.t_s[-1] > 0.2:
+            raise ZeroDivisionError("a user's bug")
+        return {0: pi.step(block.t_s, block.force_n)}
+
+    with pytest.raises(ZeroDivisionError):
+        run(board, FakeProcessor(), controller, max_pressure_pa=P_MAX_PA)
+    assert board.plant.setpoint_pa == 0.0 and zeros_at_end(board)
+    assert any(v > 0 for _, _, v in board.sent)
+
+
+@pytest.mark.parametrize("signum", [None, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT])
+def test_run_zeroes_on_ctrl_c_sigterm_sighup_and_sigquit(signum):
+    board = FakeBoard()
+
+    def on_block(block, setpoints):
+        if block.t_s[-1] >= 0.1:
+            if signum is None:
+                raise KeyboardInterrupt
+            os.kill(os.getpid(), signum)
+            time.sleep(0.5)  # the handler raises here
+
+    with pytest.raises(KeyboardInterrupt):
+        run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, on_block=on_block)
+    assert zeros_at_end(board)
+    for other in (signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
+        assert signal.getsignal(other) is signal.SIG_DFL  # the loop's handlers are gone again
+
+
+class SignalledBoard(FakeBoard):
+    """A fake board whose first zero set-point brings a stop signal: a second Ctrl-C while the loop zeros."""
+
+    def __init__(self, signum):
+        super().__init__()
+        self.signum, self.signalled = signum, False
+
+    def send_setpoint(self, line, pressure_pa, *, check_line=True):
+        if pressure_pa == 0.0 and self.k > 1 and not self.signalled:  # the zeros at the end (not the first block's)
+            self.signalled = True
+            os.kill(os.getpid(), self.signum)
+        super().send_setpoint(line, pressure_pa, check_line=check_line)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.parametrize("first", ["ctrl-c", "duration"])
+def test_a_stop_signal_while_the_loop_zeros_acts_after_every_line_has_its_zero(signum, first):
+    board = SignalledBoard(signum)
+    stop = threading.Event()
+
+    def on_block(block, setpoints):
+        if block.t_s[-1] >= 0.1:
+            if first == "ctrl-c":
+                raise KeyboardInterrupt
+            stop.set()
+
+    with pytest.raises(KeyboardInterrupt) as info:  # after a normal end too: the signal is acted on, late
+        run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, stop=stop, on_block=on_block,
+            n_lines=3)
+    assert board.signalled and zeros_at_end(board, (0, 1, 2))
+    zeros = board.sent[-3:]
+    assert [(line, v) for _, line, v in zeros] == [(0, 0.0), (1, 0.0), (2, 0.0)]
+    result = info.value.result
+    assert result.unsent == () and [z.line for z in result.zeros] == [0, 1, 2]
+    assert result.outcome == ("interrupted" if first == "ctrl-c" else "stopped")
+
+
+def test_run_stops_on_lost_frames():
+    board = FakeBoard(lose_after=200)
+    with pytest.raises(ControlStop, match="frames lost within 1 s") as info:
+        run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, seconds=5.0,
+            safety=Safety(max_lost_frames=10))
+    assert zeros_at_end(board)
+    assert 200 < board.sent[-1][0] <= 200 + 2 * 12  # every other frame lost: the 11th loss stops it
+    assert info.value.result.outcome.startswith("safety stop")
+
+
+def test_run_stops_when_the_board_falls_silent():
+    board = FakeBoard(silent_after=100)
+    t0 = time.monotonic()
+    with pytest.raises(ControlStop, match="no frame from the board"):
+        run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, seconds=5.0,
+            safety=Safety(silence_s=0.05))
+    assert time.monotonic() - t0 < 1.0
+    assert zeros_at_end(board)
+
+
+def test_run_waits_for_the_first_frame_then_stops():
+    board = FakeBoard(silent_after=0)
+    with pytest.raises(ControlStop, match="no frame from the board within 0.05 s of the start"):
+        run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, seconds=5.0,
+            safety=Safety(silence_s=0.01, first_frame_s=0.05))
+    assert board.sent == [(0, 0, 0.0)]  # nothing but the zero
+
+
+@pytest.mark.parametrize("flag", ["model_misfit", "not_identifiable"])
+def test_run_stops_on_a_run_of_flags_not_on_a_chance_one(flag):
+    # isolated flagged frames (a frame's χ² beyond chance) do not stop the loop ...
+    board = FakeBoard()
+    stop = threading.Event()
+    run(board, FakeProcessor(flagged={50, 120, 121, 300}, status=flag), as_controller(pi_of()),
+        max_pressure_pa=P_MAX_PA, stop=stop, on_block=lambda b, s: b.t_s[-1] >= 0.4 and stop.set(),
+        safety=Safety(flagged_s=0.01))
+    assert board.k >= 400
+    # ... a run of them for 10 ms does, at its 11th frame
+    board = FakeBoard(per_batch=3)
+    with pytest.raises(ControlStop, match=rf"{flag} for 10 ms .* at t = 0.21\d s"):
+        run(board, FakeProcessor(flagged=range(200, 260), status=flag), as_controller(pi_of()),
+            max_pressure_pa=P_MAX_PA, seconds=5.0, safety=Safety(flagged_s=0.01))
+    assert zeros_at_end(board) and board.sent[-1][0] <= 213
+
+
+def test_run_refuses_bad_arguments():
+    with pytest.raises(ArgumentError, match="max_pressure_pa"):
+        run(FakeBoard(), FakeProcessor(), lambda b: {}, max_pressure_pa=-1.0)
+    with pytest.raises(ArgumentError, match="silence_s"):
+        Safety(silence_s=0.0)
+
+
+# --------------------------------------------------------------------------- the command's checks
+
+
+@pytest.mark.parametrize(("extra", "gripper", "match"), [
+    (["--finger", "thumb"], False, "'--finger': names a finger of a gripper config"),
+    (["--finger", "pinky"], True, "finger 'pinky': not a finger of this gripper; its fingers: thumb, index"),
+    ([], "shared", "'--finger': fingers thumb and index both drive pressure line 0: control one of them with --finger"),
+    (["--max-pressure-kpa", "0"], False, "'--max-pressure-kpa': expected a pressure limit > 0 kPa, got 0"),
+])
+def test_control_refuses_what_it_cannot_do(tmp_path, extra, gripper, match):
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+    from bendsense.config import save_config
+    from bendsense.sim import gripper_config
+
+    cal = tmp_path / "cal.yaml"
+    linear_calibration().save(cal)
+    args = ["control", "/dev/null", "--calibration", str(cal), "--target-force-n", "0.15", *extra]
+    if gripper:
+        config = gripper_config(2).to_dict()
+        if gripper == "shared":
+            config["fingers"][1]["pressure_line"] = 0
+        save_config(type(gripper_config(2)).from_dict(config), tmp_path / "g.yaml")
+        args += ["--config", str(tmp_path / "g.yaml")]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2, res.output
+    assert match in " ".join(res.output.split())
+
+
+def test_the_silence_limit_follows_a_slow_board():
+    from bendsense.control.safety import Guard
+
+    assert Guard(Safety(), (None,), rate_hz=1000.0).silence_s == 0.1
+    assert Guard(Safety(), (None,), rate_hz=35.0).silence_s == pytest.approx(10 / 35)  # the paper's 35 Hz board
+    assert Guard(Safety(silence_s=0.5), (None,), rate_hz=35.0).silence_s == 0.5

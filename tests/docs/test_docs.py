@@ -1,0 +1,452 @@
+"""The documentation runs: every fenced ``bash`` and ``python`` block of README.md and docs/*.md.
+
+The blocks of one page run in order, in one fresh temporary working directory that
+holds copies of the repository's ``configs/`` and ``examples/`` (the docs are written
+to run from the repository root), so later blocks see the files earlier ones wrote.
+``bash`` blocks run under ``bash -euo pipefail``, ``python`` blocks with this
+interpreter; each must exit 0. Blocks in other languages (``text``, ``yaml``, …) are
+not run. Three pages run at a time, each in its own directory; a block that times a board
+against its client (a simulated board, a recording, a control loop, a benchmark) waits
+until it is alone and runs alone.
+
+What is not run as written:
+
+- a command on the line after a ``# needs hardware`` comment (with its ``\\``
+  continuation lines) needs a sensor board and is skipped;
+- ``pip install ... && CMD``: the package is already installed in the test
+  environment, so only ``CMD`` runs; ``python -m pytest`` is skipped (the suite would
+  run itself recursively);
+- ``bendsense reproduce`` runs with its documented ``--quick`` flag (the full run takes
+  minutes; the quick one makes every table and figure);
+- ``python benchmarks/...`` (docs/performance.md) runs with its ``--quick`` flag
+  (a few seconds: every row, fewer repetitions).
+
+Example output is checked, not pasted: a ``text`` block right after an
+``<!-- output -->`` line (an HTML comment, invisible on the rendered site) is the
+output of the nearest runnable block above it, and that block's fenced neighbour
+above the marker must be that runnable block (or another output block of it). Every
+non-empty line of the documented output must appear as a line of the block's real
+stdout + stderr, after masking what legitimately differs between runs (rates
+``4,618 frames/s``, durations ``in 115.4 s`` or ``, 10 s``, ISO time stamps,
+``/dev/pts/N``, temporary paths); everything else must match exactly. A line ``...`` abridges (it is not
+compared) and a line ending in `` ...`` matches the lines that start with the text
+before it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+COPIED = ("configs", "examples", "benchmarks", "tools")
+# and the independent forward model that tools/model_error.py (so benchmarks/bench_model_error.py) builds on
+COPIED_FILES = ("tests/forward_model.py",)
+HARDWARE = re.compile(r"^\s*#\s*needs hardware\b", re.IGNORECASE)
+FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[\w+-]*)[^\n]*\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
+TIMEOUT_S = 300
+OUTPUT_MARK = re.compile(r"^[ \t]*<!--\s*output\s*-->[ \t]*\n[ \t]*\Z")
+
+
+def extract_steps(text: str) -> list[tuple[str, str, list[str]]]:
+    """``(language, code, outputs)`` of every fenced bash or python block, in page order.
+
+    ``outputs`` are the bodies of the ``<!-- output -->`` text blocks that document
+    what the block prints. A marked output block whose fenced neighbour above is
+    neither a runnable block nor another output block of one is an error (its
+    command would not be run, so its output could not be checked).
+    """
+    out: list[tuple[str, str, list[str]]] = []
+    previous = None  # what the last fenced block was: "run", "output" or "other"
+    for m in FENCE.finditer(text):
+        lang = m["lang"].lower()
+        line_start = text.rfind("\n", 0, max(m.start() - 1, 0)) + 1 if m.start() else 0
+        marked = bool(OUTPUT_MARK.match(text[line_start:m.start()]))
+        if marked:
+            if lang != "text" or previous not in ("run", "output"):
+                line = text.count("\n", 0, m.start()) + 1
+                raise ValueError(f"line {line}: an <!-- output --> block must be a text block after a runnable "
+                                 f"block (bash or python, not only hardware commands)")
+            out[-1][2].append(m["body"])
+            previous = "output"
+            continue
+        previous = "other"
+        if lang in ("bash", "sh", "shell"):
+            code = runnable_shell(m["body"])
+            if code.strip():
+                out.append(("bash", code, []))
+                previous = "run"
+        elif lang == "python":
+            out.append(("python", m["body"], []))
+            previous = "run"
+    return out
+
+
+def extract_blocks(text: str) -> list[tuple[str, str]]:
+    """The ``(language, code)`` of every fenced bash or python block, in page order."""
+    return [(lang, code) for lang, code, _ in extract_steps(text)]
+
+
+# what differs between two runs of the same command: (pattern, replacement)
+VARYING = [
+    (re.compile(r"\d[\d,]*(?:\.\d+)?(?= frames/s\b)"), "<RATE>"),
+    (re.compile(r"(?<=\bin )\d+(?:\.\d+)?(?= (?:s|ms|min)\b)"), "<DURATION>"),
+    (re.compile(r"(?<=, )\d+(?:\.\d+)?(?= s\b)"), "<DURATION>"),
+    (re.compile(r"\b\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?(?:Z|[+-]\d\d:?\d\d)?"), "<TIME>"),
+    (re.compile(r"/dev/pts/\d+"), "/dev/pts/<N>"),
+    (re.compile(r"(?:/private)?(?:/tmp|/var/folders|" + re.escape(tempfile.gettempdir()) + r")/[^\s'\"),:;]*"),
+     "<TMP>"),
+]
+
+
+def mask(line: str) -> str:
+    """``line`` with what legitimately varies between runs replaced by placeholders."""
+    for pattern, placeholder in VARYING:
+        line = pattern.sub(placeholder, line)
+    return line.rstrip()
+
+
+def missing_output(documented: str, actual: str) -> list[str]:
+    """The documented lines (masked) that are not lines of ``actual`` (masked)."""
+    real = [mask(line) for line in actual.splitlines()]
+    missing = []
+    for line in documented.splitlines():
+        if not line.strip() or line.strip() in ("...", "…"):
+            continue
+        want = mask(line)
+        if want.endswith(" ..."):
+            prefix = want[:-len(" ...")]
+            found = any(r.startswith(prefix) for r in real)
+        else:
+            found = want in real
+        if not found:
+            missing.append(want)
+    return missing
+
+
+def runnable_shell(code: str) -> str:
+    """``code`` without its hardware commands, with the ``pip install`` and reproduce rules applied."""
+    lines = code.splitlines()
+    kept = []
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if HARDWARE.match(line):
+            # skip the marked command and its continuation lines
+            i += 1
+            while i < len(lines) and lines[i].rstrip().endswith("\\"):
+                i += 1
+            i += 1
+            continue
+        kept.append(_test_equivalent(line))
+        i += 1
+    return "\n".join(kept) + "\n"
+
+
+def _test_equivalent(line: str) -> str:
+    stripped = line.strip()
+    if stripped.startswith("pip install"):
+        parts = [p.strip() for p in stripped.split("&&")]
+        rest = [p for p in parts if not p.startswith("pip install")]
+        rest = [p for p in rest if not re.match(r"python[0-9.]* -m pytest\b", p)]
+        return " && ".join(rest)
+    command = stripped.split("#", 1)[0]  # a "--quick" in the comment is no flag
+    if re.match(r"bendsense\s+reproduce\b", stripped) and "--quick" not in command:
+        return line.replace("reproduce", "reproduce --quick", 1)
+    if re.match(r"python[0-9.]*\s+benchmarks/", stripped) and "--quick" not in command:
+        return re.sub(r"(benchmarks/\S+)", r"\1 --quick", line, count=1)
+    return line
+
+
+# ------------------------------------------------------------------ the extraction itself
+
+
+def test_hardware_commands_are_skipped_with_their_continuations():
+    text = (
+        "```bash\n"
+        "echo one\n"
+        "# needs hardware\n"
+        "bendsense record /dev/ttyACM0 \\\n"
+        "    -o s --seconds 3\n"
+        "echo two\n"
+        "```\n"
+    )
+    [(lang, code)] = extract_blocks(text)
+    assert lang == "bash"
+    assert code.split() == ["echo", "one", "echo", "two"]
+
+
+def test_block_of_hardware_commands_only_is_dropped():
+    text = "```bash\n# needs hardware\nbendsense live /dev/ttyACM0 --calibration cal.yaml\n```\n"
+    assert extract_blocks(text) == []
+
+
+def test_pip_install_lines_keep_only_the_command_after_them():
+    assert _test_equivalent("pip install . && bendsense demo") == "bendsense demo"
+    assert _test_equivalent('pip install ".[test,distributed]" && python -m pytest') == ""
+    assert _test_equivalent('pip install ".[distributed]"') == ""
+
+
+def test_reproduce_gets_its_quick_flag():
+    assert _test_equivalent("bendsense reproduce -o report") == "bendsense reproduce --quick -o report"
+    assert _test_equivalent("bendsense reproduce --quick -o r") == "bendsense reproduce --quick -o r"
+
+
+def test_benchmarks_get_their_quick_flag():
+    line = "python benchmarks/run_all.py --markdown results.md   # ~10 s"
+    assert _test_equivalent(line).startswith("python benchmarks/run_all.py --quick --markdown results.md")
+    # a "--quick" mentioned in the comment does not count as the flag
+    commented = "python benchmarks/bench_batch.py   # ~2 min; --no-dask, --quick"
+    assert _test_equivalent(commented).startswith("python benchmarks/bench_batch.py --quick")
+
+
+def test_other_languages_are_not_run_and_order_is_kept():
+    text = "```text\nnot run\n```\n```python\nprint(1)\n```\n```yaml\na: 1\n```\n```bash\necho 2\n```\n"
+    assert extract_blocks(text) == [("python", "print(1)\n"), ("bash", "echo 2\n")]
+
+
+def test_output_blocks_belong_to_the_runnable_block_above():
+    text = (
+        "```bash\necho one\n```\n\nIt prints:\n\n<!-- output -->\n```text\none\n```\n"
+        "```text\nnot output\n```\n```python\nprint(2)\n```\n<!-- output -->\n```text\n2\n```\n"
+        "<!-- output -->\n```text\n2 again\n```\n"
+    )
+    assert extract_steps(text) == [("bash", "echo one\n", ["one\n"]), ("python", "print(2)\n", ["2\n", "2 again\n"])]
+
+
+def test_output_block_after_no_runnable_block_is_an_error():
+    after_text = "```bash\necho 1\n```\n```text\nx\n```\n<!-- output -->\n```text\n1\n```\n"
+    after_hardware = ("```bash\n# needs hardware\nbendsense record /dev/ttyACM0 -o s\n```\n"
+                      "<!-- output -->\n```text\n1\n```\n")
+    first = "<!-- output -->\n```text\n1\n```\n"
+    not_text = "```bash\necho 1\n```\n<!-- output -->\n```yaml\na: 1\n```\n"
+    for text in (after_text, after_hardware, first, not_text):
+        with pytest.raises(ValueError, match="output"):
+            extract_steps(text)
+
+
+def test_an_unmarked_text_block_is_no_output():
+    # the marker must be the line right before the fence
+    text = "```bash\necho 1\n```\n<!-- output -->\n\n```text\n2\n```\n"
+    assert extract_steps(text) == [("bash", "echo 1\n", [])]
+
+
+def test_masking_hides_rates_durations_terminals_and_temporary_paths():
+    assert mask("  constraint none  RMS error 0.1421 N, converged 100 %, 4,618 frames/s") == (
+        "  constraint none  RMS error 0.1421 N, converged 100 %, <RATE> frames/s")
+    assert mask("processed 500 frames in 115.4 s") == "processed 500 frames in <DURATION> s"
+    assert mask("compiling: 7/12 functions, 20 s (continuation)") == (
+        "compiling: 7/12 functions, <DURATION> s (continuation)")
+    assert mask("board on /dev/pts/7") == "board on /dev/pts/<N>"
+    assert mask("2026-11-21T11:06:14.082922Z crc: 1 CRC error(s)") == "<TIME> crc: 1 CRC error(s)"
+    assert mask(f"wrote {Path(tempfile.gettempdir(), 'pytest-of-x', 'test_a0', 'results.csv')}") == "wrote <TMP>"
+    assert mask("wrote results/results.csv") == "wrote results/results.csv"
+    # what does not vary is kept: errors, coverages, counts, seeded numbers
+    kept = "force vs simulated truth (500 frames, peak contact force 0.15 N): RMS error 0.0039 N, 84 %"
+    assert mask(kept) == kept
+
+
+def test_documented_output_must_match_the_real_output():
+    actual = "noise\n  constraint normal  RMS error 0.0041 N, 3,120 frames/s\nError: x.csv: line 2: bad\n"
+    assert missing_output("  constraint normal  RMS error 0.0041 N, 4,618 frames/s\n", actual) == []
+    # a changed deterministic number is caught, as is a missing line or a changed indentation
+    assert missing_output("  constraint normal  RMS error 0.0039 N, 4,618 frames/s\n", actual) == [
+        "  constraint normal  RMS error 0.0039 N, <RATE> frames/s"]
+    assert missing_output("Error: x.csv: line 3: bad\n", actual) == ["Error: x.csv: line 3: bad"]
+    assert missing_output("constraint normal  RMS error 0.0041 N, 1 frames/s\n", actual) != []
+    # "..." abridges: a line of its own is skipped, a trailing one matches a prefix
+    assert missing_output("...\nError: x.csv: line 2: ...\n\n", actual) == []
+    assert missing_output("Error: y.csv: ...\n", actual) == ["Error: y.csv: ..."]
+
+
+def test_fences_name_their_language_without_a_space():
+    # a page whose fences were mistyped (e.g. ``` bash) would silently run nothing
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        assert "``` bash" not in text and "```Bash" not in text, page.name
+
+
+# ------------------------------------------------------------------ running the pages
+
+
+def _run(lang: str, code: str, cwd: Path, env: dict) -> subprocess.CompletedProcess:
+    """Run one block in its own process group; afterwards end whatever it left running.
+
+    Output goes to files, not pipes, so that a background job the block started (a
+    simulated board) cannot keep the call waiting after the block has finished or failed.
+    """
+    cmd = ["bash", "-euo", "pipefail", "-c", code] if lang == "bash" else [sys.executable, "-c", code]
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen(
+            cmd, cwd=cwd, env=env, stdout=out, stderr=err, stdin=subprocess.DEVNULL, text=True, start_new_session=True
+        )
+        try:
+            returncode = proc.wait(timeout=TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            returncode = None
+        finally:
+            try:
+                os.killpg(proc.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            proc.wait()
+        out.seek(0)
+        err.seek(0)
+        stderr = err.read() + (f"\n[timed out after {TIMEOUT_S} s]" if returncode is None else "")
+        return subprocess.CompletedProcess(cmd, -1 if returncode is None else returncode, out.read(), stderr)
+
+
+# pages without a bash or python block (theory.md) have nothing to run
+RUNNABLE = [p for p in PAGES if extract_blocks(p.read_text(encoding="utf-8"))]
+
+
+def test_the_pages_with_commands_are_run():
+    assert {p.name for p in RUNNABLE} >= {"README.md", "getting-started.md", "cli.md", "calibration.md"}
+
+
+# Three pages run at a time (their blocks are mostly one process on one core), each in its own
+# directory; a block that times a board against its client (a simulated board at up to 2 kHz, a
+# recording, a control loop, a benchmark) runs alone, as the rest of the suite does (``realtime``).
+# (The demo's 100 Hz board shares: it loses no frame beside two other blocks.)
+TIMED = re.compile(r"\bbendsense\s+(?:-\w+\s+)*(?:sim-device|record|live|control)\b|"
+                   r"--port\b|benchmarks/|SimulatedDevice|Driver\(")
+PAGES_AT_ONCE = 3
+
+
+class _Turns:
+    """Blocks share the machine (PAGES_AT_ONCE at a time); a timed block waits until it is alone, and keeps it."""
+
+    def __init__(self):
+        self._cond = threading.Condition()
+        self._shared = 0
+        self._alone = False
+
+    @contextlib.contextmanager
+    def turn(self, alone: bool):
+        with self._cond:
+            self._cond.wait_for(lambda: not self._alone and (not alone or self._shared == 0))
+            if alone:
+                self._alone = True
+            else:
+                self._shared += 1
+        try:
+            yield
+        finally:
+            with self._cond:
+                if alone:
+                    self._alone = False
+                else:
+                    self._shared -= 1
+                self._cond.notify_all()
+
+
+def _run_page(page: Path, work: Path, turns: _Turns) -> list[str]:
+    """Run every block of ``page`` in ``work``; the problems found (empty: the page runs as documented)."""
+    blocks = extract_steps(page.read_text(encoding="utf-8"))
+    for name in COPIED:
+        if (ROOT / name).is_dir():
+            shutil.copytree(ROOT / name, work / name, ignore=shutil.ignore_patterns("__pycache__"))
+    for name in COPIED_FILES:
+        (work / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ROOT / name, work / name)
+    # single-threaded BLAS as the CLI sets it (troubleshooting.md): the python blocks'
+    # many small matrices crawl when threaded BLAS competes for the cores
+    env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    for k, (lang, code, outputs) in enumerate(blocks, start=1):
+        with turns.turn(alone=bool(TIMED.search(code))):
+            proc = _run(lang, code, work, env)
+        if proc.returncode != 0:
+            return [f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
+                    f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"]
+        for documented in outputs:
+            missing = missing_output(documented, proc.stdout + "\n" + proc.stderr)
+            if missing:
+                return [f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it prints;\n"
+                        f"documented lines not printed (masked):\n" + "\n".join(missing) + "\n"
+                        f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"]
+    return []
+
+
+@pytest.fixture(scope="module")
+def page_runs(request, tmp_path_factory):
+    """The selected pages' runs, started together (PAGES_AT_ONCE at a time) when the first page's test asks."""
+    selected = [item.callspec.params["page"] for item in request.session.items
+                if getattr(item, "originalname", None) == "test_page_runs"]
+    turns = _Turns()
+    with ThreadPoolExecutor(PAGES_AT_ONCE) as pool:
+        yield {page: pool.submit(_run_page, page, tmp_path_factory.mktemp(page.stem), turns) for page in selected}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
+def test_page_runs(page: Path, page_runs):
+    assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
+    problems = page_runs[page].result()
+    assert not problems, problems[0]
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
+def test_run_ends_background_jobs_of_a_failed_block(tmp_path: Path):
+    # a block that fails with a background job still running returns at once, job ended
+    code = "sleep 60 > /dev/null 2>&1 &\necho $! > job.pid\nfalse\n"
+    t0 = time.monotonic()
+    proc = _run("bash", code, tmp_path, dict(os.environ))
+    assert proc.returncode == 1 and time.monotonic() - t0 < 30
+    pid = int((tmp_path / "job.pid").read_text())
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and Path(f"/proc/{pid}").exists():
+        time.sleep(0.05)  # the killed job may linger a moment as a zombie of its reaper
+        if Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z":
+            break
+    alive = Path(f"/proc/{pid}/stat").exists() and Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    assert not alive
+
+
+# ------------------------------------------------------------------ links between pages
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading."""
+    text = re.sub(r"[`*_]", "", heading.strip().lower())
+    text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", text)
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def _anchors(path: Path) -> set[str]:
+    text = FENCE.sub("", path.read_text(encoding="utf-8"))
+    return {_slug(m[1]) for m in re.finditer(r"^#{1,6}\s+(.+?)\s*$", text, re.M)}
+
+
+def test_slug_follows_github():
+    assert _slug("Free bending (paper eq. 8–12)") == "free-bending-paper-eq-812"
+    assert _slug("1. Install and run the demo") == "1-install-and-run-the-demo"
+    assert _slug("ModemManager grabs /dev/ttyACM*") == "modemmanager-grabs-devttyacm"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(ROOT).as_posix() for p in PAGES])
+def test_relative_links_and_anchors_resolve(page: Path):
+    text = FENCE.sub("", page.read_text(encoding="utf-8"))
+    broken = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if re.match(r"[a-z]+:", target):
+            continue  # http(s), mailto: not checked offline
+        file_part, _, anchor = target.partition("#")
+        path = (page.parent / file_part).resolve() if file_part else page
+        if not path.exists():
+            broken.append(f"{target}: no such file")
+        elif anchor and path.suffix == ".md" and anchor not in _anchors(path):
+            broken.append(f"{target}: no heading with this anchor")
+    assert not broken, f"{page.name}: " + "; ".join(broken)

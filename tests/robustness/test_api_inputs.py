@@ -1,0 +1,151 @@
+"""The public API with the obvious wrong inputs: the library's own errors, naming the argument.
+
+Each case calls a public function (``bendsense.__all__``, and ``bendsense.pipeline.process``)
+with a wrong shape, a wrong type, a path where an object is expected, None, an empty
+array or NaN, and checks that it raises a :class:`~bendsense.errors.BendsenseError`
+whose message names the argument (never numpy's broadcast ``ValueError``, an
+``AttributeError`` or a ``TypeError`` from deep inside). Where a path is the obvious
+alternative to an object, it is accepted.
+"""
+
+import numpy as np
+import pytest
+
+import bendsense
+from bendsense.calibration import Calibration
+from bendsense.errors import ArgumentError, BendsenseError, ConfigError, SessionError
+from bendsense.mechanics.actuator import FreeBendingModel
+from bendsense.pipeline import process
+from robustness.test_invalid_corpus import GOOD_CAL, GOOD_CSV
+
+N = 16
+CONFIG = bendsense.load_config()
+CAL = Calibration.load(GOOD_CAL)
+SESSION = bendsense.read_session_csv(GOOD_CSV)
+SIGNALS = SESSION.signals
+
+CASES = {
+    # Session(t_s, signals, pressure_pa): the issue's case, mismatched lengths
+    "session_pressure_length": (lambda: bendsense.Session(np.arange(4.0), np.zeros((4, N)), np.zeros(5)),
+                                SessionError, r"pressure_pa: expected one number or shape \(4,\)"),
+    "session_signals_length": (lambda: bendsense.Session(np.arange(4.0), np.zeros((3, N)), 0.0),
+                               SessionError, r"signals: expected shape \(4, N\)"),
+    "session_t_text": (lambda: bendsense.Session("x", np.zeros((1, N)), 0.0), SessionError, r"t_s: expected numbers"),
+    "session_signals_dict": (lambda: bendsense.Session(np.arange(2.0), {"a": 1}, 0.0), SessionError,
+                             r"signals: expected numbers"),
+    "session_pressure_path": (lambda: bendsense.Session(np.arange(2.0), np.zeros((2, N)), str(GOOD_CSV)),
+                              SessionError, r"pressure_pa: expected numbers"),
+    "session_pressure_2d": (lambda: bendsense.Session(np.arange(4.0), np.zeros((4, N)), np.zeros((4, 4))),
+                            SessionError,
+                            r"pressure_pa: expected one number or shape \(4,\) \(frames of t_s\), got shape \(4, 4\)"),
+    "session_seq_text": (lambda: bendsense.Session(np.arange(2.0), np.zeros((2, N)), 0.0, seq=["a", "b"]),
+                         SessionError, r"seq: expected integers"),
+    # readers and writers: a path, not None or a number
+    "read_session_none": (lambda: bendsense.read_session(None), ArgumentError,
+                          r"path: expected a file path \(str or os\.PathLike\), got None"),
+    "read_session_array": (lambda: bendsense.read_session(np.zeros(3)), ArgumentError,
+                           r"path: expected a file path .*, got an array of shape \(3,\)"),
+    "read_session_csv_int": (lambda: bendsense.read_session_csv(3), ArgumentError, r"path: expected a file path"),
+    "read_session_nul": (lambda: bendsense.read_session("a\x00b.csv"), ArgumentError, r"path: expected a file path"),
+    "write_session_not_a_session": (lambda: bendsense.session.write_session_csv(SIGNALS, "out.csv"), ArgumentError,
+                                    r"session: expected a Session \(bendsense\.read_session\(path\)\), got an array"),
+    "write_session_path_none": (lambda: bendsense.session.write_session_csv(SESSION, None), ArgumentError,
+                                r"path: expected a file path"),
+    "load_config_number": (lambda: bendsense.load_config(3), ConfigError, r"path: expected a file path"),
+    "save_config_not_a_config": (lambda: bendsense.config.save_config({"a": 1}, "c.yaml"), ArgumentError,
+                                 r"config: expected a Config \(bendsense\.load_config\(path\)\), got dict"),
+    "calibration_load_none": (lambda: Calibration.load(None), ConfigError, r"path: expected a file path"),
+    "calibration_fit_none": (lambda: Calibration.fit(None), ArgumentError, r"manifest_path: expected a file path"),
+    "calibration_save_number": (lambda: CAL.save(3.5), ArgumentError, r"path: expected a file path"),
+    # reconstruct
+    "reconstruct_sensor_path": (lambda: bendsense.reconstruct(SIGNALS, CAL, "paper.yaml"), ArgumentError,
+                                r"sensor: expected a SensorConfig or a Config .*, got str"),
+    "reconstruct_s_m_text": (lambda: bendsense.reconstruct(SIGNALS, CAL, CONFIG.sensor, s_m=["a"]), ArgumentError,
+                             r"s_m: expected numbers"),
+    "reconstruct_channels": (lambda: bendsense.reconstruct(np.zeros((3, 5)), CAL, CONFIG.sensor), ArgumentError,
+                             r"signals: expected 16 channels on the last axis, got shape \(3, 5\)"),
+    "reconstruct_calibration_path": (lambda: bendsense.reconstruct(SIGNALS, str(GOOD_CAL), CONFIG), ArgumentError,
+                                     r"calibration: expected a Calibration"),
+    # solve_beam
+    "solve_beam_method_array": (lambda: bendsense.solve_beam(0.1, 2.5e-3, 10.0, method=np.zeros(2)), ArgumentError,
+                                r"method: must be one of fast, shooting, paper"),
+    "solve_beam_length_nan": (lambda: bendsense.solve_beam(np.nan, 2.5e-3, 10.0), ArgumentError, r"length_m"),
+    "solve_beam_s_m_empty": (lambda: bendsense.solve_beam(0.1, 2.5e-3, 10.0, s_m=np.array([])), ArgumentError,
+                             r"s_m: expected a non-empty 1-D array"),
+    # estimate_force
+    "estimate_no_frames": (lambda: bendsense.estimate_force(np.zeros((0, N)), 5e4, CONFIG), ArgumentError,
+                           r"shape: no frames to estimate \(batch shape \(0,\)\)"),
+    "estimate_constraint_array": (lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, constraint=np.zeros(2)),
+                                  ArgumentError, r"constraint: must be one of"),
+    "estimate_method_list": (lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, method=["fast"]),
+                             ArgumentError, r"method: must be one of"),
+    "estimate_config_path": (lambda: bendsense.estimate_force(np.zeros(N), 5e4, "paper.yaml"), ArgumentError,
+                             r"config: expected a Config"),
+    "estimate_pressure_nan": (lambda: bendsense.estimate_force(np.zeros(N), np.nan, CONFIG), ArgumentError,
+                              r"pressure_pa: must be finite"),
+    "estimate_objective_array": (lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, objective=np.zeros(2)),
+                                 ArgumentError, r"objective: must be one of angles, positions"),
+    "estimate_angle_source_array": (
+        lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, constraint="normal", tip_angle_source=[1]),
+        ArgumentError, r"tip_angle_source: must be one of"),
+    "estimate_n_points_text": (lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, n_points="many"),
+                               ArgumentError, r"n_points: must be between 3 and 1000 \(an integer\), got 'many'"),
+    "estimate_max_iter_text": (lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, max_iter="x"),
+                               ArgumentError, r"max_iter: must be >= 0 \(an integer\)"),
+    "estimate_direction_text": (
+        lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, constraint="direction", direction="down"),
+        ArgumentError, r"direction: expected numbers, got \('down',\)"),
+    "estimate_noise_std_text": (lambda: bendsense.estimate_force(np.zeros(N), 5e4, CONFIG, noise_std="x"),
+                                ArgumentError, r"noise_std: expected numbers"),
+    "reconstruct_base_angle_shape": (
+        lambda: bendsense.reconstruct(SIGNALS, CAL, CONFIG, base_angle_rad=np.zeros(7)), ArgumentError,
+        r"base_angle_rad: shape \(7,\) does not broadcast against the frames \(4,\)"),
+    "calibration_fit_sensor_path": (lambda: Calibration.fit("m.yaml", sensor="paper.yaml"), ArgumentError,
+                                    r"sensor: expected a SensorConfig or a Config"),
+    "session_with_pressure_text": (lambda: SESSION.with_pressure("50 kPa"), SessionError,
+                                   r"pressure_pa: expected a number, got '50 kPa'"),
+    "session_select_text": (lambda: SESSION.select("all"), SessionError,
+                            r"index: expected a slice, a boolean mask of 4 frames or frame numbers below 4, got 'all'"),
+    # FreeBendingModel
+    "free_bending_from_path": (lambda: FreeBendingModel.from_config("paper.yaml"), ArgumentError,
+                               r"config: expected a Config"),
+    "free_bending_pressure_text": (
+        lambda: FreeBendingModel.from_config(CONFIG).bending_angle_rad("20 kPa"), ArgumentError,
+        r"expected numbers, got '20 kPa'"),
+    # pipeline.process: the issue's case (a path) is accepted; other wrong types are named
+    "process_session_none": (lambda: process(None, CONFIG, CAL), ArgumentError,
+                             r"session: expected a Session \(bendsense\.read_session\(path\), or the path\), got None"),
+    "process_session_array": (lambda: process(SIGNALS, CONFIG, CAL), ArgumentError,
+                              r"session: expected a Session .*, got an array of shape \(4, 16\)"),
+    "process_config_dict": (lambda: process(SESSION, {"sensor": 1}, CAL), ArgumentError,
+                            r"config: expected a Config .*, got dict"),
+    "process_calibration_none": (lambda: process(SESSION, CONFIG, None), ArgumentError,
+                                 r"calibration: expected a Calibration"),
+    "process_pressure_text": (lambda: process(SESSION, CONFIG, CAL, pressure_pa="x"), ArgumentError,
+                              r"pressure_pa: expected a number, got 'x'"),
+    "process_pressure_nan": (lambda: process(SESSION, CONFIG, CAL, pressure_pa=np.nan), ArgumentError,
+                             r"pressure_pa: expected a finite number"),
+    "process_missing_file": (lambda: process("nothere.csv", CONFIG, CAL), SessionError,
+                             r"nothere\.csv: no such file or session directory"),
+    "process_time_backwards": (
+        lambda: process(bendsense.Session([0.0, 0.2, 0.1], SIGNALS[:3], 5e4), CONFIG, CAL, estimate=False),
+        ArgumentError, r"frame 2, column t_s: time runs backwards \(0\.1 s after 0\.2 s on frame 1\)"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_wrong_input_raises_the_librarys_error(name, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    call, error, match = CASES[name]
+    with pytest.raises(error, match=match) as info:
+        call()
+    assert isinstance(info.value, BendsenseError)
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_process_accepts_paths_for_the_session_the_config_and_the_calibration():
+    config_path = bendsense.config.resources.files("bendsense.data").joinpath(bendsense.config.PAPER_CONFIG)
+    by_path = process(str(GOOD_CSV), str(config_path), str(GOOD_CAL), estimate=False)
+    by_object = process(SESSION, CONFIG, CAL, estimate=False)
+    assert by_path.session.source == str(GOOD_CSV)
+    np.testing.assert_array_equal(by_path.shape.curvature_per_m, by_object.shape.curvature_per_m)
