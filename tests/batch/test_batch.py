@@ -20,6 +20,7 @@ from bendsense.batch import (
     process_sessions,
     session_names,
 )
+from bendsense.choices import Options
 from bendsense.cli import main
 from bendsense.errors import SessionError
 from bendsense.results import read_results
@@ -231,16 +232,19 @@ def test_process_session_reports_failures_instead_of_raising(tmp_path):
     no_pressure = Session(session.t_s, session.signals, np.full(5, np.nan))
     write_session_csv(no_pressure, tmp_path / "nop.csv")
     cal = linear_calibration()
-    row = process_session(tmp_path / "nop.csv", tmp_path / "o1", config=CONFIG, calibration=cal, estimate=True)
+    row = process_session(tmp_path / "nop.csv", tmp_path / "o1", config=CONFIG, calibration=cal,
+                          options=Options(estimate=True))
     assert row.status == "failed" and "5 of 5 frames have no pressure reading" in row.reason
     row = process_session(
-        tmp_path / "nop.csv", tmp_path / "o2", config=CONFIG, calibration=cal, pressure_pa=50e3, estimate=ESTIMATE
+        tmp_path / "nop.csv", tmp_path / "o2", config=CONFIG, calibration=cal,
+        options=Options(pressure_pa=50e3, estimate=ESTIMATE)
     )
     assert row.status == "ok" and row.frames == 5
     assert np.all(read_results(tmp_path / "o2")["pressure_pa"] == 50e3)
     # a session with the wrong channel count
     write_session_csv(Session(session.t_s, session.signals[:, :8], session.pressure_pa), tmp_path / "ch8.csv")
-    row = process_session(tmp_path / "ch8.csv", tmp_path / "o3", config=CONFIG, calibration=cal, estimate=ESTIMATE)
+    row = process_session(tmp_path / "ch8.csv", tmp_path / "o3", config=CONFIG, calibration=cal,
+                          options=Options(estimate=ESTIMATE))
     assert row.status == "failed" and "ch8.csv: 8 signal channels (ch1..ch8), but the calibration has 16" in row.reason
     row = process_session(tmp_path / "missing.csv", tmp_path / "o4", config=CONFIG, calibration=cal)
     assert row.status == "failed" and "missing.csv: no such file" in row.reason
@@ -252,7 +256,8 @@ def test_extrapolated_frames_are_counted(tmp_path):
     signals[2, 0] += 4000.0  # beyond the calibrated ΔA range of ±3000
     write_session_csv(Session(session.t_s, signals, session.pressure_pa), tmp_path / "x.csv")
     cal = linear_calibration()
-    row = process_session(tmp_path / "x.csv", tmp_path / "o", config=CONFIG, calibration=cal, estimate=ESTIMATE)
+    row = process_session(tmp_path / "x.csv", tmp_path / "o", config=CONFIG, calibration=cal,
+                          options=Options(estimate=ESTIMATE))
     assert row.status == "ok" and row.extrapolated == 1 and "1 of 5 frames extrapolated" in row.reason
     assert list(read_results(tmp_path / "o")["status"])[2] in ("extrapolated", "not_converged", "model_misfit")
 

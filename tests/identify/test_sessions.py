@@ -20,11 +20,8 @@ from bendsense.config import MODEL_PARAMETERS, ParameterCovarianceConfig
 from bendsense.errors import SessionError
 from bendsense.identify import fit_free_bending
 from bendsense.identify.covariance import session_covariance
-from bendsense.identify.sessions import (
-    fit_free_bending_session,
-    fit_stiffness_session,
-    stiffness_data_from_session,
-)
+from bendsense.identify.sessions import fit_free_bending_session
+from bendsense.identify.weights import fit_stiffness_session, stiffness_data_from_session
 from bendsense.mechanics.actuator import FreeBendingModel, model_jacobian
 from bendsense.sim.scenarios import free_sweep_profile, simulate
 

@@ -10,6 +10,7 @@ from click.testing import CliRunner
 
 import bendsense
 from bendsense.calibration import Calibration
+from bendsense.choices import Options
 from bendsense.cli import main
 from bendsense.config import save_config
 from bendsense.results import read_results
@@ -308,7 +309,7 @@ def test_a_track_the_likelihood_cannot_choose_says_so_in_one_line(tmp_path, capl
     from bendsense.batch import process_session
 
     outcome = process_session(tmp_path / "s.csv", tmp_path / "batch", config=bendsense.load_config(), calibration=cal,
-                              track="smooth")
+                              options=Options(track="smooth"))
     assert outcome.status == "ok" and "track: the likelihood is flat" in outcome.reason  # process's note
     est = bendsense.estimate_force(bendsense.reconstruct(signals, cal, bendsense.load_config().sensor), pressure,
                                    bendsense.load_config(), calibration=cal)

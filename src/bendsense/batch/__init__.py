@@ -30,6 +30,7 @@ from pathlib import Path
 
 from bendsense import output
 from bendsense._io import check_regular_file
+from bendsense.choices import Options
 from bendsense.errors import ArgumentError, BendsenseError, DataWarning, OutputError, SessionError
 from bendsense.stop_signals import worker_pool
 
@@ -322,26 +323,8 @@ def session_names(paths) -> list[str]:
 # --- one session (runs in a worker) -------------------------------------------------------
 
 
-def process_session(
-    path,
-    out_dir,
-    *,
-    config,
-    calibration,
-    constraint=None,
-    method=None,
-    objective=None,
-    pressure_pa=None,
-    estimate: bool = True,
-    overwrite: bool = False,
-    name: str | None = None,
-    track: str | None = None,
-    bandwidth_hz: float | None = None,
-    window_s: float = 0.05,
-    load: str = "tip",
-    contact_s_m: float | None = None,
-    adapt: bool = False,
-) -> SessionOutcome:
+def process_session(path, out_dir, *, config, calibration, options: Options | None = None, overwrite: bool = False,
+                    name: str | None = None) -> SessionOutcome:
     """Process one session and write its results; never raises for a bad session.
 
     Reads ``path`` (:func:`bendsense.session.read_session`), reconstructs the shapes (paper eq. 1–7)
@@ -359,23 +342,14 @@ def process_session(
         Sensor and actuator configuration.
     calibration : Calibration
         Signal → shift calibration of the sensor.
-    constraint, method, objective : str, optional
-        Force estimate options (:func:`bendsense.estimation.estimate_force`); None: the config's.
-    pressure_pa : float, optional
-        Constant pressure for a session without a pressure column [Pa].
-    estimate : bool, default True
-        Estimate the tip forces; False writes the shapes only.
+    options : Options, optional
+        What to do to the session (:class:`bendsense.choices.Options`: the
+        estimate's options, a fallback pressure, tracking, the load model, adapting
+        first, which writes ``config.yaml``); None: the defaults.
     overwrite : bool, default False
         Replace a previous bendsense output in ``out_dir``.
     name : str, optional
         Name of the session in the outcome (default: the file or directory name).
-    track, bandwidth_hz, window_s
-        Track the forces over time (``"smooth"`` or ``"filter"``; None: not), its
-        bandwidth [Hz] and the window of the model check [s] (:func:`bendsense.pipeline.process`).
-    load, contact_s_m : str, float, optional
-        The load model and a known contact location [m] (:func:`bendsense.pipeline.process`).
-    adapt : bool
-        First adapt the config to the session's own free frames (:func:`bendsense.adapt`): ``config.yaml``.
 
     Returns
     -------
@@ -400,10 +374,8 @@ def process_session(
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("ignore")
             warnings.simplefilter("always", DataWarning)
-            counts, lost, tx_drops, pressure_ignored = _run(
-                path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
-                {"track": track, "bandwidth_hz": bandwidth_hz, "window_s": window_s, "load": load,
-                 "contact_s_m": contact_s_m, "adapt": adapt})
+            counts, lost, tx_drops, pressure_ignored = _run(path, out_dir, config, calibration,
+                                                            options or Options(), overwrite)
     except (BendsenseError, OSError) as err:
         if isinstance(err, OutputError) and err.errno in _FATAL_ERRNOS:
             raise  # a full disk is not this session's fault: process_sessions stops
@@ -434,8 +406,7 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) ->
                           out_of_range=counts.out_of_range, frames_lost=lost, tx_drops=tx_drops, **row)
 
 
-def _run(path, out_dir, config, calibration, constraint, method, objective, pressure_pa, estimate, overwrite,
-         over_time):
+def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
     import numpy as np
 
     from bendsense.config import save_config
@@ -443,19 +414,16 @@ def _run(path, out_dir, config, calibration, constraint, method, objective, pres
     from bendsense.pipeline import process
     from bendsense.session import read_session
 
-    adapt = over_time.pop("adapt", False)  # (refused for a gripper before any session)
     if isinstance(calibration, dict):  # a gripper: each finger's part of the board (bendsense.batch.fingers)
         from bendsense.batch.fingers import run_gripper
 
-        options = dict(constraint=constraint, method=method, objective=objective, estimate=estimate, **over_time)
-        return run_gripper(path, out_dir, config, calibration, options, overwrite, pressure_pa)
+        return run_gripper(path, out_dir, config, calibration, options, overwrite)  # (adapt: refused before)
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
     session = read_session(path)
     # (a worker's log line would be lost in the console: the session's report row says it)
-    ignored = pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
-    adapted = adapt and adapt_session(session, config, calibration, pressure_pa)
-    processed = process(session, config if not adapted else adapted.config, calibration, constraint=constraint,
-                        method=method, objective=objective, pressure_pa=pressure_pa, estimate=estimate, **over_time)
+    ignored = options.pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
+    adapted = options.adapt and adapt_session(session, config, calibration, options.pressure_pa)
+    processed = process(session, config if not adapted else adapted.config, calibration, **options.process_keywords())
     session = processed.session
     processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made
     if adapted:
@@ -503,8 +471,7 @@ def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
-def warm_up(config, calibration, *, constraint=None, method=None, objective=None, estimate: bool = True,
-            track: str | None = None) -> None:
+def warm_up(config, calibration, options: Options | None = None) -> None:
     """Compile or load the kernels a batch uses, in one worker, before the others start.
 
     :func:`process_sessions` runs it as the first task and waits for it: on a cold cache (the first run after
@@ -512,6 +479,15 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     workers then only load it, instead of all compiling the same kernels at once. Runs
     :func:`bendsense.pipeline.process` on 100 flat frames (a worker's per-frame kernel) at the middle of the
     pressure range, with the batch's options (``track``: the tracker's kernels too).
+
+    Parameters
+    ----------
+    config : Config or GripperConfig
+        The batch's config.
+    calibration : Calibration or dict
+        Its calibration, or a gripper's per finger.
+    options : Options, optional
+        The batch's options (:class:`bendsense.choices.Options`).
     """
     import numpy as np
 
@@ -527,8 +503,10 @@ def warm_up(config, calibration, *, constraint=None, method=None, objective=None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            process(session, config, calibration, constraint=constraint, method=method, objective=objective,
-                    estimate=estimate, track=track if estimate else None)
+            options = options or Options()
+            process(session, config, calibration, constraint=options.constraint, method=options.method,
+                    objective=options.objective, estimate=options.estimate,
+                    track=options.track if options.estimate else None)
         except (BendsenseError, ValueError) as err:  # a mismatch every session reports itself, under its name
             log.debug("warm-up skipped: %s", err)
 
@@ -613,37 +591,43 @@ def process_sessions(
     out_dir = Path(out_dir)
     given = [paths] if isinstance(paths, (str, os.PathLike)) else list(paths)
     inputs = [*given, *(p for p in (config, calibration) if isinstance(p, (str, os.PathLike)))]
+    options = Options(constraint=constraint, method=method, objective=objective, pressure_pa=pressure_pa,
+                      estimate=estimate, track=track, bandwidth_hz=bandwidth_hz, window_s=window_s, load=load,
+                      contact_s_m=contact_s_m, adapt=adapt)
     # the root collects one results directory per session; it is never replaced
     with output.reserve([output.collection(out_dir)], inputs):
-        return _process(given, out_dir, start, config=config, calibration=calibration, executor=executor,
-                        workers=workers, constraint=constraint, method=method, objective=objective,
-                        overwrite=overwrite, pressure_pa=pressure_pa, estimate=estimate, recursive=recursive,
-                        progress=progress, track=track, bandwidth_hz=bandwidth_hz, window_s=window_s, load=load,
-                        contact_s_m=contact_s_m, adapt=adapt)
+        config, calibration = _prepared(config, calibration, estimate)
+        sessions = discover_sessions(given, recursive=recursive, exclude=out_dir)
+        if not sessions:
+            raise SessionError("no sessions (*.csv files or session directories) found in "
+                               f"{', '.join(map(str, given))}")
+        names = session_names(sessions)
+        rows, todo = _plan(sessions, names, out_dir, overwrite)
+        if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
+            from bendsense.sim.scenarios import check_workers
+
+            check_workers(min(workers, len(todo)))
+        _start_collection(out_dir)
+        task = dict(config=config, calibration=calibration, options=options, overwrite=overwrite)
+        tasks = [(i, sessions[i], names[i]) for i in todo]
+        description = _run_tasks(tasks, rows, out_dir, task, executor=executor, workers=workers, progress=progress)
+        return BatchReport(sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start,
+                           workers=description)
 
 
-def _process(paths, out_dir, start, *, config, calibration, executor, workers, constraint, method, objective,
-             overwrite, pressure_pa, estimate, recursive, progress, track, bandwidth_hz, window_s, load,
-             contact_s_m, adapt) -> BatchReport:
+def _prepared(config, calibration, estimate: bool):
+    """The config (loaded from a path if given one) and the calibration, or a gripper's per finger (errors made)."""
     from bendsense.batch.fingers import prepare
     from bendsense.config import Config, GripperConfig, load_config
 
     if not isinstance(config, (Config, GripperConfig)):
         config = load_config(config)
     # one calibration, or a gripper's per finger; each with its error model made once when estimating
-    calibration = prepare(config, calibration, estimate)
-    sessions = discover_sessions(paths, recursive=recursive, exclude=out_dir)
-    if not sessions:
-        raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, paths))}")
-    names = session_names(sessions)
-    rows, todo = _plan(sessions, names, out_dir, overwrite)
-    if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
-        from bendsense.sim.scenarios import check_workers
+    return config, prepare(config, calibration, estimate)
 
-        check_workers(min(workers, len(todo)))
-    options = dict(config=config, calibration=calibration, constraint=constraint, method=method, objective=objective,
-                   pressure_pa=pressure_pa, estimate=estimate, overwrite=overwrite, track=track,
-                   bandwidth_hz=bandwidth_hz, window_s=window_s, load=load, contact_s_m=contact_s_m, adapt=adapt)
+
+def _start_collection(out_dir: Path) -> None:
+    """Create ``out_dir`` (the collection of the results directories) with its manifest; nothing left on failure."""
     created = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -655,11 +639,6 @@ def _process(paths, out_dir, start, *, config, calibration, executor, workers, c
         if isinstance(err, OutputError):
             raise
         raise output.write_error(out_dir, err) from None
-    tasks = [(i, sessions[i], names[i]) for i in todo]
-    description = _run_tasks(tasks, rows, out_dir, options, executor=executor, workers=workers, progress=progress)
-    return BatchReport(
-        sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start, workers=description
-    )
 
 
 def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
@@ -689,7 +668,7 @@ def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
     return rows, todo
 
 
-def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, workers, progress) -> str:
+def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, workers, progress) -> str:
     """Process the sessions of ``tasks`` ((row index, path, name)) into ``rows``; a description of the workers.
 
     Interrupted (Ctrl-C, SIGTERM: a KeyboardInterrupt), the local pool's workers are
@@ -722,7 +701,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
 
             description = f"in-process, {numba.get_num_threads()} numba threads"
             for i, path, name in tasks:
-                finish(i, process_session(path, out_dir / name, name=name, **options))
+                finish(i, process_session(path, out_dir / name, name=name, **task))
         else:
             if executor is None and tasks:
                 own = executor = worker_pool(min(workers or os.cpu_count() or 1, len(tasks)))
@@ -734,14 +713,11 @@ def _run_tasks(tasks, rows: list, out_dir: Path, options: dict, *, executor, wor
                 # compile once: one worker compiles the kernels (or loads them) before any other starts, and the
                 # others find its cache. Not here: numba's threads in this process would break a forking pool.
                 with quietly():
-                    first = executor.submit(warm_up, options["config"], options["calibration"],
-                                            constraint=options["constraint"], method=options["method"],
-                                            objective=options["objective"], estimate=options["estimate"],
-                                            track=options["track"])
+                    first = executor.submit(warm_up, task["config"], task["calibration"], task["options"])
                 first.result()
             with quietly():
                 for i, path, name in tasks:
-                    future = executor.submit(process_session, path, out_dir / name, name=name, **options)
+                    future = executor.submit(process_session, path, out_dir / name, name=name, **task)
                     futures[future] = (i, path, name)
             for future in cf.as_completed(futures):
                 i, path, name = futures[future]

@@ -70,8 +70,7 @@ def warm_up_finger(config, calibration) -> tuple:
     return config, calibration
 
 
-def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, options: dict, overwrite: bool,
-                pressure_pa=None):
+def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, options, overwrite: bool):
     """Process one board session of a gripper and write each finger's results (a batch task's work).
 
     Parameters
@@ -84,12 +83,10 @@ def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, optio
         The fingers.
     calibrations : dict
         ``{finger: Calibration}``.
-    options : dict
-        The options of :func:`bendsense.pipeline.process` (constraint, method, ...).
+    options : Options
+        What to do to each finger's part (:class:`bendsense.choices.Options`).
     overwrite : bool
         Replace a previous bendsense output in ``out_dir``.
-    pressure_pa : float, optional
-        Pressure for frames without a reading [Pa].
 
     Returns
     -------
@@ -105,11 +102,10 @@ def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, optio
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
     session = read_session(path)
-    ignored = pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
+    ignored = options.pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
     parts, counts = {}, None
     for name, part in split_session(session, gripper).items():
-        processed = process(part, gripper.finger(name).config, calibrations[name], pressure_pa=pressure_pa,
-                            **options)
+        processed = process(part, gripper.finger(name).config, calibrations[name], **options.process_keywords())
         parts[name] = (processed.session, processed.shape, processed.estimate, processed.track)
         c = processed.counts()
         counts = c if counts is None else dataclasses.replace(counts, **{

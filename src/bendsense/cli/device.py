@@ -575,8 +575,7 @@ def sim_device(
     _check_grasp_flags(grasp, contact_s_m, channels)
     targets = [] if truth_path is None else [outputs.file(truth_path, overwrite=overwrite)]
     with outputs.reserve(targets):  # checked before any work, locked while the board runs
-        _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart,
-                   contact_s_m, truth_path, watchdog_ms, grasp, errors)
+        _sim_board(click.get_current_context().params, grasp, errors)
 
 
 def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
@@ -594,39 +593,40 @@ def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
                                  param_hint="--channels")
 
 
-def _sim_board(rate_hz, seconds, drop, corrupt, truncate, seed, channels, adc_bits, source, autostart, contact_s_m,
-               truth_path, watchdog_ms, grasp, errors) -> None:
-    """Build the simulated board's source (and truth file) and serve it."""
+def _sim_board(given: dict, grasp: dict, errors: dict) -> None:
+    """Build the simulated board's source (and truth file) and serve it (``given``: sim-device's options, by name)."""
     from bendsense.cli.sim import grasp_board
     from bendsense.device.simdevice import DEFAULT_WATCHDOG_MS, SimulatedDevice, ramp_source, scripted_board
     from bendsense.sim.truth import TruthWriter, truth_columns
 
+    rate_hz, seed, adc_bits, channels = given["rate_hz"], given["seed"], given["adc_bits"], given["channels"]
+    truth_path, watchdog_ms = given["truth_path"], given["watchdog_ms"]
     board = grasp_board(grasp, rate_hz=rate_hz, seed=seed, adc_bits=adc_bits, errors=errors)
     columns = truth_columns()
     if board is not None:
         src, channels = board, board.n_channels
         columns = truth_columns(board.truth_fingers, board.n_lines)
-    elif source == "ramp":
+    elif given["source"] == "ramp":
         src = ramp_source(channels, adc_bits)
     else:
         src = scripted_board(n_channels=channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed,
-                             contact_s_m=contact_s_m, truth=truth_path is not None, **errors)
+                             contact_s_m=given["contact_s_m"], truth=truth_path is not None, **errors)
     truth = None if truth_path is None else TruthWriter(truth_path, columns)
     dev = SimulatedDevice(
         src,
         rate_hz=rate_hz,
         n_channels=channels,
         adc_bits=adc_bits,
-        drop=drop,
-        corrupt=corrupt,
-        truncate=truncate,
+        drop=given["drop"],
+        corrupt=given["corrupt"],
+        truncate=given["truncate"],
         seed=seed,
-        autostart=autostart,
+        autostart=given["autostart"],
         truth=truth,
         watchdog_ms=DEFAULT_WATCHDOG_MS if watchdog_ms is None else watchdog_ms,
     )
     try:
-        _serve(dev, seconds)
+        _serve(dev, given["seconds"])
     finally:
         if truth is not None:
             truth.close()

@@ -328,7 +328,7 @@ def _free_bending_session(inputs, config, fix):
 
 def _stiffness_session(inputs, config, options):
     """The stiffness fit of a session of hanging weights."""
-    from bendsense.identify.sessions import fit_stiffness_session
+    from bendsense.identify.weights import fit_stiffness_session
 
     session, calibration = inputs()
     return fit_stiffness_session(session, calibration, config, **options)

@@ -165,9 +165,7 @@ def simulate(
     on the object, with each finger's true force and contact and each line's set-point).
     """
     if scenario == "gripper" or seconds is not None or any(v is not None for v in grasp.values()):
-        return _gripper_step(scenario, out_dir, seed, config_path, noise_counts, frames, ei_error, k0_error,
-                             base_rotation, hysteresis_kpa, max_pressure_kpa, contact_n, contact_s_m, rate_hz,
-                             overwrite, seconds, grasp)
+        return _gripper_step(click.get_current_context().params, grasp)
     options = {
         "noise_counts": noise_counts,
         **model_errors(ei_error, k0_error, base_rotation, hysteresis_kpa),
@@ -212,20 +210,20 @@ def simulate(
     return step_io(step, outputs=[output.directory(out_dir, overwrite=overwrite)], inputs=[config_path])
 
 
-def _gripper_step(scenario, out_dir, seed, config_path, noise_counts, frames, ei_error, k0_error, base_rotation,
-                  hysteresis_kpa, max_pressure_kpa, contact_n, contact_s_m, rate_hz, overwrite, seconds, grasp):
-    """``simulate gripper``: check its options, then the step that writes it."""
+def _gripper_step(given: dict, grasp: dict):
+    """``simulate gripper``: check its options (``given``: the command's, by name), then the step that writes it."""
+    scenario, seconds, rate_hz = given["scenario"], given["seconds"], given["rate_hz"]
+    out_dir, seed, overwrite, noise_counts = given["out_dir"], given["seed"], given["overwrite"], given["noise_counts"]
     if scenario != "gripper":
         flag = "--seconds" if seconds is not None else "--" + next(
             k for k, v in grasp.items() if v is not None).replace("_", "-").replace("object-kind", "object")
         raise click.BadParameter(f"applies to gripper only, not {scenario}", param_hint=flag)
-    for flag, value in (("--config", config_path), ("--frames", frames), ("--ei-error", ei_error),
-                        ("--k0-error", k0_error), ("--base-rotation", base_rotation),
-                        ("--hysteresis-kpa", hysteresis_kpa), ("--contact-n", contact_n),
-                        ("--contact-s-m", contact_s_m)):
-        if value is not None:
+    for name in ("config_path", "frames", "ei_error", "k0_error", "base_rotation", "hysteresis_kpa", "contact_n",
+                 "contact_s_m"):
+        if given[name] is not None:
+            flag = "--config" if name == "config_path" else "--" + name.replace("_", "-")
             raise click.BadParameter("does not apply to gripper (its fingers are the paper's)", param_hint=flag)
-    arguments = grasp_arguments({**grasp, "max_pressure_kpa": max_pressure_kpa}, gripper=True)
+    arguments = grasp_arguments({**grasp, "max_pressure_kpa": given["max_pressure_kpa"]}, gripper=True)
     fingers = arguments.pop("fingers")
     if noise_counts is not None:
         arguments["noise_counts"] = noise_counts

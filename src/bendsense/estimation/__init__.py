@@ -40,7 +40,7 @@ from bendsense.choices import ANGLE_SOURCES, LOADS, METHODS, OBJECTIVES
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import _kernels
 from bendsense.estimation.paper import paper_fit
-from bendsense.estimation.plausibility import force_bound_step, pressure_range_step
+from bendsense.estimation.plausibility import force_bound, mark_out_of_range, pressure_range
 from bendsense.estimation.problem import (
     ANGLES,
     CONSTRAINTS,
@@ -62,7 +62,7 @@ from bendsense.estimation.uncertainty import tip_angle_shift_gradient, warn_no_p
 from bendsense.mechanics import beam as _beam
 from bendsense.mechanics.actuator import model_jacobian
 from bendsense.status import Status
-from bendsense.validation import float_array, short
+from bendsense.validation import float_array, instance, short
 
 _OK = int(Status.OK)
 
@@ -117,8 +117,6 @@ def _models(config):
 
 # steps kept apart from the estimator: frames outside the actuator's pressure range get no force (first),
 # a force beyond what the actuator can carry is not ok (last)
-@pressure_range_step
-@force_bound_step
 def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "none", method: str | None = "fast", *,
                    objective: str | None = None, push_only: bool | None = None, tip_angle_source: str | None = None,
                    direction=None, follower_angle_rad: float | None = None, initial_force_n=None,
@@ -194,9 +192,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         Frames that fail have ``success=False``, NaN force and a message. Frames whose
         pressure lies outside ``config.actuator.pressure_range_pa`` have no force,
         ``success=False`` and the message ``"pressure_out_of_range: ..."``
-        (:func:`bendsense.estimation.plausibility.pressure_range_step`). Frames whose force is beyond
+        (:func:`bendsense.estimation.plausibility.pressure_range`). Frames whose force is beyond
         what the actuator can carry keep it, with ``success=False`` and the message
-        ``"implausible_force: ..."`` (:func:`bendsense.estimation.plausibility.force_bound_step`).
+        ``"implausible_force: ..."`` (:func:`bendsense.estimation.plausibility.force_bound`).
         With ``load="contact"``: ``contact_s_m`` the given location, ``contact_std_m`` 0
         and ``contact_jacobian_rad_per_m`` ∂(model coil angle)/∂s_c at the optimum.
 
@@ -208,27 +206,17 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         With ``strict=True`` when a frame fails.
     """
     t_start = time.perf_counter()
-    if config is None:
-        from bendsense.config import load_config
-
-        config = load_config()
+    config = _config(config)
     est = config.estimation
     constraint = est.constraint if constraint is None else constraint
     method = est.method if method is None else method
-    if not isinstance(method, str) or method not in METHODS:
-        raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {short(method)}")
-    if not isinstance(constraint, str) or constraint not in CONSTRAINTS:
-        raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {short(constraint)}")
-    for name, value, allowed in (("objective", objective, OBJECTIVES), ("tip_angle_source", tip_angle_source,
-                                                                         ANGLE_SOURCES)):
-        if value is not None and (not isinstance(value, str) or value not in allowed):
-            raise ArgumentError(f"{name}: must be one of {', '.join(allowed)}, got {short(value)}")
-    if method == "paper" and objective not in (None, "positions"):
-        raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
-    _check_load(load, contact_s_m, method)
+    _check_choices(method, constraint, objective, tip_angle_source, load, contact_s_m)
+    # the checks at the edges, in the open: pressures outside the range are estimated at its end and marked
+    given_pa, (pressure_pa, outside) = pressure_pa, pressure_range(pressure_pa, config, strict)
     if load == "contact" and contact_s_m is None:  # the location estimated, each frame its own window
-        return _contact().estimate_frames(estimate_force, shape, pressure_pa, config,
-                                          {k: v for k, v in locals().items() if k in _FRAME_OPTIONS})
+        result = _contact().estimate_frames(estimate_force, shape, pressure_pa, config,
+                                            {k: v for k, v in locals().items() if k in _FRAME_OPTIONS})
+        return mark_out_of_range(force_bound(result, pressure_pa, config, strict), outside, given_pa, config)
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
     L = float(config.actuator.length_m)
@@ -292,17 +280,44 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                                          np.maximum(np.zeros((B, k)), pb.lower))
         _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _REF, _c(u),
                   _c(run_status, np.int64), out)
-    if uncertainty == "none":  # stacklevel 4: the caller of the public wrappers (pressure_range_step, force_bound_step)
+    if uncertainty == "none":
         warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
-                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=4)
+                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=2)
     elif config.parameter_covariance is None:  # once per process: σ without the model parameters' part
-        warn_no_parameter_covariance(config, stacklevel=4)
+        warn_no_parameter_covariance(config, stacklevel=2)
     text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
             else messages(status, residual, chi2, p_value, blocked_dir, method))
     if strict and not success.all():
         raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
-    return _result(out, batch, text, time.perf_counter() - t_start, method, constraint, uncertainty, objective,
-                   pb, plain_err, load, contact_s_m)
+    result = _result(out, batch, text, pb, plain_err, wall_time_s=time.perf_counter() - t_start, method=method,
+                     constraint=constraint, uncertainty=uncertainty, objective=objective, load=load,
+                     contact_s_m=contact_s_m)
+    return mark_out_of_range(force_bound(result, pressure_pa, config, strict), outside, given_pa, config)
+
+
+def _config(config):
+    """The config of an estimate: the paper's for None, else a :class:`~bendsense.config.Config` (or an error)."""
+    from bendsense.config import Config, load_config
+
+    if config is None:
+        return load_config()
+    instance("config", config, Config, "bendsense.load_config(path)")
+    return config
+
+
+def _check_choices(method, constraint, objective, tip_angle_source, load, contact_s_m) -> None:
+    """The named options of :func:`estimate_force`, or an ArgumentError naming the wrong one."""
+    if not isinstance(method, str) or method not in METHODS:
+        raise ArgumentError(f"method: must be one of {', '.join(METHODS)}, got {short(method)}")
+    if not isinstance(constraint, str) or constraint not in CONSTRAINTS:
+        raise ArgumentError(f"constraint: must be one of {', '.join(CONSTRAINTS)}, got {short(constraint)}")
+    for name, value, allowed in (("objective", objective, OBJECTIVES), ("tip_angle_source", tip_angle_source,
+                                                                         ANGLE_SOURCES)):
+        if value is not None and (not isinstance(value, str) or value not in allowed):
+            raise ArgumentError(f"{name}: must be one of {', '.join(allowed)}, got {short(value)}")
+    if method == "paper" and objective not in (None, "positions"):
+        raise ArgumentError(f"objective: method='paper' fits the positions (paper eq. 18), got {objective!r}")
+    _check_load(load, contact_s_m, method)
 
 
 def _check_load(load, contact_s_m, method):
@@ -396,12 +411,16 @@ def _payload_buffers(B, pb):
     return np.empty((B, pb.coils.size, 6)), np.empty((B, pb.lengths.size))
 
 
-def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, objective, pb, err, load, contact_s_m):
-    """The :class:`ForceEstimate` of the kernels' outputs ``out``, shaped to the frames' ``batch``."""
-    contact = load == "contact"
+def _result(out, batch, text, pb, err, *, contact_s_m, **asked):
+    """The :class:`ForceEstimate` of the kernels' outputs ``out``, shaped to the frames' ``batch``.
+
+    ``asked``: the estimate's own attributes (``method``, ``constraint``, ``objective``,
+    ``uncertainty``, ``load``, ``wall_time_s``).
+    """
+    contact = asked["load"] == "contact"
     force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out[:14]
     b2, b22 = batch + (2,), batch + (2, 2)
-    window = method == "fast" and objective == "angles" and pb.pcc  # what a window test needs, or None
+    window = asked["method"] == "fast" and asked["objective"] == "angles" and pb.pcc  # what a window test needs
     pay, shifts = out[14:]
     if len(batch) != 1:
         pay, shifts = pay.reshape(batch + pay.shape[1:]), shifts.reshape(batch + shifts.shape[1:])
@@ -414,16 +433,11 @@ def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, obje
         status=status.astype(np.int8).reshape(batch),
         message=text.reshape(batch) if batch else str(text[0]),
         iterations=iters.reshape(batch),
-        wall_time_s=wall_time_s,
-        method=method,
-        constraint=constraint,
-        uncertainty=uncertainty,
         tip_position_m=tip.reshape(b2),
         state=state.reshape(batch + (state.shape[1],)),
         guess_n=guess_n.reshape(b2),
         chi2_per_dof=chi2.reshape(batch),
         p_value=p_value.reshape(batch),
-        objective=objective,
         covariance_parts_n2=parts.reshape(batch + (3, 2, 2)),
         residual_rad=pay[..., 0] if window else None,
         jacobian_rad_per_n=pay[..., 1:3] if window else None,
@@ -432,11 +446,11 @@ def _result(out, batch, text, wall_time_s, method, constraint, uncertainty, obje
         shift_errors=err if window else None,
         coils=_coils(pb) if window else None,
         strip_gap_m=pb.gap,
-        load=load,
         contact_s_m=np.broadcast_to(np.asarray(contact_s_m, dtype=float), batch).copy() if contact
         else np.full(batch, np.nan),
         contact_std_m=np.zeros(batch) if contact else np.full(batch, np.nan),
         contact_jacobian_rad_per_m=pay[..., 5] if window and contact else None,
+        **asked,
     )
 
 

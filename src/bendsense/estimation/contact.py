@@ -262,7 +262,7 @@ def locate(estimate_force, kappa, P, bounds, config, options, threshold):
     s_frames = np.repeat(np.where(contact, s_hat, L), counts)
     est = estimate_force(kappa, P, config, load="contact", contact_s_m=s_frames, **options)
     mix = _mixture(grid, Tg, forces, covs, (s_hat, T_hat, force_hat, cov_hat, var_s), contact)
-    return _finish(est, bounds, contact, s_hat, var_s, var_parts, (g, cross), why, grid[0], L, mix)
+    return _finish(est, bounds, contact, s_hat, var_s, var_parts, (g, cross), why, (grid[0], L), mix)
 
 
 def _mixture(grid, T, forces, covs, refined, contact):
@@ -401,14 +401,16 @@ def _unresolved(config, s_hat, var_s, force, shifts):
     return why
 
 
-def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, lo, L, mixture):
+def _finish(est, bounds, contact, s_hat, var_s, var_parts, slope, why, span, mixture):
     """``est`` (the frames at their windows' locations) with the location, its σ, its part of the force's σ.
 
     Per part p of the budget: ``g gᵀ σ_p(s_c)² + c_p gᵀ + g c_pᵀ`` with ``g = ∂F/∂s_c`` and
     ``c_p`` the frames' force covariance with ŝ (:func:`_force_slope`); then the
     hypotheses the window did not rule out (``mixture``: the force's shift and the added
-    covariance parts per window, :func:`_mixture`).
+    covariance parts per window, :func:`_mixture`). ``span``: the arc lengths a contact
+    may lie in, (first grid point, L) [m].
     """
+    lo, L = span
     counts = np.diff(bounds)
     B = int(bounds[-1])
     rep = lambda a: np.repeat(a, counts, axis=0)  # noqa: E731 (per window → per frame)

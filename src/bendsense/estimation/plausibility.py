@@ -20,7 +20,6 @@ The kinds of checks live here, both applied where data enter the library:
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
 import math
 import warnings
@@ -30,18 +29,19 @@ import numpy as np
 from bendsense.errors import ArgumentError, DataWarning, SessionError
 from bendsense.mechanics.bounds import max_curvature_per_m
 from bendsense.status import Status
-from bendsense.validation import float_array, instance, short
+from bendsense.validation import float_array, short
 
 __all__ = [
     "pressure_outside",
-    "pressure_range_step",
+    "pressure_range",
+    "mark_out_of_range",
     "check_pressure_column",
     "warn_kpa_as_pa",
     "check_time_column",
     "check_channels",
     "check_one_line",
     "force_bound_n",
-    "force_bound_step",
+    "force_bound",
 ]
 
 log = logging.getLogger("bendsense")
@@ -72,43 +72,45 @@ def _kpa(value: float) -> str:
     return f"{value / 1e3:g} kPa"
 
 
-def pressure_range_step(estimate):
-    """Wrap ``estimate_force``: frames outside the actuator's pressure range get no force.
+def pressure_range(pressure_pa, config, strict: bool = False):
+    """The pressures an estimate runs at, and the frames outside the actuator's range (a step of ``estimate_force``).
 
-    Those frames are estimated at the nearest end of the range (so that a batch keeps
-    its shape and a time series its warm start) and then marked: ``force_n``,
-    ``std_n``, ``covariance_n2``, ``residual_m`` NaN, ``success`` False and the message
-    ``"pressure_out_of_range: ..."``. With ``strict=True`` they raise
-    :class:`~bendsense.errors.ArgumentError` instead.
+    Frames outside ``actuator.pressure_range_pa`` are estimated at the nearest end of the
+    range (so that a batch keeps its shape and a time series its warm start) and then
+    marked by :func:`mark_out_of_range`; with ``strict=True`` they raise instead. Warns
+    when the pressures look like kPa given as Pa (:func:`warn_kpa_as_pa`).
 
     Parameters
     ----------
-    estimate : callable
-        ``estimate_force`` or a function with its signature.
+    pressure_pa : float or array_like
+        The frames' pressures [Pa].
+    config : Config
+        Its ``actuator.pressure_range_pa`` [Pa].
+    strict : bool
+        Raise for a pressure outside the range.
+
+    Returns
+    -------
+    pressure_pa, outside
+        The pressures to estimate at (clipped to the range where needed), and the bool
+        mask of the frames outside it (shape of ``pressure_pa``).
+
+    Raises
+    ------
+    ArgumentError
+        With ``strict=True``, for a pressure outside the range.
     """
-    from bendsense.config import Config, load_config
-
-    @functools.wraps(estimate)
-    def estimate_force(shape, pressure_pa, config=None, *args, **options):
-        if config is None:
-            config = load_config()
-        else:
-            instance("config", config, Config, "bendsense.load_config(path)")
-        outside = pressure_outside(pressure_pa, config)
-        warn_kpa_as_pa(pressure_pa, config)
-        if not outside.any():
-            return estimate(shape, pressure_pa, config, *args, **options)
-        lo, hi = config.actuator.pressure_range_pa
-        p = np.asarray(pressure_pa, dtype=float)
-        first = float(p[outside].flat[0])
-        text = (f"{int(outside.sum())} of {outside.size} pressure(s) outside actuator.pressure_range_pa "
-                f"{lo / 1e3:g}..{hi / 1e3:g} kPa (first: {_kpa(first)})")
-        if options.get("strict"):
-            raise ArgumentError(f"pressure_pa: {text}")
-        result = estimate(shape, np.clip(p, lo, hi), config, *args, **options)
-        return _mark(result, outside, p, lo, hi)
-
-    return estimate_force
+    outside = pressure_outside(pressure_pa, config)
+    warn_kpa_as_pa(pressure_pa, config)
+    if not outside.any():
+        return pressure_pa, outside
+    lo, hi = config.actuator.pressure_range_pa
+    p = np.asarray(pressure_pa, dtype=float)
+    if strict:
+        raise ArgumentError(f"pressure_pa: {int(outside.sum())} of {outside.size} pressure(s) outside "
+                            f"actuator.pressure_range_pa {lo / 1e3:g}..{hi / 1e3:g} kPa "
+                            f"(first: {_kpa(float(p[outside].flat[0]))})")
+    return np.clip(p, lo, hi), outside
 
 
 def warn_kpa_as_pa(pressure_pa, config) -> None:
@@ -137,11 +139,30 @@ def warn_kpa_as_pa(pressure_pa, config) -> None:
     warnings.warn(f"pressure_pa: every pressure is below {REST_PA / 1e3:g} kPa (largest {p.max():g} Pa), where the "
                   f"actuator hardly bends, but read as kPa they lie inside actuator.pressure_range_pa "
                   f"{lo / 1e3:g}..{hi / 1e3:g} kPa: pressures in kPa given as Pa? (multiply by 1000, or name the "
-                  "column pressure_kpa)", DataWarning, stacklevel=3)
+                  "column pressure_kpa)", DataWarning, stacklevel=4)  # the caller of estimate_force
 
 
-def _mark(result, outside, p, lo, hi):
-    """``result`` with the frames where ``outside`` is true set to no force and the status."""
+def mark_out_of_range(result, outside, pressure_pa, config):
+    """``result`` with the frames where ``outside`` is true set to no force and ``PRESSURE_OUT_OF_RANGE``.
+
+    ``force_n``, ``std_n``, ``covariance_n2``, ``residual_m`` NaN, ``success`` False and
+    the message ``"pressure_out_of_range: ..."`` (:func:`pressure_range`).
+
+    Parameters
+    ----------
+    result : ForceEstimate
+        The estimate at the clipped pressures.
+    outside : ndarray of bool
+        The frames outside the range (:func:`pressure_range`).
+    pressure_pa : float or array_like
+        The frames' own pressures [Pa].
+    config : Config
+        Its ``actuator.pressure_range_pa``.
+    """
+    if not np.any(outside):
+        return result
+    lo, hi = config.actuator.pressure_range_pa
+    p = np.asarray(pressure_pa, dtype=float)
     batch = result.batch_shape
     mask = np.broadcast_to(outside, batch)
     p = np.broadcast_to(p, batch)
@@ -339,62 +360,53 @@ def force_bound_n(pressure_pa, config):
 
 
 def _force_scale(config) -> float:
-    """``FORCE_MARGIN · κ_max / L`` [1/m²], memoised on the (frozen) config: the live path asks every frame."""
-    scale = config.__dict__.get("_force_scale_cache")
-    if scale is None:
-        scale = FORCE_MARGIN * max_curvature_per_m(config.sensor) / config.actuator.length_m
-        object.__setattr__(config, "_force_scale_cache", scale)
-    return scale
+    """``FORCE_MARGIN · κ_max / L`` [1/m²]."""
+    return FORCE_MARGIN * max_curvature_per_m(config.sensor) / config.actuator.length_m
 
 
-def force_bound_step(estimate):
-    """Wrap ``estimate_force``: a frame whose force is beyond :func:`force_bound_n` is not ok.
+def force_bound(result, pressure_pa, config, strict: bool = False):
+    """``result`` with a frame whose force is beyond :func:`force_bound_n` not ok (a step of ``estimate_force``).
 
     The force is kept (as with ``model_misfit``) but a frame that succeeded gets
-    ``success`` False and the message ``"implausible_force: ..."`` (status ``implausible_force``); with
-    ``strict=True`` such a frame raises :class:`~bendsense.errors.ConvergenceError`.
+    ``success`` False, status ``IMPLAUSIBLE_FORCE`` and the message ``"implausible_force:
+    ..."``; with ``strict=True`` such a frame raises :class:`~bendsense.errors.ConvergenceError`.
 
     Parameters
     ----------
-    estimate : callable
-        ``estimate_force`` or a function with its signature.
+    result : ForceEstimate
+        The estimate.
+    pressure_pa : float or array_like
+        The frames' pressures [Pa].
+    config : Config
+        The actuator's stiffness and the sensor's range.
+    strict : bool
+        Raise for such a frame.
     """
+    force = result.force_n
+    if force.ndim == 1:  # one frame (the live path): float arithmetic
+        magnitude = math.hypot(*force.tolist())
+        p = pressure_pa if isinstance(pressure_pa, float) else float(np.asarray(pressure_pa, dtype=float).flat[0])
+        top = _force_scale(config) * config.stiffness.ei_nm2(p)
+        if not (magnitude > top and bool(result.success)):  # a failed frame keeps its own reason
+            return result
+        over, magnitude, top, p = np.bool_(True), np.float64(magnitude), np.float64(top), np.float64(p)
+    else:
+        force = np.asarray(force, dtype=float)
+        magnitude = np.hypot(force[..., 0], force[..., 1])
+        p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
+        top = force_bound_n(p, config)
+        with np.errstate(invalid="ignore"):  # a failed frame keeps its own reason
+            over = np.isfinite(magnitude) & (magnitude > top) & np.broadcast_to(result.success, magnitude.shape)
+        if not over.any():
+            return result
+    if strict:
+        from bendsense.errors import ConvergenceError
 
-    @functools.wraps(estimate)
-    def estimate_force(shape, pressure_pa, config=None, *args, **options):
-        result = estimate(shape, pressure_pa, config, *args, **options)
-        if config is None:
-            from bendsense.config import load_config
-
-            config = load_config()
-        force = result.force_n
-        if force.ndim == 1:  # one frame (the live path): float arithmetic
-            magnitude = math.hypot(*force.tolist())
-            p = pressure_pa if isinstance(pressure_pa, float) else float(np.asarray(pressure_pa, dtype=float).flat[0])
-            top = _force_scale(config) * config.stiffness.ei_nm2(p)
-            if not (magnitude > top and bool(result.success)):  # a failed frame keeps its own reason
-                return result
-            over, magnitude, top, p = np.bool_(True), np.float64(magnitude), np.float64(top), np.float64(p)
-        else:
-            force = np.asarray(force, dtype=float)
-            magnitude = np.hypot(force[..., 0], force[..., 1])
-            p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
-            top = force_bound_n(p, config)
-            with np.errstate(invalid="ignore"):  # a failed frame keeps its own reason
-                over = np.isfinite(magnitude) & (magnitude > top) & np.broadcast_to(result.success, magnitude.shape)
-            if not over.any():
-                return result
-        if options.get("strict"):
-            from bendsense.errors import ConvergenceError
-
-            first = np.argwhere(np.atleast_1d(over))[0]
-            m, t = np.atleast_1d(magnitude)[tuple(first)], np.atleast_1d(top)[tuple(first)]
-            raise ConvergenceError(f"{int(np.count_nonzero(over))} frame(s) {Status.IMPLAUSIBLE_FORCE.word}: "
-                                   f"|F| = {m:.3g} N "
-                                   f"beyond the {t:.3g} N this actuator can carry")
-        return _mark_force(result, over, magnitude, top, p)
-
-    return estimate_force
+        first = np.argwhere(np.atleast_1d(over))[0]
+        m, t = np.atleast_1d(magnitude)[tuple(first)], np.atleast_1d(top)[tuple(first)]
+        raise ConvergenceError(f"{int(np.count_nonzero(over))} frame(s) {Status.IMPLAUSIBLE_FORCE.word}: "
+                               f"|F| = {m:.3g} N beyond the {t:.3g} N this actuator can carry")
+    return _mark_force(result, over, magnitude, top, p)
 
 
 def _mark_force(result, over, magnitude, top, p):

@@ -747,7 +747,7 @@ def fit_stiffness(
     level_covariance : callable, optional
         ``level_covariance(sensitivity, level, level_ei_nm2)`` → two (levels, levels)
         covariances [N²·m⁴] of the levels' EI: from the measured points' errors (a
-        calibration common to all rows, :func:`bendsense.identify.sessions.fit_stiffness_session`)
+        calibration common to all rows, :func:`bendsense.identify.weights.fit_stiffness_session`)
         and a systematic part the residuals cannot show (from K0's uncertainty);
         ``sensitivity`` (n, M, 2) is ∂EI of each row's level / ∂ its measured points
         [N·m²/m], ``level`` (n,) each row's level, ``level_ei_nm2`` the levels' fitted EI.

@@ -192,7 +192,7 @@ def _with_covariance(config, names: tuple[str, ...], block: np.ndarray, what: st
     The fits are separate least-squares problems, so the matrix is block diagonal:
     the covariance between the parameters of different fits is taken as zero (the
     stiffness fit uses K0(P) from the free-bending parameters; from a session,
-    :func:`bendsense.identify.sessions.fit_stiffness_session` adds their uncertainty to
+    :func:`bendsense.identify.weights.fit_stiffness_session` adds their uncertainty to
     its own block's variance, a table fit does not). A block that is not finite (parameters not identifiable)
     is not written, and an older block of the same parameters is removed.
     """

@@ -1,4 +1,4 @@
-"""Identification from sessions recorded with bendsense: a free pressure sweep, hanging weights.
+"""Identification from sessions recorded with bendsense: a free pressure sweep, and learning while running (adapt).
 
 The fits are those of :mod:`bendsense.identify`; this module turns a recorded session
 into their data.
@@ -41,13 +41,7 @@ covariance is the sandwich ``A Σ_θ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``), scaled u
 residuals scatter more than Σ_θ says (:func:`bendsense.identify.fit_free_bending`,
 ``data_covariance``).
 
-**Stiffness** (:func:`stiffness_data_from_session`). A session of hanging weights: the
-known tip force of each frame in the columns ``fx_n, fy_n`` (base frame, as ``bendsense
-simulate tip-loads`` writes them) or ``mass_kg`` (``F = m g ĝ`` with ``g`` and ``ĝ`` of
-the config's gravity). The frames with a load (``|F| > 0``) and a usable shape become
-rows of :class:`~bendsense.identify.StiffnessData` whose measured points are the
-reconstructed shape at the coils (arc lengths ``L_i``); :func:`bendsense.identify.fit_stiffness`
-fits EI per pressure level and the line EI(P).
+**Stiffness** from hanging weights: :mod:`bendsense.identify.weights`.
 """
 
 from __future__ import annotations
@@ -59,15 +53,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
+from bendsense.config import STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, SessionError
-from bendsense.identify import StiffnessData, fit_free_bending
+from bendsense.identify import fit_free_bending
 from bendsense.identify.covariance import session_covariance
 
 __all__ = [
     "ADAPT_FRAMES", "FREE_CHI2_2SIGMA", "FREE_P", "MAX_FRAMES", "Adaptation", "FreeBendingSessionFit", "adapt",
-    "adapt_session", "free_bending_angles", "k0_with_sigma", "fit_free_bending_session", "fit_stiffness_session",
-    "session_shapes", "stiffness_data_from_session",
+    "adapt_session", "free_bending_angles", "k0_with_sigma", "fit_free_bending_session", "session_shapes",
 ]
 
 #: χ² with 2 degrees of freedom at the 2σ level (95.45 %): the free frames' force ellipse.
@@ -412,17 +405,27 @@ def fit_free_bending_session(session, calibration, config=None, *, fix=None, rou
     session, config, calibration, _ = process_inputs(session, config, calibration, "")
     shape, usable = session_shapes(session, calibration, config)
     return _free_frames_fit(shape, np.asarray(session.pressure_pa, dtype=float), usable, config, calibration,
-                            _source(session), fix=fix, rounds=rounds, chi2_limit=chi2_limit, max_frames=max_frames)
+                            _source(session), fix=fix, limits=_Limits(rounds, chi2_limit, max_frames))
 
 
-def _free_frames_fit(shape, p, usable, config, calibration, source, *, fix=None, rounds=5,
-                     chi2_limit=FREE_CHI2_2SIGMA, max_frames=MAX_FRAMES, prior=False) -> FreeBendingSessionFit:
+@dataclass(frozen=True)
+class _Limits:
+    """How the free frames are chosen: rounds of selection and fit, the χ² limit of a free frame, the most frames."""
+
+    rounds: int = 5
+    chi2_limit: float = FREE_CHI2_2SIGMA
+    max_frames: int = MAX_FRAMES
+
+
+def _free_frames_fit(shape, p, usable, config, calibration, source, *, fix=None, limits=_Limits(),
+                     prior=False) -> FreeBendingSessionFit:
     """The free frames of a session and the free-bending fit on them, iterated (module docstring).
 
     ``prior``: the fit updates the config's prior (:func:`adapt`); the first selection is
     then the starting config's alone (no fall back to every usable frame: a session
     need not be a free sweep) and fewer than four free frames raise :class:`SessionError`.
     """
+    rounds, chi2_limit, max_frames = limits.rounds, limits.chi2_limit, limits.max_frames
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise ArgumentError(f"rounds: expected an integer >= 1, got {rounds!r}")
     if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 4:
@@ -658,7 +661,7 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
         raise ArgumentError(f"t_s: expected one time per frame {p.shape}, got {t.shape}")
     try:
         fit = _free_frames_fit(shape, p, _usable(shape, p, config), config, calibration, "adapt", prior=True,
-                               max_frames=ADAPT_FRAMES)
+                               limits=_Limits(max_frames=ADAPT_FRAMES))
     except SessionError as err:
         why = str(err).removeprefix("adapt: ")
         report = (f"adapt: learned nothing from {len(p)} frames and kept the config's prior: {why}. "
@@ -748,153 +751,3 @@ def _adapt_report(fit, prior, posterior, t_s) -> str:
             f"shape no free beam has, p < {FREE_P:g}; unusable: outside the calibrated or pressure range), in "
             f"{fit.rounds} round(s) of selection.{one}{caveats}"
             f"{settled}")
-
-
-def stiffness_data_from_session(session, calibration, config=None):
-    """The loaded frames of a hanging-weight session as stiffness data (module docstring).
-
-    Parameters
-    ----------
-    session : Session or path
-        The recording, with the pressure of every frame and the known tip force in the
-        columns ``fx_n, fy_n`` [N] or ``mass_kg`` [kg].
-    calibration : Calibration or path
-        The sensor's calibration.
-    config : Config or path, optional
-        Sensor, actuator and gravity; default the paper's.
-
-    Returns
-    -------
-    StiffnessData
-        One row per usable loaded frame, the reconstructed points at the coils.
-
-    Raises
-    ------
-    SessionError
-        No pressure, no load columns, or no usable loaded frame.
-    """
-    from bendsense.session.inputs import process_inputs
-
-    session, config, calibration, _ = process_inputs(session, config, calibration, "")
-    return _stiffness_rows(session, calibration, config)[0]
-
-
-def _stiffness_rows(session, calibration, config):
-    """The stiffness data of the session's loaded frames, and their frame indices."""
-    force = _known_force(session, config)
-    shape, usable = session_shapes(session, calibration, config)
-    loaded = usable & np.all(np.isfinite(force), axis=-1) & (np.hypot(force[:, 0], force[:, 1]) > 0)
-    rows = np.flatnonzero(loaded)
-    if rows.size == 0:
-        raise SessionError(f"{_source(session)}: no frame with a known nonzero load and a usable shape "
-                           "(in the calibrated range, its pressure in actuator.pressure_range_pa)")
-    pos = np.asarray(shape.positions_m)[rows]
-    s = np.broadcast_to(np.asarray(shape.s_m), (rows.size, pos.shape[1]))
-    return StiffnessData(np.asarray(session.pressure_pa, dtype=float)[rows], force[rows], s, pos), rows
-
-
-def fit_stiffness_session(session, calibration, config=None, **options):
-    """Fit EI(P) to the hanging-weight frames of a session (module docstring).
-
-    :func:`stiffness_data_from_session` gives the rows; :func:`bendsense.identify.fit_stiffness`
-    fits them, with the levels' covariance from the calibration's errors over all rows
-    (:func:`bendsense.identify.covariance.session_covariance` through the reconstructed
-    points' sensitivity to the shifts): the calibration error is common to every frame
-    and does not average down over them.
-
-    Parameters
-    ----------
-    session : Session or path
-        The recording (pressure and known tip force of every frame).
-    calibration : Calibration or path
-        The sensor's calibration.
-    config : Config or path, optional
-        With the free-bending model identified first; default the paper's.
-    **options
-        ``fix``, ``pressure_tolerance_pa``, ``weighted``, ``method`` of
-        :func:`~bendsense.identify.fit_stiffness`.
-
-    Returns
-    -------
-    StiffnessFit
-    """
-    from bendsense.identify import fit_stiffness
-    from bendsense.session.inputs import process_inputs
-
-    session, config, calibration, _ = process_inputs(session, config, calibration, "")
-    data, rows = _stiffness_rows(session, calibration, config)
-    shifts = np.asarray(calibration.shifts_m(np.asarray(session.signals, dtype=float)[rows]))
-    dpos_ds = _points_shift_jacobian(shifts, calibration.strip_gap_m(config.sensor), config)
-
-    def level_covariance(sensitivity, level, level_ei):
-        weights = np.einsum("nmc,nmcj->nj", sensitivity, dpos_ds)
-        cov = session_covariance(calibration, shifts, weights, level, len(level_ei))
-        g = _level_k0_jacobian(data, config, sensitivity, level, level_ei)
-        return cov, g @ _block(config, FREE_BENDING_PARAMETERS) @ g.T
-
-    return fit_stiffness(data, config, level_covariance=level_covariance, **options)
-
-
-def _level_k0_jacobian(data, config, sensitivity, level, level_ei) -> np.ndarray:
-    """∂EI of each level / ∂(μ̄, μ_s, prebend) (levels, 3): through K0(P) of each row's model shape.
-
-    The level's EI minimises the distance of the model points to the measured ones; a
-    change δK0 of a row's natural curvature moves its model points by ∂r/∂K0 δK0 and
-    the fitted EI by −sensitivity · ∂r/∂K0 δK0 (∂r/∂K0 by a central difference).
-    """
-    from bendsense.mechanics.actuator import FreeBendingModel, model_jacobian
-    from bendsense.mechanics.beam import solve_beam
-
-    p = data.pressure_pa
-    k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(p)
-    grid = data.s_m[0]
-    ei = np.asarray(level_ei)[level]
-    h = 1e-4 * np.maximum(np.abs(k0), 1.0)
-    w = config.weight_per_length_n_per_m
-    hi, lo = (np.asarray(solve_beam(config.actuator.length_m, ei, k0 + sign * h, data.force_n, w, s_m=grid,
-                                    warn=False).positions_m) for sign in (1.0, -1.0))
-    dei_dk0 = -np.einsum("nmc,nmc->n", sensitivity, (hi - lo) / (2.0 * h[:, None, None]))
-    dk0 = model_jacobian(config, p, FREE_BENDING_PARAMETERS)[:, 0, :]  # (n, 3)
-    out = np.zeros((len(level_ei), dk0.shape[1]))
-    np.add.at(out, level, dei_dk0[:, None] * dk0)
-    return out
-
-
-def _points_shift_jacobian(shifts_m, gap_m: float, config, h: float = 1e-5) -> np.ndarray:
-    """∂(PCC points at the coils)/∂S (n, N, 2, N) [m/m], by central differences in the curvatures."""
-    from bendsense.shape.pcc import Shape
-
-    lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
-    coils = np.cumsum(lengths)
-    n, N = shifts_m.shape
-    delta = np.diff(np.asarray(shifts_m, dtype=float), axis=-1, prepend=0.0)
-    kappa = delta / (gap_m * lengths)
-    bumped = np.repeat(kappa[:, None, :], 2 * N, axis=1)
-    eye = np.eye(N) * h
-    bumped[:, :N] += eye
-    bumped[:, N:] -= eye
-    pos = np.asarray(Shape.from_curvatures(bumped, lengths, s_m=coils).positions_m)  # (n, 2N, M, 2)
-    dpos_dk = np.moveaxis((pos[:, :N] - pos[:, N:]) / (2 * h), 1, -1)  # (n, M, 2, N)
-    # κ_i = (S_i − S_{i−1}) / (d l_i)
-    dk_ds = (np.eye(N) - np.eye(N, k=-1)) / (gap_m * lengths)[:, None]
-    return dpos_dk @ dk_ds
-
-
-def _known_force(session, config) -> np.ndarray:
-    """The tip force (frames, 2) [N] of the session's truth columns ``fx_n, fy_n`` or ``mass_kg``."""
-    extra = session.extra
-    has_f = [n for n in ("fx_n", "fy_n") if n in extra]
-    if has_f and "mass_kg" in extra:
-        raise SessionError(f"{_source(session)}: give the load as fx_n, fy_n or as mass_kg, not both")
-    if len(has_f) == 1:
-        other = "fy_n" if has_f == ["fx_n"] else "fx_n"
-        raise SessionError(f"{_source(session)}: missing column {other} (the tip force needs fx_n and fy_n)")
-    if has_f:
-        return np.stack([np.asarray(extra["fx_n"], dtype=float), np.asarray(extra["fy_n"], dtype=float)], axis=-1)
-    if "mass_kg" in extra:
-        m = np.asarray(extra["mass_kg"], dtype=float)
-        if np.any(m[np.isfinite(m)] < 0):
-            raise SessionError(f"{_source(session)}: column mass_kg: a hanging mass cannot be negative")
-        return m[:, None] * config.gravity.g_m_per_s2 * np.asarray(config.gravity.direction, dtype=float)
-    raise SessionError(f"{_source(session)}: no load columns: give the known tip force as fx_n, fy_n [N] "
-                       "or the hanging mass as mass_kg")

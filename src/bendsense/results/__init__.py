@@ -97,8 +97,9 @@ class Results:
                 **contact_columns(frames, estimate),
                 residual_m=np.asarray(estimate.residual_m).reshape(frames),
             )
-        columns["status"] = frame_status(shape, estimate)
-        columns.update(tracked_columns(frames, estimate, track, columns["status"]))
+        codes = frame_codes(shape, estimate)
+        columns["status"] = words(codes)
+        columns.update(tracked_columns(frames, estimate, track, codes))
         extra_names = []
         for name, values in session.extra.items():
             # an input column named like a result (e.g. ground truth fx_n) is kept as
