@@ -1,6 +1,6 @@
 """All DESIGN.md section 5 targets, measured in one run on the machine at hand.
 
-    python benchmarks/run_all.py [--quick] [--markdown docs/performance.md]
+    python benchmarks/run_all.py [--quick] [--markdown docs/performance.md]   # the table between its markers
 
 Prints ONE table (what | paper | target | measured | pass?) with wall and CPU time of
 every row, the machine (cores, CPU model, numpy/scipy versions, load average) and the
@@ -359,10 +359,24 @@ def main(argv=None):
     ]
     print(render_text(table, header))
     if args.markdown:
-        from bendsense import output
-
-        output.write_text(args.markdown, render_markdown(table, header), overwrite=True)
+        write_markdown(args.markdown, render_markdown(table, header))
         print(f"Markdown table written to {args.markdown}")
+
+
+BEGIN, END = "<!-- run_all:begin -->", "<!-- run_all:end -->"
+
+
+def write_markdown(path, table: str) -> None:
+    """Write ``table`` to ``path``: between its BEGIN and END markers if it has them, else alone."""
+    from pathlib import Path
+
+    from bendsense import output
+
+    old = Path(path).read_text(encoding="utf-8") if Path(path).is_file() else ""
+    if BEGIN in old and END in old.split(BEGIN, 1)[1]:
+        before, rest = old.split(BEGIN, 1)
+        table = f"{before}{BEGIN}\n{table}{END}{rest.split(END, 1)[1]}"
+    output.write_text(path, table, overwrite=True)
 
 
 if __name__ == "__main__":

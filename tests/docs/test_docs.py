@@ -119,9 +119,26 @@ def mask(line: str) -> str:
     return line.rstrip()
 
 
+_SECONDS = {"ms": 1e-3, "s": 1.0, "min": 60.0}
+_DURATIONS = re.compile(r"(?:(?<=\bin )|(?<=, ))(\d+(?:\.\d+)?) (ms|s|min)\b")
+
+
+def stale_duration(documented: str, actual: str) -> bool:
+    """Whether a duration the page states is 3× (and 10 s) off what the same run took here: stale on any machine.
+
+    Durations are masked to match the output at all (machines differ by ±25 %, a cold
+    cache by a minute); a page that says "in 192.2 s" of a command that now takes 60 s
+    is out of date all the same.
+    """
+    pairs = zip((float(v) * _SECONDS[u] for v, u in _DURATIONS.findall(documented)),
+                (float(v) * _SECONDS[u] for v, u in _DURATIONS.findall(actual)))
+    return any(d > 3.0 * a + 10.0 or a > 3.0 * d + 10.0 for d, a in pairs)
+
+
 def missing_output(documented: str, actual: str) -> list[str]:
-    """The documented lines (masked) that are not lines of ``actual`` (masked)."""
-    real = [mask(line) for line in actual.splitlines()]
+    """The documented lines (masked) that are not lines of ``actual`` (masked), or state a stale duration."""
+    lines = actual.splitlines()
+    real = [mask(line) for line in lines]
     missing = []
     for line in documented.splitlines():
         if not line.strip() or line.strip() in ("...", "…"):
@@ -131,7 +148,11 @@ def missing_output(documented: str, actual: str) -> list[str]:
             prefix = want[:-len(" ...")]
             found = any(r.startswith(prefix) for r in real)
         else:
-            found = want in real
+            same = [raw for raw, r in zip(lines, real) if r == want]
+            found = bool(same)
+            if found and all(stale_duration(line, raw) for raw in same):
+                missing.append(f"{line.strip()} (stale: this run printed {same[0].strip()!r})")
+                continue
         if not found:
             missing.append(want)
     return missing
@@ -270,6 +291,16 @@ def test_documented_output_must_match_the_real_output():
     # "..." abridges: a line of its own is skipped, a trailing one matches a prefix
     assert missing_output("...\nError: x.csv: line 2: ...\n\n", actual) == []
     assert missing_output("Error: y.csv: ...\n", actual) == ["Error: y.csv: ..."]
+
+
+def test_a_stale_duration_is_caught():
+    actual = "wrote demo/session, demo/results in 48.9 s\nprocessed 500 frames in 0.85 s\n"
+    assert missing_output("wrote demo/session, demo/results in 61.0 s\n", actual) == []  # another machine
+    assert missing_output("processed 500 frames in 0.4 s\n", actual) == []
+    stale = missing_output("wrote demo/session, demo/results in 192.2 s\n", actual)
+    assert len(stale) == 1 and "stale" in stale[0] and "48.9 s" in stale[0]
+    assert missing_output("processed 500 frames in 40 s\n", actual) != []
+    assert stale_duration("in 5 s", "in 12 s") is False  # short runs: within the 10 s slack
 
 
 def test_fences_name_their_language_without_a_space():
