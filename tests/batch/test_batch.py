@@ -398,7 +398,7 @@ def test_process_reports_lost_frames_and_firmware_drops(tmp_path):
 def test_more_workers_than_the_memory_holds_are_refused_before_any_work(tmp_path):
     """Each worker holds numpy, scipy, numba and the kernels (~300 MB): '--workers' for more sessions than the free
     memory holds workers is one line naming the option and the cap; nothing is processed or written."""
-    from bendsense.sim.scenarios import available_memory_bytes
+    from bendsense.sim.memory import available_memory_bytes
 
     available = available_memory_bytes()
     if available is None:

@@ -604,7 +604,7 @@ def process_sessions(
         names = session_names(sessions)
         rows, todo = _plan(sessions, names, out_dir, overwrite)
         if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
-            from bendsense.sim.scenarios import check_workers
+            from bendsense.sim.memory import check_workers
 
             check_workers(min(workers, len(todo)))
         _start_collection(out_dir)

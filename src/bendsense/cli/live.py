@@ -245,7 +245,8 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
                                  f"for 16 channels), got {rate_hz:g}", param_hint="--rate")
     from bendsense import output
     from bendsense.apps.demo import run_demo
-    from bendsense.sim.scenarios import BYTES_PER_FRAME, check_fits
+    from bendsense.sim.memory import check_fits
+    from bendsense.sim.scenarios import BYTES_PER_FRAME
 
     # the session is estimated whole in memory, as the time-varying scenario it streams is simulated
     check_fits("--seconds", "demo", round(seconds * rate_hz), BYTES_PER_FRAME["time-varying"], rate_hz)

@@ -382,8 +382,8 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     with _signals_stop():
         try:
             with _prompt_threads():
-                outcome = _loop(driver, processor, controller, float(max_pressure_pa), seconds, stop, guard, lines,
-                                recording, on_block, state)
+                outcome = _loop(driver, processor, controller, seconds, stop, guard, lines, recording, on_block,
+                                state)
             stopped_at = time.perf_counter()
         except BaseException as err:
             stopped_at = time.perf_counter()
@@ -420,8 +420,8 @@ def _fingers(processor) -> tuple:
     return (None,) if gripper is None else tuple(gripper.names)
 
 
-def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, recording, on_block, state) -> str:
-    """The loop of :func:`run` until its time or a stop; returns the outcome."""
+def _loop(driver, processor, controller, seconds, stop, guard, lines, recording, on_block, state) -> str:
+    """The loop of :func:`run` until its time or a stop; returns the outcome (set-points within the guard's limit)."""
     t0 = time.monotonic()
     last_frame, started = t0, False
     silence = guard.silence_s
@@ -451,7 +451,7 @@ def _loop(driver, processor, controller, pmax, seconds, stop, guard, lines, reco
         block = processor.process_readings(readings)
         processed = time.perf_counter()
         guard.flags(block)
-        setpoints, clipped = _clip(controller(block), lines, pmax)
+        setpoints, clipped = _clip(controller(block), lines, guard.max_pressure_pa)
         state["driven"].update(setpoints)
         if not state["loop"]:  # the first block: the lines the controller does not drive are held at 0
             state["held"] = tuple(k for k in lines if k not in setpoints)

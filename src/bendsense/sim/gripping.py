@@ -109,9 +109,9 @@ def check_memory(n_frames: int, fingers: int, rate_hz: float, field: str = "dura
 
     The session is simulated and written in memory: ``--seconds 1e6`` would grow until the
     machine swaps or kills it. ``field`` is the option to name (``--seconds`` in the CLI);
-    :func:`bendsense.sim.scenarios.check_fits` says it.
+    :func:`bendsense.sim.memory.check_fits` says it.
     """
-    from bendsense.sim.scenarios import check_fits
+    from bendsense.sim.memory import check_fits
 
     if isinstance(fingers, int) and isinstance(rate_hz, (int, float)) and rate_hz > 0:  # else the board refuses
         check_fits(field, f"gripper of {fingers} fingers", n_frames, fingers * _BYTES_PER_FINGER_FRAME, rate_hz)

@@ -74,6 +74,7 @@ import math
 import os
 from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import yaml
@@ -84,6 +85,7 @@ from bendsense.config import Config
 from bendsense.errors import ArgumentError, ConfigError
 from bendsense.session import Session, write_session_csv
 from bendsense.sim.actuator import MODEL_ERRORS, SimulatedActuator, contact_number
+from bendsense.sim.memory import BASE_BYTES, available_memory_bytes, size_text
 from bendsense.sim.sensor import VirtualSensor, calibration_shifts
 
 __all__ = [
@@ -420,16 +422,26 @@ def _repeat(frames, count):
 # --------------------------------------------------------------------------- scenarios
 
 
-def _strip_recordings(sim, rng, out, names, shifts, kappa, radii, n, rate, scenario, seed):
+class _Run(NamedTuple):
+    """Where a scenario records: the simulated actuator, its noise stream, the directory, the scenario, its seed."""
+
+    sim: SimulatedActuator
+    rng: np.random.Generator
+    out: Path
+    scenario: str
+    seed: int
+
+
+def _strip_recordings(run, names, shifts, kappa, radii, n, rate):
     """Record the sensor held on fixed shapes: ``n`` noisy frames per shift vector."""
     for name, shift, k, radius in zip(names, shifts, kappa, radii, strict=True):
-        counts = sim.sensor.measure(np.broadcast_to(shift, (n, shift.size)), rng=rng).counts
-        meta = _meta(scenario, seed, rate_hz=rate)
+        counts = run.sim.sensor.measure(np.broadcast_to(shift, (n, shift.size)), rng=run.rng).counts
+        meta = _meta(run.scenario, run.seed, rate_hz=rate)
         extra = {"kappa_true_per_m": np.full(n, k)}
         if radius is not None:
             meta["radius_m"] = radius
             extra = {"radius_m": np.full(n, radius), **extra}
-        write_session_csv(_session(counts, np.nan, rate, meta, extra), out / name)
+        write_session_csv(_session(counts, np.nan, rate, meta, extra), run.out / name)
 
 
 def _radii(radii_m) -> list:
@@ -446,37 +458,35 @@ def _strip_names(radii) -> list:
     return names
 
 
-def _calibration(sim, rng, out, seed, *, frames_per_strip, rate_hz, radii_m):
+def _calibration(run, *, frames_per_strip, rate_hz, radii_m):
     n = _count_option("frames_per_strip", frames_per_strip)
     rate = _positive_option("rate_hz", rate_hz)
     radii = _radii(radii_m)
     names = _strip_names(radii)
-    sensor = sim.config.sensor
+    sensor = run.sim.config.sensor
     shifts = calibration_shifts(sensor, radii)
     # κ_cal as calibration_shifts applies it (DESIGN section 2)
     kappa = [1.0 / (r + sensor.sleeve_thickness_m if sensor.calibration_adds_sleeve else r) for r in radii]
     n_channels = sensor.n_segments
-    _strip_recordings(
-        sim, rng, out, ["flat.csv"], np.zeros((1, n_channels)), [0.0], [None], n, rate, "calibration", seed
-    )
-    _strip_recordings(sim, rng, out, names, shifts, kappa, [None] * len(radii), n, rate, "calibration", seed)
+    _strip_recordings(run, ["flat.csv"], np.zeros((1, n_channels)), [0.0], [None], n, rate)
+    _strip_recordings(run, names, shifts, kappa, [None] * len(radii), n, rate)
     manifest = {
         "flat": "flat.csv",
         "strips": [{"radius_m": r, "recording": name} for r, name in zip(radii, names, strict=True)],
     }
-    (out / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False), encoding="utf-8")
+    (run.out / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False), encoding="utf-8")
     return {"frames": n * (len(radii) + 1), "excluded_frames": 0, "files": ["flat.csv", *names, "manifest.yaml"]}
 
 
-def _validation(sim, rng, out, seed, *, frames_per_strip, rate_hz, radii_m):
+def _validation(run, *, frames_per_strip, rate_hz, radii_m):
     n = _count_option("frames_per_strip", frames_per_strip)
     rate = _positive_option("rate_hz", rate_hz)
     radii = _radii(radii_m)
     names = _strip_names(radii)
     kappa = [1.0 / r for r in radii]
     # R_val is at the sensor layer already: S_i = d L_i / R_val, whatever calibration_adds_sleeve says
-    shifts = strip_shifts(kappa, sim.sensor.lengths_m, sim.sensor.strip_gap_m)
-    _strip_recordings(sim, rng, out, names, shifts, kappa, radii, n, rate, "validation", seed)
+    shifts = strip_shifts(kappa, run.sim.sensor.lengths_m, run.sim.sensor.strip_gap_m)
+    _strip_recordings(run, names, shifts, kappa, radii, n, rate)
     index = {
         "note": "radius_m is at the sensor layer (R_val = R + c, paper Table I); kappa_true_per_m = 1/radius_m",
         "strips": [
@@ -484,42 +494,39 @@ def _validation(sim, rng, out, seed, *, frames_per_strip, rate_hz, radii_m):
             for r, k, name in zip(radii, kappa, names, strict=True)
         ],
     }
-    (out / "validation.yaml").write_text(yaml.safe_dump(index, sort_keys=False), encoding="utf-8")
+    (run.out / "validation.yaml").write_text(yaml.safe_dump(index, sort_keys=False), encoding="utf-8")
     return {"frames": n * len(radii), "excluded_frames": 0, "files": [*names, "validation.yaml"]}
 
 
-def _write_frames(sim, rng, out, name, frames, rate_hz, scenario, seed, extra_first, fc=None, contact=False):
+def _write_frames(run, name, frames, rate_hz, extra_first, fc=None, contact=False):
     """Measure (with noise) and write the valid ones of ``frames`` with their truth."""
     keep = np.asarray(frames.valid)
     excluded = int(keep.size - keep.sum())
     frames = frames.select(keep)
     extra_first = {k: np.asarray(v)[keep] for k, v in extra_first.items()}
     fc = None if fc is None else np.asarray(fc)[keep]
-    counts = sim.sensor.measure(frames.shifts_m, rng=rng).counts
-    meta = _meta(scenario, seed, rate_hz=rate_hz, excluded_frames=excluded)
+    counts = run.sim.sensor.measure(frames.shifts_m, rng=run.rng).counts
+    meta = _meta(run.scenario, run.seed, rate_hz=rate_hz, excluded_frames=excluded)
     extra = {**extra_first, **_truth_columns(frames, fc, contact)}
-    write_session_csv(_session(counts, frames.pressure_pa, rate_hz, meta, extra), out / name)
-    _save_truth(out / "truth.npz", frames)
+    write_session_csv(_session(counts, frames.pressure_pa, rate_hz, meta, extra), run.out / name)
+    _save_truth(run.out / "truth.npz", frames)
     return {"frames": int(keep.sum()), "excluded_frames": excluded, "files": [name, "truth.npz"]}
 
 
-def _tip_loads(sim, rng, out, seed, *, frames_per_config, rate_hz, pressures_pa, loads_n):
+def _tip_loads(run, *, frames_per_config, rate_hz, pressures_pa, loads_n):
     n = _count_option("frames_per_config", frames_per_config)
     rate = _positive_option("rate_hz", rate_hz)
     p, load = np.meshgrid(np.asarray(pressures_pa, dtype=float), np.asarray(loads_n, dtype=float), indexing="ij")
     p, load = p.ravel(), load.ravel()
     # the paper's vertical downward load on the upright rig is -Fy (DESIGN section 2)
     force = np.stack([np.zeros_like(load), -load], axis=-1)
-    frames = _repeat(sim.frames(p, force, noise=False), n)
-    return _write_frames(
-        sim, rng, out, "tip_loads.csv", frames, rate, "tip-loads", seed, {"load_n": np.repeat(load, n)}
-    )
+    frames = _repeat(run.sim.frames(p, force, noise=False), n)
+    return _write_frames(run, "tip_loads.csv", frames, rate, {"load_n": np.repeat(load, n)})
 
 
-def _contact(
-    sim, rng, out, seed, *, n_configs, frames_per_config, rate_hz, pressure_range_pa, force_range_n, min_tip_angle_deg,
-    contact_s_m
-):
+def _contact(run, *, n_configs, frames_per_config, rate_hz, pressure_range_pa, force_range_n, min_tip_angle_deg,
+             contact_s_m):
+    sim, rng = run.sim, run.rng
     count = _count_option("n_configs", n_configs)
     sc = sim.contact_location(contact_s_m)
     n = _count_option("frames_per_config", frames_per_config)
@@ -551,10 +558,8 @@ def _contact(
         picked = _concat(picked, f)
     fc = np.repeat([c for _, c in chosen], n)
     frames = _repeat(picked, n)
-    return _write_frames(
-        sim, rng, out, "contact.csv", frames, rate, "contact", seed, {"config": np.repeat(np.arange(count), n)}, fc,
-        contact=sc is not None,
-    )
+    return _write_frames(run, "contact.csv", frames, rate, {"config": np.repeat(np.arange(count), n)}, fc,
+                         contact=sc is not None)
 
 
 def _concat(a, b):
@@ -565,11 +570,13 @@ def _concat(a, b):
     return ActuatorFrames(s_m=a.s_m, contact_s_m=a.contact_s_m, **fields)
 
 
-def _time_varying(sim, rng, out, seed, *, rate_hz, duration_s, contact_n, contact_s_m):
+def _time_varying(run, *, rate_hz, duration_s, contact_n, contact_s_m):
+    sim, out = run.sim, run.out
     rate = _positive_option("rate_hz", rate_hz)
     total = round(rate * _positive_option("duration_s", duration_s))
     touch_locations(0.0, sim.config.actuator.length_m, contact_s_m)
-    rows = list(_stream_frames(sim, rate, max(1, round(rate * 0.1)), total, float(contact_n), rng, True, contact_s_m))
+    rows = list(_stream_frames(sim, rate, max(1, round(rate * 0.1)), total, float(contact_n), run.rng, True,
+                               contact_s_m))
     keep = np.array([truth["valid"] for _, _, truth in rows])
     excluded = int(keep.size - keep.sum())
     rows = [r for r, k in zip(rows, keep, strict=True) if k]
@@ -580,7 +587,7 @@ def _time_varying(sim, rng, out, seed, *, rate_hz, duration_s, contact_n, contac
         np.array([t["t_s"] for _, _, t in rows]),
         np.array([c for _, c, _ in rows], dtype=float),
         np.array([p for p, _, _ in rows]),
-        meta=_meta("time-varying", seed, rate_hz=rate, excluded_frames=excluded),
+        meta=_meta(run.scenario, run.seed, rate_hz=rate, excluded_frames=excluded),
         extra=extra,
     )
     write_session_csv(session, out / "session.csv")
@@ -628,13 +635,13 @@ def free_sweep_profile(n_frames: int, pressure_max_pa: float, contact_n: float =
     return pressure, np.where(touched, float(contact_n), 0.0)
 
 
-def _free_sweep(sim, rng, out, seed, *, n_frames, rate_hz, pressure_max_pa, contact_n):
+def _free_sweep(run, *, n_frames, rate_hz, pressure_max_pa, contact_n):
     rate = _positive_option("rate_hz", rate_hz)
     pressure, fc = free_sweep_profile(n_frames, pressure_max_pa, contact_n)
-    frames = sim.frames(pressure, contact_n=fc if np.any(fc > 0) else None, time_series=True, noise=False)
+    frames = run.sim.frames(pressure, contact_n=fc if np.any(fc > 0) else None, time_series=True, noise=False)
     first = {"effective_pressure_pa": frames.effective_pressure_pa, "k0_true_per_m": frames.tip_curvature_per_m,
              "ei_true_nm2": frames.ei_nm2}
-    return _write_frames(sim, rng, out, "free_sweep.csv", frames, rate, "free-sweep", seed, first, fc)
+    return _write_frames(run, "free_sweep.csv", frames, rate, first, fc)
 
 
 _WRITERS = {
@@ -704,9 +711,6 @@ def simulate(scenario: str, out_dir, config=None, seed: int | None = 0, *, overw
 # under 1 KB for the strip recordings (written one strip at a time); rounded up.
 BYTES_PER_FRAME = {"calibration": 2_000, "validation": 2_000, "tip-loads": 12_000, "contact": 12_000,
                     "time-varying": 12_000, "free-sweep": 12_000}
-BASE_BYTES = 300e6  # the process before the first frame: numpy, scipy, numba and the kernels
-
-
 def frames_in_memory(name: str, options: dict) -> tuple[int, int]:
     """Frames of scenario ``name`` held in memory at once, and frames written in all.
 
@@ -732,28 +736,6 @@ def frames_in_memory(name: str, options: dict) -> tuple[int, int]:
         return n, n
     n = int(math.ceil(float(opts["rate_hz"]) * float(opts["duration_s"])))
     return n, n
-
-
-def available_memory_bytes() -> float | None:
-    """Memory this machine can give a new allocation now (Linux ``MemAvailable``) [bytes]; None if unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def _size(nbytes: float) -> str:
-    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
-        if nbytes >= scale:
-            return f"{nbytes / scale:.3g} {unit}"
-    return f"{nbytes / 1e3:.3g} kB"
 
 
 def check_memory(scenario: str, options: dict, field: str | None = None) -> None:
@@ -796,47 +778,10 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
         per_unit = at_once / max(float(options.get(key, _OPTIONS[name][key])), 1e-300)
         most = int((available - BASE_BYTES) / per_frame / per_unit) if available > BASE_BYTES else 0
         raise ArgumentError(
-            f"{field or key}: {name} would hold {at_once:,} frames in memory, about {_size(need)}; this machine "
-            f"has {_size(available)} available (at most {max(most, 0):,} {'s' if key == 'duration_s' else 'frames'}"
+            f"{field or key}: {name} would hold {at_once:,} frames in memory, about {size_text(need)}; this machine "
+            f"has {size_text(available)} available (at most {max(most, 0):,} {'s' if key == 'duration_s' else 'frames'}"
             f"{'' if key in ('duration_s', 'n_frames') else ' per ' + per_what})"
         )
-
-
-def check_fits(field: str, what: str, n_frames: int, bytes_per_frame: float, rate_hz: float) -> None:
-    """Refuse ``n_frames`` held in memory at once that would not fit this machine's free memory, before any work.
-
-    For a session simulated (or recorded and estimated) whole in memory at ``rate_hz``
-    [Hz]: the message names the option ``field``, the memory needed, the memory
-    available and the longest session that fits.
-
-    Raises
-    ------
-    ArgumentError
-        When ``n_frames`` × ``bytes_per_frame`` (and the process itself) exceed the memory available.
-    """
-    available = available_memory_bytes()
-    need = BASE_BYTES + n_frames * bytes_per_frame
-    if available is None or need <= available:
-        return
-    most = max(available - BASE_BYTES, 0.0) / bytes_per_frame / rate_hz
-    raise ArgumentError(f"{field}: {what} would hold {n_frames:,} frames in memory, about {_size(need)}; this machine "
-                        f"has {_size(available)} available (at most {most:,.0f} s at {rate_hz:g} Hz)")
-
-
-def check_workers(workers: int) -> None:
-    """Refuse more local worker processes than this machine's free memory holds, before any work (one line).
-
-    Raises
-    ------
-    ArgumentError
-        When ``workers`` processes of :data:`BASE_BYTES` each exceed the memory available.
-    """
-    available = available_memory_bytes()
-    if available is not None and workers * BASE_BYTES > available:
-        raise ArgumentError(f"workers (--workers): {workers:,} worker processes would need about "
-                            f"{_size(workers * BASE_BYTES)} ({_size(BASE_BYTES)} each: numpy, scipy, numba and the "
-                            f"kernels); this machine has {_size(available)} available (at most "
-                            f"{int(available // BASE_BYTES):,} workers)")
 
 
 def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **options):
@@ -862,7 +807,7 @@ def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **opti
             target.mkdir(exist_ok=True)
             sim = _actuator(config, seed, **actuator_options)
             opts = {**_OPTIONS[name], **{k: v for k, v in options.items() if k in _OPTIONS[name]}}
-            summary = _WRITERS[name](sim, _stream(seed, name), target, seed, **opts)
+            summary = _WRITERS[name](_Run(sim, _stream(seed, name), target, name, seed), **opts)
             _write_description(target, name, seed, config, actuator_options, opts, summary)
             summary["files"].append("scenario.yaml")
             summaries[name] = {**summary, "path": out if scenario != "all" else out / name}
