@@ -129,12 +129,23 @@ del _status
 
 
 def words(codes) -> np.ndarray:
-    """The results.csv words of status codes, same shape (ndarray of str)."""
+    """The results.csv words of status codes, same shape (ndarray of str).
+
+    Parameters
+    ----------
+    codes : int or array_like of int
+        Status codes (:class:`Status`).
+    """
     return WORDS[np.asarray(codes, dtype=np.intp)].astype(str)
 
 
 def code_of(word: str) -> Status:
     """The code of a results.csv status word (of several codes with one word: the general one).
+
+    Parameters
+    ----------
+    word : str
+        A word of results.csv's ``status`` or ``track_status`` column.
 
     Raises
     ------

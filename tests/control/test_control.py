@@ -23,6 +23,7 @@ from bendsense.control import ControlStop, PIController, Safety, normal_force, r
 from bendsense.control.force import contact_normal
 from bendsense.device.driver import DeviceStats, Reading
 from bendsense.errors import ArgumentError
+from bendsense.status import Status, code_of
 from bendsense.wire.frames import Sample
 
 TAU_S = 0.025
@@ -63,13 +64,13 @@ class FakeProcessor:
     """Turns the fake board's readings into blocks: the force rides in the first ADC count (µN)."""
 
     def __init__(self, flagged=(), status="model_misfit"):
-        self.flagged = set(flagged)  # frame indices reported with ``status``
-        self.flag = status
+        self.flagged = set(flagged)  # frame indices reported with ``status`` (its results.csv word)
+        self.flag = code_of(status)
 
     def process_readings(self, readings):
         t = np.array([r.device_us for r in readings]) * 1e-6
         f = np.array([r.sample.adc[0] for r in readings]) * 1e-6
-        status = np.array([self.flag if r.sample.seq in self.flagged else "ok" for r in readings], dtype=object)
+        status = np.array([self.flag if r.sample.seq in self.flagged else Status.OK for r in readings], dtype=np.int8)
         return FakeBlock(t, f, status)
 
 

@@ -27,4 +27,5 @@ def test_the_recipe_writes_the_frozen_files_byte_for_byte(tmp_path):
 def test_the_mask_hides_only_a_files_record_of_its_making():
     line = b"# identified by bendsense from /home/lab/run-3/free_sweep.csv (2026-11-29T01:02:03.5Z)"
     assert masked(line) == b"# identified by bendsense from <masked>free_sweep.csv (<masked>)"
+    assert masked(b"source: 'adapt 2026-11-29 02:34 UTC from free_sweep") == b"source: 'adapt <masked> from free_sweep"
     assert masked(b"1.25,0.0123,2026.5,nan\n") == b"1.25,0.0123,2026.5,nan\n"

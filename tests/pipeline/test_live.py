@@ -240,7 +240,8 @@ def test_live_and_offline_give_each_frame_the_same_status_near_the_identifiabili
     optimum lies at the stability boundary (an axial load of ~0.2 N at 2–5 kPa, σ of the
     order of the load), under 1 %. Where both are ``ok`` the forces agree to 1 % of σ.
     """
-    from bendsense.results import frame_status
+    from bendsense.results import frame_codes
+    from bendsense.status import Status
 
     cal = Calibration.load(calibration_path)
     config = bendsense.load_config()
@@ -252,10 +253,10 @@ def test_live_and_offline_give_each_frame_the_same_status_near_the_identifiabili
     live = np.concatenate([b.status for b in blocks])
     shape = bendsense.reconstruct(signals, cal, config.sensor, s_m=proc.s_m)
     cold = estimate_force(shape, pressure, config, calibration=cal)
-    offline = frame_status(shape, cold)
-    assert np.count_nonzero(offline == "not_identifiable") > 100  # the regime this test is about
+    offline = frame_codes(shape, cold)
+    assert np.count_nonzero(offline == Status.NOT_IDENTIFIABLE) > 100  # the regime this test is about
     assert np.count_nonzero(live != offline) <= 0.01 * len(frames)
-    both = (live == "ok") & (offline == "ok")
+    both = (live == Status.OK) & (offline == Status.OK)
     force = np.concatenate([b.estimate.force_n for b in blocks])
     assert np.all(np.abs(force[both] - cold.force_n[both]) <= 0.01 * cold.std_n[both])
 

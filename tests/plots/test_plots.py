@@ -25,6 +25,7 @@ from bendsense.plots import (  # noqa: E402
 from bendsense.results import read_results, write_results  # noqa: E402
 from bendsense.session import Session, write_session_csv  # noqa: E402
 from bendsense.shape.pcc import Shape  # noqa: E402
+from bendsense.status import Status
 
 SENSOR = load_config().sensor
 N = SENSOR.n_segments
@@ -47,6 +48,7 @@ class FakeEstimate:
         self.std_n = np.column_stack([np.full_like(t, 0.01), np.full_like(t, 0.02)])
         self.residual_m = np.full_like(t, 1e-4)
         self.success = np.arange(t.size) != 3  # one frame not converged
+        self.status = np.where(self.success, Status.OK, Status.NOT_CONVERGED)
 
 
 def uniform_kappa(frames=FRAMES):

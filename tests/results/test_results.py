@@ -91,7 +91,7 @@ def test_status_column_names_the_reason_of_each_frame(tmp_path):
     shape.extrapolated[0] = True
     shape.curvature_per_m[1, 2] = np.nan
     est.success[2] = False
-    est.message[2] = "pressure_out_of_range: 250 kPa"
+    est.status[2], est.message[2] = Status.PRESSURE_OUT_OF_RANGE, "pressure_out_of_range: 250 kPa"
     est.force_n[3] = np.nan  # a NaN force is never ok, whatever the solver said
     shape.tip_angle_rad[4] = 2 * math.pi + 0.1  # beyond a full turn
     write_results(tmp_path / "out", session, shape, est)
@@ -104,8 +104,10 @@ def test_status_column_names_the_reason_of_each_frame(tmp_path):
 def test_not_converged_model_misfit_and_not_identifiable(tmp_path):
     session, shape, est = inputs()
     est.success[:2] = False
+    est.status[:2] = [Status.NOT_CONVERGED, Status.MODEL_MISFIT]
     est.message[:2] = ["gave up after 100 iterations", "model_misfit: p = 1e-9"]
     est.std_n[2, 1] = np.inf  # a converged fit whose shape does not determine Fy
+    est.status[2] = Status.NOT_IDENTIFIABLE
     est.message[2] = "not identifiable: the shape does not determine the load along (0, 1)"
     write_results(tmp_path / "out", session, shape, est)
     want = ["not_converged", "model_misfit", "not_identifiable", "ok", "ok"]

@@ -597,12 +597,7 @@ def process_sessions(
     # the root collects one results directory per session; it is never replaced
     with output.reserve([output.collection(out_dir)], inputs):
         config, calibration = _prepared(config, calibration, estimate)
-        sessions = discover_sessions(given, recursive=recursive, exclude=out_dir)
-        if not sessions:
-            raise SessionError("no sessions (*.csv files or session directories) found in "
-                               f"{', '.join(map(str, given))}")
-        names = session_names(sessions)
-        rows, todo = _plan(sessions, names, out_dir, overwrite)
+        sessions, names, rows, todo = _sessions(given, out_dir, recursive, overwrite)
         if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
             from bendsense.sim.memory import check_workers
 
@@ -613,6 +608,15 @@ def process_sessions(
         description = _run_tasks(tasks, rows, out_dir, task, executor=executor, workers=workers, progress=progress)
         return BatchReport(sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start,
                            workers=description)
+
+
+def _sessions(given, out_dir: Path, recursive: bool, overwrite: bool):
+    """The sessions found, their names, the report's rows (those already done filled in) and the indices to do."""
+    sessions = discover_sessions(given, recursive=recursive, exclude=out_dir)
+    if not sessions:
+        raise SessionError(f"no sessions (*.csv files or session directories) found in {', '.join(map(str, given))}")
+    names = session_names(sessions)
+    return (sessions, names, *_plan(sessions, names, out_dir, overwrite))
 
 
 def _prepared(config, calibration, estimate: bool):

@@ -52,6 +52,19 @@ def check_fits(field: str, what: str, n_frames: int, bytes_per_frame: float, rat
     [Hz]: the message names the option ``field``, the memory needed, the memory
     available and the longest session that fits.
 
+    Parameters
+    ----------
+    field : str
+        The option that sets the size, for the message (``--seconds``).
+    what : str
+        What would be held, for the message.
+    n_frames : int
+        Frames held at once.
+    bytes_per_frame : float
+        Memory per frame [bytes].
+    rate_hz : float
+        Frames per second, to say the longest session that fits [Hz].
+
     Raises
     ------
     ArgumentError
@@ -68,6 +81,11 @@ def check_fits(field: str, what: str, n_frames: int, bytes_per_frame: float, rat
 
 def check_workers(workers: int) -> None:
     """Refuse more local worker processes than this machine's free memory holds, before any work (one line).
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes to start.
 
     Raises
     ------

@@ -39,7 +39,7 @@ COMMANDS = [
 ]
 
 # a file's own record of where and when it was made
-_VOLATILE = re.compile(rb"(\d{4}-\d\d-\d\dT[\d:.]+Z?|/[^\s'\"]*/(?=[\w.-]+(yaml|csv|bsess)\b))")
+_VOLATILE = re.compile(rb"(\d{4}-\d\d-\d\d[T ][\d:.]+(?: UTC|Z)?|/[^\s'\"]*/(?=[\w.-]+(yaml|csv|bsess)\b))")
 
 
 def run(workdir) -> None:
