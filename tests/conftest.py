@@ -21,3 +21,14 @@ def calibration_path(tmp_path_factory):
     simulate("calibration", root / "cal", seed=0, frames_per_strip=20)
     Calibration.fit(root / "cal" / "manifest.yaml").save(root / "cal.yaml")
     return root / "cal.yaml"
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist (``-n 2 --dist loadgroup``) the tests that time a board run on one worker, one at a time.
+
+    A ``realtime`` test times a simulated board against its client; two of them at once
+    would each take a core from the other. The other worker goes on with the rest.
+    """
+    for item in items:
+        if item.get_closest_marker("realtime") is not None:
+            item.add_marker(pytest.mark.xdist_group("realtime"))

@@ -144,12 +144,11 @@ def _board_session(board, n_frames: int, seed):
 def _calibration(config, seed, noise_counts, tmp: Path) -> None:
     """``calibration/`` as ``simulate calibration`` writes it, and ``calibration.yaml`` fitted from it."""
     from bendsense.calibration import Calibration
-    from bendsense.sim.scenarios import _OPTIONS, _WRITERS, _actuator, _stream
+    from bendsense.sim.scenarios import record_calibration
 
     target = tmp / "calibration"
     target.mkdir()
-    sim = _actuator(config, seed, noise_counts=noise_counts)
-    _WRITERS["calibration"](sim, _stream(seed, "calibration"), target, seed, **_OPTIONS["calibration"])
+    record_calibration(target, config, seed, noise_counts=noise_counts)
     Calibration.fit(target / "manifest.yaml", config.sensor).save(tmp / "calibration.yaml")
 
 

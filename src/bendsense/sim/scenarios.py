@@ -95,6 +95,7 @@ __all__ = [
     "TIP_LOAD_PRESSURES_PA",
     "TIP_LOADS_N",
     "simulate",
+    "record_calibration",
     "time_varying_profile",
     "time_varying_frames",
     "touch_locations",
@@ -476,6 +477,25 @@ def _calibration(run, *, frames_per_strip, rate_hz, radii_m):
     }
     (run.out / "manifest.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False), encoding="utf-8")
     return {"frames": n * (len(radii) + 1), "excluded_frames": 0, "files": ["flat.csv", *names, "manifest.yaml"]}
+
+
+def record_calibration(out_dir, config, seed: int, *, noise_counts: float = 1.5) -> dict:
+    """``simulate calibration``'s recordings and manifest into the existing directory ``out_dir``; its summary.
+
+    Parameters
+    ----------
+    out_dir : path
+        An existing directory (being written, e.g. a simulated gripper's ``calibration/``).
+    config : Config
+        The sensor's and actuator's config.
+    seed : int
+        Seed of the sensor hardware and the noise.
+    noise_counts : float
+        Sensor noise std [counts].
+    """
+    sim = _actuator(config, seed, noise_counts=noise_counts)
+    run = _Run(sim, _stream(seed, "calibration"), Path(out_dir), "calibration", seed)
+    return _calibration(run, **_OPTIONS["calibration"])
 
 
 def _validation(run, *, frames_per_strip, rate_hz, radii_m):
