@@ -24,11 +24,15 @@ def calibration_path(tmp_path_factory):
 
 
 def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist (``-n 2 --dist loadgroup``) the tests that time a board run on one worker, one at a time.
+    """Under pytest-xdist (``-n 2 --dist loadgroup``): groups of tests that one worker runs, one after the other.
 
     A ``realtime`` test times a simulated board against its client; two of them at once
-    would each take a core from the other. The other worker goes on with the rest.
+    would each take a core from the other. The documentation pages run from one fixture
+    that starts every page selected (tests/docs/test_docs.py): on two workers they would
+    run twice. The other worker goes on with the rest.
     """
     for item in items:
-        if item.get_closest_marker("realtime") is not None:
+        if getattr(item, "originalname", None) == "test_page_runs":
+            item.add_marker(pytest.mark.xdist_group("docs-pages"))
+        elif item.get_closest_marker("realtime") is not None:
             item.add_marker(pytest.mark.xdist_group("realtime"))
