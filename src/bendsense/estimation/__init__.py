@@ -266,13 +266,13 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
            np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2)), np.empty((B, n)), np.empty((B, 2)),
            np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)), np.empty(B, dtype=bool),
            *_payload_buffers(B, pb))
-    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out[:14]
+    o = _kernels.Outputs(*out)
     if method == "fast":
         _run_fast(B, chain, use_guess, tuple(fr), plain_pb, plain_err, start, out)
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force (it makes no
         # guess); the shape, its sensitivities and the uncertainty at its optimum come from the compiled core
-        guess_n[...] = np.nan
+        o.guess_n[...] = np.nan
         tip_angle = (fr.tip_shape if pb.shape_angle else fr.theta)
         D = constraint_basis(constraint, tip_angle, direction=pb.direction, follower_angle_rad=pb.follower_angle)[0]
         u, run_status, iters = paper_fit(L, pb.s, pb.w, ref.Lc, pb.wload, fr.p0, fr.ei, fr.k0, D,
@@ -285,10 +285,11 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                       "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=2)
     elif config.parameter_covariance is None:  # once per process: σ without the model parameters' part
         warn_no_parameter_covariance(config, stacklevel=2)
-    text = (np.array([OK_MESSAGE]) if B == 1 and status[0] == _OK
-            else messages(status, residual, chi2, p_value, blocked_dir, method))
-    if strict and not success.all():
-        raise ConvergenceError(f"{int((~success).sum())} of {B} force estimate(s) failed; first: {text[~success][0]}")
+    text = (np.array([OK_MESSAGE]) if B == 1 and o.status[0] == _OK
+            else messages(o.status, o.residual, o.chi2, o.p_value, o.direction, method))
+    if strict and not o.success.all():
+        raise ConvergenceError(f"{int((~o.success).sum())} of {B} force estimate(s) failed; "
+                               f"first: {text[~o.success][0]}")
     result = _result(out, batch, text, pb, plain_err, wall_time_s=time.perf_counter() - t_start, method=method,
                      constraint=constraint, uncertainty=uncertainty, objective=objective, load=load,
                      contact_s_m=contact_s_m)
@@ -418,27 +419,27 @@ def _result(out, batch, text, pb, err, *, contact_s_m, **asked):
     ``uncertainty``, ``load``, ``wall_time_s``).
     """
     contact = asked["load"] == "contact"
-    force, cov, status, iters, residual, chi2, p_value, guess_n, state, tip, blocked_dir, std, parts, success = out[:14]
+    o = _kernels.Outputs(*out)
     b2, b22 = batch + (2,), batch + (2, 2)
     window = asked["method"] == "fast" and asked["objective"] == "angles" and pb.pcc  # what a window test needs
-    pay, shifts = out[14:]
+    pay, shifts = o.payload, o.shifts
     if len(batch) != 1:
         pay, shifts = pay.reshape(batch + pay.shape[1:]), shifts.reshape(batch + shifts.shape[1:])
     return ForceEstimate(
-        force_n=force.reshape(b2),
-        std_n=std.reshape(b2),
-        covariance_n2=cov.reshape(b22),
-        residual_m=residual.reshape(batch),
-        success=success.reshape(batch),
-        status=status.astype(np.int8).reshape(batch),
+        force_n=o.force.reshape(b2),
+        std_n=o.std.reshape(b2),
+        covariance_n2=o.cov.reshape(b22),
+        residual_m=o.residual.reshape(batch),
+        success=o.success.reshape(batch),
+        status=o.status.astype(np.int8).reshape(batch),
         message=text.reshape(batch) if batch else str(text[0]),
-        iterations=iters.reshape(batch),
-        tip_position_m=tip.reshape(b2),
-        state=state.reshape(batch + (state.shape[1],)),
-        guess_n=guess_n.reshape(b2),
-        chi2_per_dof=chi2.reshape(batch),
-        p_value=p_value.reshape(batch),
-        covariance_parts_n2=parts.reshape(batch + (3, 2, 2)),
+        iterations=o.iters.reshape(batch),
+        tip_position_m=o.tip.reshape(b2),
+        state=o.state.reshape(batch + (o.state.shape[1],)),
+        guess_n=o.guess_n.reshape(b2),
+        chi2_per_dof=o.chi2.reshape(batch),
+        p_value=o.p_value.reshape(batch),
+        covariance_parts_n2=o.parts.reshape(batch + (3, 2, 2)),
         residual_rad=pay[..., 0] if window else None,
         jacobian_rad_per_n=pay[..., 1:3] if window else None,
         model_factor_rad=pay[..., 3:5] if window else None,

@@ -15,6 +15,7 @@ the model shape against the measured one and its Jacobian by F; the positions ob
 """
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -134,28 +135,89 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, g
         u[q] = max(v if math.isfinite(v) else 0.0, lower[q])
 
 
+class Workspace(NamedTuple):
+    """Buffers of one beam evaluation."""
+
+    #: positions (M, 2) at the comparison nodes
+    pos: np.ndarray
+    #: ∂p/∂F (M, 2, 2)
+    dpos: np.ndarray
+    #: the beam's state (n,)
+    state: np.ndarray
+    #: the tip (+ ∂tip/∂F) (6,)
+    tip: np.ndarray
+    #: ∂φ_nodes/∂(Fx, Fy, K0, EI, s_c) (n, 5)
+    dphi: np.ndarray
+    #: the fitted response y (R,): the positions flattened, or the tangent angles at the coils
+    y: np.ndarray
+    #: ∂y/∂F (R, 2)
+    dy: np.ndarray
+
+
+class Target(NamedTuple):
+    """What a frame's fit compares with (:func:`whitened`)."""
+
+    y0: np.ndarray  #: the measured response (R,): the angles at the coils, or the reference positions flattened
+    sw: np.ndarray  #: √w (R,): the quadrature weights of the positions objective
+    Lw: np.ndarray  #: the Cholesky factor of the angles' covariance (R, R), when ``whiten``
+    whiten: bool  #: whether the angles are whitened by ``Lw`` (a noise model is known)
+
+
+class Buffers(NamedTuple):
+    """Per-thread buffers of :func:`setup`: one frame's inputs of the fit."""
+
+    pos: np.ndarray  #: the reference shape's points (m, 2)
+    ang: np.ndarray  #: its angles (m,)
+    ks: np.ndarray  #: κ at the beam's nodes
+    state: np.ndarray  #: the beam's start (n,)
+    D: np.ndarray  #: the constraint basis (2, k)
+    dD: np.ndarray  #: ∂D/∂φ_L (2, k)
+    cov_s: np.ndarray  #: Σ_S, the shifts' covariance (N, N)
+    no_kappa: np.ndarray  #: κ of a shape given by points: zeros (N,)
+    y0: np.ndarray  #: the target's measured response (R,)
+    Lw: np.ndarray  #: the target's Cholesky factor (R, R), or (1, 1)
+    noise_var: np.ndarray  #: Σ_S's signal-noise variances (N,)
+    shifts: np.ndarray  #: the measured shifts (N,) [m]
+
+
+class Outputs(NamedTuple):
+    """What the estimate kernels write per frame (B frames), in the order of the plain tuple they are called with."""
+
+    force: np.ndarray  #: (B, 2) [N]
+    cov: np.ndarray  #: (B, 2, 2) [N²]
+    status: np.ndarray  #: (B,) int64 codes (:class:`bendsense.status.Status`)
+    iters: np.ndarray  #: (B,) int64
+    residual: np.ndarray  #: (B,) [m]
+    chi2: np.ndarray  #: (B,) χ²/dof
+    p_value: np.ndarray  #: (B,)
+    guess_n: np.ndarray  #: (B, 2) the moment-balance start [N]
+    state: np.ndarray  #: (B, n) the beam's state
+    tip: np.ndarray  #: (B, 2) [m]
+    direction: np.ndarray  #: (B, 2) the direction a non-identifiable load lies along
+    std: np.ndarray  #: (B, 2) [N]
+    parts: np.ndarray  #: (B, 3, 2, 2) the budget's parts [N²]
+    success: np.ndarray  #: (B,) bool
+    payload: np.ndarray  #: (B, coils, 6) the window test's payload (:func:`payload`)
+    shifts: np.ndarray  #: (B, N) the measured shifts [m]
+
+
 @njit(cache=True)
 def workspace(M, n, R):
-    """Buffers of one beam evaluation.
-
-    Positions (M, 2) and ∂p/∂F (M, 2, 2) at the comparison nodes, the state (n,), the tip
-    (+ ∂tip/∂F) (6,), ∂φ_nodes/∂(Fx, Fy, K0, EI, s_c) (n, 5), and the fitted response y (R,)
-    with ∂y/∂F (R, 2): the positions flattened, or the tangent angles at the coils.
-    """
-    return (np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 5)), np.empty(R),
-            np.empty((R, 2)))
+    """Buffers of one beam evaluation (:class:`Workspace`): M comparison nodes, n state nodes, R fitted values."""
+    return Workspace(np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 5)), np.empty(R),
+                     np.empty((R, 2)))
 
 
 @njit(cache=True)
 def copy_workspace(src, dst):
     """Copy one beam evaluation's workspace into another."""
-    dst[0][:, :] = src[0]
-    dst[1][:, :, :] = src[1]
-    dst[2][:] = src[2]
-    dst[3][:] = src[3]
-    dst[4][:, :] = src[4]
-    dst[5][:] = src[5]
-    dst[6][:, :] = src[6]
+    dst.pos[:, :] = src.pos
+    dst.dpos[:, :, :] = src.dpos
+    dst.state[:] = src.state
+    dst.tip[:] = src.tip
+    dst.dphi[:, :] = src.dphi
+    dst.y[:] = src.y
+    dst.dy[:, :] = src.dy
 
 
 @njit(cache=True)
@@ -208,11 +270,11 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
 def whitened(ws, tg):
     """The whitened residual e (R,) and its Jacobian ∂e/∂F (R, 2) of the target ``tg``.
 
-    ``tg`` = (y⁰, √w, L_w, whiten): e = √w (y − y⁰) with per-row weights (positions,
+    ``tg``: the :class:`Target` (y⁰, √w, L_w, whiten): e = √w (y − y⁰) with per-row weights (positions,
     paper eq. 18's quadrature), or e = L_w⁻¹ (y − y⁰) with L_w the Cholesky factor of the
     measured angles' covariance (angles objective: weights Σ_θ⁻¹).
     """
-    y, dy = ws[5], ws[6]
+    y, dy = ws.y, ws.dy
     y0, sw, Lw, whiten = tg
     R = y.size
     e = np.empty((R, 3))
@@ -388,7 +450,7 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     """
     k = u.size
     n = state0.size
-    trial = workspace(ws[0].shape[0], n, ws[5].size)
+    trial = workspace(ws.pos.shape[0], n, ws.y.size)
     ok, iters = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial)
     if not ok:
         return _BEAM_FAILED, iters, np.nan
@@ -410,13 +472,13 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     guess = np.empty(n)
     gFn = np.empty(2)
     GFn = np.empty((2, 2))
-    st, dst, y, dy = ws[2], ws[4], ws[5], ws[6]
+    st, dst, y, dy = ws.state, ws.dphi, ws.y, ws.dy
     weak = False
     for _ in range(max_iter):
         # a χ² cost that does not determine the load along ``blocked`` here: the step keeps
         # to the determined direction; where the iteration ends so (the cost's shape at the
         # optimum, not at the iterates on the way there), the frame is not identifiable along it
-        weak = tg[3] and flat_direction(H, (FLAT * ei / (L * L)) ** -2, blocked)
+        weak = tg.whiten and flat_direction(H, (FLAT * ei / (L * L)) ** -2, blocked)
         if weak:
             restricted_step(H, g, blocked, step)
         else:
@@ -425,7 +487,7 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         for c in range(k):
             dstep[c] = max(u[c] + step[c], lower[c]) - u[c]
             size = max(size, abs(dstep[c]))
-        if converged(dstep, size, last, H, tg[3], xtol):
+        if converged(dstep, size, last, H, tg.whiten, xtol):
             for c in range(k):
                 u[c] += dstep[c]
             status = _OK
@@ -447,7 +509,7 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
             guess[i] = st[i] + dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
         okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, pb, trial)
         iters += 1
-        okn = okn and not jumped(y, dy, trial[5], dF, pb.jump_floor)
+        okn = okn and not jumped(y, dy, trial.y, dF, pb.jump_floor)
         cn = objective(trial, tg, gFn, GFn)
         rho = (cost - cn) / (predicted if predicted > 0 else np.inf)
         # below ~1e-6 N the cost change is lost in the beam's round-off: the step is trusted
@@ -516,9 +578,9 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
     chance under the stated covariance (p < ``MISFIT_P``). ``pay`` (R, 5): the frame's
     window test payload (:func:`payload`), NaN unless the fit of the coil angles has a force.
     """
-    pos, L, w = ws[0], pb.L, pb.w
+    pos, L, w = ws.pos, pb.L, pb.w
     if pb.objective == ANGLES:  # the positions at the comparison nodes, for the residual (no sensitivities)
-        bk.sample(ws[2], ws[4], L, pb.PQ, pb.q, bool(NO), pos, ws[1], ws[3])
+        bk.sample(ws.state, ws.dphi, L, pb.PQ, pb.q, bool(NO), pos, ws.dpos, ws.tip)
     num = 0.0
     den = 0.0
     for j in range(p0.shape[0]):
@@ -533,13 +595,13 @@ def finish(status, pb, p0, tg, D, dD, u, ws, blocked, frame_cov, cov_s, noise_va
     pay[:, :] = np.nan
     if status == _OK or status == _NOT_IDENTIFIABLE:
         # a covariance with a zero diagonal is zero: no parameter term (the config has no parameter_covariance)
-        dym = model_response(pb, ws) if model_cov[0, 0] > 0.0 or model_cov[1, 1] > 0.0 else np.zeros((ws[5].size, 2))
+        dym = model_response(pb, ws) if model_cov[0, 0] > 0.0 or model_cov[1, 1] > 0.0 else np.zeros((ws.y.size, 2))
         if pb.objective == ANGLES:
             payload(tg, ws, D, dym, model_cov, pay)
             ratio, p = unc.covariance_angles(whitened(ws, tg), tg, D, dD, pb.shape_angle, u, frame_cov, cov_s, pb.coils,
-                                             pb.gap, pb.dphi_ds, ws[6], cov, noise_var, dym, model_cov, parts)
+                                             pb.gap, pb.dphi_ds, ws.dy, cov, noise_var, dym, model_cov, parts)
         else:
-            ratio, p = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws[0], ws[1], frame_cov, cov_s, kappa,
+            ratio, p = unc.covariance(L, p0, w, D, dD, pb.shape_angle, u, ws.pos, ws.dpos, frame_cov, cov_s, kappa,
                                       pb.lengths, pb.gap, pb.seg, pb.sigma, pb.dphi_ds, cov, noise_var, dym, model_cov,
                                       parts)
     if status == _NOT_IDENTIFIABLE:
@@ -580,7 +642,7 @@ def payload(tg, ws, D, dym, model_cov, pay):
     covariance); 5: NaN, ∂y/∂s_c of a contact (:func:`contact_jacobian`). Copies of what
     the fit has.
     """
-    y, dy, y0 = ws[5], ws[6], tg[0]
+    y, dy, y0 = ws.y, ws.dy, tg.y0
     k = D.shape[1]
     l00 = math.sqrt(max(model_cov[0, 0], 0.0))
     l10 = model_cov[1, 0] / l00 if l00 > 0.0 else 0.0
@@ -602,10 +664,10 @@ def contact_jacobian(L, ei, k0, F, wload, ops, pb, ws, out):
     of φ' at s_c (:func:`bendsense.mechanics._beam_kernels.newton`): a Newton iteration from the
     solution. Only for a contact load (the tip load's frames are not slowed by it).
     """
-    n = ws[2].size
-    st = ws[2].copy()
+    n = ws.state.size
+    st = ws.state.copy()
     extra = np.empty((n - 1, bk.extra_columns(CONTACT_SENS)))
-    status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], ws[2], bool(YES), ops, NEWTON_TOL,
+    status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], ws.state, bool(YES), ops, NEWTON_TOL,
                                   int(NEWTON_MAX_ITER), int(CONTACT_SENS), bool(NO), st, extra)
     for a in range(out.size):
         acc = 0.0
@@ -617,8 +679,8 @@ def contact_jacobian(L, ei, k0, F, wload, ops, pb, ws, out):
 @njit(cache=True)
 def model_response(pb, ws):
     """∂y/∂(K0, EI) (R, 2) of the fitted response at the beam in ``ws`` (:func:`beam_eval`)."""
-    dphi = ws[4][:, 2:4].copy()
-    R = ws[5].size
+    dphi = ws.dphi[:, 2:4].copy()
+    R = ws.y.size
     out = np.empty((R, 2))
     if pb.objective == ANGLES:
         for i in range(R):
@@ -630,7 +692,7 @@ def model_response(pb, ws):
     else:
         M = pb.PQ_fit.shape[0]
         pos, dpos, tip = np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(6)
-        bk.sample(ws[2], dphi, pb.L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
+        bk.sample(ws.state, dphi, pb.L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
         for j in range(M):
             for a in range(2):
                 out[2 * j + a, 0] = dpos[j, a, 0]
@@ -640,18 +702,15 @@ def model_response(pb, ws):
 
 @njit(cache=True)
 def buffers(pb, n):
-    """Per-thread buffers of :func:`setup`.
-
-    Reference points and angles, κ at the nodes, beam start, D, ∂D, Σ_S, κ, the
-    target's y⁰ and L_w (:func:`whitened`), Σ_S's signal-noise variances and the shifts.
-    """
+    """Per-thread buffers of :func:`setup` (:class:`Buffers`)."""
     m = pb.seg_fk.size
     N = pb.lengths.size
     k = pb.lower.size
     R = pb.sw.size
     Rw = R if pb.objective == ANGLES else 1
-    return (np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
-            np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N), np.empty(N))
+    return Buffers(np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
+                   np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N),
+                   np.empty(N))
 
 
 @njit(cache=True)
@@ -700,7 +759,7 @@ def setup(i, fr, pb, err, buf):
         for j in range(M):
             y0[2 * j] = p0[j, 0]
             y0[2 * j + 1] = p0[j, 1]
-    return p0, phi_end, kappa_s, state0, (y0, pb.sw, Lw, whiten), D, dD, frame_cov, cov_s, noise_var, kappa
+    return p0, phi_end, kappa_s, state0, Target(y0, pb.sw, Lw, whiten), D, dD, frame_cov, cov_s, noise_var, kappa
 
 
 @njit(cache=True)
@@ -743,8 +802,8 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
     ``fr``, ``pb``, ``err``, ``ops``, ``ref``: the plain tuples of :func:`plain`.
     """
     fr, pb0, err, ops0, ref = typed(fr, pb, err, ops, ref)
-    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out[:14]
-    pay, shifts = out[14:]
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
+        shifts = Outputs(*out)
     k = pb0.lower.size
     n = ops0.sigma.size
     buf = buffers(pb0, n)
@@ -796,16 +855,16 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
         if pb.contact and pb.objective == ANGLES and math.isfinite(pay[i, 0, 0]):
             contact_jacobian(pb.L, ei, k0, force[i], pb.wload, ops, pb, ws, pay[i, :, 5])
         if pb.pcc:
-            shifts[i] = buf[11]
+            shifts[i] = buf.shifts
         else:
             shifts[i] = np.nan
         iters[i] = it
         success[i] = status[i] == _OK or status[i] == _NOT_IDENTIFIABLE  # never with a NaN force (finish)
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
-        state[i] = ws[2]
-        tip[i, 0] = ws[3][0]
-        tip[i, 1] = ws[3][1]
+        state[i] = ws.state
+        tip[i, 0] = ws.tip[0]
+        tip[i, 1] = ws.tip[1]
 
 
 @njit(cache=True, parallel=True)
@@ -836,8 +895,8 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, ref, start, out):
 def evaluate_frames(fr, pb, err, ops, ref, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
     fr, pb, err, ops, ref = typed(fr, pb, err, ops, ref)
-    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success = out[:14]
-    pay, shifts = out[14:]
+    force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
+        shifts = Outputs(*out)
     buf = buffers(pb, ops.sigma.size)
     ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
     F = np.empty(2)
@@ -851,15 +910,15 @@ def evaluate_frames(fr, pb, err, ops, ref, u, run_status, out):
                                                           noise_var, fr.model_cov[i], kappa, force[i], cov[i],
                                                           parts[i], direction[i], pay[i])
         if pb.pcc:
-            shifts[i] = buf[11]
+            shifts[i] = buf.shifts
         else:
             shifts[i] = np.nan
         success[i] = status[i] == _OK or status[i] == _NOT_IDENTIFIABLE
         std[i, 0] = math.sqrt(cov[i, 0, 0])
         std[i, 1] = math.sqrt(cov[i, 1, 1])
-        state[i] = ws[2]
-        tip[i, 0] = ws[3][0]
-        tip[i, 1] = ws[3][1]
+        state[i] = ws.state
+        tip[i, 0] = ws.tip[0]
+        tip[i, 1] = ws.tip[1]
 
 
 _jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once
