@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import concurrent.futures
 import logging
 import os
 import re
@@ -172,6 +173,10 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
                 contact_s_m=contact_s_m,
                 adapt=adapt,
             )
+        except concurrent.futures.CancelledError:  # the scheduler dropped the client: its tasks are cancelled
+            raise click.ClickException(f"--scheduler {scheduler}: the connection to the scheduler was lost and its "
+                                       "tasks cancelled; the sessions finished before are complete, a rerun "
+                                       "does the rest") from None
         except KeyboardInterrupt:
             if client is not None:  # its connections close under the cluster's feet: no tracebacks of theirs
                 quiet_loggers = ("distributed", "tornado", "asyncio")

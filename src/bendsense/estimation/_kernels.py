@@ -15,7 +15,6 @@ the model shape against the measured one and its Jacobian by F; the positions ob
 """
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -24,6 +23,7 @@ from bendsense import _jit
 from bendsense.calibration.shift_errors import ShiftErrorModel, shift_covariance
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
+from bendsense.estimation.problem import Buffers, Outputs, Target, Workspace
 from bendsense.mechanics import _beam_kernels as bk
 from bendsense.mechanics._beam_kernels import _KernelOperators
 from bendsense.status import Status
@@ -133,72 +133,6 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, g
     for q in range(k):
         v = u[q] * f
         u[q] = max(v if math.isfinite(v) else 0.0, lower[q])
-
-
-class Workspace(NamedTuple):
-    """Buffers of one beam evaluation."""
-
-    #: positions (M, 2) at the comparison nodes
-    pos: np.ndarray
-    #: ∂p/∂F (M, 2, 2)
-    dpos: np.ndarray
-    #: the beam's state (n,)
-    state: np.ndarray
-    #: the tip (+ ∂tip/∂F) (6,)
-    tip: np.ndarray
-    #: ∂φ_nodes/∂(Fx, Fy, K0, EI, s_c) (n, 5)
-    dphi: np.ndarray
-    #: the fitted response y (R,): the positions flattened, or the tangent angles at the coils
-    y: np.ndarray
-    #: ∂y/∂F (R, 2)
-    dy: np.ndarray
-
-
-class Target(NamedTuple):
-    """What a frame's fit compares with (:func:`whitened`)."""
-
-    y0: np.ndarray  #: the measured response (R,): the angles at the coils, or the reference positions flattened
-    sw: np.ndarray  #: √w (R,): the quadrature weights of the positions objective
-    Lw: np.ndarray  #: the Cholesky factor of the angles' covariance (R, R), when ``whiten``
-    whiten: bool  #: whether the angles are whitened by ``Lw`` (a noise model is known)
-
-
-class Buffers(NamedTuple):
-    """Per-thread buffers of :func:`setup`: one frame's inputs of the fit."""
-
-    pos: np.ndarray  #: the reference shape's points (m, 2)
-    ang: np.ndarray  #: its angles (m,)
-    ks: np.ndarray  #: κ at the beam's nodes
-    state: np.ndarray  #: the beam's start (n,)
-    D: np.ndarray  #: the constraint basis (2, k)
-    dD: np.ndarray  #: ∂D/∂φ_L (2, k)
-    cov_s: np.ndarray  #: Σ_S, the shifts' covariance (N, N)
-    no_kappa: np.ndarray  #: κ of a shape given by points: zeros (N,)
-    y0: np.ndarray  #: the target's measured response (R,)
-    Lw: np.ndarray  #: the target's Cholesky factor (R, R), or (1, 1)
-    noise_var: np.ndarray  #: Σ_S's signal-noise variances (N,)
-    shifts: np.ndarray  #: the measured shifts (N,) [m]
-
-
-class Outputs(NamedTuple):
-    """What the estimate kernels write per frame (B frames), in the order of the plain tuple they are called with."""
-
-    force: np.ndarray  #: (B, 2) [N]
-    cov: np.ndarray  #: (B, 2, 2) [N²]
-    status: np.ndarray  #: (B,) int64 codes (:class:`bendsense.status.Status`)
-    iters: np.ndarray  #: (B,) int64
-    residual: np.ndarray  #: (B,) [m]
-    chi2: np.ndarray  #: (B,) χ²/dof
-    p_value: np.ndarray  #: (B,)
-    guess_n: np.ndarray  #: (B, 2) the moment-balance start [N]
-    state: np.ndarray  #: (B, n) the beam's state
-    tip: np.ndarray  #: (B, 2) [m]
-    direction: np.ndarray  #: (B, 2) the direction a non-identifiable load lies along
-    std: np.ndarray  #: (B, 2) [N]
-    parts: np.ndarray  #: (B, 3, 2, 2) the budget's parts [N²]
-    success: np.ndarray  #: (B,) bool
-    payload: np.ndarray  #: (B, coils, 6) the window test's payload (:func:`payload`)
-    shifts: np.ndarray  #: (B, N) the measured shifts [m]
 
 
 @njit(cache=True)

@@ -31,8 +31,8 @@ from bendsense.mechanics import _beam_kernels as bk
 from bendsense.shape import pcc
 from bendsense.validation import float_array
 
-__all__ = ["CONSTRAINTS", "Frames", "Problem", "Reference", "constraint_basis", "quadrature", "reference", "points",
-           "chebyshev_nodes_m"]
+__all__ = ["CONSTRAINTS", "Buffers", "Frames", "Outputs", "Problem", "Reference", "Target", "Workspace",
+           "constraint_basis", "quadrature", "reference", "points", "chebyshev_nodes_m"]
 
 POSITIONS, ANGLES = 0, 1  # codes of bendsense.choices.OBJECTIVES in the kernels
 
@@ -430,3 +430,69 @@ def points(ref: Reference) -> Reference:
 
 
 _jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once
+
+
+class Workspace(NamedTuple):
+    """Buffers of one beam evaluation."""
+
+    #: positions (M, 2) at the comparison nodes
+    pos: np.ndarray
+    #: ∂p/∂F (M, 2, 2)
+    dpos: np.ndarray
+    #: the beam's state (n,)
+    state: np.ndarray
+    #: the tip (+ ∂tip/∂F) (6,)
+    tip: np.ndarray
+    #: ∂φ_nodes/∂(Fx, Fy, K0, EI, s_c) (n, 5)
+    dphi: np.ndarray
+    #: the fitted response y (R,): the positions flattened, or the tangent angles at the coils
+    y: np.ndarray
+    #: ∂y/∂F (R, 2)
+    dy: np.ndarray
+
+
+class Target(NamedTuple):
+    """What a frame's fit compares with (:func:`whitened`)."""
+
+    y0: np.ndarray  #: the measured response (R,): the angles at the coils, or the reference positions flattened
+    sw: np.ndarray  #: √w (R,): the quadrature weights of the positions objective
+    Lw: np.ndarray  #: the Cholesky factor of the angles' covariance (R, R), when ``whiten``
+    whiten: bool  #: whether the angles are whitened by ``Lw`` (a noise model is known)
+
+
+class Buffers(NamedTuple):
+    """Per-thread buffers of :func:`setup`: one frame's inputs of the fit."""
+
+    pos: np.ndarray  #: the reference shape's points (m, 2)
+    ang: np.ndarray  #: its angles (m,)
+    ks: np.ndarray  #: κ at the beam's nodes
+    state: np.ndarray  #: the beam's start (n,)
+    D: np.ndarray  #: the constraint basis (2, k)
+    dD: np.ndarray  #: ∂D/∂φ_L (2, k)
+    cov_s: np.ndarray  #: Σ_S, the shifts' covariance (N, N)
+    no_kappa: np.ndarray  #: κ of a shape given by points: zeros (N,)
+    y0: np.ndarray  #: the target's measured response (R,)
+    Lw: np.ndarray  #: the target's Cholesky factor (R, R), or (1, 1)
+    noise_var: np.ndarray  #: Σ_S's signal-noise variances (N,)
+    shifts: np.ndarray  #: the measured shifts (N,) [m]
+
+
+class Outputs(NamedTuple):
+    """What the estimate kernels write per frame (B frames), in the order of the plain tuple they are called with."""
+
+    force: np.ndarray  #: (B, 2) [N]
+    cov: np.ndarray  #: (B, 2, 2) [N²]
+    status: np.ndarray  #: (B,) int64 codes (:class:`bendsense.status.Status`)
+    iters: np.ndarray  #: (B,) int64
+    residual: np.ndarray  #: (B,) [m]
+    chi2: np.ndarray  #: (B,) χ²/dof
+    p_value: np.ndarray  #: (B,)
+    guess_n: np.ndarray  #: (B, 2) the moment-balance start [N]
+    state: np.ndarray  #: (B, n) the beam's state
+    tip: np.ndarray  #: (B, 2) [m]
+    direction: np.ndarray  #: (B, 2) the direction a non-identifiable load lies along
+    std: np.ndarray  #: (B, 2) [N]
+    parts: np.ndarray  #: (B, 3, 2, 2) the budget's parts [N²]
+    success: np.ndarray  #: (B,) bool
+    payload: np.ndarray  #: (B, coils, 6) the window test's payload (:func:`payload`)
+    shifts: np.ndarray  #: (B, N) the measured shifts [m]
