@@ -432,7 +432,12 @@ def test_a_cold_cache_compiles_once_before_the_workers_start(batch, tmp_path):
         assert list((tmp_path / f"numba-cache-{name}").rglob("*.nbi"))  # (the cache really was the fresh directory)
 
 
-@pytest.mark.realtime  # what the cluster finishes in the 2 s after the client left
+def _running_tasks(dask_worker):
+    """The tasks occupying a thread of a Dask worker, those its scheduler cancelled included."""
+    return len(dask_worker.state.all_running_tasks)
+
+
+@pytest.mark.realtime  # a Ctrl-C while the cluster works
 # Dask's LocalCluster may leave a socket of its own to the garbage collector when it closes on a busy machine
 @pytest.mark.filterwarnings("ignore::ResourceWarning", "ignore::pytest.PytestUnraisableExceptionWarning")
 def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path):
@@ -445,7 +450,10 @@ def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path)
                                   dashboard_address=None) as cluster:
         args = [*process_args(batch, out)[:-3], "--scheduler", cluster.scheduler_address, "--no-progress"]
         line = run_and_stop(args, tmp_path, signal.SIGINT, whole_group=True, ready=lambda: finished_sessions(out))
-        time.sleep(2.0)  # what the cluster was running when the client left
+        # the sessions the workers were running when the client left go on (a thread cannot be stopped): their end
+        with distributed.Client(cluster) as observer:
+            wait_until(lambda: not any(observer.run(_running_tasks).values()), 120,
+                       "the cluster's workers never finished their tasks")
         done = finished_sessions(out)
         assert 0 < len(done) < SESSIONS
         assert_complete(out, done)
