@@ -290,7 +290,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     if strict and not o.success.all():
         raise ConvergenceError(f"{int((~o.success).sum())} of {B} force estimate(s) failed; "
                                f"first: {text[~o.success][0]}")
-    result = _result(out, batch, text, pb, plain_err, wall_time_s=time.perf_counter() - t_start, method=method,
+    result = _result(o, batch, text, pb, plain_err, wall_time_s=time.perf_counter() - t_start, method=method,
                      constraint=constraint, uncertainty=uncertainty, objective=objective, load=load,
                      contact_s_m=contact_s_m)
     return mark_out_of_range(force_bound(result, pressure_pa, config, strict), outside, given_pa, config)
@@ -412,14 +412,13 @@ def _payload_buffers(B, pb):
     return np.empty((B, pb.coils.size, 6)), np.empty((B, pb.lengths.size))
 
 
-def _result(out, batch, text, pb, err, *, contact_s_m, **asked):
-    """The :class:`ForceEstimate` of the kernels' outputs ``out``, shaped to the frames' ``batch``.
+def _result(o, batch, text, pb, err, *, contact_s_m, **asked):
+    """The :class:`ForceEstimate` of the kernels' outputs ``o`` (``problem.Outputs``), shaped to the frames' ``batch``.
 
     ``asked``: the estimate's own attributes (``method``, ``constraint``, ``objective``,
     ``uncertainty``, ``load``, ``wall_time_s``).
     """
     contact = asked["load"] == "contact"
-    o = _kernels.Outputs(*out)
     b2, b22 = batch + (2,), batch + (2, 2)
     window = asked["method"] == "fast" and asked["objective"] == "angles" and pb.pcc  # what a window test needs
     pay, shifts = o.payload, o.shifts
