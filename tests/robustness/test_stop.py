@@ -387,7 +387,7 @@ import sys
 from dask.distributed import Client, LocalCluster
 from bendsense.batch import process_sessions
 if __name__ == "__main__":
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \\
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \\
             Client(cluster) as client:
         report = process_sessions([sys.argv[1]], sys.argv[2], calibration=sys.argv[3],
                                   executor=client.get_executor(), progress=False, estimate=False)
@@ -438,7 +438,8 @@ def _running_tasks(dask_worker):
 
 
 @pytest.mark.realtime  # a Ctrl-C while the cluster works
-# Dask's LocalCluster may leave a socket of its own to the garbage collector when it closes on a busy machine
+# Dask's LocalCluster may leave a socket of its own to the garbage collector when it closes on a busy machine.
+# dashboard_address=":0" everywhere: None still binds the HTTP server to 8787, which another test worker may hold.
 @pytest.mark.filterwarnings("ignore::ResourceWarning", "ignore::pytest.PytestUnraisableExceptionWarning")
 def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path):
     """``process --scheduler``: Ctrl-C cancels the queued sessions and closes the client within seconds; the
@@ -447,7 +448,7 @@ def test_process_on_a_dask_scheduler_stops_and_a_rerun_finishes(batch, tmp_path)
     distributed = pytest.importorskip("dask.distributed")
     out = tmp_path / "out"
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         args = [*process_args(batch, out)[:-3], "--scheduler", cluster.scheduler_address, "--no-progress"]
         line = run_and_stop(args, tmp_path, signal.SIGINT, whole_group=True, ready=lambda: finished_sessions(out))
         # the sessions the workers were running when the client left go on (a thread cannot be stopped): their end
