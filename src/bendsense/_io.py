@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import stat
 
-__all__ = ["check_regular_file", "file_kind", "load_yaml", "open_regular", "parse_yaml", "read_text", "safe_load"]
+__all__ = ["check_regular_file", "file_kind", "read_yaml", "open_regular", "parse_yaml", "read_text", "safe_load"]
 
 
 MAX_YAML_BYTES = 2 * 2**20
@@ -151,7 +151,7 @@ def read_text(path: str | os.PathLike, what: str, error=None, *, max_bytes: int 
                     "save the file as UTF-8") from None
 
 
-def load_yaml(path: str | os.PathLike, what: str, parse, error=None):
+def read_yaml(path: str | os.PathLike, what: str, parse, error=None):
     """Read the YAML file ``path`` and return ``parse(data)``.
 
     Every problem is a :class:`~bendsense.errors.ConfigError` (or ``error``) whose

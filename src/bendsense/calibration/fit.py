@@ -4,7 +4,7 @@ The steps of :meth:`Calibration.from_data <bendsense.calibration.Calibration.fro
 each a function here: check the options and the recordings, turn them into one point
 per recording and channel (the mean ΔA against the strip's shifts ``S_i = κ_cal d L_i``),
 choose the degree (``"auto"``: cross-validation), fit ``f_odd`` and ``f_even``, and
-measure the fit on every strip (:class:`StripResidual`). :func:`load_recordings` reads
+measure the fit on every strip (:class:`StripResidual`). :func:`read_recordings` reads
 the recordings a manifest names (:meth:`Calibration.fit
 <bendsense.calibration.Calibration.fit>`).
 
@@ -76,7 +76,7 @@ class StripResidual:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
-def load_recordings(manifest_path: str | os.PathLike, sensor=None, channels=None) -> dict:
+def read_recordings(manifest_path: str | os.PathLike, sensor=None, channels=None) -> dict:
     """The recordings a manifest names, checked against the sensor, as :func:`fit_fields` takes them.
 
     Parameters

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bendsense import validation as check
-from bendsense._io import file_kind, load_yaml
+from bendsense._io import file_kind, read_yaml
 from bendsense.errors import ConfigError
 
 log = logging.getLogger("bendsense")
@@ -64,7 +64,7 @@ def read_manifest(path: str | os.PathLike) -> Manifest:
         Naming the file and the field, e.g. ``strips[2].radius_cm: unknown key``.
     """
     path = Path(path)
-    return load_yaml(path, "manifest", lambda data: _parse_manifest(data, path.parent, str(path)))
+    return read_yaml(path, "manifest", lambda data: _parse_manifest(data, path.parent, str(path)))
 
 
 def _recording(where: str, value: Any, base: Path) -> Path:

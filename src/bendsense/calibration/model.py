@@ -21,11 +21,11 @@ import numpy as np
 
 from bendsense import validation as check
 from bendsense._blas import one_thread
-from bendsense._io import load_yaml
+from bendsense._io import read_yaml
 from bendsense.calibration import error_model as errors
 from bendsense.calibration import io, report
 from bendsense.calibration.error_model import AngleCovariance
-from bendsense.calibration.fit import StripResidual, fit_fields, load_recordings
+from bendsense.calibration.fit import StripResidual, fit_fields, read_recordings
 from bendsense.calibration.io import _array, _range
 from bendsense.calibration.polynomials import WEIGHTINGS, parity_masks
 from bendsense.errors import ArgumentError, ConfigError
@@ -627,14 +627,14 @@ class Calibration:
         """
         manifest_path = check.path("manifest_path", manifest_path)
         if finger is None:
-            return cls.from_data(**load_recordings(manifest_path, sensor), degree=degree, weighting=weighting,
+            return cls.from_data(**read_recordings(manifest_path, sensor), degree=degree, weighting=weighting,
                                  sleeve=sleeve)
         from bendsense.config import Finger
 
         check.instance("finger", finger, Finger, "gripper.finger(name)")
         if sensor is not None:
             raise ConfigError("sensor: give the finger or the sensor, not both (a finger's sensor is its own)")
-        data = load_recordings(manifest_path, finger.config.sensor, channels=finger.channels)
+        data = read_recordings(manifest_path, finger.config.sensor, channels=finger.channels)
         return cls(**fit_fields(**data, degree=degree, weighting=weighting, sleeve=sleeve), finger=finger.name)
 
     @classmethod
@@ -719,7 +719,7 @@ class Calibration:
             If the file cannot be read, is not a bendsense calibration, or a field is
             invalid; the message names the file and the field.
         """
-        return load_yaml(path, "calibration", cls.from_dict)
+        return read_yaml(path, "calibration", cls.from_dict)
 
     # -- reporting ----------------------------------------------------------------------
 

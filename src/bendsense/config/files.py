@@ -42,12 +42,12 @@ def load_config(path: str | os.PathLike | None = None) -> Config | GripperConfig
     ConfigError
         If the file cannot be read or parsed, or a value is invalid.
     """
-    from bendsense._io import load_yaml, parse_yaml
+    from bendsense._io import parse_yaml, read_yaml
 
     if path is None:
         text = resources.files("bendsense.data").joinpath(PAPER_CONFIG).read_text(encoding="utf-8")
         return parse_yaml(text, "paper.yaml (built in)", Config.from_dict)
-    return load_yaml(path, "config", parse_config)
+    return read_yaml(path, "config", parse_config)
 
 
 def save_config(config: Config | GripperConfig, path: str | os.PathLike, *, overwrite: bool = True,

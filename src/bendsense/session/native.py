@@ -70,7 +70,7 @@ import numpy as np
 import yaml
 
 from bendsense import validation as check
-from bendsense._io import check_regular_file, load_yaml, open_regular
+from bendsense._io import check_regular_file, open_regular, read_yaml
 from bendsense.errors import OutputError, SessionError
 from bendsense.session.csvfile import read_session_csv, write_session_csv
 from bendsense.session.records import (
@@ -669,7 +669,7 @@ def read_session_meta(path) -> dict:
     if not (path / META).exists():
         raise SessionError(f"{path}: not a session directory (no {META})")
     where = path / META
-    meta = load_yaml(where, "session meta.yaml", lambda data: data, SessionError)
+    meta = read_yaml(where, "session meta.yaml", lambda data: data, SessionError)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
         raise SessionError(f"{where}: format: expected {FORMAT!r}, got {short(got)}")
