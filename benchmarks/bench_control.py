@@ -42,10 +42,11 @@ import numpy as np
 
 from bendsense import load_config
 from bendsense.calibration import Calibration
-from bendsense.control import Grasp, PIController, Safety, run
+from bendsense.control import Grasp, ModelController, PIController, Safety, run
 from bendsense.device.driver import Driver
 from bendsense.device.simdevice import SimulatedDevice
 from bendsense.pipeline import LiveProcessor
+from bendsense.sim.grasp import GraspObject
 from bendsense.sim.gripper import DEFAULT_CONTACT_S_M, GraspBoard, default_objects, gripper_config
 from bendsense.sim.scenarios import simulate
 
@@ -78,7 +79,7 @@ from bench_control import board_of
 from bendsense.device.simdevice import SimulatedDevice
 
 k, path = int(sys.argv[1]), sys.argv[2]
-board = board_of(k)
+board = board_of(k, tuple(float(x) for x in sys.argv[3:5]) or None)
 
 
 class Truth:
@@ -101,14 +102,15 @@ with open(path, "w") as fh, SimulatedDevice(board, rate_hz=1000.0, truth=Truth(f
 class Board:
     """A board of k fingers in a child process (:data:`CHILD`); ``truth(since)`` reads its rows after a host time."""
 
-    def __init__(self, k, root: Path):
+    def __init__(self, k, root: Path, place=None):
         import subprocess
 
-        self.path = root / f"truth{k}.tsv"
+        self.path = root / f"truth{k}{'' if place is None else '-{:g}-{:g}'.format(*place)}.tsv"
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).resolve().parent),
                                                             os.environ.get("PYTHONPATH", "")]))
-        self.proc = subprocess.Popen([sys.executable, "-c", CHILD, str(k), str(self.path)], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, text=True, env=env)
+        where = [] if place is None else [repr(float(x)) for x in place]
+        self.proc = subprocess.Popen([sys.executable, "-c", CHILD, str(k), str(self.path), *where],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
         port, n_lines, *fingers = self.proc.stdout.readline().split(" ")
         self.port, self.n_lines = port, int(n_lines)
         self._read = 0  # bytes of the truth file read so far
@@ -136,11 +138,11 @@ class Board:
         self.proc.wait(timeout=30)
 
 
-def processor(cal, k):
-    """One LiveProcessor for the single actuator, a gripper processor of k fingers otherwise."""
+def processor(cal, k, s_c=S_C[0]):
+    """One LiveProcessor for the single actuator (the object at ``s_c``), a gripper processor of k fingers otherwise."""
     options = {"load": "contact", "constraint": "normal", "bandwidth_hz": 30.0}
     if k == 1:
-        proc = LiveProcessor(cal, load_config(), contact_s_m=S_C[0], **options)
+        proc = LiveProcessor(cal, load_config(), contact_s_m=s_c, **options)
     else:
         from bendsense.pipeline.gripper import GripperProcessor
 
@@ -151,12 +153,17 @@ def processor(cal, k):
     return proc
 
 
-def controller(k):
+def controller(k, kind="model", target=TARGET_N, s_c=None):
+    """The controller(s) of k fingers: ``model`` (ModelController at the fingers' known contacts) or ``pi``."""
+    def one(config, contact_s_m, **kw):
+        if kind == "pi":
+            return PIController(target, max_pressure_pa=LIMIT_PA, **kw)
+        return ModelController(target, config, max_pressure_pa=LIMIT_PA, contact_s_m=contact_s_m, **kw)
+
     if k == 1:
-        return PIController(TARGET_N, max_pressure_pa=LIMIT_PA)
+        return one(load_config(), S_C[0] if s_c is None else s_c)
     gripper = gripper_config(k)
-    return Grasp([PIController(TARGET_N, line=f.pressure_line, finger=f.name, max_pressure_pa=LIMIT_PA)
-                  for f in gripper.fingers])
+    return Grasp([one(f.config, S_C[i], line=f.pressure_line, finger=f.name) for i, f in enumerate(gripper.fingers)])
 
 
 def session(board, proc, ctl, seconds):
@@ -205,9 +212,12 @@ def session(board, proc, ctl, seconds):
     return truth, result, sent["t"], board
 
 
-def board_of(k):
+def board_of(k, place=None):
+    """The simulated board of k fingers on the default objects, or one finger on a rigid object at ``place``
+    = (s_c [m], touch pressure [Pa])."""
     config = load_config() if k == 1 else gripper_config(k)
-    return GraspBoard(config, default_objects(k), rate_hz=RATE_HZ, seed=0)
+    objects = default_objects(k) if place is None else [GraspObject(place[0], place[1], math.inf)]
+    return GraspBoard(config, objects, rate_hz=RATE_HZ, seed=0)
 
 
 def score(truth, result, t_signal, board, k):
@@ -229,7 +239,10 @@ def score(truth, result, t_signal, board, k):
         steady = running & (host >= t_signal - 0.5)
         after = (host > t_signal) & (setpoint > 0)
         zero = np.flatnonzero((host > t_signal) & (setpoint == 0))
+        touched = np.flatnonzero(running & (force > 0))
+        from_touch = settle - t[touched[0]] if touched.size else math.nan
         out.append({"finger": name or "(one actuator)", "rise_s": rise, "settle_s": settle,
+                    "overshoot_n": float(force[running].max() - TARGET_N), "settle_from_touch_s": from_touch,
                     "steady_error_n": float(np.mean(force[steady]) - TARGET_N),
                     "ripple_n": float(np.std(force[steady])), "peak_pressure_pa": float(pressure.max()),
                     "peak_setpoint_pa": float(setpoint.max()), "frames_after_stop": int(after.sum()),
@@ -244,7 +257,7 @@ def score(truth, result, t_signal, board, k):
 
 
 
-def rows(quick=False, fingers=(1, 3), seconds=1.5, stop_repeats=None, in_process=False):
+def rows(quick=False, fingers=(1, 3), seconds=1.5, stop_repeats=None, in_process=False, kind="model"):
     """(what, target, measured, pass) rows for run_all.py's table."""
     stop_repeats = (2 if quick else 9) if stop_repeats is None else stop_repeats
     with tempfile.TemporaryDirectory() as tmp:
@@ -255,7 +268,7 @@ def rows(quick=False, fingers=(1, 3), seconds=1.5, stop_repeats=None, in_process
         for k in fingers:
             template = board_of(k) if in_process else Board(k, root)
             try:
-                table += _rows_of(k, template, processor(cal, k), controller(k), seconds, stop_repeats)
+                table += _rows_of(k, template, processor(cal, k), controller(k, kind), seconds, stop_repeats)
             finally:
                 if not in_process:
                     template.close()
@@ -276,6 +289,10 @@ def _rows_of(k, template, proc, ctl, seconds, stop_repeats):
     table.append((f"{label}: step to 0.15 N, settled (rise)", "<= 0.3 s",
                   f"{worst['settle_s']:.3f} s ({max(r['rise_s'] for r in per):.3f} s), worst finger",
                   worst["settle_s"] <= 0.3))
+    over = max(r["overshoot_n"] for r in per)
+    table.append((f"{label}: overshoot of the true force at the touch (settled after the touch)", "<= 15 mN",
+                  f"{over * 1e3:.1f} mN ({max(r['settle_from_touch_s'] for r in per):.3f} s), worst finger",
+                  over <= 0.015))
     err = max(abs(r["steady_error_n"]) for r in per)
     table.append((f"{label}: steady error vs the simulator's truth", "<= 10 mN",
                   f"{err * 1e3:.2f} mN (ripple {max(r['ripple_n'] for r in per) * 1e3:.2f} mN RMS)", err <= 0.01))
@@ -295,6 +312,77 @@ def _rows_of(k, template, proc, ctl, seconds, stop_repeats):
     return table
 
 
+TARGETS_N = (0.05, 0.15, 0.3)
+#: object places: (s_c [m], touch pressure [Pa]), near the base (stiff) to near the tip
+PLACES = ((0.07, 50e3), (0.10, 40e3), (0.12, 30e3))
+
+
+def step_responses(cal, kinds=("model", "pi"), seconds=0.9):
+    """One finger at 1 kHz, its board in its own process: a step to each target at each object place, per
+    controller kind, each session cut at the Ctrl-C that ends it (its zeros are no part of the step).
+
+    Returns {(kind, place, target): (t from the first set-point [s], true force [N], overshoot [N], settled
+    after the touch [s])}."""
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for place in PLACES:
+            board = Board(1, Path(tmp), place)
+            try:
+                proc = processor(cal, 1, place[0])
+                for kind in kinds:
+                    for target in TARGETS_N:
+                        truth, _, t_signal, _ = session(board, proc, controller(1, kind, target, place[0]), seconds)
+                        host, setpoint = np.array([r[0] for r in truth.rows]), truth.column("setpoint_pa")
+                        force = np.hypot(truth.column("fx_n"), truth.column("fy_n"))
+                        keep = (host >= host[np.flatnonzero(setpoint > 0)[0]]) & (host < t_signal)
+                        t, force = host[keep] - host[keep][0], force[keep]
+                        touch = t[np.flatnonzero(force > 0)[0]]
+                        outside = np.flatnonzero(np.abs(force - target) > BAND_N)
+                        settle = t[outside[-1] + 1] - touch if outside.size and outside[-1] + 1 < t.size else math.nan
+                        out[kind, place, target] = (t, force, float(force.max() - target), settle)
+            finally:
+                board.close()
+    return out
+
+
+def step_rows(steps):
+    """The table's rows of :func:`step_responses`: the worst overshoot and settling per controller kind."""
+    table = []
+    for kind in sorted({k[0] for k in steps}):
+        mine = {k: v for k, v in steps.items() if k[0] == kind}
+        over, settle = max(v[2] for v in mine.values()), max(v[3] for v in mine.values())
+        table.append((f"control ({kind}), 1 finger: steps to {', '.join(f'{x:g}' for x in TARGETS_N)} N at "
+                      f"{len(PLACES)} object places: worst overshoot; settled within 10 mN after the touch",
+                      "<= 15 mN; <= 0.3 s", f"{over * 1e3:.1f} mN; {settle:.3f} s", over <= 0.015 and settle <= 0.3))
+    return table
+
+
+def step_figure(steps, path):
+    """The step responses as a figure: one panel per object place, the true force against time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(PLACES), figsize=(12, 3.6), sharey=True, constrained_layout=True)
+    colours = dict(zip(TARGETS_N, ("tab:blue", "tab:orange", "tab:green"), strict=True))
+    for ax, place in zip(axes, PLACES, strict=True):
+        for (kind, where, target), (t, force, *_) in steps.items():
+            if where == place:
+                ax.plot(t, force * 1e3, color=colours[target], ls="-" if kind == "model" else "--", lw=1.2,
+                        label=f"{kind}, {target * 1e3:g} mN")
+        for target in TARGETS_N:
+            ax.axhspan((target - BAND_N) * 1e3, (target + BAND_N) * 1e3, color=colours[target], alpha=0.12, lw=0)
+        ax.set_title(f"object at s_c = {place[0] * 1e3:g} mm, touched at {place[1] / 1e3:g} kPa", fontsize=9)
+        ax.set_xlabel("time from the first set-point [s]")
+    axes[0].set_ylabel("true contact force [mN]")
+    axes[0].legend(fontsize=7, ncol=2)
+    fig.suptitle("Steps on the simulated board at 1 kHz: ModelController (solid) and PIController (dashed); "
+                 "bands ±10 mN", fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fingers", type=int, nargs="+", default=[1, 3], help="finger counts to run (1..4)")
@@ -304,8 +392,19 @@ def main():
     ap.add_argument("--quick", action="store_true", help="a smaller calibration, fewer stops")
     ap.add_argument("--in-process", action="store_true",
                     help="the simulated board in this process (as in the tests) instead of its own")
+    ap.add_argument("--controller", choices=("model", "pi"), default="model", help="the controller of the sessions")
+    ap.add_argument("--steps", action="store_true",
+                    help="also steps to 0.05, 0.15, 0.3 N at three object places, model and PI controllers")
+    ap.add_argument("--figure", type=Path, help="with --steps: write the step responses here (PNG)")
     args = ap.parse_args()
-    table = rows(args.quick, args.fingers, args.seconds, args.stops, args.in_process)
+    table = rows(args.quick, args.fingers, args.seconds, args.stops, args.in_process, args.controller)
+    if args.steps:
+        with tempfile.TemporaryDirectory() as tmp:
+            simulate("calibration", Path(tmp) / "cal", seed=0, frames_per_strip=20 if args.quick else 50)
+            steps = step_responses(Calibration.fit(Path(tmp) / "cal" / "manifest.yaml"))
+        table += step_rows(steps)
+        if args.figure:
+            step_figure(steps, args.figure)
     width = max(len(r[0]) for r in table)
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; Python {sys.version.split()[0]}")
     print(f"{'what':<{width}}  {'target':<18}  {'measured':<70}  pass?")

@@ -1,4 +1,4 @@
-"""The ``control`` command: hold a contact force with a PI loop on the tracked estimate (bendsense.control)."""
+"""The ``control`` command: hold a contact force with a loop on the tracked estimate (bendsense.control)."""
 
 from __future__ import annotations
 
@@ -30,22 +30,28 @@ log = logging.getLogger("bendsense")
 
 
 
-def _controllers(config, finger, target, max_pressure_pa, gains, load_options):
-    """The PI controller(s): one per controlled finger, on its line (a single actuator: line 0).
+def _controllers(config, finger, target, max_pressure_pa, tuning, load_options):
+    """The controller(s): one per controlled finger, on its line (a single actuator: line 0).
 
-    A target beyond what a finger can press with at the pressure limit (at its known contact
-    location, else its tip: :func:`bendsense.control.force_limit_n`) is refused here, before
-    the board is driven.
+    ``tuning`` names the kind (``model``: :class:`bendsense.control.ModelController`, ``pi``:
+    :class:`bendsense.control.PIController`) and its options. A target beyond what a finger
+    can press with at the pressure limit (at its known contact location, else its tip:
+    :func:`bendsense.control.force_limit_n`) is refused here, before the board is driven.
     """
     from bendsense.config import GripperConfig
-    from bendsense.control import Grasp, PIController, force_limit_n
+    from bendsense.control import Grasp, ModelController, PIController, force_limit_n
     from bendsense.errors import ArgumentError, BendsenseError
 
-    def pi(cfg, options, **kw):
+    kind, options_of_kind = tuning["controller"], {k: v for k, v in tuning.items() if k != "controller"}
+
+    def one(cfg, options, **kw):
         bound = force_limit_n(cfg, max_pressure_pa, options.get("contact_s_m"))
         try:
+            if kind == "model":
+                return ModelController(target, cfg, max_pressure_pa=max_pressure_pa, max_force_n=bound,
+                                       contact_s_m=options.get("contact_s_m"), **kw, **options_of_kind)
             return PIController(target, max_pressure_pa=max_pressure_pa, tip_s_m=cfg.actuator.length_m,
-                                max_force_n=bound, **kw, **gains)
+                                max_force_n=bound, **kw, **options_of_kind)
         except ArgumentError as err:
             raise click.BadParameter(str(err).removeprefix("target_force_n: "),
                                      param_hint="'--target-force-n'") from None
@@ -54,14 +60,14 @@ def _controllers(config, finger, target, max_pressure_pa, gains, load_options):
         if finger is not None:
             raise click.BadParameter("names a finger of a gripper config (--config with fingers:); this config is "
                                      "a single actuator", param_hint="'--finger'")
-        return pi(config, load_options)
+        return one(config, load_options)
     try:
         chosen = config.fingers if finger is None else (config.finger(finger),)
     except BendsenseError as err:
         raise click.BadParameter(str(err), param_hint="'--finger'") from None
-    pis = [pi(f.config, load_options["finger_options"][f.name], line=f.pressure_line, finger=f.name) for f in chosen]
+    each = [one(f.config, load_options["finger_options"][f.name], line=f.pressure_line, finger=f.name) for f in chosen]
     try:
-        return Grasp(pis)
+        return Grasp(each)
     except BendsenseError as err:
         raise click.BadParameter(f"{str(err).removeprefix('controllers: ')} with --finger NAME",
                                  param_hint="'--finger'") from None
@@ -127,13 +133,13 @@ def _summary(result, controller) -> str:
     """What the loop did, in one paragraph for stderr."""
     from bendsense.control import Grasp, zero_report
 
-    pis = controller.controllers if isinstance(controller, Grasp) else (controller,)
+    each = controller.controllers if isinstance(controller, Grasp) else (controller,)
     parts = []
-    for pi in pis:
-        nf = pi.last
+    for c in each:
+        nf = c.last
         force = "no force" if nf is None else f"N = {nf.force_n[-1] * 1e3:.1f} ± {nf.std_n[-1] * 1e3:.1f} mN"
-        name = "" if pi.finger is None else f"{pi.finger}: "
-        parts.append(f"{name}{force} (target {pi.target_force_n * 1e3:.4g} mN, set-point {pi.output_pa / 1e3:.1f} kPa)")
+        name = "" if c.finger is None else f"{c.finger}: "
+        parts.append(f"{name}{force} (target {c.target_force_n * 1e3:.4g} mN, set-point {c.output_pa / 1e3:.1f} kPa)")
     held = ""
     if result.held:
         held = (f"; line{'s' if len(result.held) > 1 else ''} {', '.join(str(k) for k in result.held)} not "
@@ -161,10 +167,17 @@ def _summary(result, controller) -> str:
 @live_contact_option
 @click.option("--constraint", type=click.Choice(CONSTRAINTS), default="normal", show_default=True,
               help="Force constraint: normal (a frictionless contact: F along n) or any other of 'estimate'.")
+@click.option("--controller", "controller_kind", type=click.Choice(["model", "pi"]), default="model",
+              show_default=True,
+              help="model: the finger's pressing curve from its config as feed-forward, a model-mismatch observer "
+                   "(no overshoot at the touch; bendsense.control.ModelController); pi: a PI on the force.")
+@click.option("--approach-kpa-per-s", type=Finite(min=0, min_open=True), default=None,
+              help="model: set-point ramp before the touch [kPa/s] (default 3000 kPa/(N s) times the target, "
+                   "250 kPa/s at least, the slew limit at most).")
 @click.option("--kp-kpa-per-n", type=Finite(min=0), default=None,
-              help="Proportional gain [kPa/N] (default 50: bendsense.control.DEFAULT_KP_PA_PER_N).")
+              help="pi: proportional gain [kPa/N] (default 50: bendsense.control.DEFAULT_KP_PA_PER_N).")
 @click.option("--ki-kpa-per-n-s", type=Finite(min=0), default=None,
-              help="Integral gain [kPa/(N s)] (default 3000: bendsense.control.DEFAULT_KI_PA_PER_N_S).")
+              help="pi: integral gain [kPa/(N s)] (default 3000: bendsense.control.DEFAULT_KI_PA_PER_N_S).")
 @click.option("--max-rate-kpa-per-s", type=Finite(min=0, min_open=True), default=None,
               help="Slew limit of the set-point [kPa/s] (default 500).")
 @make_bandwidth_option("30 Hz (bendsense.control.TRACK_BANDWIDTH_HZ: the loop needs a faster track than live's 5 Hz)")
@@ -177,16 +190,19 @@ def _summary(result, controller) -> str:
               help="HELLO wait [s].")
 @adapt_option
 def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, output, overwrite, config_path, seconds,
-            load, contact_s_m, constraint, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s, bandwidth_hz, silence_s,
-            baud, hello_timeout, adapt):
-    """Hold a contact force: a PI loop on the tracked contact normal force, at the board's frame rate.
+            load, contact_s_m, constraint, controller_kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s,
+            max_rate_kpa_per_s, bandwidth_hz, silence_s, baud, hello_timeout, adapt):
+    """Hold a contact force: a loop on the tracked contact normal force, at the board's frame rate.
 
     Every frame from the board on PORT is reconstructed, its force estimated and tracked
     (a causal Kalman filter, --bandwidth-hz), and the contact normal force N = F · n (n the
     finger's normal at the contact, from the estimated shape; --load contact
-    --contact-s-m X: a contact at the known arc length X, else the tip) drives a PI
-    controller with anti-windup whose output, clipped to [0, --max-pressure-kpa], goes to
-    the board as a SETPOINT. With a gripper config every finger is controlled on its own
+    --contact-s-m X: a contact at the known arc length X, else the tip) drives a
+    controller whose output, clipped to [0, --max-pressure-kpa], goes to the board as a
+    SETPOINT: by default one that knows the finger (--controller model: it approaches,
+    takes the touch pressure, and follows the config's pressing curve to the target, with
+    a model-mismatch observer; no overshoot at the touch), or a PI with anti-windup
+    (--controller pi, --kp-kpa-per-n, --ki-kpa-per-n-s). With a gripper config every finger is controlled on its own
     pressure line (--finger NAME: only that one; the other lines are held at set-point 0).
     A target beyond what a finger can press with at the pressure limit is refused.
 
@@ -213,12 +229,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     """
     from bendsense.cli.device import live_load
     from bendsense.config import load_config
-    from bendsense.control import (
-        DEFAULT_KI_PA_PER_N_S,
-        DEFAULT_KP_PA_PER_N,
-        DEFAULT_MAX_RATE_PA_PER_S,
-        TRACK_BANDWIDTH_HZ,
-    )
+    from bendsense.control import TRACK_BANDWIDTH_HZ
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
 
     ctx = click.get_current_context()
@@ -228,19 +239,41 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     config = load_config(config_path)
     calibrations = calibration_paths_of(calibration_paths, config)
     pmax = pressure_limit(config, max_pressure_kpa)
-    gains = {"kp_pa_per_n": DEFAULT_KP_PA_PER_N if kp_kpa_per_n is None else kp_kpa_per_n * 1e3,
-             "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,
-             "max_rate_pa_per_s": DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3}
+    tuning = _tuning(controller_kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s)
     load_options = live_load(load, contact_s_m, config)
-    controller = _controllers(config, finger, target_force_n, pmax, gains, load_options)
+    controller = _controllers(config, finger, target_force_n, pmax, tuning, load_options)
     processor = _processor(config, calibrations, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options, adapt)
     meta = {"command": "bendsense control",
-            "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **gains,
+            "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **tuning,
                         "fingers": [f for f in controller.fingers if f is not None], "load": load,
                         "constraint": constraint,
                         "contact_s_m": _locations(load_options), "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
         _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s)
+
+
+def _tuning(kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s) -> dict:
+    """The controller's kind and options [SI units], its defaults filled in; an option of the other kind is refused."""
+    from bendsense.control import (
+        DEFAULT_KI_PA_PER_N_S,
+        DEFAULT_KP_PA_PER_N,
+        DEFAULT_MAX_RATE_PA_PER_S,
+    )
+
+    given = {"--approach-kpa-per-s": approach_kpa_per_s, "--kp-kpa-per-n": kp_kpa_per_n,
+             "--ki-kpa-per-n-s": ki_kpa_per_n_s}
+    other = ("--kp-kpa-per-n", "--ki-kpa-per-n-s") if kind == "model" else ("--approach-kpa-per-s",)
+    for name in other:
+        if given[name] is not None:
+            raise click.BadParameter(f"is an option of --controller {'pi' if kind == 'model' else 'model'}",
+                                     param_hint=f"'{name}'")
+    rate = DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3
+    if kind == "model":
+        approach = None if approach_kpa_per_s is None else approach_kpa_per_s * 1e3
+        return {"controller": "model", "approach_rate_pa_per_s": approach, "max_rate_pa_per_s": rate}
+    return {"controller": "pi", "kp_pa_per_n": DEFAULT_KP_PA_PER_N if kp_kpa_per_n is None else kp_kpa_per_n * 1e3,
+            "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,
+            "max_rate_pa_per_s": rate}
 
 
 def _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s):

@@ -4,8 +4,11 @@
   process, call a controller, clip its set-points to the pressure limit and send them
   (SETPOINT frames); set-point 0 on every line whatever ends the loop, recorded line by
   line (:class:`LineZero`, :func:`zero_report`);
-- :class:`PIController` and :class:`Grasp` (:mod:`~bendsense.control.pi`): a PI loop with
-  anti-windup on a finger's contact normal force, one per finger;
+- :class:`ModelController` (:mod:`~bendsense.control.model`): a finger's contact normal
+  force held through its model's pressing curve (approach, touch, feed-forward, a
+  mismatch observer): no overshoot at the touch; :class:`PIController`
+  (:mod:`~bendsense.control.pi`): a PI loop with anti-windup; :class:`Grasp`: one
+  controller per finger;
 - :func:`normal_force` (:mod:`~bendsense.control.force`): the controlled quantity, F · n at
   the contact, from the tracked force and the estimated shape; :func:`force_limit_n` the
   most a finger can press with at a pressure limit (a target beyond it is refused);
@@ -23,11 +26,13 @@ grasp on the simulated board.
 
 from bendsense.control.force import NormalForce, contact_normal, force_limit_n, normal_force
 from bendsense.control.loop import DEFAULT_MAX_PRESSURE_PA, ControlResult, LineZero, run, zero_report
+from bendsense.control.model import ModelController
 from bendsense.control.pi import (
     DEFAULT_KI_PA_PER_N_S,
     DEFAULT_KP_PA_PER_N,
     DEFAULT_MAX_RATE_PA_PER_S,
     TRACK_BANDWIDTH_HZ,
+    FingerController,
     Grasp,
     PIController,
 )
@@ -35,7 +40,8 @@ from bendsense.control.record import CONTROL_LOG, ControlRecording
 from bendsense.control.safety import ControlStop, Safety
 from bendsense.control.sweep import Sweep
 
-__all__ = ["run", "ControlResult", "LineZero", "zero_report", "PIController", "Grasp", "normal_force",
+__all__ = ["run", "ControlResult", "LineZero", "zero_report", "ModelController", "PIController", "FingerController",
+           "Grasp", "normal_force",
            "contact_normal", "force_limit_n", "NormalForce",
            "Safety", "ControlStop", "Sweep", "ControlRecording", "CONTROL_LOG", "DEFAULT_KP_PA_PER_N",
            "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S", "TRACK_BANDWIDTH_HZ", "DEFAULT_MAX_PRESSURE_PA"]

@@ -49,8 +49,8 @@ import numpy as np
 from bendsense.control.force import normal_force
 from bendsense.errors import ArgumentError
 
-__all__ = ["PIController", "Grasp", "DEFAULT_KP_PA_PER_N", "DEFAULT_KI_PA_PER_N_S", "DEFAULT_MAX_RATE_PA_PER_S",
-           "TRACK_BANDWIDTH_HZ", "MAX_BLOCK_S", "finger_block"]
+__all__ = ["FingerController", "PIController", "Grasp", "DEFAULT_KP_PA_PER_N", "DEFAULT_KI_PA_PER_N_S",
+           "DEFAULT_MAX_RATE_PA_PER_S", "TRACK_BANDWIDTH_HZ", "MAX_BLOCK_S", "finger_block"]
 
 #: proportional gain [Pa/N]
 DEFAULT_KP_PA_PER_N = 5.0e4
@@ -99,7 +99,131 @@ def finger_block(block, finger):
     return block[finger]
 
 
-class PIController:
+class FingerController:
+    """What a controller of one finger's contact normal force is: its line, its checked target, its latest force.
+
+    Subclasses implement :meth:`step`; calling the controller with a processed block takes
+    the finger's part, its normal force (:func:`bendsense.control.normal_force`) and its
+    line's pressure, and returns ``{line: set-point}``.
+
+    Parameters
+    ----------
+    target_force_n : float
+        The normal force to hold, N* [N] (>= 0; settable: :attr:`target_force_n`).
+    line : int, default 0
+        The pressure line (0-based) the finger is on.
+    finger : str, optional
+        The finger (a gripper's blocks); None: a single actuator.
+    max_pressure_pa : float
+        Highest set-point [Pa].
+    tip_s_m : float, optional
+        The contact location logged for a tip load [m] (the actuator's length).
+    max_force_n : float, optional
+        The most force the finger can press with at ``max_pressure_pa`` [N]
+        (:func:`~bendsense.control.force_limit_n` of its config): a target beyond it is
+        refused (ArgumentError); None: no bound.
+
+    Attributes
+    ----------
+    output_pa : float
+        The latest set-point [Pa].
+    last : NormalForce or None
+        The normal force of the latest block's frames.
+    """
+
+    def __init__(self, target_force_n, *, line=0, finger=None, max_pressure_pa, tip_s_m=None, max_force_n=None):
+        if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not 0 <= line <= 254:
+            raise ArgumentError(f"line: expected a pressure line 0..254, got {line!r}")
+        self.line = int(line)
+        self.finger = finger
+        self.max_pressure_pa = _positive("max_pressure_pa", max_pressure_pa)
+        self.tip_s_m = tip_s_m
+        self.max_force_n = None if max_force_n is None else _positive("max_force_n", max_force_n)
+        self.target_force_n = target_force_n
+        self.reset()
+
+    @property
+    def target_force_n(self) -> float:
+        """The normal force to hold, N* [N]; setting it checks it against ``max_force_n``."""
+        return self._target
+
+    @target_force_n.setter
+    def target_force_n(self, value) -> None:
+        self._target = self.checked_target(value)
+
+    def checked_target(self, value) -> float:
+        """``value`` as a target [N], or ArgumentError: not a number >= 0, or beyond ``max_force_n``.
+
+        Parameters
+        ----------
+        value : float
+            A target force [N].
+        """
+        target = _positive("target_force_n", value, zero=True)
+        if self.max_force_n is not None and target > self.max_force_n:
+            who = "the finger" if self.finger is None else f"finger {self.finger}"
+            raise ArgumentError(f"target_force_n: {target:g} N is beyond what {who} can press at the pressure limit "
+                                f"{self.max_pressure_pa / 1e3:g} kPa (at most {self.max_force_n:.3g} N: twice its "
+                                "blocked force, bendsense.control.force_limit_n); a force in mN is given in N")
+        return target
+
+    @property
+    def fingers(self) -> tuple:
+        """The fingers this controller watches (for the safety checks of :func:`~bendsense.control.run`)."""
+        return (self.finger,)
+
+    def reset(self) -> None:
+        """Forget the state (a new grasp): the output is 0."""
+        self.output_pa = 0.0
+        self.last = None
+        self._targets = np.zeros(0)
+
+    def step(self, t_s, force_n, pressure_pa, contact_s_m=None) -> float:
+        """Advance over a block's frames; returns the set-point [Pa].
+
+        Parameters
+        ----------
+        t_s : array_like, shape (n,)
+            Frame times [s], increasing.
+        force_n : array_like, shape (n,)
+            Measured normal force N [N]; NaN: none.
+        pressure_pa : array_like, shape (n,)
+            The line's measured pressure [Pa]; NaN: no reading.
+        contact_s_m : array_like, shape (n,), optional
+            The estimate's contact location per frame [m].
+        """
+        raise NotImplementedError
+
+    def __call__(self, block) -> dict:
+        """The set-point of the finger's line after a block of frames: ``{line: pressure_pa}``.
+
+        Parameters
+        ----------
+        block : LiveBlock or dict of str to LiveBlock
+            The processor's result for the block.
+        """
+        own = finger_block(block, self.finger)
+        self.last = normal_force(own, tip_s_m=self.tip_s_m)
+        self._targets = np.full(len(own), self.target_force_n)
+        return {self.line: self.step(own.t_s, self.last.force_n, own.pressure_pa, self.last.contact_s_m)}
+
+    def columns(self, prefix: str = "") -> dict:
+        """The latest block's per-frame columns for the control log: normal force, σ, location, target, status.
+
+        Parameters
+        ----------
+        prefix : str
+            Put before each name (``"thumb_"`` for a gripper's finger).
+        """
+        nf = self.last
+        if nf is None:
+            return {}
+        return {f"{prefix}normal_force_n": nf.force_n, f"{prefix}normal_force_std_n": nf.std_n,
+                f"{prefix}contact_s_m": nf.contact_s_m, f"{prefix}target_force_n": self._targets,
+                f"{prefix}status": nf.status}
+
+
+class PIController(FingerController):
     """PI control of one finger's contact normal force through one pressure line (module docstring).
 
     Parameters
@@ -140,59 +264,20 @@ class PIController:
     def __init__(self, target_force_n, *, line=0, finger=None, kp_pa_per_n=DEFAULT_KP_PA_PER_N,
                  ki_pa_per_n_s=DEFAULT_KI_PA_PER_N_S, max_pressure_pa, feedforward_pa=0.0,
                  max_rate_pa_per_s=DEFAULT_MAX_RATE_PA_PER_S, tip_s_m=None, max_force_n=None):
-        if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not 0 <= line <= 254:
-            raise ArgumentError(f"line: expected a pressure line 0..254, got {line!r}")
-        self.line = int(line)
-        self.finger = finger
         self.kp = _positive("kp_pa_per_n", kp_pa_per_n, zero=True)
         self.ki = _positive("ki_pa_per_n_s", ki_pa_per_n_s, zero=True)
-        self.max_pressure_pa = _positive("max_pressure_pa", max_pressure_pa)
         self.feedforward_pa = _positive("feedforward_pa", feedforward_pa, zero=True)
         self.max_rate = _positive("max_rate_pa_per_s", max_rate_pa_per_s)
-        self.tip_s_m = tip_s_m
-        self.max_force_n = None if max_force_n is None else _positive("max_force_n", max_force_n)
-        self.target_force_n = target_force_n
-        self.reset()
-
-    @property
-    def target_force_n(self) -> float:
-        """The normal force to hold, N* [N]; setting it checks it against ``max_force_n``."""
-        return self._target
-
-    @target_force_n.setter
-    def target_force_n(self, value) -> None:
-        self._target = self.checked_target(value)
-
-    def checked_target(self, value) -> float:
-        """``value`` as a target [N], or ArgumentError: not a number >= 0, or beyond ``max_force_n``.
-
-        Parameters
-        ----------
-        value : float
-            A target force [N].
-        """
-        target = _positive("target_force_n", value, zero=True)
-        if self.max_force_n is not None and target > self.max_force_n:
-            who = "the finger" if self.finger is None else f"finger {self.finger}"
-            raise ArgumentError(f"target_force_n: {target:g} N is beyond what {who} can press at the pressure limit "
-                                f"{self.max_pressure_pa / 1e3:g} kPa (at most {self.max_force_n:.3g} N: twice its "
-                                "blocked force, bendsense.control.force_limit_n); a force in mN is given in N")
-        return target
-
-    @property
-    def fingers(self) -> tuple:
-        """The fingers this controller watches (for the safety checks of :func:`~bendsense.control.run`)."""
-        return (self.finger,)
+        super().__init__(target_force_n, line=line, finger=finger, max_pressure_pa=max_pressure_pa, tip_s_m=tip_s_m,
+                         max_force_n=max_force_n)
 
     def reset(self) -> None:
         """Forget the integral, the output and the time (a new grasp)."""
+        super().reset()
         self.integral_pa = 0.0
-        self.output_pa = 0.0
         self._t = math.nan
-        self.last = None
-        self._targets = np.zeros(0)
 
-    def step(self, t_s, force_n) -> float:
+    def step(self, t_s, force_n, pressure_pa=None, contact_s_m=None) -> float:
         """Advance over frames at times ``t_s`` with normal forces ``force_n``; returns the set-point [Pa].
 
         Parameters
@@ -201,6 +286,8 @@ class PIController:
             Frame times [s], increasing.
         force_n : array_like, shape (n,)
             Measured normal force N [N]; NaN holds the integral.
+        pressure_pa, contact_s_m : array_like, shape (n,), optional
+            The line's pressure, the contact location (not used: the PI knows no model).
         """
         kp, ki, ff, pmax, rate = self.kp, self.ki, self.feedforward_pa, self.max_pressure_pa, self.max_rate
         target = self.target_force_n
@@ -228,41 +315,13 @@ class PIController:
         self.integral_pa, self.output_pa, self._t = integral, out, last_t
         return out
 
-    def __call__(self, block) -> dict:
-        """The set-point of the finger's line after a block of frames: ``{line: pressure_pa}``.
-
-        Parameters
-        ----------
-        block : LiveBlock or dict of str to LiveBlock
-            The processor's result for the block.
-        """
-        own = finger_block(block, self.finger)
-        self.last = normal_force(own, tip_s_m=self.tip_s_m)
-        self._targets = np.full(len(own), self.target_force_n)
-        return {self.line: self.step(own.t_s, self.last.force_n)}
-
-    def columns(self, prefix: str = "") -> dict:
-        """The latest block's per-frame columns for the control log: normal force, σ, location, target, status.
-
-        Parameters
-        ----------
-        prefix : str
-            Put before each name (``"thumb_"`` for a gripper's finger).
-        """
-        nf = self.last
-        if nf is None:
-            return {}
-        return {f"{prefix}normal_force_n": nf.force_n, f"{prefix}normal_force_std_n": nf.std_n,
-                f"{prefix}contact_s_m": nf.contact_s_m, f"{prefix}target_force_n": self._targets,
-                f"{prefix}status": nf.status}
-
 
 class Grasp:
     """Several controllers as one: each finger its own (on its own line); their set-points merged.
 
     Parameters
     ----------
-    controllers : sequence of PIController
+    controllers : sequence of FingerController
         One per controlled finger; two may not drive the same line.
     """
 
