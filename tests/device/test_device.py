@@ -15,6 +15,7 @@ from bendsense import read_session
 from bendsense.cli import main
 from bendsense.device import Driver, Recorder, SimulatedDevice, ramp_source
 from bendsense.device import ports as ports_mod
+from bendsense.device.driver import Reconnect
 from bendsense.errors import DeviceError, OutputExistsError
 from bendsense.session.native import SessionWriter
 from bendsense.wire.frames import encode_hello, encode_sample, encode_text
@@ -110,7 +111,7 @@ def test_clock_and_sequence_wrap_recorded(tmp_path):
 
 def test_disconnect_raises_device_error_and_session_stays_readable(tmp_path):
     with SimulatedDevice(ramp_source(N_CH), rate_hz=1000, disconnect_after=300) as sim:
-        drv = Driver(sim.port, reconnect_attempts=2, reconnect_backoff_s=0.02)
+        drv = Driver(sim.port, reconnect=Reconnect(attempts=2, backoff_s=0.02))
         with drv:
             rec = Recorder(drv, tmp_path / "s")
             drv.start()
@@ -137,7 +138,7 @@ def test_reconnect_to_a_port_that_comes_back(tmp_path):
     link = tmp_path / "ttyBENDSENSE"
     sim1 = SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500).start()
     os.symlink(sim1.port, link)
-    with Driver(str(link), reconnect_attempts=30, reconnect_backoff_s=0.05) as drv:
+    with Driver(str(link), reconnect=Reconnect(attempts=30, backoff_s=0.05)) as drv:
         drv.start()
         first = drain(drv, lambda: drv.stats.samples >= 50)
         sim1.disconnect()
