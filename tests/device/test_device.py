@@ -18,7 +18,7 @@ from bendsense.device import ports as ports_mod
 from bendsense.device.driver import Reconnect
 from bendsense.device.simdevice import Faults, Firmware
 from bendsense.errors import DeviceError, OutputExistsError
-from bendsense.session.native import SessionWriter
+from bendsense.session.native import SessionWriter, record_dtype
 from bendsense.wire.frames import encode_hello, encode_sample, encode_text
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
@@ -284,7 +284,7 @@ def test_default_source_computes_its_first_frame_before_the_board_streams(monkey
 
 
 def test_recorder_refuses_existing_session(tmp_path):
-    SessionWriter(tmp_path / "s", 1).close()
+    SessionWriter(tmp_path / "s", record_dtype(1)).close()
     with Driver("loop://", handshake=False) as drv, pytest.raises(OutputExistsError, match="exists and is not empty"):
         Recorder(drv, tmp_path / "s")
 
@@ -301,7 +301,7 @@ def test_a_ctrl_c_between_a_write_and_its_count_keeps_the_session_whole(tmp_path
         real_write(fd, bytes(data)[:int(len(data) * written)])
         raise KeyboardInterrupt
 
-    with SessionWriter(tmp_path / "s", 2) as w:
+    with SessionWriter(tmp_path / "s", record_dtype(2)) as w:
         rec = w.empty(6)
         rec["seq"] = np.arange(6)
         w.write(rec[:4])
