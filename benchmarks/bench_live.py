@@ -128,11 +128,11 @@ def gripper_processor(cal, gripper):
 
 def gripper_model(cal, seconds, block=10):
     """Wall time per board frame of the gripper's processor over the simulated board's frames (computed ahead)."""
-    from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+    from bendsense.sim.gripper import GraspBoard, Regulation, default_objects, gripper_config
 
     gripper = gripper_config(3)
     board = GraspBoard(gripper, default_objects(3, contact_s_m=CONTACT_S_M), rate_hz=GRIPPER_RATE_HZ, seed=SEED,
-                       period_s=4.0)
+                       regulation=Regulation(period_s=4.0))
     n = int(seconds * GRIPPER_RATE_HZ)
     frames = [board(k) for k in range(n)]
     signals = np.array([c for _, c, _ in frames], dtype=float)
@@ -225,12 +225,12 @@ def board_readings(k, n):
     """``n`` driver readings of the simulated board of ``k`` fingers closing on the object (1: the single actuator)."""
     from bendsense import load_config
     from bendsense.device.driver import Reading
-    from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+    from bendsense.sim.gripper import GraspBoard, Regulation, default_objects, gripper_config
     from bendsense.wire.frames import Sample
 
     config = load_config() if k == 1 else gripper_config(k)
     board = GraspBoard(config, default_objects(k, contact_s_m=CONTACT_S_M), rate_hz=GRIPPER_RATE_HZ, seed=SEED,
-                       period_s=4.0)
+                       regulation=Regulation(period_s=4.0))
     readings = []
     for i in range(n):
         p, counts, _ = board(i)

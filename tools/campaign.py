@@ -476,10 +476,10 @@ def make_lab(root: Path, log=print) -> Path:
         import sys
         import numpy as np
         import bendsense as bs
-        from bendsense.session.native import SessionWriter
+        from bendsense.session.native import SessionWriter, record_dtype
         lab = sys.argv[1]
         s = bs.read_session_csv(lab + "/run.csv")
-        with SessionWriter(lab + "/native", s.n_channels) as w:
+        with SessionWriter(lab + "/native", record_dtype(s.n_channels)) as w:
             rec = w.empty(len(s.t_s))
             rec["adc"] = np.round(s.signals)
             rec["pressure_pa"] = np.round(s.pressure_pa)

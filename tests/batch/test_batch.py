@@ -25,7 +25,7 @@ from bendsense.cli import main
 from bendsense.errors import SessionError
 from bendsense.results import read_results
 from bendsense.session import Session, write_session_csv
-from bendsense.session.native import SessionWriter
+from bendsense.session.native import SessionWriter, record_dtype
 from bendsense.stop_signals import worker_pool
 
 CONFIG = load_config()
@@ -66,7 +66,7 @@ def write_csv_session(path, seed, frames=FRAMES):
 
 def write_native_session(path, seed, frames=FRAMES):
     session, kappa = make_session(seed, frames)
-    with SessionWriter(path, N, adc_dtype="<f8") as writer:
+    with SessionWriter(path, record_dtype(N, "<f8")) as writer:
         rec = writer.empty(frames)
         rec["t_us"] = np.round(session.t_s * 1e6).astype(np.uint64)
         rec["seq"] = np.arange(frames)
@@ -377,10 +377,10 @@ def test_processes_or_numba_threads_never_both(sessions, tmp_path):
 
 
 def test_process_reports_lost_frames_and_firmware_drops(tmp_path):
-    from bendsense.session.native import SessionWriter
+    from bendsense.session.native import SessionWriter, record_dtype
 
     cal = linear_calibration()
-    with SessionWriter(tmp_path / "runs" / "rec", 16, adc_bits=16) as w:
+    with SessionWriter(tmp_path / "runs" / "rec", record_dtype(16), adc_bits=16) as w:
         rec = w.empty(6)
         rec["seq"] = [10, 11, 14, 15, 16, 20]  # 2 + 3 frames missing
         rec["tx_drops"] = [7, 7, 9, 9, 9, 10]  # the firmware could not send 3 of them

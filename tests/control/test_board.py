@@ -23,7 +23,7 @@ import bendsense
 from bendsense.calibration import Calibration
 from bendsense.control import CONTROL_LOG, ControlRecording, ControlStop, PIController, Safety, run
 from bendsense.device.driver import Driver
-from bendsense.device.simdevice import SimulatedDevice
+from bendsense.device.simdevice import Faults, SimulatedDevice
 from bendsense.pipeline import LiveProcessor
 from bendsense.sim.grasp import GraspObject
 from bendsense.sim.gripper import GraspBoard
@@ -86,7 +86,7 @@ def session(board, processor, controller, *, drop=0.0, after=None, source=None, 
     kw.setdefault("safety", Safety(silence_s=1.0))
     processor.reset()
     truth = Truth()
-    with SimulatedDevice(source or board, rate_hz=RATE, truth=truth, drop=drop, seed=3) as dev, \
+    with SimulatedDevice(source or board, rate_hz=RATE, truth=truth, faults=Faults(drop=drop, seed=3)) as dev, \
             Driver(dev.port) as driver:
         driver.start()
         try:
@@ -316,7 +316,7 @@ def test_a_safety_stop_is_one_line_and_exit_1(board, calibration_path, tmp_path)
     from bendsense.cli import main
 
     truth = Truth()
-    with SimulatedDevice(board, rate_hz=RATE, truth=truth, drop=0.05, seed=3) as dev:
+    with SimulatedDevice(board, rate_hz=RATE, truth=truth, faults=Faults(drop=0.05, seed=3)) as dev:
         res = CliRunner().invoke(main, ["control", dev.port, "--calibration", str(calibration_path),
                                         "--target-force-n", "0.15", "--load", "contact", "--contact-s-m", str(S_C),
                                         "--silence-s", "1", "-o", str(tmp_path / "s")])

@@ -15,8 +15,10 @@ from bendsense import read_session
 from bendsense.cli import main
 from bendsense.device import Driver, Recorder, SimulatedDevice, ramp_source
 from bendsense.device import ports as ports_mod
+from bendsense.device.driver import Reconnect
+from bendsense.device.simdevice import Faults, Firmware
 from bendsense.errors import DeviceError, OutputExistsError
-from bendsense.session.native import SessionWriter
+from bendsense.session.native import SessionWriter, record_dtype
 from bendsense.wire.frames import encode_hello, encode_sample, encode_text
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
@@ -52,7 +54,8 @@ def test_end_to_end_exact_counts():
     """1,000 frames at 500 Hz with injected faults: received + lost == sent, errors == corrupted + truncated."""
     with (
         SimulatedDevice(
-            ramp_source(N_CH), rate_hz=500, max_frames=1000, drop=0.03, corrupt=0.03, truncate=0.03, seed=11
+            ramp_source(N_CH), rate_hz=500, max_frames=1000,
+            faults=Faults(drop=0.03, corrupt=0.03, truncate=0.03, seed=11),
         ) as sim,
         Driver(sim.port) as drv,
     ):
@@ -87,7 +90,8 @@ def test_clock_and_sequence_wrap_recorded(tmp_path):
     start_t = 2**32 - 100_000  # wraps after 0.1 s
     with (
         SimulatedDevice(
-            ramp_source(4), n_channels=4, rate_hz=2000, max_frames=600, start_seq=65400, start_t_us=start_t
+            ramp_source(4), n_channels=4, rate_hz=2000, max_frames=600,
+            firmware=Firmware(start_seq=65400, start_t_us=start_t),
         ) as sim,
         Driver(sim.port) as drv,
     ):
@@ -109,8 +113,8 @@ def test_clock_and_sequence_wrap_recorded(tmp_path):
 
 
 def test_disconnect_raises_device_error_and_session_stays_readable(tmp_path):
-    with SimulatedDevice(ramp_source(N_CH), rate_hz=1000, disconnect_after=300) as sim:
-        drv = Driver(sim.port, reconnect_attempts=2, reconnect_backoff_s=0.02)
+    with SimulatedDevice(ramp_source(N_CH), rate_hz=1000, faults=Faults(disconnect_after=300)) as sim:
+        drv = Driver(sim.port, reconnect=Reconnect(attempts=2, backoff_s=0.02))
         with drv:
             rec = Recorder(drv, tmp_path / "s")
             drv.start()
@@ -137,12 +141,12 @@ def test_reconnect_to_a_port_that_comes_back(tmp_path):
     link = tmp_path / "ttyBENDSENSE"
     sim1 = SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500).start()
     os.symlink(sim1.port, link)
-    with Driver(str(link), reconnect_attempts=30, reconnect_backoff_s=0.05) as drv:
+    with Driver(str(link), reconnect=Reconnect(attempts=30, backoff_s=0.05)) as drv:
         drv.start()
         first = drain(drv, lambda: drv.stats.samples >= 50)
         sim1.disconnect()
         # the board comes back, its sequence having moved on by 1000 frames
-        with SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500, start_seq=5000) as sim2:
+        with SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500, firmware=Firmware(start_seq=5000)) as sim2:
             os.unlink(link)
             os.symlink(sim2.port, link)
             second = drain(drv, lambda: drv.stats.samples >= len(first) + 50)
@@ -243,7 +247,7 @@ def test_sim_device_stops_on_stop_and_counts_commands():
         assert sim.stats.generated == n
         assert sim.stats.commands == 3 and sim.stats.hellos == 1
     with pytest.raises(DeviceError, match="drop"):
-        SimulatedDevice(ramp_source(1), drop=1.5)
+        Faults(drop=1.5)
 
 
 def test_default_source_gives_pressure_and_counts_per_frame():
@@ -280,7 +284,7 @@ def test_default_source_computes_its_first_frame_before_the_board_streams(monkey
 
 
 def test_recorder_refuses_existing_session(tmp_path):
-    SessionWriter(tmp_path / "s", 1).close()
+    SessionWriter(tmp_path / "s", record_dtype(1)).close()
     with Driver("loop://", handshake=False) as drv, pytest.raises(OutputExistsError, match="exists and is not empty"):
         Recorder(drv, tmp_path / "s")
 
@@ -297,7 +301,7 @@ def test_a_ctrl_c_between_a_write_and_its_count_keeps_the_session_whole(tmp_path
         real_write(fd, bytes(data)[:int(len(data) * written)])
         raise KeyboardInterrupt
 
-    with SessionWriter(tmp_path / "s", 2) as w:
+    with SessionWriter(tmp_path / "s", record_dtype(2)) as w:
         rec = w.empty(6)
         rec["seq"] = np.arange(6)
         w.write(rec[:4])
@@ -395,8 +399,8 @@ def test_a_board_whose_hello_lies_about_its_channels_is_one_line_and_counted(tmp
     counts the skipped and malformed frames as the board's own counters have them, and 'load' is one line."""
     import logging
 
-    with SimulatedDevice(ramp_source(N_CH), n_channels=8, rate_hz=1000, max_frames=200, truncate=0.1,
-                         seed=4) as sim:
+    with SimulatedDevice(ramp_source(N_CH), n_channels=8, rate_hz=1000, max_frames=200,
+                         faults=Faults(truncate=0.1, seed=4)) as sim:
         with caplog.at_level(logging.WARNING, logger="bendsense"):
             res = CliRunner().invoke(main, ["record", sim.port, "-o", str(tmp_path / "s"), "--seconds", "0.6",
                                             "--quiet-status"])

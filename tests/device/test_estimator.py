@@ -17,7 +17,7 @@ import bendsense
 from bendsense._batched import take_frames
 from bendsense.calibration import Calibration
 from bendsense.cli import main
-from bendsense.device.simdevice import SimulatedDevice, default_source
+from bendsense.device.simdevice import Faults, SimulatedDevice, default_source
 from bendsense.pipeline import LiveProcessor
 from bendsense.sim.scenarios import time_varying_frames
 from bendsense.status import Status
@@ -148,7 +148,8 @@ def test_record_estimate_writes_the_columns_of_save(calibration_path, tmp_path):
     """The live results.csv has the header of 'load SESSION reconstruct estimate track --filter save' of the same
     session, and its pass-through columns equal those the saved results read from frames.bin."""
     out = tmp_path / "s"
-    with SimulatedDevice(default_source(rate_hz=500, seed=SEED), rate_hz=500, drop=0.05, seed=SEED) as dev:
+    with SimulatedDevice(default_source(rate_hz=500, seed=SEED), rate_hz=500,
+                         faults=Faults(drop=0.05, seed=SEED)) as dev:
         res = CliRunner().invoke(main, ["record", dev.port, "-o", str(out), "--seconds", "1",
                                         "--calibration", str(calibration_path), "--estimate", "--quiet-status"])
     assert res.exit_code == 0, res.output

@@ -17,7 +17,7 @@ from bendsense.device import Driver, Recorder
 from bendsense.device.replay import ReplayDevice
 from bendsense.errors import SessionError
 from bendsense.session import Session, write_session_csv
-from bendsense.session.native import NO_PRESSURE, SessionWriter
+from bendsense.session.native import NO_PRESSURE, SessionWriter, record_dtype
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs POSIX pseudo-terminals")
 
@@ -26,7 +26,7 @@ def make_recording(path, n=300, n_ch=6, seed=3):
     """A native session as a board would leave it: jittered clock, seq gaps and a wrap, status bits,
     frames without pressure."""
     rng = np.random.default_rng(seed)
-    w = SessionWriter(path, n_ch, adc_bits=12, device={"firmware": "test-board"})
+    w = SessionWriter(path, record_dtype(n_ch), adc_bits=12, device={"firmware": "test-board"})
     rec = w.empty(n)
     dt = rng.integers(900, 1100, n)  # ~1 kHz with jitter [us]
     rec["t_us"] = 5_000_000 + np.cumsum(dt)

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from bendsense import read_session
 from bendsense.cli import main
 from bendsense.device.driver import Driver
-from bendsense.device.simdevice import SimulatedDevice, ramp_source
+from bendsense.device.simdevice import Faults, SimulatedDevice, ramp_source
 
 # pyserial's RFC 2217 client starts its reader thread with the deprecated setDaemon(), setName()
 pytestmark = [
@@ -122,7 +122,7 @@ class RFC2217Server:
 
 @pytest.fixture
 def board():
-    with SimulatedDevice(ramp_source(4), n_channels=4, rate_hz=500, drop=0.1, seed=3) as sim:
+    with SimulatedDevice(ramp_source(4), n_channels=4, rate_hz=500, faults=Faults(drop=0.1, seed=3)) as sim:
         yield sim
 
 

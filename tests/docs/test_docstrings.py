@@ -18,7 +18,6 @@ import bendsense
 # Functions and methods in modules another engineer is optimising (estimation/,
 # shift_errors.py): their Parameters sections are filled when that work lands.
 NO_PARAMETERS_YET = {
-    "bendsense.estimation.paper.paper_fit",
     "bendsense.estimation.problem.reference",
     "bendsense.estimation.problem.points",
     "bendsense.estimation.result.messages",

@@ -184,10 +184,10 @@ def config_segments(tmp):
 
 def native_run(tmp: Path, records: int) -> tuple[Path, int]:
     """A finished native session ``run1/`` of ``records`` 16-channel records; its record size."""
-    from bendsense.session.native import SessionWriter
+    from bendsense.session.native import SessionWriter, record_dtype
 
     d = tmp / "run1"
-    with SessionWriter(d, N, adc_bits=12, device={"firmware": "docs"}) as w:
+    with SessionWriter(d, record_dtype(N), adc_bits=12, device={"firmware": "docs"}) as w:
         rec = w.empty(records)
         rec["t_us"] = np.arange(records) * 2000
         rec["host_ns"] = np.arange(records) * 2_000_000

@@ -19,7 +19,7 @@ from scipy.optimize import brentq
 from scipy.special import ellipe, ellipeinc, ellipk, ellipkinc
 
 from bendsense.errors import ConvergenceError
-from bendsense.mechanics.beam import BeamConvergenceWarning, BeamSolution, free_arc, solve, solve_beam
+from bendsense.mechanics.beam import BeamConvergenceWarning, BeamSolution, FastOptions, free_arc, solve, solve_beam
 
 L = 0.134  # paper actuator length [m]
 MASS = 0.03927  # actuator + sensor [kg]
@@ -496,14 +496,14 @@ def test_warm_start_without_continuation():
     straight = np.zeros(DEFAULT_NODES)
     args = (L, np.asarray(ei), np.asarray(0.0), np.array([0.0, 1.03 * fcr]), GRAVITY, np.asarray(0.0), s)
     # beyond buckling, Newton from the straight state stays on the (unstable) straight branch
-    sol = solve(*args, initial=straight, continuation=False)
+    sol = solve(*args, initial=straight, options=FastOptions(continuation=False))
     assert not sol.success and "unstable" in str(sol.message)
     np.testing.assert_allclose(sol.positions_m[..., 0], 0.0, atol=1e-12)
     # a frame well inside the convexity bound is the same with or without continuation
     mild = (L, np.asarray(ei_of(60e3)), np.asarray(k0_of(60e3)), np.array([0.05, -0.05]), GRAVITY,
             np.asarray(0.0), s)
     start = solve_beam(L, ei_of(60e3), k0_of(60e3), (0.04, -0.04), GRAVITY, s_m=s)
-    a = solve(*mild, initial=start, continuation=False)
-    b = solve(*mild, initial=start, continuation=True)
+    a = solve(*mild, initial=start, options=FastOptions(continuation=False))
+    b = solve(*mild, initial=start, options=FastOptions(continuation=True))
     assert a.success and b.success
     np.testing.assert_array_equal(a.positions_m, b.positions_m)

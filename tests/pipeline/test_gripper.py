@@ -220,14 +220,14 @@ def test_live_view_draws_a_panel_per_finger(calibration_path, gripper, board, tm
 def grasp(tmp_path_factory):
     """The simulated gripper (3 fingers closing on a rigid object) and its config file."""
     from bendsense.config import save_config
-    from bendsense.sim.gripper import GraspBoard, default_objects, gripper_config
+    from bendsense.sim.gripper import GraspBoard, Regulation, default_objects, gripper_config
 
     root = tmp_path_factory.mktemp("grasp")
     gripper = gripper_config(3)
     save_config(gripper, root / "gripper.yaml")
     # coarse tables (2 kPa) keep the build short; a fast close reaches the object within the recording
     board = GraspBoard(gripper, default_objects(3, contact_s_m=CONTACT_S_M), rate_hz=RATE_HZ, seed=0, step_pa=2000.0,
-                       period_s=0.8)
+                       regulation=Regulation(period_s=0.8))
     return root, gripper, board
 
 

@@ -24,7 +24,7 @@ from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.control import ControlStop, Grasp, PIController, Safety, force_limit_n, run, zero_report
 from bendsense.device.driver import Driver
-from bendsense.device.simdevice import SimulatedDevice
+from bendsense.device.simdevice import Faults, SimulatedDevice
 from bendsense.errors import ArgumentError
 from bendsense.pipeline import LiveProcessor
 from bendsense.pipeline.gripper import GripperProcessor
@@ -220,7 +220,7 @@ def test_a_board_reading_900_kpa_stops_the_command(single_board, files):
 def test_a_board_that_dies_is_said_to_keep_its_pressure(single_board, files):
     # the board closes its port after 300 frames, its line pressurised: no zero can reach it, and the loop says so
     board = Faulty(copy.deepcopy(single_board))
-    with SimulatedDevice(board, rate_hz=RATE, disconnect_after=FAULT_AT) as dev:
+    with SimulatedDevice(board, rate_hz=RATE, faults=Faults(disconnect_after=FAULT_AT)) as dev:
         t0 = time.monotonic()
         res = control_cli(dev.port, files, "--seconds", "5")
         ran = time.monotonic() - t0
@@ -239,7 +239,8 @@ def test_the_library_records_a_zero_it_could_not_send(single_board, calibration_
                          constraint="normal", bandwidth_hz=30.0)
     proc.warm_up()
     board = Faulty(copy.deepcopy(single_board))
-    with SimulatedDevice(board, rate_hz=RATE, disconnect_after=FAULT_AT) as dev, Driver(dev.port) as driver:
+    with SimulatedDevice(board, rate_hz=RATE, faults=Faults(disconnect_after=FAULT_AT)) as dev, \
+            Driver(dev.port) as driver:
         driver.start()
         with pytest.raises(ControlStop, match="no frame from the board") as info:
             run(driver, proc, PIController(0.15, max_pressure_pa=LIMIT_PA), max_pressure_pa=LIMIT_PA, seconds=5.0)
@@ -314,7 +315,7 @@ def test_a_pressure_limit_beyond_the_config_is_refused(files):
 def test_a_zero_that_could_not_be_sent_after_a_normal_end_exits_1(single_board, files):
     # the board dies at 0.3 s; the run ends by its time (0.4 s, before the 1 s silence stop): its zero cannot go out
     board = Faulty(copy.deepcopy(single_board))
-    with SimulatedDevice(board, rate_hz=RATE, disconnect_after=FAULT_AT) as dev:
+    with SimulatedDevice(board, rate_hz=RATE, faults=Faults(disconnect_after=FAULT_AT)) as dev:
         res = control_cli(dev.port, files, "--seconds", "0.4", "--silence-s", "1")
     assert res.exit_code == 1, res.output
     line = one_error_line(res)

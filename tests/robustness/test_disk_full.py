@@ -321,7 +321,7 @@ session = read_session_csv(lab + "/run.csv")
 calls = {
     "Calibration.save": lambda: Calibration.load(lab + "/cal.yaml").save(disk + "/cal.yaml"),
     "write_session_csv": lambda: write_session_csv(session, disk + "/s.csv"),
-    "SessionWriter": lambda: SessionWriter(disk + "/rec", 16).write(np.zeros(100000, record_dtype(16))),
+    "SessionWriter": lambda: SessionWriter(disk + "/rec", record_dtype(16)).write(np.zeros(100000, record_dtype(16))),
 }
 for name, call in calls.items():
     try:

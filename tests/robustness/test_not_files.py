@@ -46,10 +46,10 @@ def fifo(tmp_path):
 
 
 def _session_dir(tmp_path):
-    from bendsense.session.native import SessionWriter
+    from bendsense.session.native import SessionWriter, record_dtype
 
     d = tmp_path / "rec"
-    with SessionWriter(d, 16, adc_bits=12) as w:
+    with SessionWriter(d, record_dtype(16), adc_bits=12) as w:
         rec = w.empty(3)
         rec["t_us"] = [0, 2000, 4000]
         rec["seq"] = [0, 1, 2]

@@ -23,7 +23,7 @@ from bendsense import load_config, output
 from bendsense.calibration import Calibration
 from bendsense.cli import main
 from bendsense.session import Session, write_session_csv
-from bendsense.session.native import SessionWriter, read_session_dir
+from bendsense.session.native import SessionWriter, read_session_dir, record_dtype
 from bendsense.sim.scenarios import simulate
 
 SENSOR = load_config().sensor
@@ -41,7 +41,7 @@ def lab(tmp_path_factory):
     signals = signals_for(kappa, cal)
     session = Session(np.arange(FRAMES) * 0.1, signals, np.full(FRAMES, 50e3))
     write_session_csv(session, root / "run.csv")
-    with SessionWriter(root / "native", N) as w:
+    with SessionWriter(root / "native", record_dtype(N)) as w:
         rec = w.empty(FRAMES)
         rec["adc"] = np.round(signals)
         rec["pressure_pa"] = 50_000
@@ -368,7 +368,7 @@ def test_permissions_follow_the_umask(work, umask):
     try:
         assert run(*DIRECTORY_COMMANDS["save"]("out")).exit_code == 0
         assert run("calibrate", "calib/manifest.yaml", "-o", "new.yaml", "--degree", "1").exit_code == 0
-        with SessionWriter(work / "rec", N) as w:
+        with SessionWriter(work / "rec", record_dtype(N)) as w:
             w.write(w.empty(1))
     finally:
         os.umask(old)
@@ -378,7 +378,7 @@ def test_permissions_follow_the_umask(work, umask):
 
 
 def test_a_killed_recording_is_still_bendsenses_and_user_files_stop_record(work):
-    w = SessionWriter(work / "rec", N)  # never closed: killed
+    w = SessionWriter(work / "rec", record_dtype(N))  # never closed: killed
     w.write(w.empty(2))
     manifest = json.loads((work / "rec" / output.MANIFEST_NAME).read_text())
     assert manifest["files"] == ["meta.yaml", "frames.bin", "events.log"] and manifest["writer"] == "bendsense record"
@@ -389,7 +389,7 @@ def test_a_killed_recording_is_still_bendsenses_and_user_files_stop_record(work)
     assert one_line_error(result) and "holds files bendsense did not write: USER_NOTES.txt" in result.output
     assert intact(planted) and len(read_session_dir(work / "rec")) == 2
     (work / "rec" / "USER_NOTES.txt").unlink()
-    with SessionWriter(work / "rec", N, overwrite=True) as w2:
+    with SessionWriter(work / "rec", record_dtype(N), overwrite=True) as w2:
         w2.write(w2.empty(1))
     assert len(read_session_dir(work / "rec")) == 1
 

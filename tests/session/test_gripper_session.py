@@ -153,7 +153,7 @@ def test_record_layout_with_lines():
 def test_native_session_stores_every_line_byte_for_byte(tmp_path):
     samples = [Sample(7, 100, 2, 1, 0, 30_000, (11, 12), (30_000, None, 45_000)),
                Sample(8, 200, 2, 0, 0, None, (13, 14), (None, 40_000, 46_000))]
-    with SessionWriter(tmp_path / "s", 2, adc_bits=12, n_lines=3) as w:
+    with SessionWriter(tmp_path / "s", record_dtype(2, n_lines=3), adc_bits=12) as w:
         w.write(sample_records(w.dtype, samples, [5, 6], [100, 200]))
     raw = (tmp_path / "s" / "frames.bin").read_bytes()
     assert raw == (struct.pack("<qQHBHi2H3i", 5, 100, 7, 1, 0, 30_000, 11, 12, 30_000, NO_PRESSURE, 45_000)
@@ -167,7 +167,7 @@ def test_native_session_stores_every_line_byte_for_byte(tmp_path):
 
 def test_one_line_sessions_are_as_before(tmp_path):
     samples = [Sample(1, 10, 1, 0, 0, 20_000, (5,)), Sample(2, 20, 1, 0, 0, 20_000, (6,), (20_000,))]
-    with SessionWriter(tmp_path / "one", 1) as w:
+    with SessionWriter(tmp_path / "one", record_dtype(1)) as w:
         w.write(sample_records(w.dtype, samples, [1, 2], [10, 20]))
     assert (tmp_path / "one" / "frames.bin").read_bytes() == (struct.pack("<qQHBHiH", 1, 10, 1, 0, 0, 20_000, 5)
                                                                 + struct.pack("<qQHBHiH", 2, 20, 2, 0, 0, 20_000, 6))
@@ -226,7 +226,7 @@ def test_native_reader_refuses_inconsistent_lines(tmp_path):
 
 
 def test_set_lines_only_before_the_first_record(tmp_path):
-    with SessionWriter(tmp_path / "s", 1) as w:
+    with SessionWriter(tmp_path / "s", record_dtype(1)) as w:
         w.set_lines(2)
         assert yaml.safe_load((tmp_path / "s" / "meta.yaml").read_text())["n_lines"] == 2
         w.write(sample_records(w.dtype, [Sample(1, 0, 1, 0, 0, 1e4, (1,), (1e4, 2e4))], [0], [0]))

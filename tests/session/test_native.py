@@ -103,7 +103,7 @@ def test_writer_layout_matches_the_format(tmp_path):
         ["adc", "(3,)<u2"],
     ]
     assert dtype_from_list(dtype_to_list(dtype)) == dtype
-    with SessionWriter(tmp_path / "w", 3, adc_bits=12, device={"firmware": "x"}, config={"a": 1}) as w:
+    with SessionWriter(tmp_path / "w", record_dtype(3), adc_bits=12, device={"firmware": "x"}, config={"a": 1}) as w:
         assert yaml.safe_load((tmp_path / "w" / "meta.yaml").read_text())["finished"] is False
         rec = w.empty(len(ROWS))
         for i, (r, tx) in enumerate(zip(ROWS, TX_DROPS)):
@@ -128,14 +128,27 @@ def test_writer_layout_matches_the_format(tmp_path):
 
 
 def test_existing_session_is_not_overwritten(tmp_path):
-    SessionWriter(tmp_path / "s", 2).close()
+    SessionWriter(tmp_path / "s", record_dtype(2)).close()
     with pytest.raises(OutputExistsError, match="exists and is not empty"):
-        SessionWriter(tmp_path / "s", 2)
-    with SessionWriter(tmp_path / "s", 2, overwrite=True) as w:
+        SessionWriter(tmp_path / "s", record_dtype(2))
+    with SessionWriter(tmp_path / "s", record_dtype(2), overwrite=True) as w:
         w.write(w.empty(3))
     assert len(read_session_dir(tmp_path / "s")) == 3
-    with SessionWriter(tmp_path / "t", 2) as w, pytest.raises(SessionError, match="records: expected dtype"):
+    with SessionWriter(tmp_path / "t", record_dtype(2)) as w, \
+            pytest.raises(SessionError, match="records: expected dtype"):
         w.write(np.zeros(2, dtype=record_dtype(3)))
+
+
+def test_the_writer_takes_a_record_dtype_only(tmp_path):
+    """The layout is record_dtype's, extra columns and lines included; anything else is refused before any output."""
+    laid_out = record_dtype(3, "<f8", [("temp_c", "<f4")], 2)
+    with SessionWriter(tmp_path / "s", laid_out) as w:
+        assert (w.n_channels, w.n_lines, w.dtype) == (3, 2, laid_out)
+    shuffled = np.dtype([(name, laid_out.fields[name][0]) for name in reversed(laid_out.names)])
+    for bad in (np.dtype([("a", "<i4")]), shuffled, 3, "<u2"):
+        with pytest.raises(SessionError, match=r"dtype: expected a record dtype \(record_dtype"):
+            SessionWriter(tmp_path / "t", bad)
+    assert not (tmp_path / "t").exists()
 
 
 def test_bad_meta_is_reported(tmp_path):
@@ -156,7 +169,7 @@ def test_bad_meta_is_reported(tmp_path):
 
 
 def test_empty_session_reads(tmp_path):
-    SessionWriter(tmp_path / "s", 4).close()
+    SessionWriter(tmp_path / "s", record_dtype(4)).close()
     s = read_session_dir(tmp_path / "s")
     assert len(s) == 0 and s.signals.shape == (0, 4)
 
@@ -221,7 +234,7 @@ def test_saved_version_1_session_still_loads():
 
 
 def test_killed_recording_is_read_and_flagged_unfinished(tmp_path, caplog):
-    w = SessionWriter(tmp_path / "s", 3, adc_bits=12)
+    w = SessionWriter(tmp_path / "s", record_dtype(3), adc_bits=12)
     rec = w.empty(6)
     rec["seq"] = np.arange(6)
     w.write(rec)
@@ -238,7 +251,7 @@ def test_killed_recording_is_read_and_flagged_unfinished(tmp_path, caplog):
 
 
 def test_finished_session_reports_lost_records_with_the_numbers(tmp_path):
-    with SessionWriter(tmp_path / "s", 2) as w:
+    with SessionWriter(tmp_path / "s", record_dtype(2)) as w:
         w.write(w.empty(1500))
     frames = tmp_path / "s" / "frames.bin"
     frames.write_bytes(frames.read_bytes()[: 745 * w.dtype.itemsize])
@@ -266,7 +279,7 @@ def test_a_new_sample_field_reaches_every_layer(tmp_path, monkeypatch):
     from bendsense.wire.frames import SAMPLE_FIELDS, SampleField
 
     old = tmp_path / "v2"
-    with SessionWriter(old, 2) as w:  # written before the field existed
+    with SessionWriter(old, record_dtype(2)) as w:  # written before the field existed
         w.write(native.sample_records(w.dtype, [SimpleNamespace(seq=0, status=0, tx_drops=0, pressure_pa=None,
                                                                 adc=(1, 2))], [0], [0]))
     temp = SampleField("temp_cdeg", "<i2", 3, "board temperature [0.01 °C]")
@@ -280,7 +293,7 @@ def test_a_new_sample_field_reaches_every_layer(tmp_path, monkeypatch):
     samples = [SimpleNamespace(seq=k, status=0, tx_drops=0, pressure_pa=20_000.4, adc=(k, 2 * k), temp_cdeg=2150 - k)
                for k in range(5)]
     path = tmp_path / "v3"
-    with SessionWriter(path, 2) as w:
+    with SessionWriter(path, record_dtype(2)) as w:
         w.write(native.sample_records(w.dtype, samples, range(0, 5000, 1000), range(0, 50, 10)))
     s = read_session(path)
     assert s.meta["version"] == 3

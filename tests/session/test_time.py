@@ -9,12 +9,12 @@ import pytest
 
 import bendsense
 from bendsense.errors import SessionError
-from bendsense.session.native import SessionWriter
+from bendsense.session.native import SessionWriter, record_dtype
 
 
 def _native(path, t_us, host_ns=None):
     n = len(t_us)
-    with SessionWriter(path, 4, adc_bits=12) as w:
+    with SessionWriter(path, record_dtype(4), adc_bits=12) as w:
         rec = w.empty(n)
         rec["t_us"] = t_us
         rec["host_ns"] = np.arange(n) * 2_000_000 if host_ns is None else host_ns

@@ -21,6 +21,7 @@ from bendsense.sim.gripper import (
     DEFAULT_CLOSE_PA,
     DEFAULT_TOUCH_PRESSURE_PA,
     GraspBoard,
+    Regulation,
     default_objects,
     gripper_config,
 )
@@ -35,7 +36,8 @@ TAU = 0.025
 @pytest.fixture(scope="module")
 def board():
     # coarse tables (2 kPa) keep the build short; the physics is tested in test_sim_grasp.py
-    return GraspBoard(gripper_config(3), default_objects(3), rate_hz=RATE, seed=0, tau_s=TAU, step_pa=2000.0)
+    return GraspBoard(gripper_config(3), default_objects(3), rate_hz=RATE, seed=0, regulation=Regulation(tau_s=TAU),
+                      step_pa=2000.0)
 
 
 def _truth_rows(path):

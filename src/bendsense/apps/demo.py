@@ -190,7 +190,7 @@ def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo, progress
     """Stream the virtual sensor through a pseudo-terminal, the driver and the recorder."""
     from bendsense.device.driver import Driver
     from bendsense.device.recorder import Recorder
-    from bendsense.device.simdevice import SimulatedDevice, default_source
+    from bendsense.device.simdevice import Firmware, SimulatedDevice, default_source
 
     n_frames = max(1, round(seconds * rate_hz))
     n_channels = config.sensor.n_segments
@@ -200,7 +200,8 @@ def _record(session_dir: Path, config, *, seconds, rate_hz, seed, echo, progress
         "demo": {"seed": seed, "rate_hz": rate_hz, "frames": n_frames, "scenario": "time-varying"},
     }
     device = SimulatedDevice(
-        source, rate_hz=rate_hz, n_channels=n_channels, max_frames=n_frames, firmware="bendsense-sim demo"
+        source, rate_hz=rate_hz, n_channels=n_channels, max_frames=n_frames,
+        firmware=Firmware(name="bendsense-sim demo"),
     )
     with device, Driver(device.port) as driver:
         hello = driver.hello

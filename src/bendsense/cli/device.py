@@ -546,10 +546,10 @@ def sim_device(
                 raise click.UsageError(f"{flag} does not apply to --replay: a recording is played back, not "
                                        "simulated")
 
-        dev = ReplayDevice(
-            replay_path, speed=speed, loop=loop, drop=drop, corrupt=corrupt, truncate=truncate, seed=seed,
-            autostart=autostart,
-        )
+        from bendsense.device.simdevice import Faults
+
+        faults = Faults(drop=drop, corrupt=corrupt, truncate=truncate, seed=seed)
+        dev = ReplayDevice(replay_path, speed=speed, loop=loop, faults=faults, autostart=autostart)
         return _serve(dev, seconds, replay=True)
     if speed != 1.0 or loop:
         raise click.BadParameter("--speed and --loop need --replay SESSION", param_hint="--speed/--loop")
@@ -596,7 +596,7 @@ def _check_grasp_flags(grasp, contact_s_m, channels) -> None:
 def _sim_board(given: dict, grasp: dict, errors: dict) -> None:
     """Build the simulated board's source (and truth file) and serve it (``given``: sim-device's options, by name)."""
     from bendsense.cli.sim import grasp_board
-    from bendsense.device.simdevice import DEFAULT_WATCHDOG_MS, SimulatedDevice, ramp_source, scripted_board
+    from bendsense.device.simdevice import DEFAULT_WATCHDOG_MS, Faults, SimulatedDevice, ramp_source, scripted_board
     from bendsense.sim.truth import TruthWriter, truth_columns
 
     rate_hz, seed, adc_bits, channels = given["rate_hz"], given["seed"], given["adc_bits"], given["channels"]
@@ -617,10 +617,7 @@ def _sim_board(given: dict, grasp: dict, errors: dict) -> None:
         rate_hz=rate_hz,
         n_channels=channels,
         adc_bits=adc_bits,
-        drop=given["drop"],
-        corrupt=given["corrupt"],
-        truncate=given["truncate"],
-        seed=seed,
+        faults=Faults(drop=given["drop"], corrupt=given["corrupt"], truncate=given["truncate"], seed=seed),
         autostart=given["autostart"],
         truth=truth,
         watchdog_ms=DEFAULT_WATCHDOG_MS if watchdog_ms is None else watchdog_ms,

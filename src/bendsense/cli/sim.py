@@ -300,7 +300,9 @@ def grasp_arguments(options: dict, *, gripper: bool = False) -> dict | None:
     -------
     dict or None
         ``fingers`` (None: the single actuator), ``stiffness_n_per_m``, ``contact_s_m``,
-        ``touch_pressure_pa``, ``max_pressure_pa``, ``tau_s`` and ``close_pa`` when given.
+        ``touch_pressure_pa`` and the ``regulation``
+        (:class:`~bendsense.sim.gripper.Regulation`: ``max_pressure_pa``, and ``tau_s`` and
+        ``close_pa`` when given).
     """
     import math
 
@@ -315,7 +317,7 @@ def grasp_arguments(options: dict, *, gripper: bool = False) -> dict | None:
     if kind == "rigid" and options.get("object_stiffness") is not None:
         raise click.BadParameter("applies to --object compliant only", param_hint="--object-stiffness")
     from bendsense.config import load_config
-    from bendsense.sim.gripper import DEFAULT_COMPLIANT_N_PER_M, DEFAULT_TOUCH_PRESSURE_PA
+    from bendsense.sim.gripper import DEFAULT_COMPLIANT_N_PER_M, DEFAULT_TOUCH_PRESSURE_PA, Regulation
     from bendsense.sim.regulator import DEFAULT_MAX_PRESSURE_PA
 
     if gripper and fingers is None:
@@ -341,12 +343,13 @@ def grasp_arguments(options: dict, *, gripper: bool = False) -> dict | None:
                                                                 or DEFAULT_COMPLIANT_N_PER_M),
         "contact_s_m": s_c,
         "touch_pressure_pa": touch_pa,
-        "max_pressure_pa": max_pa,
     }
+    regulation = {"max_pressure_pa": max_pa}
     if options.get("tau_ms") is not None:
-        arguments["tau_s"] = options["tau_ms"] / 1e3
+        regulation["tau_s"] = options["tau_ms"] / 1e3
     if close_pa is not None:
-        arguments["close_pa"] = close_pa
+        regulation["close_pa"] = close_pa
+    arguments["regulation"] = Regulation(**regulation)
     return arguments
 
 

@@ -16,6 +16,7 @@ _LAZY = {
     "Reading": "bendsense.device.driver",
     "Event": "bendsense.device.driver",
     "DeviceStats": "bendsense.device.driver",
+    "Reconnect": "bendsense.device.driver",
     "Recorder": "bendsense.device.recorder",
     "RecorderStats": "bendsense.device.recorder",
     "SimulatedDevice": "bendsense.device.simdevice",

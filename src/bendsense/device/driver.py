@@ -42,7 +42,7 @@ from bendsense.wire.frames import (
     encode_setpoint,
 )
 
-__all__ = ["Reading", "Event", "DeviceStats", "Driver", "DEFAULT_BAUDRATE"]
+__all__ = ["Reading", "Event", "DeviceStats", "Driver", "Reconnect", "DEFAULT_BAUDRATE"]
 
 log = logging.getLogger("bendsense.device")
 
@@ -85,6 +85,32 @@ class Event:
     text: str
 
 
+@dataclass(frozen=True, kw_only=True)
+class Reconnect:
+    """How a :class:`Driver` tries to get a vanished port back after a read error.
+
+    Attempt ``i`` (1-based) waits ``min(backoff_s * 2**(i - 1), 2 s)`` first, then opens
+    the port again (and repeats the HELLO_REQUEST and START it had sent).
+
+    Attributes
+    ----------
+    attempts : int
+        Reconnect attempts before giving up (0: none).
+    backoff_s : float
+        Delay before the first attempt; doubles each attempt, at most 2 s [s].
+    """
+
+    attempts: int = 5
+    backoff_s: float = 0.1
+
+    def __post_init__(self):
+        if isinstance(self.attempts, bool) or not isinstance(self.attempts, numbers.Integral) or self.attempts < 0:
+            raise DeviceError(f"reconnect.attempts: expected an integer >= 0, got {self.attempts!r}")
+        if isinstance(self.backoff_s, bool) or not isinstance(self.backoff_s, numbers.Real) \
+                or not 0 <= self.backoff_s < float("inf"):
+            raise DeviceError(f"reconnect.backoff_s: expected a time >= 0 [s], got {self.backoff_s!r}")
+
+
 @dataclass(frozen=True)
 class DeviceStats:
     """Counters of a driver (a snapshot)."""
@@ -123,14 +149,14 @@ class Driver:
         Capacity of the recorder queue [readings]; None: no queue (live value only).
     queue_block_s : float
         How long the reader blocks on a full queue before it counts a drop [s].
+    reconnect : Reconnect, optional
+        Reconnect attempts and their backoff after a read error; default ``Reconnect()``
+        (5 attempts from 0.1 s).
+
+    Attributes
+    ----------
     read_timeout_s : float
-        Serial read timeout; bounds how fast the reader notices :meth:`close` [s].
-    reconnect_attempts : int
-        Reconnect attempts after a read error before giving up (0: none).
-    reconnect_backoff_s : float
-        Delay before the first attempt; doubles each attempt, at most 2 s [s].
-    serial_kwargs : dict, optional
-        Further arguments of ``serial.serial_for_url``.
+        Serial read timeout (0.02 s); bounds how fast the reader notices :meth:`close` [s].
 
     Examples
     --------
@@ -139,6 +165,8 @@ class Driver:
     ...     for reading in dev:
     ...         print(reading.sample.adc)
     """
+
+    read_timeout_s = 0.02
 
     def __init__(
         self,
@@ -152,10 +180,7 @@ class Driver:
         hello_timeout_s: float = 2.0,
         queue_size: int | None = 10_000,
         queue_block_s: float = 0.05,
-        read_timeout_s: float = 0.02,
-        reconnect_attempts: int = 5,
-        reconnect_backoff_s: float = 0.1,
-        serial_kwargs: dict | None = None,
+        reconnect: Reconnect | None = None,
     ):
         if dialect not in ("binary", "line"):
             raise DeviceError(f"dialect: expected 'binary' or 'line', got {dialect!r}")
@@ -170,10 +195,9 @@ class Driver:
         self.handshake = bool(handshake) and dialect == "binary"
         self.hello_timeout_s = float(hello_timeout_s)
         self.queue_block_s = float(queue_block_s)
-        self.read_timeout_s = float(read_timeout_s)
-        self.reconnect_attempts = int(reconnect_attempts)
-        self.reconnect_backoff_s = float(reconnect_backoff_s)
-        self.serial_kwargs = dict(serial_kwargs or {})
+        if reconnect is not None and not isinstance(reconnect, Reconnect):
+            raise DeviceError(f"reconnect: expected a Reconnect, got {type(reconnect).__name__}")
+        self.reconnect = Reconnect() if reconnect is None else reconnect
         if dialect == "binary":
             self.decoder = Decoder()
         else:
@@ -204,7 +228,7 @@ class Driver:
     def _open_serial(self):
         import serial
 
-        kwargs = {"baudrate": self.baudrate, "timeout": self.read_timeout_s, **self.serial_kwargs}
+        kwargs = {"baudrate": self.baudrate, "timeout": self.read_timeout_s}
         try:
             try:
                 return serial.serial_for_url(self.port, write_timeout=1.0, **kwargs)
@@ -562,9 +586,9 @@ class Driver:
             self._ser.close()
         except Exception:  # noqa: BLE001
             pass
-        n = self.reconnect_attempts
+        n = self.reconnect.attempts
         for attempt in range(1, n + 1):
-            delay = min(self.reconnect_backoff_s * 2 ** (attempt - 1), 2.0)
+            delay = min(self.reconnect.backoff_s * 2 ** (attempt - 1), 2.0)
             if self._closing.wait(delay):
                 return False
             try:

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 
 from bendsense import output
 from bendsense.errors import DeviceError, OutputError
-from bendsense.session.native import SessionWriter, sample_records
+from bendsense.session.native import SessionWriter, record_dtype, sample_records
 
 __all__ = ["Recorder", "RecorderStats"]
 
@@ -153,16 +153,15 @@ class Recorder:
                     device["columns"] = list(drv.decoder.columns)
                 self._writer = SessionWriter(
                     self.path,
-                    n_channels,
+                    record_dtype(n_channels, "<u2" if drv.dialect == "binary" else "<f8"),
                     adc_bits=None if drv.hello is None else drv.hello.adc_bits,
                     device=device,
                     config=self.config,
                     meta=self.meta,
-                    adc_dtype="<u2" if drv.dialect == "binary" else "<f8",
                     overwrite=self.overwrite,
-                    fsync_interval_s=self.fsync_interval_s,
                     extra_files=self.extra_files,
                 )
+                self._writer.fsync_interval_s = self.fsync_interval_s
                 for ev in self._early_events:
                     self._writer.event(f"{ev.kind}: {ev.text}", ev.time_s)
                 self._early_events = []

@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
+from bendsense.device.simdevice import Firmware, SimulatedDevice, max_rate_hz
 from bendsense.errors import SessionError
 from bendsense.validation import short
 from bendsense.wire.frames import MAX_LINES
 
 __all__ = ["ReplayDevice", "replay_frames"]
+
+_FIRMWARE = Firmware(name="bendsense-replay 1")
 
 
 def replay_frames(session) -> dict:
@@ -109,7 +111,7 @@ class ReplayDevice(SimulatedDevice):
         Stream without waiting for START.
     **options
         Further options of :class:`~bendsense.device.simdevice.SimulatedDevice`
-        (fault injection, ``burst``).
+        (``faults``: dropped, corrupted, truncated frames).
 
     Notes
     -----
@@ -146,7 +148,7 @@ class ReplayDevice(SimulatedDevice):
         self._sent_k = 0
         super().__init__(self._source, rate_hz=_rate_hz(frames["t_us"]), n_channels=session.n_channels,
                          adc_bits=int(adc_bits), autostart=autostart,
-                         max_frames=None if loop else self.n_frames, firmware="bendsense-replay 1", **options)
+                         max_frames=None if loop else self.n_frames, firmware=_FIRMWARE, **options)
 
     def _source(self, k: int):
         i = k % self.n_frames

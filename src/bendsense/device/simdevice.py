@@ -35,7 +35,16 @@ import numpy as np
 from bendsense.errors import DeviceError
 from bendsense.wire.frames import Command, Decoder, FrameType, Setpoint, encode_hello, encode_sample, encode_text
 
-__all__ = ["SimulatedDevice", "SimStats", "default_source", "scripted_board", "ramp_source", "DEFAULT_WATCHDOG_MS"]
+__all__ = [
+    "SimulatedDevice",
+    "SimStats",
+    "Faults",
+    "Firmware",
+    "default_source",
+    "scripted_board",
+    "ramp_source",
+    "DEFAULT_WATCHDOG_MS",
+]
 
 log = logging.getLogger("bendsense.device.sim")
 
@@ -210,6 +219,66 @@ def ramp_source(n_channels: int = 16, adc_bits: int = 12, pressure_pa: float | N
     return source
 
 
+@dataclass(frozen=True, kw_only=True)
+class Faults:
+    """How a :class:`SimulatedDevice` misbehaves on purpose (every injection is counted in its stats).
+
+    Attributes
+    ----------
+    drop, corrupt, truncate : float
+        Probability per SAMPLE frame of each fault (at most one per frame): skipped (its
+        ``seq`` consumed, nothing sent), one bit flipped (always a CRC error at the
+        receiver), cut short (no trailing delimiter). Together at most 1.
+    disconnect_after : int, optional
+        Close the master after this many SAMPLE frames were generated (once the
+        receiver has read them, waiting at most 0.5 s), as if the cable were pulled.
+    seed : int, optional
+        Seed of the fault draws.
+
+    Raises
+    ------
+    DeviceError
+        For a probability outside [0, 1] or a sum above 1.
+    """
+
+    drop: float = 0.0
+    corrupt: float = 0.0
+    truncate: float = 0.0
+    disconnect_after: int | None = None
+    seed: int | None = None
+
+    def __post_init__(self):
+        for name in ("drop", "corrupt", "truncate"):
+            p = getattr(self, name)
+            if not 0.0 <= p <= 1.0:
+                raise DeviceError(f"{name}: expected a probability in [0, 1], got {p!r}")
+            object.__setattr__(self, name, float(p))
+        if self.drop + self.corrupt + self.truncate > 1.0:
+            raise DeviceError(f"drop + corrupt + truncate: expected <= 1, got "
+                              f"{self.drop + self.corrupt + self.truncate:g}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Firmware:
+    """What a :class:`SimulatedDevice`'s firmware says of itself in HELLO, and where its counters start.
+
+    Attributes
+    ----------
+    name : str
+        The firmware string of HELLO.
+    vref_mv : int
+        The ADC reference voltage of HELLO [mV].
+    start_seq, start_t_us : int
+        First sequence number and device clock [us]: a board that has been running a
+        while (to exercise the receiver's unwrapping of both).
+    """
+
+    name: str = "bendsense-sim 1"
+    vref_mv: int = 3300
+    start_seq: int = 0
+    start_t_us: int = 0
+
+
 @dataclass(frozen=True)
 class SimStats:
     """Exact counts of what a :class:`SimulatedDevice` did.
@@ -267,28 +336,21 @@ class SimulatedDevice:
         a method ``setpoint(line, pressure_pa) -> bool`` takes the SETPOINT frames (a
         :class:`~bendsense.sim.gripper.GraspBoard`); other sources answer them with a
         TEXT line. A source with a method ``release()`` (set-point 0 on every line) gets
-        the watchdog. None: :func:`default_source`, the virtual sensor.
+        the watchdog. None: :func:`default_source`, the virtual sensor (seed 0).
     rate_hz : float
         Frame rate [Hz].
     n_channels, adc_bits : int
         Reported in HELLO; counts are masked to ``adc_bits``.
-    drop, corrupt, truncate : float
-        Probability per SAMPLE frame of each fault (at most one per frame).
-    disconnect_after : int, optional
-        Close the master after this many SAMPLE frames were generated (once the
-        receiver has read them, waiting at most 0.5 s).
-    seed : int, optional
-        Seed of the fault generator.
+    faults : Faults, optional
+        Dropped, corrupted and truncated frames, a disconnect, and their seed; default
+        ``Faults()``: none.
     autostart : bool
         Stream from the start without waiting for START (a free-running board).
     max_frames : int, optional
         Stop streaming after this many generated frames.
-    firmware, vref_mv : str, int
-        Reported in HELLO.
-    start_seq, start_t_us : int
-        First sequence number and device clock (to exercise wrapping).
-    burst : int
-        Most frames written in one go when the sender is behind.
+    firmware : Firmware, optional
+        Its name and reference voltage in HELLO, and its first sequence number and
+        device clock; default ``Firmware()``.
     truth : TruthWriter, optional
         Gets ``write(seq, t_us, truth)`` for every SAMPLE frame generated (dropped ones
         too: match rows by ``seq``) and ``flush()`` after every burst
@@ -300,12 +362,19 @@ class SimulatedDevice:
         sends a TEXT frame saying so and logs a warning. The next non-zero SETPOINT
         arms it again. Only a source with ``release()`` has it.
 
+    Attributes
+    ----------
+    burst : int
+        Most frames written in one go when the sender is behind (64).
+
     Notes
     -----
-    The device clock of frame ``k`` is exactly ``start_t_us + round(k * 1e6 / rate_hz)``
-    (mod 2**32), whatever the host's timing jitter; frames are paced against the host
-    clock and sent in bursts when the thread wakes up late.
+    The device clock of frame ``k`` is exactly ``firmware.start_t_us + round(k * 1e6 /
+    rate_hz)`` (mod 2**32), whatever the host's timing jitter; frames are paced against
+    the host clock and sent in bursts when the thread wakes up late.
     """
+
+    burst = 64
 
     def __init__(
         self,
@@ -314,18 +383,10 @@ class SimulatedDevice:
         rate_hz: float = 500.0,
         n_channels: int = 16,
         adc_bits: int = 12,
-        drop: float = 0.0,
-        corrupt: float = 0.0,
-        truncate: float = 0.0,
-        disconnect_after: int | None = None,
-        seed=None,
+        faults: Faults | None = None,
         autostart: bool = False,
         max_frames: int | None = None,
-        firmware: str = "bendsense-sim 1",
-        vref_mv: int = 3300,
-        start_seq: int = 0,
-        start_t_us: int = 0,
-        burst: int = 64,
+        firmware: Firmware | None = None,
         truth=None,
         watchdog_ms: float = DEFAULT_WATCHDOG_MS,
     ):
@@ -335,16 +396,16 @@ class SimulatedDevice:
             # the board would simulate rate_hz x 0.1 s of frames per block and queue what the link cannot carry
             raise DeviceError(f"rate_hz: expected at most {max_rate_hz(n_channels):,} Hz (what a USB full-speed "
                               f"link carries for {n_channels} channels), got {rate_hz:g}")
-        for name, p in (("drop", drop), ("corrupt", corrupt), ("truncate", truncate)):
-            if not 0.0 <= p <= 1.0:
-                raise DeviceError(f"{name}: expected a probability in [0, 1], got {p!r}")
-        if drop + corrupt + truncate > 1.0:
-            raise DeviceError(f"drop + corrupt + truncate: expected <= 1, got {drop + corrupt + truncate:g}")
+        faults = Faults() if faults is None else faults
+        firmware = Firmware() if firmware is None else firmware
+        for name, value, kind in (("faults", faults, Faults), ("firmware", firmware, Firmware)):
+            if not isinstance(value, kind):
+                raise DeviceError(f"{name}: expected a {kind.__name__}, got {type(value).__name__}")
         if isinstance(watchdog_ms, bool) or not isinstance(watchdog_ms, (int, float)) \
                 or not 0 <= watchdog_ms < float("inf"):
             raise DeviceError(f"watchdog_ms: expected a time >= 0 [ms] (0: no watchdog), got {watchdog_ms!r}")
         if source is None:
-            source = default_source(n_channels=n_channels, adc_bits=adc_bits, rate_hz=rate_hz, seed=seed)
+            source = default_source(n_channels=n_channels, adc_bits=adc_bits, rate_hz=rate_hz)
         self._source_fn = source if callable(source) and not hasattr(source, "__next__") else None
         self._source_it = None if self._source_fn is not None else iter(source)
         self._on_setpoint = getattr(source, "setpoint", None)
@@ -356,16 +417,13 @@ class SimulatedDevice:
         self.rate_hz = float(rate_hz)
         self.n_channels = int(n_channels)
         self.adc_bits = int(adc_bits)
-        self.drop, self.corrupt, self.truncate = float(drop), float(corrupt), float(truncate)
-        self.disconnect_after = disconnect_after
+        self.faults = faults
         self.autostart = bool(autostart)
         self.max_frames = max_frames
         self.firmware = firmware
-        self.vref_mv = int(vref_mv)
-        self.burst = int(burst)
-        self._rng = random.Random(seed)
-        self._seq = int(start_seq) & 0xFFFF
-        self._t0_us = int(start_t_us)
+        self._rng = random.Random(faults.seed)
+        self._seq = int(firmware.start_seq) & 0xFFFF
+        self._t0_us = int(firmware.start_t_us)
         self._mask = (1 << self.adc_bits) - 1
         self._lock = threading.Lock()
         self._counts = dict.fromkeys(
@@ -527,7 +585,7 @@ class SimulatedDevice:
                     if self.max_frames is not None and k >= self.max_frames:
                         self._exhausted = True
                         break
-                    if self.disconnect_after is not None and k >= self.disconnect_after:
+                    if self.faults.disconnect_after is not None and k >= self.faults.disconnect_after:
                         self._flush(wait_s=0.5)
                         self._wait_read(0.5)
                         self._close_fds(disconnected=True)
@@ -568,8 +626,8 @@ class SimulatedDevice:
                 self.n_channels,
                 self.adc_bits,
                 round(self.rate_hz) & 0xFFFF,
-                self.vref_mv,
-                self.firmware,
+                int(self.firmware.vref_mv),
+                self.firmware.name,
             )
             with self._lock:
                 self._counts["hellos"] += 1
@@ -622,9 +680,10 @@ class SimulatedDevice:
         if self._truth is not None:
             self._truth.write(seq, t_us & 0xFFFFFFFF, {} if truth is None else truth)
         r = self._rng.random()
+        drop, corrupt, truncate = self.faults.drop, self.faults.corrupt, self.faults.truncate
         with self._lock:
             self._counts["generated"] += 1
-        if r < self.drop:
+        if r < drop:
             with self._lock:
                 self._counts["dropped"] += 1
             return
@@ -635,10 +694,10 @@ class SimulatedDevice:
         else:
             frame = encode_sample(seq, t_us, counts.tolist(), pressure_pa=pressure, status=status, tx_drops=tx_drops)
         kind = "sent"
-        if r < self.drop + self.corrupt:
+        if r < drop + corrupt:
             frame = self._flip_one_bit(frame)
             kind = "corrupted"
-        elif r < self.drop + self.corrupt + self.truncate:
+        elif r < drop + corrupt + truncate:
             frame = frame[: self._rng.randrange(2, len(frame) - 1)]
             kind = "truncated"
         if self._queue_bytes(frame):

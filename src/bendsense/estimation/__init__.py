@@ -275,9 +275,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         o.guess_n[...] = np.nan
         tip_angle = (fr.tip_shape if pb.shape_angle else fr.theta)
         D = constraint_basis(constraint, tip_angle, direction=pb.direction, follower_angle_rad=pb.follower_angle)[0]
-        u, run_status, iters = paper_fit(L, pb.s, pb.w, ref.Lc, pb.wload, fr.p0, fr.ei, fr.k0, D,
-                                         np.broadcast_to(pb.ffix, (B, 2)), pb.lower,
-                                         np.maximum(np.zeros((B, k)), pb.lower))
+        u, run_status, iters = paper_fit(pb, fr, D, ref.Lc)
         _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _REF, _c(u),
                   _c(run_status, np.int64), out)
     if uncertainty == "none":

@@ -15,21 +15,46 @@ _PAPER_ODE_TOL = 1e-9
 _PAPER_BOUND_N = 5.0  # far beyond what bends (or buckles) a soft actuator of this size
 
 
-def paper_fit(L, s, wq, Lc, wload, p0_all, ei_all, k0_all, D_all, ffix_all, lower, u0):
+def paper_fit(problem, frames, D_all, Lc):
     """Shooting beam solver inside Nelder–Mead (free) or SLSQP (constrained), frame by frame.
 
-    Returns ``u`` (B, k), the status per frame (``Status.OK`` or ``NOT_CONVERGED``) and
-    the objective evaluations.
+    Each frame starts at ``u = max(0, lower)`` (zero force, where fminsearch/fmincon would).
+
+    Parameters
+    ----------
+    problem : Problem
+        The estimate's constants (:class:`~bendsense.estimation.problem.Problem`): the
+        comparison arc lengths ``s`` and weights ``w``, the length ``L``, the distributed
+        load ``wload``, the fixed force ``ffix`` and the bounds ``lower`` of ``u``.
+    frames : Frames
+        The frames' inputs (:class:`~bendsense.estimation.problem.Frames`): the reference
+        points ``p0`` (B, M, 2) [m], ``ei`` (B,) [N·m²] and ``k0`` (B,) [1/m].
+    D_all : ndarray, shape (B, 2, k)
+        Each frame's constraint basis: ``F = ffix + D u``.
+    Lc : float
+        Length of the compared arc [m] (the objective is the mean squared distance in mm²).
+
+    Returns
+    -------
+    u : ndarray, shape (B, k)
+        The fitted force coordinates.
+    status : ndarray of int, shape (B,)
+        ``Status.OK`` or ``Status.NOT_CONVERGED`` per frame.
+    nfev : ndarray of int, shape (B,)
+        Objective evaluations per frame.
     """
     from scipy.optimize import minimize
 
-    B, k = u0.shape
+    L, s, wq, wload, ffix, lower = problem.L, problem.s, problem.w, problem.wload, problem.ffix, problem.lower
+    p0_all, ei_all, k0_all = frames.p0, frames.ei, frames.k0
+    B, k = len(D_all), lower.size
+    u0 = np.maximum(np.zeros((B, k)), lower)
     scale = 1.0 / (Lc * 1e-6)  # objective in mm² (mean squared distance)
     u_out = np.empty((B, k))
     status = np.full(B, int(Status.OK))
     nfev = np.zeros(B, dtype=int)
     for b in range(B):
-        p0, ffix, D = p0_all[b], ffix_all[b], D_all[b]
+        p0, D = p0_all[b], D_all[b]
         ei, k0 = float(ei_all[b]), float(k0_all[b])
 
         def objective(F, p0=p0, ei=ei, k0=k0):

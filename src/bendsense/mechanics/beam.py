@@ -54,6 +54,7 @@ __all__ = [
     "BeamConvergenceWarning",
     "solve_beam",
     "solve",
+    "FastOptions",
     "free_arc",
     "DEFAULT_NODES",
     "DEFAULT_POINTS",
@@ -72,6 +73,41 @@ NEWTON_MAX_ITER = 30
 
 class BeamConvergenceWarning(ConvergenceWarning):
     """Some frames of a beam solve did not converge or are unstable (``success=False``)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class FastOptions:
+    """How the fast spectral solver (:func:`solve`) runs: its grid, its Newton iteration, what it returns.
+
+    Attributes
+    ----------
+    n_nodes : int
+        Chebyshev–Lobatto nodes of the collocation (at least 4).
+    tol : float
+        Newton stops when the angle error left is below ``tol`` [rad].
+    max_iter : int
+        Newton iterations per solve (per continuation step).
+    continuation : bool
+        With a warm start: False reports a frame beyond the convexity bound whose
+        warm-started Newton converged to an *unstable* equilibrium as failed
+        (``success=False``) instead of re-solving it by load continuation from the
+        unloaded arc. Frames that converged to a stable equilibrium far from the
+        start, or did not converge, are still continued.
+    sensitivities : bool
+        Also return ∂r/∂F and ∂φ/∂F (and ∂/∂s_c of a contact) from the converged Jacobian.
+    """
+
+    n_nodes: int = DEFAULT_NODES
+    tol: float = NEWTON_TOL
+    max_iter: int = NEWTON_MAX_ITER
+    continuation: bool = True
+    sensitivities: bool = False
+
+    def __post_init__(self):
+        n = self.n_nodes
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 4:
+            raise ArgumentError(f"n_nodes: expected an integer >= 4, got {n!r}")
+        object.__setattr__(self, "n_nodes", int(n))
 
 
 @dataclass(frozen=True)
@@ -339,13 +375,9 @@ def solve(
     base_angle_rad,
     s_m,
     *,
-    n_nodes: int = DEFAULT_NODES,
     initial=None,
-    sensitivities: bool = False,
-    tol: float = NEWTON_TOL,
-    max_iter: int = NEWTON_MAX_ITER,
-    continuation: bool = True,
     contact_s_m=None,
+    options: FastOptions = FastOptions(),
 ) -> BeamSolution:
     """Fast spectral solver on already validated arrays (compiled kernels: :mod:`bendsense.mechanics._beam_kernels`).
 
@@ -360,29 +392,20 @@ def solve(
         Tip force F [N] and distributed load w [N/m] in the base frame.
     s_m : ndarray, shape (M,)
         Output arc lengths 0 ≤ s ≤ L [m].
-    n_nodes : int
-        Chebyshev–Lobatto nodes of the collocation.
     initial : BeamSolution or ndarray, shape (..., n_nodes), optional
         Warm start: a previous solution (its ``state``) or φ at the nodes.
-    sensitivities : bool
-        Also return ∂r/∂F and ∂φ/∂F from the converged Jacobian.
-    tol : float
-        Newton stops when the angle error left is below ``tol`` [rad].
-    max_iter : int
-        Newton iterations per solve (per continuation step).
-    continuation : bool
-        With ``initial``: False reports a frame beyond the convexity bound whose
-        warm-started Newton converged to an *unstable* equilibrium as failed
-        (``success=False``) instead of re-solving it by load continuation from the
-        unloaded arc. Frames that converged to a stable equilibrium far from the
-        start, or did not converge, are still continued.
     contact_s_m : ndarray, shape (...), optional
         Arc length s_c of the force's point, 0 < s_c ≤ L [m]; None: the tip.
+    options : FastOptions, optional
+        Nodes, Newton tolerance and iterations, continuation, sensitivities; default
+        ``FastOptions()``.
 
     Returns
     -------
     BeamSolution
     """
+    n_nodes, tol, max_iter = options.n_nodes, options.tol, options.max_iter
+    sensitivities, continuation = options.sensitivities, options.continuation
     ops = _operators(int(n_nodes))
     n = ops.n
     L = float(length_m)
@@ -718,26 +741,11 @@ def solve_beam(
         if method != "fast":
             raise ArgumentError("contact_s_m: only available with method='fast'")
     if method == "fast":
-        if isinstance(n_nodes, bool) or not isinstance(n_nodes, (int, np.integer)) or n_nodes < 4:
-            raise ArgumentError(f"n_nodes: expected an integer >= 4, got {n_nodes!r}")
+        options = FastOptions(n_nodes=n_nodes, tol=tol, max_iter=max_iter, sensitivities=sensitivities)
         if contact_s_m is not None and n_nodes < 2 * _k.MIN_DOMAIN - 1:
             raise ArgumentError(f"n_nodes: a force along the body (contact_s_m) needs >= {2 * _k.MIN_DOMAIN - 1} "
                                 f"nodes, got {n_nodes!r}")
-        sol = solve(
-            L,
-            ei,
-            k0,
-            F,
-            w,
-            base,
-            s,
-            n_nodes=int(n_nodes),
-            initial=initial,
-            sensitivities=sensitivities,
-            tol=tol,
-            max_iter=max_iter,
-            contact_s_m=contact_s_m,
-        )
+        sol = solve(L, ei, k0, F, w, base, s, initial=initial, contact_s_m=contact_s_m, options=options)
     elif method in ("shooting", "paper"):
         if sensitivities:
             raise ArgumentError("sensitivities: only available with method='fast'")

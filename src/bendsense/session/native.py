@@ -290,6 +290,21 @@ def dtype_from_list(pairs, *, version: int = FORMAT_VERSION, n_channels: int | N
     return dt
 
 
+def _layout(dtype) -> tuple:
+    """``(n_channels, adc_dtype, extra_fields, n_lines)`` of a dtype :func:`record_dtype` made; else SessionError."""
+    dt = dtype if isinstance(dtype, np.dtype) else None
+    adc = None if dt is None or dt.names is None or "adc" not in dt.names else dt.fields["adc"][0]
+    if adc is None or adc.subdtype is None or len(adc.shape) != 1:
+        raise SessionError(f"dtype: expected a record dtype (record_dtype(n_channels, ...)), got {short(dtype)}")
+    lines = dt.fields[LINES_FIELD][0].shape[0] if LINES_FIELD in dt.names else 1
+    standard = {HOST_FIELD[0], *(f.name for f in SAMPLE_FIELDS), "adc", LINES_FIELD}
+    extra = tuple((name, dt.fields[name][0].str) for name in dt.names if name not in standard)
+    layout = (adc.shape[0], adc.base.str, extra, lines)
+    if record_dtype(*layout) != dt:
+        raise SessionError(f"dtype: expected a record dtype (record_dtype(n_channels, ...)), got {short(dtype)}")
+    return layout
+
+
 def is_session_dir(path) -> bool:
     """Tell whether ``path`` is a directory holding ``meta.yaml`` or ``frames.bin``.
 
@@ -329,8 +344,11 @@ class SessionWriter:
     ----------
     path : path
         Session directory; created. An existing session is refused unless ``overwrite``.
-    n_channels : int
-        Number of ADC channels N.
+    dtype : numpy.dtype
+        The record layout, as :func:`record_dtype` makes it: the channels N, the dtype of
+        the ADC values, further per-frame columns and the pressure lines (more than one is
+        recorded in ``meta.yaml`` as ``n_lines``; :meth:`set_lines` changes them before
+        the first record).
     adc_bits : int, optional
         ADC resolution (from the HELLO).
     device : dict, optional
@@ -339,15 +357,9 @@ class SessionWriter:
         Config snapshot stored in ``meta.yaml``.
     meta : dict, optional
         Further metadata.
-    adc_dtype : str
-        dtype of the ADC values (see :func:`record_dtype`).
-    extra_fields : sequence of (name, dtype str)
-        Further per-frame columns.
     overwrite : bool
         Replace an existing session (only what bendsense wrote there, see
         :mod:`bendsense.output`; a directory with other files is refused).
-    fsync_interval_s : float
-        Longest time between ``os.fsync`` calls while writing [s].
     inputs : iterable of paths
         Inputs of the command, never to be written over.
     writer : str
@@ -355,42 +367,41 @@ class SessionWriter:
     extra_files : sequence of str
         Further files written into the session directory by others (e.g. the
         ``results.csv`` of ``record --estimate``), listed in the manifest as bendsense's.
-    n_lines : int, default 1
-        Pressure lines of the board (1..255; see :func:`record_dtype`); more than one is
-        recorded in ``meta.yaml`` as ``n_lines``. :meth:`set_lines` changes it before
-        the first record.
+
+    Attributes
+    ----------
+    fsync_interval_s : float
+        Longest time between ``os.fsync`` calls while writing [s] (0.5).
 
     Notes
     -----
     :meth:`write` and :meth:`event` may be called from different threads.
     """
 
+    fsync_interval_s = 0.5
+
     def __init__(
         self,
         path,
-        n_channels: int,
+        dtype: np.dtype,
         *,
         adc_bits: int | None = None,
         device: dict | None = None,
         config=None,
         meta: dict | None = None,
-        adc_dtype: str = "<u2",
-        extra_fields=(),
         overwrite: bool = False,
-        fsync_interval_s: float = 0.5,
         inputs=(),
         writer: str = "bendsense record",
         extra_files=(),
-        n_lines: int = 1,
     ):
         from bendsense import output
 
+        n_channels, adc_dtype, extra_fields, n_lines = _layout(dtype)
         self.path = Path(path)
-        self.dtype = record_dtype(n_channels, adc_dtype, extra_fields, n_lines)
-        self._layout = (adc_dtype, tuple(extra_fields))
+        self.dtype = dtype
+        self._layout = (adc_dtype, extra_fields)
         self.n_channels = int(n_channels)
         self.n_lines = int(n_lines)
-        self.fsync_interval_s = float(fsync_interval_s)
         # written in place (a recording must survive being killed): the output layer checks
         # and locks the directory, removes an earlier session there (only what bendsense
         # wrote) and writes the manifest before any data
@@ -839,14 +850,12 @@ def import_session_csv(csv_path, session_dir, *, overwrite: bool = False) -> Non
     n = len(s)
     writer = SessionWriter(
         session_dir,
-        s.n_channels,
-        adc_dtype="<u2" if counts else "<f8",
-        extra_fields=[(k, dt) for k, (_, dt) in extra_cols.items()],
+        record_dtype(s.n_channels, "<u2" if counts else "<f8", [(k, dt) for k, (_, dt) in extra_cols.items()],
+                     s.n_lines),
         meta={"imported_from": str(csv_path), "t_offset_s": float(s.t_s[0]) if n else 0.0, "csv_meta": s.meta},
         overwrite=overwrite,
         inputs=[csv_path],
         writer="bendsense import",
-        n_lines=s.n_lines,
     )
     try:
         rec = writer.empty(n)

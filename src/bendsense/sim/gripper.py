@@ -38,6 +38,7 @@ __all__ = [
     "DEFAULT_CLOSE_PA",
     "DEFAULT_COMPLIANT_N_PER_M",
     "GraspBoard",
+    "Regulation",
     "ScriptedBoard",
     "gripper_config",
     "default_objects",
@@ -119,6 +120,34 @@ def _per_finger(name, value, k) -> list:
     return values
 
 
+@dataclass(frozen=True, kw_only=True)
+class Regulation:
+    """How a simulated board drives its pressure lines: the regulators and the profile they follow.
+
+    Every line's regulator (:class:`~bendsense.sim.regulator.PressureRegulators`) lags
+    its set-point by ``tau_s`` and holds it in ``[0, max_pressure_pa]``; a line the host
+    does not drive follows the scenario's closing profile
+    (:func:`~bendsense.sim.regulator.closing_profile`). ``scenario.yaml`` of ``simulate
+    gripper`` writes these four under ``regulators``. :class:`GraspBoard` checks them.
+
+    Attributes
+    ----------
+    tau_s : float
+        The regulators' time constant [s].
+    max_pressure_pa : float
+        Their supply limit [Pa] (also the top of the fingers' pressure tables).
+    close_pa : float
+        The closing profile's set-point while closed [Pa].
+    period_s : float
+        The closing profile's period [s].
+    """
+
+    tau_s: float = DEFAULT_TAU_S
+    max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA
+    close_pa: float = DEFAULT_CLOSE_PA
+    period_s: float = 8.0
+
+
 @dataclass(frozen=True, eq=False)
 class _Finger:
     name: str
@@ -147,10 +176,9 @@ class GraspBoard:
         Frame rate [Hz].
     seed : int, optional
         Seed of the sensor hardware (shared by the fingers) and of the noise; None: 0.
-    tau_s, max_pressure_pa : float
-        The regulators' time constant [s] and limit [Pa].
-    close_pa, period_s : float
-        The scenario's closing set-point [Pa] and its period [s] (:func:`closing_profile`).
+    regulation : Regulation, optional
+        The regulators' time constant and limit, and the scenario's closing set-point and
+        period; default ``Regulation()``.
     noise_counts : float
         Sensor noise [counts].
     adc_bits : int
@@ -170,6 +198,8 @@ class GraspBoard:
         Board channels (the highest mapped) and pressure lines.
     truth_fingers : list of str or None
         The fingers' names for the truth columns; None for a single actuator.
+    regulation : Regulation
+        How the lines are driven (as given).
     regulators : PressureRegulators
         The lines' regulators (replaced by :meth:`reset`).
     profile : object
@@ -178,14 +208,18 @@ class GraspBoard:
         Name → :class:`~bendsense.sim.grasp.FingerGrasp`.
     """
 
-    def __init__(self, config, objects, *, rate_hz: float, seed: int | None = 0, tau_s: float = DEFAULT_TAU_S,
-                 max_pressure_pa: float = DEFAULT_MAX_PRESSURE_PA, close_pa: float = DEFAULT_CLOSE_PA,
-                 period_s: float = 8.0, noise_counts: float = 1.5, adc_bits: int = 12, step_pa: float = 500.0,
-                 **mismatch):
+    def __init__(self, config, objects, *, rate_hz: float, seed: int | None = 0, regulation: Regulation | None = None,
+                 noise_counts: float = 1.5, adc_bits: int = 12, step_pa: float = 500.0, **mismatch):
         from bendsense.sim.actuator import SimulatedActuator
         from bendsense.sim.sensor import VirtualSensor
 
         seed = 0 if seed is None else seed
+        if regulation is None:
+            regulation = Regulation()
+        elif not isinstance(regulation, Regulation):
+            raise ConfigError(f"regulation: expected a Regulation, got {type(regulation).__name__}")
+        self.regulation = regulation
+        max_pressure_pa = regulation.max_pressure_pa
         single = not hasattr(config, "fingers")
         members = [(None, config, tuple(range(1, config.sensor.n_segments + 1)), 0)] if single else [
             (f.name, f.config, tuple(f.channels), int(f.pressure_line)) for f in config.fingers]
@@ -197,9 +231,9 @@ class GraspBoard:
         self.n_lines = max(m[3] for m in members) + 1
         self.single = single
         self.rate_hz = float(rate_hz)
-        profile = self.profile = _Profile(float(close_pa), float(period_s))
+        profile = self.profile = _Profile(float(regulation.close_pa), float(regulation.period_s))
         self._seed = seed
-        self._regulator_options = {"tau_s": tau_s, "max_pressure_pa": max_pressure_pa, "profile": profile}
+        self._regulator_options = {"tau_s": regulation.tau_s, "max_pressure_pa": max_pressure_pa, "profile": profile}
         self.reset()  # checks the regulators' options before the slow tables
         self._fingers = []
         sensors = {}

@@ -66,8 +66,9 @@ def simulate_gripper(out_dir, fingers: int = 3, *, seed: int | None = 0, rate_hz
     overwrite : bool
         Replace a previous bendsense output in ``out_dir``.
     **board
-        ``tau_s``, ``max_pressure_pa``, ``close_pa``, ``period_s``, ``noise_counts`` of
-        :class:`~bendsense.sim.gripper.GraspBoard`.
+        ``regulation`` (:class:`~bendsense.sim.gripper.Regulation`: the regulators' ``tau_s``
+        and ``max_pressure_pa``, the closing profile's ``close_pa`` and ``period_s``) and
+        ``noise_counts`` of :class:`~bendsense.sim.gripper.GraspBoard`.
 
     Returns
     -------

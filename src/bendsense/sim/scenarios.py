@@ -118,6 +118,7 @@ ALONG_BODY_FRACTIONS = (0.5, 0.7, 0.85, 1.0, 0.6, 0.9)
 
 _FORMAT = "bendsense-sim-scenario"
 _FORMAT_VERSION = 1
+_BLOCK_S = 0.1  # time simulated per batch of time_varying_frames (one batched beam solve) [s]
 # a spawn key apart from the two that VirtualSensor.from_config uses for the same seed
 _STREAM_BASE = 1000
 
@@ -224,7 +225,6 @@ def time_varying_frames(
     *,
     truth: bool = False,
     duration_s: float | None = None,
-    block_s: float = 0.1,
     contact_n: float = 0.15,
     contact_s_m=None,
     noise_counts: float = 1.5,
@@ -234,7 +234,7 @@ def time_varying_frames(
     """Stream the frames of the ``time-varying`` scenario one at a time, at any rate.
 
     This is the default source of the simulated device (``bendsense.device.simdevice``)
-    and of ``bendsense demo``. Frames are simulated in blocks of ``block_s`` seconds
+    and of ``bendsense demo``. Frames are simulated in blocks of 0.1 s
     (one batched beam solve per block) and yielded one by one; the stream is endless
     unless ``duration_s`` is given. The hysteresis state carries over between blocks.
     A frame whose beam solve fails repeats the last valid shape (with fresh noise) and
@@ -252,8 +252,6 @@ def time_varying_frames(
         Also yield the ground truth of each frame.
     duration_s : float, optional
         Stop after this time [s].
-    block_s : float
-        Frames simulated per batch [s].
     contact_n : float
         Contact force magnitude while on [N].
     contact_s_m : None, float or "along-body"
@@ -280,7 +278,7 @@ def time_varying_frames(
         (M,), ``positions_m`` (M, 2), ``s_m`` (M,).
     """
     rate = _positive_option("rate_hz", rate_hz)
-    block = max(1, round(rate * _positive_option("block_s", block_s)))
+    block = max(1, round(rate * _BLOCK_S))
     total = None if duration_s is None else round(rate * _positive_option("duration_s", duration_s))
     sim = _actuator(config, seed, sensor=sensor, noise_counts=noise_counts, **mismatch)
     touch_locations(0.0, sim.config.actuator.length_m, contact_s_m)  # a bad location fails here, not mid-stream

@@ -32,7 +32,7 @@ sys.path.insert(0, str(HERE.parents[2] / "src"))
 
 from bendsense.device.driver import Driver  # noqa: E402
 from bendsense.device.recorder import Recorder  # noqa: E402
-from bendsense.device.simdevice import SimulatedDevice, default_source  # noqa: E402
+from bendsense.device.simdevice import Faults, Firmware, SimulatedDevice, default_source  # noqa: E402
 
 STREAM = HERE / "stream_v1.bin"
 SESSION = HERE / "session_v2"
@@ -70,8 +70,9 @@ def main():
             yield (None if k % 37 == 5 else pressure), counts
 
     shutil.rmtree(SESSION, ignore_errors=True)
-    sim = SimulatedDevice(source(), rate_hz=RATE_HZ, n_channels=16, adc_bits=12, drop=0.02, corrupt=0.01, seed=13,
-                          max_frames=FRAMES, start_seq=65536 - 120, start_t_us=2**32 - 100_000)
+    sim = SimulatedDevice(source(), rate_hz=RATE_HZ, n_channels=16, adc_bits=12,
+                          faults=Faults(drop=0.02, corrupt=0.01, seed=13), max_frames=FRAMES,
+                          firmware=Firmware(start_seq=65536 - 120, start_t_us=2**32 - 100_000))
     with sim, CapturingDriver(sim.port) as drv:
         rec = Recorder(drv, SESSION, meta={"fixture": "tests/data/formats/make.py"})
         drv.start()
@@ -102,7 +103,7 @@ def main_lines():
     seq = (65536 - 60 + k) % 65536  # the sequence wraps
     session = Session(k * 1e-3, counts.astype(float), pressure, seq=seq, extra={"status": (k % 5 == 0) * 2})
     shutil.rmtree(SESSION_LINES, ignore_errors=True)
-    dev = ReplayDevice(session, adc_bits=12, drop=0.02, corrupt=0.02, seed=5)
+    dev = ReplayDevice(session, adc_bits=12, faults=Faults(drop=0.02, corrupt=0.02, seed=5))
     with dev, CapturingDriver(dev.port) as drv:
         rec = Recorder(drv, SESSION_LINES, meta={"fixture": "tests/data/formats/make.py"})
         drv.start()

@@ -14,7 +14,7 @@ import yaml
 REPO = Path(__file__).resolve().parents[3]
 ROOT = REPO / "tests" / "data" / "invalid"
 sys.path.insert(0, str(REPO / "src"))
-from bendsense.session.native import SessionWriter  # noqa: E402
+from bendsense.session.native import SessionWriter, record_dtype  # noqa: E402
 
 N = 16
 OFFSET = [2000.0 + 10 * i for i in range(N)]
@@ -257,7 +257,7 @@ shutil.rmtree(NAT, ignore_errors=True)
 
 def native(name, expect, records=40, mutate_meta=None, mutate_bytes=None, n=N, adc_bits=12, cli_only=False):
     d = NAT / name
-    with SessionWriter(d, n, adc_bits=adc_bits, device={"firmware": "corpus"}) as w:
+    with SessionWriter(d, record_dtype(n), adc_bits=adc_bits, device={"firmware": "corpus"}) as w:
         rec = w.empty(records)
         rec["t_us"] = np.arange(records) * 2000
         rec["host_ns"] = np.arange(records) * 2_000_000
