@@ -13,6 +13,7 @@ import pytest
 import bendsense
 from bendsense.device.driver import Driver
 from bendsense.errors import ArgumentError, DeviceError, SessionError
+from bendsense.estimation import cramer_rao
 from bendsense.identify import read_free_bending_csv
 from bendsense.session.native import record_dtype, records_to_session
 
@@ -62,7 +63,7 @@ def test_a_message_shows_numbers_not_numpys_repr():
 
 def test_times_and_bounds_show_numbers_not_numpys_repr():
     with pytest.raises(ArgumentError) as err:
-        bendsense.estimation.cramer_rao.contact_bound(contact_s_m=0.1, force_n=float("nan"), pressure_pa=5e4)
+        cramer_rao.contact_bound(contact_s_m=0.1, force_n=float("nan"), pressure_pa=5e4)
     assert str(err.value).endswith("got nan")
     est = bendsense.estimate_force(np.full((3, 16), 5.0), 5e4)
     with pytest.raises(ArgumentError) as err:
