@@ -285,6 +285,7 @@ def _progress(dispatcher):
 _KERNEL_NAMES = {
     "bendsense.estimation._kernels": "estimation kernels",
     "bendsense.mechanics._beam_kernels": "beam solver",
+    "bendsense.mechanics._actuator_kernels": "free-bending interpolant",
     "bendsense.shape._kernels": "shape reconstruction",
     "bendsense.calibration._kernels": "shift error model",
     "bendsense.estimation.problem": "estimation set-up",
