@@ -14,9 +14,9 @@ import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 
-# three jobs, each a family of kernels: a batch above bendsense._jit.PARALLEL_MIN frames (the prange kernels) with
-# the tracker and its window check; contact loads, known and not; the paper's baseline, the positions objective,
-# adapt and the live tracker (a gripper's per-finger kernels are the single finger's)
+# three jobs, each a family of kernels: a batch above bendsense._jit.PARALLEL_MIN frames (the prange kernels, the
+# kinematics' too) with the tracker and its window check; contact loads, known and not; the paper's baseline, the
+# positions objective, adapt and the live tracker (a gripper's per-finger kernels are the single finger's)
 SETUP = """
 import numpy as np
 from bendsense.calibration import Calibration
@@ -33,7 +33,11 @@ session = Session(0.01 * np.arange(rows.size), tv.signals[rows], tv.pressure_pa[
 """
 JOBS = {
     "tracking, batch": "process(session, None, calibration, constraint='normal', track='smooth')\n"
-                       "process(session, None, calibration, constraint='none', track='filter')",
+                       "process(session, None, calibration, constraint='none', track='filter')\n"
+                       "from bendsense import load_config\n"
+                       "from bendsense.shape.pcc import forward_kinematics\n"
+                       "lengths = load_config().sensor.segment_lengths_m\n"
+                       "forward_kinematics(np.zeros((rows.size, lengths.size)), lengths, [0.0, 0.1])",
     "contact": "process(session, None, calibration, constraint='normal', load='contact', contact_s_m=0.1)\n"
                "process(session, None, calibration, constraint='normal', load='contact')",
     "baseline, positions, adapt, live": """

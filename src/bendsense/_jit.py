@@ -285,14 +285,14 @@ def _progress(dispatcher):
 _KERNEL_NAMES = {
     "bendsense.estimation._kernels": "estimation kernels",
     "bendsense.mechanics._beam_kernels": "beam solver",
-    "bendsense.shape.pcc": "shape reconstruction",
-    "bendsense.calibration.shift_errors": "shift error model",
+    "bendsense.mechanics._actuator_kernels": "free-bending interpolant",
+    "bendsense.shape._kernels": "shape reconstruction",
+    "bendsense.calibration._kernels": "shift error model",
     "bendsense.estimation.problem": "estimation set-up",
     "bendsense.estimation.uncertainty": "uncertainty kernels",
-    "bendsense.tracking.kalman": "tracking kernels",
-    "bendsense.tracking.stream": "live tracking kernels",
-    "bendsense.tracking.windows": "window check",
-    "bendsense.tracking.track": "tracking kernels",
+    "bendsense.tracking._kalman_kernels": "tracking kernels",
+    "bendsense.tracking._stream_kernels": "live tracking kernels",
+    "bendsense.tracking._window_kernels": "window check",
 }
 
 

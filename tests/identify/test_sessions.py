@@ -179,7 +179,7 @@ def test_gravity_is_taken_out_of_the_free_angle(lab):
 def test_session_covariance_of_repeated_frames(lab):
     # two identical frames: each one's variance is the frame's Σ_S; their covariance is Σ_S without
     # the noise (the calibration's error is common, the noise independent)
-    from bendsense.calibration.shift_errors import shift_covariance
+    from bendsense.calibration._kernels import shift_covariance
 
     cal = lab["cal"]
     signals = bendsense.read_session(lab["sweep"]).signals[[20]]

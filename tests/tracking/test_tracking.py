@@ -25,7 +25,7 @@ from bendsense.errors import ArgumentError
 from bendsense.estimation import ForceEstimate
 from bendsense.status import Status
 from bendsense.tracking import Tracker
-from bendsense.tracking.kalman import DIFFUSE, DIFFUSE_RATE, process_intensity
+from bendsense.tracking._kalman_kernels import DIFFUSE, DIFFUSE_RATE, process_intensity
 
 CFG = dataclasses.replace(bendsense.load_config(), parameter_covariance=None)
 SENSOR = CFG.sensor

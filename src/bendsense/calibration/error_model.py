@@ -331,7 +331,7 @@ def angle_covariance(cal, signals, sensor=None) -> AngleCovariance:
     -------
     AngleCovariance
     """
-    from bendsense.calibration.shift_errors import shift_covariances
+    from bendsense.calibration._kernels import shift_covariances
 
     a = np.asarray(signals, dtype=float)
     cal._check_channels(a)

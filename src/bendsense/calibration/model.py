@@ -259,7 +259,7 @@ class Calibration:
         if s.ndim == 0 or s.shape[-1] != n:
             raise ArgumentError(f"shifts_m: expected shape (..., {n}), got {s.shape}")
         if covariance:  # the misfit part of the one shift-covariance kernel (no noise, exact coefficients)
-            from bendsense.calibration.shift_errors import shift_covariances
+            from bendsense.calibration._kernels import shift_covariances
 
             model = self.error_model(0.0)._replace(coef_cov=np.zeros((1, 1)))
             flat = np.ascontiguousarray(np.broadcast_to(s, s.shape).reshape(-1, n))
@@ -520,7 +520,7 @@ class Calibration:
             The channels' polynomials, the noise, the misfit envelopes with their
             correlation (:meth:`shift_error_m`) and the coefficients' and offsets'
             covariance (:attr:`coefficient_covariance`; zeros when the file lacks what
-            it needs). :func:`bendsense.calibration.shift_errors.shift_covariance` evaluates it.
+            it needs). :func:`bendsense.calibration._kernels.shift_covariance` evaluates it.
         """
         return errors.error_model(self, noise_std_counts)
 

@@ -521,15 +521,9 @@ def _flat(a, batch, B, tail=(), dtype=float):
 def _frames(ref, P, batch, B, config, contact) -> Frames:
     """The per-frame inputs of the kernels: the shape's, the pressure's (K0, EI, the free tip angle), the σ_c."""
     model = _models(config)
-    if B == 1:  # one frame (the live path): plain floats, as numpy costs ~1 µs a call on one value
-        Pf = P.reshape(1)
-        p = float(Pf[0])
-        angle = float(model.bending_angle_rad(p))
-        theta, k0, ei = np.array([angle]), np.array([angle / model.length_m]), np.array([config.stiffness.ei_nm2(p)])
-    else:
-        Pf = P.reshape(B) if P.size == B else _flat(P, batch, B)
-        theta = _c(model.bending_angle_rad(Pf))
-        ei, k0 = _c(config.stiffness.ei_nm2(Pf)), theta / model.length_m
+    Pf = P.reshape(B) if P.size == B else _flat(P, batch, B)
+    theta = _c(model.bending_angle_rad(Pf))
+    ei, k0 = _c(config.stiffness.ei_nm2(Pf)), theta / model.length_m
     if not (ei[0] if B == 1 else ei.min()) > 0:
         raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
                             f"at {float(Pf[np.argmin(ei)])!r} Pa")

@@ -20,7 +20,8 @@ import numpy as np
 from numba import njit, prange
 
 from bendsense import _jit
-from bendsense.calibration.shift_errors import ShiftErrorModel, shift_covariance
+from bendsense.calibration._kernels import shift_covariance
+from bendsense.calibration.shift_errors import ShiftErrorModel
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
 from bendsense.estimation.problem import Buffers, Outputs, Target, Workspace

@@ -58,6 +58,7 @@ import numpy as np
 from bendsense import _jit
 from bendsense.errors import ArgumentError
 from bendsense.status import Status
+from bendsense.tracking import _window_kernels
 from bendsense.tracking import windows as _win
 from bendsense.validation import float_array, short
 
@@ -348,7 +349,7 @@ def _metric(est, n):
         return tuple(np.full_like(a, np.nan) for a in out)
     pay = est.residual_rad, est.jacobian_rad_per_n, est.model_factor_rad, est.shifts_m, est.contact_jacobian_rad_per_m
     c = np.ascontiguousarray
-    _jit.call(_win.window_metrics, *(c(a, dtype=float) for a in pay),
+    _jit.call(_window_kernels.window_metrics, *(c(a, dtype=float) for a in pay),
               c(n, dtype=np.int64), tuple(est.shift_errors), np.asarray(est.coils, dtype=np.int64),
               float(est.strip_gap_m), *out)
     return out

@@ -103,7 +103,7 @@ def _array(name, value, low=None, low_open=False, high=None):
 def _noise_std_m(sensor, calibration, noise_std, shifts):
     """σ of each shift (..., N) [m] at the shifts (..., N): the signal noise through the sensor's slope."""
     if calibration is not None:
-        from bendsense.calibration.shift_errors import shift_covariance
+        from bendsense.calibration._kernels import shift_covariance
 
         sigma_a = calibration.noise_std if noise_std is None else noise_std
         model = calibration.error_model(np.broadcast_to(np.asarray(sigma_a, dtype=float), (shifts.shape[-1],)))

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import warnings
 
 import numpy as np
@@ -61,8 +60,6 @@ def pressure_outside(pressure_pa, config) -> np.ndarray:
         Its ``actuator.pressure_range_pa`` gives the range [Pa].
     """
     lo, hi = config.actuator.pressure_range_pa
-    if isinstance(pressure_pa, float):  # one frame (the live path)
-        return np.bool_(lo > pressure_pa or pressure_pa > hi)
     p = float_array("pressure_pa", pressure_pa)
     with np.errstate(invalid="ignore"):
         return np.isfinite(p) & ((p < lo) | (p > hi))
@@ -129,8 +126,6 @@ def warn_kpa_as_pa(pressure_pa, config) -> None:
     config : Config
         Its ``actuator.pressure_range_pa`` is the working range [Pa].
     """
-    if isinstance(pressure_pa, float):
-        return
     p = np.asarray(pressure_pa, dtype=float)
     p = p[np.isfinite(p)]
     lo, hi = config.actuator.pressure_range_pa
@@ -353,10 +348,7 @@ def force_bound_n(pressure_pa, config):
     float or ndarray
         ``F_max`` at each pressure [N] (NaN where the pressure is).
     """
-    scale = _force_scale(config)
-    if isinstance(pressure_pa, float):
-        return scale * config.stiffness.ei_nm2(pressure_pa)
-    return scale * config.stiffness.ei_nm2(np.asarray(pressure_pa, dtype=float))
+    return _force_scale(config) * config.stiffness.ei_nm2(np.asarray(pressure_pa, dtype=float))
 
 
 def _force_scale(config) -> float:
@@ -382,23 +374,14 @@ def force_bound(result, pressure_pa, config, strict: bool = False):
     strict : bool
         Raise for such a frame.
     """
-    force = result.force_n
-    if force.ndim == 1:  # one frame (the live path): float arithmetic
-        magnitude = math.hypot(*force.tolist())
-        p = pressure_pa if isinstance(pressure_pa, float) else float(np.asarray(pressure_pa, dtype=float).flat[0])
-        top = _force_scale(config) * config.stiffness.ei_nm2(p)
-        if not (magnitude > top and bool(result.success)):  # a failed frame keeps its own reason
-            return result
-        over, magnitude, top, p = np.bool_(True), np.float64(magnitude), np.float64(top), np.float64(p)
-    else:
-        force = np.asarray(force, dtype=float)
-        magnitude = np.hypot(force[..., 0], force[..., 1])
-        p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
-        top = force_bound_n(p, config)
-        with np.errstate(invalid="ignore"):  # a failed frame keeps its own reason
-            over = np.isfinite(magnitude) & (magnitude > top) & np.broadcast_to(result.success, magnitude.shape)
-        if not over.any():
-            return result
+    force = np.asarray(result.force_n, dtype=float)
+    magnitude = np.hypot(force[..., 0], force[..., 1])
+    p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
+    top = force_bound_n(p, config)
+    with np.errstate(invalid="ignore"):  # a failed frame keeps its own reason
+        over = np.isfinite(magnitude) & (magnitude > top) & np.broadcast_to(result.success, magnitude.shape)
+    if not over.any():
+        return result
     if strict:
         from bendsense.errors import ConvergenceError
 

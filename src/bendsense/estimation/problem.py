@@ -28,6 +28,7 @@ from bendsense.choices import CONSTRAINTS
 from bendsense.errors import ArgumentError
 from bendsense.estimation.uncertainty import tip_angle_weights
 from bendsense.mechanics import _beam_kernels as bk
+from bendsense.shape import _kernels as shape_kernels
 from bendsense.shape import pcc
 from bendsense.validation import float_array
 
@@ -337,7 +338,7 @@ def pcc_reference(kappa, lengths, seg_fk, sigma_fk, beyond, tip_weights, pos, an
         theta[i] = kappa[i] * lengths[i]
         start[i] = acc
         acc += theta[i]
-    pcc.frame_kinematics(kappa, theta, 0.0, seg_fk[:M], sigma_fk[:M], lengths, pos, ang, tip)
+    shape_kernels.frame_kinematics(kappa, theta, 0.0, seg_fk[:M], sigma_fk[:M], lengths, pos, ang, tip)
     for j in range(M):
         kappa_s[j] = kappa[seg_fk[j]]
     for j in range(state.size):

@@ -5,7 +5,7 @@ optimum moves by ``δu = (JᵀJ)⁻¹ Jᵀ W^½ δp⁰`` when the reconstructed 
 ``δp⁰ = G δS``, ``G = ∂p⁰/∂S`` through the PCC kinematics (paper eq. 3–7). So
 ``Cov(F) = T Σ_S Tᵀ`` with ``T = ∂F/∂S`` (including the change of ``D`` with the tip
 angle for ``tip_angle_source="shape"``). ``Σ_S`` holds the signal noise through the
-calibration slope and the calibration's own error (:func:`bendsense.calibration.shift_errors.shift_covariance`).
+calibration slope and the calibration's own error (:func:`bendsense.calibration._kernels.shift_covariance`).
 
 The misfit: the residual is pulled back to the shift perturbation that explains it
 best, ``δŜ = −(GᵀWG)⁻¹ GᵀW r``, and ``χ² = δŜᵀ C⁺ δŜ`` with ``C`` the covariance that
@@ -25,11 +25,7 @@ from numba import njit
 from bendsense import _jit
 from bendsense.errors import ArgumentError
 from bendsense.mechanics import _beam_kernels as bk
-
-
-@njit(cache=True)
-def _sinc(v):
-    return 1.0 if v == 0.0 else math.sin(v) / v
+from bendsense.shape._kernels import sinc
 
 
 @njit(cache=True)
@@ -45,7 +41,7 @@ def _dsinc(v):
 def _arc_dkappa(kappa, sigma, phi0):
     """∂/∂κ of the chord σ sinc(κσ/2) (sin(φ0 + κσ/2), cos(φ0 + κσ/2)) (paper eq. 5–6)."""
     half = 0.5 * kappa * sigma
-    c = sigma * _sinc(half)
+    c = sigma * sinc(half)
     dc = 0.5 * sigma * sigma * _dsinc(half)
     m = phi0 + half
     sm, cm = math.sin(m), math.cos(m)
@@ -73,7 +69,7 @@ def shape_jacobian(kappa, lengths, gap, seg, sigma, pos, out):
         theta = kappa[i] * lengths[i]
         phi_start[i] = acc
         half = 0.5 * theta
-        chord = lengths[i] * _sinc(half)
+        chord = lengths[i] * sinc(half)
         ex += chord * math.sin(acc + half)
         ey += chord * math.cos(acc + half)
         ends_x[i] = ex

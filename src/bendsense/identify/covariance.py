@@ -247,7 +247,7 @@ def session_covariance(calibration, shifts_m, weights, groups, n_groups: int, no
 
     Output ``g`` is ``y_g = Σ_{a: groups[a] = g} weights[a] · S_a`` (to first order),
     with ``S_a`` (N,) the shifts of frame ``a``. The frames' shifts are stacked into one
-    vector and :func:`bendsense.calibration.shift_errors.shift_covariance` evaluates the
+    vector and :func:`bendsense.calibration._kernels.shift_covariance` evaluates the
     calibration's error model over it (its channel tables tiled, the offsets' covariance
     indexed per channel): the noise is independent per frame, the coefficients',
     offsets' and misfit errors are correlated across frames as across channels. Pairs of
@@ -273,7 +273,7 @@ def session_covariance(calibration, shifts_m, weights, groups, n_groups: int, no
     ndarray, shape (n_groups, n_groups)
         Covariance of the outputs.
     """
-    from bendsense.calibration.shift_errors import shift_covariance
+    from bendsense.calibration._kernels import shift_covariance
 
     m = calibration.error_model(noise_std)
     shifts = np.asarray(shifts_m, dtype=float)

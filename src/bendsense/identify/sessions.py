@@ -34,7 +34,7 @@ The covariance of the fit is not the residual scatter's ``s² (JᵀJ)⁻¹``: th
 error is one error common to all frames of a session (the same polynomials map every
 frame), so it does not average down over the frames. The angles' joint covariance over
 all used frames comes from the calibration's error model
-(:func:`bendsense.calibration.shift_errors.shift_covariance` over the frames' shifts stacked into
+(:func:`bendsense.calibration._kernels.shift_covariance` over the frames' shifts stacked into
 one vector: noise independent per frame, coefficient and misfit errors correlated
 across frames as across channels), through each frame's angle weights; the fit's
 covariance is the sandwich ``A Σ_θ Aᵀ`` (``A = (JᵀJ)⁻¹Jᵀ``), scaled up when the
@@ -210,7 +210,7 @@ def _free_p_value(misfit, shape, p, config, calibration):
     """
     from scipy.stats import chi2
 
-    from bendsense.calibration.shift_errors import shift_covariances
+    from bendsense.calibration._kernels import shift_covariances
     from bendsense.sim.sensor import shifts_from_curvatures
 
     r, j, dphi_dei = misfit

@@ -30,8 +30,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bendsense import _jit
 from bendsense.config import FREE_BENDING_PARAMETERS, MODEL_PARAMETERS, STIFFNESS_PARAMETERS, StiffnessConfig
 from bendsense.errors import ArgumentError, ConfigError, ConvergenceError
+from bendsense.mechanics import _actuator_kernels
 from bendsense.validation import float_array, instance, short
 
 __all__ = [
@@ -63,7 +65,7 @@ def _finite(name: str, value) -> np.ndarray:
     arr = float_array(name, value)
     if not np.all(np.isfinite(arr)):
         bad = arr[~np.isfinite(arr)].flat[0]
-        raise ArgumentError(f"{name}: must be finite, got {bad!r}")
+        raise ArgumentError(f"{name}: must be finite, got {float(bad)!r}")
     return arr
 
 
@@ -433,13 +435,15 @@ class _Table:
     bucket_start: np.ndarray  # (n_buckets,) interval that holds the bucket's left end
     error_rad: float  # largest error found at the test points
     converged: bool
-    columns: tuple = ()  # coef[:, 0..3] as contiguous arrays: faster gathers for batches
+    kernel_args: tuple = ()  # (p_pa, inv_width, coef, bucket_pa, bucket_start) as the kernel takes them
 
     def __post_init__(self):
-        cols = tuple(np.ascontiguousarray(self.coef[:, i]) for i in range(4))
-        for col in cols:
-            col.setflags(write=False)
-        object.__setattr__(self, "columns", cols)
+        # C-contiguous and writable (the kernel never writes): numba types a read-only or strided array
+        # argument on its slow path, ~10 µs a call (a one-frame lookup is ~1 µs)
+        arrays = (self.p_pa, self.inv_width, self.coef)
+        args = (*(np.array(a, dtype=float, order="C") for a in arrays), float(self.bucket_pa),
+                np.array(self.bucket_start, dtype=np.int64, order="C"))
+        object.__setattr__(self, "kernel_args", args)
 
 
 @functools.lru_cache(maxsize=32)
@@ -614,32 +618,36 @@ class FreeBendingModel:
         """
         return solve_bending_angle(pressure_pa, **self.params)
 
-    def _theta0_scalar(self, p: float) -> float:
-        return self._interpolant_scalar(p, slope=False)[0]
+    def _lookup(self, pressure_pa, slope: bool):
+        """The checked pressures, θ0 [rad] and, if ``slope``, dθ0/dP [rad/Pa] (0 below 0 Pa) there (any shape).
 
-    def _interpolant_scalar(self, p: float, slope: bool) -> tuple[float, float]:
-        """θ0(P) [rad] and, if ``slope``, dθ0/dP [rad/Pa] of one frame (else NaN).
-
-        One frame: plain floats are ~10x faster than numpy for a single value; the same
-        table and formulas as :meth:`theta0_rad` and :meth:`bending_angle_slope`.
+        One compiled lookup of the interpolant for every caller, one frame or a batch
+        (:func:`bendsense.mechanics._actuator_kernels.hermite`, which also checks that the
+        pressures are finite); the direct solve above its range, or everywhere if it did
+        not converge. The arrays are C-contiguous and writable, as the kernels take them.
         """
-        if not math.isfinite(p):
-            raise ArgumentError(f"pressure_pa: must be finite, got {p!r}")
-        if p <= 0.0:
-            return 0.0, 0.0
+        p = np.array(float_array("pressure_pa", pressure_pa), order="C")
         tab = self._table
-        if p > self.pressure_max_pa or not tab.converged:
-            theta0 = float(self.solve(p)) - self.prebend_angle_rad
-            return theta0, float(self._exact_slope(np.array([p]))[0]) if slope else math.nan
-        j = min(int(p / tab.bucket_pa), len(tab.bucket_start) - 1)
-        k = int(tab.bucket_start[j])
-        if k + 1 < len(tab.coef) and p >= tab.p_pa[k + 1]:
-            k += 1
-        width = float(tab.inv_width[k])
-        u = (p - float(tab.p_pa[k])) * width
-        c0, c1, c2, c3 = tab.coef[k].tolist()
-        d = (c1 + u * (2.0 * c2 + 3.0 * u * c3)) * width if slope else math.nan
-        return c0 + u * (c1 + u * (c2 + u * c3)), d
+        if not tab.converged:
+            _finite("pressure_pa", p)
+            theta = self.solve(p) - self.prebend_angle_rad
+            d = np.zeros(p.shape)
+            exact = np.ones(p.shape, dtype=bool)
+        else:
+            theta, d = np.empty(p.shape), np.empty(p.shape)
+            above = _jit.call(_actuator_kernels.hermite, p.reshape(-1), *tab.kernel_args, theta.reshape(-1),
+                              d.reshape(-1))
+            if above < 0:
+                raise ArgumentError(f"pressure_pa: must be finite, got {float(p.flat[-1 - above])!r}")
+            if not above:
+                return p, theta, (d if slope else None)
+            exact = p > self.pressure_max_pa
+            theta[exact] = self.solve(p[exact]) - self.prebend_angle_rad
+        if not slope:
+            return p, theta, None
+        d[exact] = self._exact_slope(p[exact])
+        d[p < 0] = 0.0
+        return p, theta, d
 
     def theta0_rad(self, pressure_pa) -> np.ndarray:
         """Pressure-induced bending angle θ0 without the prebend [rad], same shape as ``pressure_pa``.
@@ -649,25 +657,8 @@ class FreeBendingModel:
         pressure_pa : float or array_like
             Actuation pressure P [Pa].
         """
-        if isinstance(pressure_pa, (float, int)) and not isinstance(pressure_pa, bool):
-            return np.float64(self._theta0_scalar(float(pressure_pa)))
-        p = _finite("pressure_pa", pressure_pa)
-        if p.size == 1:
-            return np.full(p.shape, self._theta0_scalar(float(p.flat[0])))
-        tab = self._table
-        if not tab.converged:
-            return self.solve(p) - self.prebend_angle_rad
-        q = np.clip(p, 0.0, self.pressure_max_pa)
-        k = tab.bucket_start[np.minimum((q / tab.bucket_pa).astype(np.intp), len(tab.bucket_start) - 1)]
-        k = np.minimum(k + (q >= tab.p_pa[k + 1]), len(tab.coef) - 1)
-        u = (q - tab.p_pa[k]) * tab.inv_width[k]
-        c0, c1, c2, c3 = tab.columns
-        theta = c0[k] + u * (c1[k] + u * (c2[k] + u * c3[k]))
-        above = p > self.pressure_max_pa
-        if np.any(above):
-            theta = np.array(theta, dtype=float)
-            theta[above] = self.solve(p[above]) - self.prebend_angle_rad
-        return theta
+        _, theta, _ = self._lookup(pressure_pa, slope=False)
+        return theta if isinstance(pressure_pa, np.ndarray) else theta[()]  # a number for a number
 
     def bending_angle_rad(self, pressure_pa) -> np.ndarray:
         """Total free bending angle θ = θ0(P) + θ_pre [rad] (paper eq. 8 plus prebend).
@@ -720,24 +711,7 @@ class FreeBendingModel:
         ndarray
             dθ/dP [rad/Pa], same shape as ``pressure_pa``.
         """
-        p = _finite("pressure_pa", pressure_pa)
-        tab = self._table
-        q = np.clip(p, 0.0, self.pressure_max_pa)
-        if tab.converged:
-            k = tab.bucket_start[np.minimum((q / tab.bucket_pa).astype(np.intp), len(tab.bucket_start) - 1)]
-            k = np.minimum(k + (q >= tab.p_pa[k + 1]), len(tab.coef) - 1)
-            u = (q - tab.p_pa[k]) * tab.inv_width[k]
-            _, c1, c2, c3 = tab.columns
-            slope = (c1[k] + u * (2.0 * c2[k] + 3.0 * u * c3[k])) * tab.inv_width[k]
-            exact = p > self.pressure_max_pa
-        else:
-            slope = np.zeros(p.shape)
-            exact = np.ones(p.shape, dtype=bool)
-        slope = np.array(slope, dtype=float)
-        if np.any(exact):
-            slope[exact] = self._exact_slope(p[exact])
-        slope[p < 0] = 0.0
-        return slope
+        return self._lookup(pressure_pa, slope=True)[2]
 
     def _exact_slope(self, p):
         """dθ0/dP = c_a / (μ̄ m'(θ0) + μ_s) at the directly solved θ0 (eq. 8–9)."""
@@ -785,16 +759,11 @@ class FreeBendingModel:
             order of :data:`FREE_BENDING_PARAMETERS`.
         """
         mu, mu_s, c_a = self.shear_modulus_pa, self.sensor_stiffness_nm_per_rad, self._moment_per_pa
-        if isinstance(pressure_pa, float):  # one frame (the live path): plain floats
-            theta0, slope = self._interpolant_scalar(pressure_pa, slope=True)
-            per, unit = slope / c_a, (c_a * max(pressure_pa, 0.0) - mu_s * theta0) / mu
-            return np.array([-unit * per, -theta0 * per, 1.0]) / self.length_m
-        p = _finite("pressure_pa", pressure_pa)
-        theta0 = np.asarray(self.theta0_rad(p), dtype=float)
-        per = self.bending_angle_slope(p) / c_a  # 1 / D
-        unit_moment = (c_a * np.maximum(p, 0.0) - mu_s * theta0) / mu
-        out = np.stack([-unit_moment * per, -theta0 * per, np.ones(p.shape)], axis=-1)
-        return out / self.length_m
+        p, theta0, slope = self._lookup(pressure_pa, slope=True)
+        out = np.empty((*p.shape, 3))
+        _jit.call(_actuator_kernels.curvature_jacobian, p.reshape(-1), np.ascontiguousarray(theta0).reshape(-1),
+                  slope.reshape(-1), c_a, mu, mu_s, self.length_m, out.reshape(-1, 3))
+        return out
 
     def elastic_moment(self, theta0_rad) -> np.ndarray:
         """M_θ0(θ0) + μ_s θ0, the total restoring moment [N·m] (paper eq. 10–12).

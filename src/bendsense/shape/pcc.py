@@ -33,11 +33,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit, prange
 
 from bendsense import _jit
-from bendsense.calibration.shift_errors import horner
 from bendsense.errors import ArgumentError
+from bendsense.shape import _kernels
 from bendsense.validation import float_array, short
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -167,97 +166,8 @@ def shifts_to_curvatures(shifts_m, lengths_m, strip_gap_m):
     return local
 
 
-@njit(cache=True)
-def frame_kinematics(kappa, theta, base, seg, sigma, lengths, pos, ang, tip):
-    """One frame of the PCC kinematics (paper eq. 5–7): points, angles and tip; returns the tip angle.
-
-    ``kappa``, ``theta`` = κ l (N,); the points lie in segments ``seg`` (M,) at arc
-    lengths ``sigma`` (M,) from the segment's start. Every arc goes through the chord
-    form (module docstring). Writes ``pos`` (M, 2), ``ang`` (M,) and ``tip`` (2,).
-    Measured: ~0.3 µs for N = 16, M = 11 (one core).
-    """
-    n = lengths.size
-    start_x = np.empty(n)  # start point and start angle of every segment
-    start_y = np.empty(n)
-    start_phi = np.empty(n)
-    x = 0.0
-    y = 0.0
-    phi = base
-    for i in range(n):
-        start_x[i] = x
-        start_y[i] = y
-        start_phi[i] = phi
-        half = 0.5 * theta[i]
-        chord = lengths[i] * _sinc1(half)
-        x += chord * math.sin(phi + half)
-        y += chord * math.cos(phi + half)
-        phi += theta[i]
-    tip[0] = x
-    tip[1] = y
-    for j in range(seg.size):
-        g = seg[j]
-        half = 0.5 * kappa[g] * sigma[j]
-        chord = sigma[j] * _sinc1(half)
-        mid = start_phi[g] + half
-        pos[j, 0] = start_x[g] + chord * math.sin(mid)
-        pos[j, 1] = start_y[g] + chord * math.cos(mid)
-        ang[j] = mid + half
-    return phi
-
-
-@njit(cache=True)
-def _sinc1(u):
-    return 1.0 if u == 0.0 else math.sin(u) / u
-
-
-@njit(cache=True, parallel=True)
-def _frames_kinematics(kappa, theta, base, seg, sigma, lengths, pos, ang, tip, tip_ang):
-    """:func:`frame_kinematics` over frames (B, N) in parallel; ``base`` (B,)."""
-    for b in prange(kappa.shape[0]):
-        tip_ang[b] = frame_kinematics(kappa[b], theta[b], base[b], seg, sigma, lengths, pos[b], ang[b], tip[b])
-
-
-@njit(cache=True)
-def frame_curvatures(signals, offset, coef, lo, hi, lengths, gap, kappa, theta):
-    """Signals A (N,) → κ and θ = κ l (N,) through ΔA, S = f(ΔA) (paper eq. 1–4); True if extrapolated.
-
-    ``coef`` (N, n+1) holds each channel's polynomial in ascending powers, ``lo``/``hi``
-    (N,) the calibrated range of ΔA.
-    """
-    extrapolated = False
-    prev = 0.0
-    for i in range(lengths.size):
-        delta = signals[i] - offset[i]
-        extrapolated |= delta < lo[i] or delta > hi[i]
-        shift = horner(coef[i], delta)  # NaN for a non-finite signal
-        theta[i] = (shift - prev) / gap
-        kappa[i] = theta[i] / lengths[i]
-        prev = shift
-    return extrapolated
-
-
-@njit(cache=True)
-def frames_reconstruct(first, last, signals, offset, coef, lo, hi, lengths, gap, base, seg, sigma, kappa, pos, ang,
-                       tip, tip_ang, extrapolated):
-    """Signals (B, N) → curvatures and PCC shape of frames ``first:last``, in order (:func:`frame_curvatures`)."""
-    theta = np.empty(lengths.size)
-    for b in range(first, last):
-        extrapolated[b] = frame_curvatures(signals[b], offset, coef, lo, hi, lengths, gap, kappa[b], theta)
-        tip_ang[b] = frame_kinematics(kappa[b], theta, base[b], seg, sigma, lengths, pos[b], ang[b], tip[b])
-
-
-@njit(cache=True, parallel=True)
-def _frames_reconstruct(signals, offset, coef, lo, hi, lengths, gap, base, seg, sigma, kappa, pos, ang, tip, tip_ang,
-                        extrapolated):
-    """:func:`frames_reconstruct` of every frame (B, N) in parallel, in chunks of 64 frames."""
-    frames = signals.shape[0]
-    for c in prange((frames + 63) // 64):
-        frames_reconstruct(64 * c, min(frames, 64 * c + 64), signals, offset, coef, lo, hi, lengths, gap, base, seg,
-                           sigma, kappa, pos, ang, tip, tip_ang, extrapolated)
-
-
 def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
-    """Run :func:`frame_kinematics` over any batch shape (in parallel for more than one frame)."""
+    """Run the kinematics kernels over any batch shape (on numba's threads from ``_jit.PARALLEL_MIN`` frames)."""
     n = grid.lengths.size
     if kappa.shape[-1:] != (n,):
         raise ArgumentError(f"curvature_per_m: expected {n} values on the last axis, got {kappa.shape}")
@@ -276,10 +186,10 @@ def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
     m = seg.size
     pos, ang = np.empty((frames, m, 2)), np.empty((frames, m))
     tip, tip_ang = np.empty((frames, 2)), np.empty(frames)
-    if frames == 1:
-        tip_ang[0] = _jit.call(frame_kinematics, k2[0], th2[0], b2[0], seg, sigma, grid.lengths, pos[0], ang[0], tip[0])
+    if not _jit.parallel(frames):  # a live block: in this thread
+        _jit.call(_kernels.kinematics_block, 0, frames, k2, th2, b2, seg, sigma, grid.lengths, pos, ang, tip, tip_ang)
     else:
-        _jit.call(_frames_kinematics, k2, th2, b2, seg, sigma, grid.lengths, pos, ang, tip, tip_ang)
+        _jit.call(_kernels.kinematics_frames, k2, th2, b2, seg, sigma, grid.lengths, pos, ang, tip, tip_ang)
     tip = tip.reshape(*batch, 2)
     tip_ang = tip_ang.reshape(batch)
     if not points:
@@ -707,9 +617,9 @@ def reconstruct(
     extrapolated = np.empty(frames, dtype=bool)
     out = (np.full(frames, float(base_angle_rad)), grid.seg, grid.sigma, kappa, pos, ang, tip, tip_ang, extrapolated)
     if not _jit.parallel(frames):  # a live block: in this thread
-        _jit.call(frames_reconstruct, 0, frames, a2, *args, *out)
+        _jit.call(_kernels.reconstruct_block, 0, frames, a2, *args, *out)
     else:
-        _jit.call(_frames_reconstruct, a2, *args, *out)
+        _jit.call(_kernels.reconstruct_frames, a2, *args, *out)
     return Shape(
         curvature_per_m=kappa.reshape(a.shape),
         s_m=grid.s,
@@ -721,5 +631,3 @@ def reconstruct(
         extrapolated=extrapolated.reshape(batch),
     )
 
-
-_jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once

@@ -1,7 +1,7 @@
 """Tracking the force over time: :func:`track` (offline, filter or smoother) and :class:`Tracker` (streaming).
 
 The per-frame estimates are the measurements of a Kalman filter whose state is the force
-(:mod:`bendsense.tracking.kalman`). Only each frame's **sensor-noise** covariance enters
+(:mod:`bendsense.tracking._kalman_kernels`). Only each frame's **sensor-noise** covariance enters
 the filter; the calibration and model-parameter parts of the frame's covariance are one
 bias shared by neighbouring frames, which no averaging removes: they are added back whole
 to the filtered or smoothed covariance, so that a tracked σ is never below that floor
@@ -23,8 +23,8 @@ from bendsense.estimation._kernels import MISFIT_P
 from bendsense.estimation.result import ForceEstimate
 from bendsense.results import TRACK_COLUMNS, estimate_codes
 from bendsense.status import Status, words
-from bendsense.tracking import kalman as _kalman
-from bendsense.tracking import stream as _stream
+from bendsense.tracking import _kalman_kernels as _kalman
+from bendsense.tracking import _stream_kernels as _stream
 from bendsense.tracking import windows as _windows
 from bendsense.validation import short
 
@@ -64,7 +64,7 @@ class Track:
         (``NOT_CONVERGED``, ``NOT_IDENTIFIABLE``, ...): never ``OK`` for a frame whose own
         status is not. Its words are results.csv's ``track_status``.
     bandwidth_hz : float
-        The bandwidth of the filter used [Hz] (module :mod:`~bendsense.tracking.kalman`).
+        The bandwidth of the filter used [Hz] (:func:`bendsense.tracking.track.intensity`).
     mode : str
         ``"smooth"`` (RTS smoother) or ``"filter"`` (causal Kalman filter).
     t_s : ndarray, shape (B,)
@@ -179,7 +179,7 @@ def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = N
 def intensity(bandwidth_hz, dt_ref_s):
     """The process intensity q [1/s³] of a bandwidth at the reference interval; 0 without one.
 
-    :func:`bendsense.tracking.kalman.process_intensity`.
+    :func:`bendsense.tracking._kalman_kernels.process_intensity`.
     """
     if not (math.isfinite(dt_ref_s) and dt_ref_s > 0):
         return 0.0  # fewer than two frames: nothing moves between them
@@ -191,7 +191,7 @@ def measurements(estimate):
 
     A component with an infinite σ (``not_identifiable``) gets a NaN force (not observed);
     the floor (B, 2, 2) is the covariance's calibration and parameter parts
-    (:func:`bendsense.tracking.stream.measure`).
+    (:func:`bendsense.tracking._stream_kernels.measure`).
     """
     force = np.asarray(estimate.force_n, dtype=float).reshape(-1, 2)
     B = force.shape[0]
@@ -205,7 +205,7 @@ def measurements(estimate):
 def fill_floor(floor, starts, backward):
     """The floor (B, 2, 2) of a frame without one: the last one of its segment (and the next, ``backward``).
 
-    :func:`bendsense.tracking.stream.fill_floor`.
+    :func:`bendsense.tracking._stream_kernels.fill_floor`.
     """
     out = np.empty_like(floor)
     _jit.call(_stream.fill_floor, np.ascontiguousarray(floor), starts, backward, out)
@@ -433,7 +433,7 @@ class Tracker:
         return est, t, P
 
     def _windows(self, est, t, starts, b):
-        """The latest completed window's p at each frame (b,), and whether any is below MISFIT_P (:mod:`.stream`)."""
+        """The latest completed window's p at each frame (b,), and whether any is below MISFIT_P (stream kernels)."""
         resid, jac, mfac, shifts = (est.residual_rad, est.jacobian_rad_per_n, est.model_factor_rad, est.shifts_m)
         p = np.full(b, np.nan)
         if resid is None or jac is None or mfac is None or shifts is None or est.shift_errors is None \

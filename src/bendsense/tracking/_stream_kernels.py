@@ -1,11 +1,12 @@
 """The compiled kernels of the streaming tracker (:class:`~bendsense.tracking.Tracker`): a block of frames per call.
 
 :func:`stream_filter` cuts the segments (a gap, a pressure step), runs the filter's
-frames (:func:`bendsense.tracking.kalman.advance` and ``observe``, the steps of ``track``'s filter), carries
-the calibration and parameter floor within a segment and writes the tracked force;
-:func:`stream_windows` keeps the open window's sums across blocks and reports, at each
-frame, the p-value of the latest completed window
-(:func:`bendsense.tracking.windows.window_statistic`, the statistic of ``check_windows``).
+frames (:func:`bendsense.tracking._kalman_kernels.advance` and ``observe``, the steps of
+``track``'s filter), carries the calibration and parameter floor within a segment and
+writes the tracked force; :func:`stream_windows` keeps the open window's sums across
+blocks and reports, at each frame, the p-value of the latest completed window
+(:func:`bendsense.tracking._window_kernels.window_statistic`, the statistic of
+``check_windows``).
 Their state lives in arrays the Tracker owns, so a call costs the frames and one
 dispatch each, not a chain of numpy calls: ``Tracker.update`` ~17 µs for a single frame,
 ~1.5 µs per frame in blocks of 20 (benchmarks/bench_track.py).
@@ -19,8 +20,8 @@ from numba import njit
 from bendsense import _jit
 from bendsense.calibration.shift_errors import ShiftErrorModel
 from bendsense.estimation._kernels import MISFIT_P
-from bendsense.tracking import kalman as K
-from bendsense.tracking import windows as W
+from bendsense.tracking import _kalman_kernels as K
+from bendsense.tracking import _window_kernels as W
 
 # the carried scalars (a float array the Tracker owns)
 HAS_LAST, LAST_T, LAST_P, SEG_T0, WIN_J, HAS_OPEN, LATEST_P, WIN_N = range(8)
