@@ -36,7 +36,7 @@ JOBS = {
                        "process(session, None, calibration, constraint='none', track='filter')\n"
                        "from bendsense import load_config\n"
                        "from bendsense.shape.pcc import forward_kinematics\n"
-                       "lengths = load_config().sensor.segment_lengths_m\n"
+                       "lengths = np.asarray(load_config().sensor.segment_lengths_m)\n"
                        "forward_kinematics(np.zeros((rows.size, lengths.size)), lengths, [0.0, 0.1])",
     "contact": "process(session, None, calibration, constraint='normal', load='contact', contact_s_m=0.1)\n"
                "process(session, None, calibration, constraint='normal', load='contact')",
