@@ -115,6 +115,8 @@ class Board:
         self.port, self.n_lines = port, int(n_lines)
         self._read = 0  # bytes of the truth file read so far
         self.driver = Driver(self.port).open()
+        for line in range(self.n_lines):  # the board holds its lines at 0 until the first session, not its profile
+            self.driver.send_setpoint(line, 0.0)
         self.truth_fingers = [f.strip() for f in fingers if f.strip()] or None
 
     def truth(self, since_s):

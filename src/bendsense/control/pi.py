@@ -254,11 +254,7 @@ class PIController(FingerController):
     Attributes
     ----------
     integral_pa : float
-        The integral term I [Pa].
-    output_pa : float
-        The latest set-point [Pa].
-    last : NormalForce or None
-        The normal force of the latest block's frames.
+        The integral term I [Pa] (and :class:`FingerController`'s ``output_pa``, ``last``).
     """
 
     def __init__(self, target_force_n, *, line=0, finger=None, kp_pa_per_n=DEFAULT_KP_PA_PER_N,
