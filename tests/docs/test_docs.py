@@ -423,7 +423,12 @@ def page_runs(request, tmp_path_factory):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
-def test_page_runs(page: Path, page_runs):
+def test_page_runs(page: Path, page_runs, request):
+    if hasattr(request.config, "workerinput") and request.config.getvalue("loadgroup"):
+        # one worker runs every page (tests/conftest.py): without the group in the node id, xdist spreads the pages
+        # over the workers and each worker's fixture runs every page
+        assert request.node.nodeid.endswith("@docs-pages"), (
+            f"{request.node.nodeid}: not grouped; the xdist_group mark of conftest.py did not reach the node id")
     assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
     problems = page_runs[page].result()
     assert not problems, problems[0]
