@@ -23,6 +23,7 @@ def calibration_path(tmp_path_factory):
     return root / "cal.yaml"
 
 
+@pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``-n 2 --dist loadgroup``): groups of tests that one worker runs, one after the other.
 
@@ -30,9 +31,32 @@ def pytest_collection_modifyitems(config, items):
     would each take a core from the other. The documentation pages run from one fixture
     that starts every page selected (tests/docs/test_docs.py): on two workers they would
     run twice. The other worker goes on with the rest.
+
+    xdist's worker turns the ``xdist_group`` marks into the ``@group`` suffix of the node ids
+    its scheduler groups by, in its own hook of this name: the marks are added before it (a
+    wrapper), and the suffix after it where xdist's did not take (xdist 3.8 writes
+    ``item._nodeid``, which pytest 9.2's structured node ids ignore: pytest-xdist#1386).
+    The ``page_runs`` fixture of tests/docs/test_docs.py checks that the pages are grouped.
     """
     for item in items:
         if getattr(item, "originalname", None) == "test_page_runs":
             item.add_marker(pytest.mark.xdist_group("docs-pages"))
         elif item.get_closest_marker("realtime") is not None:
             item.add_marker(pytest.mark.xdist_group("realtime"))
+    result = yield
+    if getattr(config.option, "loadgroup", False):
+        for item in items:
+            names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                            for m in item.iter_markers("xdist_group")})
+            if names and not item.nodeid.endswith("@" + "_".join(names)):
+                _set_nodeid(item, f"{item.nodeid}@{'_'.join(names)}")
+    return result
+
+
+def _set_nodeid(item, nodeid):
+    if hasattr(item, "_id"):  # pytest >= 9.2: a structured node id, its string cached as given
+        from _pytest.nodeid import NodeId
+
+        item._id = NodeId.parse(nodeid)
+    else:
+        item._nodeid = nodeid

@@ -5,6 +5,7 @@
 """
 
 import functools
+import time
 
 import numpy as np
 
@@ -87,3 +88,28 @@ class Listening:
 
     def __call__(self, k):
         return self.board(k)
+
+
+def board_caught_up(dev, driver=None, *, frames=30, timeout_s=60.0):
+    """Wait until the simulated board ``dev`` has taken every command sent to it so far and, if it streams, made
+    ``frames`` frames after them (their truth carries the set-points it then holds).
+
+    An acknowledgement, not a guess of the clock: a HELLO_REQUEST written after the commands (through ``driver``,
+    the open connection they went through, or a new one after a command that closed its own) is answered after
+    them, and the frames are counted by the board itself. On a loaded machine the board's thread may not run for a
+    while, and a fixed sleep (30 ms: 30 frames at 1 kHz) may see none of it. A board whose port is closed (it died,
+    or was disconnected) takes nothing more: no wait.
+    """
+    from bendsense.device.driver import Driver
+
+    if dev.stats.disconnected:
+        return
+    if driver is not None:
+        driver.request_hello(timeout_s=timeout_s)
+    else:
+        with Driver(dev.port, hello_timeout_s=timeout_s):
+            pass
+    end, deadline = dev.stats.generated + frames, time.monotonic() + timeout_s
+    while dev.streaming and not dev.finished.is_set() and dev.stats.generated < end:  # (finished: it makes no more)
+        assert time.monotonic() < deadline, f"the board made {frames} frames in {timeout_s} s"
+        time.sleep(0.002)

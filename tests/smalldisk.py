@@ -5,15 +5,19 @@ the test and unmounted at the end. Otherwise it is mounted inside a user and mou
 namespace (``unshare -rm``), which a long-lived helper process holds; commands then run
 inside that namespace, where they see the tmpfs. Either way a test uses only
 :meth:`SmallDisk.run` (a command, as a subprocess, that sees the file system),
+:meth:`SmallDisk.cli` (``bendsense ARGS``: in this process where the mount is seen here),
 :meth:`SmallDisk.fill`, :meth:`SmallDisk.files` and :meth:`SmallDisk.copy_out`.
 ``SMALLDISK_NAMESPACE=1`` takes the namespace way as root too (to test it).
 """
 
+import io
 import json
+import logging
 import os
 import shutil
 import subprocess
 import sys
+import traceback
 from pathlib import Path
 
 # the helper inside the namespace: mount, then run one command per request line
@@ -94,6 +98,34 @@ class SmallDisk:
         self._server.stdin.flush()
         reply = json.loads(self._server.stdout.readline())
         return subprocess.CompletedProcess(argv, reply["returncode"], reply["stdout"], reply["stderr"])
+
+    def cli(self, args, *, timeout=300) -> subprocess.CompletedProcess:
+        """``bendsense ARGS`` where the tmpfs is seen; its exit code and output.
+
+        Where the tmpfs is mounted in this process's namespace (as root), the command line's entry point is called
+        here (click's ``CliRunner``: the same ``main`` as the console script, its exit code from its ``SystemExit``);
+        an exception that escaped it becomes its traceback on stderr and exit code 1, and what the command logged
+        is on stderr, as from a process of its own. Otherwise it runs as a process in the namespace.
+        """
+        args = [str(a) for a in args]
+        if self._server is not None:
+            return self.run([sys.executable, "-c", "from bendsense.cli import main; main()", *args], timeout=timeout)
+        from click.testing import CliRunner
+
+        from bendsense.cli import main
+
+        logged = io.StringIO()
+        handler = logging.StreamHandler(logged)
+        handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))  # the command line's format
+        logging.getLogger().addHandler(handler)
+        try:
+            result = CliRunner().invoke(main, args)
+        finally:
+            logging.getLogger().removeHandler(handler)
+        stderr = logged.getvalue() + result.stderr
+        if result.exception is not None and not isinstance(result.exception, SystemExit):
+            stderr += "".join(traceback.format_exception(result.exception))
+        return subprocess.CompletedProcess(["bendsense", *args], result.exit_code, result.stdout, stderr)
 
     def fill(self, leave: int = 0) -> int:
         """Fill the file system (a file ``fill``) until ``leave`` bytes are free; the bytes free after."""

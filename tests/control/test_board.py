@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 import pytest
-from helpers import Listening
+from helpers import Listening, board_caught_up
 
 import bendsense
 from bendsense.calibration import Calibration
@@ -93,7 +93,7 @@ def session(board, processor, controller, *, drop=0.0, after=None, source=None, 
             out = run(driver, processor, controller, max_pressure_pa=kw.pop("max_pressure_pa", LIMIT_PA), **kw)
         except (ControlStop, KeyboardInterrupt) as err:
             out = err
-        time.sleep(0.03)  # frames after the stop: their truth carries the set-point the board holds
+        board_caught_up(dev, driver)  # frames after the stop: their truth carries the set-point the board holds
         if after is not None:
             after(driver)
     return out, truth
@@ -121,7 +121,7 @@ def test_the_loop_holds_015_n_and_records_it(board, processor, tmp_path):
         driver.start()
         result = run(driver, processor, controller, max_pressure_pa=LIMIT_PA, seconds=60.0, stop=stop,
                      recording=rec, safety=Safety(silence_s=1.0), on_block=on_block)
-        time.sleep(0.03)
+        board_caught_up(dev, driver)
     assert result.outcome == "stopped", "the force was never held for 0.3 s"
     force, setpoint = truth.force_n, truth.column("setpoint_pa")
     last = np.flatnonzero(setpoint > 0)[-1]
@@ -183,7 +183,7 @@ def test_a_board_that_falls_silent_stops_the_loop(board, processor):
         driver.start()
         with pytest.raises(ControlStop, match="no frame from the board for"):
             run(driver, processor, pi, max_pressure_pa=LIMIT_PA, seconds=5.0, safety=Safety(silence_s=0.05))
-        time.sleep(0.05)
+        board_caught_up(dev, driver)
     assert max(p for _, p in source.received) > 0 and source.received[-1] == (0, 0.0)
 
 
@@ -253,7 +253,7 @@ def test_sigterm_ends_the_command_with_every_line_at_zero(board, calibration_pat
             time.sleep(0.05)
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=30)
-        time.sleep(0.03)
+        board_caught_up(dev)
     assert proc.returncode == 143, err
     assert f"Interrupted (SIGTERM): set-point 0 sent on every pressure line (0); the session is in {out}" in err
     assert truth.column("setpoint_pa").max() > 50e3 and truth.column("setpoint_pa")[-1] == 0.0
@@ -289,7 +289,7 @@ def test_a_gripper_holds_with_two_fingers_and_lets_go_of_every_line(calibration_
         driver.start()
         result = run(driver, proc, grasp, max_pressure_pa=LIMIT_PA, seconds=60.0, stop=stop, recording=rec,
                      safety=Safety(silence_s=1.0), on_block=on_block)
-        time.sleep(0.03)
+        board_caught_up(dev, driver)
     assert stop.is_set(), "the fingers never held their force for 0.3 s"
     assert result.lines == (0, 1, 2) and result.held == (2,)
     assert truth.column("line2_setpoint_pa").max() < 1e3  # held from the first block, not the board's profile
@@ -320,7 +320,7 @@ def test_a_safety_stop_is_one_line_and_exit_1(board, calibration_path, tmp_path)
         res = CliRunner().invoke(main, ["control", dev.port, "--calibration", str(calibration_path),
                                         "--target-force-n", "0.15", "--load", "contact", "--contact-s-m", str(S_C),
                                         "--silence-s", "1", "-o", str(tmp_path / "s")])
-        time.sleep(0.03)
+        board_caught_up(dev)
     assert res.exit_code == 1, res.output
     errors = [line for line in res.output.splitlines() if line.startswith("Error:")]
     assert len(errors) == 1 and "Traceback" not in res.output

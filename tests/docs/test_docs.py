@@ -3,9 +3,21 @@
 The blocks of one page run in order, in one fresh temporary working directory that
 holds copies of the repository's ``configs/`` and ``examples/`` (the docs are written
 to run from the repository root), so later blocks see the files earlier ones wrote.
-``bash`` blocks run under ``bash -euo pipefail``, ``python`` blocks with this
+``bash`` blocks run as under ``bash -euo pipefail``, ``python`` blocks with this
 interpreter; each must exit 0. Blocks in other languages (``text``, ``yaml``, …) are
-not run. Three pages run at a time, each in its own directory; a block that times a board
+not run.
+
+A page's Python runs in one interpreter of its own (tests/docs/page_interpreter.py), in
+the page's directory, where a Python call does what the process would: its ``python``
+blocks, and in a ``bash`` block without shell state (no variables, background jobs,
+here-documents or ``cd``) each plain ``bendsense ARGS`` command (the command line's entry
+point called there), ``python -c "CODE"`` and ``python SCRIPT ARGS`` (not the benchmarks:
+they time a fresh interpreter); that block's other commands run one by one under
+``bash -euo pipefail``, and a block with shell state runs whole under bash, as before.
+The interpreter starts once and loads the compiled kernels once per page, where each
+command was a process of its own (~1 s of CPU each). ``bendsense demo``, the first block
+of two pages on the same fresh directory, runs once: the other page takes its output and
+its files. Three pages run at a time, each in its own directory; a block that times a board
 against its client (a simulated board, a recording, a control loop, a benchmark) waits
 until it is alone and runs alone.
 
@@ -36,8 +48,11 @@ before it.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
+import select
+import shlex
 import shutil
 import signal
 import subprocess
@@ -45,7 +60,7 @@ import sys
 import tempfile
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -310,34 +325,258 @@ def test_fences_name_their_language_without_a_space():
         assert "``` bash" not in text and "```Bash" not in text, page.name
 
 
+# ------------------------------------------------------------------ what runs in the page's interpreter
+
+# a block with shell state runs whole under bash: variables ($VAR, $!), background jobs, here-documents, cd, ...
+_STATEFUL_WORDS = {"cd", "pushd", "popd", "export", "unset", "set", "source", ".", "alias", "function", "if", "for",
+                   "while", "until", "case", "{", "(", "trap", "wait", "kill", "read", "shopt", "exec", "eval"}
+_ASSIGNMENT = re.compile(r"^[A-Za-z_][A-Za-z_0-9]*=")
+_SHELL_CHARS = set("$`*?[]{}~\\'\"")  # expansions, globs, quoting left over: bash's business
+_PYTHON_C = re.compile(r'python3?\s+-c\s+"([^"$`\\]*)"\s*', re.S)
+
+
+def _commands(code: str) -> list[str] | None:
+    """The commands of a bash block (continuation lines and multi-line quotes joined), or None if it cannot be
+    split into commands that run one after the other (a line shlex cannot read)."""
+    commands, pending = [], ""
+    for line in code.splitlines():
+        pending += line + "\n"
+        if pending.rstrip("\n").endswith("\\"):
+            continue
+        try:
+            words = shlex.split(pending, comments=True)
+        except ValueError:  # an open quote: the command goes on
+            continue
+        if words:
+            commands.append(pending.rstrip("\n"))
+        pending = ""
+    return None if pending.strip() else commands
+
+
+def _words(command: str) -> list[str]:
+    lexer = shlex.shlex(command.replace("\\\n", " "), posix=True, punctuation_chars=True)  # continuation lines
+    lexer.whitespace_split = True
+    return list(lexer)
+
+
+def in_process_steps(lang: str, code: str) -> list[tuple[str, object]]:
+    """How a block runs: ``(kind, what)`` steps one after the other, each must exit 0.
+
+    ``("python", CODE)``, ``("cli", ARGS)`` and ``("script", ARGV)`` run in the page's
+    interpreter, ``("bash", TEXT)`` under ``bash -euo pipefail``. A bash block with shell
+    state is one bash step.
+    """
+    if lang == "python":
+        return [("python", code)]
+    whole = [("bash", code)]
+    commands = _commands(code) if "<<" not in code else None
+    if commands is None:
+        return whole
+    steps = []
+    for command in commands:
+        words = _words(command)
+        if "$" in command or words[0] in _STATEFUL_WORDS or "&" in words or (
+                _ASSIGNMENT.match(words[0]) and all(_ASSIGNMENT.match(w) for w in words)):
+            return whole
+        plain = not any(set(w) <= set("();<>|&") for w in words) and not any(set(w) & _SHELL_CHARS for w in words)
+        python_c = _PYTHON_C.fullmatch(command.strip())
+        if plain and words[0] == "bendsense":
+            steps.append(("cli", words[1:]))
+        elif python_c:
+            steps.append(("python", python_c[1]))
+        elif plain and words[0] in ("python", "python3") and len(words) > 1 and words[1].endswith(".py") and \
+                not words[1].startswith("benchmarks/"):
+            steps.append(("script", words[1:]))
+        else:
+            steps.append(("bash", command))
+    return steps
+
+
+def test_plain_commands_run_in_process_and_the_rest_under_bash():
+    code = ("bendsense simulate calibration -o sim/cal   # or record your own (strips)\n"
+            "bendsense load a.csv --calibration cal.yaml \\\n    reconstruct estimate --contact-s-m thumb=0.10\n"
+            "head -n 3 out/tv/results.csv | cut -c 1-200\n"
+            "python examples/full_workflow.py --out figures\n"
+            "python benchmarks/run_all.py --quick\n"
+            'python -c "\nimport numpy as np\nprint(np.pi)\n"\n'
+            "bendsense load board.csv reconstruct 2>&1 || true\n"
+            "OPENBLAS_NUM_THREADS=1 python examples/beam_solver.py --out beam-figures\n"
+            "ls sim/*.csv\n")
+    assert in_process_steps("bash", code) == [
+        ("cli", ["simulate", "calibration", "-o", "sim/cal"]),
+        ("cli", ["load", "a.csv", "--calibration", "cal.yaml", "reconstruct", "estimate", "--contact-s-m",
+                 "thumb=0.10"]),
+        ("bash", "head -n 3 out/tv/results.csv | cut -c 1-200"),
+        ("script", ["examples/full_workflow.py", "--out", "figures"]),
+        ("bash", "python benchmarks/run_all.py --quick"),
+        ("python", "\nimport numpy as np\nprint(np.pi)\n"),
+        ("bash", "bendsense load board.csv reconstruct 2>&1 || true"),
+        ("bash", "OPENBLAS_NUM_THREADS=1 python examples/beam_solver.py --out beam-figures"),
+        ("bash", "ls sim/*.csv"),
+    ]
+    assert in_process_steps("python", "print(1)\n") == [("python", "print(1)\n")]
+
+
+@pytest.mark.parametrize("code", [
+    "rm -f port.txt\nbendsense sim-device > port.txt &\nbendsense record \"$(cat port.txt)\" -o r\nkill $!\n",
+    "cat > a.csv <<'EOF'\nx,y\n1,2\nEOF\nbendsense identify free-bending a.csv -o c.yaml\n",
+    "cd sim\nbendsense simulate calibration -o cal\n",
+    "X=1\nbendsense demo\n",
+    'python -c "print(\'$HOME\')"\n',
+])
+def test_a_block_with_shell_state_runs_whole_under_bash(code):
+    assert in_process_steps("bash", code) == [("bash", code)]
+
+
 # ------------------------------------------------------------------ running the pages
 
 
-def _run(lang: str, code: str, cwd: Path, env: dict) -> subprocess.CompletedProcess:
-    """Run one block in its own process group; afterwards end whatever it left running.
+def _spawn(cmd: list[str], cwd: Path, env: dict, out, err, timeout: float) -> int | None:
+    """Run ``cmd`` in its own process group, output to the files ``out`` and ``err``; afterwards end whatever it
+    left running. Its exit status, None if it timed out.
 
-    Output goes to files, not pipes, so that a background job the block started (a
-    simulated board) cannot keep the call waiting after the block has finished or failed.
+    Output goes to files, not pipes, so that a background job the command started (a
+    simulated board) cannot keep the call waiting after the command has finished or failed.
     """
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=out, stderr=err, stdin=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        return proc.wait(timeout=max(timeout, 0.0))
+    except subprocess.TimeoutExpired:
+        return None
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGTERM)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+
+
+def _run(lang: str, code: str, cwd: Path, env: dict) -> subprocess.CompletedProcess:
+    """Run one block as a process of its own (bash, or this Python for a ``python`` block)."""
     cmd = ["bash", "-euo", "pipefail", "-c", code] if lang == "bash" else [sys.executable, "-c", code]
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-        proc = subprocess.Popen(
-            cmd, cwd=cwd, env=env, stdout=out, stderr=err, stdin=subprocess.DEVNULL, text=True, start_new_session=True
-        )
-        try:
-            returncode = proc.wait(timeout=TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            returncode = None
-        finally:
-            try:
-                os.killpg(proc.pid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-            proc.wait()
+        returncode = _spawn(cmd, cwd, env, out, err, TIMEOUT_S)
         out.seek(0)
         err.seek(0)
         stderr = err.read() + (f"\n[timed out after {TIMEOUT_S} s]" if returncode is None else "")
         return subprocess.CompletedProcess(cmd, -1 if returncode is None else returncode, out.read(), stderr)
+
+
+INTERPRETER = Path(__file__).with_name("page_interpreter.py")
+
+
+class _Interpreter:
+    """The page's Python interpreter (tests/docs/page_interpreter.py), in its own process group, started when a
+    step first needs it."""
+
+    def __init__(self, cwd: Path, env: dict):
+        self.cwd, self.env, self.proc = cwd, env, None
+        self.log = cwd.parent / f"{cwd.name}-interpreter.log"  # its own errors, outside the page's directory
+
+    def run(self, request: dict, timeout: float) -> int | None:
+        """The exit status of one step (None: timed out, the interpreter is ended)."""
+        if self.proc is None:
+            with open(self.log, "a", encoding="utf-8") as log:
+                self.proc = subprocess.Popen([sys.executable, str(INTERPRETER)], cwd=self.cwd, env=self.env,
+                                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log, text=True,
+                                             start_new_session=True)
+        self.proc.stdin.write(json.dumps(request) + "\n")
+        self.proc.stdin.flush()
+        ready, _, _ = select.select([self.proc.stdout], [], [], max(timeout, 0.0))
+        reply = self.proc.stdout.readline() if ready else None
+        if not reply:
+            self.close(wait_s=0.0)
+            if reply is not None:  # it died: what it said
+                with open(request["stderr"], "a", encoding="utf-8") as err:
+                    err.write(f"\n[the page's interpreter died]\n{self.log.read_text(encoding='utf-8')[-3000:]}")
+                return -1
+            return None
+        return json.loads(reply)["returncode"]
+
+    def close(self, wait_s: float = 10.0):
+        """End it (at the end of its input, or killed after ``wait_s``), and whatever its steps left running."""
+        if self.proc is None:
+            return
+        self.proc.stdin.close()
+        try:
+            self.proc.wait(timeout=wait_s)
+        except subprocess.TimeoutExpired:
+            pass
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.proc.wait()
+        self.proc.stdout.close()
+        self.proc = None
+
+
+def _run_block(lang: str, code: str, cwd: Path, env: dict, interpreter: _Interpreter) -> subprocess.CompletedProcess:
+    """Run one block as its steps (:func:`in_process_steps`): the first that fails ends it, as under ``bash -e``."""
+    deadline = time.monotonic() + TIMEOUT_S
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = {"stdout": str(Path(tmp, "stdout")), "stderr": str(Path(tmp, "stderr"))}
+        for path in paths.values():
+            Path(path).touch()
+        returncode = 0
+        for kind, what in in_process_steps(lang, code):
+            if kind == "bash":
+                with open(paths["stdout"], "a") as out, open(paths["stderr"], "a") as err:
+                    returncode = _spawn(["bash", "-euo", "pipefail", "-c", what], cwd, env, out, err,
+                                        deadline - time.monotonic())
+            else:
+                returncode = interpreter.run({kind: what, **paths}, deadline - time.monotonic())
+            if returncode != 0:
+                break
+        stdout = Path(paths["stdout"]).read_text(encoding="utf-8", errors="replace")
+        stderr = Path(paths["stderr"]).read_text(encoding="utf-8", errors="replace")
+    if returncode is None:
+        stderr += f"\n[timed out after {TIMEOUT_S} s]"
+    return subprocess.CompletedProcess(code, -1 if returncode is None else returncode, stdout, stderr)
+
+
+def test_steps_in_the_page_interpreter_exit_as_their_process_would(tmp_path: Path):
+    env = dict(os.environ, MPLBACKEND="Agg")
+    interpreter = _Interpreter(tmp_path, env)
+    try:
+        ok = _run_block("bash", "bendsense --version\necho shell > shell.txt\nbendsense -q devices\n", tmp_path, env,
+                        interpreter)
+        assert ok.returncode == 0 and "bendsense, version" in ok.stdout
+        assert (tmp_path / "shell.txt").read_text() == "shell\n"
+        # a usage error: its exit status and one line; the block's later commands do not run
+        usage = _run_block("bash", "bendsense simulate calibration --frames x\ntouch after\n", tmp_path, env,
+                           interpreter)
+        assert usage.returncode == 2 and usage.stderr.startswith("Error: Invalid value for '--frames'")
+        assert not (tmp_path / "after").exists()
+        # python: an uncaught exception is its traceback and 1, sys.exit its code; each block in a fresh namespace
+        crash = _run_block("python", "import os\nx = 1\nprint('before')\nraise RuntimeError('boom')\n", tmp_path,
+                           env, interpreter)
+        assert crash.returncode == 1 and crash.stdout == "before\n"
+        assert "Traceback" in crash.stderr and crash.stderr.rstrip().endswith("RuntimeError: boom")
+        fresh = _run_block("python", "import sys\nprint('x' in globals(), sys.argv)\nsys.exit(3)\n", tmp_path, env,
+                           interpreter)
+        assert fresh.returncode == 3 and fresh.stdout == "False ['-c']\n"
+        # what a step changes for the process is put back: working directory, environment, numpy's print options
+        _run_block("python", "import os, numpy as np\nos.chdir('/')\nos.environ['DOCS_X'] = '1'\n"
+                             "np.set_printoptions(precision=2)\n", tmp_path, env, interpreter)
+        back = _run_block("python", "import os, numpy as np\nprint(os.getcwd(), 'DOCS_X' in os.environ, np.pi * "
+                                    "np.ones(1))\n", tmp_path, env, interpreter)
+        assert back.stdout == f"{tmp_path} False [3.14159265]\n"
+    finally:
+        interpreter.close()
+
+
+def test_a_step_that_hangs_times_out_and_its_interpreter_is_ended(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(sys.modules[__name__], "TIMEOUT_S", 1.0)
+    interpreter = _Interpreter(tmp_path, dict(os.environ))
+    try:
+        proc = _run_block("python", "import time\nprint('started', flush=True)\ntime.sleep(60)\n", tmp_path,
+                          dict(os.environ), interpreter)
+        assert proc.returncode == -1 and proc.stdout == "started\n" and "[timed out after 1.0 s]" in proc.stderr
+        assert interpreter.proc is None
+    finally:
+        interpreter.close()
 
 
 # pages without a bash or python block (theory.md) have nothing to run
@@ -384,7 +623,46 @@ class _Turns:
                 self._cond.notify_all()
 
 
-def _run_page(page: Path, work: Path, turns: _Turns) -> list[str]:
+class _FirstBlocks:
+    """The first blocks of the pages, each run once: the first block of a page runs in a directory that holds only
+    the copies of the repository (the same for every page), so a page whose first block is another's (``bendsense
+    demo``: README.md, getting-started.md) takes that run's output and the files it made."""
+
+    def __init__(self, root: Path):
+        self.root, self._lock, self._runs = root, threading.Lock(), {}
+
+    def run(self, lang: str, code: str, work: Path, run) -> subprocess.CompletedProcess:
+        with self._lock:
+            future = self._runs.get((lang, code))
+            mine = future is None
+            if mine:
+                future = self._runs[(lang, code)] = Future()
+        if mine:
+            try:
+                before = set(os.listdir(work))
+                proc = run()
+                made = Path(tempfile.mkdtemp(prefix="first-block-", dir=self.root))  # its files, as they were after it
+                for name in set(os.listdir(work)) - before:
+                    _copy(work / name, made / name)
+            except BaseException as err:
+                future.set_exception(err)
+                raise
+            future.set_result((proc, made))
+            return proc
+        proc, made = future.result()
+        for path in made.iterdir():
+            _copy(path, work / path.name)
+        return proc
+
+
+def _copy(src: Path, dst: Path):
+    if src.is_dir() and not src.is_symlink():
+        shutil.copytree(src, dst, symlinks=True)
+    else:
+        shutil.copy2(src, dst, follow_symlinks=False)
+
+
+def _run_page(page: Path, work: Path, turns: _Turns, firsts: _FirstBlocks) -> list[str]:
     """Run every block of ``page`` in ``work``; the problems found (empty: the page runs as documented)."""
     blocks = extract_steps(page.read_text(encoding="utf-8"))
     for name in COPIED:
@@ -396,18 +674,25 @@ def _run_page(page: Path, work: Path, turns: _Turns) -> list[str]:
     # single-threaded BLAS as the CLI sets it (troubleshooting.md): the python blocks'
     # many small matrices crawl when threaded BLAS competes for the cores
     env = dict(os.environ, MPLBACKEND="Agg", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    for k, (lang, code, outputs) in enumerate(blocks, start=1):
-        with turns.turn(alone=bool(TIMED.search(code))):
-            proc = _run(lang, code, work, env)
-        if proc.returncode != 0:
-            return [f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
-                    f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"]
-        for documented in outputs:
-            missing = missing_output(documented, proc.stdout + "\n" + proc.stderr)
-            if missing:
-                return [f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it prints;\n"
-                        f"documented lines not printed (masked):\n" + "\n".join(missing) + "\n"
+    interpreter = _Interpreter(work, env)
+    try:
+        for k, (lang, code, outputs) in enumerate(blocks, start=1):
+            def run(lang=lang, code=code):
+                with turns.turn(alone=bool(TIMED.search(code))):
+                    return _run_block(lang, code, work, env, interpreter)
+
+            proc = firsts.run(lang, code, work, run) if k == 1 else run()
+            if proc.returncode != 0:
+                return [f"{page.name}, runnable block {k} ({lang}) exited {proc.returncode}:\n{code}\n"
                         f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"]
+            for documented in outputs:
+                missing = missing_output(documented, proc.stdout + "\n" + proc.stderr)
+                if missing:
+                    return [f"{page.name}, the documented output of runnable block {k} ({lang}) is not what it "
+                            f"prints;\ndocumented lines not printed (masked):\n" + "\n".join(missing) + "\n"
+                            f"--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"]
+    finally:
+        interpreter.close()
     return []
 
 
@@ -416,14 +701,20 @@ def page_runs(request, tmp_path_factory):
     """The selected pages' runs, started together (PAGES_AT_ONCE at a time) when the first page's test asks."""
     selected = [item.callspec.params["page"] for item in request.session.items
                 if getattr(item, "originalname", None) == "test_page_runs"]
-    turns = _Turns()
+    turns, firsts = _Turns(), _FirstBlocks(tmp_path_factory.mktemp("first-blocks"))
     with ThreadPoolExecutor(PAGES_AT_ONCE) as pool:
-        yield {page: pool.submit(_run_page, page, tmp_path_factory.mktemp(page.stem), turns) for page in selected}
+        yield {page: pool.submit(_run_page, page, tmp_path_factory.mktemp(page.stem), turns, firsts)
+               for page in selected}
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("page", RUNNABLE, ids=[p.relative_to(ROOT).as_posix() for p in RUNNABLE])
-def test_page_runs(page: Path, page_runs):
+def test_page_runs(page: Path, page_runs, request):
+    if hasattr(request.config, "workerinput") and request.config.getvalue("loadgroup"):
+        # one worker runs every page (tests/conftest.py): without the group in the node id, xdist spreads the pages
+        # over the workers and each worker's fixture runs every page
+        assert request.node.nodeid.endswith("@docs-pages"), (
+            f"{request.node.nodeid}: not grouped; the xdist_group mark of conftest.py did not reach the node id")
     assert shutil.which("bendsense") is not None, "the bendsense command is not on PATH (package not installed)"
     problems = page_runs[page].result()
     assert not problems, problems[0]

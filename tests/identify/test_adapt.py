@@ -33,6 +33,8 @@ from bendsense.shape.pcc import reconstruct
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
 import model_error as me  # noqa: E402
 
+# under xdist, one worker: `session` and `adapted` (a module fixture of seconds) made once, not on both workers
+pytestmark = pytest.mark.xdist_group("identify-adapt")
 CFG = bendsense.load_config()
 K0_SCALE, EI_SCALE = 0.92, 1.15
 TRUTH = {"k0_scale": K0_SCALE, "stiffness": me._scaled_stiffness(CFG, EI_SCALE)}

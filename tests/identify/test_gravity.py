@@ -22,6 +22,8 @@ from bendsense.errors import ArgumentError
 from bendsense.identify.gravity import identify_gravity
 from bendsense.session import Session
 
+# under xdist, one worker: both cases of `identified` (a module fixture of seconds) made once, not on both workers
+pytestmark = pytest.mark.xdist_group("identify-gravity")
 CFG = bendsense.load_config()
 HANGING = (0.0, 1.0)
 LEVELS = np.array([20e3, 60e3, 100e3])

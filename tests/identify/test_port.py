@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from forward_model import forward, free_bending_k0
-from helpers import Listening
+from helpers import Listening, board_caught_up
 
 import bendsense
 from bendsense.calibration import Calibration
@@ -146,7 +146,7 @@ def test_a_board_that_falls_silent_mid_sweep_is_let_go_and_nothing_is_written(ca
     out = tmp_path / "fitted.yaml"
     with SimulatedDevice(board, rate_hz=RATE, max_frames=int(RATE)) as dev:
         res = identify(dev.port, calibration_path, out)
-        time.sleep(0.05)
+        board_caught_up(dev)  # the zero reaches the board
     assert res.exit_code == 1, res.output
     errors = [line for line in res.output.splitlines() if line.startswith("Error:")]
     assert len(errors) == 1 and "Traceback" not in res.output, res.output

@@ -23,6 +23,8 @@ from bendsense.session import Session, read_session, write_session_csv
 from bendsense.session.fingers import calibrations, split_session
 from bendsense.sim.actuator import SimulatedActuator
 
+# under xdist, one worker: `board` (a module fixture of seconds) made once, not on both workers
+pytestmark = pytest.mark.xdist_group("gripper-chain")
 PAPER = load_config()
 N = PAPER.sensor.n_segments
 NAMES = ("thumb", "index", "middle")

@@ -18,6 +18,7 @@ import time
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import board_caught_up
 
 import bendsense
 from bendsense.calibration import Calibration
@@ -128,7 +129,7 @@ def gripper_run(board, processor, controller, truth=None, **kw):
         except ControlStop as err:
             out = err
         ran = time.monotonic() - t0
-        time.sleep(0.03)  # the zeros reach the board
+        board_caught_up(dev, driver)  # the zeros reach the board
     return out, ran
 
 
@@ -185,7 +186,7 @@ def test_a_failed_pressure_sensor_stops_the_command(single_board, files):
     board = Faulty(copy.deepcopy(single_board), FAULT_AT, lambda p: None)
     with SimulatedDevice(board, rate_hz=RATE) as dev:
         res = control_cli(dev.port, files, "--seconds", "2", "--silence-s", "1")
-        time.sleep(0.03)
+        board_caught_up(dev)  # the zeros reach the board
     assert res.exit_code == 1, res.output
     line = one_error_line(res)
     assert re.match(r"Error: control stopped: no force \(no_pressure\) for 10 ms \(limit 10 ms\) at t = 0\.3[01]\d s",
@@ -202,7 +203,7 @@ def test_a_board_reading_900_kpa_stops_the_command(single_board, files):
     truth = Truth()
     with SimulatedDevice(board, rate_hz=RATE, truth=truth) as dev:
         res = control_cli(dev.port, files, "--seconds", "2", "--silence-s", "1", "--max-pressure-kpa", "60")
-        time.sleep(0.03)
+        board_caught_up(dev)  # the zeros reach the board
     assert res.exit_code == 1, res.output
     line = one_error_line(res)
     assert line.startswith(f"Error: control stopped: line 0 reads 900 kPa at seq {truth.seq[FAULT_AT]}, "
@@ -259,7 +260,7 @@ def test_a_finger_subset_holds_the_other_lines_at_zero(gripper_board, files, tmp
                                         files["calibration"], "--target-force-n", "0.15", "--finger", "thumb",
                                         "--load", "contact", "--contact-s-m", str(S_C), "--max-pressure-kpa", "60",
                                         "--seconds", "1", "--silence-s", "1", "-o", str(out)])
-        time.sleep(0.03)
+        board_caught_up(dev)  # the zeros reach the board
     assert res.exit_code == 0, res.output
     assert "lines 1, 2 not controlled: held at set-point 0" in res.output
     assert "set-point 0 sent on every pressure line (0, 1, 2)" in res.output
@@ -338,7 +339,7 @@ def test_a_pressure_outside_the_configs_range_leaves_the_finger_without_a_force(
         with pytest.raises(ControlStop, match=r"^no force \(pressure_out_of_range\) for 10 ms") as info:
             run(driver, proc, PIController(0.15, max_pressure_pa=LIMIT_PA), max_pressure_pa=LIMIT_PA, seconds=2.0,
                 safety=Safety(silence_s=1.0))
-        time.sleep(0.03)
+        board_caught_up(dev, driver)
     pressure = truth.column("pressure_pa")
     first = int(np.flatnonzero(pressure > 30e3)[0])  # the board's first frame beyond the model's range
     # stopped at the frame 10 ms after it, by the board's clock (the loop's frame count leaves out the block it
@@ -376,7 +377,7 @@ def test_a_closed_terminal_sighup_zeroes_every_line_and_exits_129(single_board, 
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
-        time.sleep(0.03)
+        board_caught_up(dev)  # the zeros reach the board
     assert proc.returncode == 129, err
     assert err.splitlines()[-1] == "Interrupted (SIGHUP): set-point 0 sent on every pressure line (0)", err
     assert board.received[-1] == (0, 0.0) and board.board.regulators.setpoint_pa[0] == 0.0
@@ -400,7 +401,7 @@ def test_a_second_ctrl_c_while_control_zeros_waits_for_every_zero(gripper_board,
         res = CliRunner().invoke(main, ["control", dev.port, "--config", files["gripper"], "--calibration",
                                         files["calibration"], "--target-force-n", "0.15", "--load", "contact",
                                         "--contact-s-m", str(S_C), "--seconds", "5", "--silence-s", "1"])
-        time.sleep(0.03)
+        board_caught_up(dev)  # the zeros reach the board
     assert len(presses) == 2, res.output
     assert res.exit_code == 130, res.output
     assert res.output.splitlines()[-1] == "Interrupted (SIGINT): set-point 0 sent on every pressure line (0, 1, 2)"
@@ -441,7 +442,7 @@ def test_a_board_that_holds_a_line_above_its_setpoints_stops_the_loop(single_boa
                                               "set-points") as info:
             run(driver, proc, hold_20_kpa, max_pressure_pa=LIMIT_PA, seconds=2.0, safety=Safety(silence_s=1.0))
         ran = time.monotonic() - t0
-        time.sleep(0.03)
+        board_caught_up(dev, driver)
     result = info.value.result
     # the host has sent 20 kPa for longer than 0.25 s: the first frame that reads 60 kPa stops it, before processing
     assert info.match(rf"at seq {truth.seq[FAULT_AT]},") and result.frames <= FAULT_AT and ran < 1.5

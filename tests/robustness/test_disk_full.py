@@ -1,11 +1,15 @@
 """The file system says no: a full disk, a file-size limit, a too-long name, a read-only disk.
 
-Every writing command runs as the ``bendsense`` command line (a subprocess) against a
-real condition: a small tmpfs filled to the last byte (:mod:`smalldisk`), a file-size
-limit set with ``setrlimit(RLIMIT_FSIZE)`` (Python ignores SIGXFSZ, so the write fails
-with EFBIG), a 300-character name, a read-only tmpfs. Each must end with one line
-``Error: PATH: reason``, a non-zero exit, nothing half-written and an earlier output
-intact; ``record`` keeps every frame written before the disk filled.
+Every writing command runs as the ``bendsense`` command line against a real condition: a
+small tmpfs filled to the last byte (:mod:`smalldisk`), a file-size limit set with
+``setrlimit(RLIMIT_FSIZE)`` (Python ignores SIGXFSZ, so the write fails with EFBIG), a
+300-character name, a read-only tmpfs. Each must end with one line ``Error: PATH:
+reason``, a non-zero exit, nothing half-written and an earlier output intact; ``record``
+keeps every frame written before the disk filled. On a tmpfs the command line's entry
+point runs in this process where the tmpfs is mounted here (:meth:`SmallDisk.cli`: as
+root, as on CI), in a process of its own inside the namespace that holds it otherwise; a
+file-size limit is a process's, so those commands, ``record`` and ``live`` (a simulated
+board against a process) run as processes of their own.
 """
 
 import os
@@ -96,12 +100,12 @@ def one_error_line(result, pattern: str) -> str:
 @pytest.mark.parametrize("name", CHEAP)
 def test_a_full_disk_leaves_the_earlier_output_intact(lab, disk, name):
     args = commands(lab, disk.path)[name]
-    first = disk.run([*CLI, *args])
+    first = disk.cli(args)
     assert first.returncode == 0, first.stderr
     before = disk.files()
     assert before  # the first run wrote its output
     assert disk.fill(0) == 0
-    result = disk.run([*CLI, *args, "--overwrite"])
+    result = disk.cli([*args, "--overwrite"])
     one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/\S+: no space left on device")
     assert disk.files() == before  # unchanged, nothing half-written, no temporary file left
 
@@ -110,7 +114,7 @@ def test_a_full_disk_leaves_the_earlier_output_intact(lab, disk, name):
 def test_a_full_disk_writes_nothing(lab, disk, name):
     args = commands(lab, disk.path).get(name) or ["reproduce", "-o", disk.path / "rep", "--quick"]
     disk.fill(0)
-    result = disk.run([*CLI, *args])
+    result = disk.cli(args)
     one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/\S+: no space left on device")
     assert disk.files() == {}
 
@@ -119,11 +123,11 @@ def test_a_full_disk_writes_nothing(lab, disk, name):
 def test_a_disk_that_fills_half_way_through_an_output(lab, disk, name, leave):
     """Space for some of the files, not for all: the earlier output stays whole and nothing else is left."""
     args = commands(lab, disk.path)[name]
-    first = disk.run([*CLI, *args])
+    first = disk.cli(args)
     assert first.returncode == 0, first.stderr
     before = disk.files()
     assert disk.fill(leave) <= leave
-    result = disk.run([*CLI, *args, "--overwrite"])
+    result = disk.cli([*args, "--overwrite"])
     one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/\S+: no space left on device; nothing was written; "
                            "the earlier output is unchanged")
     assert disk.files() == before
@@ -136,7 +140,7 @@ def test_process_stops_when_the_disk_fills(lab, disk, tmp_path, workers):
     for name in ("a", "b", "c"):
         shutil.copy(lab / "run.csv", runs / f"{name}.csv")
     disk.fill(8192)  # room for the root's manifest, not for a session's results
-    result = disk.run([*CLI, "process", runs, "--calibration", lab / "cal.yaml", "-o", disk.path / "proc",
+    result = disk.cli(["process", runs, "--calibration", lab / "cal.yaml", "-o", disk.path / "proc",
                        "--workers", workers, "--no-progress"])
     one_error_line(result, rf"^Error: {re.escape(str(disk.path))}/proc/[abc]: no space left on device; nothing was "
                            r"written; processing stopped \(0 of 3 sessions written before\)")
@@ -155,8 +159,8 @@ def test_a_file_size_limit_is_one_line_and_keeps_the_earlier_output(lab, tmp_pat
     out = tmp_path / "out-root"
     out.mkdir()
     args = commands(lab, out)[name]
-    first = subprocess.run([*CLI, *args], capture_output=True, text=True)
-    assert first.returncode == 0, first.stderr
+    first = CliRunner().invoke(main, [str(a) for a in args])  # the earlier output: no limit, no process needed
+    assert first.exit_code == 0, first.output
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     result = subprocess.run([*CLI, *args, "--overwrite"], capture_output=True, text=True,
                             preexec_fn=_file_size_limit(1500))
@@ -219,7 +223,7 @@ def test_a_read_only_disk(lab, tmp_path):
     fs = SmallDisk(tmp_path / "ro", 1 << 20, read_only=True)
     try:
         for name in ("save", "export", "calibrate", "simulate"):
-            result = fs.run([*CLI, *commands(lab, fs.path)[name]])
+            result = fs.cli(commands(lab, fs.path)[name])
             one_error_line(result, rf"^Error: {re.escape(str(fs.path))}/\S+: cannot write in "
                                    rf"{re.escape(str(fs.path))} \(read-only file system\)")
     finally:

@@ -19,6 +19,8 @@ from bendsense.sim.scenarios import time_varying_frames
 
 matplotlib.use("Agg")
 
+# under xdist, one worker: the chain runs of `workdir` (a module fixture of seconds) made once, not on both workers
+pytestmark = pytest.mark.xdist_group("tracking-outputs")
 SEED = 0
 RATE_HZ = 1000.0
 STATUSES = {"ok", "model_misfit", "not_converged", "not_identifiable", "extrapolated", "no_force",
