@@ -188,7 +188,7 @@ def test_control_adapt_on_a_finger_that_is_not_the_configs(object_board, calibra
     out = tmp_path / "grasp"
     res = CliRunner().invoke(main, ["control", port, "--calibration", str(calibration_path), "--target-force-n", "0.15",
                                     "--load", "contact", "--contact-s-m", "0.10", "--seconds", "1.5", "-o", str(out),
-                                    "--adapt"])
+                                    "--adapt", "--silence-s", "1"])  # a loaded machine may hold the board back
     assert res.exit_code == 0, res.output
     line = next(x for x in res.output.splitlines() if x.startswith("adapt: "))
     if "update(s)" in line:  # what it learned went into the loop and into the session's config.yaml
@@ -227,7 +227,7 @@ def test_control_adapt_after_two_mounts_holds_the_target_within_10_mn(object_boa
     res = CliRunner().invoke(main, ["control", port, "--config", str(gravity_identified), "--calibration",
                                     str(calibration_path), "--target-force-n", "0.15", "--load", "contact",
                                     "--contact-s-m", "0.10", "--seconds", "1.5", "-o", str(tmp_path / "grasp"),
-                                    "--adapt"])
+                                    "--adapt", "--silence-s", "1"])  # a loaded machine may hold the board back
     assert res.exit_code == 0, res.output
     true, claimed, sigma = _held(truth, res.output)
     assert abs(true * 1e3 - 150.0) <= 10.0, (true, res.output)
