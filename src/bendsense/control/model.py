@@ -89,7 +89,8 @@ class _PressingTable:
 
     def curve(self, touch_pa):
         """(ΔP nodes, force nodes) of the curve from ``touch_pa``, up to the first node without an equilibrium."""
-        i = min(int(max(touch_pa, 0.0) // TABLE_STEP_PA), self.nodes.size - 2)
+        touch_pa = min(max(touch_pa, 0.0), self.nodes[-1])
+        i = min(int(touch_pa // TABLE_STEP_PA), self.nodes.size - 2)
         w = (touch_pa - self.nodes[i]) / TABLE_STEP_PA
         force = (1.0 - w) * self.force[i] + w * self.force[i + 1]
         n = int(np.argmax(~np.isfinite(force))) if not np.isfinite(force).all() else force.size
@@ -121,7 +122,9 @@ class ModelController(FingerController):
         Highest set-point [Pa].
     contact_s_m : float, optional
         Where the object touches the finger [m] (the processor's known contact location);
-        None: where the estimate says at the touch (the tip for a tip load).
+        None: where the estimate says at the touch (the tip for a tip load). The curve of
+        this location (or the tip's) is tabulated here, before the loop runs (~0.3 s); one
+        the estimate locates elsewhere is tabulated at its touch, once per millimetre.
     max_force_n : float, optional
         The most force the finger can press with at ``max_pressure_pa`` [N]; a target
         beyond it is refused; None: no bound.
