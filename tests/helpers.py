@@ -5,7 +5,12 @@
 """
 
 import functools
+import io
+import logging
+import os
+import subprocess
 import time
+import traceback
 
 import numpy as np
 
@@ -113,3 +118,34 @@ def board_caught_up(dev, driver=None, *, frames=30, timeout_s=60.0):
     while dev.streaming and not dev.finished.is_set() and dev.stats.generated < end:  # (finished: it makes no more)
         assert time.monotonic() < deadline, f"the board made {frames} frames in {timeout_s} s"
         time.sleep(0.002)
+
+
+def run_cli(args, *, cwd=None) -> subprocess.CompletedProcess:
+    """``bendsense ARGS`` called in this process (click's ``CliRunner``: the console script's ``main``), in ``cwd``.
+
+    As from a process of its own: the exit code (of its ``SystemExit``), stdout, and stderr with what the command
+    logged (``LEVEL: message``, its format) and the traceback of an exception that escaped it (exit code 1). For
+    the tests whose subject is not the process (its signals, its exit, a fresh interpreter): no interpreter start
+    and no load of the compiled kernels per command.
+    """
+    from click.testing import CliRunner
+
+    from bendsense.cli import main
+
+    args = [str(a) for a in args]
+    logged = io.StringIO()
+    handler = logging.StreamHandler(logged)
+    handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+    root, old = logging.getLogger(), os.getcwd()
+    root.addHandler(handler)
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        result = CliRunner().invoke(main, args)
+    finally:
+        os.chdir(old)
+        root.removeHandler(handler)
+    stderr = logged.getvalue() + result.stderr
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        stderr += "".join(traceback.format_exception(result.exception))
+    return subprocess.CompletedProcess(["bendsense", *args], result.exit_code, result.stdout, stderr)

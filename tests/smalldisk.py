@@ -10,14 +10,11 @@ inside that namespace, where they see the tmpfs. Either way a test uses only
 ``SMALLDISK_NAMESPACE=1`` takes the namespace way as root too (to test it).
 """
 
-import io
 import json
-import logging
 import os
 import shutil
 import subprocess
 import sys
-import traceback
 from pathlib import Path
 
 # the helper inside the namespace: mount, then run one command per request line
@@ -110,22 +107,9 @@ class SmallDisk:
         args = [str(a) for a in args]
         if self._server is not None:
             return self.run([sys.executable, "-c", "from bendsense.cli import main; main()", *args], timeout=timeout)
-        from click.testing import CliRunner
+        from helpers import run_cli
 
-        from bendsense.cli import main
-
-        logged = io.StringIO()
-        handler = logging.StreamHandler(logged)
-        handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))  # the command line's format
-        logging.getLogger().addHandler(handler)
-        try:
-            result = CliRunner().invoke(main, args)
-        finally:
-            logging.getLogger().removeHandler(handler)
-        stderr = logged.getvalue() + result.stderr
-        if result.exception is not None and not isinstance(result.exception, SystemExit):
-            stderr += "".join(traceback.format_exception(result.exception))
-        return subprocess.CompletedProcess(["bendsense", *args], result.exit_code, result.stdout, stderr)
+        return run_cli(args)
 
     def fill(self, leave: int = 0) -> int:
         """Fill the file system (a file ``fill``) until ``leave`` bytes are free; the bytes free after."""

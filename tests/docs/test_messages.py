@@ -20,12 +20,12 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from helpers import run_cli
 from robustness.test_invalid_corpus import (
     CALIBRATIONS,
     CLI,
@@ -79,10 +79,9 @@ def provokes(key: str):
 
 
 def bendsense(cwd: Path, *args: str, ok: bool = False) -> str:
-    """``bendsense ARGS`` in ``cwd``: its stdout + stderr; exit 0 if ``ok``, else non-zero."""
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    proc = subprocess.run(["bendsense", *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300,
-                          stdin=subprocess.DEVNULL)
+    """``bendsense ARGS`` in ``cwd`` (the command line called in this process, :func:`helpers.run_cli`): its
+    stdout + stderr; exit 0 if ``ok``, else non-zero."""
+    proc = run_cli(args, cwd=cwd)
     text = proc.stdout + "\n" + proc.stderr
     assert (proc.returncode == 0) == ok, f"exit {proc.returncode}:\n{text}"
     assert "Traceback" not in text

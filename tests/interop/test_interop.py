@@ -194,8 +194,10 @@ def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_
                 shapes = pylsl.resolve_byprop("name", "bendsense-shape", minimum=1, timeout=10)
                 force_in = pylsl.StreamInlet(found[0], max_buflen=60)
                 shape_in = pylsl.StreamInlet(shapes[0], max_buflen=60)
-                force_in.open_stream(timeout=10)
+                # the shape stream first: --lsl-wait starts the board when the force stream has a consumer, and a
+                # shape inlet subscribed after that would miss the first frames' shapes (a loaded machine, ~5)
                 shape_in.open_stream(timeout=10)
+                force_in.open_stream(timeout=10)
                 info, sinfo = force_in.info(timeout=10), shape_in.info(timeout=10)
                 (force, stamps), (shape, _) = pull_all([force_in, shape_in], proc)
                 proc.wait(30)
