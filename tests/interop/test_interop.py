@@ -234,7 +234,10 @@ def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_
                                                                      "fx_track_n", "fy_track_n", "fx_track_std_n",
                                                                      "fy_track_std_n")])
     np.testing.assert_allclose(force[:m], want, rtol=0, atol=1e-12, equal_nan=True)
-    assert np.isfinite(force[:m, 4:]).all(axis=1).mean() > 0.9
+    # the track starts within its first 0.4 s of frames and then holds (a fraction of the whole would depend on
+    # how many frames a loaded machine let the board make)
+    tracked = np.isfinite(force[:m, 4:]).all(axis=1)
+    assert tracked.any() and np.argmax(tracked) < 400 and tracked[np.argmax(tracked):].mean() > 0.9
     np.testing.assert_allclose(shape[:m, -3], results["tip_x_m"][:m].astype(float), atol=1e-15)
     # time stamps: arrival times on the LSL clock, in order, about 1 ms apart
     assert np.all(np.diff(stamps) >= 0)
