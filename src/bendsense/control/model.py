@@ -12,7 +12,9 @@ turn that lead into tens of mN (the PI: 35–190 mN at 0.15–0.3 N on the simul
    :data:`APPROACH_GAIN_PA_PER_N_S` times the target, between
    :data:`MIN_APPROACH_RATE_PA_PER_S` and the slew limit: the force with which the finger
    meets the object before the loop sees it grows with the ramp, so a small target is
-   approached gently, a large one fast.
+   approached gently, a large one fast. A block spanning more than
+   :data:`~bendsense.control.pi.MAX_BLOCK_S` (a loop behind its board) ramps as if only
+   that had passed: a late loop approaches more slowly.
 2. **Touch**: the pressure of first touch ``P_c`` is where the model's pressing curve from
    ``P_c`` reaches the tracked force at the line's measured pressure (lagged like the
    track, so that the two are of the same moment). The curve is
@@ -49,7 +51,7 @@ import math
 
 import numpy as np
 
-from bendsense.control.pi import DEFAULT_MAX_RATE_PA_PER_S, MAX_DT_S, FingerController, _positive
+from bendsense.control.pi import DEFAULT_MAX_RATE_PA_PER_S, MAX_BLOCK_S, MAX_DT_S, FingerController, _positive
 from bendsense.errors import ArgumentError
 
 __all__ = ["ModelController", "APPROACH_GAIN_PA_PER_N_S", "MIN_APPROACH_RATE_PA_PER_S", "DEFAULT_TOUCH_FORCE_N",
@@ -216,13 +218,16 @@ class ModelController(FingerController):
             controller has no ``contact_s_m`` of its own).
         """
         out, last_t = self.output_pa, self._t
+        times = np.asarray(t_s, dtype=float)
+        span = times[-1] - last_t if times.size and math.isfinite(last_t) else 0.0
+        late = MAX_BLOCK_S / span if span > MAX_BLOCK_S else 1.0  # a late block approaches as a short one (PI's rule)
         n = len(force_n)
         where = np.full(n, np.nan) if contact_s_m is None else np.broadcast_to(np.asarray(contact_s_m, float), (n,))
         touch_n = min(self.touch_force_n, 0.5 * self.target_force_n)
         rate = self.approach_rate_pa_per_s
         if rate is None:
             rate = min(max(APPROACH_GAIN_PA_PER_N_S * self.target_force_n, MIN_APPROACH_RATE_PA_PER_S), self.max_rate)
-        for t, f, p, s_c in zip(np.asarray(t_s, dtype=float).tolist(), np.asarray(force_n, dtype=float).tolist(),
+        for t, f, p, s_c in zip(times.tolist(), np.asarray(force_n, dtype=float).tolist(),
                                 np.asarray(pressure_pa, dtype=float).tolist(), where.tolist()):
             dt = min(t - last_t, MAX_DT_S) if t > last_t else 0.0  # the first frame, or a clock going back: no time
             if math.isfinite(t):
@@ -235,7 +240,7 @@ class ModelController(FingerController):
                 if self.target_force_n > 0.0 and f >= touch_n:
                     self._touch(self._lagged_pa, f, s_c)
                 else:
-                    out = min(out + rate * dt, self.max_pressure_pa) if self.target_force_n > 0 else 0.0
+                    out = min(out + rate * late * dt, self.max_pressure_pa) if self.target_force_n > 0 else 0.0
                     continue
             self._lost_s = self._lost_s + dt if f < 0.5 * touch_n else 0.0
             if self._lost_s > LOST_S and self.target_force_n > 0.0:
