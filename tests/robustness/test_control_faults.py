@@ -373,7 +373,7 @@ def test_a_closed_terminal_sighup_zeroes_every_line_and_exits_129(single_board, 
         try:
             assert wait_for(lambda: board.received and board.received[-1][1] > 20e3, 60.0)
             proc.send_signal(signal.SIGHUP)  # the terminal (or the ssh session) closed
-            err = proc.communicate(timeout=10)[1]
+            err = proc.communicate(timeout=60)[1]  # a bound on a busy machine, not an expected time
         finally:
             if proc.poll() is None:
                 proc.kill()
