@@ -80,9 +80,8 @@ def pressing_force(config, contact_s_m: float, touch_pressure_pa, pressure_pa) -
     phi0 = np.repeat(free.angle_rad[:, 0], j)
     n0 = np.stack((np.cos(phi0), -np.sin(phi0)), axis=-1)  # into the object
     flat = p.reshape(-1)
-    f = np.where(flat > np.repeat(pc, j), np.nan, 0.0)  # NaN: still to solve
-    todo = np.flatnonzero(np.isnan(f))
-    f[todo] = 0.0
+    f = np.zeros(flat.size)
+    todo = np.flatnonzero(flat > np.repeat(pc, j))  # beyond the touch: still to solve
     direction = n0.copy()  # n(φ_c): the object's push is −f n
     for _ in range(MAX_STEPS):
         if todo.size == 0:
