@@ -476,6 +476,7 @@ def make_lab(root: Path, log=print) -> Path:
         import sys
         import numpy as np
         import bendsense as bs
+        import bendsense.config
         from bendsense.session.native import SessionWriter, record_dtype
         lab = sys.argv[1]
         s = bs.read_session_csv(lab + "/run.csv")
@@ -484,7 +485,7 @@ def make_lab(root: Path, log=print) -> Path:
             rec["adc"] = np.round(s.signals)
             rec["pressure_pa"] = np.round(s.pressure_pa)
             w.write(rec)
-        bs.save_config(bs.load_config(), lab + "/cfg.yaml")
+        bs.config.save_config(bs.load_config(), lab + "/cfg.yaml")
     """)
     r = subprocess.run([PY, "-c", code, str(lab)], env=env, capture_output=True, text=True, timeout=300)
     if r.returncode:
@@ -525,6 +526,10 @@ API_PRELUDE = textwrap.dedent("""
     import sys, json, warnings
     import numpy as np
     import bendsense as bs
+    import bendsense.config
+    import bendsense.estimation.cramer_rao
+    import bendsense.mechanics.actuator
+    import bendsense.session
     from bendsense.errors import BendsenseError
     LAB = sys.argv[1]
     def wrong(why):
@@ -1440,7 +1445,7 @@ def api_case(name, code, expect="any", command="api"):
 api_case("api-load-config-dir", "bs.load_config(LAB)", expect="error")
 api_case("api-load-config-calibration", "bs.load_config(LAB + '/cal.yaml')", expect="error")
 api_case("api-load-config-bytes-path", "c = bs.load_config((LAB + '/cfg.yaml').encode())")
-api_case("api-save-config-over-session", "bs.save_config(bs.load_config(), LAB + '/run.csv', overwrite=False)",
+api_case("api-save-config-over-session", "bs.config.save_config(bs.load_config(), LAB + '/run.csv', overwrite=False)",
          expect="error")
 api_case("api-read-session-int", "bs.read_session(3)", expect="error")
 api_case("api-read-session-none", "bs.read_session(None)", expect="error")
@@ -1466,12 +1471,12 @@ api_case("api-session-select-out-of-range", """
 """, expect="error")
 api_case("api-write-session-csv-over-itself", """
     s = bs.read_session_csv(LAB + '/run.csv')
-    bs.write_session_csv(s, LAB + '/run.csv', overwrite=True)
+    bs.session.write_session_csv(s, LAB + '/run.csv', overwrite=True)
     t = bs.read_session_csv(LAB + '/run.csv')
     if not np.allclose(t.signals, s.signals):
         wrong('the session changed when written over itself')
 """)
-api_case("api-write-session-csv-dir", "bs.write_session_csv(bs.read_session_csv(LAB + '/run.csv'), LAB)",
+api_case("api-write-session-csv-dir", "bs.session.write_session_csv(bs.read_session_csv(LAB + '/run.csv'), LAB)",
          expect="error")
 api_case("api-calibration-load-session", "bs.Calibration.load(LAB + '/run.csv')", expect="error")
 api_case("api-calibration-fit-degree-0", "bs.Calibration.fit(LAB + '/calsim/manifest.yaml', degree=0)",
@@ -1596,11 +1601,11 @@ api_case("api-solve-beam-method-bad", "bs.solve_beam(0.13, 2.5e-3, 5.0, method='
 api_case("api-solve-beam-s-m-outside", "bs.solve_beam(0.13, 2.5e-3, 5.0, s_m=[0, 0.5, 1.0])", expect="error")
 api_case("api-solve-beam-n-nodes-1", "bs.solve_beam(0.13, 2.5e-3, 5.0, n_nodes=1)", expect="error")
 api_case("api-free-bending-negative-mu", """
-    m = bs.FreeBendingModel(chamber_radius_m=0.01, bottom_thickness_m=0.002, wall_thickness_m=0.002,
+    m = bs.mechanics.actuator.FreeBendingModel(chamber_radius_m=0.01, bottom_thickness_m=0.002, wall_thickness_m=0.002,
                             length_m=0.13, shear_modulus_pa=-1.8e5, sensor_stiffness_nm_per_rad=1.5e-3)
 """, expect="error")
 api_case("api-free-bending-length-inf", """
-    m = bs.FreeBendingModel(chamber_radius_m=0.01, bottom_thickness_m=0.002, wall_thickness_m=0.002,
+    m = bs.mechanics.actuator.FreeBendingModel(chamber_radius_m=0.01, bottom_thickness_m=0.002, wall_thickness_m=0.002,
                             length_m=float('inf'), shear_modulus_pa=1.8e5, sensor_stiffness_nm_per_rad=1.5e-3)
 """, expect="error")
 api_case("api-config-mutate-then-estimate", """

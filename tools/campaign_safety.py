@@ -683,11 +683,11 @@ track_api("contact-threshold-nan", "bs.estimate_contact(sh, p, calibration=c, th
 track_api("contact-noise-negative", "bs.estimate_contact(sh, p, calibration=c, noise_std=-1.0)", expect="error")
 track_api("contact-then-track", "ec = bs.estimate_contact(sh, p, calibration=c, t_s=t)\n"
                                 "track_sane(bs.track(ec, t, pressure_pa=p))")
-track_api("contact-bound-broadcast-ok", "b = bs.contact_bound(contact_s_m=[0.05, 0.1], force_n=0.1, "
-                                        "pressure_pa=[[4e4], [6e4]])", expect="ok")
-track_api("contact-bound-force-nan", "bs.contact_bound(contact_s_m=0.1, force_n=float('nan'), pressure_pa=5e4)",
-          expect="error")
-track_api("contact-bound-frames-zero", "bs.contact_bound(contact_s_m=0.1, force_n=0.1, pressure_pa=5e4, frames=0)",
+BOUND = "bs.estimation.cramer_rao.contact_bound"
+track_api("contact-bound-broadcast-ok", f"{BOUND}(contact_s_m=[0.05, 0.1], force_n=0.1, pressure_pa=[[4e4], [6e4]])",
+          expect="ok")
+track_api("contact-bound-force-nan", f"{BOUND}(contact_s_m=0.1, force_n=float('nan'), pressure_pa=5e4)", expect="error")
+track_api("contact-bound-frames-zero", f"{BOUND}(contact_s_m=0.1, force_n=0.1, pressure_pa=5e4, frames=0)",
           expect="error")
 
 TVC = ["load", "lab/tv/session.csv", "--calibration", "lab/cal.yaml", "reconstruct", "estimate"]
