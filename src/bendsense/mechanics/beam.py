@@ -354,8 +354,11 @@ def _contact_sigma(contact_s_m, length_m: float) -> np.ndarray:
     So close to the tip the second domain would be too short to resolve its φ' (its
     rows scale with its length); the force moves by at most 1e-9 L.
     """
-    sc = _as_float("contact_s_m", contact_s_m)
     tol = 1e-12 * length_m
+    if type(contact_s_m) is float and 0.0 < contact_s_m <= length_m + tol:  # one location (a live loop's, per block)
+        sigma = contact_s_m / length_m
+        return np.array(1.0 if sigma >= 1.0 - 1e-9 else sigma)
+    sc = _as_float("contact_s_m", contact_s_m)
     if not np.all((sc > 0.0) & (sc <= length_m + tol)):
         bad = sc[~((sc > 0.0) & (sc <= length_m + tol))].ravel()[0]
         raise ArgumentError(f"contact_s_m: expected 0 < s_c <= length_m = {length_m:g} m, got {bad:g}")

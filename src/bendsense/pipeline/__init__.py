@@ -28,6 +28,7 @@ on one core.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import time
@@ -41,7 +42,7 @@ from bendsense.choices import OBJECTIVES
 from bendsense.errors import ArgumentError, ConfigError, DataWarning, SessionError
 from bendsense.pipeline.readings import ReadingClock
 from bendsense.results import Results
-from bendsense.status import Status, words
+from bendsense.status import WORDS, Status, words
 
 log = logging.getLogger("bendsense")
 
@@ -502,12 +503,13 @@ class LiveBlock:
             return np.full((len(self), 2), np.nan)
         return np.asarray(self.estimate.std_n, dtype=float).reshape(len(self), 2)
 
-    @property
+    @functools.cached_property
     def status(self) -> np.ndarray:
         """Per-frame status codes (n,) of int8 (:class:`bendsense.status.Status`).
 
         Those of :func:`bendsense.results.frame_codes`, and ``NO_PRESSURE`` for frames
         without pressure when forces are estimated. Their words are results.csv's ``status``.
+        Worked out once per block (the processor counts them, the loop reads them).
         """
         from bendsense.results import frame_codes
 
@@ -739,7 +741,7 @@ class LiveProcessor:
             est = put_frames(est, failed, retry, m)
         ok = np.flatnonzero(np.asarray(est.success).reshape(-1))
         if ok.size:  # a failed frame has NaN forces: it cannot seed the next block
-            self._previous = take_frames(est, int(ok[-1]), m)
+            self._previous = est if m == 1 else take_frames(est, int(ok[-1]), m)
         self.failures += int(np.count_nonzero(~np.asarray(est.success)))
         self.estimated += m
         return est if m == n else expand_frames(est, has_p)
@@ -804,9 +806,14 @@ class LiveProcessor:
             extra={} if extra is None else {k: np.asarray(v) for k, v in extra.items()},
         )
         self.frames += n
-        codes, counts = np.unique(block.status, return_counts=True)
-        for word, count in zip(words(codes), counts):
-            self.status_counts[word] = self.status_counts.get(word, 0) + int(count)
+        status = block.status
+        if n == 1 or (status == status[0]).all():  # the usual block: one status
+            word = str(WORDS[status[0]])
+            self.status_counts[word] = self.status_counts.get(word, 0) + n
+        else:
+            codes, counts = np.unique(status, return_counts=True)
+            for word, count in zip(words(codes), counts):
+                self.status_counts[word] = self.status_counts.get(word, 0) + int(count)
         if track is not None:
             from bendsense.estimation._kernels import MISFIT_P
             from bendsense.results import WINDOW_MISFIT

@@ -228,18 +228,26 @@ def estimate_codes(estimate, n: int) -> np.ndarray:
     n : int
         The number of frames.
     """
-    codes = np.array(np.broadcast_to(np.asarray(estimate.status, dtype=np.int8), (n,)))
-    failed = ~np.broadcast_to(np.asarray(estimate.success, dtype=bool), (n,))
-    codes[failed & np.isin(codes, _SUCCESSES)] = Status.NOT_CONVERGED  # a failure never reads as a success
+    codes = _frames_of(estimate.status, n, np.int8).copy()
+    failed = ~_frames_of(estimate.success, n, bool)
+    if failed.any():  # a failure never reads as a success
+        codes[failed & ((codes == _SUCCESSES[0]) | (codes == _SUCCESSES[1]) | (codes == _SUCCESSES[2]))] = \
+            Status.NOT_CONVERGED
     ok = codes == Status.OK
     if not ok.any():
         return codes
     force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
     codes[ok & ~np.isfinite(force).all(axis=1)] = Status.NO_FORCE
     if getattr(estimate, "load", "tip") == "contact" and estimate.contact_std_m is not None:
-        unresolved = np.broadcast_to(np.isinf(np.asarray(estimate.contact_std_m, dtype=float)), (n,))
+        unresolved = np.isinf(_frames_of(estimate.contact_std_m, n, float))
         codes[(codes == Status.OK) & unresolved] = Status.CONTACT_UNRESOLVED  # the force reported, never ok
     return codes
+
+
+def _frames_of(values, n: int, dtype) -> np.ndarray:
+    """``values`` as an array (n,) of ``dtype``: itself when it is one (a view, not to be written), else broadcast."""
+    a = np.asarray(values, dtype=dtype)
+    return a if a.shape == (n,) else np.broadcast_to(a, (n,))
 
 
 def frame_codes(shape, estimate=None) -> np.ndarray:
@@ -259,17 +267,15 @@ def frame_codes(shape, estimate=None) -> np.ndarray:
     """
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
     codes = np.full(n, Status.OK, dtype=np.int8)
-    codes[np.broadcast_to(np.asarray(getattr(shape, "extrapolated", False)), (n,))] = Status.EXTRAPOLATED
+    codes[_frames_of(getattr(shape, "extrapolated", False), n, bool)] = Status.EXTRAPOLATED
     kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
     codes[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = Status.NO_SHAPE
     if estimate is not None:
         own = estimate_codes(estimate, n)
-        failed = ~np.broadcast_to(np.asarray(estimate.success), (n,))
-        codes[failed] = own[failed]
-        codes[codes == Status.OK] = own[codes == Status.OK]
+        take = ~_frames_of(estimate.success, n, bool) | (codes == Status.OK)  # the estimate's word where it failed
+        codes[take] = own[take]
     # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
-    tip = np.broadcast_to(np.asarray(shape.tip_angle_rad, dtype=float), (n,))
-    codes[np.abs(tip) > 2.0 * np.pi] = Status.IMPLAUSIBLE_SHAPE
+    codes[np.abs(_frames_of(shape.tip_angle_rad, n, float)) > 2.0 * np.pi] = Status.IMPLAUSIBLE_SHAPE
     return codes
 
 
