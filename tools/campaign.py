@@ -112,6 +112,7 @@ class Outcome:
     detail: str
     seconds: float
     returncode: int | None
+    output: str = ""  # the command's last output, for a case that was not handled
 
 
 CASES: list[Case] = []
@@ -623,7 +624,7 @@ def run_case(c: Case, lab: Path, tmp: Path) -> Outcome:
         except OSError:
             pass
     kind, detail = classify(c, work, before, rc, out, hung)
-    return Outcome(c, kind, detail, seconds, rc)
+    return Outcome(c, kind, detail, seconds, rc, "" if kind == "handled" else out[-4000:])
 
 
 def first_line(out: str, pattern=None) -> str:
@@ -767,7 +768,8 @@ def main(argv=None) -> int:
         if opts.json:
             Path(opts.json).write_text(json.dumps([
                 {"name": o.case.name, "command": o.case.command, "kind": o.kind, "detail": o.detail,
-                 "seconds": round(o.seconds, 2), "returncode": o.returncode} for o in outcomes], indent=1))
+                 "seconds": round(o.seconds, 2), "returncode": o.returncode, "output": o.output} for o in outcomes],
+                indent=1))
         return report(outcomes, time.monotonic() - t0)
     finally:
         if opts.keep:

@@ -156,7 +156,10 @@ def controlled(client, board=BOARD, during=None, never_driven=False, probe_after
 
     def after(port, board, work):
         seen["rows"] = len(truth_rows(work)[1])
-        seen["dead"] = board.poll() is not None or getattr(during, "ends_board", False)
+        # a board that a case ended while the client ran (a client that stopped before, on a fault of a loaded
+        # machine, sent its zeros to a live board: not judged by its death)
+        seen["dead"] = board.poll() is not None or (getattr(during, "ends_board", False)
+                                                    and during.client_ran_at_end)
         if probe_after:
             probe(port, board)
 
@@ -218,9 +221,11 @@ def signal_after(seconds, sig, target="client", running=True):
             streaming(work)
         time.sleep(seconds)
         p = client if target == "client" else board
+        during.client_ran_at_end = client.poll() is None
         if p.poll() is None:
             p.send_signal(sig)
-    during.ends_board = target == "board"  # a board told to stop is gone: its lines hold what they held
+    # a board told to stop may take its time (or, on a loaded machine, not stop): judged by whether it ended
+    during.ends_board = False
     return during
 
 
@@ -239,6 +244,7 @@ def kill_board(seconds):
     def during(client, board, work):
         streaming(work)
         time.sleep(seconds)
+        during.client_ran_at_end = client.poll() is None
         _kill(board)
     during.ends_board = True
     return during

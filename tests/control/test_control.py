@@ -337,6 +337,35 @@ def test_run_zeroes_on_ctrl_c_sigterm_sighup_and_sigquit(signum):
         assert signal.getsignal(other) is signal.SIG_DFL  # the loop's handlers are gone again
 
 
+class SwallowingProcessor(FakeProcessor):
+    """A processor under which the loop's KeyboardInterrupt is lost, as seen under load (the first Ctrl-C gone)."""
+
+    def __init__(self):
+        super().__init__()
+        self.swallowed = 0
+
+    def process_readings(self, readings):
+        block = super().process_readings(readings)
+        if block.t_s[-1] >= 0.1 and not self.swallowed:
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.5)  # the handler raises here
+            except KeyboardInterrupt:
+                self.swallowed = block.t_s[-1]
+        return block
+
+
+def test_a_stop_signal_whose_keyboardinterrupt_is_lost_under_the_loop_still_stops_it():
+    board = FakeBoard()
+    proc = SwallowingProcessor()
+    with pytest.raises(KeyboardInterrupt) as info:
+        run(board, proc, as_controller(pi_of()), max_pressure_pa=P_MAX_PA, seconds=5.0)
+    assert proc.swallowed and zeros_at_end(board)
+    result = info.value.result
+    assert result.outcome == "interrupted"
+    assert result.frames == round(proc.swallowed * 1e3)  # the next turn of the loop: no frame after the signal's
+
+
 class SignalledBoard(FakeBoard):
     """A fake board whose first zero set-point brings a stop signal: a second Ctrl-C while the loop zeros."""
 

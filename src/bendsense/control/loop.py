@@ -39,7 +39,7 @@ import numpy as np
 from bendsense.control.safety import ControlStop, Guard, Safety
 from bendsense.errors import ArgumentError, DeviceError
 from bendsense.pipeline.readings import sample_lines
-from bendsense.stop_signals import deferred, handled
+from bendsense.stop_signals import STOP_SIGNALS, deferred, handled
 
 __all__ = ["run", "ControlResult", "LineZero", "zero_report", "DEFAULT_MAX_PRESSURE_PA", "HEARTBEAT_S"]
 
@@ -207,16 +207,28 @@ def _prompt_threads():
 
 
 @contextlib.contextmanager
-def _signals_stop():
-    """SIGTERM, SIGHUP and SIGQUIT raise KeyboardInterrupt in the loop, as Ctrl-C does.
+def _signals_stop(noted: list):
+    """Every stop signal raises KeyboardInterrupt in the loop, and is noted in ``noted`` for the loop to check.
 
-    In the main thread, for each that nobody handles yet (its default action would kill
-    the process without the zeros); the previous handlers come back after.
+    In the main thread, for each stop signal not ignored: the signal is noted, then the
+    handler there before acts (the command line's notes it for the exit status and raises
+    the first; Python's SIGINT handler raises); a signal whose default would kill the
+    process without the zeros (SIGTERM, SIGHUP, SIGQUIT outside the command line), or
+    whose handler did not raise (a later one), raises KeyboardInterrupt here. The loop
+    checks ``noted`` at every turn (:func:`_loop`): a KeyboardInterrupt that something
+    under it swallowed (seen under load: the first Ctrl-C lost, the loop holding the force
+    on, the later signals only noted) still stops it. The previous handlers come back after.
     """
+    previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
+
     def interrupt(signum, frame):
+        noted.append(signum)
+        before = previous.get(signum)
+        if callable(before):
+            before(signum, frame)
         raise KeyboardInterrupt
 
-    with handled(interrupt, lambda signum, current: signum != signal.SIGINT and current is signal.SIG_DFL):
+    with handled(interrupt):
         yield
 
 
@@ -377,9 +389,9 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     guard = Guard(safety, _fingers(processor) if fingers is None else fingers,
                   rate_hz=getattr(hello, "rate_hz", None) or None, max_pressure_pa=float(max_pressure_pa))
     state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {},
-             "driven": set(), "held": ()}
+             "driven": set(), "held": (), "signals": []}
     outcome, stopped_at, zero_at, error, result = "stopped", math.nan, math.nan, None, None
-    with _signals_stop():
+    with _signals_stop(state["signals"]):
         try:
             with _prompt_threads():
                 outcome = _loop(driver, processor, controller, seconds, stop, guard, lines, recording, on_block,
@@ -427,6 +439,8 @@ def _loop(driver, processor, controller, seconds, stop, guard, lines, recording,
     silence = guard.silence_s
     beat = -math.inf
     while True:
+        if state["signals"]:  # a stop signal whose KeyboardInterrupt did not reach the loop
+            raise KeyboardInterrupt
         now = time.monotonic()
         if now - beat >= HEARTBEAT_S:  # the board's watchdog: the loop is alive, set-points or not
             beat = now
