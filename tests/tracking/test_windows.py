@@ -145,6 +145,21 @@ def _with_model_cov(kappa, pressure, cal, cov):
         estimation._model_cov = original
 
 
+def test_the_window_kernel_compiled_ahead_is_the_one_a_window_test_calls():
+    """compile_kernels (the demo's, while the estimator compiles) and a real window test: one compiled signature."""
+    from bendsense.tracking import _window_kernels
+    from bendsense.tracking.windows import compile_kernels
+
+    cal = linear_calibration(noise_std=1.5)
+    compile_kernels(cal, CFG)
+    pressure = np.full(2 * PER_WINDOW, 45e3)
+    kappa = curvatures_for(shifts_for(loaded_curvatures(45e3, (0.05, -0.04))))
+    est = estimate_force(np.tile(kappa.reshape(1, -1), (pressure.size, 1)), pressure, CFG, calibration=cal)
+    p, _ = _window_p(est, pressure)
+    assert np.isfinite(p).all()
+    assert len(_window_kernels.window_tests.signatures) == 1
+
+
 def test_the_positions_objective_and_the_paper_method_have_no_window_test():
     kappa = loaded_curvatures(40e3, (0.05, 0.0)).reshape(1, -1).repeat(8, axis=0)
     est = estimate_force(kappa, 40e3, CFG, calibration=linear_calibration(), objective="positions")

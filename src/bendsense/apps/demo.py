@@ -343,6 +343,8 @@ def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progres
     from bendsense.pipeline import process
     from bendsense.results import write_results
     from bendsense.session.native import read_session_dir
+    from bendsense.shape.pcc import reconstruct
+    from bendsense.tracking.windows import compile_kernels as compile_window_kernels
 
     session_dir, results_dir, figure_path = work / "session", work / "results", work / "demo.png"
     # first run after an install: the estimation kernels compile on the second core while
@@ -355,6 +357,9 @@ def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progres
         session = read_session_dir(session_dir)
         truth = _aligned_truth(session, session_dir, config, seconds=seconds, rate_hz=rate_hz, seed=seed,
                                echo=echo)
+        if compiling.process is not None:  # the kernels of the steps after the estimate, while it compiles
+            compile_window_kernels(cal, config)
+            reconstruct(session.signals[:1], cal, config.sensor)
         compiling.wait()
 
     echo(f"processing {len(session)} frames: shape, force (constraint normal and none) ...")

@@ -60,6 +60,7 @@ from __future__ import annotations
 import contextlib
 import datetime as _dt
 import errno
+import functools
 import logging
 import os
 import threading
@@ -158,13 +159,19 @@ def record_dtype(n_channels: int, adc_dtype: str = "<u2", extra_fields=(), n_lin
         raise SessionError(f"n_channels: expected 1..64, got {n_channels!r}")
     if isinstance(n_lines, bool) or not isinstance(n_lines, (int, np.integer)) or not 1 <= n_lines <= MAX_LINES:
         raise SessionError(f"n_lines: expected 1..{MAX_LINES} pressure lines, got {n_lines!r}")
+    return _record_dtype(n, adc_dtype, tuple((str(name), dt) for name, dt in extra_fields), int(n_lines), SAMPLE_FIELDS)
+
+
+@functools.lru_cache(maxsize=64)
+def _record_dtype(n: int, adc_dtype: str, extra_fields: tuple, n_lines: int, sample_fields: tuple) -> np.dtype:
+    """:func:`record_dtype` of checked arguments and the wire's fields, made once (a live loop asks every block)."""
     lines = [(LINES_FIELD, np.dtype("<i4"), (int(n_lines),))] if n_lines > 1 else []
     fields = [
         HOST_FIELD,
-        *((f.name, f.dtype) for f in SAMPLE_FIELDS),
+        *((f.name, f.dtype) for f in sample_fields),
         ("adc", np.dtype(adc_dtype).newbyteorder("<"), (n,)),
         *lines,
-        *[(str(name), np.dtype(dt).newbyteorder("<")) for name, dt in extra_fields],
+        *[(name, np.dtype(dt).newbyteorder("<")) for name, dt in extra_fields],
     ]
     return np.dtype(fields)
 

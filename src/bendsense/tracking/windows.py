@@ -111,6 +111,29 @@ def window_p_values(estimate, bounds, payload=None):
     return p, n
 
 
+def compile_kernels(calibration, config) -> None:
+    """Compile (or load from the cache) the window test's kernel for a session of ``calibration``: no window tested.
+
+    The types of every later call (the shift error model of the calibration's noise, the
+    payload's arrays); ``bendsense demo`` compiles it while the estimation kernels compile
+    in a second process.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        The session's calibration.
+    config : Config
+        Its ``estimation.signal_noise_std``, where the calibration has no noise.
+    """
+    from bendsense.estimation.uncertainty import noise_std
+
+    err = calibration.error_model(noise_std(None, calibration, config.estimation))
+    none = np.empty(0)
+    _jit.call(_window_kernels.window_tests, np.zeros(1, dtype=np.int64), np.empty((0, 1)), np.empty((0, 1, 2)),
+              np.empty((0, 1, 2)), np.empty((0, 1)), tuple(err), np.zeros(1, dtype=np.int64), 0.0, none,
+              np.empty(0, dtype=np.int64))
+
+
 def check_windows(estimate, t_s, *, window_s: float = WINDOW_S, pressure_pa=None) -> ForceEstimate:
     """The model check over windows of frames: ``estimate`` with ``window_p_value`` and the misfits flagged.
 
