@@ -183,7 +183,7 @@ def lu_solve(A, B):
     piv = np.empty(A.shape[0], dtype=np.int64)
     if not lu_factor(A, piv):
         return False
-    lu_apply(A, piv, B, int(0), int(B.shape[1]))  # noqa: UP018 (int(): no literal-typed copy to compile)
+    lu_apply(A, piv, B, 0, B.shape[1])
     return True
 
 
@@ -247,7 +247,7 @@ def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
         # the step now; the other columns (Jacobi field, sensitivities) only at the last iterate
         good = lu_factor(J, piv)
         if good:
-            lu_apply(J, piv, rhs, int(0), int(1))  # noqa: UP018 (int(): one compiled lu_apply, not one per literal)
+            lu_apply(J, piv, rhs, 0, 1)
         size = 0.0
         for i in range(m):
             size = max(size, abs(rhs[i, 0]))
@@ -260,7 +260,7 @@ def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
             p[i + 1] += rhs[i, 0] * damp
         prev = size
         if done:
-            lu_apply(J, piv, rhs, int(1), int(ncol))  # noqa: UP018
+            lu_apply(J, piv, rhs, 1, ncol)
             for i in range(m):
                 for c_ in range(ncol - 1):
                     x[i, c_] = rhs[i, c_ + 1]
