@@ -22,6 +22,7 @@ import logging
 import numbers
 import os
 import queue
+import re
 import threading
 import time
 from collections import deque
@@ -336,7 +337,7 @@ class Driver:
                 self._ser.write(data)
                 self._ser.flush()
         except Exception as err:  # noqa: BLE001 - pyserial raises several types here
-            raise DeviceError(f"{self.port}: write failed ({err})") from None
+            raise DeviceError(f"{self.port}: write failed ({_os_reason(err)})") from None
 
     def send(self, kind: str) -> None:
         """Send a command: ``"start"``, ``"stop"`` or ``"hello_request"`` (binary dialect only).
@@ -698,3 +699,10 @@ def _check_port_path(port: str) -> None:
         kind = file_kind(mode) or "a regular file"
         raise DeviceError(f"{port}: {kind}, not a serial port (give the board's port, e.g. /dev/ttyACM0; "
                           "'bendsense devices' lists them)")
+
+
+def _os_reason(err: Exception) -> str:
+    """Why a port operation failed, for a person: ``Input/output error``, not ``write failed: [Errno 5] ...``."""
+    if isinstance(err, OSError) and err.strerror:
+        return err.strerror
+    return re.sub(r"^(?:write|read) failed: |\[Errno \d+\] ", "", str(err)) or type(err).__name__
