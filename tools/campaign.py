@@ -345,9 +345,24 @@ def _finish(p, timeout):
         out, err = p.communicate(timeout=timeout)
         return p.returncode, (out + err).decode(errors="replace"), False
     except subprocess.TimeoutExpired:
-        _kill(p)
-        out, err = p.communicate()
+        out, err = _dump_and_kill(p)
         return None, (out + err).decode(errors="replace"), True
+
+
+def _dump_and_kill(p):
+    """Stop a hung process, and return its (stdout, stderr).
+
+    SIGABRT first, whose faulthandler (PYTHONFAULTHANDLER, :func:`base_env`) prints every
+    thread's stack into its output; then SIGKILL to its group.
+    """
+    try:
+        p.send_signal(signal.SIGABRT)
+        return p.communicate(timeout=5)
+    except subprocess.TimeoutExpired:
+        pass
+    finally:
+        _kill(p)
+    return p.communicate()
 
 
 def _kill(p):
@@ -503,6 +518,7 @@ def make_lab(root: Path, log=print) -> Path:
 def base_env() -> dict:
     env = dict(os.environ)
     env.setdefault("MPLBACKEND", "Agg")
+    env["PYTHONFAULTHANDLER"] = "1"  # a hang's output shows where every thread was (_dump_and_kill)
     env.pop("PYTHONWARNINGS", None)
     return env
 
@@ -609,8 +625,7 @@ def run_case(c: Case, lab: Path, tmp: Path) -> Outcome:
             o, e = p.communicate(c.stdin, timeout=c.timeout)
             rc, hung = p.returncode, False
         except subprocess.TimeoutExpired:
-            _kill(p)
-            o, e = p.communicate()
+            o, e = _dump_and_kill(p)
             rc, hung = None, True
         out = (o + e).decode("utf-8", errors="replace")
         _kill(p)  # nothing of the case outlives it

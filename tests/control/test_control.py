@@ -330,11 +330,17 @@ def test_run_zeroes_on_ctrl_c_sigterm_sighup_and_sigquit(signum):
             os.kill(os.getpid(), signum)
             time.sleep(0.5)  # the handler raises here
 
-    with pytest.raises(KeyboardInterrupt):
-        run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, on_block=on_block)
-    assert zeros_at_end(board)
-    for other in (signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
-        assert signal.getsignal(other) is signal.SIG_DFL  # the loop's handlers are gone again
+    others = (signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
+    before = {other: signal.signal(other, signal.SIG_DFL) for other in others}  # as a shell starts a command
+    try:  # (nohup would start it with SIGHUP ignored, and an ignored signal stays ignored: stop_signals.handled)
+        with pytest.raises(KeyboardInterrupt):
+            run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, on_block=on_block)
+        assert zeros_at_end(board)
+        for other in others:
+            assert signal.getsignal(other) is signal.SIG_DFL  # the loop's handlers are gone again
+    finally:
+        for other, handler in before.items():
+            signal.signal(other, handler)
 
 
 class SwallowingProcessor(FakeProcessor):
