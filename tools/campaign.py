@@ -731,7 +731,20 @@ def report(outcomes: list[Outcome], elapsed: float) -> int:
     return 1 if failing else 0
 
 
+def _signals_as_a_terminal_gives_them() -> None:
+    """The stop signals at their defaults for every command the campaign starts.
+
+    A shell starts a background job with SIGINT and SIGQUIT ignored (and nohup SIGHUP), an
+    ignored signal is inherited ignored, and every Ctrl-C case would then test a command
+    that cannot receive one.
+    """
+    for signum in (signal.SIGINT, signal.SIGQUIT, signal.SIGHUP):
+        if signal.getsignal(signum) == signal.SIG_IGN:
+            signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+
+
 def main(argv=None) -> int:
+    _signals_as_a_terminal_gives_them()
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--only", metavar="PATTERN", action="append",

@@ -224,8 +224,7 @@ def signal_after(seconds, sig, target="client", running=True):
         during.client_ran_at_end = client.poll() is None
         if p.poll() is None:
             p.send_signal(sig)
-    # a board told to stop may take its time (or, on a loaded machine, not stop): judged by whether it ended
-    during.ends_board = False
+    during.ends_board = target == "board"  # a board told to stop is gone: its lines hold what they held
     return during
 
 
@@ -247,6 +246,19 @@ def kill_board(seconds):
         during.client_ran_at_end = client.poll() is None
         _kill(board)
     during.ends_board = True
+    return during
+
+
+def board_ends():
+    """Wait for the board to end its own run (its --seconds) while the client runs: then it is gone."""
+    def during(client, board, work):
+        try:
+            board.wait(timeout=60)
+        except Exception:  # noqa: BLE001 - still running: judged by its truth
+            return
+        during.client_ran_at_end = client.poll() is None
+    during.ends_board = True
+    during.client_ran_at_end = False
     return during
 
 
@@ -348,7 +360,7 @@ control_case("control-grip-board-killed", grasp(seconds="10"), during=kill_board
 control_case("control-grip-board-sigint", grasp(seconds="10"), during=signal_after(3, signal.SIGINT, "board"),
              probe_after=False)
 control_case("control-grip-board-ends-its-run", grasp(seconds="40"), board=(*BOARD, "--seconds", "20"),
-             probe_after=False)
+             during=board_ends(), probe_after=False)
 control_case("control-grip-board-freezes-2s", grasp(seconds="10"), during=freeze_board(1, 2), timeout=40)
 
 # nonsense options: refused before the port is opened (a port nobody can open would say so instead)
