@@ -21,6 +21,7 @@ import os
 import re
 import shutil
 import signal
+import subprocess
 import textwrap
 import time
 
@@ -254,7 +255,7 @@ def board_ends():
     def during(client, board, work):
         try:
             board.wait(timeout=60)
-        except Exception:  # noqa: BLE001 - still running: judged by its truth
+        except subprocess.TimeoutExpired:  # still running: judged by its truth
             return
         during.client_ran_at_end = client.poll() is None
     during.ends_board = True
