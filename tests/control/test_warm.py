@@ -109,7 +109,7 @@ def test_a_control_run_readies_every_kernel_before_the_loop_and_processes_every_
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stdout.splitlines()[-1])
     compiled = report["compiled"]
-    assert report["warm"]["bendsense.estimation._kernels.estimate_block"] >= 1  # warm_up readied the kernels
+    assert report["warm"]["bendsense.pipeline._kernels.live_block"] >= 1  # warm_up readied the live step
     assert report["warm before the loop"]  # and the command called it before the loop
     # nothing compiled or loaded in the loop, nor for the big block after it
     assert compiled["after"] == [] and report["new versions"] == [], (compiled["after"], report["new versions"])

@@ -264,9 +264,9 @@ def test_live_and_offline_give_each_frame_the_same_status_near_the_identifiabili
 def test_warm_up_readies_the_live_kernel_and_forgets_its_frames(calibration_path):
     """``record`` and ``live`` warm the processor before a port opens: no board streams into a compiling process.
 
-    In a fresh process, the warm-up compiles (or loads) the per-frame kernel that live
-    blocks of one frame and of several use, and not the batch kernel of large batches,
-    which a live block never needs; afterwards the processor counts nothing and
+    In a fresh process, the warm-up compiles (or loads) the one compiled live step that
+    blocks of one frame and of several use (one signature), and not the batch kernel of
+    large batches, which a live block never needs; afterwards the processor counts nothing and
     estimates a block exactly as a processor that never saw the warm-up frames.
     """
     import subprocess
@@ -276,11 +276,11 @@ def test_warm_up_readies_the_live_kernel_and_forgets_its_frames(calibration_path
         "import bendsense\n"
         "from bendsense.calibration import Calibration\n"
         "from bendsense.estimation import _kernels as kernels\n"
-        "from bendsense.pipeline import LiveProcessor\n"
+        "from bendsense.pipeline import LiveProcessor, _kernels as live\n"
         f"p = LiveProcessor(Calibration.load({str(calibration_path)!r}), bendsense.load_config())\n"
-        "assert not kernels.estimate_block.signatures and not kernels.estimate_frames.signatures\n"
+        "assert not live.live_block.signatures and not kernels.estimate_frames.signatures\n"
         "p.warm_up()\n"
-        "print(len(kernels.estimate_block.signatures), len(kernels.estimate_frames.signatures), p.frames, p.estimated,"
+        "print(len(live.live_block.signatures), len(kernels.estimate_frames.signatures), p.frames, p.estimated,"
         " p.status_counts)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True)

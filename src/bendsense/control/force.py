@@ -97,16 +97,12 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
     NormalForce
     """
     n = len(block)
-    shape = block.shape
-    est = block.estimate
-    length = float(shape.s_m[-1])
-    s_c = np.full(n, np.nan)
-    if est is not None and getattr(est, "load", "tip") == "contact" and est.contact_s_m is not None:
-        s_c[:] = np.broadcast_to(np.asarray(est.contact_s_m, dtype=float), (n,))
+    s_grid = np.asarray(block.s_m, dtype=float)
+    length = float(s_grid[-1])
     # a tip load, or a frame without a location: the end of the body (the sensor's tip angle holds beyond it)
+    s_c = block.contact_s_m
     s_c = np.where(np.isfinite(s_c), s_c, np.inf)
-    angle = np.asarray(shape.angle_rad, dtype=float).reshape(n, -1)
-    s_grid = np.asarray(shape.s_m, dtype=float)
+    angle = block.angle_rad
     at = np.minimum(s_c, length)
     # the angle is piecewise linear on the PCC grid between its samples (linear within a segment)
     j = np.clip(np.searchsorted(s_grid, at, side="right") - 1, 0, s_grid.size - 2)
@@ -114,16 +110,11 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
     rows = np.arange(n)
     phi = (1.0 - w) * angle[rows, j] + w * angle[rows, j + 1]
     normal = contact_normal(phi)
-    use_track = tracked and block.track is not None
-    if use_track:
-        force = block.track_force_n
-        cov = np.asarray(block.track.covariance_n2, dtype=float).reshape(n, 2, 2)
-        status = words(np.asarray(block.track.status).reshape(n))
+    track_status = block.track_status if tracked else None
+    if track_status is not None:
+        force, cov, status = block.track_force_n, block.track_covariance_n2, words(track_status)
     else:
-        force = block.force_n
-        cov = (np.full((n, 2, 2), np.nan) if est is None
-               else np.asarray(est.covariance_n2, dtype=float).reshape(n, 2, 2))
-        status = words(block.status)
+        force, cov, status = block.force_n, block.covariance_n2, words(block.status)
     nx, ny = normal[:, 0], normal[:, 1]
     value = force[:, 0] * nx + force[:, 1] * ny
     var = cov[:, 0, 0] * nx * nx + (cov[:, 0, 1] + cov[:, 1, 0]) * nx * ny + cov[:, 1, 1] * ny * ny

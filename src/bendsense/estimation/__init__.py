@@ -27,9 +27,11 @@ and an infinite standard deviation along that direction.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 
@@ -219,32 +221,10 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         return mark_out_of_range(force_bound(result, pressure_pa, config, strict), outside, given_pa, config)
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
-    L = float(config.actuator.length_m)
-    n_points = est.n_points if n_points is None else n_points
-    if not _whole(n_points) or not 3 <= n_points <= 1000:
-        raise ArgumentError(f"n_points: must be between 3 and 1000 (an integer), got {short(n_points)}")
-    n_points = int(n_points)
-    if not _whole(max_iter) or not max_iter >= 0:
-        raise ArgumentError(f"max_iter: must be >= 0 (an integer), got {short(max_iter)}")
-    if noise_std is not None:
-        noise_std = float_array("noise_std", noise_std)
-    if calibration is not None and not isinstance(calibration, Calibration):
-        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
-                            f"{type(calibration).__name__}")
-    ref = reference(shape, config, s_m, n_points, L)
-    contact = _AT_TIP if contact_s_m is None else _beam._contact_sigma(contact_s_m, L)  # σ_c, 1 at the tip
-    if load == "contact" and tip_angle_source is None and ref.kappa is not None:
-        tip_angle_source = "shape"  # the loaded tangent at s_c; the free shape's is off by the load's own bending
-    if contact_s_m is not None and ref.kappa is None and (tip_angle_source or est.tip_angle_source) == "shape" \
-            and constraint in ("normal", "follower"):
-        raise ArgumentError("tip_angle_source: 'shape' at a contact needs a PCC shape (curvatures or a Shape), "
-                            "not a shape given by points")
-    if objective is None:  # the paper's method fits the positions (paper eq. 18), and so must a shape of points
-        objective = "positions" if method == "paper" or ref.kappa is None else est.objective
-    options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
-        np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
-        None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes(), load)
-    pb, plain_pb, plain_err, uncertainty = _problem(config, calibration, ref, options, noise_std)
+    ref, contact, objective, (pb, plain_pb, plain_err, uncertainty) = _setup(
+        shape, config, constraint, method, objective, push_only, tip_angle_source, direction, follower_angle_rad,
+        noise_std, calibration, s_m, n_points, xtol_n, max_iter, load, contact_s_m)
+    L = pb.L
     P = np.asarray(pressure_pa, dtype=float)
     if not (math.isfinite(P.item()) if P.size == 1 else np.isfinite(P).all()):
         raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
@@ -292,6 +272,180 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                      constraint=constraint, uncertainty=uncertainty, objective=objective, load=load,
                      contact_s_m=contact_s_m)
     return mark_out_of_range(force_bound(result, pressure_pa, config, strict), outside, given_pa, config)
+
+
+def _setup(shape, config, constraint, method, objective, push_only, tip_angle_source, direction, follower_angle_rad,
+           noise_std, calibration, s_m, n_points, xtol_n, max_iter, load, contact_s_m):
+    """The checked constants of an estimate (:func:`estimate_force`'s options): what every frame shares.
+
+    Returns (the reference shape, σ_c of the force's point, the objective, the problem as
+    :func:`_problem` gives it).
+    """
+    est = config.estimation
+    L = float(config.actuator.length_m)
+    n_points = est.n_points if n_points is None else n_points
+    if not _whole(n_points) or not 3 <= n_points <= 1000:
+        raise ArgumentError(f"n_points: must be between 3 and 1000 (an integer), got {short(n_points)}")
+    n_points = int(n_points)
+    if not _whole(max_iter) or not max_iter >= 0:
+        raise ArgumentError(f"max_iter: must be >= 0 (an integer), got {short(max_iter)}")
+    if noise_std is not None:
+        noise_std = float_array("noise_std", noise_std)
+    if calibration is not None and not isinstance(calibration, Calibration):
+        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
+                            f"{type(calibration).__name__}")
+    ref = reference(shape, config, s_m, n_points, L)
+    contact = _AT_TIP if contact_s_m is None else _beam._contact_sigma(contact_s_m, L)  # σ_c, 1 at the tip
+    if load == "contact" and tip_angle_source is None and ref.kappa is not None:
+        tip_angle_source = "shape"  # the loaded tangent at s_c; the free shape's is off by the load's own bending
+    if contact_s_m is not None and ref.kappa is None and (tip_angle_source or est.tip_angle_source) == "shape" \
+            and constraint in ("normal", "follower"):
+        raise ArgumentError("tip_angle_source: 'shape' at a contact needs a PCC shape (curvatures or a Shape), "
+                            "not a shape given by points")
+    if objective is None:  # the paper's method fits the positions (paper eq. 18), and so must a shape of points
+        objective = "positions" if method == "paper" or ref.kappa is None else est.objective
+    options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
+        np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
+        None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes(), load)
+    return ref, contact, objective, _problem(config, calibration, ref, options, noise_std)
+
+
+class Compiled(NamedTuple):
+    """The constants of an estimate as the live step (:mod:`bendsense.pipeline._kernels`) takes them.
+
+    ``problem``: (Problem, shift error model, beam operators, a contact's operators, coils
+    R, beam nodes) as plain tuples; ``model``: the pressure range, the free-bending
+    table, θ_pre, L, γ0, γ1, the parameters' covariance (5, 5) and whether there is one,
+    μ̄, μ_s, c_a, the force bound's scale (:func:`~bendsense.estimation.plausibility.force_bound_n`)
+    and σ_c of the force's point.
+    """
+
+    problem: tuple
+    model: tuple
+    pb: Problem
+    uncertainty: str
+    objective: str
+
+
+def compiled(config, calibration, constraint, objective, options) -> Compiled | None:
+    """The constants of the live step for :func:`estimate_force`'s ``options``; None where it cannot run them.
+
+    The compiled step runs the fast method at the tip or at a known contact location, for
+    pressures inside the free-bending table (the actuator's range within
+    ``estimation.pressure_max_pa``); anything else (the paper's method, a contact located
+    per frame, a start given) goes through :func:`estimate_force`. Checks the options as
+    :func:`estimate_force` does, and warns as it does about a missing noise model.
+    """
+    from bendsense.estimation.plausibility import _force_scale
+
+    given = dict(options)
+    if given.pop("method", "fast") != "fast" or set(given) - _COMPILED_OPTIONS:
+        return None
+    load, contact_s_m = given.get("load", "tip"), given.get("contact_s_m")
+    if load == "contact" and not (isinstance(contact_s_m, (int, float)) and not isinstance(contact_s_m, bool)):
+        return None
+    model = _models(config)
+    table = model._table
+    lo, hi = (float(v) for v in config.actuator.pressure_range_pa)
+    if not table.converged or hi > model.pressure_max_pa:
+        return None
+    _check_choices("fast", constraint, objective, given.get("tip_angle_source"), load, contact_s_m)
+    kappa = np.zeros(config.sensor.n_segments)
+    ref, contact, objective, (pb, plain_pb, plain_err, uncertainty) = _setup(
+        kappa, config, constraint, "fast", objective, given.get("push_only"), given.get("tip_angle_source"),
+        given.get("direction"), given.get("follower_angle_rad"), given.get("noise_std"), calibration, None,
+        given.get("n_points"), given.get("xtol_n", XTOL_N), given.get("max_iter", MAX_ITER), load, contact_s_m)
+    stiffness = config.stiffness
+    if not min(stiffness.ei_nm2(lo), stiffness.ei_nm2(hi)) > 0:
+        raise ArgumentError(f"pressure_pa: EI(P) must be > 0 over actuator.pressure_range_pa, got "
+                            f"{min(stiffness.ei_nm2(lo), stiffness.ei_nm2(hi))!r} N·m²")
+    section = config.parameter_covariance
+    cov = np.zeros((5, 5)) if section is None else np.array(_full_covariance(section), dtype=float)
+    if uncertainty == "none":
+        warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
+                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)
+    elif section is None:
+        warn_no_parameter_covariance(config, stacklevel=3)
+    model_args = (lo, hi, table.kernel_args, float(model.prebend_angle_rad), float(model.length_m),
+                  float(stiffness.ei0_nm2), float(stiffness.ei1_nm2_per_pa), cov, section is not None,
+                  float(model.shear_modulus_pa), float(model.sensor_stiffness_nm_per_rad), float(model._moment_per_pa),
+                  float(_force_scale(config)), float(np.reshape(contact, -1)[0]))
+    # a known location: the location's own sensitivity (an estimated location's windows need it) is not computed
+    pb = pb._replace(contact=False)
+    return Compiled((tuple(pb), plain_err, _OPS, _REF, int(pb.coils.size), N_NODES), model_args, pb, uncertainty,
+                    objective)
+
+
+_COMPILED_OPTIONS = frozenset(("constraint", "objective", "push_only", "tip_angle_source", "direction",
+                               "follower_angle_rad", "noise_std", "xtol_n", "max_iter", "n_points", "load",
+                               "contact_s_m"))
+
+
+def compiled_estimate(step, out, pressure_pa, config, *, constraint, load, contact_s_m, wall_time_s):
+    """The :class:`ForceEstimate` of the live step's outputs ``out`` (n frames), as :func:`estimate_force` makes it.
+
+    ``pressure_pa`` (n,): the frames' pressures (NaN: none, ``"no pressure reading"``).
+    """
+    from bendsense.estimation.plausibility import _mark_force, force_bound_n
+
+    o = _kernels.Outputs(*out)
+    n = o.status.size
+    text = messages(o.status, o.residual, o.chi2, o.p_value, o.direction, "fast")
+    result = _result(o, (n,), text, step.pb, step.problem[1], wall_time_s=wall_time_s, method="fast",
+                     constraint=constraint, uncertainty=step.uncertainty, objective=step.objective, load=load,
+                     contact_s_m=contact_s_m)
+    if result.contact_jacobian_rad_per_m is not None:  # not computed at a known location
+        result = dataclasses.replace(result, contact_jacobian_rad_per_m=None)
+    lo, hi = step.model[:2]
+    clipped = np.clip(pressure_pa, lo, hi)
+    over = o.status == Status.IMPLAUSIBLE_FORCE
+    if over.any():
+        result = _mark_force(result, over, np.hypot(o.force[:, 0], o.force[:, 1]), force_bound_n(clipped, config),
+                             clipped)
+    with np.errstate(invalid="ignore"):
+        result = mark_out_of_range(result, (pressure_pa < lo) | (pressure_pa > hi), pressure_pa, config)
+    unestimated = (o.status == Status.NO_PRESSURE) | (o.status == Status.NO_SHAPE)
+    if unestimated.any():
+        result = dataclasses.replace(result, message=np.where(o.status == Status.NO_PRESSURE, "no pressure reading",
+                                                              np.where(o.status == Status.NO_SHAPE, _NO_SHAPE_MESSAGE,
+                                                                       result.message)))
+    return result
+
+
+_NO_SHAPE_MESSAGE = "no shape: a signal that is not finite"
+
+
+def estimation_options(config, constraint=None, method=None, objective=None) -> tuple[str, str, str]:
+    """The constraint, method and objective of a force estimate: those given, else the config's.
+
+    Parameters
+    ----------
+    config : Config
+        Its ``estimation`` section gives the defaults.
+    constraint, method, objective : str, optional
+        Force constraint (:data:`bendsense.choices.CONSTRAINTS`), estimator
+        (:data:`~bendsense.choices.METHODS`) and what the fit compares
+        (:data:`~bendsense.choices.OBJECTIVES`); None: the config's. The paper's method
+        fits the positions (paper eq. 18), so its default objective is ``positions``.
+
+    Returns
+    -------
+    tuple of str
+        ``(constraint, method, objective)``.
+
+    Raises
+    ------
+    ArgumentError
+        For an objective that is not one of :data:`~bendsense.choices.OBJECTIVES`.
+    """
+    est = config.estimation
+    constraint = est.constraint if constraint is None else constraint
+    method = est.method if method is None else method
+    if objective is None:
+        objective = "positions" if method == "paper" else est.objective
+    if objective not in OBJECTIVES:
+        raise ArgumentError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    return constraint, method, objective
 
 
 def _config(config):

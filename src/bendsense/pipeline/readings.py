@@ -10,6 +10,7 @@ splits the board per finger) both read readings through it.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,9 +37,9 @@ class ReadingColumns:
         Raw sequence numbers.
     host_ns : list of int
         Arrival time of each frame on the host clock [ns].
-    extra : dict of str to ndarray
+    extra : Mapping of str to ndarray
         The columns a recording of the readings has beside its own
-        (:func:`bendsense.session.native.records_extra`).
+        (:func:`bendsense.session.native.records_extra`), made when first read.
     """
 
     signals: np.ndarray
@@ -47,7 +48,7 @@ class ReadingColumns:
     t_s: np.ndarray
     seq: list
     host_ns: list
-    extra: dict
+    extra: Mapping
 
 
 def sample_lines(sample) -> tuple:
@@ -78,15 +79,10 @@ def reading_columns(readings, t0_us: int, host0_ns: int | None) -> ReadingColumn
     -------
     ReadingColumns
     """
-    from bendsense.session.native import record_dtype, records_extra, sample_records
-
     readings = list(readings)
     n = len(readings)
     signals = np.array([r.sample.adc for r in readings], dtype=float).reshape(n, -1)
     host_ns = [r.host_ns for r in readings]
-    # the records the recorder writes of these readings, for the same extra columns
-    records = sample_records(record_dtype(max(signals.shape[1], 1), "<f8"), [r.sample for r in readings],
-                             host_ns, [max(r.device_us, 0) for r in readings])
     lines = [sample_lines(r.sample) for r in readings]
     pressures = np.full((n, max((len(x) for x in lines), default=1)), np.nan)
     for k, values in enumerate(lines):
@@ -99,8 +95,39 @@ def reading_columns(readings, t0_us: int, host0_ns: int | None) -> ReadingColumn
         t_s=(np.array([r.device_us for r in readings], dtype=np.int64) - t0_us) * 1e-6,
         seq=[r.sample.seq for r in readings],
         host_ns=host_ns,
-        extra=records_extra(records, host0_ns),
+        extra=_RecordColumns(readings, signals.shape[1], host0_ns),
     )
+
+
+class _RecordColumns(Mapping):
+    """The columns a recording of the readings has beside its own, made when first read.
+
+    :func:`bendsense.session.native.records_extra` of the records the recorder writes of
+    these readings. Only a block that is saved reads them (``record --estimate``); a
+    control loop never does.
+    """
+
+    def __init__(self, readings, channels, host0_ns):
+        self._readings, self._channels, self._host0_ns, self._columns = readings, channels, host0_ns, None
+
+    def _made(self) -> dict:
+        if self._columns is None:
+            from bendsense.session.native import record_dtype, records_extra, sample_records
+
+            readings = self._readings
+            records = sample_records(record_dtype(max(self._channels, 1), "<f8"), [r.sample for r in readings],
+                                     [r.host_ns for r in readings], [max(r.device_us, 0) for r in readings])
+            self._columns = records_extra(records, self._host0_ns)
+        return self._columns
+
+    def __getitem__(self, name):
+        return self._made()[name]
+
+    def __iter__(self):
+        return iter(self._made())
+
+    def __len__(self) -> int:
+        return len(self._made())
 
 
 class ReadingClock:

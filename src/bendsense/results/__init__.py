@@ -253,10 +253,10 @@ def _frames_of(values, n: int, dtype) -> np.ndarray:
 def frame_codes(shape, estimate=None) -> np.ndarray:
     """Per-frame status codes (n,) of int8: the shape's, then the force estimate's (:mod:`bendsense.status`).
 
-    ``EXTRAPOLATED`` (signals outside the calibrated range), ``NO_SHAPE`` (non-finite
-    signals), the estimate's own (:func:`estimate_codes`) where the shape is ok or the
-    estimate failed, and ``IMPLAUSIBLE_SHAPE`` (a tip angle beyond a full turn: a unit or
-    calibration mistake) over all.
+    ``EXTRAPOLATED`` (signals outside the calibrated range), the estimate's own
+    (:func:`estimate_codes`) where the shape is ok or the estimate failed, and over all
+    ``NO_SHAPE`` (non-finite signals: nothing to estimate from) and ``IMPLAUSIBLE_SHAPE``
+    (a tip angle beyond a full turn: a unit or calibration mistake).
 
     Parameters
     ----------
@@ -268,12 +268,12 @@ def frame_codes(shape, estimate=None) -> np.ndarray:
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
     codes = np.full(n, Status.OK, dtype=np.int8)
     codes[_frames_of(getattr(shape, "extrapolated", False), n, bool)] = Status.EXTRAPOLATED
-    kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
-    codes[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = Status.NO_SHAPE
     if estimate is not None:
         own = estimate_codes(estimate, n)
         take = ~_frames_of(estimate.success, n, bool) | (codes == Status.OK)  # the estimate's word where it failed
         codes[take] = own[take]
+    kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
+    codes[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = Status.NO_SHAPE  # nothing to estimate from
     # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
     codes[np.abs(_frames_of(shape.tip_angle_rad, n, float)) > 2.0 * np.pi] = Status.IMPLAUSIBLE_SHAPE
     return codes

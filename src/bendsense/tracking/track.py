@@ -408,6 +408,30 @@ class Tracker:
                      bandwidth_hz=self.bandwidth_hz,
                      mode=self.mode, t_s=t, frame_force_n=z)
 
+    def stream_state(self, t, coils: int, channels: int) -> tuple:
+        """The filter's state as the live step takes it (``pipeline._kernels.track``), for frames at ``t``.
+
+        Learns the reference interval from the first frames, as :meth:`update` does; the
+        arrays are the Tracker's own, so the step carries them on.
+
+        Parameters
+        ----------
+        t : ndarray, shape (b,)
+            The block's frame times [s].
+        coils, channels : int
+            The sizes of the window test's sums (the coils fitted, the sensor's channels).
+        """
+        fs = self._fs
+        if self._dt_ref is None:
+            tt = t if fs[_stream.HAS_LAST] == 0.0 else np.concatenate(([fs[_stream.LAST_T]], t))
+            if tt.size > 1:
+                self._dt_ref = _windows.reference_interval(tt)
+                self._q = intensity(self.bandwidth_hz, self._dt_ref)
+        if self._sums is None:
+            self._sums = (np.zeros(coils), np.zeros((coils, 2)), np.zeros((coils, 2)), np.zeros(channels))
+        return (self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR, _windows.PRESSURE_STEP_PA,
+                fs, *self._state, self._carry, *self._sums)
+
     def _inputs(self, est, t_s, pressure_pa):
         """The checked block: (estimate, t (b,), pressure (b,) NaN where not given)."""
         if not isinstance(est, ForceEstimate):
