@@ -241,31 +241,57 @@ def board_readings(k, n):
     return readings
 
 
-def block_rows(cal, sizes=(1, 2, 5, 10), frames=1200, repeats=3):
-    """Median wall time of ``process_readings`` per block of each size, one finger and three; prints the rows."""
+def python_loop_ms():
+    """This machine's speed at the moment: a plain Python loop of 2 million additions [ms] (a VM's varies 2x)."""
+    t = time.perf_counter()
+    total = 0
+    for i in range(2_000_000):
+        total += i
+    return (time.perf_counter() - t) * 1e3
+
+
+def block_rows(cal, sizes=(1, 2, 5, 10), frames=600, repeats=3):
+    """Median wall time of ``process_readings`` per block of each size, one finger and three; prints the rows.
+
+    Each row runs the compiled live step (one call per finger per block) and, in the same
+    loop, block for block, the path before it (``reconstruct``, ``estimate_force``, the
+    ``Tracker``: what options the step does not run still take), so that both see the
+    machine in the same state.
+    """
     from bendsense import load_config
     from bendsense.pipeline.gripper import GripperProcessor
+    from bendsense.pipeline.live import _GENERAL
     from bendsense.sim.gripper import gripper_config
 
     options = {"load": "contact", "contact_s_m": CONTACT_S_M, "constraint": "normal", "bandwidth_hz": 30.0}
-    print("control loop's processor: process_readings per block (contact at 0.1 m, normal, 30 Hz track), warm")
-    print(f"{'fingers':<8} {'frames/block':>12} {'µs per block':>13} {'µs per frame':>13}")
+    print("control loop's processor: process_readings per block (contact at 0.1 m, normal, 30 Hz track), warm;")
+    print(f"the compiled step, and the estimate_force path before it (Python loop of 2e6 additions: "
+          f"{python_loop_ms():.0f} ms)")
+    print(f"{'fingers':<8} {'frames/block':>12} {'µs per block':>13} {'µs per frame':>13} {'before µs/block':>16}")
     for k in (1, 3):
-        proc = LiveProcessor(cal, load_config(), **options) if k == 1 else GripperProcessor(
-            cal, gripper_config(k), **options)
-        proc.warm_up()
+        procs = []
+        for general in (False, True):
+            proc = LiveProcessor(cal, load_config(), **options) if k == 1 else GripperProcessor(
+                cal, gripper_config(k), **options)
+            for finger in ([proc] if k == 1 else proc.processors.values()):
+                finger._step = _GENERAL if general else None
+            proc.warm_up()
+            procs.append(proc)
         readings = board_readings(k, 1000 + frames)[1000:]  # from the touch on: the force the loop controls
         for size in sizes:
-            times = []
+            times = ([], [])
             for _ in range(repeats):
-                proc.reset()
+                for proc in procs:
+                    proc.reset()
                 for i in range(0, frames - size + 1, size):
                     block = readings[i:i + size]
-                    t = time.perf_counter()
-                    proc.process_readings(block)
-                    times.append(time.perf_counter() - t)
-            per_block = float(np.median(times))
-            print(f"{k:<8} {size:>12} {per_block * 1e6:13.0f} {per_block * 1e6 / size:13.0f}")
+                    for proc, spent in zip(procs, times):
+                        t = time.perf_counter()
+                        proc.process_readings(block)
+                        spent.append(time.perf_counter() - t)
+            now, before = (float(np.median(x)) * 1e6 for x in times)
+            print(f"{k:<8} {size:>12} {now:13.0f} {now / size:13.0f} {before:16.0f}")
+    print(f"(Python loop of 2e6 additions, after: {python_loop_ms():.0f} ms)")
 
 
 def main():

@@ -314,10 +314,11 @@ class Compiled(NamedTuple):
     """The constants of an estimate as the live step (:mod:`bendsense.pipeline._kernels`) takes them.
 
     ``problem``: (Problem, shift error model, beam operators, a contact's operators, coils
-    R, beam nodes) as plain tuples; ``model``: the pressure range, the free-bending
-    table, θ_pre, L, γ0, γ1, the parameters' covariance (5, 5) and whether there is one,
-    μ̄, μ_s, c_a, the force bound's scale (:func:`~bendsense.estimation.plausibility.force_bound_n`)
-    and σ_c of the force's point.
+    R, beam nodes, the force point's problem and operators with its σ_c), plain tuples;
+    ``model``: the pressure range, the free-bending table, θ_pre, L, γ0, γ1, the
+    parameters' covariance (5, 5) and whether there is one, μ̄, μ_s, c_a, the force
+    bound's scale (:func:`~bendsense.estimation.plausibility.force_bound_n`) and σ_c of
+    the force's point.
     """
 
     problem: tuple
@@ -372,7 +373,10 @@ def compiled(config, calibration, constraint, objective, options) -> Compiled | 
                   float(_force_scale(config)), float(np.reshape(contact, -1)[0]))
     # a known location: the location's own sensitivity (an estimated location's windows need it) is not computed
     pb = pb._replace(contact=False)
-    return Compiled((tuple(pb), plain_err, _OPS, _REF, int(pb.coils.size), N_NODES), model_args, pb, uncertainty,
+    sc = model_args[-1]
+    at_pb, at_ops = _jit.call(_kernels.contact_at, tuple(pb), _OPS, _REF, sc)  # the point's problem, made once
+    at = (tuple(at_pb), tuple(at_ops), sc)
+    return Compiled((tuple(pb), plain_err, _OPS, _REF, int(pb.coils.size), N_NODES, at), model_args, pb, uncertainty,
                     objective)
 
 

@@ -731,10 +731,24 @@ def plain(*structures):
 
 
 @njit(cache=True)
-def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out):
+def contact_at(pb, ops, ref, sc):
+    """The problem and the beam's operators of a force at σ_c = ``sc`` (< 1), as :func:`estimate_block`'s ``at``.
+
+    ``pb``, ``ops``, ``ref``: the plain tuples of :func:`plain`. A live stream at a known
+    contact makes them once, not per frame (~10 µs a frame).
+    """
+    pb, ops, ref = prob.Problem(*pb), _KernelOperators(*ops), bk._SplitOperators(*ref)
+    return prob.contact_problem(pb, sc, ref), bk.contact_grid(sc, ops, ref)
+
+
+@njit(cache=True)
+def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out, at=None):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`).
 
-    ``fr``, ``pb``, ``err``, ``ops``, ``ref``: the plain tuples of :func:`plain`.
+    ``fr``, ``pb``, ``err``, ``ops``, ``ref``: the plain tuples of :func:`plain`. A
+    frame's force point gets its problem and operators once for a run of frames at the
+    same point; ``at`` (optional): those of the point σ_c = ``at[2]``, made ahead
+    (:func:`contact_at`, plain tuples).
     """
     fr, pb0, err, ops0, ref = typed(fr, pb, err, ops, ref)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
@@ -751,12 +765,18 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
     blocked = np.zeros(k)
     g = np.empty(k)
     prev_ok = False
+    ops_c, pb_c, sc_c = ops0, pb0, 1.0  # the latest contact point's
+    if at is not None:
+        ops_c, pb_c, sc_c = _KernelOperators(*at[1]), prob.Problem(*at[0]), at[2]
     for i in range(lo, hi):
         # the beam's operators and the problem of the frame's force point: the tip's, or a contact's
         # (bendsense.mechanics._beam_kernels.contact_grid, problem.contact_problem: one code path for every point)
         ops, pb = ops0, pb0
         if fr.contact[i] < 1.0:
-            ops, pb = bk.contact_grid(fr.contact[i], ops0, ref), prob.contact_problem(pb0, fr.contact[i], ref)
+            if fr.contact[i] != sc_c:
+                sc_c = fr.contact[i]
+                ops_c, pb_c = bk.contact_grid(sc_c, ops0, ref), prob.contact_problem(pb0, sc_c, ref)
+            ops, pb = ops_c, pb_c
         p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
         if fr.contact[i] < 1.0:
             prob.contact_state(state0, ops0.sigma, ops.sigma, on_grid)

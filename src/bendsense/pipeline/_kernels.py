@@ -200,7 +200,7 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     Returns (frames estimated, frames failed, frames marked).
     """
     p_lo, p_hi, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_a, force_scale, contact = model
-    pb, err, ops, ref, R, nodes = problem
+    pb, err, ops, ref, R, nodes, at = problem
     m = rows.size
     whole = m == p.size
     part = out if whole else outputs(m, kappa.shape[1], R, nodes)
@@ -216,13 +216,13 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     start = np.empty((m, 2))
     start[:, 0] = previous[0]
     start[:, 1] = previous[1]
-    est_kernels.estimate_block(0, m, YES, YES, fr, pb, err, ops, ref, start, part)
+    est_kernels.estimate_block(0, m, YES, YES, fr, pb, err, ops, ref, start, part, at)
     failed = 0
     marked = 0
     for i in range(m):
         if not success[i] and (i > 0 or previous[0] != 0.0 or previous[1] != 0.0):
             start[i, :] = 0.0  # a start far from the frame (a fast change): its own start may converge
-            est_kernels.estimate_block(i, i + 1, YES, NO, fr, pb, err, ops, ref, start, part)
+            est_kernels.estimate_block(i, i + 1, YES, NO, fr, pb, err, ops, ref, start, part, at)
         failed += not success[i]
         magnitude = math.hypot(force[i, 0], force[i, 1])
         if success[i] and math.isfinite(magnitude) and magnitude > force_scale * ei[i]:

@@ -23,13 +23,16 @@ import math
 import time
 import warnings
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from bendsense import _jit
 from bendsense._batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.errors import ArgumentError, ConfigError, DataWarning
 from bendsense.estimation import estimation_options
 from bendsense.estimation._kernels import MISFIT_P
+from bendsense.pipeline._kernels import live_block
 from bendsense.pipeline.readings import ReadingClock
 from bendsense.results import WINDOW_MISFIT
 from bendsense.status import WORDS, Status, words
@@ -100,6 +103,16 @@ class LiveFrame:
         return np.asarray(self.estimate.std_n, dtype=float)
 
 
+class _Arrays(NamedTuple):
+    """A block's outputs of the compiled step (:func:`bendsense.pipeline._kernels.live_block`)."""
+
+    step: object  # the processor's _Step: the constants, and how to make objects of the arrays
+    shape: tuple  # κ, positions, angles, tip, tip angle, extrapolated
+    estimate: tuple | None  # the estimate's outputs (bendsense.estimation.problem.Outputs); None: no estimate
+    track: tuple | None  # force, σ, covariance, window p, status; None: no track
+    t: np.ndarray  # the frames' times [s]
+
+
 class LiveBlock:
     """Shapes and force estimates of a block of consecutive frames.
 
@@ -160,8 +173,8 @@ class LiveBlock:
         has_estimate = counts[0] > 0
         block = cls(t_s, seq, host_ns, pressure_pa, signals, None, None, step.estimating, process_s,
                     offset=step.offset, tracked=step.tracking, load=step.load)
-        block._step = (step, shape, out if has_estimate else None, track if has_estimate and step.tracking else None,
-                       t)
+        block._step = _Arrays(step, shape, out if has_estimate else None,
+                              track if has_estimate and step.tracking else None, t)
         block.__dict__["status"] = status
         return block
 
@@ -176,35 +189,35 @@ class LiveBlock:
     def shape(self):
         """Shapes, batch axis n (:class:`~bendsense.shape.pcc.Shape`)."""
         if self._shape is None and self._step is not None:
-            self._shape = self._step[0].shape_of(self._step[1])
+            self._shape = self._step.step.shape_of(self._step.shape)
         return self._shape
 
     @property
     def estimate(self):
         """Forces, batch axis n (:class:`~bendsense.ForceEstimate`); None without an estimate."""
-        if self._estimate is None and self._step is not None and self._step[2] is not None:
-            self._estimate = self._step[0].estimate_of(self._step[2], self.pressure_pa, self.process_s)
+        if self._estimate is None and self._step is not None and self._step.estimate is not None:
+            self._estimate = self._step.step.estimate_of(self._step.estimate, self.pressure_pa, self.process_s)
         return self._estimate
 
     @property
     def track(self):
         """The causally tracked forces (:class:`~bendsense.tracking.Track`); None without a track."""
-        if self._track is None and self._step is not None and self._step[3] is not None:
-            self._track = self._step[0].track_of(self._step[3], self._step[2], self._step[4])
+        if self._track is None and self._step is not None and self._step.track is not None:
+            self._track = self._step.step.track_of(self._step.track, self._step.estimate, self._step.t)
         return self._track
 
     @property
     def window_p_value(self) -> np.ndarray | None:
         """Each frame's p-value of the latest completed window (n,) (the Tracker's); None untracked."""
         if self._step is not None:
-            return None if self._step[3] is None else self._step[3][3]
+            return None if self._step.track is None else self._step.track[3]
         return None if self.track is None else np.asarray(self.track.window_p_value, dtype=float)
 
     @property
     def track_covariance_n2(self) -> np.ndarray:
         """Covariances of the tracked forces (n, 2, 2) [N²]; NaN where not tracked."""
-        if self._step is not None and self._step[3] is not None:
-            return self._step[3][2]
+        if self._step is not None and self._step.track is not None:
+            return self._step.track[2]
         if self.track is None:
             return np.full((len(self), 2, 2), np.nan)
         return np.asarray(self.track.covariance_n2, dtype=float).reshape(len(self), 2, 2)
@@ -213,14 +226,14 @@ class LiveBlock:
     def track_status(self) -> np.ndarray | None:
         """The tracked frames' status codes (n,) of int8; None without a track."""
         if self._step is not None:
-            return None if self._step[3] is None else self._step[3][4]
+            return None if self._step.track is None else self._step.track[4]
         return None if self.track is None else np.asarray(self.track.status).reshape(len(self))
 
     @property
     def covariance_n2(self) -> np.ndarray:
         """Covariances of the forces (n, 2, 2) [N²]; NaN where not estimated."""
-        if self._step is not None and self._step[2] is not None:
-            return self._step[2][1]
+        if self._step is not None and self._step.estimate is not None:
+            return self._step.estimate[1]
         if self.estimate is None:
             return np.full((len(self), 2, 2), np.nan)
         return np.asarray(self.estimate.covariance_n2, dtype=float).reshape(len(self), 2, 2)
@@ -229,8 +242,8 @@ class LiveBlock:
     def contact_s_m(self) -> np.ndarray:
         """The contact location of each frame (n,) [m]: NaN for a tip load or a frame without an estimate."""
         if self._step is not None:
-            c = self._step[0].contact_s_m
-            return np.full(len(self), np.nan if c is None or self._step[2] is None else float(c))
+            c = self._step.step.contact_s_m
+            return np.full(len(self), np.nan if c is None or self._step.estimate is None else float(c))
         est = self.estimate
         if est is None or getattr(est, "load", "tip") != "contact" or est.contact_s_m is None:
             return np.full(len(self), np.nan)
@@ -239,13 +252,13 @@ class LiveBlock:
     @property
     def s_m(self) -> np.ndarray:
         """Arc lengths (M,) of the shapes' points [m]."""
-        return self._step[0].grid.s if self._step is not None else np.asarray(self.shape.s_m, dtype=float)
+        return self._step.step.grid.s if self._step is not None else np.asarray(self.shape.s_m, dtype=float)
 
     @property
     def angle_rad(self) -> np.ndarray:
         """Tangent angles (n, M) of the shapes at their points ``shape.s_m`` [rad]."""
         if self._step is not None:
-            return self._step[1][2]
+            return self._step.shape[2]
         return np.asarray(self.shape.angle_rad, dtype=float).reshape(len(self), -1)
 
     def __len__(self) -> int:
@@ -254,8 +267,8 @@ class LiveBlock:
     @property
     def track_force_n(self) -> np.ndarray:
         """Tracked tip forces (n, 2) [N]; NaN where not tracked."""
-        if self._step is not None and self._step[3] is not None:
-            return self._step[3][0]
+        if self._step is not None and self._step.track is not None:
+            return self._step.track[0]
         if self.track is None:
             return np.full((len(self), 2), np.nan)
         return np.asarray(self.track.force_n, dtype=float).reshape(len(self), 2)
@@ -263,8 +276,8 @@ class LiveBlock:
     @property
     def track_std_n(self) -> np.ndarray:
         """Standard deviations of the tracked forces (n, 2) [N]; NaN where not tracked."""
-        if self._step is not None and self._step[3] is not None:
-            return self._step[3][1]
+        if self._step is not None and self._step.track is not None:
+            return self._step.track[1]
         if self.track is None:
             return np.full((len(self), 2), np.nan)
         return np.asarray(self.track.std_n, dtype=float).reshape(len(self), 2)
@@ -272,8 +285,8 @@ class LiveBlock:
     @property
     def force_n(self) -> np.ndarray:
         """Tip forces (n, 2) [N]; NaN where not estimated or not converged."""
-        if self._step is not None and self._step[2] is not None:
-            return self._step[2][0]
+        if self._step is not None and self._step.estimate is not None:
+            return self._step.estimate[0]
         if self.estimate is None:
             return np.full((len(self), 2), np.nan)
         return np.asarray(self.estimate.force_n, dtype=float).reshape(len(self), 2)
@@ -281,8 +294,8 @@ class LiveBlock:
     @property
     def std_n(self) -> np.ndarray:
         """Standard deviations of the forces (n, 2) [N]; NaN where not estimated."""
-        if self._step is not None and self._step[2] is not None:
-            return self._step[2][11]
+        if self._step is not None and self._step.estimate is not None:
+            return self._step.estimate[11]
         if self.estimate is None:
             return np.full((len(self), 2), np.nan)
         return np.asarray(self.estimate.std_n, dtype=float).reshape(len(self), 2)
@@ -404,7 +417,7 @@ class _Step:
         (shapes, the estimate's (none without estimating), the track's, the statuses (n,),
         the counts (5,)): :func:`bendsense.pipeline._kernels.live_block`.
         """
-        N, M, (R, nodes) = self.shape[0].size, self.grid.s.size, self.est.problem[4:]
+        N, M, (R, nodes) = self.shape[0].size, self.grid.s.size, self.est.problem[4:6]
         e = n if self.estimating else 0
         empty = np.empty
         return ((empty((n, N)), empty((n, M, 2)), empty((n, M)), empty((n, 2)), empty(n), empty(n, dtype=bool)),
@@ -636,29 +649,30 @@ class LiveProcessor:
 
     def _run_step(self, step, a, p, t):
         """The compiled step's outputs of the block; a clock that goes back (a device reset) restarts the track."""
-        from bendsense import _jit
-        from bendsense.pipeline._kernels import live_block
-
         n = t.size
-        parts = [(0, n)]
-        if self.track and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any())):
+        outs = step.outputs(n)
+        if not (self.track and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any()))) and n <= _PIECE:
+            tracker = self.tracker.stream_state(t, *step.sizes) if self.track else step.idle_tracker
+            _jit.call(live_block, a, p, t, step.shape, step.est.model, step.est.problem, self._offset, step.flags,
+                      tracker, step.window_model, *outs)
+            self._track_t = float(t[-1])
+            return outs
+        cuts = [0, n]  # the usual block: one part
+        if self.track:
             back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
             cuts = [0, *[int(b) for b in back if b > 0], n]
-            parts = [(lo, hi) for lo, hi in zip(cuts[:-1], cuts[1:]) if hi > lo]
-        if n > _PIECE:  # a loop seconds behind: calls of a fraction of a second, so that a stop signal is handled
-            parts = [(lo, min(hi, lo + _PIECE)) for lo0, hi in parts for lo in range(lo0, hi, _PIECE)]
-        outs = step.outputs(n)
+        # a loop seconds behind: calls of a fraction of a second, so that a stop signal is handled between them
+        parts = [(lo, min(hi, lo + _PIECE)) for lo0, hi in zip(cuts[:-1], cuts[1:]) for lo in range(lo0, hi, _PIECE)]
         for lo, hi in parts:
             if self.track and (t[lo] < (t[lo - 1] if lo else self._track_t)):
                 log.info("the frame clock went back %.6g s: the track restarts", (t[lo - 1] if lo else
                                                                                   self._track_t) - t[lo])
                 self.tracker = self._new_tracker()
             tracker = self.tracker.stream_state(t[lo:hi], *step.sizes) if self.track else step.idle_tracker
-            part = outs if len(parts) == 1 else _rows(outs, lo, hi, n)
+            part = _rows(outs, lo, hi, n)
             _jit.call(live_block, a[lo:hi], p[lo:hi], t[lo:hi], step.shape, step.est.model, step.est.problem,
                       self._offset, step.flags, tracker, step.window_model, *part)
-            if len(parts) > 1:
-                outs[-1][...] += part[-1]
+            outs[-1][...] += part[-1]
             self._track_t = float(t[hi - 1])
         return outs
 
@@ -750,7 +764,6 @@ class LiveProcessor:
 
     def _general_block(self, a, p, t_s, seq, host_ns, t, t_start):
         """The block through ``reconstruct`` and :func:`estimate_force` (the options the step lacks)."""
-        from bendsense import _jit
         from bendsense.shape.pcc import reconstruct
 
         n = a.shape[0]

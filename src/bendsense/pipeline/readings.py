@@ -10,6 +10,7 @@ splits the board per finger) both read readings through it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -81,20 +82,18 @@ def reading_columns(readings, t0_us: int, host0_ns: int | None) -> ReadingColumn
     """
     readings = list(readings)
     n = len(readings)
-    signals = np.array([r.sample.adc for r in readings], dtype=float).reshape(n, -1)
-    host_ns = [r.host_ns for r in readings]
-    lines = [sample_lines(r.sample) for r in readings]
-    pressures = np.full((n, max((len(x) for x in lines), default=1)), np.nan)
-    for k, values in enumerate(lines):
-        pressures[k, : len(values)] = [np.nan if v is None else v for v in values]
+    samples = [r.sample for r in readings]
+    signals = np.array([s.adc for s in samples], dtype=float).reshape(n, -1)
+    lines = [[math.nan if v is None else v for v in sample_lines(s)] for s in samples]
+    width = max(map(len, lines)) if n else 1
+    pressures = np.array([x + [math.nan] * (width - len(x)) for x in lines], dtype=float).reshape(n, width)
     return ReadingColumns(
         signals=signals,
-        pressure_pa=np.array([np.nan if r.sample.pressure_pa is None else r.sample.pressure_pa for r in readings],
-                             float),
+        pressure_pa=np.array([math.nan if s.pressure_pa is None else s.pressure_pa for s in samples], dtype=float),
         pressures_pa=pressures,
-        t_s=(np.array([r.device_us for r in readings], dtype=np.int64) - t0_us) * 1e-6,
-        seq=[r.sample.seq for r in readings],
-        host_ns=host_ns,
+        t_s=np.array([(r.device_us - t0_us) * 1e-6 for r in readings], dtype=float),
+        seq=[s.seq for s in samples],
+        host_ns=[r.host_ns for r in readings],
         extra=_RecordColumns(readings, signals.shape[1], host0_ns),
     )
 
