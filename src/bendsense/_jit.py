@@ -293,6 +293,7 @@ _KERNEL_NAMES = {
     "bendsense.tracking._kalman_kernels": "tracking kernels",
     "bendsense.tracking._stream_kernels": "live tracking kernels",
     "bendsense.tracking._window_kernels": "window check",
+    "bendsense.pipeline._kernels": "live step",
 }
 
 

@@ -656,10 +656,15 @@ class _FirstBlocks:
 
 
 def _copy(src: Path, dst: Path):
-    if src.is_dir() and not src.is_symlink():
-        shutil.copytree(src, dst, symlinks=True)
-    else:
-        shutil.copy2(src, dst, follow_symlinks=False)
+    """Copy a file or directory a block made; a file a background command removed meanwhile (a lock) is not copied."""
+    try:
+        if src.is_dir() and not src.is_symlink():
+            shutil.copytree(src, dst, symlinks=True)
+        else:
+            shutil.copy2(src, dst, follow_symlinks=False)
+    except FileNotFoundError:
+        if src.exists():
+            raise
 
 
 def _run_page(page: Path, work: Path, turns: _Turns, firsts: _FirstBlocks) -> list[str]:
