@@ -44,6 +44,8 @@ the fingers closing on the object: median wall time per block and per frame. The
 readings are made ahead; the cold process (compilation, cache load) is excluded.
 
     python benchmarks/bench_live.py --blocks-only
+
+``--quick``: few frames and one-second runs (for the docs test; its numbers are not the rows').
 """
 
 import argparse
@@ -299,7 +301,10 @@ def main():
     parser.add_argument("--seconds", type=float, default=5.0, help="run time of each end-to-end case [s]")
     parser.add_argument("--gripper-only", action="store_true", help="only the gripper rows")
     parser.add_argument("--blocks-only", action="store_true", help="only the block rows (the control loop's cost)")
+    parser.add_argument("--quick", action="store_true", help="few frames and short runs (seconds; for the docs test)")
     args = parser.parse_args()
+    if args.quick:
+        args.seconds = min(args.seconds, 1.0)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(
         f"bendsense live benchmark (headless Agg, matplotlib {matplotlib.__version__}; "
@@ -308,7 +313,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         cal = calibration(Path(tmp))
         print()
-        block_rows(cal)
+        block_rows(cal, sizes=(1, 10), frames=60, repeats=1) if args.quick else block_rows(cal)
         if args.blocks_only:
             return
         print()

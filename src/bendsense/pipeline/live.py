@@ -216,11 +216,7 @@ class LiveBlock:
     @property
     def track_covariance_n2(self) -> np.ndarray:
         """Covariances of the tracked forces (n, 2, 2) [N²]; NaN where not tracked."""
-        if self._step is not None and self._step.track is not None:
-            return self._step.track[2]
-        if self.track is None:
-            return np.full((len(self), 2, 2), np.nan)
-        return np.asarray(self.track.covariance_n2, dtype=float).reshape(len(self), 2, 2)
+        return self._frames("track", 2, "track", "covariance_n2", (2, 2))
 
     @property
     def track_status(self) -> np.ndarray | None:
@@ -232,11 +228,7 @@ class LiveBlock:
     @property
     def covariance_n2(self) -> np.ndarray:
         """Covariances of the forces (n, 2, 2) [N²]; NaN where not estimated."""
-        if self._step is not None and self._step.estimate is not None:
-            return self._step.estimate[1]
-        if self.estimate is None:
-            return np.full((len(self), 2, 2), np.nan)
-        return np.asarray(self.estimate.covariance_n2, dtype=float).reshape(len(self), 2, 2)
+        return self._frames("estimate", 1, "estimate", "covariance_n2", (2, 2))
 
     @property
     def contact_s_m(self) -> np.ndarray:
@@ -264,41 +256,35 @@ class LiveBlock:
     def __len__(self) -> int:
         return self.t_s.size
 
+    def _frames(self, part, index, source, name, tail):
+        """A per-frame array (n, *tail): the compiled step's ``part[index]``, else ``source.name``; else NaN."""
+        arrays = None if self._step is None else getattr(self._step, part)
+        if arrays is not None:
+            return arrays[index]
+        obj = getattr(self, source)
+        if obj is None:
+            return np.full((len(self), *tail), np.nan)
+        return np.asarray(getattr(obj, name), dtype=float).reshape(len(self), *tail)
+
     @property
     def track_force_n(self) -> np.ndarray:
         """Tracked tip forces (n, 2) [N]; NaN where not tracked."""
-        if self._step is not None and self._step.track is not None:
-            return self._step.track[0]
-        if self.track is None:
-            return np.full((len(self), 2), np.nan)
-        return np.asarray(self.track.force_n, dtype=float).reshape(len(self), 2)
+        return self._frames("track", 0, "track", "force_n", (2,))
 
     @property
     def track_std_n(self) -> np.ndarray:
         """Standard deviations of the tracked forces (n, 2) [N]; NaN where not tracked."""
-        if self._step is not None and self._step.track is not None:
-            return self._step.track[1]
-        if self.track is None:
-            return np.full((len(self), 2), np.nan)
-        return np.asarray(self.track.std_n, dtype=float).reshape(len(self), 2)
+        return self._frames("track", 1, "track", "std_n", (2,))
 
     @property
     def force_n(self) -> np.ndarray:
         """Tip forces (n, 2) [N]; NaN where not estimated or not converged."""
-        if self._step is not None and self._step.estimate is not None:
-            return self._step.estimate[0]
-        if self.estimate is None:
-            return np.full((len(self), 2), np.nan)
-        return np.asarray(self.estimate.force_n, dtype=float).reshape(len(self), 2)
+        return self._frames("estimate", 0, "estimate", "force_n", (2,))
 
     @property
     def std_n(self) -> np.ndarray:
         """Standard deviations of the forces (n, 2) [N]; NaN where not estimated."""
-        if self._step is not None and self._step.estimate is not None:
-            return self._step.estimate[11]
-        if self.estimate is None:
-            return np.full((len(self), 2), np.nan)
-        return np.asarray(self.estimate.std_n, dtype=float).reshape(len(self), 2)
+        return self._frames("estimate", 11, "estimate", "std_n", (2,))
 
     @functools.cached_property
     def status(self) -> np.ndarray:
