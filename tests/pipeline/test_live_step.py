@@ -158,3 +158,13 @@ def test_options_the_step_does_not_run_go_through_estimate_force(calibration_pat
         block = proc.process_block(signals[100:102], p[100:102], t_s=t[100:102])
         assert proc._step is not None and not isinstance(proc._step, _Step)
         assert block.estimate is not None and np.isfinite(block.force_n).all()
+
+
+def test_a_block_without_frames_is_an_empty_block(calibration_path):
+    """A loop that finds nothing arrived gets an empty block (columns of no rows), and the counts stay."""
+    proc = LiveProcessor(Calibration.load(calibration_path), constraint="normal")
+    for block in (proc.process_readings([]), proc.process_block(np.empty((0, 16)), np.empty(0), t_s=np.empty(0))):
+        assert len(block) == 0 and block.force_n.shape == (0, 2) and block.status.shape == (0,)
+        columns = block.columns()
+        assert all(len(v) == 0 for v in columns.values()) and "fx_n" in columns and "kappa16" in columns
+    assert proc.frames == 0 and proc.status_counts == {}

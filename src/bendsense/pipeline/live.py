@@ -637,6 +637,8 @@ class LiveProcessor:
         """The compiled step's outputs of the block; a clock that goes back (a device reset) restarts the track."""
         n = t.size
         outs = step.outputs(n)
+        if n == 0:  # nothing arrived: an empty block
+            return outs
         if not (self.track and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any()))) and n <= _PIECE:
             tracker = self.tracker.stream_state(t, *step.sizes) if self.track else step.idle_tracker
             _jit.call(live_block, a, p, t, step.shape, step.est.model, step.est.problem, self._offset, step.flags,
@@ -738,6 +740,8 @@ class LiveProcessor:
     def _count(self, status, misfits):
         """Count a block's frames by status, and its frames tracked while the latest window failed the test."""
         counts = self.status_counts
+        if status.size == 0:
+            return
         if status.size == 1 or (status == status[0]).all():  # the usual block: one status
             word = str(WORDS[status[0]])
             counts[word] = counts.get(word, 0) + status.size
@@ -778,6 +782,9 @@ class LiveProcessor:
         readings : list of Reading
             Driver readings, oldest first.
         """
+        readings = list(readings)
+        if not readings:  # nothing arrived: an empty block
+            return self.process_block(np.empty((0, self.calibration.n_channels)), t_s=np.empty(0))
         c = self._clock.columns(readings)
         return self.process_block(c.signals, c.pressure_pa, t_s=c.t_s, seq=c.seq, host_ns=c.host_ns, extra=c.extra)
 

@@ -76,7 +76,8 @@ class Results:
             :data:`TRACK_COLUMNS` after ``status``, and the track's ``window_p_value``.
         """
         frames = len(session)
-        kappa = np.asarray(shape.curvature_per_m).reshape(frames, -1)
+        kappa = np.asarray(shape.curvature_per_m)
+        kappa = kappa.reshape(frames, kappa.shape[-1] if kappa.ndim else 1)  # no frames: still N columns
         tip = np.asarray(shape.tip_position_m).reshape(frames, 2)
         columns: dict[str, np.ndarray] = {
             "t_s": session.t_s,
@@ -108,7 +109,7 @@ class Results:
             name = f"input_{name}" if reserved else name
             columns[name] = values
             extra_names.append(name)
-        positions = np.asarray(shape.positions_m).reshape(frames, -1, 2)
+        positions = np.asarray(shape.positions_m).reshape(frames, np.size(shape.s_m), 2)
         return cls(columns=columns, s_m=np.asarray(shape.s_m), positions_m=positions,
                    extra_names=tuple(extra_names))
 
@@ -273,7 +274,8 @@ def frame_codes(shape, estimate=None) -> np.ndarray:
         take = ~_frames_of(estimate.success, n, bool) | (codes == Status.OK)  # the estimate's word where it failed
         codes[take] = own[take]
     kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
-    codes[~np.isfinite(kappa.reshape(n, -1)).all(axis=1)] = Status.NO_SHAPE  # nothing to estimate from
+    kappa = kappa.reshape(n, kappa.shape[-1] if kappa.ndim else 1)  # (a block without frames too)
+    codes[~np.isfinite(kappa).all(axis=1)] = Status.NO_SHAPE  # nothing to estimate from
     # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
     codes[np.abs(_frames_of(shape.tip_angle_rad, n, float)) > 2.0 * np.pi] = Status.IMPLAUSIBLE_SHAPE
     return codes
