@@ -23,6 +23,30 @@ def calibration_path(tmp_path_factory):
     return root / "cal.yaml"
 
 
+@pytest.fixture(scope="session", autouse=True)
+def live_step_ready(tmp_path_factory, calibration_path):
+    """The compiled live step in numba's cache before the first test: compiled once, by one worker at a time.
+
+    On a fresh install (the README's commands: the demo, then the suite) nothing has
+    compiled ``bendsense.pipeline._kernels.live_block`` yet, and every ``record --estimate``,
+    ``live`` or ``control`` a test starts would compile it at once (a minute of CPU each):
+    the realtime tests' boards would starve meanwhile. The first worker compiles it under a
+    lock the others wait on, then load it; with a warm cache this is a cache load (~1 s).
+    """
+    from bendsense.calibration import Calibration
+    from bendsense.pipeline import LiveProcessor
+
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: each worker on its own
+        fcntl = None
+    lock = tmp_path_factory.getbasetemp().parent / "live-step.lock"  # shared by the xdist workers of this run
+    with open(lock, "w") as fh:
+        if fcntl is not None:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        LiveProcessor(Calibration.load(calibration_path), load_config()).warm_up()
+
+
 @pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``-n 2 --dist loadgroup``): groups of tests that one worker runs, one after the other.
