@@ -258,11 +258,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         u, run_status, iters = paper_fit(pb, fr, D, ref.Lc)
         _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _REF, _c(u),
                   _c(run_status, np.int64), out)
-    if uncertainty == "none":
-        warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
-                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=2)
-    elif config.parameter_covariance is None:  # once per process: σ without the model parameters' part
-        warn_no_parameter_covariance(config, stacklevel=2)
+    _warn_uncertainty(uncertainty, config, stacklevel=3)
     text = (np.array([OK_MESSAGE]) if B == 1 and o.status[0] == _OK
             else messages(o.status, o.residual, o.chi2, o.p_value, o.direction, method))
     if strict and not o.success.all():
@@ -309,6 +305,14 @@ def _setup(shape, config, constraint, method, objective, push_only, tip_angle_so
         None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes(), load)
     return ref, contact, objective, _problem(config, calibration, ref, options, noise_std)
 
+
+def _warn_uncertainty(uncertainty, config, stacklevel):
+    """Warn where σ lacks a part: no noise model at all, or (once per process) no parameter covariance."""
+    if uncertainty == "none":
+        warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
+                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=stacklevel)
+    elif config.parameter_covariance is None:  # once per process: σ without the model parameters' part
+        warn_no_parameter_covariance(config, stacklevel=stacklevel)
 
 class Compiled(NamedTuple):
     """The constants of an estimate as the live step (:mod:`bendsense.pipeline._kernels`) takes them.
@@ -362,11 +366,7 @@ def compiled(config, calibration, constraint, objective, options) -> Compiled | 
                             f"{min(stiffness.ei_nm2(lo), stiffness.ei_nm2(hi))!r} N·m²")
     section = config.parameter_covariance
     cov = np.zeros((5, 5)) if section is None else np.array(_full_covariance(section), dtype=float)
-    if uncertainty == "none":
-        warnings.warn("estimate_force: no noise model (no calibration with its flat-recording noise, no noise_std): "
-                      "std_n is NaN (uncertainty='none')", NoNoiseModelWarning, stacklevel=3)
-    elif section is None:
-        warn_no_parameter_covariance(config, stacklevel=3)
+    _warn_uncertainty(uncertainty, config, stacklevel=4)
     model_args = (lo, hi, table.kernel_args, float(model.prebend_angle_rad), float(model.length_m),
                   float(stiffness.ei0_nm2), float(stiffness.ei1_nm2_per_pa), cov, section is not None,
                   float(model.shear_modulus_pa), float(model.sensor_stiffness_nm_per_rad), float(model._moment_per_pa),

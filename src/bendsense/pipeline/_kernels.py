@@ -13,7 +13,7 @@ range) → the causal track and the streaming window check
 (:mod:`bendsense.tracking._stream_kernels`) → the statuses (:func:`frame_code`).
 
 Every stage is the offline chain's own kernel; this module only strings them together so
-that Python touches a block once (``tests/pipeline/test_live_kernel.py`` compares the two
+that Python touches a block once (``tests/pipeline/test_live_step.py`` compares the two
 frame by frame).
 """
 
@@ -102,9 +102,11 @@ def model_inputs(p, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_
 
     θ = θ0(P) + θ_pre (the table, :func:`bendsense.mechanics._actuator_kernels.hermite`),
     K0 = θ / L, EI = γ0 + γ1 P (paper eq. 8, 15), and the covariance of (K0, EI) from the
-    parameters' ``cov`` (5, 5) over :data:`bendsense.config.MODEL_PARAMETERS` (zero
-    without ``has_cov``): ``J Σ Jᵀ`` with ∂K0/∂(μ̄, μ_s, θ_pre) from
-    :func:`~bendsense.mechanics._actuator_kernels.curvature_jacobian` and ∂EI/∂(γ0, γ1) = (1, P).
+    parameters' ``cov`` (5, 5) over :data:`bendsense.config.MODEL_PARAMETERS`: ``J Σ Jᵀ``
+    with ∂K0/∂(μ̄, μ_s, θ_pre) from
+    :func:`~bendsense.mechanics._actuator_kernels.curvature_jacobian` and ∂EI/∂(γ0, γ1) =
+    (1, P). Without a parameter covariance (``has_cov`` False, ``cov`` zeros) the Jacobian
+    is not computed and the covariance is zero.
     """
     B = p.size
     p_pa, inv_width, coef, bucket_pa, bucket_start = table
@@ -124,10 +126,10 @@ def model_inputs(p, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_
                 kk += k[i, a] * k[i, b] * cov[a, b]
             ke += k[i, a] * (cov[a, 3] + p[i] * cov[a, 4])
         ee = cov[3, 3] + 2.0 * p[i] * cov[3, 4] + p[i] * p[i] * cov[4, 4]
-        model_cov[i, 0, 0] = kk if has_cov else 0.0
-        model_cov[i, 0, 1] = ke if has_cov else 0.0
-        model_cov[i, 1, 0] = ke if has_cov else 0.0
-        model_cov[i, 1, 1] = ee if has_cov else 0.0
+        model_cov[i, 0, 0] = kk
+        model_cov[i, 0, 1] = ke
+        model_cov[i, 1, 0] = ke
+        model_cov[i, 1, 1] = ee
 
 
 @njit(cache=True)

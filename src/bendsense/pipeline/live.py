@@ -370,19 +370,17 @@ class _Step:
     """
 
     def __init__(self, processor, est):
-        from bendsense.shape.pcc import _grid
+        from bendsense.shape.pcc import _grid, calibration_args
         from bendsense.tracking import Tracker
 
-        config, cal = processor.config, processor.calibration
+        config = processor.config
         sensor = config.sensor
         self.config = config
         self.grid = _grid(sensor.lengths_m, processor.s_m)
-        lo, hi = cal._channel_range
-        self.offset = np.asarray(cal.offset, dtype=float)
-        self.shape = tuple(np.ascontiguousarray(x, dtype=float) for x in (
-            cal.offset, cal._channel_coefficients, lo, hi, self.grid.lengths))
-        self.shape += (float(sensor.strip_gap_m), np.ascontiguousarray(self.grid.seg, dtype=np.int64),
-                       np.ascontiguousarray(self.grid.sigma, dtype=float))
+        self.shape = (*calibration_args(processor.calibration, sensor),
+                      np.ascontiguousarray(self.grid.seg, dtype=np.int64),
+                      np.ascontiguousarray(self.grid.sigma, dtype=float))
+        self.offset = self.shape[0]
         self.est = est
         self.estimating, self.tracking = processor.estimate, processor.track
         self.constraint = processor.constraint
@@ -403,7 +401,7 @@ class _Step:
         (shapes, the estimate's (none without estimating), the track's, the statuses (n,),
         the counts (5,)): :func:`bendsense.pipeline._kernels.live_block`.
         """
-        N, M, (R, nodes) = self.shape[0].size, self.grid.s.size, self.est.problem[4:6]
+        (R, N), M, nodes = self.sizes, self.grid.s.size, self.est.problem[5]
         e = n if self.estimating else 0
         empty = np.empty
         return ((empty((n, N)), empty((n, M, 2)), empty((n, M)), empty((n, 2)), empty(n), empty(n, dtype=bool)),
@@ -415,11 +413,9 @@ class _Step:
 
     def shape_of(self, arrays):
         """The :class:`~bendsense.shape.pcc.Shape` of the step's shape arrays."""
-        from bendsense.shape.pcc import Shape
+        from bendsense.shape.pcc import shape_of
 
-        kappa, pos, ang, tip, tip_ang, extrapolated = arrays
-        return Shape(curvature_per_m=kappa, s_m=self.grid.s, positions_m=pos, angle_rad=ang, tip_position_m=tip,
-                     tip_angle_rad=tip_ang, lengths_m=self.grid.lengths, extrapolated=extrapolated)
+        return shape_of(arrays, self.grid, (arrays[4].size,))
 
     def estimate_of(self, out, pressure_pa, process_s):
         """The :class:`~bendsense.ForceEstimate` of the step's estimate outputs."""

@@ -609,19 +609,40 @@ def reconstruct(
     batch = a.shape[:-1]
     frames, m = math.prod(batch), grid.s.size
     a2 = np.ascontiguousarray(a.reshape(frames, n))
-    lo, hi = calibration._channel_range
-    args = (calibration.offset, calibration._channel_coefficients, lo, hi, lengths, float(sensor.strip_gap_m))
     kappa = np.empty((frames, n))
     pos, ang = np.empty((frames, m, 2)), np.empty((frames, m))
     tip, tip_ang = np.empty((frames, 2)), np.empty(frames)
     extrapolated = np.empty(frames, dtype=bool)
+    args = calibration_args(calibration, sensor)
     out = (np.full(frames, float(base_angle_rad)), grid.seg, grid.sigma, kappa, pos, ang, tip, tip_ang, extrapolated)
     if not _jit.parallel(frames):  # a live block: in this thread
         _jit.call(_kernels.reconstruct_block, 0, frames, a2, *args, *out)
     else:
         _jit.call(_kernels.reconstruct_frames, a2, *args, *out)
+    return shape_of((kappa, pos, ang, tip, tip_ang, extrapolated), grid, batch)
+
+
+def calibration_args(calibration, sensor) -> tuple:
+    """The calibration and the sensor as the reconstruction kernels take them.
+
+    (offset A0, each channel's polynomial, the calibrated ΔA range lo and hi, the segment
+    lengths, the strip gap): :func:`bendsense.shape._kernels.reconstruct_block`, which the
+    live step calls too.
+    """
+    lo, hi = calibration._channel_range
+    arrays = (calibration.offset, calibration._channel_coefficients, lo, hi, sensor.lengths_m)
+    return (*(np.ascontiguousarray(x, dtype=float) for x in arrays), float(sensor.strip_gap_m))
+
+
+def shape_of(arrays, grid: _Grid, batch: tuple) -> Shape:
+    """The :class:`Shape` of the reconstruction kernels' outputs (κ, positions, angles, tip, tip angle, extrapolated).
+
+    ``batch``: the frames' batch shape (the kernels' frame axis is flat).
+    """
+    kappa, pos, ang, tip, tip_ang, extrapolated = arrays
+    m = grid.s.size
     return Shape(
-        curvature_per_m=kappa.reshape(a.shape),
+        curvature_per_m=kappa.reshape(*batch, kappa.shape[-1]),
         s_m=grid.s,
         positions_m=pos.reshape(*batch, m, 2),
         angle_rad=ang.reshape(*batch, m),

@@ -379,21 +379,14 @@ class Tracker:
         est, t, P = self._inputs(estimate_block, t_s_block, pressure_pa_block)
         b = t.size
         fs = self._fs
-        learning = self._dt_ref is None
-        if learning:  # the median interval of the first frames seen
-            tt = t if fs[_stream.HAS_LAST] == 0.0 else np.concatenate(([fs[_stream.LAST_T]], t))
-            if tt.size > 1:
-                self._dt_ref = _windows.reference_interval(tt)
-                self._q = intensity(self.bandwidth_hz, self._dt_ref)
+        learning = self._learn(t)
         force, std, cov = np.empty((b, 2)), np.empty((b, 2)), np.empty((b, 2, 2))
         starts = np.empty(b, dtype=np.bool_)
         parts = est.covariance_parts_n2
         parts = np.full((b, 3, 2, 2), np.nan) if parts is None else _c(parts, (b, 3, 2, 2))
-        x, Pk, Rbar, has = self._state
         z = _c(est.force_n, (b, 2))
-        missing = _jit.call(_stream.stream_filter, t, P, z, _c(est.std_n, (b, 2)), parts,
-                            self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR,
-                            _windows.PRESSURE_STEP_PA, fs, x, Pk, Rbar, has, self._carry, starts, force, std, cov)
+        missing = _jit.call(_stream.stream_filter, t, P, z, _c(est.std_n, (b, 2)), parts, *self._filter_state(),
+                            starts, force, std, cov)
         if missing < 0:  # nothing filtered: the times are checked first
             if learning:
                 self._dt_ref = self._q = None  # nor the interval learnt from these times kept
@@ -421,16 +414,30 @@ class Tracker:
         coils, channels : int
             The sizes of the window test's sums (the coils fitted, the sensor's channels).
         """
+        self._learn(t)
+        return (*self._filter_state(), *self._window_sums(coils, channels))
+
+    def _learn(self, t) -> bool:
+        """Learn the reference interval (the median of the first frames seen) at times ``t``; whether it was unknown."""
+        if self._dt_ref is not None:
+            return False
         fs = self._fs
-        if self._dt_ref is None:
-            tt = t if fs[_stream.HAS_LAST] == 0.0 else np.concatenate(([fs[_stream.LAST_T]], t))
-            if tt.size > 1:
-                self._dt_ref = _windows.reference_interval(tt)
-                self._q = intensity(self.bandwidth_hz, self._dt_ref)
+        tt = t if fs[_stream.HAS_LAST] == 0.0 else np.concatenate(([fs[_stream.LAST_T]], t))
+        if tt.size > 1:
+            self._dt_ref = _windows.reference_interval(tt)
+            self._q = intensity(self.bandwidth_hz, self._dt_ref)
+        return True
+
+    def _filter_state(self) -> tuple:
+        """:func:`~bendsense.tracking._stream_kernels.stream_filter`'s constants and carried state, in its order."""
+        return (self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR, _windows.PRESSURE_STEP_PA,
+                self._fs, *self._state, self._carry)
+
+    def _window_sums(self, coils: int, channels: int) -> tuple:
+        """The open window's sums (r, A, M, shifts), made at the first block."""
         if self._sums is None:
             self._sums = (np.zeros(coils), np.zeros((coils, 2)), np.zeros((coils, 2)), np.zeros(channels))
-        return (self._q or 0.0, self.window_s, self._dt_ref or np.inf, _windows.GAP_FACTOR, _windows.PRESSURE_STEP_PA,
-                fs, *self._state, self._carry, *self._sums)
+        return self._sums
 
     def _inputs(self, est, t_s, pressure_pa):
         """The checked block: (estimate, t (b,), pressure (b,) NaN where not given)."""
@@ -465,12 +472,11 @@ class Tracker:
             return p, False
         R, N = resid.shape[-1], shifts.shape[-1]
         resid, shifts, jac, mfac = _c(resid, (b, R)), _c(shifts, (b, N)), _c(jac, (b, R, 2)), _c(mfac, (b, R, 2))
-        if self._sums is None:
-            self._sums = (np.zeros(R), np.zeros((R, 2)), np.zeros((R, 2)), np.zeros(N))
+        sums = self._window_sums(R, N)
         if self._model is None or self._model[0] is not est.shift_errors:  # the same calibration: converted once
             self._model = (est.shift_errors, tuple(est.shift_errors), np.asarray(est.coils, dtype=np.int64))
         misfit = _jit.call(_stream.stream_windows, t, starts, resid, jac, mfac, shifts, self._model[1],
-                           self._model[2], float(est.strip_gap_m), self.window_s, self._fs, *self._sums, p)
+                           self._model[2], float(est.strip_gap_m), self.window_s, self._fs, *sums, p)
         return p, misfit
 
 
