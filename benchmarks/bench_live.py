@@ -255,10 +255,11 @@ def python_loop_ms():
 def block_rows(cal, sizes=(1, 2, 5, 10), frames=600, repeats=3):
     """Median wall time of ``process_readings`` per block of each size, one finger and three; prints the rows.
 
-    Each row runs the compiled live step (one call per finger per block) and, in the same
-    loop, block for block, the path before it (``reconstruct``, ``estimate_force``, the
-    ``Tracker``: what options the step does not run still take), so that both see the
-    machine in the same state.
+    Each row runs the compiled live step (one call per finger per block) and the path
+    before it (``reconstruct``, ``estimate_force``, the ``Tracker``: what options the step
+    does not run still take) in alternate passes over the frames, so that both see the
+    machine in the same state; a pass runs one path alone, as a control loop does (block
+    for block, each would evict the other's data from the caches).
     """
     from bendsense import load_config
     from bendsense.pipeline.gripper import GripperProcessor
@@ -283,13 +284,11 @@ def block_rows(cal, sizes=(1, 2, 5, 10), frames=600, repeats=3):
         for size in sizes:
             times = ([], [])
             for _ in range(repeats):
-                for proc in procs:
+                for proc, spent in zip(procs, times):
                     proc.reset()
-                for i in range(0, frames - size + 1, size):
-                    block = readings[i:i + size]
-                    for proc, spent in zip(procs, times):
+                    for i in range(0, frames - size + 1, size):
                         t = time.perf_counter()
-                        proc.process_readings(block)
+                        proc.process_readings(readings[i:i + size])
                         spent.append(time.perf_counter() - t)
             now, before = (float(np.median(x)) * 1e6 for x in times)
             print(f"{k:<8} {size:>12} {now:13.0f} {now / size:13.0f} {before:16.0f}")

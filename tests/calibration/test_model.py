@@ -190,3 +190,32 @@ def test_old_files_load_and_say_what_is_missing(tmp_path):
     one = Calibration.from_data(model.signals(0.0, 1), [model.signals(1 / r, 3) for r in RADII], RADII, SENSOR)
     assert not one.noise_known
     assert "flat noise std (mean over channels): not measured" in one.report()
+
+
+def test_shift_covariance_is_the_delta_method_written_out():
+    # Σ_S = L Q Lᵀ (the coefficients' and offsets' covariance through ∂S/∂(a, b, A0)) + the misfit
+    # envelopes' correlated part + the noise through the slope, each term built here with numpy
+    from bendsense.calibration._kernels import shift_covariance
+
+    model, cal = fitted(noise=1.5, seed=6)
+    signals = model.signals(1 / 0.07, 1, 1.5, np.random.default_rng(7))[0]
+    m = cal.error_model()
+    S = cal.shifts_m(signals[None])[0]
+    x = signals - cal.offset
+    slope = cal.shift_slopes(signals[None])[0]
+    k, n = m.coef.shape[1], S.size
+    L = np.zeros((n, 2 * k + n))
+    for i in range(n):
+        block = 0 if m.odd[i] else k
+        L[i, block:block + k] = x[i] ** np.arange(k)
+        L[i, 2 * k + i] = -slope[i]
+    err = np.array([np.interp(abs(s), m.grid_m, m.sigma_odd_m if odd else m.sigma_even_m) for s, odd in zip(S, m.odd)])
+    d = (S[:, None] - S[None, :]) / m.length_m
+    misfit = np.outer(err, err) * np.exp(-0.5 * d**2) * np.where(np.eye(n, dtype=bool), 1.0, m.parity)
+    expected = L @ m.coef_cov @ L.T + misfit + np.diag((slope * m.noise_std) ** 2)
+    assert m.length_m > 0 and np.any(m.coef_cov) and np.any(err)  # every term is there
+    out, noise = np.empty((n, n)), np.empty(n)
+    trace = shift_covariance(m, S, out, noise)
+    np.testing.assert_allclose(out, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
+    np.testing.assert_allclose(noise, (slope * m.noise_std) ** 2, rtol=1e-9)
+    assert trace == pytest.approx(np.trace(expected), rel=1e-12)

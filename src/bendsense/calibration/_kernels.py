@@ -76,29 +76,36 @@ def shift_covariance(m, S, out, noise_var):
             sd[i] = slope[i] * m.noise_std[i]
             err[i] = interp(abs(S[i]), m.grid_m, m.sigma_odd_m if m.odd[i] else m.sigma_even_m)
     coef = m.calibrated and m.coef_cov.shape[0] == 2 * k + n
+    # the calibration's part l_i Q l_jᵀ, l_i nonzero at the powers of ΔA_i in its parity's block and
+    # at A0_i (−f_i'): the rows T = L Q once, then each pair's product with l_j
+    Q = m.coef_cov
+    width = Q.shape[0] if coef else 0
+    T = np.zeros((n, width))
+    powers = np.empty((n, k))
+    for i in range(n if coef else 0):
+        bi = 0 if m.odd[i] else k
+        pw = 1.0
+        for a in range(k):
+            powers[i, a] = pw
+            for c in range(width):
+                T[i, c] += pw * Q[bi + a, c]
+            pw *= x[i]
+        for c in range(width):
+            T[i, c] -= slope[i] * Q[2 * k + i, c]
     trace = 0.0
     for i in range(n):
         for j in range(i + 1):
             v = 0.0
-            if m.length_m > 0 or i == j:
-                d = (S[i] - S[j]) / m.length_m if m.length_m > 0 else 0.0
+            if m.length_m > 0:
+                d = (S[i] - S[j]) / m.length_m
                 v = err[i] * err[j] * math.exp(-0.5 * d * d) * (1.0 if i == j else m.parity[i, j])
+            elif i == j:
+                v = err[i] * err[i]
             if coef:
-                # l_i Q l_jᵀ with l_i nonzero at the powers of its parity's block and at A0_i
-                bi, bj = (0 if m.odd[i] else k), (0 if m.odd[j] else k)
-                pi = 1.0
-                for a in range(k):
-                    pj = 1.0
-                    for b in range(k):
-                        v += pi * m.coef_cov[bi + a, bj + b] * pj
-                        pj *= x[j]
-                    v -= pi * m.coef_cov[bi + a, 2 * k + j] * slope[j]
-                    pi *= x[i]
-                pj = 1.0
+                bj = 0 if m.odd[j] else k
                 for b in range(k):
-                    v -= slope[i] * m.coef_cov[2 * k + i, bj + b] * pj
-                    pj *= x[j]
-                v += slope[i] * m.coef_cov[2 * k + i, 2 * k + j] * slope[j]
+                    v += T[i, bj + b] * powers[j, b]
+                v -= T[i, 2 * k + j] * slope[j]
             out[i, j] = out[j, i] = v
         noise_var[i] = sd[i] * sd[i]
         out[i, i] += noise_var[i]

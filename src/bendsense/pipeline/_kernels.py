@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.typed import List
 
 from bendsense import _jit
 from bendsense.estimation import _kernels as est_kernels
@@ -278,17 +279,30 @@ def track(t, p, out, tracker, windows, window_model, tforce, tstd, tcov, window_
 
 
 @njit(cache=True)
-def live_block(a, p, t, shape, model, problem, previous, flags, tracker, window_model, out_shape, out, out_track,
-               status, counts):
+def hold(constants):
+    """The tuple ``constants`` in a typed list of one, which a compiled call takes as one object.
+
+    A call unboxes each array it is given (~0.1 µs each); the live step's constants (the
+    calibration, the free-bending table, the problem, the beam's operators) are ~150
+    arrays, the same for every block.
+    """
+    held = List()
+    held.append(constants)
+    return held
+
+
+@njit(cache=True)
+def live_block(a, p, t, constants, previous, tracker, out_shape, out, out_track, status, counts):
     """One block of frames (n,) of one finger, readings to statuses (module docstring), into the outputs given.
 
     ``a`` (n, N) raw signals, ``p`` (n,) pressures (NaN: none), ``t`` (n,) times;
-    ``shape``: the calibration and the PCC grid (offset, coefficients, ΔA range, lengths,
-    strip gap, the points' segments and arc lengths within them); ``model`` and
-    ``problem``: :class:`bendsense.estimation.Compiled`; ``previous`` (2,): the warm
-    start, carried; ``flags``: whether to estimate, track and check windows;
-    ``tracker``: :meth:`bendsense.tracking.Tracker.stream_state`; ``window_model``: the
-    shift error model, the coils and the strip gap of the window test. Outputs: the
+    ``constants``: the step's, :func:`hold` of (shape, model, problem, flags,
+    window_model): ``shape`` the calibration and the PCC grid (offset, coefficients, ΔA
+    range, lengths, strip gap, the points' segments and arc lengths within them);
+    ``model`` and ``problem`` :class:`bendsense.estimation.Compiled`'s; ``flags`` whether
+    to estimate, track and check windows; ``window_model`` the shift error model, the
+    coils and the strip gap of the window test. ``previous`` (2,): the warm start,
+    carried; ``tracker``: :meth:`bendsense.tracking.Tracker.stream_state`. Outputs: the
     shapes (κ, positions, angles, tip, tip angle, extrapolated), the estimate's (n frames
     when estimating, else none; :class:`~bendsense.estimation.problem.Outputs`), the
     track's (force, σ, covariance, window p, status), the frames' status (n,) and
@@ -299,6 +313,7 @@ def live_block(a, p, t, shape, model, problem, previous, flags, tracker, window_
     arrays runs Python code as it hands them over, where a stop signal's handler would
     raise into numba's own code.
     """
+    shape, model, problem, flags, window_model = constants[0]
     estimating, tracking, windows = flags
     offset, coef, lo, hi, lengths, gap, seg, sigma = shape
     kappa, pos, ang, tip, tip_ang, extrapolated = out_shape

@@ -32,7 +32,7 @@ from bendsense._batched import concat_frames, expand_frames, put_frames, take_fr
 from bendsense.errors import ArgumentError, ConfigError, DataWarning
 from bendsense.estimation import estimation_options
 from bendsense.estimation._kernels import MISFIT_P
-from bendsense.pipeline._kernels import live_block
+from bendsense.pipeline._kernels import hold, live_block
 from bendsense.pipeline.readings import ReadingClock
 from bendsense.results import WINDOW_MISFIT
 from bendsense.status import WORDS, Status, words
@@ -391,9 +391,10 @@ class _Step:
         self.sizes = (R, N)
         self.idle_tracker = Tracker().stream_state(np.zeros(1), R, N)  # what a processor that does not track passes
         # the window test: a fit of the coil angles with a noise model (what Tracker.update checks)
-        self.windows = est.objective == "angles" and est.uncertainty == "propagated"
-        self.window_model = (est.problem[1], est.pb.coils, float(est.pb.gap))
-        self.flags = (bool(self.estimating), bool(self.tracking), bool(self.windows))
+        windows = est.objective == "angles" and est.uncertainty == "propagated"
+        window_model = (est.problem[1], est.pb.coils, float(est.pb.gap))
+        flags = (bool(self.estimating), bool(self.tracking), bool(windows))
+        self.constants = _jit.call(hold, (self.shape, est.model, est.problem, flags, window_model))
 
     def outputs(self, n):
         """The compiled step's outputs of a block of ``n`` frames (filled by the step).
@@ -637,8 +638,7 @@ class LiveProcessor:
             return outs
         if not (self.track and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any()))) and n <= _PIECE:
             tracker = self.tracker.stream_state(t, *step.sizes) if self.track else step.idle_tracker
-            _jit.call(live_block, a, p, t, step.shape, step.est.model, step.est.problem, self._offset, step.flags,
-                      tracker, step.window_model, *outs)
+            _jit.call(live_block, a, p, t, step.constants, self._offset, tracker, *outs)
             self._track_t = float(t[-1])
             return outs
         cuts = [0, n]  # the usual block: one part
@@ -654,8 +654,7 @@ class LiveProcessor:
                 self.tracker = self._new_tracker()
             tracker = self.tracker.stream_state(t[lo:hi], *step.sizes) if self.track else step.idle_tracker
             part = _rows(outs, lo, hi, n)
-            _jit.call(live_block, a[lo:hi], p[lo:hi], t[lo:hi], step.shape, step.est.model, step.est.problem,
-                      self._offset, step.flags, tracker, step.window_model, *part)
+            _jit.call(live_block, a[lo:hi], p[lo:hi], t[lo:hi], step.constants, self._offset, tracker, *part)
             outs[-1][...] += part[-1]
             self._track_t = float(t[hi - 1])
         return outs
