@@ -54,7 +54,7 @@ class FakeBlock:
     t_s: np.ndarray
     force_n: np.ndarray
     status: np.ndarray
-    track = None
+    track = track_status = None
 
     def __len__(self):
         return self.t_s.size

@@ -341,19 +341,20 @@ class Guard:
         from bendsense.control.pi import finger_block
 
         for finger in self.fingers:
-            own = finger_block(block, finger)
-            status = np.asarray(own.track.status if own.track is not None else own.status)
+            own = finger_block(block, finger)  # its arrays: a block's objects are made only when asked for
+            track_status = own.track_status
+            status = own.status if track_status is None else track_status
             blind = ~np.isfinite(np.asarray(own.force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
-            if own.track is not None:  # and the force the controller acts on
-                blind |= ~np.isfinite(np.asarray(own.track_force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
-            flagged = np.isin(status, STOP_STATUSES) | blind
+            if track_status is not None:  # and the force the controller acts on
+                blind |= ~np.isfinite(own.track_force_n).all(axis=1)
+            stopping = (status == STOP_STATUSES[0]) | (status == STOP_STATUSES[1])
+            flagged = stopping | blind
             if not flagged.any():
                 self._flag_start[finger] = math.nan
                 continue
             reason = words(status).astype(object)
             if blind.any():  # the frame's own status says why it has no force (no_pressure, out of range, ...)
-                reason = np.where(blind & ~np.isin(status, STOP_STATUSES),
-                                  [f"no force ({w})" for w in words(own.status).tolist()], reason)
+                reason = np.where(blind & ~stopping, [f"no force ({w})" for w in words(own.status).tolist()], reason)
             start = self._flag_start[finger]
             for t, bad, what in zip(own.t_s.tolist(), flagged.tolist(), reason.tolist()):
                 if not bad:
