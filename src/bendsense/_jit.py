@@ -294,6 +294,7 @@ _KERNEL_NAMES = {
     "bendsense.tracking._stream_kernels": "live tracking kernels",
     "bendsense.tracking._window_kernels": "window check",
     "bendsense.pipeline._kernels": "live step",
+    "bendsense.results._kernels": "status rules",
 }
 
 

@@ -342,6 +342,7 @@ def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progres
     from bendsense.estimation import _kernels as kernels
     from bendsense.pipeline import process
     from bendsense.results import write_results
+    from bendsense.results._kernels import compile_kernels as compile_status_kernels
     from bendsense.session.native import read_session_dir
     from bendsense.shape.pcc import reconstruct
     from bendsense.tracking.windows import compile_kernels as compile_window_kernels
@@ -359,6 +360,7 @@ def _run(work: Path, out: Path, config, *, seconds, rate_hz, seed, echo, progres
                                echo=echo)
         if compiling.process is not None:  # the kernels of the steps after the estimate, while it compiles
             compile_window_kernels(cal, config)
+            compile_status_kernels()
             reconstruct(session.signals[:1], cal, config.sensor)
         compiling.wait()
 

@@ -10,7 +10,8 @@ free-bending table, EI(P), the covariance of (K0, EI) from the parameters',
 warm-started from the previous block's last good frame, a failed frame retried cold) →
 the plausibility marks (a force beyond what the actuator carries, a pressure outside its
 range) → the causal track and the streaming window check
-(:mod:`bendsense.tracking._stream_kernels`) → the statuses (:func:`frame_code`).
+(:mod:`bendsense.tracking._stream_kernels`) → the statuses (:mod:`bendsense.results._kernels`,
+the rules of the offline outputs).
 
 Every stage is the offline chain's own kernel; this module only strings them together so
 that Python touches a block once (``tests/pipeline/test_live_step.py`` compares the two
@@ -26,75 +27,17 @@ from numba.typed import List
 from bendsense import _jit
 from bendsense.estimation import _kernels as est_kernels
 from bendsense.mechanics import _actuator_kernels as act
+from bendsense.results._kernels import estimate_code, frame_code, track_code
 from bendsense.shape import _kernels as shape_kernels
 from bendsense.status import Status
 from bendsense.tracking import _stream_kernels as stream
 
-_OK = int(Status.OK)
-_NOT_IDENTIFIABLE = int(Status.NOT_IDENTIFIABLE)
-_CONTACT_UNRESOLVED = int(Status.CONTACT_UNRESOLVED)
-_NOT_CONVERGED = int(Status.NOT_CONVERGED)
-_NO_FORCE = int(Status.NO_FORCE)
-_MODEL_MISFIT = int(Status.MODEL_MISFIT)
-_EXTRAPOLATED = int(Status.EXTRAPOLATED)
 _NO_SHAPE = int(Status.NO_SHAPE)
-_IMPLAUSIBLE_SHAPE = int(Status.IMPLAUSIBLE_SHAPE)
 _IMPLAUSIBLE_FORCE = int(Status.IMPLAUSIBLE_FORCE)
 _OUT_OF_RANGE = int(Status.PRESSURE_OUT_OF_RANGE)
 _NO_PRESSURE = int(Status.NO_PRESSURE)
 _RUNNING = int(Status.RUNNING)
 _MISFIT_P = est_kernels.MISFIT_P
-_TURN = 2.0 * math.pi
-
-
-@njit(cache=True)
-def estimate_code(status, success, fx, fy, unresolved):
-    """A frame's status code from its estimate alone (:func:`bendsense.results.estimate_codes`).
-
-    Its own status; ``NOT_CONVERGED`` for a failed frame whose code reads as a success,
-    ``NO_FORCE`` for an ``OK`` frame without a finite force, ``CONTACT_UNRESOLVED`` for an
-    ``OK`` frame whose contact location the data cannot place.
-    """
-    code = status
-    if not success and (code == _OK or code == _NOT_IDENTIFIABLE or code == _CONTACT_UNRESOLVED):
-        code = _NOT_CONVERGED
-    if code == _OK and not (math.isfinite(fx) and math.isfinite(fy)):
-        code = _NO_FORCE
-    if code == _OK and unresolved:
-        code = _CONTACT_UNRESOLVED
-    return code
-
-
-@njit(cache=True)
-def frame_code(extrapolated, shape_finite, tip_angle, has_estimate, own, success):
-    """A frame's status code (:func:`bendsense.results.frame_codes`): the shape's, then the estimate's ``own``.
-
-    ``EXTRAPOLATED``, the estimate's code where the shape is ok or the estimate failed,
-    ``NO_SHAPE`` (a non-finite curvature: nothing to estimate from) and
-    ``IMPLAUSIBLE_SHAPE`` (a tip turned by more than a full turn) over all.
-    """
-    code = _OK
-    if extrapolated:
-        code = _EXTRAPOLATED
-    if has_estimate and (not success or code == _OK):
-        code = own
-    if not shape_finite:  # nothing to estimate from
-        code = _NO_SHAPE
-    if abs(tip_angle) > _TURN:
-        code = _IMPLAUSIBLE_SHAPE
-    return code
-
-
-@njit(cache=True)
-def track_code(own, window_p, fx, fy, sx, sy):
-    """A tracked frame's status (:func:`bendsense.tracking.track.track_status`): its own, or what the track adds."""
-    if own != _OK:
-        return own
-    if window_p < _MISFIT_P:
-        return _MODEL_MISFIT
-    if not (math.isfinite(fx) and math.isfinite(fy) and math.isfinite(sx) and math.isfinite(sy)):
-        return _NO_FORCE
-    return own
 
 
 @njit(cache=True)

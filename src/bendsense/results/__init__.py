@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bendsense import _jit
 from bendsense._io import open_regular, read_text
 from bendsense.errors import SessionError
 from bendsense.results.contact import CONTACT_COLUMNS, contact_columns
@@ -212,15 +213,13 @@ def tracked_columns(frames: int, estimate=None, track=None, status=None) -> dict
     return columns
 
 
-_SUCCESSES = (Status.OK, Status.NOT_IDENTIFIABLE, Status.CONTACT_UNRESOLVED)
-
-
 def estimate_codes(estimate, n: int) -> np.ndarray:
     """Per-frame status codes (n,) of a force estimate alone: its own, and what the outputs add.
 
     The estimate's :attr:`~bendsense.ForceEstimate.status`; ``NO_FORCE`` for an ``OK``
     frame without a finite force (whatever the solver said), ``CONTACT_UNRESOLVED`` for
-    an ``OK`` frame of a contact load whose ``contact_std_m`` is infinite.
+    an ``OK`` frame of a contact load whose ``contact_std_m`` is infinite
+    (:func:`bendsense.results._kernels.estimate_code`, the live step's rule too).
 
     Parameters
     ----------
@@ -229,19 +228,15 @@ def estimate_codes(estimate, n: int) -> np.ndarray:
     n : int
         The number of frames.
     """
-    codes = _frames_of(estimate.status, n, np.int8).copy()
-    failed = ~_frames_of(estimate.success, n, bool)
-    if failed.any():  # a failure never reads as a success
-        codes[failed & ((codes == _SUCCESSES[0]) | (codes == _SUCCESSES[1]) | (codes == _SUCCESSES[2]))] = \
-            Status.NOT_CONVERGED
-    ok = codes == Status.OK
-    if not ok.any():
-        return codes
-    force = np.asarray(estimate.force_n, dtype=float).reshape(n, 2)
-    codes[ok & ~np.isfinite(force).all(axis=1)] = Status.NO_FORCE
+    from bendsense.results import _kernels
+
+    unresolved = np.zeros(n, dtype=bool)
     if getattr(estimate, "load", "tip") == "contact" and estimate.contact_std_m is not None:
         unresolved = np.isinf(_frames_of(estimate.contact_std_m, n, float))
-        codes[(codes == Status.OK) & unresolved] = Status.CONTACT_UNRESOLVED  # the force reported, never ok
+    codes = np.empty(n, dtype=np.int8)
+    _jit.call(_kernels.estimate_codes_into, _whole(estimate.status, n, np.int8), _whole(estimate.success, n, bool),
+              np.ascontiguousarray(np.asarray(estimate.force_n, dtype=float).reshape(n, 2)),
+              np.ascontiguousarray(unresolved), codes)
     return codes
 
 
@@ -249,6 +244,11 @@ def _frames_of(values, n: int, dtype) -> np.ndarray:
     """``values`` as an array (n,) of ``dtype``: itself when it is one (a view, not to be written), else broadcast."""
     a = np.asarray(values, dtype=dtype)
     return a if a.shape == (n,) else np.broadcast_to(a, (n,))
+
+
+def _whole(values, n: int, dtype) -> np.ndarray:
+    """:func:`_frames_of` as a contiguous array (what the status kernels take: one compiled version)."""
+    return np.ascontiguousarray(_frames_of(values, n, dtype))
 
 
 def frame_codes(shape, estimate=None) -> np.ndarray:
@@ -266,18 +266,18 @@ def frame_codes(shape, estimate=None) -> np.ndarray:
     estimate : ForceEstimate, optional
         Force estimates of the same frames.
     """
+    from bendsense.results import _kernels
+
     n = np.shape(shape.tip_angle_rad)[0] if np.ndim(shape.tip_angle_rad) else 1
-    codes = np.full(n, Status.OK, dtype=np.int8)
-    codes[_frames_of(getattr(shape, "extrapolated", False), n, bool)] = Status.EXTRAPOLATED
-    if estimate is not None:
-        own = estimate_codes(estimate, n)
-        take = ~_frames_of(estimate.success, n, bool) | (codes == Status.OK)  # the estimate's word where it failed
-        codes[take] = own[take]
     kappa = np.asarray(getattr(shape, "curvature_per_m", np.zeros((n, 1))), dtype=float)
     kappa = kappa.reshape(n, kappa.shape[-1] if kappa.ndim else 1)  # (a block without frames too)
-    codes[~np.isfinite(kappa).all(axis=1)] = Status.NO_SHAPE  # nothing to estimate from
-    # a bending actuator does not turn its tip by more than a full turn: a unit or calibration mistake
-    codes[np.abs(_frames_of(shape.tip_angle_rad, n, float)) > 2.0 * np.pi] = Status.IMPLAUSIBLE_SHAPE
+    has_estimate = estimate is not None
+    own = estimate_codes(estimate, n) if has_estimate else np.zeros(n, dtype=np.int8)
+    success = _whole(estimate.success, n, bool) if has_estimate else np.zeros(n, dtype=bool)
+    codes = np.empty(n, dtype=np.int8)
+    # (the tip turned by more than a full turn is a unit or calibration mistake: a bending actuator does not)
+    _jit.call(_kernels.frame_codes_into, _whole(getattr(shape, "extrapolated", False), n, bool),
+              np.ascontiguousarray(kappa), _whole(shape.tip_angle_rad, n, float), has_estimate, own, success, codes)
     return codes
 
 

@@ -506,7 +506,10 @@ def track_status(est, z, window_p, force, std, flagged=None):
     flagged = flagged or not (np.isfinite(force).all() and np.isfinite(std).all())
     if not flagged and bool(np.all(est.success)) and bool(np.all(est.status == Status.OK)):
         return np.full(b, Status.OK, dtype=np.int8)  # every frame ok (the live path's usual block)
-    status = estimate_codes(est, b)
-    status[(window_p < MISFIT_P) & (status == Status.OK)] = Status.MODEL_MISFIT
-    status[~(np.isfinite(force).all(axis=1) & np.isfinite(std).all(axis=1)) & (status == Status.OK)] = Status.NO_FORCE
+    from bendsense.results import _kernels
+
+    status = np.empty(b, dtype=np.int8)
+    force, std = (np.ascontiguousarray(x, dtype=float).reshape(b, 2) for x in (force, std))
+    _jit.call(_kernels.track_codes_into, estimate_codes(est, b), np.ascontiguousarray(window_p, dtype=float), force,
+              std, status)
     return status
