@@ -20,7 +20,10 @@ from enum import IntEnum
 
 import numpy as np
 
-__all__ = ["Status", "LABELS", "WORDS", "words", "code_of"]
+__all__ = ["Status", "LABELS", "WORDS", "words", "code_of", "MISFIT_P"]
+
+#: χ² p-value below which a converged fit, or a window of frames, is ``model_misfit``
+MISFIT_P = 1e-3
 
 
 class Status(IntEnum):

@@ -27,7 +27,7 @@ from bendsense.estimation import uncertainty as unc
 from bendsense.estimation.problem import Buffers, Outputs, Target, Workspace
 from bendsense.mechanics import _beam_kernels as bk
 from bendsense.mechanics._beam_kernels import _KernelOperators
-from bendsense.status import Status
+from bendsense.status import MISFIT_P, Status
 
 _RUNNING = int(Status.RUNNING)
 _OK = int(Status.OK)
@@ -48,7 +48,6 @@ FORCE_SENS, CONTACT_SENS = 1, 2  # the beam's sensitivity levels (bendsense.mech
 MAX_JUMPS = 8  # trial steps off the stable branch before stopping at the boundary
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a shape is no bending of the model actuator
 SIGMA_STEP = 1e-4  # a step below this many σ (a whitened cost) changes nothing a user can see: converged
-MISFIT_P = 1e-3  # χ² p-value below which a converged fit is model_misfit
 FLAT = 2.0  # σ beyond FLAT · EI/L² (the force that bends the actuator a radian): the data do not determine it
 NEWTON_MAX_ITER = 30
 

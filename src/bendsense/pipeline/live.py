@@ -563,12 +563,17 @@ class LiveProcessor:
         a recording must not spend that time with a board streaming into a full queue. A
         block of one frame and one of two (a cold frame and a warm-started series: a live
         block never needs the batch kernel of large batches) of the flat calibration
-        signals, at the middle of the actuator's pressure range.
+        signals, at the middle of the actuator's pressure range; and the status rules of a
+        block's results.csv columns (:mod:`bendsense.results._kernels`), which a recording
+        writes.
         """
+        from bendsense.results._kernels import compile_kernels
+
         lo, hi = self.config.actuator.pressure_range_pa
         flat = np.asarray(self.calibration.offset, dtype=float)
         for n in (1, 2):
             self.process_block(np.tile(flat, (n, 1)), np.full(n, 0.5 * (lo + hi)), t_s=np.arange(n) * 1e-3)
+        compile_kernels()
         self._forget()
         if self.adaptation is not None:  # its worker started and warmed
             self.adaptation.start()

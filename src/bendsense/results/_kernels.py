@@ -13,8 +13,7 @@ import numpy as np
 from numba import njit
 
 from bendsense import _jit
-from bendsense.estimation._kernels import MISFIT_P
-from bendsense.status import Status
+from bendsense.status import MISFIT_P, Status
 
 _OK = int(Status.OK)
 _NOT_IDENTIFIABLE = int(Status.NOT_IDENTIFIABLE)
