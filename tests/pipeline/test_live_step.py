@@ -160,6 +160,24 @@ def test_options_the_step_does_not_run_go_through_estimate_force(calibration_pat
         assert block.estimate is not None and np.isfinite(block.force_n).all()
 
 
+def test_a_warmed_processor_pickles_and_goes_on_alike(calibration_path):
+    """A processor that has run (its compiled step made) copies and pickles; the copy goes on as the original."""
+    import copy
+    import pickle
+
+    cal = Calibration.load(calibration_path)
+    t, signals, p = _frames(6, cal)
+    proc = LiveProcessor(cal, constraint="normal")
+    proc.process_block(signals[:20], p[:20], t_s=t[:20])
+    assert isinstance(proc._step, _Step)
+    for lo, copied in ((20, lambda x: pickle.loads(pickle.dumps(x))), (25, copy.deepcopy)):
+        twin = copied(proc)
+        mine, theirs = (x.process_block(signals[lo:lo + 5], p[lo:lo + 5], t_s=t[lo:lo + 5]) for x in (proc, twin))
+        np.testing.assert_array_equal(theirs.force_n, mine.force_n)
+        np.testing.assert_array_equal(theirs.status, mine.status)
+        proc = twin  # the next copy is of the copy that went on
+
+
 def test_a_block_without_frames_is_an_empty_block(calibration_path):
     """A loop that finds nothing arrived gets an empty block (columns of no rows), and the counts stay."""
     proc = LiveProcessor(Calibration.load(calibration_path), constraint="normal")

@@ -394,7 +394,16 @@ class _Step:
         windows = est.objective == "angles" and est.uncertainty == "propagated"
         window_model = (est.problem[1], est.pb.coils, float(est.pb.gap))
         flags = (bool(self.estimating), bool(self.tracking), bool(windows))
-        self.constants = _jit.call(hold, (self.shape, est.model, est.problem, flags, window_model))
+        self._held = (self.shape, est.model, est.problem, flags, window_model)
+        self.constants = _jit.call(hold, self._held)
+
+    def __getstate__(self):
+        # numba's typed list does not pickle (a copied or pickled processor): it is made again of its parts
+        return {k: v for k, v in self.__dict__.items() if k != "constants"}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self.constants = _jit.call(hold, self._held)
 
     def outputs(self, n):
         """The compiled step's outputs of a block of ``n`` frames (filled by the step).
