@@ -189,9 +189,12 @@ def test_lsl_inlet_receives_every_force_sample_of_a_1khz_recording(workdir, tmp_
             stdout=subprocess.DEVNULL, stderr=err
         ) as proc:
             try:
-                found = pylsl.resolve_byprop("name", "bendsense-force", minimum=1, timeout=30)
+                # this recording's streams (the port is in their source id), not another test's running beside it
+                found = pylsl.resolve_bypred(f"name='bendsense-force' and source_id='bendsense {dev.port}-force'", 1,
+                                             30.0)
                 assert found, "no bendsense-force stream"
-                shapes = pylsl.resolve_byprop("name", "bendsense-shape", minimum=1, timeout=10)
+                shapes = pylsl.resolve_bypred(f"name='bendsense-shape' and source_id='bendsense {dev.port}-shape'", 1,
+                                              10.0)
                 force_in = pylsl.StreamInlet(found[0], max_buflen=60)
                 shape_in = pylsl.StreamInlet(shapes[0], max_buflen=60)
                 # the shape stream first: --lsl-wait starts the board when the force stream has a consumer, and a
