@@ -40,8 +40,9 @@ The block rows (issue 24, the control loop's cost): a warm processor as
 30 Hz, windowed model check) given the board's readings in blocks of 1, 2, 5 and 10
 frames (``process_readings``: what the loop calls per block), one finger
 (:class:`LiveProcessor`) and three (:class:`~bendsense.pipeline.gripper.GripperProcessor`),
-the fingers closing on the object: median wall time per block and per frame. The
-readings are made ahead; the cold process (compilation, cache load) is excluded.
+the fingers closing on the object: the median wall time per block and per frame of the
+fastest of five passes, and over all passes. The readings are made ahead; the cold process
+(compilation, cache load) is excluded.
 
     python benchmarks/bench_live.py --blocks-only
 
