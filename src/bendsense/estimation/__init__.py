@@ -314,6 +314,7 @@ def _warn_uncertainty(uncertainty, config, stacklevel):
     elif config.parameter_covariance is None:  # once per process: σ without the model parameters' part
         warn_no_parameter_covariance(config, stacklevel=stacklevel)
 
+
 class Compiled(NamedTuple):
     """The constants of an estimate as the live step (:mod:`bendsense.pipeline._kernels`) takes them.
 

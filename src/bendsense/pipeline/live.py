@@ -648,17 +648,11 @@ class LiveProcessor:
         """The compiled step's outputs of the block; a clock that goes back (a device reset) restarts the track."""
         n = t.size
         outs = step.outputs(n)
-        if n == 0:  # nothing arrived: an empty block
-            return outs
-        if not (self.track and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any()))) and n <= _PIECE:
-            tracker = self.tracker.stream_state(t, *step.sizes) if self.track else step.idle_tracker
-            _jit.call(live_block, a, p, t, step.constants, self._offset, tracker, *outs)
-            self._track_t = float(t[-1])
-            return outs
-        cuts = [0, n]  # the usual block: one part
-        if self.track:
+        if self.track and n and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any())):
             back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
             cuts = [0, *[int(b) for b in back if b > 0], n]
+        else:  # the usual block: one part
+            cuts = [0, n] if n else []
         # a loop seconds behind: calls of a fraction of a second, so that a stop signal is handled between them
         parts = [(lo, min(hi, lo + _PIECE)) for lo0, hi in zip(cuts[:-1], cuts[1:]) for lo in range(lo0, hi, _PIECE)]
         for lo, hi in parts:
@@ -667,9 +661,11 @@ class LiveProcessor:
                                                                                   self._track_t) - t[lo])
                 self.tracker = self._new_tracker()
             tracker = self.tracker.stream_state(t[lo:hi], *step.sizes) if self.track else step.idle_tracker
-            part = _rows(outs, lo, hi, n)
+            whole = hi - lo == n  # the usual block: the outputs themselves
+            part = outs if whole else _rows(outs, lo, hi, n)
             _jit.call(live_block, a[lo:hi], p[lo:hi], t[lo:hi], step.constants, self._offset, tracker, *part)
-            outs[-1][...] += part[-1]
+            if not whole:
+                outs[-1][...] += part[-1]
             self._track_t = float(t[hi - 1])
         return outs
 
