@@ -202,7 +202,8 @@ def call_tree(dispatcher) -> set:
 
     Read from the names each function's code uses, looked up in its module's globals
     (and one level into imported modules: ``bk.solve_frame``); an upper bound of what
-    numba compiles for it.
+    numba compiles for it. A kernel inlined into its callers (``inline="always"``) is not
+    compiled on its own: its callees count, it does not.
     """
     seen, todo = set(), [dispatcher]
     while todo:
@@ -223,7 +224,7 @@ def call_tree(dispatcher) -> set:
                 todo.extend(a for a in (getattr(obj, n, None) for n in names) if isinstance(a, Dispatcher))
             elif isinstance(obj, Dispatcher):
                 todo.append(obj)
-    return seen
+    return {d for d in seen if d.targetoptions.get("inline") != "always"}
 
 
 @contextlib.contextmanager

@@ -268,10 +268,10 @@ def unresolved(c, D, V, singular, out):
                 for b in range(2):
                     if abs(v[a] * v[b]) > 1e-12:
                         c[a, b] = np.inf
-    out[:, :] = c
+    bk.copy_into(c, out)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, lengths, gap, seg, sigma, dphi_ds, out,
                noise_var, dym, model_cov, parts):
     """Cov(F) (2, 2) into ``out`` and its parts into ``parts`` (:func:`budget`); returns χ²/dof and its p-value.
@@ -345,7 +345,7 @@ def covariance(L, p0, w, D, dD, has_dD, u, pos, dpos, has_cov, cov_s, kappa, len
     return ratio, p
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_ds, dy, out, noise_var, dym, model_cov,
                       parts):
     """Cov(F) (2, 2) into ``out``, its parts into ``parts``, χ²/dof and p of one frame fitted to the coil angles.
@@ -461,9 +461,9 @@ def budget(T, cov_s, noise_var, Tm, model_cov, parts):
         for a in range(2):
             for b in range(2):
                 noise[a, b] += T[a, i] * noise_var[i] * T[b, i]
-    parts[0] = noise
-    parts[1] = shifts - noise
-    parts[2] = mm(mm(Tm, model_cov), Tm.T.copy())
+    bk.copy_into(noise, parts[0])
+    bk.copy_into(shifts - noise, parts[1])
+    bk.copy_into(mm(mm(Tm, model_cov), Tm.T.copy()), parts[2])
     return shifts + parts[2]
 
 

@@ -297,7 +297,7 @@ def arc_tangent(phi, gi, ops, out):
             out[r] += J0inv[r, i] * v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
     """Follow the branch from the unloaded arc ``phi`` (λ = 0) to the full load (λ = 1).
 
@@ -343,7 +343,7 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
                 status = _UNSTABLE
                 where = lam
         if ok:
-            phi[:] = pred
+            copy_into(pred, phi)
             lam = lt
             for i in range(m):
                 tan[i] = x[i, ncol - 2]
@@ -361,6 +361,17 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
     if status == _RUNNING:
         return _LOST, lam, iters
     return status, where, iters
+
+
+@njit(cache=True)
+def copy_into(src, dst):
+    """``dst[...] = src`` for two arrays of one shape (the kernels' own buffers), element by element.
+
+    An array's slice assignment compiles numba's shape check and its error message for
+    every signature (~1 s each on the first run); these copies are alike by construction.
+    """
+    for i in np.ndindex(src.shape):
+        dst[i] = src[i]
 
 
 @njit(cache=True)
@@ -404,7 +415,7 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     iters = 0
     x = np.full((m, extra_columns(sens)), np.nan)
     if has_state:
-        phi[:] = state
+        copy_into(state, phi)
         phi[0] = base
         conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, x)
         if conv:
@@ -433,7 +444,7 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
             phi[i] = base + k0n * ops.sigma[i]
         status, where, it = continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, x)
         iters += it
-    extra[:, :] = x
+    copy_into(x, extra)
     return status, where, iters
 
 

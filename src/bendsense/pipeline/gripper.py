@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from bendsense.errors import ArgumentError
+from bendsense.pipeline.live import frame_times
 from bendsense.pipeline.readings import ReadingClock
 
 __all__ = ["GripperProcessor"]
@@ -175,11 +176,9 @@ class GripperProcessor:
         if self.pressure_pa is not None and p.shape[1] < self.gripper.n_lines:
             # lines the board does not send: frames without a reading of them, filled by the fallback
             p = np.hstack([p, np.full((p.shape[0], self.gripper.n_lines - p.shape[1]), np.nan)])
-        if host_ns is None:  # one arrival time for every finger's copy of a frame
-            host_ns = np.full(n, time.monotonic_ns(), dtype=np.int64)
+        times = frame_times(n, t_s, seq, host_ns)  # one arrival time for every finger's copy of a frame
         parts = split_signals(a, p if p.shape[1] > 1 else p[:, 0], self.gripper)
-        blocks = {name: self.processors[name].process_block(parts[name][0], parts[name][1], t_s=t_s, seq=seq,
-                                                            host_ns=host_ns, extra=extra)
+        blocks = {name: self.processors[name]._block(*parts[name], *times, extra, time.perf_counter())
                   for name in self.fingers}
         self.frames += n
         return blocks

@@ -349,6 +349,21 @@ class LiveBlock:
 
 
 _PIECE = 4096  # frames per call of the compiled step (~0.3 s)
+
+
+def frame_times(n, t_s=None, seq=None, host_ns=None):
+    """A block's per-frame columns as arrays (n,): ``t_s``, ``seq``, ``host_ns``, and the times the track runs on.
+
+    Defaults: ``t_s`` NaN, ``seq`` -1, ``host_ns`` now; the track's times are ``t_s``, the
+    host's clock [s] for frames without a device time.
+    """
+    t_s = np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float)
+    host_ns = np.asarray(np.full(n, time.monotonic_ns()) if host_ns is None else host_ns, dtype=np.int64)
+    seq = np.full(n, -1, dtype=np.int64) if seq is None else np.asarray(seq, dtype=np.int64)
+    t = t_s
+    if not (math.isfinite(t_s[0]) if n == 1 else np.isfinite(t_s).all()):
+        t = np.where(np.isfinite(t_s), t_s, host_ns * 1e-9)
+    return t_s, seq, host_ns, t
 _GENERAL = object()  # a processor whose options need estimate_force (the paper's method, a contact located per frame)
 
 
@@ -693,6 +708,10 @@ class LiveProcessor:
         a = np.asarray(signals, dtype=float)
         if a.ndim != 2:
             raise ArgumentError(f"signals: expected shape (n, N), got {a.shape}")
+        return self._block(a, pressure_pa, *frame_times(a.shape[0], t_s, seq, host_ns), extra, t_start)
+
+    def _block(self, a, pressure_pa, t_s, seq, host_ns, t, extra, t_start) -> LiveBlock:
+        """:meth:`process_block` of the signals ``a`` (n, N) and the frames' columns of :func:`frame_times`."""
         n = a.shape[0]
         if pressure_pa is None:
             p = np.full(n, np.nan)
@@ -702,12 +721,6 @@ class LiveProcessor:
                 p = np.broadcast_to(p, (n,)).copy()
         if self.pressure_pa is not None:
             self._fill_pressure(p)
-        t_s = np.full(n, np.nan) if t_s is None else np.asarray(t_s, dtype=float)
-        host_ns = np.asarray(np.full(n, time.monotonic_ns()) if host_ns is None else host_ns, dtype=np.int64)
-        seq = np.full(n, -1, dtype=np.int64) if seq is None else np.asarray(seq, dtype=np.int64)
-        t = t_s  # frames without a device time: the host's
-        if not (math.isfinite(t_s[0]) if n == 1 else np.isfinite(t_s).all()):
-            t = np.where(np.isfinite(t_s), t_s, host_ns * 1e-9)
         step = self._compiled_step()
         if step is not None:
             if a.shape[1] != step.shape[0].size:
