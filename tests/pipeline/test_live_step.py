@@ -186,3 +186,40 @@ def test_a_block_without_frames_is_an_empty_block(calibration_path):
         columns = block.columns()
         assert all(len(v) == 0 for v in columns.values()) and "fx_n" in columns and "kappa16" in columns
     assert proc.frames == 0 and proc.status_counts == {}
+
+
+def test_another_thread_runs_while_a_block_is_computed(calibration_path):
+    """The compiled step releases the GIL: a loop's reader thread is not held up for the block's whole call.
+
+    A thread counts beside a long block (hundreds of frames, one compiled call of
+    ~50–200 ms). Holding the GIL, the call would stop the thread for all of it; it is held
+    for the Python around the call only.
+    """
+    import threading
+    import time
+
+    cal = Calibration.load(calibration_path)
+    t, signals, p = _frames(7, cal)
+    proc = LiveProcessor(cal, constraint="normal")
+    proc.process_block(signals[:2], p[:2], t_s=t[:2])  # the step made, its kernels loaded
+    rows = np.resize(np.arange(t.size), 1500)
+    stop, ticks = threading.Event(), []
+
+    def count():
+        while not stop.is_set():
+            ticks.append(time.perf_counter())
+
+    thread = threading.Thread(target=count)
+    thread.start()
+    try:
+        time.sleep(0.02)
+        start = time.perf_counter()
+        proc.process_block(signals[rows], p[rows], t_s=1.0 + np.arange(rows.size) / RATE_HZ)
+        spent = time.perf_counter() - start
+    finally:
+        stop.set()
+        thread.join()
+    during = np.array([x for x in ticks if start <= x <= start + spent])
+    assert spent > 0.03 and during.size > 100
+    gaps = np.diff(np.concatenate(([start], during, [start + spent])))
+    assert gaps.max() < 0.5 * spent, (gaps.max(), spent)

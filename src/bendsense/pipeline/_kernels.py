@@ -234,7 +234,7 @@ def hold(constants):
     return held
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def live_block(a, p, t, constants, previous, tracker, out_shape, out, out_track, status, counts):
     """One block of frames (n,) of one finger, readings to statuses (module docstring), into the outputs given.
 
@@ -254,7 +254,8 @@ def live_block(a, p, t, constants, previous, tracker, out_shape, out, out_track,
 
     The outputs are the caller's (no array is returned): a compiled call that returns
     arrays runs Python code as it hands them over, where a stop signal's handler would
-    raise into numba's own code.
+    raise into numba's own code. The call releases the GIL (``nogil``): the driver's
+    reader thread takes in the next frames while a control loop's block is computed.
     """
     shape, model, problem, flags, window_model = constants[0]
     estimating, tracking, windows = flags
