@@ -17,8 +17,9 @@ The stages of a frame that one kernel calls (``setup``, ``moment_guess``,
 ``gauss_newton`` and its ``first_solve``, ``finish`` and the covariances it calls) are
 inlined into their caller (``inline="always"``): numba builds every compiled function
 with its callees' code and optimises and generates the whole again, so each level of a
-deep tree pays for the levels below it. The shallower tree compiles ~10 % faster on the
-first run; the beam solve, called from several places, stays a function of its own.
+deep tree pays for the levels below it, and the shallower tree compiles faster on the
+first run (docs/performance.md); the beam solve, called from several places, stays a
+function of its own.
 """
 
 import math

@@ -349,6 +349,7 @@ class LiveBlock:
 
 
 _PIECE = 4096  # frames per call of the compiled step (~0.3 s)
+_GENERAL = object()  # a processor whose options need estimate_force (the paper's method, a contact located per frame)
 
 
 def frame_times(n, t_s=None, seq=None, host_ns=None):
@@ -364,7 +365,6 @@ def frame_times(n, t_s=None, seq=None, host_ns=None):
     if not (math.isfinite(t_s[0]) if n == 1 else np.isfinite(t_s).all()):
         t = np.where(np.isfinite(t_s), t_s, host_ns * 1e-9)
     return t_s, seq, host_ns, t
-_GENERAL = object()  # a processor whose options need estimate_force (the paper's method, a contact located per frame)
 
 
 def _rows(outs, lo, hi, n):
