@@ -46,10 +46,9 @@ import bendsense  # noqa: E402
 from bendsense.calibration import Calibration  # noqa: E402
 from bendsense.config import ParameterCovarianceConfig  # noqa: E402
 from bendsense.estimation import estimate_force  # noqa: E402
-from bendsense.estimation._kernels import MISFIT_P  # noqa: E402
 from bendsense.results import frame_status  # noqa: E402
 from bendsense.shape.pcc import reconstruct  # noqa: E402
-from bendsense.status import Status  # noqa: E402
+from bendsense.status import MISFIT_P, Status  # noqa: E402
 
 RATE_HZ = 2000.0
 RAMP_FRAMES, HOLD_FRAMES = 100, 400  # 50 ms ramps, 200 ms holds at 2 kHz

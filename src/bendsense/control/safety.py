@@ -347,7 +347,9 @@ class Guard:
             blind = ~np.isfinite(np.asarray(own.force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
             if track_status is not None:  # and the force the controller acts on
                 blind |= ~np.isfinite(own.track_force_n).all(axis=1)
-            stopping = (status == STOP_STATUSES[0]) | (status == STOP_STATUSES[1])
+            stopping = status == STOP_STATUSES[0]  # comparisons: np.isin costs ~10 µs a block
+            for code in STOP_STATUSES[1:]:
+                stopping |= status == code
             flagged = stopping | blind
             if not flagged.any():
                 self._flag_start[finger] = math.nan

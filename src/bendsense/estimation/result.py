@@ -6,8 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bendsense.estimation._kernels import MISFIT_P
-from bendsense.status import Status
+from bendsense.status import MISFIT_P, Status
 
 __all__ = ["ForceEstimate", "messages"]
 

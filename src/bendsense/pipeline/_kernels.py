@@ -29,7 +29,7 @@ from bendsense.estimation import _kernels as est_kernels
 from bendsense.mechanics import _actuator_kernels as act
 from bendsense.results._kernels import estimate_code, frame_code, track_code
 from bendsense.shape import _kernels as shape_kernels
-from bendsense.status import Status
+from bendsense.status import MISFIT_P, Status
 from bendsense.tracking import _stream_kernels as stream
 
 _NO_SHAPE = int(Status.NO_SHAPE)
@@ -37,7 +37,6 @@ _IMPLAUSIBLE_FORCE = int(Status.IMPLAUSIBLE_FORCE)
 _OUT_OF_RANGE = int(Status.PRESSURE_OUT_OF_RANGE)
 _NO_PRESSURE = int(Status.NO_PRESSURE)
 _RUNNING = int(Status.RUNNING)
-_MISFIT_P = est_kernels.MISFIT_P
 
 
 @njit(cache=True)
@@ -287,7 +286,7 @@ def live_block(a, p, t, constants, previous, tracker, out_shape, out, out_track,
     if estimating and tracking:
         counts[3] = track(t, p, out, tracker, windows, window_model, tforce, tstd, tcov, window_p)
         for i in range(n):
-            counts[4] += window_p[i] < _MISFIT_P
+            counts[4] += window_p[i] < MISFIT_P
     force, success, est_status = out[0], out[13], out[2]
     for i in range(n):
         own = _RUNNING

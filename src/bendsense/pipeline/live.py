@@ -31,11 +31,10 @@ from bendsense import _jit
 from bendsense._batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.errors import ArgumentError, ConfigError, DataWarning
 from bendsense.estimation import estimation_options
-from bendsense.estimation._kernels import MISFIT_P
 from bendsense.pipeline._kernels import hold, live_block
 from bendsense.pipeline.readings import ReadingClock
 from bendsense.results import WINDOW_MISFIT
-from bendsense.status import WORDS, Status, words
+from bendsense.status import MISFIT_P, WORDS, Status, words
 
 log = logging.getLogger("bendsense")
 

@@ -91,8 +91,7 @@ def frame_codes_into(extrapolated, kappa, tip_angle, has_estimate, own, success,
         finite = True
         for j in range(kappa.shape[1]):
             finite = finite and math.isfinite(kappa[i, j])
-        out[i] = frame_code(extrapolated[i], finite, tip_angle[i], has_estimate, own[i] if has_estimate else _OK,
-                            success[i] if has_estimate else False)
+        out[i] = frame_code(extrapolated[i], finite, tip_angle[i], has_estimate, own[i], success[i])
 
 
 @njit(cache=True)

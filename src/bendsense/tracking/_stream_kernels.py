@@ -19,7 +19,7 @@ from numba import njit
 
 from bendsense import _jit
 from bendsense.calibration.shift_errors import ShiftErrorModel
-from bendsense.estimation._kernels import MISFIT_P
+from bendsense.status import MISFIT_P
 from bendsense.tracking import _kalman_kernels as K
 from bendsense.tracking import _window_kernels as W
 

@@ -19,10 +19,9 @@ import numpy as np
 from bendsense import _jit
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError, DataWarning
-from bendsense.estimation._kernels import MISFIT_P
 from bendsense.estimation.result import ForceEstimate
 from bendsense.results import TRACK_COLUMNS, estimate_codes
-from bendsense.status import Status, words
+from bendsense.status import MISFIT_P, Status, words
 from bendsense.tracking import _kalman_kernels as _kalman
 from bendsense.tracking import _stream_kernels as _stream
 from bendsense.tracking import windows as _windows

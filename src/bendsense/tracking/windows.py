@@ -30,9 +30,8 @@ import numpy as np
 
 from bendsense import _jit
 from bendsense.errors import ArgumentError, DataWarning
-from bendsense.estimation._kernels import MISFIT_P
 from bendsense.estimation.result import ForceEstimate
-from bendsense.status import Status
+from bendsense.status import MISFIT_P, Status
 from bendsense.tracking import _window_kernels
 from bendsense.tracking._window_kernels import MIN_FRAMES
 from bendsense.validation import short
@@ -142,7 +141,7 @@ def check_windows(estimate, t_s, *, window_s: float = WINDOW_S, pressure_pa=None
     consecutive windows of ``window_s`` (a remainder shorter than half a window joins the
     previous one). Each window's mean residual is tested against its covariance (the
     sensor noise divided by the frames, the calibration and parameter parts whole; module
-    docstring). Where p < 0.001 (:data:`~bendsense.estimation._kernels.MISFIT_P`), the
+    docstring). Where p < 0.001 (:data:`~bendsense.status.MISFIT_P`), the
     window's converged frames become ``model_misfit`` (``success=False``, the force kept,
     a message naming the window test).
 
