@@ -14,7 +14,7 @@ from numba import njit, prange
 from bendsense import _jit
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def horner(c, x):
     """``Σ_j c[j] x^j`` (ascending coefficients ``c``) by Horner's rule."""
     acc = 0.0
@@ -23,7 +23,7 @@ def horner(c, x):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def inverse(c, dc, shift):
     """ΔA with ``f(ΔA) = shift`` by Newton's method from the linear inverse; returns (ΔA, f'(ΔA))."""
     x = (shift - c[0]) / dc[0] if dc[0] != 0 else 0.0
@@ -36,7 +36,7 @@ def inverse(c, dc, shift):
     return x, horner(dc, x)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def interp(x, xp, fp):
     """np.interp for one value (ascending ``xp``; constant beyond its ends)."""
     n = xp.size

@@ -130,7 +130,7 @@ def scatter(part, rows, out):
         out[15][i] = part[15][k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def estimate(kappa, p, rows, model, problem, previous, out):
     """Force and σ of the frames ``rows`` (those with a pressure), into ``out``.
 
@@ -194,7 +194,7 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     return m, failed, marked
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def track(t, p, out, tracker, windows, window_model, tforce, tstd, tcov, window_p):
     """The causal track of the block and its window check (:class:`bendsense.tracking.Tracker`'s kernels).
 
