@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import warnings
 
 import numpy as np
@@ -47,6 +48,8 @@ log = logging.getLogger("bendsense")
 
 #: Below this a soft pneumatic actuator hardly bends [Pa]: pressures all under it are a session at rest, or kPa.
 REST_PA = 1e3
+
+_ONE_FRAME = (float, np.float64)  # the pressure of one frame as a number (a per-frame caller's)
 
 
 def pressure_outside(pressure_pa, config) -> np.ndarray:
@@ -97,6 +100,10 @@ def pressure_range(pressure_pa, config, strict: bool = False):
     ArgumentError
         With ``strict=True``, for a pressure outside the range.
     """
+    if type(pressure_pa) in _ONE_FRAME:  # one frame: two comparisons, not ~6 µs of array calls (NaN is never outside)
+        lo, hi = config.actuator.pressure_range_pa
+        if not (pressure_pa < lo or pressure_pa > hi):
+            return pressure_pa, np.False_
     outside = pressure_outside(pressure_pa, config)
     warn_kpa_as_pa(pressure_pa, config)
     if not outside.any():
@@ -154,7 +161,7 @@ def mark_out_of_range(result, outside, pressure_pa, config):
     config : Config
         Its ``actuator.pressure_range_pa``.
     """
-    if not np.any(outside):
+    if not outside.any():
         return result
     lo, hi = config.actuator.pressure_range_pa
     p = np.asarray(pressure_pa, dtype=float)
@@ -375,6 +382,11 @@ def force_bound(result, pressure_pa, config, strict: bool = False):
         Raise for such a frame.
     """
     force = np.asarray(result.force_n, dtype=float)
+    if force.shape == (2,) and type(pressure_pa) in _ONE_FRAME:  # one frame: plain floats, not ~13 µs of arrays
+        magnitude = math.hypot(force[0], force[1])
+        if not (result.success and math.isfinite(magnitude)
+                and magnitude > _force_scale(config) * float(config.stiffness.ei_nm2(pressure_pa))):
+            return result
     magnitude = np.hypot(force[..., 0], force[..., 1])
     p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
     top = force_bound_n(p, config)
