@@ -137,12 +137,17 @@ def _with_model_cov(kappa, pressure, cal, cov):
     """The estimate with the covariance ``cov`` of (K0, EI) itself (the kernels' model input covariance)."""
     import bendsense.estimation as estimation
 
-    original = estimation._model_cov
-    estimation._model_cov = lambda config, p: np.broadcast_to(cov, (np.size(p), 2, 2)).copy()
+    original = estimation._beam_inputs
+
+    def given(config, p):
+        theta, ei, k0, _ = original(config, p)
+        return theta, ei, k0, np.broadcast_to(cov, (p.size, 2, 2)).copy()
+
+    estimation._beam_inputs = given
     try:
         return estimate_force(kappa.reshape(1, -1), pressure, CFG, calibration=cal)
     finally:
-        estimation._model_cov = original
+        estimation._beam_inputs = original
 
 
 def test_the_window_kernel_compiled_ahead_is_the_one_a_window_test_calls():

@@ -61,6 +61,7 @@ from bendsense.estimation.problem import (
 from bendsense.estimation.result import OK_MESSAGE, ForceEstimate, messages
 from bendsense.estimation.uncertainty import noise_std as _signal_noise
 from bendsense.estimation.uncertainty import tip_angle_shift_gradient, warn_no_parameter_covariance
+from bendsense.mechanics import _actuator_kernels
 from bendsense.mechanics import beam as _beam
 from bendsense.mechanics.actuator import model_jacobian
 from bendsense.status import Status
@@ -92,7 +93,6 @@ _REF = tuple(_beam._split_operators(N_NODES))  # ... and the reference operators
 _NONE = np.empty(0)  # a per-frame input the frames do not have
 _NO_POINTS = (np.empty((0, 1, 2)), _NONE, np.empty((0, 1)), np.empty((0, 1)), _NONE)  # Frames' points: none
 _AT_TIP = np.ones(1)  # σ_c of a tip load, one frame (the kernels only read it)
-_NO_MODEL_COV = np.zeros((1, 2, 2))  # one frame's, without a parameter covariance (the kernels only read it)
 
 
 def _c(a, dtype=float):
@@ -365,13 +365,8 @@ def compiled(config, calibration, constraint, objective, options) -> Compiled | 
     if not min(stiffness.ei_nm2(lo), stiffness.ei_nm2(hi)) > 0:
         raise ArgumentError(f"pressure_pa: EI(P) must be > 0 over actuator.pressure_range_pa, got "
                             f"{min(stiffness.ei_nm2(lo), stiffness.ei_nm2(hi))!r} N·m²")
-    section = config.parameter_covariance
-    cov = np.zeros((5, 5)) if section is None else np.array(_full_covariance(section), dtype=float)
     _warn_uncertainty(uncertainty, config, stacklevel=4)
-    model_args = (lo, hi, table.kernel_args, float(model.prebend_angle_rad), float(model.length_m),
-                  float(stiffness.ei0_nm2), float(stiffness.ei1_nm2_per_pa), cov, section is not None,
-                  float(model.shear_modulus_pa), float(model.sensor_stiffness_nm_per_rad), float(model._moment_per_pa),
-                  float(_force_scale(config)), float(np.reshape(contact, -1)[0]))
+    model_args = (lo, hi, *_beam_inputs_args(config), float(_force_scale(config)), float(np.reshape(contact, -1)[0]))
     # a known location: the location's own sensitivity (an estimated location's windows need it) is not computed
     pb = pb._replace(contact=False)
     sc = model_args[-1]
@@ -679,10 +674,8 @@ def _flat(a, batch, B, tail=(), dtype=float):
 
 def _frames(ref, P, batch, B, config, contact) -> Frames:
     """The per-frame inputs of the kernels: the shape's, the pressure's (K0, EI, the free tip angle), the σ_c."""
-    model = _models(config)
-    Pf = P.reshape(B) if P.size == B else _flat(P, batch, B)
-    theta = _c(model.bending_angle_rad(Pf))
-    ei, k0 = _c(config.stiffness.ei_nm2(Pf)), theta / model.length_m
+    Pf = _c(P.reshape(B) if P.size == B else _flat(P, batch, B))
+    theta, ei, k0, model_cov = _beam_inputs(config, Pf)
     if not (ei[0] if B == 1 else ei.min()) > 0:
         raise ArgumentError(f"pressure_pa: EI(P) must be > 0, got {float(ei.min())!r} N·m² "
                             f"at {float(Pf[np.argmin(ei)])!r} Pa")
@@ -696,45 +689,66 @@ def _frames(ref, P, batch, B, config, contact) -> Frames:
         sc = _AT_TIP if B == 1 else np.ones(B)
     else:
         sc = _c(contact.reshape(B) if contact.size == B else np.broadcast_to(contact, batch).reshape(B))
-    return Frames(kappa, *given, ei, k0, theta, _model_cov(config, Pf), sc)
+    return Frames(kappa, *given, ei, k0, theta, model_cov, sc)
 
 
-def _model_cov(config, pressure_pa):
-    """Covariance (B, 2, 2) of the beam's inputs (K0, EI) from the identified parameters' (zero without them).
+def _beam_inputs(config, pressure_pa):
+    """θ, EI, K0 (B,) and the covariance (B, 2, 2) of (K0, EI) at the pressures ``pressure_pa`` (B,).
 
-    ``Σ_m = J Σ_θ Jᵀ`` with ``J = ∂(K0, EI)/∂θ`` (:func:`bendsense.mechanics.actuator.model_jacobian`)
-    and ``Σ_θ`` the config's ``parameter_covariance`` (written by ``bendsense identify``).
+    One compiled call, the live step's own
+    (:func:`bendsense.mechanics._actuator_kernels.model_inputs`): θ(P) from the
+    free-bending table, and ``Σ_m = J Σ_θ Jᵀ`` with ``J = ∂(K0, EI)/∂θ`` and ``Σ_θ`` the
+    config's ``parameter_covariance`` (written by ``bendsense identify``; zero without
+    it). Pressures beyond the table (an actuator range past ``estimation.pressure_max_pa``),
+    or a table that did not converge: the free-bending model's direct solve.
     """
+    args = _beam_inputs_args(config)
+    B = pressure_pa.size
+    theta, ei, k0, cov = np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2, 2))
+    if args is not None and _jit.call(_actuator_kernels.model_inputs, pressure_pa, *args, theta, ei, k0, cov) == 0:
+        return theta, ei, k0, cov
+    model = _models(config)
+    theta = _c(model.bending_angle_rad(pressure_pa))
     section = config.parameter_covariance
     if section is None:
-        return _NO_MODEL_COV if pressure_pa.size == 1 else np.zeros((pressure_pa.size, 2, 2))
-    if pressure_pa.size == 1:  # one frame (the live path): plain floats, ~3 µs instead of ~60 µs of numpy calls
-        p = float(pressure_pa.reshape(-1)[0])
-        m = _full_covariance(section)
-        k = _models(config).tip_curvature_jacobian(p).tolist()  # ∂K0/∂(μ̄, μ_s, θ_pre); ∂EI/∂(γ0, γ1) = (1, P)
-        kk = sum(k[i] * k[j] * m[i][j] for i in range(3) for j in range(3))
-        ke = sum(k[i] * (m[i][3] + p * m[i][4]) for i in range(3))
-        ee = m[3][3] + 2.0 * p * m[3][4] + p * p * m[4][4]
-        return np.array([[[kk, ke], [ke, ee]]])
-    J = model_jacobian(config, pressure_pa, section.parameters)
-    return _c(J @ np.asarray(section.covariance, dtype=float) @ np.swapaxes(J, -1, -2))
+        cov[...] = 0.0
+    else:
+        J = model_jacobian(config, pressure_pa, section.parameters)
+        cov = _c(J @ np.asarray(section.covariance, dtype=float) @ np.swapaxes(J, -1, -2))
+    return theta, _c(config.stiffness.ei_nm2(pressure_pa)), theta / model.length_m, cov
+
+
+def _beam_inputs_args(config):
+    """The constants of :func:`_beam_inputs`' compiled call; None where the free-bending table did not converge.
+
+    (the table, θ_pre, L, γ0, γ1, the parameters' covariance (5, 5) over
+    :data:`~bendsense.config.MODEL_PARAMETERS`, whether there is one, μ̄, μ_s, c_a),
+    memoised on the config as :func:`_models` is.
+    """
+    cached = getattr(config, "_beam_inputs_cache", None)
+    if cached is None:
+        model, stiffness, section = _models(config), config.stiffness, config.parameter_covariance
+        cached = (None,) if not model._table.converged else ((
+            model._table.kernel_args, float(model.prebend_angle_rad), float(model.length_m),
+            float(stiffness.ei0_nm2), float(stiffness.ei1_nm2_per_pa),
+            np.zeros((5, 5)) if section is None else _full_covariance(section),
+            section is not None, float(model.shear_modulus_pa), float(model.sensor_stiffness_nm_per_rad),
+            float(model._moment_per_pa)),)
+        try:
+            object.__setattr__(config, "_beam_inputs_cache", cached)
+        except (AttributeError, TypeError):
+            pass
+    return cached[0]
 
 
 def _full_covariance(section):
-    """``section``'s covariance over all :data:`MODEL_PARAMETERS` (0 where not listed), as nested lists.
+    """``section``'s covariance (5, 5) over all :data:`MODEL_PARAMETERS` (0 where not listed)."""
+    from bendsense.config import MODEL_PARAMETERS
 
-    Memoised on the section: a live loop asks every frame.
-    """
-    cached = getattr(section, "_full", None)
-    if cached is None:
-        from bendsense.config import MODEL_PARAMETERS
-
-        idx = [MODEL_PARAMETERS.index(n) for n in section.parameters]
-        full = np.zeros((len(MODEL_PARAMETERS), len(MODEL_PARAMETERS)))
-        full[np.ix_(idx, idx)] = section.matrix
-        cached = full.tolist()
-        object.__setattr__(section, "_full", cached)
-    return cached
+    idx = [MODEL_PARAMETERS.index(n) for n in section.parameters]
+    full = np.zeros((len(MODEL_PARAMETERS), len(MODEL_PARAMETERS)))
+    full[np.ix_(idx, idx)] = section.matrix
+    return full
 
 
 def _starts(initial, initial_force_n, B, batch, warm_start):

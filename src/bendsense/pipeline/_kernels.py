@@ -6,8 +6,9 @@ order a frame flows, on the processor's state:
 readings → ΔA → shifts → PCC shape (:func:`bendsense.shape._kernels.reconstruct_block`) →
 the beam's inputs at the pressure, clipped to the actuator's range (θ(P) from the
 free-bending table, EI(P), the covariance of (K0, EI) from the parameters',
-:func:`model_inputs`) → force and σ (:func:`bendsense.estimation._kernels.estimate_block`,
-warm-started from the previous block's last good frame, a failed frame retried cold) →
+:func:`bendsense.mechanics._actuator_kernels.model_inputs`) → force and σ
+(:func:`bendsense.estimation._kernels.estimate_block`, warm-started from the previous
+block's last good frame, a failed frame retried cold) →
 the plausibility marks (a force beyond what the actuator carries, a pressure outside its
 range) → the causal track and the streaming window check
 (:mod:`bendsense.tracking._stream_kernels`) → the statuses (:mod:`bendsense.results._kernels`,
@@ -37,42 +38,6 @@ _IMPLAUSIBLE_FORCE = int(Status.IMPLAUSIBLE_FORCE)
 _OUT_OF_RANGE = int(Status.PRESSURE_OUT_OF_RANGE)
 _NO_PRESSURE = int(Status.NO_PRESSURE)
 _RUNNING = int(Status.RUNNING)
-
-
-@njit(cache=True)
-def model_inputs(p, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_a, theta, ei, k0, model_cov):
-    """The beam's inputs of the frames at the pressures ``p`` (B,) [Pa], within the free-bending table's range.
-
-    θ = θ0(P) + θ_pre (the table, :func:`bendsense.mechanics._actuator_kernels.hermite`),
-    K0 = θ / L, EI = γ0 + γ1 P (paper eq. 8, 15), and the covariance of (K0, EI) from the
-    parameters' ``cov`` (5, 5) over :data:`bendsense.config.MODEL_PARAMETERS`: ``J Σ Jᵀ``
-    with ∂K0/∂(μ̄, μ_s, θ_pre) from
-    :func:`~bendsense.mechanics._actuator_kernels.curvature_jacobian` and ∂EI/∂(γ0, γ1) =
-    (1, P). Without a parameter covariance (``has_cov`` False, ``cov`` zeros) the Jacobian
-    is not computed and the covariance is zero.
-    """
-    B = p.size
-    p_pa, inv_width, coef, bucket_pa, bucket_start = table
-    slope = np.empty(B)
-    act.hermite(p, p_pa, inv_width, coef, bucket_pa, bucket_start, theta, slope)
-    k = np.zeros((B, 3))
-    if has_cov:
-        act.curvature_jacobian(p, theta, slope, c_a, mu, mu_s, length, k)
-    for i in range(B):
-        theta[i] += prebend
-        k0[i] = theta[i] / length
-        ei[i] = ei0 + ei1 * p[i]
-        kk = 0.0
-        ke = 0.0
-        for a in range(3):
-            for b in range(3):
-                kk += k[i, a] * k[i, b] * cov[a, b]
-            ke += k[i, a] * (cov[a, 3] + p[i] * cov[a, 4])
-        ee = cov[3, 3] + 2.0 * p[i] * cov[3, 4] + p[i] * p[i] * cov[4, 4]
-        model_cov[i, 0, 0] = kk
-        model_cov[i, 0, 1] = ke
-        model_cov[i, 1, 0] = ke
-        model_cov[i, 1, 1] = ee
 
 
 @njit(cache=True)
@@ -152,7 +117,7 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     pm = p if whole else p[rows]
     pc = np.minimum(np.maximum(pm, p_lo), p_hi)
     theta, ei, k0, model_cov = np.empty(m), np.empty(m), np.empty(m), np.empty((m, 2, 2))
-    model_inputs(pc, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_a, theta, ei, k0, model_cov)
+    act.model_inputs(pc, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_a, theta, ei, k0, model_cov)
     none = np.empty((0, 1))
     YES, NO = bool(est_kernels.YES), bool(est_kernels.NO)  # not literals: the signature estimate_force compiled
     fr = (kappa if whole else kappa[rows], np.empty((0, 1, 2)), np.empty(0), none, none, np.empty(0), ei, k0, theta,
