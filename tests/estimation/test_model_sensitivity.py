@@ -95,6 +95,34 @@ def test_ei_and_model_jacobian():
         model_jacobian(CONFIG, p, parameters=("gamma0",))
 
 
+def test_the_beam_inputs_of_an_estimate_inside_and_past_the_free_bending_table():
+    """θ, K0, EI and Σ(K0, EI) of estimate_force's frames: the compiled table inside it, the direct solve past it.
+
+    Against the direct solve of eq. 8, EI = γ0 + γ1 P and ``J Σ Jᵀ`` written out here. The
+    table ends at ``estimation.pressure_max_pa`` (150 kPa here), inside the actuator's range
+    (to 200 kPa): a frame past it must not take the table's end.
+    """
+    from bendsense.estimation import _beam_inputs, estimate_force
+
+    config = dataclasses.replace(CONFIG, estimation=dataclasses.replace(CONFIG.estimation, pressure_max_pa=1.5e5))
+    section = config.parameter_covariance
+    assert section is not None  # the shipped prior: a model part to propagate
+    model = FreeBendingModel.from_config(config)
+    for p in (np.array([2e4, 9e4, 1.4e5]), np.array([9e4, 1.8e5])):  # inside the table; a frame past it
+        theta, ei, k0, cov = _beam_inputs(config, p)
+        np.testing.assert_allclose(theta, model.solve(p), rtol=0, atol=1e-8)  # the table's error bound
+        np.testing.assert_allclose(k0, theta / config.actuator.length_m, rtol=1e-15)
+        np.testing.assert_allclose(ei, config.stiffness.ei0_nm2 + config.stiffness.ei1_nm2_per_pa * p, rtol=1e-15)
+        J = model_jacobian(config, p, section.parameters)
+        expected = np.einsum("bij,jk,blk->bil", J, np.asarray(section.covariance), J)
+        for a, b in ((0, 0), (0, 1), (1, 1)):
+            np.testing.assert_allclose(cov[:, a, b], expected[:, a, b], rtol=1e-9,
+                                       atol=1e-12 * np.sqrt(expected[:, a, a] * expected[:, b, b]).max())
+        np.testing.assert_array_equal(cov[:, 0, 1], cov[:, 1, 0])
+    past = estimate_force(np.full(config.sensor.n_segments, 4.0), 1.8e5, config, noise_std=0.02)
+    assert past.success
+
+
 # --- the covariance section of the config ----------------------------------------------------
 
 
