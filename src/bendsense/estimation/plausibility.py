@@ -385,7 +385,7 @@ def force_bound(result, pressure_pa, config, strict: bool = False):
     if force.shape == (2,) and type(pressure_pa) in _ONE_FRAME:  # one frame: plain floats, not ~13 µs of arrays
         magnitude = math.hypot(force[0], force[1])
         if not (result.success and math.isfinite(magnitude)
-                and magnitude > _force_scale(config) * float(config.stiffness.ei_nm2(pressure_pa))):
+                and magnitude > force_bound_n(pressure_pa, config)):
             return result
     magnitude = np.hypot(force[..., 0], force[..., 1])
     p = np.broadcast_to(np.asarray(pressure_pa, dtype=float), magnitude.shape)
