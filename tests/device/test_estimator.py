@@ -230,3 +230,10 @@ def test_a_clock_that_jumps_back_restarts_the_live_track(calibration_path):
                                   bandwidth_hz=DEFAULT_BANDWIDTH_HZ, pressure_pa=pressure[part])
         np.testing.assert_allclose(tracked[part], offline.force_n, atol=1e-5)
     assert np.isfinite(tracked).all()
+    # the block ran in two calls of the step, one per stretch: each frame's own outputs where they belong
+    np.testing.assert_allclose(first.force_n, np.asarray(cold.force_n)[:40], atol=1e-5)
+    np.testing.assert_allclose(first.std_n, np.asarray(cold.std_n)[:40], rtol=1e-4)
+    np.testing.assert_allclose(first.shape.positions_m, np.asarray(shape.positions_m)[:40], atol=1e-12)
+    assert (first.status == bendsense.results.frame_codes(take_frames(shape, slice(0, 40), 60),
+                                                          take_frames(cold, slice(0, 40), 60))).all()
+    assert first.estimate.status.shape == (40,) and proc.estimated == 60

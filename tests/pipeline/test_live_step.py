@@ -185,7 +185,7 @@ def test_a_block_without_frames_is_an_empty_block(calibration_path):
         assert len(block) == 0 and block.force_n.shape == (0, 2) and block.status.shape == (0,)
         columns = block.columns()
         assert all(len(v) == 0 for v in columns.values()) and "fx_n" in columns and "kappa16" in columns
-    assert proc.frames == 0 and proc.status_counts == {}
+    assert proc.frames == 0 and proc.status_counts == {} and proc.estimated == 0 and proc.failures == 0
 
 
 def test_another_thread_runs_while_a_block_is_computed(calibration_path):
@@ -223,3 +223,30 @@ def test_another_thread_runs_while_a_block_is_computed(calibration_path):
     assert spent > 0.03 and during.size > 100
     gaps = np.diff(np.concatenate(([start], during, [start + spent])))
     assert gaps.max() < 0.5 * spent, (gaps.max(), spent)
+
+
+@pytest.mark.parametrize(("n", "estimating"), [(1, True), (4, True), (3, False)])
+def test_a_block_reads_each_output_where_the_step_wrote_it(calibration_path, n, estimating):
+    """The kernel's views of its four buffers (``carve``) and the block's (``_fields``) are the same runs.
+
+    Each output the kernel carves must start at the same byte of the same buffer as the
+    block's view of it, with its shape and type.
+    """
+    from bendsense.pipeline._kernels import carve
+    from bendsense.pipeline.live import _Arrays
+
+    proc = LiveProcessor(Calibration.load(calibration_path), constraint="normal", estimate=estimating)
+    step = proc._compiled_step()
+    buffers, layout = step.outputs(n)
+    R, N = step.sizes
+    kernel = carve(n, n if estimating else 0, N, step.grid.s.size, R, step.est.problem[5], *buffers)
+    arrays = _Arrays(step, buffers, layout, np.zeros(n))
+    for group, outputs in zip(("shape", "estimate", "track", "status", "counts"), kernel):
+        outputs = outputs if isinstance(outputs, tuple) else (outputs,)
+        assert len(outputs) == len(layout[group])
+        for index, theirs in enumerate(outputs):
+            mine = arrays.field(group, index)
+            assert (mine.shape, mine.dtype) == (theirs.shape, theirs.dtype), (group, index)
+            if mine.size:
+                assert mine.ctypes.data == theirs.ctypes.data, (group, index)
+    assert sum(b.size for b in buffers) == sum(stop - start for runs in layout.values() for _, start, stop, _ in runs)

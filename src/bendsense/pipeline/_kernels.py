@@ -198,8 +198,73 @@ def hold(constants):
     return held
 
 
+@njit(cache=True, inline="always")
+def carve(n, e, N, M, R, nodes, f, ints, bools, codes):
+    """The step's outputs of ``n`` frames as views of its four buffers, each output one run of a buffer.
+
+    ``e``: the frames estimated (``n``, or 0 without estimating); ``N`` channels, ``M``
+    points of a shape, ``R`` coils fitted, ``nodes`` of the beam. ``f`` float64, ``ints``
+    int64 (the counts (5,), then the estimate's codes), ``bools`` bool, ``codes`` int8.
+    Returns (shapes, the estimate's, the track's, the frames' status, counts), as
+    :func:`live_block` documents them. The order is that of
+    :func:`bendsense.pipeline.live._fields`, which sizes the buffers and makes a block's
+    arrays as views at the same offsets (one array per buffer crosses the call, not 30).
+    """
+    o = 0
+    kappa = f[o:o + n * N].reshape((n, N))
+    o += n * N
+    pos = f[o:o + n * M * 2].reshape((n, M, 2))
+    o += n * M * 2
+    ang = f[o:o + n * M].reshape((n, M))
+    o += n * M
+    tip = f[o:o + n * 2].reshape((n, 2))
+    o += n * 2
+    tip_ang = f[o:o + n]
+    o += n
+    force = f[o:o + e * 2].reshape((e, 2))
+    o += e * 2
+    cov = f[o:o + e * 4].reshape((e, 2, 2))
+    o += e * 4
+    residual = f[o:o + e]
+    o += e
+    chi2 = f[o:o + e]
+    o += e
+    pval = f[o:o + e]
+    o += e
+    guess = f[o:o + e * 2].reshape((e, 2))
+    o += e * 2
+    state = f[o:o + e * nodes].reshape((e, nodes))
+    o += e * nodes
+    etip = f[o:o + e * 2].reshape((e, 2))
+    o += e * 2
+    direction = f[o:o + e * 2].reshape((e, 2))
+    o += e * 2
+    std = f[o:o + e * 2].reshape((e, 2))
+    o += e * 2
+    parts = f[o:o + e * 12].reshape((e, 3, 2, 2))
+    o += e * 12
+    pay = f[o:o + e * R * 6].reshape((e, R, 6))
+    o += e * R * 6
+    shifts = f[o:o + e * N].reshape((e, N))
+    o += e * N
+    tforce = f[o:o + n * 2].reshape((n, 2))
+    o += n * 2
+    tstd = f[o:o + n * 2].reshape((n, 2))
+    o += n * 2
+    tcov = f[o:o + n * 4].reshape((n, 2, 2))
+    o += n * 4
+    window_p = f[o:o + n]
+    o += n
+    if o != f.size or ints.size != 5 + 2 * e or bools.size != n + e or codes.size != 2 * n:
+        raise ValueError("live_block: output buffers of the wrong size")
+    out = (force, cov, ints[5:5 + e], ints[5 + e:5 + 2 * e], residual, chi2, pval, guess, state, etip, direction, std,
+           parts, bools[n:n + e], pay, shifts)
+    return ((kappa, pos, ang, tip, tip_ang, bools[:n]), out, (tforce, tstd, tcov, window_p, codes[:n]), codes[n:],
+            ints[:5])
+
+
 @njit(cache=True, nogil=True)
-def live_block(a, p, t, constants, previous, tracker, out_shape, out, out_track, status, counts):
+def live_block(a, p, t, constants, previous, tracker, f, ints, bools, codes):
     """One block of frames (n,) of one finger, readings to statuses (module docstring), into the outputs given.
 
     ``a`` (n, N) raw signals, ``p`` (n,) pressures (NaN: none), ``t`` (n,) times;
@@ -224,9 +289,11 @@ def live_block(a, p, t, constants, previous, tracker, out_shape, out, out_track,
     shape, model, problem, flags, window_model = constants[0]
     estimating, tracking, windows = flags
     offset, coef, lo, hi, lengths, gap, seg, sigma = shape
+    n, N = a.shape[0], lengths.size
+    out_shape, out, out_track, status, counts = carve(n, n if estimating else 0, N, seg.size, problem[4], problem[5],
+                                                      f, ints, bools, codes)
     kappa, pos, ang, tip, tip_ang, extrapolated = out_shape
     tforce, tstd, tcov, window_p, tstatus = out_track
-    n, N = a.shape[0], lengths.size
     shape_kernels.reconstruct_block(0, n, a, offset, coef, lo, hi, lengths, gap, np.zeros(n), seg, sigma, kappa, pos,
                                     ang, tip, tip_ang, extrapolated)
     has_p = np.empty(n, dtype=np.bool_)

@@ -23,7 +23,6 @@ import math
 import time
 import warnings
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -102,14 +101,47 @@ class LiveFrame:
         return np.asarray(self.estimate.std_n, dtype=float)
 
 
-class _Arrays(NamedTuple):
-    """A block's outputs of the compiled step (:func:`bendsense.pipeline._kernels.live_block`)."""
+class _Arrays:
+    """A block's outputs of the compiled step (:func:`bendsense.pipeline._kernels.live_block`): its four buffers.
 
-    step: object  # the processor's _Step: the constants, and how to make objects of the arrays
-    shape: tuple  # κ, positions, angles, tip, tip angle, extrapolated
-    estimate: tuple | None  # the estimate's outputs (bendsense.estimation.problem.Outputs); None: no estimate
-    track: tuple | None  # force, σ, covariance, window p, status; None: no track
-    t: np.ndarray  # the frames' times [s]
+    Each output is a run of one buffer (:func:`_fields`); its array, a view, is made when asked for.
+    """
+
+    __slots__ = ("step", "buffers", "layout", "t")
+
+    def __init__(self, step, buffers, layout, t):
+        self.step = step  # the processor's _Step: the constants, and how to make objects of the arrays
+        self.buffers = buffers  # float64, int64, bool, int8: live_block's f, ints, bools, codes
+        self.layout = layout  # output group → ((buffer, start, stop, shape), ...), in the group's order
+        self.t = t  # the frames' times [s]
+
+    @property
+    def has_estimate(self) -> bool:
+        """Whether the step estimated a frame (its counts' first)."""
+        return bool(self.buffers[1][0] > 0)
+
+    @property
+    def has_track(self) -> bool:
+        """Whether the step tracked the frames (it estimated one, and tracks)."""
+        return self.step.tracking and self.has_estimate
+
+    def field(self, group, index):
+        """Output ``index`` of ``group`` (``"shape"``, ``"estimate"``, ``"track"``, ``"status"``, ``"counts"``)."""
+        b, start, stop, shape = self.layout[group][index]
+        return self.buffers[b][start:stop].reshape(shape)
+
+    def group(self, group):
+        """The outputs of ``group``, as :func:`~bendsense.pipeline._kernels.live_block` has them."""
+        return tuple(self.buffers[b][start:stop].reshape(shape) for b, start, stop, shape in self.layout[group])
+
+    def put(self, piece, lo, hi):
+        """The outputs of another call (``piece``, frames ``lo:hi`` of these) into these; its counts added."""
+        for group, fields in self.layout.items():
+            for index in range(len(fields)):
+                if group == "counts":
+                    self.field(group, index)[...] += piece.field(group, index)
+                else:
+                    self.field(group, index)[lo:hi] = piece.field(group, index)
 
 
 class LiveBlock:
@@ -166,15 +198,13 @@ class LiveBlock:
         self._step = None  # the compiled step's outputs and how to make the objects of them
 
     @classmethod
-    def _of_step(cls, step, kernel_out, *, t_s, seq, host_ns, pressure_pa, signals, process_s, t):
-        """The block of the live step's outputs (:func:`bendsense.pipeline._kernels.live_block`)."""
-        shape, out, track, status, counts = kernel_out
-        has_estimate = counts[0] > 0
+    def _of_step(cls, arrays, *, t_s, seq, host_ns, pressure_pa, signals, process_s):
+        """The block of the live step's outputs (:func:`bendsense.pipeline._kernels.live_block`, :class:`_Arrays`)."""
+        step = arrays.step
         block = cls(t_s, seq, host_ns, pressure_pa, signals, None, None, step.estimating, process_s,
                     offset=step.offset, tracked=step.tracking, load=step.load)
-        block._step = _Arrays(step, shape, out if has_estimate else None,
-                              track if has_estimate and step.tracking else None, t)
-        block.__dict__["status"] = status
+        block._step = arrays
+        block.__dict__["status"] = arrays.field("status", 0)
         return block
 
     @property
@@ -188,28 +218,30 @@ class LiveBlock:
     def shape(self):
         """Shapes, batch axis n (:class:`~bendsense.shape.pcc.Shape`)."""
         if self._shape is None and self._step is not None:
-            self._shape = self._step.step.shape_of(self._step.shape)
+            self._shape = self._step.step.shape_of(self._step.group("shape"))
         return self._shape
 
     @property
     def estimate(self):
         """Forces, batch axis n (:class:`~bendsense.ForceEstimate`); None without an estimate."""
-        if self._estimate is None and self._step is not None and self._step.estimate is not None:
-            self._estimate = self._step.step.estimate_of(self._step.estimate, self.pressure_pa, self.process_s)
+        if self._estimate is None and self._step is not None and self._step.has_estimate:
+            self._estimate = self._step.step.estimate_of(self._step.group("estimate"), self.pressure_pa,
+                                                         self.process_s)
         return self._estimate
 
     @property
     def track(self):
         """The causally tracked forces (:class:`~bendsense.tracking.Track`); None without a track."""
-        if self._track is None and self._step is not None and self._step.track is not None:
-            self._track = self._step.step.track_of(self._step.track, self._step.estimate, self._step.t)
+        if self._track is None and self._step is not None and self._step.has_track:
+            arrays = self._step
+            self._track = arrays.step.track_of(arrays.group("track"), arrays.field("estimate", 0), arrays.t)
         return self._track
 
     @property
     def window_p_value(self) -> np.ndarray | None:
         """Each frame's p-value of the latest completed window (n,) (the Tracker's); None untracked."""
         if self._step is not None:
-            return None if self._step.track is None else self._step.track[3]
+            return self._step.field("track", 3) if self._step.has_track else None
         return None if self.track is None else np.asarray(self.track.window_p_value, dtype=float)
 
     @property
@@ -221,7 +253,7 @@ class LiveBlock:
     def track_status(self) -> np.ndarray | None:
         """The tracked frames' status codes (n,) of int8; None without a track."""
         if self._step is not None:
-            return None if self._step.track is None else self._step.track[4]
+            return self._step.field("track", 4) if self._step.has_track else None
         return None if self.track is None else np.asarray(self.track.status).reshape(len(self))
 
     @property
@@ -234,7 +266,7 @@ class LiveBlock:
         """The contact location of each frame (n,) [m]: NaN for a tip load or a frame without an estimate."""
         if self._step is not None:
             c = self._step.step.contact_s_m
-            return np.full(len(self), np.nan if c is None or self._step.estimate is None else float(c))
+            return np.full(len(self), np.nan if c is None or not self._step.has_estimate else float(c))
         est = self.estimate
         if est is None or getattr(est, "load", "tip") != "contact" or est.contact_s_m is None:
             return np.full(len(self), np.nan)
@@ -249,7 +281,7 @@ class LiveBlock:
     def angle_rad(self) -> np.ndarray:
         """Tangent angles (n, M) of the shapes at their points ``shape.s_m`` [rad]."""
         if self._step is not None:
-            return self._step.shape[2]
+            return self._step.field("shape", 2)
         return np.asarray(self.shape.angle_rad, dtype=float).reshape(len(self), -1)
 
     def __len__(self) -> int:
@@ -257,9 +289,9 @@ class LiveBlock:
 
     def _frames(self, part, index, source, name, tail):
         """A per-frame array (n, *tail): the compiled step's ``part[index]``, else ``source.name``; else NaN."""
-        arrays = None if self._step is None else getattr(self._step, part)
-        if arrays is not None:
-            return arrays[index]
+        arrays = self._step
+        if arrays is not None and (arrays.has_track if part == "track" else arrays.has_estimate):
+            return arrays.field(part, index)
         obj = getattr(self, source)
         if obj is None:
             return np.full((len(self), *tail), np.nan)
@@ -366,14 +398,34 @@ def frame_times(n, t_s=None, seq=None, host_ns=None):
     return t_s, seq, host_ns, t
 
 
-def _rows(outs, lo, hi, n):
-    """The frames ``lo:hi`` of the compiled step's outputs (views, those of every frame), and counts of their own."""
-    def rows(a):
-        return a[lo:hi] if a.shape[:1] == (n,) else a
+def _fields(N, M, R, nodes):
+    """The compiled step's outputs as :func:`bendsense.pipeline._kernels.carve` lays them in its four buffers.
 
-    shape, est, track, status, _ = outs
-    return (tuple(map(rows, shape)), tuple(map(rows, est)), tuple(map(rows, track)), status[lo:hi],
-            np.zeros(5, dtype=np.int64))
+    In the buffers' order: (group, index in the group, buffer (0 float64, 1 int64, 2 bool,
+    3 int8), rows (``"n"`` the block's frames, ``"e"`` those estimated, or a number), shape
+    of a row) for ``N`` channels, ``M`` points of a shape, ``R`` coils fitted and ``nodes``
+    of the beam.
+    """
+    est = (((0, (2,)), (1, (2, 2)), (4, ()), (5, ()), (6, ()), (7, (2,)), (8, (nodes,)), (9, (2,)), (10, (2,)),
+            (11, (2,)), (12, (3, 2, 2)), (14, (R, 6)), (15, (N,))))
+    return (*[("shape", i, 0, "n", tail) for i, tail in enumerate(((N,), (M, 2), (M,), (2,), ()))],
+            *[("estimate", i, 0, "e", tail) for i, tail in est],
+            *[("track", i, 0, "n", tail) for i, tail in enumerate(((2,), (2,), (2, 2), ()))],
+            ("counts", 0, 1, 5, ()), ("estimate", 2, 1, "e", ()), ("estimate", 3, 1, "e", ()),
+            ("shape", 5, 2, "n", ()), ("estimate", 13, 2, "e", ()),
+            ("track", 4, 3, "n", ()), ("status", 0, 3, "n", ()))
+
+
+def _layout(fields, n, e):
+    """The buffers' sizes and each output's run of them for a block of ``n`` frames, ``e`` of them estimated."""
+    ends = [0, 0, 0, 0]
+    groups = {}
+    for group, index, buffer, rows, tail in fields:
+        shape = ({"n": n, "e": e}.get(rows, rows), *tail)
+        size = math.prod(shape)
+        groups.setdefault(group, {})[index] = (buffer, ends[buffer], ends[buffer] + size, shape)
+        ends[buffer] += size
+    return tuple(ends), {g: tuple(runs[i] for i in range(len(runs))) for g, runs in groups.items()}
 
 
 class _Step:
@@ -403,6 +455,8 @@ class _Step:
         self.bandwidth_hz = processor.tracker.bandwidth_hz if processor.tracker is not None else None
         R, N = int(est.pb.coils.size), sensor.n_segments
         self.sizes = (R, N)
+        self._fields = _fields(N, self.grid.s.size, R, int(est.problem[5]))
+        self._layouts = {}  # block size → the outputs' layout (_layout)
         self.idle_tracker = Tracker().stream_state(np.zeros(1), R, N)  # what a processor that does not track passes
         # the window test: a fit of the coil angles with a noise model (what Tracker.update checks)
         windows = est.objective == "angles" and est.uncertainty == "propagated"
@@ -420,20 +474,18 @@ class _Step:
         self.constants = _jit.call(hold, self._held)
 
     def outputs(self, n):
-        """The compiled step's outputs of a block of ``n`` frames (filled by the step).
+        """The compiled step's four buffers for a block of ``n`` frames (filled by the step), and their layout.
 
-        (shapes, the estimate's (none without estimating), the track's, the statuses (n,),
-        the counts (5,)): :func:`bendsense.pipeline._kernels.live_block`.
+        :func:`bendsense.pipeline._kernels.live_block` fills the buffers, :class:`_Arrays` reads them.
         """
-        (R, N), M, nodes = self.sizes, self.grid.s.size, self.est.problem[5]
-        e = n if self.estimating else 0
-        empty = np.empty
-        return ((empty((n, N)), empty((n, M, 2)), empty((n, M)), empty((n, 2)), empty(n), empty(n, dtype=bool)),
-                (empty((e, 2)), empty((e, 2, 2)), empty(e, dtype=np.int64), empty(e, dtype=np.int64), empty(e),
-                 empty(e), empty(e), empty((e, 2)), empty((e, nodes)), empty((e, 2)), empty((e, 2)), empty((e, 2)),
-                 empty((e, 3, 2, 2)), empty(e, dtype=bool), empty((e, R, 6)), empty((e, N))),
-                (empty((n, 2)), empty((n, 2)), empty((n, 2, 2)), empty(n), empty(n, dtype=np.int8)),
-                empty(n, dtype=np.int8), np.zeros(5, dtype=np.int64))
+        layout = self._layouts.get(n)
+        if layout is None:
+            if len(self._layouts) >= 64:  # a loop's blocks of many sizes: keep the latest
+                self._layouts.clear()
+            layout = self._layouts[n] = _layout(self._fields, n, n if self.estimating else 0)
+        (nf, ni, nb, nc), runs = layout
+        # the counts start at zero: a block of no frames, or of several calls (their counts added), has them so
+        return (np.empty(nf), np.zeros(ni, dtype=np.int64), np.empty(nb, dtype=bool), np.empty(nc, dtype=np.int8)), runs
 
     def shape_of(self, arrays):
         """The :class:`~bendsense.shape.pcc.Shape` of the step's shape arrays."""
@@ -448,13 +500,13 @@ class _Step:
         return compiled_estimate(self.est, out, pressure_pa, self.config, constraint=self.constraint, load=self.load,
                                  contact_s_m=self.contact_s_m, wall_time_s=process_s)
 
-    def track_of(self, arrays, out, t):
-        """The :class:`~bendsense.tracking.Track` of the step's track arrays."""
+    def track_of(self, arrays, frame_force, t):
+        """The :class:`~bendsense.tracking.Track` of the step's track arrays (``frame_force``: the estimate's)."""
         from bendsense.tracking import Track
 
         force, std, cov, window_p, status = arrays
         return Track(force_n=force, std_n=std, covariance_n2=cov, window_p_value=window_p, status=status,
-                     bandwidth_hz=self.bandwidth_hz, mode="filter", t_s=t, frame_force_n=out[0])
+                     bandwidth_hz=self.bandwidth_hz, mode="filter", t_s=t, frame_force_n=frame_force)
 
 
 class LiveProcessor:
@@ -661,7 +713,7 @@ class LiveProcessor:
     def _run_step(self, step, a, p, t):
         """The compiled step's outputs of the block; a clock that goes back (a device reset) restarts the track."""
         n = t.size
-        outs = step.outputs(n)
+        arrays = _Arrays(step, *step.outputs(n), t)
         if self.track and n and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any())):
             back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
             cuts = [0, *[int(b) for b in back if b > 0], n]
@@ -676,12 +728,12 @@ class LiveProcessor:
                 self.tracker = self._new_tracker()
             tracker = self.tracker.stream_state(t[lo:hi], *step.sizes) if self.track else step.idle_tracker
             whole = hi - lo == n  # the usual block: the outputs themselves
-            part = outs if whole else _rows(outs, lo, hi, n)
-            _jit.call(live_block, a[lo:hi], p[lo:hi], t[lo:hi], step.constants, self._offset, tracker, *part)
+            piece = arrays if whole else _Arrays(step, *step.outputs(hi - lo), t[lo:hi])
+            _jit.call(live_block, a[lo:hi], p[lo:hi], t[lo:hi], step.constants, self._offset, tracker, *piece.buffers)
             if not whole:
-                outs[-1][...] += part[-1]
+                arrays.put(piece, lo, hi)
             self._track_t = float(t[hi - 1])
-        return outs
+        return arrays
 
     def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
                       extra=None) -> LiveBlock:
@@ -725,13 +777,13 @@ class LiveProcessor:
             if a.shape[1] != step.shape[0].size:
                 raise ArgumentError(f"signals: expected {step.shape[0].size} channels on the last axis, got shape "
                                     f"{a.shape}")
-            out = self._run_step(step, np.ascontiguousarray(a), p, np.ascontiguousarray(t))
-            counts = out[4]
+            arrays = self._run_step(step, np.ascontiguousarray(a), p, np.ascontiguousarray(t))
+            counts = arrays.buffers[1]
             self.estimated += int(counts[0])
             self.failures += int(counts[1])
             misfits = int(counts[4])
-            block = LiveBlock._of_step(step, out, t_s=t_s, seq=seq, host_ns=host_ns, pressure_pa=p, signals=a,
-                                       process_s=time.perf_counter() - t_start, t=t)
+            block = LiveBlock._of_step(arrays, t_s=t_s, seq=seq, host_ns=host_ns, pressure_pa=p, signals=a,
+                                       process_s=time.perf_counter() - t_start)
         else:
             block = self._general_block(a, p, t_s, seq, host_ns, t, t_start)
             window_p = block.window_p_value
