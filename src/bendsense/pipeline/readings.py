@@ -10,18 +10,16 @@ splits the board per finger) both read readings through it.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 __all__ = ["ReadingColumns", "ReadingClock", "reading_columns", "sample_lines"]
 
 
-@dataclass(frozen=True)
-class ReadingColumns:
-    """Per-frame arrays of a block of readings.
+class ReadingColumns(NamedTuple):
+    """Per-frame arrays of a block of readings (a named tuple: a live loop makes one per block).
 
     Attributes
     ----------
@@ -84,14 +82,16 @@ def reading_columns(readings, t0_us: int, host0_ns: int | None) -> ReadingColumn
     n = len(readings)
     samples = [r.sample for r in readings]
     signals = np.array([s.adc for s in samples], dtype=float).reshape(n, -1)
-    lines = [[math.nan if v is None else v for v in sample_lines(s)] for s in samples]
+    lines = [sample_lines(s) for s in samples]
     width = max(map(len, lines)) if n else 1
-    pressures = np.array([x + [math.nan] * (width - len(x)) for x in lines], dtype=float).reshape(n, width)
+    if any(len(x) < width for x in lines):  # frames of fewer lines: no reading of the others
+        lines = [x + (None,) * (width - len(x)) for x in lines]
+    # a float array takes None as NaN: no reading; the device clock in whole microseconds, exact in a float64
     return ReadingColumns(
         signals=signals,
-        pressure_pa=np.array([math.nan if s.pressure_pa is None else s.pressure_pa for s in samples], dtype=float),
-        pressures_pa=pressures,
-        t_s=np.array([(r.device_us - t0_us) * 1e-6 for r in readings], dtype=float),
+        pressure_pa=np.array([s.pressure_pa for s in samples], dtype=float),
+        pressures_pa=np.array(lines, dtype=float).reshape(n, width),
+        t_s=(np.array([r.device_us for r in readings], dtype=float) - t0_us) * 1e-6,
         seq=[s.seq for s in samples],
         host_ns=[r.host_ns for r in readings],
         extra=_RecordColumns(readings, signals.shape[1], host0_ns),
