@@ -22,6 +22,7 @@ import numpy as np
 from bendsense.errors import ArgumentError
 from bendsense.pipeline.live import frame_times
 from bendsense.pipeline.readings import ReadingClock
+from bendsense.session.fingers import _board_columns, split_signals
 
 __all__ = ["GripperProcessor"]
 
@@ -81,6 +82,8 @@ class GripperProcessor:
         self.frames = 0
         self._clock = ReadingClock()
         self._lines_reported = 0  # the most pressure lines a SAMPLE of this run carried
+        self._board = None  # (channels, pressure lines) of the board's blocks, checked against the fingers
+        self._plan = tuple((f.name, _board_columns(f.channels), f.pressure_line) for f in gripper.fingers)
 
     # the finger processors' shared options, for the outputs' metadata
     def _first(self):
@@ -164,8 +167,6 @@ class GripperProcessor:
         dict of str to LiveBlock
             Each finger's block, in the config's order.
         """
-        from bendsense.session.fingers import split_signals
-
         a = np.asarray(signals, dtype=float)
         if a.ndim != 2:
             raise ArgumentError(f"signals: expected shape (n, N), got {a.shape}")
@@ -177,11 +178,23 @@ class GripperProcessor:
             # lines the board does not send: frames without a reading of them, filled by the fallback
             p = np.hstack([p, np.full((p.shape[0], self.gripper.n_lines - p.shape[1]), np.nan)])
         times = frame_times(n, t_s, seq, host_ns)  # one arrival time for every finger's copy of a frame
-        parts = split_signals(a, p if p.shape[1] > 1 else p[:, 0], self.gripper)
+        parts = self._split(a, p)
         blocks = {name: self.processors[name]._block(*parts[name], *times, extra, time.perf_counter())
                   for name in self.fingers}
         self.frames += n
         return blocks
+
+    def _split(self, a, p) -> dict:
+        """Each finger's (signals, pressure) of a block of the board (:func:`~bendsense.session.fingers.split_signals`).
+
+        The board's shape is checked against the fingers when it first comes or changes,
+        not at every block: a loop's blocks come from one board.
+        """
+        board = (a.shape[1], p.shape[1])
+        if board != self._board:
+            split_signals(a, p if p.shape[1] > 1 else p[:, 0], self.gripper)  # its checks, their one clear error
+            self._board = board
+        return {name: (a[:, columns], p[:, line]) for name, columns, line in self._plan}  # line < lines: checked
 
     def process_readings(self, readings) -> dict:
         """Process driver readings (:class:`~bendsense.device.driver.Reading`) of the board, in arrival order.

@@ -380,6 +380,7 @@ class LiveBlock:
 
 
 _PIECE = 4096  # frames per call of the compiled step (~0.3 s)
+_WORD_OF = tuple(str(word) for word in WORDS)  # each status code's word, as a str
 _GENERAL = object()  # a processor whose options need estimate_force (the paper's method, a contact located per frame)
 
 
@@ -714,25 +715,26 @@ class LiveProcessor:
         """The compiled step's outputs of the block; a clock that goes back (a device reset) restarts the track."""
         n = t.size
         arrays = _Arrays(step, *step.outputs(n), t)
-        if self.track and n and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any())):
-            back = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0)
-            cuts = [0, *[int(b) for b in back if b > 0], n]
-        else:  # the usual block: one part
-            cuts = [0, n] if n else []
-        # a loop seconds behind: calls of a fraction of a second, so that a stop signal is handled between them
-        parts = [(lo, min(hi, lo + _PIECE)) for lo0, hi in zip(cuts[:-1], cuts[1:]) for lo in range(lo0, hi, _PIECE)]
+        back = self.track and n and (t[0] < self._track_t or (n > 1 and (np.diff(t) < 0).any()))
+        if n and n <= _PIECE and not back:  # the usual block: one call
+            parts = ((0, n),)
+        else:  # a loop seconds behind: calls of a fraction of a second, so that a stop signal is handled between them
+            steps = np.flatnonzero(np.diff(np.concatenate(([self._track_t], t))) < 0) if back else ()
+            cuts = [0, *[int(b) for b in steps if b > 0], n]
+            parts = [(lo, min(hi, lo + _PIECE)) for lo0, hi in zip(cuts, cuts[1:]) for lo in range(lo0, hi, _PIECE)]
         for lo, hi in parts:
-            if self.track and (t[lo] < (t[lo - 1] if lo else self._track_t)):
+            if back and (t[lo] < (t[lo - 1] if lo else self._track_t)):
                 log.info("the frame clock went back %.6g s: the track restarts", (t[lo - 1] if lo else
                                                                                   self._track_t) - t[lo])
                 self.tracker = self._new_tracker()
-            tracker = self.tracker.stream_state(t[lo:hi], *step.sizes) if self.track else step.idle_tracker
             whole = hi - lo == n  # the usual block: the outputs themselves
             piece = arrays if whole else _Arrays(step, *step.outputs(hi - lo), t[lo:hi])
-            _jit.call(live_block, a[lo:hi], p[lo:hi], t[lo:hi], step.constants, self._offset, tracker, *piece.buffers)
+            ap, pp, tp = (a, p, t) if whole else (a[lo:hi], p[lo:hi], t[lo:hi])
+            tracker = self.tracker.stream_state(tp, *step.sizes) if self.track else step.idle_tracker
+            _jit.call(live_block, ap, pp, tp, step.constants, self._offset, tracker, *piece.buffers)
             if not whole:
                 arrays.put(piece, lo, hi)
-            self._track_t = float(t[hi - 1])
+            self._track_t = float(tp[-1])
         return arrays
 
     def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
@@ -778,10 +780,9 @@ class LiveProcessor:
                 raise ArgumentError(f"signals: expected {step.shape[0].size} channels on the last axis, got shape "
                                     f"{a.shape}")
             arrays = self._run_step(step, np.ascontiguousarray(a), p, np.ascontiguousarray(t))
-            counts = arrays.buffers[1]
-            self.estimated += int(counts[0])
-            self.failures += int(counts[1])
-            misfits = int(counts[4])
+            estimated, failed, _, _, misfits = arrays.buffers[1][:5].tolist()
+            self.estimated += estimated
+            self.failures += failed
             block = LiveBlock._of_step(arrays, t_s=t_s, seq=seq, host_ns=host_ns, pressure_pa=p, signals=a,
                                        process_s=time.perf_counter() - t_start)
         else:
@@ -812,7 +813,7 @@ class LiveProcessor:
         if status.size == 0:
             return
         if status.size == 1 or (status == status[0]).all():  # the usual block: one status
-            word = str(WORDS[status[0]])
+            word = _WORD_OF[status[0]]
             counts[word] = counts.get(word, 0) + status.size
         else:
             codes, numbers = np.unique(status, return_counts=True)
