@@ -296,6 +296,7 @@ _KERNEL_NAMES = {
     "bendsense.tracking._window_kernels": "window check",
     "bendsense.pipeline._kernels": "live step",
     "bendsense.results._kernels": "status rules",
+    "bendsense.control._kernels": "force controller's kernels",
 }
 
 

@@ -246,6 +246,49 @@ def test_normal_force_is_positive_when_the_finger_presses():
     assert normal_force(block, tracked=False).force_n[-1] == pytest.approx(push, rel=0.02)
 
 
+class _Block:
+    """What normal_force reads of a processed block, made up: per-frame contact locations and forces."""
+
+    def __init__(self, rng, n, tracked):
+        self.s_m = np.linspace(0.0, 0.1, 11)
+        self.angle_rad = np.cumsum(rng.uniform(0.0, 0.2, (n, 11)), axis=1)
+        self.contact_s_m = rng.choice([np.nan, 0.0, 0.03, 0.05, 0.0999, 0.1, 0.12], n)  # NaN: a tip load
+        self.force_n, self.track_force_n = rng.normal(0, 0.2, (n, 2)), rng.normal(0, 0.2, (n, 2))
+        self.force_n[::5] = np.nan  # frames without a force
+        a = rng.normal(0, 0.01, (2, n, 2, 2))
+        self.covariance_n2, self.track_covariance_n2 = a @ a.transpose(0, 1, 3, 2)
+        self.status = np.ones(n, dtype=np.int8)
+        self.track_status = self.status if tracked else None
+        self.n = n
+
+    def __len__(self):
+        return self.n
+
+
+@pytest.mark.parametrize("tracked", [True, False])
+def test_normal_force_interpolates_the_angle_at_the_contact_frame_by_frame(tracked):
+    """N = F · n(φ_c), φ_c linear between the shape's points, the last point's angle beyond them and for a tip load.
+
+    Against the formula on whole arrays, written here; for frames at, between and beyond
+    the points, at the base, without a location, without a force.
+    """
+    rng = np.random.default_rng(3)
+    block = _Block(rng, 60, tracked)
+    nf = normal_force(block, tip_s_m=0.11)
+    s = block.s_m
+    at = np.where(np.isfinite(block.contact_s_m), np.minimum(block.contact_s_m, s[-1]), s[-1])
+    phi = np.array([np.interp(x, s, row) for x, row in zip(at, block.angle_rad)])
+    n = np.stack((-np.cos(phi), np.sin(phi)), axis=-1)
+    force, cov = ((block.track_force_n, block.track_covariance_n2) if tracked else
+                  (block.force_n, block.covariance_n2))
+    np.testing.assert_allclose(nf.angle_rad, phi, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(nf.force_n, np.einsum("ni,ni->n", force, n), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(nf.std_n, np.sqrt(np.einsum("ni,nij,nj->n", n, cov, n)), rtol=1e-12, atol=1e-15)
+    assert np.isnan(nf.force_n).sum() == (0 if tracked else 12)  # a frame without a force has no N
+    np.testing.assert_array_equal(nf.contact_s_m, np.where(np.isfinite(block.contact_s_m), block.contact_s_m, 0.11))
+    assert list(nf.status) == ["ok"] * 60
+
+
 # --------------------------------------------------------------------------- the loop and its stops
 
 

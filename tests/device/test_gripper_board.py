@@ -71,6 +71,27 @@ def test_readings_of_v2_frames_carry_the_lines_and_setpoints_reach_the_board(boa
     assert all(type(f) is Setpoint for f in frames) and board.decoder.errors == 0
 
 
+def test_send_setpoints_sends_a_blocks_lines_together_or_none(board):
+    """A loop's set-points of one block: every line's SETPOINT, each with its own sequence number, in one write;
+    a refused line or pressure among them sends none of them."""
+    with Driver(board.port, handshake=False) as drv:
+        board.send(encode_sample(0, 0, [1], pressures_pa=[1, 2, 3]))
+        assert drv.get(timeout=5) is not None
+        writes = []
+        write = drv._ser.write
+        drv._ser.write = lambda data: writes.append(data) or write(data)
+        drv.send_setpoints({2: 45_000.4, 0: 0.0, 1: 119_999.6})
+        for bad, match in (({0: 10.0, 1: math.nan}, "pressure_pa"), ({0: 10.0, 3: 5.0}, "line: 3 is not a pressure")):
+            with pytest.raises(ArgumentError, match=match):
+                drv.send_setpoints(bad)
+        drv.send_setpoints({})  # nothing to send: nothing written
+        drv.send_setpoints({1: 7})
+        frames = board.received(4)
+    assert [(f.line, f.pressure_pa) for f in frames] == [(2, 45_000), (0, 0), (1, 120_000), (1, 7)]
+    assert len(writes) == 2 and board.decoder.errors == 0
+    assert len({f.seq for f in frames}) == 4 and [f.seq for f in frames[:3]] == sorted(f.seq for f in frames[:3])
+
+
 def test_send_setpoint_from_several_threads_keeps_frames_whole(board):
     with Driver(board.port, handshake=False) as drv:
         def send(line):

@@ -389,15 +389,23 @@ def test_a_closed_terminal_sighup_zeroes_every_line_and_exits_129(single_board, 
 def test_a_second_ctrl_c_while_control_zeros_waits_for_every_zero(gripper_board, files, monkeypatch):
     # Ctrl-C mid-grasp, and again while the zeros go out (after line 0's): lines 1 and 2 still get theirs
     board = Faulty(copy.deepcopy(gripper_board))
-    send = Driver.send_setpoint
+    send, send_all = Driver.send_setpoint, Driver.send_setpoints
     presses = []
 
-    def send_setpoint(self, line, pressure_pa, *, check_line=True):
-        if (pressure_pa > 20e3 and not presses) or (pressure_pa == 0.0 and len(presses) == 1 and line == 1):
+    def send_setpoints(self, setpoints, *, check_line=True):  # the loop's: every line's set-point of a block
+        for line, pressure_pa in setpoints.items():
+            if pressure_pa > 20e3 and not presses:
+                presses.append(line)
+                os.kill(os.getpid(), signal.SIGINT)
+        return send_all(self, setpoints, check_line=check_line)
+
+    def send_setpoint(self, line, pressure_pa, *, check_line=True):  # the zeros at the end, line by line
+        if pressure_pa == 0.0 and len(presses) == 1 and line == 1:
             presses.append(line)
             os.kill(os.getpid(), signal.SIGINT)
         return send(self, line, pressure_pa, check_line=check_line)
 
+    monkeypatch.setattr(Driver, "send_setpoints", send_setpoints)
     monkeypatch.setattr(Driver, "send_setpoint", send_setpoint)
     with SimulatedDevice(board, rate_hz=RATE, n_channels=GRIPPER_CHANNELS) as dev:
         res = CliRunner().invoke(main, ["control", dev.port, "--config", files["gripper"], "--calibration",

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense import _jit
+from bendsense.control._kernels import normal_components
 from bendsense.status import words
 
 __all__ = ["NormalForce", "contact_normal", "normal_force", "force_limit_n", "BLOCKED_FORCE_MARGIN"]
@@ -96,31 +98,22 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
     -------
     NormalForce
     """
-    # a control loop calls this for every finger and block: a few whole-array operations, no objects
-    s_grid = np.asarray(block.s_m, dtype=float)
-    length = float(s_grid[-1])
-    # a tip load, or a frame without a location: the end of the body (the sensor's tip angle holds beyond it)
-    s_c = block.contact_s_m
-    located = np.isfinite(s_c)
-    at = np.where(located, np.minimum(s_c, length), length)
-    # the angle is piecewise linear on the PCC grid between its samples (linear within a segment)
-    j = np.minimum(np.maximum(np.searchsorted(s_grid, at, side="right") - 1, 0), s_grid.size - 2)
-    w = (at - s_grid[j]) / (s_grid[j + 1] - s_grid[j])
-    angle = block.angle_rad
-    rows = np.arange(len(block))
-    phi = (1.0 - w) * angle[rows, j] + w * angle[rows, j + 1]
-    nx, ny = -np.cos(phi), np.sin(phi)  # contact_normal(phi)
+    # a control loop calls this for every finger and block: one compiled call, no objects; its inputs as copies,
+    # writable and contiguous whatever the block holds (read-only or strided arrays would be another compiled version)
+    n = len(block)
+    s_grid = np.array(block.s_m, dtype=float)
     track_status = block.track_status if tracked else None
     if track_status is not None:
         force, cov, status = block.track_force_n, block.track_covariance_n2, words(track_status)
     else:
         force, cov, status = block.force_n, block.covariance_n2, words(block.status)
-    value = force[:, 0] * nx + force[:, 1] * ny
-    var = cov[:, 0, 0] * nx * nx + (cov[:, 0, 1] + cov[:, 1, 0]) * nx * ny + cov[:, 1, 1] * ny * ny
-    s_out = np.where(located, s_c, length if tip_s_m is None else float(tip_s_m))
-    return NormalForce(force_n=value, std_n=np.sqrt(np.maximum(var, 0.0)), contact_s_m=s_out, angle_rad=phi,
-                       status=status)
-
+    value, std, s_out, phi = np.empty((4, n))
+    # a tip load, or a frame without a location: the end of the body (the sensor's tip angle holds beyond it)
+    tip = float(s_grid[-1] if tip_s_m is None else tip_s_m)
+    _jit.call(normal_components, s_grid, np.array(block.contact_s_m, dtype=float),
+              np.array(block.angle_rad, dtype=float), np.array(force, dtype=float), np.array(cov, dtype=float), tip,
+              value, std, s_out, phi)
+    return NormalForce(force_n=value, std_n=std, contact_s_m=s_out, angle_rad=phi, status=status)
 
 
 def force_limit_n(config, max_pressure_pa: float, contact_s_m: float | None = None) -> float:

@@ -327,8 +327,9 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     ----------
     driver : Driver
         An open, streaming board (with a queue) that takes set-points
-        (:meth:`~bendsense.device.driver.Driver.send_setpoint`) and heartbeats
-        (:meth:`~bendsense.device.driver.Driver.send_heartbeat`).
+        (:meth:`~bendsense.device.driver.Driver.send_setpoint`; a block's together with
+        :meth:`~bendsense.device.driver.Driver.send_setpoints` where it has it) and
+        heartbeats (:meth:`~bendsense.device.driver.Driver.send_heartbeat`).
     processor : LiveProcessor or gripper processor
         Its ``process_readings(readings)`` makes the block the controller gets.
     controller : callable
@@ -432,6 +433,20 @@ def _fingers(processor) -> tuple:
     return (None,) if gripper is None else tuple(gripper.names)
 
 
+def _send(driver, setpoints) -> None:
+    """A block's set-points: in one write where the driver can, else line by line.
+
+    :meth:`~bendsense.device.driver.Driver.send_setpoints`; a driver of one's own may have
+    ``send_setpoint`` only.
+    """
+    many = getattr(driver, "send_setpoints", None)
+    if many is not None:
+        many(setpoints, check_line=False)
+        return
+    for line, value in setpoints.items():
+        driver.send_setpoint(line, value, check_line=False)
+
+
 def _loop(driver, processor, controller, seconds, stop, guard, lines, recording, on_block, state) -> str:
     """The loop of :func:`run` until its time or a stop; returns the outcome (set-points within the guard's limit)."""
     t0 = time.monotonic()
@@ -470,8 +485,7 @@ def _loop(driver, processor, controller, seconds, stop, guard, lines, recording,
         if not state["loop"]:  # the first block: the lines the controller does not drive are held at 0
             state["held"] = tuple(k for k in lines if k not in setpoints)
             setpoints = {**dict.fromkeys(state["held"], 0.0), **setpoints}
-        for line, value in setpoints.items():
-            driver.send_setpoint(line, value, check_line=False)
+        _send(driver, setpoints)
         guard.sent(setpoints, now)
         state["loop"].append(time.perf_counter() - tic)
         state["process"].append(processed - tic)

@@ -141,6 +141,9 @@ class FingerController:
         self.max_force_n = None if max_force_n is None else _positive("max_force_n", max_force_n)
         self.target_force_n = target_force_n
         self.reset()
+        from bendsense.control._kernels import warm
+
+        warm()  # the normal force's kernel, before the loop runs
 
     @property
     def target_force_n(self) -> float:

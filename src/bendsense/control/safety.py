@@ -90,6 +90,7 @@ __all__ = ["Safety", "Guard", "ControlStop", "STOP_STATUSES"]
 DEFAULT_SILENCE_S = 0.1
 #: a controlled finger's statuses that stop the loop when they last ``flagged_s``
 STOP_STATUSES = (Status.MODEL_MISFIT, Status.NOT_IDENTIFIABLE)
+_STOPPING = np.isin(np.arange(len(Status)), STOP_STATUSES)  # by status code: whether it is one of them
 
 
 class ControlStop(BendsenseError, RuntimeError):
@@ -344,16 +345,16 @@ class Guard:
             own = finger_block(block, finger)  # its arrays: a block's objects are made only when asked for
             track_status = own.track_status
             status = own.status if track_status is None else track_status
-            blind = ~np.isfinite(np.asarray(own.force_n, dtype=float).reshape(len(own), -1)).all(axis=1)
-            if track_status is not None:  # and the force the controller acts on
-                blind |= ~np.isfinite(own.track_force_n).all(axis=1)
-            stopping = status == STOP_STATUSES[0]  # comparisons: np.isin costs ~10 µs a block
-            for code in STOP_STATUSES[1:]:
-                stopping |= status == code
-            flagged = stopping | blind
-            if not flagged.any():
-                self._flag_start[finger] = math.nan
+            force = np.asarray(own.force_n, dtype=float).reshape(len(own), -1)
+            tracked = None if track_status is None else own.track_force_n  # the force the controller acts on
+            stopping = _STOPPING[status]
+            if not stopping.any() and np.isfinite(force).all() and (tracked is None or np.isfinite(tracked).all()):
+                self._flag_start[finger] = math.nan  # the usual block: a few whole-array checks, per finger
                 continue
+            blind = ~np.isfinite(force).all(axis=1)
+            if tracked is not None:
+                blind |= ~np.isfinite(tracked).all(axis=1)
+            flagged = stopping | blind
             reason = words(status).astype(object)
             if blind.any():  # the frame's own status says why it has no force (no_pressure, out of range, ...)
                 reason = np.where(blind & ~stopping, [f"no force ({w})" for w in words(own.status).tolist()], reason)

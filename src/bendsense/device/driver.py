@@ -379,21 +379,44 @@ class Driver:
             The port is closed (or was never opened), the write fails, or the driver
             speaks the line dialect (which has no host-to-device frames).
         """
-        if isinstance(line, bool) or not isinstance(line, numbers.Integral) or not 0 <= line < MAX_LINES:
-            raise ArgumentError(f"line: expected a pressure line 0..{MAX_LINES - 1}, got {line!r}")
+        self.send_setpoints({line: pressure_pa}, check_line=check_line)
+
+    def send_setpoints(self, setpoints, *, check_line: bool = True) -> None:
+        """Send a SETPOINT for each line of ``setpoints`` (line → pressure [Pa]), in one write.
+
+        :meth:`send_setpoint` of each, checked first: a line or pressure refused sends
+        none. One write and one drain of the port for all of them: a gripper's loop sends
+        its fingers' set-points together, not one wait per line.
+
+        Parameters
+        ----------
+        setpoints : mapping of int to float
+            Pressure line (0-based) → target pressure [Pa].
+        check_line : bool, default True
+            As :meth:`send_setpoint`'s.
+
+        Raises
+        ------
+        ArgumentError, DeviceError
+            As :meth:`send_setpoint`.
+        """
         latest = self._latest
-        if check_line and latest is not None:
-            n_lines = len(latest.sample.pressures_pa) or 1
+        n_lines = (len(latest.sample.pressures_pa) or 1) if check_line and latest is not None else MAX_LINES
+        for line in setpoints:
+            if isinstance(line, bool) or not isinstance(line, numbers.Integral) or not 0 <= line < MAX_LINES:
+                raise ArgumentError(f"line: expected a pressure line 0..{MAX_LINES - 1}, got {line!r}")
             if line >= n_lines:
                 raise ArgumentError(f"line: {line} is not a pressure line of the board on {self.port} "
                                     f"(it sends {n_lines} line{'s' if n_lines > 1 else ''}, 0..{n_lines - 1})")
         if self.dialect != "binary":
             raise DeviceError(f"{self.port}: the line dialect has no set-points (SETPOINT needs the binary protocol)")
         try:
-            data = encode_setpoint(int(line), pressure_pa, seq=self._next_command_seq())
+            data = b"".join(encode_setpoint(int(line), value, seq=self._next_command_seq())
+                            for line, value in setpoints.items())
         except FrameError as err:
             raise ArgumentError(str(err)) from None
-        self.write(data)
+        if data:
+            self.write(data)
 
     def send_heartbeat(self) -> None:
         """Send a HEARTBEAT: the host is alive, and feeds the board's host-silence watchdog.

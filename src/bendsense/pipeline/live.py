@@ -107,23 +107,19 @@ class _Arrays:
     Each output is a run of one buffer (:func:`_fields`); its array, a view, is made when asked for.
     """
 
-    __slots__ = ("step", "buffers", "layout", "t")
+    __slots__ = ("step", "buffers", "layout", "t", "has_estimate", "has_track")
 
     def __init__(self, step, buffers, layout, t):
         self.step = step  # the processor's _Step: the constants, and how to make objects of the arrays
         self.buffers = buffers  # float64, int64, bool, int8: live_block's f, ints, bools, codes
         self.layout = layout  # output group → ((buffer, start, stop, shape), ...), in the group's order
         self.t = t  # the frames' times [s]
+        self.has_estimate = self.has_track = False  # whether the step estimated a frame, and tracked: counted()
 
-    @property
-    def has_estimate(self) -> bool:
-        """Whether the step estimated a frame (its counts' first)."""
-        return bool(self.buffers[1][0] > 0)
-
-    @property
-    def has_track(self) -> bool:
-        """Whether the step tracked the frames (it estimated one, and tracks)."""
-        return self.step.tracking and self.has_estimate
+    def counted(self):
+        """Read the counts after the step's calls: whether it estimated a frame (and so tracked, if it tracks)."""
+        self.has_estimate = bool(self.buffers[1][0] > 0)
+        self.has_track = self.has_estimate and self.step.tracking
 
     def field(self, group, index):
         """Output ``index`` of ``group`` (``"shape"``, ``"estimate"``, ``"track"``, ``"status"``, ``"counts"``)."""
@@ -735,6 +731,7 @@ class LiveProcessor:
             if not whole:
                 arrays.put(piece, lo, hi)
             self._track_t = float(tp[-1])
+        arrays.counted()
         return arrays
 
     def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
