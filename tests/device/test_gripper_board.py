@@ -85,11 +85,15 @@ def test_send_setpoints_sends_a_blocks_lines_together_or_none(board):
             with pytest.raises(ArgumentError, match=match):
                 drv.send_setpoints(bad)
         drv.send_setpoints({})  # nothing to send: nothing written
-        drv.send_setpoints({1: 7})
-        frames = board.received(4)
-    assert [(f.line, f.pressure_pa) for f in frames] == [(2, 45_000), (0, 0), (1, 120_000), (1, 7)]
-    assert len(writes) == 2 and board.decoder.errors == 0
-    assert len({f.seq for f in frames}) == 4 and [f.seq for f in frames[:3]] == sorted(f.seq for f in frames[:3])
+        drains = []
+        flush = drv._ser.flush
+        drv._ser.flush = lambda: drains.append(len(writes)) or flush()
+        drv.send_setpoints({1: 7}, drain=False)  # a loop's block: the system sends the bytes on by itself
+        drv.send_setpoint(0, 0.0)  # a zero: back once it has left the host
+        frames = board.received(5)
+    assert [(f.line, f.pressure_pa) for f in frames] == [(2, 45_000), (0, 0), (1, 120_000), (1, 7), (0, 0)]
+    assert len(writes) == 3 and drains == [3] and board.decoder.errors == 0
+    assert len({f.seq for f in frames}) == 5 and [f.seq for f in frames[:3]] == sorted(f.seq for f in frames[:3])
 
 
 def test_send_setpoint_from_several_threads_keeps_frames_whole(board):

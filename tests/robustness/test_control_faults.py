@@ -392,12 +392,12 @@ def test_a_second_ctrl_c_while_control_zeros_waits_for_every_zero(gripper_board,
     send, send_all = Driver.send_setpoint, Driver.send_setpoints
     presses = []
 
-    def send_setpoints(self, setpoints, *, check_line=True):  # the loop's: every line's set-point of a block
+    def send_setpoints(self, setpoints, *, check_line=True, drain=True):  # the loop's: every line's of a block
         for line, pressure_pa in setpoints.items():
             if pressure_pa > 20e3 and not presses:
                 presses.append(line)
                 os.kill(os.getpid(), signal.SIGINT)
-        return send_all(self, setpoints, check_line=check_line)
+        return send_all(self, setpoints, check_line=check_line, drain=drain)
 
     def send_setpoint(self, line, pressure_pa, *, check_line=True):  # the zeros at the end, line by line
         if pressure_pa == 0.0 and len(presses) == 1 and line == 1:

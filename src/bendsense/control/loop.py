@@ -441,7 +441,7 @@ def _send(driver, setpoints) -> None:
     """
     many = getattr(driver, "send_setpoints", None)
     if many is not None:
-        many(setpoints, check_line=False)
+        many(setpoints, check_line=False, drain=False)  # the zeros at the end wait for the port
         return
     for line, value in setpoints.items():
         driver.send_setpoint(line, value, check_line=False)

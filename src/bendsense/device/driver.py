@@ -322,20 +322,24 @@ class Driver:
 
     # ------------------------------------------------------------------ commands
 
-    def write(self, data: bytes) -> None:
+    def write(self, data: bytes, *, drain: bool = True) -> None:
         """Write raw bytes to the port.
 
         Parameters
         ----------
         data : bytes
             The bytes to write.
+        drain : bool, default True
+            Return once the bytes have left the host (the port's output drained), not once
+            they are in the system's buffer (which sends them on by itself).
         """
         if self._closed or self._ser is None:
             raise DeviceError(f"{self.port}: not open")
         try:
             with self._write_lock:
                 self._ser.write(data)
-                self._ser.flush()
+                if drain:
+                    self._ser.flush()
         except Exception as err:  # noqa: BLE001 - pyserial raises several types here
             raise DeviceError(f"{self.port}: write failed ({_os_reason(err)})") from None
 
@@ -381,12 +385,12 @@ class Driver:
         """
         self.send_setpoints({line: pressure_pa}, check_line=check_line)
 
-    def send_setpoints(self, setpoints, *, check_line: bool = True) -> None:
+    def send_setpoints(self, setpoints, *, check_line: bool = True, drain: bool = True) -> None:
         """Send a SETPOINT for each line of ``setpoints`` (line → pressure [Pa]), in one write.
 
         :meth:`send_setpoint` of each, checked first: a line or pressure refused sends
-        none. One write and one drain of the port for all of them: a gripper's loop sends
-        its fingers' set-points together, not one wait per line.
+        none. One write for all of them: a gripper's loop sends its fingers' set-points
+        together.
 
         Parameters
         ----------
@@ -394,6 +398,10 @@ class Driver:
             Pressure line (0-based) → target pressure [Pa].
         check_line : bool, default True
             As :meth:`send_setpoint`'s.
+        drain : bool, default True
+            Return once the frames have left the host (:meth:`write`). A control loop does
+            not wait for that at every block (on a pseudo-terminal it waits for the board
+            process to read them; on a USB port for the bus); its zeros at the end do.
 
         Raises
         ------
@@ -416,7 +424,7 @@ class Driver:
         except FrameError as err:
             raise ArgumentError(str(err)) from None
         if data:
-            self.write(data)
+            self.write(data, drain=drain)
 
     def send_heartbeat(self) -> None:
         """Send a HEARTBEAT: the host is alive, and feeds the board's host-silence watchdog.
