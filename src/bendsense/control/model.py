@@ -222,7 +222,9 @@ class ModelController(FingerController):
         span = times[-1] - last_t if times.size and math.isfinite(last_t) else 0.0
         late = MAX_BLOCK_S / span if span > MAX_BLOCK_S else 1.0  # a late block approaches as a short one (PI's rule)
         n = len(force_n)
-        where = np.full(n, np.nan) if contact_s_m is None else np.broadcast_to(np.asarray(contact_s_m, float), (n,))
+        where = np.full(n, np.nan) if contact_s_m is None else np.asarray(contact_s_m, dtype=float)
+        if where.shape != (n,):  # one location for every frame (a block's are per frame already)
+            where = np.broadcast_to(where, (n,))
         touch_n = min(self.touch_force_n, 0.5 * self.target_force_n)
         rate = self.approach_rate_pa_per_s
         if rate is None:

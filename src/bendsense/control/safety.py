@@ -80,6 +80,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense.control.pi import finger_block
 from bendsense.errors import ArgumentError, BendsenseError
 from bendsense.pipeline.readings import sample_lines
 from bendsense.status import Status, words
@@ -339,8 +340,6 @@ class Guard:
         block : LiveBlock or dict of str to LiveBlock
             The processor's result for the block.
         """
-        from bendsense.control.pi import finger_block
-
         for finger in self.fingers:
             own = finger_block(block, finger)  # its arrays: a block's objects are made only when asked for
             track_status = own.track_status
