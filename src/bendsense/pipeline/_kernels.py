@@ -199,6 +199,30 @@ def hold(constants):
 
 
 @njit(cache=True, inline="always")
+def _run1(f, o, a):
+    """The ``a`` values of ``f`` from ``o`` (a view), and the offset after them."""
+    return f[o:o + a], o + a
+
+
+@njit(cache=True, inline="always")
+def _run2(f, o, a, b):
+    """The ``a × b`` values of ``f`` from ``o`` as an (a, b) view, and the offset after them."""
+    return f[o:o + a * b].reshape((a, b)), o + a * b
+
+
+@njit(cache=True, inline="always")
+def _run3(f, o, a, b, c):
+    """The ``a × b × c`` values of ``f`` from ``o`` as an (a, b, c) view, and the offset after them."""
+    return f[o:o + a * b * c].reshape((a, b, c)), o + a * b * c
+
+
+@njit(cache=True, inline="always")
+def _run4(f, o, a, b, c, d):
+    """The ``a × b × c × d`` values of ``f`` from ``o`` as an (a, b, c, d) view, and the offset after them."""
+    return f[o:o + a * b * c * d].reshape((a, b, c, d)), o + a * b * c * d
+
+
+@njit(cache=True, inline="always")
 def carve(n, e, N, M, R, nodes, f, ints, bools, codes):
     """The step's outputs of ``n`` frames as views of its four buffers, each output one run of a buffer.
 
@@ -210,51 +234,28 @@ def carve(n, e, N, M, R, nodes, f, ints, bools, codes):
     :func:`bendsense.pipeline.live._fields`, which sizes the buffers and makes a block's
     arrays as views at the same offsets (one array per buffer crosses the call, not 30).
     """
-    o = 0
-    kappa = f[o:o + n * N].reshape((n, N))
-    o += n * N
-    pos = f[o:o + n * M * 2].reshape((n, M, 2))
-    o += n * M * 2
-    ang = f[o:o + n * M].reshape((n, M))
-    o += n * M
-    tip = f[o:o + n * 2].reshape((n, 2))
-    o += n * 2
-    tip_ang = f[o:o + n]
-    o += n
-    force = f[o:o + e * 2].reshape((e, 2))
-    o += e * 2
-    cov = f[o:o + e * 4].reshape((e, 2, 2))
-    o += e * 4
-    residual = f[o:o + e]
-    o += e
-    chi2 = f[o:o + e]
-    o += e
-    pval = f[o:o + e]
-    o += e
-    guess = f[o:o + e * 2].reshape((e, 2))
-    o += e * 2
-    state = f[o:o + e * nodes].reshape((e, nodes))
-    o += e * nodes
-    etip = f[o:o + e * 2].reshape((e, 2))
-    o += e * 2
-    direction = f[o:o + e * 2].reshape((e, 2))
-    o += e * 2
-    std = f[o:o + e * 2].reshape((e, 2))
-    o += e * 2
-    parts = f[o:o + e * 12].reshape((e, 3, 2, 2))
-    o += e * 12
-    pay = f[o:o + e * R * 6].reshape((e, R, 6))
-    o += e * R * 6
-    shifts = f[o:o + e * N].reshape((e, N))
-    o += e * N
-    tforce = f[o:o + n * 2].reshape((n, 2))
-    o += n * 2
-    tstd = f[o:o + n * 2].reshape((n, 2))
-    o += n * 2
-    tcov = f[o:o + n * 4].reshape((n, 2, 2))
-    o += n * 4
-    window_p = f[o:o + n]
-    o += n
+    kappa, o = _run2(f, 0, n, N)
+    pos, o = _run3(f, o, n, M, 2)
+    ang, o = _run2(f, o, n, M)
+    tip, o = _run2(f, o, n, 2)
+    tip_ang, o = _run1(f, o, n)
+    force, o = _run2(f, o, e, 2)
+    cov, o = _run3(f, o, e, 2, 2)
+    residual, o = _run1(f, o, e)
+    chi2, o = _run1(f, o, e)
+    pval, o = _run1(f, o, e)
+    guess, o = _run2(f, o, e, 2)
+    state, o = _run2(f, o, e, nodes)
+    etip, o = _run2(f, o, e, 2)
+    direction, o = _run2(f, o, e, 2)
+    std, o = _run2(f, o, e, 2)
+    parts, o = _run4(f, o, e, 3, 2, 2)
+    pay, o = _run3(f, o, e, R, 6)
+    shifts, o = _run2(f, o, e, N)
+    tforce, o = _run2(f, o, n, 2)
+    tstd, o = _run2(f, o, n, 2)
+    tcov, o = _run3(f, o, n, 2, 2)
+    window_p, o = _run1(f, o, n)
     if o != f.size or ints.size != 5 + 2 * e or bools.size != n + e or codes.size != 2 * n:
         raise ValueError("live_block: output buffers of the wrong size")
     out = (force, cov, ints[5:5 + e], ints[5 + e:5 + 2 * e], residual, chi2, pval, guess, state, etip, direction, std,
