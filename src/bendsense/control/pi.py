@@ -46,6 +46,7 @@ import math
 
 import numpy as np
 
+from bendsense.control._kernels import warm as warm_kernels
 from bendsense.control.force import normal_force
 from bendsense.errors import ArgumentError
 
@@ -141,9 +142,7 @@ class FingerController:
         self.max_force_n = None if max_force_n is None else _positive("max_force_n", max_force_n)
         self.target_force_n = target_force_n
         self.reset()
-        from bendsense.control._kernels import warm
-
-        warm()  # the normal force's kernel, before the loop runs
+        warm_kernels()  # the normal force's kernel, before the loop runs
 
     @property
     def target_force_n(self) -> float:

@@ -91,7 +91,7 @@ __all__ = ["Safety", "Guard", "ControlStop", "STOP_STATUSES"]
 DEFAULT_SILENCE_S = 0.1
 #: a controlled finger's statuses that stop the loop when they last ``flagged_s``
 STOP_STATUSES = (Status.MODEL_MISFIT, Status.NOT_IDENTIFIABLE)
-_STOPPING = np.isin(np.arange(len(Status)), STOP_STATUSES)  # by status code: whether it is one of them
+_STOPPING = np.isin(np.arange(max(Status) + 1), STOP_STATUSES)  # by status code: whether it is one of them
 
 
 class ControlStop(BendsenseError, RuntimeError):

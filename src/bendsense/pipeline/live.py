@@ -403,8 +403,8 @@ def _fields(N, M, R, nodes):
     of a row) for ``N`` channels, ``M`` points of a shape, ``R`` coils fitted and ``nodes``
     of the beam.
     """
-    est = (((0, (2,)), (1, (2, 2)), (4, ()), (5, ()), (6, ()), (7, (2,)), (8, (nodes,)), (9, (2,)), (10, (2,)),
-            (11, (2,)), (12, (3, 2, 2)), (14, (R, 6)), (15, (N,))))
+    est = ((0, (2,)), (1, (2, 2)), (4, ()), (5, ()), (6, ()), (7, (2,)), (8, (nodes,)), (9, (2,)), (10, (2,)),
+           (11, (2,)), (12, (3, 2, 2)), (14, (R, 6)), (15, (N,)))
     return (*[("shape", i, 0, "n", tail) for i, tail in enumerate(((N,), (M, 2), (M,), (2,), ()))],
             *[("estimate", i, 0, "e", tail) for i, tail in est],
             *[("track", i, 0, "n", tail) for i, tail in enumerate(((2,), (2,), (2, 2), ()))],
