@@ -22,7 +22,7 @@ import numpy as np
 from bendsense.errors import ArgumentError
 from bendsense.pipeline.live import frame_times
 from bendsense.pipeline.readings import ReadingClock
-from bendsense.session.fingers import _board_columns, split_signals
+from bendsense.session.fingers import finger_parts, split_signals
 
 __all__ = ["GripperProcessor"]
 
@@ -83,7 +83,6 @@ class GripperProcessor:
         self._clock = ReadingClock()
         self._lines_reported = 0  # the most pressure lines a SAMPLE of this run carried
         self._board = None  # (channels, pressure lines) of the board's blocks, checked against the fingers
-        self._plan = tuple((f.name, _board_columns(f.channels), f.pressure_line) for f in gripper.fingers)
 
     # the finger processors' shared options, for the outputs' metadata
     def _first(self):
@@ -191,10 +190,12 @@ class GripperProcessor:
         not at every block: a loop's blocks come from one board.
         """
         board = (a.shape[1], p.shape[1])
+        p = p if p.shape[1] > 1 else p[:, 0]
         if board != self._board:
-            split_signals(a, p if p.shape[1] > 1 else p[:, 0], self.gripper)  # its checks, their one clear error
+            parts = split_signals(a, p, self.gripper)  # its checks, their one clear error
             self._board = board
-        return {name: (a[:, columns], p[:, line]) for name, columns, line in self._plan}  # line < lines: checked
+            return parts
+        return finger_parts(a, p, self.gripper)
 
     def process_readings(self, readings) -> dict:
         """Process driver readings (:class:`~bendsense.device.driver.Reading`) of the board, in arrival order.

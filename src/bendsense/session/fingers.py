@@ -182,6 +182,11 @@ def split_signals(signals, pressure_pa, gripper: GripperConfig) -> dict:
         raise ArgumentError(f"pressure_pa: expected shape ({frames},) or ({frames}, n_lines) (frames of signals), "
                             f"got {pressure.shape}")
     _check_board(signals.shape[1], _lines(pressure), gripper, "signals", ArgumentError)
+    return finger_parts(signals, pressure, gripper)
+
+
+def finger_parts(signals: np.ndarray, pressure: np.ndarray, gripper: GripperConfig) -> dict:
+    """:func:`split_signals` of float arrays already checked against the gripper (a live loop's later blocks)."""
     return {f.name: (signals[:, _board_columns(f.channels)], _line(pressure, f)) for f in gripper.fingers}
 
 
