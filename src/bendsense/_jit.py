@@ -15,7 +15,9 @@ setting applies only while bendsense's own kernels compile and is restored after
 
 The cache: several processes may start cold at once (a process pool's workers, a
 notebook beside a command); reads and writes of bendsense's cache entries hold a lock
-file in the cache directory, so that no two processes write numba's cache at once.
+file in the cache directory, so that no two processes write numba's cache at once. An index
+that cannot be read (left by another version of bendsense, or torn) is a first run, not a
+failure: the kernel compiles, saying so, and writes a new one.
 
 Threads: the batch kernels run their ``prange`` loops on numba's ``workqueue`` layer,
 which is safe across ``fork`` (a process pool created after an estimate, e.g. by a
@@ -110,10 +112,29 @@ def guard_cache(namespace: dict) -> None:
 def _locked(method, cache):
     def locked(self, *args, **kwargs):
         with _cache_lock():
-            return method(*args, **kwargs)
+            if method.__name__ != "load_overload":
+                return method(*args, **kwargs)
+            try:
+                return method(*args, **kwargs)
+            except Exception:  # any unreadable entry is a miss, never a failed call
+                _drop_index(cache)
+                return None
 
     locked._bendsense_locked = True
     return types.MethodType(locked, cache)
+
+
+def _drop_index(cache) -> None:
+    """Remove a kernel's cache index that cannot be read, so that its compile writes a new one.
+
+    numba reads an index before it checks that the index is of this source: one written
+    by another version of bendsense (an upgrade leaves ``__pycache__`` behind) whose
+    kernel had the same name and line can pickle a class this version no longer has, and
+    a torn write leaves half a file. Either would fail every call of the kernel, and its
+    save after a compile; without the index the kernel compiles as on a first run.
+    """
+    with contextlib.suppress(OSError, AttributeError):
+        os.remove(cache._cache_file._index_path)
 
 
 _cache_rlock = threading.RLock()
@@ -190,11 +211,19 @@ def _optimisation_level():
 
 
 def _cached(dispatcher) -> bool:
-    """Whether ``dispatcher`` has a cache index on disk (a compiled version of its source)."""
+    """Whether ``dispatcher`` has a cache index on disk of this source (a compiled version of it).
+
+    An index of another source (an upgrade or an edit leaves the old one behind) or one
+    that cannot be read (:func:`_drop_index`) means a compile: it is shown.
+    """
     try:
-        return os.path.exists(dispatcher._cache._cache_file._index_path)
+        load_index = dispatcher._cache._cache_file._load_index
     except AttributeError:  # numba internals moved: assume cached, stay quiet
         return True
+    try:
+        return bool(load_index())
+    except Exception:  # unreadable: compiles after the load drops it
+        return False
 
 
 def call_tree(dispatcher) -> set:

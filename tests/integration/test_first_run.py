@@ -96,6 +96,36 @@ def test_two_cold_processes_compile_side_by_side_and_both_find_the_result(tmp_pa
     assert (third.returncode, out, err) == (0, "6.0\n", "")
 
 
+@pytest.mark.parametrize("stale", ["a class gone", "torn", "another source"])
+def test_a_cache_index_this_version_cannot_read_is_a_first_run_not_a_failure(tmp_path, stale):
+    """An index left by another version (it pickles a class no longer there, or is of another source) or torn
+    mid-write: the kernels compile, saying so, and write an index the next run loads."""
+    import pickle
+
+    (tmp_path / "bs_toy_kernels.py").write_text(KERNEL)
+    code = ("import numpy as np\nfrom bendsense import _jit\nimport bs_toy_kernels as k\n"
+            "print(_jit.call(k.outer, np.ones(3)))\n")
+    first = _run(tmp_path, code)
+    assert first.communicate(timeout=300)[0] == "6.0\n"
+    indexes = sorted((tmp_path / "cache").rglob("*.nbi"))
+    assert len(indexes) == 2  # outer's and inner's
+    if stale == "another source":  # an upgrade or an edit: numba's index is of the old source's stamp
+        (tmp_path / "bs_toy_kernels.py").write_text(KERNEL + "\n# another version\n")
+        indexes = []
+    for index in indexes:
+        with open(index, "rb") as fh:
+            version = pickle.load(fh)  # numba's own version header: the body is read only when it matches
+            body = fh.read()
+        rest = b"cbs_toy_kernels\nGone\n." if stale == "a class gone" else body[:len(body) // 2]
+        index.write_bytes(pickle.dumps(version, protocol=-1) + rest)
+    again = _run(tmp_path, code)
+    out, err = again.communicate(timeout=300)
+    assert (again.returncode, out) == (0, "6.0\n"), err
+    assert "compiling" in err and "Traceback" not in err
+    third = _run(tmp_path, code)  # the compile wrote readable indexes: loaded, quiet
+    assert third.communicate(timeout=300) == ("6.0\n", "")
+
+
 def test_the_optimisation_level_of_the_user_is_kept(tmp_path):
     """``NUMBA_OPT`` set by the user is left alone (and not removed after the compile)."""
     (tmp_path / "bs_toy_kernels.py").write_text(KERNEL)
