@@ -147,19 +147,7 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, g
 def workspace(M, n, R):
     """Buffers of one beam evaluation (:class:`Workspace`): M comparison nodes, n state nodes, R fitted values."""
     return Workspace(np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 5)), np.empty(R),
-                     np.empty((R, 2)))
-
-
-@njit(cache=True)
-def copy_workspace(src, dst):
-    """Copy one beam evaluation's workspace into another."""
-    bk.copy_into(src.pos, dst.pos)
-    bk.copy_into(src.dpos, dst.dpos)
-    bk.copy_into(src.state, dst.state)
-    bk.copy_into(src.tip, dst.tip)
-    bk.copy_into(src.dphi, dst.dphi)
-    bk.copy_into(src.y, dst.y)
-    bk.copy_into(src.dy, dst.dy)
+                     np.empty((R, 2)), np.empty((R, 3)), np.empty((n - 1, bk.extra_columns(FORCE_SENS))))
 
 
 @njit(cache=True)
@@ -173,9 +161,8 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
     objective interpolates the tangent angle at the coils (rows of ``pb.PA``): ``φ(L_i)``,
     what the sensor measures as ``S_i / d``.
     """
-    pos, dpos, st, tip, dst, y, dy = ws
+    pos, dpos, st, tip, dst, y, dy, _, extra = ws
     n = st.size
-    extra = np.empty((n - 1, 4))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
                                   NEWTON_TOL, int(NEWTON_MAX_ITER), int(FORCE_SENS), allow_continuation, st, extra)
     bk.node_sensitivity(extra, L, ei, dst)
@@ -210,16 +197,15 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
 
 @njit(cache=True)
 def whitened(ws, tg):
-    """The whitened residual e (R,) and its Jacobian ∂e/∂F (R, 2) of the target ``tg``.
+    """The whitened residual e (R,) and its Jacobian ∂e/∂F (R, 2) of the target ``tg``, into ``ws.e`` (R, 3).
 
     ``tg``: the :class:`Target` (y⁰, √w, L_w, whiten): e = √w (y − y⁰) with per-row weights (positions,
     paper eq. 18's quadrature), or e = L_w⁻¹ (y − y⁰) with L_w the Cholesky factor of the
     measured angles' covariance (angles objective: weights Σ_θ⁻¹).
     """
-    y, dy = ws.y, ws.dy
+    y, dy, e = ws.y, ws.dy, ws.e
     y0, sw, Lw, whiten = tg
     R = y.size
-    e = np.empty((R, 3))
     for i in range(R):
         e[i, 0] = (y[i] - y0[i]) * sw[i]
         e[i, 1] = dy[i, 0] * sw[i]
@@ -283,12 +269,12 @@ def convex_start(L, ei, wload, D, ffix, lower, beyond, u, out):
 
 @njit(cache=True, inline="always")
 def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial):
-    """The iteration's first beam at ``u`` (into ``ws``); returns (stable, beam solves).
+    """The iteration's first beam at ``u`` (into ``ws``); returns (stable, beam solves, ws, trial).
 
     Newton starts from the reference shape ``state0`` where the load is provably convex,
     else by continuation from the unloaded arc; a start that fails restarts at zero force;
     a start beyond the convexity bound competes with the same start scaled into the convex
-    region (the lower cost wins; ``trial`` is scratch).
+    region (the lower cost wins; ``trial`` is scratch: the two trade places when it wins).
     """
     k = u.size
     for c in range(k):
@@ -326,8 +312,8 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, tr
             iters += 1
             if okc and objective(trial, tg, gF, GF) < objective(ws, tg, gF, GF):
                 bk.copy_into(uc, u)
-                copy_workspace(trial, ws)
-    return ok, iters
+                ws, trial = trial, ws
+    return ok, iters, ws, trial
 
 
 @njit(cache=True)
@@ -381,21 +367,21 @@ def jumped(y, dy, y_trial, dF, floor):
 
 
 @njit(cache=True, inline="always")
-def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter, ops, pb, ws, blocked):
+def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter, ops, pb, ws, trial, blocked):
     """Projected Gauss–Newton with a trust region on ``u`` (k,) for one frame; ``u`` updated in place.
 
     The first beam comes from :func:`first_solve`. Each trial solve starts from the
     first-order prediction of the state and may not leave its linear prediction (a jump
-    to another branch). Stops by :func:`converged`. Returns (status, beam solves, cost);
-    ``ws`` holds the beam at the last accepted ``u``; ``blocked`` the last step that left
-    the stable branch (status NOT_IDENTIFIABLE).
+    to another branch). Stops by :func:`converged`. Returns (status, beam solves, cost, ws,
+    trial): the workspace holding the beam at the last accepted ``u``, and the other
+    (``ws`` and the scratch ``trial`` trade places at each accepted step); ``blocked`` the
+    last step that left the stable branch (status NOT_IDENTIFIABLE).
     """
     k = u.size
     n = state0.size
-    trial = workspace(ws.pos.shape[0], n, ws.y.size)
-    ok, iters = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial)
+    ok, iters, ws, trial = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial)
     if not ok:
-        return _BEAM_FAILED, iters, np.nan
+        return _BEAM_FAILED, iters, np.nan, ws, trial
     F = np.empty(2)
     gF = np.empty(2)
     GF = np.empty((2, 2))
@@ -414,7 +400,7 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     guess = np.empty(n)
     gFn = np.empty(2)
     GFn = np.empty((2, 2))
-    st, dst, y, dy = ws.state, ws.dphi, ws.y, ws.dy
+    zero = np.zeros(2)
     weak = False
     for _ in range(max_iter):
         # a χ² cost that does not determine the load along ``blocked`` here: the step keeps
@@ -445,20 +431,21 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
             un[c] = max(u[c] + dstep[c] * shrink, lower[c])
             dstep[c] = un[c] - u[c]
         predicted = decrease(g, H, dstep)
-        force_of(D, np.zeros(2), dstep, dF)
+        force_of(D, zero, dstep, dF)
         force_of(D, ffix, un, F)
+        st, dst = ws.state, ws.dphi
         for i in range(n):  # first-order prediction of the new state
             guess[i] = st[i] + dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
         okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, pb, trial)
         iters += 1
-        okn = okn and not jumped(y, dy, trial.y, dF, pb.jump_floor)
+        okn = okn and not jumped(ws.y, ws.dy, trial.y, dF, pb.jump_floor)
         cn = objective(trial, tg, gFn, GFn)
         rho = (cost - cn) / (predicted if predicted > 0 else np.inf)
         # below ~1e-6 N the cost change is lost in the beam's round-off: the step is trusted
         acc = okn and (rho > 1e-4 or norm < 1e-6)
         if acc:
             bk.copy_into(un, u)
-            copy_workspace(trial, ws)
+            ws, trial = trial, ws
             cost = cn
             bk.copy_into(gFn, gF)
             bk.copy_into(GFn, GF)
@@ -484,7 +471,7 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         status = _NOT_CONVERGED
     if status == _OK and weak:
         status = _NOT_IDENTIFIABLE
-    return status, iters, cost
+    return status, iters, cost, ws, trial
 
 
 @njit(cache=True)
@@ -764,6 +751,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
     n = ops0.sigma.size
     buf = buffers(pb0, n)
     ws = workspace(pb0.s.size, n, pb0.sw.size)
+    trial = workspace(pb0.s.size, n, pb0.sw.size)
     on_grid = np.empty(n)  # the reference's angles on a contact's nodes
     u = np.empty(k)
     u0 = np.empty(k)
@@ -805,8 +793,8 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
             for c in range(k):
                 u[c] = max(u0[c] + prev_u[c] - prev_u0[c], pb.lower[c])
         blocked[:] = 0.0
-        st, it, _ = gauss_newton(pb.L, ei, k0, pb.wload, tg, D, pb.ffix, pb.lower, u, state0, pb.xtol, pb.max_iter,
-                                 ops, pb, ws, blocked)
+        st, it, _, ws, trial = gauss_newton(pb.L, ei, k0, pb.wload, tg, D, pb.ffix, pb.lower, u, state0, pb.xtol,
+                                            pb.max_iter, ops, pb, ws, trial, blocked)
         prev_ok = chained and st == _OK
         bk.copy_into(u, prev_u)
         bk.copy_into(u0, prev_u0)

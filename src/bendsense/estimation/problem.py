@@ -450,6 +450,10 @@ class Workspace(NamedTuple):
     y: np.ndarray
     #: ∂y/∂F (R, 2)
     dy: np.ndarray
+    #: the whitened residual and its Jacobian by F (R, 3) (:func:`~bendsense.estimation._kernels.whitened`)
+    e: np.ndarray
+    #: the beam solver's J⁻¹ columns (n - 1, 4) (:func:`bendsense.mechanics._beam_kernels.solve_frame`)
+    extra: np.ndarray
 
 
 class Target(NamedTuple):

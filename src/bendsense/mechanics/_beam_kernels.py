@@ -413,7 +413,8 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     convex = ratio < 1.0
     status = _RUNNING
     iters = 0
-    x = np.full((m, extra_columns(sens)), np.nan)
+    x = extra  # written in place: NaN where a solve leaves a column unset
+    x[:, :] = np.nan
     if has_state:
         copy_into(state, phi)
         phi[0] = base
@@ -444,7 +445,6 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
             phi[i] = base + k0n * ops.sigma[i]
         status, where, it = continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, x)
         iters += it
-    copy_into(x, extra)
     return status, where, iters
 
 
