@@ -151,17 +151,18 @@ def workspace(M, n, R):
 
 
 @njit(cache=True)
-def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb, ws):
+def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, fit, ws):
     """The beam at force ``F`` and its fitted response with ∂y/∂F, into the workspace ``ws``; True if stable.
 
     ``ops``: the frame's beam operators, of its contact point (the force acts there;
     :func:`bendsense.mechanics._beam_kernels.contact_grid`), ``pb`` its problem
-    (:func:`~bendsense.estimation.problem.contact_problem`). The positions objective
-    samples the positions at the comparison nodes (rows of ``pb.PQ_fit``), the angles
-    objective interpolates the tangent angle at the coils (rows of ``pb.PA``): ``φ(L_i)``,
-    what the sensor measures as ``S_i / d``.
+    (:func:`~bendsense.estimation.problem.contact_problem`) gives ``fit`` (:func:`fitted`).
+    The positions objective samples the positions at the comparison nodes (rows of
+    ``PQ_fit``), the angles objective interpolates the tangent angle at the coils (rows
+    of ``PA``): ``φ(L_i)``, what the sensor measures as ``S_i / d``.
     """
     pos, dpos, st, tip, dst, y, dy, _, extra = ws
+    objective, PQ_fit, q, PA = fit
     n = st.size
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
                                   NEWTON_TOL, int(NEWTON_MAX_ITER), int(FORCE_SENS), allow_continuation, st, extra)
@@ -173,16 +174,16 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
     for i in range(n - 1):
         dst[i + 1, 2] = extra[i, 0] * L
         dst[i + 1, 3] = -extra[i, 3] / ei
-    bk.sample(st, dst, L, pb.PQ_fit, pb.q, bool(YES), pos, dpos, tip)
-    if pb.objective == ANGLES:
+    bk.sample(st, dst, L, PQ_fit, q, bool(YES), pos, dpos, tip)
+    if objective == ANGLES:
         for i in range(y.size):
             a = 0.0
             d0 = 0.0
             d1 = 0.0
             for j in range(n):
-                a += pb.PA[i, j] * st[j]
-                d0 += pb.PA[i, j] * dst[j, 0]
-                d1 += pb.PA[i, j] * dst[j, 1]
+                a += PA[i, j] * st[j]
+                d0 += PA[i, j] * dst[j, 0]
+                d1 += PA[i, j] * dst[j, 1]
             y[i] = a
             dy[i, 0] = d0
             dy[i, 1] = d1
@@ -193,6 +194,16 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, pb
                 dy[2 * j + a, 0] = dpos[j, a, 0]
                 dy[2 * j + a, 1] = dpos[j, a, 1]
     return status == _OK
+
+
+@njit(cache=True, inline="always")
+def fitted(pb):
+    """What :func:`beam_eval` needs of the problem ``pb``: (objective, PQ_fit, q, PA).
+
+    A compiled call takes a reference to every array it is given, at its start and end:
+    the problem's ~25 arrays at each beam solve cost more than its lines.
+    """
+    return pb.objective, pb.PQ_fit, pb.q, pb.PA
 
 
 @njit(cache=True)
@@ -268,7 +279,7 @@ def convex_start(L, ei, wload, D, ffix, lower, beyond, u, out):
 
 
 @njit(cache=True, inline="always")
-def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial):
+def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, trial):
     """The iteration's first beam at ``u`` (into ``ws``); returns (stable, beam solves, ws, trial).
 
     Newton starts from the reference shape ``state0`` where the load is provably convex,
@@ -289,14 +300,14 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, tr
                math.hypot(wx, wy) * beyond)
     convex = gmax * scale < 0.9 * bk.STABLE_BOUND
     iters = 1
-    ok = beam_eval(L, ei, k0, F, wload, state0, unique, bool(YES), ops, pb, ws)
+    ok = beam_eval(L, ei, k0, F, wload, state0, unique, bool(YES), ops, fit, ws)
     if not ok:
         # the start may buckle the beam or lead Newton astray: start over from the unloaded
         # arc by continuation at the constraint's zero force
         for c in range(k):
             u[c] = max(0.0, lower[c])
         force_of(D, ffix, u, F)
-        ok = beam_eval(L, ei, k0, F, wload, state0, bool(NO), bool(YES), ops, pb, ws)
+        ok = beam_eval(L, ei, k0, F, wload, state0, bool(NO), bool(YES), ops, fit, ws)
         iters += 1
     if not convex and ok:
         gF = np.empty(2)
@@ -308,7 +319,7 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, tr
             moved |= uc[c] != u[c]
         if moved:
             force_of(D, ffix, uc, F)
-            okc = beam_eval(L, ei, k0, F, wload, state0, bool(YES), bool(YES), ops, pb, trial)
+            okc = beam_eval(L, ei, k0, F, wload, state0, bool(YES), bool(YES), ops, fit, trial)
             iters += 1
             if okc and objective(trial, tg, gF, GF) < objective(ws, tg, gF, GF):
                 bk.copy_into(uc, u)
@@ -379,7 +390,8 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     """
     k = u.size
     n = state0.size
-    ok, iters, ws, trial = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, pb, ws, trial)
+    fit = fitted(pb)
+    ok, iters, ws, trial = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, trial)
     if not ok:
         return _BEAM_FAILED, iters, np.nan, ws, trial
     F = np.empty(2)
@@ -436,7 +448,7 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         st, dst = ws.state, ws.dphi
         for i in range(n):  # first-order prediction of the new state
             guess[i] = st[i] + dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
-        okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, pb, trial)
+        okn = beam_eval(L, ei, k0, F, wload, guess, bool(YES), bool(NO), ops, fit, trial)
         iters += 1
         okn = okn and not jumped(ws.y, ws.dy, trial.y, dF, pb.jump_floor)
         cn = objective(trial, tg, gFn, GFn)
@@ -702,7 +714,7 @@ def near(u0, prev_u0, prev_u):
     return d <= off
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def typed(fr, pb, err, ops, ref):
     """The kernels' structures from the plain tuples they are called with.
 
@@ -854,7 +866,7 @@ def evaluate_frames(fr, pb, err, ops, ref, u, run_status, out):
     for i in range(fr.ei.size):
         p0, _, _, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
         force_of(D, pb.ffix, u[i], F)
-        ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, pb, ws)
+        ok = beam_eval(pb.L, fr.ei[i], fr.k0[i], F, pb.wload, state0, bool(YES), bool(YES), ops, fitted(pb), ws)
         st = run_status[i] if ok else _BEAM_FAILED
         status[i], residual[i], chi2[i], pval[i] = finish(st, pb, p0, tg, D, dD, u[i], ws, blocked, frame_cov, cov_s,
                                                           noise_var, fr.model_cov[i], kappa, force[i], cov[i],
