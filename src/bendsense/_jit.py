@@ -14,8 +14,8 @@ and the kernels run as fast as at numba's default level 3 (docs/performance.md);
 setting applies only while bendsense's own kernels compile and is restored after.
 
 The cache: several processes may start cold at once (a process pool's workers, a
-notebook beside a command); reads and writes of bendsense's cache entries hold a lock
-file in the cache directory, so that no two processes write numba's cache at once. An index
+notebook beside a command); reads and writes of bendsense's cache entries hold one lock
+file (in the temporary directory), so that no two processes write numba's cache at once. An index
 that cannot be read (left by another version of bendsense, or torn) is a first run, not a
 failure: the kernel compiles, saying so, and writes a new one.
 

@@ -155,8 +155,8 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, fi
     """The beam at force ``F`` and its fitted response with ∂y/∂F, into the workspace ``ws``; True if stable.
 
     ``ops``: the frame's beam operators, of its contact point (the force acts there;
-    :func:`bendsense.mechanics._beam_kernels.contact_grid`), ``pb`` its problem
-    (:func:`~bendsense.estimation.problem.contact_problem`) gives ``fit`` (:func:`fitted`).
+    :func:`bendsense.mechanics._beam_kernels.contact_grid`); ``fit``: what it reads of the
+    point's problem (:func:`fitted`; :func:`~bendsense.estimation.problem.contact_problem`).
     The positions objective samples the positions at the comparison nodes (rows of
     ``PQ_fit``), the angles objective interpolates the tangent angle at the coils (rows
     of ``PA``): ``φ(L_i)``, what the sensor measures as ``S_i / d``.
