@@ -413,18 +413,17 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     convex = ratio < 1.0
     status = _RUNNING
     iters = 0
-    x = extra  # written in place: NaN where a solve leaves a column unset
-    x[:, :] = np.nan
+    extra[:, :] = np.nan  # where a solve leaves a column unset
     if has_state:
         copy_into(state, phi)
         phi[0] = base
-        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, x)
+        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, extra)
         if conv:
             near = True
             for i in range(1, n):
                 if abs(phi[i] - state[i]) > WARM_MOVE:
                     near = False
-            st = stable(x[:, 0], ops.D0)
+            st = stable(extra[:, 0], ops.D0)
             if convex or (st and near):
                 status = _OK
             elif not allow_continuation and not st:
@@ -436,14 +435,14 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
         arc_tangent(phi, gi, ops, tan)
         for i in range(m):
             phi[i + 1] += tan[i]
-        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, x)
+        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, extra)
         if conv:
             status = _OK
     where = 1.0
     if status == _RUNNING:
         for i in range(n):
             phi[i] = base + k0n * ops.sigma[i]
-        status, where, it = continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, x)
+        status, where, it = continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra)
         iters += it
     return status, where, iters
 
