@@ -1,9 +1,10 @@
-"""Frames of batched result objects: take some, put some back, expand to a larger batch.
+"""The frozen result dataclasses: made quickly, and their frames taken, put back, expanded to a larger batch.
 
 The live processor (:class:`bendsense.pipeline.LiveProcessor`) estimates the frames of a
 block that have a pressure, retries those that failed, and keeps one frame as the next
 block's warm start: these helpers cut and join the frozen result dataclasses
 (``Shape``, ``ForceEstimate``) along their leading frame axis, field by field.
+:func:`quick_init` gives them an ``__init__`` that costs a tenth of the generated one.
 """
 
 from __future__ import annotations
@@ -12,11 +13,44 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames", "STATIC_FIELDS"]
+__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames", "quick_init", "STATIC_FIELDS"]
 
 #: Fields that are never per frame, whatever their length: a shape's points along the body
 #: and its segment lengths. A block of as many frames (41 points, 16 segments) must not cut them.
 STATIC_FIELDS = frozenset({"s_m", "lengths_m"})
+
+
+def quick_init(cls):
+    """Give the frozen dataclass ``cls`` an ``__init__`` that fills the instance's dict in one update.
+
+    The ``__init__`` that :func:`dataclasses.dataclass` writes for a frozen class sets each
+    field through ``object.__setattr__``, ~0.2–0.3 µs a field: ~5–10 µs for a
+    ``ForceEstimate``'s 31 fields, a tenth of a one-frame estimate. This one has the same
+    signature (the same names, order, defaults and keyword-only fields) and sets the same
+    attributes; the instances stay frozen (assignment raises). Use as a decorator above
+    ``@dataclass(frozen=True)``; a class with ``__post_init__`` or a ``default_factory``
+    keeps the generated ``__init__`` (a TypeError says so).
+    """
+    fields = [f for f in dataclasses.fields(cls) if f.init]
+    if hasattr(cls, "__post_init__") or any(f.default_factory is not dataclasses.MISSING for f in fields):
+        raise TypeError(f"quick_init: {cls.__name__} has __post_init__ or a default_factory")
+    defaults = {f"_d_{f.name}": f.default for f in fields if f.default is not dataclasses.MISSING}
+    params, kw = [], False
+    for f in fields:
+        if f.kw_only and not kw:
+            params.append("*")
+            kw = True
+        params.append(f.name if f.default is dataclasses.MISSING else f"{f.name}=_d_{f.name}")
+    source = (f"def __init__(self, {', '.join(params)}):\n"
+              f"    self.__dict__.update({', '.join(f'{f.name}={f.name}' for f in fields)})\n")
+    namespace = {}
+    exec(source, defaults, namespace)  # as dataclasses writes its own: one function of the fields' names
+    init = namespace["__init__"]
+    init.__annotations__ = dict(cls.__init__.__annotations__)
+    init.__qualname__ = f"{cls.__qualname__}.__init__"
+    init.__module__ = cls.__module__
+    cls.__init__ = init
+    return cls
 
 
 def _per_frame(name: str, value, n: int) -> bool:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bendsense._batched import quick_init
 from bendsense.status import MISFIT_P, Status
 
 __all__ = ["ForceEstimate", "messages"]
@@ -41,6 +42,7 @@ def messages(status, residual_m, chi2_per_dof, p_value, direction, method):
     return out.astype(str)
 
 
+@quick_init
 @dataclass(frozen=True, eq=False)
 class ForceEstimate:
     """Estimated tip force (paper eq. 18), batched over leading axes ``...``.

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bendsense import _jit
+from bendsense._batched import quick_init
 from bendsense.errors import ArgumentError
 from bendsense.shape import _kernels
 from bendsense.validation import float_array, short
@@ -390,6 +391,7 @@ def max_position_error(positions_m, s_m, kappa, length_m):
 # --- result object and the chain ---------------------------------------------------------
 
 
+@quick_init
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Shape:
     """A reconstructed PCC shape for one frame or a batch of frames.

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bendsense import _jit
+from bendsense._batched import quick_init
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation.result import ForceEstimate
@@ -39,6 +40,7 @@ ML_REFINE_PASSES = 6  # at most this many more passes over the whole series afte
 LOWEST_BANDWIDTH_HZ = 0.01  # the grid's lower end [Hz]; its upper end is a quarter of the frame rate
 
 
+@quick_init
 @dataclass(frozen=True, eq=False)
 class Track:
     """The force tracked over a time series of frames (B,).
