@@ -24,23 +24,24 @@ def quick_init(cls):
     """Give the frozen dataclass ``cls`` an ``__init__`` that fills the instance's dict in one update.
 
     The ``__init__`` that :func:`dataclasses.dataclass` writes for a frozen class sets each
-    field through ``object.__setattr__``, ~0.2–0.3 µs a field: ~5–10 µs for a
-    ``ForceEstimate``'s 31 fields, a tenth of a one-frame estimate. This one has the same
-    signature (the same names, order, defaults and keyword-only fields) and sets the same
-    attributes; the instances stay frozen (assignment raises). Use as a decorator above
-    ``@dataclass(frozen=True)``; a class with ``__post_init__`` or a ``default_factory``
-    keeps the generated ``__init__`` (a TypeError says so).
+    field through ``object.__setattr__``, ~0.3 µs a field: 8.5 µs for a ``ForceEstimate``'s
+    31 fields, 3.7 µs with this one. It has the same signature (the same names, order,
+    defaults and keyword-only fields) and sets the same attributes; the instances stay
+    frozen (assignment raises). Use as a decorator above ``@dataclass(frozen=True)``; a
+    class with ``__post_init__`` or a ``default_factory`` is refused (TypeError).
     """
     fields = [f for f in dataclasses.fields(cls) if f.init]
     if hasattr(cls, "__post_init__") or any(f.default_factory is not dataclasses.MISSING for f in fields):
         raise TypeError(f"quick_init: {cls.__name__} has __post_init__ or a default_factory")
     defaults = {f"_d_{f.name}": f.default for f in fields if f.default is not dataclasses.MISSING}
-    params, kw = [], False
-    for f in fields:
-        if f.kw_only and not kw:
-            params.append("*")
-            kw = True
-        params.append(f.name if f.default is dataclasses.MISSING else f"{f.name}=_d_{f.name}")
+
+    def param(f):
+        return f.name if f.default is dataclasses.MISSING else f"{f.name}=_d_{f.name}"
+
+    # as dataclasses orders them: the keyword-only fields after the others, wherever declared
+    params = [param(f) for f in fields if not f.kw_only]
+    keywords = [param(f) for f in fields if f.kw_only]
+    params += ["*", *keywords] if keywords else []
     source = (f"def __init__(self, {', '.join(params)}):\n"
               f"    self.__dict__.update({', '.join(f'{f.name}={f.name}' for f in fields)})\n")
     namespace = {}

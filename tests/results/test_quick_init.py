@@ -19,9 +19,9 @@ class Plain:
     """Positional, defaulted and keyword-only fields, as dataclasses writes the class."""
 
     a: object
+    d: object = dataclasses.field(default="x", kw_only=True)  # keyword-only, declared among the others
     b: object = 2.0
     c: object = dataclasses.field(default=None, repr=False)
-    d: object = dataclasses.field(default="x", kw_only=True)
     e: object = dataclasses.field(kw_only=True, default=None)
 
 
@@ -31,9 +31,9 @@ class Quick:
     """The same fields, with quick_init."""
 
     a: object
+    d: object = dataclasses.field(default="x", kw_only=True)  # keyword-only, declared among the others
     b: object = 2.0
     c: object = dataclasses.field(default=None, repr=False)
-    d: object = dataclasses.field(default="x", kw_only=True)
     e: object = dataclasses.field(kw_only=True, default=None)
 
 
