@@ -14,35 +14,25 @@ from bendsense.shape.pcc import Shape
 from bendsense.tracking.track import Track
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class Plain:
-    """Positional, defaulted and keyword-only fields, as dataclasses writes the class."""
-
-    a: object
-    d: object = dataclasses.field(default="x", kw_only=True)  # keyword-only, declared among the others
-    b: object = 2.0
-    c: object = dataclasses.field(default=None, repr=False)
-    e: object = dataclasses.field(kw_only=True, default=None)
-
-
-@quick_init
-@dataclasses.dataclass(frozen=True, eq=False)
-class Quick:
-    """The same fields, with quick_init."""
-
-    a: object
-    d: object = dataclasses.field(default="x", kw_only=True)  # keyword-only, declared among the others
-    b: object = 2.0
-    c: object = dataclasses.field(default=None, repr=False)
-    e: object = dataclasses.field(kw_only=True, default=None)
+def _record(name):
+    """A frozen dataclass with positional, defaulted and keyword-only fields (one declared among the others)."""
+    cls = dataclasses.make_dataclass(name, [
+        ("a", object),
+        ("d", object, dataclasses.field(default="x", kw_only=True)),
+        ("b", object, dataclasses.field(default=2.0)),
+        ("c", object, dataclasses.field(default=None, repr=False)),
+        ("e", object, dataclasses.field(kw_only=True, default=None)),
+    ], frozen=True, eq=False)
+    cls.__module__ = __name__  # pickled by name, as a module's class
+    return cls
 
 
-def _twins():
-    return Plain, Quick
+Plain = _record("Plain")  # as dataclasses writes it
+Quick = quick_init(_record("Quick"))
 
 
 def test_the_quick_init_takes_what_the_generated_one_takes_and_sets_the_same_fields():
-    plain, quick = _twins()
+    plain, quick = Plain, Quick
     assert inspect.signature(quick) == inspect.signature(plain)
     for args, kwargs in [((1,), {}), ((1, 3, 4), {"d": "y"}), ((), {"a": 1, "e": 5})]:
         want, got = plain(*args, **kwargs), quick(*args, **kwargs)
@@ -56,8 +46,7 @@ def test_the_quick_init_takes_what_the_generated_one_takes_and_sets_the_same_fie
 
 
 def test_a_quickly_made_result_is_still_frozen_and_replaces_copies_and_pickles():
-    _, quick = _twins()
-    r = quick(np.arange(3.0), d="z")
+    r = Quick(np.arange(3.0), d="z")
     with pytest.raises(dataclasses.FrozenInstanceError):
         r.a = 1
     assert dataclasses.replace(r, b=7).b == 7 and dataclasses.replace(r, b=7).d == "z"
