@@ -4,7 +4,7 @@ The live processor (:class:`bendsense.pipeline.LiveProcessor`) estimates the fra
 block that have a pressure, retries those that failed, and keeps one frame as the next
 block's warm start: these helpers cut and join the frozen result dataclasses
 (``Shape``, ``ForceEstimate``) along their leading frame axis, field by field.
-:func:`quick_init` gives them an ``__init__`` that costs a tenth of the generated one.
+:func:`quick_init` gives them an ``__init__`` that costs under half of the generated one.
 """
 
 from __future__ import annotations

@@ -106,13 +106,13 @@ def guard_cache(namespace: dict) -> None:
             for name in ("load_overload", "save_overload"):
                 method = getattr(cache, name)
                 if not getattr(method, "_bendsense_locked", False):
-                    setattr(cache, name, _locked(method, cache))
+                    setattr(cache, name, _locked(method, cache, miss_on_error=name == "load_overload"))
 
 
-def _locked(method, cache):
+def _locked(method, cache, miss_on_error):
     def locked(self, *args, **kwargs):
         with _cache_lock():
-            if method.__name__ != "load_overload":
+            if not miss_on_error:
                 return method(*args, **kwargs)
             try:
                 return method(*args, **kwargs)
