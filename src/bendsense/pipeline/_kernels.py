@@ -199,27 +199,12 @@ def hold(constants):
 
 
 @njit(cache=True, inline="always")
-def _run1(f, o, a):
-    """The ``a`` values of ``f`` from ``o`` (a view), and the offset after them."""
-    return f[o:o + a], o + a
-
-
-@njit(cache=True, inline="always")
-def _run2(f, o, a, b):
-    """The ``a × b`` values of ``f`` from ``o`` as an (a, b) view, and the offset after them."""
-    return f[o:o + a * b].reshape((a, b)), o + a * b
-
-
-@njit(cache=True, inline="always")
-def _run3(f, o, a, b, c):
-    """The ``a × b × c`` values of ``f`` from ``o`` as an (a, b, c) view, and the offset after them."""
-    return f[o:o + a * b * c].reshape((a, b, c)), o + a * b * c
-
-
-@njit(cache=True, inline="always")
-def _run4(f, o, a, b, c, d):
-    """The ``a × b × c × d`` values of ``f`` from ``o`` as an (a, b, c, d) view, and the offset after them."""
-    return f[o:o + a * b * c * d].reshape((a, b, c, d)), o + a * b * c * d
+def _run(f, o, shape):
+    """The values of ``f`` from offset ``o`` as a view of ``shape`` (a tuple), and the offset after them."""
+    size = 1
+    for d in shape:
+        size *= d
+    return f[o:o + size].reshape(shape), o + size
 
 
 @njit(cache=True, inline="always")
@@ -235,28 +220,28 @@ def carve(n, e, N, M, R, nodes, f, ints, bools, codes):
     arrays as views at the same offsets (one array per buffer crosses the call, not 30);
     ``tests/pipeline/test_live_step.py`` checks that the two agree.
     """
-    kappa, o = _run2(f, 0, n, N)
-    pos, o = _run3(f, o, n, M, 2)
-    ang, o = _run2(f, o, n, M)
-    tip, o = _run2(f, o, n, 2)
-    tip_ang, o = _run1(f, o, n)
-    force, o = _run2(f, o, e, 2)
-    cov, o = _run3(f, o, e, 2, 2)
-    residual, o = _run1(f, o, e)
-    chi2, o = _run1(f, o, e)
-    pval, o = _run1(f, o, e)
-    guess, o = _run2(f, o, e, 2)
-    state, o = _run2(f, o, e, nodes)
-    etip, o = _run2(f, o, e, 2)
-    direction, o = _run2(f, o, e, 2)
-    std, o = _run2(f, o, e, 2)
-    parts, o = _run4(f, o, e, 3, 2, 2)
-    pay, o = _run3(f, o, e, R, 6)
-    shifts, o = _run2(f, o, e, N)
-    tforce, o = _run2(f, o, n, 2)
-    tstd, o = _run2(f, o, n, 2)
-    tcov, o = _run3(f, o, n, 2, 2)
-    window_p, _ = _run1(f, o, n)
+    kappa, o = _run(f, 0, (n, N))
+    pos, o = _run(f, o, (n, M, 2))
+    ang, o = _run(f, o, (n, M))
+    tip, o = _run(f, o, (n, 2))
+    tip_ang, o = _run(f, o, (n,))
+    force, o = _run(f, o, (e, 2))
+    cov, o = _run(f, o, (e, 2, 2))
+    residual, o = _run(f, o, (e,))
+    chi2, o = _run(f, o, (e,))
+    pval, o = _run(f, o, (e,))
+    guess, o = _run(f, o, (e, 2))
+    state, o = _run(f, o, (e, nodes))
+    etip, o = _run(f, o, (e, 2))
+    direction, o = _run(f, o, (e, 2))
+    std, o = _run(f, o, (e, 2))
+    parts, o = _run(f, o, (e, 3, 2, 2))
+    pay, o = _run(f, o, (e, R, 6))
+    shifts, o = _run(f, o, (e, N))
+    tforce, o = _run(f, o, (n, 2))
+    tstd, o = _run(f, o, (n, 2))
+    tcov, o = _run(f, o, (n, 2, 2))
+    window_p, _ = _run(f, o, (n,))
     out = (force, cov, ints[5:5 + e], ints[5 + e:5 + 2 * e], residual, chi2, pval, guess, state, etip, direction, std,
            parts, bools[n:n + e], pay, shifts)
     return ((kappa, pos, ang, tip, tip_ang, bools[:n]), out, (tforce, tstd, tcov, window_p, codes[:n]), codes[n:],
