@@ -221,7 +221,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         return mark_out_of_range(force_bound(result, pressure_pa, config, strict), outside, given_pa, config)
     if initial is not None and not isinstance(initial, ForceEstimate):
         raise ArgumentError(f"initial: expected a ForceEstimate, got {type(initial).__name__}")
-    ref, contact, objective, (pb, plain_pb, plain_err, uncertainty) = _setup(
+    ref, contact, objective, (pb, held, plain_err, uncertainty) = _setup(
         shape, config, constraint, method, objective, push_only, tip_angle_source, direction, follower_angle_rad,
         noise_std, calibration, s_m, n_points, xtol_n, max_iter, load, contact_s_m)
     L = pb.L
@@ -248,7 +248,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
            *_payload_buffers(B, pb))
     o = _kernels.Outputs(*out)
     if method == "fast":
-        _run_fast(B, chain, use_guess, tuple(fr), plain_pb, plain_err, start, out)
+        _run_fast(B, chain, use_guess, tuple(fr), held, start, out)
     else:
         # the paper's baseline starts where fminsearch/fmincon would: at zero force (it makes no
         # guess); the shape, its sensitivities and the uncertainty at its optimum come from the compiled core
@@ -256,7 +256,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         tip_angle = (fr.tip_shape if pb.shape_angle else fr.theta)
         D = constraint_basis(constraint, tip_angle, direction=pb.direction, follower_angle_rad=pb.follower_angle)[0]
         u, run_status, iters = paper_fit(pb, fr, D, ref.Lc)
-        _jit.call(_kernels.evaluate_frames, tuple(fr), plain_pb, plain_err, _OPS, _REF, _c(u),
+        _jit.call(_kernels.evaluate_frames, tuple(fr), held, _c(u),
                   _c(run_status, np.int64), out)
     _warn_uncertainty(uncertainty, config, stacklevel=3)
     text = (np.array([OK_MESSAGE]) if B == 1 and o.status[0] == _OK
@@ -318,8 +318,10 @@ def _warn_uncertainty(uncertainty, config, stacklevel):
 class Compiled(NamedTuple):
     """The constants of an estimate as the live step (:mod:`bendsense.pipeline._kernels`) takes them.
 
-    ``problem``: (Problem, shift error model, beam operators, a contact's operators, coils
-    R, beam nodes, the force point's problem and operators with its σ_c), plain tuples;
+    ``problem``: (the estimate's constants (Problem, shift error model, beam operators, a
+    contact's operators), which the live step holds as the kernels take them
+    (:func:`~bendsense.estimation._kernels.hold`), the shift error model, coils R, beam
+    nodes, the force point's problem and operators with its σ_c), plain tuples;
     ``model``: the pressure range, the free-bending table, θ_pre, L, γ0, γ1, the
     parameters' covariance (5, 5) and whether there is one, μ̄, μ_s, c_a, the force
     bound's scale (:func:`~bendsense.estimation.plausibility.force_bound_n`) and σ_c of
@@ -357,7 +359,7 @@ def compiled(config, calibration, constraint, objective, options) -> Compiled | 
         return None
     _check_choices("fast", constraint, objective, given.get("tip_angle_source"), load, contact_s_m)
     kappa = np.zeros(config.sensor.n_segments)
-    ref, contact, objective, (pb, plain_pb, plain_err, uncertainty) = _setup(
+    ref, contact, objective, (pb, _, plain_err, uncertainty) = _setup(
         kappa, config, constraint, "fast", objective, given.get("push_only"), given.get("tip_angle_source"),
         given.get("direction"), given.get("follower_angle_rad"), given.get("noise_std"), calibration, None,
         given.get("n_points"), given.get("xtol_n", XTOL_N), given.get("max_iter", MAX_ITER), load, contact_s_m)
@@ -372,7 +374,8 @@ def compiled(config, calibration, constraint, objective, options) -> Compiled | 
     sc = model_args[-1]
     at_pb, at_ops = _jit.call(_kernels.contact_at, tuple(pb), _OPS, _REF, sc)  # the point's problem, made once
     at = (tuple(at_pb), tuple(at_ops), sc)
-    return Compiled((tuple(pb), plain_err, _OPS, _REF, int(pb.coils.size), N_NODES, at), model_args, pb, uncertainty,
+    return Compiled(((tuple(pb), plain_err, _OPS, _REF), plain_err, int(pb.coils.size), N_NODES, at), model_args, pb,
+                    uncertainty,
                     objective)
 
 
@@ -627,7 +630,7 @@ def _whole(value) -> bool:
     return math.isfinite(value) and float(value).is_integer()
 
 
-def _run_fast(B, chain, use_guess, fr, pb, err, start, out):
+def _run_fast(B, chain, use_guess, fr, held, start, out):
     """Run the compiled estimate of ``B`` frames into ``out``, in calls of a fraction of a second each.
 
     One frame, a live block, a worker of a process pool (one numba thread), a batch
@@ -640,16 +643,15 @@ def _run_fast(B, chain, use_guess, fr, pb, err, start, out):
     if not _jit.parallel(B):
         step = block if block > 1 else _PIECE
         for lo in range(0, B, step):
-            _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, pb, err, _OPS, _REF,
-                      start, out)
+            _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, held, start, out)
         return
     step = max(block, _PIECE // block * block)
     for lo in range(0, B, step):
         def piece(a, lo=lo):
             return a[lo:lo + step] if a.shape[:1] == (B,) else a
 
-        _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), pb, err, _OPS, _REF,
-                  piece(start), tuple(map(piece, out)))
+        _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), held, piece(start),
+                  tuple(map(piece, out)))
 
 
 def _batch(shape_batch, pressure_shape):
@@ -781,9 +783,11 @@ _PROBLEMS: dict = {}  # (config, calibration, grid, options) -> (config, calibra
 def _problem(config, calibration, ref, options, noise_opt):
     """The constants of an estimate, cached per inputs.
 
-    Returns (:class:`~bendsense.estimation.problem.Problem`, it and the shift error model
-    (:class:`~bendsense.calibration.shift_errors.ShiftErrorModel`) as the kernels take them
-    (:func:`~bendsense.estimation._kernels.plain`), the ``uncertainty`` label).
+    Returns (:class:`~bendsense.estimation.problem.Problem`, the constants as the kernels
+    take them (:func:`~bendsense.estimation._kernels.hold` of the plain tuples of the
+    problem, the shift error model, the beam's operators and a contact's), the shift error
+    model (:class:`~bendsense.calibration.shift_errors.ShiftErrorModel`) as a plain tuple,
+    the ``uncertainty`` label).
     """
     key = (id(config), id(calibration), id(ref.grid) if ref.kappa is not None else ref.s.tobytes(), options)
     hit = _PROBLEMS.get(key)
@@ -866,7 +870,9 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         PQ=_c(PQ), q=_c(ops.Q[-1]), objective=ANGLES if angles else POSITIONS, PQ_fit=_c(PQ_fit),
         coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor, contact=load == "contact")
     err = err._replace(**{name: _c(a, a.dtype) for name, a in err._asdict().items() if isinstance(a, np.ndarray)})
-    return pb, *_kernels.plain(pb, err), ("propagated" if noise else "none")
+    plain_pb, plain_err = _kernels.plain(pb, err)
+    held = _jit.call(_kernels.hold, (plain_pb, plain_err, _OPS, _REF))
+    return pb, held, plain_err, ("propagated" if noise else "none")
 
 
 def compile_kernels() -> None:

@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 from numba import njit, prange
+from numba.typed import List
 
 from bendsense import _jit
 from bendsense.calibration._kernels import shift_covariance
@@ -715,13 +716,16 @@ def near(u0, prev_u0, prev_u):
 
 
 @njit(cache=True, inline="always")
-def typed(fr, pb, err, ops, ref):
-    """The kernels' structures from the plain tuples they are called with.
+def typed(fr, held):
+    """The kernels' structures from what the entry points are called with.
 
-    numba types a plain tuple of arrays in its compiled dispatcher, a named tuple in
-    Python (~3 µs of a one-frame call): the entry points take plain tuples
-    (:func:`plain`) and name their fields here.
+    ``fr``: the frames as a plain tuple (numba types a plain tuple of arrays in its
+    compiled dispatcher, a named tuple in Python, ~3 µs of a one-frame call); ``held``:
+    the estimate's constants (:func:`hold` of :func:`plain`'s problem, shift error model,
+    beam operators and a contact's), one object for the ~40 arrays a call would
+    otherwise take in one by one.
     """
+    pb, err, ops, ref = held[0]
     return prob.Frames(*fr), prob.Problem(*pb), ShiftErrorModel(*err), _KernelOperators(*ops), bk._SplitOperators(*ref)
 
 
@@ -737,6 +741,20 @@ def plain(*structures):
 
 
 @njit(cache=True)
+def hold(constants):
+    """The tuple ``constants`` in a typed list of one, which a compiled call takes as one object.
+
+    A call from Python unboxes each array it is given (~0.1 µs each, a reference the
+    interpreter takes and gives back under the GIL); an estimate's constants (the problem,
+    the shift error model, the beam's operators) are ~40 arrays, a live step's ~150, the
+    same for every call. Held, they cross as one.
+    """
+    held = List()
+    held.append(constants)
+    return held
+
+
+@njit(cache=True)
 def contact_at(pb, ops, ref, sc):
     """The problem and the beam's operators of a force at σ_c = ``sc`` (< 1), as :func:`estimate_block`'s ``at``.
 
@@ -748,15 +766,15 @@ def contact_at(pb, ops, ref, sc):
 
 
 @njit(cache=True)
-def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out, at=None):
+def estimate_block(lo, hi, use_guess, chained, fr, held, start, out, at=None):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`).
 
-    ``fr``, ``pb``, ``err``, ``ops``, ``ref``: the plain tuples of :func:`plain`. A
+    ``fr``: the frames' plain tuple, ``held``: the constants (:func:`typed`). A
     frame's force point gets its problem and operators once for a run of frames at the
     same point; ``at`` (optional): those of the point σ_c = ``at[2]``, made ahead
     (:func:`contact_at`, plain tuples).
     """
-    fr, pb0, err, ops0, ref = typed(fr, pb, err, ops, ref)
+    fr, pb0, err, ops0, ref = typed(fr, held)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
         shifts = Outputs(*out)
     k = pb0.lower.size
@@ -830,17 +848,17 @@ def estimate_block(lo, hi, use_guess, chained, fr, pb, err, ops, ref, start, out
 
 
 @njit(cache=True, parallel=True)
-def estimate_frames(block, use_guess, fr, pb, err, ops, ref, start, out):
+def estimate_frames(block, use_guess, fr, held, start, out):
     """The whole estimate of every frame (B,), in parallel over blocks of ``block`` consecutive frames.
 
     ``use_guess``: start at the moment-balance guess plus the force offset ``start`` (B, 2)
     (projected on the constraint), else at the force ``start``. Within a block (``block`` >
     1, a time series) a frame's start is corrected by the previous frame's offset from its
-    own guess when that converged. ``fr``, ``pb``, ``err``, ``ops``, ``ref``: the plain
-    tuples (:func:`plain`) of :class:`~bendsense.estimation.problem.Frames`,
-    :class:`~bendsense.estimation.problem.Problem`, the shift error model, the beam
-    solver's operators and a contact's reference operators (each frame's force acts at
-    its ``Frames.contact``). ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
+    own guess when that converged. ``fr``: the plain tuple (:func:`plain`) of
+    :class:`~bendsense.estimation.problem.Frames`; ``held``: :func:`hold` of the plain
+    tuples of :class:`~bendsense.estimation.problem.Problem`, the shift error model, the
+    beam solver's operators and a contact's reference operators (each frame's force acts
+    at its ``Frames.contact``). ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
     its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable direction of a boundary
     stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2), success (B,) (converged or not
     identifiable), and the window test's payload (:func:`payload`): residual, Jacobian by u and
@@ -850,13 +868,13 @@ def estimate_frames(block, use_guess, fr, pb, err, ops, ref, start, out):
     nblocks = (B + block - 1) // block
     for blk in prange(nblocks):
         lo = np.int64(blk) * block  # prange's index is unsigned: one compiled estimate_block for both callers
-        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, pb, err, ops, ref, start, out)
+        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, held, start, out)
 
 
 @njit(cache=True)
-def evaluate_frames(fr, pb, err, ops, ref, u, run_status, out):
+def evaluate_frames(fr, held, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
-    fr, pb, err, ops, ref = typed(fr, pb, err, ops, ref)
+    fr, pb, err, ops, ref = typed(fr, held)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
         shifts = Outputs(*out)
     buf = buffers(pb, ops.sigma.size)

@@ -23,7 +23,6 @@ import math
 
 import numpy as np
 from numba import njit
-from numba.typed import List
 
 from bendsense import _jit
 from bendsense.estimation import _kernels as est_kernels
@@ -110,7 +109,7 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     Returns (frames estimated, frames failed, frames marked).
     """
     p_lo, p_hi, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_a, force_scale, contact = model
-    pb, err, ops, ref, R, nodes, at = problem
+    held, _, R, nodes, at = problem
     m = rows.size
     whole = m == p.size
     part = out if whole else outputs(m, kappa.shape[1], R, nodes)
@@ -126,13 +125,13 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     start = np.empty((m, 2))
     start[:, 0] = previous[0]
     start[:, 1] = previous[1]
-    est_kernels.estimate_block(0, m, YES, YES, fr, pb, err, ops, ref, start, part, at)
+    est_kernels.estimate_block(0, m, YES, YES, fr, held, start, part, at)
     failed = 0
     marked = 0
     for i in range(m):
         if not success[i] and (i > 0 or previous[0] != 0.0 or previous[1] != 0.0):
             start[i, :] = 0.0  # a start far from the frame (a fast change): its own start may converge
-            est_kernels.estimate_block(i, i + 1, YES, NO, fr, pb, err, ops, ref, start, part, at)
+            est_kernels.estimate_block(i, i + 1, YES, NO, fr, held, start, part, at)
         failed += not success[i]
         magnitude = math.hypot(force[i, 0], force[i, 1])
         if success[i] and math.isfinite(magnitude) and magnitude > force_scale * ei[i]:
@@ -183,19 +182,6 @@ def track(t, p, out, tracker, windows, window_model, tforce, tstd, tcov, window_
     stream.stream_windows(t, starts, resid, jac, mfac, shifts, err, coils, gap, window_s, fs, rsum, Asum, Msum, Ssum,
                           window_p)
     return missing
-
-
-@njit(cache=True)
-def hold(constants):
-    """The tuple ``constants`` in a typed list of one, which a compiled call takes as one object.
-
-    A call unboxes each array it is given (~0.1 µs each); the live step's constants (the
-    calibration, the free-bending table, the problem, the beam's operators) are ~150
-    arrays, the same for every block.
-    """
-    held = List()
-    held.append(constants)
-    return held
 
 
 @njit(cache=True, inline="always")
@@ -253,10 +239,11 @@ def live_block(a, p, t, constants, previous, tracker, f, ints, bools, codes):
     """One block of frames (n,) of one finger, readings to statuses (module docstring), into the outputs given.
 
     ``a`` (n, N) raw signals, ``p`` (n,) pressures (NaN: none), ``t`` (n,) times;
-    ``constants``: the step's, :func:`hold` of (shape, model, problem, flags,
+    ``constants``: the step's, :func:`~bendsense.estimation._kernels.hold` of (shape, model, problem, flags,
     window_model): ``shape`` the calibration and the PCC grid (offset, coefficients, ΔA
     range, lengths, strip gap, the points' segments and arc lengths within them);
-    ``model`` and ``problem`` :class:`bendsense.estimation.Compiled`'s; ``flags`` whether
+    ``model`` and ``problem`` :class:`bendsense.estimation.Compiled`'s (the problem's
+    first item, the estimate's constants, held); ``flags`` whether
     to estimate, track and check windows; ``window_model`` the shift error model, the
     coils and the strip gap of the window test. ``previous`` (2,): the warm start,
     carried; ``tracker``: :meth:`bendsense.tracking.Tracker.stream_state`. Outputs: the
@@ -275,7 +262,7 @@ def live_block(a, p, t, constants, previous, tracker, f, ints, bools, codes):
     estimating, tracking, windows = flags
     offset, coef, lo, hi, lengths, gap, seg, sigma = shape
     n, N = a.shape[0], lengths.size
-    out_shape, out, out_track, status, counts = carve(n, n if estimating else 0, N, seg.size, problem[4], problem[5],
+    out_shape, out, out_track, status, counts = carve(n, n if estimating else 0, N, seg.size, problem[2], problem[3],
                                                       f, ints, bools, codes)
     kappa, pos, ang, tip, tip_ang, extrapolated = out_shape
     tforce, tstd, tcov, window_p, tstatus = out_track

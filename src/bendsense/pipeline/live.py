@@ -30,7 +30,8 @@ from bendsense import _jit
 from bendsense._batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.errors import ArgumentError, ConfigError, DataWarning
 from bendsense.estimation import estimation_options
-from bendsense.pipeline._kernels import hold, live_block
+from bendsense.estimation._kernels import hold
+from bendsense.pipeline._kernels import live_block
 from bendsense.pipeline.readings import ReadingClock
 from bendsense.results import WINDOW_MISFIT
 from bendsense.status import MISFIT_P, WORDS, Status, words
@@ -452,15 +453,21 @@ class _Step:
         self.bandwidth_hz = processor.tracker.bandwidth_hz if processor.tracker is not None else None
         R, N = int(est.pb.coils.size), sensor.n_segments
         self.sizes = (R, N)
-        self._fields = _fields(N, self.grid.s.size, R, int(est.problem[5]))
+        self._fields = _fields(N, self.grid.s.size, R, int(est.problem[3]))
         self._layouts = {}  # block size → the outputs' layout (_layout)
         self.idle_tracker = Tracker().stream_state(np.zeros(1), R, N)  # what a processor that does not track passes
         # the window test: a fit of the coil angles with a noise model (what Tracker.update checks)
         windows = est.objective == "angles" and est.uncertainty == "propagated"
         window_model = (est.problem[1], est.pb.coils, float(est.pb.gap))
         flags = (bool(self.estimating), bool(self.tracking), bool(windows))
-        self._held = (self.shape, est.model, est.problem, flags, window_model)
-        self.constants = _jit.call(hold, self._held)
+        self._parts = (self.shape, est.model, flags, window_model)
+        self._hold()
+
+    def _hold(self):
+        """The step's constants as the compiled step takes them: typed lists (:func:`hold`) of its parts."""
+        shape, model, flags, window_model = self._parts
+        problem = (_jit.call(hold, self.est.problem[0]), *self.est.problem[1:])
+        self.constants = _jit.call(hold, (shape, model, problem, flags, window_model))
 
     def __getstate__(self):
         # numba's typed list does not pickle (a copied or pickled processor): it is made again of its parts
@@ -468,7 +475,7 @@ class _Step:
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-        self.constants = _jit.call(hold, self._held)
+        self._hold()
 
     def outputs(self, n):
         """The compiled step's four buffers for a block of ``n`` frames (filled by the step), and their layout.
