@@ -13,9 +13,12 @@ unless ``NUMBA_OPT`` is set in the environment. It cuts the first compile by a q
 and the kernels run as fast as at numba's default level 3 (docs/performance.md); the
 setting applies only while bendsense's own kernels compile and is restored after.
 
-The cache: several processes may start cold at once (a process pool's workers, a
-notebook beside a command); reads and writes of bendsense's cache entries hold one lock
-file (in the temporary directory), so that no two processes write numba's cache at once. An index
+The cache: a kernel's cached code is fresh while no module with kernels changed
+(:func:`sources_stamp`; numba itself checks only the kernel's own module, and the kernels
+it calls from others would stay as they were cached). Several processes may start cold at
+once (a process pool's workers, a notebook beside a command); reads and writes of
+bendsense's cache entries hold one lock file (in the temporary directory), so that no two
+processes write numba's cache at once. An index
 that cannot be read (left by another version of bendsense, or torn) is a first run, not a
 failure: the kernel compiles, saying so, and writes a new one.
 
@@ -95,14 +98,55 @@ def _call(dispatcher, args):
         return dispatcher(*args)
 
 
+#: bendsense's modules with compiled kernels (those that end with :func:`guard_cache`), relative to the package
+KERNEL_MODULES = (
+    "calibration/_kernels.py", "control/_kernels.py", "estimation/_kernels.py", "estimation/problem.py",
+    "estimation/uncertainty.py", "mechanics/_actuator_kernels.py", "mechanics/_beam_kernels.py",
+    "pipeline/_kernels.py", "results/_kernels.py", "shape/_kernels.py", "tracking/_kalman_kernels.py",
+    "tracking/_stream_kernels.py", "tracking/_window_kernels.py",
+)
+
+_sources = []  # the stamp of KERNEL_MODULES, once per process
+
+
+def sources_stamp() -> tuple:
+    """(path, mtime, size) of every module of :data:`KERNEL_MODULES`: part of each kernel's cache stamp.
+
+    numba keeps a kernel's cached code while the file of its own module is unchanged, but
+    that code holds the kernels it calls from other modules, inlined or linked in: an edit
+    of one of those (a researcher's, in an editable install) would leave its callers' cached
+    code as it was, silently, and their results with it. With the stamp of every kernel
+    module in each kernel's, an edit of any of them recompiles them all.
+    """
+    if not _sources:
+        root = os.path.dirname(os.path.abspath(__file__))
+        stamps = []
+        for name in KERNEL_MODULES:
+            try:
+                st = os.stat(os.path.join(root, name))
+            except OSError:  # not a plain directory of files (a zip): numba's own stamp only
+                stamps.append((name, None))
+                continue
+            stamps.append((name, st.st_mtime_ns, st.st_size))
+        _sources.append(tuple(stamps))
+    return _sources[0]
+
+
 def guard_cache(namespace: dict) -> None:
     """Make the cache reads and writes of the kernels in ``namespace`` (a module's globals) hold the lock file.
 
-    Call at the end of every module that defines ``@njit(cache=True)`` kernels.
+    Call at the end of every module that defines ``@njit(cache=True)`` kernels (and list it
+    in :data:`KERNEL_MODULES`): each kernel's cache is also stamped with
+    :func:`sources_stamp`, so that it is fresh only while no kernel module changed.
     """
+    stamp = sources_stamp()
     for obj in list(namespace.values()):
         if isinstance(obj, Dispatcher) and getattr(obj, "_cache", None) is not None:
             cache = obj._cache
+            cache_file = getattr(cache, "_cache_file", None)
+            if cache_file is not None and not getattr(cache, "_bendsense_stamped", False):
+                cache_file._source_stamp = (cache_file._source_stamp, stamp)
+                cache._bendsense_stamped = True
             for name in ("load_overload", "save_overload"):
                 method = getattr(cache, name)
                 if not getattr(method, "_bendsense_locked", False):

@@ -126,6 +126,45 @@ def test_a_cache_index_this_version_cannot_read_is_a_first_run_not_a_failure(tmp
     assert third.communicate(timeout=300) == ("6.0\n", "")
 
 
+def test_an_edit_of_a_kernel_a_cached_kernel_calls_from_another_module_recompiles_it(tmp_path):
+    """numba keeps a kernel's cache while its own file is unchanged, though its code holds the callees' from other
+    files: an edit of one of those (an editable install) must not leave the caller's old code running."""
+    import shutil
+
+    package = tmp_path / "bendsense"
+    shutil.copytree(os.path.dirname(bendsense.__file__), package,
+                    ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    # shape's frame_curvatures calls calibration's horner (the polynomial), its code linked into the caller's
+    code = ("import numpy as np\nfrom bendsense import _jit\nfrom bendsense.shape import _kernels as k\n"
+            "kappa, theta = np.zeros(1), np.zeros(1)\n"
+            "_jit.call(k.frame_curvatures, np.ones(1), np.zeros(1), np.array([[0.0, 1.0]]), -np.ones(1) * 9,\n"
+            "          np.ones(1) * 9, np.ones(1), 1.0, kappa, theta)\n"
+            f"print(kappa.tolist(), k.__file__.startswith({str(package)!r}))\n")
+    first = _run(tmp_path, code)
+    out, err = first.communicate(timeout=300)
+    assert (first.returncode, out) == (0, "[1.0] True\n"), err
+    callee = package / "calibration" / "_kernels.py"
+    text = callee.read_text()
+    assert text.count("        acc = acc * x + c[j]\n") == 1
+    callee.write_text(text.replace("        acc = acc * x + c[j]\n", "        acc = acc * x + 2.0 * c[j]\n"))
+    again = _run(tmp_path, code)
+    out, err = again.communicate(timeout=300)
+    assert (again.returncode, out) == (0, "[2.0] True\n"), err  # the caller compiled anew
+    assert "compiling" in err
+
+
+def test_the_kernel_modules_stamped_are_every_module_with_kernels():
+    """Each module that ends with ``guard_cache(globals())`` is in ``KERNEL_MODULES`` (an edit of it recompiles)."""
+    from pathlib import Path
+
+    root = Path(bendsense.__file__).parent
+    found = sorted(p.relative_to(root).as_posix() for p in root.rglob("*.py")
+                   if "_jit.guard_cache(globals())" in p.read_text(encoding="utf-8"))
+    assert found == sorted(_jit.KERNEL_MODULES)
+    assert [s[0] for s in _jit.sources_stamp()] == list(_jit.KERNEL_MODULES)
+    assert all(len(s) == 3 for s in _jit.sources_stamp())  # each found on disk
+
+
 def test_the_optimisation_level_of_the_user_is_kept(tmp_path):
     """``NUMBA_OPT`` set by the user is left alone (and not removed after the compile)."""
     (tmp_path / "bs_toy_kernels.py").write_text(KERNEL)

@@ -464,7 +464,11 @@ class _Step:
         self._hold()
 
     def _hold(self):
-        """The step's constants as the compiled step takes them: typed lists (:func:`hold`) of its parts."""
+        """The step's constants as the compiled step takes them (:func:`~bendsense.estimation._kernels.hold`).
+
+        Held twice: the estimate's constants inside the problem (as ``estimate_block`` takes
+        them), and the whole.
+        """
         shape, model, flags, window_model = self._parts
         problem = (_jit.call(hold, self.est.problem[0]), *self.est.problem[1:])
         self.constants = _jit.call(hold, (shape, model, problem, flags, window_model))
