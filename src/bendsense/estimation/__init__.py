@@ -374,9 +374,8 @@ def compiled(config, calibration, constraint, objective, options) -> Compiled | 
     sc = model_args[-1]
     at_pb, at_ops = _jit.call(_kernels.contact_at, tuple(pb), _OPS, _REF, sc)  # the point's problem, made once
     at = (tuple(at_pb), tuple(at_ops), sc)
-    return Compiled(((tuple(pb), plain_err, _OPS, _REF), plain_err, int(pb.coils.size), N_NODES, at), model_args, pb,
-                    uncertainty,
-                    objective)
+    constants = (tuple(pb), plain_err, _OPS, _REF)
+    return Compiled((constants, plain_err, int(pb.coils.size), N_NODES, at), model_args, pb, uncertainty, objective)
 
 
 _COMPILED_OPTIONS = frozenset(("constraint", "objective", "push_only", "tip_angle_source", "direction",
