@@ -717,13 +717,9 @@ def near(u0, prev_u0, prev_u):
 
 @njit(cache=True, inline="always")
 def typed(fr, held):
-    """The kernels' structures from what the entry points are called with.
+    """The kernels' structures from the frames' plain tuple and the constants ``held`` (:func:`hold`).
 
-    ``fr``: the frames as a plain tuple (numba types a plain tuple of arrays in its
-    compiled dispatcher, a named tuple in Python, ~3 µs of a one-frame call); ``held``:
-    the estimate's constants (:func:`hold` of :func:`plain`'s problem, shift error model,
-    beam operators and a contact's), one object for the ~40 arrays a call would
-    otherwise take in one by one.
+    numba types a named tuple given from Python slowly (~3 µs a call): the entry points take plain tuples.
     """
     pb, err, ops, ref = held[0]
     return prob.Frames(*fr), prob.Problem(*pb), ShiftErrorModel(*err), _KernelOperators(*ops), bk._SplitOperators(*ref)
@@ -742,12 +738,9 @@ def plain(*structures):
 
 @njit(cache=True)
 def hold(constants):
-    """The tuple ``constants`` in a typed list of one, which a compiled call takes as one object.
+    """The tuple ``constants`` in a typed list of one, which a call from Python takes as one object.
 
-    A call from Python unboxes each array it is given (~0.1 µs each, a reference the
-    interpreter takes and gives back under the GIL); an estimate's constants (the problem,
-    the shift error model, the beam's operators) are ~40 arrays, a live step's ~150, the
-    same for every call. Held, they cross as one.
+    Not each of its arrays (~0.1 µs each; an estimate's constants are ~40, a live step's ~150, the same at every call).
     """
     held = List()
     held.append(constants)

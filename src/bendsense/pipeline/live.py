@@ -29,8 +29,8 @@ import numpy as np
 from bendsense import _jit
 from bendsense._batched import concat_frames, expand_frames, put_frames, take_frames
 from bendsense.errors import ArgumentError, ConfigError, DataWarning
+from bendsense.estimation import _kernels as est_kernels
 from bendsense.estimation import estimation_options
-from bendsense.estimation._kernels import hold
 from bendsense.pipeline._kernels import live_block
 from bendsense.pipeline.readings import ReadingClock
 from bendsense.results import WINDOW_MISFIT
@@ -222,8 +222,7 @@ class LiveBlock:
     def estimate(self):
         """Forces, batch axis n (:class:`~bendsense.ForceEstimate`); None without an estimate."""
         if self._estimate is None and self._step is not None and self._step.has_estimate:
-            self._estimate = self._step.step.estimate_of(self._step.group("estimate"), self.pressure_pa,
-                                                         self.process_s)
+            self._estimate = self._step.step.estimate_of(self._step.group("estimate"), self.pressure_pa, self.process_s)
         return self._estimate
 
     @property
@@ -410,8 +409,7 @@ def _fields(N, M, R, nodes):
             *[("estimate", i, 0, "e", tail) for i, tail in est],
             *[("track", i, 0, "n", tail) for i, tail in enumerate(((2,), (2,), (2, 2), ()))],
             ("counts", 0, 1, 5, ()), ("estimate", 2, 1, "e", ()), ("estimate", 3, 1, "e", ()),
-            ("shape", 5, 2, "n", ()), ("estimate", 13, 2, "e", ()),
-            ("track", 4, 3, "n", ()), ("status", 0, 3, "n", ()))
+            ("shape", 5, 2, "n", ()), ("estimate", 13, 2, "e", ()), ("track", 4, 3, "n", ()), ("status", 0, 3, "n", ()))
 
 
 def _layout(fields, n, e):
@@ -460,18 +458,14 @@ class _Step:
         windows = est.objective == "angles" and est.uncertainty == "propagated"
         window_model = (est.problem[1], est.pb.coils, float(est.pb.gap))
         flags = (bool(self.estimating), bool(self.tracking), bool(windows))
-        self._parts = (self.shape, est.model, flags, window_model)
+        self._held = (self.shape, est.model, est.problem, flags, window_model)
         self._hold()
 
     def _hold(self):
-        """The step's constants as the compiled step takes them (:func:`~bendsense.estimation._kernels.hold`).
-
-        Held twice: the estimate's constants inside the problem (as ``estimate_block`` takes
-        them), and the whole.
-        """
-        shape, model, flags, window_model = self._parts
-        problem = (_jit.call(hold, self.est.problem[0]), *self.est.problem[1:])
-        self.constants = _jit.call(hold, (shape, model, problem, flags, window_model))
+        """Hold the constants as the step takes them, the estimate's inside (:func:`est_kernels.hold`)."""
+        shape, model, problem, flags, window_model = self._held
+        self.constants = _jit.call(est_kernels.hold, (shape, model, (_jit.call(est_kernels.hold, problem[0]),
+                                                                     *problem[1:]), flags, window_model))
 
     def __getstate__(self):
         # numba's typed list does not pickle (a copied or pickled processor): it is made again of its parts
@@ -745,8 +739,7 @@ class LiveProcessor:
         arrays.counted()
         return arrays
 
-    def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None,
-                      extra=None) -> LiveBlock:
+    def process_block(self, signals, pressure_pa=None, *, t_s=None, seq=None, host_ns=None, extra=None) -> LiveBlock:
         """Process a block of consecutive frames.
 
         Parameters
