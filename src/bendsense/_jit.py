@@ -30,6 +30,7 @@ oversubscribe the cores). ``NUMBA_THREADING_LAYER`` in the environment takes pre
 """
 
 import contextlib
+import functools
 import os
 import sys
 import threading
@@ -106,9 +107,7 @@ KERNEL_MODULES = (
     "tracking/_stream_kernels.py", "tracking/_window_kernels.py",
 )
 
-_sources = []  # the stamp of KERNEL_MODULES, once per process
-
-
+@functools.cache
 def sources_stamp() -> tuple:
     """(path, mtime, size) of every module of :data:`KERNEL_MODULES`: part of each kernel's cache stamp.
 
@@ -118,18 +117,16 @@ def sources_stamp() -> tuple:
     code as it was, silently, and their results with it. With the stamp of every kernel
     module in each kernel's, an edit of any of them recompiles them all.
     """
-    if not _sources:
-        root = os.path.dirname(os.path.abspath(__file__))
-        stamps = []
-        for name in KERNEL_MODULES:
-            try:
-                st = os.stat(os.path.join(root, name))
-            except OSError:  # not a plain directory of files (a zip): numba's own stamp only
-                stamps.append((name, None))
-                continue
-            stamps.append((name, st.st_mtime_ns, st.st_size))
-        _sources.append(tuple(stamps))
-    return _sources[0]
+    root = os.path.dirname(os.path.abspath(__file__))
+    stamps = []
+    for name in KERNEL_MODULES:
+        try:
+            st = os.stat(os.path.join(root, name))
+        except OSError:  # not a plain directory of files (a zip): numba's own stamp only
+            stamps.append((name, None))
+            continue
+        stamps.append((name, st.st_mtime_ns, st.st_size))
+    return tuple(stamps)
 
 
 def guard_cache(namespace: dict) -> None:

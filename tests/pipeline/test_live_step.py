@@ -239,7 +239,7 @@ def test_a_block_reads_each_output_where_the_step_wrote_it(calibration_path, n, 
     step = proc._compiled_step()
     buffers, layout = step.outputs(n)
     R, N = step.sizes
-    kernel = carve(n, n if estimating else 0, N, step.grid.s.size, R, step.est.problem[3], *buffers)
+    kernel = carve(n, n if estimating else 0, N, step.grid.s.size, R, step.est.problem[2], *buffers)
     arrays = _Arrays(step, buffers, layout, np.zeros(n))
     for group, outputs in zip(("shape", "estimate", "track", "status", "counts"), kernel):
         outputs = outputs if isinstance(outputs, tuple) else (outputs,)

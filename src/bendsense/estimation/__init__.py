@@ -320,8 +320,8 @@ class Compiled(NamedTuple):
 
     ``problem``: (the estimate's constants (Problem, shift error model, beam operators, a
     contact's operators), which the live step holds as the kernels take them
-    (:func:`~bendsense.estimation._kernels.hold`), the shift error model, coils R, beam
-    nodes, the force point's problem and operators with its σ_c), plain tuples;
+    (:func:`~bendsense.estimation._kernels.hold`), coils R, beam nodes, the force point's
+    problem and operators with its σ_c), plain tuples;
     ``model``: the pressure range, the free-bending table, θ_pre, L, γ0, γ1, the
     parameters' covariance (5, 5) and whether there is one, μ̄, μ_s, c_a, the force
     bound's scale (:func:`~bendsense.estimation.plausibility.force_bound_n`) and σ_c of
@@ -375,7 +375,7 @@ def compiled(config, calibration, constraint, objective, options) -> Compiled | 
     at_pb, at_ops = _jit.call(_kernels.contact_at, tuple(pb), _OPS, _REF, sc)  # the point's problem, made once
     at = (tuple(at_pb), tuple(at_ops), sc)
     constants = (tuple(pb), plain_err, _OPS, _REF)
-    return Compiled((constants, plain_err, int(pb.coils.size), N_NODES, at), model_args, pb, uncertainty, objective)
+    return Compiled((constants, int(pb.coils.size), N_NODES, at), model_args, pb, uncertainty, objective)
 
 
 _COMPILED_OPTIONS = frozenset(("constraint", "objective", "push_only", "tip_angle_source", "direction",
@@ -393,7 +393,7 @@ def compiled_estimate(step, out, pressure_pa, config, *, constraint, load, conta
     o = _kernels.Outputs(*out)
     n = o.status.size
     text = messages(o.status, o.residual, o.chi2, o.p_value, o.direction, "fast")
-    result = _result(o, (n,), text, step.pb, step.problem[1], wall_time_s=wall_time_s, method="fast",
+    result = _result(o, (n,), text, step.pb, step.problem[0][1], wall_time_s=wall_time_s, method="fast",
                      constraint=constraint, uncertainty=step.uncertainty, objective=step.objective, load=load,
                      contact_s_m=contact_s_m)
     if result.contact_jacobian_rad_per_m is not None:  # not computed at a known location

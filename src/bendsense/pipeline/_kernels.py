@@ -109,7 +109,7 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     Returns (frames estimated, frames failed, frames marked).
     """
     p_lo, p_hi, table, prebend, length, ei0, ei1, cov, has_cov, mu, mu_s, c_a, force_scale, contact = model
-    held, _, R, nodes, at = problem
+    held, R, nodes, at = problem
     m = rows.size
     whole = m == p.size
     part = out if whole else outputs(m, kappa.shape[1], R, nodes)
@@ -262,7 +262,7 @@ def live_block(a, p, t, constants, previous, tracker, f, ints, bools, codes):
     estimating, tracking, windows = flags
     offset, coef, lo, hi, lengths, gap, seg, sigma = shape
     n, N = a.shape[0], lengths.size
-    out_shape, out, out_track, status, counts = carve(n, n if estimating else 0, N, seg.size, problem[2], problem[3],
+    out_shape, out, out_track, status, counts = carve(n, n if estimating else 0, N, seg.size, problem[1], problem[2],
                                                       f, ints, bools, codes)
     kappa, pos, ang, tip, tip_ang, extrapolated = out_shape
     tforce, tstd, tcov, window_p, tstatus = out_track

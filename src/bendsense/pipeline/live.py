@@ -451,12 +451,12 @@ class _Step:
         self.bandwidth_hz = processor.tracker.bandwidth_hz if processor.tracker is not None else None
         R, N = int(est.pb.coils.size), sensor.n_segments
         self.sizes = (R, N)
-        self._fields = _fields(N, self.grid.s.size, R, int(est.problem[3]))
+        self._fields = _fields(N, self.grid.s.size, R, int(est.problem[2]))
         self._layouts = {}  # block size → the outputs' layout (_layout)
         self.idle_tracker = Tracker().stream_state(np.zeros(1), R, N)  # what a processor that does not track passes
         # the window test: a fit of the coil angles with a noise model (what Tracker.update checks)
         windows = est.objective == "angles" and est.uncertainty == "propagated"
-        window_model = (est.problem[1], est.pb.coils, float(est.pb.gap))
+        window_model = (est.problem[0][1], est.pb.coils, float(est.pb.gap))
         flags = (bool(self.estimating), bool(self.tracking), bool(windows))
         self._held = (self.shape, est.model, est.problem, flags, window_model)
         self._hold()
