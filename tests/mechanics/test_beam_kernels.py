@@ -41,6 +41,43 @@ def test_semidefinite_cholesky_is_a_pseudo_inverse_of_the_measured_channels():
     assert float(z[:, 0] @ z[:, 0]) == pytest.approx(want, rel=1e-10)
 
 
+@pytest.mark.parametrize("drop", [(), (3, 9)])
+def test_forward_transposed_moves_the_whitening_onto_the_other_factor(drop):
+    # Vᵀ (L⁺ B) = (L⁺ᵀ V)ᵀ B, also where channels without noise leave L singular
+    rng = np.random.default_rng(len(drop))
+    A = rng.standard_normal((16, 16))
+    S = A @ A.T + np.eye(16)
+    S[list(drop), :] = 0.0
+    S[:, list(drop)] = 0.0
+    Lc = S.copy()
+    assert unc.cholesky(Lc) == 16 - len(drop)
+    V, B = rng.standard_normal((16, 2)), rng.standard_normal((16, 16))
+    whitened, moved = B.copy(), V.copy()
+    unc.forward(Lc, whitened)
+    unc.forward_transposed(Lc, moved)
+    np.testing.assert_allclose(moved.T @ B, V.T @ whitened, rtol=1e-11, atol=1e-11)
+    keep = np.setdiff1d(np.arange(16), drop)
+    if drop:  # the dropped channels take no part: the pseudo-inverse of the kept block
+        np.testing.assert_array_equal(moved[list(drop)], 0.0)
+    np.testing.assert_allclose(Lc[np.ix_(keep, keep)].T @ moved[keep], V[keep], rtol=1e-10, atol=1e-12)  # Lᵀ X = V
+
+
+@pytest.mark.parametrize("k", [1, 2])
+@pytest.mark.parametrize("singular", [False, True])
+def test_chi2_with_model_is_the_generalised_least_squares_minimum(k, singular):
+    # χ² = min_δu (e + J δu)ᵀ C⁻¹ (e + J δu), C = I + B Σ Bᵀ: dense, by numpy
+    rng = np.random.default_rng(10 * k + singular)
+    R = 14
+    e, J, B = rng.standard_normal(R), rng.standard_normal((R, k)), rng.standard_normal((R, 2))
+    a = rng.standard_normal((2, 2))
+    cov = np.outer(a[0], a[0]) if singular else a @ a.T
+    C = np.eye(R) + B @ cov @ B.T
+    Ci = np.linalg.inv(C)
+    du = -np.linalg.solve(J.T @ Ci @ J, J.T @ Ci @ e)
+    r = e + J @ du
+    assert unc.chi2_with_model(e, J, B, cov) == pytest.approx(r @ Ci @ r, rel=1e-10)
+
+
 def test_scalar_interp_matches_numpy():
     from bendsense.calibration._kernels import interp
 

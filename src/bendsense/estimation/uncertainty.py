@@ -210,6 +210,22 @@ def forward(Lc, B):
 
 
 @njit(cache=True)
+def forward_transposed(Lc, V):
+    """``V`` (n, m) ← Mᵀ V in place, with M the linear map of :func:`forward` (X = M B).
+
+    ``(M V)ᵀ B = Vᵀ (M B)``: a product with a whitened matrix of many columns (the
+    whitened ∂r/∂S, N of them) needs the whitening only of the few columns of ``V``.
+    Backward substitution with Lcᵀ; rows of a zero pivot get 0, as in :func:`forward`.
+    """
+    for i in range(Lc.shape[0] - 1, -1, -1):
+        for c in range(V.shape[1]):
+            acc = V[i, c]
+            for j in range(i + 1, Lc.shape[0]):
+                acc -= Lc[j, i] * V[j, c]
+            V[i, c] = acc / Lc[i, i] if Lc[i, i] > 0.0 else 0.0
+
+
+@njit(cache=True)
 def misfit(Gf, w2, r, JD, cov_s):
     """χ² of the residual ``r`` (2M,) against the propagated shift covariance, and its dof.
 
@@ -376,19 +392,26 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
         for a in range(2):
             for c in range(k):
                 Fd[a] += dD[a, c] * u[c]
-    B = np.zeros((R, N))  # ∂r/∂S, then whitened
-    for a in range(R):
-        B[a, coils[a]] = -1.0 / gap
-        if has_dD:
-            t = dy[a, 0] * Fd[0] + dy[a, 1] * Fd[1]
-            for j in range(N):
-                B[a, j] += t * dphi_ds[j]
     y0, sw, Lw, whiten = tg
+    # J̃ᵀ L_w⁻¹ ∂r/∂S (k, N) with ∂r/∂S = −E/d + (∂y/∂F · F_d) ∂φ_L/∂S (E picks the coils'
+    # columns): the whitening moved onto J̃'s k columns (forward_transposed), ∂r/∂S never formed
+    Y = JD.copy()
+    if whiten:
+        forward_transposed(Lw, Y)
+    JB = np.zeros((k, N))
+    turn = np.zeros(k)
+    for a in range(R):
+        t = dy[a, 0] * Fd[0] + dy[a, 1] * Fd[1] if has_dD else 0.0
+        for c in range(k):
+            JB[c, coils[a]] -= Y[a, c] / gap
+            turn[c] += Y[a, c] * t
+    for c in range(k):
+        for j in range(N):
+            JB[c, j] += turn[c] * dphi_ds[j]
     Bm = dym.copy()  # ∂r/∂(K0, EI), then whitened
     if whiten:
-        forward(Lw, B)
         forward(Lw, Bm)
-    T = mm(D, mm(Hinv, mm(JD.T.copy(), B)))
+    T = mm(D, mm(Hinv, JB))
     for a in range(2):
         for j in range(N):
             T[a, j] = Fd[a] * dphi_ds[j] - T[a, j]
@@ -419,31 +442,39 @@ def chi2_with_model(e, JD, Bm, model_cov):
 
     In whitened units the residual's covariance is ``C = I + B_m Σ_m B_mᵀ`` (``Bm`` (R, 2)
     = whitened ∂r/∂(K0, EI)); χ² = min_δu (e + J̃ δu)ᵀ C⁻¹ (e + J̃ δu), a k-parameter
-    least-squares problem after one Cholesky factorisation of C (docs/theory.md).
+    least-squares problem (docs/theory.md). C is the identity plus a rank-2 term: with
+    ``Σ_m = G Gᵀ`` and ``U = B_m G``, ``C⁻¹ = I − U (I + UᵀU)⁻¹ Uᵀ`` (Woodbury), so the
+    Gram matrix of ``[e, J̃]`` under C⁻¹ costs O(R), not C's O(R³) factorisation.
     """
     R = e.size
     k = JD.shape[1]
-    C = mm(mm(Bm, model_cov), Bm.T.copy())
+    G = model_cov.copy()
+    cholesky(G)  # Σ_m = G Gᵀ, a zero column where Σ_m is singular
+    U = mm(Bm, G)
+    A = np.empty((R, 1 + k))
     for a in range(R):
-        C[a, a] += 1.0
-    cholesky(C)
-    rhs = np.empty((R, 1 + k))
-    for a in range(R):
-        rhs[a, 0] = e[a]
+        A[a, 0] = e[a]
         for c in range(k):
-            rhs[a, 1 + c] = JD[a, c]
-    forward(C, rhs)
-    G = mm(rhs[:, 1:].T.copy(), rhs[:, 1:].copy())
-    g = mm(rhs[:, 1:].T.copy(), rhs[:, :1].copy())[:, 0]
+            A[a, 1 + c] = JD[a, c]
+    At = A.T.copy()
+    UtA = mm(U.T.copy(), A)
+    S = mm(U.T.copy(), U)  # I + UᵀU (2, 2), symmetric positive definite
+    S[0, 0] += 1.0
+    S[1, 1] += 1.0
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    Si = np.empty((2, 2))
+    Si[0, 0], Si[1, 1], Si[0, 1], Si[1, 0] = S[1, 1] / det, S[0, 0] / det, -S[0, 1] / det, -S[1, 0] / det
+    M = mm(At, A) - mm(UtA.T.copy(), mm(Si, UtA))  # [e, J̃]ᵀ C⁻¹ [e, J̃]
+    Gk = M[1:, 1:].copy()
+    g = M[1:, 0].copy()
     step = np.empty(k)
-    lm_step(G, g, step)
-    chi2 = 0.0
-    for a in range(R):
-        r = rhs[a, 0]
-        for c in range(k):
-            r += rhs[a, 1 + c] * step[c]
-        chi2 += r * r
-    return chi2
+    lm_step(Gk, g, step)
+    chi2 = M[0, 0]
+    for c in range(k):
+        chi2 += 2.0 * g[c] * step[c]
+        for d in range(k):
+            chi2 += step[c] * Gk[c, d] * step[d]
+    return max(chi2, 0.0)
 
 
 @njit(cache=True)
