@@ -63,14 +63,18 @@ def test_forward_transposed_moves_the_whitening_onto_the_other_factor(drop):
 
 
 @pytest.mark.parametrize("k", [1, 2])
-@pytest.mark.parametrize("singular", [False, True])
-def test_chi2_with_model_is_the_generalised_least_squares_minimum(k, singular):
-    # χ² = min_δu (e + J δu)ᵀ C⁻¹ (e + J δu), C = I + B Σ Bᵀ: dense, by numpy
-    rng = np.random.default_rng(10 * k + singular)
+@pytest.mark.parametrize("case", ["full", "singular", "units"])
+def test_chi2_with_model_is_the_generalised_least_squares_minimum(k, case):
+    # χ² = min_δu (e + J δu)ᵀ C⁻¹ (e + J δu), C = I + B Σ Bᵀ: dense, by numpy; "units": Σ over
+    # (K0, EI) in units 1e8 apart (B the inverse), where a factor of Σ with a relative pivot floor drops EI
+    rng = np.random.default_rng(10 * k + len(case))
     R = 14
     e, J, B = rng.standard_normal(R), rng.standard_normal((R, k)), rng.standard_normal((R, 2))
     a = rng.standard_normal((2, 2))
-    cov = np.outer(a[0], a[0]) if singular else a @ a.T
+    cov = np.outer(a[0], a[0]) if case == "singular" else a @ a.T
+    if case == "units":
+        scale = np.array([1e4, 1e-4])
+        cov, B = cov * np.outer(scale, scale), B / scale
     C = np.eye(R) + B @ cov @ B.T
     Ci = np.linalg.inv(C)
     du = -np.linalg.solve(J.T @ Ci @ J, J.T @ Ci @ e)

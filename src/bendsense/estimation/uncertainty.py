@@ -442,38 +442,36 @@ def chi2_with_model(e, JD, Bm, model_cov):
 
     In whitened units the residual's covariance is ``C = I + B_m Σ_m B_mᵀ`` (``Bm`` (R, 2)
     = whitened ∂r/∂(K0, EI)); χ² = min_δu (e + J̃ δu)ᵀ C⁻¹ (e + J̃ δu), a k-parameter
-    least-squares problem (docs/theory.md). C is the identity plus a rank-2 term: with
-    ``Σ_m = G Gᵀ`` and ``U = B_m G``, ``C⁻¹ = I − U (I + UᵀU)⁻¹ Uᵀ`` (Woodbury), so the
-    Gram matrix of ``[e, J̃]`` under C⁻¹ costs O(R), not C's O(R³) factorisation.
+    least-squares problem (docs/theory.md). C is the identity plus a rank-2 term:
+    ``C⁻¹ = I − B_m Σ_m (I + B_mᵀ B_m Σ_m)⁻¹ B_mᵀ`` (Woodbury's identity in the form that
+    needs no factor of Σ_m, which may be singular and mixes the units of K0 and EI), so
+    the Gram matrix of ``[e, J̃]`` under C⁻¹ costs O(R), not C's O(R³) factorisation.
     """
     R = e.size
     k = JD.shape[1]
-    G = model_cov.copy()
-    cholesky(G)  # Σ_m = G Gᵀ, a zero column where Σ_m is singular
-    U = mm(Bm, G)
     A = np.empty((R, 1 + k))
     for a in range(R):
         A[a, 0] = e[a]
         for c in range(k):
             A[a, 1 + c] = JD[a, c]
-    At = A.T.copy()
-    UtA = mm(U.T.copy(), A)
-    S = mm(U.T.copy(), U)  # I + UᵀU (2, 2), symmetric positive definite
+    Bt = Bm.T.copy()
+    P = mm(Bt, A)  # B_mᵀ [e, J̃] (2, 1 + k)
+    S = mm(mm(Bt, Bm), model_cov)  # I + B_mᵀ B_m Σ_m: its eigenvalues are ≥ 1
     S[0, 0] += 1.0
     S[1, 1] += 1.0
     det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
     Si = np.empty((2, 2))
     Si[0, 0], Si[1, 1], Si[0, 1], Si[1, 0] = S[1, 1] / det, S[0, 0] / det, -S[0, 1] / det, -S[1, 0] / det
-    M = mm(At, A) - mm(UtA.T.copy(), mm(Si, UtA))  # [e, J̃]ᵀ C⁻¹ [e, J̃]
-    Gk = M[1:, 1:].copy()
+    M = mm(A.T.copy(), A) - mm(P.T.copy(), mm(mm(model_cov, Si), P))  # [e, J̃]ᵀ C⁻¹ [e, J̃]
+    G = M[1:, 1:].copy()
     g = M[1:, 0].copy()
     step = np.empty(k)
-    lm_step(Gk, g, step)
+    lm_step(G, g, step)
     chi2 = M[0, 0]
     for c in range(k):
         chi2 += 2.0 * g[c] * step[c]
         for d in range(k):
-            chi2 += step[c] * Gk[c, d] * step[d]
+            chi2 += step[c] * G[c, d] * step[d]
     return max(chi2, 0.0)
 
 
