@@ -173,9 +173,10 @@ def window_metric(rsum, Asum, Msum, Ssum, n, err, coils, gap, extra):
             ee[a, b] = 0.0
             for i in range(y.shape[0]):
                 ee[a, b] += ye[i, a] * ye[i, b]
-    x = np.zeros(0)
+    x = np.zeros((0, 1))
     if m > 0:
-        x = back_substitute(Cy, ye[:, 0].copy())  # Cy⁻¹ Qᵀ ẽ₀ = Ly⁻ᵀ ỹ
+        x = ye[:, :1].copy()
+        unc.forward_transposed(Cy, x)  # Cy⁻¹ Qᵀ ẽ₀ = Ly⁻ᵀ ỹ
         for c in range(2):
             for c2 in range(2):
                 X[c, 3 + c2] = 0.0
@@ -186,7 +187,7 @@ def window_metric(rsum, Asum, Msum, Ssum, n, err, coils, gap, extra):
         unc.forward(Lc, Gp)
         Gp = Gp.T.copy()
         unc.forward(Lc, Gp)
-        v = unc.mm(Gp, unc.mm(Q, x.reshape(-1, 1)))
+        v = unc.mm(Gp, unc.mm(Q, x))
         for c in range(2):  # Āᵀ W C_p Ω e₀ = Ãᵀ G_p Q Cy⁻¹ Qᵀ ẽ₀
             X[c, p] = 0.0
             for i in range(R):
@@ -214,19 +215,6 @@ def window_tests(bounds, resid, jac, mfac, shifts, err, coils, gap, p_out, n_out
     model = ShiftErrorModel(*err)
     for w in range(bounds.size - 1):
         p_out[w], n_out[w] = window_test(bounds[w], bounds[w + 1], resid, jac, mfac, shifts, model, coils, gap)
-
-
-@njit(cache=True)
-def back_substitute(Ly, b):
-    """``Ly⁻ᵀ b`` for a lower triangular ``Ly`` (its zero pivots give 0)."""
-    D = b.size
-    x = np.zeros(D)
-    for i in range(D - 1, -1, -1):
-        acc = b[i]
-        for j in range(i + 1, D):
-            acc -= Ly[j, i] * x[j]
-        x[i] = acc / Ly[i, i] if Ly[i, i] > 0.0 else 0.0
-    return x
 
 
 @njit(cache=True)
