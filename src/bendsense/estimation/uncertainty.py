@@ -399,15 +399,15 @@ def covariance_angles(e, tg, D, dD, has_dD, u, has_cov, cov_s, coils, gap, dphi_
     if whiten:
         forward_transposed(Lw, Y)
     JB = np.zeros((k, N))
-    turn = np.zeros(k)
     for a in range(R):
-        t = dy[a, 0] * Fd[0] + dy[a, 1] * Fd[1] if has_dD else 0.0
         for c in range(k):
             JB[c, coils[a]] -= Y[a, c] / gap
-            turn[c] += Y[a, c] * t
-    for c in range(k):
+    for c in range(k if has_dD else 0):  # the turn of D with the shape's tip angle
+        turn = 0.0
+        for a in range(R):
+            turn += Y[a, c] * (dy[a, 0] * Fd[0] + dy[a, 1] * Fd[1])
         for j in range(N):
-            JB[c, j] += turn[c] * dphi_ds[j]
+            JB[c, j] += turn * dphi_ds[j]
     Bm = dym.copy()  # ∂r/∂(K0, EI), then whitened
     if whiten:
         forward(Lw, Bm)
