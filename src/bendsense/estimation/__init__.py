@@ -39,6 +39,7 @@ from bendsense import _jit
 from bendsense.calibration import Calibration
 from bendsense.calibration.shift_errors import noise_only
 from bendsense.choices import ANGLE_SOURCES, LOADS, METHODS, OBJECTIVES
+from bendsense.config import MODEL_PARAMETERS, Config, load_config
 from bendsense.errors import ArgumentError, ConvergenceError, NoNoiseModelWarning
 from bendsense.estimation import _kernels
 from bendsense.estimation.paper import paper_fit
@@ -267,7 +268,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     result = _result(o, batch, text, pb, plain_err, wall_time_s=time.perf_counter() - t_start, method=method,
                      constraint=constraint, uncertainty=uncertainty, objective=objective, load=load,
                      contact_s_m=contact_s_m)
-    return mark_out_of_range(force_bound(result, pressure_pa, config, strict), outside, given_pa, config)
+    return mark_out_of_range(force_bound(result, pressure_pa, config, strict, ei_nm2=fr.ei), outside, given_pa, config)
 
 
 def _setup(shape, config, constraint, method, objective, push_only, tip_angle_source, direction, follower_angle_rad,
@@ -452,8 +453,6 @@ def estimation_options(config, constraint=None, method=None, objective=None) -> 
 
 def _config(config):
     """The config of an estimate: the paper's for None, else a :class:`~bendsense.config.Config` (or an error)."""
-    from bendsense.config import Config, load_config
-
     if config is None:
         return load_config()
     instance("config", config, Config, "bendsense.load_config(path)")
@@ -576,6 +575,7 @@ def _result(o, batch, text, pb, err, *, contact_s_m, **asked):
     b2, b22 = batch + (2,), batch + (2, 2)
     window = asked["method"] == "fast" and asked["objective"] == "angles" and pb.pcc  # what a window test needs
     pay, shifts = o.payload, o.shifts
+    nan = None if contact else np.full(batch, np.nan)  # a tip load's contact_s_m and contact_std_m
     if len(batch) != 1:
         pay, shifts = pay.reshape(batch + pay.shape[1:]), shifts.reshape(batch + shifts.shape[1:])
     return ForceEstimate(
@@ -600,9 +600,8 @@ def _result(o, batch, text, pb, err, *, contact_s_m, **asked):
         shift_errors=err if window else None,
         coils=_coils(pb) if window else None,
         strip_gap_m=pb.gap,
-        contact_s_m=np.broadcast_to(np.asarray(contact_s_m, dtype=float), batch).copy() if contact
-        else np.full(batch, np.nan),
-        contact_std_m=np.zeros(batch) if contact else np.full(batch, np.nan),
+        contact_s_m=np.broadcast_to(np.asarray(contact_s_m, dtype=float), batch).copy() if contact else nan,
+        contact_std_m=np.zeros(batch) if contact else nan.copy(),
         contact_jacobian_rad_per_m=pay[..., 5] if window and contact else None,
         **asked,
     )
@@ -624,6 +623,8 @@ _COILS: dict = {}  # id(coils array) -> (the array, its tuple): a tuple of 16 in
 
 def _whole(value) -> bool:
     """Whether ``value`` is a whole number (an int, or a float without a fraction; not a bool, not text)."""
+    if type(value) is int:  # the common case (a bool's type is bool)
+        return True
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return False
     return math.isfinite(value) and float(value).is_integer()
@@ -744,8 +745,6 @@ def _beam_inputs_args(config):
 
 def _full_covariance(section):
     """``section``'s covariance (5, 5) over all :data:`MODEL_PARAMETERS` (0 where not listed)."""
-    from bendsense.config import MODEL_PARAMETERS
-
     idx = [MODEL_PARAMETERS.index(n) for n in section.parameters]
     full = np.zeros((len(MODEL_PARAMETERS), len(MODEL_PARAMETERS)))
     full[np.ix_(idx, idx)] = section.matrix
@@ -880,6 +879,4 @@ def compile_kernels() -> None:
     Every estimate of one frame, a live block or a batch below ``_jit.PARALLEL_MIN`` frames
     runs this one compiled kernel, whatever its constraint, objective or noise model.
     """
-    from bendsense.config import load_config
-
     estimate_force(np.full(16, 5.0), 40e3, load_config(), noise_std=0.02)

@@ -172,15 +172,16 @@ def quadrature(lengths_m, length_m: float, n_points: int):
 
 
 @functools.lru_cache(maxsize=32)
-def _pcc_grid(lengths: bytes, n_points: int, beam_length_m: float):
+def _pcc_grid(lengths: tuple, n_points: int, beam_length_m: float):
     """Per-grid constants of a PCC reference (cached, read-only) on ``[0, Lc]``, ``Lc = min(L_N, L)``.
 
     The quadrature nodes, weights, segment and local arc length of each node; the nodes
     followed by the beam's nodes clipped to the sensor length, with the PCC kinematics'
     own grid of them; the tip-angle weights (:func:`tip_angle_weights`) and the arc
     length of each beam node beyond the sensor (where the last curvature is carried on).
+    ``lengths``: the segment lengths as a tuple of float (the config's own, hashed as it is).
     """
-    lengths = np.frombuffer(lengths)
+    lengths = np.array(lengths, dtype=float)
     Lc = min(float(lengths.sum()), beam_length_m)
     s, w = quadrature(lengths, Lc, n_points)
     bounds = np.concatenate(([0.0], np.cumsum(lengths)))
@@ -360,26 +361,26 @@ def reference(shape, config, s_opt, n_points, L_act) -> Reference:
         angle = None
     elif not array and hasattr(shape, "curvature_per_m") and hasattr(shape, "lengths_m"):
         kappa = np.asarray(shape.curvature_per_m, dtype=float)
-        lengths = np.asarray(shape.lengths_m, dtype=float)
+        lengths = tuple(np.asarray(shape.lengths_m, dtype=float).tolist())
     elif not array and hasattr(shape, "positions_m") and hasattr(shape, "s_m"):
         pos = np.asarray(shape.positions_m, dtype=float)
         s_in = np.asarray(shape.s_m, dtype=float)
         angle = getattr(shape, "angle_rad", None)
     else:
         kappa = float_array("shape", shape)
-        lengths = config.sensor.lengths_m
-        if kappa.ndim == 0 or kappa.shape[-1] != lengths.size:
+        lengths = config.sensor.segment_lengths_m
+        if kappa.ndim == 0 or kappa.shape[-1] != len(lengths):
             raise ArgumentError(
-                f"shape: expected a Shape, a BeamSolution or curvatures (..., {lengths.size}) [1/m], "
+                f"shape: expected a Shape, a BeamSolution or curvatures (..., {len(lengths)}) [1/m], "
                 f"got shape {kappa.shape}"
             )
     if kappa is not None:
         # one frame: κ·κ is finite for finite κ below ~1e154 (0.3 against 1 µs); else the exact test
         if not (kappa.ndim == 1 and math.isfinite(kappa.dot(kappa))) and not np.isfinite(kappa).all():
             raise ArgumentError("shape.curvature_per_m: must be finite")
-        grid = _pcc_grid(lengths.tobytes(), n_points, L_act)
+        grid = _pcc_grid(lengths, n_points, L_act)
         return Reference(s=grid["s"], w=grid["w"], Lc=grid["Lc"], batch_shape=kappa.shape[:-1], kappa=kappa,
-                         lengths=lengths, grid=grid)
+                         lengths=grid["lengths"], grid=grid)
     if s_in.ndim != 1 or s_in.size < 2 or np.any(np.diff(s_in) <= 0) or s_in[0] < 0:
         raise ArgumentError(f"s_m: expected at least 2 increasing arc lengths from >= 0, got shape {s_in.shape}")
     if pos.shape[-2:] != (s_in.size, 2):
