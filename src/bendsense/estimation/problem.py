@@ -21,7 +21,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.experimental import structref
 
 from bendsense import _jit
 from bendsense.choices import CONSTRAINTS
@@ -32,7 +33,7 @@ from bendsense.shape import _kernels as shape_kernels
 from bendsense.shape import pcc
 from bendsense.validation import float_array
 
-__all__ = ["CONSTRAINTS", "Buffers", "Frames", "Outputs", "Problem", "Reference", "Target", "Workspace",
+__all__ = ["CONSTRAINTS", "Buffers", "Frames", "Outputs", "Problem", "ProblemRef", "Reference", "Target", "Workspace",
            "constraint_basis", "quadrature", "reference", "points", "chebyshev_nodes_m"]
 
 POSITIONS, ANGLES = 0, 1  # codes of bendsense.choices.OBJECTIVES in the kernels
@@ -122,6 +123,25 @@ class Problem(NamedTuple):
     sw: np.ndarray  # (R,) square root of each fitted row's weight: (2M,) positions, (Nc,) ones for angles
     jump_floor: float  # a trial response this far from its linear prediction is no branch jump [m or rad]
     contact: bool  # load="contact": the window payload carries ∂y/∂s_c (kernels.contact_jacobian)
+
+
+@structref.register
+class _ProblemRefType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class ProblemRef(structref.StructRefProxy):
+    """A :class:`Problem` as the kernels hold it: one object, not a tuple of its 22 arrays.
+
+    A compiled function takes a reference to every array of a tuple it is given (an
+    atomic count in and one out), and numba copies a tuple's every field wherever it is
+    passed; this is one pointer. Made in the kernels from a Problem's fields
+    (``ProblemRef(*pb)``); its fields are read as a Problem's.
+    """
+
+
+structref.define_proxy(ProblemRef, _ProblemRefType, list(Problem._fields))
 
 
 @functools.lru_cache(maxsize=16)
@@ -275,36 +295,38 @@ def contact_problem(pb, sc, ref):
     contact's two Chebyshev domains (:func:`bendsense.mechanics._beam_kernels.contact_sampling`);
     ``tip_weights`` and ``dphi_ds`` give the reconstructed shape's angle at s_c
     (φ(s_c) = c · κ, the last curvature carried on beyond the sensor) and its gradient
-    by the shifts, for the constraints at s_c. ``pb`` itself for σ_c ≥ 1.
+    by the shifts, for the constraints at s_c; ``pb``'s own for σ_c ≥ 1. A :class:`Problem` of ``pb``'s
+    fields (a :class:`ProblemRef`): the kernels make a ProblemRef of it, a caller from Python gets it whole.
     """
-    if sc >= 1.0:
-        return pb
-    n = pb.q.size
-    s_c = sc * pb.L
-    N = pb.lengths.size
-    c = np.zeros(N)
-    b = 0.0
-    for i in range(N):
-        c[i] = min(max(s_c - b, 0.0), pb.lengths[i]) if i < N - 1 else max(s_c - b, 0.0)
-        b += pb.lengths[i]
-    dphi = np.empty(N)
-    for i in range(N):
-        dphi[i] = c[i] / (pb.lengths[i] * pb.gap) - (c[i + 1] / (pb.lengths[i + 1] * pb.gap) if i + 1 < N else 0.0)
-    M = pb.s.size
-    PQ, P, q = np.empty((M, n)), np.empty((M, n)), np.empty(n)
-    bk.contact_sampling(sc, ref, pb.s / pb.L, P, PQ, q)
-    Nc = pb.coils.size
-    PA, PQc = np.empty((Nc, n)), np.empty((Nc, n))
-    ends = np.cumsum(pb.lengths) / pb.L
-    coil = np.empty(Nc)
-    for a in range(Nc):
-        coil[a] = ends[pb.coils[a]]
-    bk.contact_sampling(sc, ref, coil, PA, PQc, q)
-    PQ_fit = PQ if pb.PQ_fit.shape[0] > 0 else PQ[:0]
+    c, dphi, PQ, q, PQ_fit, PA = pb.tip_weights, pb.dphi_ds, pb.PQ, pb.q, pb.PQ_fit, pb.PA
+    if sc < 1.0:
+        n = pb.q.size
+        s_c = sc * pb.L
+        N = pb.lengths.size
+        c = np.zeros(N)
+        b = 0.0
+        for i in range(N):
+            c[i] = min(max(s_c - b, 0.0), pb.lengths[i]) if i < N - 1 else max(s_c - b, 0.0)
+            b += pb.lengths[i]
+        dphi = np.empty(N)
+        for i in range(N):
+            dphi[i] = c[i] / (pb.lengths[i] * pb.gap) - (c[i + 1] / (pb.lengths[i + 1] * pb.gap) if i + 1 < N
+                                                         else 0.0)
+        M = pb.s.size
+        PQ, P, q = np.empty((M, n)), np.empty((M, n)), np.empty(n)
+        bk.contact_sampling(sc, ref, pb.s / pb.L, P, PQ, q)
+        Nc = pb.coils.size
+        PA, PQc = np.empty((Nc, n)), np.empty((Nc, n))
+        ends = np.cumsum(pb.lengths) / pb.L
+        coil = np.empty(Nc)
+        for a in range(Nc):
+            coil[a] = ends[pb.coils[a]]
+        bk.contact_sampling(sc, ref, coil, PA, PQc, q)
+        PQ_fit = np.ascontiguousarray(PQ if pb.PQ_fit.shape[0] > 0 else PQ[:0])
     return Problem(pb.pcc, pb.kind, pb.direction, pb.follower_angle, pb.shape_angle, pb.seg_fk, pb.sigma_fk, pb.beyond,
                    c, pb.lengths, pb.gap, pb.seg, pb.sigma, dphi, pb.noise, pb.s, pb.w, pb.L, pb.wload, pb.ffix,
-                   pb.lower, pb.xtol, pb.max_iter, PQ, q, pb.objective, np.ascontiguousarray(PQ_fit), pb.coils, PA,
-                   pb.sw, pb.jump_floor, pb.contact)
+                   pb.lower, pb.xtol, pb.max_iter, PQ, q, pb.objective, PQ_fit, pb.coils, PA, pb.sw, pb.jump_floor,
+                   pb.contact)
 
 
 @njit(cache=True)
