@@ -33,7 +33,7 @@ from bendsense.calibration._kernels import shift_covariance
 from bendsense.calibration.shift_errors import ShiftErrorModel
 from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
-from bendsense.estimation.problem import Buffers, Outputs, Target, Workspace
+from bendsense.estimation.problem import BuffersRef, Outputs, Target, WorkspaceRef
 from bendsense.mechanics import _beam_kernels as bk
 from bendsense.mechanics._beam_kernels import _KernelOperators
 from bendsense.status import MISFIT_P, Status
@@ -147,8 +147,8 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, g
 @njit(cache=True)
 def workspace(M, n, R):
     """Buffers of one beam evaluation (:class:`Workspace`): M comparison nodes, n state nodes, R fitted values."""
-    return Workspace(np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 5)), np.empty(R),
-                     np.empty((R, 2)), np.empty((R, 3)), np.empty((n - 1, bk.extra_columns(FORCE_SENS))))
+    return WorkspaceRef(np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 5)), np.empty(R),
+                        np.empty((R, 2)), np.empty((R, 3)), np.empty((n - 1, bk.extra_columns(FORCE_SENS))))
 
 
 @njit(cache=True)
@@ -162,7 +162,7 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, fi
     ``PQ_fit``), the angles objective interpolates the tangent angle at the coils (rows
     of ``PA``): ``φ(L_i)``, what the sensor measures as ``S_i / d``.
     """
-    pos, dpos, st, tip, dst, y, dy, _, extra = ws
+    pos, dpos, st, tip, dst, y, dy, extra = ws.pos, ws.dpos, ws.state, ws.tip, ws.dphi, ws.y, ws.dy, ws.extra
     objective, PQ_fit, q, PA = fit
     n = st.size
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
@@ -650,9 +650,9 @@ def buffers(pb, n):
     k = pb.lower.size
     R = pb.sw.size
     Rw = R if pb.objective == ANGLES else 1
-    return Buffers(np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
-                   np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N),
-                   np.empty(N))
+    return BuffersRef(np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
+                      np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N),
+                      np.empty(N))
 
 
 @njit(cache=True, inline="always")
@@ -668,7 +668,8 @@ def setup(i, fr, pb, err, buf):
     at the last node, κ at the nodes, beam start, target, D, ∂D/∂φ_L, whether Σ_S is
     known, Σ_S, its noise variances, κ) of the frame; the arrays live in ``buf`` (:func:`buffers`).
     """
-    pos, ang, ks, st, D, dD, cov_s, no_kappa, y0, Lw, noise_var, shifts = buf
+    pos, ang, ks, st, D, dD, cov_s = buf.pos, buf.ang, buf.ks, buf.state, buf.D, buf.dD, buf.cov_s
+    no_kappa, y0, Lw, noise_var, shifts = buf.no_kappa, buf.y0, buf.Lw, buf.noise_var, buf.shifts
     M = ks.size
     if pb.pcc:
         tip = prob.pcc_reference(fr.kappa[i], pb.lengths, pb.seg_fk, pb.sigma_fk, pb.beyond, pb.tip_weights, pos, ang,
@@ -722,7 +723,7 @@ def typed(fr, held):
     numba types a named tuple given from Python slowly (~3 µs a call): the entry points take plain tuples.
     """
     pb, err, ops, ref = held[0]
-    return (prob.Frames(*fr), prob.ProblemRef(*pb), ShiftErrorModel(*err), _KernelOperators(*ops),
+    return (prob.FramesRef(*fr), prob.ProblemRef(*pb), ShiftErrorModel(*err), _KernelOperators(*ops),
             bk._SplitOperators(*ref))
 
 

@@ -33,8 +33,9 @@ from bendsense.shape import _kernels as shape_kernels
 from bendsense.shape import pcc
 from bendsense.validation import float_array
 
-__all__ = ["CONSTRAINTS", "Buffers", "Frames", "Outputs", "Problem", "ProblemRef", "Reference", "Target", "Workspace",
-           "constraint_basis", "quadrature", "reference", "points", "chebyshev_nodes_m"]
+__all__ = ["CONSTRAINTS", "Buffers", "BuffersRef", "Frames", "FramesRef", "Outputs", "Problem", "ProblemRef",
+           "Reference", "Target", "Workspace", "WorkspaceRef", "constraint_basis", "quadrature", "reference", "points",
+           "chebyshev_nodes_m"]
 
 POSITIONS, ANGLES = 0, 1  # codes of bendsense.choices.OBJECTIVES in the kernels
 
@@ -125,10 +126,29 @@ class Problem(NamedTuple):
     contact: bool  # load="contact": the window payload carries ∂y/∂s_c (kernels.contact_jacobian)
 
 
-@structref.register
-class _ProblemRefType(types.StructRef):
+class _Fields(types.StructRef):
     def preprocess_fields(self, fields):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+@structref.register
+class _ProblemRefType(_Fields):
+    pass
+
+
+@structref.register
+class _FramesRefType(_Fields):
+    pass
+
+
+@structref.register
+class _WorkspaceRefType(_Fields):
+    pass
+
+
+@structref.register
+class _BuffersRefType(_Fields):
+    pass
 
 
 class ProblemRef(structref.StructRefProxy):
@@ -137,11 +157,25 @@ class ProblemRef(structref.StructRefProxy):
     A compiled function takes a reference to every array of a tuple it is given (an
     atomic count in and one out), and numba copies a tuple's every field wherever it is
     passed; this is one pointer. Made in the kernels from a Problem's fields
-    (``ProblemRef(*pb)``); its fields are read as a Problem's.
+    (``ProblemRef(*pb)``); its fields are read as a Problem's. :class:`FramesRef`,
+    :class:`WorkspaceRef` and :class:`BuffersRef` are the same of the other structures.
     """
 
 
+class FramesRef(structref.StructRefProxy):
+    """A :class:`Frames` as the kernels hold it (:class:`ProblemRef`)."""
+
+
+class WorkspaceRef(structref.StructRefProxy):
+    """A :class:`Workspace` as the kernels hold it (:class:`ProblemRef`)."""
+
+
+class BuffersRef(structref.StructRefProxy):
+    """A :class:`Buffers` as the kernels hold it (:class:`ProblemRef`)."""
+
+
 structref.define_proxy(ProblemRef, _ProblemRefType, list(Problem._fields))
+structref.define_proxy(FramesRef, _FramesRefType, list(Frames._fields))
 
 
 @functools.lru_cache(maxsize=16)
@@ -524,3 +558,7 @@ class Outputs(NamedTuple):
     success: np.ndarray  #: (B,) bool
     payload: np.ndarray  #: (B, coils, 6) the window test's payload (:func:`payload`)
     shifts: np.ndarray  #: (B, N) the measured shifts [m]
+
+
+structref.define_proxy(WorkspaceRef, _WorkspaceRefType, list(Workspace._fields))
+structref.define_proxy(BuffersRef, _BuffersRefType, list(Buffers._fields))
