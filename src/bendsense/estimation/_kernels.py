@@ -35,7 +35,6 @@ from bendsense.estimation import problem as prob
 from bendsense.estimation import uncertainty as unc
 from bendsense.estimation.problem import BuffersRef, Outputs, Target, WorkspaceRef
 from bendsense.mechanics import _beam_kernels as bk
-from bendsense.mechanics._beam_kernels import _KernelOperators
 from bendsense.status import MISFIT_P, Status
 
 _RUNNING = int(Status.RUNNING)
@@ -723,7 +722,7 @@ def typed(fr, held):
     numba types a named tuple given from Python slowly (~3 µs a call): the entry points take plain tuples.
     """
     pb, err, ops, ref = held[0]
-    return (prob.FramesRef(*fr), prob.ProblemRef(*pb), ShiftErrorModel(*err), _KernelOperators(*ops),
+    return (prob.FramesRef(*fr), prob.ProblemRef(*pb), ShiftErrorModel(*err), bk.OperatorsRef(*ops),
             bk._SplitOperators(*ref))
 
 
@@ -756,7 +755,7 @@ def contact_at(pb, ops, ref, sc):
     ``pb``, ``ops``, ``ref``: the plain tuples of :func:`plain`. A live stream at a known
     contact makes them once, not per frame (~10 µs a frame).
     """
-    pb, ops, ref = prob.ProblemRef(*pb), _KernelOperators(*ops), bk._SplitOperators(*ref)
+    pb, ops, ref = prob.ProblemRef(*pb), bk.OperatorsRef(*ops), bk._SplitOperators(*ref)
     return prob.contact_problem(pb, sc, ref), bk.contact_grid(sc, ops, ref)
 
 
@@ -787,7 +786,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, held, start, out, at=None):
     prev_ok = False
     ops_c, pb_c, sc_c = ops0, pb0, 1.0  # the latest contact point's
     if at is not None:
-        ops_c, pb_c, sc_c = _KernelOperators(*at[1]), prob.ProblemRef(*at[0]), at[2]
+        ops_c, pb_c, sc_c = bk.OperatorsRef(*at[1]), prob.ProblemRef(*at[0]), at[2]
     for i in range(lo, hi):
         # the beam's operators and the problem of the frame's force point: the tip's, or a contact's
         # (bendsense.mechanics._beam_kernels.contact_grid, problem.contact_problem: one code path for every point)
@@ -795,7 +794,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, held, start, out, at=None):
         if fr.contact[i] < 1.0:
             if fr.contact[i] != sc_c:
                 sc_c = fr.contact[i]
-                ops_c = bk.contact_grid(sc_c, ops0, ref)
+                ops_c = bk.OperatorsRef(*bk.contact_grid(sc_c, ops0, ref))
                 pb_c = prob.ProblemRef(*prob.contact_problem(pb0, sc_c, ref))
             ops, pb = ops_c, pb_c
         p0, phi_end, kappa_s, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)

@@ -28,7 +28,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.experimental import structref
 
 from bendsense import _jit
 from bendsense.status import Status
@@ -73,6 +74,23 @@ class _KernelOperators(NamedTuple):
     kscale: float  # the tip row's K0 L factor (the last domain's length)
     jrow: int  # the row of the contact node (the interface, or the tip for a tip load)
     jscale: float  # the contact row's scale: the ∂φ/∂σ_c source is −jscale × the jump of φ'
+
+
+@structref.register
+class _OperatorsRefType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class OperatorsRef(structref.StructRefProxy):
+    """:class:`_KernelOperators` as the estimator's kernels hold them: one object, not a tuple of 8 arrays.
+
+    (:class:`bendsense.estimation.problem.ProblemRef` says why.) Made from their fields,
+    ``OperatorsRef(*ops)``; :func:`contact_grid` gives a ``_KernelOperators``.
+    """
+
+
+structref.define_proxy(OperatorsRef, _OperatorsRefType, list(_KernelOperators._fields))
 
 
 class _SplitOperators(NamedTuple):
@@ -458,8 +476,9 @@ def contact_grid(sc, ops, ref):
     φ_b = h_a h_b (φ'(σ_c−) − φ'(σ_c+)) = 0``; the tip ``D_b φ_b = h_b K0 L``. ~2 µs
     (n = 16), once per frame.
     """
-    if sc >= 1.0:
-        return ops
+    if sc >= 1.0:  # a _KernelOperators of any form of ops (an OperatorsRef's fields)
+        return _KernelOperators(ops.sigma, ops.C, ops.h2, ops.on, ops.tail, ops.J0, ops.J0inv, ops.D0, ops.kscale,
+                                ops.jrow, ops.jscale)
     n = ops.sigma.size
     m = n - 1
     na, nb = split_nodes(sc, n)
