@@ -39,12 +39,26 @@ import types
 import warnings
 
 import numba
+from numba.core import types as nb_types
 from numba.core.dispatcher import Dispatcher
 
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "workqueue"
 
 _OPT_LEVEL = 1
+
+
+class StructType(nb_types.StructRef):
+    """A numba StructRef type whose fields take their values' types (not literal ones).
+
+    The base of the structures the kernels hold as one object
+    (:class:`bendsense.estimation.problem.ProblemRef`, ...): register a subclass with
+    ``numba.experimental.structref.register`` and give it a proxy (``define_proxy``).
+    """
+
+    def preprocess_fields(self, fields):
+        return tuple((name, nb_types.unliteral(typ)) for name, typ in fields)
+
 _lock = threading.Lock()
 
 _ready = set()  # dispatchers called in this process (numba's .signatures is slow to ask)

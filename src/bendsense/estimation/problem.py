@@ -21,7 +21,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, types
+from numba import njit
 from numba.experimental import structref
 
 from bendsense import _jit
@@ -126,28 +126,23 @@ class Problem(NamedTuple):
     contact: bool  # load="contact": the window payload carries ∂y/∂s_c (kernels.contact_jacobian)
 
 
-class _Fields(types.StructRef):
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
-
-
 @structref.register
-class _ProblemRefType(_Fields):
+class _ProblemRefType(_jit.StructType):
     pass
 
 
 @structref.register
-class _FramesRefType(_Fields):
+class _FramesRefType(_jit.StructType):
     pass
 
 
 @structref.register
-class _WorkspaceRefType(_Fields):
+class _WorkspaceRefType(_jit.StructType):
     pass
 
 
 @structref.register
-class _BuffersRefType(_Fields):
+class _BuffersRefType(_jit.StructType):
     pass
 
 

@@ -28,7 +28,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange, types
+from numba import njit, prange
 from numba.experimental import structref
 
 from bendsense import _jit
@@ -77,9 +77,8 @@ class _KernelOperators(NamedTuple):
 
 
 @structref.register
-class _OperatorsRefType(types.StructRef):
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+class _OperatorsRefType(_jit.StructType):
+    pass
 
 
 class OperatorsRef(structref.StructRefProxy):
