@@ -74,7 +74,7 @@ class Reference(NamedTuple):
 
 
 class Frames(NamedTuple):
-    """Per-frame inputs of the compiled estimate (B frames; unused fields are empty)."""
+    """Per-frame inputs of the compiled estimate (B frames, unused fields empty; the kernels hold a FramesRef)."""
 
     kappa: np.ndarray  # (B, N) segment curvatures of a PCC shape [1/m]
     p0: np.ndarray  # (B, M, 2) points of a shape given by points [m]
@@ -90,7 +90,7 @@ class Frames(NamedTuple):
 
 
 class Problem(NamedTuple):
-    """Constants of an estimate, shared by every frame (the compiled kernels' typed structure)."""
+    """Constants of an estimate, shared by every frame (their fields; the kernels hold a :class:`ProblemRef`)."""
 
     pcc: bool  # frames are PCC curvatures (else points)
     kind: int  # constraint kind (:func:`constraint_kind`)
@@ -486,7 +486,7 @@ _jit.guard_cache(globals())  # no two processes write these kernels to numba's c
 
 
 class Workspace(NamedTuple):
-    """Buffers of one beam evaluation."""
+    """Buffers of one beam evaluation (their fields; the kernels hold a :class:`WorkspaceRef`)."""
 
     #: positions (M, 2) at the comparison nodes
     pos: np.ndarray
@@ -518,7 +518,7 @@ class Target(NamedTuple):
 
 
 class Buffers(NamedTuple):
-    """Per-thread buffers of :func:`setup`: one frame's inputs of the fit."""
+    """Per-thread buffers of :func:`setup`: one frame's inputs of the fit (the kernels hold a :class:`BuffersRef`)."""
 
     pos: np.ndarray  #: the reference shape's points (m, 2)
     ang: np.ndarray  #: its angles (m,)
