@@ -126,53 +126,6 @@ class Problem(NamedTuple):
     contact: bool  # load="contact": the window payload carries ∂y/∂s_c (kernels.contact_jacobian)
 
 
-@structref.register
-class _ProblemRefType(_jit.StructType):
-    pass
-
-
-@structref.register
-class _FramesRefType(_jit.StructType):
-    pass
-
-
-@structref.register
-class _WorkspaceRefType(_jit.StructType):
-    pass
-
-
-@structref.register
-class _BuffersRefType(_jit.StructType):
-    pass
-
-
-class ProblemRef(structref.StructRefProxy):
-    """A :class:`Problem` as the kernels hold it: one object, not a tuple of its 22 arrays.
-
-    A compiled function takes a reference to every array of a tuple it is given (an
-    atomic count in and one out), and numba copies a tuple's every field wherever it is
-    passed; this is one pointer. Made in the kernels from a Problem's fields
-    (``ProblemRef(*pb)``); its fields are read as a Problem's. :class:`FramesRef`,
-    :class:`WorkspaceRef` and :class:`BuffersRef` are the same of the other structures.
-    """
-
-
-class FramesRef(structref.StructRefProxy):
-    """A :class:`Frames` as the kernels hold it (:class:`ProblemRef`)."""
-
-
-class WorkspaceRef(structref.StructRefProxy):
-    """A :class:`Workspace` as the kernels hold it (:class:`ProblemRef`)."""
-
-
-class BuffersRef(structref.StructRefProxy):
-    """A :class:`Buffers` as the kernels hold it (:class:`ProblemRef`)."""
-
-
-structref.define_proxy(ProblemRef, _ProblemRefType, list(Problem._fields))
-structref.define_proxy(FramesRef, _FramesRefType, list(Frames._fields))
-
-
 @functools.lru_cache(maxsize=16)
 def chebyshev_nodes_m(length_m: float, n_nodes: int = N_NODES) -> np.ndarray:
     """Arc lengths of the fast beam solver's Chebyshev–Lobatto nodes, base first [m]."""
@@ -555,5 +508,50 @@ class Outputs(NamedTuple):
     shifts: np.ndarray  #: (B, N) the measured shifts [m]
 
 
+@structref.register
+class _ProblemRefType(_jit.StructType):
+    pass
+
+
+@structref.register
+class _FramesRefType(_jit.StructType):
+    pass
+
+
+@structref.register
+class _WorkspaceRefType(_jit.StructType):
+    pass
+
+
+@structref.register
+class _BuffersRefType(_jit.StructType):
+    pass
+
+
+class ProblemRef(structref.StructRefProxy):
+    """A :class:`Problem` as the kernels hold it: one object, not a tuple of its 20 arrays.
+
+    A compiled function takes a reference to every array of a tuple it is given (an
+    atomic count in and one out), and numba copies a tuple's every field wherever it is
+    passed; this is one pointer. Made in the kernels from a Problem's fields
+    (``ProblemRef(*pb)``); its fields are read as a Problem's. :class:`FramesRef`,
+    :class:`WorkspaceRef` and :class:`BuffersRef` are the same of the other structures.
+    """
+
+
+class FramesRef(structref.StructRefProxy):
+    """A :class:`Frames` as the kernels hold it (:class:`ProblemRef`)."""
+
+
+class WorkspaceRef(structref.StructRefProxy):
+    """A :class:`Workspace` as the kernels hold it (:class:`ProblemRef`)."""
+
+
+class BuffersRef(structref.StructRefProxy):
+    """A :class:`Buffers` as the kernels hold it (:class:`ProblemRef`)."""
+
+
+structref.define_proxy(ProblemRef, _ProblemRefType, list(Problem._fields))
+structref.define_proxy(FramesRef, _FramesRefType, list(Frames._fields))
 structref.define_proxy(WorkspaceRef, _WorkspaceRefType, list(Workspace._fields))
 structref.define_proxy(BuffersRef, _BuffersRefType, list(Buffers._fields))
