@@ -661,7 +661,7 @@ def solve_sample(b, L, ei, k0, base, F, w, sc, state, has_state, ops, ref, tol, 
     phi, status, where, iters, angle, pos, dpos, dang, tip = out
     n = ops.sigma.size
     M = P.shape[0]
-    grid = contact_grid(sc[b], ops, ref)
+    grid = OperatorsRef(*contact_grid(sc[b], OperatorsRef(*ops), ref))  # as the estimator holds them: one compile
     if sc[b] < 1.0:  # the contact grid's sampling (the tip grid's is a constant)
         P, PQ, q = np.empty((M, n)), np.empty((M, n)), np.empty(n)
         contact_sampling(sc[b], ref, sig, P, PQ, q)
@@ -704,9 +704,9 @@ def solve_frames(L, ei, k0, base, F, w, sc, state, has_state, ops, ref, tol, max
     ``dang`` (B, M, 3) (by Fx, Fy and s_c), ``tip`` (B, 8) (the tip and ∂tip/∂(Fx, Fy, s_c)
     row-major).
     """
-    for b in prange(ei.size):
-        solve_sample(b, L, ei, k0, base, F, w, sc, state, has_state, ops, ref, tol, max_iter, sens, allow_continuation,
-                     sig, P, PQ, q, out)
+    for b in prange(ei.size):  # prange's index is unsigned, the loop's typed before it is not: one compile as int64
+        solve_sample(np.int64(b), L, ei, k0, base, F, w, sc, state, has_state, ops, ref, tol, max_iter, sens,
+                     allow_continuation, sig, P, PQ, q, out)
 
 
 _jit.guard_cache(globals())  # no two processes write these kernels to numba's cache at once
