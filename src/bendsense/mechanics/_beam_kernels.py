@@ -82,10 +82,12 @@ class _OperatorsRefType(_jit.StructType):
 
 
 class OperatorsRef(structref.StructRefProxy):
-    """:class:`_KernelOperators` as the estimator's kernels hold them: one object, not a tuple of 8 arrays.
+    """:class:`_KernelOperators` as the kernels hold them: one object, not a tuple of 8 arrays.
 
     (:class:`bendsense.estimation.problem.ProblemRef` says why.) Made from their fields,
-    ``OperatorsRef(*ops)``; :func:`contact_grid` gives a ``_KernelOperators``.
+    ``OperatorsRef(*ops)``; :func:`contact_grid` gives a ``_KernelOperators``. The
+    estimator's kernels and the simulator's (:func:`solve_sample`) pass them alike, so
+    that a process running both compiles :func:`solve_frame` once.
     """
 
 
