@@ -163,10 +163,20 @@ def test_paper_method_agrees_with_fast(constraint):
     np.testing.assert_allclose(fast.force_n, force[frames_], atol=0.03)
 
 
-def test_paper_method_recovers_the_model_force():
+def test_paper_method_recovers_the_model_force(monkeypatch):
+    import bendsense.estimation.paper as paper
+
+    solves = []  # the shooting solves the paper's method makes, counted where it makes them
+
+    def counted(*args, **kwargs):
+        solves.append(kwargs.get("method"))
+        return solve_beam(*args, **kwargs)
+
+    monkeypatch.setattr(paper, "solve_beam", counted)
     sol = beam_shape(70e3, (0.1, -0.15))
     est = estimate_force(sol, 70e3, CFG, method="paper")
     np.testing.assert_allclose(est.force_n, [0.1, -0.15], atol=1e-4)
+    assert set(solves) == {"shooting"} and int(est.iterations) == len(solves) > 10  # its objective's evaluations
 
 
 @pytest.mark.parametrize("pressure_pa", [0.0, 20e3, 60e3, 120e3, 180e3])

@@ -259,6 +259,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
         u, run_status, iters = paper_fit(pb, fr, D, ref.Lc)
         _jit.call(_kernels.evaluate_frames, tuple(fr), held, _c(u),
                   _c(run_status, np.int64), out)
+        o.iters[:] = iters  # the objective's evaluations (shooting solves), as the field says
     _warn_uncertainty(uncertainty, config, stacklevel=3)
     text = (np.array([OK_MESSAGE]) if B == 1 and o.status[0] == _OK
             else messages(o.status, o.residual, o.chi2, o.p_value, o.direction, method))
