@@ -322,7 +322,7 @@ class Compiled(NamedTuple):
 
     ``problem``: (the estimate's constants (Problem, shift error model, beam operators, a
     contact's operators), which the live step holds as the kernels take them
-    (:func:`~bendsense.estimation._kernels.hold`), coils R, beam nodes, the force point's
+    (:func:`~bendsense.estimation._kernels.hold_estimate`), coils R, beam nodes, the force point's
     problem and operators with its σ_c), plain tuples;
     ``model``: the pressure range, the free-bending table, θ_pre, L, γ0, γ1, the
     parameters' covariance (5, 5) and whether there is one, μ̄, μ_s, c_a, the force
@@ -783,7 +783,7 @@ def _problem(config, calibration, ref, options, noise_opt):
     """The constants of an estimate, cached per inputs.
 
     Returns (:class:`~bendsense.estimation.problem.Problem`, the constants as the kernels
-    take them (:func:`~bendsense.estimation._kernels.hold` of the plain tuples of the
+    take them (:func:`~bendsense.estimation._kernels.hold_estimate` of the plain tuples of the
     problem, the shift error model, the beam's operators and a contact's), the shift error
     model (:class:`~bendsense.calibration.shift_errors.ShiftErrorModel`) as a plain tuple,
     the ``uncertainty`` label).
@@ -870,7 +870,7 @@ def _build_problem(config, calibration, ref, options, noise_opt):
         coils=_c(coils, np.int64), PA=_c(PA), sw=_c(sw), jump_floor=jump_floor, contact=load == "contact")
     err = err._replace(**{name: _c(a, a.dtype) for name, a in err._asdict().items() if isinstance(a, np.ndarray)})
     plain_pb, plain_err = _kernels.plain(pb, err)
-    held = _jit.call(_kernels.hold, (plain_pb, plain_err, _OPS, _REF))
+    held = _jit.call(_kernels.hold_estimate, (plain_pb, plain_err, _OPS, _REF))
     return pb, held, plain_err, ("propagated" if noise else "none")
 
 

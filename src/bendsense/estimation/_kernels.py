@@ -717,23 +717,16 @@ def near(u0, prev_u0, prev_u):
 
 @njit(cache=True, inline="always")
 def typed(fr, held):
-    """The kernels' structures from the frames' plain tuple and the constants ``held`` (:func:`hold`).
+    """The kernels' structures from the frames' plain tuple and the constants ``held`` (:func:`hold_estimate`).
 
     numba types a named tuple given from Python slowly (~3 µs a call): the entry points take plain tuples.
     """
     pb, err, ops, ref = held[0]
-    return (prob.FramesRef(*fr), prob.ProblemRef(*pb), ShiftErrorModel(*err), bk.OperatorsRef(*ops),
-            bk._SplitOperators(*ref))
+    return prob.FramesRef(*fr), pb, err, ops, ref
 
 
 def plain(*structures):
-    """The structures as the entry points take them: plain tuples (:func:`typed`).
-
-    Parameters
-    ----------
-    *structures : NamedTuple
-        Frames, Problem, shift error model, beam operators and a contact's, in any number.
-    """
+    """The structures (NamedTuples: frames, problem, shift error model, operators) as plain tuples (:func:`typed`)."""
     return tuple(tuple(s) for s in structures)
 
 
@@ -746,6 +739,16 @@ def hold(constants):
     held = List()
     held.append(constants)
     return held
+
+
+@njit(cache=True)
+def hold_estimate(constants):
+    """:func:`hold` of an estimate's constants as the kernels take them: StructRefs, made once (~230 counts a call).
+
+    ``constants``: the plain tuples (:func:`plain`) of its Problem, shift error model, beam operators and a contact's.
+    """
+    pb, err, ops, ref = constants
+    return hold((prob.ProblemRef(*pb), ShiftErrorModel(*err), bk.OperatorsRef(*ops), bk._SplitOperators(*ref)))
 
 
 @njit(cache=True)
@@ -850,14 +853,12 @@ def estimate_frames(block, use_guess, fr, held, start, out):
     (projected on the constraint), else at the force ``start``. Within a block (``block`` >
     1, a time series) a frame's start is corrected by the previous frame's offset from its
     own guess when that converged. ``fr``: the plain tuple (:func:`plain`) of
-    :class:`~bendsense.estimation.problem.Frames`; ``held``: :func:`hold` of the plain
-    tuples of :class:`~bendsense.estimation.problem.Problem`, the shift error model, the
-    beam solver's operators and a contact's reference operators (each frame's force acts
-    at its ``Frames.contact``). ``out``: force (B, 2), cov (B, 2, 2), status, iterations, residual, χ²/dof,
-    its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable direction of a boundary
-    stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2), success (B,) (converged or not
-    identifiable), and the window test's payload (:func:`payload`): residual, Jacobian by u and
-    model factor (B, R, 5), and the measured shifts (B, N).
+    :class:`~bendsense.estimation.problem.Frames`; ``held``: the constants (:func:`hold_estimate`;
+    each frame's force acts at its ``Frames.contact``). ``out``: force (B, 2), cov (B, 2, 2), status,
+    iterations, residual, χ²/dof, its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable
+    direction of a boundary stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2), success (B,)
+    (converged or not identifiable), and the window test's payload (:func:`payload`): residual, Jacobian
+    by u and model factor (B, R, 5), and the measured shifts (B, N).
     """
     B = prob.Frames(*fr).ei.size
     nblocks = (B + block - 1) // block

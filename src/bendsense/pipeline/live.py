@@ -462,10 +462,10 @@ class _Step:
         self._hold()
 
     def _hold(self):
-        """Hold the constants as the step takes them, the estimate's inside (:func:`est_kernels.hold`)."""
+        """Hold the constants as the step takes them, the estimate's inside (:func:`est_kernels.hold_estimate`)."""
         shape, model, problem, flags, window_model = self._held
-        self.constants = _jit.call(est_kernels.hold, (shape, model, (_jit.call(est_kernels.hold, problem[0]),
-                                                                     *problem[1:]), flags, window_model))
+        estimate = (_jit.call(est_kernels.hold_estimate, problem[0]), *problem[1:])
+        self.constants = _jit.call(est_kernels.hold, (shape, model, estimate, flags, window_model))
 
     def __getstate__(self):
         # numba's typed list does not pickle (a copied or pickled processor): it is made again of its parts
