@@ -17,7 +17,7 @@ import pytest
 
 import bendsense
 from bendsense.calibration import Calibration
-from bendsense.control import ModelController
+from bendsense.control import ModelController, PIController, force_limit_n
 from bendsense.errors import ArgumentError
 from bendsense.mechanics.pressing import pressing_force
 from bendsense.pipeline import LiveProcessor
@@ -108,6 +108,24 @@ def test_bad_arguments_are_refused():
         ModelController(0.1, CONFIG, max_pressure_pa=LIMIT_PA, approach_rate_pa_per_s=0.0)
     with pytest.raises(ArgumentError, match="target_force_n"):
         ModelController(0.5, CONFIG, max_pressure_pa=LIMIT_PA, max_force_n=0.3)
+    top = CONFIG.actuator.pressure_range_pa[1]
+    with pytest.raises(ArgumentError, match="max_pressure_pa.*pressure_range_pa"):  # its table would not fit in memory
+        ModelController(0.1, CONFIG, max_pressure_pa=1e12)
+    ModelController(0.1, CONFIG, max_pressure_pa=top)  # the range's end is allowed
+    with pytest.raises(ArgumentError, match="config: expected a Config"):
+        ModelController(0.1, "config.yaml", max_pressure_pa=LIMIT_PA)
+    with pytest.raises(ArgumentError, match="faster than the slew limit"):
+        ModelController(0.1, CONFIG, max_pressure_pa=LIMIT_PA, approach_rate_pa_per_s=1e9)
+    with pytest.raises(ArgumentError, match="tip_s_m"):
+        PIController(0.1, max_pressure_pa=LIMIT_PA, tip_s_m=float("nan"))
+
+
+@pytest.mark.parametrize("kwargs", [{"contact_s_m": -0.1}, {"contact_s_m": 5.0}, {"max_pressure_pa": -1e5},
+                                    {"max_pressure_pa": 1e12}, {"max_pressure_pa": float("nan")}])
+def test_force_limit_refuses_a_point_off_the_finger_or_a_limit_beyond_the_model(kwargs):
+    args = {"max_pressure_pa": LIMIT_PA, **kwargs}
+    with pytest.raises(ArgumentError, match=next(iter(kwargs))):
+        force_limit_n(CONFIG, **args)
 
 
 @pytest.fixture(scope="module")

@@ -315,6 +315,18 @@ def test_a_pressure_limit_beyond_the_config_is_refused(files):
             in " ".join(res.output.split()))
 
 
+@pytest.mark.parametrize("argv, message", [
+    (["control", "--bandwidth-hz", "1e-9"], "'--bandwidth-hz': expected > 5, got 1e-09"),  # a frozen track: overpress
+    (["control", "--approach-kpa-per-s", "1e9"],
+     "'--approach-kpa-per-s': 1e+09 kPa/s is faster than the set-point's slew limit (--max-rate-kpa-per-s, 500 kPa/s)"),
+])
+def test_a_track_too_slow_or_an_approach_beyond_the_slew_limit_is_refused(files, argv, message):
+    res = CliRunner().invoke(main, [*argv, "/dev/null", "--calibration", files["calibration"],
+                                    "--target-force-n", "0.15"])
+    assert res.exit_code != 0 and "Traceback" not in res.output, res.output
+    assert message in " ".join(res.output.split())
+
+
 def test_a_zero_that_could_not_be_sent_after_a_normal_end_exits_1(single_board, files):
     # the board dies at 0.3 s; the run ends by its time (0.4 s, before the 1 s silence stop): its zero cannot go out
     board = Faulty(copy.deepcopy(single_board))

@@ -456,9 +456,9 @@ def finger_contact(values, state: dict, load: str):
     return location
 
 
-def make_bandwidth_option(default_text: str):
-    """``--bandwidth-hz`` of the tracked force, with its default told in ``default_text``."""
-    return click.option("--bandwidth-hz", type=Finite(min=0, min_open=True), default=None,
+def make_bandwidth_option(default_text: str, minimum_hz: float = 0.0):
+    """``--bandwidth-hz`` of the tracked force (> ``minimum_hz``), with its default told in ``default_text``."""
+    return click.option("--bandwidth-hz", type=Finite(min=minimum_hz, min_open=True), default=None,
                         help=f"Bandwidth of the tracked force [Hz]: the -3 dB bandwidth of the steady-state filter; "
                              f"default: {default_text}.")
 

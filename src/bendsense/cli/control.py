@@ -180,7 +180,8 @@ def _summary(result, controller) -> str:
               help="pi: integral gain [kPa/(N s)] (default 3000: bendsense.control.DEFAULT_KI_PA_PER_N_S).")
 @click.option("--max-rate-kpa-per-s", type=Finite(min=0, min_open=True), default=None,
               help="Slew limit of the set-point [kPa/s] (default 500).")
-@make_bandwidth_option("30 Hz (bendsense.control.TRACK_BANDWIDTH_HZ: the loop needs a faster track than live's 5 Hz)")
+@make_bandwidth_option("30 Hz (bendsense.control.TRACK_BANDWIDTH_HZ); above 5 Hz: the loop needs a faster track "
+                       "than live's 5 Hz, whose lag it would act on", minimum_hz=5.0)
 @click.option("--silence-s", type=Finite(min=0, min_open=True), default=None,
               help="Stop when no frame arrives for this long [s] (default 0.1, or 10 frame periods of a slower "
                    "board).")
@@ -270,6 +271,10 @@ def _tuning(kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa
     rate = DEFAULT_MAX_RATE_PA_PER_S if max_rate_kpa_per_s is None else max_rate_kpa_per_s * 1e3
     if kind == "model":
         approach = None if approach_kpa_per_s is None else approach_kpa_per_s * 1e3
+        if approach is not None and approach > rate:
+            raise click.BadParameter(f"{approach_kpa_per_s:g} kPa/s is faster than the set-point's slew limit "
+                                     f"(--max-rate-kpa-per-s, {rate / 1e3:g} kPa/s)",
+                                     param_hint="'--approach-kpa-per-s'")
         return {"controller": "model", "approach_rate_pa_per_s": approach, "max_rate_pa_per_s": rate}
     return {"controller": "pi", "kp_pa_per_n": DEFAULT_KP_PA_PER_N if kp_kpa_per_n is None else kp_kpa_per_n * 1e3,
             "ki_pa_per_n_s": DEFAULT_KI_PA_PER_N_S if ki_kpa_per_n_s is None else ki_kpa_per_n_s * 1e3,

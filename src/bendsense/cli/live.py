@@ -78,7 +78,7 @@ _NO_CALIBRATION = (
 @click.option("--lsl", is_flag=True, help="Publish bendsense-force and bendsense-shape on LSL (extra 'lsl').")
 @click.option(
     "--lsl-wait",
-    type=float,
+    type=Finite(min=0),
     default=5.0,
     show_default=True,
     help="With --lsl: wait this long for a consumer (e.g. LabRecorder) before starting the board [s].",

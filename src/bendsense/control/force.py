@@ -29,6 +29,7 @@ import numpy as np
 
 from bendsense import _jit
 from bendsense.control._kernels import normal_components
+from bendsense.errors import ArgumentError
 from bendsense.status import words
 
 __all__ = ["NormalForce", "contact_normal", "normal_force", "force_limit_n", "BLOCKED_FORCE_MARGIN"]
@@ -149,8 +150,14 @@ def force_limit_n(config, max_pressure_pa: float, contact_s_m: float | None = No
     """
     from bendsense.mechanics.actuator import FreeBendingModel
 
-    s_c = float(config.actuator.length_m if contact_s_m is None else contact_s_m)
+    length, top = config.actuator.length_m, config.actuator.pressure_range_pa[1]
+    s_c = float(length if contact_s_m is None else contact_s_m)
+    if not 0.0 < s_c <= length:
+        raise ArgumentError(f"contact_s_m: expected 0 < s_c <= L = {length:g} m, got {contact_s_m!r}")
     p = float(max_pressure_pa)
+    if not 0.0 < p <= top:
+        raise ArgumentError(f"max_pressure_pa: expected a pressure in (0, {top:g}] Pa (the config's "
+                            f"actuator.pressure_range_pa), got {max_pressure_pa!r}")
     k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(np.array([0.0, p]))
     blocked = 3.0 * float(config.stiffness.ei_nm2(p)) * float(k0[1] - k0[0]) / (2.0 * s_c)
     return BLOCKED_FORCE_MARGIN * blocked

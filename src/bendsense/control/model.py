@@ -51,6 +51,7 @@ import math
 
 import numpy as np
 
+from bendsense.config import Config
 from bendsense.control.pi import DEFAULT_MAX_RATE_PA_PER_S, MAX_BLOCK_S, MAX_DT_S, FingerController, _positive
 from bendsense.errors import ArgumentError
 
@@ -151,15 +152,24 @@ class ModelController(FingerController):
     def __init__(self, target_force_n, config, *, line=0, finger=None, max_pressure_pa, contact_s_m=None,
                  max_force_n=None, approach_rate_pa_per_s=None,
                  touch_force_n=DEFAULT_TOUCH_FORCE_N, max_rate_pa_per_s=DEFAULT_MAX_RATE_PA_PER_S):
+        if not isinstance(config, Config):
+            raise ArgumentError(f"config: expected a Config (bendsense.load_config(path)), got {type(config).__name__}")
         self.config = config
         length = config.actuator.length_m
         if contact_s_m is not None and not 0.0 < contact_s_m <= length:
             raise ArgumentError(f"contact_s_m: expected 0 < s_c <= L = {length:g} m, got {contact_s_m!r}")
+        top = config.actuator.pressure_range_pa[1]  # the pressing curve is tabulated up to the limit
+        if _positive("max_pressure_pa", max_pressure_pa) > top:
+            raise ArgumentError(f"max_pressure_pa: {max_pressure_pa:g} Pa is beyond the config's "
+                                f"actuator.pressure_range_pa (up to {top:g} Pa), where the actuator model ends")
         self.contact_s_m = contact_s_m
-        self.approach_rate_pa_per_s = (None if approach_rate_pa_per_s is None
-                                       else _positive("approach_rate_pa_per_s", approach_rate_pa_per_s))
         self.touch_force_n = _positive("touch_force_n", touch_force_n)
         self.max_rate = _positive("max_rate_pa_per_s", max_rate_pa_per_s)
+        self.approach_rate_pa_per_s = (None if approach_rate_pa_per_s is None
+                                       else _positive("approach_rate_pa_per_s", approach_rate_pa_per_s))
+        if self.approach_rate_pa_per_s is not None and self.approach_rate_pa_per_s > self.max_rate:
+            raise ArgumentError(f"approach_rate_pa_per_s: {approach_rate_pa_per_s:g} Pa/s is faster than the slew "
+                                f"limit max_rate_pa_per_s = {self.max_rate:g} Pa/s")
         self._tables = {}
         super().__init__(target_force_n, line=line, finger=finger, max_pressure_pa=max_pressure_pa, tip_s_m=length,
                          max_force_n=max_force_n)

@@ -138,7 +138,7 @@ class FingerController:
         self.line = int(line)
         self.finger = finger
         self.max_pressure_pa = _positive("max_pressure_pa", max_pressure_pa)
-        self.tip_s_m = tip_s_m
+        self.tip_s_m = None if tip_s_m is None else _positive("tip_s_m", tip_s_m)
         self.max_force_n = None if max_force_n is None else _positive("max_force_n", max_force_n)
         self.target_force_n = target_force_n
         self.reset()
