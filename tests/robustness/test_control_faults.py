@@ -253,6 +253,17 @@ def test_the_library_records_a_zero_it_could_not_send(single_board, calibration_
     assert board.received[-1][1] > 0
 
 
+def test_a_gripper_config_on_a_board_without_its_channels_is_refused_before_the_board_is_driven(single_board, files):
+    board = Faulty(copy.deepcopy(single_board))  # 16 channels; the gripper's fingers read up to channel 48
+    with SimulatedDevice(board, rate_hz=RATE) as dev:
+        res = CliRunner().invoke(main, ["control", dev.port, "--config", files["gripper"], "--calibration",
+                                        files["calibration"], "--target-force-n", "0.15", "--seconds", "1"])
+    assert res.exit_code == 1 and one_error_line(res).endswith(
+        "the board sends 16 channels (its HELLO), but finger index reads channel 32 (fingers[1].channels of the "
+        "config)"), res.output
+    assert "holding" not in res.output and board.received == [] and board.frames == 0  # never started, never driven
+
+
 def test_a_finger_subset_holds_the_other_lines_at_zero(gripper_board, files, tmp_path):
     # the board's own profile would close every finger (70 kPa); --finger thumb must hold the others at 0
     board = Faulty(copy.deepcopy(gripper_board))

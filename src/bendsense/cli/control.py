@@ -250,7 +250,21 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
                         "constraint": constraint,
                         "contact_s_m": _locations(load_options), "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
+        _check_board(driver, config, port)
         _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s)
+
+
+def _check_board(driver, config, port) -> None:
+    """Every finger's channels on the board its HELLO announces, or one error line before the board is driven."""
+    from bendsense.config import GripperConfig
+
+    n = driver.n_channels
+    if n is None or not isinstance(config, GripperConfig):  # a single actuator: its calibration's check, per block
+        return
+    for i, finger in enumerate(config.fingers):
+        if max(finger.channels) > n:
+            raise click.ClickException(f"{port}: the board sends {n} channels (its HELLO), but finger {finger.name} "
+                                       f"reads channel {max(finger.channels)} (fingers[{i}].channels of the config)")
 
 
 def _tuning(kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s) -> dict:
