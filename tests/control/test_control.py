@@ -510,7 +510,10 @@ def test_run_refuses_bad_arguments():
 @pytest.mark.parametrize(("extra", "gripper", "match"), [
     (["--finger", "thumb"], False, "'--finger': names a finger of a gripper config"),
     (["--finger", "pinky"], True, "finger 'pinky': not a finger of this gripper; its fingers: thumb, index"),
-    ([], "shared", "'--finger': fingers thumb and index both drive pressure line 0: control one of them with --finger"),
+    ([], "shared", "Error: the config's fingers: fingers thumb and index both drive pressure line 0: control one of "
+                   "them (--finger NAME)"),
+    (["--finger", "thumb", "--finger", "index"], "shared",
+     "'--finger': fingers thumb and index both drive pressure line 0: control one of them"),
     (["--max-pressure-kpa", "0"], False, "'--max-pressure-kpa': expected a pressure limit > 0 kPa, got 0"),
 ])
 def test_control_refuses_what_it_cannot_do(tmp_path, extra, gripper, match):
@@ -530,8 +533,19 @@ def test_control_refuses_what_it_cannot_do(tmp_path, extra, gripper, match):
         save_config(type(gripper_config(2)).from_dict(config), tmp_path / "g.yaml")
         args += ["--config", str(tmp_path / "g.yaml")]
     res = CliRunner().invoke(main, args)
-    assert res.exit_code == 2, res.output
-    assert match in " ".join(res.output.split())
+    assert res.exit_code == (1 if match.startswith("Error: the config") else 2), res.output
+    assert match in " ".join(res.output.split()) and "Traceback" not in res.output
+
+
+def test_a_repeated_finger_controls_each_named_finger_once():
+    from bendsense.cli.control import _controllers
+    from bendsense.cli.device import live_load
+    from bendsense.sim import gripper_config
+
+    config = gripper_config(3)
+    tuning = {"controller": "pi", "kp_pa_per_n": 5e4, "ki_pa_per_n_s": 3e6, "max_rate_pa_per_s": 5e5}
+    grasp = _controllers(config, ("index", "thumb", "index"), 0.15, 100e3, tuning, live_load("tip", None, config))
+    assert grasp.fingers == ("thumb", "index") and [c.line for c in grasp.controllers] == [0, 1]
 
 
 def test_the_silence_limit_follows_a_slow_board():

@@ -57,20 +57,24 @@ def _controllers(config, finger, target, max_pressure_pa, tuning, load_options):
                                      param_hint="'--target-force-n'") from None
 
     if not isinstance(config, GripperConfig):
-        if finger is not None:
+        if finger:
             raise click.BadParameter("names a finger of a gripper config (--config with fingers:); this config is "
                                      "a single actuator", param_hint="'--finger'")
         return one(config, load_options)
-    try:
-        chosen = config.fingers if finger is None else (config.finger(finger),)
+    try:  # the named fingers (each once, in the config's order), or every finger
+        chosen = tuple(f for f in config.fingers if f.name in finger) if finger else config.fingers
+        for name in finger:
+            config.finger(name)  # an unknown name: its error
     except BendsenseError as err:
         raise click.BadParameter(str(err), param_hint="'--finger'") from None
     each = [one(f.config, load_options["finger_options"][f.name], line=f.pressure_line, finger=f.name) for f in chosen]
     try:
         return Grasp(each)
     except BendsenseError as err:
-        raise click.BadParameter(f"{str(err).removeprefix('controllers: ')} with --finger NAME",
-                                 param_hint="'--finger'") from None
+        text = str(err).removeprefix("controllers: ")
+        if finger:
+            raise click.BadParameter(text, param_hint="'--finger'") from None
+        raise click.ClickException(f"the config's fingers: {text} (--finger NAME)") from None
 
 
 def _processor(config, calibrations, constraint, bandwidth_hz, load, adapt):
@@ -154,7 +158,9 @@ def _summary(result, controller) -> str:
 @make_calibration_option("Calibration YAML written by 'bendsense calibrate'", required=True)
 @click.option("--target-force-n", required=True, type=Finite(min=0),
               help="Contact normal force to hold [N] (F · n at the contact; positive: the finger presses).")
-@click.option("--finger", help="A gripper's finger to control (default: every finger, each on its own line).")
+@click.option("--finger", multiple=True,
+              help="A gripper's finger to control; repeat it for several (default: every finger, each on its own "
+                   "line).")
 @click.option("--max-pressure-kpa", type=PressureKpa(min=0), default=None,
               help="Highest set-point ever sent [kPa] (default 100, or the end of the config's pressure range "
                    "if lower).")
@@ -204,7 +210,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     takes the touch pressure, and follows the config's pressing curve to the target, with
     a model-mismatch observer; no overshoot at the touch), or a PI with anti-windup
     (--controller pi, --kp-kpa-per-n, --ki-kpa-per-n-s). With a gripper config every finger is controlled on its own
-    pressure line (--finger NAME: only that one; the other lines are held at set-point 0).
+    pressure line (--finger NAME, repeatable: only those; the other lines are held at set-point 0).
     A target beyond what a finger can press with at the pressure limit is refused.
 
     Set-point 0 goes to every pressure line (the config's, every line driven, every line
