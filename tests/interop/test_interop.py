@@ -255,3 +255,13 @@ def test_lsl_without_the_extra_names_it(workdir, monkeypatch, tmp_path):
     assert res.exit_code == 1 and not (tmp_path / "s").exists()
     assert res.output.strip().splitlines() == [
         "Error: --lsl needs the optional extra 'lsl' (pylsl is not installed): pip install 'bendsense[lsl]'"]
+
+
+@pytest.mark.parametrize("command", ["live", "record"])
+@pytest.mark.parametrize("wait", ["nan", "-1", "inf"])
+def test_lsl_wait_must_be_a_finite_time(command, wait, tmp_path):
+    # NaN and a negative wait were taken as no wait, inf waited for a consumer until killed
+    extra = ["-o", str(tmp_path / "s")] if command == "record" else []
+    res = CliRunner().invoke(main, [command, "/dev/null", *extra, "--lsl", "--lsl-wait", wait])
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert "Invalid value for '--lsl-wait'" in res.output and not (tmp_path / "s").exists()
