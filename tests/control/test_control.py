@@ -415,6 +415,29 @@ def test_a_stop_signal_whose_keyboardinterrupt_is_lost_under_the_loop_still_stop
     assert result.frames == round(proc.swallowed * 1e3)  # the next turn of the loop: no frame after the signal's
 
 
+class ConvertingProcessor(FakeProcessor):
+    """A processor whose call turns the signal's KeyboardInterrupt into its own error, as numba's unboxing does."""
+
+    def process_readings(self, readings):
+        block = super().process_readings(readings)
+        if block.t_s[-1] >= 0.1:
+            try:
+                os.kill(os.getpid(), signal.SIGHUP)
+                time.sleep(0.5)  # the handler raises here
+            except KeyboardInterrupt:
+                raise TypeError("can't unbox a <class 'numba.typed.typedlist.List'> as a <NULL>") from None
+        return block
+
+
+def test_a_stop_signal_that_a_call_under_the_loop_turns_into_another_error_is_an_interrupt():
+    # seen on CI: SIGHUP during the live step's call, whose typed list's unboxing reported a TypeError (exit 1)
+    board = FakeBoard()
+    with pytest.raises(KeyboardInterrupt) as info:
+        run(board, ConvertingProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, seconds=5.0)
+    assert isinstance(info.value.__cause__, TypeError) and zeros_at_end(board)
+    assert info.value.result.outcome == "interrupted"
+
+
 class SignalledBoard(FakeBoard):
     """A fake board whose first zero set-point brings a stop signal: a second Ctrl-C while the loop zeros."""
 

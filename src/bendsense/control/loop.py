@@ -401,9 +401,15 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
         except BaseException as err:
             stopped_at = time.perf_counter()
             error = err
-            outcome = "interrupted" if isinstance(err, KeyboardInterrupt) else f"{type(err).__name__}: {err}"
+            if state["signals"] and not isinstance(err, (KeyboardInterrupt, ControlStop)):
+                # the signal's KeyboardInterrupt, raised inside a call that reported its own error instead (numba's
+                # unboxing of a typed list, interrupted, raises "can't unbox ..."): the signal stopped the loop
+                error = KeyboardInterrupt()
+            outcome = "interrupted" if isinstance(error, KeyboardInterrupt) else f"{type(err).__name__}: {err}"
             if isinstance(err, ControlStop):
                 outcome = f"safety stop: {err.reason}"
+            if error is not err:
+                raise error from err
             raise
         finally:
             try:
