@@ -127,7 +127,7 @@ def known_location_rows(n_frames, cal):
 def bench_latency(table, n):
     """Known-location frame vs tip frame, cold, interleaved (:func:`known_location_rows`)."""
     for what, got, target, ok in known_location_rows(n, calibration()):
-        table.append((what, got, target or "—", None if ok is None else bool(ok)))
+        table.append((what, got, target or "—", ok))  # rows() makes it a bool
 
 
 def bench_known_accuracy(table, n, sensors):

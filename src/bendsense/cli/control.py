@@ -61,12 +61,12 @@ def _controllers(config, finger, target, max_pressure_pa, tuning, load_options):
             raise click.BadParameter("names a finger of a gripper config (--config with fingers:); this config is "
                                      "a single actuator", param_hint="'--finger'")
         return one(config, load_options)
-    try:  # the named fingers (each once, in the config's order), or every finger
-        chosen = tuple(f for f in config.fingers if f.name in finger) if finger else config.fingers
+    try:
         for name in finger:
             config.finger(name)  # an unknown name: its error
     except BendsenseError as err:
         raise click.BadParameter(str(err), param_hint="'--finger'") from None
+    chosen = [f for f in config.fingers if f.name in finger] if finger else config.fingers  # each once, in order
     each = [one(f.config, load_options["finger_options"][f.name], line=f.pressure_line, finger=f.name) for f in chosen]
     try:
         return Grasp(each)

@@ -117,6 +117,23 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
     return NormalForce(force_n=value, std_n=std, contact_s_m=s_out, angle_rad=phi, status=status)
 
 
+def _limits(config, max_pressure_pa, contact_s_m=None) -> tuple:
+    """(pressure limit [Pa], s_c [m]) checked against the finger's config, or ArgumentError; s_c None: the tip L.
+
+    The limit within (0, the end of ``actuator.pressure_range_pa``], where the actuator model
+    ends; s_c within (0, L].
+    """
+    length, top = config.actuator.length_m, config.actuator.pressure_range_pa[1]
+    s_c = length if contact_s_m is None else contact_s_m
+    number = (int, float, np.integer, np.floating)
+    if isinstance(s_c, bool) or not isinstance(s_c, number) or not 0.0 < s_c <= length:
+        raise ArgumentError(f"contact_s_m: expected 0 < s_c <= L = {length:g} m, got {contact_s_m!r}")
+    if isinstance(max_pressure_pa, bool) or not isinstance(max_pressure_pa, number) or not 0.0 < max_pressure_pa <= top:
+        raise ArgumentError(f"max_pressure_pa: expected a pressure in (0, {top:g}] Pa (the config's "
+                            f"actuator.pressure_range_pa, where the actuator model ends), got {max_pressure_pa!r}")
+    return float(max_pressure_pa), float(s_c)
+
+
 def force_limit_n(config, max_pressure_pa: float, contact_s_m: float | None = None) -> float:
     """The most normal force a finger can press with at s_c, at pressures up to ``max_pressure_pa`` [N].
 
@@ -150,14 +167,7 @@ def force_limit_n(config, max_pressure_pa: float, contact_s_m: float | None = No
     """
     from bendsense.mechanics.actuator import FreeBendingModel
 
-    length, top = config.actuator.length_m, config.actuator.pressure_range_pa[1]
-    s_c = float(length if contact_s_m is None else contact_s_m)
-    if not 0.0 < s_c <= length:
-        raise ArgumentError(f"contact_s_m: expected 0 < s_c <= L = {length:g} m, got {contact_s_m!r}")
-    p = float(max_pressure_pa)
-    if not 0.0 < p <= top:
-        raise ArgumentError(f"max_pressure_pa: expected a pressure in (0, {top:g}] Pa (the config's "
-                            f"actuator.pressure_range_pa), got {max_pressure_pa!r}")
+    p, s_c = _limits(config, max_pressure_pa, contact_s_m)
     k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(np.array([0.0, p]))
     blocked = 3.0 * float(config.stiffness.ei_nm2(p)) * float(k0[1] - k0[0]) / (2.0 * s_c)
     return BLOCKED_FORCE_MARGIN * blocked

@@ -52,6 +52,7 @@ import math
 import numpy as np
 
 from bendsense.config import Config
+from bendsense.control.force import _limits
 from bendsense.control.pi import DEFAULT_MAX_RATE_PA_PER_S, MAX_BLOCK_S, MAX_DT_S, FingerController, _positive
 from bendsense.errors import ArgumentError
 
@@ -156,12 +157,7 @@ class ModelController(FingerController):
             raise ArgumentError(f"config: expected a Config (bendsense.load_config(path)), got {type(config).__name__}")
         self.config = config
         length = config.actuator.length_m
-        if contact_s_m is not None and not 0.0 < contact_s_m <= length:
-            raise ArgumentError(f"contact_s_m: expected 0 < s_c <= L = {length:g} m, got {contact_s_m!r}")
-        top = config.actuator.pressure_range_pa[1]  # the pressing curve is tabulated up to the limit
-        if _positive("max_pressure_pa", max_pressure_pa) > top:
-            raise ArgumentError(f"max_pressure_pa: {max_pressure_pa:g} Pa is beyond the config's "
-                                f"actuator.pressure_range_pa (up to {top:g} Pa), where the actuator model ends")
+        _limits(config, max_pressure_pa, contact_s_m)  # the pressing curve is tabulated up to the limit, at s_c
         self.contact_s_m = contact_s_m
         self.touch_force_n = _positive("touch_force_n", touch_force_n)
         self.max_rate = _positive("max_rate_pa_per_s", max_rate_pa_per_s)
