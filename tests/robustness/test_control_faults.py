@@ -259,7 +259,7 @@ def test_a_gripper_config_on_a_board_without_its_channels_is_refused_before_the_
         res = CliRunner().invoke(main, ["control", dev.port, "--config", files["gripper"], "--calibration",
                                         files["calibration"], "--target-force-n", "0.15", "--seconds", "1"])
     assert res.exit_code == 1 and one_error_line(res).endswith(
-        "the board sends 16 channels (its HELLO), but finger index reads channel 32 (fingers[1].channels of the "
+        "(the board's HELLO): 16 channels, but finger index reads channel 32 (fingers[1].channels of the "
         "config)"), res.output
     assert "holding" not in res.output and board.received == [] and board.frames == 0  # never started, never driven
 

@@ -263,14 +263,10 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
 def _check_board(driver, config, port) -> None:
     """Every finger's channels on the board its HELLO announces, or one error line before the board is driven."""
     from bendsense.config import GripperConfig
+    from bendsense.session.fingers import check_board
 
-    n = driver.n_channels
-    if n is None or not isinstance(config, GripperConfig):  # a single actuator: its calibration's check, per block
-        return
-    for i, finger in enumerate(config.fingers):
-        if max(finger.channels) > n:
-            raise click.ClickException(f"{port}: the board sends {n} channels (its HELLO), but finger {finger.name} "
-                                       f"reads channel {max(finger.channels)} (fingers[{i}].channels of the config)")
+    if driver.n_channels is not None and isinstance(config, GripperConfig):  # an actuator: its calibration's check
+        check_board(driver.n_channels, None, config, f"{port} (the board's HELLO)", click.ClickException)
 
 
 def _tuning(kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s) -> dict:

@@ -56,15 +56,19 @@ def _line(pressure: np.ndarray, finger: Finger) -> np.ndarray:
     return pressure if pressure.ndim == 1 else pressure[:, finger.pressure_line]
 
 
-def _check_board(n_channels: int, n_lines: int, gripper: GripperConfig, source: str, error) -> None:
-    """A board of ``n_channels`` and ``n_lines`` holds every finger's channels and line, or one clear error."""
+def check_board(n_channels: int, n_lines: int | None, gripper: GripperConfig, source: str, error) -> None:
+    """A board of ``n_channels`` and ``n_lines`` holds every finger's channels and line, or one ``error``.
+
+    The error's message begins with ``source``; ``n_lines`` None: not known (a board's
+    HELLO announces its channels, not its lines).
+    """
     for i, finger in enumerate(gripper.fingers):
         high = max(finger.channels)
         if high > n_channels:
             raise error(f"{source}: {n_channels} channel{'s' if n_channels != 1 else ''}, but finger {finger.name} "
                         f"reads channel {high} (fingers[{i}].channels of the config)")
     for i, finger in enumerate(gripper.fingers):
-        if finger.pressure_line >= n_lines:
+        if n_lines is not None and finger.pressure_line >= n_lines:
             raise error(f"{source}: {n_lines} pressure line{'s' if n_lines != 1 else ''}, but finger {finger.name} "
                         f"is on line {finger.pressure_line} (fingers[{i}].pressure_line of the config, 0-based)")
 
@@ -142,7 +146,7 @@ def split_session(session: Session, gripper: GripperConfig) -> dict:
     gripper = _gripper(gripper)
     check.instance("session", session, Session, "bendsense.read_session(path)")
     pressure = np.asarray(session.pressure_pa)
-    _check_board(session.n_channels, _lines(pressure), gripper, session.source or "session", SessionError)
+    check_board(session.n_channels, _lines(pressure), gripper, session.source or "session", SessionError)
     extras = split_extra(session.extra, gripper)
     out = {}
     for finger in gripper.fingers:
@@ -181,7 +185,7 @@ def split_signals(signals, pressure_pa, gripper: GripperConfig) -> dict:
     if pressure.ndim not in (1, 2) or pressure.shape[0] != frames:
         raise ArgumentError(f"pressure_pa: expected shape ({frames},) or ({frames}, n_lines) (frames of signals), "
                             f"got {pressure.shape}")
-    _check_board(signals.shape[1], _lines(pressure), gripper, "signals", ArgumentError)
+    check_board(signals.shape[1], _lines(pressure), gripper, "signals", ArgumentError)
     return finger_parts(signals, pressure, gripper)
 
 
