@@ -567,7 +567,7 @@ def test_a_repeated_finger_controls_each_named_finger_once():
 
     config = gripper_config(3)
     tuning = {"controller": "pi", "kp_pa_per_n": 5e4, "ki_pa_per_n_s": 3e6, "max_rate_pa_per_s": 5e5}
-    grasp = _controllers(config, ("index", "thumb", "index"), 0.15, 100e3, tuning, live_load("tip", None, config))
+    grasp = _controllers(config, ("index", "thumb", "index"), 0.15, 100e3, tuning, live_load("tip", None, config), 30.0)
     assert grasp.fingers == ("thumb", "index") and [c.line for c in grasp.controllers] == [0, 1]
 
 
@@ -577,3 +577,12 @@ def test_the_silence_limit_follows_a_slow_board():
     assert Guard(Safety(), (None,), rate_hz=1000.0).silence_s == 0.1
     assert Guard(Safety(), (None,), rate_hz=35.0).silence_s == pytest.approx(10 / 35)  # the paper's 35 Hz board
     assert Guard(Safety(silence_s=0.5), (None,), rate_hz=35.0).silence_s == 0.5
+
+
+def test_the_model_controller_is_told_the_tracks_bandwidth():
+    from bendsense.cli.control import _controllers, _tuning
+    from bendsense.cli.device import live_load
+
+    tuning = _tuning("model", None, None, None, None)
+    ctl = _controllers(CONFIG, (), 0.15, 100e3, tuning, live_load("tip", None, CONFIG), 12.0)
+    assert ctl.track_bandwidth_hz == 12.0  # its lag is the track's (bendsense control --bandwidth-hz 12)

@@ -30,11 +30,12 @@ log = logging.getLogger("bendsense")
 
 
 
-def _controllers(config, finger, target, max_pressure_pa, tuning, load_options):
+def _controllers(config, finger, target, max_pressure_pa, tuning, load_options, bandwidth_hz):
     """The controller(s): one per controlled finger, on its line (a single actuator: line 0).
 
     ``tuning`` names the kind (``model``: :class:`bendsense.control.ModelController`, ``pi``:
-    :class:`bendsense.control.PIController`) and its options. A target beyond what a finger
+    :class:`bendsense.control.PIController`) and its options; the model's knows the track's
+    ``bandwidth_hz`` (its lag). A target beyond what a finger
     can press with at the pressure limit (at its known contact location, else its tip:
     :func:`bendsense.control.force_limit_n`) is refused here, before the board is driven.
     """
@@ -49,7 +50,8 @@ def _controllers(config, finger, target, max_pressure_pa, tuning, load_options):
         try:
             if kind == "model":
                 return ModelController(target, cfg, max_pressure_pa=max_pressure_pa, max_force_n=bound,
-                                       contact_s_m=options.get("contact_s_m"), **kw, **options_of_kind)
+                                       contact_s_m=options.get("contact_s_m"), track_bandwidth_hz=bandwidth_hz,
+                                       **kw, **options_of_kind)
             return PIController(target, max_pressure_pa=max_pressure_pa, tip_s_m=cfg.actuator.length_m,
                                 max_force_n=bound, **kw, **options_of_kind)
         except ArgumentError as err:
@@ -248,13 +250,14 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     pmax = pressure_limit(config, max_pressure_kpa)
     tuning = _tuning(controller_kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s)
     load_options = live_load(load, contact_s_m, config)
-    controller = _controllers(config, finger, target_force_n, pmax, tuning, load_options)
-    processor = _processor(config, calibrations, constraint, bandwidth_hz or TRACK_BANDWIDTH_HZ, load_options, adapt)
+    bandwidth_hz = bandwidth_hz or TRACK_BANDWIDTH_HZ
+    controller = _controllers(config, finger, target_force_n, pmax, tuning, load_options, bandwidth_hz)
+    processor = _processor(config, calibrations, constraint, bandwidth_hz, load_options, adapt)
     meta = {"command": "bendsense control",
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **tuning,
                         "fingers": [f for f in controller.fingers if f is not None], "load": load,
                         "constraint": constraint,
-                        "contact_s_m": _locations(load_options), "bandwidth_hz": bandwidth_hz or TRACK_BANDWIDTH_HZ}}
+                        "contact_s_m": _locations(load_options), "bandwidth_hz": bandwidth_hz}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
         _check_board(driver, config, port)
         _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s)

@@ -12,7 +12,9 @@ turn that lead into tens of mN (the PI: 35–190 mN at 0.15–0.3 N on the simul
    :data:`APPROACH_GAIN_PA_PER_N_S` times the target, between
    :data:`MIN_APPROACH_RATE_PA_PER_S` and the slew limit: the force with which the finger
    meets the object before the loop sees it grows with the ramp, so a small target is
-   approached gently, a large one fast. A block spanning more than
+   approached gently, a large one fast. A track slower than
+   :data:`~bendsense.control.TRACK_BANDWIDTH_HZ` sees the touch later: the ramp slows in
+   proportion (a 6 Hz track: a fifth). A block spanning more than
    :data:`~bendsense.control.pi.MAX_BLOCK_S` (a loop behind its board) ramps as if only
    that had passed: a late loop approaches more slowly.
 2. **Touch**: the pressure of first touch ``P_c`` is where the model's pressing curve from
@@ -20,7 +22,8 @@ turn that lead into tens of mN (the PI: 35–190 mN at 0.15–0.3 N on the simul
    track, so that the two are of the same moment). The curve is
    :func:`bendsense.mechanics.pressing.pressing_force`: the config's finger against a
    rigid object at the contact location, tabulated over ``P_c`` and ``P − P_c`` once per
-   location (every 5 kPa to the pressure limit, interpolated).
+   location (every 5 kPa to the pressure limit, interpolated). The lag is the track's,
+   ``1 / (2π f)`` of its bandwidth f (``track_bandwidth_hz``).
 3. **Pressing**: a reference force rises from the force at the touch to the target as a
    first-order step (:data:`REFERENCE_TAU_S`), and the set-point is the pressure at which
    the model presses with the reference plus the model's mismatch:
@@ -53,7 +56,14 @@ import numpy as np
 
 from bendsense.config import Config
 from bendsense.control.force import _limits
-from bendsense.control.pi import DEFAULT_MAX_RATE_PA_PER_S, MAX_BLOCK_S, MAX_DT_S, FingerController, _positive
+from bendsense.control.pi import (
+    DEFAULT_MAX_RATE_PA_PER_S,
+    MAX_BLOCK_S,
+    MAX_DT_S,
+    TRACK_BANDWIDTH_HZ,
+    FingerController,
+    _positive,
+)
 from bendsense.errors import ArgumentError
 
 __all__ = ["ModelController", "APPROACH_GAIN_PA_PER_N_S", "MIN_APPROACH_RATE_PA_PER_S", "DEFAULT_TOUCH_FORCE_N",
@@ -71,9 +81,6 @@ REFERENCE_TAU_S = 0.03
 #: time constant of the model-mismatch observer [s]: slower than the regulator and the track, so it does not
 #: chase their lag
 OBSERVER_TAU_S = 0.04
-#: the tracked force's lag behind the line's pressure [s] (a 30 Hz track: 1/(2π · 30 Hz)), applied to the model's
-#: force before it is compared with the tracked one
-TRACK_LAG_S = 1.0 / (2.0 * math.pi * 30.0)
 #: a contact whose force stays below half the touch force this long [s] is lost: the approach resumes
 LOST_S = 0.05
 #: node spacing of the pressing tables [Pa]
@@ -139,6 +146,12 @@ class ModelController(FingerController):
         Normal force that counts as the touch [N] (at most half the target is used).
     max_rate_pa_per_s : float, default :data:`~bendsense.control.DEFAULT_MAX_RATE_PA_PER_S`
         Slew limit of a rising set-point while pressing [Pa/s].
+    track_bandwidth_hz : float, default :data:`~bendsense.control.TRACK_BANDWIDTH_HZ`
+        The bandwidth of the track whose force the controller gets
+        (:class:`~bendsense.pipeline.LiveProcessor`'s ``bandwidth_hz``): the model's force
+        and the line's pressure are lagged by ``1 / (2π f)`` before they meet the tracked
+        force, and a slower track than the default's approaches more slowly. With a 6 Hz
+        track and the 30 Hz lag assumed, the simulated board overshot 0.15 N by 60 mN.
 
     Attributes
     ----------
@@ -152,7 +165,8 @@ class ModelController(FingerController):
 
     def __init__(self, target_force_n, config, *, line=0, finger=None, max_pressure_pa, contact_s_m=None,
                  max_force_n=None, approach_rate_pa_per_s=None,
-                 touch_force_n=DEFAULT_TOUCH_FORCE_N, max_rate_pa_per_s=DEFAULT_MAX_RATE_PA_PER_S):
+                 touch_force_n=DEFAULT_TOUCH_FORCE_N, max_rate_pa_per_s=DEFAULT_MAX_RATE_PA_PER_S,
+                 track_bandwidth_hz=TRACK_BANDWIDTH_HZ):
         if not isinstance(config, Config):
             raise ArgumentError(f"config: expected a Config (bendsense.load_config(path)), got {type(config).__name__}")
         self.config = config
@@ -161,6 +175,8 @@ class ModelController(FingerController):
         self.contact_s_m = contact_s_m
         self.touch_force_n = _positive("touch_force_n", touch_force_n)
         self.max_rate = _positive("max_rate_pa_per_s", max_rate_pa_per_s)
+        self.track_bandwidth_hz = _positive("track_bandwidth_hz", track_bandwidth_hz)
+        self._lag_s = 1.0 / (2.0 * math.pi * self.track_bandwidth_hz)  # the track's lag behind the pressure
         self.approach_rate_pa_per_s = (None if approach_rate_pa_per_s is None
                                        else _positive("approach_rate_pa_per_s", approach_rate_pa_per_s))
         if self.approach_rate_pa_per_s is not None and self.approach_rate_pa_per_s > self.max_rate:
@@ -197,7 +213,7 @@ class ModelController(FingerController):
     def _press(self, dt, force_n, pressure_pa, out):
         dp, curve = self._curve
         model = float(np.interp(pressure_pa - self.touch_pressure_pa, dp, curve))
-        self._model_n += (model - self._model_n) * -math.expm1(-dt / TRACK_LAG_S)
+        self._model_n += (model - self._model_n) * -math.expm1(-dt / self._lag_s)
         m = self.mismatch_n + (self._model_n - force_n - self.mismatch_n) * -math.expm1(-dt / OBSERVER_TAU_S)
         at_top, at_bottom = out >= self.max_pressure_pa, out <= 0.0
         if not ((at_top and m < self.mismatch_n) or (at_bottom and m > self.mismatch_n)):  # anti-windup
@@ -235,6 +251,7 @@ class ModelController(FingerController):
         rate = self.approach_rate_pa_per_s
         if rate is None:
             rate = min(max(APPROACH_GAIN_PA_PER_N_S * self.target_force_n, MIN_APPROACH_RATE_PA_PER_S), self.max_rate)
+            rate *= min(1.0, self.track_bandwidth_hz / TRACK_BANDWIDTH_HZ) ** 0.5  # a slower track sees the touch later
         for t, f, p, s_c in zip(times.tolist(), np.asarray(force_n, dtype=float).tolist(),
                                 np.asarray(pressure_pa, dtype=float).tolist(), where.tolist()):
             dt = min(t - last_t, MAX_DT_S) if t > last_t else 0.0  # the first frame, or a clock going back: no time
@@ -243,7 +260,7 @@ class ModelController(FingerController):
             if not (math.isfinite(f) and math.isfinite(p)):
                 continue
             lagged = self._lagged_pa
-            self._lagged_pa = p if not math.isfinite(lagged) else lagged + (p - lagged) * -math.expm1(-dt / TRACK_LAG_S)
+            self._lagged_pa = p if not math.isfinite(lagged) else lagged + (p - lagged) * -math.expm1(-dt / self._lag_s)
             if self._mode == _APPROACH:
                 if self.target_force_n > 0.0 and f >= touch_n:
                     self._touch(self._lagged_pa, f, s_c)
