@@ -423,6 +423,8 @@ def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
     # (a worker's log line would be lost in the console: the session's report row says it)
     ignored = options.pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
     adapted = options.adapt and adapt_session(session, config, calibration, options.pressure_pa)
+    if adapted and adapted.refused:  # the session's row says so (its note)
+        warnings.warn(f"adapt learned nothing, the config's prior used: {adapted.why}", DataWarning, stacklevel=2)
     processed = process(session, config if not adapted else adapted.config, calibration, **options.process_keywords())
     session = processed.session
     processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made

@@ -10,9 +10,9 @@ on it: the ORIGINAL config's prior updated by every free frame in the buffer (a 
 counts once, however many updates it sees; ``adapt`` chooses the free frames and
 refuses loaded ones). The processor checks for the result without waiting, once per
 block, and continues with the adapted config from the next block: the same arrays of
-the same shapes, so nothing compiles in the loop. An update whose frame selection did
-not settle (its posterior finds too few of its own frames free) is not swapped in: the
-loop keeps its config.
+the same shapes, so nothing compiles in the loop. An update that learned nothing
+(``adapt`` refused: too few free frames, or a frame selection that did not settle) is
+not swapped in: the loop keeps its config.
 
 A process and not a thread: the compiled kernels hold the GIL, and an update of a few
 hundred frames (0.5–2 s) would stall the loop. The worker is spawned and warmed when
@@ -42,14 +42,14 @@ PER_BIN = 4
 
 
 def _learn(kappa, pressure_pa, t_s, config, calibration, source):
-    """The worker's job: :func:`bendsense.adapt` on the buffer; (config or None when refused, free frames, report)."""
+    """The worker's job: :func:`bendsense.adapt` on the buffer.
+
+    Returns (the config, or None when refused; its free frames; the report; why it refused).
+    """
     from bendsense.identify.sessions import adapt
 
     result = adapt(kappa, pressure_pa, config, calibration=calibration, t_s=t_s, source=source)
-    if not result.refused and not result.fit.settled:  # a posterior that does not describe its own free frames
-        return None, 0, (f"{result.report} Not used live: the frame selection did not settle (the config kept; "
-                         "record a free sweep over the pressure range)")
-    return (None if result.refused else result.config), int(np.count_nonzero(result.free)), result.report
+    return (None if result.refused else result.config), int(np.count_nonzero(result.free)), result.report, result.why
 
 
 class LiveAdaptation:
@@ -76,6 +76,8 @@ class LiveAdaptation:
         Free frames of the latest of them.
     report : str
         The latest update's report (:attr:`bendsense.identify.sessions.Adaptation.report`).
+    why : str
+        Why the latest update was not used ("" if it was, or none finished).
     """
 
     def __init__(self, calibration, config, *, source: str = "a live stream"):
@@ -94,7 +96,7 @@ class LiveAdaptation:
         self._job_t = math.nan  # the device time of the newest frame of the update submitted last [s]
         self._last_t, self._last_bins, self._since = None, 0, 0
         self.updates = self.free = 0
-        self.report = "adapt: no update yet"
+        self.report, self.why = "adapt: no update yet", ""
 
     def start(self) -> None:
         """Spawn the worker and warm it: an update on a straight actuator over mid pressures (it learns nothing)."""
@@ -164,9 +166,10 @@ class LiveAdaptation:
             return None
         job, self._job = self._job, None
         try:
-            config, free, self.report = job.result()
+            config, free, self.report, self.why = job.result()
         except Exception as err:  # noqa: BLE001 (a failed update must not stop the stream: the config is kept)
-            self.report = f"adapt: the update failed ({type(err).__name__}: {err}); the config kept"
+            self.why = f"the update failed ({type(err).__name__}: {err})"
+            self.report = f"adapt: {self.why}; the config kept"
             log.warning("%s", self.report)
             return None
         if config is None:
@@ -205,7 +208,7 @@ class LiveAdaptation:
         from bendsense.identify.sessions import k0_with_sigma
 
         if not self.updates:
-            return f"adapt: learned nothing, the config's prior kept ({self.report.removeprefix('adapt: ')[:160]})"
+            return f"adapt: learned nothing, the config's prior kept: {self.why or 'no update finished'}"
         p = self._p[np.isfinite(self._p)]
         levels = np.unique(np.round(np.percentile(p, [5, 50, 95]), -3))
         (k0, before), (k1, after) = (k0_with_sigma(c, levels) for c in (self.prior, self.config))

@@ -256,6 +256,8 @@ class FreeBendingSessionFit:
         How the first fit's frames were chosen.
     caveats : tuple of str
         What the fit takes as exact that may not be (printed by :meth:`report`).
+    unsettled : str
+        Why the selection did not settle, in a few words ("" when it did).
     """
 
     fit: object
@@ -267,6 +269,7 @@ class FreeBendingSessionFit:
     settled: bool
     note: str
     caveats: tuple = ()
+    unsettled: str = ""
 
     def to_config(self, config):
         """A copy of ``config`` with the fitted values and covariance (:meth:`FreeBendingFit.to_config`).
@@ -455,15 +458,16 @@ def _free_frames_fit(shape, p, usable, config, calibration, source, *, fix=None,
         used, note = usable.copy(), (f"the starting config found {int(used.sum())} of {int(usable.sum())} usable "
                                      "frames free; the first fit used all usable frames")
     frames = _FreeFrames(shape, p, angle, weights, slope_ei, calibration, config, source)
-    fit, settled, done, caveats = None, False, 0, ()
+    fit, settled, done, caveats, unsettled = None, False, 0, (), ""
     while done < rounds:
         done += 1
         fit = frames.fit(used, fix, prior)
         current = fit.to_config(config)
         new_used, new_reason = _select(shape, p, usable, current, calibration, chi2_limit, thinned, shaped)
         if new_used.sum() < 0.5 * used.sum():  # the fitted model describes few of its own frames: keep them
-            caveats = (f"the fitted config finds only {int(new_used.sum())} of the {int(used.sum())} frames it was "
-                       "fitted to free: the model does not describe the free sweep to within its sigma (is EI(P) "
+            unsettled = (f"the fitted config finds only {int(new_used.sum())} of the {int(used.sum())} frames it was "
+                         "fitted to free")
+            caveats = (f"{unsettled}: the model does not describe the free sweep to within its sigma (is EI(P) "
                        "right? identify stiffness, then this again); the fit keeps those frames",)
             reason = np.where(used, "used", reason)
             break
@@ -473,12 +477,13 @@ def _free_frames_fit(shape, p, usable, config, calibration, source, *, fix=None,
             break
     if not settled and not caveats:  # the final fit is on the final selection
         fit = frames.fit(used, fix, prior)
+        unsettled = f"the frame selection still changed in round {done}"
     if not prior and not np.any(_block(config, STIFFNESS_PARAMETERS)):
         caveats += ("the config states no covariance of ei0_nm2, ei1_nm2_per_pa: the gravity correction takes its "
                     "EI(P) as exact; identify stiffness, then free bending again with that config",)
     return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
                                  reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note,
-                                 caveats=caveats)
+                                 caveats=caveats, unsettled=unsettled)
 
 
 def _thin(candidates, pressure_pa, max_frames: int) -> np.ndarray:
@@ -578,12 +583,15 @@ class Adaptation:
         what it refused and why.
     fit : FreeBendingSessionFit or None
         The fit behind it (None when it refused).
+    why : str
+        Why it refused, in a few words ("" when it learned).
     """
 
     config: object
     free: np.ndarray
     report: str
     fit: object = None
+    why: str = ""
 
     @property
     def refused(self) -> bool:
@@ -610,8 +618,13 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
     pressure only: the posterior keeps the prior's split between μ̄ and μ_s there.
 
     It refuses to learn (the config returned unchanged, ``refused`` True, the report
-    says why) from fewer than four free frames: a session whose frames are all loaded,
-    or none in the calibrated range and the pressure range.
+    says why) from fewer than four free frames (a session whose frames are all loaded,
+    or none in the calibrated range and the pressure range), and when the selection does
+    not settle: a posterior that finds few of its own frames free, or a selection that
+    still changes after the last round, learned from frames that are not free (a light
+    touch, a load the prior's wide ellipse let through; a few such frames move the
+    posterior by tens of percent, since the calibration's error, common to all frames,
+    leaves their per-frame noise as the measure of a misfit).
 
     Parameters
     ----------
@@ -668,7 +681,13 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
                   "It learns only from frames it can tell from loaded ones (the force estimate ok and inside its "
                   "2-sigma ellipse of zero); record a moment of free motion (a sweep, the approach before a "
                   "grasp, a rest between touches).")
-        return Adaptation(config=config, free=np.zeros(len(p), dtype=bool), report=report)
+        return Adaptation(config=config, free=np.zeros(len(p), dtype=bool), report=report, why=why)
+    if not fit.settled:  # a posterior that does not describe its own free frames: nothing to believe
+        why = f"{fit.unsettled} (frames taken for free that are not: a light touch, a load inside the prior's ellipse)"
+        report = (f"adapt: learned nothing from {len(p)} frames and kept the config's prior: {why}. It learns from "
+                  "sessions whose free frames it can tell from loaded ones: record a moment of free motion over the "
+                  "pressure range (a sweep, the approach before a grasp).")
+        return Adaptation(config=config, free=np.zeros(len(p), dtype=bool), report=report, why=why)
     new = fit.to_config(config)
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     provenance = (f"adapt {when} from {source or 'a session'}: {int(fit.used.sum())} of {len(p)} frames free; "
@@ -743,11 +762,8 @@ def _adapt_report(fit, prior, posterior, t_s) -> str:
     refused = ", ".join(f"{c} {r}" for r, c in counts.items() if r != "used") or "none"
     one = "" if np.ptp(p) > 10e3 else (" Its free frames lie at one pressure: they teach K0 there, and the split "
                                        "between shear_modulus_pa and sensor_stiffness_nm_per_rad stays the prior's.")
-    caveats = "".join(f" Note: {c}." for c in fit.caveats)
-    settled = "" if fit.settled else " WARNING: the frame selection had not settled; check the free frames."
     return (f"adapt: learned from {int(used.sum())} free frames of {considered} considered ({len(used)} in the "
             f"session, spread over pressure, at most {ADAPT_FRAMES}) at {span}{when}; K0 moved by {learned}; "
             f"{params}. Refused: {refused} (loaded: the force outside its 2-sigma ellipse of zero; load_shape: a "
             f"shape no free beam has, p < {FREE_P:g}; unusable: outside the calibrated or pressure range), in "
-            f"{fit.rounds} round(s) of selection.{one}{caveats}"
-            f"{settled}")
+            f"{fit.rounds} round(s) of selection.{one}")
