@@ -13,8 +13,8 @@ turn that lead into tens of mN (the PI: 35–190 mN at 0.15–0.3 N on the simul
    :data:`MIN_APPROACH_RATE_PA_PER_S` and the slew limit: the force with which the finger
    meets the object before the loop sees it grows with the ramp, so a small target is
    approached gently, a large one fast. A track slower than
-   :data:`~bendsense.control.TRACK_BANDWIDTH_HZ` sees the touch later: the ramp slows in
-   proportion (a 6 Hz track: a fifth). A block spanning more than
+   :data:`~bendsense.control.TRACK_BANDWIDTH_HZ` sees the touch later: the ramp slows by the
+   square root of the ratio (a 6 Hz track: to 45 %). A block spanning more than
    :data:`~bendsense.control.pi.MAX_BLOCK_S` (a loop behind its board) ramps as if only
    that had passed: a late loop approaches more slowly.
 2. **Touch**: the pressure of first touch ``P_c`` is where the model's pressing curve from
