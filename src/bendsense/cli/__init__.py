@@ -53,3 +53,18 @@ def _run_pipeline(steps, **_options) -> None:
 for _module in (pipeline, batch, calibrate, identify, sim, reproduce, device, live, control):
     for _command in _module.COMMANDS:
         main.add_command(_command)
+
+
+def run() -> None:
+    """The ``bendsense`` console script: :func:`main`; once it is done, a late stop signal keeps its exit status.
+
+    (:func:`bendsense.cli._signals.exit_quietly`: a second Ctrl-C while the interpreter
+    exits ends it at once with the command's status, instead of killing it by the signal.)
+    """
+    from bendsense.cli import _signals
+
+    try:
+        main()
+    except SystemExit as done:
+        _signals.exit_quietly(done.code)
+        raise

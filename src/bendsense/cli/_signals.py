@@ -21,9 +21,9 @@ from __future__ import annotations
 import contextlib
 import signal
 
-from bendsense.stop_signals import handled
+from bendsense.stop_signals import STOP_SIGNALS, handled
 
-__all__ = ["installed", "note", "exit_code", "message"]
+__all__ = ["installed", "stopping", "interrupting", "note", "exit_code", "message", "exit_quietly"]
 
 _received: list[int] = []  # the stop signals seen, first first
 
@@ -46,6 +46,31 @@ def installed():
         yield
 
 
+def stopping() -> bool:
+    """Whether a stop signal has come (the command is stopping, whatever became of its KeyboardInterrupt)."""
+    return bool(_received)
+
+
+@contextlib.contextmanager
+def interrupting():
+    """The block ends with KeyboardInterrupt when a stop signal came, whatever became of the signal's own.
+
+    A call under the block may turn the KeyboardInterrupt the signal raised inside it into
+    its own error (numba unboxing a typed list reports ``TypeError: can't unbox ...``;
+    matplotlib in the middle of a draw ``ValueError: Invalid affine transformation
+    matrix``) or swallow it (an exception in a finaliser is only printed): the signal
+    stopped the command all the same.
+    """
+    try:
+        yield
+    except Exception as err:
+        if not _received:
+            raise
+        raise KeyboardInterrupt from err
+    if _received:
+        raise KeyboardInterrupt
+
+
 def note(err: BaseException, text: str) -> None:
     """Add what an interrupted command kept to the KeyboardInterrupt ``err`` (shown in its one line)."""
     err.__notes__ = [*getattr(err, "__notes__", []), text]
@@ -66,3 +91,19 @@ def message(err: BaseException | None) -> str:
     notes = [n for n in getattr(err, "__notes__", []) if n]
     kept = "; ".join(notes) if notes else "no output left half-written"
     return f"Interrupted ({signal.Signals(signum()).name}): {kept}"
+
+
+def exit_quietly(code) -> None:
+    """From now on a stop signal ends the process at once with ``code`` (the command has finished).
+
+    After the command's last line, the interpreter still takes a moment to exit (threads,
+    worker pools, finalisers); a second Ctrl-C then must not kill it by the signal and
+    change its exit status. For the console script only (:func:`bendsense.cli.run`):
+    never in a process that goes on.
+    """
+    import os
+
+    status = code if isinstance(code, int) else (0 if code is None else 1)
+    for signum in STOP_SIGNALS:
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, lambda *_: os._exit(status))

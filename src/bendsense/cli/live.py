@@ -162,9 +162,9 @@ def live(
         if not no_start:
             driver.start()
         try:
-            stats = run_live(
-                driver, processor, view, duration_s=seconds, max_fps=max_fps, is_open=is_open, outlets=outlets
-            )
+            with _signals.interrupting():  # a signal's KeyboardInterrupt that a draw or a kernel turned into its error
+                stats = run_live(driver, processor, view, duration_s=seconds, max_fps=max_fps, outlets=outlets,
+                                 is_open=lambda: not _signals.stopping() and (is_open is None or is_open()))
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM: one line by the group, exit 130 / 143
             if save_path is not None:
                 _signals.note(err, f"no figure saved ({save_path} is written when --seconds ends)")
