@@ -34,10 +34,10 @@ def _controllers(config, finger, target, max_pressure_pa, tuning, load_options, 
     """The controller(s): one per controlled finger, on its line (a single actuator: line 0).
 
     ``tuning`` names the kind (``model``: :class:`bendsense.control.ModelController`, ``pi``:
-    :class:`bendsense.control.PIController`) and its options; the model's knows the track's
-    ``bandwidth_hz`` (its lag). A target beyond what a finger
-    can press with at the pressure limit (at its known contact location, else its tip:
-    :func:`bendsense.control.force_limit_n`) is refused here, before the board is driven.
+    :class:`bendsense.control.PIController`) and its options; the model's is told the track's
+    ``bandwidth_hz`` (its lag). A target beyond what a finger can press with at the pressure
+    limit (at its known contact location, else its tip: :func:`bendsense.control.force_limit_n`)
+    is refused here, before the board is driven.
     """
     from bendsense.config import GripperConfig
     from bendsense.control import Grasp, ModelController, PIController, force_limit_n
