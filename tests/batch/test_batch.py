@@ -23,6 +23,7 @@ from bendsense.batch import (
 from bendsense.choices import Options
 from bendsense.cli import main
 from bendsense.errors import SessionError
+from bendsense.output import read_manifest
 from bendsense.results import read_results
 from bendsense.session import Session, write_session_csv
 from bendsense.session.native import SessionWriter, record_dtype
@@ -413,3 +414,20 @@ def test_more_workers_than_the_memory_holds_are_refused_before_any_work(tmp_path
     assert re.search(rf"workers \(--workers\): {n:,} worker processes would need about .*; this machine has .* "
                      r"available \(at most [\d,]+ workers\)", res.output), res.output
     assert not (tmp_path / "out").exists()
+
+
+def test_a_rerun_removes_the_manifest_copy_a_killed_run_left(sessions, tmp_path):
+    """A run killed between writing the collection's manifest aside and renaming it leaves the copy; the next run
+    removes it (and only it)."""
+    runs, _ = sessions
+    out = tmp_path / "out"
+    process_sessions(runs / "a.csv", out, calibration=linear_calibration(), workers=0, estimate=False, progress=False)
+    stale = out / "..bendsense-output.json.bendsense-tmp-k1lled"
+    stale.write_text('{"format": "bendsense-out')  # cut off mid-write
+    (out / ".my-settings").write_text("a user's")  # hidden, but not bendsense's: kept
+    (out / "notes.txt").write_text("a user's")
+    report = process_sessions(runs / "b.csv", out, calibration=linear_calibration(), workers=0, estimate=False,
+                              progress=False)
+    assert [s.status for s in report.sessions] == ["ok"]
+    assert sorted(p.name for p in out.iterdir()) == [".bendsense-output.json", ".my-settings", "a", "b", "notes.txt"]
+    assert read_manifest(out)["files"] == ["a/", "b/"]

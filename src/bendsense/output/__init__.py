@@ -60,6 +60,7 @@ from bendsense.output.manifest import (
     _umask,
     _write_manifest,
     add_to_manifest,
+    clear_manifest_copies,
     foreign_entries,
     read_manifest,
 )
@@ -93,6 +94,7 @@ __all__ = [
     "write_text",
     "begin_in_place",
     "add_to_manifest",
+    "clear_manifest_copies",
     "read_manifest",
     "foreign_entries",
     "resolve",
