@@ -637,7 +637,7 @@ def _start_collection(out_dir: Path) -> None:
     created = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
-        output.clear_manifest_copies(out_dir)  # a killed run's, caught between writing its manifest and renaming it
+        output._clear_litter(out_dir / output.MANIFEST_NAME)  # a killed run's copy of it, written aside, not renamed
         output.add_to_manifest(out_dir, [], writer="bendsense process")
     except OSError as err:
         if created:  # nothing of ours is left behind

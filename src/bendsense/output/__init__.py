@@ -60,7 +60,6 @@ from bendsense.output.manifest import (
     _umask,
     _write_manifest,
     add_to_manifest,
-    clear_manifest_copies,
     foreign_entries,
     read_manifest,
 )
@@ -94,7 +93,6 @@ __all__ = [
     "write_text",
     "begin_in_place",
     "add_to_manifest",
-    "clear_manifest_copies",
     "read_manifest",
     "foreign_entries",
     "resolve",
@@ -573,7 +571,11 @@ def _remove_ours(d: Path, user: Path, keep_root: bool = False) -> None:
 
 
 def _clear_litter(r: Path) -> None:
-    """Remove temporary and old siblings of ``r`` left by a killed run (we hold its lock)."""
+    """Remove temporary and old siblings of ``r`` left by a killed run (we hold its lock).
+
+    A run killed between writing ``r`` aside and renaming it leaves its temporary copy (a
+    directory, or a file: ``r`` a file, or a directory's manifest).
+    """
     if not r.parent.is_dir():
         return
     prefix = f".{r.name}"
@@ -581,9 +583,12 @@ def _clear_litter(r: Path) -> None:
         if not name.startswith(prefix):
             continue
         q, rest = r.parent / name, name[len(prefix) :]
-        if q.is_dir() and not q.is_symlink() and rest.startswith(_TMP_MARK):
-            shutil.rmtree(q, ignore_errors=True)
-        elif q.is_dir() and not q.is_symlink() and rest.startswith(_OLD_MARK):
+        if q.is_symlink():
+            continue
+        if rest.startswith(_TMP_MARK):
+            with contextlib.suppress(OSError):
+                shutil.rmtree(q, ignore_errors=True) if q.is_dir() else q.unlink()
+        elif q.is_dir() and rest.startswith(_OLD_MARK):
             _remove_ours(q, q)
 
 
@@ -620,6 +625,7 @@ def write_file(
     check([target], inputs)
     with _locked([(p, r)]):
         check([target], inputs)
+        _clear_litter(r)
         existed = r.exists()
         consequence = "nothing was written" + ("; the earlier output is unchanged" if existed else "")
         tmp = None

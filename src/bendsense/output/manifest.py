@@ -171,26 +171,6 @@ def _write_manifest(directory: Path, files: list[str], writer: str, previous: di
         raise
 
 
-def clear_manifest_copies(path) -> None:
-    """Remove the temporary copies of the manifest of ``path`` that a killed writer left.
-
-    A manifest is written to a hidden copy beside it and renamed over it; a process killed
-    in between leaves the copy (``..bendsense-output.json.bendsense-tmp-XXXXXXXX``). The
-    caller holds the lock of ``path``, so no other writer has one open.
-
-    Parameters
-    ----------
-    path : path
-        The output directory.
-    """
-    prefix = f".{MANIFEST_NAME}{_TMP_MARK}"
-    with contextlib.suppress(OSError):
-        for entry in os.scandir(path):
-            if entry.name.startswith(prefix) and entry.is_file(follow_symlinks=False):
-                with contextlib.suppress(OSError):
-                    os.unlink(entry.path)
-
-
 def add_to_manifest(path, names: Iterable[str], *, writer: str = "bendsense") -> None:
     """Add ``names`` (relative paths; ``name/`` for a nested output) to the manifest of ``path``.
 
