@@ -256,14 +256,3 @@ def test_nested_outputs_and_litter_of_a_killed_run(cwd):
         _write(tmp, x="1")
     assert _visible(cwd) == ["all"] and _visible(cwd / "all") == [".bendsense-output.json", "x"]
 
-
-def test_a_killed_writers_copy_of_a_file_is_removed_by_the_next_write(cwd):
-    """A file written aside and not renamed (the writer killed in between) is litter: the next write of that file
-    removes it; a sibling's copy and the user's hidden files stay."""
-    (cwd / ".cal.yaml.bendsense-tmp-k1lled.yaml").write_text("a: ")  # cut off mid-write
-    (cwd / ".cal.yaml.bendsense-tmp-dir").mkdir()  # a killed directory write of the same name
-    (cwd / ".cal.yaml.notes").write_text("the user's")
-    (cwd / ".cal.yaml.old.bendsense-tmp-x.yaml").write_text("another output's copy")
-    output.write_text("cal.yaml", "a: 2\n")
-    assert (cwd / "cal.yaml").read_text() == "a: 2\n"
-    assert _visible(cwd) == [".cal.yaml.notes", ".cal.yaml.old.bendsense-tmp-x.yaml", "cal.yaml"]

@@ -573,8 +573,8 @@ def _remove_ours(d: Path, user: Path, keep_root: bool = False) -> None:
 def _clear_litter(r: Path) -> None:
     """Remove temporary and old siblings of ``r`` left by a killed run (we hold its lock).
 
-    A run killed between writing ``r`` aside and renaming it leaves its temporary copy (a
-    directory, or a file: ``r`` a file, or a directory's manifest).
+    A run killed between writing ``r`` aside and renaming it leaves its temporary copy: a
+    directory, or a file (``r`` a directory's manifest).
     """
     if not r.parent.is_dir():
         return
@@ -625,7 +625,6 @@ def write_file(
     check([target], inputs)
     with _locked([(p, r)]):
         check([target], inputs)
-        _clear_litter(r)
         existed = r.exists()
         consequence = "nothing was written" + ("; the earlier output is unchanged" if existed else "")
         tmp = None
