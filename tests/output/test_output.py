@@ -255,4 +255,3 @@ def test_nested_outputs_and_litter_of_a_killed_run(cwd):
     with output.write_dir("all", overwrite=True) as tmp:
         _write(tmp, x="1")
     assert _visible(cwd) == ["all"] and _visible(cwd / "all") == [".bendsense-output.json", "x"]
-
