@@ -250,14 +250,12 @@ class FreeBendingSessionFit:
         considered: beyond ``max_frames``).
     rounds : int
         Fit and re-selection rounds run.
-    settled : bool
-        The selection repeated in the last round.
     note : str
         How the first fit's frames were chosen.
     caveats : tuple of str
         What the fit takes as exact that may not be (printed by :meth:`report`).
     unsettled : str
-        Why the selection did not settle, in a few words ("" when it did).
+        Why the selection did not settle, in a few words ("" when it did: :attr:`settled`).
     """
 
     fit: object
@@ -266,10 +264,14 @@ class FreeBendingSessionFit:
     used: np.ndarray
     reason: np.ndarray
     rounds: int
-    settled: bool
     note: str
     caveats: tuple = ()
     unsettled: str = ""
+
+    @property
+    def settled(self) -> bool:
+        """Whether the selection repeated in the last round."""
+        return not self.unsettled
 
     def to_config(self, config):
         """A copy of ``config`` with the fitted values and covariance (:meth:`FreeBendingFit.to_config`).
@@ -482,8 +484,8 @@ def _free_frames_fit(shape, p, usable, config, calibration, source, *, fix=None,
         caveats += ("the config states no covariance of ei0_nm2, ei1_nm2_per_pa: the gravity correction takes its "
                     "EI(P) as exact; identify stiffness, then free bending again with that config",)
     return FreeBendingSessionFit(fit=fit, pressure_pa=p, bending_angle_rad=angle, used=used,
-                                 reason=np.asarray(reason, dtype=str), rounds=done, settled=settled, note=note,
-                                 caveats=caveats, unsettled=unsettled)
+                                 reason=np.asarray(reason, dtype=str), rounds=done, note=note, caveats=caveats,
+                                 unsettled=unsettled)
 
 
 def _thin(candidates, pressure_pa, max_frames: int) -> np.ndarray:
