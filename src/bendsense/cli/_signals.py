@@ -52,7 +52,7 @@ def stopping() -> bool:
 
 
 @contextlib.contextmanager
-def interrupting():
+def interrupting(*, returned: bool = True):
     """The block ends with KeyboardInterrupt when a stop signal came, whatever became of the signal's own.
 
     A call under the block may turn the KeyboardInterrupt the signal raised inside it into
@@ -60,6 +60,13 @@ def interrupting():
     matplotlib in the middle of a draw ``ValueError: Invalid affine transformation
     matrix``) or swallow it (an exception in a finaliser is only printed): the signal
     stopped the command all the same.
+
+    Parameters
+    ----------
+    returned : bool, default True
+        Also when the block returns after a signal (one swallowed under it); False: only an
+        error the block raises after a signal is the interrupt (a command that handled its
+        interrupt and returned keeps its result).
     """
     try:
         yield
@@ -67,7 +74,7 @@ def interrupting():
         if not _received:
             raise
         raise KeyboardInterrupt from err
-    if _received:
+    if returned and _received:
         raise KeyboardInterrupt
 
 

@@ -105,12 +105,8 @@ class PipelineGroup(click.Group):
             The command line's context.
         """
         try:
-            try:
-                return super().invoke(ctx)
-            except Exception as err:  # after a stop signal: its KeyboardInterrupt, turned into another error by a
-                if _signals.stopping():  # call under the command (_signals.interrupting)
-                    raise KeyboardInterrupt from err
-                raise
+            with _signals.interrupting(returned=False):  # an error after a stop signal: its KeyboardInterrupt, turned
+                return super().invoke(ctx)  # into another error by a call under the command
         except KeyboardInterrupt as err:  # Ctrl-C or SIGTERM (_signals): one line, exit 130 / 143 in main
             raise _Interrupted("interrupted") from err
         except BendsenseError as err:
