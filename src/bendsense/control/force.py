@@ -70,15 +70,21 @@ class NormalForce:
         The contact location used [m].
     angle_rad : ndarray, shape (n,)
         The tangent angle φ_c there [rad].
-    status : ndarray of str, shape (n,)
-        The frame's status (the tracked one where the force is tracked).
+    status_code : ndarray of int8, shape (n,)
+        The frame's status code (:class:`bendsense.status.Status`; the tracked one where the
+        force is tracked); :attr:`status` its words.
     """
 
     force_n: np.ndarray
     std_n: np.ndarray
     contact_s_m: np.ndarray
     angle_rad: np.ndarray
-    status: np.ndarray
+    status_code: np.ndarray
+
+    @property
+    def status(self) -> np.ndarray:
+        """The frames' status words (n,) of str (results.csv's ``status``)."""
+        return words(self.status_code)
 
 
 def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -> NormalForce:
@@ -105,16 +111,16 @@ def normal_force(block, *, tracked: bool = True, tip_s_m: float | None = None) -
     s_grid = np.array(block.s_m, dtype=float)
     track_status = block.track_status if tracked else None
     if track_status is not None:
-        force, cov, status = block.track_force_n, block.track_covariance_n2, words(track_status)
+        force, cov, status = block.track_force_n, block.track_covariance_n2, track_status
     else:
-        force, cov, status = block.force_n, block.covariance_n2, words(block.status)
-    value, std, s_out, phi = np.empty((4, n))
+        force, cov, status = block.force_n, block.covariance_n2, block.status
+    value, std, s_out, phi = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     # a tip load, or a frame without a location: the end of the body (the sensor's tip angle holds beyond it)
     tip = float(s_grid[-1] if tip_s_m is None else tip_s_m)
     _jit.call(normal_components, s_grid, np.array(block.contact_s_m, dtype=float),
               np.array(block.angle_rad, dtype=float), np.array(force, dtype=float), np.array(cov, dtype=float), tip,
               value, std, s_out, phi)
-    return NormalForce(force_n=value, std_n=std, contact_s_m=s_out, angle_rad=phi, status=status)
+    return NormalForce(value, std, s_out, phi, status)
 
 
 def _limits(config, max_pressure_pa, contact_s_m=None) -> tuple:

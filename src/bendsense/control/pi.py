@@ -180,7 +180,7 @@ class FingerController:
         """Forget the state (a new grasp): the output is 0."""
         self.output_pa = 0.0
         self.last = None
-        self._targets = np.zeros(0)
+        self._logged_target = math.nan  # the target of the latest block (its log column)
 
     def step(self, t_s, force_n, pressure_pa, contact_s_m=None) -> float:
         """Advance over a block's frames; returns the set-point [Pa].
@@ -208,7 +208,7 @@ class FingerController:
         """
         own = finger_block(block, self.finger)
         self.last = normal_force(own, tip_s_m=self.tip_s_m)
-        self._targets = np.full(len(own), self.target_force_n)
+        self._logged_target = self.target_force_n
         return {self.line: self.step(own.t_s, self.last.force_n, own.pressure_pa, self.last.contact_s_m)}
 
     def columns(self, prefix: str = "") -> dict:
@@ -223,7 +223,8 @@ class FingerController:
         if nf is None:
             return {}
         return {f"{prefix}normal_force_n": nf.force_n, f"{prefix}normal_force_std_n": nf.std_n,
-                f"{prefix}contact_s_m": nf.contact_s_m, f"{prefix}target_force_n": self._targets,
+                f"{prefix}contact_s_m": nf.contact_s_m,
+                f"{prefix}target_force_n": np.full(nf.force_n.shape, self._logged_target),
                 f"{prefix}status": nf.status}
 
 

@@ -347,8 +347,10 @@ class Guard:
             force = np.asarray(own.force_n, dtype=float).reshape(len(own), -1)
             tracked = None if track_status is None else own.track_force_n  # the force the controller acts on
             stopping = _STOPPING[status]
-            if not stopping.any() and np.isfinite(force).all() and (tracked is None or np.isfinite(tracked).all()):
-                self._flag_start[finger] = math.nan  # the usual block: a few whole-array checks, per finger
+            # the usual block, in a few whole-array operations: nothing flagged, every force a number (a sum of
+            # numbers is one unless it overflows, which the frame-by-frame look below then clears)
+            if not stopping.any() and math.isfinite(force.sum() + (0.0 if tracked is None else tracked.sum())):
+                self._flag_start[finger] = math.nan
                 continue
             blind = ~np.isfinite(force).all(axis=1)
             if tracked is not None:
