@@ -78,8 +78,8 @@ def test_send_setpoints_sends_a_blocks_lines_together_or_none(board):
         board.send(encode_sample(0, 0, [1], pressures_pa=[1, 2, 3]))
         assert drv.get(timeout=5) is not None
         writes = []
-        write = drv._ser.write
-        drv._ser.write = lambda data: writes.append(data) or write(data)
+        write = drv.write
+        drv.write = lambda data, drain=True: writes.append(data) or write(data, drain=drain)
         drv.send_setpoints({2: 45_000.4, 0: 0.0, 1: 119_999.6})
         for bad, match in (({0: 10.0, 1: math.nan}, "pressure_pa"), ({0: 10.0, 3: 5.0}, "line: 3 is not a pressure")):
             with pytest.raises(ArgumentError, match=match):
@@ -179,3 +179,34 @@ def test_bad_v2_frames_are_counted_and_the_good_ones_read(board):
             assert time.monotonic() < deadline, "timed out"
             time.sleep(0.01)
         assert drv.stats.malformed == 3 and drv.stats.samples == 1
+
+
+def test_a_write_beyond_the_ports_buffer_waits_and_arrives_whole(board):
+    """The driver writes with one system call; what the port's buffer does not take goes through pyserial's write,
+    which waits for the board to read (here a board that starts reading 0.2 s late): every frame, in order."""
+    from bendsense.wire.frames import encode_setpoint
+
+    setpoints = [(k % 4, 1000 * k) for k in range(6000)]  # ~100 kB, beyond what a pseudo-terminal holds
+    data = b"".join(encode_setpoint(line, p, seq=seq) for seq, (line, p) in enumerate(setpoints))
+    with Driver(board.port, handshake=False) as drv:
+        rest = []
+        write = drv._ser.write
+        drv._ser.write = lambda d: rest.append(len(d)) or write(d)
+        writer = threading.Thread(target=drv.write, args=(data,))
+        writer.start()
+        time.sleep(0.2)
+        frames = board.received(len(setpoints), timeout=20)
+        writer.join(5)
+    assert not writer.is_alive() and board.decoder.errors == 0
+    assert [(f.line, f.pressure_pa) for f in frames] == setpoints
+    assert len(rest) == 1 and 0 < rest[0] < len(data)  # the system call took a part, pyserial's write the rest
+
+
+def test_a_write_to_a_board_that_is_gone_is_a_device_error(board):
+    with Driver(board.port, handshake=False) as drv:
+        board.close()
+        board.close = lambda: None
+        with pytest.raises(DeviceError, match="write failed"):
+            for _ in range(100):  # the reader may notice first and reconnect; the write then fails on its own
+                drv.send_setpoint(0, 1000.0, check_line=False)
+                time.sleep(0.01)
