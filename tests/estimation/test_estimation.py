@@ -22,6 +22,7 @@ from bendsense.mechanics.beam import solve_beam
 from bendsense.results import frame_status
 from bendsense.shape.pcc import reconstruct, shifts_to_curvatures
 from bendsense.sim.sensor import shifts_from_shape
+from bendsense.status import Status
 
 CFG = bendsense.load_config()
 MODEL = FreeBendingModel.from_config(CFG)
@@ -424,6 +425,31 @@ def test_failed_frames_are_flagged_not_raised():
     assert not est.success.any() and all("no convergence" in m for m in est.message)
     with pytest.raises(ConvergenceError, match="1 of 2 force estimate"):
         estimate_force(kappa, np.array([60e3, 0.0]), CFG, strict=True)
+
+
+def test_an_estimate_does_not_depend_on_the_frames_estimated_before():
+    """The kernels work in buffers kept with the estimate's constants: nothing a frame leaves there reaches another.
+
+    Frames estimated alone give the same numbers bit for bit before and after (and in the
+    reverse order of) frames that fail, are not identifiable, or run as a warm series.
+    """
+    rng = np.random.default_rng(11)
+    p = rng.uniform(30e3, 100e3, 6)
+    kappa = pcc_curvatures(beam_shape(p, rng.uniform(-0.15, 0.15, (6, 2))))
+    cal = _cubic_calibration(0.2)
+
+    def alone(order):
+        return {i: estimate_force(kappa[i], p[i], CFG, calibration=cal) for i in order}
+
+    first = alone(range(6))
+    assert not estimate_force(np.full(16, 40.0), 0.0, CFG, calibration=cal).success  # no stable equilibrium
+    assert estimate_force(np.full(16, 2.0), 0.0, CFG, calibration=cal).status == Status.NOT_IDENTIFIABLE
+    assert estimate_force(kappa[::-1], p[::-1], CFG, calibration=cal).success.all()  # a chained series
+    again = alone(range(5, -1, -1))
+    for i in range(6):
+        for field in ("force_n", "std_n", "covariance_parts_n2", "residual_m", "chi2_per_dof", "iterations",
+                      "status", "state", "guess_n", "residual_rad", "jacobian_rad_per_n", "model_factor_rad"):
+            np.testing.assert_array_equal(getattr(again[i], field), getattr(first[i], field), err_msg=field)
 
 
 def test_bad_arguments_name_the_field():

@@ -644,7 +644,8 @@ def _run_fast(B, chain, use_guess, fr, held, start, out):
     if not _jit.parallel(B):
         step = block if block > 1 else _PIECE
         for lo in range(0, B, step):
-            _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, held, start, out)
+            _jit.call(_kernels.estimate_block, lo, min(B, lo + step), use_guess, block > 1, fr, held, start, out,
+                      0)
         return
     step = max(block, _PIECE // block * block)
     for lo in range(0, B, step):

@@ -24,6 +24,7 @@ function of its own.
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 from numba.typed import List
@@ -279,7 +280,7 @@ def convex_start(L, ei, wload, D, ffix, lower, beyond, u, out):
 
 
 @njit(cache=True, inline="always")
-def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, trial):
+def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, trial, buf):
     """The iteration's first beam at ``u`` (into ``ws``); returns (stable, beam solves, ws, trial).
 
     Newton starts from the reference shape ``state0`` where the load is provably convex,
@@ -290,7 +291,7 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, t
     k = u.size
     for c in range(k):
         u[c] = max(u[c], lower[c])
-    F = np.empty(2)
+    F = buf.gram[0, 0]
     force_of(D, ffix, u, F)
     scale = L * L / ei
     wx, wy = wload[0] * L, wload[1] * L
@@ -310,9 +311,7 @@ def first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, t
         ok = beam_eval(L, ei, k0, F, wload, state0, bool(NO), bool(YES), ops, fit, ws)
         iters += 1
     if not convex and ok:
-        gF = np.empty(2)
-        GF = np.empty((2, 2))
-        uc = np.empty(k)
+        gF, GF, uc = buf.gram[1, 0], buf.gram[2], buf.guess[10]
         convex_start(L, ei, wload, D, ffix, lower, beyond, u, uc)
         moved = False
         for c in range(k):
@@ -378,7 +377,7 @@ def jumped(y, dy, y_trial, dF, floor):
 
 
 @njit(cache=True, inline="always")
-def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter, ops, pb, ws, trial, blocked):
+def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter, ops, pb, ws, trial, blocked, buf):
     """Projected Gauss–Newton with a trust region on ``u`` (k,) for one frame; ``u`` updated in place.
 
     The first beam comes from :func:`first_solve`. Each trial solve starts from the
@@ -391,28 +390,20 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     k = u.size
     n = state0.size
     fit = fitted(pb)
-    ok, iters, ws, trial = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, trial)
+    ok, iters, ws, trial = first_solve(L, ei, k0, wload, tg, D, ffix, lower, u, state0, ops, fit, ws, trial, buf)
     if not ok:
         return _BEAM_FAILED, iters, np.nan, ws, trial
-    F = np.empty(2)
-    gF = np.empty(2)
-    GF = np.empty((2, 2))
+    F, gF, GF, dF, gFn, GFn, zero = buf.gram[0, 0], buf.gram[1, 0], buf.gram[2], buf.gram[3, 0], buf.gram[4, 0], \
+        buf.gram[5], buf.gram[6, 0]
+    zero[:] = 0.0
     cost = objective(ws, tg, gF, GF)
-    g = np.empty(k)
-    H = np.empty((k, k))
+    g, step, dstep, un, H = buf.guess[6], buf.guess[7], buf.guess[8], buf.guess[9], buf.H
     project(D, gF, GF, g, H)
     radius = 0.5 * ei / (L * L)  # trust region in units of the natural force scale EI/L²
     last = np.inf
     jumps = 0
     status = _RUNNING
-    step = np.empty(k)
-    dstep = np.empty(k)
-    un = np.empty(k)
-    dF = np.empty(2)
-    guess = np.empty(n)
-    gFn = np.empty(2)
-    GFn = np.empty((2, 2))
-    zero = np.zeros(2)
+    guess = buf.state_guess
     weak = False
     for _ in range(max_iter):
         # a χ² cost that does not determine the load along ``blocked`` here: the step keeps
@@ -651,7 +642,13 @@ def buffers(pb, n):
     Rw = R if pb.objective == ANGLES else 1
     return BuffersRef(np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
                       np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N),
-                      np.empty(N))
+                      np.empty(N), np.empty(n), np.empty((11, k)), np.empty((7, 2, 2)), np.empty(n), np.empty((k, k)))
+
+
+@njit(cache=True)
+def scratch(pb, n):
+    """What one frame's estimate works in (:func:`buffers`, two :func:`workspace`): kept with its constants."""
+    return buffers(pb, n), workspace(pb.s.size, n, pb.sw.size), workspace(pb.s.size, n, pb.sw.size)
 
 
 @njit(cache=True, inline="always")
@@ -721,8 +718,8 @@ def typed(fr, held):
 
     numba types a named tuple given from Python slowly (~3 µs a call): the entry points take plain tuples.
     """
-    pb, err, ops, ref = held[0]
-    return prob.FramesRef(*fr), pb, err, ops, ref
+    pb, err, ops, ref, sc = held[0]
+    return prob.FramesRef(*fr), pb, err, ops, ref, sc
 
 
 def plain(*structures):
@@ -746,9 +743,14 @@ def hold_estimate(constants):
     """:func:`hold` of an estimate's constants as the kernels take them: StructRefs, made once (~140 counts a call).
 
     ``constants``: the plain tuples (:func:`plain`) of its Problem, shift error model, beam operators and a contact's.
+    With them the buffers of :func:`scratch`, one set a ``slot`` of :func:`estimate_block` (:func:`estimate_frames`
+    adds its threads'): calls with the same constants must not overlap (bendsense's hold ``_jit``'s lock).
     """
     pb, err, ops, ref = constants
-    return hold((prob.ProblemRef(*pb), ShiftErrorModel(*err), bk.OperatorsRef(*ops), bk._SplitOperators(*ref)))
+    pb, ops = prob.ProblemRef(*pb), bk.OperatorsRef(*ops)
+    slots = List()
+    slots.append(scratch(pb, ops.sigma.size))
+    return hold((pb, ShiftErrorModel(*err), ops, bk._SplitOperators(*ref), slots))
 
 
 @njit(cache=True)
@@ -763,29 +765,22 @@ def contact_at(pb, ops, ref, sc):
 
 
 @njit(cache=True)
-def estimate_block(lo, hi, use_guess, chained, fr, held, start, out, at=None):
+def estimate_block(lo, hi, use_guess, chained, fr, held, start, out, slot, at=None):
     """The whole estimate of frames ``lo:hi`` in order (:func:`estimate_frames`).
 
     ``fr``: the frames' plain tuple, ``held``: the constants (:func:`typed`). A
     frame's force point gets its problem and operators once for a run of frames at the
-    same point; ``at`` (optional): those of the point σ_c = ``at[2]``, made ahead
-    (:func:`contact_at`, plain tuples).
+    same point; ``at`` (optional): those of the point σ_c = ``at[2]``, made ahead (:func:`contact_at`, plain
+    tuples). ``slot``: which buffers of ``held`` it works in (:func:`hold_estimate`; 0 but in a batch's threads).
     """
-    fr, pb0, err, ops0, ref = typed(fr, held)
+    fr, pb0, err, ops0, ref, scratch_of = typed(fr, held)
+    buf, ws, trial = scratch_of[slot]
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
         shifts = Outputs(*out)
     k = pb0.lower.size
-    n = ops0.sigma.size
-    buf = buffers(pb0, n)
-    ws = workspace(pb0.s.size, n, pb0.sw.size)
-    trial = workspace(pb0.s.size, n, pb0.sw.size)
-    on_grid = np.empty(n)  # the reference's angles on a contact's nodes
-    u = np.empty(k)
-    u0 = np.empty(k)
-    prev_u = np.empty(k)
-    prev_u0 = np.empty(k)
-    blocked = np.zeros(k)
-    g = np.empty(k)
+    on_grid = buf.on_grid  # the reference's angles on a contact's nodes
+    u, u0, prev_u, prev_u0, blocked, g = buf.guess[0], buf.guess[1], buf.guess[2], buf.guess[3], buf.guess[4], \
+        buf.guess[5]
     prev_ok = False
     ops_c, pb_c, sc_c = ops0, pb0, 1.0  # the latest contact point's
     if at is not None:
@@ -822,7 +817,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, held, start, out, at=None):
                 u[c] = max(u0[c] + prev_u[c] - prev_u0[c], pb.lower[c])
         blocked[:] = 0.0
         st, it, _, ws, trial = gauss_newton(pb.L, ei, k0, pb.wload, tg, D, pb.ffix, pb.lower, u, state0, pb.xtol,
-                                            pb.max_iter, ops, pb, ws, trial, blocked)
+                                            pb.max_iter, ops, pb, ws, trial, blocked, buf)
         prev_ok = chained and st == _OK
         bk.copy_into(u, prev_u)
         bk.copy_into(u0, prev_u0)
@@ -862,15 +857,20 @@ def estimate_frames(block, use_guess, fr, held, start, out):
     """
     B = prob.Frames(*fr).ei.size
     nblocks = (B + block - 1) // block
-    for blk in prange(nblocks):
-        lo = np.int64(blk) * block  # prange's index is unsigned: one compiled estimate_block for both callers
-        estimate_block(lo, min(B, lo + block), use_guess, block > 1, fr, held, start, out)
+    pb, _, ops, _, scratch_of = held[0]
+    slots = min(nblocks, numba.get_num_threads())
+    while len(scratch_of) < slots:
+        scratch_of.append(scratch(pb, ops.sigma.size))
+    for s in prange(slots):  # slot s runs the blocks s, s + slots, ...: its buffers in one thread at a time
+        slot = np.int64(s)  # prange's index is unsigned: one compiled estimate_block for every caller
+        for blk in range(slot, nblocks, slots):
+            estimate_block(blk * block, min(B, (blk + 1) * block), use_guess, block > 1, fr, held, start, out, slot)
 
 
 @njit(cache=True)
 def evaluate_frames(fr, held, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
-    fr, pb, err, ops, ref = typed(fr, held)
+    fr, pb, err, ops, ref, _ = typed(fr, held)
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
         shifts = Outputs(*out)
     buf = buffers(pb, ops.sigma.size)

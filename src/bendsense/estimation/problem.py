@@ -485,6 +485,11 @@ class Buffers(NamedTuple):
     Lw: np.ndarray  #: the target's Cholesky factor (R, R), or (1, 1)
     noise_var: np.ndarray  #: Σ_S's signal-noise variances (N,)
     shifts: np.ndarray  #: the measured shifts (N,) [m]
+    on_grid: np.ndarray  #: the reference's angles on a contact's nodes (n,)
+    guess: np.ndarray  #: the iteration's k-vectors (11, k) (:func:`~bendsense.estimation._kernels.estimate_block`)
+    gram: np.ndarray  #: the iteration's 2-vectors and 2×2 matrices (7, 2, 2)
+    state_guess: np.ndarray  #: a trial's first-order state (n,)
+    H: np.ndarray  #: the reduced Gauss–Newton matrix (k, k)
 
 
 class Outputs(NamedTuple):

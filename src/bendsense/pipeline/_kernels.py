@@ -125,13 +125,13 @@ def estimate(kappa, p, rows, model, problem, previous, out):
     start = np.empty((m, 2))
     start[:, 0] = previous[0]
     start[:, 1] = previous[1]
-    est_kernels.estimate_block(0, m, YES, YES, fr, held, start, part, at)
+    est_kernels.estimate_block(0, m, YES, YES, fr, held, start, part, 0, at)
     failed = 0
     marked = 0
     for i in range(m):
         if not success[i] and (i > 0 or previous[0] != 0.0 or previous[1] != 0.0):
             start[i, :] = 0.0  # a start far from the frame (a fast change): its own start may converge
-            est_kernels.estimate_block(i, i + 1, YES, NO, fr, held, start, part, at)
+            est_kernels.estimate_block(i, i + 1, YES, NO, fr, held, start, part, 0, at)
         failed += not success[i]
         magnitude = math.hypot(force[i, 0], force[i, 1])
         if success[i] and math.isfinite(magnitude) and magnitude > force_scale * ei[i]:
