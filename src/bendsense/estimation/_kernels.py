@@ -148,7 +148,8 @@ def moment_guess(p0, s, w, L, ei, k0, wload, D, ffix, lower, phi_end, kappa_s, g
 def workspace(M, n, R):
     """Buffers of one beam evaluation (:class:`Workspace`): M comparison nodes, n state nodes, R fitted values."""
     return WorkspaceRef(np.empty((M, 2)), np.empty((M, 2, 2)), np.empty(n), np.empty(6), np.empty((n, 5)), np.empty(R),
-                        np.empty((R, 2)), np.empty((R, 3)), np.empty((n - 1, bk.extra_columns(FORCE_SENS))))
+                        np.empty((R, 2)), np.empty((R, 3)), np.empty((n - 1, bk.extra_columns(FORCE_SENS))),
+                        bk.solver_work(n))
 
 
 @njit(cache=True)
@@ -165,8 +166,8 @@ def beam_eval(L, ei, k0, F, wload, state, has_state, allow_continuation, ops, fi
     pos, dpos, st, tip, dst, y, dy, extra = ws.pos, ws.dpos, ws.state, ws.tip, ws.dphi, ws.y, ws.dy, ws.extra
     objective, PQ_fit, q, PA = fit
     n = st.size
-    status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops,
-                                  NEWTON_TOL, int(NEWTON_MAX_ITER), int(FORCE_SENS), allow_continuation, st, extra)
+    status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], state, has_state, ops, NEWTON_TOL,
+                                  int(NEWTON_MAX_ITER), int(FORCE_SENS), allow_continuation, st, extra, ws.solver)
     bk.node_sensitivity(extra, L, ei, dst)
     # the model inputs: ∂φ/∂K0 = L ψ (ψ = ∂φ/∂(K0 L), the Jacobi field); EI scales the
     # load factor, λ ∝ 1/EI: ∂φ/∂EI = −(dφ/dλ)/EI at λ = 1 (∂φ/∂s_c: contact_jacobian)
@@ -395,7 +396,6 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         return _BEAM_FAILED, iters, np.nan, ws, trial
     F, gF, GF, dF, gFn, GFn, zero = buf.gram[0, 0], buf.gram[1, 0], buf.gram[2], buf.gram[3, 0], buf.gram[4, 0], \
         buf.gram[5], buf.gram[6, 0]
-    zero[:] = 0.0
     cost = objective(ws, tg, gF, GF)
     g, step, dstep, un, H = buf.guess[6], buf.guess[7], buf.guess[8], buf.guess[9], buf.H
     project(D, gF, GF, g, H)
@@ -600,7 +600,7 @@ def contact_jacobian(L, ei, k0, F, wload, ops, pb, ws, out):
     st = ws.state.copy()
     extra = np.empty((n - 1, bk.extra_columns(CONTACT_SENS)))
     status, _, _ = bk.solve_frame(L, ei, k0, 0.0, F[0], F[1], wload[0], wload[1], ws.state, bool(YES), ops, NEWTON_TOL,
-                                  int(NEWTON_MAX_ITER), int(CONTACT_SENS), bool(NO), st, extra)
+                                  int(NEWTON_MAX_ITER), int(CONTACT_SENS), bool(NO), st, extra, ws.solver)
     for a in range(out.size):
         acc = 0.0
         for j in range(n - 1):
@@ -642,7 +642,7 @@ def buffers(pb, n):
     Rw = R if pb.objective == ANGLES else 1
     return BuffersRef(np.empty((m, 2)), np.empty(m), np.empty(pb.s.size), np.empty(n), np.empty((2, k)),
                       np.empty((2, k)), np.empty((N, N)), np.zeros(N), np.empty(R), np.empty((Rw, Rw)), np.zeros(N),
-                      np.empty(N), np.empty(n), np.empty((11, k)), np.empty((7, 2, 2)), np.empty(n), np.empty((k, k)))
+                      np.empty(N), np.empty(n), np.empty((11, k)), np.zeros((7, 2, 2)), np.empty(n), np.empty((k, k)))
 
 
 @njit(cache=True)

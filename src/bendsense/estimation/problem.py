@@ -459,6 +459,8 @@ class Workspace(NamedTuple):
     e: np.ndarray
     #: the beam solver's J⁻¹ columns (n - 1, 4) (:func:`bendsense.mechanics._beam_kernels.solve_frame`)
     extra: np.ndarray
+    #: the beam solver's own buffers (:func:`bendsense.mechanics._beam_kernels.solver_work`)
+    solver: tuple
 
 
 class Target(NamedTuple):
@@ -487,7 +489,7 @@ class Buffers(NamedTuple):
     shifts: np.ndarray  #: the measured shifts (N,) [m]
     on_grid: np.ndarray  #: the reference's angles on a contact's nodes (n,)
     guess: np.ndarray  #: the iteration's k-vectors (11, k) (:func:`~bendsense.estimation._kernels.estimate_block`)
-    gram: np.ndarray  #: the iteration's 2-vectors and 2×2 matrices (7, 2, 2)
+    gram: np.ndarray  #: the iteration's 2-vectors and 2×2 matrices (7, 2, 2); row 6 stays zero (a zero force)
     state_guess: np.ndarray  #: a trial's first-order state (n,)
     H: np.ndarray  #: the reduced Gauss–Newton matrix (k, k)
 

@@ -207,7 +207,7 @@ def lu_solve(A, B):
 
 
 @njit(cache=True)
-def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
+def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x, work):
     """Newton on the collocation equations at load factor λ; ``p`` (n,) updated in place.
 
     ``gi`` (n-1, 2): g at the nodes 1..n-1 (the rows' nodes), ``f`` (2,) the point force
@@ -228,9 +228,7 @@ def newton(p, lam, k0n, gi, f, ops, tol, limit, sens, tangent, x):
     ncol = 2 + 2 * (sens > 0) + (sens > 1) + tangent
     quad = QUAD_SENS if sens > 0 else QUAD
     C, h2, on, J0 = ops.C, ops.h2, ops.on, ops.J0
-    J = np.empty((m, m))
-    rhs = np.empty((m, ncol))
-    piv = np.empty(m, dtype=np.int64)
+    J, rhs, piv = work[0], work[1], work[2]  # rhs's first ncol columns
     prev = np.inf
     it = 0
     while it < limit:
@@ -317,7 +315,7 @@ def arc_tangent(phi, gi, ops, out):
 
 
 @njit(cache=True, inline="always")
-def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
+def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra, work):
     """Follow the branch from the unloaded arc ``phi`` (λ = 0) to the full load (λ = 1).
 
     Euler–Newton continuation with the tangent dφ/dλ as predictor. A step is accepted
@@ -334,10 +332,8 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
     status = _RUNNING
     where = 0.0
     iters = 0
-    tan = np.empty(m)
+    tan, pred, start, x = work[5], work[6], work[7], work[8]  # x's first ncol - 1 columns
     arc_tangent(phi, gi, ops, tan)
-    pred = np.empty(n)
-    x = np.empty((m, ncol - 1))
     for _ in range(1000):
         lt = min(1.0, lam + dlam)
         pred[0] = phi[0]
@@ -346,10 +342,10 @@ def continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra):
             d = (lt - lam) * tan[i]
             pred[i + 1] = phi[i + 1] + d
             pstep = max(pstep, abs(d))
-        start = pred.copy()
+        copy_into(pred, start)
         last = lt >= 1.0
         conv, it = newton(pred, lt, k0n, gi, f, ops, tol if last else 1e-6,
-                          max_iter if last else min(STEP_ITER, max_iter), sens, bool(YES), x)
+                          max_iter if last else min(STEP_ITER, max_iter), sens, bool(YES), x, work)
         iters += it
         move = 0.0
         for i in range(n):
@@ -394,6 +390,18 @@ def copy_into(src, dst):
 
 
 @njit(cache=True)
+def solver_work(n):
+    """The buffers of :func:`solve_frame` for n nodes: kept by a caller that solves often (the estimator's workspace).
+
+    With m = n - 1: Newton's matrix (m, m), right-hand sides (m, 6) and pivots (m,), the load
+    g (m, 2) and f (2,), continuation's tangent (m,), prediction and start (n,) and solutions (m, 5).
+    """
+    m = n - 1
+    return (np.empty((m, m)), np.empty((m, 6)), np.empty(m, dtype=np.int64), np.empty((m, 2)), np.empty(2),
+            np.empty(m), np.empty(n), np.empty(n), np.empty((m, 5)))
+
+
+@njit(cache=True)
 def extra_columns(sens):
     """Columns of :func:`solve_frame`'s ``extra`` at a sensitivity level ``sens`` (0, 1 or 2)."""
     return 1 + 3 * (sens > 0) + (sens > 1)
@@ -401,7 +409,7 @@ def extra_columns(sens):
 
 @njit(cache=True)
 def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max_iter, sens, allow_continuation,
-                phi, extra):
+                phi, extra, work):
     """One frame of the fast solver: φ at the nodes into ``phi`` (n,), J⁻¹ columns into ``extra``.
 
     ``state`` (n,) with ``has_state``: Newton starts there (warm start); accepted if the
@@ -413,18 +421,18 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     operators, of its contact point σ_c (:func:`contact_grid`; the force ``(fx, fy)``
     acts there). ``sens`` 0, 1 or 2: ``extra`` (n-1, :func:`extra_columns`) holds the
     Jacobi field ψ = ∂φ/∂(K0 L) and, with ``sens`` ≥ 1, ∂φ/∂g (g = F L²/EI), with ``sens``
-    2 ∂φ/∂σ_c at fixed σ, and last the load tangent dφ/dλ (= −EI ∂φ/∂EI at λ = 1). Returns
-    (status, load factor of a failure, Newton iterations).
+    2 ∂φ/∂σ_c at fixed σ, and last the load tangent dφ/dλ (= −EI ∂φ/∂EI at λ = 1). ``work``:
+    the solver's buffers (:func:`solver_work`). Returns (status, load factor of a failure,
+    Newton iterations).
     """
     n = phi.size
     m = n - 1
     scale = L * L / ei
     k0n = k0 * L
-    f = np.empty(2)
+    gi, f = work[3], work[4]
     f0, f1 = fx * scale, fy * scale
     f[0], f[1] = f0, f1
     w0, w1 = wx * scale * L, wy * scale * L
-    gi = np.empty((m, 2))
     for i in range(m):
         gi[i, 0] = f0 * ops.on[i] + w0 * ops.tail[i]
         gi[i, 1] = f1 * ops.on[i] + w1 * ops.tail[i]
@@ -436,7 +444,7 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     if has_state:
         copy_into(state, phi)
         phi[0] = base
-        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, extra)
+        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, extra, work)
         if conv:
             near = True
             for i in range(1, n):
@@ -450,18 +458,18 @@ def solve_frame(L, ei, k0, base, fx, fy, wx, wy, state, has_state, ops, tol, max
     elif convex:
         for i in range(n):
             phi[i] = base + k0n * ops.sigma[i]
-        tan = np.empty(m)
+        tan = work[5]
         arc_tangent(phi, gi, ops, tan)
         for i in range(m):
             phi[i + 1] += tan[i]
-        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, extra)
+        conv, iters = newton(phi, 1.0, k0n, gi, f, ops, tol, max_iter, sens, sens > 0, extra, work)
         if conv:
             status = _OK
     where = 1.0
     if status == _RUNNING:
         for i in range(n):
             phi[i] = base + k0n * ops.sigma[i]
-        status, where, it = continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra)
+        status, where, it = continuation(phi, k0n, gi, f, ratio, ops, tol, max_iter, sens, extra, work)
         iters += it
     return status, where, iters
 
@@ -670,7 +678,7 @@ def solve_sample(b, L, ei, k0, base, F, w, sc, state, has_state, ops, ref, tol, 
     level = 2 if sens else 0  # with the force's sensitivities, the contact point's
     extra = np.empty((n - 1, extra_columns(level)))
     st, wh, it = solve_frame(L, ei[b], k0[b], base[b], F[b, 0], F[b, 1], w[b, 0], w[b, 1], state[b], has_state, grid,
-                             tol, max_iter, level, allow_continuation, phi[b], extra)
+                             tol, max_iter, level, allow_continuation, phi[b], extra, solver_work(n))
     status[b] = st
     where[b] = wh
     iters[b] = it
