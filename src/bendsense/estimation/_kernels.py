@@ -744,13 +744,13 @@ def hold_estimate(constants):
 
     ``constants``: the plain tuples (:func:`plain`) of its Problem, shift error model, beam operators and a contact's.
     With them the buffers of :func:`scratch`, one set a ``slot`` of :func:`estimate_block` (:func:`estimate_frames`
-    adds its threads'): calls with the same constants must not overlap (bendsense's hold ``_jit``'s lock).
+    adds its threads'): calls with the same constants must not overlap (bendsense's calls hold ``_jit``'s lock).
     """
     pb, err, ops, ref = constants
     pb, ops = prob.ProblemRef(*pb), bk.OperatorsRef(*ops)
-    slots = List()
-    slots.append(scratch(pb, ops.sigma.size))
-    return hold((pb, ShiftErrorModel(*err), ops, bk._SplitOperators(*ref), slots))
+    scratch_of = List()
+    scratch_of.append(scratch(pb, ops.sigma.size))
+    return hold((pb, ShiftErrorModel(*err), ops, bk._SplitOperators(*ref), scratch_of))
 
 
 @njit(cache=True)
