@@ -481,7 +481,8 @@ def test_a_board_that_holds_a_line_above_its_setpoints_stops_the_loop(single_boa
     assert info.match(rf"at seq {truth.seq[FAULT_AT]},") and result.frames <= FAULT_AT and ran < 1.5
     assert board.received[-1] == (0, 0.0) and truth.column("setpoint_pa")[-1] == 0.0
     assert result.high == (0,) and result.zeros[0].pressure_pa == 60e3 and 0.5 <= result.zeros[0].after_s < 0.7
-    assert zero_report(result).endswith("; line 0 did not fall: 60 kPa after 0.5 s")
+    # the watch's length, as timed on this machine (0.5 s and a scheduler's few ms), in two digits
+    assert re.search(r"; line 0 did not fall: 60 kPa after 0\.[56]\d? s$", zero_report(result))
 
 
 @pytest.mark.parametrize("constraint", ["direction", "none"])
