@@ -870,13 +870,13 @@ def estimate_frames(block, use_guess, fr, held, start, out):
 @njit(cache=True)
 def evaluate_frames(fr, held, u, run_status, out):
     """Shape, covariance and status of every frame at given parameters ``u`` (B, k) (the paper's optimum)."""
-    fr, pb, err, ops, ref, _ = typed(fr, held)
+    fr, pb, err, ops, ref, scratch_of = typed(fr, held)
+    buf, ws, _ = scratch_of[0]
     force, cov, status, iters, residual, chi2, pval, guess_n, state, tip, direction, std, parts, success, pay, \
         shifts = Outputs(*out)
-    buf = buffers(pb, ops.sigma.size)
-    ws = workspace(pb.s.size, ops.sigma.size, pb.sw.size)
-    F = np.empty(2)
-    blocked = np.zeros(pb.lower.size)
+    F = buf.gram[0, 0]
+    blocked = buf.guess[4]
+    blocked[:] = 0.0
     for i in range(fr.ei.size):
         p0, _, _, state0, tg, D, dD, frame_cov, cov_s, noise_var, kappa = setup(i, fr, pb, err, buf)
         force_of(D, pb.ffix, u[i], F)
