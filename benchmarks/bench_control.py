@@ -24,7 +24,9 @@ defaults) starts with the fingers open and the target 0.15 N, and is stopped aft
   a non-zero one (target: within one frame period). A signal reaches Python between
   two bytecodes: a stop that lands inside a block's compiled estimate waits for it;
 - the loop's cost: wall time per frame (process, check, control, send; mean and p99 per
-  block) and the frames per block (1: the loop keeps up frame by frame).
+  block) and the frames per block (1: the loop keeps up frame by frame), with the reads of the port they came
+  in (the frames a read brought arrived together: the board's or the driver's bunching, which no loop can
+  undo; reads a block over 1: the loop was behind).
 """
 
 import argparse
@@ -254,6 +256,8 @@ def score(truth, result, t_signal, board, k):
     loop = {"per_frame_s": result.per_frame_s,
             "p99_block_per_frame_s": float(np.percentile(result.loop_s / np.maximum(result.block_frames, 1), 99)),
             "frames_per_block": float(np.mean(result.block_frames)),
+            "reads_per_block": float(np.mean(result.block_reads)),
+            "frames_per_read": float(np.sum(result.block_frames) / max(np.sum(result.block_reads), 1)),
             "own_per_frame_s": float(np.sum(result.loop_s - result.process_s) / max(result.frames, 1)),
             "host_zero_s": result.stopped_at_s + result.zero_latency_s - t_signal, "frames": result.frames}
     return out, loop
@@ -312,7 +316,8 @@ def _rows_of(k, template, proc, ctl, seconds, stop_repeats):
                   f"signal: median {np.median(late):.0f}, max {late.max()}", np.median(host_zero) <= 1.0 / RATE_HZ))
     table.append((f"{label}: loop per frame (process, check, control, send)", f"keeps up (< {period_ms:g} ms)",
                   f"{loop['per_frame_s'] * 1e6:.0f} µs mean, p99 {loop['p99_block_per_frame_s'] * 1e6:.0f} µs; "
-                  f"{loop['frames_per_block']:.2f} frames per block; the processor's part: all but "
+                  f"{loop['frames_per_block']:.2f} frames per block (arrived in {loop['reads_per_block']:.2f} reads "
+                  f"of {loop['frames_per_read']:.2f} frames); the processor's part: all but "
                   f"{loop['own_per_frame_s'] * 1e6:.0f} µs", loop["per_frame_s"] < 1.0 / RATE_HZ))
     return table
 

@@ -77,7 +77,7 @@ class FakeProcessor:
 class FakeBoard:
     """The plant at 1 kHz in simulated time; a frame per ``get_batch`` (what a loop that keeps up sees)."""
 
-    def __init__(self, *, lose_after=None, silent_after=None, per_batch=1):
+    def __init__(self, *, lose_after=None, silent_after=None, per_batch=1, per_read=1):
         self.plant = Plant()
         self.k = 0
         self.sent = []  # (frame, line, pressure_pa)
@@ -86,6 +86,7 @@ class FakeBoard:
         self.lose_after = lose_after
         self.silent_after = silent_after
         self.per_batch = per_batch
+        self.per_read = per_read  # frames of one read of the port (one arrival time)
 
     def get_batch(self, timeout=None, max_items=4096):
         if self.silent_after is not None and self.k >= self.silent_after:
@@ -101,7 +102,9 @@ class FakeBoard:
             self.k += 1
             sample = Sample(seq=self.k & 0xFFFF, t_us=self.k * 1000, n_channels=1, status=0, tx_drops=0,
                             pressure_pa=int(self.plant.pressure_pa), adc=(int(round(self.plant.force_n * 1e6)),))
-            out.append(Reading(time.monotonic_ns(), self.k * 1000, sample))
+            if len(out) % self.per_read == 0:
+                arrived = time.monotonic_ns()
+            out.append(Reading(arrived, self.k * 1000, sample))
         return out
 
     def send_setpoint(self, line, pressure_pa, *, check_line=True):
@@ -518,6 +521,15 @@ def test_run_stops_on_a_run_of_flags_not_on_a_chance_one(flag):
         run(board, FakeProcessor(flagged=range(200, 260), status=flag), as_controller(pi_of()),
             max_pressure_pa=P_MAX_PA, seconds=5.0, safety=Safety(flagged_s=0.01))
     assert zeros_at_end(board) and board.sent[-1][0] <= 213
+
+
+@pytest.mark.parametrize(("per_batch", "per_read"), [(1, 1), (3, 3), (4, 2), (3, 1)])
+def test_run_counts_the_reads_each_block_came_in(per_batch, per_read):
+    # frames read together arrived together (the board's or the driver's bunching); reads over 1: the loop lagged
+    board = FakeBoard(per_batch=per_batch, per_read=per_read)
+    res = run(board, FakeProcessor(), as_controller(pi_of()), max_pressure_pa=P_MAX_PA, seconds=0.05)
+    assert res.blocks > 0 and res.block_reads.shape == res.block_frames.shape == (res.blocks,)
+    assert (res.block_frames == per_batch).all() and (res.block_reads == per_batch // per_read).all()
 
 
 def test_run_refuses_bad_arguments():

@@ -112,6 +112,11 @@ class ControlResult:
         Of that, the processor's (``process_readings``) [s]: the rest is the loop's own.
     block_frames : ndarray of int, shape (blocks,)
         Frames of each block.
+    block_reads : ndarray of int, shape (blocks,)
+        Reads of the port each block's frames came in (their distinct arrival times): frames
+        that arrived in one read were sent, or read, together (the board's or the driver's
+        bunching), not left waiting by the loop. ``block_frames / block_reads`` > 1: frames
+        arrived together; ``block_reads`` > 1: the loop was behind.
     zeros : tuple of LineZero
         Each line's set-point 0 at the end, by line: sent, or why not; whether its pressure fell.
     held : tuple of int
@@ -129,6 +134,7 @@ class ControlResult:
     loop_s: np.ndarray
     process_s: np.ndarray
     block_frames: np.ndarray
+    block_reads: np.ndarray
     zeros: tuple = ()
     held: tuple = ()
 
@@ -389,8 +395,8 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     fingers = getattr(controller, "fingers", None)
     guard = Guard(safety, _fingers(processor) if fingers is None else fingers,
                   rate_hz=getattr(hello, "rate_hz", None) or None, max_pressure_pa=float(max_pressure_pa))
-    state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "current": {},
-             "driven": set(), "held": (), "signals": []}
+    state = {"frames": 0, "max": 0.0, "clipped": 0, "loop": [], "process": [], "sizes": [], "reads": [],
+             "current": {}, "driven": set(), "held": (), "signals": []}
     outcome, stopped_at, zero_at, error, result = "stopped", math.nan, math.nan, None, None
     with _signals_stop(state["signals"]):
         try:
@@ -421,7 +427,8 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
                         lines=tuple(z.line for z in zeros), max_setpoint_pa=state["max"], clipped=state["clipped"],
                         zero_latency_s=zero_at - stopped_at, stopped_at_s=stopped_at,
                         loop_s=np.asarray(state["loop"]), process_s=np.asarray(state["process"]),
-                        block_frames=np.asarray(state["sizes"], dtype=np.int64), zeros=zeros,
+                        block_frames=np.asarray(state["sizes"], dtype=np.int64),
+                        block_reads=np.asarray(state["reads"], dtype=np.int64), zeros=zeros,
                         held=tuple(k for k in state["held"] if k not in state["driven"]))
                     if error is not None:
                         with contextlib.suppress(AttributeError, TypeError):  # a user's exception may not take them
@@ -496,6 +503,7 @@ def _loop(driver, processor, controller, seconds, stop, guard, lines, recording,
         state["loop"].append(time.perf_counter() - tic)
         state["process"].append(processed - tic)
         state["sizes"].append(len(readings))
+        state["reads"].append(len({r.host_ns for r in readings}))
         state["frames"] += len(readings)
         state["clipped"] += clipped
         if setpoints:
