@@ -241,6 +241,30 @@ def test_small_batches_and_single_threads_use_the_per_frame_kernel_with_the_batc
     np.testing.assert_array_equal(one.message, many.message)
 
 
+def test_every_kernel_compiled_here_can_be_cached(monkeypatch):
+    """No compiled kernel holds a runtime address (numba's "dynamic globals"), which numba does not cache.
+
+    ``numba.get_num_threads()`` compiled into the batch kernel did (the threading layer's
+    function): the kernel then compiled again in every process, ~30 s at the first large
+    batch of each ``bendsense batch`` or notebook, and numba's warning of it is silenced
+    with its others during a first call (``_jit.call``). The batch kernel is run here on
+    a small batch (``_jit.parallel`` forced), then every kernel this process holds is checked.
+    """
+    from numba.core.caching import NullCache
+    from numba.core.registry import CPUDispatcher
+
+    monkeypatch.setattr(_jit, "parallel", lambda frames: True)
+    rng = np.random.default_rng(5)
+    result = est.estimate_force(rng.uniform(2.0, 10.0, (9, 16)), rng.uniform(20e3, 90e3, 9),
+                                bendsense.load_config(), noise_std=0.02)
+    assert result.success.all() and est._kernels.estimate_frames.signatures
+    kernels = [(f"{module}.{name}", obj) for module, m in list(sys.modules.items()) if module.startswith("bendsense")
+               for name, obj in list(vars(m).items()) if isinstance(obj, CPUDispatcher)]
+    held = [(name, cres) for name, obj in kernels if not isinstance(obj._cache, NullCache)
+            for cres in obj.overloads.values()]
+    assert len(held) > 10 and [name for name, cres in held if cres.library.has_dynamic_globals] == []
+
+
 @pytest.mark.parametrize("n", [1, 5])
 def test_live_sized_blocks_never_compile_the_batch_kernel(n, calibration_path):
     code = textwrap.dedent(f'''

@@ -33,6 +33,7 @@ import time
 import warnings
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from bendsense import _jit
@@ -653,7 +654,7 @@ def _run_fast(B, chain, use_guess, fr, held, start, out):
             return a[lo:lo + step] if a.shape[:1] == (B,) else a
 
         _jit.call(_kernels.estimate_frames, block, use_guess, tuple(map(piece, fr)), held, piece(start),
-                  tuple(map(piece, out)))
+                  tuple(map(piece, out)), numba.get_num_threads())
 
 
 def _batch(shape_batch, pressure_shape):

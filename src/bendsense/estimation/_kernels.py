@@ -24,7 +24,6 @@ function of its own.
 
 import math
 
-import numba
 import numpy as np
 from numba import njit, prange
 from numba.typed import List
@@ -841,7 +840,7 @@ def estimate_block(lo, hi, use_guess, chained, fr, held, start, out, slot, at=No
 
 
 @njit(cache=True, parallel=True)
-def estimate_frames(block, use_guess, fr, held, start, out):
+def estimate_frames(block, use_guess, fr, held, start, out, threads):
     """The whole estimate of every frame (B,), in parallel over blocks of ``block`` consecutive frames.
 
     ``use_guess``: start at the moment-balance guess plus the force offset ``start`` (B, 2)
@@ -853,12 +852,13 @@ def estimate_frames(block, use_guess, fr, held, start, out):
     iterations, residual, χ²/dof, its p-value, guess (B, 2), state (B, n), tip (B, 2), the unidentifiable
     direction of a boundary stop (B, 2), σ (B, 2), the covariance's parts (B, 3, 2, 2), success (B,)
     (converged or not identifiable), and the window test's payload (:func:`payload`): residual, Jacobian
-    by u and model factor (B, R, 5), and the measured shifts (B, N).
+    by u and model factor (B, R, 5), and the measured shifts (B, N). ``threads``: the caller's numba thread
+    count (asked in Python: compiled in, it puts an address in the code, and numba caches no such code).
     """
     B = prob.Frames(*fr).ei.size
     nblocks = (B + block - 1) // block
     pb, _, ops, _, scratch_of = held[0]
-    slots = min(nblocks, numba.get_num_threads())
+    slots = min(nblocks, threads)
     while len(scratch_of) < slots:
         scratch_of.append(scratch(pb, ops.sigma.size))
     for s in prange(slots):  # slot s runs the blocks s, s + slots, ...: its buffers in one thread at a time
