@@ -6,7 +6,8 @@ compiles. Later processes load the cache in well under a second. While a kernel
 compiles, one line on stderr says what is compiling and how far it is (the functions of
 its call tree done out of all, and the seconds so far), updated in place on a terminal
 and every 10 s otherwise. numba's compile-time hints (performance, deprecation) are for
-developers and never reach a user.
+developers and never reach a user; a kernel numba cannot cache (which every process would
+compile again) is a RuntimeWarning.
 
 Optimisation level: bendsense's kernels are compiled at LLVM level 1 (``NUMBA_OPT=1``)
 unless ``NUMBA_OPT`` is set in the environment. It cuts the first compile by a quarter
@@ -32,6 +33,7 @@ oversubscribe the cores). ``NUMBA_THREADING_LAYER`` in the environment takes pre
 import contextlib
 import functools
 import os
+import re
 import sys
 import threading
 import time
@@ -106,11 +108,33 @@ def _call(dispatcher, args):
     if dispatcher in _ready:
         return dispatcher(*args)
     _ready.add(dispatcher)
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught, _progress(dispatcher), _optimisation_level():
+            warnings.simplefilter("always")  # every warning of the first call recorded, sorted by _pass_on
+            return dispatcher(*args)
+    finally:
+        _pass_on(caught)
+
+
+def _pass_on(caught):
+    """The warnings of a first call, under the caller's filters: numba's hints dropped, a cache refusal loud.
+
+    numba refuses to cache a kernel whose code holds a runtime address (its "dynamic
+    globals": a ctypes pointer, ``numba.get_num_threads()`` compiled in): every process
+    then compiles it again, tens of seconds, with nothing else to show. That is a bug of
+    bendsense's and is passed on as a RuntimeWarning; the other NumbaWarnings
+    (performance, deprecation) are for developers.
+    """
     from numba.core.errors import NumbaWarning
 
-    with warnings.catch_warnings(), _progress(dispatcher), _optimisation_level():
-        warnings.simplefilter("ignore", NumbaWarning)
-        return dispatcher(*args)
+    for w in caught:
+        text = re.sub(r"\x1b\[[0-9;]*m", "", str(w.message))  # numba's terminal highlighting
+        if not issubclass(w.category, NumbaWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        elif text.startswith("Cannot cache"):
+            warnings.warn(f"bendsense: {text} ({w.filename}:{w.lineno}): every process compiles it again, "
+                          "please report this", RuntimeWarning, stacklevel=4)
 
 
 #: bendsense's modules with compiled kernels (those that end with :func:`guard_cache`), relative to the package

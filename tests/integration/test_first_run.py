@@ -265,6 +265,27 @@ def test_every_kernel_compiled_here_can_be_cached(monkeypatch):
     assert len(held) > 10 and [name for name, cres in held if cres.library.has_dynamic_globals] == []
 
 
+def test_a_first_call_warns_of_a_kernel_numba_cannot_cache_and_drops_numbas_hints(tmp_path, monkeypatch):
+    """A kernel with a runtime address compiled in: a RuntimeWarning; numba's performance hint: nothing."""
+    (tmp_path / "toy_kernels.py").write_text(textwrap.dedent('''
+        import numba
+
+        @numba.njit(cache=True)
+        def threads():
+            return numba.get_num_threads()
+
+        @numba.njit(cache=True, parallel=True)
+        def plus_one(x):
+            return x + 1.0
+    '''))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import toy_kernels
+
+    with pytest.warns(RuntimeWarning, match=r'Cannot cache compiled function "threads".*compiles it again'):
+        assert _jit.call(toy_kernels.threads) == numba.get_num_threads()
+    assert _jit.call(toy_kernels.plus_one, 1.0) == 2.0  # its NumbaPerformanceWarning would fail the test
+
+
 @pytest.mark.parametrize("n", [1, 5])
 def test_live_sized_blocks_never_compile_the_batch_kernel(n, calibration_path):
     code = textwrap.dedent(f'''
