@@ -322,7 +322,13 @@ def test_pressures_in_kpa_given_as_pa_are_warned_of():
                                          r"actuator hardly bends, but read as kPa they lie inside "
                                          r"actuator.pressure_range_pa 0..200 kPa: pressures in kPa given as Pa\?"):
         estimate_force(kappa, p_kpa, CONFIG)
+    ramp = np.linspace(0.0, 100.0, 30)  # a ramp from the vented zero, in kPa given as Pa: warned as well
+    with pytest.warns(DataWarning, match=r"^pressure_pa: every pressure is below 1 kPa \(largest 100 Pa\)"):
+        estimate_force(_shapes(ramp * 1e3), ramp, CONFIG)
+    noise = np.random.default_rng(3).normal(0.0, 40.0, 30)  # a sensor at rest: noise around zero
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataWarning)
         estimate_force(kappa, p_kpa * 1e3, CONFIG)
-        estimate_force(kappa[:3], np.array([0.0, 80.0, 300.0]), CONFIG)  # at rest: a zero among them
+        estimate_force(kappa[:3], np.array([0.0, 80.0, 300.0]), CONFIG)  # at rest: 300 kPa would be out of range
+        estimate_force(kappa[:3], np.array([0.0, 0.0, 60.0]), CONFIG)  # at rest: mostly the vented zero
+        estimate_force(_shapes(np.zeros(30)), noise, CONFIG)

@@ -120,11 +120,13 @@ def pressure_range(pressure_pa, config, strict: bool = False):
 def warn_kpa_as_pa(pressure_pa, config) -> None:
     """A :class:`~bendsense.errors.DataWarning` when the pressures look like kPa given as Pa.
 
-    Every finite pressure positive and below :data:`REST_PA` (the actuator hardly
-    bends: at rest), but inside ``config.actuator.pressure_range_pa`` read as kPa: a
-    session at rest reads zero or noise around it; kPa numbers of a working actuator
-    read 20–120. One frame, and a block of a live stream (:class:`bendsense.pipeline.LiveProcessor`,
-    which silences it), are not judged: a ramp from rest starts with a few pascals.
+    Every finite pressure below :data:`REST_PA` (the actuator hardly bends: at rest),
+    none negative, most of them positive, and the positive ones inside
+    ``config.actuator.pressure_range_pa`` read as kPa: a session at rest reads zeros or
+    noise around zero (negative readings among it); kPa numbers of a working actuator
+    read 20–120, and a ramp of them starts from a vented zero. One frame, and a block of
+    a live stream (:class:`bendsense.pipeline.LiveProcessor`, which silences it), are not
+    judged: a ramp from rest starts with a few pascals.
 
     Parameters
     ----------
@@ -135,8 +137,10 @@ def warn_kpa_as_pa(pressure_pa, config) -> None:
     """
     p = np.asarray(pressure_pa, dtype=float)
     p = p[np.isfinite(p)]
+    positive = p[p > 0]
     lo, hi = config.actuator.pressure_range_pa
-    if p.size < 2 or not (p > 0).all() or not p.max() < REST_PA or not lo <= p.min() * 1e3 <= p.max() * 1e3 <= hi:
+    if p.size < 2 or (p < 0).any() or 2 * positive.size <= p.size or not p.max() < REST_PA \
+            or not lo <= positive.min() * 1e3 <= p.max() * 1e3 <= hi:
         return
     warnings.warn(f"pressure_pa: every pressure is below {REST_PA / 1e3:g} kPa (largest {p.max():g} Pa), where the "
                   f"actuator hardly bends, but read as kPa they lie inside actuator.pressure_range_pa "
