@@ -98,3 +98,15 @@ def test_demo_rejects_bad_options(tmp_path):
     res = invoke("-o", str(tmp_path / "d"), "--seconds", "0")
     assert res.exit_code == 2 and "--seconds" in res.output
     assert not (tmp_path / "d").exists()
+
+
+def test_demo_below_100_hz_tests_its_windows_and_warns_of_nothing(tmp_path):
+    """At 50 Hz a 50 ms window holds 3 frames, too few for the window test: the demo takes windows that hold one,
+    and says nothing a user cannot act on (its command has no --window-s; a DataWarning fails the test here)."""
+    out = tmp_path / "out"
+    res = invoke("-o", str(out), "--seconds", "1.5", "--rate", "50", "--seed", str(SEED))
+    assert res.exit_code == 0, res.output
+    assert "Warning" not in res.output and "--window-s" not in res.output
+    p = read_results(out / "results")["window_p_value"]
+    # 50 ms windows would test none; frames between steps of over 1 kPa (the ramp at 50 Hz) stay untested
+    assert np.isfinite(p).mean() > 0.3

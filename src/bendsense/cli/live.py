@@ -16,6 +16,7 @@ from bendsense.cli._common import (
     check_figure_suffix,
     config_option,
     constraint_option,
+    data_warnings_logged,
     live_bandwidth_option,
     live_contact_option,
     load_option,
@@ -277,7 +278,7 @@ def demo(out_dir, seconds, rate_hz, seed, overwrite):
         bar.update(done - bar.n)
 
     try:
-        with output.reserve([target]):  # checked and locked before the board starts
+        with output.reserve([target]), data_warnings_logged():  # checked and locked before the board starts
             result = run_demo(
                 out_dir, seconds=seconds, rate_hz=rate_hz, seed=seed, overwrite=overwrite, echo=echo, progress=progress
             )
