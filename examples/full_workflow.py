@@ -94,8 +94,8 @@ print(f"shape: max position error {shape_error.max() * 1e3:.2f} mm "
 # calibration propagates the sensor noise to the standard deviation std_n.
 force = bendsense.estimate_force(shape, session.pressure_pa, config, constraint="normal", calibration=cal)
 free = bendsense.estimate_force(shape, session.pressure_pa, config, constraint="none", calibration=cal, max_iter=25)
-print(f"force: {force.wall_time_s * 1e3 / len(t_s):.2f} ms per frame (normal), "
-      f"{free.wall_time_s * 1e3 / len(t_s):.2f} ms per frame (none)")
+print(f"force: {force.wall_time_s * 1e3 / len(t_s):.2f} ms per frame (normal; a process's first estimate loads the "
+      f"compiled kernels), {free.wall_time_s * 1e3 / len(t_s):.2f} ms per frame (none)")
 
 # %% Compare with the simulated truth
 # Frames where the shape cannot tell a force component (an axial load on the nearly
@@ -111,7 +111,8 @@ for name, est in (("normal", force), ("none", free)):
     print(f"  constraint {name:6s}: |error| median {np.median(size):.4f} N, RMS {np.sqrt(np.mean(size**2)):.4f} N "
           f"over {ok.sum()} frames, truth within ±2σ {within.mean():.0%}; {np.count_nonzero(~est.success)} not "
           f"converged, {np.count_nonzero(est.success & ~determined)} with a component the shape does not determine")
-print("  (σ: sensor noise and calibration error; not the errors of K0(P), EI(P) or the constraint)")
+print("  (σ: sensor noise, calibration error and the config's parameter prior on K0(P) and EI(P), scaled up where "
+      "the shape misfits the model; not the constraint's error)")
 
 # %% Figures: shapes against the truth, force against the truth
 frames = np.linspace(0, len(t_s) - 1, 6).astype(int)
