@@ -190,6 +190,21 @@ def test_simulate_refuses_frames_beyond_the_free_memory(tmp_path, monkeypatch):
     assert not (tmp_path / "sim2").exists()
 
 
+def test_simulate_names_the_rate_that_overfills_the_memory_and_the_rate_that_fits(tmp_path, monkeypatch):
+    from bendsense.sim import scenarios
+
+    monkeypatch.chdir(tmp_path)
+    line = _cli(tmp_path, ["simulate", "time-varying", "-o", "sim", "--rate", "1e9"])
+    assert re.search(r"^Error: --rate: time-varying would hold 10,000,000,000 frames in memory, about 120 TB; .* "
+                     r"\(at most [\d,]+ frames: [\d.e+-]+ s at 1e\+09 Hz, or [\d.e+]+ Hz for 10 s\)$", line), line
+    assert not (tmp_path / "sim").exists()
+    monkeypatch.setattr(scenarios, "available_memory_bytes", lambda: 1e9)  # its 10 s session: the rate that fits
+    fits = (1e9 - scenarios.BASE_BYTES) / scenarios.BYTES_PER_FRAME["time-varying"] / 10.0
+    with pytest.raises(ArgumentError, match=rf"^rate_hz × duration_s: .* or {re.escape(f'{fits:.3g}')} Hz for 10 s\)$"):
+        scenarios.simulate("time-varying", tmp_path / "sim2", rate_hz=fits * 1.01)
+    scenarios.check_memory("time-varying", {"rate_hz": fits * 0.99})  # below it: nothing to say
+
+
 def test_sim_device_refuses_a_rate_the_link_cannot_carry():
     from bendsense.device.simdevice import SimulatedDevice, max_rate_hz
 

@@ -190,10 +190,11 @@ def simulate(
         if scenario in ("free-sweep", "all"):
             options["n_frames"] = max(frames, 2)
     options = {k: v for k, v in options.items() if v is not None}
-    if frames is not None:
+    if frames is not None or rate_hz is not None:
         from bendsense.sim.scenarios import check_memory
 
-        check_memory(scenario, options, field="--frames")  # before any work (the group makes it one line)
+        # before any work (the group makes it one line)
+        check_memory(scenario, options, field="--frames" if frames is not None else "--rate")
 
     def step(state):
         from bendsense.sim.scenarios import _simulate

@@ -794,12 +794,16 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
         per_frame = BYTES_PER_FRAME[name]
         per_what = "strip" if key == "frames_per_strip" else "configuration"
         per_unit = at_once / max(float(options.get(key, _OPTIONS[name][key])), 1e-300)
-        most = int((available - BASE_BYTES) / per_frame / per_unit) if available > BASE_BYTES else 0
-        raise ArgumentError(
-            f"{field or key}: {name} would hold {at_once:,} frames in memory, about {size_text(need)}; this machine "
-            f"has {size_text(available)} available (at most {max(most, 0):,} {'s' if key == 'duration_s' else 'frames'}"
-            f"{'' if key in ('duration_s', 'n_frames') else ' per ' + per_what})"
-        )
+        frames = max((available - BASE_BYTES) / per_frame, 0.0)
+        if key == "duration_s":  # frames = rate × duration: either may be the option to change
+            rate, seconds = float(options.get("rate_hz", _OPTIONS[name]["rate_hz"])), at_once / per_unit
+            most = f"{int(frames):,} frames: {frames / rate:.3g} s at {rate:g} Hz, or {frames / seconds:.3g} Hz for " \
+                   f"{seconds:g} s"
+        else:
+            most = f"{int(frames / per_unit):,} frames" + ("" if key == "n_frames" else " per " + per_what)
+        label = field or ("rate_hz × duration_s" if key == "duration_s" else key)
+        raise ArgumentError(f"{label}: {name} would hold {at_once:,} frames in memory, about "
+                            f"{size_text(need)}; this machine has {size_text(available)} available (at most {most})")
 
 
 def _simulate(scenario, out_dir, config=None, seed=0, *, overwrite=False, **options):
