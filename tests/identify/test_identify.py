@@ -480,3 +480,16 @@ def test_unit_mistakes_in_identification_data_are_refused(tmp_path):
     with pytest.raises(SessionError, match=r"st\.csv: measured points up to 125\.7\d* m from the base, farther "
                                            r"than the actuator is long \(0\.134 m\); looks like millimetres"):
         read_stiffness_csv(mm, 0.134)
+
+
+def test_a_parameter_at_its_bound_is_said_without_the_solvers_own_words():
+    """A sensor without stiffness (μ_s = 0 true): noisy angles put the fit at the bound μ_s = 0 in about half the
+    draws; the report's warning then names the bound, not scipy's "`gtol` termination condition is satisfied."."""
+    theta = solve_bending_angle(P_FB, **GEOM, **{**TRUE_FB, "sensor_stiffness_nm_per_rad": 0.0})
+    fits = [fit_free_bending(P_FB, theta + SIGMA_FB * np.random.default_rng(seed).standard_normal(theta.shape), CFG)
+            for seed in range(6)]
+    bound = [f for f in fits if not f.success]
+    assert bound and len(bound) < len(fits)
+    for fit in bound:
+        assert fit.message == "sensor_stiffness_nm_per_rad at its bound (fix it, or the data do not support it)"
+        assert "WARNING: sensor_stiffness_nm_per_rad at its bound" in fit.report()

@@ -417,9 +417,9 @@ def fit_free_bending(
         cov, dof = joint[:len(names), :len(names)], len(p)
     m = len(free)
     stderr = _stderr(cov[:m, :m], free, FREE_BENDING_PARAMETERS)
-    if at_bound:
-        ok = False
-        message += f"; {', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
+    if at_bound:  # the solver's own words only where it failed ("`xtol` termination condition is satisfied.")
+        bound = f"{', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
+        message, ok = (f"{message}; {bound}" if not ok else bound), False
     if not all(math.isfinite(stderr[n]) for n in free):
         ok = False
         message += "; parameters not identifiable from these data (fix one)"
