@@ -793,10 +793,11 @@ def check_memory(scenario: str, options: dict, field: str | None = None) -> None
                "time-varying": "duration_s", "free-sweep": "n_frames"}.get(name, "frames_per_config")
         per_frame = BYTES_PER_FRAME[name]
         per_what = "strip" if key == "frames_per_strip" else "configuration"
-        per_unit = at_once / max(float(options.get(key, _OPTIONS[name][key])), 1e-300)
+        size = max(float(options.get(key, _OPTIONS[name][key])), 1e-300)  # frames (or seconds) a strip, ...
+        per_unit = at_once / size
         frames = max((available - BASE_BYTES) / per_frame, 0.0)
         if key == "duration_s":  # frames = rate × duration: either may be the option to change
-            rate, seconds = float(options.get("rate_hz", _OPTIONS[name]["rate_hz"])), at_once / per_unit
+            rate, seconds = float(options.get("rate_hz", _OPTIONS[name]["rate_hz"])), size
             most = f"{int(frames):,} frames: {frames / rate:.3g} s at {rate:g} Hz, or {frames / seconds:.3g} Hz for " \
                    f"{seconds:g} s"
         else:
