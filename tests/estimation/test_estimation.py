@@ -464,8 +464,12 @@ def test_bad_arguments_name_the_field():
         estimate_force(kappa, 0.0, CFG, push_only=True)
     with pytest.raises(ValueError, match="shape: expected"):
         estimate_force(np.zeros(15), 0.0, CFG)
-    with pytest.raises(ValueError, match="pressure_pa: must be finite"):
+    with pytest.raises(ValueError, match=r"^pressure_pa: must be finite, got nan$"):
         estimate_force(kappa, np.nan, CFG)
+    many = np.full(1000, 5e4)
+    many[[7, 500]] = np.nan  # the first named, not the whole array
+    with pytest.raises(ValueError, match=r"^pressure_pa: must be finite, got nan at frame 7 \(2 of 1000 frames\)$"):
+        estimate_force(np.broadcast_to(kappa, (1000, kappa.size)), many, CFG)
     with pytest.raises(ValueError, match="direction: expected a unit vector"):
         estimate_force(kappa, 0.0, CFG, constraint="direction", direction=(1.0, 1.0))
     with pytest.raises(ValueError, match="pressure_pa: shape"):

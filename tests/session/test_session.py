@@ -133,6 +133,24 @@ def test_all_equal_time_stamps_are_refused(tmp_path):
         read_session_csv(path)
 
 
+def test_the_first_cell_that_is_not_finite_is_named_in_reading_order_at_every_run(tmp_path):
+    """Row by row, then left to right, whatever order Python's hashing gives the column names (subprocesses: each
+    its own string hashing)."""
+    import subprocess
+    import sys
+
+    rows = [",".join(["0.01"] * 1 + ["1"] * 16)] * 6
+    rows[3] = ",".join(["0.04"] + ["1"] * 7 + ["nan"] + ["1"] * 4 + ["nan"] + ["1"] * 3)  # ch8 and ch13
+    rows[4] = ",".join(["0.05"] + ["nan"] * 16)  # a later row with every channel NaN
+    body = "\n".join(",".join([f"{0.01 * i:.2f}", *r.split(",")[1:]]) for i, r in enumerate(rows))
+    path = tmp_path / "nan.csv"
+    path.write_text("t_s," + ",".join(f"ch{i}" for i in range(1, 17)) + "\n" + body + "\n")
+    code = f"from bendsense.session.csvfile import read_session_csv\nread_session_csv({str(path)!r})"
+    said = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stderr.strip().splitlines()[-1]
+            for _ in range(4)}
+    assert len(said) == 1 and said.pop().endswith("line 5, column ch8: must be finite, got 'nan'")
+
+
 def test_an_infinite_pressure_is_no_missing_reading(tmp_path):
     path = tmp_path / "inf.csv"
     path.write_text("t_s,pressure_pa,ch1\n0,50000,1\n0.1,inf,2\n0.2,nan,3\n")

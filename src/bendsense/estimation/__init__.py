@@ -229,7 +229,9 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     L = pb.L
     P = np.asarray(pressure_pa, dtype=float)
     if not (math.isfinite(P.item()) if P.size == 1 else np.isfinite(P).all()):
-        raise ArgumentError(f"pressure_pa: must be finite, got {pressure_pa!r}")
+        bad = np.flatnonzero(~np.isfinite(P.reshape(-1)))
+        where = "" if P.size == 1 else f" at frame {int(bad[0])} ({bad.size} of {P.size} frames)"
+        raise ArgumentError(f"pressure_pa: must be finite, got {short(P.reshape(-1)[bad[0]].item())}{where}")
     batch = _batch(ref.batch_shape, P.shape)
     if contact is not _AT_TIP and contact.shape != batch:
         try:

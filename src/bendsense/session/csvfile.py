@@ -138,18 +138,21 @@ def _parse_session_csv(text: str, source: str) -> Session:
 
     numeric = {"t_s", "pressure_pa", "pressure_kpa", *line_cols, *(h for _, h in channels)}
     values = {}
-    for h in numeric & seen:
+    first = None  # (row, column) of the first cell that is not finite, in reading order
+    for h in (h for h in header if h in numeric):  # the file's order: the same message at every run
         try:
             # float() strips the surrounding white space itself and rounds correctly
             arr = np.array(list(map(float, cells[h])))
         except ValueError:
             arr = np.array([_parse_float(c.strip(), row_lines[i], h) for i, c in enumerate(cells[h])])
         # a missing pressure reading may be NaN (never ±inf); time and signals must be finite
-        wrong = np.isinf(arr) if _is_pressure(h) else ~np.isfinite(arr)
-        if wrong.any():
-            bad = int(np.flatnonzero(wrong)[0])
-            raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {short(cells[h][bad].strip())}")
+        wrong = np.flatnonzero(np.isinf(arr) if _is_pressure(h) else ~np.isfinite(arr))
+        if wrong.size and (first is None or wrong[0] < first[0]):
+            first = (int(wrong[0]), h)
         values[h] = arr
+    if first is not None:
+        bad, h = first
+        raise SessionError(f"line {row_lines[bad]}, column {h}: must be finite, got {short(cells[h][bad].strip())}")
     t = values["t_s"]
     pressure = _pressure(values, line_cols, header_line, t.shape)
     check_time_column(t, source, row_lines)
