@@ -2,6 +2,7 @@
 
 import concurrent.futures as cf
 import importlib.util
+import os
 import pickle
 import re
 import sys
@@ -172,7 +173,11 @@ def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_
     assert "line 3, column ch2: expected a number, got 'oops'" in rows["broken"].reason
     assert not (out / "broken").exists()
     batch_records = [r for r in caplog.records if r.name == "bendsense.batch"]
-    assert [r.getMessage().split(":")[:2] for r in batch_records] == [["broken", " failed"]]  # live, as it happens
+    said = [r.getMessage().split(":")[:2] for r in batch_records]
+    assert [x for x in said if x[1] == " failed"] == [["broken", " failed"]]  # live, as it happens
+    # and what the data could not carry, whole: these sessions' windows are too short for the window test
+    assert {name for name, text in said if text != " failed"} <= {"a", "b", "native"}
+    assert all(text == " window check" for _, text in said if text != " failed")
     assert report.frames == 3 * FRAMES and report.n_ok == 3 and report.n_failed == 1 and not report.ok
     assert report.frames_per_s == pytest.approx(report.frames / report.wall_s)
     assert all(rows[n].seconds > 0 and rows[n].frames == FRAMES for n in truth)
@@ -263,6 +268,41 @@ def test_extrapolated_frames_are_counted(tmp_path):
     assert list(read_results(tmp_path / "o")["status"])[2] in ("extrapolated", "not_converged", "model_misfit")
 
 
+def test_the_note_counts_each_frame_by_the_status_results_csv_gives_it(tmp_path):
+    """Signals far beyond the calibration (a unit mistake) turn the tip by more than a full turn: those frames are
+    implausible_shape in results.csv and in the note, not also counted as estimates that did not converge."""
+    import collections
+
+    session, _ = make_session(0, frames=6)
+    signals = session.signals.copy()
+    signals[:3] += 10_000.0
+    write_session_csv(Session(session.t_s, signals, session.pressure_pa), tmp_path / "x.csv")
+    row = process_session(tmp_path / "x.csv", tmp_path / "o", config=CONFIG, calibration=linear_calibration(),
+                          options=Options(estimate=ESTIMATE))
+    words = collections.Counter(read_results(tmp_path / "o")["status"])
+    assert words == {"implausible_shape": 3, "ok": 3}
+    assert row.reason == "3 of 6 frames extrapolated, 3 of 6 frames implausible_shape" and row.not_converged == 0
+
+
+def test_an_unfinished_recording_is_processed_and_its_note_says_so(tmp_path):
+    """A recorder killed before its clean stop (meta.yaml still ``finished: false``): its whole records are read
+    and processed, and the batch's row says what ``load`` logs (a worker's log line would be lost)."""
+    session, _ = make_session(0, frames=8)
+    writer = SessionWriter(tmp_path / "killed", record_dtype(N, "<f8"))
+    rec = writer.empty(8)
+    rec["t_us"] = np.round(session.t_s * 1e6).astype(np.uint64)
+    rec["seq"] = np.arange(8)
+    rec["pressure_pa"] = np.round(session.pressure_pa).astype(np.int32)
+    rec["adc"] = session.signals
+    writer.write(rec)
+    os.close(writer._fd)  # killed: the OS closes the files, meta.yaml is never rewritten (finished: false)
+    writer._events.close()
+    row = process_session(tmp_path / "killed", tmp_path / "o", config=CONFIG, calibration=linear_calibration(),
+                          options=Options(estimate=ESTIMATE))
+    assert row.status == "ok" and row.frames == 8
+    assert row.reason.endswith("unfinished recording (no clean stop: killed, crashed or still recording)")
+
+
 def test_no_sessions_is_an_error(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(SessionError, match="no sessions"):
@@ -337,6 +377,25 @@ def test_cli_process_on_a_dask_scheduler(sessions, tmp_path, dask_cluster):
     assert result.exit_code == 0, result.output
     assert "3 sessions: 3 ok" in result.output
     check_outputs(out, truth)
+
+
+def test_cli_process_says_what_the_data_could_not_carry_whole(tmp_path, caplog):
+    """The table cuts its notes to its width; the DataWarning behind one (pressures in kPa written as Pa) is said
+    whole, once, as the session's WARNING line."""
+    import logging
+
+    session, _ = make_session(0)
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    write_session_csv(Session(session.t_s, session.signals, session.pressure_pa / 1e3), runs / "kpa.csv")
+    cal_path = tmp_path / "cal.yaml"
+    linear_calibration().save(cal_path)
+    with caplog.at_level(logging.WARNING, logger="bendsense"):
+        res = CliRunner().invoke(main, process_args(runs, cal_path, tmp_path / "out"))
+    assert res.exit_code == 0, res.output
+    said = [r.getMessage() for r in caplog.records if "kPa given as Pa" in r.getMessage()]
+    assert len(said) == 1 and said[0].startswith("kpa: pressure_pa: every pressure is below 1 kPa (largest 80 Pa)")
+    assert said[0].endswith("(multiply by 1000, or name the column pressure_kpa)")
 
 
 def test_cli_process_option_errors(sessions, tmp_path, monkeypatch):

@@ -79,6 +79,10 @@ class SessionOutcome:
         Of those, frames the firmware reported it could not send (``tx_drops``).
     out_dir : str
         Results directory of the session.
+    warnings : tuple of str
+        What the data could not carry, said while the session was processed (the
+        :class:`~bendsense.errors.DataWarning` s: pressures that look like kPa, an unfinished
+        recording, ...), whole; the note (``reason``) ends with them, cut to the table's width.
     """
 
     name: str
@@ -95,6 +99,7 @@ class SessionOutcome:
     frames_lost: int = 0
     tx_drops: int = 0
     out_dir: str = ""
+    warnings: tuple = ()
 
     def __post_init__(self):
         if self.status not in STATUSES:
@@ -394,13 +399,14 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) ->
         (counts.extrapolated, "extrapolated"), (counts.not_converged, "not converged"),
         (counts.model_misfit, "model_misfit"), (counts.not_identifiable, "not identifiable"),
         (counts.implausible_force, "implausible_force"), (counts.contact_unresolved, "contact_unresolved"),
-        (counts.out_of_range, "pressure out of range")) if n]
+        (counts.out_of_range, "pressure out of range"), (counts.implausible_shape, "implausible_shape"),
+        (counts.no_shape, "no_shape")) if n]
     if lost or tx_drops:
         notes.append(f"{lost} frames lost ({tx_drops} dropped by the firmware)")
     if pressure_ignored:
         notes.append("the fallback pressure ignored (every frame has a pressure reading)")
     notes.extend(said)
-    return SessionOutcome(status="ok", frames=frames, seconds=seconds, reason=", ".join(notes),
+    return SessionOutcome(status="ok", frames=frames, seconds=seconds, reason=", ".join(notes), warnings=tuple(said),
                           extrapolated=counts.extrapolated, not_converged=counts.not_converged,
                           model_misfit=counts.model_misfit, not_identifiable=counts.not_identifiable,
                           out_of_range=counts.out_of_range, frames_lost=lost, tx_drops=tx_drops, **row)
@@ -412,14 +418,13 @@ def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
     from bendsense.config import save_config
     from bendsense.identify.sessions import adapt_session
     from bendsense.pipeline import process
-    from bendsense.session import read_session
 
     if isinstance(calibration, dict):  # a gripper: each finger's part of the board (bendsense.batch.fingers)
         from bendsense.batch.fingers import run_gripper
 
         return run_gripper(path, out_dir, config, calibration, options, overwrite)  # (adapt: refused before)
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
-    session = read_session(path)
+    session = read_noted(path)
     # (a worker's log line would be lost in the console: the session's report row says it)
     ignored = options.pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
     adapted = options.adapt and adapt_session(session, config, calibration, options.pressure_pa)
@@ -432,6 +437,20 @@ def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
         save_config(adapted.config, out_dir / "config.yaml")
     return (processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)),
             ignored)
+
+
+def read_noted(path):
+    """:func:`bendsense.session.read_session`, an unfinished recording a DataWarning (the session's note in a batch).
+
+    The reader logs it, which a batch's worker cannot show: the report's row says it instead.
+    """
+    from bendsense.session import read_session
+
+    session = read_session(path)
+    if session.meta.get("finished") is False:
+        warnings.warn("unfinished recording (no clean stop: killed, crashed or still recording)", DataWarning,
+                      stacklevel=2)
+    return session
 
 
 # --- many sessions ------------------------------------------------------------------------
@@ -696,9 +715,10 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
         bar.update(1)
         if row.status == "ok":
             output.add_to_manifest(out_dir, [f"{row.name}/"])
-        if row.status == "failed":  # above the progress bar, not glued to it
+        if row.status == "failed" or row.warnings:  # whole, above the progress bar (the table cuts its notes)
             with contextlib.nullcontext() if bar.disable else logging_redirect_tqdm():
-                log.warning("%s: failed: %s", row.name, row.reason)
+                for text in [f"failed: {row.reason}"] if row.status == "failed" else row.warnings:
+                    log.warning("%s: %s", row.name, text)
 
     own = None
     futures: dict = {}

@@ -95,13 +95,13 @@ def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, optio
         returns them: the board's frames, each flagged count summed over the fingers.
     """
     from bendsense import output
+    from bendsense.batch import read_noted
     from bendsense.pipeline import process
     from bendsense.results.gripper import write_gripper_results
-    from bendsense.session import read_session
     from bendsense.session.fingers import split_session
 
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
-    session = read_session(path)
+    session = read_noted(path)
     ignored = options.pressure_pa is not None and bool(np.isfinite(session.pressure_pa).all())
     parts, counts = {}, None
     for name, part in split_session(session, gripper).items():

@@ -232,10 +232,13 @@ def reconstruct(points):
         calibration = _require(state, "calibration", "reconstruct", "'load ... --calibration CAL.yaml'")
         processed = process(session, state["config"], calibration, estimate=False, points=points,
                             calibration_source=str(state.get("calibration_path") or ""))
-        n_extra = processed.counts().extrapolated
-        if n_extra:
+        counts = processed.counts()
+        if counts.extrapolated:
             log.warning("%d of %d frames outside the calibrated signal range (status 'extrapolated')",
-                        n_extra, len(session))
+                        counts.extrapolated, len(session))
+        if counts.implausible_shape:  # a unit or calibration mistake, not a bend
+            log.warning("%d of %d frames: the tip turns by more than a full turn (status 'implausible_shape'): check "
+                        "the calibration and the config's sensor", counts.implausible_shape, len(session))
         state["shape"] = processed.shape
         return state
 

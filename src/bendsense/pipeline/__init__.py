@@ -74,6 +74,11 @@ class FrameCounts:
     contact_unresolved : int
         Frames of a contact load whose location the data cannot place (status
         ``contact_unresolved``, force kept, ``contact_std_m`` inf).
+    implausible_shape : int
+        Frames whose tip turned by more than a full turn (status ``implausible_shape``: a unit
+        or calibration mistake); their estimate is not counted above.
+    no_shape : int
+        Frames with non-finite signals (status ``no_shape``); their estimate is not counted above.
     """
 
     frames: int
@@ -84,6 +89,8 @@ class FrameCounts:
     not_identifiable: int = 0
     implausible_force: int = 0
     contact_unresolved: int = 0
+    implausible_shape: int = 0
+    no_shape: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,25 +125,29 @@ class Processed(Results):
     estimate_s: float = 0.0
 
     def counts(self) -> FrameCounts:
-        """Frames flagged: extrapolated, pressure out of range, not converged, model_misfit, not identifiable."""
+        """Frames flagged, by reason (:class:`FrameCounts`)."""
         from bendsense.estimation.plausibility import pressure_outside
         from bendsense.results import frame_codes
 
         n = len(self.session)
         extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(self.shape.extrapolated), (n,))))
+        codes = frame_codes(self.shape, self.estimate)
+        # a shape that is nonsense is the frame's status: its estimate (which fails on it) is not counted as well
+        shapes = {"implausible_shape": int(np.count_nonzero(codes == Status.IMPLAUSIBLE_SHAPE)),
+                  "no_shape": int(np.count_nonzero(codes == Status.NO_SHAPE))}
         if self.estimate is None:
-            return FrameCounts(frames=n, extrapolated=extrapolated)
+            return FrameCounts(frames=n, extrapolated=extrapolated, **shapes)
         outside = pressure_outside(self.session.pressure_pa, self.config)
-        failed = ~np.asarray(self.estimate.success, dtype=bool) & ~outside
+        nonsense = (codes == Status.IMPLAUSIBLE_SHAPE) | (codes == Status.NO_SHAPE)
+        failed = ~np.asarray(self.estimate.success, dtype=bool) & ~outside & ~nonsense
         own = np.broadcast_to(np.asarray(self.estimate.status), (n,))
         misfit = failed & (own == Status.MODEL_MISFIT)
         implausible = failed & (own == Status.IMPLAUSIBLE_FORCE)
-        codes = frame_codes(self.shape, self.estimate)
         return FrameCounts(frames=n, extrapolated=extrapolated, out_of_range=int(outside.sum()),
                            not_converged=int(np.count_nonzero(failed & ~misfit & ~implausible)),
                            model_misfit=int(misfit.sum()), implausible_force=int(implausible.sum()),
                            not_identifiable=int(np.count_nonzero(codes == Status.NOT_IDENTIFIABLE)),
-                           contact_unresolved=int(np.count_nonzero(codes == Status.CONTACT_UNRESOLVED)))
+                           contact_unresolved=int(np.count_nonzero(codes == Status.CONTACT_UNRESOLVED)), **shapes)
 
 
 def _source(session) -> str:
