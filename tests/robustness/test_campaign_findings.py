@@ -55,6 +55,19 @@ def test_an_empty_port_or_a_device_that_is_no_terminal_is_named(port, said):
     assert str(err.value).startswith(said) and "Errno" not in str(err.value) and "ioctl" not in str(err.value)
 
 
+def test_record_on_a_regular_file_is_one_line_without_a_blank_one_before(tmp_path):
+    """The status line is ended before an error only when one was drawn: none before the port opened."""
+    import subprocess
+    import sys
+
+    (tmp_path / "session.csv").write_text("t_s,ch1\n0,1\n")
+    out = subprocess.run([sys.executable, "-c", "from bendsense.cli import main; main()", "record",
+                          str(tmp_path / "session.csv"), "-o",
+                          str(tmp_path / "rec")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1 and out.stderr.startswith(f"Error: {tmp_path / 'session.csv'}: a regular file")
+    assert out.stderr.count("\n") == 1 and not (tmp_path / "rec").exists()
+
+
 def test_a_message_shows_numbers_not_numpys_repr():
     with pytest.raises(ArgumentError) as err:
         bendsense.solve_beam(0.13, 2.5e-3, 5.0, s_m=[0, 0.5, 1.0])

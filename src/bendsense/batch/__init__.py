@@ -198,7 +198,7 @@ class BatchReport:
             seconds = f"{s.seconds:9.2f}" if s.status != "skipped" else f"{'-':>9}"
             lines.append(f"{s.name:<{width}}  {s.status:<7} {frames} {seconds}  {reason}".rstrip())
         lines.append(
-            f"{len(self.sessions)} sessions: {self.n_ok} ok, {self.n_skipped} skipped, {self.n_failed} failed; "
+            f"{len(self.sessions)} session{'s' * (len(self.sessions) != 1)}: {self.n_ok} ok, {self.n_skipped} skipped, {self.n_failed} failed; "
             f"{self.frames} frames in {self.wall_s:.2f} s ({self.frames_per_s:,.0f} frames/s"
             f"{', ' + self.workers if self.workers else ''})"
         )
@@ -678,7 +678,7 @@ def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
                 name=name,
                 source=str(path),
                 status="skipped",
-                reason="output exists (use overwrite / --overwrite to reprocess)",
+                reason="output exists (--overwrite, or overwrite=True, reprocesses it)",
                 out_dir=str(target),
             )
         elif overwrite and target.exists():

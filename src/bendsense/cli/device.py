@@ -369,11 +369,13 @@ def record(
     target = outputs.recording(output, overwrite=overwrite)
     click.get_current_context().with_resource(outputs.reserve([target], [config_path]))
     estimator = None
+    drawn = []  # a status line on stderr, which an error ends first
 
     def progress(stats):
         if show:
             sys.stderr.write("\r" + _status_line(stats, estimator and estimator.stats) + "   ")
             sys.stderr.flush()
+            drawn[:] = [True]
 
     try:
         config = load_config(config_path) if config_path else None
@@ -414,7 +416,7 @@ def record(
             finally:  # interrupted: what is still queued is not estimated (it stays in frames.bin)
                 est_stats = None if estimator is None else estimator.close(None if interrupted is None else 0.5)
     except BendsenseError:
-        if show:  # end the status line before the error
+        if drawn:  # end the status line before the error
             sys.stderr.write("\n")
         raise
     if show:
