@@ -379,6 +379,46 @@ def test_cli_process_on_a_dask_scheduler(sessions, tmp_path, dask_cluster):
     check_outputs(out, truth)
 
 
+def test_cli_process_refuses_a_scheduler_without_workers_in_one_line(sessions, tmp_path, monkeypatch):
+    """Its tasks would wait for ever (a scheduler whose workers were never started, or have left)."""
+    from dask.distributed import LocalCluster
+
+    import bendsense.cli.batch as cli_batch
+
+    monkeypatch.setattr(cli_batch, "WORKER_WAIT_S", 1.0)
+    runs, _ = sessions
+    cal_path = tmp_path / "cal.yaml"
+    linear_calibration().save(cal_path)
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp", dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        result = CliRunner().invoke(main, process_args(runs, cal_path, tmp_path / "out") + ["--scheduler", address])
+    assert result.exit_code == 1
+    assert result.output.strip() == f"Error: --scheduler {address!r}: no worker joined it in 1 s (start one: dask " \
+                                    f"worker {address!r})"
+
+
+def test_a_batch_whose_executor_cancels_its_tasks_stops_instead_of_failing_each_session(sessions, tmp_path):
+    """A Dask scheduler gone cancels every task: one error for the batch (the command says it in one line), not a
+    'failed' row of an empty reason for every session."""
+
+    class Cancelling(cf.ThreadPoolExecutor):
+        calls = 0
+
+        def submit(self, fn, *args, **kwargs):
+            Cancelling.calls += 1
+            if Cancelling.calls == 1:  # the warm-up runs; the sessions' tasks are cancelled
+                return super().submit(fn, *args, **kwargs)
+            future = cf.Future()
+            future.cancel()
+            future.set_running_or_notify_cancel()  # as an executor does: as_completed sees it done
+            return future
+
+    runs, _ = sessions
+    with Cancelling(1) as executor, pytest.raises(cf.CancelledError):
+        process_sessions(runs, tmp_path / "out", calibration=linear_calibration(), executor=executor,
+                         estimate=ESTIMATE, progress=False)
+
+
 def test_cli_process_says_what_the_data_could_not_carry_whole(tmp_path, caplog):
     """The table cuts its notes to its width; the DataWarning behind one (pressures in kPa written as Pa) is said
     whole, once, as the session's WARNING line."""

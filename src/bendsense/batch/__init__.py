@@ -198,7 +198,8 @@ class BatchReport:
             seconds = f"{s.seconds:9.2f}" if s.status != "skipped" else f"{'-':>9}"
             lines.append(f"{s.name:<{width}}  {s.status:<7} {frames} {seconds}  {reason}".rstrip())
         lines.append(
-            f"{len(self.sessions)} session{'s' * (len(self.sessions) != 1)}: {self.n_ok} ok, {self.n_skipped} skipped, {self.n_failed} failed; "
+            f"{len(self.sessions)} session{'s' * (len(self.sessions) != 1)}: {self.n_ok} ok, {self.n_skipped} "
+            f"skipped, {self.n_failed} failed; "
             f"{self.frames} frames in {self.wall_s:.2f} s ({self.frames_per_s:,.0f} frames/s"
             f"{', ' + self.workers if self.workers else ''})"
         )
@@ -415,6 +416,7 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) ->
 def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
     import numpy as np
 
+    from bendsense.batch.fingers import read_noted
     from bendsense.config import save_config
     from bendsense.identify.sessions import adapt_session
     from bendsense.pipeline import process
@@ -437,20 +439,6 @@ def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
         save_config(adapted.config, out_dir / "config.yaml")
     return (processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)),
             ignored)
-
-
-def read_noted(path):
-    """:func:`bendsense.session.read_session`, an unfinished recording a DataWarning (the session's note in a batch).
-
-    The reader logs it, which a batch's worker cannot show: the report's row says it instead.
-    """
-    from bendsense.session import read_session
-
-    session = read_session(path)
-    if session.meta.get("finished") is False:
-        warnings.warn("unfinished recording (no clean stop: killed, crashed or still recording)", DataWarning,
-                      stacklevel=2)
-    return session
 
 
 # --- many sessions ------------------------------------------------------------------------
@@ -755,6 +743,8 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
                         raise
                     row = SessionOutcome(name=name, source=str(path), status="failed", reason=str(err),
                                          out_dir=str(out_dir / name))
+                except cf.CancelledError:  # the executor cancelled its tasks (a Dask scheduler gone): not the session's
+                    raise
                 except Exception as err:  # noqa: BLE001 - a worker died or the task could not be sent
                     row = SessionOutcome(
                         name=name,

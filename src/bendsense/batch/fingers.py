@@ -12,10 +12,12 @@ board's frames; its flagged frames are summed over the fingers.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 
 from bendsense.config import GripperConfig
+from bendsense.errors import DataWarning
 
 __all__ = ["prepare", "run_gripper", "warm_up_finger"]
 
@@ -95,7 +97,6 @@ def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, optio
         returns them: the board's frames, each flagged count summed over the fingers.
     """
     from bendsense import output
-    from bendsense.batch import read_noted
     from bendsense.pipeline import process
     from bendsense.results.gripper import write_gripper_results
     from bendsense.session.fingers import split_session
@@ -113,3 +114,16 @@ def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, optio
     write_gripper_results(out_dir, parts, overwrite=overwrite, inputs=[path])
     return (counts, int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)), ignored)
 
+
+def read_noted(path):
+    """:func:`bendsense.session.read_session`, an unfinished recording a DataWarning (the session's note in a batch).
+
+    The reader logs it, which a batch's worker cannot show: the report's row says it instead.
+    """
+    from bendsense.session import read_session
+
+    session = read_session(path)
+    if session.meta.get("finished") is False:
+        warnings.warn("unfinished recording (no clean stop: killed, crashed or still recording)", DataWarning,
+                      stacklevel=2)
+    return session

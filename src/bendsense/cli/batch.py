@@ -40,6 +40,21 @@ from bendsense.cli._common import (
 log = logging.getLogger("bendsense")
 
 
+WORKER_WAIT_S = 10.0  # how long --scheduler waits for a first worker [s]
+
+
+def _quiet_dask_logs() -> None:
+    """Silence Dask's, tornado's and asyncio's loggers, with their children that Dask sets a level on.
+
+    Their connections close under a cluster's feet (a scheduler gone, Ctrl-C) with
+    tracebacks, where the batch says what happened in one line.
+    """
+    quiet_loggers = ("distributed", "tornado", "asyncio")
+    for name in [*quiet_loggers, *logging.root.manager.loggerDict]:
+        if name.split(".")[0] in quiet_loggers:
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
 def _dask_executor(address: str):
     """Connect to a Dask scheduler; returns (client, executor)."""
     try:
@@ -56,6 +71,12 @@ def _dask_executor(address: str):
         client = Client(address, timeout="10s")
     except (OSError, TimeoutError) as err:
         raise click.ClickException(f"--scheduler {short(address)}: cannot connect: {err}") from None
+    try:  # a scheduler without workers would hold the tasks for ever
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except TimeoutError:
+        client.close()
+        raise click.ClickException(f"--scheduler {short(address)}: no worker joined it in {WORKER_WAIT_S:g} s (start "
+                                   f"one: dask worker {short(address)})") from None
     return client, client.get_executor()
 
 
@@ -150,6 +171,7 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
         client = executor = None
         if scheduler:
             client, executor = _dask_executor(scheduler)
+            _quiet_dask_logs()  # a lost scheduler is one line of ours, not their tracebacks
         try:
             report = process_sessions(
                 paths,
@@ -177,13 +199,6 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
             raise click.ClickException(f"--scheduler {scheduler}: the connection to the scheduler was lost and its "
                                        "tasks cancelled; the sessions finished before are complete, a rerun "
                                        "does the rest") from None
-        except KeyboardInterrupt:
-            if client is not None:  # its connections close under the cluster's feet: no tracebacks of theirs
-                quiet_loggers = ("distributed", "tornado", "asyncio")
-                for name in [*quiet_loggers, *logging.root.manager.loggerDict]:
-                    if name.split(".")[0] in quiet_loggers:  # with their children that Dask sets a level on
-                        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
-            raise
         finally:
             if client is not None:
                 client.close()
