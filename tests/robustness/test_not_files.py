@@ -183,22 +183,16 @@ def test_simulate_refuses_frames_beyond_the_free_memory(tmp_path, monkeypatch):
     assert re.search(r"--frames: tip-loads would hold 4,400,000,000 frames in memory, about 52\.8 TB; this machine "
                      r"has .* available \(at most [\d,]+ frames per configuration\)", line), line
     assert not (tmp_path / "sim").exists()
+    line = _cli(tmp_path, ["simulate", "time-varying", "-o", "sim", "--rate", "1e9"])  # a rate: named, and what fits
+    assert re.search(r"^Error: --rate: time-varying would hold 10,000,000,000 frames in memory, about 120 TB; .* "
+                     r"\(at most [\d,]+ frames: [\d.e+-]+ s at 1e\+09 Hz, or [\d.e+]+ Hz for 10 s\)$", line), line
+    assert not (tmp_path / "sim").exists()
     # the bound is the machine's: with 1 GB free, 5,000 frames per configuration (2.9 GB) are too many
     monkeypatch.setattr(scenarios, "available_memory_bytes", lambda: 1e9)
     with pytest.raises(ArgumentError, match=r"frames_per_config: .* \(at most 1,325 frames per configuration\)"):
         scenarios.simulate("tip-loads", tmp_path / "sim2", frames_per_config=5000)
     assert not (tmp_path / "sim2").exists()
-
-
-def test_simulate_names_the_rate_that_overfills_the_memory_and_the_rate_that_fits(tmp_path, monkeypatch):
-    from bendsense.sim import scenarios
-
-    monkeypatch.chdir(tmp_path)
-    line = _cli(tmp_path, ["simulate", "time-varying", "-o", "sim", "--rate", "1e9"])
-    assert re.search(r"^Error: --rate: time-varying would hold 10,000,000,000 frames in memory, about 120 TB; .* "
-                     r"\(at most [\d,]+ frames: [\d.e+-]+ s at 1e\+09 Hz, or [\d.e+]+ Hz for 10 s\)$", line), line
-    assert not (tmp_path / "sim").exists()
-    monkeypatch.setattr(scenarios, "available_memory_bytes", lambda: 1e9)  # its 10 s session: the rate that fits
+    # a rate: the option named, and the rate that fits the time-varying scenario's 10 s
     fits = (1e9 - scenarios.BASE_BYTES) / scenarios.BYTES_PER_FRAME["time-varying"] / 10.0
     with pytest.raises(ArgumentError, match=rf"^rate_hz × duration_s: .* or {re.escape(f'{fits:.3g}')} Hz for 10 s\)$"):
         scenarios.simulate("time-varying", tmp_path / "sim2", rate_hz=fits * 1.01)
