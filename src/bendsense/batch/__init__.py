@@ -416,14 +416,12 @@ def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) ->
 def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
     import numpy as np
 
-    from bendsense.batch.fingers import read_noted
+    from bendsense.batch.fingers import read_noted, run_gripper
     from bendsense.config import save_config
     from bendsense.identify.sessions import adapt_session
     from bendsense.pipeline import process
 
     if isinstance(calibration, dict):  # a gripper: each finger's part of the board (bendsense.batch.fingers)
-        from bendsense.batch.fingers import run_gripper
-
         return run_gripper(path, out_dir, config, calibration, options, overwrite)  # (adapt: refused before)
     output.check([output.directory(out_dir, overwrite=overwrite)], [path])
     session = read_noted(path)

@@ -119,6 +119,8 @@ def read_noted(path):
     """:func:`bendsense.session.read_session`, an unfinished recording a DataWarning (the session's note in a batch).
 
     The reader logs it, which a batch's worker cannot show: the report's row says it instead.
+    Here, beside the gripper's run, for both runs: :mod:`bendsense.batch` imports this module,
+    not the other way round.
     """
     from bendsense.session import read_session
 

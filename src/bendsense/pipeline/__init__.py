@@ -133,13 +133,12 @@ class Processed(Results):
         extrapolated = int(np.count_nonzero(np.broadcast_to(np.asarray(self.shape.extrapolated), (n,))))
         codes = frame_codes(self.shape, self.estimate)
         # a shape that is nonsense is the frame's status: its estimate (which fails on it) is not counted as well
-        shapes = {"implausible_shape": int(np.count_nonzero(codes == Status.IMPLAUSIBLE_SHAPE)),
-                  "no_shape": int(np.count_nonzero(codes == Status.NO_SHAPE))}
+        implausible_shape, no_shape = codes == Status.IMPLAUSIBLE_SHAPE, codes == Status.NO_SHAPE
+        shapes = {"implausible_shape": int(implausible_shape.sum()), "no_shape": int(no_shape.sum())}
         if self.estimate is None:
             return FrameCounts(frames=n, extrapolated=extrapolated, **shapes)
         outside = pressure_outside(self.session.pressure_pa, self.config)
-        nonsense = (codes == Status.IMPLAUSIBLE_SHAPE) | (codes == Status.NO_SHAPE)
-        failed = ~np.asarray(self.estimate.success, dtype=bool) & ~outside & ~nonsense
+        failed = ~np.asarray(self.estimate.success, dtype=bool) & ~outside & ~implausible_shape & ~no_shape
         own = np.broadcast_to(np.asarray(self.estimate.status), (n,))
         misfit = failed & (own == Status.MODEL_MISFIT)
         implausible = failed & (own == Status.IMPLAUSIBLE_FORCE)
