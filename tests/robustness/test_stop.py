@@ -173,6 +173,37 @@ def running_process(batch, out, tmp_path):
     return proc, workers
 
 
+
+def test_process_overwrite_stopped_counts_only_the_sessions_it_redid(batch, tmp_path):
+    """Ctrl-C during ``process --overwrite``: the earlier outputs are not counted as finished, the line says which
+    were redone (each complete) and that the others keep their earlier output."""
+    out = tmp_path / "out"
+    first = subprocess.run([*CLI, *process_args(batch, out)], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    earlier = {p.name: p.stat().st_ino for p in out.iterdir() if p.is_dir() and not p.name.startswith(".")}
+    assert len(earlier) == SESSIONS
+
+    def redone():
+        return sorted(name for name, ino in earlier.items()
+                      if (out / name).exists() and (out / name).stat().st_ino != ino)
+
+    proc = start([*process_args(batch, out), "--overwrite"], tmp_path)
+    try:
+        wait_until(lambda: redone() or proc.poll() is not None, 120, "no session redone")
+        assert proc.poll() is None, stderr_of(proc)
+        code, _ = stop(proc, signal.SIGINT, whole_group=True)
+        text = stderr_of(proc)
+    finally:
+        cleanup(proc)
+    assert code == 128 + signal.SIGINT, text
+    line = assert_one_interrupted_line(text, signal.SIGINT)
+    done = redone()
+    assert 0 < len(done) < SESSIONS, line
+    assert f": {len(done)} of {SESSIONS} sessions redone in " in line
+    assert "the others keep their earlier output" in line
+    assert finished_sessions(out) == sorted(earlier)  # nothing lost
+    assert_complete(out, sorted(earlier))
+
 @pytest.mark.parametrize(("sig", "whole_group"), [(signal.SIGINT, True), (signal.SIGTERM, False)],
                          ids=["ctrl-c-to-the-group", "sigterm-to-the-command"])
 def test_process_stops_with_its_workers_and_a_rerun_finishes(batch, tmp_path, sig, whole_group):

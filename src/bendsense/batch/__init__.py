@@ -708,6 +708,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
 
     own = None
     futures: dict = {}
+    earlier = {i: _identity(out_dir / name) for i, _, name in tasks}  # outputs --overwrite replaces
     try:
         if executor is None and workers == 0:
             import numba
@@ -765,13 +766,17 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
         for future in futures:
             future.cancel()
         # a worker may have swapped a session in just before it was killed: complete, so counted
-        late = [name for i, _, name in tasks if i not in done and (out_dir / name).is_dir()]
+        late = [name for i, _, name in tasks if i not in done and _identity(out_dir / name) not in (None, earlier[i])]
         if late:
             output.add_to_manifest(out_dir, [f"{name}/" for name in late])
         _clear_unfinished(out_dir, [name for i, _, name in tasks if i not in done and name not in late])
         ok = sum(1 for i, _, _ in tasks if i in done and rows[i].status == "ok") + len(late)
-        text = (f"{ok} of {len(tasks)} sessions finished in {out_dir} (each complete); the rest have no output: "
-                "run the same command again to process them (finished sessions are skipped)")
+        if any(earlier.values()):  # --overwrite: the sessions not redone keep what an earlier run wrote
+            text = (f"{ok} of {len(tasks)} sessions redone in {out_dir} (each complete); the others keep their "
+                    "earlier output (the same command again redoes them all)")
+        else:
+            text = (f"{ok} of {len(tasks)} sessions finished in {out_dir} (each complete); the rest have no output: "
+                    "run the same command again to process them (finished sessions are skipped)")
         err.__notes__ = [*getattr(err, "__notes__", []), text]
         raise
     finally:
@@ -779,6 +784,15 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
         if own is not None:
             own.shutdown(cancel_futures=True)
     return description
+
+
+def _identity(path: Path):
+    """Which directory ``path`` is (device, inode), None if none: a session's is swapped in whole, a new one."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino)
 
 
 def _clear_unfinished(out_dir: Path, names) -> None:
