@@ -160,6 +160,22 @@ def test_session_names_are_unique(tmp_path):
 # --- processing ----------------------------------------------------------------------------
 
 
+def test_relative_paths_reach_workers_that_run_elsewhere(sessions, tmp_path, monkeypatch):
+    """Sessions and the output given relative to this directory are found by workers started in another one (a
+    Dask cluster's workers have their own working directory)."""
+    runs, truth = sessions
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(tmp_path)
+    with cf.ProcessPoolExecutor(1, initializer=os.chdir, initargs=(str(elsewhere),)) as pool:
+        report = process_sessions(runs.name, "out", calibration=linear_calibration(), executor=pool,
+                                  estimate=False, progress=False)
+    assert {s.name: s.status for s in report.sessions} == {"a": "ok", "b": "ok", "broken": "failed", "native": "ok"}
+    assert sorted(p.name for p in (tmp_path / "out").iterdir() if not p.name.startswith(".")) == ["a", "b", "native"]
+    assert not any(elsewhere.iterdir())
+    assert [s.source for s in report.sessions] == [str(runs / n) for n in ("a.csv", "b.csv", "broken.csv", "native")]
+    assert f"{runs / 'broken.csv'}: line 3, column ch2" in by_name(report)["broken"].reason
+
 def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_path, caplog):
     runs, truth = sessions
     out = tmp_path / "out"

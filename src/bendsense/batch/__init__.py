@@ -730,8 +730,9 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
                     first = executor.submit(warm_up, task["config"], task["calibration"], task["options"])
                 first.result()
             with quietly():
-                for i, path, name in tasks:
-                    future = executor.submit(process_session, path, out_dir / name, name=name, **task)
+                for i, path, name in tasks:  # absolute: a worker may run in another directory (a Dask cluster's)
+                    future = executor.submit(process_session, Path(path).absolute(), (out_dir / name).absolute(),
+                                             name=name, **task)
                     futures[future] = (i, path, name)
             for future in cf.as_completed(futures):
                 i, path, name = futures[future]
