@@ -13,6 +13,7 @@ from bendsense.choices import ANGLE_SOURCES, CONSTRAINTS, LOADS, METHODS, OBJECT
 __all__ = [
     "ANGLE_SOURCES",
     "CONSTRAINTS",
+    "Directory",
     "Finite",
     "SEED",
     "METHODS",
@@ -132,6 +133,21 @@ class Relative(Finite):
             name = param.opts[0] if param is not None and param.opts else "value"
             self.fail(bound.message(name, number), param, ctx)
         return number
+
+
+class Directory(click.Path):
+    """A directory the command writes (created): a name ending in ``.csv`` is refused (a slip for a session CSV)."""
+
+    def __init__(self):
+        super().__init__(file_okay=False, path_type=Path)
+
+    def convert(self, value, param, ctx):
+        """Check one path."""
+        path = super().convert(value, param, ctx)
+        if Path(path).suffix.lower() == ".csv":
+            self.fail(f"{click.format_filename(value)!r} is a CSV file's name, but this writes a directory of files: "
+                      "give a directory's name", param, ctx)
+        return path
 
 
 SEED = click.IntRange(0, 2**32 - 1)

@@ -18,6 +18,7 @@ from bendsense import output
 from bendsense.choices import TRACK_MODES
 from bendsense.cli._common import (
     METHODS,
+    Directory,
     InterspersedCommand,
     PressureKpa,
     bandwidth_option,
@@ -84,7 +85,7 @@ def _dask_executor(address: str):
 @click.argument("paths", metavar="SESSION_OR_DIR...", nargs=-1, required=True,
                 type=click.Path(exists=True, path_type=Path))
 @make_calibration_option(required=True)
-@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--output", "out_dir", required=True, type=Directory(),
               help="Root output directory; each session's results go to OUT/<session name>/.")
 @config_option
 @click.option("--workers", type=click.IntRange(0), help="Local worker processes (default: one per CPU; 0: no pool).")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import sys
-from pathlib import Path
 
 import click
 
@@ -12,6 +11,7 @@ from bendsense import output as outputs
 from bendsense.cli import _signals
 from bendsense.cli._common import (
     CONSTRAINTS,
+    Directory,
     Finite,
     InterspersedCommand,
     PressureKpa,
@@ -166,7 +166,7 @@ def _summary(result, controller) -> str:
 @click.option("--max-pressure-kpa", type=PressureKpa(min=0), default=None,
               help="Highest set-point ever sent [kPa] (default 100, or the end of the config's pressure range "
                    "if lower).")
-@click.option("-o", "--output", type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--output", type=Directory(),
               help="Record the session here: the board's native session, control.csv and the results.")
 @make_overwrite_option("Replace an existing session.")
 @make_config_option("Config YAML (a gripper: with fingers:; default: the paper's prototype).")

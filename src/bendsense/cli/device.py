@@ -14,6 +14,7 @@ from bendsense.cli import _signals
 from bendsense.cli._common import (
     SEED,
     ContactLocation,
+    Directory,
     Finite,
     InterspersedCommand,
     PressureKpa,
@@ -284,7 +285,7 @@ def make_outlets(processor, driver, port):
 @click.command("record", cls=InterspersedCommand)
 @click.argument("port")
 @click.option(
-    "-o", "--output", required=True, type=click.Path(file_okay=False, path_type=Path), help="Session directory."
+    "-o", "--output", required=True, type=Directory(), help="Session directory."
 )
 @click.option("--seconds", type=Finite(min=0, min_open=True), help="Recording time [s] (default: until Ctrl-C).")
 @make_overwrite_option("Replace an existing session.")

@@ -10,6 +10,7 @@ import click
 from bendsense.cli import _signals
 from bendsense.cli._common import (
     SEED,
+    Directory,
     Finite,
     InterspersedCommand,
     PressureKpa,
@@ -213,7 +214,7 @@ def _window(processor, scale_m_per_n):
     "-o",
     "--output",
     "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
+    type=Directory(),
     default="bendsense-demo",
     show_default=True,
     help="Output directory.",

@@ -19,6 +19,7 @@ from bendsense.cli import _signals
 from bendsense.cli._common import (
     ANGLE_SOURCES,
     METHODS,
+    Directory,
     Finite,
     InterspersedCommand,
     PressureKpa,
@@ -426,7 +427,7 @@ def track(smooth, bandwidth_hz, window_s):
 
 
 @click.command("save", cls=InterspersedCommand)
-@click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("out_dir", type=Directory())
 @overwrite_option
 def save(out_dir, overwrite):
     """Write results.csv and shape.npz into OUT_DIR (a gripper: OUT_DIR/<finger>/ for each finger).

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
 from bendsense import output
-from bendsense.cli._common import SEED, InterspersedCommand, overwrite_option, quiet, say, step_io
+from bendsense.cli._common import SEED, Directory, InterspersedCommand, overwrite_option, quiet, say, step_io
 
 
 @click.command("reproduce", cls=InterspersedCommand)
@@ -17,7 +15,7 @@ from bendsense.cli._common import SEED, InterspersedCommand, overwrite_option, q
     "out_dir",
     metavar="REPORT_DIR",
     required=True,
-    type=click.Path(file_okay=False, path_type=Path),
+    type=Directory(),
     help="Report directory: report.md and PNG figures (created).",
 )
 @click.option("--seed", type=SEED, default=0, show_default=True,

@@ -6,14 +6,13 @@ regulators) and the board they build (:func:`grasp_board`).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
 from bendsense import output
 from bendsense.cli._common import (
     SEED,
     ContactLocation,
+    Directory,
     Finite,
     InterspersedCommand,
     PressureKpa,
@@ -94,7 +93,7 @@ def model_errors(ei_error=None, k0_error=None, base_rotation=None, hysteresis_kp
     "--output",
     "out_dir",
     required=True,
-    type=click.Path(file_okay=False, path_type=Path),
+    type=Directory(),
     help="Directory to write (created; with 'all', one subdirectory per scenario).",
 )
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seed of the sensor hardware and the noise.")
