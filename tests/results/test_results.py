@@ -205,3 +205,25 @@ def test_an_infinite_time_names_the_line(tmp_path):
 def test_not_a_results_directory(tmp_path):
     with pytest.raises(SessionError, match=r"nowhere: no results.csv \(not a results directory\)"):
         read_results(tmp_path / "nowhere")
+
+
+@pytest.mark.parametrize("finger", ["", "index"], ids=["actuator", "gripper-finger"])
+def test_a_recordings_results_without_shapes_say_how_to_get_a_results_directory(tmp_path, finger):
+    """``record --estimate`` writes SESSION/results.csv (a gripper's SESSION/<finger>/) and no shape.npz: reading
+    it says so and how to make a results directory, not that the directory is damaged."""
+    from bendsense.session.native import SessionWriter, record_dtype
+
+    session = tmp_path / "rec"
+    with SessionWriter(session, record_dtype(N, "<f8")) as writer:
+        writer.write(writer.empty(2))
+    path, _ = _written(tmp_path)
+    (session / finger).mkdir(exist_ok=True)
+    (session / finger / "results.csv").write_bytes(path.read_bytes())
+    with pytest.raises(SessionError) as info:
+        read_results(session / finger)
+    assert str(info.value) == (f"{session / finger / 'results.csv'}: a recording's results ('record --estimate' keeps "
+                               f"no shapes); for a results directory: bendsense load {session} --calibration CAL.yaml "
+                               "reconstruct estimate save OUT_DIR")
+    (tmp_path / "out" / "shape.npz").unlink()  # a results directory that lost its shapes: damaged
+    with pytest.raises(SessionError, match=r"out/shape\.npz: missing \(every results directory has one\)$"):
+        read_results(tmp_path / "out")

@@ -385,7 +385,7 @@ def read_results(out_dir) -> Results:
         raise SessionError(f"{path}: not a results.csv of bendsense (no column {missing[0]})")
     npz_path = out_dir / "shape.npz"
     if not npz_path.exists():
-        raise SessionError(f"{npz_path}: missing (every results directory has one)")
+        raise SessionError(_no_shapes(out_dir, npz_path))
     # our own file object: np.load leaks its handle when the zip is damaged
     fh = open_regular(npz_path, "shape.npz", SessionError)
     try:
@@ -400,6 +400,17 @@ def read_results(out_dir) -> Results:
     known = set(RESULT_COLUMNS)
     extra = tuple(h for h in header if h not in known and not _KAPPA.match(h))
     return Results(columns=columns, s_m=s_m, positions_m=positions, extra_names=extra)
+
+
+def _no_shapes(out_dir: Path, npz_path: Path) -> str:
+    """Why a results.csv has no shape.npz beside it: a recording's (``record --estimate``), else a damaged directory."""
+    from bendsense.session.native import is_session_dir
+
+    session = next((d for d in (out_dir, out_dir.parent) if is_session_dir(d)), None)
+    if session is None:
+        return f"{npz_path}: missing (every results directory has one)"
+    return (f"{out_dir / 'results.csv'}: a recording's results ('record --estimate' keeps no shapes); for a results "
+            f"directory: bendsense load {session} --calibration CAL.yaml reconstruct estimate save OUT_DIR")
 
 
 def _is_number(cell) -> bool:
