@@ -219,6 +219,51 @@ def test_time_series_force_band_and_curvatures(results_dir, tmp_path):
     saved(fig, tmp_path / "series.png")
 
 
+
+def test_time_series_lines_stop_at_a_gap_in_the_frames(tmp_path):
+    """A recording with a 2 s gap: the force, its band, the pressure and the curvatures stop at the gap instead of
+    drawing a straight line across it; the frames on either side are drawn as they are."""
+    session, shape, est = session_shape_estimate()
+    t = session.t_s.copy()
+    t[FRAMES // 2:] += 2.0  # the board stopped for 2 s
+    session = Session(t, session.signals, session.pressure_pa)
+    fig = plot_time_series(write_results(tmp_path / "res", session, shape, est))
+    ax_f, ax_k = fig.axes[:2]
+    gap = FRAMES // 2
+    fy = [line for line in ax_f.lines if line.get_label() == "F_y"][0]
+    x, y = fy.get_xdata(), fy.get_ydata()
+    assert x.size == FRAMES + 1 and np.flatnonzero(np.isnan(y)).tolist() == [gap]
+    assert t[gap - 1] < x[gap] < t[gap]
+    np.testing.assert_array_equal(np.delete(y, gap), est.force_n[:, 1])
+    np.testing.assert_array_equal(np.delete(x, gap), t)
+    band = [c for c in ax_f.collections if c.get_label() == "F_y ± 2σ"][0]
+    assert len(band.get_paths()) == 2  # one band on each side
+    for ax in (ax_k, [a for a in fig.axes if a is not ax_f and a.bbox.bounds == ax_f.bbox.bounds][0]):
+        assert all(np.flatnonzero(np.isnan(line.get_ydata())).tolist() == [gap] for line in ax.lines)
+    ticks = [line for line in ax_f.lines if line.get_label() == "status not ok"][0]
+    np.testing.assert_array_equal(ticks.get_xdata(), t[3:4])  # the one frame not converged, where it is
+    saved(fig, tmp_path / "series.png")
+
+
+def test_a_track_plot_stops_at_a_gap_and_keeps_its_labels_in_the_figure(tmp_path):
+    from bendsense.tracking import Track
+
+    t = np.concatenate([np.arange(50) * 0.01, 3.0 + np.arange(50) * 0.01])
+    est = FakeEstimate(t)
+    track = Track(force_n=est.force_n, std_n=est.std_n, covariance_n2=np.zeros((100, 2, 2)), window_p_value=None,
+                  status=np.zeros(100, dtype=np.int8), bandwidth_hz=5.0, mode="filter", t_s=t,
+                  frame_force_n=est.force_n)
+    ax = track.plot()
+    for line in ax.lines:
+        assert np.flatnonzero(np.isnan(line.get_ydata())).tolist() == [50]
+    fig = ax.figure
+    fig.canvas.draw()
+    inside = fig.bbox
+    for label in (ax.xaxis.label, ax.yaxis.label):
+        box = label.get_window_extent(fig.canvas.get_renderer())
+        assert inside.x0 <= box.x0 and box.x1 <= inside.x1 and inside.y0 <= box.y0 and box.y1 <= inside.y1
+    saved(fig, tmp_path / "track.png")
+
 def test_time_series_without_forces(tmp_path):
     session, shape, _ = session_shape_estimate()
     fig = plot_time_series(results_from_state(session, shape))

@@ -766,25 +766,28 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
             own = None
         for future in futures:
             future.cancel()
-        # a worker may have swapped a session in just before it was killed: complete, so counted
-        late = [name for i, _, name in tasks if i not in done and _identity(out_dir / name) not in (None, earlier[i])]
-        if late:
-            output.add_to_manifest(out_dir, [f"{name}/" for name in late])
-        _clear_unfinished(out_dir, [name for i, _, name in tasks if i not in done and name not in late])
-        ok = sum(1 for i, _, _ in tasks if i in done and rows[i].status == "ok") + len(late)
-        if any(earlier.values()):  # --overwrite: the sessions not redone keep what an earlier run wrote
-            text = (f"{ok} of {len(tasks)} sessions redone in {out_dir} (each complete); the others keep their "
-                    "earlier output (the same command again redoes them all)")
-        else:
-            text = (f"{ok} of {len(tasks)} sessions finished in {out_dir} (each complete); the rest have no output: "
-                    "run the same command again to process them (finished sessions are skipped)")
-        err.__notes__ = [*getattr(err, "__notes__", []), text]
+        err.__notes__ = [*getattr(err, "__notes__", []), _stopped(tasks, rows, done, out_dir, earlier)]
         raise
     finally:
         bar.close()
         if own is not None:
             own.shutdown(cancel_futures=True)
     return description
+
+
+def _stopped(tasks, rows: list, done: set, out_dir: Path, earlier: dict) -> str:
+    """After an interrupt: the sessions swapped in late counted, the unfinished ones' litter cleared; what was kept."""
+    # a worker may have swapped a session in just before it was killed: complete, so counted
+    late = [name for i, _, name in tasks if i not in done and _identity(out_dir / name) not in (None, earlier[i])]
+    if late:
+        output.add_to_manifest(out_dir, [f"{name}/" for name in late])
+    _clear_unfinished(out_dir, [name for i, _, name in tasks if i not in done and name not in late])
+    ok = sum(1 for i, _, _ in tasks if i in done and rows[i].status == "ok") + len(late)
+    if any(earlier.values()):  # --overwrite: the sessions not redone keep what an earlier run wrote
+        return (f"{ok} of {len(tasks)} sessions redone in {out_dir} (each complete); the others keep their earlier "
+                "output (the same command again redoes them all)")
+    return (f"{ok} of {len(tasks)} sessions finished in {out_dir} (each complete); the rest have no output: run the "
+            "same command again to process them (finished sessions are skipped)")
 
 
 def _identity(path: Path):

@@ -441,6 +441,8 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
     """
     import matplotlib as mpl
 
+    from bendsense.tracking.gaps import broken_at_gaps
+
     results = _as_results(results)
     if ax is None:
         import matplotlib.pyplot as plt
@@ -455,7 +457,8 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
     else:
         ax_f, ax_k = ax
         fig = ax_f.figure
-    t = np.asarray(results["t_s"], dtype=float)
+    times = np.asarray(results["t_s"], dtype=float)
+    t, kappa = broken_at_gaps(times, results.curvature_per_m)  # lines stop at a gap in the frames, not bridge it
     if results.has_forces:
         force = np.stack([np.asarray(results[f"f{c}_n"], dtype=float) for c in "xy"], axis=-1)
         std = np.stack([np.asarray(results[f"f{c}_std_n"], dtype=float) for c in "xy"], axis=-1)
@@ -467,12 +470,11 @@ def plot_time_series(results, ax=None, *, cax=None, cmap: str = "viridis", press
             tracked = tuple(np.stack([np.asarray(results[f"f{c}_track{s}_n"], dtype=float) for c in "xy"], axis=-1)
                             for s in ("", "_std"))
             status = np.asarray(results["track_status"])
-        _force_panel(ax_f, t, force, std, status=status, pressure_kpa=kpa, tracked=tracked,
+        _force_panel(ax_f, times, force, std, status=status, pressure_kpa=kpa, tracked=tracked,
                      contact="contact_s_m" in results.columns)
     else:
         ax_f.set_ylabel("tip force [N]")
         ax_f.text(0.5, 0.5, "no force estimate", transform=ax_f.transAxes, ha="center", va="center", color="0.4")
-    kappa = results.curvature_per_m
     n = kappa.shape[1]
     colors = _colors(n, cmap)
     for i in range(n):
@@ -502,6 +504,13 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
     """
     from matplotlib.legend_handler import HandlerTuple
 
+    from bendsense.tracking.gaps import broken_at_gaps, gaps
+
+    if status is not None:  # (the rows a gap gets below: nothing to tick)
+        status = np.insert(np.asarray(status), gaps(t), "ok")
+    # lines and bands stop at a gap in the frames, not bridge it
+    t, force, std, pressure_kpa, *tracked = broken_at_gaps(t, force, std, pressure_kpa, *(tracked or (None,)))
+    tracked = None if tracked[0] is None else tuple(tracked)
     ax.set_ylabel("contact force [N]" if contact else "tip force [N]")
     handles, labels, dots = [], [], []
     drawn, bands = [force], []

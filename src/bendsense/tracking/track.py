@@ -26,6 +26,7 @@ from bendsense.status import MISFIT_P, Status, words
 from bendsense.tracking import _kalman_kernels as _kalman
 from bendsense.tracking import _stream_kernels as _stream
 from bendsense.tracking import windows as _windows
+from bendsense.tracking.gaps import broken_at_gaps
 from bendsense.validation import short
 
 __all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_STEP_DECADES", "TRACK_COLUMNS"]
@@ -100,12 +101,13 @@ class Track:
         import matplotlib.pyplot as plt
 
         if ax is None:
-            _, ax = plt.subplots(figsize=(7, 3.5))
+            _, ax = plt.subplots(figsize=(7, 3.5), layout="constrained")
         t = np.arange(len(self.force_n)) if self.t_s is None else np.asarray(self.t_s)
-        f, s = np.asarray(self.force_n), np.asarray(self.std_n)
+        # lines and bands stop at a gap in the frames, not bridge it
+        t, f, s, points = broken_at_gaps(t, self.force_n, self.std_n, self.frame_force_n)
         for c, (name, colour) in enumerate((("Fx", "C0"), ("Fy", "C1"))):
-            if self.frame_force_n is not None:
-                ax.plot(t, np.asarray(self.frame_force_n)[:, c], ".", ms=2, color=colour, alpha=0.3)
+            if points is not None:
+                ax.plot(t, points[:, c], ".", ms=2, color=colour, alpha=0.3)
             band = np.where(np.isfinite(s[:, c]), 2.0 * s[:, c], np.nan)
             ax.fill_between(t, f[:, c] - band, f[:, c] + band, color=colour, alpha=0.25, lw=0)
             ax.plot(t, f[:, c], color=colour, lw=1.2, label=f"{name} tracked ({self.mode}, {self.bandwidth_hz:.3g} Hz)")

@@ -34,12 +34,12 @@ from bendsense.estimation.result import ForceEstimate
 from bendsense.status import MISFIT_P, Status
 from bendsense.tracking import _window_kernels
 from bendsense.tracking._window_kernels import MIN_FRAMES
+from bendsense.tracking.gaps import GAP_FACTOR, reference_interval
 from bendsense.validation import short
 
 __all__ = ["check_windows", "WINDOW_S", "PRESSURE_STEP_PA", "MIN_FRAMES"]
 
 WINDOW_S = 0.05  # default window [s]: 100 frames at 2 kHz
-GAP_FACTOR = 3.0  # an interval over this many times the median one is a gap
 PRESSURE_STEP_PA = 1000.0  # a pressure change between two frames beyond this is a step [Pa]
 
 
@@ -213,11 +213,6 @@ def flag(estimate, bounds, p, n, window_s):
     return dataclasses.replace(estimate, window_p_value=frame_p, success=np.where(bad, False, estimate.success),
                                status=np.where(bad, Status.MODEL_MISFIT, estimate.status).astype(np.int8),
                                message=message.astype(str))
-
-
-def reference_interval(t_s):
-    """The median interval between frames [s] (inf for fewer than two frames)."""
-    return float(np.median(np.diff(t_s))) if t_s.size > 1 else np.inf
 
 
 def as_series(estimate):
