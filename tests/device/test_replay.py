@@ -34,6 +34,7 @@ def make_recording(path, n=300, n_ch=6, seed=3):
     steps = np.where(rng.random(n) < 0.05, 3, 1)  # lost frames in the original recording
     rec["seq"] = (65_400 + np.cumsum(steps)) % 65536  # wraps
     rec["status"] = rng.integers(0, 16, n)
+    rec["tx_drops"] = (65_530 + np.cumsum(rng.random(n) < 0.03)) % 65536  # the firmware's own losses, wrapping
     p = rng.integers(0, 100_000, n)
     p[rng.random(n) < 0.1] = NO_PRESSURE
     rec["pressure_pa"] = p
@@ -62,6 +63,7 @@ def assert_same_frames(a, b):
     np.testing.assert_array_equal(a.pressure_pa, b.pressure_pa)  # NaN where no reading, equal NaN
     np.testing.assert_array_equal(a.seq - a.seq[0], b.seq - b.seq[0])
     np.testing.assert_array_equal(a.extra["status"], b.extra["status"])
+    np.testing.assert_array_equal(a.extra["tx_drops"], b.extra["tx_drops"])
     np.testing.assert_allclose(a.t_s - a.t_s[0], b.t_s - b.t_s[0], rtol=0, atol=1e-9)
 
 
@@ -116,6 +118,10 @@ def test_replay_speed_and_loop(tmp_path):
     span = original.seq[-1] - original.seq[0] + 1
     expected = (original.seq[k] + (np.arange(250) // 100) * span) % 65536
     np.testing.assert_array_equal([r.sample.seq for r in readings[:250]], expected)
+    # the firmware's drop counter counts on across passes too
+    drops = original.extra["tx_drops"].astype(np.int64)
+    expected = (drops[k] + (np.arange(250) // 100) * (drops[-1] - drops[0])) % 65536
+    np.testing.assert_array_equal([r.sample.tx_drops for r in readings[:250]], expected)
 
 
 def test_replay_of_a_session_csv(tmp_path):

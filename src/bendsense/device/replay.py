@@ -2,14 +2,15 @@
 
 :class:`ReplayDevice` is the simulated board of :mod:`bendsense.device.simdevice` whose
 frames come from a :class:`~bendsense.session.Session` (a native session directory or a
-session CSV): each SAMPLE carries the recorded counts, pressure, status bits, sequence
-number and device clock, and is sent at the recorded time (divided by ``speed``). A
-replayed session recorded again with ``bendsense record`` therefore has the same frames:
-signals, pressure, status, ``seq`` (with the original gaps) and ``t_s`` (a session with
-several pressure lines, a gripper's board, is sent as SAMPLE version 2, one pressure per
-line, and records again with all its lines). With ``loop``,
-the recording starts over after its last frame, the clock and the sequence numbers going
-on from where they ended (a board that never stops); without it, the board sends nothing
+session CSV): each SAMPLE carries the recorded counts, pressure, status bits, the
+firmware's count of frames it could not send, sequence number and device clock, and is
+sent at the recorded time (divided by ``speed``). A replayed session recorded again with
+``bendsense record`` therefore has the same frames: signals, pressure, status,
+``tx_drops``, ``seq`` (with the original gaps) and ``t_s`` (a session with several
+pressure lines, a gripper's board, is sent as SAMPLE version 2, one pressure per line,
+and records again with all its lines). With ``loop``, the recording starts over after
+its last frame, the clock, the sequence numbers and the drop count going on from where
+they ended (a board that never stops); without it, the board sends nothing
 after the last frame but keeps the port open (:attr:`~SimulatedDevice.finished` is set),
 as BrainFlow's playback board sleeps at the end of its file: a client that records the
 replay ends when it chooses, not with a disconnected port.
@@ -43,7 +44,8 @@ def replay_frames(session) -> dict:
         ``adc`` (frames, N) int, ``pressure_pa`` (frames,) or (frames, n_lines) float
         (NaN: no reading),
         ``t_us`` (frames,) int (device clock from 0 [us]), ``seq`` (frames,) int
-        (unwrapped), ``status`` (frames,) int.
+        (unwrapped), ``status`` (frames,) int, ``tx_drops`` (frames,) int (the firmware's
+        count of frames it could not send, as recorded; 0 without the column).
 
     Raises
     ------
@@ -79,9 +81,10 @@ def replay_frames(session) -> dict:
     if back.size:
         raise SessionError(f"{where}: frame {back[0] + 1}: t_s runs backwards; cannot replay")
     seq = np.arange(n, dtype=np.int64) if session.seq is None else np.asarray(session.seq, dtype=np.int64)
-    status = np.asarray(session.extra.get("status", np.zeros(n)), dtype=np.int64) & 0xFF
+    status, drops = (np.nan_to_num(np.asarray(session.extra.get(name, np.zeros(n)), dtype=float)).astype(np.int64)
+                     for name in ("status", "tx_drops"))
     return {"adc": sig.astype(np.int64), "pressure_pa": session.pressure_pa, "t_us": t_us, "seq": seq,
-            "status": status}
+            "status": status & 0xFF, "tx_drops": drops}
 
 
 def _rate_hz(t_us: np.ndarray) -> float:
@@ -170,7 +173,11 @@ class ReplayDevice(SimulatedDevice):
 
     def _sample_header(self, k: int) -> tuple:
         self._sent_k = k + 1
-        return self._recorded_seq(k) & 0xFFFF, self._t_us(k), int(self._frames["status"][k % self.n_frames])
+        passes, i = divmod(k, self.n_frames)
+        # the recorded firmware's drops go on counting over the passes, as a board's counter would
+        drops = self._frames["tx_drops"]
+        drops = int(drops[i]) + passes * int(drops[-1] - drops[0])
+        return self._recorded_seq(k) & 0xFFFF, self._t_us(k), int(self._frames["status"][i]), drops
 
     def _next_seq(self) -> int:
         # HELLO/TEXT: before the first sample, the number just before it; later, the next one

@@ -522,8 +522,11 @@ class SimulatedDevice:
         return k / self.rate_hz
 
     def _sample_header(self, k: int) -> tuple:
-        """``(seq, t_us, status)`` of SAMPLE ``k`` (consumes its sequence number)."""
-        return self._next_seq(), self._t_us(k), 0
+        """``(seq, t_us, status, drops)`` of SAMPLE ``k`` (consumes its sequence number).
+
+        ``drops``: frames lost before this board's own (its ``tx_drops`` adds them; a replay's recorded ones).
+        """
+        return self._next_seq(), self._t_us(k), 0, 0
 
     def _next_seq(self) -> int:
         s = self._seq
@@ -675,7 +678,7 @@ class SimulatedDevice:
             self._texts.append(text)
 
     def _produce(self, k: int, pressure, adc, truth=None) -> None:
-        seq, t_us, status = self._sample_header(k)
+        seq, t_us, status, drops = self._sample_header(k)
         counts = np.asarray(adc, dtype=np.int64) & self._mask
         if self._truth is not None:
             self._truth.write(seq, t_us & 0xFFFFFFFF, {} if truth is None else truth)
@@ -688,7 +691,7 @@ class SimulatedDevice:
                 self._counts["dropped"] += 1
             return
         # a dropped frame is one the firmware could not send: it counts it in tx_drops
-        tx_drops = (self._counts["dropped"] + self._counts["tx_overflow"]) & 0xFFFF
+        tx_drops = (drops + self._counts["dropped"] + self._counts["tx_overflow"]) & 0xFFFF
         if isinstance(pressure, tuple):  # one per line: a version-2 SAMPLE
             frame = encode_sample(seq, t_us, counts.tolist(), status=status, tx_drops=tx_drops, pressures_pa=pressure)
         else:
