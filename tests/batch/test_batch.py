@@ -413,6 +413,60 @@ def test_cli_process_refuses_a_scheduler_without_workers_in_one_line(sessions, t
                                     f"worker {address!r})"
 
 
+
+@pytest.mark.realtime  # a worker closed while the cluster works
+def test_cli_process_stops_in_one_line_when_the_schedulers_workers_leave(tmp_path, monkeypatch):
+    """Every worker gone mid-run: the tasks would wait for ever; the command stops in one line, the sessions
+    finished before complete, and a rerun on a cluster with a worker does the rest."""
+    import shutil
+    import threading
+    import time
+
+    from dask.distributed import LocalCluster
+
+    import bendsense.cli.batch as cli_batch
+
+    monkeypatch.setattr(cli_batch, "WORKER_WAIT_S", 1.0)
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    write_csv_session(runs / "s00.csv", 1, frames=400)
+    for i in range(1, 40):
+        shutil.copy(runs / "s00.csv", runs / f"s{i:02d}.csv")
+    cal_path = tmp_path / "cal.yaml"
+    linear_calibration().save(cal_path)
+    out = tmp_path / "out"
+
+    def finished():
+        return sorted(p.name for p in out.glob("s*") if p.is_dir())
+
+    with LocalCluster(n_workers=1, processes=True, threads_per_worker=1, dashboard_address=":0",
+                      silence_logs=50) as cluster:
+        def leave():  # the worker goes once a session is done
+            end = time.monotonic() + 120
+            while not finished() and time.monotonic() < end:
+                time.sleep(0.05)
+            cluster.scale(0)
+
+        leaving = threading.Thread(target=leave)
+        leaving.start()
+        address = cluster.scheduler_address
+        t0 = time.monotonic()
+        result = CliRunner().invoke(main, process_args(runs, cal_path, out) + ["--scheduler", address])
+        seconds = time.monotonic() - t0
+        leaving.join()
+        assert result.exit_code == 1, result.output
+        assert result.output.strip().splitlines()[-1] == (
+            f"Error: --scheduler {address}: no worker left on the scheduler for 1 s and its tasks cancelled; the "
+            "sessions finished before are complete, a rerun does the rest")
+        assert "Traceback" not in result.output and seconds < 60
+        done = finished()
+        assert 0 < len(done) < 40
+        cluster.scale(1)
+        cluster.wait_for_workers(1)
+        rerun = CliRunner().invoke(main, process_args(runs, cal_path, out) + ["--scheduler", address])
+    assert rerun.exit_code == 0, rerun.output
+    assert f"40 sessions: {40 - len(done)} ok, {len(done)} skipped, 0 failed" in rerun.output
+
 def test_a_batch_whose_executor_cancels_its_tasks_stops_instead_of_failing_each_session(sessions, tmp_path):
     """A Dask scheduler gone cancels every task: one error for the batch (the command says it in one line), not a
     'failed' row of an empty reason for every session."""

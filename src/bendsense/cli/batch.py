@@ -10,6 +10,8 @@ import concurrent.futures
 import logging
 import os
 import re
+import threading
+import time
 from pathlib import Path
 
 import click
@@ -41,7 +43,7 @@ from bendsense.cli._common import (
 log = logging.getLogger("bendsense")
 
 
-WORKER_WAIT_S = 10.0  # how long --scheduler waits for a first worker [s]
+WORKER_WAIT_S = 10.0  # how long --scheduler waits for a worker, at the start or when all have left [s]
 
 
 def _quiet_dask_logs() -> None:
@@ -79,6 +81,36 @@ def _dask_executor(address: str):
         raise click.ClickException(f"--scheduler {short(address)}: no worker joined it in {WORKER_WAIT_S:g} s (start "
                                    f"one: dask worker {short(address)})") from None
     return client, client.get_executor()
+
+
+class _WorkerWatch:
+    """Cancels a batch's tasks when its Dask scheduler has had no worker for ``WORKER_WAIT_S``.
+
+    The tasks would wait for ever; :attr:`gone` then says why they were cancelled.
+    """
+
+    def __init__(self, client, executor):
+        self.client, self.executor, self.gone = client, executor, False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="bendsense-worker-watch", daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        since = None
+        while not self._stop.wait(min(1.0, WORKER_WAIT_S / 4)):
+            try:
+                workers = len(self.client.scheduler_info().get("workers", ()))
+            except Exception:  # noqa: BLE001 - a lost connection cancels the tasks itself
+                continue
+            since = None if workers else since or time.monotonic()
+            if since is not None and time.monotonic() - since >= WORKER_WAIT_S:
+                self.gone = True
+                self.executor.shutdown(wait=False)  # cancels the tasks: the batch stops, its finished sessions kept
+                return
+
+    def close(self):
+        self._stop.set()
+        self._thread.join()
 
 
 @click.command("process", cls=InterspersedCommand)
@@ -169,10 +201,11 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
                 check_load(load, contact_s_m, actuator)
         if not no_estimate and config_path is not None:  # the workers' warnings are silenced: say it here, once
             log_no_parameter_covariance(next((a for a in actuators if a.parameter_covariance is None), None))
-        client = executor = None
+        client = executor = watch = None
         if scheduler:
             client, executor = _dask_executor(scheduler)
             _quiet_dask_logs()  # a lost scheduler is one line of ours, not their tracebacks
+            watch = _WorkerWatch(client, executor)
         try:
             report = process_sessions(
                 paths,
@@ -196,11 +229,14 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
                 contact_s_m=contact_s_m,
                 adapt=adapt,
             )
-        except concurrent.futures.CancelledError:  # the scheduler dropped the client: its tasks are cancelled
-            raise click.ClickException(f"--scheduler {scheduler}: the connection to the scheduler was lost and its "
-                                       "tasks cancelled; the sessions finished before are complete, a rerun "
-                                       "does the rest") from None
+        except concurrent.futures.CancelledError:  # the scheduler dropped the client, or has no worker left
+            why = (f"no worker left on the scheduler for {WORKER_WAIT_S:g} s" if watch.gone else
+                   "the connection to the scheduler was lost")
+            raise click.ClickException(f"--scheduler {scheduler}: {why} and its tasks cancelled; the sessions "
+                                       "finished before are complete, a rerun does the rest") from None
         finally:
+            if watch is not None:
+                watch.close()
             if client is not None:
                 client.close()
         say(report.table())
