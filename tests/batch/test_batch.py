@@ -155,6 +155,14 @@ def test_session_names_are_unique(tmp_path):
     (tmp_path / "a" / "sess").mkdir()
     names = session_names([tmp_path / "a" / "run.csv", tmp_path / "b" / "run.csv", tmp_path / "a" / "sess"])
     assert names == ["a_run", "b_run", "sess"]
+    # a recording's directory beside its CSV export: told apart by the suffix, not by the absolute path
+    (tmp_path / "a" / "sess.csv").write_text("")
+    assert session_names([tmp_path / "a" / "sess", tmp_path / "a" / "sess.csv"]) == ["sess", "sess_csv"]
+    # parents prepended only as deep as they differ
+    for d in ("x/day", "y/day"):
+        (tmp_path / d).mkdir(parents=True)
+        (tmp_path / d / "run.csv").write_text("")
+    assert session_names([tmp_path / "x/day/run.csv", tmp_path / "y/day/run.csv"]) == ["x_day_run", "y_day_run"]
 
 
 # --- processing ----------------------------------------------------------------------------

@@ -304,19 +304,28 @@ def discover_sessions(paths, *, recursive: bool = False, exclude=None) -> list[P
 def session_names(paths) -> list[str]:
     """Output names for sessions: the file stem or directory name, made unique.
 
-    Sessions with the same name (``a/run.csv``, ``b/run.csv``) get their parent
-    directories' names prepended (``a_run``, ``b_run``), then a counter if needed.
+    Sessions with the same name get, in turn: a file its suffix (``rec.csv`` beside the
+    directory ``rec``: ``rec_csv``, ``rec``); their parent directories' names prepended
+    where those differ (``a/run.csv``, ``b/run.csv``: ``a_run``, ``b_run``); then a counter.
     """
     paths = [Path(p) for p in paths]
     names = [p.stem if p.is_file() else p.name for p in paths]
-    depth = 0
-    while len(set(names)) < len(names) and depth < 8:
-        depth += 1
-        counts = Counter(names)
-        for i, p in enumerate(paths):
-            if counts[names[i]] > 1:
-                parents = [q.name for q in p.resolve().parents[:depth][::-1] if q.name]
-                names[i] = "_".join([*parents, p.stem if p.is_file() else p.name])
+
+    def tell_apart(make):  # each group of one name renamed by make(i) where that tells its members apart
+        for name in [n for n, c in Counter(names).items() if c > 1]:
+            group = [i for i, n in enumerate(names) if n == name]
+            renamed = [make(i) for i in group]
+            if len(set(renamed)) > 1:
+                for i, new in zip(group, renamed):
+                    names[i] = new
+
+    tell_apart(lambda i: paths[i].name.replace(".", "_") if paths[i].is_file() else names[i])
+    base = list(names)
+    for depth in range(1, 9):
+        if len(set(names)) == len(names):
+            break
+        parents = [[q.name for q in p.resolve().parents[:depth][::-1] if q.name] for p in paths]
+        tell_apart(lambda i, parents=parents: "_".join([*parents[i], base[i]]))
     counts = Counter(names)
     seen: Counter = Counter()
     for i, n in enumerate(names):
