@@ -110,7 +110,7 @@ class _WorkerWatch:
 
     def close(self):
         self._stop.set()
-        self._thread.join()
+        self._thread.join(timeout=2.0)  # (a call to a scheduler gone may hang; the thread is a daemon)
 
 
 @click.command("process", cls=InterspersedCommand)

@@ -175,8 +175,8 @@ class ReplayDevice(SimulatedDevice):
         self._sent_k = k + 1
         passes, i = divmod(k, self.n_frames)
         # the recorded firmware's drops go on counting over the passes, as a board's counter would
-        drops = self._frames["tx_drops"]
-        drops = int(drops[i]) + passes * int(drops[-1] - drops[0])
+        recorded = self._frames["tx_drops"]
+        drops = int(recorded[i]) + passes * int(recorded[-1] - recorded[0])
         return self._recorded_seq(k) & 0xFFFF, self._t_us(k), int(self._frames["status"][i]), drops
 
     def _next_seq(self) -> int:
