@@ -48,6 +48,42 @@ def test_a_swallowed_signal_still_ends_the_block_with_the_interrupt():
     assert info.value.__cause__ is None
 
 
+# llvmlite's callback from compiled code (its object cache, called while numba compiles or loads a kernel), as a
+# ctypes callback of the same file name: here called back by libc's qsort
+CALLBACK = """
+import ctypes, ctypes.util, os, signal
+
+calls = []
+
+@ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int))
+def compare(a, b):
+    if not calls:
+        os.kill(os.getpid(), signal.SIGHUP)  # the handler runs here, inside the callback
+        for _ in range(1000):
+            pass
+    calls.append(1)
+    return a[0] - b[0]
+
+def sort(values):
+    array = (ctypes.c_int * len(values))(*values)
+    ctypes.CDLL(ctypes.util.find_library("c")).qsort(array, len(values), ctypes.sizeof(ctypes.c_int), compare)
+    return list(array)
+"""
+
+
+def test_a_signal_inside_a_compiled_callback_comes_again_after_it(capfd):
+    """A KeyboardInterrupt raised inside a ctypes callback is printed ("Exception ignored on calling ctypes
+    callback function") and dropped: numba compiling a kernel when Ctrl-C came went on, and the command finished
+    with status 0. The signal is sent again after the callback, and stops the command there."""
+    space: dict = {}
+    exec(compile(CALLBACK, "/site-packages/llvmlite/binding/executionengine.py", "exec"), space)
+    with _signals.installed(), pytest.raises(KeyboardInterrupt):
+        assert space["sort"]([3, 1, 2]) == [1, 2, 3]  # the callback came back whole
+        assert not _signals.stopping()  # (not yet: the signal comes again)
+        time.sleep(2.0)
+    assert _signals.exit_code() == 129
+    assert "Exception ignored" not in capfd.readouterr().err
+
 def test_without_a_signal_an_error_is_itself():
     with _signals.installed(), pytest.raises(ValueError, match="a bad value"), _signals.interrupting():
         raise ValueError("a bad value")

@@ -19,19 +19,36 @@ finished.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
+import threading
 
 from bendsense.stop_signals import STOP_SIGNALS, handled
 
 __all__ = ["installed", "stopping", "interrupting", "note", "exit_code", "message", "exit_quietly"]
 
 _received: list[int] = []  # the stop signals seen, first first
+_AGAIN_S = 0.01  # a signal that came inside a foreign callback comes again this much later [s]
 
 
 def _raise(signum, frame):
+    if _in_callback(frame):
+        # an exception raised in a ctypes callback is printed and dropped, and the command would go on: the
+        # signal is sent again once the callback has (most likely) returned
+        threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signum)).start()
+        return
     _received.append(signum)
     if len(_received) == 1:  # a later one while the command stops is only noted
         raise KeyboardInterrupt
+
+
+def _in_callback(frame) -> bool:
+    """Whether ``frame`` runs inside llvmlite's callbacks from compiled code (numba compiling or loading a kernel)."""
+    while frame is not None:
+        if "llvmlite" in frame.f_code.co_filename:
+            return True
+        frame = frame.f_back
+    return False
 
 
 @contextlib.contextmanager
