@@ -68,12 +68,16 @@ def _dask_executor(address: str):
         ) from None
     from bendsense.validation import short
 
+    if re.match(r"https?://", address):  # the dashboard's address, pasted from the browser
+        raise click.BadParameter(f"expected the scheduler's tcp://HOST:PORT, got {short(address)} (a web address: "
+                                 "the dashboard's, not the scheduler's)", param_hint="--scheduler")
     if not re.fullmatch(r"(?:[a-z][a-z0-9+]*://)?[^\s/:]+:[0-9]{1,5}", address):
         raise click.BadParameter(f"expected tcp://HOST:PORT, got {short(address)}", param_hint="--scheduler")
     try:
         client = Client(address, timeout="10s")
-    except (OSError, TimeoutError) as err:
-        raise click.ClickException(f"--scheduler {short(address)}: cannot connect: {err}") from None
+    except (OSError, TimeoutError, ValueError, TypeError) as err:  # (an unknown scheme, tls:// without a context)
+        raise click.ClickException(f"--scheduler {short(address)}: cannot connect: {' '.join(str(err).split())}"
+                                   ) from None
     try:  # a scheduler without workers would hold the tasks for ever
         client.wait_for_workers(1, timeout=WORKER_WAIT_S)
     except TimeoutError:
