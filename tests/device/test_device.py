@@ -347,6 +347,31 @@ def test_cli_record(tmp_path):
     assert "Traceback" not in res.output
 
 
+
+def test_a_second_record_on_a_port_in_use_is_refused_and_the_first_keeps_every_frame(tmp_path):
+    """Two readers of one port take half of each other's bytes: the first recording lost frames and the second
+    failed half-way, leaving its session unfinished. The port is opened exclusively: the second is one line, writes
+    nothing, and the first loses nothing."""
+    with SimulatedDevice(ramp_source(N_CH), rate_hz=500) as sim:
+        first = {}
+        thread = threading.Thread(target=lambda: first.update(res=CliRunner().invoke(
+            main, ["record", sim.port, "-o", str(tmp_path / "a"), "--seconds", "1.5"])))
+        thread.start()
+        deadline = time.monotonic() + 10
+        while not (tmp_path / "a" / "frames.bin").exists() or sim.stats.sent < 50:
+            assert time.monotonic() < deadline, "the first recording never started"
+            time.sleep(0.02)
+        res = CliRunner().invoke(main, ["record", sim.port, "-o", str(tmp_path / "b"), "--seconds", "0.5"])
+        thread.join()
+    assert res.exit_code == 1, res.output
+    assert res.output.strip() == (f"Error: {sim.port}: in use by another program that reads it (another bendsense "
+                                  "record, live or control?); one program at a time reads a board")
+    assert not (tmp_path / "b").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["a"]
+    assert first["res"].exit_code == 0, first["res"].output
+    session = read_session(tmp_path / "a")
+    assert session.meta["stats"]["lost"] == 0 and session.meta["stats"]["malformed"] == 0
+    assert np.all(np.diff(session.seq) == 1) and len(session) > 0.9 * 1.5 * 500
+
 def test_cli_sim_device():
     res = CliRunner().invoke(main, ["sim-device", "--source", "ramp", "--seconds", "0.2", "--rate", "100"])
     assert res.exit_code == 0, res.output

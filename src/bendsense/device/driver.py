@@ -229,7 +229,8 @@ class Driver:
     def _open_serial(self):
         import serial
 
-        kwargs = {"baudrate": self.baudrate, "timeout": self.read_timeout_s}
+        # exclusive: a second bendsense on the port is refused (it would take half of each other's bytes)
+        kwargs = {"baudrate": self.baudrate, "timeout": self.read_timeout_s, "exclusive": True}
         try:
             try:
                 return serial.serial_for_url(self.port, write_timeout=1.0, **kwargs)
@@ -240,6 +241,9 @@ class Driver:
             if getattr(err, "errno", None) != errno.EACCES:  # denied: that is the message, whatever the path is
                 _check_port_path(self.port)  # a directory or a regular file: say so, not pyserial's ioctl error
             text = " ".join(str(err).split())[:200]
+            if "exclusively lock" in text:
+                raise DeviceError(f"{self.port}: in use by another program that reads it (another bendsense record, "
+                                  "live or control?); one program at a time reads a board") from None
             if f"({errno.ENOTTY}," in text or getattr(err, "errno", None) == errno.ENOTTY:
                 raise DeviceError(f"{self.port}: a device that is no terminal, not a serial port (give the board's "
                                   "port, e.g. /dev/ttyACM0; 'bendsense devices' lists them)") from None
