@@ -18,11 +18,15 @@ import sys
 import threading
 import time
 
-__all__ = ["STOP_SIGNALS", "handled", "deferred", "worker_pool", "worker_init", "exit_with_parent"]
+__all__ = ["STOP_SIGNALS", "GROUP_SIGNALS", "handled", "deferred", "blocked", "worker_pool", "worker_init",
+           "exit_with_parent"]
 
 #: SIGINT, SIGTERM, SIGHUP, SIGQUIT (those the platform has)
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
                      if hasattr(signal, name))
+#: The stop signals a terminal sends a command's whole process group (Ctrl-C, a closed terminal, Ctrl-\\):
+#: a command's helper processes ignore them, the command stops them itself.
+GROUP_SIGNALS = tuple(s for s in STOP_SIGNALS if s != getattr(signal, "SIGTERM", None))
 
 
 @contextlib.contextmanager
@@ -70,6 +74,23 @@ def deferred():
 # --------------------------------------------------------------------------- worker processes
 
 
+@contextlib.contextmanager
+def blocked(signals):
+    """Block ``signals`` in this thread while the block runs: processes started meanwhile inherit the mask.
+
+    A signal that comes meanwhile stays pending and is delivered here when the block ends.
+    Where the platform has no signal masks, the block runs as it is.
+    """
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, set(signals))
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def worker_pool(workers: int, *, nice: int = 0):
     """A process pool whose workers use one BLAS thread and one numba thread each.
 
@@ -89,9 +110,12 @@ def worker_pool(workers: int, *, nice: int = 0):
     """
     import concurrent.futures as cf
     import multiprocessing
+    from multiprocessing import resource_tracker
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
+    with blocked(GROUP_SIGNALS):  # multiprocessing's resource tracker inherits the mask: a closed terminal or
+        resource_tracker.ensure_running()  # Ctrl-\\ to the group must not kill it (its tracebacks, relaunched)
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                   initializer=worker_init, initargs=(os.getpid(), nice))
 
@@ -114,9 +138,10 @@ def worker_init(parent_pid: int | None = None, nice: int = 0) -> None:
     """
     import numba
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if hasattr(signal, "pthread_sigmask"):  # the parent blocked it while starting us (batch._started_quietly)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    for signum in GROUP_SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):  # the parent blocked them while starting us (blocked)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, GROUP_SIGNALS)
     if parent_pid is not None:
         exit_with_parent(parent_pid)
     numba.set_num_threads(1)

@@ -204,8 +204,10 @@ def test_process_overwrite_stopped_counts_only_the_sessions_it_redid(batch, tmp_
     assert finished_sessions(out) == sorted(earlier)  # nothing lost
     assert_complete(out, sorted(earlier))
 
-@pytest.mark.parametrize(("sig", "whole_group"), [(signal.SIGINT, True), (signal.SIGTERM, False)],
-                         ids=["ctrl-c-to-the-group", "sigterm-to-the-command"])
+@pytest.mark.parametrize(("sig", "whole_group"), [(signal.SIGINT, True), (signal.SIGTERM, False),
+                                                  (signal.SIGHUP, True), (signal.SIGQUIT, True)],
+                         ids=["ctrl-c-to-the-group", "sigterm-to-the-command", "closed-terminal-to-the-group",
+                              "ctrl-backslash-to-the-group"])
 def test_process_stops_with_its_workers_and_a_rerun_finishes(batch, tmp_path, sig, whole_group):
     out = tmp_path / "out"
     proc, workers = running_process(batch, out, tmp_path)

@@ -457,23 +457,18 @@ def _executor_name(executor) -> str:
     return f"{kind}({workers} workers)" if workers else kind
 
 
-@contextlib.contextmanager
 def _started_quietly():
-    """Block SIGINT in this thread while workers start: they inherit the mask and ignore Ctrl-C from birth.
+    """Block the group's stop signals in this thread while workers start: they inherit the mask and ignore them.
 
     A Ctrl-C meanwhile stays pending and is delivered here when the block ends.
     """
-    import signal
     import threading
 
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+    from bendsense.stop_signals import GROUP_SIGNALS, blocked
+
+    if threading.current_thread() is not threading.main_thread():
+        return contextlib.nullcontext()
+    return blocked(GROUP_SIGNALS)
 
 
 def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
