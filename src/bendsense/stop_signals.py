@@ -24,7 +24,8 @@ __all__ = ["STOP_SIGNALS", "GROUP_SIGNALS", "handled", "deferred", "blocked", "w
 #: SIGINT, SIGTERM, SIGHUP, SIGQUIT (those the platform has)
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
                      if hasattr(signal, name))
-#: The stop signals a terminal sends a command's whole process group (Ctrl-C, a closed terminal, Ctrl-\\):
+#: The stop signals a terminal sends a command's whole process group (Ctrl-C, a closed terminal,
+#: Ctrl-backslash):
 #: a command's helper processes ignore them, the command stops them itself.
 GROUP_SIGNALS = tuple(s for s in STOP_SIGNALS if s != getattr(signal, "SIGTERM", None))
 
@@ -98,7 +99,8 @@ def worker_pool(workers: int, *, nice: int = 0):
     kernels' threads (in-process), never both: two levels of threads on few cores only
     oversubscribe them. The workers are spawned (not forked) so that they import numpy
     afresh with these variables, even if this process has numpy loaded already. They
-    ignore Ctrl-C and exit with this process (:func:`worker_init`).
+    ignore the group's stop signals (Ctrl-C, a closed terminal, Ctrl-backslash) and exit with this
+    process (:func:`worker_init`).
 
     Parameters
     ----------
@@ -114,8 +116,10 @@ def worker_pool(workers: int, *, nice: int = 0):
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
-    with blocked(GROUP_SIGNALS):  # multiprocessing's resource tracker inherits the mask: a closed terminal or
-        resource_tracker.ensure_running()  # Ctrl-\\ to the group must not kill it (its tracebacks, relaunched)
+    # multiprocessing's resource tracker inherits the mask: the group's stop signals must not kill it (it
+    # is relaunched with a warning and tracebacks)
+    with blocked(GROUP_SIGNALS):
+        resource_tracker.ensure_running()
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                   initializer=worker_init, initargs=(os.getpid(), nice))
 
@@ -123,8 +127,9 @@ def worker_pool(workers: int, *, nice: int = 0):
 def worker_init(parent_pid: int | None = None, nice: int = 0) -> None:
     """Pool worker initializer: one numba thread, Ctrl-C left to the parent, and exit with the parent.
 
-    One numba thread because the processes are the parallelism. SIGINT (Ctrl-C reaches
-    the whole process group) is ignored: the parent stops the workers itself, so that
+    One numba thread because the processes are the parallelism. The group's stop signals
+    (:data:`GROUP_SIGNALS`: Ctrl-C, a closed terminal and Ctrl-backslash reach the whole
+    process group) are ignored: the parent stops the workers itself, so that
     no worker prints a traceback or leaves half a session behind on its own. A worker
     whose parent died (SIGKILL, a crash) exits at once: it must not go on using the
     CPU nor write results for a run that is over (:func:`exit_with_parent`).
