@@ -25,8 +25,7 @@ __all__ = ["STOP_SIGNALS", "GROUP_SIGNALS", "handled", "deferred", "blocked", "w
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
                      if hasattr(signal, name))
 #: The stop signals a terminal sends a command's whole process group (Ctrl-C, a closed terminal,
-#: Ctrl-backslash):
-#: a command's helper processes ignore them, the command stops them itself.
+#: Ctrl-backslash): a command's helper processes ignore them, the command stops them itself.
 GROUP_SIGNALS = tuple(s for s in STOP_SIGNALS if s != getattr(signal, "SIGTERM", None))
 
 
