@@ -764,7 +764,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
         written = sum(1 for row in rows if row is not None and row.status == "ok")
         raise OutputError(f"{err}; processing stopped ({written} of {len(rows)} sessions written before)",
                           errno=err.errno) from None
-    except KeyboardInterrupt as err:
+    except (KeyboardInterrupt, cf.CancelledError) as err:  # stopped, or the executor cancelled the tasks (Dask)
         if own is not None:
             _stop_pool(own)
             own = None

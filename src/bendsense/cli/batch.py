@@ -233,11 +233,11 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
                 contact_s_m=contact_s_m,
                 adapt=adapt,
             )
-        except concurrent.futures.CancelledError:  # the scheduler dropped the client, or has no worker left
+        except concurrent.futures.CancelledError as err:  # the scheduler dropped the client, or has no worker left
             why = (f"no worker left on the scheduler for {WORKER_WAIT_S:g} s" if watch.gone else
                    "the connection to the scheduler was lost")
-            raise click.ClickException(f"--scheduler {scheduler}: {why} and its tasks cancelled; the sessions "
-                                       "finished before are complete, a rerun does the rest") from None
+            kept = "; ".join(getattr(err, "__notes__", ()))  # how many sessions finished (process_sessions)
+            raise click.ClickException(f"--scheduler {scheduler}: {why} and its tasks cancelled; {kept}") from None
         finally:
             if watch is not None:
                 watch.close()
