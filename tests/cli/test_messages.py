@@ -114,15 +114,19 @@ def test_driver_refuses_nonsense_baud_rates(baud):
     ["process", GOOD_CSV, "--calibration", GOOD_CAL, "-o", "out.csv"],
     ["load", GOOD_CSV, "--calibration", GOOD_CAL, "reconstruct", "save", "results.csv"],
     ["simulate", "validation", "-o", "sessions.csv"],
-    ["demo", "-o", "demo.csv"],
-], ids=["record", "control", "process", "save", "simulate", "demo"])
-def test_a_directory_output_named_like_a_csv_file_is_refused_before_any_work(args, tmp_path, monkeypatch):
-    """``record -o new.csv`` made a directory named ``new.csv``: every command that writes a directory refuses
-    a CSV file's name in one line, and writes nothing."""
+    ["demo", "-o", "demo.png"],
+    ["reproduce", "--quick", "-o", "report.md"],
+    ["record", "/dev/null", "-o", "rec.yaml"],
+], ids=["record", "control", "process", "save", "simulate", "demo", "reproduce", "record-yaml"])
+def test_a_directory_output_named_like_a_file_is_refused_before_any_work(args, tmp_path, monkeypatch):
+    """``record -o new.csv`` made a directory named ``new.csv``, ``demo -o demo.png`` one holding ``demo.png/demo.png``:
+    every command that writes a directory refuses a file's name in one line, and writes nothing."""
     result = _run(args, tmp_path, monkeypatch)
     assert result.exit_code == 2, result.output
-    name = next(a for a in args if str(a).lower().endswith(".csv") and a not in (GOOD_CSV,))
+    name = args[-1]
+    suffix = "." + name.rsplit(".", 1)[1]
     assert result.output.strip().splitlines()[-1].endswith(
-        f"{name!r} is a CSV file's name, but this writes a directory of files: give a directory's name"), result.output
+        f"{name!r} is a file's name ({suffix}), but this writes a directory of files: give a directory's name"), \
+        result.output
     assert "Traceback" not in result.output
     assert list(tmp_path.iterdir()) == []

@@ -135,8 +135,17 @@ class Relative(Finite):
         return number
 
 
+FILE_SUFFIXES = (".csv", ".png", ".pdf", ".svg", ".jpg", ".jpeg", ".yaml", ".yml", ".json", ".md", ".txt", ".npz",
+                 ".mcap", ".bin", ".html")
+"""Suffixes of the files bendsense reads and writes: a directory output named with one is a slip."""
+
+
 class Directory(click.Path):
-    """A directory the command writes (created): a name ending in ``.csv`` is refused (a slip for a session CSV)."""
+    """A directory the command writes (created): a name ending in a file's suffix (``.csv``, ``.png``, ...) is refused.
+
+    ``record -o new.csv`` made a directory named ``new.csv``, ``demo -o demo.png`` one holding
+    ``demo.png/demo.png``: such a name is a slip for a file (:data:`FILE_SUFFIXES`).
+    """
 
     def __init__(self):
         super().__init__(file_okay=False, path_type=Path)
@@ -144,9 +153,10 @@ class Directory(click.Path):
     def convert(self, value, param, ctx):
         """Check one path."""
         path = super().convert(value, param, ctx)
-        if Path(path).suffix.lower() == ".csv":
-            self.fail(f"{click.format_filename(value)!r} is a CSV file's name, but this writes a directory of files: "
-                      "give a directory's name", param, ctx)
+        suffix = Path(path).suffix
+        if suffix.lower() in FILE_SUFFIXES:
+            self.fail(f"{click.format_filename(value)!r} is a file's name ({suffix}), but this writes a directory of "
+                      "files: give a directory's name", param, ctx)
         return path
 
 
