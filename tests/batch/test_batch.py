@@ -566,7 +566,7 @@ def test_processes_or_numba_threads_never_both(sessions, tmp_path):
     pooled = process_sessions(runs / "a.csv", tmp_path / "pool", calibration=linear_calibration(), workers=2,
                               estimate=ESTIMATE, progress=False)
     assert [s.status for s in pooled.sessions] == ["ok"]
-    assert pooled.workers == "ProcessPoolExecutor(1 workers, 1 numba thread each)"
+    assert pooled.workers == "ProcessPoolExecutor(1 worker, 1 numba thread each)"
     local = process_sessions(runs / "a.csv", tmp_path / "here", calibration=linear_calibration(), workers=0,
                              estimate=ESTIMATE, progress=False)
     assert local.workers == f"in-process, {numba.get_num_threads()} numba threads"

@@ -340,7 +340,9 @@ def test_cli_plot_standalone(results_dir, tmp_path):
     result = CliRunner().invoke(main, ["plot", str(results_dir)])
     assert result.exit_code == 2 and "-o FIG.png" in result.output
     result = CliRunner().invoke(main, ["plot", str(tmp_path / "none"), "-o", str(tmp_path / "x.png")])
-    assert result.exit_code == 2 and "not a results directory" in result.output
+    assert result.exit_code == 2 and "none: no such results directory" in result.output
+    result = CliRunner().invoke(main, ["plot", str(fig), "-o", str(tmp_path / "x.png")])  # a file
+    assert result.exit_code == 2 and "fig.png: not a results directory" in result.output
     result = CliRunner().invoke(main, ["plot", str(results_dir), "-o", str(tmp_path / "fig.doc")])
     assert result.exit_code == 1 and "unknown figure format '.doc' (-o/--output); use one of" in result.output
 

@@ -203,8 +203,11 @@ def test_an_infinite_time_names_the_line(tmp_path):
 
 
 def test_not_a_results_directory(tmp_path):
-    with pytest.raises(SessionError, match=r"nowhere: no results.csv \(not a results directory\)"):
+    with pytest.raises(SessionError, match=r"nowhere: no such results directory$"):
         read_results(tmp_path / "nowhere")
+    (tmp_path / "elsewhere").mkdir()
+    with pytest.raises(SessionError, match=r"elsewhere: no results.csv \(not a results directory\)"):
+        read_results(tmp_path / "elsewhere")
 
 
 @pytest.mark.parametrize("finger", ["", "index"], ids=["actuator", "gripper-finger"])

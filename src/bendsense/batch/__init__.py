@@ -454,7 +454,7 @@ def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
 def _executor_name(executor) -> str:
     workers = getattr(executor, "_max_workers", None)
     kind = type(executor).__name__
-    return f"{kind}({workers} workers)" if workers else kind
+    return f"{kind}({workers} worker{'s' if workers != 1 else ''})" if workers else kind
 
 
 def _started_quietly():
@@ -725,7 +725,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
                 own = executor = worker_pool(min(workers or os.cpu_count() or 1, len(tasks)))
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
-                description = description.replace(" workers)", " workers, 1 numba thread each)")
+                description = description[:-1] + ", 1 numba thread each)"
             quietly = _started_quietly if own is not None else contextlib.nullcontext
             if tasks:
                 # compile once: one worker compiles the kernels (or loads them) before any other starts, and the

@@ -297,7 +297,8 @@ def plot(target, figure_path, shapes, dpi, overwrite):
             return state
         if figure_path is not None:
             if not target.is_dir():
-                raise click.BadParameter(f"{target}: not a results directory", param_hint="RESULTS_DIR")
+                raise click.BadParameter(f"{target}: {'not a' if target.exists() else 'no such'} results directory",
+                                         param_hint="RESULTS_DIR")
             source, out = target, figure_path
         elif state.get("shape") is not None:
             source = results_from_state(state["session"], state["shape"], state.get("estimate"), state.get("track"))

@@ -359,6 +359,8 @@ def read_results(out_dir) -> Results:
     """
     out_dir = Path(out_dir)
     path = out_dir / "results.csv"
+    if not out_dir.exists():
+        raise SessionError(f"{out_dir}: no such results directory")
     if not path.exists():
         raise SessionError(f"{out_dir}: no results.csv (not a results directory)")
     rows = list(csv.reader(read_text(path, "results CSV", SessionError).splitlines()))
