@@ -35,7 +35,9 @@ def _raise(signum, frame):
     if _in_callback(frame):
         # an exception raised in a ctypes callback is printed and dropped, and the command would go on: the
         # signal is sent again once the callback has (most likely) returned
-        threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signum)).start()
+        again = threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signum))
+        again.daemon = True  # (a process that ends meanwhile does not wait for it)
+        again.start()
         return
     _received.append(signum)
     if len(_received) == 1:  # a later one while the command stops is only noted
