@@ -111,14 +111,14 @@ def worker_pool(workers: int, *, nice: int = 0):
     """
     import concurrent.futures as cf
     import multiprocessing
-    from multiprocessing import resource_tracker
 
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
-    # multiprocessing's resource tracker inherits the mask: the group's stop signals must not kill it (it
-    # is relaunched with a warning and tracebacks)
-    with blocked(GROUP_SIGNALS):
-        resource_tracker.ensure_running()
+    if os.name == "posix":  # multiprocessing's resource tracker inherits the mask: the group's stop signals must
+        from multiprocessing import resource_tracker  # not kill it (relaunched, with a warning and tracebacks)
+
+        with blocked(GROUP_SIGNALS):
+            resource_tracker.ensure_running()
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                   initializer=worker_init, initargs=(os.getpid(), nice))
 

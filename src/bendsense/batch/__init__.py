@@ -780,7 +780,10 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
 
 
 def _stopped(tasks, rows: list, done: set, out_dir: Path, earlier: dict) -> str:
-    """After an interrupt: the sessions swapped in late counted, the unfinished ones' litter cleared; what was kept."""
+    """What a batch that stopped (interrupted, or its tasks cancelled) kept, in words.
+
+    Sessions swapped in late are counted and added to the manifest, the unfinished ones' litter cleared.
+    """
     # a worker may have swapped a session in just before it was killed: complete, so counted
     late = [name for i, _, name in tasks if i not in done and _identity(out_dir / name) not in (None, earlier[i])]
     if late:
