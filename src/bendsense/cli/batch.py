@@ -61,7 +61,9 @@ def _quiet_dask_logs() -> None:
 def _dask_executor(address: str):
     """Connect to a Dask scheduler; returns (client, executor)."""
     try:
+        import dask
         from dask.distributed import Client
+        from distributed.comm.registry import backends
     except ImportError:
         raise click.ClickException(
             "--scheduler needs Dask distributed, which is not installed: pip install bendsense[distributed]"
@@ -73,11 +75,17 @@ def _dask_executor(address: str):
                                  "the dashboard's, not the scheduler's)", param_hint="--scheduler")
     if not re.fullmatch(r"(?:[a-z][a-z0-9+]*://)?[^\s/:]+:[0-9]{1,5}", address):
         raise click.BadParameter(f"expected tcp://HOST:PORT, got {short(address)}", param_hint="--scheduler")
+    scheme = address.split("://")[0] if "://" in address else "tcp"
+    if scheme not in backends:
+        raise click.BadParameter(f"expected tcp://HOST:PORT, got {short(address)} (Dask knows no {scheme}://; it knows "
+                                 f"{', '.join(s + '://' for s in sorted(backends))})", param_hint="--scheduler")
+    if scheme in ("tls", "wss") and not dask.config.get("distributed.comm.tls.client.cert", None):
+        raise click.BadParameter(f"{short(address)}: {scheme}:// needs Dask's TLS configuration (a client "
+                                 "certificate: distributed.comm.tls.client.cert)", param_hint="--scheduler")
     try:
         client = Client(address, timeout="10s")
-    except (OSError, TimeoutError, ValueError, TypeError) as err:  # (an unknown scheme, tls:// without a context)
-        raise click.ClickException(f"--scheduler {short(address)}: cannot connect: {' '.join(str(err).split())}"
-                                   ) from None
+    except (OSError, TimeoutError) as err:
+        raise click.ClickException(f"--scheduler {short(address)}: cannot connect: {err}") from None
     try:  # a scheduler without workers would hold the tasks for ever
         client.wait_for_workers(1, timeout=WORKER_WAIT_S)
     except TimeoutError:
