@@ -80,6 +80,11 @@ def blocked(signals):
 
     A signal that comes meanwhile stays pending and is delivered here when the block ends.
     Where the platform has no signal masks, the block runs as it is.
+
+    Parameters
+    ----------
+    signals : iterable of int
+        The signals to block (e.g. :data:`GROUP_SIGNALS`).
     """
     if not hasattr(signal, "pthread_sigmask"):
         yield
