@@ -235,6 +235,39 @@ def test_local_process_pool_bad_session_and_skip_unless_overwrite(sessions, tmp_
     check_outputs(out, {"a": truth["a"]})
 
 
+def test_an_output_named_like_another_batchs_session_is_never_taken_for_this_one(tmp_path):
+    """Names depend on the batch: ``tv/`` and ``tv.csv`` together are ``tv`` and ``tv_csv``, ``tv.csv`` alone ``tv``."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    kappa = write_native_session(runs / "tv", 3)
+    write_csv_session(runs / "tv.csv", 1)
+    out = tmp_path / "out"
+    first = process_sessions(runs, out, calibration=linear_calibration(), workers=0, estimate=False, progress=False)
+    assert {s.name: s.status for s in first.sessions} == {"tv": "ok", "tv_csv": "ok"}
+    assert read_manifest(out / "tv")["source"] == str((runs / "tv").resolve())  # each output names its session
+    assert read_manifest(out / "tv_csv")["source"] == str((runs / "tv.csv").resolve())
+    before = {f: (out / "tv" / f).read_bytes() for f in ("results.csv", "shape.npz")}
+    for overwrite in (False, True):  # neither skipped as done nor replaced: another session's results
+        alone = process_sessions(runs / "tv.csv", out, calibration=linear_calibration(), workers=0, estimate=False,
+                                 overwrite=overwrite, progress=False)
+        (row,) = alone.sessions
+        assert (row.name, row.status) == ("tv", "failed")
+        assert f"holds the results of another session, {(runs / 'tv').resolve()}" in row.reason
+        assert {f: (out / "tv" / f).read_bytes() for f in before} == before
+    np.testing.assert_allclose(read_results(out / "tv").curvature_per_m, kappa, rtol=1e-9, atol=1e-9)
+    cal_path = tmp_path / "cal.yaml"
+    linear_calibration().save(cal_path)
+    result = CliRunner().invoke(main, process_args(runs / "tv.csv", cal_path, out) + ["--workers", "0"])
+    assert result.exit_code == 1 and "another session" in result.output and "Traceback" not in result.output
+    # the same session is still skipped, and replaced with --overwrite
+    again = process_sessions(runs / "tv", out, calibration=linear_calibration(), workers=0, estimate=False,
+                             progress=False)
+    assert [s.status for s in again.sessions] == ["skipped"]
+    redo = process_sessions(runs / "tv", out, calibration=linear_calibration(), workers=0, estimate=False,
+                            overwrite=True, progress=False)
+    assert [s.status for s in redo.sessions] == ["ok"]
+
+
 def test_table_lists_every_session_and_the_totals():
     report = BatchReport(
         sessions=(

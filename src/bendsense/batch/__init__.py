@@ -441,7 +441,7 @@ def _run(path, out_dir, config, calibration, options: Options, overwrite: bool):
         warnings.warn(f"adapt learned nothing, the config's prior used: {adapted.why}", DataWarning, stacklevel=2)
     processed = process(session, config if not adapted else adapted.config, calibration, **options.process_keywords())
     session = processed.session
-    processed.write(out_dir, overwrite=overwrite, inputs=[path])  # the columns process() made
+    processed.write(out_dir, overwrite=overwrite, inputs=[path], source=path)  # the columns process() made
     if adapted:
         save_config(adapted.config, out_dir / "config.yaml")
     return (processed.counts(), int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)),
@@ -663,7 +663,13 @@ def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
     todo = []
     for i, (path, name) in enumerate(zip(sessions, names, strict=True)):
         target = out_dir / name
-        if target.exists() and not overwrite:
+        other = _other_source(target, path)
+        if other is not None:  # a name made from this batch's sessions may be another batch's: never theirs
+            rows[i] = SessionOutcome(
+                name=name, source=str(path), status="failed", out_dir=str(target),
+                reason=f"output {name} holds the results of another session, {other}; nothing was done (process "
+                       "the two in one run, which names their outputs apart, or give another output directory)")
+        elif target.exists() and not overwrite:
             rows[i] = SessionOutcome(
                 name=name,
                 source=str(path),
@@ -681,7 +687,16 @@ def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
             todo.append(i)
         else:
             todo.append(i)
+    for row in rows:  # whole, as a session that fails in the run is said (the table cuts its notes)
+        if row is not None and row.status == "failed":
+            log.warning("%s: failed: %s", row.name, row.reason)
     return rows, todo
+
+
+def _other_source(target: Path, path: Path) -> str | None:
+    """The session whose results ``target`` holds where its manifest names one other than ``path``; else None."""
+    recorded = output.recorded_source(target) if target.is_dir() else None
+    return recorded if recorded is not None and recorded != str(output.resolve(path)) else None
 
 
 def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, workers, progress) -> str:

@@ -111,7 +111,7 @@ def run_gripper(path, out_dir, gripper: GripperConfig, calibrations: dict, optio
         c = processed.counts()
         counts = c if counts is None else dataclasses.replace(counts, **{
             f.name: getattr(counts, f.name) + getattr(c, f.name) for f in dataclasses.fields(c) if f.name != "frames"})
-    write_gripper_results(out_dir, parts, overwrite=overwrite, inputs=[path])
+    write_gripper_results(out_dir, parts, overwrite=overwrite, inputs=[path], source=path)
     return (counts, int(session.meta.get("frames_lost", 0)), int(session.meta.get("tx_drops", 0)), ignored)
 
 

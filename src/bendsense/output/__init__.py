@@ -62,6 +62,7 @@ from bendsense.output.manifest import (
     add_to_manifest,
     foreign_entries,
     read_manifest,
+    recorded_source,
 )
 from bendsense.output.paths import (
     _check_links,
@@ -94,6 +95,7 @@ __all__ = [
     "begin_in_place",
     "add_to_manifest",
     "read_manifest",
+    "recorded_source",
     "foreign_entries",
     "resolve",
     "reason",
@@ -466,7 +468,8 @@ def reserve(targets: Iterable[Target], inputs: Iterable = ()) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: str = "bendsense") -> Iterator[Path]:
+def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: str = "bendsense",
+              source=None) -> Iterator[Path]:
     """Write a directory output: yield a fresh hidden sibling, swap it in when the block ends.
 
     The block writes the content into the yielded directory. On success the manifest
@@ -484,6 +487,10 @@ def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: s
         Inputs of the command, never to be written over.
     writer : str
         Who writes, for the manifest (e.g. ``"bendsense save"``).
+    source : path, optional
+        The session the output was made from, for the manifest (``source``: resolved),
+        which :func:`bendsense.batch.process_sessions` compares before it skips or
+        replaces an output.
 
     Raises
     ------
@@ -508,7 +515,7 @@ def write_dir(path, *, overwrite: bool = False, inputs: Iterable = (), writer: s
                 raise write_error(p, err, consequence) from None
             with _user_paths(tmp, p, consequence):
                 yield tmp
-                _write_manifest(tmp, _listing(tmp), writer)
+                _write_manifest(tmp, _listing(tmp), writer, source=source)
             try:
                 _swap_in(tmp, target, r)
             except OutputError:

@@ -55,6 +55,18 @@ def _umask() -> int:
     return mask
 
 
+def recorded_source(path) -> str | None:
+    """The session whose results the output directory ``path`` holds, as its manifest names it (None: not named).
+
+    Parameters
+    ----------
+    path : path
+        The output directory.
+    """
+    source = (read_manifest(path) or {}).get("source")
+    return source if isinstance(source, str) else None
+
+
 def read_manifest(path) -> dict | None:
     """The manifest of the output directory ``path``, or None if it has none (or a broken one).
 
@@ -138,7 +150,8 @@ def _listing(root: Path) -> list[str]:
     return files
 
 
-def _write_manifest(directory: Path, files: list[str], writer: str, previous: dict | None = None) -> None:
+def _write_manifest(directory: Path, files: list[str], writer: str, previous: dict | None = None,
+                    source=None) -> None:
     from bendsense import __version__
 
     now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -152,6 +165,8 @@ def _write_manifest(directory: Path, files: list[str], writer: str, previous: di
     }
     if previous is not None:
         doc["updated_utc"] = now
+    if source is not None:  # the session a results directory was made from
+        doc["source"] = str(_resolve(source))
     path = directory / MANIFEST_NAME
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{MANIFEST_NAME}{_TMP_MARK}", dir=directory)

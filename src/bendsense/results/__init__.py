@@ -114,7 +114,7 @@ class Results:
         return cls(columns=columns, s_m=np.asarray(shape.s_m), positions_m=positions,
                    extra_names=tuple(extra_names))
 
-    def write(self, out_dir, *, overwrite: bool = False, inputs=()) -> Path:
+    def write(self, out_dir, *, overwrite: bool = False, inputs=(), source=None) -> Path:
         """Write ``results.csv`` and ``shape.npz`` into ``out_dir`` (as :func:`write_results`).
 
         Parameters
@@ -125,12 +125,16 @@ class Results:
             Replace only a previous bendsense output there.
         inputs : iterable of paths
             Inputs never to be written over (the session's source among them).
+        source : path, optional
+            The session file or directory the results were made from, named in the
+            directory's manifest.
         """
         from bendsense import output
 
         out_dir = Path(out_dir)
         output.check([output.directory(out_dir, overwrite=overwrite)], inputs)
-        with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
+        with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save",
+                              source=source) as tmp:
             self.write_files(tmp)
         return out_dir
 
@@ -337,7 +341,8 @@ def write_results(out_dir, session, shape, estimate=None, *, track=None, overwri
     overwrite : bool, default False
         Replace a previous bendsense output in ``out_dir``.
     inputs : iterable of paths
-        Inputs never to be written over (the session's source is always one).
+        Inputs never to be written over (the session's source is always one; the
+        directory's manifest names it).
 
     Raises
     ------
@@ -345,8 +350,9 @@ def write_results(out_dir, session, shape, estimate=None, *, track=None, overwri
         See :func:`bendsense.output.check`.
     """
     source = getattr(session, "source", None)
-    inputs = [*inputs, *([source] if source and Path(source).exists() else [])]
-    return Results.from_state(session, shape, estimate, track).write(out_dir, overwrite=overwrite, inputs=inputs)
+    source = source if source and Path(source).exists() else None
+    return Results.from_state(session, shape, estimate, track).write(
+        out_dir, overwrite=overwrite, inputs=[*inputs, *([source] if source else [])], source=source)
 
 
 def read_results(out_dir) -> Results:

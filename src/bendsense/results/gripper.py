@@ -20,7 +20,7 @@ __all__ = ["write_gripper_results", "read_gripper_results", "is_gripper_results"
 RESULTS_FILES = ("results.csv", "shape.npz")
 
 
-def write_gripper_results(out_dir, parts: dict, *, overwrite: bool = False, inputs=()) -> Path:
+def write_gripper_results(out_dir, parts: dict, *, overwrite: bool = False, inputs=(), source=None) -> Path:
     """Write each finger's results into ``out_dir/<finger>/`` (one output directory, one manifest).
 
     Parameters
@@ -34,15 +34,22 @@ def write_gripper_results(out_dir, parts: dict, *, overwrite: bool = False, inpu
         Replace a previous bendsense output in ``out_dir``.
     inputs : iterable of paths
         Inputs never to be written over (every session's source is one).
+    source : path, optional
+        The board's session the results were made from, named in the manifest (default:
+        the fingers' one source, if they share one).
     """
     from bendsense import output
 
     out_dir = Path(out_dir)
     results = {name: Results.from_state(*part) for name, part in parts.items()}
     sources = {getattr(part[0], "source", None) for part in parts.values()}
-    inputs = [*inputs, *(s for s in sources if s and Path(s).exists())]
+    sources = [s for s in sources if s and Path(s).exists()]
+    inputs = [*inputs, *sources]
+    if source is None and len(sources) == 1:
+        source = sources[0]
     output.check([output.directory(out_dir, overwrite=overwrite)], inputs)
-    with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save") as tmp:
+    with output.write_dir(out_dir, overwrite=overwrite, inputs=inputs, writer="bendsense save",
+                          source=source) as tmp:
         for name, result in results.items():
             (tmp / name).mkdir()
             result.write_files(tmp / name)
