@@ -22,6 +22,7 @@ from helpers import hold_output, linear_calibration, signals_for
 from bendsense import load_config, output
 from bendsense.calibration import Calibration
 from bendsense.cli import main
+from bendsense.errors import OutputError
 from bendsense.session import Session, write_session_csv
 from bendsense.session.native import SessionWriter, read_session_dir, record_dtype
 from bendsense.sim.scenarios import simulate
@@ -201,6 +202,28 @@ def test_file_outputs_never_replace_a_file_without_overwrite(work, command):
     assert run(*args).exit_code == 0
     assert run(*args, "--overwrite").exit_code == 0
     assert intact(planted) and not litter(work)
+
+
+def test_overwrite_replaces_a_bendsense_file_only_of_its_own_kind(work):
+    """A session CSV is a lab's data: no truth file or export of another kind goes over it, nor over a config."""
+    from bendsense.sim.truth import KIND, TruthWriter, truth_columns
+
+    TruthWriter(work / "truth.csv", truth_columns()).close()
+    kept = {f: (work / f).read_bytes() for f in ("run.csv", "cal.yaml", "truth.csv")}
+    result = run("sim-device", "--seconds", "0.1", "--truth", "run.csv", "--overwrite")
+    assert result.exit_code != 0 and "run.csv: exists and is not a sim-device truth file" in result.output
+    assert result.output.strip().count("\n") == 0, result.output
+    result = run("load", "run.csv", "export", "truth.csv", "--overwrite")
+    assert one_line_error(result) and "truth.csv: exists and is not a session CSV" in result.output, result.output
+    session = Session(np.arange(2) * 0.1, np.full((2, N), 2000.0), np.full(2, 50e3))
+    with pytest.raises(OutputError, match="cal.yaml: exists and is not a session CSV"):
+        write_session_csv(session, work / "cal.yaml")  # the API's default overwrite too
+    assert {f: (work / f).read_bytes() for f in kept} == kept
+    # a file of its own kind is replaced, as before
+    assert output.check([output.file(work / "truth.csv", overwrite=True, replaces=KIND)]) is None
+    assert run("load", "run.csv", "export", "copy.csv").exit_code == 0
+    assert run("load", "native", "export", "copy.csv", "--overwrite").exit_code == 0
+    assert "ch1" in (work / "copy.csv").read_text() and not litter(work)
 
 
 def test_calibrate_with_plot_writes_both_and_overwrite_replaces_them(work):

@@ -71,11 +71,12 @@ def test_failed_write_leaves_no_file(tmp_path, monkeypatch):
 
     monkeypatch.setattr(cells, "column_cells", failing_cells)
     target = tmp_path / "out.csv"
-    target.write_text("# written by bendsense earlier\nprevious content")  # a file of bendsense's
+    earlier = "# written by bendsense (a session CSV, docs/formats.md)\nprevious content"  # one of bendsense's
+    target.write_text(earlier)
     s = Session([0.0, 1.0, 2.0], [[1.0], [2.0], [3.0]], 0.0)
     with pytest.raises(OSError, match="disk full"):
         write_session_csv(s, target)
-    assert target.read_text() == "# written by bendsense earlier\nprevious content"
+    assert target.read_text() == earlier
     assert list(tmp_path.iterdir()) == [target]
 
 

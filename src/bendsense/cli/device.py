@@ -576,7 +576,9 @@ def sim_device(
             if value is not None:
                 raise click.BadParameter("applies to --source sensor only, not ramp", param_hint=flag)
     _check_grasp_flags(grasp, contact_s_m, channels)
-    targets = [] if truth_path is None else [outputs.file(truth_path, overwrite=overwrite)]
+    from bendsense.sim.truth import KIND
+
+    targets = [] if truth_path is None else [outputs.file(truth_path, overwrite=overwrite, replaces=KIND)]
     with outputs.reserve(targets):  # checked before any work, locked while the board runs
         _sim_board(click.get_current_context().params, grasp, errors)
 

@@ -516,7 +516,9 @@ def export(csv_path, finger, overwrite):
         say(f"wrote {csv_path} ({len(session)} frames)")
         return state
 
-    return step_io(step, outputs=[output.file(csv_path, overwrite=overwrite, suffixes=output.CSV)])
+    from bendsense.session.csvfile import KIND
+
+    return step_io(step, outputs=[output.file(csv_path, overwrite=overwrite, suffixes=output.CSV, replaces=KIND)])
 
 
 COMMANDS = [load, reconstruct, adapt, estimate, track, save, mcap, export]

@@ -134,6 +134,10 @@ class Target:
     files : tuple of str
         Directory outputs: the names it writes (e.g. ``results.csv``), so that another
         output of the same command line may not be one of them (:func:`check_steps`).
+    replaces : tuple of (bytes, str), optional
+        File outputs: the mark of the one kind of bendsense file ``overwrite`` may replace
+        (in its first 64 KiB) and its name for the message, e.g. a session CSV only over a
+        session CSV; None: any bendsense file.
     """
 
     path: Path
@@ -141,6 +145,7 @@ class Target:
     overwrite: bool = False
     suffixes: tuple | str = ()
     files: tuple = ()
+    replaces: tuple | None = None
 
     def __post_init__(self):
         if self.kind not in _KINDS:
@@ -163,7 +168,7 @@ def directory(path, *, overwrite: bool = False, files=()) -> Target:
     return Target(path=path, kind="dir", overwrite=overwrite, files=tuple(files))
 
 
-def file(path, *, overwrite: bool = False, suffixes=()) -> Target:
+def file(path, *, overwrite: bool = False, suffixes=(), replaces=None) -> Target:
     """A file output, written to a temporary file and renamed over ``path``.
 
     Parameters
@@ -171,11 +176,13 @@ def file(path, *, overwrite: bool = False, suffixes=()) -> Target:
     path : path
         The output file.
     overwrite : bool, default False
-        Replace an existing file.
+        Replace an existing file that bendsense wrote.
     suffixes : tuple of str or FIGURE
         Allowed suffixes (empty: any).
+    replaces : tuple of (bytes, str), optional
+        Replace only a file of this kind: its mark and its name (:class:`Target`).
     """
-    return Target(path=path, kind="file", overwrite=overwrite, suffixes=suffixes)
+    return Target(path=path, kind="file", overwrite=overwrite, suffixes=suffixes, replaces=replaces)
 
 
 def recording(path, *, overwrite: bool = False) -> Target:
@@ -298,6 +305,9 @@ def _check_file(t: Target, r: Path) -> None:
         if not _written_by_us(r):
             raise OutputError(f"{p}: exists and bendsense did not write it (no bendsense mark); refusing to replace "
                               "it even with --overwrite: remove it or choose another name")
+        if t.replaces is not None and not _holds(r, t.replaces[0]):
+            raise OutputError(f"{p}: exists and is not a {t.replaces[1]} (another kind of bendsense file); refusing "
+                              "to replace it even with --overwrite: remove it or choose another name")
 
 
 MARK = b"bendsense"
@@ -310,15 +320,23 @@ def _written_by_us(r: Path) -> bool:
     manifest = read_manifest(r.parent)
     if manifest is not None and r.name in manifest["files"]:
         return True
+    return _holds(r, MARK, tail=True)
+
+
+def _holds(r: Path, mark: bytes, tail: bool = False) -> bool:
+    """Whether the file ``r`` holds ``mark`` in its first 64 KiB (or, with ``tail``, its last)."""
     try:
         with open(r, "rb") as fh:
             head = fh.read(1 << 16)
+            if mark in head:
+                return True
+            if not tail:
+                return False
             size = fh.seek(0, os.SEEK_END)
             fh.seek(max(size - (1 << 16), 0))
-            tail = fh.read()
+            return mark in fh.read()
     except OSError:
         return False
-    return MARK in head or MARK in tail
 
 
 def figure_metadata(fmt: str) -> dict | None:
@@ -601,7 +619,7 @@ def _clear_litter(r: Path) -> None:
 
 @contextlib.contextmanager
 def write_file(
-    path, *, overwrite: bool = False, inputs: Iterable = (), suffixes=(), writer: str = "bendsense"
+    path, *, overwrite: bool = False, inputs: Iterable = (), suffixes=(), writer: str = "bendsense", replaces=None
 ) -> Iterator[Path]:
     """Write a file output: yield a hidden temporary path beside it, rename it over ``path`` at the end.
 
@@ -620,13 +638,15 @@ def write_file(
         Allowed suffixes (empty: any).
     writer : str
         Who writes, for a manifest.
+    replaces : tuple of (bytes, str), optional
+        Replace only a file of this kind (:class:`Target`).
 
     Raises
     ------
     OutputExistsError, OutputError
         See :func:`check`.
     """
-    target = file(path, overwrite=overwrite, suffixes=suffixes)
+    target = file(path, overwrite=overwrite, suffixes=suffixes, replaces=replaces)
     p, r = target.path, _resolve(path)
     inputs = list(inputs)
     check([target], inputs)

@@ -29,7 +29,11 @@ from bendsense.session.records import check_line_pressure
 from bendsense.validation import key as _name
 from bendsense.validation import short
 
-__all__ = ["read_session_csv", "write_session_csv"]
+__all__ = ["KIND", "read_session_csv", "write_session_csv"]
+
+_FIRST_LINE = "# written by bendsense (a session CSV, docs/formats.md)\n"  # output.MARK; no key, no metadata
+#: a session CSV's mark and name: ``overwrite`` replaces a session CSV only (:class:`bendsense.output.Target`)
+KIND = (b"(a session CSV", "session CSV")
 
 _CHANNEL = re.compile(r"ch([1-9][0-9]*)$")
 _LINE = re.compile(r"line(0|[1-9][0-9]*)_pressure_(pa|kpa)$")
@@ -228,7 +232,7 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
     check.instance("session", session, Session, "bendsense.read_session(path)")
     path = check.path("path", path)
     source = session.source if session.source and Path(session.source).exists() else None
-    output.check([output.file(path, overwrite=overwrite)], [source])
+    output.check([output.file(path, overwrite=overwrite, replaces=KIND)], [source])
     header = ["t_s"]
     cols = [session.t_s]
     if session.pressure_pa.ndim == 2:
@@ -246,10 +250,10 @@ def write_session_csv(session: Session, path: str | os.PathLike, *, overwrite: b
         header.append(name)
         cols.append(values)
     with (
-        output.write_file(path, overwrite=overwrite, inputs=[source], writer="bendsense export") as tmp,
+        output.write_file(path, overwrite=overwrite, inputs=[source], writer="bendsense export", replaces=KIND) as tmp,
         open(tmp, "w", encoding="utf-8", newline="") as fh,
     ):
-        fh.write("# written by bendsense (a session CSV, docs/formats.md)\n")  # output.MARK; no key, no metadata
+        fh.write(_FIRST_LINE)
         for key, value in session.meta.items():
             if isinstance(value, (str, int, float)):
                 fh.write(f"# {key}: {value}\n")

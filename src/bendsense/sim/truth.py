@@ -14,7 +14,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-__all__ = ["TruthWriter", "scenario_truth", "truth_columns"]
+__all__ = ["KIND", "TruthWriter", "scenario_truth", "truth_columns"]
+
+_HEADER = "# bendsense sim-device truth: the simulator's force, contact and pressures per frame\n"
+#: the truth file's mark and name: ``--overwrite`` replaces a truth file only (:class:`bendsense.output.Target`)
+KIND = (_HEADER[:28].encode(), "sim-device truth file")
 
 _PER_FINGER = ("fx_n", "fy_n", "contact_s_m")
 _PER_LINE = ("setpoint_pa", "pressure_pa")
@@ -64,7 +68,7 @@ class TruthWriter:
         self.columns = list(columns)
         self._values = self.columns[2:]
         self._fh = open(self.path, "w", encoding="utf-8", newline="")  # noqa: SIM115 (closed by close())
-        self._fh.write("# bendsense sim-device truth: the simulator's force, contact and pressures per frame\n")
+        self._fh.write(_HEADER)
         self._fh.write(",".join(self.columns) + "\n")
         self._fh.flush()
         self.rows = 0
