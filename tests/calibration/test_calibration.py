@@ -464,3 +464,11 @@ def test_two_strips_of_the_same_radius_warn(manifest_dir, caplog):
     with caplog.at_level(logging.WARNING, logger="bendsense"):
         read_manifest(path)
     assert "strips[0] and strips[1] have the same radius 0.04 m (r040.0.csv, r050.0.csv)" in caplog.text
+
+
+def test_a_session_csv_given_as_the_calibration_says_what_it_looks_like(tmp_path):
+    session = Session(np.arange(3) * 0.1, np.full((3, 4), 2000.0), np.full(3, 50e3))
+    write_session_csv(session, tmp_path / "run.csv")
+    with pytest.raises(ConfigError, match=r"run\.csv: calibration: expected a mapping .*got 't_s,pressure_pa,ch1.*"
+                                          r"\(a session CSV\? a calibration is the YAML of 'bendsense calibrate'\)"):
+        Calibration.load(tmp_path / "run.csv")

@@ -85,6 +85,23 @@ def test_overwrite_refuses_and_names_user_files(cwd):
     assert _visible(cwd) == ["out"]
 
 
+def test_overwrite_names_a_nested_output_as_bendsenses_own(cwd):
+    with output.write_dir("rec") as tmp:  # e.g. a recording, then `save rec/results` inside it
+        _write(tmp, **{"frames.bin": "ours"})
+    with output.write_dir("rec/results") as tmp:
+        _write(tmp, **{"results.csv": "ours too"})
+    with pytest.raises(OutputError, match=r"^rec: holds another bendsense output that is not part of it: results/; "
+                                          r"nothing was replaced"):
+        with output.write_dir("rec", overwrite=True) as tmp:
+            _write(tmp, **{"frames.bin": "new"})
+    assert (cwd / "rec/results/results.csv").read_text() == "ours too"
+    _write(cwd, **{"rec/notes.txt": "mine"})  # beside a user's file: the user's file is what it names
+    with pytest.raises(OutputError, match=r"^rec: holds files bendsense did not write: notes.txt, results/"):
+        with output.write_dir("rec", overwrite=True) as tmp:
+            _write(tmp, **{"frames.bin": "new"})
+    assert (cwd / "rec/frames.bin").read_text() == "ours"
+
+
 def test_directory_without_manifest_is_not_ours(cwd):
     _write(cwd, **{"out/results.csv": "mine"})  # looks like an output, but bendsense did not write it
     not_ours = r"out: not a bendsense output \(no .bendsense-output.json\); it holds results.csv"

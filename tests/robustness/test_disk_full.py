@@ -168,7 +168,7 @@ def test_a_file_size_limit_is_one_line_and_keeps_the_earlier_output(lab, tmp_pat
     if name == "process":  # a limit per file fails the sessions too large for it, each with its reason
         assert result.returncode == 1 and "Traceback" not in result.stderr
         assert re.search(rf"WARNING: run: failed: {re.escape(str(out))}/proc/run: {reason}", result.stderr)
-        assert "error: 1 of 1 sessions failed" in result.stderr
+        assert "Error: 1 of 1 sessions failed" in result.stderr
     else:
         one_error_line(result, rf"^Error: {re.escape(str(out))}/\S+: {reason}")
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

@@ -163,7 +163,9 @@ def fields_from_dict(data: Any) -> dict:
         The keyword arguments of :class:`~bendsense.calibration.Calibration`.
     """
     if not isinstance(data, dict):
-        raise ConfigError(f"calibration: expected a mapping, got {type(data).__name__}")
+        what = " (a session CSV? a calibration is the YAML of 'bendsense calibrate')" if isinstance(data, str) and \
+            "," in data else ""
+        raise ConfigError(f"calibration: expected a mapping (format: {FORMAT}), got {check.short(data)}{what}")
     if data.get("format") != FORMAT:
         raise ConfigError(f"format: expected {FORMAT!r}, got {check.short(data.get('format'))}")
     version = data.get("version")

@@ -521,11 +521,10 @@ def check_figure_suffix(path: Path | None, param_hint: str) -> None:
 
     formats = FigureCanvasBase.get_supported_filetypes()
     if path.suffix[1:].lower() not in formats:
-        got = repr(path.suffix) if path.suffix else "no suffix"
+        what = f"unknown figure format {path.suffix!r}" if path.suffix else "no figure format (a file name suffix)"
         # exit status 1, as for the output layer's own checks of output paths
         raise click.ClickException(
-            f"{path}: unknown figure format {got} ({param_hint}); use one of "
-            f"{', '.join('.' + f for f in sorted(formats))}"
+            f"{path}: {what} ({param_hint}); use one of {', '.join('.' + f for f in sorted(formats))}"
         )
 
 

@@ -254,7 +254,7 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
         say(report.table())
         state["batch_report"] = report
         if not report.ok:
-            click.echo(f"error: {report.n_failed} of {len(report.sessions)} sessions failed", err=True)
+            click.echo(f"Error: {report.n_failed} of {len(report.sessions)} sessions failed", err=True)
             click.get_current_context().exit(1)
         return state
 

@@ -371,6 +371,12 @@ def _foreign_message(p: Path, r: Path, foreign: list) -> str:
             f"{p}: not a bendsense output (no {MANIFEST_NAME}); it holds {shown}; "
             "nothing was replaced (choose a new directory)"
         )
+    nested = [f for f in foreign if f.endswith("/") and read_manifest(r / f) is not None]
+    if nested == foreign:  # e.g. `save rec/results` inside a recording: its own output, not this one's
+        return (
+            f"{p}: holds another bendsense output that is not part of it: {shown}; nothing was replaced "
+            "(move it away or choose a new directory)"
+        )
     return (
         f"{p}: holds files bendsense did not write: {shown}; nothing was replaced "
         "(move them away or choose a new directory)"

@@ -98,8 +98,8 @@ def cal_case(name, expect, change=None, text=None, sidecar=False, raw=None):
 
 
 cal_case("not_yaml.yaml", r"not valid YAML: .* \(line \d+, column \d+\)", text="offset: [1, 2\nformat: x: y\n")
-cal_case("top_level_list.yaml", r"calibration: expected a mapping, got list", text="- 1\n- 2\n")
-cal_case("empty.yaml", r"calibration: expected a mapping, got NoneType", text="")
+cal_case("top_level_list.yaml", r"calibration: expected a mapping \(format: bendsense-calibration\), got \[1, 2\]", text="- 1\n- 2\n")
+cal_case("empty.yaml", r"calibration: expected a mapping \(format: bendsense-calibration\), got None", text="")
 cal_case("wrong_format.yaml", r"format: expected 'bendsense-calibration', got 'bendsense-config'",
          lambda d: d.update(format="bendsense-config"))
 cal_case("future_version.yaml", r"version: this bendsense reads version", lambda d: d.update(version=99))
@@ -373,7 +373,7 @@ cases = {
     "save_without_reconstruct": ("load {good_csv} save out", r"'save' needs 'reconstruct' earlier in the chain"),
     "plot_bad_suffix_in_chain": ("load {good_csv} --calibration {good_cal} reconstruct save out plot fig.xyz",
                                  r"fig\.xyz: unknown figure format '\.xyz'"),
-    "plot_no_suffix": ("load {good_csv} --calibration {good_cal} reconstruct plot figure", r"figure: unknown figure format no suffix"),
+    "plot_no_suffix": ("load {good_csv} --calibration {good_cal} reconstruct plot figure", r"figure: no figure format \(a file name suffix\)"),
     "plot_results_bad_suffix": ("plot {invalid}/good -o fig.docx", r"fig\.docx: unknown figure format '\.docx'"),
     "plot_not_results_dir": ("plot {invalid}/good -o fig.png", r"good: no results\.csv \(not a results directory\)"),
     "plot_without_reconstruct": ("plot fig.png", r"'plot FIG' needs 'reconstruct' earlier in the chain"),
