@@ -105,7 +105,7 @@ class Track:
         t = np.arange(len(self.force_n)) if self.t_s is None else np.asarray(self.t_s)
         # lines and bands stop at a gap in the frames, not bridge it
         t, f, s, points = broken_at_gaps(t, self.force_n, self.std_n, self.frame_force_n)
-        for c, (name, colour) in enumerate((("Fx", "C0"), ("Fy", "C1"))):
+        for c, (name, colour) in enumerate((("Fx", "C0"), ("Fy", "C3"))):
             if points is not None:
                 ax.plot(t, points[:, c], ".", ms=2, color=colour, alpha=0.3)
             band = np.where(np.isfinite(s[:, c]), 2.0 * s[:, c], np.nan)
