@@ -60,7 +60,8 @@ def test_free_bending_block_in_the_config():
 
 
 def test_not_identifiable_is_not_written():
-    # two points for three parameters cannot identify them: no covariance, old block removed
+    # two points for three parameters cannot identify them: no covariance written, the config's own block stays
+    # (dropping it would make the parameters exact: a config without a parameter's variance takes it as truth)
     few = fit_free_bending(P_FB[:4], fb_data()[:4] + [0.001, -0.002, 0.001, 0.0], CFG)
     known = CFG.replace(parameter_covariance=None)
     with_old = fit_free_bending(P_FB, fb_data(np.random.default_rng(2)), CFG).to_config(known)
@@ -68,12 +69,15 @@ def test_not_identifiable_is_not_written():
     few_cov = few.covariance.copy()
     few_cov[0, 0] = np.inf
     broken = type(few)(**{**few.__dict__, "covariance": few_cov})
-    assert broken.to_config(with_old).parameter_covariance is None
+    old = with_old.parameter_covariance
+    assert broken.to_config(with_old).parameter_covariance.parameters == old.parameters
+    np.testing.assert_array_equal(broken.to_config(with_old).parameter_covariance.matrix, old.matrix)
     assert "NOT written" in broken.report()
-    # from the shipped config: the free-bending prior goes too (its values are replaced), the stiffness one stays
+    assert broken.to_config(known).parameter_covariance is None  # none before, none invented
+    # from the shipped config: its whole prior stays, the free-bending block as the stiffness one
     kept = broken.to_config(CFG).parameter_covariance
-    assert kept.parameters == MODEL_PARAMETERS[3:]
-    assert kept.source.startswith("none identified")
+    assert kept.parameters == CFG.parameter_covariance.parameters
+    np.testing.assert_array_equal(kept.matrix, CFG.parameter_covariance.matrix)
 
 
 def test_stiffness_block_joins_the_free_bending_block(tips):

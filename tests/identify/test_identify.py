@@ -109,6 +109,21 @@ def test_free_bending_all_fixed_just_evaluates():
     assert np.max(np.abs(fit.residuals)) < 1e-12
 
 
+def test_a_fit_of_nothing_keeps_the_configs_prior_and_the_cli_refuses_it(tmp_path):
+    from bendsense.config import ParameterCovarianceConfig
+
+    prior = ParameterCovarianceConfig(parameters=("shear_modulus_pa", "ei0_nm2"),
+                                      covariance=((1e8, 0.0), (0.0, 1e-8)), source="a lab's prior")
+    cfg = CFG.replace(parameter_covariance=prior)
+    new = fit_free_bending(P_FB, fb_data(), cfg, fix=TRUE_FB).to_config(cfg)
+    assert new.parameter_covariance == prior  # not variance 0: nothing was learned about them
+    write_fb_csv(tmp_path / "fb.csv", np.random.default_rng(1))
+    result = CliRunner().invoke(main, ["identify", "free-bending", str(tmp_path / "fb.csv"), "-o",
+                                       str(tmp_path / "o.yaml"), "--fix", "mu", "--fix", "mu_s", "--fix", "prebend"])
+    assert result.exit_code == 2 and "holds every parameter of free-bending" in result.output, result.output
+    assert not (tmp_path / "o.yaml").exists()
+
+
 def test_free_bending_to_config_replaces_material_only():
     fit = fit_free_bending(P_FB, fb_data(), CFG)
     new = fit.to_config(CFG)
@@ -382,6 +397,19 @@ def test_cli_stiffness_round_trip(tmp_path, tip_dataset):
     fit = fit_stiffness(read_stiffness_csv(tmp_path / "st.csv", L), CFG)
     assert loaded.stiffness.ei0_nm2 == pytest.approx(fit.params["ei0_nm2"], rel=1e-9)
     assert loaded.stiffness.ei1_nm2_per_pa == pytest.approx(fit.params["ei1_nm2_per_pa"], rel=1e-9)
+
+
+def test_cli_stiffness_writes_no_config_from_a_fit_whose_levels_failed(tmp_path, tip_dataset):
+    p, f, tip = tip_dataset
+    lines = ["pressure_pa,fx_n,fy_n,tip_x_m,tip_y_m"]  # loads 1000x too large (grams): no beam fits
+    lines += [",".join(repr(float(v)) for v in (a, *(1e3 * b), *c)) for a, b, c in zip(p, f, tip, strict=True)]
+    (tmp_path / "st.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    fit = fit_stiffness(read_stiffness_csv(tmp_path / "st.csv", L), CFG)
+    assert not fit.success and "level fit failed" in fit.message  # the fit says so itself
+    out = tmp_path / "fitted.yaml"
+    result = CliRunner().invoke(main, ["identify", "stiffness", str(tmp_path / "st.csv"), "-o", str(out)])
+    assert result.exit_code == 1 and "the stiffness fit failed (level fit failed at" in result.output, result.output
+    assert "no config written" in result.output and not out.exists() and "Traceback" not in result.output
 
 
 def test_cli_refuses_to_overwrite(tmp_path):

@@ -50,6 +50,9 @@ def _parse_fix(kind: str, items) -> dict:
             out[name] = parse_number(f"--fix {name}", value.strip())
         else:
             out[name] = None
+    if len(out) == len(_NAMES[kind]):  # a fit of nothing would write variance 0 over the prior's
+        raise click.BadParameter(f"holds every parameter of {kind} ({', '.join(_NAMES[kind])}): nothing is left to "
+                                 "fit; free at least one", param_hint="--fix")
     return out
 
 
@@ -203,10 +206,13 @@ def identify(
                     fit = fit_stiffness(read_stiffness_csv(data, config.actuator.length_m), config, **options)
                 else:
                     fit = _stiffness_session(inputs, config, options)
-            new_config = written(fit.to_config(config))
+            failed = _failure(fit)  # never a config from a fit that failed: it would pose as identified
+            new_config = None if failed else written(fit.to_config(config))
         except BendsenseError as err:
             raise click.ClickException(f"{source}: {err}" if str(source) not in str(err) else str(err)) from None
         say(fit.report())
+        if failed is not None:
+            raise click.ClickException(f"{source}: the {kind} fit failed ({failed}); no config written")
         ax = None
         if plot_path is not None:  # drawn before anything is written: a failure leaves no config
             import matplotlib
@@ -269,6 +275,17 @@ def _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, 
                              (plot_path is not None, "--plot", "not with --turned-session")):
         if wrong:
             raise click.BadParameter(why, param_hint=flag)
+
+
+def _failure(fit) -> str | None:
+    """Why a stiffness fit failed (a level's beam fit, or EI not positive); None for any other fit.
+
+    A free-bending fit that stops with a parameter at its bound is a result (the data do
+    not support that parameter), not a failure.
+    """
+    from bendsense.identify import StiffnessFit
+
+    return fit.message if isinstance(fit, StiffnessFit) and not fit.success else None
 
 
 def _gravity_sessions(inputs, config, turned_path, turned):

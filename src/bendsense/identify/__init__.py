@@ -235,7 +235,8 @@ class FreeBendingFit:
 
         The covariance goes into ``parameter_covariance`` (the block of the three
         free-bending parameters; another fit's block already there is kept, with zero
-        cross-covariance). Not written if the parameters are not identifiable. A fit with
+        cross-covariance). Not written if the parameters are not identifiable or none was
+        free (the config's own block stays). A fit with
         a prior writes its posterior: every parameter the prior states, and the whole
         covariance section updated.
 
@@ -249,7 +250,7 @@ class FreeBendingFit:
             return new.replace(parameter_covariance=self.posterior["section"])
         new = _implausible_fit("free-bending", lambda: config.replace(
             material=dataclasses.replace(config.material, **self.params)))
-        if self.covariance is None:
+        if self.covariance is None or not self.free:  # nothing fitted: the config's prior stays as it was
             return new
         what = f"free-bending fit of {len(self.residuals)} points"
         return _with_covariance(new, FREE_BENDING_PARAMETERS, self.covariance, what)
@@ -609,7 +610,7 @@ class StiffnessFit:
         """
         new = _implausible_fit("stiffness", lambda: config.replace(
             stiffness=dataclasses.replace(config.stiffness, **self.params)))
-        if self.covariance is None:
+        if self.covariance is None or not self.free:  # nothing fitted: the config's prior stays as it was
             return new
         what = f"stiffness fit of {len(self.level_ei_nm2)} pressure levels"
         return _with_covariance(new, STIFFNESS_PARAMETERS, self.covariance, what)
@@ -702,7 +703,8 @@ def _fit_level(data: StiffnessData, rows, k0, w, length_m, ei_start, method):
     full[obs] = (pos - measured)[obs]
     # ∂EI/∂(measured points): x̂ moves by (jᵀj)⁻¹jᵀ δ(measured), EI = exp(x̂)
     sens = np.zeros(measured.shape)
-    sens[obs] = (ei * jac[:, 0] / float(jac[:, 0] @ jac[:, 0])).reshape(-1, 2)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a level whose beam never answered: NaN, and failed
+        sens[obs] = (ei * jac[:, 0] / float(jac[:, 0] @ jac[:, 0])).reshape(-1, 2)
     success = bool(sol.success) and bool(np.all(ok)) and math.isfinite(se)
     return ei, se, float(np.sqrt(np.mean(r**2))), full, success, sens
 

@@ -194,20 +194,22 @@ def _with_covariance(config, names: tuple[str, ...], block: np.ndarray, what: st
     stiffness fit uses K0(P) from the free-bending parameters; from a session,
     :func:`bendsense.identify.weights.fit_stiffness_session` adds their uncertainty to
     its own block's variance, a table fit does not). A block that is not finite (parameters not identifiable)
-    is not written, and an older block of the same parameters is removed.
+    is not written: the config's own variances of those parameters stay (never variance 0 for what the
+    fit could not determine).
     """
     from bendsense.config import MODEL_PARAMETERS, ParameterCovarianceConfig
 
     blocks, kept, prior = [], [], ""
     old = config.parameter_covariance
+    finite = bool(np.all(np.isfinite(block)))
     if old is not None:
-        keep = [i for i, n in enumerate(old.parameters) if n not in names]
+        keep = [i for i, n in enumerate(old.parameters) if n not in names or not finite]
         if keep:
             kept = [old.parameters[i] for i in keep]
             blocks.append((kept, old.matrix[np.ix_(keep, keep)]))
             if not old.source.startswith("identify "):  # e.g. the shipped config's prior: not a fit
                 prior = f"; {', '.join(kept)} kept from the config's prior ({old.source or 'no source given'})"
-    if np.all(np.isfinite(block)):
+    if finite:
         blocks.append((list(names), 0.5 * (block + block.T)))
     if not blocks:
         return config.replace(parameter_covariance=None)
