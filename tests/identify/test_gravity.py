@@ -18,7 +18,7 @@ import pytest
 from forward_model import HiddenSensor, free_bending_k0, free_sweep
 
 import bendsense
-from bendsense.errors import ArgumentError
+from bendsense.errors import ArgumentError, SessionError
 from bendsense.identify.gravity import identify_gravity
 from bendsense.session import Session
 
@@ -117,3 +117,14 @@ def test_one_mount_twice_is_refused():
         identify_gravity([None, None], CFG, None, turned=(0.1, -1.0))
     with pytest.raises(ArgumentError, match="expected two free sweeps"):
         identify_gravity([None], CFG, None)
+
+
+def test_two_sweeps_in_one_mount_are_refused_not_fitted_to_a_stiff_actuator(identified):
+    # the hanging sweep given as both mounts: no difference of sag, which only an EI ~20x the prior's explains
+    # (the upright one twice drives the shear modulus to its bound: refused as implausible before this check)
+    _, _, _, sessions, calibration = identified[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(SessionError, match=r"the two sweeps put EI\(P\) \d+ σ of the config's prior from it .*"
+                                               r"were they really two mounts"):
+            identify_gravity([sessions[1], sessions[1]], CFG, calibration, turned=HANGING)

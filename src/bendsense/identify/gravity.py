@@ -36,6 +36,10 @@ __all__ = ["GravityFit", "identify_gravity"]
 
 #: Frames of each sweep used, spread over pressure (1 kPa bins).
 FRAMES_PER_MOUNT = 120
+#: The fitted EI(P) farther than this many of the prior's σ from the prior (Mahalanobis) is refused: two sweeps
+#: in one mount (or the same sweep twice) show no difference of sag, which only an EI far stiffer than any
+#: actuator of the prior explains, with a confident posterior; a lab's actuator off by 15-30 % lies 1-2 σ away
+MAX_PRIOR_SIGMA = 5.0
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -181,6 +185,7 @@ def identify_gravity(sessions, config, calibration, *, turned=None, max_rounds: 
         current = new
         if np.all(np.abs(b_new - b_lin) <= 1e-3 * np.abs(b0)):
             break
+    _check_sag_seen(config, current)
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     provenance = (f"identify gravity {when}: free sweeps in two mounts (gravity ({first[0]:g}, {first[1]:g}) and "
                   f"({second[0]:g}, {second[1]:g})); the prior: "
@@ -188,3 +193,18 @@ def identify_gravity(sessions, config, calibration, *, turned=None, max_rounds: 
     current = current.replace(parameter_covariance=dataclasses.replace(current.parameter_covariance,
                                                                        source=provenance))
     return GravityFit(config=current, fit=fit, frames=tuple(len(d[2]) for d in data), rounds=rounds, prior=config)
+
+
+def _check_sag_seen(prior, fitted) -> None:
+    """Refuse an EI(P) more than :data:`MAX_PRIOR_SIGMA` of the prior's σ from it (two mounts that were not)."""
+    section = prior.parameter_covariance
+    names = [n for n in STIFFNESS_PARAMETERS if n in section.parameters]
+    idx = [section.parameters.index(n) for n in names]
+    moved = np.array([getattr(fitted.stiffness, n) - getattr(prior.stiffness, n) for n in names])
+    distance = float(np.sqrt(moved @ np.linalg.pinv(section.matrix[np.ix_(idx, idx)]) @ moved))
+    if not distance <= MAX_PRIOR_SIGMA:
+        raise SessionError(f"the two sweeps put EI(P) {distance:.0f} σ of the config's prior from it (ei0_nm2 "
+                           f"{prior.stiffness.ei0_nm2:.3g} -> {fitted.stiffness.ei0_nm2:.3g}): the two mounts show "
+                           "less difference of sag than any actuator of the prior would; were they really two mounts "
+                           "(not one sweep twice)? An actuator this far from the prior: widen its "
+                           "parameter_covariance, or identify stiffness with weights")
