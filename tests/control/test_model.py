@@ -108,7 +108,7 @@ def test_bad_arguments_are_refused():
         ModelController(0.1, CONFIG, max_pressure_pa=LIMIT_PA, approach_rate_pa_per_s=0.0)
     with pytest.raises(ArgumentError, match="target_force_n.*a higher pressure limit"):
         ModelController(0.5, CONFIG, max_pressure_pa=LIMIT_PA, max_force_n=0.3)
-    with pytest.raises(ArgumentError, match="target_force_n: 150 N.*a force in mN is given in N"):
+    with pytest.raises(ArgumentError, match="target_force_n: 150 N.*a force in mN given in N\\?"):
         ModelController(150.0, CONFIG, max_pressure_pa=LIMIT_PA, max_force_n=0.3)
     top = CONFIG.actuator.pressure_range_pa[1]
     with pytest.raises(ArgumentError, match="max_pressure_pa.*pressure_range_pa"):  # its table would not fit in memory

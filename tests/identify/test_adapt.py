@@ -225,6 +225,18 @@ def test_chain_adapt_needs_reconstruct_first(files):
     assert res.exit_code == 2 and "'adapt' needs 'reconstruct' earlier in the chain" in res.output
 
 
+@pytest.mark.parametrize("order, said", [
+    (("estimate", "adapt"), "'adapt' goes before 'estimate'"),
+    (("adapt", "adapt"), "'adapt' once in a chain"),
+])
+def test_chain_adapt_after_estimate_or_twice_is_refused(files, order, said):
+    out = files / f"out-{'-'.join(order)}"
+    res = CliRunner().invoke(main, ["load", str(files / "run.csv"), "--calibration", str(files / "cal.yaml"),
+                                    "--config", str(files / "prior.yaml"), "reconstruct", *order, "save", str(out)])
+    assert res.exit_code == 2 and said in res.output and "Traceback" not in res.output, res.output
+    assert not out.exists()
+
+
 def test_process_adapt_adapts_each_session(files):
     out = files / "batch"
     res = CliRunner().invoke(main, ["process", str(files / "run.csv"), "--calibration", str(files / "cal.yaml"),

@@ -255,3 +255,14 @@ def test_cli_free_sweep(tmp_path):
     assert r.exit_code != 0 and "--max-pressure-kpa" in r.output and "Traceback" not in r.output
     with pytest.raises(ConfigError, match="n_frames"):
         simulate("free-sweep", tmp_path / "y", n_frames=0)
+    # a contact force in mN given in N: beyond what the finger can press, refused before any frame
+    from bendsense.control import force_limit_n
+
+    limit = force_limit_n(bendsense.load_config(), 80e3)
+    for scenario, extra in (("free-sweep", ["--max-pressure-kpa", "80"]), ("time-varying", [])):
+        r = CliRunner().invoke(main, ["simulate", scenario, "-o", str(tmp_path / "mn"), "--contact-n", "150", *extra])
+        assert r.exit_code != 0 and "contact_n: 150 N is beyond what the finger can press" in r.output, r.output
+        assert "a force in mN given in N?" in r.output and not (tmp_path / "mn").exists()
+    with pytest.raises(ConfigError, match="at most"):
+        simulate("free-sweep", tmp_path / "z", pressure_max_pa=80e3, contact_n=1.01 * limit)
+    simulate("free-sweep", tmp_path / "z", n_frames=11, pressure_max_pa=80e3, contact_n=0.99 * limit)

@@ -263,8 +263,13 @@ def adapt():
         from bendsense.identify.sessions import adapt as adapt_config
 
         if is_gripper(state):
-            raise click.UsageError("'adapt' takes one actuator's config, not a gripper's fingers:")
+            raise click.UsageError("'adapt' takes one actuator's config, not a gripper's (a config with fingers)")
         shape = _require(state, "shape", "adapt", "'reconstruct'")
+        if state.get("estimate") is not None:  # it would not use the adapted config: results and config.yaml disagree
+            raise click.UsageError("'adapt' goes before 'estimate' (the estimate made would not use the adapted "
+                                   "config): ... reconstruct adapt estimate ...")
+        if state.get("adapted"):  # the same frames twice would shrink σ for nothing learned
+            raise click.UsageError("'adapt' once in a chain: a second would learn from the same frames again")
         session = state["session"]
         with data_warnings_logged(state.setdefault("said", set())):
             result = adapt_config(shape, session.pressure_pa, state["config"], calibration=state["calibration"],

@@ -164,7 +164,7 @@ class FingerController:
         target = _positive("target_force_n", value, zero=True)
         if self.max_force_n is not None and target > self.max_force_n:
             who = "the finger" if self.finger is None else f"finger {self.finger}"
-            hint = ("a force in mN is given in N" if target >= 1.0 and target / 1e3 <= self.max_force_n
+            hint = ("a force in mN given in N?" if target >= 1.0 and target / 1e3 <= self.max_force_n
                     else "a higher pressure limit lets it press harder")
             raise ArgumentError(f"target_force_n: {target:g} N is beyond what {who} can press at the pressure limit "
                                 f"{self.max_pressure_pa / 1e3:g} kPa (at most {self.max_force_n:.3g} N: twice its "

@@ -588,11 +588,25 @@ def _concat(a, b):
     return ActuatorFrames(s_m=a.s_m, contact_s_m=a.contact_s_m, **fields)
 
 
+def _check_contact_force(config, contact_n, pressure_max_pa, contact_s_m=None) -> None:
+    """Refuse a contact force beyond what the finger can press at the sweep's pressure (a force in mN given in N)."""
+    from bendsense.control.force import force_limit_n
+
+    where = contact_s_m if isinstance(contact_s_m, (int, float)) and not isinstance(contact_s_m, bool) else None
+    limit = force_limit_n(config, pressure_max_pa, where)
+    if isinstance(contact_n, (int, float)) and contact_n > limit:
+        hint = "; a force in mN given in N?" if contact_n / 1e3 <= limit else ""
+        raise ConfigError(f"contact_n: {contact_n:g} N is beyond what the finger can press at "
+                          f"{pressure_max_pa / 1e3:g} kPa (at most {limit:.3g} N, bendsense.control.force_limit_n)"
+                          f"{hint}")
+
+
 def _time_varying(run, *, rate_hz, duration_s, contact_n, contact_s_m):
     sim, out = run.sim, run.out
     rate = _positive_option("rate_hz", rate_hz)
     total = round(rate * _positive_option("duration_s", duration_s))
     touch_locations(0.0, sim.config.actuator.length_m, contact_s_m)
+    _check_contact_force(sim.config, contact_n, 100e3, contact_s_m)  # time_varying_profile's peak pressure
     rows = list(_stream_frames(sim, rate, max(1, round(rate * 0.1)), total, float(contact_n), run.rng, True,
                                contact_s_m))
     keep = np.array([truth["valid"] for _, _, truth in rows])
@@ -656,6 +670,7 @@ def free_sweep_profile(n_frames: int, pressure_max_pa: float, contact_n: float =
 def _free_sweep(run, *, n_frames, rate_hz, pressure_max_pa, contact_n):
     rate = _positive_option("rate_hz", rate_hz)
     pressure, fc = free_sweep_profile(n_frames, pressure_max_pa, contact_n)
+    _check_contact_force(run.sim.config, contact_n, pressure_max_pa)
     frames = run.sim.frames(pressure, contact_n=fc if np.any(fc > 0) else None, time_series=True, noise=False)
     first = {"effective_pressure_pa": frames.effective_pressure_pa, "k0_true_per_m": frames.tip_curvature_per_m,
              "ei_true_nm2": frames.ei_nm2}
