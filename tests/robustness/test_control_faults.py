@@ -264,6 +264,17 @@ def test_a_gripper_config_on_a_board_without_its_channels_is_refused_before_the_
     assert "holding" not in res.output and board.received == [] and board.frames == 0  # never started, never driven
 
 
+def test_an_actuator_config_on_a_gripper_board_is_refused_before_the_board_is_driven(gripper_board, files):
+    board = Faulty(copy.deepcopy(gripper_board))  # the gripper's channels; the actuator's calibration reads 16
+    with SimulatedDevice(board, rate_hz=RATE, n_channels=GRIPPER_CHANNELS) as dev:
+        res = CliRunner().invoke(main, ["control", dev.port, "--calibration", files["calibration"],
+                                        "--target-force-n", "0.15", "--seconds", "1"])
+    assert res.exit_code == 1 and one_error_line(res).endswith(
+        f"(the board's HELLO): {GRIPPER_CHANNELS} channels, but the calibration reads 16 (a gripper's board: give "
+        "its config with fingers: as --config)"), res.output
+    assert "holding" not in res.output and board.received == []  # never driven
+
+
 def test_a_finger_subset_holds_the_other_lines_at_zero(gripper_board, files, tmp_path):
     # the board's own profile would close every finger (70 kPa); --finger thumb must hold the others at 0
     board = Faulty(copy.deepcopy(gripper_board))

@@ -259,17 +259,23 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
                         "constraint": constraint,
                         "contact_s_m": _locations(load_options), "bandwidth_hz": bandwidth_hz}}
     with Driver(port, baudrate=baud or DEFAULT_BAUDRATE, hello_timeout_s=hello_timeout) as driver:
-        _check_board(driver, config, port)
+        _check_board(driver, config, port, processor)
         _run(driver, processor, controller, config, pmax, seconds, output, overwrite, meta, silence_s)
 
 
-def _check_board(driver, config, port) -> None:
-    """Every finger's channels on the board its HELLO announces, or one error line before the board is driven."""
+def _check_board(driver, config, port, processor) -> None:
+    """Every finger's channels (or the actuator's) on the board its HELLO announces; else one line, never driven."""
     from bendsense.config import GripperConfig
     from bendsense.session.fingers import check_board
 
-    if driver.n_channels is not None and isinstance(config, GripperConfig):  # an actuator: its calibration's check
+    if driver.n_channels is None:  # no HELLO: the first block's check
+        return
+    if isinstance(config, GripperConfig):
         check_board(driver.n_channels, None, config, f"{port} (the board's HELLO)", click.ClickException)
+    elif driver.n_channels != processor.calibration.n_channels:
+        raise click.ClickException(f"{port} (the board's HELLO): {driver.n_channels} channels, but the calibration "
+                                   f"reads {processor.calibration.n_channels} (a gripper's board: give its config "
+                                   "with fingers: as --config)")
 
 
 def _tuning(kind, approach_kpa_per_s, kp_kpa_per_n, ki_kpa_per_n_s, max_rate_kpa_per_s) -> dict:
