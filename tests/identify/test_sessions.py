@@ -282,6 +282,18 @@ def _one_line_error(result, pattern):
     assert pattern in lines[0], result.output
 
 
+def test_cli_says_a_sessions_data_warning_as_one_line_with_its_error(lab, tmp_path, caplog):
+    s = bendsense.read_session(lab["sweep"])
+    kpa = tmp_path / "kpa.csv"  # pressures in kPa written as Pa: the library's DataWarning names the likely slip
+    bendsense.session.write_session_csv(bendsense.Session(s.t_s, s.signals, s.pressure_pa / 1e3), kpa)
+    r = _run(["identify", "free-bending", "--session", kpa, "--calibration", lab["root"] / "cal.yaml", "-o",
+              tmp_path / "x.yaml"])
+    assert r.exit_code != 0 and "Traceback" not in r.output and "Error" in r.output
+    said = [rec.getMessage() for rec in caplog.records if rec.name == "bendsense" and rec.levelname == "WARNING"]
+    assert any("pressures in kPa given as Pa?" in m for m in said), said  # said, though an error ends the fit
+    assert "DataWarning" not in r.output and "sessions.py" not in r.output, r.output
+
+
 def test_cli_bad_inputs_are_one_line(lab, tmp_path):
     cal = lab["root"] / "cal.yaml"
     out = tmp_path / "x.yaml"

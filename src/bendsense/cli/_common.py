@@ -554,15 +554,18 @@ def data_warnings_logged(said=None):
     from bendsense.errors import DataWarning
 
     said = set() if said is None else said
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", DataWarning)
-        yield
-    for w in caught:
-        if not issubclass(w.category, DataWarning):
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        elif str(w.message) not in said:
-            said.add(str(w.message))
-            logging.getLogger("bendsense").warning("%s", w.message)
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", DataWarning)
+            yield
+    finally:  # also before the error that ends the block: the warning is often its cause (kPa given as Pa)
+        for w in caught:
+            if not issubclass(w.category, DataWarning):
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            elif str(w.message) not in said:
+                said.add(str(w.message))
+                logging.getLogger("bendsense").warning("%s", w.message)
 
 
 def log_no_parameter_covariance(config) -> None:

@@ -15,6 +15,7 @@ from bendsense.cli._common import (
     PressureKpa,
     check_figure_suffix,
     config_option,
+    data_warnings_logged,
     make_calibration_option,
     overwrite_option,
     save_figure,
@@ -192,22 +193,23 @@ def identify(
         if port is not None:
             _sweep(port, config, calibration_paths, max_pressure_kpa, seconds, sweep_path, output, overwrite)
         try:
-            if turned_path is not None:
-                fit = _gravity_sessions(inputs, config, turned_path, turned_gravity)
-            elif kind == "free-bending" and data is None:
-                fit = _free_bending_session(inputs, config, fix)
-            elif kind == "free-bending":
-                pressure, angle = read_free_bending_csv(data)
-                fit = fit_free_bending(pressure, angle, config, fix=fix)
-            else:
-                options = {"fix": fix, "pressure_tolerance_pa": pressure_tolerance_kpa * 1e3,
-                           "weighted": not unweighted, "method": method}
-                if data is not None:
-                    fit = fit_stiffness(read_stiffness_csv(data, config.actuator.length_m), config, **options)
+            with data_warnings_logged():  # one WARNING: line each, before an error
+                if turned_path is not None:
+                    fit = _gravity_sessions(inputs, config, turned_path, turned_gravity)
+                elif kind == "free-bending" and data is None:
+                    fit = _free_bending_session(inputs, config, fix)
+                elif kind == "free-bending":
+                    pressure, angle = read_free_bending_csv(data)
+                    fit = fit_free_bending(pressure, angle, config, fix=fix)
                 else:
-                    fit = _stiffness_session(inputs, config, options)
-            failed = _failure(fit)  # never a config from a fit that failed: it would pose as identified
-            new_config = None if failed else written(fit.to_config(config))
+                    options = {"fix": fix, "pressure_tolerance_pa": pressure_tolerance_kpa * 1e3,
+                               "weighted": not unweighted, "method": method}
+                    if data is not None:
+                        fit = fit_stiffness(read_stiffness_csv(data, config.actuator.length_m), config, **options)
+                    else:
+                        fit = _stiffness_session(inputs, config, options)
+                failed = _failure(fit)  # never a config from a fit that failed: it would pose as identified
+                new_config = None if failed else written(fit.to_config(config))
         except BendsenseError as err:
             raise click.ClickException(f"{source}: {err}" if str(source) not in str(err) else str(err)) from None
         say(fit.report())
