@@ -294,6 +294,15 @@ def test_cli_says_a_sessions_data_warning_as_one_line_with_its_error(lab, tmp_pa
     assert "DataWarning" not in r.output and "sessions.py" not in r.output, r.output
 
 
+def test_cli_a_calibration_of_another_sensor_is_named_by_its_file(lab, tmp_path):
+    from helpers import linear_calibration
+
+    linear_calibration(offset=np.full(8, 2000.0), noise_std=None, sensor=None).save(tmp_path / "cal8.yaml")
+    _one_line_error(_run(["identify", "free-bending", "--session", lab["sweep"], "--calibration",
+                          tmp_path / "cal8.yaml", "-o", tmp_path / "x.yaml"]),
+                    f"{tmp_path / 'cal8.yaml'}: the calibration has 8 channels, but the config's sensor has 16")
+
+
 def test_cli_bad_inputs_are_one_line(lab, tmp_path):
     cal = lab["root"] / "cal.yaml"
     out = tmp_path / "x.yaml"

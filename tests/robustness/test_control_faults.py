@@ -264,6 +264,17 @@ def test_a_gripper_config_on_a_board_without_its_channels_is_refused_before_the_
     assert "holding" not in res.output and board.received == [] and board.frames == 0  # never started, never driven
 
 
+def test_a_calibration_of_another_sensor_is_named_by_its_file(tmp_path):
+    from helpers import linear_calibration
+
+    linear_calibration(offset=np.full(8, 2000.0), noise_std=None, sensor=None).save(tmp_path / "cal8.yaml")
+    res = CliRunner().invoke(main, ["control", str(tmp_path / "no-such-port"), "--calibration",
+                                    str(tmp_path / "cal8.yaml"), "--target-force-n", "0.15", "--seconds", "1"])
+    assert res.exit_code == 1 and one_error_line(res).startswith(f"Error: {tmp_path / 'cal8.yaml'}: the calibration "
+                                                                 "has 8 channels, but the config's sensor has 16"), \
+        res.output
+
+
 def test_an_actuator_config_on_a_gripper_board_is_refused_before_the_board_is_driven(gripper_board, files):
     board = Faulty(copy.deepcopy(gripper_board))  # the gripper's channels; the actuator's calibration reads 16
     with SimulatedDevice(board, rate_hz=RATE, n_channels=GRIPPER_CHANNELS) as dev:

@@ -541,6 +541,18 @@ def say(text: str) -> None:
         click.echo(text)
 
 
+def checked_calibration(path, config):
+    """The calibration at ``path`` for one actuator's ``config``; a channel count of another sensor names the file."""
+    from bendsense.calibration import Calibration
+    from bendsense.errors import ConfigError
+
+    calibration = Calibration.load(path)
+    if calibration.n_channels != config.sensor.n_segments:
+        raise ConfigError(f"{path}: the calibration has {calibration.n_channels} channels, but the config's sensor "
+                          f"has {config.sensor.n_segments} segments (sensor.n_segments)")
+    return calibration
+
+
 @contextlib.contextmanager
 def data_warnings_logged(said=None):
     """The library's :class:`~bendsense.errors.DataWarning` inside the block as one ``WARNING:`` line each.

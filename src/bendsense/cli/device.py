@@ -18,6 +18,7 @@ from bendsense.cli._common import (
     Finite,
     InterspersedCommand,
     PressureKpa,
+    checked_calibration,
     constraint_option,
     contact_locations,
     live_bandwidth_option,
@@ -141,7 +142,6 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
     adapt : bool, default False
         ``--adapt``: learn the free-bending model as frames arrive (a single actuator only).
     """
-    from bendsense.calibration import Calibration
     from bendsense.config import GripperConfig
     from bendsense.pipeline import LiveProcessor
     from bendsense.pipeline.gripper import GripperProcessor
@@ -152,7 +152,7 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
                                  "fingers: bendsense process --adapt on each finger's recording)",
                                  param_hint="'--adapt'")
     processor = (GripperProcessor if gripper else LiveProcessor)(
-        calibration_path if gripper else Calibration.load(calibration_path),
+        calibration_path if gripper else checked_calibration(calibration_path, config),
         config,
         constraint=constraint,
         objective=objective,

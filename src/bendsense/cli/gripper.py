@@ -168,8 +168,8 @@ def identify_inputs(config, finger, session_path, calibration_paths) -> tuple:
         returning ``(session, calibration)`` of ``--session``, and a function of the fitted
         config returning the config to write (a gripper's: with the finger's fitted config).
     """
-    from bendsense.calibration import Calibration
     from bendsense.cli._common import calibration_paths as for_config
+    from bendsense.cli._common import checked_calibration
     from bendsense.config import GripperConfig
     from bendsense.session import read_session
 
@@ -178,7 +178,7 @@ def identify_inputs(config, finger, session_path, calibration_paths) -> tuple:
         if finger is not None:
             raise click.BadParameter("a finger needs a gripper's config (--config G.yaml with fingers:)",
                                      param_hint="'--finger'")
-        return config, lambda: (read_session(session_path), Calibration.load(paths)), lambda fitted: fitted
+        return config, lambda: (read_session(session_path), checked_calibration(paths, config)), lambda fitted: fitted
     if finger is None:
         raise click.UsageError(f"the config is a gripper (fingers {', '.join(config.names)}): give --finger NAME, "
                                f"the finger to identify")
