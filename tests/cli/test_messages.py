@@ -130,3 +130,14 @@ def test_a_directory_output_named_like_a_file_is_refused_before_any_work(args, t
         result.output
     assert "Traceback" not in result.output
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args, hint, said", [
+    (["record", "/dev/bendsense-no-such-port", "-o", "rec", "--lsl-wait", "3"], "'--lsl-wait'", "it needs --lsl"),
+    (["control", "/dev/bendsense-no-such-port", "--calibration", GOOD_CAL, "--target-force-n", "0.15",
+      "--overwrite"], "'--overwrite'", "give -o"),
+])
+def test_an_option_of_another_option_is_refused_alone(args, hint, said, tmp_path, monkeypatch):
+    result = _run(args, tmp_path, monkeypatch)
+    assert result.exit_code == 2 and hint in result.output and said in result.output, result.output
+    assert list(tmp_path.iterdir()) == []  # before any work: nothing made

@@ -242,6 +242,8 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     from bendsense.device.driver import DEFAULT_BAUDRATE, Driver
 
     ctx = click.get_current_context()
+    if overwrite and output is None:
+        raise click.BadParameter("replaces the session of -o SESSION: give -o", param_hint="'--overwrite'")
     if output is not None:  # checked and locked before anything opens, until the command ends
         ctx.with_resource(outputs.reserve([outputs.recording(output, overwrite=overwrite)],
                                           [config_path, *(p for _, p in calibration_paths)]))

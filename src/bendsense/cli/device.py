@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import click
+from click.core import ParameterSource
 
 from bendsense import output as outputs
 from bendsense.cli import _signals
@@ -361,6 +362,8 @@ def record(
                                  param_hint="--calibration")
     if adapt and not estimate:
         raise click.BadParameter("needs --estimate", param_hint="'--adapt'")
+    if not lsl and click.get_current_context().get_parameter_source("lsl_wait") == ParameterSource.COMMANDLINE:
+        raise click.BadParameter("waits for an LSL consumer: it needs --lsl", param_hint="'--lsl-wait'")
     if (load != "tip" or contact_s_m) and not (estimate or lsl):
         raise click.BadParameter("a load model needs --estimate (or --lsl)",
                                  param_hint="'--load'" if load != "tip" else "'--contact-s-m'")
