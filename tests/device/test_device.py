@@ -342,6 +342,9 @@ def test_cli_record(tmp_path):
             main, ["record", sim.port, "-o", str(tmp_path / "s"), "--seconds", "0.2", "--overwrite"]
         )
         assert res.exit_code == 0 and len(read_session(tmp_path / "s")) < n
+        assert "done: " in res.output
+        res = CliRunner().invoke(main, ["-q", "record", sim.port, "-o", str(tmp_path / "q"), "--seconds", "0.2"])
+        assert res.exit_code == 0 and res.output == "" and len(read_session(tmp_path / "q")) > 0  # -q: errors only
     res = CliRunner().invoke(main, ["record", "/dev/does-not-exist-bendsense", "-o", str(tmp_path / "t")])
     assert res.exit_code == 1 and "cannot open serial port" in res.output
     assert "Traceback" not in res.output

@@ -535,10 +535,10 @@ def quiet() -> bool:
     return bool(isinstance(obj, dict) and obj.get("quiet"))
 
 
-def say(text: str) -> None:
-    """Print ``text`` (a report, a ``wrote ...`` line) unless ``bendsense -q`` was given (only errors then)."""
+def say(text: str, *, err: bool = False) -> None:
+    """Print ``text`` (a report, a ``wrote ...`` line; to stderr with ``err``) unless ``bendsense -q`` was given."""
     if not quiet():
-        click.echo(text)
+        click.echo(text, err=err)
 
 
 def checked_calibration(path, config):

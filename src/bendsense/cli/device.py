@@ -32,6 +32,7 @@ from bendsense.cli._common import (
     make_overwrite_option,
     objective_option,
     quiet,
+    say,
 )
 from bendsense.cli.sim import grasp_options, model_error_options, model_errors, noise_option
 
@@ -103,13 +104,13 @@ def finish_adapt(processor, output=None, *, wait: bool = True) -> str:
         return ""
     config = adaptation.close(wait)
     if wait:
-        click.echo(adaptation.summary(), err=True)
+        say(adaptation.summary(), err=True)
     if config is None or output is None or not output.is_dir():
         return ""
     save_config(config, output / "config.yaml")
     written = f"adapted config ({adaptation.updates} update(s)) written to {output / 'config.yaml'}"
     if wait:
-        click.echo(written, err=True)
+        say(written, err=True)
     return written
 
 
@@ -437,12 +438,12 @@ def record(
             kept += f"; {est_stats.frames} of them estimated to {where}"
         _signals.note(interrupted, "; ".join(filter(None, (kept, finish_adapt(processor, output, wait=False)))))
         raise interrupted
-    click.echo(f"done: {stats.records} frames written to {output}{losses}", err=True)
+    say(f"done: {stats.records} frames written to {output}{losses}", err=True)
     if stats.records == 0 and not stats.skipped:
         log.warning("%s: no sample frames arrived; the recording %s holds none (is the board streaming samples?)",
                     port, output)
     if estimate:
-        click.echo(estimated, err=True)
+        say(estimated, err=True)
     finish_adapt(processor, output)
 
 
