@@ -268,8 +268,13 @@ def test_control_beats_while_no_frame_arrives():
     board = NoFrames()
     with pytest.raises(ControlStop, match="no frame from the board"):
         run(board, FakeProcessor(), Quiet(), safety=Safety(first_frame_s=0.4))
-    assert max(board.waits) <= HEARTBEAT_S and len(board.beats) >= 0.4 / HEARTBEAT_S
-    assert np.max(np.diff(board.beats)) < HEARTBEAT_S + 0.02
+    assert max(board.waits) <= HEARTBEAT_S  # the loop never asks to wait longer than a beat
+    gaps = np.diff(board.beats)
+    assert len(gaps) >= 3 and np.median(gaps) < HEARTBEAT_S + 0.01  # the cadence over the 0.4 s
+    # the safety: no gap near the board's watchdog (1 s). A loaded 2-core machine delays a sleeping thread by
+    # tens of ms (a full suite with first compiles once failed this test's old bounds of 8 beats and 70 ms);
+    # the board's watchdog never notices such a delay
+    assert np.max(gaps) < 0.25 * DEFAULT_WATCHDOG_MS / 1e3
 
 
 CLI = [sys.executable, "-c", "from bendsense.cli import main; main()"]
