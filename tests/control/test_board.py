@@ -167,6 +167,26 @@ def test_a_setpoint_beyond_the_limit_is_never_sent(board, processor):
     assert truth.column("setpoint_pa")[-1] == 0.0
 
 
+def test_the_loop_reads_the_port_itself_so_a_blocks_frames_come_in_one_read(board, processor):
+    """A loop busy 3 ms a block at 1 kHz: the frames that arrived meanwhile come in the loop's one read of the port
+    (the reader thread, free while the loop sleeps, would have read each as it came: as many reads as frames), and
+    every frame the board sent before the stop reached the loop, in order."""
+    stop, seqs = threading.Event(), []
+
+    def on_block(block, setpoints):
+        seqs.extend(block.seq)
+        time.sleep(0.003)
+        if len(seqs) >= 400:
+            stop.set()
+
+    result, truth = session(board, processor, PIController(0.15, max_pressure_pa=LIMIT_PA), stop=stop,
+                            on_block=on_block)
+    assert result.outcome == "stopped"
+    # the first block: what the reader thread had queued before the loop took the port
+    assert np.median(result.block_frames) >= 2 and (result.block_reads[1:] == 1).all()
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+
+
 def test_lost_frames_stop_the_loop(board, processor):
     pi = PIController(0.15, max_pressure_pa=LIMIT_PA)
     err, truth = session(board, processor, pi, drop=0.05, seconds=5.0, safety=Safety(max_lost_frames=10, silence_s=1.0))

@@ -1,5 +1,6 @@
 """Driver, simulated board and recorder, end to end over real pseudo-terminals."""
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -189,6 +190,99 @@ def test_sigkill_leaves_a_readable_session(tmp_path):
     k = s.seq - 1
     np.testing.assert_array_equal(np.diff(k), 1)
     np.testing.assert_array_equal(s.signals, [expected_counts(int(i)) for i in k])
+
+
+def test_reading_here_keeps_every_frame_in_order_and_reads_in_the_callers_thread():
+    """Frames queued by the reader thread before, read by the caller within, and after the context: one sequence,
+    none lost, none twice; within it the caller's read takes what arrived while it was busy in one read."""
+    with SimulatedDevice(ramp_source(N_CH), rate_hz=1000, max_frames=1500,
+                         faults=Faults(drop=0.02, corrupt=0.02, seed=5)) as sim, Driver(sim.port) as drv:
+        drv.start()
+        wait_for(lambda: drv.queued >= 100)  # the reader thread's, taken inside the context first
+        got, stamps = [], []
+        with drv.reading_here():
+            while len(got) < 600:
+                got += drv.get_batch(timeout=0.5, max_items=7)
+            time.sleep(0.03)  # busy elsewhere: the reader thread is paused, nothing reads meanwhile
+            block = drv.get_batch(timeout=0.5)
+            stamps = {r.host_ns for r in block}
+            got += block
+            got += drv.get_batch(timeout=0.5, max_items=1)  # leaves frames of its read for the queue after
+        wait_for(sim.finished.is_set)
+        got += drain(drv, lambda: True)
+    assert len(block) >= 20 and len(stamps) == 1  # ~30 frames arrived in the 30 ms: one read took them all
+    st, ds = sim.stats, drv.stats
+    seqs = [r.sample.seq for r in got]
+    assert seqs == sorted(set(seqs))
+    assert len(got) == st.sent == ds.samples and ds.lost == st.dropped + st.corrupted
+    assert all(r.sample.adc == expected_counts(r.sample.seq - 1) for r in got)
+
+
+def test_reading_here_hands_a_vanished_port_back_to_the_reader_thread(tmp_path):
+    """A read error inside the context: the reader thread reconnects (START resent), and the caller gets the new
+    board's frames from it; a board that does not come back ends the caller's wait with the driver's error."""
+    link = tmp_path / "ttyBENDSENSE"
+    sim1 = SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500).start()
+    os.symlink(sim1.port, link)
+    with Driver(str(link), reconnect=Reconnect(attempts=30, backoff_s=0.05)) as drv, drv.reading_here():
+        drv.start()
+        first = drain(drv, lambda: drv.stats.samples >= 50)
+        sim1.disconnect()
+        with SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500, firmware=Firmware(start_seq=5000)) as sim2:
+            os.unlink(link)
+            os.symlink(sim2.port, link)
+            second = drain(drv, lambda: drv.stats.samples >= len(first) + 50)
+            assert sim2.streaming
+    assert drv.stats.reconnects == 1 and second[-1].sample.seq > 5000
+    with SimulatedDevice(ramp_source(N_CH), rate_hz=1000, faults=Faults(disconnect_after=200)) as sim, \
+            Driver(sim.port, reconnect=Reconnect(attempts=2, backoff_s=0.02)) as drv, drv.reading_here():
+        drv.start()
+        got = []
+        with pytest.raises(DeviceError, match="disconnected.*2 reconnect attempt"):
+            while True:
+                got += drv.get_batch(timeout=1)
+        assert [r.sample.seq for r in got] == list(range(1, 201))
+
+
+@pytest.mark.parametrize("here", [False, True], ids=["reader thread", "reading here"])
+def test_a_ctrl_c_at_any_line_of_get_batch_leaves_the_driver_working(here):
+    """KeyboardInterrupt raised at each Python line (and return) of a get_batch call in turn, as a Ctrl-C can:
+    the next get_batch still returns readings, in order (queue.Queue, interrupted inside its Condition's
+    __enter__, kept its lock taken: the next get waited for ever, the control loop's zeros unconfirmed)."""
+    with SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=1000) as sim, Driver(sim.port) as drv, \
+            (drv.reading_here() if here else contextlib.nullcontext()):
+        drv.start()
+        seqs, interrupted = [], 0
+        for k in range(1, 400):
+            events = 0
+
+            def tracer(frame, event, arg, k=k):
+                nonlocal events
+                if event in ("line", "return"):
+                    events += 1
+                    if events == k:
+                        raise KeyboardInterrupt
+                return tracer
+
+            time.sleep(0.002)
+            sys.settrace(tracer)
+            try:
+                seqs += [r.sample.seq for r in drv.get_batch(timeout=0.5)]
+            except KeyboardInterrupt:
+                interrupted += 1
+            finally:
+                sys.settrace(None)
+            after = []
+            check = threading.Thread(target=lambda out=after: out.extend(drv.get_batch(timeout=0.5)), daemon=True)
+            check.start()
+            check.join(5)
+            assert not check.is_alive(), f"get_batch hung after a KeyboardInterrupt at its line event {k}"
+            assert after
+            seqs += [r.sample.seq for r in after]
+            if events < k:
+                break  # a call with fewer events than k: every line was interrupted once
+    assert interrupted >= 5 and sim.stats.dropped == 0
+    assert seqs == sorted(set(seqs))
 
 
 def test_loop_url_and_line_dialect():

@@ -383,6 +383,10 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     :class:`ControlResult`), so that a stopped session still says what it did; its
     ``zeros`` say line by line whether set-point 0 was sent and whether the pressure fell
     (:func:`zero_report`).
+
+    The loop reads the board's port in its own thread while it runs
+    (:meth:`~bendsense.device.driver.Driver.reading_here`, where the driver has it): each
+    frame reaches it as its bytes arrive, not at the reader thread's next turn at the GIL.
     """
     if isinstance(max_pressure_pa, bool) or not isinstance(max_pressure_pa, (int, float, np.integer, np.floating)) \
             or not (math.isfinite(max_pressure_pa) and max_pressure_pa > 0):
@@ -400,7 +404,7 @@ def run(driver, processor, controller, *, max_pressure_pa=DEFAULT_MAX_PRESSURE_P
     outcome, stopped_at, zero_at, error, result = "stopped", math.nan, math.nan, None, None
     with _signals_stop(state["signals"]):
         try:
-            with _prompt_threads():
+            with _prompt_threads(), getattr(driver, "reading_here", contextlib.nullcontext)():
                 outcome = _loop(driver, processor, controller, seconds, stop, guard, lines, recording, on_block,
                                 state)
             stopped_at = time.perf_counter()

@@ -9,6 +9,10 @@ hands every SAMPLE on to two consumers:
   reader blocks briefly, then counts ``queue_drops`` and logs an event;
 - a lossy latest-value slot for the live view (:meth:`Driver.latest`).
 
+A loop that acts on each frame as it comes (:func:`bendsense.control.run`) reads the port
+in its own thread instead (:meth:`Driver.reading_here`): a frame then reaches it without
+waiting for the reader thread's turn at the GIL.
+
 Read errors (port vanished, pseudo-terminal closed) trigger bounded reconnect attempts
 with exponential backoff; if they fail, or the driver is closed, consumers blocked in
 :meth:`Driver.get` or iterating get a :class:`~bendsense.errors.DeviceError` instead of
@@ -17,12 +21,14 @@ hanging.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
 import numbers
 import os
 import queue
 import re
+import select
 import threading
 import time
 from collections import deque
@@ -203,10 +209,16 @@ class Driver:
             self.decoder = Decoder()
         else:
             self.decoder = LineDecoder(columns=columns, n_channels=n_channels)
-        self._queue = None if queue_size is None else queue.Queue(maxsize=int(queue_size))
+        # SimpleQueue: its locks are C's, which a Ctrl-C cannot leave held (queue.Queue's Python-level
+        # Condition can: raised inside its __enter__, the lock stays taken and the next get waits for ever)
+        self._queue = None if queue_size is None else queue.SimpleQueue()
+        self._queue_size = None if queue_size is None else int(queue_size)
         self._ser = None
         self._thread = None
         self._write_lock = threading.Lock()
+        self._read_lock = threading.Lock()  # held by whoever reads the port: the reader thread or reading_here
+        self._reading_here = False  # the caller's thread reads the port (reading_here)
+        self._pending = []  # readings taken from the port or the queue by reading_here, served before the queue
         self._closing = threading.Event()
         self._hello_event = threading.Event()
         self._listeners = []
@@ -510,8 +522,8 @@ class Driver:
 
     @property
     def queued(self) -> int:
-        """Readings waiting in the queue (0 without a queue)."""
-        return 0 if self._queue is None else self._queue.qsize()
+        """Readings waiting to be taken (0 without a queue)."""
+        return 0 if self._queue is None else len(self._pending) + self._queue.qsize()
 
     def latest(self) -> Reading | None:
         """Return the most recent reading (lossy; for live views), or None before the first."""
@@ -571,6 +583,17 @@ class Driver:
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             wait = 0.05 if deadline is None else max(0.0, min(0.05, deadline - time.monotonic()))
+            if self._reading_here and not self._pending:
+                self._read_here(wait)
+            if self._pending:  # no queue (and no lock of it) while the caller reads the port
+                out = self._pending[:max_items]
+                del self._pending[:max_items]
+                return out
+            if self._reading_here:  # nothing arrived within the wait
+                self._check_alive()
+                if deadline is not None and time.monotonic() >= deadline:
+                    return []
+                continue
             try:
                 first = q.get(timeout=wait) if wait > 0 else q.get_nowait()
                 break
@@ -585,6 +608,63 @@ class Driver:
             except queue.Empty:
                 break
         return out
+
+    @contextlib.contextmanager
+    def reading_here(self):
+        """Read the port in the calling thread while the context lasts: :meth:`get_batch` reads it.
+
+        The reader thread pauses after the read it is in (at most :attr:`read_timeout_s`);
+        then each :meth:`get_batch` waits on the port itself and decodes what arrived, so a
+        frame reaches the caller as soon as its bytes do, not at the reader thread's next
+        turn at the GIL (which a busy caller delays: at 2 kHz the frames then come in pairs).
+        Readings the thread had queued come first, the order kept. A read error hands the
+        port back to the reader thread, which reconnects as usual; the events (gaps, CRC
+        errors) and their listeners are called from the caller's thread meanwhile. A port
+        without a file descriptor (pyserial's URLs, Windows) keeps its reader thread: the
+        context then changes nothing.
+
+        Examples
+        --------
+        >>> with Driver("/dev/ttyACM0") as dev, dev.reading_here():  # doctest: +SKIP
+        ...     dev.start()
+        ...     block = dev.get_batch(timeout=0.05)
+        """
+        if self._reading_here or self._thread is None or self._queue is None or _fileno(self._ser) is None:
+            yield self
+            return
+        self._read_lock.acquire()  # the reader thread's read in progress ends first
+        try:
+            with contextlib.suppress(queue.Empty):
+                while True:
+                    self._pending.append(self._queue.get_nowait())
+            self._reading_here = True
+            yield self
+        finally:
+            self._hand_back()
+
+    def _hand_back(self) -> None:
+        """The reader thread reads the port again (the readings not yet taken are served first)."""
+        if self._reading_here:
+            self._reading_here = False
+            self._read_lock.release()
+
+    def _read_here(self, wait: float) -> None:
+        """Wait up to ``wait`` for the port in this thread and decode what arrived into ``_pending``."""
+        try:
+            fd = _fileno(self._ser)
+            if fd is None:
+                raise OSError(errno.EBADF, "the port is closed")
+            ready = select.select([fd], [], [], wait)[0]
+            data = os.read(fd, 65536) if ready else b""
+            if ready and not data:
+                raise OSError(errno.EIO, "the port reports data to read but gave none (disconnected?)")
+        except (OSError, ValueError, TypeError) as err:
+            log.info("%s: read in the caller's thread failed (%s); the reader thread takes the port back",
+                     self.port, err)
+            self._hand_back()
+            return
+        if data:
+            self._pending.extend(self._handle(data, time.monotonic_ns(), queued=False))
 
     def __iter__(self):
         """Yield readings in order until the driver is closed; raise DeviceError if the device fails."""
@@ -612,17 +692,24 @@ class Driver:
 
     def _run(self) -> None:
         while not self._closing.is_set():
-            ser = self._ser
+            if not self._read_lock.acquire(timeout=self.read_timeout_s):
+                continue  # the caller reads the port (reading_here)
             try:
+                ser = self._ser
                 data = ser.read(max(1, ser.in_waiting))
             except Exception as err:  # noqa: BLE001 - SerialException, OSError, TypeError on a closed port
+                data, error = None, err
+            else:
+                error = None
+                if data:
+                    self._handle(data, time.monotonic_ns())
+            finally:
+                self._read_lock.release()
+            if error is not None:
                 if self._closing.is_set():
                     break
-                if not self._reconnect(err):
+                if not self._reconnect(error):
                     break
-                continue
-            if data:
-                self._handle(data, time.monotonic_ns())
 
     def _reconnect(self, err) -> bool:
         self._emit("disconnect", f"read failed: {err}")
@@ -673,27 +760,35 @@ class Driver:
         self._last_t = t_us
         return self._device_us
 
-    def _handle(self, data: bytes, host_ns: int) -> None:
+    def _room(self) -> bool:
+        """Wait up to ``queue_block_s`` for room in the full queue; whether there is."""
+        deadline = time.monotonic() + self.queue_block_s
+        while self._queue.qsize() >= self._queue_size:
+            if time.monotonic() >= deadline or self._closing.wait(0.001):
+                return False
+        return True
+
+    def _handle(self, data: bytes, host_ns: int, *, queued: bool = True) -> list:
+        """Decode ``data``; its readings go to the queue (``queued``) or are returned (``reading_here``)."""
         dec = self.decoder
         frames = dec.feed(data)
-        q = self._queue
+        q = self._queue if queued else None
         may_block = True
         drops = 0
+        readings = []
         for f in frames:
             if type(f) is Sample:
                 r = Reading(host_ns, self._unwrap(f.t_us, host_ns), f)
                 self._latest = r
                 self._samples += 1
                 if q is None:
+                    readings.append(r)
                     continue
-                try:
-                    if may_block:
-                        q.put(r, timeout=self.queue_block_s)
-                    else:
-                        q.put_nowait(r)
-                except queue.Full:
+                if q.qsize() >= self._queue_size and not (may_block and self._room()):
                     drops += 1
                     may_block = False  # block once per chunk, not once per frame
+                    continue
+                q.put(r)
             elif type(f) is Hello:
                 self._unwrap(f.t_us, host_ns)
                 self._emit(
@@ -722,6 +817,15 @@ class Driver:
         if bad - (over - o0) != b0:
             self._emit("malformed", f"{bad - b0 - (over - o0)} malformed frame(s) (total {bad})")
         self._seen = (crc, bad, over)
+        return readings
+
+
+def _fileno(ser) -> int | None:
+    """The port's file descriptor, or None (a pyserial URL, Windows, a closed port)."""
+    try:
+        return ser.fileno()
+    except Exception:  # noqa: BLE001 - AttributeError (no descriptor), SerialException (closed)
+        return None
 
 
 def _check_port_path(port: str) -> None:
