@@ -25,8 +25,8 @@ defaults) starts with the fingers open and the target 0.15 N, and is stopped aft
   two bytecodes: a stop that lands inside a block's compiled estimate waits for it;
 - the loop's cost: wall time per frame (process, check, control, send; mean and p99 per
   block) and the frames per block (1: the loop keeps up frame by frame), with the reads of the port they came
-  in (the frames a read brought arrived together: the board's or the driver's bunching, which no loop can
-  undo; reads a block over 1: the loop was behind).
+  in (the loop reads the port itself, one read a block: its frames arrived while the loop was busy with the
+  block before, or were sent together).
 """
 
 import argparse

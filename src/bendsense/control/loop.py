@@ -113,10 +113,12 @@ class ControlResult:
     block_frames : ndarray of int, shape (blocks,)
         Frames of each block.
     block_reads : ndarray of int, shape (blocks,)
-        Reads of the port each block's frames came in (their distinct arrival times): frames
-        that arrived in one read were sent, or read, together (the board's or the driver's
-        bunching), not left waiting by the loop. ``block_frames / block_reads`` > 1: frames
-        arrived together; ``block_reads`` > 1: the loop was behind.
+        Reads of the port each block's frames came in (their distinct arrival times). The
+        loop reads the port itself (:meth:`~bendsense.device.driver.Driver.reading_here`): one
+        read a block, whose frames arrived while the loop was busy with the block before (or
+        were sent together); more than one only in the first block (what the reader thread
+        had queued) or with a driver that reads on its own thread (then ``block_reads`` > 1:
+        the loop was behind).
     zeros : tuple of LineZero
         Each line's set-point 0 at the end, by line: sent, or why not; whether its pressure fell.
     held : tuple of int
