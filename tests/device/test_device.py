@@ -200,6 +200,7 @@ def test_reading_here_keeps_every_frame_in_order_and_reads_in_the_callers_thread
         drv.start()
         wait_for(lambda: drv.queued >= 100)  # the reader thread's, taken inside the context first
         got, stamps = [], []
+        drv.here_stall_s = 60.0  # the reader thread never reads for this caller, however slow the machine
         with drv.reading_here():
             while len(got) < 600:
                 got += drv.get_batch(timeout=0.5, max_items=7)
@@ -216,6 +217,24 @@ def test_reading_here_keeps_every_frame_in_order_and_reads_in_the_callers_thread
     assert seqs == sorted(set(seqs))
     assert len(got) == st.sent == ds.samples and ds.lost == st.dropped + st.corrupted
     assert all(r.sample.adc == expected_counts(r.sample.seq - 1) for r in got)
+
+
+def test_a_caller_away_longer_than_here_stall_s_loses_no_frame():
+    """A gripper's board (48 channels at 1 kHz) and a caller away for 2 s inside reading_here: the port would fill
+    (the board then drops what it cannot write); the reader thread reads for the caller meanwhile, in order."""
+    with SimulatedDevice(ramp_source(48), n_channels=48, rate_hz=1000) as sim, Driver(sim.port) as drv, \
+            drv.reading_here():
+        drv.start()
+        got = []
+        while len(got) < 200:
+            got += drv.get_batch(timeout=0.5)
+        time.sleep(2.0)
+        assert drv.queued >= 1000  # read by the thread while the caller was away
+        while len(got) < 2800:
+            got += drv.get_batch(timeout=0.5)
+    assert sim.stats.tx_overflow == 0 and drv.stats.lost == 0
+    seqs = [r.sample.seq for r in got]
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
 
 
 def test_reading_here_hands_a_vanished_port_back_to_the_reader_thread(tmp_path):

@@ -164,6 +164,10 @@ class Driver:
     ----------
     read_timeout_s : float
         Serial read timeout (0.02 s); bounds how fast the reader notices :meth:`close` [s].
+    here_stall_s : float
+        While the caller reads the port (:meth:`reading_here`): how long it may stay away
+        from :meth:`get_batch` before the reader thread reads for it (0.1 s), so that a
+        caller held up for seconds loses no frame to a full port [s].
 
     Examples
     --------
@@ -174,6 +178,7 @@ class Driver:
     """
 
     read_timeout_s = 0.02
+    here_stall_s = 0.1
 
     def __init__(
         self,
@@ -216,8 +221,9 @@ class Driver:
         self._ser = None
         self._thread = None
         self._write_lock = threading.Lock()
-        self._read_lock = threading.Lock()  # held by whoever reads the port: the reader thread or reading_here
+        self._read_lock = threading.Lock()  # held by whoever reads and decodes: the reader thread or reading_here
         self._reading_here = False  # the caller's thread reads the port (reading_here)
+        self._here_at = 0.0  # when the caller last waited on the port (time.monotonic())
         self._pending = []  # readings taken from the port or the queue by reading_here, served before the queue
         self._closing = threading.Event()
         self._hello_event = threading.Event()
@@ -613,15 +619,16 @@ class Driver:
     def reading_here(self):
         """Read the port in the calling thread while the context lasts: :meth:`get_batch` reads it.
 
-        The reader thread pauses after the read it is in (at most :attr:`read_timeout_s`);
-        then each :meth:`get_batch` waits on the port itself and decodes what arrived, so a
-        frame reaches the caller as soon as its bytes do, not at the reader thread's next
-        turn at the GIL (which a busy caller delays: at 2 kHz the frames then come in pairs).
-        Readings the thread had queued come first, the order kept. A read error hands the
-        port back to the reader thread, which reconnects as usual; the events (gaps, CRC
-        errors) and their listeners are called from the caller's thread meanwhile. A port
-        without a file descriptor (pyserial's URLs, Windows) keeps its reader thread: the
-        context then changes nothing.
+        The reader thread pauses after the read it is in; then each :meth:`get_batch` waits
+        on the port itself and decodes what arrived, so a frame reaches the caller as soon
+        as its bytes do, not at the reader thread's next turn at the GIL (which a busy caller
+        delays: at 2 kHz the frames then come in pairs). A caller away from :meth:`get_batch`
+        longer than :attr:`here_stall_s` has the reader thread read for it meanwhile (a full
+        port would lose frames), the order kept. A read error hands the port back to the
+        reader thread, which reconnects as usual; the events (gaps, CRC errors) and their
+        listeners are called from the caller's thread while it reads. A port without a file
+        descriptor (pyserial's URLs, Windows) keeps its reader thread: the context then
+        changes nothing.
 
         Examples
         --------
@@ -632,24 +639,28 @@ class Driver:
         if self._reading_here or self._thread is None or self._queue is None or _fileno(self._ser) is None:
             yield self
             return
-        self._read_lock.acquire()  # the reader thread's read in progress ends first
+        self._here_at = time.monotonic()
+        self._reading_here = True
         try:
+            yield self
+        finally:
+            self._reading_here = False  # the reader thread reads again; the readings not taken are served first
+
+    def _read_here(self, wait: float) -> None:
+        """Wait up to ``wait`` for the port in this thread and decode what arrived into ``_pending``.
+
+        Under the read lock: what the reader thread queued before (it read while this caller
+        was away) comes first, and then it is not read here.
+        """
+        with self._read_lock:
             with contextlib.suppress(queue.Empty):
                 while True:
                     self._pending.append(self._queue.get_nowait())
-            self._reading_here = True
-            yield self
-        finally:
-            self._hand_back()
+            if not self._pending:
+                self._wait_and_read(wait)
+            self._here_at = time.monotonic()
 
-    def _hand_back(self) -> None:
-        """The reader thread reads the port again (the readings not yet taken are served first)."""
-        if self._reading_here:
-            self._reading_here = False
-            self._read_lock.release()
-
-    def _read_here(self, wait: float) -> None:
-        """Wait up to ``wait`` for the port in this thread and decode what arrived into ``_pending``."""
+    def _wait_and_read(self, wait: float) -> None:
         try:
             fd = _fileno(self._ser)
             if fd is None:
@@ -661,7 +672,7 @@ class Driver:
         except (OSError, ValueError, TypeError) as err:
             log.info("%s: read in the caller's thread failed (%s); the reader thread takes the port back",
                      self.port, err)
-            self._hand_back()
+            self._reading_here = False
             return
         if data:
             self._pending.extend(self._handle(data, time.monotonic_ns(), queued=False))
@@ -692,8 +703,11 @@ class Driver:
 
     def _run(self) -> None:
         while not self._closing.is_set():
+            if self._reading_here and time.monotonic() - self._here_at < self.here_stall_s:
+                self._closing.wait(self.read_timeout_s)  # the caller reads the port (reading_here)
+                continue
             if not self._read_lock.acquire(timeout=self.read_timeout_s):
-                continue  # the caller reads the port (reading_here)
+                continue  # the caller is reading it
             try:
                 ser = self._ser
                 data = ser.read(max(1, ser.in_waiting))
