@@ -256,6 +256,8 @@ def score(truth, result, t_signal, board, k):
     loop = {"per_frame_s": result.per_frame_s,
             "p99_block_per_frame_s": float(np.percentile(result.loop_s / np.maximum(result.block_frames, 1), 99)),
             "frames_per_block": float(np.mean(result.block_frames)),
+            "p90_block_frames": float(np.percentile(result.block_frames, 90)),
+            "max_block_frames": float(np.max(result.block_frames)),
             "reads_per_block": float(np.mean(result.block_reads)),
             "frames_per_read": float(np.sum(result.block_frames) / max(np.sum(result.block_reads), 1)),
             "own_per_frame_s": float(np.sum(result.loop_s - result.process_s) / max(result.frames, 1)),
@@ -265,19 +267,24 @@ def score(truth, result, t_signal, board, k):
 
 
 
-def rows(quick=False, fingers=(1, 3), seconds=1.5, stop_repeats=None, in_process=False, kind="model"):
-    """(what, target, measured, pass) rows for run_all.py's table."""
+def rows(quick=False, fingers=(1, 3), seconds=1.5, stop_repeats=None, in_process=False, kind="model", also=()):
+    """(what, target, measured, pass) rows for run_all.py's table; ``also``: further (fingers, rate [Hz]) runs."""
+    global RATE_HZ
     stop_repeats = (2 if quick else 9) if stop_repeats is None else stop_repeats
+    runs = [(k, RATE_HZ) for k in fingers] + list(also)
+    rate0 = RATE_HZ
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         simulate("calibration", root / "cal", seed=0, frames_per_strip=20 if quick else 50)
         cal = Calibration.fit(root / "cal" / "manifest.yaml")
         table = []
-        for k in fingers:
+        for k, rate in runs:
+            RATE_HZ = rate  # the board's, the session's and the rows' rate
             template = board_of(k) if in_process else Board(k, root)
             try:
                 table += _rows_of(k, template, processor(cal, k), controller(k, kind), seconds, stop_repeats)
             finally:
+                RATE_HZ = rate0
                 if not in_process:
                     template.close()
     return table
@@ -319,6 +326,9 @@ def _rows_of(k, template, proc, ctl, seconds, stop_repeats):
                   f"{loop['frames_per_block']:.2f} frames per block (arrived in {loop['reads_per_block']:.2f} reads "
                   f"of {loop['frames_per_read']:.2f} frames); the processor's part: all but "
                   f"{loop['own_per_frame_s'] * 1e6:.0f} µs", loop["per_frame_s"] < 1.0 / RATE_HZ))
+    table.append((f"{label}: frames per block (the loop acts on every frame)", "<= 1.5",
+                  f"{loop['frames_per_block']:.2f} (p90 {loop['p90_block_frames']:.0f}, largest "
+                  f"{loop['max_block_frames']:.0f})", loop["frames_per_block"] <= 1.5))
     return table
 
 
