@@ -237,6 +237,27 @@ def test_chain_adapt_after_estimate_or_twice_is_refused(files, order, said):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["chain", "process", "record", "live", "control"])
+def test_adapt_with_a_config_without_a_prior_names_the_file(files, command):
+    """A copy of the shipped config without its parameter_covariance keeps the shipped one's name: the one line names
+    the file the user gave, and nothing is opened or written (the port does not exist)."""
+    noprior = files / "noprior.yaml"
+    save_config(PRIOR.replace(parameter_covariance=None), noprior)
+    out = files / f"out-noprior-{command}"
+    given = ["--calibration", str(files / "cal.yaml"), "--config", str(noprior)]
+    port = str(files / "ttyNOPE")
+    args = {"chain": ["load", str(files / "run.csv"), *given, "reconstruct", "adapt", "save", str(out)],
+            "process": ["process", str(files / "run.csv"), *given, "-o", str(out), "--adapt", "--workers", "0",
+                        "--no-progress"],
+            "record": ["record", port, "-o", str(out), *given, "--estimate", "--adapt"],
+            "live": ["live", port, *given, "--adapt", "--save", str(out.with_suffix(".png")), "--seconds", "1"],
+            "control": ["control", port, *given, "--target-force-n", "0.1", "--adapt", "-o", str(out)]}[command]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code != 0 and "Traceback" not in res.output, res.output
+    assert f"{noprior}: no parameter_covariance" in res.output, res.output
+    assert not out.exists() and not out.with_suffix(".png").exists()
+
+
 def test_process_adapt_adapts_each_session(files):
     out = files / "batch"
     res = CliRunner().invoke(main, ["process", str(files / "run.csv"), "--calibration", str(files / "cal.yaml"),

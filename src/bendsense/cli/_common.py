@@ -553,6 +553,18 @@ def checked_calibration(path, config):
     return calibration
 
 
+def require_prior(config, config_path) -> None:
+    """The prior that ``--adapt`` (and the chain's ``adapt``) updates; a config without one is named by its file.
+
+    Its ``name:`` would not do: a copy of the shipped config keeps the shipped one's name.
+    """
+    from bendsense.errors import ConfigError
+
+    if config.parameter_covariance is None:
+        raise ConfigError(f"{config_path or 'the config'}: no parameter_covariance: adapt updates a prior; state "
+                          "one (the shipped config's) or identify free bending from a free sweep")
+
+
 @contextlib.contextmanager
 def data_warnings_logged(said=None):
     """The library's :class:`~bendsense.errors.DataWarning` inside the block as one ``WARNING:`` line each.

@@ -35,6 +35,7 @@ from bendsense.cli._common import (
     objective_option,
     overwrite_option,
     quiet,
+    require_prior,
     say,
     step_io,
     window_option,
@@ -205,9 +206,11 @@ def process(paths, calibration_paths, out_dir, config_path, workers, scheduler, 
         config = load_config(config_path)  # (a gripper's config: each board session's fingers)
         calibration = calibration_paths(calibration_paths_given, config)
         actuators = [f.config for f in config.fingers] if hasattr(config, "fingers") else [config]
-        if adapt and (hasattr(config, "fingers") or config.parameter_covariance is None):
+        if adapt and hasattr(config, "fingers"):
             raise click.BadParameter("needs one actuator's config with a prior (parameter_covariance) to update",
                                      param_hint="--adapt")
+        if adapt:
+            require_prior(config, config_path)
         if contact_s_m is not None:  # a location beyond the actuator is refused here, not once per session
             for actuator in actuators:
                 check_load(load, contact_s_m, actuator)

@@ -79,7 +79,7 @@ def _controllers(config, finger, target, max_pressure_pa, tuning, load_options, 
         raise click.ClickException(f"the config's fingers: {text} (--finger NAME)") from None
 
 
-def _processor(config, calibrations, constraint, bandwidth_hz, load, adapt):
+def _processor(config, calibrations, constraint, bandwidth_hz, load, adapt, config_path):
     """The live processor (a gripper's: one LiveProcessor per finger), its kernels ready.
 
     A constraint that leaves the load of a finger at rest undetermined is refused here,
@@ -90,7 +90,7 @@ def _processor(config, calibrations, constraint, bandwidth_hz, load, adapt):
     from bendsense.status import Status
 
     processor = make_processor(config, calibrations, constraint, None, None, bandwidth_hz=bandwidth_hz, load=load,
-                               adapt=adapt)
+                               adapt=adapt, config_path=config_path)
     fingers = getattr(processor, "processors", {None: processor})
     if any(p.rest_status() == Status.NOT_IDENTIFIABLE for p in fingers.values()):
         raise click.BadParameter(f"{constraint} leaves the load of a finger at rest (straight, no pressure) "
@@ -254,7 +254,7 @@ def control(port, calibration_paths, target_force_n, finger, max_pressure_kpa, o
     load_options = live_load(load, contact_s_m, config)
     bandwidth_hz = bandwidth_hz or TRACK_BANDWIDTH_HZ
     controller = _controllers(config, finger, target_force_n, pmax, tuning, load_options, bandwidth_hz)
-    processor = _processor(config, calibrations, constraint, bandwidth_hz, load_options, adapt)
+    processor = _processor(config, calibrations, constraint, bandwidth_hz, load_options, adapt, config_path)
     meta = {"command": "bendsense control",
             "control": {"target_force_n": target_force_n, "max_pressure_pa": pmax, **tuning,
                         "fingers": [f for f in controller.fingers if f is not None], "load": load,

@@ -32,6 +32,7 @@ from bendsense.cli._common import (
     make_overwrite_option,
     objective_option,
     quiet,
+    require_prior,
     say,
 )
 from bendsense.cli.sim import grasp_options, model_error_options, model_errors, noise_option
@@ -115,7 +116,7 @@ def finish_adapt(processor, output=None, *, wait: bool = True) -> str:
 
 
 def make_processor(config, calibration_path, constraint, objective, pressure_kpa, estimate=True, bandwidth_hz=None,
-                   load=None, adapt=False):
+                   load=None, adapt=False, config_path=None):
     """The :class:`~bendsense.pipeline.LiveProcessor` of ``record`` and ``live``, its kernels ready.
 
     The kernels compile (first run after an install) or load here, before a port opens
@@ -142,7 +143,10 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         The load options (:func:`~bendsense.cli._common.live_contact`): a contact at a
         known location; None or empty: the tip.
     adapt : bool, default False
-        ``--adapt``: learn the free-bending model as frames arrive (a single actuator only).
+        ``--adapt``: learn the free-bending model as frames arrive (a single actuator only,
+        its config with a prior).
+    config_path : path, optional
+        The config's file, named when ``adapt`` finds no prior in it.
     """
     from bendsense.config import GripperConfig
     from bendsense.pipeline import LiveProcessor
@@ -153,6 +157,8 @@ def make_processor(config, calibration_path, constraint, objective, pressure_kpa
         raise click.BadParameter("learns a single actuator's model: give a single actuator's config (a gripper's "
                                  "fingers: bendsense process --adapt on each finger's recording)",
                                  param_hint="'--adapt'")
+    if adapt:
+        require_prior(config, config_path)
     processor = (GripperProcessor if gripper else LiveProcessor)(
         calibration_path if gripper else checked_calibration(calibration_path, config),
         config,
@@ -395,7 +401,7 @@ def record(
             calibration = resolve_calibrations(calibration_paths, est_config)
             processor = make_processor(est_config, calibration, constraint, objective, pressure_kpa,
                                        bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, est_config),
-                                       adapt=adapt)
+                                       adapt=adapt, config_path=config_path)
         driver = Driver(port, baudrate=baud or DEFAULT_BAUDRATE, dialect=dialect, columns=cols, n_channels=channels,
                         handshake=not no_handshake, hello_timeout_s=hello_timeout)
         with driver:

@@ -152,7 +152,7 @@ def live(
     config = load_config(config_path)
     processor = make_processor(config, resolve_calibrations(calibration_paths, config), constraint, objective,
                                pressure_kpa, bandwidth_hz=bandwidth_hz, load=live_load(load, contact_s_m, config),
-                               adapt=adapt)
+                               adapt=adapt, config_path=config_path)
     if save_path is not None:
         view, is_open = _view_class(processor)(processor, headless=True, scale_m_per_n=scale_mm_per_n * 1e-3), None
     else:

@@ -35,6 +35,7 @@ from bendsense.cli._common import (
     make_calibration_option,
     objective_option,
     overwrite_option,
+    require_prior,
     say,
     step_io,
     window_option,
@@ -211,6 +212,7 @@ def load(session_path, config_path, calibration_paths, pressure_kpa):
             config=config,
             calibration=Calibration.load(calibration_path) if calibration_path else None,
             calibration_path=calibration_path,
+            config_path=config_path,
             name=session_path.stem,
         )
         log.info("loaded %s: %d frames, %d channels", session_path, len(session), session.n_channels)
@@ -270,6 +272,7 @@ def adapt():
                                    "config): ... reconstruct adapt estimate ...")
         if state.get("adapted"):  # the same frames twice would shrink σ for nothing learned
             raise click.UsageError("'adapt' once in a chain: a second would learn from the same frames again")
+        require_prior(state["config"], state.get("config_path"))
         session = state["session"]
         with data_warnings_logged(state.setdefault("said", set())):
             result = adapt_config(shape, session.pressure_pa, state["config"], calibration=state["calibration"],
