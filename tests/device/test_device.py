@@ -136,13 +136,17 @@ def test_disconnect_raises_device_error_and_session_stays_readable(tmp_path):
     assert "disconnect: read failed" in events and "reconnect attempt 2/2 failed" in events
 
 
-def test_reconnect_to_a_port_that_comes_back(tmp_path):
+@pytest.mark.parametrize("here", [False, True], ids=["reader thread", "reading here"])
+def test_reconnect_to_a_port_that_comes_back(tmp_path, here):
     """The port vanishes and reappears (a symlink, as udev would make): the driver reconnects,
-    resends HELLO_REQUEST and START, and the sequence gap over the outage is counted."""
+    resends HELLO_REQUEST and START, and the sequence gap over the outage is counted. Read in
+    the caller's thread (reading_here), the read error hands the port to the reader thread,
+    which does the same, and the caller gets the new board's frames."""
     link = tmp_path / "ttyBENDSENSE"
     sim1 = SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500).start()
     os.symlink(sim1.port, link)
-    with Driver(str(link), reconnect=Reconnect(attempts=30, backoff_s=0.05)) as drv:
+    with Driver(str(link), reconnect=Reconnect(attempts=30, backoff_s=0.05)) as drv, \
+            (drv.reading_here() if here else contextlib.nullcontext()):
         drv.start()
         first = drain(drv, lambda: drv.stats.samples >= 50)
         sim1.disconnect()
@@ -237,22 +241,10 @@ def test_a_caller_away_longer_than_here_stall_s_loses_no_frame():
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
 
 
-def test_reading_here_hands_a_vanished_port_back_to_the_reader_thread(tmp_path):
-    """A read error inside the context: the reader thread reconnects (START resent), and the caller gets the new
-    board's frames from it; a board that does not come back ends the caller's wait with the driver's error."""
-    link = tmp_path / "ttyBENDSENSE"
-    sim1 = SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500).start()
-    os.symlink(sim1.port, link)
-    with Driver(str(link), reconnect=Reconnect(attempts=30, backoff_s=0.05)) as drv, drv.reading_here():
-        drv.start()
-        first = drain(drv, lambda: drv.stats.samples >= 50)
-        sim1.disconnect()
-        with SimulatedDevice(ramp_source(2), n_channels=2, rate_hz=500, firmware=Firmware(start_seq=5000)) as sim2:
-            os.unlink(link)
-            os.symlink(sim2.port, link)
-            second = drain(drv, lambda: drv.stats.samples >= len(first) + 50)
-            assert sim2.streaming
-    assert drv.stats.reconnects == 1 and second[-1].sample.seq > 5000
+def test_reading_here_ends_the_wait_with_the_drivers_error_when_the_board_is_gone():
+    """A read error inside the context hands the port to the reader thread (test_reconnect_to_a_port_that_comes_back
+    with it); a board that does not come back ends the caller's wait with the driver's error, every frame before it
+    taken."""
     with SimulatedDevice(ramp_source(N_CH), rate_hz=1000, faults=Faults(disconnect_after=200)) as sim, \
             Driver(sim.port, reconnect=Reconnect(attempts=2, backoff_s=0.02)) as drv, drv.reading_here():
         drv.start()
