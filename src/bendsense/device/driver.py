@@ -709,21 +709,17 @@ class Driver:
             if not self._read_lock.acquire(timeout=self.read_timeout_s):
                 continue  # the caller is reading it
             try:
-                ser = self._ser
-                data = ser.read(max(1, ser.in_waiting))
-            except Exception as err:  # noqa: BLE001 - SerialException, OSError, TypeError on a closed port
-                data, error = None, err
-            else:
-                error = None
+                try:
+                    ser = self._ser
+                    data, error = ser.read(max(1, ser.in_waiting)), None
+                except Exception as err:  # noqa: BLE001 - SerialException, OSError, TypeError on a closed port
+                    data, error = b"", err
                 if data:
                     self._handle(data, time.monotonic_ns())
             finally:
                 self._read_lock.release()
-            if error is not None:
-                if self._closing.is_set():
-                    break
-                if not self._reconnect(error):
-                    break
+            if error is not None and (self._closing.is_set() or not self._reconnect(error)):
+                break  # the reconnect outside the lock: a caller reading here is not held up by its backoff
 
     def _reconnect(self, err) -> bool:
         self._emit("disconnect", f"read failed: {err}")
