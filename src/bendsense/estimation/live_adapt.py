@@ -199,7 +199,9 @@ class LiveAdaptation:
             if not self._since:
                 break
             self._submit()
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        # waited for: the process's exit would wait for a running update all the same, and a pool whose manager
+        # thread is still winding down races Python's exit hook for its wake-up pipe (an OSError traceback at exit)
+        self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None
         return self.config if self.updates else None
 
