@@ -221,8 +221,11 @@ class Driver:
         self._ser = None
         self._thread = None
         self._write_lock = threading.Lock()
-        self._read_lock = threading.Lock()  # held by whoever reads and decodes: the reader thread or reading_here
+        # who reads the port, by two flags and no lock (a Ctrl-C can skip a Python-level release, never a flag's
+        # reset at the next read): each sets its own, then backs off while the other's is set (_read_here, _run)
         self._reading_here = False  # the caller's thread reads the port (reading_here)
+        self._caller_in = False  # the caller is reading or decoding (reading_here)
+        self._thread_in = False  # the reader thread is reading or decoding
         self._here_at = 0.0  # when the caller last waited on the port (time.monotonic())
         self._pending = []  # readings taken from the port or the queue by reading_here, served before the queue
         self._closing = threading.Event()
@@ -591,9 +594,12 @@ class Driver:
             wait = 0.05 if deadline is None else max(0.0, min(0.05, deadline - time.monotonic()))
             if self._reading_here and not self._pending:
                 self._read_here(wait)
-            if self._pending:  # no queue (and no lock of it) while the caller reads the port
+            if self._pending:  # the caller's own reads first; the thread's queue after them
                 out = self._pending[:max_items]
                 del self._pending[:max_items]
+                with contextlib.suppress(queue.Empty):
+                    while len(out) < max_items and not self._reading_here:
+                        out.append(q.get_nowait())
                 return out
             if self._reading_here:  # nothing arrived within the wait
                 self._check_alive()
@@ -649,15 +655,20 @@ class Driver:
     def _read_here(self, wait: float) -> None:
         """Wait up to ``wait`` for the port in this thread and decode what arrived into ``_pending``.
 
-        Under the read lock: what the reader thread queued before (it read while this caller
-        was away) comes first, and then it is not read here.
+        Once the reader thread's read in progress has ended: what the thread queued before (it
+        read while this caller was away) comes first, and then it is not read here.
         """
-        with self._read_lock:
+        self._caller_in = True
+        try:
+            while self._thread_in:  # its read ends within read_timeout_s; it starts no other while _caller_in
+                time.sleep(0.0002)
             with contextlib.suppress(queue.Empty):
                 while True:
                     self._pending.append(self._queue.get_nowait())
             if not self._pending:
                 self._wait_and_read(wait)
+        finally:
+            self._caller_in = False
             self._here_at = time.monotonic()
 
     def _wait_and_read(self, wait: float) -> None:
@@ -703,12 +714,13 @@ class Driver:
 
     def _run(self) -> None:
         while not self._closing.is_set():
-            if self._reading_here and time.monotonic() - self._here_at < self.here_stall_s:
+            if self._reading_here and (self._caller_in or time.monotonic() - self._here_at < self.here_stall_s):
                 self._closing.wait(self.read_timeout_s)  # the caller reads the port (reading_here)
                 continue
-            if not self._read_lock.acquire(timeout=self.read_timeout_s):
-                continue  # the caller is reading it
+            self._thread_in = True
             try:
+                if self._caller_in:  # the caller came back meanwhile
+                    continue
                 try:
                     ser = self._ser
                     data, error = ser.read(max(1, ser.in_waiting)), None
@@ -717,7 +729,7 @@ class Driver:
                 if data:
                     self._handle(data, time.monotonic_ns())
             finally:
-                self._read_lock.release()
+                self._thread_in = False
             if error is not None and (self._closing.is_set() or not self._reconnect(error)):
                 break  # the reconnect outside the lock: a caller reading here is not held up by its backoff
 
