@@ -731,7 +731,7 @@ class Driver:
             finally:
                 self._thread_in = False
             if error is not None and (self._closing.is_set() or not self._reconnect(error)):
-                break  # the reconnect outside the lock: a caller reading here is not held up by its backoff
+                break  # the reconnect outside its turn (_thread_in): a caller reading here waits not for its backoff
 
     def _reconnect(self, err) -> bool:
         self._emit("disconnect", f"read failed: {err}")
