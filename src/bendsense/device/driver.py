@@ -662,9 +662,8 @@ class Driver:
         try:
             while self._thread_in:  # its read ends within read_timeout_s; it starts no other while _caller_in
                 time.sleep(0.0002)
-            with contextlib.suppress(queue.Empty):
-                while True:
-                    self._pending.append(self._queue.get_nowait())
+            while not self._queue.empty():  # the thread puts nothing while _caller_in: no race with get
+                self._pending.append(self._queue.get_nowait())
             if not self._pending:
                 self._wait_and_read(wait)
         finally:
