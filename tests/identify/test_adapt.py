@@ -331,7 +331,7 @@ def test_live_adapt_keeps_its_config_and_says_why_in_full(touched_session):
         warnings.simplefilter("ignore")
         config, free, report, why = _learn(np.asarray(shape.curvature_per_m), np.asarray(session.pressure_pa),
                                            np.asarray(session.t_s), CFG, cal, "a test")
-    assert config is None and free == 0 and "frames it was fitted to free" in why and why in report
+    assert config is None and free.size == 0 and "frames it was fitted to free" in why and why in report
     live = LiveAdaptation(cal, CFG)  # (no worker: the summary of an update that learned nothing)
     live.report, live.why = report, why
     assert live.summary() == f"adapt: learned nothing, the config's prior kept: {why}"  # whole (it was cut at 160)

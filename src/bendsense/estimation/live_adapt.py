@@ -12,7 +12,11 @@ refuses loaded ones). The processor checks for the result without waiting, once 
 block, and continues with the adapted config from the next block: the same arrays of
 the same shapes, so nothing compiles in the loop. An update that learned nothing
 (``adapt`` refused: too few free frames, or a frame selection that did not settle) is
-not swapped in: the loop keeps its config.
+not swapped in. Each update starts from the prior with every frame kept, so a refusal is
+the verdict of all of them: an earlier update's config, learned from a part of them
+(the first second of a sweep, say), is withdrawn and the loop goes back to the prior.
+The config the stream ends with is the last update's, as ``adapt`` on the same frames
+offline gives it.
 
 A process and not a thread: the compiled kernels hold the GIL, and an update of a few
 hundred frames (0.5–2 s) would stall the loop. The worker is spawned and warmed when
@@ -44,12 +48,12 @@ PER_BIN = 4
 def _learn(kappa, pressure_pa, t_s, config, calibration, source):
     """The worker's job: :func:`bendsense.adapt` on the buffer.
 
-    Returns (the config, or None when refused; its free frames; the report; why it refused).
+    Returns (the config, or None when refused; the pressures of its free frames; the report; why it refused).
     """
     from bendsense.identify.sessions import adapt
 
     result = adapt(kappa, pressure_pa, config, calibration=calibration, t_s=t_s, source=source)
-    return (None if result.refused else result.config), int(np.count_nonzero(result.free)), result.report, result.why
+    return (None if result.refused else result.config), pressure_pa[result.free], result.report, result.why
 
 
 class LiveAdaptation:
@@ -69,11 +73,12 @@ class LiveAdaptation:
     prior : Config
         The config every update starts from.
     config : Config
-        The latest adapted config (``prior`` until an update learned something).
+        The latest adapted config: ``prior`` until an update learned something, and
+        again after a later update (on those frames and more) refused.
     updates : int
-        Updates that learned something.
+        Updates that learned something (withdrawn ones included).
     free : int
-        Free frames of the latest of them.
+        Free frames of the config's update (0 while it is the prior).
     report : str
         The latest update's report (:attr:`bendsense.identify.sessions.Adaptation.report`).
     why : str
@@ -96,6 +101,7 @@ class LiveAdaptation:
         self._job_t = math.nan  # the device time of the newest frame of the update submitted last [s]
         self._last_t, self._last_bins, self._since = None, 0, 0
         self.updates = self.free = 0
+        self._free_p = np.zeros(0)  # the pressures of the free frames the config learned from [Pa]
         self.report, self.why = "adapt: no update yet", ""
 
     def start(self) -> None:
@@ -173,10 +179,16 @@ class LiveAdaptation:
             log.warning("%s", self.report)
             return None
         if config is None:
-            return None
-        self.config, self.free = config, free
+            if self.config is self.prior:
+                return None
+            self.config, self.free, self._free_p = self.prior, 0, np.zeros(0)
+            log.info("adapt: the update with the frames up to t = %.3f s refused (%s): the one before it is "
+                     "withdrawn, back to the prior", self._job_t, self.why)
+            return self.prior
+        self.config, self.free, self._free_p = config, free.size, free
         self.updates += 1
-        log.info("adapt: update %d from %d free frames, the newest at t = %.3f s", self.updates, free, self._job_t)
+        log.info("adapt: update %d from %d free frames, the newest at t = %.3f s", self.updates, free.size,
+                 self._job_t)
         return config
 
     def close(self, wait: bool = True):
@@ -203,16 +215,17 @@ class LiveAdaptation:
         # thread is still winding down races Python's exit hook for its wake-up pipe (an OSError traceback at exit)
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None
-        return self.config if self.updates else None
+        return None if self.config is self.prior else self.config
 
     def summary(self) -> str:
         """One line: what was learned (K0 and its sigma before -> after, at the free frames' pressures)."""
         from bendsense.identify.sessions import k0_with_sigma
 
-        if not self.updates:
-            return f"adapt: learned nothing, the config's prior kept: {self.why or 'no update finished'}"
-        p = self._p[np.isfinite(self._p)]
-        levels = np.unique(np.round(np.percentile(p, [5, 50, 95]), -3))
+        if self.config is self.prior:
+            withdrawn = f" ({self.updates} earlier update(s) withdrawn)" if self.updates else ""
+            return f"adapt: learned nothing, the config's prior kept: {self.why or 'no update finished'}{withdrawn}"
+        # at the pressures it learned from, not the buffer's: an update of the first seconds knows nothing above them
+        levels = np.unique(np.round(np.percentile(self._free_p, [5, 50, 95]), -3))
         (k0, before), (k1, after) = (k0_with_sigma(c, levels) for c in (self.prior, self.config))
         return (f"adapt: {self.updates} update(s), the latest from {self.free} free frames; K0 " + ", ".join(
             f"{lv / 1e3:.0f} kPa {100 * (b / a - 1):+.1f} % (sigma {100 * sa / abs(a):.1f} % -> "
