@@ -197,6 +197,26 @@ def free_bending_angles(shape, pressure_pa, config, *, max_iter: int = 8, with_m
     return angle, weights, slope_ei, (phi - mid, j, dphi_dei)
 
 
+def _slope_ei_at_model(pressure_pa, config) -> np.ndarray:
+    """∂θ/∂EI (:func:`free_bending_angles`' ``slope_ei``) of the free beam the config predicts at ``pressure_pa``.
+
+    The model's K0(P), the config's EI(P) and gravity, no tip load: the slope as a function of pressure
+    alone, free of the frames' measurement errors (NaN where the beam solve failed).
+    """
+    from bendsense.mechanics.actuator import FreeBendingModel
+    from bendsense.mechanics.beam import solve_beam
+    from bendsense.shape.pcc import Shape
+
+    p = np.asarray(pressure_pa, dtype=float)
+    lengths = np.asarray(config.sensor.segment_lengths_m, dtype=float)
+    k0 = FreeBendingModel.from_config(config).tip_curvature_per_m(p)
+    sol = solve_beam(float(config.actuator.length_m), config.stiffness.ei_nm2(p), k0, (0.0, 0.0),
+                     config.weight_per_length_n_per_m, s_m=np.cumsum(lengths), warn=False)
+    phi = np.where(np.asarray(sol.success)[:, None], np.asarray(sol.angle_rad), np.nan)
+    kappa = np.diff(phi, axis=-1, prepend=0.0) / lengths
+    return free_bending_angles(Shape.from_curvatures(kappa, lengths), p, config)[2]
+
+
 def _free_p_value(misfit, shape, p, config, calibration):
     """The p-value of each frame's free-beam fit: whether its shape is a free beam's for some K0.
 
@@ -450,6 +470,11 @@ def _free_frames_fit(shape, p, usable, config, calibration, source, *, fix=None,
         angle[idx], weights[idx], slope_ei[idx] = out[:3]
         if prior:
             shaped[idx] = _free_p_value(out[3], part, p[idx], config, calibration) >= FREE_P
+            # ∂θ/∂EI at the prior's free beam, not at each frame's measured angle: its stiffness response and the
+            # covariance R Σ_b Rᵀ it gives the angles (weighed against the prior) must not depend on the angles'
+            # own errors, or the fit lands below the data (Peelle's pertinent puzzle)
+            model = _slope_ei_at_model(p[idx], config)
+            slope_ei[idx] = np.where(np.isfinite(model), model, slope_ei[idx])
     usable &= np.isfinite(angle)
     if not usable.any():
         raise SessionError(f"{source}: no frame with a usable shape (all outside the calibrated range, "
