@@ -326,10 +326,11 @@ def k0_low_session(calibration_path):
 
 
 def test_an_update_refused_on_more_frames_withdraws_the_one_before(k0_low_session):
-    # The first second's frames (free, 0-43 kPa) gave an update that was swapped in, ~4 sigma from the finger's
-    # true K0; every update after it, on those frames and more, refused, and the stale one stayed: the loop ran on it
-    # and record wrote it to config.yaml, where `adapt` on the same frames offline refused. A refusal on a superset
-    # is the verdict of all the frames kept: the loop goes back to the prior, and the answer is the last update's.
+    # The first second's frames (free, 0-43 kPa) gave an update that was swapped in (then 4 sigma from the finger's
+    # K0: the test below); the updates after it, on those frames and the touches, refused, and the stale one stayed:
+    # the loop ran on it and record wrote it to config.yaml, where `adapt` on the same frames offline refused. A
+    # refusal on a superset is the verdict of all the frames kept: the loop goes back to the prior, and the answer
+    # is the last update's.
     calibration, shape, pressure, t = k0_low_session
     live = LiveAdaptation(calibration, CONFIG)
     live._pool = _AtOnce()
