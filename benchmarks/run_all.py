@@ -211,8 +211,11 @@ def _estimate_chunk(args):
 
 
 def bench_estimate_batch(table, quick, workers):
-    """Independent cold frames (``bench_cold``: shuffled pressures and loads, σ propagated): one process, a pool,
-    and ``process`` end to end (session CSVs in, results out)."""
+    """Force and σ of independent cold frames in one process and on a pool, and ``process`` end to end on them.
+
+    The frames are ``bench_cold``'s (shuffled pressures and loads, a calibration's error model); ``process`` reads
+    them as session CSVs of signals and writes the results.
+    """
     from bench_cold import calibration, cold_frames, process_end_to_end
 
     config = load_config()
