@@ -559,10 +559,10 @@ def require_prior(config, config_path) -> None:
     Its ``name:`` would not do: a copy of the shipped config keeps the shipped one's name.
     """
     from bendsense.errors import ConfigError
+    from bendsense.identify.sessions import NO_PRIOR
 
     if config.parameter_covariance is None:
-        raise ConfigError(f"{config_path or 'the config'}: no parameter_covariance: adapt updates a prior; state "
-                          "one (the shipped config's) or identify free bending from a free sweep")
+        raise ConfigError(f"{config_path or 'the config'}: {NO_PRIOR}")
 
 
 @contextlib.contextmanager

@@ -77,8 +77,6 @@ class LiveAdaptation:
         again after a later update (on those frames and more) refused.
     updates : int
         Updates that learned something (withdrawn ones included).
-    free : int
-        Free frames of the config's update (0 while it is the prior).
     report : str
         The latest update's report (:attr:`bendsense.identify.sessions.Adaptation.report`).
     why : str
@@ -100,9 +98,14 @@ class LiveAdaptation:
         self._pool = self._job = None
         self._job_t = math.nan  # the device time of the newest frame of the update submitted last [s]
         self._last_t, self._last_bins, self._since = None, 0, 0
-        self.updates = self.free = 0
+        self.updates = 0
         self._free_p = np.zeros(0)  # the pressures of the free frames the config learned from [Pa]
         self.report, self.why = "adapt: no update yet", ""
+
+    @property
+    def free(self) -> int:
+        """Free frames of the config's update (0 while it is the prior)."""
+        return self._free_p.size
 
     def start(self) -> None:
         """Spawn the worker and warm it: an update on a straight actuator over mid pressures (it learns nothing)."""
@@ -181,11 +184,11 @@ class LiveAdaptation:
         if config is None:
             if self.config is self.prior:
                 return None
-            self.config, self.free, self._free_p = self.prior, 0, np.zeros(0)
+            self.config, self._free_p = self.prior, np.zeros(0)
             log.info("adapt: the update with the frames up to t = %.3f s refused (%s): the one before it is "
                      "withdrawn, back to the prior", self._job_t, self.why)
             return self.prior
-        self.config, self.free, self._free_p = config, free.size, free
+        self.config, self._free_p = config, free
         self.updates += 1
         log.info("adapt: update %d from %d free frames, the newest at t = %.3f s", self.updates, free.size,
                  self._job_t)

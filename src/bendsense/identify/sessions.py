@@ -723,11 +723,14 @@ def adapt(shape, pressure_pa, config, *, calibration=None, t_s=None, source=None
     return Adaptation(config=new, free=fit.used.copy(), report=_adapt_report(fit, config, new, t), fit=fit)
 
 
+NO_PRIOR = ("no parameter_covariance: adapt updates a prior; state one (the shipped config's) or identify free "
+            "bending from a free sweep")  # why a config without a prior is refused (the CLI names its file)
+
+
 def _check_prior(config) -> None:
     """Refuse a config without ``parameter_covariance`` (:func:`adapt` and live ``--adapt`` update a prior)."""
     if config.parameter_covariance is None:
-        raise ArgumentError(f"config {config.name!r}: no parameter_covariance: adapt updates a prior; state one "
-                            "(the shipped config's) or identify free bending from a free sweep")
+        raise ArgumentError(f"config {config.name!r}: {NO_PRIOR}")
 
 
 def adapt_session(session, config, calibration, pressure_pa=None) -> Adaptation:
