@@ -482,6 +482,11 @@ def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
+def _imported() -> None:
+    """A pool worker's start beside the warm-up's: the modules a session needs, imported; no kernel loaded."""
+    import bendsense.pipeline  # noqa: F401
+
+
 def warm_up(config, calibration, options: Options | None = None) -> None:
     """Compile or load the kernels a batch uses, in one worker, before the others start.
 
@@ -725,7 +730,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
                 for text in [f"failed: {row.reason}"] if row.status == "failed" else row.warnings:
                     log.warning("%s: %s", row.name, text)
 
-    own = None
+    own, started = None, 0  # our own pool, and its workers
     futures: dict = {}
     earlier = {i: _identity(out_dir / name) for i, _, name in tasks}  # outputs --overwrite replaces
     try:
@@ -737,16 +742,20 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
                 finish(i, process_session(path, out_dir / name, name=name, **task))
         else:
             if executor is None and tasks:
-                own = executor = worker_pool(min(workers or os.cpu_count() or 1, len(tasks)))
+                started = min(workers or os.cpu_count() or 1, len(tasks))
+                own = executor = worker_pool(started)
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description[:-1] + ", 1 numba thread each)"
             quietly = _started_quietly if own is not None else contextlib.nullcontext
             if tasks:
-                # compile once: one worker compiles the kernels (or loads them) before any other starts, and the
-                # others find its cache. Not here: numba's threads in this process would break a forking pool.
+                # compile once: one worker compiles the kernels (or loads them) before any other runs a session, and
+                # the others find its cache; meanwhile they start and import (a pool of ours starts a worker per task
+                # given to it while none is idle). Not here: numba's threads in this process would break a forking pool.
                 with quietly():
                     first = executor.submit(warm_up, task["config"], task["calibration"], task["options"])
+                    for _ in range(started - 1):
+                        executor.submit(_imported)
                 first.result()
             with quietly():
                 for i, path, name in tasks:  # absolute: a worker may run in another directory (a Dask cluster's)
