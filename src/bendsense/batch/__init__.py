@@ -488,11 +488,12 @@ def _imported() -> None:
 
 
 def warm_up(config, calibration, options: Options | None = None) -> None:
-    """Compile or load the kernels a batch uses, in one worker, before the others start.
+    """Compile or load the kernels a batch uses, in one worker, before the others load them.
 
-    :func:`process_sessions` runs it as the first task and waits for it: on a cold cache (the first run after
-    an install) that worker compiles the kernels once, announced on stderr, and writes numba's cache; the other
-    workers then only load it, instead of all compiling the same kernels at once. Runs
+    :func:`process_sessions` runs it as the first task and waits for it (the other workers meanwhile start and
+    import, nothing more): on a cold cache (the first run after an install) that worker compiles the kernels
+    once, announced on stderr, and writes numba's cache; the other workers then only load it, instead of all
+    compiling the same kernels at once. Runs
     :func:`bendsense.pipeline.process` on 100 flat frames (a worker's per-frame kernel) at the middle of the
     pressure range, with the batch's options (``track``: the tracker's kernels too).
 
@@ -612,16 +613,18 @@ def process_sessions(
                       contact_s_m=contact_s_m, adapt=adapt)
     # the root collects one results directory per session; it is never replaced
     with output.reserve([output.collection(out_dir)], inputs):
-        config, calibration = _prepared(config, calibration, estimate)
         sessions, names, rows, todo = _sessions(given, out_dir, recursive, overwrite)
         if executor is None and workers:  # a pool of ours: each worker holds the process's libraries and kernels
             from bendsense.sim.memory import check_workers
 
             check_workers(min(workers, len(todo)))
-        _start_collection(out_dir)
-        task = dict(config=config, calibration=calibration, options=options, overwrite=overwrite)
-        tasks = [(i, sessions[i], names[i]) for i in todo]
-        description = _run_tasks(tasks, rows, out_dir, task, executor=executor, workers=workers, progress=progress)
+        with _own_pool(executor, workers, len(todo)) as own:  # its workers start while the calibration is prepared
+            config, calibration = _prepared(config, calibration, estimate)
+            _start_collection(out_dir)
+            task = dict(config=config, calibration=calibration, options=options, overwrite=overwrite)
+            tasks = [(i, sessions[i], names[i]) for i in todo]
+            description = _run_tasks(tasks, rows, out_dir, task, executor=executor, own=own, workers=workers,
+                                     progress=progress)
         return BatchReport(sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start,
                            workers=description)
 
@@ -704,7 +707,32 @@ def _other_source(target: Path, path: Path) -> str | None:
     return recorded if recorded is not None and recorded != str(output.resolve(path)) else None
 
 
-def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, workers, progress) -> str:
+@contextlib.contextmanager
+def _own_pool(executor, workers, sessions: int):
+    """The local pool of a batch given no executor, its workers started; None in-process or with nothing to do.
+
+    Each worker is given a task that only imports (:func:`_imported`): all start at once, beside the parent's
+    work before the batch (the calibration's error model), and none loads a kernel (:func:`warm_up` does that
+    first, in one of them). Shut down on the way out; killed at once on an error or an interrupt.
+    """
+    if executor is not None or workers == 0 or sessions == 0:
+        yield None
+        return
+    started = min(workers or os.cpu_count() or 1, sessions)
+    pool = worker_pool(started)
+    try:
+        with _started_quietly():  # a spawn pool starts a worker per task given while none is idle
+            for _ in range(started):
+                pool.submit(_imported)
+        yield pool
+    except BaseException:
+        _stop_pool(pool)
+        raise
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, own, workers, progress) -> str:
     """Process the sessions of ``tasks`` ((row index, path, name)) into ``rows``; a description of the workers.
 
     Interrupted (Ctrl-C, SIGTERM: a KeyboardInterrupt), the local pool's workers are
@@ -730,7 +758,6 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
                 for text in [f"failed: {row.reason}"] if row.status == "failed" else row.warnings:
                     log.warning("%s: %s", row.name, text)
 
-    own, started = None, 0  # our own pool, and its workers
     futures: dict = {}
     earlier = {i: _identity(out_dir / name) for i, _, name in tasks}  # outputs --overwrite replaces
     try:
@@ -741,21 +768,16 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, worker
             for i, path, name in tasks:
                 finish(i, process_session(path, out_dir / name, name=name, **task))
         else:
-            if executor is None and tasks:
-                started = min(workers or os.cpu_count() or 1, len(tasks))
-                own = executor = worker_pool(started)
+            executor = executor or own
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description[:-1] + ", 1 numba thread each)"
             quietly = _started_quietly if own is not None else contextlib.nullcontext
             if tasks:
                 # compile once: one worker compiles the kernels (or loads them) before any other runs a session, and
-                # the others find its cache; meanwhile they start and import (a pool of ours starts a worker per task
-                # given to it while none is idle). Not here: numba's threads in this process would break a forking pool.
+                # the others find its cache. Not here: numba's threads in this process would break a forking pool.
                 with quietly():
                     first = executor.submit(warm_up, task["config"], task["calibration"], task["options"])
-                    for _ in range(started - 1):
-                        executor.submit(_imported)
                 first.result()
             with quietly():
                 for i, path, name in tasks:  # absolute: a worker may run in another directory (a Dask cluster's)

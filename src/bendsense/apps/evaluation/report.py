@@ -331,7 +331,6 @@ def _model_error(res, names: dict) -> list:
 def _timing(res) -> list:
     """The time of each stage, beside the paper's."""
     tm = res.timings
-    ms = 1e3
     lines = [
         "## Timing",
         "",
@@ -342,28 +341,28 @@ def _timing(res) -> list:
             ["stage", "here", "paper"],
             [
                 ["calibration fit, n = 3 (10 strips + flat, incl. reading the CSVs)",
-                 f"{tm['calibration_s'] * ms:.1f} ms", "–"],
-                ["shape reconstruction, one frame", f"{tm['reconstruction_single_s'] * 1e6:.0f} µs "
+                 _duration(tm['calibration_s']), "–"],
+                ["shape reconstruction, one frame", f"{_duration(tm['reconstruction_single_s'])} "
                  f"({1 / tm['reconstruction_single_s']:,.0f} Hz)",
                  f"≥ {PAPER['reconstruction_hz']:g} Hz (hardware bound)"],
                 ["shape reconstruction, batched, per frame",
-                 f"{tm['reconstruction_batched_s_per_frame'] * 1e6:.2f} µs "
+                 f"{_duration(tm['reconstruction_batched_s_per_frame'])} "
                  f"({1 / tm['reconstruction_batched_s_per_frame']:,.0f} frames/s)", "–"],
-                ["identification (free bending + stiffness)", f"{tm['identification_s']:.2f} s", "–"],
-                ["force estimate, unconstrained, fast, one frame", f"{tm['force_fast_none_single_s'] * ms:.1f} ms",
+                ["identification (free bending + stiffness)", _duration(tm['identification_s']), "–"],
+                ["force estimate, unconstrained, fast, one frame", _duration(tm['force_fast_none_single_s']),
                  f"{PAPER['force_none_s']:g} s"],
                 ["force estimate, unconstrained, fast, batched per frame",
-                 f"{tm['force_fast_none_batched_s_per_frame'] * ms:.2f} ms", "–"],
+                 _duration(tm['force_fast_none_batched_s_per_frame']), "–"],
                 ["force estimate, normal constraint, fast, one frame",
-                 f"{tm['force_fast_normal_single_s'] * ms:.1f} ms",
+                 _duration(tm['force_fast_normal_single_s']),
                  f"{PAPER['force_constrained_s']:g} s"],
                 ["force estimate, normal constraint, fast, batched per frame",
-                 f"{tm['force_fast_normal_batched_s_per_frame'] * ms:.2f} ms", "–"],
+                 _duration(tm['force_fast_normal_batched_s_per_frame']), "–"],
                 _paper_row(tm, "none", "unconstrained, paper's method (shooting + Nelder–Mead)",
                            PAPER["force_none_s"]),
                 _paper_row(tm, "normal", "normal constraint, paper's method (shooting + SLSQP)",
                            PAPER["force_constrained_s"]),
-                ["whole evaluation (simulation, all stages, figures)", f"{res.wall_time_s:.1f} s", "–"],
+                ["whole evaluation (simulation, all stages, figures)", _duration(res.wall_time_s), "–"],
             ],
         ),
         "",
@@ -403,9 +402,17 @@ def _miss_note(ident) -> str:
             "model-form error, which no parameter covariance describes.")
 
 
+def _duration(seconds) -> str:
+    """A time in s, ms or µs with three significant digits (a fast stage is never printed as 0)."""
+    for unit, scale in (("s", 1.0), ("ms", 1e3), ("µs", 1e6)):
+        if seconds * scale >= 1.0 or unit == "µs":
+            value = seconds * scale
+            return f"{value:.3g} {unit}" if value < 1000.0 else f"{value:,.0f} {unit}"
+
+
 def _paper_row(tm, key, what, paper_s):
     frames = tm[f"force_paper_{key}_frames"]
     if not frames:
         return [f"force estimate, {what}", "not timed (--quick)", f"{paper_s:g} s"]
-    return [f"force estimate, {what}, mean of {frames} frame(s)", f"{tm[f'force_paper_{key}_s']:.2f} s",
+    return [f"force estimate, {what}, mean of {frames} frame(s)", _duration(tm[f'force_paper_{key}_s']),
             f"{paper_s:g} s"]
