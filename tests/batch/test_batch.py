@@ -665,3 +665,36 @@ def test_a_rerun_removes_the_manifest_copy_a_killed_run_left(sessions, tmp_path)
     assert [s.status for s in report.sessions] == ["ok"]
     assert sorted(p.name for p in out.iterdir()) == [".bendsense-output.json", ".my-settings", "a", "b", "notes.txt"]
     assert read_manifest(out)["files"] == ["a/", "b/"]
+
+
+def test_a_calibration_that_fails_stops_the_pool_started_beside_it(sessions, tmp_path, monkeypatch):
+    """The local pool's workers start while the parent prepares the calibration; a calibration that cannot be read
+    is the batch's one error, its workers are stopped at once (none left running) and nothing is written."""
+    import multiprocessing
+
+    import bendsense.batch as batch
+    from bendsense.errors import BendsenseError
+
+    runs, _ = sessions
+    bad = tmp_path / "cal.yaml"
+    bad.write_text("coefficients_odd: [1, 2\n")  # cut off mid-list
+    pools = []
+
+    def recorded(workers, **kwargs):
+        pools.append(worker_pool(workers, **kwargs))
+        return pools[-1]
+
+    workers = []  # the pool's processes when the parent prepares the calibration
+    prepared = batch._prepared
+
+    def preparing(*args):
+        workers.extend(pools[0]._processes.values())
+        return prepared(*args)
+
+    monkeypatch.setattr(batch, "worker_pool", recorded)
+    monkeypatch.setattr(batch, "_prepared", preparing)
+    with pytest.raises(BendsenseError, match="cal.yaml"):
+        process_sessions(runs, tmp_path / "out", calibration=bad, workers=2, progress=False)
+    assert len(workers) == 2  # both started before the calibration was read
+    assert all(w.exitcode is not None for w in workers) and multiprocessing.active_children() == []
+    assert not (tmp_path / "out").exists()
