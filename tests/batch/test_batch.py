@@ -669,7 +669,7 @@ def test_a_rerun_removes_the_manifest_copy_a_killed_run_left(sessions, tmp_path)
 
 def test_a_calibration_that_fails_stops_the_pool_started_beside_it(sessions, tmp_path, monkeypatch):
     """The local pool's workers start while the parent prepares the calibration; a calibration that cannot be read
-    is the batch's one error, its workers are stopped at once (none left running) and nothing is written."""
+    is the batch's one error, its workers are stopped (none left running) and nothing is written."""
     import multiprocessing
 
     import bendsense.batch as batch
@@ -696,5 +696,6 @@ def test_a_calibration_that_fails_stops_the_pool_started_beside_it(sessions, tmp
     with pytest.raises(BendsenseError, match="cal.yaml"):
         process_sessions(runs, tmp_path / "out", calibration=bad, workers=2, progress=False)
     assert len(workers) == 2  # both started before the calibration was read
-    assert all(w.exitcode is not None for w in workers) and multiprocessing.active_children() == []
+    assert all(w.exitcode is not None for w in workers)  # ended and joined: none left running
+    assert not set(workers) & set(multiprocessing.active_children())
     assert not (tmp_path / "out").exists()
