@@ -483,7 +483,7 @@ def _stop_pool(pool: cf.ProcessPoolExecutor) -> None:
 
 
 def _imported() -> None:
-    """A pool worker's start beside the warm-up's: the modules a session needs, imported; no kernel loaded."""
+    """A local pool worker's first task (:func:`_own_pool`): the modules a session needs imported; no kernel loaded."""
     import bendsense.pipeline  # noqa: F401
 
 
@@ -768,7 +768,7 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, own, w
             for i, path, name in tasks:
                 finish(i, process_session(path, out_dir / name, name=name, **task))
         else:
-            executor = executor or own
+            executor = own if executor is None else executor
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description[:-1] + ", 1 numba thread each)"
