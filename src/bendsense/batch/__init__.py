@@ -721,7 +721,8 @@ def _own_pool(executor, workers, sessions: int):
     started = min(workers or os.cpu_count() or 1, sessions)
     pool = worker_pool(started)
     try:
-        with _started_quietly():  # a spawn pool starts a worker per task given while none is idle
+        # a spawn pool starts a worker per task given while none is idle: all of them here, with the signals blocked
+        with _started_quietly():
             for _ in range(started):
                 pool.submit(_imported)
         yield pool
@@ -772,18 +773,14 @@ def _run_tasks(tasks, rows: list, out_dir: Path, task: dict, *, executor, own, w
             description = _executor_name(executor) if executor is not None else ""
             if own is not None:
                 description = description[:-1] + ", 1 numba thread each)"
-            quietly = _started_quietly if own is not None else contextlib.nullcontext
             if tasks:
                 # compile once: one worker compiles the kernels (or loads them) before any other runs a session, and
                 # the others find its cache. Not here: numba's threads in this process would break a forking pool.
-                with quietly():
-                    first = executor.submit(warm_up, task["config"], task["calibration"], task["options"])
-                first.result()
-            with quietly():
-                for i, path, name in tasks:  # absolute: a worker may run in another directory (a Dask cluster's)
-                    future = executor.submit(process_session, Path(path).absolute(), (out_dir / name).absolute(),
-                                             name=name, **task)
-                    futures[future] = (i, path, name)
+                executor.submit(warm_up, task["config"], task["calibration"], task["options"]).result()
+            for i, path, name in tasks:  # absolute: a worker may run in another directory (a Dask cluster's)
+                future = executor.submit(process_session, Path(path).absolute(), (out_dir / name).absolute(),
+                                         name=name, **task)
+                futures[future] = (i, path, name)
             for future in cf.as_completed(futures):
                 i, path, name = futures[future]
                 try:
