@@ -341,6 +341,29 @@ def test_the_note_counts_each_frame_by_the_status_results_csv_gives_it(tmp_path)
     assert row.reason == "3 of 6 frames extrapolated, 3 of 6 frames implausible_shape" and row.not_converged == 0
 
 
+def test_a_session_without_a_frame_to_use_says_so_first(tmp_path, caplog):
+    """Processed, so listed ok in the table; but every frame's pressure is beyond the actuator's range (no force):
+    the note begins with that, before the counts, and a chain on the command line warns so too."""
+    session, _ = make_session(0, frames=6)
+    beyond = np.full(6, CONFIG.actuator.pressure_range_pa[1] + 50e3)
+    write_session_csv(Session(session.t_s, session.signals, beyond), tmp_path / "x.csv")
+    cal = linear_calibration()
+    row = process_session(tmp_path / "x.csv", tmp_path / "o", config=CONFIG, calibration=cal,
+                          options=Options(estimate=ESTIMATE))
+    assert set(read_results(tmp_path / "o")["status"]) == {"pressure_out_of_range"}
+    assert row.status == "ok" and row.reason.startswith("no frame ok (0 of 6), 6 of 6 frames pressure out of range")
+    cal.save(tmp_path / "cal.yaml")
+    res = CliRunner().invoke(main, ["load", str(tmp_path / "x.csv"), "--calibration", str(tmp_path / "cal.yaml"),
+                                    "reconstruct", "estimate"])
+    assert res.exit_code == 0, res.output
+    assert "no frame of 6 has status 'ok'" in caplog.text
+
+    good = tmp_path / "good.csv"
+    write_csv_session(good, 1, frames=6)
+    row = process_session(good, tmp_path / "g", config=CONFIG, calibration=cal, options=Options(estimate=ESTIMATE))
+    assert "no frame ok" not in row.reason
+
+
 def test_an_unfinished_recording_is_processed_and_its_note_says_so(tmp_path):
     """A recorder killed before its clean stop (meta.yaml still ``finished: false``): its whole records are read
     and processed, and the batch's row says what ``load`` logs (a worker's log line would be lost)."""

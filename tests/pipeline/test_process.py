@@ -83,7 +83,7 @@ def test_estimates_the_loads_it_was_given():
     np.testing.assert_allclose(got.estimate.force_n, force, atol=2e-3)
     assert list(got["status"]) == ["ok"] * FRAMES
     np.testing.assert_array_equal(got["fx_n"], got.estimate.force_n[:, 0])
-    assert got.counts() == FrameCounts(frames=FRAMES)
+    assert got.counts() == FrameCounts(frames=FRAMES, ok=FRAMES)
     assert got.reconstruct_s > 0 and got.estimate_s > 0
 
 
@@ -122,7 +122,7 @@ def test_shapes_only():
     got = process(session(np.full(FRAMES, np.nan)), CONFIG, linear_calibration(), estimate=False, points=21)
     assert got.estimate is None and not got.has_forces
     assert "fx_n" not in got.columns and got.positions_m.shape == (FRAMES, 21, 2)
-    assert got.counts() == FrameCounts(frames=FRAMES) and got.estimate_s == 0.0
+    assert got.counts() == FrameCounts(frames=FRAMES, ok=FRAMES) and got.estimate_s == 0.0
     estimated = process(session(), CONFIG, linear_calibration(), shape=got.shape)
     assert estimated.shape is got.shape and estimated.reconstruct_s == 0.0
     assert_same_results(estimated, process(session(), CONFIG, linear_calibration(), points=21))

@@ -405,7 +405,9 @@ def process_session(path, out_dir, *, config, calibration, options: Options | No
 def _outcome(counts, lost, tx_drops, pressure_ignored, seconds, row, said=()) -> SessionOutcome:
     """The outcome of a processed session: its counts, and a note of each kind of flagged frame."""
     frames = counts.frames
-    notes = [f"{n} of {frames} frames {what}" for n, what in (
+    # a session processed is listed ok; one without a frame to use says so first
+    notes = [] if counts.ok or not frames else [f"no frame ok (0 of {frames})"]
+    notes += [f"{n} of {frames} frames {what}" for n, what in (
         (counts.extrapolated, "extrapolated"), (counts.not_converged, "not converged"),
         (counts.model_misfit, "model_misfit"), (counts.not_identifiable, "not identifiable"),
         (counts.implausible_force, "implausible_force"), (counts.contact_unresolved, "contact_unresolved"),

@@ -358,6 +358,9 @@ def estimate(constraint, method, objective, push_only, tip_angle_source, window_
         if counts.contact_unresolved:
             log.warning("%d of %d frames: the data cannot place the contact (status 'contact_unresolved', "
                         "contact_std_m inf, force kept)", counts.contact_unresolved, len(session))
+        if not counts.ok and len(session):
+            log.warning("no frame of %d has status 'ok': no force to use (results.csv's status column says why)",
+                        len(session))
         state.update(estimate=processed.estimate, window_s=window, track=None)
         return state
 

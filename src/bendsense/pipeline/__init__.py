@@ -79,6 +79,9 @@ class FrameCounts:
         or calibration mistake); their estimate is not counted above.
     no_shape : int
         Frames with non-finite signals (status ``no_shape``); their estimate is not counted above.
+    ok : int
+        Frames whose status is ``ok`` (a shape and, where estimated, a force to use). A
+        gripper's counts (:mod:`bendsense.batch.fingers`) sum it over the fingers.
     """
 
     frames: int
@@ -91,6 +94,7 @@ class FrameCounts:
     contact_unresolved: int = 0
     implausible_shape: int = 0
     no_shape: int = 0
+    ok: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,7 +138,8 @@ class Processed(Results):
         codes = frame_codes(self.shape, self.estimate)
         # a shape that is nonsense is the frame's status: its estimate (which fails on it) is not counted as well
         implausible_shape, no_shape = codes == Status.IMPLAUSIBLE_SHAPE, codes == Status.NO_SHAPE
-        shapes = {"implausible_shape": int(implausible_shape.sum()), "no_shape": int(no_shape.sum())}
+        shapes = {"implausible_shape": int(implausible_shape.sum()), "no_shape": int(no_shape.sum()),
+                  "ok": int(np.count_nonzero(codes == Status.OK))}
         if self.estimate is None:
             return FrameCounts(frames=n, extrapolated=extrapolated, **shapes)
         outside = pressure_outside(self.session.pressure_pa, self.config)
