@@ -264,7 +264,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
                   _c(run_status, np.int64), out)
         o.iters[:] = iters  # the objective's evaluations (shooting solves), as the field says
     _warn_uncertainty(uncertainty, config, stacklevel=3)
-    text = (np.array([OK_MESSAGE]) if B == 1 and o.status[0] == _OK
+    text = (OK_MESSAGE if not batch and o.status[0] == _OK
             else messages(o.status, o.residual, o.chi2, o.p_value, o.direction, method))
     if strict and not o.success.all():
         raise ConvergenceError(f"{int((~o.success).sum())} of {B} force estimate(s) failed; "
@@ -572,6 +572,8 @@ def _payload_buffers(B, pb):
 def _result(o, batch, text, pb, err, *, contact_s_m, **asked):
     """The :class:`ForceEstimate` of the kernels' outputs ``o`` (``problem.Outputs``), shaped to the frames' ``batch``.
 
+    ``text``: the frames' messages (B,), or one str for one frame.
+
     ``asked``: the estimate's own attributes (``method``, ``constraint``, ``objective``,
     ``uncertainty``, ``load``, ``wall_time_s``).
     """
@@ -579,7 +581,12 @@ def _result(o, batch, text, pb, err, *, contact_s_m, **asked):
     b2, b22 = batch + (2,), batch + (2, 2)
     window = asked["method"] == "fast" and asked["objective"] == "angles" and pb.pcc  # what a window test needs
     pay, shifts = o.payload, o.shifts
-    nan = None if contact else np.full(batch, np.nan)  # a tip load's contact_s_m and contact_std_m
+    if contact:
+        where, where_std = np.broadcast_to(np.asarray(contact_s_m, dtype=float), batch).copy(), np.zeros(batch)
+    else:  # a tip load's: NaN (np.full costs twice this)
+        where, where_std = np.empty(batch), np.empty(batch)
+        where.fill(np.nan)
+        where_std.fill(np.nan)
     if len(batch) != 1:
         pay, shifts = pay.reshape(batch + pay.shape[1:]), shifts.reshape(batch + shifts.shape[1:])
     return ForceEstimate(
@@ -589,7 +596,7 @@ def _result(o, batch, text, pb, err, *, contact_s_m, **asked):
         residual_m=o.residual.reshape(batch),
         success=o.success.reshape(batch),
         status=o.status.astype(np.int8).reshape(batch),
-        message=text.reshape(batch) if batch else str(text[0]),
+        message=text if isinstance(text, str) else text.reshape(batch) if batch else str(text[0]),
         iterations=o.iters.reshape(batch),
         tip_position_m=o.tip.reshape(b2),
         state=o.state.reshape(batch + (o.state.shape[1],)),
@@ -604,8 +611,8 @@ def _result(o, batch, text, pb, err, *, contact_s_m, **asked):
         shift_errors=err if window else None,
         coils=_coils(pb) if window else None,
         strip_gap_m=pb.gap,
-        contact_s_m=np.broadcast_to(np.asarray(contact_s_m, dtype=float), batch).copy() if contact else nan,
-        contact_std_m=np.zeros(batch) if contact else nan.copy(),
+        contact_s_m=where,
+        contact_std_m=where_std,
         contact_jacobian_rad_per_m=pay[..., 5] if window and contact else None,
         **asked,
     )
