@@ -218,7 +218,7 @@ def test_a_board_reading_900_kpa_stops_the_command(single_board, files):
     assert setpoint[FAULT_AT] > 0 and let_go < FAULT_AT + 200 and np.all(setpoint[let_go:] == 0.0)  # at once
 
 
-def test_a_board_that_dies_is_said_to_keep_its_pressure(single_board, files):
+def test_a_board_that_dies_is_said_to_keep_its_pressure(single_board, files, caplog):
     # the board closes its port after 300 frames, its line pressurised: no zero can reach it, and the loop says so
     board = Faulty(copy.deepcopy(single_board))
     with SimulatedDevice(board, rate_hz=RATE, faults=Faults(disconnect_after=FAULT_AT)) as dev:
@@ -230,6 +230,10 @@ def test_a_board_that_dies_is_said_to_keep_its_pressure(single_board, files):
     assert line.startswith("Error: control stopped: no frame from the board for "), line
     assert "set-point 0 could NOT be sent on line 0 (" in line and "it may still be pressurised" in line
     assert "sent on every" not in res.output
+    # in a person's words, each once: the read that failed, the heartbeat (not every 50 ms), the closed port
+    said = res.output + caplog.text
+    assert "read failed (Input/output error)" in said and said.count("heartbeat not sent") <= 1, said
+    assert "the port is closed: its last read failed" in line and "not open" not in said and "Errno" not in said
     # the board's own log: its last set-point is the loop's last pressure, never a zero: what the loop said
     first = next(i for i, (_, v) in enumerate(board.received) if v > 0)  # the loop's first block sends 0 (no time)
     assert board.received[-1][1] > 10e3 and all(v > 0 for _, v in board.received[first:])

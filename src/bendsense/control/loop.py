@@ -471,7 +471,7 @@ def _loop(driver, processor, controller, seconds, stop, guard, lines, recording,
     t0 = time.monotonic()
     last_frame, started = t0, False
     silence = guard.silence_s
-    beat = -math.inf
+    beat, beat_failed = -math.inf, False
     while True:
         if state["signals"]:  # a stop signal whose KeyboardInterrupt did not reach the loop
             raise KeyboardInterrupt
@@ -480,8 +480,11 @@ def _loop(driver, processor, controller, seconds, stop, guard, lines, recording,
             beat = now
             try:
                 driver.send_heartbeat()
+                beat_failed = False
             except DeviceError as err:  # a board that takes no frames: its silence or the next set-point stops the loop
-                log.warning("heartbeat not sent: %s", err)
+                if not beat_failed:  # once while they fail, not every 50 ms
+                    log.warning("heartbeat not sent: %s", err)
+                beat_failed = True
         if stop is not None and stop.is_set():
             return "stopped"
         if seconds is not None and now - t0 >= seconds:

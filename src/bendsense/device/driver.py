@@ -374,7 +374,10 @@ class Driver:
                 if drain:
                     ser.flush()
         except Exception as err:  # noqa: BLE001 - pyserial raises several types here
-            raise DeviceError(f"{self.port}: write failed ({_os_reason(err)})") from None
+            # a port closed under us is the reader's: its read failed, it reconnects (pyserial: "not open")
+            reason = "the port is closed: its last read failed" if not getattr(self._ser, "is_open", True) else \
+                _os_reason(err)
+            raise DeviceError(f"{self.port}: write failed ({reason})") from None
 
     def send(self, kind: str) -> None:
         """Send a command: ``"start"``, ``"stop"`` or ``"hello_request"`` (binary dialect only).
@@ -733,12 +736,12 @@ class Driver:
                 break  # the reconnect outside its turn (_thread_in): a caller reading here waits not for its backoff
 
     def _reconnect(self, err) -> bool:
-        self._emit("disconnect", f"read failed: {err}")
+        n = self.reconnect.attempts
+        self._emit("disconnect", f"read failed ({_os_reason(err)}){'; reconnecting' if n else ''}")
         try:
             self._ser.close()
         except Exception:  # noqa: BLE001
             pass
-        n = self.reconnect.attempts
         for attempt in range(1, n + 1):
             delay = min(self.reconnect.backoff_s * 2 ** (attempt - 1), 2.0)
             if self._closing.wait(delay):
@@ -760,7 +763,7 @@ class Driver:
             except DeviceError as exc:
                 self._emit("reconnect", f"could not resend commands: {exc}")
             return True
-        self._error = f"{self.port}: device disconnected ({err}); {n} reconnect attempt(s) failed"
+        self._error = f"{self.port}: device disconnected ({_os_reason(err)}); {n} reconnect attempt(s) failed"
         self._emit("error", self._error)
         return False
 
