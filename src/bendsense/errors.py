@@ -106,7 +106,7 @@ def require_extra(module: str, extra: str, feature: str):
     except ImportError as err:
         raise MissingExtraError(
             f"{feature} needs the optional extra '{extra}' ({module} is not installed): "
-            f"pip install 'bendsense[{extra}]'"
+            f"pip install '.[{extra}]' in bendsense's source directory (from a package index: 'bendsense[{extra}]')"
         ) from err
 
 

@@ -135,7 +135,8 @@ def test_mcap_without_the_extra_names_it(workdir, monkeypatch):
     assert res.exit_code == 1 and not out.exists()
     assert res.output.strip().splitlines() == [
         "Error: the mcap step needs the optional extra 'ros' (mcap_ros2.writer is not installed): "
-        "pip install 'bendsense[ros]'"
+        "pip install '.[ros]' in bendsense's source directory "
+        "(from a package index: 'bendsense[ros]')"
     ]
 
 
@@ -147,7 +148,8 @@ def test_mcap_without_the_extra_stops_the_chain_before_any_step(workdir, monkeyp
                                     "reconstruct", "save", str(out), "mcap", str(workdir / "none.mcap")])
     assert res.exit_code == 1
     assert res.output.strip().splitlines() == [
-        "Error: the mcap step needs the optional extra 'ros' (mcap is not installed): pip install 'bendsense[ros]'"
+        "Error: the mcap step needs the optional extra 'ros' (mcap is not installed): pip install '.[ros]' in "
+        "bendsense's source directory (from a package index: 'bendsense[ros]')"
     ]
     assert not out.exists() and not (workdir / "none.mcap").exists()
 
@@ -254,7 +256,8 @@ def test_lsl_without_the_extra_names_it(workdir, monkeypatch, tmp_path):
                                     str(workdir / "cal.yaml"), "--lsl"])
     assert res.exit_code == 1 and not (tmp_path / "s").exists()
     assert res.output.strip().splitlines() == [
-        "Error: --lsl needs the optional extra 'lsl' (pylsl is not installed): pip install 'bendsense[lsl]'"]
+        "Error: --lsl needs the optional extra 'lsl' (pylsl is not installed): pip install '.[lsl]' in "
+        "bendsense's source directory (from a package index: 'bendsense[lsl]')"]
 
 
 @pytest.mark.parametrize("command", ["live", "record"])
