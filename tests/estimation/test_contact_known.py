@@ -16,6 +16,7 @@ from bendsense.errors import ArgumentError
 from bendsense.estimation import estimate_force
 from bendsense.mechanics.beam import solve_beam
 from bendsense.shape.pcc import reconstruct
+from bendsense.status import Status
 
 CFG = bendsense.load_config()
 SENSOR = CFG.sensor
@@ -94,6 +95,17 @@ def test_a_shape_needs_more_force_nearer_the_base():
     fx = [estimate_force(_kappa(t.shifts_m), p, KNOWN, "horizontal", load="contact", contact_s_m=f * L,
                          noise_std=1e-6).force_n[0] for f in (0.6, 0.8, 0.95)]
     assert fx[0] > fx[1] > fx[2] > 0.12
+
+
+@pytest.mark.parametrize("s_c", [1e-6, 1e-3])
+def test_a_contact_before_every_compared_point_is_no_force_it_can_tell(s_c):
+    """Closer to the base than the first compared point the force has no moment arm there: a frame not ok (it
+    divided by zero in the start's 2 x 2 solve, a traceback), at every constraint."""
+    p = 50e3
+    kappa = _kappa(forward(CFG, p, (0.12, 0.0)).shifts_m)
+    for constraint in ("none", "normal"):
+        est = estimate_force(kappa, p, KNOWN, constraint, load="contact", contact_s_m=s_c, noise_std=1e-6)
+        assert not est.success and est.status != Status.OK
 
 
 def test_contact_jacobian_is_the_beam_sensitivity_at_the_optimum(truths):

@@ -24,6 +24,15 @@ def test_reads_kpa_metadata_and_extra_columns(tmp_path):
     assert list(s.extra["note"]) == ["a", "b"]
 
 
+def test_an_integer_wider_than_int64_is_kept_as_written(tmp_path):
+    p = tmp_path / "s.csv"
+    p.write_text("t_s,pressure_kpa,ch1,frame_id\n0,20,1,1000000000000000000001\n0.5,40,3,1000000000000000000002\n")
+    s = read_session(p)
+    assert list(s.extra["frame_id"]) == ["1000000000000000000001", "1000000000000000000002"]
+    write_session_csv(s, tmp_path / "back.csv")
+    assert list(read_session(tmp_path / "back.csv").extra["frame_id"]) == list(s.extra["frame_id"])
+
+
 def test_channels_in_any_column_order(tmp_path):
     p = tmp_path / "s.csv"
     p.write_text("ch2,t_s,ch1\n5,0,7\n")

@@ -162,6 +162,10 @@ def lm_step(H, g, out):
     d = H[1, 1] + eps
     b = H[0, 1]
     det = a * d - b * b
+    if not det > 0.0:  # H = 0 (ε² underflows): nothing to step on (a force with no moment arm at any node)
+        out[0] = 0.0
+        out[1] = 0.0
+        return
     out[0] = -((d * g[0] - b * g[1]) / det)
     out[1] = -((a * g[1] - b * g[0]) / det)
 

@@ -102,11 +102,13 @@ def parse_column(cells: list[str]) -> np.ndarray:
     -------
     ndarray, shape (rows,)
         ``int64`` when every cell is an integer, ``float`` when every cell is a number,
-        else ``object`` (the strings).
+        else ``object`` (the strings; also integers wider than ``int64``, kept as written).
     """
     try:
         ints = [int(c) for c in cells]
         return np.array(ints, dtype=np.int64)
+    except OverflowError:  # an identifier of 20 digits and more: a float would round it
+        return np.array(cells, dtype=object)
     except ValueError:
         pass
     try:
