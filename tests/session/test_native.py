@@ -250,6 +250,18 @@ def test_killed_recording_is_read_and_flagged_unfinished(tmp_path, caplog):
            f"a torn last record (7 of {w.dtype.itemsize} bytes) ignored" in caplog.text
 
 
+def test_an_unfinished_recording_larger_than_memory_is_one_line(tmp_path):
+    """A killed recording's frames.bin has no n_records to hold its size to: 4 TiB (a sparse file) is refused."""
+    w = SessionWriter(tmp_path / "s", record_dtype(3), adc_bits=12)
+    w.write(w.empty(6))
+    os.close(w._fd)
+    w._events.close()
+    os.truncate(tmp_path / "s" / "frames.bin", 4 * 2**40)
+    with pytest.raises(SessionError, match=r"frames.bin: [\d,]+ records of \d+ bytes \(4096.0 GiB\) do not fit in "
+                                           r"this machine's memory"):
+        read_session_dir(tmp_path / "s")
+
+
 def test_finished_session_reports_lost_records_with_the_numbers(tmp_path):
     with SessionWriter(tmp_path / "s", record_dtype(2)) as w:
         w.write(w.empty(1500))

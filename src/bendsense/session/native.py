@@ -776,7 +776,11 @@ def read_records(path) -> tuple[np.ndarray, dict]:
                     "present%s", path, f"{n:,}", note)
     if n:
         with open_regular(frames, "frames.bin of a session", SessionError) as fh:
-            records = np.fromfile(fh, dtype=dtype, count=n)
+            try:
+                records = np.fromfile(fh, dtype=dtype, count=n)
+            except MemoryError:  # an unfinished recording has no n_records to hold its size to
+                raise SessionError(f"{frames}: {n:,} records of {size} bytes ({n * size / 2**30:.1f} GiB) do not fit "
+                                   "in this machine's memory") from None
     else:
         records = np.zeros(0, dtype=dtype)
     bits = meta.get("adc_bits")
