@@ -104,10 +104,10 @@ def put_frames(obj, index, part, n: int):
     return dataclasses.replace(obj, **changes)
 
 
-def expand_frames(est, mask: np.ndarray):
+def expand_frames(est, mask: np.ndarray, *, message: str = "no pressure reading", status: int = 0):
     """A ForceEstimate for all frames of ``mask`` from one for the frames where it is True.
 
-    The other frames get NaN forces, ``success=False`` and the message "no pressure reading".
+    The other frames get NaN forces, ``success=False``, ``message`` and the code ``status``.
 
     Parameters
     ----------
@@ -115,6 +115,10 @@ def expand_frames(est, mask: np.ndarray):
         The estimates of the frames where ``mask`` is True.
     mask : ndarray of bool, shape (n,)
         The frames that have an estimate.
+    message : str, default "no pressure reading"
+        The other frames' message.
+    status : int, default 0
+        The other frames' status code (:class:`~bendsense.status.Status`; 0: none).
     """
     n, m = mask.size, int(mask.sum())
     changes = {}
@@ -124,9 +128,9 @@ def expand_frames(est, mask: np.ndarray):
             if value.dtype.kind == "b":
                 full = np.zeros((n, *value.shape[1:]), dtype=bool)
             elif value.dtype.kind in "US":
-                full = np.full((n, *value.shape[1:]), "no pressure reading", dtype=object)
+                full = np.full((n, *value.shape[1:]), message, dtype=object)
             elif value.dtype.kind in "iu":
-                full = np.zeros((n, *value.shape[1:]), dtype=value.dtype)
+                full = np.full((n, *value.shape[1:]), status if f.name == "status" else 0, dtype=value.dtype)
             else:
                 full = np.full((n, *value.shape[1:]), np.nan, dtype=value.dtype if value.dtype.kind == "f" else object)
             full[mask] = value

@@ -87,6 +87,28 @@ def test_estimates_the_loads_it_was_given():
     assert got.reconstruct_s > 0 and got.estimate_s > 0
 
 
+def test_a_frame_whose_signal_overflows_its_curvature_has_no_force_and_the_others_do():
+    """A signal whose curvature overflows (1e308 through a polynomial calibration; inf here through a linear one) makes
+    no shape: that frame is no_shape, without a force, and
+    the session's other frames are estimated as before (it stopped the whole estimate with a message naming no
+    frame); a session where no frame has a shape is one line naming it."""
+    good = session()
+    signals = good.signals.copy()
+    signals[4, 3] = np.inf
+    bad = Session(good.t_s, signals, good.pressure_pa, source="bad.csv")
+    got = process(bad, CONFIG, linear_calibration(), constraint="none")
+    assert not np.isfinite(got.shape.curvature_per_m[4]).all()
+    assert list(got["status"]).count("no_shape") == 1 and got["status"][4] == "no_shape"
+    assert np.isnan(got["fx_n"][4]) and got.estimate.message[4] == "no shape: a signal that is not finite"
+    keep = np.arange(FRAMES) != 4
+    np.testing.assert_allclose(got.estimate.force_n[keep], process(good, CONFIG, linear_calibration(),
+                               constraint="none").estimate.force_n[keep], atol=1e-9)
+    assert got.counts() == FrameCounts(frames=FRAMES, ok=FRAMES - 1, no_shape=1, extrapolated=1)
+    signals[:, 3] = np.inf
+    with pytest.raises(SessionError, match=r"^bad.csv: no frame has a finite shape"):
+        process(Session(good.t_s, signals, good.pressure_pa, source="bad.csv"), CONFIG, linear_calibration())
+
+
 def test_options_fall_back_to_the_config():
     estimation = dataclasses.replace(CONFIG.estimation, constraint="vertical", objective="positions")
     config = CONFIG.replace(estimation=estimation)

@@ -286,13 +286,26 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
 
 
 def _estimate(session, shape, config, calibration, window_s, options):
-    """The force estimate of the session's frames under the load model of ``options`` (its noise model gives std_n)."""
+    """The force estimate of the session's frames under the load model of ``options`` (its noise model gives std_n).
+
+    A frame without a finite shape (a signal so far beyond its calibration that a curvature
+    overflows) has no force: status ``no_shape``, as its row in results.csv says.
+    """
+    from bendsense._batched import expand_frames, take_frames
+    from bendsense.estimation import _NO_SHAPE_MESSAGE
     from bendsense.estimation.load_models import estimate_load
 
     options["constraint"], options["method"], options["objective"] = estimation_options(
         config, options["constraint"], options["method"], options["objective"])
-    return estimate_load(shape, session.pressure_pa, config, t_s=session.t_s, window_s=window_s,
-                         calibration=calibration, **options)
+    n = len(session)
+    has = np.isfinite(np.reshape(shape.curvature_per_m, (n, -1))).all(axis=1)
+    if not has.any():
+        raise SessionError(f"{_source(session)}: no frame has a finite shape (every frame's signals are beyond the "
+                           "calibration's reach: check the calibration and the session's channels)")
+    part = shape if has.all() else take_frames(shape, np.flatnonzero(has), n)
+    est = estimate_load(part, session.pressure_pa[has], config, t_s=session.t_s[has], window_s=window_s,
+                        calibration=calibration, **options)
+    return est if has.all() else expand_frames(est, has, message=_NO_SHAPE_MESSAGE, status=Status.NO_SHAPE)
 
 
 def _shapes(session, config, calibration, points, shape):
