@@ -120,6 +120,10 @@ class Calibration:
         noise = np.zeros(n) if self.noise_std is None else _array("noise_std", self.noise_std, n)
         if np.any(noise < 0):
             raise ConfigError(f"noise_std: values must be >= 0, got {noise.tolist()}")
+        wide = max(hi - lo for lo, hi in (self.delta_a_range_odd, self.delta_a_range_even))
+        if np.any(noise > wide):  # σ would swamp every signal (and overflow its squares at 1e300)
+            raise ConfigError(f"noise_std: {check.short(float(noise.max()))} is wider than the calibrated signal "
+                              f"range ({wide:g}): a flat recording's noise is a fraction of it (units?)")
         set_(self, "noise_std", noise)
         if self.weighting not in WEIGHTINGS:
             raise ConfigError(f"weighting: must be one of {', '.join(WEIGHTINGS)}, got {check.short(self.weighting)}")
