@@ -412,6 +412,19 @@ def test_cli_stiffness_writes_no_config_from_a_fit_whose_levels_failed(tmp_path,
     assert "no config written" in result.output and not out.exists() and "Traceback" not in result.output
 
 
+def test_cli_free_bending_writes_no_config_from_data_that_determine_nothing(tmp_path):
+    """Four equal rows determine none of the three parameters: no config (it was written, exit 0, with only a warning
+    in the solver's words), and the fit's message is ours, not scipy's "`gtol` termination condition"."""
+    (tmp_path / "fb.csv").write_text("pressure_kpa,bending_angle_deg\n" + "20,24.1\n" * 4, encoding="utf-8")
+    fit = fit_free_bending(*read_free_bending_csv(tmp_path / "fb.csv"), CFG)
+    assert not fit.success and fit.message == "parameters not identifiable from these data (fix one)"
+    out = tmp_path / "fitted.yaml"
+    result = CliRunner().invoke(main, ["identify", "free-bending", str(tmp_path / "fb.csv"), "-o", str(out)])
+    assert result.exit_code == 1 and "the free-bending fit failed (parameters not identifiable" in result.output
+    assert "no config written" in result.output and not out.exists() and "Traceback" not in result.output
+    assert "termination condition" not in result.output
+
+
 def test_cli_refuses_to_overwrite(tmp_path):
     write_fb_csv(tmp_path / "fb.csv", np.random.default_rng(1))
     out = tmp_path / "fitted.yaml"

@@ -280,14 +280,19 @@ def _check_turned(kind, session_path, turned_path, turned_gravity, finger, fix, 
 
 
 def _failure(fit) -> str | None:
-    """Why a stiffness fit failed (a level's beam fit, or EI not positive); None for any other fit.
+    """Why a fit failed (a config of it would pose as identified); None for a fit that did not.
+
+    A stiffness fit fails where a level's beam fit does or EI is not positive; a free-bending
+    fit where its data determine no value of a parameter (its standard error not finite).
 
     A free-bending fit that stops with a parameter at its bound is a result (the data do
     not support that parameter), not a failure.
     """
-    from bendsense.identify import StiffnessFit
+    from bendsense.identify import NOT_IDENTIFIABLE, StiffnessFit
 
-    return fit.message if isinstance(fit, StiffnessFit) and not fit.success else None
+    if isinstance(fit, StiffnessFit):
+        return None if fit.success else fit.message
+    return NOT_IDENTIFIABLE if NOT_IDENTIFIABLE in getattr(fit, "message", "") else None
 
 
 def _gravity_sessions(inputs, config, turned_path, turned):

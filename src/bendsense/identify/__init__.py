@@ -421,9 +421,8 @@ def fit_free_bending(
     if at_bound:  # the solver's own words only where it failed ("`xtol` termination condition is satisfied.")
         bound = f"{', '.join(at_bound)} at its bound (fix it, or the data do not support it)"
         message, ok = (f"{message}; {bound}" if not ok else bound), False
-    if not all(math.isfinite(stderr[n]) for n in free):
-        ok = False
-        message += "; parameters not identifiable from these data (fix one)"
+    if not all(math.isfinite(stderr[n]) for n in free):  # (the solver's "`gtol` ... satisfied" is no reason)
+        message, ok = NOT_IDENTIFIABLE if ok else f"{message}; {NOT_IDENTIFIABLE}", False
     return FreeBendingFit(
         params={n: values[n] for n in FREE_BENDING_PARAMETERS},
         stderr=stderr,
@@ -438,6 +437,10 @@ def fit_free_bending(
         covariance=_full_covariance(cov[:m, :m], free, FREE_BENDING_PARAMETERS),
         posterior=belief.posterior(names, values, joint, len(p)) if prior else None,
     )
+
+
+#: A free-bending fit's message where the data do not determine a parameter (its standard error is not finite).
+NOT_IDENTIFIABLE = "parameters not identifiable from these data (fix one)"
 
 
 def _free_bending_data(pressure_pa, bending_angle_rad):
