@@ -746,8 +746,9 @@ def test_run_ends_background_jobs_of_a_failed_block(tmp_path: Path):
 
 
 def _slug(heading: str) -> str:
-    """GitHub's anchor of a Markdown heading."""
-    text = re.sub(r"[`*_]", "", heading.strip().lower())
+    """GitHub's anchor of a Markdown heading (and mkdocs' toc: emphasis dropped, a code span's ``_`` kept)."""
+    parts = re.split(r"(`[^`]*`)", heading.strip().lower())
+    text = "".join(p[1:-1] if p.startswith("`") else re.sub(r"[*_]", "", p) for p in parts)
     text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", text)
     return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
 
@@ -761,6 +762,7 @@ def test_slug_follows_github():
     assert _slug("Free bending (paper eq. 8–12)") == "free-bending-paper-eq-812"
     assert _slug("1. Install and run the demo") == "1-install-and-run-the-demo"
     assert _slug("ModemManager grabs /dev/ttyACM*") == "modemmanager-grabs-devttyacm"
+    assert _slug("A force along the body (`contact_s_m`)") == "a-force-along-the-body-contact_s_m"
 
 
 @pytest.mark.parametrize("page", PAGES, ids=[p.relative_to(ROOT).as_posix() for p in PAGES])
