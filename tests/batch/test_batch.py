@@ -313,6 +313,24 @@ def test_process_session_reports_failures_instead_of_raising(tmp_path):
     assert row.status == "failed" and "missing.csv: no such file" in row.reason
 
 
+def test_a_batch_whose_every_session_fails_leaves_no_output_root(tmp_path):
+    """Nothing to keep: the collection the run made goes (it stayed, holding only its manifest); one made before it,
+    or one that a session wrote into, stays."""
+    session, _ = make_session(0, frames=5)
+    write_session_csv(Session(session.t_s, session.signals, np.full(5, np.nan)), tmp_path / "nop.csv")
+    report = process_sessions([tmp_path / "nop.csv"], tmp_path / "out", config=CONFIG,
+                              calibration=linear_calibration(), workers=0)
+    assert report.n_failed == 1 and not (tmp_path / "out").exists()
+    (tmp_path / "mine").mkdir()
+    process_sessions([tmp_path / "nop.csv"], tmp_path / "mine", config=CONFIG, calibration=linear_calibration(),
+                     workers=0)
+    assert (tmp_path / "mine").is_dir()
+    write_csv_session(tmp_path / "good.csv", 1, frames=5)
+    report = process_sessions([tmp_path / "nop.csv", tmp_path / "good.csv"], tmp_path / "both", config=CONFIG,
+                              calibration=linear_calibration(), workers=0)
+    assert report.n_ok == 1 and (tmp_path / "both" / "good" / "results.csv").exists()
+
+
 def test_extrapolated_frames_are_counted(tmp_path):
     session, _ = make_session(0, frames=5)
     signals = session.signals.copy()

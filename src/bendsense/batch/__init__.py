@@ -622,11 +622,13 @@ def process_sessions(
             check_workers(min(workers, len(todo)))
         with _own_pool(executor, workers, len(todo)) as own:  # its workers start while the calibration is prepared
             config, calibration = _prepared(config, calibration, estimate)
-            _start_collection(out_dir)
+            created = _start_collection(out_dir)
             task = dict(config=config, calibration=calibration, options=options, overwrite=overwrite)
             tasks = [(i, sessions[i], names[i]) for i in todo]
             description = _run_tasks(tasks, rows, out_dir, task, executor=executor, own=own, workers=workers,
                                      progress=progress)
+            if created and not any(row is not None and row.status == "ok" for row in rows):  # all failed: no empty root
+                _drop_collection(out_dir)
         return BatchReport(sessions=tuple(rows), out_dir=str(out_dir), wall_s=time.perf_counter() - start,
                            workers=description)
 
@@ -651,8 +653,11 @@ def _prepared(config, calibration, estimate: bool):
     return config, prepare(config, calibration, estimate)
 
 
-def _start_collection(out_dir: Path) -> None:
-    """Create ``out_dir`` (the collection of the results directories) with its manifest; nothing left on failure."""
+def _start_collection(out_dir: Path) -> bool:
+    """Create ``out_dir`` (the collection of the results directories) with its manifest; nothing left on failure.
+
+    Returns whether this run created the directory.
+    """
     created = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -665,6 +670,16 @@ def _start_collection(out_dir: Path) -> None:
         if isinstance(err, OutputError):
             raise
         raise output.write_error(out_dir, err) from None
+    return created
+
+
+def _drop_collection(out_dir: Path) -> None:
+    """Remove the collection :func:`_start_collection` created, while it holds nothing but its manifest."""
+    manifest = out_dir / output.MANIFEST_NAME
+    with contextlib.suppress(OSError):
+        if [p.name for p in out_dir.iterdir()] == [manifest.name]:
+            manifest.unlink()
+            out_dir.rmdir()
 
 
 def _plan(sessions, names, out_dir: Path, overwrite: bool) -> tuple[list, list]:
