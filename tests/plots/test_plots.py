@@ -25,7 +25,7 @@ from bendsense.plots import (  # noqa: E402
 from bendsense.results import read_results, write_results  # noqa: E402
 from bendsense.session import Session, write_session_csv  # noqa: E402
 from bendsense.shape.pcc import Shape  # noqa: E402
-from bendsense.status import Status
+from bendsense.status import Status  # noqa: E402
 
 SENSOR = load_config().sensor
 N = SENSOR.n_segments
@@ -243,6 +243,28 @@ def test_time_series_lines_stop_at_a_gap_in_the_frames(tmp_path):
     ticks = [line for line in ax_f.lines if line.get_label() == "status not ok"][0]
     np.testing.assert_array_equal(ticks.get_xdata(), t[3:4])  # the one frame not converged, where it is
     saved(fig, tmp_path / "series.png")
+
+
+def test_a_tracked_series_leaves_out_the_frames_whose_track_is_not_ok(tmp_path):
+    """A smoother carried through frames that do not determine the force swings there (0.5 N, σ tens of N, on a
+    straight finger at rest): the tracked line and band leave those frames out; the ticks say why."""
+    from bendsense.tracking import Track
+
+    session, shape, est = session_shape_estimate()
+    status = np.full(FRAMES, Status.OK, dtype=np.int8)
+    status[:5] = Status.NOT_IDENTIFIABLE  # the first frames' tracks, at rest
+    swing = est.force_n.copy()
+    swing[:5, 1] = -0.5
+    track = Track(force_n=swing, std_n=np.where(np.arange(FRAMES)[:, None] < 5, 26.0, est.std_n),
+                  covariance_n2=np.zeros((FRAMES, 2, 2)), window_p_value=None, status=status, bandwidth_hz=5.0,
+                  mode="smooth", t_s=session.t_s, frame_force_n=est.force_n)
+    fig = plot_time_series(write_results(tmp_path / "res", session, shape, est, track=track))
+    ax_f = fig.axes[0]
+    fy = [line for line in ax_f.lines if line.get_label() == "F_y tracked"][0]
+    y = np.asarray(fy.get_ydata(), dtype=float)
+    assert np.isnan(y[:5]).all() and np.isfinite(y[5:]).all()
+    assert ax_f.get_ylim()[0] > -0.5  # the swing is not drawn, and does not set the scale
+    saved(fig, tmp_path / "tracked.png")
 
 
 def test_a_track_plot_stops_at_a_gap_and_keeps_its_labels_in_the_figure(tmp_path):

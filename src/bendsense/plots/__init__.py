@@ -500,7 +500,8 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
     A component with an infinite σ (not identifiable: the shape does not determine it)
     is left out, not drawn at the value where the fit stopped. With ``tracked`` (the
     tracked force and its σ, each (frames, 2)), the band is the tracked force's and the
-    per-frame forces are points under it. ``contact``: the load is a contact along the body, not at the tip.
+    per-frame forces are points under it; the tracked line and band leave out the frames
+    whose ``status`` (then the track's) is not ``ok``. ``contact``: the load is a contact along the body, not at the tip.
     """
     from matplotlib.legend_handler import HandlerTuple
 
@@ -520,8 +521,11 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
         if tracked is not None:  # over the band, under the tracked line
             (points,) = ax.plot(t, f, ".", color=color, markersize=2.5, alpha=0.5, markeredgewidth=0, zorder=2.2,
                                 label=f"{label} per frame")
-            f = np.where(np.isinf(tracked[1][:, i]), np.nan, tracked[0][:, i])
-            band = 2.0 * tracked[1][:, i]
+            # a frame whose tracked status is not ok (the ticks) is left out: a smoother carried through frames
+            # that do not determine the force swings there (half a newton, sigma tens of newtons) and tells nothing
+            kept = np.ones(t.size, dtype=bool) if status is None else status == "ok"
+            f = np.where(np.isinf(tracked[1][:, i]) | ~kept, np.nan, tracked[0][:, i])
+            band = np.where(kept, 2.0 * tracked[1][:, i], np.nan)
             label += " tracked"
         drawn.append(f)
         bands.append(band)
