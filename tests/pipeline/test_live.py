@@ -164,8 +164,8 @@ def test_every_received_frame_is_estimated(calibration_path, stream):
 
     cal = Calibration.load(calibration_path)
     config = bendsense.load_config()
-    readings = [SimpleNamespace(sample=SimpleNamespace(adc=np.asarray(c), pressure_pa=p, seq=k), device_us=k * 10_000,
-                                host_ns=k) for k, (p, c, _) in enumerate(stream)]
+    readings = [SimpleNamespace(sample=SimpleNamespace(adc=np.asarray(c), pressure_pa=p, seq=k, status=0),
+                                device_us=k * 10_000, host_ns=k) for k, (p, c, _) in enumerate(stream)]
     proc = LiveProcessor(cal, config, constraint="normal")
     shown = [proc.process_many(readings[i:i + 40]) for i in range(0, len(readings), 40)]
     assert proc.estimated == proc.frames == len(stream) and proc.failures == 0
@@ -296,3 +296,38 @@ def test_warm_up_readies_the_live_kernel_and_forgets_its_frames(calibration_path
     a, b = warmed.process_block(signals, pressure), fresh.process_block(signals, pressure)
     np.testing.assert_array_equal(a.estimate.force_n, b.estimate.force_n)
     assert warmed.frames == fresh.frames == len(frames)
+
+
+def test_a_reading_the_board_flags_has_no_shape_live_and_offline(calibration_path, stream, tmp_path):
+    """ADC overrun, lock-in saturated, multiplexer settling: the SAMPLE's own readings are not to be used; the frame
+    is no_shape with no force, in the live block and in the recorded session's offline run alike (both were ok with
+    a clipped channel's force). A lost-frames bit (TX overflow) says nothing of the frame: it stays ok."""
+    from bendsense.device.driver import Reading
+    from bendsense.pipeline import process
+    from bendsense.session.native import SessionWriter, record_dtype
+    from bendsense.status import Status
+    from bendsense.wire.frames import StatusBits, decode_frame, encode_sample
+
+    cal = Calibration.load(calibration_path)
+    config = bendsense.load_config()
+    frames = stream[100:110]  # pressed: every frame ok unflagged
+    bits = [0, StatusBits.ADC_OVERRUN, 0, StatusBits.LOCKIN_SATURATED, StatusBits.MUX_SETTLE,
+            StatusBits.TX_OVERFLOW, 0, 0, 0, 0]
+    readings = [Reading(10**12 + 10**7 * k, 10**4 * k, decode_frame(encode_sample(
+        k, 10**4 * k, [int(c) for c in counts], p, status=int(b)))) for k, ((p, counts, _), b) in
+        enumerate(zip(frames, bits, strict=True))]
+    live = LiveProcessor(cal, config, constraint="normal").process_readings(readings)
+    flagged = np.array([b & 0b111 != 0 for b in bits])
+    assert (live.status[flagged] == Status.NO_SHAPE).all() and (live.status[~flagged] == Status.OK).all()
+    assert np.isnan(live.estimate.force_n[flagged]).all() and np.isfinite(live.estimate.force_n[~flagged]).all()
+
+    with SessionWriter(tmp_path / "s", record_dtype(16), adc_bits=12) as w:
+        rec = w.empty(len(frames))
+        rec["seq"], rec["t_us"], rec["status"] = np.arange(len(frames)), 10**4 * np.arange(len(frames)), bits
+        rec["adc"] = [counts for _, counts, _ in frames]
+        rec["pressure_pa"] = [p for p, _, _ in frames]
+        w.write(rec)
+    offline = process(tmp_path / "s", config, cal, constraint="normal")
+    np.testing.assert_array_equal(offline["status"], np.array([Status(c).word for c in live.status]))
+    # (the live block starts each frame from the one before, the offline batch cold: the same optimum to ~5 uN)
+    np.testing.assert_allclose(offline.estimate.force_n, live.estimate.force_n, atol=2e-5)

@@ -19,7 +19,7 @@ import bendsense
 from bendsense._batched import expand_frames
 from bendsense.calibration import Calibration
 from bendsense.config import ParameterCovarianceConfig
-from bendsense.estimation import estimate_force
+from bendsense.estimation import _NO_SHAPE_MESSAGE, estimate_force
 from bendsense.pipeline import LIVE_MAX_ITER, LiveProcessor
 from bendsense.pipeline.live import _Step
 from bendsense.results import frame_codes
@@ -95,7 +95,7 @@ def test_the_compiled_block_gives_the_offline_chain_frame_by_frame(calibration_p
     est = expand_frames(estimate_force(shape.curvature_per_m[ok], p[ok], config, constraint="normal", calibration=cal,
                                        max_iter=LIVE_MAX_ITER, **load), ok)
     est = dataclasses.replace(est, status=np.where(ok, est.status, Status.NO_SHAPE).astype(np.int8),
-                              message=np.where(ok, est.message, "no shape: a signal that is not finite"))
+                              message=np.where(ok, est.message, _NO_SHAPE_MESSAGE))
     tracked = Tracker(bandwidth_hz=30.0).update(est, t, p)
 
     # the shapes: the same kernel, the same numbers

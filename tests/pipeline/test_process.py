@@ -99,7 +99,7 @@ def test_a_frame_whose_signal_overflows_its_curvature_has_no_force_and_the_other
     got = process(bad, CONFIG, linear_calibration(), constraint="none")
     assert not np.isfinite(got.shape.curvature_per_m[4]).all()
     assert list(got["status"]).count("no_shape") == 1 and got["status"][4] == "no_shape"
-    assert np.isnan(got["fx_n"][4]) and got.estimate.message[4] == "no shape: a signal that is not finite"
+    assert np.isnan(got["fx_n"][4]) and got.estimate.message[4].startswith("no shape: a signal that is not finite")
     keep = np.arange(FRAMES) != 4
     np.testing.assert_allclose(got.estimate.force_n[keep], process(good, CONFIG, linear_calibration(),
                                constraint="none").estimate.force_n[keep], atol=1e-9)

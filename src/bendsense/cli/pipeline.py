@@ -239,6 +239,10 @@ def reconstruct(points):
         if counts.extrapolated:
             log.warning("%d of %d frames outside the calibrated signal range (status 'extrapolated')",
                         counts.extrapolated, len(session))
+        if counts.no_shape:
+            log.warning("%d of %d frames have no shape (status 'no_shape'): a signal that is not finite, or a "
+                        "reading the board flags (input_status: ADC overrun, lock-in saturated, multiplexer settling)",
+                        counts.no_shape, len(session))
         if counts.implausible_shape:  # a unit or calibration mistake, not a bend
             log.warning("%d of %d frames: the tip turns by more than a full turn (status 'implausible_shape'): check "
                         "the calibration and the config's sensor", counts.implausible_shape, len(session))

@@ -419,7 +419,7 @@ def compiled_estimate(step, out, pressure_pa, config, *, constraint, load, conta
     return result
 
 
-_NO_SHAPE_MESSAGE = "no shape: a signal that is not finite"
+_NO_SHAPE_MESSAGE = "no shape: a signal that is not finite, or a reading the board flags"
 
 
 def estimation_options(config, constraint=None, method=None, objective=None) -> tuple[str, str, str]:

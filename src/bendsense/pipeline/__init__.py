@@ -319,8 +319,24 @@ def _shapes(session, config, calibration, points, shape):
         return shape, 0.0
     s_m = None if points is None else np.linspace(0.0, config.sensor.length_m, int(points))
     t0 = time.perf_counter()
-    shape = reconstruct(session.signals, calibration, config.sensor, s_m=s_m)
+    shape = reconstruct(_readings_kept(session), calibration, config.sensor, s_m=s_m)
     return shape, time.perf_counter() - t0
+
+
+def _readings_kept(session) -> np.ndarray:
+    """The session's signals, NaN in the frames its board flagged (a native session's status bits): no shape there.
+
+    :data:`~bendsense.wire.frames.BAD_READING` (ADC overrun, lock-in saturated,
+    multiplexer settling), as the live path reads them. A CSV's ``status`` column is the
+    user's own: not read.
+    """
+    from bendsense.wire.frames import BAD_READING
+
+    status = session.extra.get("status") if "record_dtype" in session.meta else None
+    if status is None:
+        return session.signals
+    flagged = (np.asarray(status).astype(np.int64) & int(BAD_READING)) != 0
+    return np.where(flagged[:, None], np.nan, session.signals) if flagged.any() else session.signals
 
 
 def _over_time(est, session, window_s, mode, bandwidth_hz):

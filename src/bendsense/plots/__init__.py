@@ -501,7 +501,8 @@ def _force_panel(ax, t, force, std, *, status=None, pressure_kpa=None, tracked=N
     is left out, not drawn at the value where the fit stopped. With ``tracked`` (the
     tracked force and its σ, each (frames, 2)), the band is the tracked force's and the
     per-frame forces are points under it; the tracked line and band leave out the frames
-    whose ``status`` (then the track's) is not ``ok``. ``contact``: the load is a contact along the body, not at the tip.
+    whose ``status`` (then the track's) is not ``ok``. ``contact``: the load is a contact
+    along the body, not at the tip.
     """
     from matplotlib.legend_handler import HandlerTuple
 

@@ -111,6 +111,11 @@ class StatusBits(enum.IntFlag):
     TX_OVERFLOW = 8
 
 
+#: The bits that say a SAMPLE's own readings are not to be used (a clipped or unsettled channel): such a frame
+#: has no shape (status ``no_shape``). TX_OVERFLOW says frames were lost before it, not that it is wrong.
+BAD_READING = StatusBits.ADC_OVERRUN | StatusBits.LOCKIN_SATURATED | StatusBits.MUX_SETTLE
+
+
 class _Lines:
     __slots__ = ("pressures_pa",)
 
