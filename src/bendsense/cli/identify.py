@@ -288,11 +288,15 @@ def _failure(fit) -> str | None:
     A free-bending fit that stops with a parameter at its bound is a result (the data do
     not support that parameter), not a failure.
     """
-    from bendsense.identify import NOT_IDENTIFIABLE, StiffnessFit
+    import math
+
+    from bendsense.identify import NOT_IDENTIFIABLE, FreeBendingFit, StiffnessFit
 
     if isinstance(fit, StiffnessFit):
         return None if fit.success else fit.message
-    return NOT_IDENTIFIABLE if NOT_IDENTIFIABLE in getattr(fit, "message", "") else None
+    if isinstance(fit, FreeBendingFit) and not all(math.isfinite(fit.stderr[n]) for n in fit.free):
+        return NOT_IDENTIFIABLE
+    return None
 
 
 def _gravity_sessions(inputs, config, turned_path, turned):

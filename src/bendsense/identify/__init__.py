@@ -84,6 +84,9 @@ __all__ = [
     "read_stiffness_csv",
 ]
 
+#: A free-bending fit's message where the data do not determine a parameter (its standard error is not finite).
+NOT_IDENTIFIABLE = "parameters not identifiable from these data (fix one)"
+
 # typical magnitudes: parameter scales for the optimiser when a start value is 0
 _TYPICAL = {
     "shear_modulus_pa": 1e5,
@@ -437,10 +440,6 @@ def fit_free_bending(
         covariance=_full_covariance(cov[:m, :m], free, FREE_BENDING_PARAMETERS),
         posterior=belief.posterior(names, values, joint, len(p)) if prior else None,
     )
-
-
-#: A free-bending fit's message where the data do not determine a parameter (its standard error is not finite).
-NOT_IDENTIFIABLE = "parameters not identifiable from these data (fix one)"
 
 
 def _free_bending_data(pressure_pa, bending_angle_rad):

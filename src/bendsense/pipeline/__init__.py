@@ -78,7 +78,8 @@ class FrameCounts:
         Frames whose tip turned by more than a full turn (status ``implausible_shape``: a unit
         or calibration mistake); their estimate is not counted above.
     no_shape : int
-        Frames with non-finite signals (status ``no_shape``); their estimate is not counted above.
+        Frames with non-finite signals, or readings their board flags (status ``no_shape``);
+        their estimate is not counted above.
     ok : int
         Frames whose status is ``ok`` (a shape and, where estimated, a force to use). A
         gripper's counts (:mod:`bendsense.batch.fingers`) sum it over the fingers.
