@@ -12,7 +12,7 @@ from click.testing import CliRunner
 import bendsense
 from bendsense.calibration import read_manifest
 from bendsense.cli import main
-from bendsense.errors import ConfigError, OutputError
+from bendsense.errors import ArgumentError, ConfigError, OutputError
 from bendsense.sim import VirtualSensor, calibration_shifts
 from bendsense.sim.scenarios import (
     CALIBRATION_RADII_M,
@@ -188,6 +188,8 @@ def test_library_errors(tmp_path):
         simulate("calibration", tmp_path / "x", frames_per_config=2)
     with pytest.raises(ConfigError, match="frames_per_strip: must be an integer >= 1"):
         simulate("validation", tmp_path / "x", frames_per_strip=0)
+    with pytest.raises(ArgumentError, match=r"rate_hz: 0.05 Hz over 10 s gives no frame \(one needs more than 0.05"):
+        simulate("time-varying", tmp_path / "x", rate_hz=0.05, duration_s=10.0)
     assert not (tmp_path / "x").exists()
     assert list(tmp_path.iterdir()) == []
     (tmp_path / "y").mkdir()
