@@ -248,9 +248,9 @@ def time_inputs(B, t_s, window_s, pressure_pa):
     if not np.isfinite(t).all():
         raise ArgumentError(f"t_s: must be finite, got {short(t[~np.isfinite(t)][0])} at frame "
                             f"{int(np.flatnonzero(~np.isfinite(t))[0])}")
-    back = np.flatnonzero(np.diff(t) < 0)
+    back = np.flatnonzero(~(np.diff(t) > 0))  # equal times too: no interval to filter over (t + 1e15: all equal)
     if back.size:
-        raise ArgumentError(f"t_s: must not decrease, got {short(t[back[0] + 1])} s after {short(t[back[0]])} s "
+        raise ArgumentError(f"t_s: must increase, got {short(t[back[0] + 1])} s after {short(t[back[0]])} s "
                             f"at frame {int(back[0]) + 1}")
     if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
             math.isfinite(window_s) and window_s > 0):
@@ -262,5 +262,8 @@ def time_inputs(B, t_s, window_s, pressure_pa):
         except (TypeError, ValueError):
             raise ArgumentError(f"pressure_pa: expected {B} pressures [Pa] (one per frame), got "
                                 f"{short(pressure_pa)}") from None
+        if not np.isfinite(P).all():  # a step in it restarts the series: NaN would hide every step
+            bad = int(np.flatnonzero(~np.isfinite(P))[0])
+            raise ArgumentError(f"pressure_pa: must be finite, got {short(P[bad])} at frame {bad} (or give None)")
     return t, P, float(window_s)
 
