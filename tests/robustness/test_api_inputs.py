@@ -14,6 +14,7 @@ import pytest
 import bendsense
 from bendsense.calibration import Calibration
 from bendsense.errors import ArgumentError, BendsenseError, ConfigError, SessionError
+from bendsense.identify import fit_free_bending
 from bendsense.mechanics.actuator import FreeBendingModel
 from bendsense.pipeline import process
 from robustness.test_invalid_corpus import GOOD_CAL, GOOD_CSV
@@ -23,6 +24,7 @@ CONFIG = bendsense.load_config()
 CAL = Calibration.load(GOOD_CAL)
 SESSION = bendsense.read_session_csv(GOOD_CSV)
 SIGNALS = SESSION.signals
+KAPPA = bendsense.reconstruct(SIGNALS, CAL, CONFIG).curvature_per_m
 
 CASES = {
     # Session(t_s, signals, pressure_pa): the case, mismatched lengths
@@ -130,6 +132,30 @@ CASES = {
     "process_time_backwards": (
         lambda: process(bendsense.Session([0.0, 0.2, 0.1], SIGNALS[:3], 5e4), CONFIG, CAL, estimate=False),
         ArgumentError, r"frame 2, column t_s: time runs backwards \(0\.1 s after 0\.2 s on frame 1\)"),
+    # a campaign on the API (2026-12-01): each of these was numpy's, Python's or an attribute's error from inside
+    "estimate_noise_std_length": (lambda: bendsense.estimate_force(KAPPA[:2], 5e4, CONFIG, noise_std=np.ones(3)),
+                                  ArgumentError, r"noise_std: expected one value or 16 \(one per channel\), got "
+                                                 r"shape \(3,\)"),
+    "estimate_initial_batch": (lambda: bendsense.estimate_force(KAPPA[:2], 5e4, CONFIG, noise_std=0.02,
+                                                                initial=bendsense.estimate_force(
+                                                                    KAPPA, 5e4, CONFIG, noise_std=0.02)),
+                               ArgumentError, r"initial: an estimate of batch shape \(4,\) does not broadcast "
+                                              r"against the frames \(2,\)"),
+    "estimate_contact_config_calibration": (
+        lambda: bendsense.estimate_contact(KAPPA, 5e4, CAL, t_s=np.arange(4.0)), ArgumentError,
+        r"config: expected a Config"),
+    "fit_free_bending_config_calibration": (
+        lambda: fit_free_bending([1e4, 2e4, 3e4, 4e4], [0.1, 0.2, 0.3, 0.4], CAL),
+        ArgumentError, r"config: expected a Config"),
+    "fit_free_bending_text": (lambda: fit_free_bending("a", "b", CONFIG), ArgumentError,
+                              r"pressure_pa: expected numbers"),
+    "process_unknown_option": (lambda: process(SESSION, CONFIG, CAL, bogus=1), ArgumentError,
+                               r"bogus: not an option of process"),
+    "process_shape_text": (lambda: process(SESSION, CONFIG, CAL, shape="x"), ArgumentError,
+                           r"shape: expected a Shape"),
+    "process_points_zero": (lambda: process(SESSION, CONFIG, CAL, points=0), ArgumentError, r"points: "),
+    "reconstruct_base_angle_inf": (lambda: bendsense.reconstruct(SIGNALS, CAL, CONFIG, base_angle_rad=np.inf),
+                                   ArgumentError, r"base_angle_rad: must be finite, got inf"),
 }
 
 

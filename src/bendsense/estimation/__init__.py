@@ -292,6 +292,10 @@ def _setup(shape, config, constraint, method, objective, push_only, tip_angle_so
         raise ArgumentError(f"max_iter: must be >= 0 (an integer), got {short(max_iter)}")
     if noise_std is not None:
         noise_std = float_array("noise_std", noise_std)
+        channels = config.sensor.n_segments
+        if noise_std.ndim > 1 or noise_std.size not in (1, channels):
+            raise ArgumentError(f"noise_std: expected one value or {channels} (one per channel), got shape "
+                                f"{noise_std.shape}")
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
@@ -546,6 +550,7 @@ def estimate_contact(shape, pressure_pa, config=None, *, calibration=None, t_s=N
     if other:
         raise ArgumentError(f"{other[0]}: not an option of estimate_contact (it takes "
                             f"{', '.join(n for n in _FRAME_OPTIONS if n not in ('calibration', 'noise_std'))})")
+    config = _config(config)
     contact = _contact()
     threshold = contact.LR_THRESHOLD if threshold is None else threshold
     return contact.estimate_windows(estimate_force, shape, pressure_pa, config, calibration, t_s, window_s,
@@ -770,6 +775,14 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
     guess; a given force (``initial_force_n``, or an ``initial`` without guesses) is the
     start itself. Either disables the chaining of frames along the batch.
     """
+    if initial is not None and initial.batch_shape != batch:
+        try:
+            fits = np.broadcast_shapes(initial.batch_shape, batch) == batch
+        except ValueError:
+            fits = False
+        if not fits:
+            raise ArgumentError(f"initial: an estimate of batch shape {initial.batch_shape} does not broadcast against "
+                                f"the frames {batch} (give one frame's estimate, or one per frame)")
     if initial is not None and initial_force_n is None and initial.guess_n is not None:
         offset = _flat(np.subtract(initial.force_n, initial.guess_n, dtype=float), batch, B, (2,))
         offset[~np.isfinite(offset.sum(axis=1))] = 0.0  # a failed estimate corrects nothing

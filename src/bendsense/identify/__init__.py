@@ -56,6 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bendsense import validation as check
 from bendsense._blas import one_thread
 from bendsense.config import FREE_BENDING_PARAMETERS, STIFFNESS_PARAMETERS
 from bendsense.errors import ArgumentError, ConfigError
@@ -378,10 +379,9 @@ def fit_free_bending(
     ConfigError
         An unknown parameter name.
     """
-    from bendsense.config import load_config
+    from bendsense.config import Config, load_config
 
-    if config is None:
-        config = load_config()
+    config = load_config() if config is None else check.instance("config", config, Config, "bendsense.load_config()")
     p, y = _free_bending_data(pressure_pa, bending_angle_rad)
     start = _free_bending_start(config.material, initial)
     free, fixed = _split_fix(fix, FREE_BENDING_PARAMETERS, start, config)
@@ -444,8 +444,8 @@ def fit_free_bending(
 
 def _free_bending_data(pressure_pa, bending_angle_rad):
     """The pressures [Pa] and angles [rad] as float arrays of one shape (n,), checked finite."""
-    p = np.asarray(pressure_pa, dtype=float)
-    y = np.asarray(bending_angle_rad, dtype=float)
+    p = check.float_array("pressure_pa", pressure_pa)
+    y = check.float_array("bending_angle_rad", bending_angle_rad)
     if p.ndim != 1 or y.shape != p.shape:
         raise ArgumentError(f"pressure_pa, bending_angle_rad: expected equal shapes (n,), got {p.shape} and {y.shape}")
     for name, arr in (("pressure_pa", p), ("bending_angle_rad", y)):

@@ -254,6 +254,12 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     from bendsense.estimation.plausibility import check_channels, check_one_line, check_time_column
     from bendsense.session.inputs import process_inputs
 
+    unknown = sorted(set(options) - _ESTIMATE_OPTIONS)
+    if unknown:
+        raise ArgumentError(f"{unknown[0]}: not an option of process (its own, or estimate_force's: "
+                            f"{', '.join(sorted(_ESTIMATE_OPTIONS))})")
+    if points is not None:
+        points = check.integer("points", points, minimum=2, maximum=10000)
     session, config, calibration, calibration_source = process_inputs(session, config, calibration,
                                                                       calibration_source)
     check_one_line(session)
@@ -286,6 +292,11 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
                      estimate_s=estimate_s)
 
 
+# the options of estimate_force that process passes on (the others are its own arguments)
+_ESTIMATE_OPTIONS = frozenset(("direction", "follower_angle_rad", "initial_force_n", "initial", "warm_start",
+                               "noise_std", "strict", "s_m", "n_points", "xtol_n", "max_iter"))
+
+
 def _estimate(session, shape, config, calibration, window_s, options):
     """The force estimate of the session's frames under the load model of ``options`` (its noise model gives std_n).
 
@@ -314,6 +325,10 @@ def _shapes(session, config, calibration, points, shape):
     from bendsense.shape.pcc import reconstruct
 
     if shape is not None:
+        from bendsense import validation as check
+        from bendsense.shape.pcc import Shape
+
+        check.instance("shape", shape, Shape, "bendsense.reconstruct")
         if np.shape(shape.tip_angle_rad)[:1] != (len(session),):
             raise ArgumentError(f"shape: expected the shapes of the session's {len(session)} frames, got batch "
                                 f"shape {np.shape(shape.tip_angle_rad)}")

@@ -173,6 +173,8 @@ def _kinematics(kappa, grid: _Grid, base_angle_rad, points=True, theta=None):
     if kappa.shape[-1:] != (n,):
         raise ArgumentError(f"curvature_per_m: expected {n} values on the last axis, got {kappa.shape}")
     base = float_array("base_angle_rad", base_angle_rad)
+    if not np.isfinite(base).all():
+        raise ArgumentError(f"base_angle_rad: must be finite, got {base[~np.isfinite(base)].ravel()[0]!r}")
     try:
         batch = np.broadcast_shapes(kappa.shape[:-1], base.shape)
     except ValueError:
@@ -603,6 +605,8 @@ def reconstruct(
         raise ArgumentError(f"signals: expected {n} channels on the last axis, got shape {a.shape}")
     lengths = sensor.lengths_m
     grid = _grid(lengths, default_s_m(lengths) if s_m is None else s_m)
+    if isinstance(base_angle_rad, (float, int)) and not math.isfinite(base_angle_rad):
+        raise ArgumentError(f"base_angle_rad: must be finite, got {base_angle_rad!r}")
     if not isinstance(base_angle_rad, (float, int)):
         delta = a - calibration.offset
         kappa = shifts_to_curvatures(calibration.shifts_from_delta(delta), lengths, sensor.strip_gap_m)
