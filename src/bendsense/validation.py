@@ -355,3 +355,27 @@ def _type(value) -> str:
     if value is None:
         return "None"
     return type(value).__name__
+
+
+def broadcasts(field: str, shape: tuple, to: tuple, what: str = "the frames", *, error=ArgumentError) -> None:
+    """Refuse an argument of ``shape`` that does not broadcast to ``to`` (one line naming it and both shapes).
+
+    Parameters
+    ----------
+    field : str
+        The argument, for the message.
+    shape : tuple of int
+        Its shape (a batch shape, or an array's).
+    to : tuple of int
+        The shape it must broadcast to.
+    what : str, default "the frames"
+        What ``to`` is the shape of, for the message.
+    error : type, default ArgumentError
+        The exception class to raise.
+    """
+    try:
+        if np.broadcast_shapes(shape, to) == tuple(to):
+            return
+    except ValueError:
+        pass
+    raise error(f"{field}: shape {tuple(shape)} does not broadcast against {what} {tuple(to)}")

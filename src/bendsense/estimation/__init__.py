@@ -67,7 +67,7 @@ from bendsense.mechanics import _actuator_kernels
 from bendsense.mechanics import beam as _beam
 from bendsense.mechanics.actuator import model_jacobian
 from bendsense.status import Status
-from bendsense.validation import float_array, instance, short
+from bendsense.validation import broadcasts, float_array, instance, short
 
 _OK = int(Status.OK)
 
@@ -292,10 +292,7 @@ def _setup(shape, config, constraint, method, objective, push_only, tip_angle_so
         raise ArgumentError(f"max_iter: must be >= 0 (an integer), got {short(max_iter)}")
     if noise_std is not None:
         noise_std = float_array("noise_std", noise_std)
-        channels = config.sensor.n_segments
-        if noise_std.ndim > 1 or noise_std.size not in (1, channels):
-            raise ArgumentError(f"noise_std: expected one value or {channels} (one per channel), got shape "
-                                f"{noise_std.shape}")
+        broadcasts("noise_std", noise_std.shape, (config.sensor.n_segments,), "the channels")
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
@@ -775,14 +772,8 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
     guess; a given force (``initial_force_n``, or an ``initial`` without guesses) is the
     start itself. Either disables the chaining of frames along the batch.
     """
-    if initial is not None and initial.batch_shape != batch:
-        try:
-            fits = np.broadcast_shapes(initial.batch_shape, batch) == batch
-        except ValueError:
-            fits = False
-        if not fits:
-            raise ArgumentError(f"initial: an estimate of batch shape {initial.batch_shape} does not broadcast against "
-                                f"the frames {batch} (give one frame's estimate, or one per frame)")
+    if initial is not None and initial.batch_shape != batch:  # one frame's estimate, or one per frame
+        broadcasts("initial", initial.batch_shape, batch)
     if initial is not None and initial_force_n is None and initial.guess_n is not None:
         offset = _flat(np.subtract(initial.force_n, initial.guess_n, dtype=float), batch, B, (2,))
         offset[~np.isfinite(offset.sum(axis=1))] = 0.0  # a failed estimate corrects nothing

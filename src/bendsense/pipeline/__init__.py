@@ -209,8 +209,7 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     estimate : bool
         Estimate the tip forces (False: shapes only).
     points : int, optional
-        Points of each shape along the sensor (default that of
-        :func:`bendsense.shape.pcc.reconstruct`).
+        Points of each shape along the sensor, 2..10000 (default :func:`~bendsense.reconstruct`'s).
     shape : Shape, optional
         The shapes of these frames, reconstructed earlier (the ``reconstruct`` step of a
         command line chain, or another estimate of the same session); None: reconstructed
@@ -254,12 +253,7 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     from bendsense.estimation.plausibility import check_channels, check_one_line, check_time_column
     from bendsense.session.inputs import process_inputs
 
-    unknown = sorted(set(options) - _ESTIMATE_OPTIONS)
-    if unknown:
-        raise ArgumentError(f"{unknown[0]}: not an option of process (its own, or estimate_force's: "
-                            f"{', '.join(sorted(_ESTIMATE_OPTIONS))})")
-    if points is not None:
-        points = check.integer("points", points, minimum=2, maximum=10000)
+    points = _checked_options(options, points)
     session, config, calibration, calibration_source = process_inputs(session, config, calibration,
                                                                       calibration_source)
     check_one_line(session)
@@ -297,11 +291,22 @@ _ESTIMATE_OPTIONS = frozenset(("direction", "follower_angle_rad", "initial_force
                                "noise_std", "strict", "s_m", "n_points", "xtol_n", "max_iter"))
 
 
+def _checked_options(options, points):
+    """``points`` checked (None, or 2..10000 sample points), after the ``options`` passed on to estimate_force."""
+    from bendsense import validation as check
+
+    unknown = sorted(set(options) - _ESTIMATE_OPTIONS)
+    if unknown:
+        raise ArgumentError(f"{unknown[0]}: not an option of process (its own, or estimate_force's: "
+                            f"{', '.join(sorted(_ESTIMATE_OPTIONS))})")
+    return None if points is None else check.integer("points", points, minimum=2, maximum=10000)
+
+
 def _estimate(session, shape, config, calibration, window_s, options):
     """The force estimate of the session's frames under the load model of ``options`` (its noise model gives std_n).
 
-    A frame without a finite shape (a signal so far beyond its calibration that a curvature
-    overflows) has no force: status ``no_shape``, as its row in results.csv says.
+    A frame without a finite shape (a signal that is not finite or overflows its curvature, a
+    reading its board flags) has no force: status ``no_shape``, as its row in results.csv says.
     """
     from bendsense._batched import expand_frames, take_frames
     from bendsense.estimation import _NO_SHAPE_MESSAGE

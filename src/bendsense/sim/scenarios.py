@@ -604,10 +604,11 @@ def _check_contact_force(config, contact_n, pressure_max_pa, contact_s_m=None) -
 def _time_varying(run, *, rate_hz, duration_s, contact_n, contact_s_m):
     sim, out = run.sim, run.out
     rate = _positive_option("rate_hz", rate_hz)
-    total = round(rate * _positive_option("duration_s", duration_s))
+    duration = _positive_option("duration_s", duration_s)
+    total = round(rate * duration)
     if total < 1:
-        raise ArgumentError(f"rate_hz: {rate:g} Hz over {duration_s:g} s gives no frame (one needs more than "
-                            f"{0.5 / duration_s:g} Hz)")
+        raise ArgumentError(f"rate_hz: {rate:g} Hz over {duration:g} s gives no frame (one needs more than "
+                            f"{0.5 / duration:g} Hz)")
     touch_locations(0.0, sim.config.actuator.length_m, contact_s_m)
     _check_contact_force(sim.config, contact_n, 100e3, contact_s_m)  # time_varying_profile's peak pressure
     rows = list(_stream_frames(sim, rate, max(1, round(rate * 0.1)), total, float(contact_n), run.rng, True,
