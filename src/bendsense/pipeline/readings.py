@@ -85,7 +85,8 @@ def reading_columns(readings, t0_us: int, host0_ns: int | None) -> ReadingColumn
     samples = [r.sample for r in readings]
     signals = np.array([s.adc for s in samples], dtype=float).reshape(n, -1)
     flagged = [i for i, s in enumerate(samples) if s.status & BAD_READING]
-    signals[flagged] = np.nan  # readings the board flags (clipped, unsettled): no shape, as the offline run
+    if flagged:  # readings the board flags (clipped, unsettled): no shape, as the offline run (an empty index: 1 µs)
+        signals[flagged] = np.nan
     lines = [sample_lines(s) for s in samples]
     width = max(map(len, lines)) if n else 1
     if any(len(x) < width for x in lines):  # frames of fewer lines: no reading of the others
