@@ -292,7 +292,6 @@ def _setup(shape, config, constraint, method, objective, push_only, tip_angle_so
         raise ArgumentError(f"max_iter: must be >= 0 (an integer), got {short(max_iter)}")
     if noise_std is not None:
         noise_std = float_array("noise_std", noise_std)
-        broadcasts("noise_std", noise_std.shape, (config.sensor.n_segments,), "the channels")
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
                             f"{type(calibration).__name__}")
@@ -308,7 +307,7 @@ def _setup(shape, config, constraint, method, objective, push_only, tip_angle_so
         objective = "positions" if method == "paper" or ref.kappa is None else est.objective
     options = (constraint, objective, push_only, tip_angle_source, None if direction is None else tuple(
         np.ravel(direction).tolist()), follower_angle_rad, float(xtol_n), int(max_iter),
-        None if noise_std is None else np.asarray(noise_std, dtype=float).tobytes(), load)
+        None if noise_std is None else (noise_std.shape, noise_std.tobytes()), load)
     return ref, contact, objective, _problem(config, calibration, ref, options, noise_std)
 
 
@@ -772,7 +771,7 @@ def _starts(initial, initial_force_n, B, batch, warm_start):
     guess; a given force (``initial_force_n``, or an ``initial`` without guesses) is the
     start itself. Either disables the chaining of frames along the batch.
     """
-    if initial is not None and initial.batch_shape != batch:  # one frame's estimate, or one per frame
+    if initial is not None and initial.batch_shape not in ((), batch):  # one frame's estimate, or one per frame
         broadcasts("initial", initial.batch_shape, batch)
     if initial is not None and initial_force_n is None and initial.guess_n is not None:
         offset = _flat(np.subtract(initial.force_n, initial.guess_n, dtype=float), batch, B, (2,))
@@ -848,6 +847,8 @@ def _build_problem(config, calibration, ref, options, noise_opt):
     gap = float(config.sensor.strip_gap_m)
     pcc = ref.kappa is not None
     noise = False
+    if noise_opt is not None:  # (here, once per problem: it is cached by the option's bytes)
+        broadcasts("noise_std", noise_opt.shape, (config.sensor.n_segments,), "the channels")
     sigma_a = _signal_noise(noise_opt, calibration, est)
     if pcc:
         g = ref.grid
