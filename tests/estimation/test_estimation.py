@@ -521,11 +521,50 @@ def test_single_frame_path_equals_the_batched_path(frames, constraint):
         assert one_of_batch.force_n.shape == (1, 2)
         np.testing.assert_allclose(one_of_batch.std_n[0], one.std_n, rtol=1e-12)
         # warm-started from the previous frame, as the live view does: the same optimum, to
-        # the 1e-4 σ within which each converges (kernels.SIGMA_STEP)
+        # the SIGMA_STEP σ within which each converges (kernels.SIGMA_STEP)
         warm = estimate_force(kappa[i], p[idx][i], CFG, constraint=constraint, calibration=cal, initial=previous)
         tol = np.maximum(1e-8, 2 * SIGMA_STEP * np.nan_to_num(one.std_n, posinf=0.0))
         assert np.all(np.abs(warm.force_n - batch.force_n[i]) <= tol)
         previous = warm
+
+
+def _pcc_points(kappa, s_m):
+    """Points (M, 2) at ``s_m`` of arcs of curvatures ``kappa`` on the sensor's segments (closed form, base angle 0)."""
+    start = np.concatenate(([0.0], np.cumsum(SENSOR.lengths_m)))
+    phi, x, y, out = 0.0, 0.0, 0.0, []
+    for i, k in enumerate(kappa):
+        for t in s_m[(s_m >= start[i]) & (s_m < start[i + 1])] - start[i]:  # x = ∫ sin φ, y = ∫ cos φ
+            out.append((x + (math.cos(phi) - math.cos(phi + k * t)) / k,
+                        y + (math.sin(phi + k * t) - math.sin(phi)) / k))
+        x += (math.cos(phi) - math.cos(phi + k * SENSOR.lengths_m[i])) / k
+        y += (math.sin(phi + k * SENSOR.lengths_m[i]) - math.sin(phi)) / k
+        phi += k * SENSOR.lengths_m[i]
+    return np.array(out)
+
+
+@pytest.mark.parametrize("constraint", ("none", "normal"))
+def test_the_estimate_reports_the_beam_at_its_own_force(frames, constraint):
+    """The iteration stops once the error left is below SIGMA_STEP σ, its last step taken
+    without a beam solve: the shape it reports (nodes' angles, tip, residual) must be the
+    beam's at the force it reports, not the iterate's before it (tens of µm away).
+    Checked against the forward solver at the reported force, on noisy frames."""
+    p, mag, ang = frames
+    force = np.column_stack([mag * np.cos(ang), mag * np.sin(ang)]) * 0.5
+    noisy = pcc_curvatures(beam_shape(p, force)) + np.random.default_rng(3).normal(scale=0.3, size=(p.size, 16))
+    est = estimate_force(noisy, p, CFG, constraint=constraint, warm_start=False, calibration=_cubic_calibration(0.2))
+    ok = est.status == Status.OK
+    assert ok.sum() >= 40
+    nodes = bendsense.estimation.chebyshev_nodes_m(L)
+    sol = beam_shape(p[ok], est.force_n[ok], nodes)
+    # the step's square is left (2e-6 rad here); the iterate before it was up to 2e-3 rad away
+    np.testing.assert_allclose(est.state[ok], sol.angle_rad, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(est.tip_position_m[ok], sol.tip_position_m, rtol=0, atol=1e-5 * L)
+    # the residual: the RMS distance over [0, Lc] of the beam there from the PCC shape, by the estimate's quadrature
+    s, w = quadrature(SENSOR.lengths_m, min(SENSOR.lengths_m.sum(), L), CFG.estimation.n_points)
+    model = beam_shape(p[ok], est.force_n[ok], s).positions_m
+    measured = np.array([_pcc_points(k, s) for k in noisy[ok]])
+    rms = np.sqrt(np.einsum("j,bj->b", w, ((model - measured) ** 2).sum(-1)) / w.sum())
+    np.testing.assert_allclose(est.residual_m[ok], rms, rtol=1e-3, atol=2e-7)
 
 
 def test_option_values_of_the_wrong_kind_name_the_option():

@@ -91,7 +91,7 @@ def test_estimator_reproduces_the_frozen_outputs(case, calibration):
     same = keep & ~misfit
     np.testing.assert_array_equal(_path_free(out["message"])[same], _path_free(want["message"])[same])
     # 1e-9 N, or 1e-6 σ where σ is larger than 1 mN (the iteration stops when the error
-    # left is below 1e-4 σ, kernels.SIGMA_STEP)
+    # left is below kernels.SIGMA_STEP σ)
     want = {k: v[keep] for k, v in want.items() if k in ("force_n", "std_n", "chi2_per_dof", "residual_m", "message")}
     out = {k: out[k][keep] for k in want}
     tol = np.maximum(1e-9, 1e-6 * np.nan_to_num(want["std_n"], nan=0.0, posinf=0.0))

@@ -55,7 +55,7 @@ POSITIONS, ANGLES = prob.POSITIONS, prob.ANGLES
 FORCE_SENS, CONTACT_SENS = 1, 2  # the beam's sensitivity levels (bendsense.mechanics._beam_kernels.solve_frame)
 MAX_JUMPS = 8  # trial steps off the stable branch before stopping at the boundary
 BOUNDARY_MISFIT = 0.05  # RMS residual / L beyond which a shape is no bending of the model actuator
-SIGMA_STEP = 1e-4  # a step below this many σ (a whitened cost) changes nothing a user can see: converged
+SIGMA_STEP = 1e-3  # an error left below this many σ (a whitened cost) changes nothing a user can see: converged
 FLAT = 2.0  # σ beyond FLAT · EI/L² (the force that bends the actuator a radian): the data do not determine it
 NEWTON_MAX_ITER = 30
 
@@ -350,6 +350,26 @@ def converged(dstep, size, last, H, chi2, xtol):
 
 
 @njit(cache=True)
+def advance(ws, dF):
+    """The beam in ``ws`` moved by the force step ``dF`` to first order: the last step, taken without a solve.
+
+    The state, the fitted response, the positions and the tip, off by O(``dF``²); their
+    sensitivities (and so σ) stay those of the last solve, O(``dF``) off. Without it the
+    residual, χ² and shape of a frame were the last solve's, not the estimate's.
+    """
+    st, dst, y, dy, pos, dpos, tip = ws.state, ws.dphi, ws.y, ws.dy, ws.pos, ws.dpos, ws.tip
+    for i in range(st.size):
+        st[i] += dst[i, 0] * dF[0] + dst[i, 1] * dF[1]
+    for i in range(y.size):
+        y[i] += dy[i, 0] * dF[0] + dy[i, 1] * dF[1]
+    for j in range(pos.shape[0]):
+        for a in range(2):
+            pos[j, a] += dpos[j, a, 0] * dF[0] + dpos[j, a, 1] * dF[1]
+    tip[0] += tip[2] * dF[0] + tip[3] * dF[1]
+    tip[1] += tip[4] * dF[0] + tip[5] * dF[1]
+
+
+@njit(cache=True)
 def decrease(g, H, step):
     """The cost decrease −(2 gᵀ step + stepᵀ H step) that the Gauss–Newton model predicts for ``step``."""
     predicted = 0.0
@@ -408,9 +428,9 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         # a χ² cost that does not determine the load along ``blocked`` here: the step keeps
         # to the determined direction; where the iteration ends so (the cost's shape at the
         # optimum, not at the iterates on the way there), the frame is not identifiable along it
-        weak = tg.whiten and flat_direction(H, (FLAT * ei / (L * L)) ** -2, blocked)
+        weak = tg.whiten and unc.flat_direction(H, (FLAT * ei / (L * L)) ** -2, blocked)
         if weak:
-            restricted_step(H, g, blocked, step)
+            unc.restricted_step(H, g, blocked, step)
         else:
             unc.lm_step(H, g, step)
         size = 0.0
@@ -420,6 +440,8 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
         if converged(dstep, size, last, H, tg.whiten, xtol):
             for c in range(k):
                 u[c] += dstep[c]
+            force_of(D, zero, dstep, dF)
+            advance(ws, dF)
             status = _OK
             break
         last = size
@@ -474,29 +496,6 @@ def gauss_newton(L, ei, k0, wload, tg, D, ffix, lower, u, state0, xtol, max_iter
     if status == _OK and weak:
         status = _NOT_IDENTIFIABLE
     return status, iters, cost, ws, trial
-
-
-@njit(cache=True)
-def flat_direction(H, floor, out):
-    """Whether ``H`` (k, k) has an eigenvalue below ``floor``; its eigenvector into ``out``."""
-    if H.shape[0] == 1:
-        out[0] = 1.0
-        return H[0, 0] < floor
-    lam, V = unc.eigh2(H)
-    out[0], out[1] = V[0, 0], V[1, 0]
-    return lam[0] < floor
-
-
-@njit(cache=True)
-def restricted_step(H, g, v, out):
-    """The Gauss–Newton step −(wᵀHw)⁻¹(wᵀg) w in the direction w ⊥ ``v`` (none for k = 1)."""
-    if H.shape[0] == 1:
-        out[0] = 0.0
-        return
-    w0, w1 = -v[1], v[0]
-    h = w0 * (H[0, 0] * w0 + H[0, 1] * w1) + w1 * (H[1, 0] * w0 + H[1, 1] * w1)
-    t = -(w0 * g[0] + w1 * g[1]) / h if h > 0 else 0.0
-    out[0], out[1] = t * w0, t * w1
 
 
 @njit(cache=True, inline="always")

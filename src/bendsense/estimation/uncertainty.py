@@ -171,6 +171,29 @@ def lm_step(H, g, out):
 
 
 @njit(cache=True)
+def flat_direction(H, floor, out):
+    """Whether ``H`` (k, k) has an eigenvalue below ``floor``; its eigenvector into ``out``."""
+    if H.shape[0] == 1:
+        out[0] = 1.0
+        return H[0, 0] < floor
+    lam, V = eigh2(H)
+    out[0], out[1] = V[0, 0], V[1, 0]
+    return lam[0] < floor
+
+
+@njit(cache=True)
+def restricted_step(H, g, v, out):
+    """The Gauss–Newton step −(wᵀHw)⁻¹(wᵀg) w in the direction w ⊥ ``v`` (none for k = 1)."""
+    if H.shape[0] == 1:
+        out[0] = 0.0
+        return
+    w0, w1 = -v[1], v[0]
+    h = w0 * (H[0, 0] * w0 + H[0, 1] * w1) + w1 * (H[1, 0] * w0 + H[1, 1] * w1)
+    t = -(w0 * g[0] + w1 * g[1]) / h if h > 0 else 0.0
+    out[0], out[1] = t * w0, t * w1
+
+
+@njit(cache=True)
 def cholesky(A):
     """Lower Cholesky factor of a symmetric positive semidefinite A (n, n) in place; returns its rank.
 
