@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import bendsense
+from bendsense import plots
 from bendsense.calibration import Calibration
 from bendsense.errors import ArgumentError, BendsenseError, ConfigError, SessionError
 from bendsense.identify import fit_free_bending
@@ -24,7 +25,8 @@ CONFIG = bendsense.load_config()
 CAL = Calibration.load(GOOD_CAL)
 SESSION = bendsense.read_session_csv(GOOD_CSV)
 SIGNALS = SESSION.signals
-KAPPA = bendsense.reconstruct(SIGNALS, CAL, CONFIG).curvature_per_m
+SHAPE = bendsense.reconstruct(SIGNALS, CAL, CONFIG)
+KAPPA = SHAPE.curvature_per_m
 
 CASES = {
     # Session(t_s, signals, pressure_pa): the case, mismatched lengths
@@ -156,17 +158,54 @@ CASES = {
     "process_points_zero": (lambda: process(SESSION, CONFIG, CAL, points=0), ArgumentError, r"points: "),
     "reconstruct_base_angle_inf": (lambda: bendsense.reconstruct(SIGNALS, CAL, CONFIG, base_angle_rad=np.inf),
                                    ArgumentError, r"base_angle_rad: must be finite, got inf"),
+    # flags: True or False, not text that reads the other way ("no" is true)
+    "estimate_strict_text": (lambda: bendsense.estimate_force(KAPPA[0], 5e4, CONFIG, strict="yes"), ArgumentError,
+                             r"strict: expected true or false, got 'yes'"),
+    "estimate_warm_start_text": (lambda: bendsense.estimate_force(KAPPA, 5e4, CONFIG, warm_start="no"),
+                                 ArgumentError, r"warm_start: expected true or false, got 'no'"),
+    "process_estimate_text": (lambda: process(SESSION, CONFIG, CAL, estimate="no"), ArgumentError,
+                              r"estimate: expected true or false, got 'no'"),
+    # plots: the argument named, before a figure is made
+    "plot_shapes_frame_beyond": (lambda: plots.plot_shapes(SHAPE, frames=[1000]), ArgumentError,
+                                 r"frames: expected an index, a slice or indices of the 4 frames, got \[1000\]"),
+    "plot_shapes_frames_text": (lambda: plots.plot_shapes(SHAPE, frames="a"), ArgumentError, r"frames: expected"),
+    "plot_shapes_no_frame": (lambda: plots.plot_shapes(SHAPE, frames=[]), ArgumentError,
+                             r"frames: selects no frame of the 4"),
+    "plot_shapes_max_zero": (lambda: plots.plot_shapes(SHAPE, max_frames=0), ArgumentError,
+                             r"max_frames: expected an integer >= 1, got 0"),
+    "plot_shapes_max_negative": (lambda: plots.plot_shapes(SHAPE, max_frames=-1), ArgumentError, r"max_frames: "),
+    "plot_shapes_cmap": (lambda: plots.plot_shapes(SHAPE, cmap="nope"), ArgumentError,
+                         r"cmap: 'nope' is not a matplotlib colour map"),
+    "plot_shapes_text": (lambda: plots.plot_shapes("x"), ArgumentError, r"positions_m: expected a Shape"),
+    "plot_error_map_empty": (lambda: plots.plot_force_error_map([], [], []), ArgumentError,
+                             r"error: no samples to draw"),
+    "plot_error_map_cmap": (lambda: plots.plot_force_error_map([1e4], [0.1], [0.0], kind="heatmap", cmap="nope"),
+                            ArgumentError, r"cmap: 'nope' is not"),
+    "plot_time_series_dict": (lambda: plots.plot_time_series({}), ArgumentError,
+                              r"results: expected Results \(bendsense.read_results\) or a results directory, got dict"),
+    "plot_results_none": (lambda: plots.plot_results(None), ArgumentError, r"results: expected Results"),
+    "plot_results_max_shapes": (lambda: plots.plot_results("r", max_shapes=0), ArgumentError,
+                                r"max_shapes: expected an integer >= 1, got 0"),
+    "plot_force_shape": (lambda: plots.plot_force(SHAPE), ArgumentError,
+                         r"estimate: expected a ForceEstimate \(bendsense.estimate_force\), got Shape"),
+    "plot_force_none": (lambda: plots.plot_force(None), ArgumentError, r"estimate: expected a ForceEstimate"),
+    "plot_calibration_config": (lambda: plots.plot_calibration(CONFIG), ArgumentError,
+                                r"calibration: expected a Calibration \(Calibration.load\(path\)\), got Config"),
 }
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_wrong_input_raises_the_librarys_error(name, tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+
     monkeypatch.chdir(tmp_path)
     call, error, match = CASES[name]
+    figures = plt.get_fignums()
     with pytest.raises(error, match=match) as info:
         call()
     assert isinstance(info.value, BendsenseError)
     assert list(tmp_path.iterdir()) == []  # nothing written
+    assert plt.get_fignums() == figures  # no figure left open
 
 
 def test_process_accepts_paths_for_the_session_the_config_and_the_calibration():

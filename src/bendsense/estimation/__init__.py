@@ -67,7 +67,7 @@ from bendsense.mechanics import _actuator_kernels
 from bendsense.mechanics import beam as _beam
 from bendsense.mechanics.actuator import model_jacobian
 from bendsense.status import Status
-from bendsense.validation import broadcasts, float_array, instance, short
+from bendsense.validation import boolean, broadcasts, float_array, instance, short
 
 _OK = int(Status.OK)
 
@@ -215,6 +215,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     constraint = est.constraint if constraint is None else constraint
     method = est.method if method is None else method
     _check_choices(method, constraint, objective, tip_angle_source, load, contact_s_m)
+    if type(strict) is not bool or type(warm_start) is not bool:  # np.bool_ passes; "no" would be true
+        boolean("strict", strict), boolean("warm_start", warm_start)
     # the checks at the edges, in the open: pressures outside the range are estimated at its end and marked
     given_pa, (pressure_pa, outside) = pressure_pa, pressure_range(pressure_pa, config, strict)
     if load == "contact" and contact_s_m is None:  # the location estimated, each frame its own window
@@ -249,7 +251,7 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     out = (np.empty((B, 2)), np.empty((B, 2, 2)), np.empty(B, dtype=np.int64), np.zeros(B, dtype=np.int64),
            np.empty(B), np.empty(B), np.empty(B), np.empty((B, 2)), np.empty((B, n)), np.empty((B, 2)),
            np.zeros((B, 2)), np.empty((B, 2)), np.empty((B, 3, 2, 2)), np.empty(B, dtype=bool),
-           *_payload_buffers(B, pb))
+           np.empty((B, pb.coils.size, 6)), np.empty((B, pb.lengths.size)))  # the window test's payload, shifts
     o = _kernels.Outputs(*out)
     if method == "fast":
         _run_fast(B, chain, use_guess, tuple(fr), held, start, out)
@@ -563,11 +565,6 @@ def _contact():
     from bendsense.estimation import contact
 
     return contact
-
-
-def _payload_buffers(B, pb):
-    """The kernels' outputs of the window test's payload (:func:`~bendsense.estimation._kernels.payload`)."""
-    return np.empty((B, pb.coils.size, 6)), np.empty((B, pb.lengths.size))
 
 
 def _result(o, batch, text, pb, err, *, contact_s_m, **asked):

@@ -253,7 +253,7 @@ def process(session, config=None, calibration=None, *, constraint=None, objectiv
     from bendsense.estimation.plausibility import check_channels, check_one_line, check_time_column
     from bendsense.session.inputs import process_inputs
 
-    points = _checked_options(options, points)
+    points = _checked_options(options, points, estimate)
     session, config, calibration, calibration_source = process_inputs(session, config, calibration,
                                                                       calibration_source)
     check_one_line(session)
@@ -291,10 +291,11 @@ _ESTIMATE_OPTIONS = frozenset(("direction", "follower_angle_rad", "initial_force
                                "noise_std", "strict", "s_m", "n_points", "xtol_n", "max_iter"))
 
 
-def _checked_options(options, points):
+def _checked_options(options, points, estimate):
     """``points`` checked (None, or 2..10000 sample points), after the ``options`` passed on to estimate_force."""
     from bendsense import validation as check
 
+    check.boolean("estimate", estimate)
     unknown = sorted(set(options) - _ESTIMATE_OPTIONS)
     if unknown:
         raise ArgumentError(f"{unknown[0]}: not an option of process (its own, or estimate_force's: "

@@ -46,7 +46,11 @@ def _new_axes(ax, **kwargs):
 
 def _positions(obj) -> np.ndarray:
     """Positions as (frames, M, 2) [m] from a shape-like object or an array."""
-    pos = np.asarray(getattr(obj, "positions_m", obj), dtype=float)
+    try:
+        pos = np.asarray(getattr(obj, "positions_m", obj), dtype=float)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"positions_m: expected a Shape, BeamSolution, Results or numbers of shape (..., M, 2), "
+                            f"got {type(obj).__name__}") from None
     if pos.ndim < 2 or pos.shape[-1] != 2:
         raise ArgumentError(f"positions_m: expected shape (..., M, 2), got {pos.shape}")
     return pos.reshape(-1, pos.shape[-2], 2)
@@ -64,19 +68,42 @@ def _flags(obj, frames: int):
     return np.broadcast_to(np.asarray(flags, dtype=bool).reshape(-1) if np.ndim(flags) else flags, (frames,)), label
 
 
+def _at_least_one(name: str, value) -> None:
+    """Refuse ``value`` of the argument ``name`` unless it is an integer >= 1 (a count of frames to draw)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ArgumentError(f"{name}: expected an integer >= 1, got {value!r:.60}")
+
+
 def _pick(n: int, frames, max_frames: int) -> np.ndarray:
+    """The frames drawn: ``frames`` (an index, a slice or indices of the ``n``), else up to ``max_frames`` spread."""
     if frames is not None:
-        idx = np.arange(n)[frames] if not isinstance(frames, (int, np.integer)) else np.array([frames])
-        return np.atleast_1d(idx)
+        try:
+            idx = np.atleast_1d(np.arange(n)[frames])
+        except (IndexError, TypeError, ValueError):
+            raise ArgumentError(f"frames: expected an index, a slice or indices of the {n} frames, got "
+                                f"{frames!r:.60}") from None
+        if idx.size == 0:
+            raise ArgumentError(f"frames: selects no frame of the {n}, got {frames!r:.60}")
+        return idx
+    _at_least_one("max_frames", max_frames)
     if n <= max_frames:
         return np.arange(n)
     return np.unique(np.linspace(0, n - 1, max_frames).round().astype(int))
 
 
-def _colors(n: int, cmap: str = "viridis"):
+def _colormap(cmap: str):
+    """The matplotlib colour map named ``cmap``."""
     import matplotlib
 
-    cm = matplotlib.colormaps[cmap]
+    try:
+        return matplotlib.colormaps[cmap]
+    except (KeyError, TypeError):
+        raise ArgumentError(f"cmap: {cmap!r:.60} is not a matplotlib colour map (e.g. 'viridis'; "
+                            "matplotlib.colormaps lists them)") from None
+
+
+def _colors(n: int, cmap: str = "viridis"):
+    cm = _colormap(cmap)
     return [cm(x) for x in (np.linspace(0.0, 0.9, n) if n > 1 else [0.0])]
 
 
@@ -123,9 +150,9 @@ def plot_shapes(
     ``x`` points toward the centre of curvature, ``y`` along the base tangent
     (DESIGN.md section 2); the base is the black square, the tips are dots.
     """
-    ax = _new_axes(ax, figsize=(5, 5))
     pos = _positions(shape_or_positions)
     idx = _pick(len(pos), frames, max_frames)
+    colors = _colors(len(idx), cmap)
     flags, dashed = _flags(shape_or_positions, len(pos))
     if labels is None:
         columns = getattr(shape_or_positions, "columns", None)
@@ -136,7 +163,8 @@ def plot_shapes(
     labels = list(labels)
     if len(labels) != len(idx):
         raise ArgumentError(f"labels: expected {len(idx)} labels (one per drawn frame), got {len(labels)}")
-    for i, color, label in zip(idx, _colors(len(idx), cmap), labels, strict=True):
+    ax = _new_axes(ax, figsize=(5, 5))
+    for i, color, label in zip(idx, colors, labels, strict=True):
         p = pos[i] * MM
         style = dict(color=color, linewidth=1.8, linestyle="--" if flags[i] else "-", label=label)
         style.update(line_kwargs)
@@ -252,6 +280,9 @@ def plot_force(estimate, ax=None, *, shape=None, t_s=None, scale_mm_per_n: float
         the shape's point at ``contact_s_m``, drawn with its ±2σ arc, and s_c in the title.
         A batch: Fx and Fy against time with their ±2σ bands.
     """
+    if not (hasattr(estimate, "force_n") and hasattr(estimate, "std_n")):  # a ForceEstimate (it imports plots)
+        raise ArgumentError(f"estimate: expected a ForceEstimate (bendsense.estimate_force), got "
+                            f"{type(estimate).__name__}")
     force = np.asarray(estimate.force_n, dtype=float)
     if force.ndim == 1:
         ax = _new_axes(ax, figsize=(5, 5))
@@ -300,6 +331,8 @@ def _grid(pressure_pa, load_n, error):
     if e.shape == (p.size, f.size) and not (e.ndim == 1 and p.size == f.size == e.size):
         return p, f, e, np.full(e.shape, np.nan)
     e = e.ravel()
+    if e.size == 0:
+        raise ArgumentError("error: no samples to draw (empty pressure_pa, load_n and error)")
     if not p.size == f.size == e.size:
         raise ArgumentError(
             "error: expected shape (len(pressure_pa), len(load_n)) for a grid, or three arrays of equal "
@@ -357,6 +390,8 @@ def plot_force_error_map(
     """
     if kind not in ("bars", "heatmap"):
         raise ArgumentError(f"kind: must be 'bars' or 'heatmap', got {kind!r}")
+    if cmap is not None:
+        _colormap(cmap)
     pu, fu, mean, std = _grid(pressure_pa, load_n, error)
     ax = _new_axes(ax, figsize=(7, 4))
     if kind == "bars":
@@ -382,7 +417,7 @@ def plot_force_error_map(
     else:
         vmin = vmax = None
         cmap = cmap or "viridis"
-    image = ax.imshow(np.ma.masked_invalid(mean.T), origin="lower", aspect="auto", cmap=cmap,
+    image = ax.imshow(np.ma.masked_invalid(mean.T), origin="lower", aspect="auto", cmap=_colormap(cmap),
                       vmin=vmin, vmax=vmax, interpolation="nearest")
     ax.set_xticks(np.arange(pu.size), [f"{v * KPA:g}" for v in pu])
     ax.set_yticks(np.arange(fu.size), [f"{v:g}" for v in fu])
@@ -403,10 +438,14 @@ def plot_force_error_map(
 
 
 def _as_results(results):
-    if isinstance(results, (str, os.PathLike)):
-        from bendsense.results import read_results
+    """``results`` as :class:`~bendsense.results.Results`: read from its directory where it is a path."""
+    from bendsense.results import Results, read_results
 
+    if isinstance(results, (str, os.PathLike)):
         return read_results(results)
+    if not isinstance(results, Results):
+        raise ArgumentError(f"results: expected Results (bendsense.read_results) or a results directory, got "
+                            f"{type(results).__name__}")
     return results
 
 
@@ -593,6 +632,11 @@ def plot_calibration(calibration, data=None, ax=None):
     matplotlib.figure.Figure or matplotlib.axes.Axes
         The figure for the two-panel plot, the axes when ``ax`` was given.
     """
+    from bendsense.calibration import Calibration
+
+    if not isinstance(calibration, Calibration):
+        raise ArgumentError(f"calibration: expected a Calibration (Calibration.load(path)), got "
+                            f"{type(calibration).__name__}")
     axes = calibration.plot(ax=ax)
     fit_ax = axes if ax is not None else axes[0]
     if data is not None:
@@ -676,6 +720,7 @@ def plot_results(
         (:mod:`bendsense.plots.contact`).
     """
     source = results if isinstance(results, (str, os.PathLike)) else None
+    _at_least_one("max_shapes", max_shapes)
     results = _as_results(results)
     if path is not None:
         from matplotlib.figure import Figure
