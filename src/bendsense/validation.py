@@ -286,7 +286,7 @@ def key(value, limit: int = 40) -> str:
 
 
 def float_array(field: str, value, *, error=ArgumentError) -> np.ndarray:
-    """``value`` as a float array; text or objects that are not numbers are refused.
+    """``value`` as a float array; text, complex numbers or objects that are not numbers are refused.
 
     Parameters
     ----------
@@ -297,6 +297,8 @@ def float_array(field: str, value, *, error=ArgumentError) -> np.ndarray:
     error : type, default ArgumentError
         The exception class to raise.
     """
+    if isinstance(value, complex) or getattr(getattr(value, "dtype", None), "kind", "") == "c":
+        raise fail(field, "real numbers", value, error)  # numpy would drop the imaginary part with a warning
     try:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError):

@@ -158,6 +158,12 @@ CASES = {
     "process_points_zero": (lambda: process(SESSION, CONFIG, CAL, points=0), ArgumentError, r"points: "),
     "reconstruct_base_angle_inf": (lambda: bendsense.reconstruct(SIGNALS, CAL, CONFIG, base_angle_rad=np.inf),
                                    ArgumentError, r"base_angle_rad: must be finite, got inf"),
+    "reconstruct_complex": (lambda: bendsense.reconstruct(SIGNALS + 1j, CAL, CONFIG), ArgumentError,
+                            r"signals: expected real numbers, got \[2012\.5\+1\.j"),
+    "estimate_complex": (lambda: bendsense.estimate_force(KAPPA[0].astype(complex), 5e4, CONFIG), ArgumentError,
+                         r"expected real numbers"),
+    "session_complex": (lambda: bendsense.Session(np.arange(2.0), np.zeros((2, N), complex), 0.0), SessionError,
+                        r"signals: expected real numbers"),
     # flags: True or False, not text that reads the other way ("no" is true)
     "estimate_strict_text": (lambda: bendsense.estimate_force(KAPPA[0], 5e4, CONFIG, strict="yes"), ArgumentError,
                              r"strict: expected true or false, got 'yes'"),
