@@ -216,7 +216,8 @@ def estimate_force(shape, pressure_pa, config=None, constraint: str | None = "no
     method = est.method if method is None else method
     _check_choices(method, constraint, objective, tip_angle_source, load, contact_s_m)
     if type(strict) is not bool or type(warm_start) is not bool:  # np.bool_ passes; "no" would be true
-        boolean("strict", strict), boolean("warm_start", warm_start)
+        boolean("strict", strict)
+        boolean("warm_start", warm_start)
     # the checks at the edges, in the open: pressures outside the range are estimated at its end and marked
     given_pa, (pressure_pa, outside) = pressure_pa, pressure_range(pressure_pa, config, strict)
     if load == "contact" and contact_s_m is None:  # the location estimated, each frame its own window

@@ -353,9 +353,9 @@ def converged(dstep, size, last, H, chi2, xtol):
 def advance(ws, dF):
     """The beam in ``ws`` moved by the force step ``dF`` to first order: the last step, taken without a solve.
 
-    The state, the fitted response, the positions and the tip, off by O(``dF``²); their
-    sensitivities (and so σ) stay those of the last solve, O(``dF``) off. Without it the
-    residual, χ² and shape of a frame were the last solve's, not the estimate's.
+    The state, the fitted response, the positions and the tip, off by O(``dF``²): the
+    frame's residual, χ² and shape are the estimate's, not the last solve's. Their
+    sensitivities (and so σ) stay the last solve's, O(``dF``) off.
     """
     st, dst, y, dy, pos, dpos, tip = ws.state, ws.dphi, ws.y, ws.dy, ws.pos, ws.dpos, ws.tip
     for i in range(st.size):
