@@ -313,6 +313,7 @@ def test_bad_arguments_are_named(cases):
 
 def test_columns_and_plot(cases):
     import matplotlib
+    import matplotlib.pyplot
 
     matplotlib.use("Agg")
     est, t, pressure = cases
@@ -322,6 +323,18 @@ def test_columns_and_plot(cases):
     assert list(cols) == ["fx_track_n", "fy_track_n", "fx_track_std_n", "fy_track_std_n", "track_status"]
     np.testing.assert_array_equal(cols["fy_track_std_n"], tr.std_n[:, 1])
     assert tr.plot().get_xlabel() == "t [s]"
+    # frames whose track is not ok (sigma of tens of newtons where the shape determines nothing) are left out
+    # of the line and the band, and the limits follow the forces: before, the band set them (+-130 N for 0.1 N)
+    wild = dataclasses.replace(tr, std_n=tr.std_n.copy(), status=tr.status.copy())
+    wild.std_n[:20] = 60.0
+    wild.status[:20] = Status.NOT_IDENTIFIABLE
+    ax = wild.plot()
+    low, high = ax.get_ylim()
+    kept = np.asarray(tr.frame_force_n)[20:]
+    assert high - low < 3 * (np.nanmax(kept) - np.nanmin(kept)) + 0.1
+    ticks = [line for line in ax.get_lines() if line.get_marker() == "|"]
+    assert len(ticks) == 1 and np.isin(t[:20], ticks[0].get_xdata()).all()
+    matplotlib.pyplot.close("all")
 
 
 # --------------------------------------------------------------------------- a ramp-and-hold on real sensors

@@ -26,7 +26,6 @@ from bendsense.status import MISFIT_P, Status, words
 from bendsense.tracking import _kalman_kernels as _kalman
 from bendsense.tracking import _stream_kernels as _stream
 from bendsense.tracking import windows as _windows
-from bendsense.tracking.gaps import broken_at_gaps
 from bendsense.validation import short
 
 __all__ = ["Track", "Tracker", "track", "DEFAULT_BANDWIDTH_HZ", "ML_STEP_DECADES", "TRACK_COLUMNS"]
@@ -93,29 +92,28 @@ class Track:
     def plot(self, ax=None):
         """Fx and Fy against time: the tracked force with its ±2σ band over the per-frame points; returns the axes.
 
+        As the force panel of :func:`bendsense.plots.plot_time_series`: the frames whose
+        track is not ``ok`` are ticked and left out of the line and band (a smoother carried
+        through frames that do not determine the force swings there, with σ of newtons),
+        and the limits follow the forces, not a band far wider than them.
+
         Parameters
         ----------
         ax : matplotlib Axes, optional
             Where to draw (default: a new figure).
         """
-        import matplotlib.pyplot as plt
+        from bendsense.plots import _force_panel, _new_axes
 
-        if ax is None:
-            _, ax = plt.subplots(figsize=(7, 3.5), layout="constrained")
-        t = np.arange(len(self.force_n)) if self.t_s is None else np.asarray(self.t_s)
-        # lines and bands stop at a gap in the frames, not bridge it
-        t, f, s, points = broken_at_gaps(t, self.force_n, self.std_n, self.frame_force_n)
-        for c, (name, colour) in enumerate((("Fx", "C0"), ("Fy", "C3"))):
-            if points is not None:
-                ax.plot(t, points[:, c], ".", ms=2, color=colour, alpha=0.3)
-            band = np.where(np.isfinite(s[:, c]), 2.0 * s[:, c], np.nan)
-            ax.fill_between(t, f[:, c] - band, f[:, c] + band, color=colour, alpha=0.25, lw=0)
-            ax.plot(t, f[:, c], color=colour, lw=1.2, label=f"{name} tracked ({self.mode}, {self.bandwidth_hz:.3g} Hz)")
+        ax = _new_axes(ax, figsize=(7, 3.5))
+        t = np.arange(len(self.force_n), dtype=float) if self.t_s is None else np.asarray(self.t_s, dtype=float)
+        if self.frame_force_n is None:  # the track alone
+            _force_panel(ax, t, self.force_n, self.std_n, status=words(self.status))
+        else:
+            _force_panel(ax, t, self.frame_force_n, np.zeros_like(self.std_n), status=words(self.status),
+                         tracked=(self.force_n, self.std_n))
         ax.set_xlabel("t [s]" if self.t_s is not None else "frame")
-        ax.set_ylabel("force [N]")
-        ax.legend(loc="best", fontsize="small")
+        ax.set_title(f"{self.mode}, {self.bandwidth_hz:.3g} Hz", loc="left", fontsize="small")
         return ax
-
 
 def track(estimate, t_s, *, mode: str = "smooth", bandwidth_hz: float | None = None, window_s: float = 0.05,
           pressure_pa=None) -> Track:
