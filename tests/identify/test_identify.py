@@ -495,8 +495,12 @@ def test_plots_draw(tmp_path, tip_dataset):
     assert result.exit_code == 0, result.output
     assert fig_path.stat().st_size > 0
     p, f, tip = tip_dataset
-    ax = fit_stiffness(StiffnessData.from_tip(p, f, tip, L), CFG).plot()
-    assert len(ax.lines) >= 1
+    fit = fit_stiffness(StiffnessData.from_tip(p, f, tip, L), CFG)
+    ax = fit.plot()
+    assert ax.get_ylabel() == "EI [N·mm²]"
+    np.testing.assert_allclose(ax.lines[0].get_ydata(), fit.level_ei_nm2 * 1e6)
+    ax.figure.canvas.draw()  # the axis label inside the figure (it was cut at the left edge)
+    assert ax.yaxis.label.get_window_extent().x0 >= 0
     plt.close("all")
 
 

@@ -645,14 +645,18 @@ class StiffnessFit:
         import matplotlib.pyplot as plt
 
         if ax is None:
-            _, ax = plt.subplots()
-        p = self.level_pressure_pa
-        ax.errorbar(p / 1e3, self.level_ei_nm2, yerr=self.level_ei_stderr_nm2, fmt="o", label="per level")
+            _, ax = plt.subplots(layout="constrained")
+        p, mm2 = self.level_pressure_pa, 1e6  # EI in N·mm²: thousands, not 0.00300
+        ax.errorbar(p / 1e3, self.level_ei_nm2 * mm2, yerr=self.level_ei_stderr_nm2 * mm2, fmt="o",
+                    label="per pressure level (± 1 standard error)")
         grid = np.linspace(min(0.0, p.min()), p.max(), 50)
-        ax.plot(grid / 1e3, self.params["ei0_nm2"] + self.params["ei1_nm2_per_pa"] * grid, "-", label="EI(P)")
+        ei0, ei1 = self.params["ei0_nm2"], self.params["ei1_nm2_per_pa"]
+        ax.plot(grid / 1e3, (ei0 + ei1 * grid) * mm2, "-",
+                label=f"EI(P) = {ei0 * mm2:.4g} + {ei1 * mm2 * 1e3:.4g} P[kPa] N·mm²")
         ax.set_xlabel("pressure [kPa]")
-        ax.set_ylabel("EI [N m²]")
-        ax.legend()
+        ax.set_ylabel("EI [N·mm²]")
+        ax.set_title("stiffness fit", fontsize="medium")
+        ax.legend(loc="upper left", fontsize="small")
         return ax
 
 
