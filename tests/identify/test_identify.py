@@ -538,3 +538,16 @@ def test_a_parameter_at_its_bound_is_said_without_the_solvers_own_words():
     for fit in bound:
         assert fit.message == "sensor_stiffness_nm_per_rad at its bound (fix it, or the data do not support it)"
         assert "WARNING: sensor_stiffness_nm_per_rad at its bound" in fit.report()
+
+
+def test_a_session_csv_given_as_measured_data_says_how_identify_reads_it(tmp_path):
+    from bendsense.identify.data import read_free_bending_csv, read_stiffness_csv
+
+    path = tmp_path / "free_sweep.csv"
+    path.write_text("t_s,pressure_kpa," + ",".join(f"ch{i}" for i in range(1, 17)) + "\n0,50," +
+                    ",".join(["2000"] * 16) + "\n")
+    hint = r"\(a session CSV of coil signals: identify reads it with --session SESSION --calibration CAL\)"
+    with pytest.raises(SessionError, match=r"missing bending angle column .*" + hint):
+        read_free_bending_csv(path)
+    with pytest.raises(SessionError, match=r"missing column fx_n " + hint):
+        read_stiffness_csv(path, L)

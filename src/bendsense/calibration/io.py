@@ -167,7 +167,11 @@ def fields_from_dict(data: Any) -> dict:
             "," in data else ""
         raise ConfigError(f"calibration: expected a mapping (format: {FORMAT}), got {check.short(data)}{what}")
     if data.get("format") != FORMAT:
-        raise ConfigError(f"format: expected {FORMAT!r}, got {check.short(data.get('format'))}")
+        hint = (" (a calibration manifest: fit it with 'bendsense calibrate MANIFEST -o cal.yaml', or "
+                "Calibration.fit(MANIFEST), and give the YAML it writes)" if "strips" in data else
+                " (an actuator config: a calibration is the YAML of 'bendsense calibrate')"
+                if {"actuator", "sensor", "stiffness"} & set(map(str, data)) and "offset" not in data else "")
+        raise ConfigError(f"format: expected {FORMAT!r}, got {check.short(data.get('format'))}{hint}")
     version = data.get("version")
     if version != VERSION:
         raise ConfigError(f"version: this bendsense reads version {VERSION}, got {check.short(version)}")

@@ -67,11 +67,17 @@ def _column(path, header, data, names: Mapping[str, float], what: str, required:
         raise SessionError(f"{path}: give one {what} column, got {', '.join(present)}")
     if not present:
         if required:
-            raise SessionError(f"{path}: missing {what} column ({' or '.join(names)})")
+            raise SessionError(f"{path}: missing {what} column ({' or '.join(names)}){_session_hint(header)}")
         return None
     name = present[0]
     values = data[:, header.index(name)] * names[name]
     return values, name
+
+
+def _session_hint(header) -> str:
+    """A hint where the table is a session's signals, which identify reads with ``--session`` and a calibration."""
+    return (" (a session CSV of coil signals: identify reads it with --session SESSION --calibration CAL)"
+            if "ch1" in header else "")
 
 
 def _require_finite(path, name, values):
@@ -213,7 +219,7 @@ def read_stiffness_csv(path: str | os.PathLike, length_m: float) -> StiffnessDat
     forces = []
     for name in ("fx_n", "fy_n"):
         if name not in header:
-            raise SessionError(f"{path}: missing column {name}")
+            raise SessionError(f"{path}: missing column {name}{_session_hint(header)}")
         forces.append(data[:, header.index(name)])
         _require_finite(path, name, forces[-1])
     s_cols, pos_cols = [], []
