@@ -538,6 +538,9 @@ def test_a_parameter_at_its_bound_is_said_without_the_solvers_own_words():
     for fit in bound:
         assert fit.message == "sensor_stiffness_nm_per_rad at its bound (fix it, or the data do not support it)"
         assert "WARNING: sensor_stiffness_nm_per_rad at its bound" in fit.report()
+        # the bound itself, not the solver's float beside it (it printed 1.8e-34 next to the warning)
+        assert fit.params["sensor_stiffness_nm_per_rad"] == 0.0
+        assert "sensor_stiffness_nm_per_rad  0 ± " in fit.report()
 
 
 def test_a_session_csv_given_as_measured_data_says_how_identify_reads_it(tmp_path):

@@ -541,8 +541,10 @@ def _solve_free_bending(resid, jac, x0, lb, free):
         gtol=1e-14,
         max_nfev=500,
     )
-    x = sol.x
-    at_bound = [n for n, v, b in zip(free, x, lb, strict=True) if np.isfinite(b) and v <= b * (1 + 1e-9) + 1e-12]
+    lb = np.asarray(lb, dtype=float)
+    near = np.isfinite(lb) & (sol.x <= lb * (1 + 1e-9) + 1e-12)
+    x = np.where(near, lb, sol.x)  # at its bound: the bound itself, not the solver's 1.8e-34 beside a 0
+    at_bound = [n for n, a in zip(free, near, strict=True) if a]
     return x, bool(sol.success), str(sol.message), at_bound
 
 

@@ -343,7 +343,9 @@ class FreeBendingSessionFit:
         ax.plot(p_kpa[self.used], deg[self.used], ".", color="C0", label=f"used ({int(self.used.sum())})")
         for i, reason in enumerate(r for r in dict.fromkeys(self.reason.tolist()) if r not in ("used", "thinned")):
             sel = self.reason == reason
-            ax.plot(p_kpa[sel], deg[sel], "x", color=f"C{3 + i}", label=f"rejected: {reason} ({int(sel.sum())})")
+            hidden = int(np.count_nonzero(sel & ~np.isfinite(deg)))  # no angle to draw (a frame not reconstructed)
+            note = f"; {hidden} without an angle, not drawn" if hidden else ""
+            ax.plot(p_kpa[sel], deg[sel], "x", color=f"C{3 + i}", label=f"rejected: {reason} ({int(sel.sum())}{note})")
         grid = np.linspace(0.0, max(float(np.nanmax(self.pressure_pa)), 1.0), 200)
         fitted = FreeBendingModel.from_config(self.to_config(prior)).bending_angle_rad(grid)
         ax.plot(grid / 1e3, np.degrees(FreeBendingModel.from_config(prior).bending_angle_rad(grid)), "--",
