@@ -13,7 +13,7 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames", "quick_init", "STATIC_FIELDS"]
+__all__ = ["take_frames", "put_frames", "expand_frames", "concat_frames", "quick_init", "brief_repr", "STATIC_FIELDS"]
 
 #: Fields that are never per frame, whatever their length: a shape's points along the body
 #: and its segment lengths. A block of as many frames (41 points, 16 segments) must not cut them.
@@ -52,6 +52,31 @@ def quick_init(cls):
     init.__module__ = cls.__module__
     cls.__init__ = init
     return cls
+
+
+def brief_repr(obj) -> str:
+    """A result dataclass in a line or two: each field's value, or an array's shape and range, a dict's keys.
+
+    A notebook that prints a session of 1,000 frames got every time and pressure (numpy
+    shows arrays of up to 1,000 values whole) and every extra column: 136 kB.
+    """
+    def brief(value) -> str:
+        if isinstance(value, np.ndarray) and value.size > 6:
+            finite = value[np.isfinite(value)] if value.dtype.kind == "f" else None
+            span = f", {finite.min():.4g}..{finite.max():.4g}" if finite is not None and finite.size else ""
+            kind = {"U": "str", "S": "bytes", "O": "object"}.get(value.dtype.kind, value.dtype.name)
+            return f"<{kind} array {value.shape}{span}>"
+        if isinstance(value, dict) and (len(value) > 6 or any(isinstance(v, np.ndarray) and v.size > 6
+                                                              for v in value.values())):
+            keys = list(value)
+            return "{" + ", ".join(map(str, keys[:8])) + (", ..." if len(keys) > 8 else "") + f"}} ({len(keys)} keys)"
+        if isinstance(value, (tuple, list)) and len(value) > 8:
+            return f"<{type(value).__name__} of {len(value)}>"
+        text = repr(value)
+        return text if len(text) <= 80 else text[:77] + "..."
+
+    fields = ", ".join(f"{f.name}={brief(getattr(obj, f.name))}" for f in dataclasses.fields(obj) if f.repr)
+    return f"{type(obj).__name__}({fields})"
 
 
 def _per_frame(name: str, value, n: int) -> bool:

@@ -4,6 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+import bendsense
 from bendsense.errors import OutputExistsError, SessionError
 from bendsense.session import Session, read_session, read_session_csv, write_session_csv
 
@@ -173,3 +174,18 @@ def test_an_empty_pressure_cell_is_no_reading(tmp_path):
     path.write_text("t_s,pressure_kpa,ch1\n0,50,1\n0.1,,2\n0.2,nan,3\n")
     p = read_session_csv(path).pressure_pa
     assert p[0] == 50e3 and np.isnan(p[1:]).all()
+
+
+def test_a_long_session_and_its_results_print_in_a_few_lines():
+    """A notebook's print of a session of 1,000 frames was 136 kB (every time, pressure and extra column)."""
+    n = 1000
+    t = np.arange(n) * 0.01
+    session = bendsense.Session(t, np.full((n, 16), 2000.0), np.linspace(0.0, 1e5, n),
+                                extra={f"col{i}": np.zeros(n) for i in range(9)})
+    text = repr(session)
+    assert len(text) < 600 and text.startswith("Session(t_s=<float64 array (1000,), 0..9.99>")
+    assert "pressure_pa=<float64 array (1000,), 0..1e+05>" in text and "(9 keys)" in text
+    est = bendsense.estimate_force(np.full((n, 16), 5.0), 5e4, bendsense.load_config(), noise_std=1.0)
+    text = repr(est)
+    assert len(text) < 1200 and "force_n=<float64 array (1000, 2), " in text and "method='fast'" in text
+    assert "message=<str array (1000,)>" in text

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bendsense._batched import quick_init
+from bendsense._batched import brief_repr, quick_init
 from bendsense.status import MISFIT_P, Status
 
 __all__ = ["ForceEstimate", "messages"]
@@ -145,6 +145,8 @@ class ForceEstimate:
         the tip (at s_c = L the one-sided derivative). None for ``load="tip"`` and
         where ``residual_rad`` is None; NaN for a frame without a force.
     """
+
+    __repr__ = brief_repr  # a line or two, not every value of every frame
 
     force_n: np.ndarray
     std_n: np.ndarray

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bendsense import _jit
+from bendsense._batched import brief_repr
 from bendsense.errors import ArgumentError, ConvergenceError, ConvergenceWarning
 from bendsense.mechanics import _beam_kernels as _k
 from bendsense.status import Status
@@ -155,6 +156,8 @@ class BeamSolution:
     dtip_position_dcontact : ndarray, shape (..., 2) or None
         ∂r_a(L)/∂s_c [m/m], with ``sensitivities=True``.
     """
+
+    __repr__ = brief_repr  # a line or two, not every value of every frame
 
     s_m: np.ndarray
     angle_rad: np.ndarray

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from bendsense import _jit
+from bendsense._batched import brief_repr
 from bendsense._io import open_regular, read_text
 from bendsense.errors import SessionError
 from bendsense.results.contact import CONTACT_COLUMNS, contact_columns
@@ -53,6 +54,8 @@ _NUMERIC = ("t_s", "pressure_pa", "tip_x_m", "tip_y_m", "tip_angle_rad", "fx_n",
 @dataclass(frozen=True, eq=False)
 class Results:
     """Per-frame results as read back from an output directory."""
+
+    __repr__ = brief_repr  # a line or two, not every value of every frame
 
     columns: dict
     s_m: np.ndarray

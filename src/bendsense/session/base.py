@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bendsense._batched import brief_repr
 from bendsense.errors import SessionError
 from bendsense.validation import float_array, short
 
@@ -44,6 +45,8 @@ class Session:
     source : str
         Where the session was read from.
     """
+
+    __repr__ = brief_repr  # a line or two, not every value of every frame
 
     t_s: np.ndarray
     signals: np.ndarray

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from bendsense import _jit
-from bendsense._batched import quick_init
+from bendsense._batched import brief_repr, quick_init
 from bendsense.errors import ArgumentError
 from bendsense.shape import _kernels
 from bendsense.validation import float_array, short
@@ -418,6 +418,8 @@ class Shape:
         True where a signal lay outside the calibrated range (the curvature is an
         extrapolation of the calibration polynomials); False if unknown.
     """
+
+    __repr__ = brief_repr  # a line or two, not every value of every frame
 
     curvature_per_m: np.ndarray
     s_m: np.ndarray

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bendsense import _jit
-from bendsense._batched import quick_init
+from bendsense._batched import brief_repr, quick_init
 from bendsense.choices import TRACK_MODES
 from bendsense.errors import ArgumentError, DataWarning
 from bendsense.estimation.result import ForceEstimate
@@ -73,6 +73,8 @@ class Track:
     frame_force_n : ndarray, shape (B, 2)
         The per-frame estimates tracked [N].
     """
+
+    __repr__ = brief_repr  # a line or two, not every value of every frame
 
     force_n: np.ndarray
     std_n: np.ndarray
