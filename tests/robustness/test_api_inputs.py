@@ -164,6 +164,11 @@ CASES = {
                          r"expected real numbers"),
     "session_complex": (lambda: bendsense.Session(np.arange(2.0), np.zeros((2, N), complex), 0.0), SessionError,
                         r"signals: expected real numbers"),
+    "check_windows_ms": (lambda: bendsense.check_windows(
+        bendsense.estimate_force(KAPPA, SESSION.pressure_pa, CONFIG, noise_std=1.0), SESSION.t_s, window_s=50),
+        ArgumentError, r"window_s: 50 s looks like milliseconds \(a window holds one load"),
+    "tracker_window_ms": (lambda: bendsense.tracking.Tracker(window_s=50.0), ArgumentError,
+                          r"window_s: 50 s looks like milliseconds"),
     # flags: True or False, not text that reads the other way ("no" is true)
     "estimate_strict_text": (lambda: bendsense.estimate_force(KAPPA[0], 5e4, CONFIG, strict="yes"), ArgumentError,
                              r"strict: expected true or false, got 'yes'"),

@@ -353,10 +353,7 @@ class Tracker:
         if mode != "filter":
             raise ArgumentError(f"mode: a Tracker filters causally: only 'filter', got {short(mode)}")
         self.bandwidth_hz = _check_bandwidth(DEFAULT_BANDWIDTH_HZ if bandwidth_hz is None else bandwidth_hz, False)
-        if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
-                math.isfinite(window_s) and window_s > 0):
-            raise ArgumentError(f"window_s: expected a duration > 0 [s], got {short(window_s)}")
-        self.window_s = float(window_s)
+        self.window_s = _windows.checked_window_s(window_s)
         self.mode = mode
         self._state = new_state()
         self._dt_ref = None  # the median interval of the first frames

@@ -40,6 +40,7 @@ from bendsense.validation import short
 __all__ = ["check_windows", "WINDOW_S", "PRESSURE_STEP_PA", "MIN_FRAMES"]
 
 WINDOW_S = 0.05  # default window [s]: 100 frames at 2 kHz
+WINDOW_SLIP_S = 10.0  # a window this long is a window in milliseconds given as seconds (50 for 0.05 s)
 PRESSURE_STEP_PA = 1000.0  # a pressure change between two frames beyond this is a step [Pa]
 
 
@@ -237,6 +238,17 @@ def series_inputs(estimate, t_s, window_s, pressure_pa):
     return time_inputs(estimate.batch_shape[0], t_s, window_s, pressure_pa)
 
 
+def checked_window_s(window_s) -> float:
+    """``window_s`` [s] checked: a duration > 0, below :data:`WINDOW_SLIP_S` (beyond: milliseconds given)."""
+    if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
+            math.isfinite(window_s) and window_s > 0):
+        raise ArgumentError(f"window_s: expected a duration > 0 [s], got {short(window_s)}")
+    if window_s >= WINDOW_SLIP_S:
+        raise ArgumentError(f"window_s: {float(window_s):g} s looks like milliseconds (a window holds one load: tens "
+                            f"to hundreds of ms; give seconds, e.g. {WINDOW_S:g})")
+    return float(window_s)
+
+
 def time_inputs(B, t_s, window_s, pressure_pa):
     """The checked times (B,), pressures (B,) or None and window length of a series of ``B`` frames."""
     try:
@@ -252,9 +264,7 @@ def time_inputs(B, t_s, window_s, pressure_pa):
     if back.size:
         raise ArgumentError(f"t_s: must increase, got {short(t[back[0] + 1])} s after {short(t[back[0]])} s "
                             f"at frame {int(back[0]) + 1}")
-    if isinstance(window_s, bool) or not isinstance(window_s, (int, float, np.integer, np.floating)) or not (
-            math.isfinite(window_s) and window_s > 0):
-        raise ArgumentError(f"window_s: expected a duration > 0 [s], got {short(window_s)}")
+    window_s = checked_window_s(window_s)
     P = None
     if pressure_pa is not None:
         try:
