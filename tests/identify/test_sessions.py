@@ -8,6 +8,7 @@ polynomials). The truth is the simulator's: ``K0_true = 1.08 K0_paper(P)``,
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from click.testing import CliRunner
 import bendsense
 from bendsense.cli import main
 from bendsense.config import MODEL_PARAMETERS, ParameterCovarianceConfig
-from bendsense.errors import SessionError
+from bendsense.errors import DataWarning, SessionError
 from bendsense.identify import fit_free_bending
 from bendsense.identify.covariance import session_covariance
 from bendsense.identify.sessions import fit_free_bending_session
@@ -28,6 +29,7 @@ from bendsense.sim.scenarios import free_sweep_profile, simulate
 K0_ERROR, EI_ERROR = 0.08, 0.15
 PAPER = bendsense.load_config()
 P_CHECK = np.linspace(20e3, 110e3, 10)
+LEFT_OUT = r"(\d+) of (\d+) loaded frames not used: their signals outside the calibrated range"
 
 
 def _prior(config):
@@ -59,7 +61,8 @@ def _identify(cal, sweep, loads, config, rounds=2):
     for _ in range(rounds):
         fb = fit_free_bending_session(sweep, cal, config)
         config = fb.to_config(config)
-        st = fit_stiffness_session(loads, cal, config)
+        with pytest.warns(DataWarning, match=LEFT_OUT):  # the loads at 110-120 kPa beyond the calibrated range
+            st = fit_stiffness_session(loads, cal, config)
         config = st.to_config(config)
         fits.append((fb, st))
     return config, fits
@@ -235,8 +238,10 @@ def test_mass_column_gives_the_same_loads(lab, tmp_path):
     extra["mass_kg"] = s.extra["load_n"] / PAPER.gravity.g_m_per_s2
     path = tmp_path / "masses.csv"
     bendsense.session.write_session_csv(bendsense.Session(s.t_s, s.signals, s.pressure_pa, extra=extra), path)
-    a = stiffness_data_from_session(lab["loads"], lab["cal"], lab["config"])
-    b = stiffness_data_from_session(path, lab["cal"], lab["config"])
+    with pytest.warns(DataWarning, match=LEFT_OUT):
+        a = stiffness_data_from_session(lab["loads"], lab["cal"], lab["config"])
+    with pytest.warns(DataWarning, match=LEFT_OUT):
+        b = stiffness_data_from_session(path, lab["cal"], lab["config"])
     np.testing.assert_allclose(b.force_n, a.force_n, atol=1e-12)
     assert np.all(a.force_n[:, 0] == 0) and np.all(a.force_n[:, 1] < 0)  # hanging down on the upright rig
 
@@ -438,3 +443,18 @@ def test_systematic_part_is_not_scaled_by_the_residuals():
     # the same systematic part adds the same covariance whatever the residual scatter (25x apart in variance)
     np.testing.assert_allclose(added[1], added[0], rtol=0.1, atol=1e-3 * np.abs(added[0]).max())
     assert added[0][0, 0] > 0 and added[0][2, 2] > 0 and np.all(added[0][1] == 0)  # μ_s held: no variance
+
+
+def test_loaded_frames_left_out_are_said_with_their_pressures(lab):
+    """A loaded frame beyond the calibrated range is not used: the fit says how many and where (it had fewer
+    levels than the session without a word: 10 at 20-110 kPa of a session at 20-120 kPa)."""
+    s = bendsense.read_session(lab["loads"])
+    loaded = np.hypot(s.extra["fx_n"], s.extra["fy_n"]) > 0
+    with pytest.warns(DataWarning, match=LEFT_OUT + r" or their pressure outside actuator\.pressure_range_pa "
+                                                    r"\((\d+)\.\.(\d+) kPa\)") as caught:
+        data = stiffness_data_from_session(lab["loads"], lab["cal"], lab["config"])
+    said = re.search(LEFT_OUT + r".*\((\d+)\.\.(\d+) kPa\)", str(caught[0].message))
+    left, of, lo, hi = (int(x) for x in said.groups())
+    assert of == loaded.sum() and left == of - len(data.pressure_pa) > 0
+    used = set(np.round(data.pressure_pa / 1e3).astype(int))
+    assert hi == max(np.round(s.pressure_pa[loaded] / 1e3).astype(int)) and hi not in used and lo >= 20

@@ -12,10 +12,12 @@ per pressure level and the line EI(P), with the calibration's error common to al
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from bendsense.config import FREE_BENDING_PARAMETERS
-from bendsense.errors import SessionError
+from bendsense.errors import DataWarning, SessionError
 from bendsense.identify import StiffnessData
 from bendsense.identify.covariance import session_covariance
 from bendsense.identify.sessions import _block, _source, session_shapes
@@ -56,8 +58,14 @@ def _stiffness_rows(session, calibration, config):
     """The stiffness data of the session's loaded frames, and their frame indices."""
     force = _known_force(session, config)
     shape, usable = session_shapes(session, calibration, config)
-    loaded = usable & np.all(np.isfinite(force), axis=-1) & (np.hypot(force[:, 0], force[:, 1]) > 0)
-    rows = np.flatnonzero(loaded)
+    weighed = np.all(np.isfinite(force), axis=-1) & (np.hypot(force[:, 0], force[:, 1]) > 0)
+    rows = np.flatnonzero(usable & weighed)
+    left = weighed & ~usable
+    if left.any() and rows.size:  # said, not silently fewer levels than the session holds
+        p = np.asarray(session.pressure_pa, dtype=float)[left]
+        warnings.warn(f"{_source(session)}: {int(left.sum())} of {int(weighed.sum())} loaded frames not used: their "
+                      f"signals outside the calibrated range or their pressure outside actuator.pressure_range_pa "
+                      f"({np.nanmin(p) / 1e3:g}..{np.nanmax(p) / 1e3:g} kPa)", DataWarning, stacklevel=3)
     if rows.size == 0:
         raise SessionError(f"{_source(session)}: no frame with a known nonzero load and a usable shape "
                            "(in the calibrated range, its pressure in actuator.pressure_range_pa)")
