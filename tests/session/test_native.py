@@ -322,3 +322,11 @@ def test_a_new_sample_field_reaches_every_layer(tmp_path, monkeypatch):
     assert "temp_cdeg" not in read_session(old).extra  # older sessions still read
     with pytest.raises(SessionError, match=r"missing fields \['temp_cdeg'\]"):
         dtype_from_list(dtype_to_list(record_dtype(2)[[n for n in dtype.names if n != "temp_cdeg"]]), version=3)
+
+
+def test_a_folder_holding_one_session_csv_names_it(tmp_path):
+    (tmp_path / "tv").mkdir()
+    (tmp_path / "tv" / "session.csv").write_text("t_s,ch1\n0,1\n")
+    with pytest.raises(SessionError, match=r"tv: not a session directory \(no meta\.yaml\); it holds session\.csv: "
+                                           r"give .*tv/session\.csv$"):
+        read_session(tmp_path / "tv")

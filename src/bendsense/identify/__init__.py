@@ -626,7 +626,7 @@ class StiffnessFit:
         for p, ei, se, rms in zip(
             self.level_pressure_pa, self.level_ei_nm2, self.level_ei_stderr_nm2, self.level_rms_m, strict=True
         ):
-            lines.append(f"  {p / 1e3:14.2f}   {ei:.5g} ± {se:<10.2g}  {rms * 1e3:8.3g}")
+            lines.append(f"  {p / 1e3:14.2f}   {ei:<9.5g} ± {se:<10.2g}  {rms * 1e3:8.3g}")
         for name in STIFFNESS_PARAMETERS:
             lines.append(f"  {name:16s} {_format_value(self.params[name], self.stderr[name])}")
         if len(self.free) == 2:

@@ -796,6 +796,6 @@ def _adapt_report(fit, prior, posterior, t_s) -> str:
                                        "between shear_modulus_pa and sensor_stiffness_nm_per_rad stays the prior's.")
     return (f"adapt: learned from {int(used.sum())} free frames of {considered} considered ({len(used)} in the "
             f"session, spread over pressure, at most {ADAPT_FRAMES}) at {span}{when}; K0 moved by {learned}; "
-            f"{params}. Refused: {refused} (loaded: the force outside its 2-sigma ellipse of zero; load_shape: a "
-            f"shape no free beam has, p < {FREE_P:g}; unusable: outside the calibrated or pressure range), in "
-            f"{fit.rounds} round(s) of selection.{one}")
+            f"{params}. Frames left out: {refused} (loaded: the force outside its 2-sigma ellipse of zero; "
+            f"load_shape: a shape no free beam has, p < {FREE_P:g}; unusable: outside the calibrated or pressure "
+            f"range), in {fit.rounds} round(s) of selection.{one}")

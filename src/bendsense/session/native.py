@@ -685,7 +685,9 @@ def read_session_meta(path) -> dict:
     """
     path = Path(path)
     if not (path / META).exists():
-        raise SessionError(f"{path}: not a session directory (no {META})")
+        csvs = sorted(p.name for p in path.glob("*.csv")) if path.is_dir() else []
+        hint = f"; it holds {csvs[0]}: give {path / csvs[0]}" if len(csvs) == 1 else ""
+        raise SessionError(f"{path}: not a session directory (no {META}){hint}")
     where = path / META
     meta = read_yaml(where, "session meta.yaml", lambda data: data, SessionError)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
