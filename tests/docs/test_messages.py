@@ -118,6 +118,16 @@ def extrapolated(tmp):
     return bendsense(tmp, "load", "run.csv", "--calibration", "cal.yaml", "reconstruct", ok=True)
 
 
+@provokes(r"window check: 50 ms windows hold at most 3 frames at 35 Hz")
+def windows_at_35_hz(tmp):
+    signals = np.tile(offsets(), (40, 1)) + np.random.default_rng(0).normal(0.0, 1.5, (40, N))
+    rows = [",".join([repr(k / 35), "40", *(f"{v:.3f}" for v in sig)]) for k, sig in enumerate(signals)]
+    (tmp / "run.csv").write_text("\n".join(["t_s,pressure_kpa," + ",".join(f"ch{i + 1}" for i in range(N)), *rows])
+                                 + "\n", encoding="utf-8")
+    cal(tmp)
+    return bendsense(tmp, "load", "run.csv", "--calibration", "cal.yaml", "reconstruct", "estimate", ok=True)
+
+
 @provokes(r"frames have a pressure outside actuator\.pressure_range_pa")
 def pressure_out_of_range(tmp):
     pressure = np.full(88, 40.0)
