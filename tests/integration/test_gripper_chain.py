@@ -172,6 +172,12 @@ def test_plot_has_a_panel_per_finger(board, chain):
     magnitude, std = grasp_force(results["thumb"])
     assert np.all(std > 0) and np.all(std <= np.hypot(results["thumb"]["fx_track_std_n"],
                                                       results["thumb"]["fy_track_std_n"]) * (1 + 1e-12))
+    # the total's band: a sum of magnitudes, never below 0 (a barely determined finger's band reached -0.3 N)
+    for r in results.values():
+        for column in ("fx_track_std_n", "fy_track_std_n"):
+            r.columns[column] = np.asarray(r.columns[column]) * 100.0
+    band = next(c for c in plot_gripper(results).axes[-2].collections if c.get_label() == "total ± 2σ")
+    assert band.get_paths()[0].vertices[:, 1].min() == 0.0
 
 
 def test_mcap_has_topics_per_finger(board, chain):

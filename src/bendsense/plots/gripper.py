@@ -95,7 +95,9 @@ def _grasp_panels(fig, grid, results: dict, lengths_m: dict):
     if total is not None:
         band = np.where(np.isfinite(total_var), 2 * np.sqrt(total_var), np.nan)
         ax_g.plot(t, total, color="k", linewidth=1.6, label="total")
-        ax_g.fill_between(t, total - band, total + band, color="k", alpha=0.15, linewidth=0, label="total ± 2σ")
+        # a sum of magnitudes is never below 0: its band stops there (it reached -0.3 N for a barely held grasp)
+        ax_g.fill_between(t, np.maximum(total - band, 0.0), total + band, color="k", alpha=0.15, linewidth=0,
+                          label="total ± 2σ")
         values, bands = total[np.isfinite(total)], band[np.isfinite(band)]
         if values.size:  # the forces set the limits: a band far wider than them (a barely determined frame) is cut
             pad = max(0.1 * float(np.ptp(values)), float(np.median(bands)) if bands.size else 0.0, 1e-3)
