@@ -320,8 +320,14 @@ def test_shape_indexing_and_plot(tmp_path):
     assert ax.get_xlabel() == "x [mm]" and len(ax.lines) == 3 * 2 + 1
     np.testing.assert_allclose(np.column_stack(ax.lines[2].get_data()), shape.positions_m[1] * 1e3)
     ax.figure.savefig(tmp_path / "shape.png")
-    plt.close("all")
     assert (tmp_path / "shape.png").stat().st_size > 0
+    # many frames: no legend of 50 labels, a colour bar of the frames says what the colours mean
+    many = Shape.from_curvatures(np.linspace(0, 20, 200)[:, None] * np.ones(16), LENGTHS, s_m=np.linspace(0, L, 11))
+    ax = many.plot()
+    bars = [a for a in ax.figure.axes if a is not ax]
+    assert ax.get_legend() is None and len(bars) == 1 and bars[0].get_ylabel() == "frame"
+    assert bars[0].get_ylim() == (0.0, 199.0)
+    plt.close("all")
 
 
 def test_reconstruct_blocks_and_base_angles_agree_with_single_frames():

@@ -136,7 +136,8 @@ def plot_shapes(
     cmap : str
         Colour map; the frames go from its dark to its light end in order.
     legend : bool
-        Draw a legend when there is more than one line.
+        Draw a legend when there is more than one line; False with many frames: a colour
+        bar of the frames (their times where known) says what the colours mean.
     **line_kwargs
         Passed to ``Axes.plot``.
 
@@ -177,6 +178,16 @@ def plot_shapes(
         ax.plot([], [], "--", color="0.3", linewidth=1.8, label=dashed)
     if legend and (len(idx) > 1 or np.any(flags[idx])):
         ax.legend(fontsize="small", loc="best")
+    elif not legend and len(idx) > 8:  # too many for a legend: the colours' meaning on a bar
+        from matplotlib.cm import ScalarMappable
+        from matplotlib.colors import ListedColormap, Normalize
+
+        columns = getattr(shape_or_positions, "columns", None)
+        times = columns is not None and "t_s" in columns
+        where = np.asarray(columns["t_s"], dtype=float)[idx] if times else idx.astype(float)
+        bar = ax.figure.colorbar(ScalarMappable(Normalize(where[0], where[-1]), ListedColormap(colors)), ax=ax,
+                                 shrink=0.8)
+        bar.set_label("t [s]" if times else "frame")
     return ax
 
 
