@@ -273,10 +273,12 @@ def test_a_track_plot_stops_at_a_gap_and_keeps_its_labels_in_the_figure(tmp_path
     t = np.concatenate([np.arange(50) * 0.01, 3.0 + np.arange(50) * 0.01])
     est = FakeEstimate(t)
     track = Track(force_n=est.force_n, std_n=est.std_n, covariance_n2=np.zeros((100, 2, 2)), window_p_value=None,
-                  status=np.zeros(100, dtype=np.int8), bandwidth_hz=5.0, mode="filter", t_s=t,
+                  status=np.full(100, Status.OK, dtype=np.int8), bandwidth_hz=5.0, mode="filter", t_s=t,
                   frame_force_n=est.force_n)
     ax = track.plot()
-    for line in ax.lines:
+    series = [line for line in ax.lines if len(line.get_ydata()) > 2]  # (not the zero line)
+    assert len(series) == 4  # Fx and Fy: the per-frame points and the tracked line
+    for line in series:
         assert np.flatnonzero(np.isnan(line.get_ydata())).tolist() == [50]
     fig = ax.figure
     fig.canvas.draw()
