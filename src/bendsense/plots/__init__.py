@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bendsense import validation as check
 from bendsense.errors import ArgumentError
 
 __all__ = [
@@ -68,12 +69,6 @@ def _flags(obj, frames: int):
     return np.broadcast_to(np.asarray(flags, dtype=bool).reshape(-1) if np.ndim(flags) else flags, (frames,)), label
 
 
-def _at_least_one(name: str, value) -> None:
-    """Refuse ``value`` of the argument ``name`` unless it is an integer >= 1 (a count of frames to draw)."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ArgumentError(f"{name}: expected an integer >= 1, got {value!r:.60}")
-
-
 def _pick(n: int, frames, max_frames: int) -> np.ndarray:
     """The frames drawn: ``frames`` (an index, a slice or indices of the ``n``), else up to ``max_frames`` spread."""
     if frames is not None:
@@ -85,7 +80,7 @@ def _pick(n: int, frames, max_frames: int) -> np.ndarray:
         if idx.size == 0:
             raise ArgumentError(f"frames: selects no frame of the {n}, got {frames!r:.60}")
         return idx
-    _at_least_one("max_frames", max_frames)
+    check.integer("max_frames", max_frames, minimum=1)
     if n <= max_frames:
         return np.arange(n)
     return np.unique(np.linspace(0, n - 1, max_frames).round().astype(int))
@@ -731,7 +726,7 @@ def plot_results(
         (:mod:`bendsense.plots.contact`).
     """
     source = results if isinstance(results, (str, os.PathLike)) else None
-    _at_least_one("max_shapes", max_shapes)
+    check.integer("max_shapes", max_shapes, minimum=1)
     results = _as_results(results)
     if path is not None:
         from matplotlib.figure import Figure
